@@ -1,0 +1,220 @@
+"""Nelder–Mead identification in log coordinates with restarts.
+
+scipy's Nelder–Mead builds its first simplex from 5 % steps of each coordinate's value,
+which is meaningless when parameters span six orders of magnitude (an inertia in kg m^2
+next to a tyre stiffness in N/m). suspid optimises ``u = log(theta / theta_start)``, so a
+step of 0.1 is a 10 % change of any parameter, and every coordinate starts at 0. After the
+first run it restarts from the best vertex with a fresh, smaller simplex until the cost no
+longer improves (Nelder–Mead stalls on curved valleys; a restart re-opens the simplex). The
+``final_simplex`` of every run is kept so a sliding window can warm-start from it.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable, Mapping
+
+import numpy as np
+from scipy.optimize import minimize
+
+from estimator.identify.identifiability import assess
+from estimator.identify.params import Parameters
+from estimator.identify.problem import OutputErrorProblem
+from estimator.identify.result import IdentResult
+from suspid.models.base import FloatArray
+from suspid.simulate import outputs, road_matrix, simulate_states
+
+
+@dataclass
+class NMOutcome:
+    """Raw outcome of :func:`minimize_log`."""
+
+    u: FloatArray
+    fun: float
+    nfev: int
+    restarts: int
+    converged: bool
+    final_simplex: FloatArray
+
+
+def minimize_log(fun: Callable[[FloatArray], float], u0: FloatArray, step: float = 0.3,
+                 restarts: int = 6, maxfev: int | None = None, xatol: float = 1e-9,
+                 fatol: float = 1e-18, initial_simplex: FloatArray | None = None,
+                 bounds: list[tuple[float, float]] | None = None,
+                 rel_improve: float = 1e-9) -> NMOutcome:
+    """Minimise ``fun(u)`` with Nelder–Mead, restarting from the best vertex.
+
+    Parameters
+    ----------
+    fun : callable
+        Cost of the scaled coordinates ``u`` (dimensionless).
+    u0 : ndarray
+        Start.
+    step : float
+        Initial simplex edge in ``u`` (0.3 = about 35 % per parameter).
+    restarts : int
+        Maximum number of restarts after the first run.
+    maxfev : int, optional
+        Evaluation budget over all runs (default ``1000 * len(u0)``).
+    initial_simplex : ndarray, optional
+        Warm start (e.g. a previous window's ``final_simplex``).
+    """
+    n = u0.size
+    budget = maxfev if maxfev is not None else 1000 * max(n, 1)
+    if n == 0:
+        f = fun(u0)
+        return NMOutcome(u0, f, 1, 0, True, u0[None, :])
+    nfev = 0
+    best_u, best_f = np.asarray(u0, dtype=float), math.inf
+    simplex = initial_simplex
+    cur_step = step
+    converged = False
+    run = 0
+    final = None
+    while run <= restarts and nfev < budget:
+        if simplex is None:
+            simplex = np.vstack([best_u] + [best_u + cur_step * e for e in np.eye(n)])
+        res = minimize(fun, simplex[0], method="Nelder-Mead", bounds=bounds,
+                       options={"initial_simplex": simplex, "xatol": xatol, "fatol": fatol,
+                                "maxfev": budget - nfev, "adaptive": n > 4})
+        nfev += int(res.nfev)
+        final = res.final_simplex[0]
+        improved = best_f - res.fun
+        prev = best_f
+        if res.fun < best_f:
+            best_u, best_f = np.asarray(res.x, dtype=float), float(res.fun)
+        run += 1
+        simplex = None
+        cur_step = max(cur_step * 0.3, 0.01)
+        if math.isfinite(prev) and improved <= rel_improve * max(abs(prev), 1e-300):
+            converged = res.status == 0 or res.status == 2
+            break
+        if best_f == 0.0:
+            converged = True
+            break
+    return NMOutcome(best_u, best_f, nfev, run - 1, converged, final)
+
+
+def fit(problem: OutputErrorProblem, params: Parameters, restarts: int = 6,
+        maxfev: int | None = None, step: float = 0.3,
+        initial_simplex: FloatArray | None = None, with_stderr: bool = True) -> tuple[IdentResult, NMOutcome]:
+    """Identify the free parameters of ``problem`` by Nelder–Mead in log coordinates.
+
+    Returns
+    -------
+    IdentResult
+        The contract's result (params, stderr, cost, nfev, success, rms, identifiability).
+    NMOutcome
+        Raw optimiser outcome (``final_simplex`` for warm starts).
+    """
+    model = problem.model
+    free = params.free
+    theta0 = np.array([params[k].value for k in free])
+    base = params.valuesdict()
+
+    def to_params(u: FloatArray) -> dict[str, float]:
+        p = dict(base)
+        p.update(zip(free, theta0 * np.exp(u)))
+        return p
+
+    bounds = None
+    if any(params[k].min > 0 or math.isfinite(params[k].max) for k in free):
+        bounds = [(math.log(params[k].min / params[k].value) if params[k].min > 0 else -np.inf,
+                   math.log(params[k].max / params[k].value) if math.isfinite(params[k].max) else np.inf)
+                  for k in free]
+
+    def cost(u: FloatArray) -> float:
+        if not np.all(np.abs(u) < 30):
+            return np.inf
+        return problem.normalized_ss(to_params(u))
+
+    out = minimize_log(cost, np.zeros(len(free)), step=step, restarts=restarts, maxfev=maxfev,
+                       initial_simplex=initial_simplex, bounds=bounds)
+    p_hat = to_params(out.u)
+    res = finish(problem, params, p_hat, out.nfev, out.converged, with_stderr=with_stderr)
+    res.restarts = out.restarts
+    return res, out
+
+
+def jacobian_log(problem: OutputErrorProblem, p: Mapping[str, float], free: list[str],
+                 rel_step: float = 1e-5) -> FloatArray:
+    """Central-difference Jacobian of the residual vector w.r.t. log-parameters."""
+    cols = []
+    for k in free:
+        pp, pm = dict(p), dict(p)
+        pp[k] = p[k] * math.exp(rel_step)
+        pm[k] = p[k] * math.exp(-rel_step)
+        cols.append((problem.residual_vector(pm) - problem.residual_vector(pp)) / (2 * rel_step))
+    # residual = y - yhat, so -d(residual) = d(yhat)
+    return np.column_stack(cols) if cols else np.zeros((problem.n_obs, 0))
+
+
+def finish(problem: OutputErrorProblem, params: Parameters, p_hat: Mapping[str, float],
+           nfev: int, converged: bool, with_stderr: bool = True) -> IdentResult:
+    """Build the :class:`IdentResult` at ``p_hat``: residuals, stderr, identifiability."""
+    model = problem.model
+    free = params.free
+    pred = problem.predict(p_hat)
+    res = pred.residual
+    ss = float(np.nansum((res * problem.w) ** 2))
+    warnings = list(problem.meas.warnings) + list(problem.warnings)
+    # RMS over every measured channel, not only those in the cost
+    U = road_matrix(model, problem.t, problem.meas.road)
+    X = simulate_states(model, p_hat, problem.t, U, pred.x0)
+    allout = outputs(model, p_hat, X, U)
+    rms = {c: float(np.sqrt(np.nanmean((problem.meas.measured[c] - allout[c]) ** 2)))
+           for c in model.channels if c in problem.meas.measured}
+    stderr: dict[str, float] = {k: float("nan") for k in free}
+    identifiable, sv, cov_log = True, [], None
+    if with_stderr and free:
+        J = jacobian_log(problem, p_hat, free)
+        # per-channel residual variance (sandwich estimate for the unweighted channels)
+        rw = res * problem.w
+        sig2 = np.nanmean(rw ** 2, axis=0)
+        dof = max(problem.n_obs - len(free), 1) / max(problem.n_obs, 1)
+        sig2 = sig2 / dof
+        ch_of_row = np.nonzero(problem.mask)[1]
+        row_sig2 = sig2[ch_of_row]
+        # identifiability on the noise-normalised Jacobian (channel scale when noise-free)
+        scale_c = np.sqrt(np.where(sig2 > 0, sig2, 0.0))
+        ref = np.sqrt(np.nanmean((problem.Ymeas * problem.w) ** 2, axis=0))
+        scale_c = np.where(scale_c > 1e-9 * np.maximum(ref, 1e-300), scale_c, np.maximum(ref, 1e-300))
+        Jn = J / scale_c[ch_of_row][:, None]
+        verdict = assess(Jn, free, {p.name: p.kind for p in model.params})
+        identifiable, sv = verdict.identifiable, verdict.singular_values
+        warnings += verdict.warnings
+        H = J.T @ J
+        try:
+            Hinv = np.linalg.pinv(H, rcond=1e-12)
+            Bm = (J * row_sig2[:, None]).T @ J
+            cov_log = Hinv @ Bm @ Hinv
+            d = np.sqrt(np.clip(np.diag(cov_log), 0, None))
+            for i, k in enumerate(free):
+                stderr[k] = float(p_hat[k] * d[i]) if identifiable else float("inf")
+        except np.linalg.LinAlgError:
+            warnings.append("could not invert the sensitivity matrix for standard errors")
+    n_obs = problem.n_obs
+    k = len(free)
+    nss = ss / problem.scale
+    aic = n_obs * math.log(max(nss, 1e-300) / n_obs) + 2 * k if n_obs else float("nan")
+    bic = n_obs * math.log(max(nss, 1e-300) / n_obs) + k * math.log(max(n_obs, 1)) if n_obs else float("nan")
+    if not converged:
+        warnings.append("Nelder–Mead stopped on its evaluation budget before converging")
+    return IdentResult(
+        model=model.name,
+        params={k: float(v) for k, v in p_hat.items()},
+        fixed=params.fixed,
+        stderr=stderr,
+        cost=problem.seed_cost(ss),
+        nfev=nfev,
+        success=bool(converged and identifiable),
+        rms_residual=rms,
+        identifiable=identifiable,
+        warnings=warnings,
+        x0=[float(v) for v in pred.x0],
+        aic=aic,
+        bic=bic,
+        n_obs=n_obs,
+        singular_values=sv,
+        cov_log=cov_log,
+    )

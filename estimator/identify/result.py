@@ -1,0 +1,82 @@
+"""Result of an identification run (in the style of lmfit's MinimizerResult)."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+
+@dataclass
+class IdentResult:
+    """Outcome of :func:`estimator.identify.fit`.
+
+    Attributes
+    ----------
+    model : str
+    params : dict
+        Every parameter (fixed ones included), SI units.
+    fixed : list of str
+    stderr : dict
+        Standard error of each free parameter (SI), from the sensitivity at the optimum
+        (sandwich estimate with per-channel residual variance).
+    cost : float
+        The seed's cost at the optimum (``sse`` or ``frobenius``), SI.
+    nfev : int
+        Cost evaluations, all restarts included.
+    success : bool
+        Converged and identifiable.
+    rms_residual : dict
+        RMS residual per measured channel (SI).
+    identifiable : bool
+    warnings : list of str
+    x0 : list of float
+        Initial state used (estimated or given).
+    aic, bic : float
+        Information criteria of the (normalised) least-squares fit.
+    """
+
+    model: str
+    params: dict[str, float]
+    fixed: list[str]
+    stderr: dict[str, float]
+    cost: float
+    nfev: int
+    success: bool
+    rms_residual: dict[str, float]
+    identifiable: bool
+    warnings: list[str] = field(default_factory=list)
+    x0: list[float] = field(default_factory=list)
+    aic: float = float("nan")
+    bic: float = float("nan")
+    n_obs: int = 0
+    restarts: int = 0
+    singular_values: list[float] = field(default_factory=list)
+    cov_log: Any = None  # covariance of log-parameters (free ones), ndarray
+    frames: dict[str, Any] | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        """The contract's JSON object."""
+        def f(x: float) -> float | None:
+            return float(x) if np.isfinite(x) else None
+
+        out: dict[str, Any] = {
+            "model": self.model,
+            "params": {k: float(v) for k, v in self.params.items()},
+            "fixed": list(self.fixed),
+            "cost": f(self.cost),
+            "nfev": int(self.nfev),
+            "success": bool(self.success),
+            "rms_residual": {k: f(v) for k, v in self.rms_residual.items()},
+            "stderr": {k: f(v) for k, v in self.stderr.items()},
+            "identifiable": bool(self.identifiable),
+            "warnings": list(self.warnings),
+            "x0": [float(v) for v in self.x0],
+            "aic": f(self.aic),
+            "bic": f(self.bic),
+            "n_obs": int(self.n_obs),
+            "restarts": int(self.restarts),
+        }
+        if self.frames is not None:
+            out["frames"] = self.frames
+        return out

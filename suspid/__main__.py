@@ -1,0 +1,3 @@
+from suspid.cli import main
+
+raise SystemExit(main())

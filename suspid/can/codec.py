@@ -1,0 +1,479 @@
+"""Channel values <-> CAN frames: precompiled signal packing, quantization, E2E.
+
+Decoding every frame through ``cantools.Message.decode`` costs tens of microseconds; the
+decoder of a live bus or a 100 k-frame log needs a few. :class:`MessageCodec` therefore
+compiles, once per message, a small Python function for the selected signals: a
+:class:`struct.Struct` unpack when every signal is a byte-aligned little-endian 8/16/32/64
+bit integer (our own DBC), else shifts and masks on ``int.from_bytes`` (any Intel or
+Motorola integer signal, any bit position), with IEEE floats read by ``struct``. The scaled
+values equal cantools' ``decode(..., decode_choices=False)`` (checked in
+``tests/can/test_codec.py``).
+
+:class:`SensorEncoder` turns channel samples into the sensor frames of
+``dbc/suspension.dbc`` (the sensor node and ``suspid encode`` share it): quantization
+``raw = round((value - offset) / scale)``, saturation to the DBC range with the ``Valid``
+bit cleared and ``Saturated`` set, NaN (a missing sample) as ``Valid = 0``, then the E2E
+counter and CRC.
+"""
+from __future__ import annotations
+
+import math
+import struct
+from dataclasses import dataclass, field
+from typing import Callable, Iterable, Mapping, Sequence
+
+import can
+from cantools.database.can import Database, Message
+
+from suspid.can.crc import COUNTER_MODULUS, e2e_protect
+from suspid.can.dbc import (ALERT_MESSAGE, STATUS_MESSAGE, SYNC_MESSAGE, channel_signals,
+                            find_message, is_e2e)
+from suspid.errors import InputError, UsageError
+
+
+@dataclass(frozen=True)
+class SignalSpec:
+    """Bit layout and scaling of one signal (a compiled view of a cantools signal).
+
+    Attributes
+    ----------
+    name : str
+    start : int
+        Bit position of the least significant bit counted from the right of the payload
+        read as one integer (little-endian integer for Intel signals, big-endian integer
+        for Motorola ones).
+    length : int
+        Bits.
+    signed, big_endian, is_float : bool
+    scale, offset : float
+        ``physical = raw * scale + offset``.
+    raw_min, raw_max : int
+        Raw range (from the DBC minimum/maximum, else the full bit range).
+    """
+
+    name: str
+    start: int
+    length: int
+    signed: bool
+    big_endian: bool
+    is_float: bool
+    scale: float
+    offset: float
+    raw_min: int
+    raw_max: int
+
+
+def signal_spec(message: Message, name: str) -> SignalSpec:
+    """Compile the layout of signal ``name`` of ``message``."""
+    sig = message.get_signal_by_name(name)
+    length = sig.length
+    if sig.byte_order == "big_endian":
+        msb_left = 8 * (sig.start // 8) + (7 - sig.start % 8)
+        start = 8 * message.length - 1 - (msb_left + length - 1)
+        big = True
+    else:
+        start = sig.start
+        big = False
+    lo_full = -(1 << (length - 1)) if sig.is_signed else 0
+    hi_full = (1 << (length - 1)) - 1 if sig.is_signed else (1 << length) - 1
+    scale = float(sig.scale)
+    offset = float(sig.offset)
+    lo, hi = lo_full, hi_full
+    if not sig.is_float and scale != 0:
+        bounds = []
+        for b in (sig.minimum, sig.maximum):
+            bounds.append(None if b is None else (float(b) - offset) / scale)
+        if bounds[0] is not None and bounds[1] is not None and bounds[0] > bounds[1]:
+            bounds.reverse()
+        if bounds[0] is not None:
+            lo = max(lo_full, math.ceil(bounds[0] - 1e-9))
+        if bounds[1] is not None:
+            hi = min(hi_full, math.floor(bounds[1] + 1e-9))
+        if lo > hi:  # inconsistent DBC range: fall back to the bit range
+            lo, hi = lo_full, hi_full
+    return SignalSpec(name, start, length, bool(sig.is_signed), big, bool(sig.is_float),
+                      scale, offset, lo, hi)
+
+
+def _float_code(x: float) -> str:
+    return repr(float(x))
+
+
+class MessageCodec:
+    """Precompiled decoder (and encoder) of selected signals of one DBC message.
+
+    Parameters
+    ----------
+    message : cantools Message
+    signals : sequence of str, optional
+        Signals to handle, in this order (default: every non-multiplexed signal).
+
+    Attributes
+    ----------
+    names : tuple of str
+        Signal order of :meth:`decode` / :meth:`unpack_raw` results.
+    specs : tuple of SignalSpec
+    frame_id, length, name, is_extended, e2e
+        Message properties.
+    fast : bool
+        ``True`` if decoding uses one ``struct`` unpack.
+    """
+
+    def __init__(self, message: Message, signals: Sequence[str] | None = None) -> None:
+        self.message = message
+        self.name: str = message.name
+        self.frame_id: int = message.frame_id
+        self.length: int = message.length
+        self.is_extended: bool = message.is_extended_frame
+        self.e2e: bool = is_e2e(message)
+        if signals is None:
+            signals = [s.name for s in message.signals if not s.multiplexer_ids]
+        self.names: tuple[str, ...] = tuple(signals)
+        self.specs: tuple[SignalSpec, ...] = tuple(signal_spec(message, n) for n in self.names)
+        self.fast = False
+        self.unpack_raw: Callable[[bytes], tuple] = self._compile_unpack(scaled=False)
+        self.decode: Callable[[bytes], tuple] = self._compile_unpack(scaled=True)
+        self._pack = self._compile_pack()
+
+    # ---- decoding --------------------------------------------------------------------
+    def _compile_unpack(self, scaled: bool) -> Callable[[bytes], tuple]:
+        specs = self.specs
+        aligned = all(not s.big_endian and s.start % 8 == 0 and s.length in (8, 16, 32, 64)
+                      and (not s.is_float or s.length in (32, 64)) for s in specs)
+        ns: dict[str, object] = {"_fb": int.from_bytes, "_unpack": struct.unpack_from}
+        if aligned and specs:
+            order = sorted(range(len(specs)), key=lambda i: specs[i].start)
+            fmt = "<"
+            pos = 0
+            codes = {8: "b", 16: "h", 32: "i", 64: "q"}
+            for i in order:
+                s = specs[i]
+                byte = s.start // 8
+                if byte < pos:  # overlapping (multiplexed) signals: no struct path
+                    aligned = False
+                    break
+                if byte > pos:
+                    fmt += f"{byte - pos}x"
+                if s.is_float:
+                    fmt += "f" if s.length == 32 else "d"
+                else:
+                    c = codes[s.length]
+                    fmt += c if s.signed else c.upper()
+                pos = byte + s.length // 8
+        if aligned and specs:
+            st = struct.Struct(fmt)
+            ns["_st"] = st.unpack_from
+            inv = [0] * len(specs)
+            for k, i in enumerate(order):
+                inv[i] = k
+            lines = ["def _dec(data):", "    v = _st(data)"]
+            terms = []
+            for i, s in enumerate(specs):
+                term = f"v[{inv[i]}]"
+                if scaled and not s.is_float:
+                    term = self._scale_term(term, s)
+                terms.append(term)
+            lines.append(f"    return ({', '.join(terms)}{',' if len(terms) == 1 else ''})")
+            self.fast = True
+        else:
+            lines = ["def _dec(data):"]
+            if any(not s.big_endian and not s.is_float for s in specs):
+                lines.append("    vl = _fb(data, 'little')")
+            if any(s.big_endian and not s.is_float for s in specs):
+                lines.append("    vb = _fb(data, 'big')")
+            terms = []
+            for i, s in enumerate(specs):
+                if s.is_float:
+                    if s.start % 8 or s.big_endian:
+                        ns[f"_cd{i}"] = self.message
+                        lines.append(f"    f{i} = _cd{i}.decode(bytes(data), decode_choices=False, "
+                                     f"scaling=False)[{s.name!r}]")
+                    else:
+                        lines.append(f"    f{i} = _unpack('<{'f' if s.length == 32 else 'd'}', "
+                                     f"data, {s.start // 8})[0]")
+                    terms.append(f"f{i}")
+                    continue
+                src = "vb" if s.big_endian else "vl"
+                mask = (1 << s.length) - 1
+                lines.append(f"    r{i} = ({src} >> {s.start}) & {mask}")
+                if s.signed:
+                    lines.append(f"    r{i} -= (r{i} & {1 << (s.length - 1)}) << 1")
+                terms.append(self._scale_term(f"r{i}", s) if scaled else f"r{i}")
+            lines.append(f"    return ({', '.join(terms)}{',' if len(terms) == 1 else ''})")
+        exec("\n".join(lines), ns)  # noqa: S102 - generated from the DBC layout only
+        return ns["_dec"]  # type: ignore[return-value]
+
+    @staticmethod
+    def _scale_term(term: str, s: SignalSpec) -> str:
+        if s.scale == 1.0 and s.offset == 0.0:
+            return term
+        if s.offset == 0.0:
+            return f"{term} * {_float_code(s.scale)}"
+        return f"{term} * {_float_code(s.scale)} + {_float_code(s.offset)}"
+
+    # ---- encoding --------------------------------------------------------------------
+    def _compile_pack(self) -> Callable[..., bytearray] | None:
+        if any(s.big_endian or s.is_float for s in self.specs):
+            return None
+        args = ", ".join(f"r{i}" for i in range(len(self.specs)))
+        terms = " | ".join(f"((r{i} & {(1 << s.length) - 1}) << {s.start})"
+                           for i, s in enumerate(self.specs)) or "0"
+        code = (f"def _pack({args}):\n"
+                f"    return bytearray(({terms}).to_bytes({self.length}, 'little'))\n")
+        ns: dict[str, object] = {}
+        exec(code, ns)  # noqa: S102
+        return ns["_pack"]  # type: ignore[return-value]
+
+    def pack_raw(self, raw: Sequence[int]) -> bytearray:
+        """Payload with the raw values ``raw`` (in :attr:`names` order); other bits zero."""
+        if self._pack is not None:
+            return self._pack(*raw)
+        data = {s.name: r for s, r in zip(self.specs, raw)}
+        for sig in self.message.signals:
+            data.setdefault(sig.name, 0)
+        return bytearray(self.message.encode(data, scaling=False, strict=False))
+
+    def to_raw(self, index: int, value: float) -> tuple[int, int]:
+        """Quantize a physical value for signal ``index``.
+
+        Returns
+        -------
+        raw : int
+            Rounded raw value, clamped to the DBC range (0 for NaN).
+        status : int
+            0 valid, 1 missing (NaN), 2 saturated (clamped).
+        """
+        s = self.specs[index]
+        if value != value:  # NaN
+            return 0, 1
+        x = (value - s.offset) / s.scale
+        if x != x or x in (math.inf, -math.inf):
+            return 0, 1
+        raw = int(math.floor(x + 0.5))
+        if raw < s.raw_min:
+            return s.raw_min, 2
+        if raw > s.raw_max:
+            return s.raw_max, 2
+        return raw, 0
+
+
+# ---- the suspid sensor set ---------------------------------------------------------------
+@dataclass
+class _Slot:
+    """One channel carried by a message of the sensor set."""
+
+    channel: str
+    index: int          # position in the message codec
+    valid_index: int    # position of the <Name>Valid bit, -1 if none
+
+
+@dataclass
+class _MessagePlan:
+    codec: MessageCodec
+    slots: list[_Slot] = field(default_factory=list)
+    saturated_index: int = -1
+
+
+class SensorEncoder:
+    """Encode samples of model channels into the sensor frames of a suspid DBC.
+
+    Parameters
+    ----------
+    db : cantools Database
+        A DBC with suspid's conventions (``SuspidChannel`` attributes, ``SN_Sync``).
+    model_name : str
+        ``quarter1``, ``quarter2`` or ``half4``; selects the message set.
+    channels : iterable of str
+        Channels (and road columns) that will be given; messages carrying none of them
+        are not sent. Channels of the model that the DBC does not carry raise.
+
+    Attributes
+    ----------
+    plans : list
+        The sensor messages sent each sample, in transmission order (after ``SN_Sync``).
+    saturated : dict
+        ``channel -> number of samples clamped`` so far.
+    """
+
+    def __init__(self, db: Database, model_name: str, channels: Iterable[str]) -> None:
+        self.db = db
+        self.model_name = model_name
+        wanted = list(dict.fromkeys(channels))
+        mapping = channel_signals(db, model_name)
+        if not mapping:
+            raise InputError(f"{getattr(db, 'suspid_path', 'DBC')}: no signal has a SuspidChannel "
+                             f"attribute for model {model_name}; expected suspid's suspension.dbc")
+        by_channel = {ch: (m, s) for ch, m, s in mapping}
+        missing = [c for c in wanted if c not in by_channel]
+        if missing:
+            raise UsageError(f"the DBC carries no signal for channel(s) {', '.join(missing)} of "
+                             f"model {model_name}; it carries {', '.join(by_channel)}")
+        per_msg: dict[str, list[tuple[str, str]]] = {}
+        for ch in wanted:
+            m, s = by_channel[ch]
+            per_msg.setdefault(m, []).append((ch, s))
+        self.plans: list[_MessagePlan] = []
+        for msg in sorted((db.get_message_by_name(n) for n in per_msg), key=lambda m: m.frame_id):
+            pairs = per_msg[msg.name]
+            sig_names = [s for _, s in pairs]
+            extra = []
+            for s in sig_names:
+                v = f"{s}Valid"
+                if any(x.name == v for x in msg.signals):
+                    extra.append(v)
+            has_sat = any(x.name == "Saturated" for x in msg.signals)
+            names = sig_names + extra + (["Saturated"] if has_sat else [])
+            codec = MessageCodec(msg, names)
+            slots = []
+            for k, (ch, s) in enumerate(pairs):
+                v = f"{s}Valid"
+                slots.append(_Slot(ch, k, names.index(v) if v in names else -1))
+            self.plans.append(_MessagePlan(codec, slots, names.index("Saturated") if has_sat else -1))
+        self.sync = MessageCodec(find_message(db, SYNC_MESSAGE), ["Tick", "PeriodUs"])
+        self.saturated: dict[str, int] = {}
+
+    @property
+    def message_names(self) -> list[str]:
+        """Names of the frames sent per sample (sync first)."""
+        return [self.sync.name] + [p.codec.name for p in self.plans]
+
+    def sync_frame(self, tick: int, period_s: float) -> tuple[int, bytearray]:
+        """``(frame_id, payload)`` of the ``SN_Sync`` frame of sample ``tick``."""
+        period_us = min(65535, max(1, int(round(period_s * 1e6))))
+        data = self.sync.pack_raw((tick & 0xFFFFFFFF, period_us))
+        e2e_protect(data, self.sync.frame_id, tick % COUNTER_MODULUS)
+        return self.sync.frame_id, data
+
+    def sample_frames(self, tick: int, values: Mapping[str, float]
+                      ) -> list[tuple[int, bytearray]]:
+        """Sensor frames of one sample (without the sync frame).
+
+        Parameters
+        ----------
+        tick : int
+            Sample tick; the E2E counter of every frame is ``tick mod 15``.
+        values : mapping
+            ``channel -> value`` (SI); absent or NaN channels are sent with ``Valid = 0``.
+
+        Returns
+        -------
+        list of (frame_id, payload)
+        """
+        counter = tick % COUNTER_MODULUS
+        out = []
+        for plan in self.plans:
+            codec = plan.codec
+            raw = [0] * len(codec.specs)
+            sat = 0
+            for slot in plan.slots:
+                v = values.get(slot.channel, math.nan)
+                r, status = codec.to_raw(slot.index, float(v))
+                raw[slot.index] = r
+                if slot.valid_index >= 0:
+                    raw[slot.valid_index] = 1 if status == 0 else 0
+                if status == 2:
+                    sat = 1
+                    self.saturated[slot.channel] = self.saturated.get(slot.channel, 0) + 1
+            if plan.saturated_index >= 0:
+                raw[plan.saturated_index] = sat
+            data = codec.pack_raw(raw)
+            if codec.e2e:
+                e2e_protect(data, codec.frame_id, counter)
+            out.append((codec.frame_id, data))
+        return out
+
+
+def make_message(frame_id: int, data: bytes | bytearray, timestamp: float,
+                 is_extended: bool = False, channel: str | int | None = None) -> can.Message:
+    """A python-can data frame (``check=False``: our own payloads are well formed)."""
+    return can.Message(timestamp=timestamp, arbitration_id=frame_id, is_extended_id=is_extended,
+                       data=data, channel=channel, check=False)
+
+
+# ---- status and alert ----------------------------------------------------------------------
+#: SN_Status.State values
+STATE_INIT, STATE_RUNNING, STATE_DEGRADED, STATE_BUSOFF_RECOVERED, STATE_STOPPING = range(5)
+#: SN_Status.FaultFlags bits
+FAULT_BITS = {"loss": 0, "burst": 1, "stuck": 2, "bitflip": 3, "late": 4, "busoff": 5,
+              "saturation": 6}
+#: SUSPID_Alert parameter ids (the DBC's VAL_ table) and kinds
+PARAM_IDS = {n: i + 1 for i, n in enumerate(["m", "c", "k", "m1", "c1", "k1", "m2", "c2", "k2",
+                                             "I", "k3", "k4", "a1", "a2"])}
+PARAM_KINDS = {"mass": 0, "inertia": 1, "damping": 2, "stiffness": 3, "length": 4}
+_KIND_PREFIX = {0: "Mass", 1: "Inertia", 2: "Damping", 3: "Stiffness", 4: "Length"}
+MODEL_IDS = {"quarter1": 0, "quarter2": 1, "half4": 2}
+SEVERITIES = {"info": 0, "warning": 1, "critical": 2}
+
+
+def encode_status(db: Database, counter: int, state: int, sample_rate: float, fault_flags: int,
+                  busoff_count: int, sensor_set: int) -> tuple[int, bytearray]:
+    """``(frame_id, payload)`` of an ``SN_Status`` frame (E2E protected)."""
+    codec = MessageCodec(find_message(db, STATUS_MESSAGE),
+                         ["State", "SampleRate", "FaultFlags", "BusOffCount", "SensorSet"])
+    data = codec.pack_raw((state, int(round(sample_rate)) & 0xFFFF, fault_flags & 0xFFFF,
+                           min(255, busoff_count), sensor_set))
+    e2e_protect(data, codec.frame_id, counter)
+    return codec.frame_id, data
+
+
+def _param_kind(model_name: str, parameter: str) -> int:
+    from suspid.models import get_model
+
+    kind = get_model(model_name).spec(parameter).kind
+    return PARAM_KINDS[kind]
+
+
+def encode_alert(db: Database, model_name: str, parameter: str, value: float, nominal: float,
+                 severity: str = "warning", counter: int = 0) -> can.Message:
+    """The ``SUSPID_Alert`` frame an estimator sends for a parameter drop.
+
+    Parameters
+    ----------
+    db : cantools Database
+        suspid's DBC.
+    model_name : str
+    parameter : str
+        Parameter name (``c1``, ``k1``, ...).
+    value, nominal : float
+        Identified and nominal value (SI); clamped to the DBC range of the kind.
+    severity : {"info", "warning", "critical"}
+    counter : int
+        E2E alive counter of the alert (the sender increments it per alert).
+
+    Returns
+    -------
+    can.Message
+    """
+    if parameter not in PARAM_IDS:
+        raise UsageError(f"alert parameter {parameter!r} unknown; expected one of {', '.join(PARAM_IDS)}")
+    if severity not in SEVERITIES:
+        raise UsageError(f"alert severity {severity!r} unknown; expected one of {', '.join(SEVERITIES)}")
+    msg = find_message(db, ALERT_MESSAGE)
+    kind = _param_kind(model_name, parameter)
+    prefix = _KIND_PREFIX[kind]
+    sig_v = msg.get_signal_by_name(f"{prefix}Value")
+    lo, hi = float(sig_v.minimum), float(sig_v.maximum)
+    data = {"CRC": 0, "Counter": 0, "Severity": SEVERITIES[severity],
+            "Model": MODEL_IDS[model_name], "ParamId": PARAM_IDS[parameter], "ParamKind": kind,
+            f"{prefix}Value": min(hi, max(lo, float(value))),
+            f"{prefix}Nominal": min(hi, max(lo, float(nominal)))}
+    payload = bytearray(msg.encode(data, strict=False))
+    e2e_protect(payload, msg.frame_id, counter)
+    return make_message(msg.frame_id, payload, 0.0)
+
+
+def decode_alert(db: Database, data: bytes | bytearray) -> dict[str, object]:
+    """Decode an ``SUSPID_Alert`` payload to ``{model, parameter, value, nominal, severity}``."""
+    msg = find_message(db, ALERT_MESSAGE)
+    d = msg.decode(bytes(data), decode_choices=False)
+    kind = int(d["ParamKind"])
+    prefix = _KIND_PREFIX.get(kind)
+    if prefix is None:
+        raise InputError(f"alert frame: ParamKind {kind} unknown; expected 0..4")
+    names = {v: k for k, v in PARAM_IDS.items()}
+    models = {v: k for k, v in MODEL_IDS.items()}
+    sev = {v: k for k, v in SEVERITIES.items()}
+    return {"model": models.get(int(d["Model"]), str(d["Model"])),
+            "parameter": names.get(int(d["ParamId"]), str(d["ParamId"])),
+            "value": float(d[f"{prefix}Value"]), "nominal": float(d[f"{prefix}Nominal"]),
+            "severity": sev.get(int(d["Severity"]), str(d["Severity"]))}

@@ -1,0 +1,169 @@
+"""Loading DBC files with one-line errors, and reading suspid's own DBC conventions.
+
+Conventions of ``dbc/suspension.dbc`` (see ``docs/can.md``):
+
+* message attribute ``E2EProfile = "P01"``: byte 0 CRC-8 J1850, byte 1 low nibble alive
+  counter (:mod:`suspid.can.crc`);
+* signal attribute ``SuspidChannel = "quarter1:x quarter2:x1"``: the model channel each
+  signal carries, per model;
+* a signal ``<Name>Valid`` in the same message is the validity bit of signal ``<Name>``;
+* message ``SN_Sync`` carries the sample tick; ``SN_Status`` the node status;
+  ``SUSPID_Alert`` the estimator's maintenance alert.
+"""
+from __future__ import annotations
+
+import logging
+from importlib import resources
+from pathlib import Path
+
+import cantools
+from cantools.database.can import Database, Message
+
+from suspid.errors import InputError
+
+log = logging.getLogger(__name__)
+
+#: names of the special messages of suspension.dbc
+SYNC_MESSAGE = "SN_Sync"
+STATUS_MESSAGE = "SN_Status"
+ALERT_MESSAGE = "SUSPID_Alert"
+#: DBC attribute names used by suspid
+ATTR_E2E = "E2EProfile"
+ATTR_CHANNEL = "SuspidChannel"
+
+
+def default_dbc_path() -> Path:
+    """Path of the bundled ``suspension.dbc`` (a copy of the repository's ``dbc/suspension.dbc``).
+
+    The package copy (``suspid/data/suspension.dbc``) is used so an installed ``suspid``
+    finds it; the repository's ``dbc/`` file is preferred when running from a checkout and
+    both exist (they are kept identical; a test checks it).
+    """
+    repo = Path(__file__).resolve().parents[2] / "dbc" / "suspension.dbc"
+    if repo.is_file():
+        return repo
+    return Path(str(resources.files("suspid") / "data" / "suspension.dbc"))
+
+
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
+def load_dbc(path: str | Path | None = None, strict: bool = True) -> Database:
+    """Load a DBC file with cantools.
+
+    Parameters
+    ----------
+    path : str or Path, optional
+        DBC file; default :func:`default_dbc_path`.
+    strict : bool, optional
+        cantools strict mode (overlapping signals, signals outside the frame are errors).
+        A foreign DBC that fails only the strict checks is loaded non-strict with a
+        logged warning; suspid's own DBC must pass strict.
+
+    Returns
+    -------
+    cantools.database.can.Database
+        The database; ``db.suspid_path`` holds the path it came from.
+
+    Raises
+    ------
+    InputError
+        Missing or unreadable file, or a parse error (the message names file, line and column).
+    """
+    p = Path(path) if path is not None else default_dbc_path()
+    if not p.is_file():
+        raise InputError(f"{p}: no such DBC file")
+    try:
+        text = p.read_text(encoding="utf-8", errors="replace")
+    except OSError as exc:
+        raise InputError(f"{p}: cannot read DBC: {exc.strerror}") from None
+    db = Database(strict=strict)
+    try:
+        db.add_dbc_string(text)
+    except Exception as exc:  # cantools raises several types (ParseError, Error, ...)
+        msg = _one_line(str(exc))
+        syntax = "Invalid syntax" in msg
+        if strict and not syntax:
+            db = Database(strict=False)
+            try:
+                db.add_dbc_string(text)
+            except Exception:
+                raise InputError(f"{p}: cannot load DBC: {msg}") from None
+            log.warning("%s: loaded without cantools strict checks (%s)", p, msg)
+        else:
+            raise InputError(f"{p}: cannot load DBC: {msg}") from None
+    if not db.messages:
+        raise InputError(f"{p}: DBC defines no message (BO_), expected at least one")
+    db.suspid_path = str(p)  # type: ignore[attr-defined]
+    return db
+
+
+def message_attribute(message: Message, name: str, default: object = None) -> object:
+    """Value of a DBC message attribute (``default`` if unset)."""
+    dbc = message.dbc
+    if dbc is None or name not in dbc.attributes:
+        return default
+    return dbc.attributes[name].value
+
+
+def signal_attribute(signal: object, name: str, default: object = None) -> object:
+    """Value of a DBC signal attribute (``default`` if unset)."""
+    dbc = getattr(signal, "dbc", None)
+    if dbc is None or name not in dbc.attributes:
+        return default
+    return dbc.attributes[name].value
+
+
+def is_e2e(message: Message) -> bool:
+    """``True`` if the message is E2E protected (``E2EProfile = "P01"``)."""
+    return message_attribute(message, ATTR_E2E, "") == "P01"
+
+
+def find_message(db: Database, ref: str, where: str = "") -> Message:
+    """Message by name, or by frame ID (decimal or ``0x`` hex).
+
+    Raises
+    ------
+    InputError
+        Naming ``where`` (e.g. the map entry) and a few of the known messages.
+    """
+    try:
+        return db.get_message_by_name(ref)
+    except KeyError:
+        pass
+    try:
+        fid = int(ref, 0)
+    except ValueError:
+        fid = None
+    if fid is not None:
+        try:
+            return db.get_message_by_frame_id(fid)
+        except KeyError:
+            pass
+    names = ", ".join(m.name for m in db.messages[:12])
+    more = ", ..." if len(db.messages) > 12 else ""
+    src = getattr(db, "suspid_path", "DBC")
+    raise InputError(f"{where}{': ' if where else ''}message {ref!r} is not in {src}; "
+                     f"expected one of {names}{more}")
+
+
+def channel_signals(db: Database, model_name: str) -> list[tuple[str, str, str]]:
+    """``(channel, message, signal)`` triples that the ``SuspidChannel`` attributes give for a model.
+
+    Empty for a DBC without suspid attributes (then a signal map is needed).
+    """
+    out: list[tuple[str, str, str]] = []
+    for msg in db.messages:
+        for sig in msg.signals:
+            attr = signal_attribute(sig, ATTR_CHANNEL, "") or ""
+            for pair in str(attr).split():
+                model, _, channel = pair.partition(":")
+                if model == model_name and channel:
+                    out.append((channel, msg.name, sig.name))
+    return out
+
+
+def has_suspid_channels(db: Database) -> bool:
+    """``True`` if any signal carries a ``SuspidChannel`` attribute (i.e. suspid's own DBC)."""
+    return any(signal_attribute(s, ATTR_CHANNEL, "") for m in db.messages for s in m.signals)

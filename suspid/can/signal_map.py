@@ -1,0 +1,261 @@
+"""Map signals of a user's DBC onto model channels (the "real logger hookup").
+
+One mapping reads like an assignment, channel on the left::
+
+    x1_ddot = gnss_imu.AccelerationX - 9.81        # remove gravity
+    x_ddot  = -1 * gnss_imu.AccelerationX + 9.81   # sensor mounted upside down
+    x1_ddot = gnss_imu.AccelerationX - mean        # remove the record's mean
+    x2      = 0x123.Height * 0.001                 # message by frame ID, mm -> m
+
+Grammar: ``CHANNEL = [SCALE *] [-] MESSAGE.SIGNAL [* SCALE] [(+|-) OFFSET]`` where
+``MESSAGE`` is a message name or frame ID (decimal or ``0x`` hex), ``SCALE`` and
+``OFFSET`` are numbers and ``OFFSET`` may be ``mean`` (subtract the mean of the mapped
+signal over the data handed to the identifier: the whole log, or the current window).
+The result is ``channel = scale * signal + offset`` in the channel's SI unit.
+
+On the command line: ``--map 'x1_ddot=gnss_imu.AccelerationX-9.81'`` (repeatable). In a
+config file (``.toml`` or ``.json``)::
+
+    dbc = "canmod-gps.dbc"          # optional, relative to the config file
+    [map]
+    x1_ddot = "gnss_imu.AccelerationX - 9.81"
+    # or as a table:
+    # x1_ddot = { message = "gnss_imu", signal = "AccelerationX", scale = 1.0, offset = -9.81 }
+"""
+from __future__ import annotations
+
+import json
+import re
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable, Sequence, Union
+
+from cantools.database.can import Database
+
+from suspid.can.dbc import channel_signals, find_message
+from suspid.errors import InputError, UsageError
+
+_NUM = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
+_RE = re.compile(
+    rf"""^\s*(?P<channel>[A-Za-z_]\w*)\s*=\s*
+    (?:(?P<pre>{_NUM})\s*\*\s*)?
+    (?P<neg>-\s*)?
+    (?P<message>[A-Za-z_]\w*|0[xX][0-9A-Fa-f]+|\d+)\.(?P<signal>[A-Za-z_]\w*)\s*
+    (?:\*\s*(?P<post>{_NUM})\s*)?
+    (?:(?P<sign>[-+])\s*(?:(?P<off>(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)|(?P<mean>mean)|\(\s*(?P<poff>{_NUM})\s*\))\s*)?
+    $""",
+    re.VERBOSE,
+)
+
+
+@dataclass(frozen=True)
+class SignalMapping:
+    """``channel = scale * MESSAGE.SIGNAL + offset`` (offset ``"mean"`` removes the mean).
+
+    Attributes
+    ----------
+    channel : str
+        Model channel (``x1_ddot``) or road column (``r``).
+    message, signal : str
+        DBC message (name or frame ID) and signal name.
+    scale : float
+    offset : float or "mean"
+    """
+
+    channel: str
+    message: str
+    signal: str
+    scale: float = 1.0
+    offset: Union[float, str] = 0.0
+
+    @property
+    def remove_mean(self) -> bool:
+        """``True`` if the offset is the data's mean."""
+        return self.offset == "mean"
+
+    def __str__(self) -> str:
+        s = f"{self.channel}="
+        if self.scale != 1.0:
+            s += f"{self.scale:g}*"
+        s += f"{self.message}.{self.signal}"
+        if self.remove_mean:
+            s += "-mean"
+        elif self.offset:
+            s += f"{float(self.offset):+g}"
+        return s
+
+
+def parse_mapping(text: str, where: str = "--map") -> SignalMapping:
+    """Parse one ``CHANNEL=MESSAGE.SIGNAL...`` mapping.
+
+    Raises
+    ------
+    UsageError
+        Naming ``where`` (the option or file) and showing the expected form.
+    """
+    m = _RE.match(text)
+    if not m:
+        raise UsageError(f"{where}: cannot parse signal map {text!r}; expected "
+                         "CHANNEL=[SCALE*]MESSAGE.SIGNAL[*SCALE][+-OFFSET|-mean], "
+                         "e.g. x1_ddot=gnss_imu.AccelerationX-9.81")
+    scale = 1.0
+    if m["pre"]:
+        scale *= float(m["pre"])
+    if m["post"]:
+        scale *= float(m["post"])
+    if m["neg"]:
+        scale = -scale
+    offset: Union[float, str] = 0.0
+    if m["mean"]:
+        if m["sign"] != "-":
+            raise UsageError(f"{where}: {text!r}: the mean can only be subtracted ('-mean')")
+        offset = "mean"
+    elif m["off"] is not None:
+        offset = float(m["off"]) * (-1.0 if m["sign"] == "-" else 1.0)
+    elif m["poff"] is not None:
+        offset = float(m["poff"]) * (-1.0 if m["sign"] == "-" else 1.0)
+    return SignalMapping(m["channel"], m["message"], m["signal"], scale, offset)
+
+
+@dataclass
+class SignalMap:
+    """An ordered set of :class:`SignalMapping` plus an optional DBC named by a config file.
+
+    Attributes
+    ----------
+    mappings : list of SignalMapping
+    dbc : Path or None
+        DBC given in the config file (resolved relative to it).
+    source : str
+        Where the map came from (for messages).
+    """
+
+    mappings: list[SignalMapping]
+    dbc: Path | None = None
+    source: str = "--map"
+
+    @classmethod
+    def from_strings(cls, specs: Iterable[str], where: str = "--map") -> "SignalMap":
+        """Build from ``CHANNEL=MESSAGE.SIGNAL...`` strings (command line)."""
+        return cls([parse_mapping(s, where) for s in specs], None, where)
+
+    @classmethod
+    def from_file(cls, path: str | Path) -> "SignalMap":
+        """Read a ``.toml`` or ``.json`` signal-map file (see the module docstring)."""
+        p = Path(path)
+        if not p.is_file():
+            raise InputError(f"{p}: no such signal-map file")
+        try:
+            if p.suffix.lower() == ".toml":
+                data = tomllib.loads(p.read_text(encoding="utf-8"))
+            elif p.suffix.lower() == ".json":
+                data = json.loads(p.read_text(encoding="utf-8"))
+            else:
+                raise InputError(f"{p}: unknown signal-map format {p.suffix!r}; expected .toml or .json")
+        except tomllib.TOMLDecodeError as exc:
+            raise InputError(f"{p}: invalid TOML: {exc}") from None
+        except json.JSONDecodeError as exc:
+            raise InputError(f"{p}:{exc.lineno}: invalid JSON: {exc.msg}") from None
+        except (OSError, UnicodeDecodeError) as exc:
+            raise InputError(f"{p}: cannot read signal map: {exc}") from None
+        if not isinstance(data, dict) or not isinstance(data.get("map"), dict) or not data["map"]:
+            raise InputError(f"{p}: expected a 'map' table of channel = \"MESSAGE.SIGNAL...\" entries")
+        mappings = []
+        for channel, spec in data["map"].items():
+            where = f"{p}: map.{channel}"
+            if isinstance(spec, str):
+                mappings.append(parse_mapping(f"{channel}={spec}", where))
+            elif isinstance(spec, dict):
+                unknown = set(spec) - {"message", "signal", "scale", "offset"}
+                if unknown or "message" not in spec or "signal" not in spec:
+                    raise InputError(f"{where}: expected keys message, signal[, scale, offset], got "
+                                     f"{', '.join(sorted(spec))}")
+                try:
+                    scale = float(spec.get("scale", 1.0))
+                    off = spec.get("offset", 0.0)
+                    offset: Union[float, str] = "mean" if off == "mean" else float(off)
+                except (TypeError, ValueError):
+                    raise InputError(f"{where}: scale and offset must be numbers (offset may be "
+                                     f"\"mean\"), got {spec.get('scale')!r}, {spec.get('offset')!r}") from None
+                mappings.append(SignalMapping(channel, str(spec["message"]), str(spec["signal"]),
+                                              scale, offset))
+            else:
+                raise InputError(f"{where}: expected a string or a table, got {type(spec).__name__}")
+        dbc = data.get("dbc")
+        dbc_path = (p.parent / dbc) if isinstance(dbc, str) and dbc else None
+        return cls(mappings, dbc_path, str(p))
+
+    @classmethod
+    def from_dbc(cls, db: Database, model_name: str) -> "SignalMap":
+        """The mapping that suspid's DBC declares for a model (``SuspidChannel`` attributes)."""
+        return cls([SignalMapping(ch, m, s) for ch, m, s in channel_signals(db, model_name)],
+                   None, f"{getattr(db, 'suspid_path', 'DBC')} (SuspidChannel attributes)")
+
+    def channels(self) -> list[str]:
+        """Mapped channels in order."""
+        return [m.channel for m in self.mappings]
+
+    def validate(self, db: Database, allowed_channels: Sequence[str]) -> None:
+        """Check every mapping against the DBC and the model's channels.
+
+        Raises
+        ------
+        InputError
+            Unknown message or signal (naming the map entry and the DBC), a channel that
+            the model does not have, or a channel mapped twice.
+        """
+        seen: set[str] = set()
+        for m in self.mappings:
+            where = f"{self.source}: {m}"
+            if m.channel not in allowed_channels:
+                raise UsageError(f"{where}: channel {m.channel!r} is not a channel of the model; "
+                                 f"expected one of {', '.join(allowed_channels)}")
+            if m.channel in seen:
+                raise UsageError(f"{where}: channel {m.channel!r} is mapped twice")
+            seen.add(m.channel)
+            msg = find_message(db, m.message, where)
+            if not any(s.name == m.signal for s in msg.signals):
+                names = ", ".join(s.name for s in msg.signals)
+                raise InputError(f"{where}: message {msg.name} has no signal {m.signal!r}; "
+                                 f"expected one of {names}")
+            if m.scale == 0:
+                raise UsageError(f"{where}: scale must not be 0")
+
+
+SignalMapLike = Union[SignalMap, str, Path, Sequence[str], None]
+
+
+def as_signal_map(spec: SignalMapLike) -> SignalMap | None:
+    """Normalise what callers pass: a SignalMap, a config path, or ``--map`` strings."""
+    if spec is None or isinstance(spec, SignalMap):
+        return spec
+    if isinstance(spec, Path):
+        return SignalMap.from_file(spec)
+    if isinstance(spec, str):
+        if "=" in spec:
+            return SignalMap.from_strings([spec])
+        return SignalMap.from_file(spec)
+    specs = list(spec)
+    if not specs:
+        return None
+    return SignalMap.from_strings(specs)
+
+
+def merge_maps(maps: Iterable[SignalMap | None]) -> SignalMap | None:
+    """Concatenate maps (e.g. a ``--map-file`` and ``--map`` options); later entries win."""
+    result: dict[str, SignalMapping] = {}
+    dbc: Path | None = None
+    sources = []
+    for m in maps:
+        if m is None:
+            continue
+        sources.append(m.source)
+        dbc = m.dbc or dbc
+        for e in m.mappings:
+            result.pop(e.channel, None)
+            result[e.channel] = e
+    if not sources:
+        return None
+    return SignalMap(list(result.values()), dbc, " + ".join(sources))
+

@@ -1,0 +1,91 @@
+"""``suspid`` command line: a thin dispatcher over one module per subcommand.
+
+Each subcommand lives in ``suspid/cli/<name>.py`` and provides
+
+``add_parser(subparsers) -> argparse.ArgumentParser``
+    register the subcommand and its options;
+``run(args) -> int``
+    do the work and return the exit status.
+
+Errors derived from :class:`suspid.errors.SuspidError` (and argparse usage errors) become a
+single ``error: ...`` line on stderr with exit status 2; ``--debug`` shows the traceback.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from typing import Sequence
+
+from suspid import __version__
+from suspid.errors import SuspidError
+
+#: Subcommand modules, in the order ``suspid --help`` lists them.
+SUBCOMMANDS: tuple[str, ...] = (
+    "simulate",
+    "identify",
+    "diagnose",
+    "encode",
+    "node",
+    "monitor",
+    "compare",
+    "doe",
+)
+
+
+class _Parser(argparse.ArgumentParser):
+    """ArgumentParser whose usage errors are one ``error:`` line and exit status 2."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        sys.stderr.write(f"error: {self.prog}: {message}\n")
+        raise SystemExit(2)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Build the top-level parser with every available subcommand."""
+    parser = _Parser(
+        prog="suspid",
+        description="Identify, monitor and diagnose vehicle suspension parameters "
+        "(masses, springs, dampers) from sensor data and CAN logs.",
+    )
+    parser.add_argument("--version", action="version", version=f"suspid {__version__}")
+    parser.add_argument("--debug", action="store_true", help="show Python tracebacks on errors")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    for name in SUBCOMMANDS:
+        try:
+            module = importlib.import_module(f"suspid.cli.{name}")
+        except ModuleNotFoundError as exc:  # a subcommand not built yet
+            if exc.name == f"suspid.cli.{name}":
+                continue
+            raise
+        p = module.add_parser(sub)
+        p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                       help="show Python tracebacks on errors")
+        p.set_defaults(_run=module.run)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``suspid`` console script."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in argv
+    try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        if not getattr(args, "_run", None):
+            parser.print_help()
+            return 2
+        return int(args._run(args) or 0)
+    except SuspidError as exc:
+        if debug:
+            raise
+        sys.stderr.write(f"error: {exc}\n")
+        return 2
+    except KeyboardInterrupt:
+        return 130
+    except BrokenPipeError:
+        return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

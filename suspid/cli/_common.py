@@ -1,0 +1,101 @@
+"""Option parsing shared by several subcommands (model, parameters, input files)."""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+from suspid.errors import InputError, UsageError
+from suspid.models import MODELS, SuspensionModel, get_model
+
+#: suffixes read as CAN logs through python-can (the rest must be a measurement CSV)
+CAN_LOG_SUFFIXES = (".log", ".asc", ".blf", ".trc", ".mf4")
+
+
+def add_model_option(p: argparse.ArgumentParser, required: bool = True) -> None:
+    p.add_argument("--model", required=required, choices=list(MODELS),
+                   help="suspension model: quarter1 (1 DOF, eq. 1), quarter2 (2 DOF, eqs. 2-3), "
+                        "half4 (4 DOF half car, eqs. 4-7)")
+
+
+def add_param_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE",
+                   help="hold a parameter at a known value (SI), e.g. --fix m1=275; repeatable")
+    p.add_argument("--init", action="append", default=[], metavar="NAME=VALUE",
+                   help="starting guess of a free parameter (SI); free parameters without it "
+                        "start from the model's documented defaults; repeatable")
+
+
+def add_input_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--input", required=True, metavar="PATH",
+                   help="measurement CSV, or a CAN log (.log candump -L, .asc, .blf, .trc, .mf4) "
+                        "decoded with --dbc")
+    p.add_argument("--dbc", metavar="PATH", default=None,
+                   help="DBC for CAN-log input (default: the bundled dbc/suspension.dbc)")
+    p.add_argument("--map", action="append", default=[], metavar="MSG.SIGNAL=CHANNEL[*SCALE][+OFFSET]",
+                   help="map a signal of your own DBC onto a model channel (CAN input); repeatable")
+    p.add_argument("--map-file", metavar="PATH", default=None,
+                   help="signal map config file (JSON) for CAN input")
+
+
+def parse_assignments(items: list[str], option: str) -> dict[str, float]:
+    """Parse ``NAME=VALUE`` strings into a dict (UsageError naming the bad item)."""
+    out: dict[str, float] = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        name = name.strip()
+        if not sep or not name:
+            raise UsageError(f"{option} {item!r}: expected NAME=VALUE")
+        try:
+            v = float(value)
+        except ValueError:
+            raise UsageError(f"{option} {item!r}: expected a number after '=', got {value!r}") from None
+        if not math.isfinite(v):
+            raise UsageError(f"{option} {item!r}: expected a finite number, got {value!r}")
+        if name in out:
+            raise UsageError(f"{option} {name} given twice")
+        out[name] = v
+    return out
+
+
+def load_measurement(args: argparse.Namespace, model: SuspensionModel):
+    """Read ``--input`` as a CSV or a CAN log; returns ``(Measurement, frames or None)``."""
+    path = Path(args.input)
+    if path.suffix.lower() in CAN_LOG_SUFFIXES:
+        try:
+            from estimator.decode.log_input import load_log_as_measurement
+        except ModuleNotFoundError as exc:  # pragma: no cover - during bring-up
+            raise UsageError(f"{path}: CAN-log input is not available ({exc})") from None
+        signal_map = None
+        if getattr(args, "map", None) or getattr(args, "map_file", None):
+            from suspid.can.signal_map import SignalMap
+            signal_map = SignalMap.from_args(getattr(args, "map", []), getattr(args, "map_file", None))
+        meas, frames = load_log_as_measurement(path, model, dbc_path=args.dbc, signal_map=signal_map)
+        return meas, frames
+    if path.suffix.lower() not in (".csv", ".txt", ""):
+        raise InputError(f"{path}: unknown input format {path.suffix!r}; expected .csv or a CAN log "
+                         f"({', '.join(CAN_LOG_SUFFIXES)})")
+    from suspid.io.csvio import read_measurement
+    return read_measurement(path, model), None
+
+
+def print_json(obj: Any) -> None:
+    """Print one JSON object on stdout (NaN/inf become null)."""
+    def clean(o: Any) -> Any:
+        if isinstance(o, float):
+            return o if math.isfinite(o) else None
+        if isinstance(o, dict):
+            return {k: clean(v) for k, v in o.items()}
+        if isinstance(o, (list, tuple)):
+            return [clean(v) for v in o]
+        return o
+
+    sys.stdout.write(json.dumps(clean(obj)) + "\n")
+    sys.stdout.flush()
+
+
+def model_from_args(args: argparse.Namespace) -> SuspensionModel:
+    return get_model(args.model)

@@ -1,0 +1,83 @@
+"""``suspid identify``: fit a model's parameters to a measurement by Nelder–Mead."""
+from __future__ import annotations
+
+import argparse
+import sys
+
+import numpy as np
+
+from suspid.cli._common import (add_input_options, add_model_option, add_param_options,
+                                load_measurement, model_from_args, parse_assignments, print_json)
+from suspid.errors import UsageError
+
+
+def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("identify", help="identify suspension parameters from a measurement",
+                       description="Identify masses, springs and dampers from a measurement CSV or "
+                                   "CAN log by Nelder–Mead in log coordinates, with standard errors "
+                                   "and an identifiability verdict.")
+    add_model_option(p)
+    add_input_options(p)
+    add_param_options(p)
+    p.add_argument("--cost", choices=["sse", "frobenius"], default="sse",
+                   help="sse: sum of squared position differences (seed cost 1); frobenius: "
+                        "Frobenius norm of measured-minus-simulated over all measured channels "
+                        "(seed cost 2)")
+    p.add_argument("--x0", default="estimate", metavar="estimate|rest|V1,V2,...",
+                   help="initial state: estimate it (variable projection, default), start at "
+                        "rest, or give [q..., q_dot...] explicitly")
+    p.add_argument("--restarts", type=int, default=6, help="Nelder–Mead restarts (default 6)")
+    p.add_argument("--maxfev", type=int, default=None,
+                   help="evaluation budget over all restarts (default 1000 per free parameter)")
+    p.add_argument("--json", action="store_true", help="print the result as one JSON object")
+    p.add_argument("--plot", metavar="PNG", default=None,
+                   help="write the seed-style comparison (measured vs identified) to this PNG")
+    return p
+
+
+def parse_x0(text: str, n: int):
+    if text in ("estimate", "rest"):
+        return text
+    try:
+        v = np.array([float(s) for s in text.split(",")])
+    except ValueError:
+        raise UsageError(f"--x0 {text!r}: expected 'estimate', 'rest' or {n} comma-separated numbers") from None
+    if v.size != n:
+        raise UsageError(f"--x0: expected {n} values [q..., q_dot...], got {v.size}")
+    return v
+
+
+def run(args: argparse.Namespace) -> int:
+    from estimator.identify import OutputErrorProblem, Parameters, fit
+
+    model = model_from_args(args)
+    fix = parse_assignments(args.fix, "--fix")
+    init = parse_assignments(args.init, "--init")
+    params = Parameters.for_model(model, fix=fix, init=init)
+    if args.restarts < 0:
+        raise UsageError(f"--restarts: expected >= 0, got {args.restarts}")
+    meas, frames = load_measurement(args, model)
+    problem = OutputErrorProblem(model, meas, cost=args.cost, x0=parse_x0(args.x0, model.n_states))
+    result, _ = fit(problem, params, restarts=args.restarts, maxfev=args.maxfev)
+    if frames is not None:
+        result.frames = frames
+    if args.plot:
+        from suspid.plots import plot_comparison
+        plot_comparison(model, meas, result, args.plot)
+    if args.json:
+        print_json(result.to_json())
+    else:
+        w = sys.stdout.write
+        w(f"model {result.model}: cost {args.cost} = {result.cost:.6g}, nfev {result.nfev}, "
+          f"success {result.success}\n")
+        for k, v in result.params.items():
+            se = result.stderr.get(k)
+            tag = "fixed" if k in result.fixed else (f"± {se:.4g}" if se is not None else "")
+            w(f"  {k:>6} = {v:.6g} {model.spec(k).unit} {tag}\n")
+        for c, v in result.rms_residual.items():
+            w(f"  rms residual {c}: {v:.3g}\n")
+        for msg in result.warnings:
+            w(f"warning: {msg}\n")
+    for msg in result.warnings if args.json else []:
+        sys.stderr.write(f"warning: {msg}\n")
+    return 0

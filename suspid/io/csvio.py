@@ -1,0 +1,160 @@
+"""Measurement CSV (see CONTRACT.md): header row, one row per sample, SI units.
+
+``t`` (s) is required and must be strictly increasing; road columns are the model's
+``roads`` (with optional ``_dot``); measured columns are any subset of the model's
+``channels``. Empty cells are missing samples (NaN). Unknown columns are ignored with a
+warning. Every error names the file, the line and the column.
+"""
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterable, Mapping
+
+import numpy as np
+
+from suspid.errors import InputError
+from suspid.models.base import FloatArray, SuspensionModel
+
+
+@dataclass
+class Measurement:
+    """A measurement record on one time base.
+
+    Attributes
+    ----------
+    t : ndarray, shape (N,)
+        Sample times (s), strictly increasing.
+    road : dict
+        Road inputs by name (m) and ``<name>_dot`` (m/s) when given.
+    measured : dict
+        Measured channels (SI), NaN where a sample is missing.
+    warnings : list of str
+        Non-fatal findings (ignored columns, filled gaps, ...).
+    source : str
+        Where the data came from (for messages).
+    """
+
+    t: FloatArray
+    road: dict[str, FloatArray] = field(default_factory=dict)
+    measured: dict[str, FloatArray] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+    source: str = ""
+
+
+def _parse_float(text: str, path: str, line: int, col: str) -> float:
+    s = text.strip()
+    if s == "" or s.lower() in ("nan", "na"):
+        return math.nan
+    try:
+        v = float(s)
+    except ValueError:
+        raise InputError(f"{path}:{line}: column {col!r}: expected a number, got {s[:40]!r}") from None
+    if math.isinf(v):
+        raise InputError(f"{path}:{line}: column {col!r}: expected a finite number, got {s!r}")
+    return v
+
+
+def read_measurement(path: str | Path, model: SuspensionModel) -> Measurement:
+    """Read a measurement CSV for ``model``.
+
+    Raises
+    ------
+    InputError
+        Missing/empty file, no ``t`` column, non-numeric cells, non-increasing ``t``,
+        rows with the wrong number of cells, no measured channel of the model.
+    """
+    p = Path(path)
+    name = str(path)
+    if not p.is_file():
+        raise InputError(f"{name}: no such file")
+    try:
+        fh = p.open(newline="", encoding="utf-8-sig")
+    except OSError as exc:
+        raise InputError(f"{name}: cannot open: {exc.strerror}") from None
+    with fh:
+        reader = csv.reader(fh)
+        try:
+            header = next(reader)
+        except StopIteration:
+            raise InputError(f"{name}: empty file, expected a header row with 't'") from None
+        except (csv.Error, UnicodeDecodeError) as exc:
+            raise InputError(f"{name}:1: not a CSV text file ({exc})") from None
+        header = [h.strip() for h in header]
+        if "t" not in header:
+            raise InputError(f"{name}:1: no 't' column in the header (got {', '.join(header[:8])})")
+        dup = {h for h in header if header.count(h) > 1}
+        if dup:
+            raise InputError(f"{name}:1: duplicate column(s) {', '.join(sorted(dup))}")
+        road_cols = set(model.roads) | {f"{r}_dot" for r in model.roads}
+        known = {"t"} | road_cols | set(model.channels)
+        warnings: list[str] = []
+        unknown = [h for h in header if h not in known]
+        if unknown:
+            warnings.append(f"{name}: ignoring column(s) not used by model {model.name}: "
+                            f"{', '.join(unknown)}")
+        used = [(i, h) for i, h in enumerate(header) if h in known]
+        cols: dict[str, list[float]] = {h: [] for _, h in used}
+        ncol = len(header)
+        line = 1
+        try:
+            for row in reader:
+                line += 1
+                if not row or all(not c.strip() for c in row):
+                    continue
+                if len(row) != ncol:
+                    raise InputError(f"{name}:{line}: expected {ncol} cells, got {len(row)}")
+                for i, h in used:
+                    cols[h].append(_parse_float(row[i], name, line, h))
+        except (csv.Error, UnicodeDecodeError) as exc:
+            raise InputError(f"{name}:{line}: unreadable CSV ({exc})") from None
+    t = np.asarray(cols.pop("t"), dtype=float)
+    if t.size < 2:
+        raise InputError(f"{name}: expected at least 2 data rows, got {t.size}")
+    if np.isnan(t).any():
+        k = int(np.flatnonzero(np.isnan(t))[0])
+        raise InputError(f"{name}: row {k + 1} (line {k + 2}): column 't' is empty, expected a time in s")
+    d = np.diff(t)
+    if (d <= 0).any():
+        k = int(np.flatnonzero(d <= 0)[0])
+        raise InputError(f"{name}:{k + 3}: column 't': expected increasing time, got "
+                         f"{t[k + 1]!r} after {t[k]!r}")
+    road: dict[str, FloatArray] = {}
+    measured: dict[str, FloatArray] = {}
+    for h, vals in cols.items():
+        arr = np.asarray(vals, dtype=float)
+        if h in road_cols:
+            if np.isnan(arr).any():
+                ok = ~np.isnan(arr)
+                if ok.sum() < 2:
+                    raise InputError(f"{name}: road column {h!r} has fewer than 2 values")
+                arr = np.interp(t, t[ok], arr[ok])
+                warnings.append(f"{name}: road column {h!r}: {int((~ok).sum())} missing samples "
+                                "filled by linear interpolation")
+            road[h] = arr
+        else:
+            if np.isnan(arr).all():
+                warnings.append(f"{name}: column {h!r} has no values; not compared")
+                continue
+            measured[h] = arr
+    for r in model.roads:
+        if f"{r}_dot" in road and r not in road:
+            raise InputError(f"{name}:1: road velocity column '{r}_dot' given without '{r}'")
+    if not measured:
+        raise InputError(f"{name}:1: no measured channel for model {model.name}; expected any of "
+                         f"{', '.join(model.channels)}")
+    return Measurement(t=t, road=road, measured=measured, warnings=warnings, source=name)
+
+
+def write_measurement(path: str | Path, t: FloatArray, columns: Mapping[str, FloatArray],
+                      order: Iterable[str] | None = None) -> None:
+    """Write a measurement CSV with ``t`` first, then ``columns`` (SI units, ``%.10g``)."""
+    names = list(order) if order is not None else list(columns)
+    data = np.column_stack([np.asarray(t, dtype=float)] + [np.asarray(columns[n], dtype=float)
+                                                          for n in names])
+    with open(path, "w", newline="", encoding="utf-8") as fh:
+        fh.write(",".join(["t"] + names) + "\n")
+        for row in data:
+            fh.write(",".join("" if math.isnan(v) else f"{v:.10g}" for v in row) + "\n")

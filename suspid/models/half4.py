@@ -1,0 +1,63 @@
+"""4-DOF half car (bicycle model), seed eqs. (4)-(7).
+
+Coordinates ``q = [x, delta, x1, x2]``: body heave (m), body pitch (rad, positive when the
+rear goes up / front down, as the seed's sign convention ``x - a1 delta`` at the front
+implies), front and rear wheel displacements (m). Front suspension (``k1``, ``c1``) acts at
+distance ``a1`` ahead of the centre of mass, rear (``k2``, ``c2``) at ``a2`` behind it;
+the tyres are springs ``k3`` (front) and ``k4`` (rear) on the roads ``r1``, ``r2``.
+
+    m x'' + c1 (x' - x1' - a1 d') + c2 (x' - x2' + a2 d') + k1 (x - x1 - a1 d) + k2 (x - x2 + a2 d) = 0
+    I d'' - a1 c1 (...) + a2 c2 (...) - a1 k1 (...) + a2 k2 (...) = 0
+    m1 x1'' - c1 (x' - x1' - a1 d') + k3 (x1 - r1) - k1 (x - x1 - a1 d) = 0
+    m2 x2'' - c2 (x' - x2' + a2 d') + k4 (x2 - r2) - k2 (x - x2 + a2 d) = 0
+"""
+from __future__ import annotations
+
+from typing import Mapping
+
+import numpy as np
+
+from suspid.models.base import FloatArray, ParamSpec, SuspensionModel
+
+
+class Half4(SuspensionModel):
+    """Body heave and pitch over a front and a rear wheel."""
+
+    def __init__(self) -> None:
+        super().__init__(
+            name="half4",
+            coords=("x", "delta", "x1", "x2"),
+            roads=("r1", "r2"),
+            params=(
+                ParamSpec("m", "kg", 1200.0, "mass", "body (sprung) mass of the half car"),
+                ParamSpec("I", "kg m^2", 1500.0, "inertia", "body pitch moment of inertia"),
+                ParamSpec("m1", "kg", 40.0, "mass", "front unsprung mass"),
+                ParamSpec("m2", "kg", 40.0, "mass", "rear unsprung mass"),
+                ParamSpec("c1", "N s/m", 2000.0, "damping", "front suspension damping"),
+                ParamSpec("c2", "N s/m", 2000.0, "damping", "rear suspension damping"),
+                ParamSpec("k1", "N/m", 30000.0, "stiffness", "front suspension stiffness"),
+                ParamSpec("k2", "N/m", 30000.0, "stiffness", "rear suspension stiffness"),
+                ParamSpec("k3", "N/m", 200000.0, "stiffness", "front tyre stiffness"),
+                ParamSpec("k4", "N/m", 200000.0, "stiffness", "rear tyre stiffness"),
+                ParamSpec("a1", "m", 1.2, "length", "centre of mass to front axle"),
+                ParamSpec("a2", "m", 1.4, "length", "centre of mass to rear axle"),
+            ),
+            scale_invariant=("m", "I", "m1", "m2", "c1", "c2", "k1", "k2", "k3", "k4"),
+        )
+
+    def matrices(self, p: Mapping[str, float]) -> tuple[FloatArray, ...]:
+        m, I, m1, m2 = p["m"], p["I"], p["m1"], p["m2"]
+        c1, c2, k1, k2, k3, k4 = p["c1"], p["c2"], p["k1"], p["k2"], p["k3"], p["k4"]
+        a1, a2 = p["a1"], p["a2"]
+        # suspension deflections: d1 = x - x1 - a1*delta, d2 = x - x2 + a2*delta
+        g1 = np.array([1.0, -a1, -1.0, 0.0])
+        g2 = np.array([1.0, a2, 0.0, -1.0])
+        # generalised force of a suspension force F acting to compress: Q = -F * g
+        C = c1 * np.outer(g1, g1) + c2 * np.outer(g2, g2)
+        K = k1 * np.outer(g1, g1) + k2 * np.outer(g2, g2)
+        K[2, 2] += k3
+        K[3, 3] += k4
+        M = np.diag([m, I, m1, m2])
+        Fk = np.array([[0.0, 0.0], [0.0, 0.0], [k3, 0.0], [0.0, k4]])
+        Fc = np.zeros((4, 2))
+        return M, C, K, Fk, Fc

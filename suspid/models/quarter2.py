@@ -1,0 +1,41 @@
+"""2-DOF quarter car, seed eqs. (2)-(3).
+
+    m1 x1'' + c1 (x1' - x2') + k1 (x1 - x2) = 0
+    m2 x2'' + c1 (x2' - x1') + k1 (x2 - x1) = -c2 (x2' - r') - k2 (x2 - r)
+"""
+from __future__ import annotations
+
+from typing import Mapping
+
+import numpy as np
+
+from suspid.models.base import FloatArray, ParamSpec, SuspensionModel
+
+
+class Quarter2(SuspensionModel):
+    """Body ``m1`` on the suspension (``k1``, ``c1``) over wheel ``m2`` on the tyre (``k2``, ``c2``)."""
+
+    def __init__(self) -> None:
+        super().__init__(
+            name="quarter2",
+            coords=("x1", "x2"),
+            roads=("r",),
+            params=(
+                ParamSpec("m1", "kg", 300.0, "mass", "sprung (body) mass of one corner"),
+                ParamSpec("c1", "N s/m", 1500.0, "damping", "suspension damping"),
+                ParamSpec("k1", "N/m", 20000.0, "stiffness", "suspension spring stiffness"),
+                ParamSpec("m2", "kg", 40.0, "mass", "unsprung (wheel) mass"),
+                ParamSpec("c2", "N s/m", 300.0, "damping", "tyre damping"),
+                ParamSpec("k2", "N/m", 200000.0, "stiffness", "tyre vertical stiffness"),
+            ),
+            scale_invariant=("m1", "c1", "k1", "m2", "c2", "k2"),
+        )
+
+    def matrices(self, p: Mapping[str, float]) -> tuple[FloatArray, ...]:
+        m1, c1, k1, m2, c2, k2 = (p[n] for n in ("m1", "c1", "k1", "m2", "c2", "k2"))
+        M = np.array([[m1, 0.0], [0.0, m2]])
+        C = np.array([[c1, -c1], [-c1, c1 + c2]])
+        K = np.array([[k1, -k1], [-k1, k1 + k2]])
+        Fk = np.array([[0.0], [k2]])
+        Fc = np.array([[0.0], [c2]])
+        return M, C, K, Fk, Fc

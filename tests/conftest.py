@@ -1,0 +1,25 @@
+"""Shared fixtures: the seed's parameter sets and paths."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED = REPO.parent / "shared"
+
+#: seed Table 1 (Sharma and Saluja): quarter-car parameters, SI
+TABLE1 = dict(m1=275.0, k1=150000.0, c1=1120.0, m2=27.0, k2=310000.0, c2=3100.0)
+
+
+@pytest.fixture
+def table1() -> dict[str, float]:
+    return dict(TABLE1)
+
+
+@pytest.fixture
+def realdata() -> Path:
+    p = SHARED / "realdata"
+    if not p.is_dir():
+        pytest.skip(f"real recordings not found at {p} (../shared/realdata beside the repo)")
+    return p

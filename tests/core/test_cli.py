@@ -1,0 +1,112 @@
+"""The command line keeps the contract: JSON fields, one-line errors, exit status 2."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from ..conftest import TABLE1
+
+
+def run(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "suspid", *args], capture_output=True, text=True,
+                          cwd=cwd, timeout=300)
+
+
+@pytest.fixture(scope="module")
+def bump_csv(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("cli") / "bump.csv"
+    params = [f"--param={k}={v}" for k, v in TABLE1.items()]
+    r = run("simulate", "--model", "quarter2", "--scenario", "bump", "--duration", "3", *params,
+            "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    return out
+
+
+def test_identify_json_contract(bump_csv: Path) -> None:
+    r = run("identify", "--model", "quarter2", "--input", str(bump_csv), "--fix", "m1=275",
+            "--fix", "m2=27", "--init", "c1=560", "--init", "k1=75000", "--init", "c2=1550",
+            "--init", "k2=155000", "--cost", "sse", "--json")
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    for key in ("model", "params", "fixed", "cost", "nfev", "success", "rms_residual", "stderr",
+                "identifiable", "warnings"):
+        assert key in out
+    assert set(out["params"]) == set(TABLE1)
+    assert sorted(out["fixed"]) == ["m1", "m2"]
+    assert set(out["stderr"]) == {"c1", "k1", "c2", "k2"}
+    for k in ("c1", "k1", "c2", "k2"):
+        assert abs(out["params"][k] / TABLE1[k] - 1) < 1e-3
+    assert out["success"] is True and out["identifiable"] is True
+
+
+def test_identify_quarter1_free_mass_warns(tmp_path: Path) -> None:
+    csv = tmp_path / "q1.csv"
+    assert run("simulate", "--model", "quarter1", "--scenario", "initial", "--duration", "3",
+               "--out", str(csv)).returncode == 0
+    r = run("identify", "--model", "quarter1", "--input", str(csv), "--json")
+    out = json.loads(r.stdout)
+    assert r.returncode == 0 and out["identifiable"] is False
+    assert any("m" in w and "--fix" in w for w in out["warnings"])
+    r = run("identify", "--model", "quarter1", "--input", str(csv), "--fix", "m=300", "--json")
+    out = json.loads(r.stdout)
+    assert out["identifiable"] is True
+    assert abs(out["params"]["c"] / 1500 - 1) < 1e-6 and abs(out["params"]["k"] / 20000 - 1) < 1e-6
+
+
+@pytest.mark.parametrize("content, needle", [
+    ("t,x1\n0,0\n0,0.1\n", "increasing time"),
+    ("t,x1\n0,0\n0.1,abc\n", "column 'x1'"),
+    ("x1,x2\n0,0\n", "no 't' column"),
+    ("", "empty file"),
+    ("t,x1\n0,0\n0.1\n", "expected 2 cells"),
+    ("t,foo\n0,1\n0.1,2\n", "no measured channel"),
+    ("t,x1\n0,0\n0.1,inf\n", "finite"),
+])
+def test_bad_csv_is_one_error_line_exit_2(tmp_path: Path, content: str, needle: str) -> None:
+    f = tmp_path / "bad.csv"
+    f.write_text(content)
+    r = run("identify", "--model", "quarter2", "--input", str(f), "--json")
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and needle in lines[0], r.stderr
+    assert str(f) in lines[0] and "Traceback" not in r.stderr
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["identify", "--model", "quarter9", "--input", "x.csv"], "invalid choice"),
+    (["identify", "--model", "quarter2", "--input", "missing.csv"], "no such file"),
+    (["identify", "--model", "quarter2", "--input", "x.csv", "--fix", "zz=1"], "no parameter 'zz'"),
+    (["identify", "--model", "quarter2", "--input", "x.csv", "--fix", "m1"], "expected NAME=VALUE"),
+    (["identify", "--model", "quarter2", "--input", "x.xyz"], "unknown input format"),
+])
+def test_bad_usage_exit_2(tmp_path: Path, args: list[str], needle: str) -> None:
+    (tmp_path / "x.csv").write_text("t,x1\n0,0\n0.1,0.2\n")
+    r = run(*args, cwd=tmp_path)
+    assert r.returncode == 2
+    assert r.stderr.strip().startswith("error:") and needle in r.stderr and "Traceback" not in r.stderr
+
+
+def test_unknown_columns_and_gaps_are_tolerated(tmp_path: Path, bump_csv: Path) -> None:
+    lines = bump_csv.read_text().splitlines()
+    header = lines[0] + ",comment"
+    body = [ln + ",0" for ln in lines[1:]]
+    cells = body[500].split(",")
+    cells[3] = ""  # a missing x1 sample
+    body[500] = ",".join(cells)
+    f = tmp_path / "gappy.csv"
+    f.write_text("\n".join([header] + body) + "\n")
+    r = run("identify", "--model", "quarter2", "--input", str(f), "--fix", "m1=275", "--fix", "m2=27",
+            "--init", "c1=1120", "--init", "k1=150000", "--init", "c2=3100", "--init", "k2=310000", "--json")
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    assert any("comment" in w for w in out["warnings"])
+    assert abs(out["params"]["k1"] / 150000 - 1) < 1e-4
+
+
+def test_debug_shows_traceback(tmp_path: Path) -> None:
+    r = run("--debug", "identify", "--model", "quarter2", "--input", str(tmp_path / "none.csv"))
+    assert r.returncode != 0 and "Traceback" in r.stderr

@@ -1,0 +1,92 @@
+"""Identification recovers known truth; identifiability is reported honestly."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from estimator.identify import OutputErrorProblem, Parameters, fit
+from suspid.excitation import make_scenario
+from suspid.io.csvio import Measurement
+from suspid.models import get_model
+from suspid.simulate import simulate
+
+from ..conftest import TABLE1
+
+
+def _measure(model, truth, scenario, chans, duration=3.0, fs=1000.0, noise=0.0, seed=0, **kw):
+    t, road, x0 = make_scenario(model, scenario, duration=duration, fs=fs, params=truth, **kw)
+    out = simulate(model, truth, t, road, x0)
+    rng = np.random.default_rng(seed)
+    meas = {c: out[c] + noise * np.std(out[c]) * rng.standard_normal(t.size) for c in chans}
+    return Measurement(t=t, road=road, measured=meas, source="synthetic")
+
+
+@pytest.mark.parametrize("cost", ["sse", "frobenius"])
+def test_quarter2_bump_table1_masses_fixed(cost: str) -> None:
+    m = get_model("quarter2")
+    meas = _measure(m, TABLE1, "bump", ["x1", "x2", "x1_dot", "x2_dot"])
+    params = Parameters.for_model(m, fix={"m1": 275.0, "m2": 27.0},
+                                  init={k: 0.5 * TABLE1[k] for k in ("c1", "k1", "c2", "k2")})
+    res, _ = fit(OutputErrorProblem(m, meas, cost=cost), params)
+    assert res.success and res.identifiable
+    for k in ("c1", "k1", "c2", "k2"):
+        assert res.params[k] == pytest.approx(TABLE1[k], rel=1e-3)
+
+
+def test_quarter1_free_mass_is_reported_unidentifiable() -> None:
+    m = get_model("quarter1")
+    truth = dict(m=250.0, c=800.0, k=9000.0)
+    meas = _measure(m, truth, "initial", ["x", "x_dot"])
+    res, _ = fit(OutputErrorProblem(m, meas, cost="sse"), Parameters.for_model(m))
+    assert res.identifiable is False and res.success is False
+    assert any("unidentifiable" in w and "m" in w.split(":")[1] for w in res.warnings)
+    assert any("--fix m=" in w for w in res.warnings)
+    # the ratios are still right even though the scale is not
+    assert res.params["c"] / res.params["m"] == pytest.approx(truth["c"] / truth["m"], rel=1e-4)
+    assert res.params["k"] / res.params["m"] == pytest.approx(truth["k"] / truth["m"], rel=1e-4)
+
+
+def test_quarter1_fixed_mass_is_exact() -> None:
+    m = get_model("quarter1")
+    truth = dict(m=250.0, c=800.0, k=9000.0)
+    meas = _measure(m, truth, "initial", ["x", "x_dot"])
+    res, _ = fit(OutputErrorProblem(m, meas, cost="frobenius"),
+                 Parameters.for_model(m, fix={"m": 250.0}, init={"c": 400.0, "k": 4500.0}))
+    assert res.success and res.identifiable
+    assert res.params["c"] == pytest.approx(800.0, rel=1e-6)
+    assert res.params["k"] == pytest.approx(9000.0, rel=1e-6)
+
+
+def test_quarter2_all_free_names_the_scale_ambiguity() -> None:
+    m = get_model("quarter2")
+    meas = _measure(m, TABLE1, "bump", ["x1", "x2", "x1_dot", "x2_dot"], duration=2.0, fs=500.0)
+    res, _ = fit(OutputErrorProblem(m, meas), Parameters.for_model(m, init={k: 0.7 * v for k, v in TABLE1.items()}))
+    assert not res.identifiable
+    msg = " ".join(res.warnings)
+    assert "common factor" in msg and "m1" in msg and "k2" in msg
+
+
+def test_noisy_stderr_is_honest() -> None:
+    """Errors over noise seeds are consistent with the reported standard errors."""
+    m = get_model("quarter2")
+    z = []
+    for seed in range(6):
+        meas = _measure(m, TABLE1, "bump", ["x1", "x2"], duration=2.0, fs=500.0, noise=0.1, seed=seed)
+        params = Parameters.for_model(m, fix={"m1": 275.0, "m2": 27.0},
+                                      init={k: TABLE1[k] for k in ("c1", "k1", "c2", "k2")})
+        res, _ = fit(OutputErrorProblem(m, meas, cost="sse", x0="rest"), params)
+        for k in ("c1", "k1"):
+            z.append((res.params[k] - TABLE1[k]) / res.stderr[k])
+    z = np.array(z)
+    assert np.all(np.isfinite(z))
+    assert np.sqrt(np.mean(z ** 2)) < 2.5  # ~1 if stderr is right; far above if it lies
+
+
+def test_x0_is_estimated_from_initial_state_data() -> None:
+    m = get_model("quarter2")
+    meas = _measure(m, TABLE1, "initial", ["x1", "x2"])
+    params = Parameters.for_model(m, fix={"m1": 275.0, "m2": 27.0},
+                                  init={k: 0.5 * TABLE1[k] for k in ("c1", "k1", "c2", "k2")})
+    res, _ = fit(OutputErrorProblem(m, meas, x0="estimate"), params)
+    assert np.allclose(res.x0, [0.20, 0.10, 0.50, 0.05], atol=1e-6)
+    assert res.params["c1"] == pytest.approx(1120.0, rel=1e-4)

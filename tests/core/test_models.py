@@ -1,0 +1,50 @@
+"""The models implement the seed's equations 1-7 term by term."""
+from __future__ import annotations
+
+import numpy as np
+
+from suspid.models import get_model
+
+
+def test_quarter1_eq1() -> None:
+    m = get_model("quarter1")
+    p = dict(m=250.0, c=800.0, k=9000.0)
+    x, xd, y, yd = 0.03, -0.2, 0.01, 0.05
+    acc = m.rhs(0.0, np.array([x, xd]), np.array([y, yd]), p)[1]
+    assert np.isclose(p["m"] * acc + p["c"] * (xd - yd) + p["k"] * (x - y), 0.0)
+
+
+def test_quarter2_eqs2_3() -> None:
+    m = get_model("quarter2")
+    p = dict(m1=275.0, k1=150000.0, c1=1120.0, m2=27.0, k2=310000.0, c2=3100.0)
+    x1, x2, v1, v2, r, rd = 0.02, -0.01, 0.3, -0.4, 0.005, 0.2
+    a1, a2 = m.rhs(0.0, np.array([x1, x2, v1, v2]), np.array([r, rd]), p)[2:]
+    e2 = p["m1"] * a1 + p["c1"] * (v1 - v2) + p["k1"] * (x1 - x2)
+    e3 = (p["m2"] * a2 + p["c1"] * (v2 - v1) + p["k1"] * (x2 - x1)
+          + p["c2"] * (v2 - rd) + p["k2"] * (x2 - r))
+    assert np.isclose(e2, 0.0, atol=1e-9) and np.isclose(e3, 0.0, atol=1e-9)
+
+
+def test_half4_eqs4_7() -> None:
+    m = get_model("half4")
+    p = m.defaults()
+    rng = np.random.default_rng(3)
+    s = rng.standard_normal(8) * 0.05
+    x, d, x1, x2, xd, dd, x1d, x2d = s
+    r1, r2 = 0.01, -0.02
+    acc = m.rhs(0.0, s, np.array([r1, r2, 0.0, 0.0]), p)[4:]
+    a1, a2 = p["a1"], p["a2"]
+    D1, D2 = x - x1 - a1 * d, x - x2 + a2 * d
+    V1, V2 = xd - x1d - a1 * dd, xd - x2d + a2 * dd
+    e4 = p["m"] * acc[0] + p["c1"] * V1 + p["c2"] * V2 + p["k1"] * D1 + p["k2"] * D2
+    e5 = p["I"] * acc[1] - a1 * p["c1"] * V1 + a2 * p["c2"] * V2 - a1 * p["k1"] * D1 + a2 * p["k2"] * D2
+    e6 = p["m1"] * acc[2] - p["c1"] * V1 + p["k3"] * (x1 - r1) - p["k1"] * D1
+    e7 = p["m2"] * acc[3] - p["c2"] * V2 + p["k4"] * (x2 - r2) - p["k2"] * D2
+    assert np.allclose([e4, e5, e6, e7], 0.0, atol=1e-8)
+
+
+def test_models_are_stable_at_defaults() -> None:
+    for name in ("quarter1", "quarter2", "half4"):
+        m = get_model(name)
+        A, _ = m.state_space(m.defaults())
+        assert np.all(np.linalg.eigvals(A).real < 0)

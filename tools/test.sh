@@ -1,0 +1,13 @@
+#!/usr/bin/env bash
+# Set up a virtual environment (.venv) with suspid and its test tools, then run the tests.
+# Usage: bash tools/test.sh [pytest args...]
+set -euo pipefail
+cd "$(dirname "$0")/.."
+PY=${PYTHON:-python3}
+if [[ ! -x .venv/bin/python ]]; then
+  "$PY" -m venv .venv
+fi
+.venv/bin/python -m pip install --quiet --upgrade pip >/dev/null
+.venv/bin/python -m pip install --quiet -e ".[test]"
+export MPLBACKEND=Agg
+exec .venv/bin/python -m pytest "$@"
