@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import math
+from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterable, Mapping
@@ -96,7 +97,7 @@ def read_measurement(path: str | Path, model: SuspensionModel) -> Measurement:
             warnings.append(f"{name}: ignoring column(s) not used by model {model.name}: "
                             f"{', '.join(unknown)}")
         used = [(i, h) for i, h in enumerate(header) if h in known]
-        cols: dict[str, list[float]] = {h: [] for _, h in used}
+        cols: dict[str, array] = {h: array("d") for _, h in used}  # 8 bytes/value
         ncol = len(header)
         line = 1
         try:
@@ -110,7 +111,7 @@ def read_measurement(path: str | Path, model: SuspensionModel) -> Measurement:
                     cols[h].append(_parse_float(row[i], name, line, h))
         except (csv.Error, UnicodeDecodeError) as exc:
             raise InputError(f"{name}:{line}: unreadable CSV ({exc})") from None
-    t = np.asarray(cols.pop("t"), dtype=float)
+    t = np.frombuffer(cols.pop("t"), dtype=float).copy()
     if t.size < 2:
         raise InputError(f"{name}: expected at least 2 data rows, got {t.size}")
     if np.isnan(t).any():
@@ -124,7 +125,7 @@ def read_measurement(path: str | Path, model: SuspensionModel) -> Measurement:
     road: dict[str, FloatArray] = {}
     measured: dict[str, FloatArray] = {}
     for h, vals in cols.items():
-        arr = np.asarray(vals, dtype=float)
+        arr = np.frombuffer(vals, dtype=float).copy()
         if h in road_cols:
             if np.isnan(arr).any():
                 ok = ~np.isnan(arr)
