@@ -34,6 +34,11 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="random seed for noise and random roads")
     p.add_argument("--channels", default=None,
                    help="comma-separated channels to write (default: positions and velocities)")
+    p.add_argument("--effect", action="append", default=[], metavar="NAME[:key=val,...]",
+                   help="inject an effect the declared model lacks (undeclared; see suspid "
+                        "diagnose), e.g. coulomb_friction:F=120, bump_stop:gap=0.01,k_stop=3e5, "
+                        "tire_liftoff, sensor_delay:channels=x2+x2_dot,delay_s=0.008, "
+                        "sensor_offset:channel=x1,offset=0.003; repeatable")
     p.add_argument("--out", required=True, metavar="CSV", help="output measurement CSV")
     p.add_argument("--plot", default=None, metavar="PNG", help="also plot the channels")
     p.add_argument("--json", action="store_true", help="print a JSON summary")
@@ -65,7 +70,11 @@ def run(args: argparse.Namespace) -> int:
     t, road, x0 = make_scenario(model, args.scenario, duration=args.duration, fs=args.fs,
                                 params=params, h=args.height, l=args.length, v_kmh=args.speed,
                                 t0=args.t0, road_class=args.road_class, seed=args.seed, x0=x0)
-    out = simulate(model, params, t, road, x0)
+    if args.effect:
+        from suspid.models.effects import inject
+        out = inject(model, args.effect).simulate(params, t, road, x0)
+    else:
+        out = simulate(model, params, t, road, x0)
     if args.channels:
         chans = [c.strip() for c in args.channels.split(",") if c.strip()]
         bad = [c for c in chans if c not in model.channels]
@@ -92,5 +101,5 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print_json({"model": model.name, "scenario": args.scenario, "params": params,
                     "x0": [float(v) for v in x0], "samples": int(t.size), "out": args.out,
-                    "channels": list(cols)})
+                    "channels": list(cols), "effects": list(args.effect)})
     return 0

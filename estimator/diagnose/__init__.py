@@ -1,0 +1,9 @@
+"""Closing the loop: residual analysis, tracing the residual to a missing effect, augmented refit.
+
+``diagnose(model, meas, params)`` is the entry point (``suspid diagnose``); the effect
+library is :mod:`suspid.models.effects`, the fast nonlinear simulator
+:mod:`estimator.diagnose.nlsim`.
+"""
+from estimator.diagnose.core import DiagnoseResult, Thresholds, Verdict, diagnose
+
+__all__ = ["diagnose", "DiagnoseResult", "Thresholds", "Verdict"]

@@ -1,0 +1,543 @@
+"""Residual analysis: whiteness, correlations, and the residual *force* against candidate effects.
+
+Two views of what the fitted linear model misses:
+
+* **Output residual** ``e = y_measured - y_model`` per channel: RMS, autocorrelation and
+  the Ljung–Box statistic (is it white noise?), a noise level from second differences
+  (``var(diff2 e) / 6`` is the variance of white noise and nearly blind to a smooth
+  structured residual), and cross-correlation with the road inputs and the suspension
+  states.
+* **Residual force** reconstructed from the measured motion,
+  ``R = M q'' + C q' + K q - Fk r - Fc r'`` at the fitted parameters (for ``quarter2`` the
+  body row is ``m1 x1'' + c1 d' + k1 d``). If the truth has an effect force ``Q``, then
+  ``R = Q + (linear terms of the parameter errors)``, so ``R`` is regressed on the
+  parameter sensitivities plus each candidate's regressor (``sgn d'``, ``|d'|``,
+  ``|d'| d'``, ``d^3``, gap-exceeding compression, the tyre's pulling force). The
+  regression gives each physical candidate's parameters and refined base parameters —
+  the starting point of the output-error refit — and the fraction of the residual force
+  it explains. Sensor effects (constant offset, time shift between channels) are screened
+  in the output residual.
+
+All signals are smoothed by the same Savitzky–Golay filter before the force is formed, so
+the equation stays consistent (a linear filter commutes with the linear terms).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+import numpy as np
+from scipy.signal import savgol_filter
+from scipy.stats import chi2
+
+from suspid.io.csvio import Measurement
+from suspid.models.base import FloatArray, SuspensionModel
+from suspid.models.effects import REGISTRY, V_EPS, PhysicalEffect, Site, make_effect
+
+# ------------------------------------------------------------------------- statistics
+
+
+def autocorr(e: FloatArray, maxlag: int) -> FloatArray:
+    """Sample autocorrelation of ``e`` (NaNs dropped) at lags ``0..maxlag``."""
+    x = np.asarray(e, dtype=float)
+    x = x[~np.isnan(x)]
+    x = x - x.mean()
+    d = float(x @ x)
+    n = x.size
+    if d <= 0 or n < 3:
+        return np.zeros(maxlag + 1)
+    return np.array([float(x[: n - k] @ x[k:]) / d for k in range(min(maxlag, n - 1) + 1)])
+
+
+def ljung_box(e: FloatArray, lags: int = 20) -> tuple[float, float]:
+    """Ljung–Box statistic ``Q`` and its chi-square p-value over ``lags`` lags.
+
+    ``Q = n (n + 2) sum_k rho_k^2 / (n - k)``; a small p-value rejects whiteness.
+    """
+    x = np.asarray(e, dtype=float)
+    n = int(np.sum(~np.isnan(x)))
+    lags = max(1, min(lags, n // 4))
+    rho = autocorr(x, lags)[1:]
+    k = np.arange(1, rho.size + 1)
+    Q = float(n * (n + 2) * np.sum(rho ** 2 / (n - k)))
+    return Q, float(chi2.sf(Q, rho.size))
+
+
+def noise_variance(e: FloatArray) -> float:
+    """White-noise variance estimate ``var(second difference) / 6`` (smooth parts cancel)."""
+    x = np.asarray(e, dtype=float)
+    d2 = np.diff(x, 2)
+    d2 = d2[~np.isnan(d2)]
+    return float(np.mean(d2 ** 2) / 6.0) if d2.size else 0.0
+
+
+def xcorr_peak(a: FloatArray, b: FloatArray, maxlag: int) -> tuple[float, int]:
+    """Largest normalised cross-correlation of ``a`` and ``b`` over ``|lag| <= maxlag``.
+
+    Returns ``(rho, lag)``; lag > 0 means ``a`` follows ``b``.
+    """
+    ok = ~(np.isnan(a) | np.isnan(b))
+    x = a[ok] - np.mean(a[ok])
+    y = b[ok] - np.mean(b[ok])
+    den = math.sqrt(float(x @ x) * float(y @ y))
+    if den <= 0:
+        return 0.0, 0
+    n = x.size
+    best, lag = 0.0, 0
+    for k in range(-maxlag, maxlag + 1):
+        v = float(x[k:] @ y[: n - k]) if k >= 0 else float(x[: n + k] @ y[-k:])
+        if abs(v) > abs(best):
+            best, lag = v, k
+    return best / den, lag
+
+
+def effective_n(e: FloatArray) -> float:
+    """Effective number of independent samples under an AR(1) approximation."""
+    x = np.asarray(e, dtype=float)
+    n = int(np.sum(~np.isnan(x)))
+    rho = float(np.clip(autocorr(x, 1)[1], -0.99, 0.99))
+    return max(2.0, n * (1 - rho) / (1 + rho))
+
+
+@dataclass
+class ChannelStats:
+    """Residual statistics of one channel (SI units of the channel)."""
+
+    channel: str
+    rms: float
+    signal_rms: float
+    noise_rms: float
+    structured_rms: float
+    ljung_box_q: float
+    ljung_box_p: float
+    acf_lag1: float
+
+    def to_json(self) -> dict[str, float | str]:
+        return {"rms": self.rms, "signal_rms": self.signal_rms, "noise_rms": self.noise_rms,
+                "structured_rms": self.structured_rms, "ljung_box_q": self.ljung_box_q,
+                "ljung_box_p": self.ljung_box_p, "acf_lag1": self.acf_lag1}
+
+
+def channel_stats(name: str, e: FloatArray, y: FloatArray, lags: int = 20, skip: int = 0) -> ChannelStats:
+    """:class:`ChannelStats` of residual ``e`` of measured signal ``y``.
+
+    The whiteness statistics (Ljung–Box, lag-1 autocorrelation) ignore the first ``skip``
+    samples, where the fitted initial state's error still decays (it is estimated from the
+    cost channels and shows as a short transient on the others).
+    """
+    rms = float(np.sqrt(np.nanmean(e ** 2)))
+    nv = noise_variance(e)
+    q, p = ljung_box(e[skip:], lags)
+    return ChannelStats(name, rms, float(np.sqrt(np.nanmean(y ** 2))), math.sqrt(nv),
+                        math.sqrt(max(rms ** 2 - nv, 0.0)), q, p, float(autocorr(e[skip:], 1)[1]))
+
+
+# ------------------------------------------------------------------------- signals
+def _savgol_window(n: int, fs: float, seconds: float = 0.02) -> int:
+    """Odd Savitzky–Golay window of about ``seconds`` (at least 7, at most the record)."""
+    w = max(int(round(seconds * fs)) | 1, 7)
+    top = n if n % 2 else n - 1
+    return min(w, top)
+
+
+@dataclass
+class Motion:
+    """Smoothed motion used for the residual force: ``q``, ``q'``, ``q''`` (N, nq), roads (N, nr)."""
+
+    q: FloatArray
+    qd: FloatArray
+    qdd: FloatArray
+    r: FloatArray
+    rd: FloatArray
+    source: dict[str, str]  # channel -> "measured" | "derived" | "model"
+
+
+def motion_from(model: SuspensionModel, meas: Measurement, predicted: Mapping[str, FloatArray],
+                U: FloatArray) -> Motion:
+    """Coordinates and derivatives from the measurement, filling gaps from the model.
+
+    A coordinate's velocity is the measured ``_dot`` channel, else the derivative of the
+    measured position; its acceleration the measured ``_ddot``, else the derivative of the
+    velocity; anything not measured comes from the fitted model's simulation
+    ``predicted``. Everything is smoothed by one Savitzky–Golay filter (20 ms, cubic).
+    """
+    t = meas.t
+    n = t.size
+    fs = (n - 1) / (t[-1] - t[0])
+    w = _savgol_window(n, fs)
+    h = 1.0 / fs
+    nq = len(model.coords)
+    src: dict[str, str] = {}
+
+    def get(ch: str) -> FloatArray | None:
+        y = meas.measured.get(ch)
+        if y is None:
+            return None
+        y = np.asarray(y, dtype=float)
+        if np.isnan(y).any():
+            ok = ~np.isnan(y)
+            if ok.sum() < n // 2:
+                return None
+            y = np.interp(t, t[ok], y[ok])
+        return y
+
+    def smooth(y: FloatArray, deriv: int = 0) -> FloatArray:
+        return savgol_filter(y, w, 3, deriv=deriv, delta=h)
+
+    Q, QD, QDD = (np.empty((n, nq)) for _ in range(3))
+    for i, c in enumerate(model.coords):
+        x, xd, xdd = get(c), get(f"{c}_dot"), get(f"{c}_ddot")
+        if x is not None:
+            Q[:, i] = smooth(x)
+            src[c] = "measured"
+        else:
+            Q[:, i] = smooth(predicted[c])
+            src[c] = "model"
+        if xd is not None:
+            QD[:, i] = smooth(xd)
+            src[f"{c}_dot"] = "measured"
+        elif x is not None:
+            QD[:, i] = smooth(x, 1)
+            src[f"{c}_dot"] = "derived"
+        else:
+            QD[:, i] = smooth(predicted[f"{c}_dot"])
+            src[f"{c}_dot"] = "model"
+        if xdd is not None:
+            QDD[:, i] = smooth(xdd)
+            src[f"{c}_ddot"] = "measured"
+        elif xd is not None:
+            QDD[:, i] = smooth(xd, 1)
+            src[f"{c}_ddot"] = "derived"
+        elif x is not None:
+            QDD[:, i] = smooth(x, 2)
+            src[f"{c}_ddot"] = "derived"
+        else:
+            QDD[:, i] = smooth(predicted[f"{c}_ddot"])
+            src[f"{c}_ddot"] = "model"
+    nr = len(model.roads)
+    r = np.column_stack([smooth(U[:, j]) for j in range(nr)])
+    rd = np.column_stack([smooth(U[:, nr + j]) for j in range(nr)])
+    return Motion(Q, QD, QDD, r, rd, src)
+
+
+def residual_force(model: SuspensionModel, p: Mapping[str, float], mo: Motion) -> FloatArray:
+    """Residual generalised force ``R = M q'' + C q' + K q - Fk r - Fc r'`` (N, nq) (N, N m)."""
+    M, C, K, Fk, Fc = model.matrices(p)
+    return mo.qdd @ M.T + mo.qd @ C.T + mo.q @ K.T - mo.r @ Fk.T - mo.rd @ Fc.T
+
+
+def force_sensitivity(model: SuspensionModel, p: Mapping[str, float], mo: Motion,
+                      name: str) -> FloatArray:
+    """``dR/d theta`` for parameter ``name`` (central difference; exact where linear)."""
+    dp = 1e-4 * p[name]
+    hi, lo = dict(p), dict(p)
+    hi[name] += dp
+    lo[name] -= dp
+    return (residual_force(model, hi, mo) - residual_force(model, lo, mo)) / (2 * dp)
+
+
+# ------------------------------------------------------------------------- screening
+@dataclass
+class Screen:
+    """Screening of one candidate effect (regression on the residual force or output residual).
+
+    Attributes
+    ----------
+    name : str
+        Effect name.
+    domain : {"force", "output"}
+    explained : float
+        Fraction of the (weighted) residual sum of squares the candidate removes beyond
+        what the base parameters alone remove (0..1).
+    tstat : float
+        Largest |t| of the candidate's coefficients (effective-sample corrected).
+    plausible : bool
+        Signs and magnitudes physically possible (e.g. friction > 0).
+    params : dict
+        Estimated effect parameters (start of the refit).
+    base : dict
+        Refined base parameters from the regression (start of the refit).
+    note : str
+    """
+
+    name: str
+    domain: str
+    explained: float
+    tstat: float
+    plausible: bool
+    params: dict[str, Any]
+    base: dict[str, float] = field(default_factory=dict)
+    note: str = ""
+
+    def to_json(self) -> dict[str, Any]:
+        return {"domain": self.domain, "explained": self.explained, "tstat": self.tstat,
+                "plausible": self.plausible, "params": self.params, "note": self.note}
+
+
+def _regress(y: FloatArray, X: FloatArray) -> tuple[FloatArray, float, FloatArray]:
+    """Least squares ``y ~ X``: coefficients, residual sum of squares, coefficient std errors."""
+    beta, *_ = np.linalg.lstsq(X, y, rcond=None)
+    res = y - X @ beta
+    ss = float(res @ res)
+    dof = max(y.size - X.shape[1], 1)
+    try:
+        cov = np.linalg.pinv(X.T @ X) * ss / dof
+        se = np.sqrt(np.clip(np.diag(cov), 0, None))
+    except np.linalg.LinAlgError:
+        se = np.full(X.shape[1], np.inf)
+    return beta, ss, se
+
+
+def _site_regressors(name: str, site: Site, s: FloatArray, sd: FloatArray, base: Mapping[str, float],
+                     gap: float | None = None) -> list[FloatArray]:
+    """Regressor(s) ``phi`` per unit parameter of a physical candidate at one site."""
+    if name == "coulomb_friction":
+        return [np.tanh(sd / V_EPS)]
+    if name == "asymmetric_damping":
+        return [np.abs(sd)]
+    if name == "quadratic_damping":
+        return [np.abs(sd) * sd]
+    if name == "progressive_spring":
+        return [s ** 3]
+    if name == "bump_stop":
+        return [-np.maximum(-s - float(gap), 0.0)]
+    if name == "tire_liftoff":
+        k = base[site.k_name] if site.k_name else 0.0
+        c = base[site.c_name] if site.c_name else 0.0
+        return [np.maximum(-(site.load + k * s + c * sd), 0.0)]
+    raise KeyError(name)
+
+
+def screen_physical(model: SuspensionModel, p: Mapping[str, float], free: list[str],
+                    mo: Motion) -> tuple[list[Screen], dict[str, Any]]:
+    """Regress the residual force on base sensitivities plus each physical candidate.
+
+    Returns the screens (one per applicable candidate) and the force-domain summary
+    (weighted RMS of the residual force per coordinate before and after the base refinement).
+    """
+    R = residual_force(model, p, mo)
+    nq = R.shape[1]
+    n = R.shape[0]
+    wrow = 1.0 / np.maximum(np.sqrt(np.mean(R ** 2, axis=0)), 1e-12)
+    y = (R * wrow).reshape(-1)
+    # base sensitivities (free parameters only); R(theta_hat) ~ sum_i D_i delta_i + Q
+    base_names = [k for k in free if k in p]
+    D = [(force_sensitivity(model, p, mo, k) * wrow).reshape(-1) for k in base_names]
+    X0 = np.column_stack(D) if D else np.zeros((y.size, 0))
+    beta0, ss0, _ = _regress(y, X0) if D else (np.zeros(0), float(y @ y), np.zeros(0))
+    ss_raw = float(y @ y)
+    neff = effective_n(y[: n])  # serial correlation of the first equation
+    infl = math.sqrt(max(n / neff, 1.0))
+    screens: list[Screen] = []
+    Xs = np.column_stack([mo.q, mo.qd])
+    Us = np.column_stack([mo.r, mo.rd])
+    for name, cls in REGISTRY.items():
+        if cls.kind != "physical" or model.name not in cls.models:
+            continue
+        probe = make_effect(name, **_dummy_values(cls))
+        if not isinstance(probe, PhysicalEffect):
+            continue
+        sites = probe.sites(model, p)
+        coords = [site.coordinate(Xs, Us) for site in sites]
+        gaps: list[float | None] = [None]
+        if name == "bump_stop":
+            comp = np.concatenate([-s for s, _ in coords])
+            hi = float(np.quantile(comp, 0.995))
+            if hi <= 0:
+                continue
+            gaps = list(np.linspace(0.15, 0.9, 16) * hi)
+        best: Screen | None = None
+        for gap in gaps:
+            cols = []
+            for site, (s, sd) in zip(sites, coords):
+                for j, reg in enumerate(_site_regressors(name, site, s, sd, p, gap)):
+                    while len(cols) <= j:
+                        cols.append(np.zeros((n, nq)))
+                    cols[j] = cols[j] + reg[:, None] * site.b[None, :]
+            E = [(c * wrow).reshape(-1) for c in cols]
+            if any(not np.any(e) for e in E):
+                continue
+            X = np.column_stack([X0] + [e[:, None] for e in E]) if D else np.column_stack(E)
+            beta, ss1, se = _regress(y, X)
+            coef = beta[len(D):]
+            cse = se[len(D):] * infl
+            tstat = float(np.max(np.abs(coef) / np.maximum(cse, 1e-300)))
+            explained = max(0.0, (ss0 - ss1) / ss0) if ss0 > 0 else 0.0
+            refined = dict(p)
+            for k, d in zip(base_names, beta[: len(D)]):
+                if p[k] - d > 0:
+                    refined[k] = float(p[k] - d)
+            params, plausible, note = _effect_params(name, coef, refined, model, gap)
+            cand = Screen(name, "force", explained, tstat, plausible, params, refined, note)
+            if best is None or cand.explained > best.explained:
+                best = cand
+        if best is not None:
+            screens.append(best)
+    summary = {"rms_force": {c: float(v) for c, v in zip(model.coords, np.sqrt(np.mean(R ** 2, axis=0)))},
+               "base_refit_explained": float(1 - ss0 / ss_raw) if ss_raw > 0 else 0.0,
+               "samples": n, "effective_samples": neff}
+    return screens, summary
+
+
+def _dummy_values(cls: type) -> dict[str, Any]:
+    vals: dict[str, Any] = {}
+    for sp in cls.params:
+        vals[sp.name] = 1.0 if sp.kind in ("positive", "real") else (["x"] if sp.kind == "channels" else "x")
+    return vals
+
+
+def _effect_params(name: str, coef: FloatArray, base: Mapping[str, float], model: SuspensionModel,
+                   gap: float | None) -> tuple[dict[str, Any], bool, str]:
+    """Effect parameters from regression coefficients, and whether they are physical."""
+    c = [float(v) for v in coef]
+    if name == "coulomb_friction":
+        return {"F": c[0]}, c[0] > 0, ""
+    if name == "quadratic_damping":
+        return {"c_quad": c[0]}, c[0] > 0, ""
+    if name == "progressive_spring":
+        return {"k_cubic": c[0]}, c[0] > 0, ""
+    if name == "bump_stop":
+        return {"gap": float(gap or 0.0), "k_stop": c[0]}, c[0] > 0, ""
+    if name == "tire_liftoff":
+        ok = 0.3 < c[0] < 3.0
+        return {}, ok, f"coefficient of the pulling-force regressor {c[0]:.3g} (1 if the tyre lifts off)"
+    if name == "asymmetric_damping":
+        cname = "c" if model.name == "quarter1" else "c1"
+        cbar = base[cname]
+        cr, cc = cbar + c[0], cbar - c[0]
+        return {"c_rebound": cr, "c_compression": cc}, cr > 0 and cc > 0, ""
+    return {}, False, "unknown"
+
+
+def screen_sensor(model: SuspensionModel, t: FloatArray, residual: Mapping[str, FloatArray],
+                  predicted: Mapping[str, FloatArray], max_delay: float) -> list[Screen]:
+    """Screen ``sensor_offset`` in the output residual of every measured channel.
+
+    The candidate is the channel whose constant residual explains the largest share of the
+    residual sum of squares (t-statistic with the effective sample count).
+    """
+    out: list[Screen] = []
+    best_off: Screen | None = None
+    nch = max(len(residual), 1)
+    for ch, e in residual.items():
+        ok = ~np.isnan(e)
+        m = float(np.mean(e[ok]))
+        sd = float(np.std(e[ok]))
+        ms = float(np.mean(e[ok] ** 2))
+        neff = effective_n(e)
+        tstat = abs(m) / max(sd / math.sqrt(neff), 1e-300)
+        # share of the channel-normalised residual (each channel weighs 1 / n_channels)
+        expl = (m * m / ms) / nch if ms > 0 else 0.0
+        cand = Screen("sensor_offset", "output", expl, tstat, True, {"channel": ch, "offset": m})
+        if best_off is None or cand.explained > best_off.explained:
+            best_off = cand
+    if best_off is not None:
+        out.append(best_off)
+    return out
+
+
+def screen_delay(model: SuspensionModel, meas: Measurement, p: Mapping[str, float], free: list[str],
+                 predicted: Mapping[str, FloatArray], U: FloatArray, max_delay: float) -> Screen | None:
+    """Screen ``sensor_delay`` in the force domain: a time shift between channels.
+
+    For every group of measured channels (all channels of one coordinate, or one channel)
+    and every trial delay on a grid up to ``max_delay``, the group is advanced by the delay
+    and the residual force is regressed on the base sensitivities; a lag makes position,
+    velocity and acceleration of different coordinates inconsistent, so the right
+    compensation removes most of the residual force. The best grid point is refined by a
+    parabola through its neighbours.
+    """
+    t = meas.t
+    h = float(np.median(np.diff(t)))
+    mo0 = motion_from(model, meas, predicted, U)
+    R0 = residual_force(model, p, mo0)
+    wrow = 1.0 / np.maximum(np.sqrt(np.mean(R0 ** 2, axis=0)), 1e-12)
+    base_names = [k for k in free if k in p]
+    trim = int(math.ceil(max_delay / h)) + 2
+
+    def regress_for(m: Motion) -> tuple[float, dict[str, float]]:
+        R = residual_force(model, p, m)[:-trim]
+        y = (R * wrow).reshape(-1)
+        if not base_names:
+            return float(y @ y), dict(p)
+        sub = Motion(m.q[:-trim], m.qd[:-trim], m.qdd[:-trim], m.r[:-trim], m.rd[:-trim], m.source)
+        X = np.column_stack([(force_sensitivity(model, p, sub, k) * wrow).reshape(-1) for k in base_names])
+        beta, ss, _ = _regress(y, X)
+        refined = dict(p)
+        for k, dlt in zip(base_names, beta):
+            if p[k] - dlt > 0:
+                refined[k] = float(p[k] - dlt)
+        return ss, refined
+
+    def ss_for(m: Motion) -> float:
+        return regress_for(m)[0]
+
+    ss0 = ss_for(mo0)
+    shifted: dict[tuple[int, float], Motion] = {}
+    groups: list[list[str]] = []
+    for c in model.coords:
+        g = [ch for ch in (c, f"{c}_dot", f"{c}_ddot") if ch in meas.measured]
+        if g:
+            groups.append(g)
+            groups += [[ch] for ch in g] if len(g) > 1 else []
+    grid = [d for d in h * np.array([0.5, 1, 1.5, 2, 3, 4, 6, 8, 11, 16, 22, 32]) if d <= max_delay]
+    best: tuple[float, list[str], float, list[float]] | None = None
+    nq = len(model.coords)
+    # which measured channel each smoothed column comes from (a lag moves what it feeds)
+    feeds: list[tuple[str, int, str]] = []
+    for i, c in enumerate(model.coords):
+        for kind, chain in (("q", (c,)), ("qd", (f"{c}_dot", c)), ("qdd", (f"{c}_ddot", f"{c}_dot", c))):
+            for ch in chain:
+                if mo0.source.get(ch if kind == "q" else f"{c}{'_dot' if kind == 'qd' else '_ddot'}") == "model":
+                    break
+                if ch in meas.measured:
+                    feeds.append((kind, i, ch))
+                    break
+    for g in groups:
+        cols = [(kind, i) for kind, i, ch in feeds if ch in g]
+        if not cols:
+            continue
+        sss = []
+        for d in grid:
+            arrs = {"q": mo0.q.copy(), "qd": mo0.qd.copy(), "qdd": mo0.qdd.copy()}
+            for kind, i in cols:
+                a = arrs[kind]
+                a[:, i] = np.interp(t + d, t, a[:, i])  # advance; the tail is trimmed
+            m2 = Motion(arrs["q"], arrs["qd"], arrs["qdd"], mo0.r, mo0.rd, mo0.source)
+            shifted[(groups.index(g), float(d))] = m2
+            sss.append(ss_for(m2))
+        i = int(np.argmin(sss))
+        if best is None or sss[i] < best[0]:
+            best = (sss[i], g, float(grid[i]), sss)
+    _ = nq
+    if best is None or ss0 <= 0:
+        return None
+    ssb, g, d, sss = best
+    i = grid.index(d)
+    if 0 < i < len(grid) - 1:
+        x = np.array(grid[i - 1:i + 2])
+        yv = np.array(sss[i - 1:i + 2])
+        A = np.vstack([x ** 2, x, np.ones(3)]).T
+        a, b, _ = np.linalg.solve(A, yv)
+        if a > 0 and x[0] < -b / (2 * a) < x[2]:
+            d = float(-b / (2 * a))
+    explained = max(0.0, (ss0 - ssb) / ss0)
+    _, refined = regress_for(shifted[(groups.index(g), float(grid[i]))])
+    return Screen("sensor_delay", "force", explained, float("nan"), True,
+                  {"channels": g, "delay_s": d}, refined,
+                  note=f"time shift of {', '.join(g)} against the other channels, from the residual force")
+
+
+def _rate(ch: str, t: FloatArray, predicted: Mapping[str, FloatArray]) -> FloatArray:
+    """Time derivative of the model's prediction of channel ``ch``."""
+    if ch.endswith("_ddot"):
+        return np.gradient(predicted[ch], t)
+    if ch.endswith("_dot"):
+        return predicted[ch[:-4] + "_ddot"]
+    return predicted[f"{ch}_dot"]
+
+
+__all__ = ["autocorr", "ljung_box", "noise_variance", "xcorr_peak", "effective_n", "ChannelStats",
+           "channel_stats", "Motion", "motion_from", "residual_force", "force_sensitivity", "Screen",
+           "screen_physical", "screen_sensor", "screen_delay"]

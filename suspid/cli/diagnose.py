@@ -1,0 +1,77 @@
+"""``suspid diagnose``: fit, trace the residual to a missing effect, augment and refit."""
+from __future__ import annotations
+
+import argparse
+import sys
+
+from suspid.cli._common import (add_input_options, add_model_option, add_param_options,
+                                load_measurement, model_from_args, parse_assignments, print_json)
+from suspid.cli.identify import parse_x0
+from suspid.errors import UsageError
+
+
+def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("diagnose", help="find the effect a model lacks from its residual, add it, refit",
+                       description="Fit the declared model (as identify), analyse the residual "
+                                   "(RMS, Ljung-Box whiteness, cross-correlation, residual force "
+                                   "against candidate effects), add the effect the evidence "
+                                   "supports (coulomb_friction, asymmetric_damping, "
+                                   "quadratic_damping, progressive_spring, bump_stop, "
+                                   "tire_liftoff, sensor_delay, sensor_offset), refit by "
+                                   "Nelder-Mead and report before/after. See "
+                                   "docs/closing-the-loop.md.")
+    add_model_option(p)
+    add_input_options(p)
+    add_param_options(p)
+    p.add_argument("--cost", choices=["sse", "frobenius"], default="sse",
+                   help="sse: sum of squared position differences (seed cost 1); frobenius: "
+                        "Frobenius norm over all measured channels (seed cost 2)")
+    p.add_argument("--x0", default="estimate", metavar="estimate|rest|V1,V2,...",
+                   help="initial state: estimate it (default), start at rest, or give it")
+    p.add_argument("--restarts", type=int, default=3, help="Nelder-Mead restarts of the baseline fit (default 3; the augmented refit starts from the residual regression)")
+    p.add_argument("--maxfev", type=int, default=None, help="evaluation budget of the baseline fit")
+    p.add_argument("--json", action="store_true", help="print the result as one JSON object")
+    p.add_argument("--plot", metavar="PNG", default=None,
+                   help="write the evidence figure (residuals before/after, autocorrelation, "
+                        "residual force against the chosen effect's regressor, candidate scores)")
+    return p
+
+
+def run(args: argparse.Namespace) -> int:
+    from estimator.diagnose import diagnose
+    from estimator.identify import Parameters
+
+    model = model_from_args(args)
+    fix = parse_assignments(args.fix, "--fix")
+    init = parse_assignments(args.init, "--init")
+    params = Parameters.for_model(model, fix=fix, init=init)
+    if args.restarts < 0:
+        raise UsageError(f"--restarts: expected >= 0, got {args.restarts}")
+    meas, frames = load_measurement(args, model)
+    res = diagnose(model, meas, params, cost=args.cost, x0=parse_x0(args.x0, model.n_states),
+                   restarts=args.restarts, maxfev=args.maxfev)
+    out = res.to_json()
+    if frames is not None:
+        out["frames"] = frames
+    if args.plot:
+        from estimator.diagnose.plots import plot_evidence
+        plot_evidence(res, meas, args.plot)
+    if args.json:
+        print_json(out)
+    else:
+        w = sys.stdout.write
+        eff = out["effect"]
+        w(f"model {model.name}: effect {eff['name'] if eff else 'none'}\n")
+        if eff and eff["params"]:
+            w("  effect parameters: " + ", ".join(f"{k}={v}" for k, v in eff["params"].items()) + "\n")
+        w(f"  {out['evidence']['verdict']}\n")
+        w(f"  {'':>8} {'baseline':>14} {'augmented':>14}\n")
+        for k in out["baseline"]["params"]:
+            w(f"  {k:>8} {out['baseline']['params'][k]:>14.6g} {out['augmented']['params'][k]:>14.6g}\n")
+        for c in out["baseline"]["rms_residual"]:
+            w(f"  rms {c:>4} {out['baseline']['rms_residual'][c]:>14.4g} "
+              f"{out['augmented']['rms_residual'][c]:>14.4g}\n")
+        w(f"  {'cost':>8} {out['baseline']['cost']:>14.6g} {out['augmented']['cost']:>14.6g}\n")
+    for msg in out["warnings"]:
+        sys.stderr.write(f"warning: {msg}\n")
+    return 0
