@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 import struct
+import weakref
 from dataclasses import dataclass, field
 from typing import Callable, Iterable, Mapping, Sequence
 
@@ -405,11 +406,17 @@ MODEL_IDS = {"quarter1": 0, "quarter2": 1, "half4": 2}
 SEVERITIES = {"info": 0, "warning": 1, "critical": 2}
 
 
+_STATUS_CODECS: "weakref.WeakKeyDictionary[Database, MessageCodec]" = weakref.WeakKeyDictionary()
+
+
 def encode_status(db: Database, counter: int, state: int, sample_rate: float, fault_flags: int,
                   busoff_count: int, sensor_set: int) -> tuple[int, bytearray]:
     """``(frame_id, payload)`` of an ``SN_Status`` frame (E2E protected)."""
-    codec = MessageCodec(find_message(db, STATUS_MESSAGE),
-                         ["State", "SampleRate", "FaultFlags", "BusOffCount", "SensorSet"])
+    codec = _STATUS_CODECS.get(db)
+    if codec is None:
+        codec = MessageCodec(find_message(db, STATUS_MESSAGE),
+                             ["State", "SampleRate", "FaultFlags", "BusOffCount", "SensorSet"])
+        _STATUS_CODECS[db] = codec
     data = codec.pack_raw((state, int(round(sample_rate)) & 0xFFFF, fault_flags & 0xFFFF,
                            min(255, busoff_count), sensor_set))
     e2e_protect(data, codec.frame_id, counter)

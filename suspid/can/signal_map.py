@@ -86,14 +86,27 @@ class SignalMapping:
         return s
 
 
+_RE_REVERSED = re.compile(
+    rf"""^\s*(?P<message>[A-Za-z_]\w*|0[xX][0-9A-Fa-f]+|\d+)\.(?P<signal>[A-Za-z_]\w*)\s*=\s*
+    (?P<channel>[A-Za-z_]\w*)\s*(?P<rest>.*)$""",
+    re.VERBOSE,
+)
+
+
 def parse_mapping(text: str, where: str = "--map") -> SignalMapping:
     """Parse one ``CHANNEL=MESSAGE.SIGNAL...`` mapping.
+
+    The reversed form ``MESSAGE.SIGNAL=CHANNEL[*SCALE][+-OFFSET]`` (signal on the left) is
+    accepted too and means the same ``channel = scale * signal + offset``.
 
     Raises
     ------
     UsageError
         Naming ``where`` (the option or file) and showing the expected form.
     """
+    r = _RE_REVERSED.match(text)
+    if r and not _RE.match(text):
+        text = f"{r['channel']}={r['message']}.{r['signal']}{r['rest']}"
     m = _RE.match(text)
     if not m:
         raise UsageError(f"{where}: cannot parse signal map {text!r}; expected "
@@ -139,6 +152,16 @@ class SignalMap:
     def from_strings(cls, specs: Iterable[str], where: str = "--map") -> "SignalMap":
         """Build from ``CHANNEL=MESSAGE.SIGNAL...`` strings (command line)."""
         return cls([parse_mapping(s, where) for s in specs], None, where)
+
+    @classmethod
+    def from_args(cls, specs: Sequence[str] | None, path: str | Path | None = None) -> "SignalMap | None":
+        """Map from ``--map`` strings and/or a ``--map-file`` (``--map`` entries win)."""
+        maps = []
+        if path:
+            maps.append(cls.from_file(path))
+        if specs:
+            maps.append(cls.from_strings(specs))
+        return merge_maps(maps)
 
     @classmethod
     def from_file(cls, path: str | Path) -> "SignalMap":

@@ -1,0 +1,328 @@
+"""Bounded, preallocated rolling buffer of decoded samples, and alignment on a uniform grid.
+
+Each *source* (one CAN message: one timestamp, several channels) owns a ring of
+``capacity`` rows preallocated as :class:`array.array` columns of doubles (an element store
+costs ~50 ns, a third of a NumPy scalar store; NumPy reads the columns without copying
+through :func:`numpy.frombuffer`). When a ring is full the oldest row is overwritten and
+counted in :attr:`RollingBuffer.overwritten` -- memory stays flat on an endless stream. For
+offline loading of a whole log, ``growable=True`` doubles the rings in place instead.
+
+:meth:`RollingBuffer.align` puts the channels on one uniform time base: every sample goes
+to the grid cell nearest its time; cells without a sample stay NaN and are listed as
+:class:`Gap` records -- nothing is interpolated.
+"""
+from __future__ import annotations
+
+import threading
+from array import array
+from dataclasses import dataclass, field
+from typing import Callable, Iterable, Sequence
+
+import numpy as np
+
+from suspid.errors import InputError
+
+#: alignment refuses grids longer than this (a timestamp outlier, not a real record)
+MAX_GRID = 50_000_000
+
+
+@dataclass(frozen=True)
+class Gap:
+    """A run of missing samples of one channel on the aligned grid.
+
+    Attributes
+    ----------
+    channel : str
+    t_start, t_end : float
+        Times (s) of the first and last missing grid cell.
+    samples : int
+        Number of missing cells.
+    """
+
+    channel: str
+    t_start: float
+    t_end: float
+    samples: int
+
+    def as_dict(self) -> dict[str, object]:
+        return {"channel": self.channel, "t_start": self.t_start, "t_end": self.t_end,
+                "samples": self.samples}
+
+
+@dataclass
+class Aligned:
+    """Channels on one uniform time base.
+
+    Attributes
+    ----------
+    t : ndarray, shape (N,)
+        Grid times (s). Where a frame fell on a cell its own timestamp is used, provided
+        all frames lie within 1e-9 dt of the grid (an encoded CSV reads back exactly);
+        otherwise the ideal grid ``t0 + k dt``.
+    dt : float
+        Grid step (s).
+    values : dict
+        ``channel -> ndarray (N,)``, NaN where no valid sample fell.
+    gaps : list of Gap
+        Runs of NaN per channel (leading and trailing runs included).
+    collisions : int
+        Samples that fell on an already filled cell (the later one is kept).
+    snapped : float
+        Largest distance (s) between a frame time and its grid cell.
+    """
+
+    t: np.ndarray
+    dt: float
+    values: dict[str, np.ndarray]
+    gaps: list[Gap] = field(default_factory=list)
+    collisions: int = 0
+    snapped: float = 0.0
+
+
+class Source:
+    """Ring of rows ``(t, v_0, ..., v_{k-1})`` of one message; created by :meth:`RollingBuffer.source`."""
+
+    __slots__ = ("name", "channels", "t", "cols", "w", "n", "cap", "growable", "overwritten",
+                 "_lock", "push")
+
+    def __init__(self, name: str, channels: Sequence[str], capacity: int, growable: bool,
+                 lock: threading.Lock) -> None:
+        self.name = name
+        self.channels = tuple(channels)
+        self.cap = capacity
+        zeros = bytes(8 * capacity)
+        self.t = array("d", zeros)
+        self.cols = tuple(array("d", zeros) for _ in self.channels)
+        self.w = 0          # next write index
+        self.n = 0          # rows held (<= cap)
+        self.growable = growable
+        self.overwritten = 0
+        self._lock = lock
+        self.push = self._compile_push()
+
+    def _compile_push(self) -> Callable[[float, Sequence[float]], None]:
+        """Generate ``push(t, values)`` with the column stores unrolled (no per-row loop)."""
+        ns: dict[str, object] = {"src": self, "lock": self._lock, "T": self.t}
+        stores = []
+        for k, col in enumerate(self.cols):
+            ns[f"C{k}"] = col
+            stores.append(f"        C{k}[i] = values[{k}]")
+        code = "\n".join([
+            "def push(t, values):",
+            "    with lock:",
+            "        i = src.w",
+            "        if src.n == src.cap:",
+            "            src.overwritten += 1",
+            "        else:",
+            "            src.n += 1",
+            "        T[i] = t",
+            *stores,
+            "        i += 1",
+            "        src.w = i if i < src.cap else src._at_end()",
+        ])
+        exec(code, ns)  # noqa: S102 - generated from the column count only
+        return ns["push"]  # type: ignore[return-value]
+
+    def _at_end(self) -> int:
+        """The write index reached the end: grow (growable) or wrap to 0; new write index."""
+        if not self.growable:
+            return 0
+        more = bytes(8 * self.cap)
+        self.t.frombytes(more)
+        for col in self.cols:
+            col.frombytes(more)
+        self.cap *= 2
+        return self.cap // 2
+
+    def snapshot(self) -> tuple[np.ndarray, np.ndarray]:
+        """Copies ``(t (n,), values (n, k))`` in arrival order (oldest first)."""
+        with self._lock:
+            n, w, cap = self.n, self.w, self.cap
+            # zero-copy views of the columns, released before the lock is: a growable ring
+            # cannot resize an array.array while a view of it exists
+            views = [np.frombuffer(c, dtype=np.float64, count=cap) for c in (self.t, *self.cols)]
+            if n < cap or w == 0:
+                lo = w - n if n < cap else 0
+                parts = [v[lo:lo + n].copy() for v in views]
+            else:
+                parts = [np.concatenate((v[w:], v[:w])) for v in views]
+            del views
+        tt = parts[0]
+        vv = np.column_stack(parts[1:]) if len(parts) > 1 else np.empty((n, 0))
+        return tt, vv
+
+    def clear(self) -> None:
+        """Forget every row (capacity kept)."""
+        with self._lock:
+            self.w = 0
+            self.n = 0
+
+
+class RollingBuffer:
+    """Bounded rolling store of decoded channels, one ring per message.
+
+    Parameters
+    ----------
+    capacity : int
+        Rows per message ring (e.g. 65536 = 65 s at 1 kHz). Preallocated.
+    growable : bool
+        Double a full ring instead of overwriting (offline loading of a whole log).
+    """
+
+    def __init__(self, capacity: int = 1 << 16, growable: bool = False) -> None:
+        if capacity < 2:
+            raise ValueError(f"buffer capacity must be >= 2 rows, got {capacity}")
+        self.capacity = int(capacity)
+        self.growable = growable
+        self.sources: dict[str, Source] = {}
+        self._where: dict[str, tuple[Source, int]] = {}
+        self._lock = threading.Lock()
+
+    def source(self, name: str, channels: Sequence[str]) -> Source:
+        """Create (or return) the ring of message ``name`` carrying ``channels``."""
+        if name in self.sources:
+            return self.sources[name]
+        for ch in channels:
+            if ch in self._where:
+                raise ValueError(f"channel {ch!r} already comes from {self._where[ch][0].name}")
+        src = Source(name, channels, self.capacity, self.growable, self._lock)
+        self.sources[name] = src
+        for k, ch in enumerate(channels):
+            self._where[ch] = (src, k)
+        return src
+
+    @property
+    def channels(self) -> list[str]:
+        """Every channel held."""
+        return list(self._where)
+
+    @property
+    def overwritten(self) -> int:
+        """Rows lost because a ring was full (0 with ``growable``)."""
+        return sum(s.overwritten for s in self.sources.values())
+
+    def latest_time(self) -> float:
+        """Time (s) of the newest row of any source (NaN if empty)."""
+        best = float("nan")
+        with self._lock:
+            for s in self.sources.values():
+                if s.n:
+                    t = s.t[(s.w - 1) % s.cap]
+                    if not best >= t:
+                        best = t
+        return best
+
+    def series(self, channel: str) -> tuple[np.ndarray, np.ndarray]:
+        """``(t, v)`` of one channel in arrival order."""
+        src, k = self._where[channel]
+        t, v = src.snapshot()
+        return t, v[:, k]
+
+    def clear(self) -> None:
+        """Forget all rows."""
+        for s in self.sources.values():
+            s.clear()
+
+    def align(self, channels: Iterable[str] | None = None, dt: float | None = None,
+              t_start: float | None = None, t_end: float | None = None) -> Aligned:
+        """Put channels on one uniform grid without interpolating.
+
+        Parameters
+        ----------
+        channels : iterable of str, optional
+            Channels to align (default all).
+        dt : float, optional
+            Grid step (s); default the smallest median frame interval of the sources.
+        t_start, t_end : float, optional
+            Window (s, inclusive); default everything held.
+
+        Returns
+        -------
+        Aligned
+
+        Raises
+        ------
+        InputError
+            No data, or a time span that would need more than 50 M grid cells.
+        """
+        names = list(channels) if channels is not None else self.channels
+        unknown = [c for c in names if c not in self._where]
+        if unknown:
+            raise KeyError(f"channel(s) not in buffer: {', '.join(unknown)}")
+        snaps: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        for c in names:
+            src = self._where[c][0]
+            if src.name not in snaps:
+                t, v = src.snapshot()
+                keep = np.ones(t.size, dtype=bool)
+                if t_start is not None:
+                    keep &= t >= t_start
+                if t_end is not None:
+                    keep &= t <= t_end
+                snaps[src.name] = (t[keep], v[keep])
+        nonempty = [s for s in snaps.values() if s[0].size]
+        if not nonempty:
+            raise InputError("no decoded samples to align (no accepted frame carries the channels "
+                             f"{', '.join(names)})")
+        if dt is None:
+            steps = []
+            for t, _ in nonempty:
+                if t.size >= 2:
+                    d = np.diff(t)
+                    d = d[d > 0]
+                    if d.size:
+                        steps.append(float(np.median(d)))
+            dt = min(steps) if steps else 1.0
+        if not dt > 0:
+            raise ValueError(f"grid step must be > 0 s, got {dt}")
+        # the grid is anchored on the first frame inside the window
+        t0 = min(float(t.min()) for t, _ in nonempty)
+        t_last = max(float(t.max()) for t, _ in nonempty)
+        span = (t_last - t0) / dt
+        if span > MAX_GRID:
+            raise InputError(f"decoded frames span {t_last - t0:.6g} s, {span:.3g} samples of "
+                             f"{dt:.6g} s; expected at most {MAX_GRID} (a timestamp outlier?)")
+        n = int(np.rint(span)) + 1
+        stamps = np.full(n, np.nan)
+        values: dict[str, np.ndarray] = {}
+        collisions = 0
+        cells: dict[str, np.ndarray] = {}
+        for name, (t, v) in snaps.items():
+            k = np.rint((t - t0) / dt).astype(np.int64)
+            ok = (k >= 0) & (k < n)
+            cells[name] = k
+            kk = k[ok]
+            stamps[kk] = t[ok]
+            collisions = max(collisions, int(kk.size - np.unique(kk).size))
+        for c in names:
+            src, col = self._where[c]
+            t, v = snaps[src.name]
+            k = cells[src.name]
+            ok = (k >= 0) & (k < n)
+            out = np.full(n, np.nan)
+            out[k[ok]] = v[ok, col]
+            values[c] = out
+        present = ~np.isnan(stamps)
+        kmax = int(np.flatnonzero(present)[-1]) if present.any() else 0
+        dt_fit = (float(stamps[kmax]) - t0) / kmax if kmax > 0 else dt
+        grid = t0 + np.arange(n) * dt_fit
+        snapped = float(np.nanmax(np.abs(stamps - grid))) if present.any() else 0.0
+        if snapped <= 1e-9 * dt_fit:
+            t_out = np.where(present, stamps, grid)
+        else:
+            t_out = grid
+        gaps: list[Gap] = []
+        for c in names:
+            gaps.extend(_gaps(c, values[c], t_out))
+        return Aligned(t_out, dt_fit, values, gaps, collisions, snapped)
+
+
+def _gaps(channel: str, v: np.ndarray, t: np.ndarray) -> list[Gap]:
+    """Runs of NaN in ``v`` as Gap records."""
+    miss = np.isnan(v)
+    if not miss.any():
+        return []
+    d = np.diff(np.r_[0, miss.astype(np.int8), 0])
+    starts = np.flatnonzero(d == 1)
+    ends = np.flatnonzero(d == -1) - 1
+    return [Gap(channel, float(t[a]), float(t[b]), int(b - a + 1)) for a, b in zip(starts, ends)]

@@ -1,0 +1,153 @@
+"""A CAN log as a :class:`suspid.io.csvio.Measurement` -- what ``suspid identify --input LOG`` uses.
+
+The log is read tolerantly (:func:`suspid.can.logs.read_log`), every frame is validated
+and decoded by :class:`~estimator.decode.listener.DecodeListener`, and the channels are
+aligned on a uniform grid. For a log written by ``suspid encode`` from a measurement CSV
+the grid is the CSV's time column and the values differ from the CSV by quantization
+only (at most half a DBC resolution step).
+
+Missing samples of measured channels stay NaN (the identifier skips them, as empty CSV
+cells); road inputs cannot have holes in a simulation, so gaps in a road channel are
+bridged by linear interpolation -- reported in ``warnings`` with their count, never silently.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+from estimator.decode.buffer import Aligned
+from estimator.decode.listener import DecodeListener
+from estimator.decode.replay import feed
+from suspid.can.logs import ReadStats, read_log
+from suspid.can.signal_map import SignalMapLike
+from suspid.errors import InputError
+from suspid.io.csvio import Measurement
+from suspid.models import SuspensionModel, get_model
+
+
+def summarize_gaps(aligned: Aligned) -> list[str]:
+    """One warning line per channel with missing samples."""
+    out = []
+    by_ch: dict[str, list] = {}
+    for g in aligned.gaps:
+        by_ch.setdefault(g.channel, []).append(g)
+    for ch, gaps in by_ch.items():
+        n = sum(g.samples for g in gaps)
+        if n >= aligned.t.size:
+            continue  # never sent (absent column): not a gap
+        longest = max(gaps, key=lambda g: g.samples)
+        out.append(f"channel {ch}: {n} of {aligned.t.size} samples missing in {len(gaps)} gap(s); "
+                   f"longest {longest.samples} samples from t={longest.t_start:.6g} s")
+    return out
+
+
+def aligned_to_measurement(aligned: Aligned, model: SuspensionModel, source: str = "",
+                           warnings: list[str] | None = None) -> Measurement:
+    """Split aligned channels into the model's road inputs and measured channels.
+
+    Road channels with gaps are linearly interpolated across them (with a warning);
+    measured channels keep NaN. Channels without any valid sample (never sent, as an absent
+    CSV column) are left out.
+    """
+    warns = list(warnings or [])
+    road_names = set(model.roads) | {f"{r}_dot" for r in model.roads}
+    road: dict[str, np.ndarray] = {}
+    measured: dict[str, np.ndarray] = {}
+    t = aligned.t
+    for ch, v in aligned.values.items():
+        ok = ~np.isnan(v)
+        if not ok.any():
+            continue  # never sent (Valid = 0 throughout), like an absent CSV column
+        if ch in road_names:
+            if not ok.all():
+                if ok.sum() < 2:
+                    warns.append(f"{source}: road channel {ch!r} has fewer than 2 samples; not used")
+                    continue
+                v = np.interp(t, t[ok], v[ok])
+                warns.append(f"{source}: road channel {ch!r}: {int((~ok).sum())} missing samples "
+                             "bridged by linear interpolation")
+            road[ch] = v
+        else:
+            measured[ch] = v
+    for r in model.roads:
+        if f"{r}_dot" in road and r not in road:
+            road.pop(f"{r}_dot")
+            warns.append(f"{source}: road velocity {r}_dot without {r}; not used")
+    return Measurement(t=t, road=road, measured=measured, warnings=warns, source=source)
+
+
+def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
+                            dbc_path: str | Path | None = None,
+                            signal_map: SignalMapLike = None, *,
+                            time_source: Literal["timestamp", "tick"] = "timestamp",
+                            dt: float | None = None,
+                            max_counter_delta: int = 4) -> tuple[Measurement, dict[str, object]]:
+    """Decode a CAN log into a measurement on a uniform time grid.
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.log`` (candump -L), ``.asc``, ``.blf``, ``.trc`` or ``.mf4``.
+    model : str or SuspensionModel
+    dbc_path : str or Path, optional
+        Default: the signal map file's ``dbc``, else suspid's ``suspension.dbc``.
+    signal_map : SignalMap, path or list of str, optional
+        Needed for a foreign DBC (see :mod:`suspid.can.signal_map`).
+    time_source : {"timestamp", "tick"}
+        Frame timestamps (default) or the node's ``SN_Sync`` ticks.
+    dt : float, optional
+        Grid step (s); default the median frame interval.
+    max_counter_delta : int
+        See :class:`~estimator.decode.listener.DecodeListener`.
+
+    Returns
+    -------
+    measurement : Measurement
+        ``t`` (s), ``road``, ``measured`` (NaN for missing samples), ``warnings``.
+    frame_stats : dict
+        ``{"accepted": N, "rejected": {reason: n, ...}, "ignored": n, "lost": n}``.
+
+    Raises
+    ------
+    InputError
+        Missing/unreadable log or DBC, or no accepted frame carrying a mapped channel.
+    UsageError
+        Unknown log suffix, or a signal map that does not fit the DBC or model.
+    """
+    m = get_model(model) if isinstance(model, str) else model
+    listener = DecodeListener(m, dbc_path, signal_map, capacity=1 << 14, growable=True,
+                              time_source=time_source, max_counter_delta=max_counter_delta)
+    stats = ReadStats()
+    feed(listener, read_log(path, stats))
+    listener.count_malformed(stats.malformed)
+    frame_stats = listener.frame_stats()
+    warnings = [f"{path}: skipped {e}" for e in stats.examples]
+    if stats.malformed > len(stats.examples):
+        warnings.append(f"{path}: {stats.malformed} unparseable lines/records skipped in all")
+    if stats.truncated:
+        warnings.append(f"{path}: the file ends inside a record (truncated); frames before it used")
+    if listener.time_resyncs:
+        warnings.append(f"{path}: timestamps jumped back {listener.time_resyncs} time(s); "
+                        "the time base was re-anchored")
+    if not any(s.n for s in listener.buffer.sources.values()):
+        rej = {k: v for k, v in frame_stats["rejected"].items() if v}  # type: ignore[union-attr]
+        raise InputError(f"{path}: no accepted frame carries a channel of model {m.name} "
+                         f"({stats.frames} frames read, {frame_stats['accepted']} accepted, "
+                         f"rejected {rej or 'none'}; map: "
+                         f"{', '.join(str(x) for x in listener.signal_map.mappings)})")
+    aligned = listener.aligned(dt=dt)
+    if aligned.snapped > 1e-3 * aligned.dt:
+        warnings.append(f"{path}: frame times snapped to a uniform grid of {aligned.dt:.6g} s "
+                        f"(largest shift {aligned.snapped:.3g} s)")
+    if aligned.collisions:
+        warnings.append(f"{path}: {aligned.collisions} frames fell on an already filled grid "
+                        "cell (the later kept)")
+    warnings += [f"{path}: {w}" for w in summarize_gaps(aligned)]
+    meas = aligned_to_measurement(aligned, m, str(path), warnings)
+    if not meas.measured:
+        raise InputError(f"{path}: no measured channel of model {m.name} in the log "
+                         f"(decoded: {', '.join(aligned.values) or 'none'}); expected any of "
+                         f"{', '.join(m.channels)}")
+    return meas, frame_stats

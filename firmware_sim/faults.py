@@ -1,0 +1,227 @@
+"""Fault injection of the simulated node: sensor faults and bus/transmission faults.
+
+Specified on the command line as ``--fault KIND=ARGS`` (repeatable):
+
+=========================  ================================================================
+spec                       effect
+=========================  ================================================================
+``loss=P``                 each frame is lost with probability P (random loss)
+``burst=RATE:LEN``         bursts of frame loss: RATE bursts per second (Poisson), each
+                           LEN seconds long; every frame inside a burst is lost
+``stuck=CH:START:LEN``     sensor channel CH freezes at its value at START (s) for LEN s
+``bitflip=P``              with probability P a frame is sent with one random payload bit
+                           flipped after the CRC was computed (the receiver's CRC check
+                           must catch it)
+``late=P:DELAY``           with probability P a frame is held back DELAY seconds and sent
+                           after newer frames (out of order)
+``busoff=AT:LEN``          the CAN controller goes bus-off at AT (s) and recovers after LEN
+                           s; nothing is sent meanwhile; status reports the recovery
+=========================  ================================================================
+
+All random choices come from one seeded generator, so a run is reproducible.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Iterable
+
+import numpy as np
+
+from suspid.errors import UsageError
+
+FAULT_KINDS = ("loss", "burst", "stuck", "bitflip", "late", "busoff")
+
+
+@dataclass
+class FaultConfig:
+    """Parsed fault specification (see the module docstring).
+
+    Attributes
+    ----------
+    loss : float
+        Random frame-loss probability.
+    bursts : list of (rate_hz, length_s)
+    stuck : list of (channel, start_s, length_s)
+    bitflip : float
+        Probability of one flipped bit per frame.
+    late : tuple (probability, delay_s) or None
+    busoff : list of (at_s, length_s)
+    """
+
+    loss: float = 0.0
+    bursts: list[tuple[float, float]] = field(default_factory=list)
+    stuck: list[tuple[str, float, float]] = field(default_factory=list)
+    bitflip: float = 0.0
+    late: tuple[float, float] | None = None
+    busoff: list[tuple[float, float]] = field(default_factory=list)
+
+    @property
+    def active(self) -> bool:
+        """``True`` if any fault is configured."""
+        return bool(self.loss or self.bursts or self.stuck or self.bitflip or self.late
+                    or self.busoff)
+
+    @classmethod
+    def parse(cls, specs: Iterable[str], channels: Iterable[str] | None = None) -> "FaultConfig":
+        """Parse ``KIND=ARGS`` strings.
+
+        Raises
+        ------
+        UsageError
+            Naming the bad spec and the expected form.
+        """
+        cfg = cls()
+        chans = set(channels) if channels is not None else None
+        forms = {"loss": "loss=P", "burst": "burst=RATE_HZ:LENGTH_S",
+                 "stuck": "stuck=CHANNEL:START_S:LENGTH_S", "bitflip": "bitflip=P",
+                 "late": "late=P:DELAY_S", "busoff": "busoff=AT_S:LENGTH_S"}
+        for spec in specs:
+            kind, sep, arg = spec.partition("=")
+            kind = kind.strip()
+            if kind not in FAULT_KINDS or not sep:
+                raise UsageError(f"--fault {spec!r}: expected one of "
+                                 f"{', '.join(forms.values())}")
+            parts = [a.strip() for a in arg.split(":")]
+
+            def num(s: str, lo: float, hi: float, what: str) -> float:
+                try:
+                    v = float(s)
+                except ValueError:
+                    raise UsageError(f"--fault {spec!r}: {what} must be a number, got {s!r} "
+                                     f"(form {forms[kind]})") from None
+                if not lo <= v <= hi:
+                    raise UsageError(f"--fault {spec!r}: {what} must be in [{lo:g}, {hi:g}], got {v:g}")
+                return v
+
+            want = {"loss": 1, "bitflip": 1, "burst": 2, "late": 2, "busoff": 2, "stuck": 3}[kind]
+            if len(parts) != want:
+                raise UsageError(f"--fault {spec!r}: expected {forms[kind]}")
+            inf = float("inf")
+            if kind == "loss":
+                cfg.loss = num(parts[0], 0, 1, "probability")
+            elif kind == "bitflip":
+                cfg.bitflip = num(parts[0], 0, 1, "probability")
+            elif kind == "burst":
+                cfg.bursts.append((num(parts[0], 0, 1e3, "rate"), num(parts[1], 0, inf, "length")))
+            elif kind == "late":
+                cfg.late = (num(parts[0], 0, 1, "probability"), num(parts[1], 0, 10, "delay"))
+            elif kind == "busoff":
+                cfg.busoff.append((num(parts[0], 0, inf, "time"), num(parts[1], 0, inf, "length")))
+            else:
+                ch = parts[0]
+                if chans is not None and ch not in chans:
+                    raise UsageError(f"--fault {spec!r}: channel {ch!r} is not sent; expected one "
+                                     f"of {', '.join(sorted(chans))}")
+                cfg.stuck.append((ch, num(parts[1], 0, inf, "start"), num(parts[2], 0, inf, "length")))
+        return cfg
+
+
+class FaultInjector:
+    """Applies a :class:`FaultConfig` to the node's sensor values and transmissions.
+
+    Parameters
+    ----------
+    config : FaultConfig
+    rng : numpy Generator
+    duration : float
+        Run length (s), to draw the burst times.
+
+    Attributes
+    ----------
+    counts : dict
+        Frames affected per fault kind (``loss``, ``burst``, ``bitflip``, ``late``,
+        ``busoff``) and sensor samples held (``stuck``).
+    """
+
+    def __init__(self, config: FaultConfig, rng: np.random.Generator, duration: float) -> None:
+        self.config = config
+        self.rng = rng
+        self.counts = dict.fromkeys(FAULT_KINDS, 0)
+        self._held: dict[str, float] = {}
+        windows: list[tuple[float, float]] = []
+        for rate, length in config.bursts:
+            if rate <= 0:
+                continue
+            t = float(rng.exponential(1.0 / rate))
+            while t < duration:
+                windows.append((t, t + length))
+                t += length + float(rng.exponential(1.0 / rate))
+        self.burst_windows = sorted(windows)
+        self.busoff_windows = sorted((a, a + n) for a, n in config.busoff)
+
+    # ---- sensor side -------------------------------------------------------------------
+    def sensors(self, t: float, values: dict[str, float]) -> dict[str, float]:
+        """Apply stuck-sensor faults to one sample (in place) and return it."""
+        for ch, start, length in self.config.stuck:
+            if ch not in values:
+                continue
+            if start <= t < start + length:
+                if ch not in self._held:
+                    self._held[ch] = values[ch]
+                values[ch] = self._held[ch]
+                self.counts["stuck"] += 1
+            else:
+                self._held.pop(ch, None)
+        return values
+
+    def stuck_active(self, t: float) -> bool:
+        return any(s <= t < s + n for _, s, n in self.config.stuck)
+
+    # ---- bus side ----------------------------------------------------------------------
+    def in_busoff(self, t: float) -> bool:
+        """``True`` while the controller is bus-off at time ``t``."""
+        return any(a <= t < b for a, b in self.busoff_windows)
+
+    def busoff_started(self, t_prev: float, t: float) -> int:
+        """Number of bus-off events starting in ``(t_prev, t]``."""
+        return sum(1 for a, _ in self.busoff_windows if t_prev < a <= t)
+
+    def in_burst(self, t: float) -> bool:
+        return any(a <= t < b for a, b in self.burst_windows)
+
+    def transmit(self, t: float, data: bytearray) -> tuple[bool, float]:
+        """Decide the fate of one frame at time ``t``.
+
+        Returns
+        -------
+        send : bool
+            ``False`` if the frame is lost.
+        delay : float
+            Seconds to hold it back (late frame), 0 for now. ``data`` may have been
+            corrupted in place (bit flip).
+        """
+        cfg = self.config
+        if self.busoff_windows and self.in_busoff(t):
+            self.counts["busoff"] += 1
+            return False, 0.0
+        if self.burst_windows and self.in_burst(t):
+            self.counts["burst"] += 1
+            return False, 0.0
+        rng = self.rng
+        if cfg.loss and rng.random() < cfg.loss:
+            self.counts["loss"] += 1
+            return False, 0.0
+        if cfg.bitflip and rng.random() < cfg.bitflip and data:
+            bit = int(rng.integers(0, 8 * len(data)))
+            data[bit // 8] ^= 1 << (bit % 8)
+            self.counts["bitflip"] += 1
+        if cfg.late and rng.random() < cfg.late[0]:
+            self.counts["late"] += 1
+            return True, cfg.late[1]
+        return True, 0.0
+
+    def flags(self, t: float) -> int:
+        """SN_Status FaultFlags bits of the faults active at ``t``."""
+        cfg = self.config
+        f = 0
+        if cfg.loss:
+            f |= 1 << 0
+        if self.burst_windows:
+            f |= 1 << 1
+        if self.stuck_active(t):
+            f |= 1 << 2
+        if cfg.bitflip:
+            f |= 1 << 3
+        if cfg.late:
+            f |= 1 << 4
+        return f

@@ -1,0 +1,137 @@
+"""What the simulated node's sensors see: the core's excitations plus damper wear.
+
+=============  ==========================================================================
+scenario       plant and road
+=============  ==========================================================================
+initial        no road; the body (and wheel) released from the seed's initial state
+curb           a 0.1 m curb (half-cosine rise over 20 ms) at t = 0.5 s
+bump           the seed's speed bump: 0.1 m high, 3 m long, crossed at 20 km/h
+random         ISO 8608 class C road at 50 km/h (alias ``iso8608``)
+damper-wear    random road (class C, 50 km/h) while the damper ``c1`` loses damping
+               linearly from its nominal value, starting at ``wear_start`` (20 s) and
+               reaching ``wear_to`` (0.5) x nominal at the end of the run
+=============  ==========================================================================
+
+Road shapes come from :func:`suspid.excitation.make_scenario`; the plant from
+:class:`firmware_sim.plant.Plant`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, Mapping
+
+import numpy as np
+
+from suspid.errors import UsageError
+from suspid.excitation import make_scenario
+from suspid.models.base import FloatArray, SuspensionModel
+
+SCENARIOS: tuple[str, ...] = ("initial", "curb", "bump", "random", "damper-wear")
+_ALIASES = {"iso8608": "random", "random-road": "random", "damper_wear": "damper-wear",
+            "wear": "damper-wear"}
+#: default run length (s) per scenario
+DEFAULT_DURATION = {"initial": 5.0, "curb": 5.0, "bump": 5.0, "random": 30.0, "damper-wear": 150.0}
+
+
+@dataclass
+class ScenarioSetup:
+    """A node scenario, ready for the plant.
+
+    Attributes
+    ----------
+    name : str
+    t : ndarray
+        Sample times (s).
+    road : dict
+        Road arrays (m, m/s).
+    x0 : ndarray
+        Initial state.
+    params : callable
+        ``params(t) -> dict`` (SI); constant except for damper wear.
+    nominal : dict
+        Parameters at t = 0.
+    events : dict
+        Named times (s) of interest (e.g. ``wear_start``, ``c1_below_70pct``).
+    """
+
+    name: str
+    t: FloatArray
+    road: dict[str, FloatArray]
+    x0: FloatArray
+    params: Callable[[float], Mapping[str, float]]
+    nominal: dict[str, float]
+    events: dict[str, float] = field(default_factory=dict)
+
+
+def canonical_name(name: str) -> str:
+    """Scenario name with aliases resolved (UsageError for unknown names)."""
+    n = _ALIASES.get(name, name)
+    if n not in SCENARIOS:
+        raise UsageError(f"unknown scenario {name!r}; expected one of {', '.join(SCENARIOS)}")
+    return n
+
+
+def build_scenario(model: SuspensionModel, name: str, duration: float | None = None,
+                   fs: float = 500.0, params: Mapping[str, float] | None = None,
+                   seed: int = 0, wear_start: float = 20.0, wear_to: float = 0.5,
+                   damper: str | None = None) -> ScenarioSetup:
+    """Build the road, initial state and parameter schedule of a node scenario.
+
+    Parameters
+    ----------
+    model : SuspensionModel
+    name : str
+        One of :data:`SCENARIOS` (or an alias).
+    duration : float, optional
+        Run length (s); default :data:`DEFAULT_DURATION`.
+    fs : float
+        Sample rate (Hz).
+    params : mapping, optional
+        Parameter overrides (SI); default the model's defaults.
+    seed : int
+        Random road seed.
+    wear_start : float
+        Damper wear: time (s) the damping starts to fall.
+    wear_to : float
+        Damper wear: damping at the end of the run as a fraction of nominal (0 < f <= 1).
+    damper : str, optional
+        Damper parameter that wears (default ``c1``; ``c`` for quarter1).
+    """
+    n = canonical_name(name)
+    dur = DEFAULT_DURATION[n] if duration is None else float(duration)
+    if not dur > 0:
+        raise UsageError(f"--duration must be > 0 s, got {duration}")
+    nominal = dict(model.defaults())
+    if params:
+        unknown = set(params) - set(nominal)
+        if unknown:
+            raise UsageError(f"unknown parameter(s) {', '.join(sorted(unknown))} for model "
+                             f"{model.name}; expected {', '.join(nominal)}")
+        nominal.update(params)
+    core = {"random": "iso8608", "damper-wear": "iso8608"}.get(n, n)
+    kw = {"road_class": "C", "v_kmh": 50.0} if core == "iso8608" else {}
+    t, road, x0 = make_scenario(model, core, duration=dur, fs=fs, params=nominal, seed=seed, **kw)
+    events: dict[str, float] = {}
+    if n != "damper-wear":
+        fixed = dict(nominal)
+        return ScenarioSetup(n, t, road, x0, lambda _t: fixed, nominal, events)
+    dname = damper or ("c" if "c" in nominal and "c1" not in nominal else "c1")
+    if dname not in nominal:
+        raise UsageError(f"damper parameter {dname!r} not in model {model.name}")
+    if not 0 < wear_to <= 1:
+        raise UsageError(f"wear_to must be in (0, 1], got {wear_to}")
+    c0 = nominal[dname]
+    t_end = float(t[-1])
+    start = min(max(0.0, wear_start), t_end)
+    span = max(t_end - start, 1e-9)
+
+    def schedule(tt: float) -> Mapping[str, float]:
+        p = dict(nominal)
+        frac = 0.0 if tt <= start else min(1.0, (tt - start) / span)
+        p[dname] = c0 * (1.0 - (1.0 - wear_to) * frac)
+        return p
+
+    events["wear_start"] = start
+    if wear_to < 0.7:
+        events[f"{dname}_below_70pct"] = start + span * 0.3 / (1.0 - wear_to)
+    return ScenarioSetup(n, t, road, np.asarray(x0, dtype=float), schedule, nominal, events)

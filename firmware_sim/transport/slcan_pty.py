@@ -1,0 +1,286 @@
+"""The sensor node as an SLCAN (Lawicel) USB-CAN adapter on a pseudo-terminal.
+
+:class:`SlcanPtyBus` is a python-can bus for the node's side: it creates a pty with
+:func:`os.openpty` (raw mode), and a host process attaches to the slave end exactly as to a
+real adapter, e.g. ``can.Bus(interface="slcan", channel="/dev/pts/5")`` or
+``suspid monitor --interface slcan --channel /dev/pts/5``. Frames the node sends are written
+as SLCAN lines; frames the host transmits arrive through :meth:`recv`.
+
+Protocol subset (what python-can's ``slcan`` interface and common tools send), each command
+ending in ``\\r``; reply ``\\r`` for OK, ``\\a`` (BEL) for error:
+
+==========  =====================================================================
+``O``/``L``  open the channel (normal / listen-only); frames flow only while open
+``C``        close the channel
+``Sn``       bitrate code 0..8 (10 k .. 1 M), ``sXXYY`` BTR registers, ``Yn`` FD
+``V``/``v``  hardware/software version -> ``V1013`` / ``v0107``
+``N``        serial number -> ``NSUSP``
+``F``        status flags -> ``F00``
+``Zn``       timestamps off/on: frames then end in 4 hex digits of ms (0..59999)
+``t``/``T``  host transmits a standard/extended frame -> ``z`` / ``Z``
+``r``/``R``  host transmits a remote frame
+==========  =====================================================================
+
+Frame lines from the adapter: ``tIIILDD..[TTTT]\\r`` (standard) and
+``TIIIIIIIILDD..[TTTT]\\r`` (extended). Like a real adapter powered by the host, the
+simulated node waits in reset until the host opens the channel (:meth:`wait_open`).
+"""
+from __future__ import annotations
+
+import errno
+import fcntl
+import os
+import queue
+import select
+import struct
+import termios
+import threading
+import time
+import tty
+from typing import Any, Optional
+
+import can
+
+_BITRATES = {"S0": 10000, "S1": 20000, "S2": 50000, "S3": 100000, "S4": 125000,
+             "S5": 250000, "S6": 500000, "S7": 750000, "S8": 1000000, "S9": 83300}
+
+
+class SlcanPtyBus(can.BusABC):
+    """python-can bus of a simulated SLCAN adapter on a pseudo-terminal.
+
+    Parameters
+    ----------
+    write_timeout : float
+        Seconds a frame may wait for room in the pty before it is dropped (counted in
+        :attr:`overflows`); the pty buffer fills when the host stops reading.
+    timestamps : bool
+        Start with SLCAN timestamps on (the host can switch with ``Z0``/``Z1``).
+
+    Attributes
+    ----------
+    path : str
+        The slave device (``/dev/pts/N``) the host opens.
+    is_open : bool
+        The host has opened the channel.
+    bitrate : int or None
+        Last bitrate the host set.
+    overflows, dropped_closed, host_frames : int
+        Frames dropped on a full pty, dropped while the channel was closed, and frames
+        received from the host.
+    """
+
+    def __init__(self, channel: Any = "pty", write_timeout: float = 5.0, timestamps: bool = False,
+                 **kwargs: Any) -> None:
+        self._master, self._slave = os.openpty()
+        tty.setraw(self._slave, termios.TCSANOW)
+        os.set_blocking(self._master, False)
+        self.path = os.ttyname(self._slave)
+        self.write_timeout = write_timeout
+        self.timestamps = timestamps
+        self.listen_only = False
+        self.bitrate: Optional[int] = None
+        self.overflows = 0
+        self.dropped_closed = 0
+        self.host_frames = 0
+        self.commands: list[str] = []
+        self._opened = threading.Event()
+        self._closed_by_host = threading.Event()
+        self._stop = threading.Event()
+        self._wlock = threading.Lock()
+        self._rx: "queue.SimpleQueue[can.Message]" = queue.SimpleQueue()
+        self._t0 = time.monotonic()
+        self._thread = threading.Thread(target=self._serve, name=f"slcan-pty {self.path}",
+                                        daemon=True)
+        self._thread.start()
+        self.channel_info = f"SLCAN adapter on {self.path}"
+        super().__init__(channel=self.path, **kwargs)
+
+    # ---- host side ---------------------------------------------------------------------
+    @property
+    def is_open(self) -> bool:
+        return self._opened.is_set()
+
+    def wait_open(self, timeout: Optional[float] = None) -> bool:
+        """Block until the host opens the channel; ``False`` on timeout."""
+        return self._opened.wait(timeout)
+
+    def _serve(self) -> None:
+        buf = bytearray()
+        while not self._stop.is_set():
+            try:
+                ready, _, _ = select.select([self._master], [], [], 0.05)
+            except (OSError, ValueError):
+                return
+            if not ready:
+                continue
+            try:
+                chunk = os.read(self._master, 4096)
+            except BlockingIOError:
+                continue
+            except OSError as exc:
+                if exc.errno == errno.EIO:  # no process has the slave open
+                    time.sleep(0.02)
+                    continue
+                return
+            if not chunk:
+                continue
+            buf.extend(chunk)
+            while True:
+                cut = [i for i in (buf.find(b"\r"), buf.find(b"\n")) if i >= 0]
+                if not cut:
+                    break
+                i = min(cut)
+                line = bytes(buf[:i]).decode("ascii", errors="replace")
+                del buf[: i + 1]
+                reply = self._command(line)
+                if reply is not None:
+                    self._write(reply.encode("ascii"), urgent=True)
+
+    def _command(self, line: str) -> Optional[str]:
+        """Execute one host command; return the reply (``None`` for a blank line)."""
+        if line == "":
+            return "\r"
+        self.commands.append(line[:1])
+        c = line[0]
+        if c in "OL":
+            # python-can sends 'O' twice when it sets a bitrate; accept a repeated open
+            self.listen_only = c == "L"
+            self._closed_by_host.clear()
+            self._opened.set()
+            return "\r"
+        if c == "C":
+            self._opened.clear()
+            self._closed_by_host.set()
+            return "\r"
+        if c == "S":
+            if line[:2] not in _BITRATES or self.is_open:
+                return "\a"
+            self.bitrate = _BITRATES[line[:2]]
+            return "\r"
+        if c in "sYMm":
+            return "\a" if self.is_open and c in "sY" else "\r"
+        if c == "V":
+            return "V1013\r"
+        if c == "v":
+            return "v0107\r"
+        if c == "N":
+            return "NSUSP\r"
+        if c == "F":
+            return "F00\r"
+        if c == "Z":
+            self.timestamps = line[1:2] == "1"
+            return "\r"
+        if c in "tTrR":
+            if not self.is_open or self.listen_only:
+                return "\a"
+            msg = self._parse_frame(line)
+            if msg is None:
+                return "\a"
+            self.host_frames += 1
+            self._rx.put(msg)
+            return "z\r" if c in "tr" else "Z\r"
+        return "\a"
+
+    @staticmethod
+    def _parse_frame(line: str) -> Optional[can.Message]:
+        try:
+            c = line[0]
+            ext = c in "TR"
+            n = 8 if ext else 3
+            can_id = int(line[1:1 + n], 16)
+            dlc = int(line[1 + n], 16)
+            if dlc > 8:
+                return None
+            if c in "rR":
+                return can.Message(arbitration_id=can_id, is_extended_id=ext, is_remote_frame=True,
+                                   dlc=dlc, timestamp=time.time(), check=False)
+            data = bytes.fromhex(line[2 + n: 2 + n + 2 * dlc])
+            if len(data) != dlc:
+                return None
+            return can.Message(arbitration_id=can_id, is_extended_id=ext, data=data,
+                               timestamp=time.time(), check=False)
+        except (ValueError, IndexError):
+            return None
+
+    # ---- node side ---------------------------------------------------------------------
+    def _write(self, data: bytes, urgent: bool = False) -> bool:
+        deadline = time.monotonic() + (self.write_timeout if not urgent else 1.0)
+        view = memoryview(data)
+        with self._wlock:
+            while view:
+                try:
+                    n = os.write(self._master, view)
+                    view = view[n:]
+                    continue
+                except BlockingIOError:
+                    pass
+                except OSError:
+                    return False
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                try:
+                    select.select([], [self._master], [], min(left, 0.05))
+                except (OSError, ValueError):
+                    return False
+        return True
+
+    def send(self, msg: can.Message, timeout: Optional[float] = None) -> None:
+        """Write one frame as an SLCAN line (dropped and counted while the channel is closed)."""
+        if not self.is_open:
+            self.dropped_closed += 1
+            return
+        if msg.is_extended_id:
+            head = f"{'R' if msg.is_remote_frame else 'T'}{msg.arbitration_id:08X}{msg.dlc:d}"
+        else:
+            head = f"{'r' if msg.is_remote_frame else 't'}{msg.arbitration_id:03X}{msg.dlc:d}"
+        line = head if msg.is_remote_frame else head + msg.data.hex().upper()
+        if self.timestamps:
+            ms = int((msg.timestamp if msg.timestamp else time.monotonic() - self._t0) * 1000)
+            line += f"{ms % 60000:04X}"
+        if not self._write((line + "\r").encode("ascii")):
+            self.overflows += 1
+
+    def _recv_internal(self, timeout: Optional[float]) -> tuple[Optional[can.Message], bool]:
+        try:
+            if timeout is None:
+                return self._rx.get(), False
+            if timeout <= 0:
+                return self._rx.get_nowait(), False
+            return self._rx.get(timeout=timeout), False
+        except queue.Empty:
+            return None, False
+
+    def pending(self) -> int:
+        """Bytes written to the host that it has not read yet."""
+        try:
+            raw = fcntl.ioctl(self._slave, termios.FIONREAD, b"\0\0\0\0")
+            return int(struct.unpack("i", raw)[0])
+        except OSError:
+            return 0
+
+    def drain(self, timeout: float = 5.0) -> bool:
+        """Wait until the host has read everything (or closed the channel); ``False`` on timeout."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if self.pending() == 0 or self._closed_by_host.is_set():
+                return True
+            time.sleep(0.01)
+        return False
+
+    def wait_closed(self, timeout: Optional[float] = None) -> bool:
+        """Block until the host closes the channel (``C``); ``False`` on timeout."""
+        return self._closed_by_host.wait(timeout)
+
+    def shutdown(self) -> None:
+        """Stop the adapter and close the pseudo-terminal."""
+        if self._stop.is_set():
+            return
+        self._stop.set()
+        self._thread.join(timeout=1.0)
+        for fd in (self._master, self._slave):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+        super().shutdown()

@@ -1,0 +1,46 @@
+"""Command-line options shared by the subcommands that read CAN data.
+
+``identify``, ``diagnose``, ``monitor`` and ``compare`` can call :func:`add_can_arguments`
+on their parser and :func:`can_inputs` on the parsed arguments::
+
+    add_can_arguments(parser)            # --map CHANNEL=MSG.SIGNAL..., --map-file PATH
+    dbc_path, signal_map = can_inputs(args)
+    meas, frames = load_log_as_measurement(args.input, model, dbc_path, signal_map)
+
+(``--dbc`` is part of the contract and stays defined by each command unless ``dbc=True``.)
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from suspid.can.signal_map import SignalMap, merge_maps
+
+
+def add_can_arguments(parser: argparse.ArgumentParser, dbc: bool = False) -> None:
+    """Add ``--map`` and ``--map-file`` (and ``--dbc`` if ``dbc``) to a parser."""
+    if dbc:
+        parser.add_argument("--dbc", metavar="PATH",
+                            help="DBC of the CAN data (default: suspid's dbc/suspension.dbc)")
+    parser.add_argument("--map", metavar="CHANNEL=MSG.SIGNAL", action="append", default=[],
+                        dest="signal_map",
+                        help="map a DBC signal onto a model channel, e.g. "
+                             "'x1_ddot=gnss_imu.AccelerationX-9.81' (repeatable; "
+                             "[SCALE*]MSG.SIGNAL[*SCALE][+-OFFSET|-mean]); default: the "
+                             "SuspidChannel attributes of suspid's DBC")
+    parser.add_argument("--map-file", metavar="PATH", dest="signal_map_file",
+                        help="signal map file (.toml or .json: a [map] table, optional dbc = ...)")
+
+
+def can_inputs(args: argparse.Namespace) -> tuple[Path | None, SignalMap | None]:
+    """``(dbc_path, signal_map)`` from parsed options (the map file's ``dbc`` if no ``--dbc``)."""
+    maps = []
+    if getattr(args, "signal_map_file", None):
+        maps.append(SignalMap.from_file(args.signal_map_file))
+    if getattr(args, "signal_map", None):
+        maps.append(SignalMap.from_strings(args.signal_map))
+    smap = merge_maps(maps)
+    dbc = getattr(args, "dbc", None)
+    if dbc is None and smap is not None and smap.dbc is not None:
+        dbc = smap.dbc
+    return (Path(dbc) if dbc else None), smap

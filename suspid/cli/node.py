@@ -1,0 +1,148 @@
+"""``suspid node``: run the simulated sensor-node firmware on a python-can bus."""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from suspid.errors import UsageError
+from suspid.models import MODELS
+
+
+def _speed(text: str) -> float:
+    t = text.strip().lower()
+    if t in ("max", "inf", "0"):
+        return 0.0
+    try:
+        v = float(t)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number or 'max', got {text!r}") from None
+    if not v >= 0:
+        raise argparse.ArgumentTypeError(f"expected >= 0, got {text!r}")
+    return v
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Register ``suspid node``."""
+    from firmware_sim.scenarios import SCENARIOS
+
+    p = subparsers.add_parser(
+        "node", help="run the simulated sensor node on a CAN bus",
+        description="Run the simulated suspension sensor-node firmware: a fixed-rate "
+        "scheduler (sensor task at --rate, status at 10 Hz) reads the plant (the model), adds "
+        "sensor noise, packs frames per the DBC with E2E counter and CRC-8 and sends them on a "
+        "python-can bus. '--interface slcan --channel pty' makes the node a simulated SLCAN "
+        "USB-CAN adapter on a pseudo-terminal and prints 'pty: /dev/pts/N' as the first "
+        "stdout line; the node starts when a host opens the channel "
+        "(e.g. suspid monitor --interface slcan --channel /dev/pts/N). At the end one JSON "
+        "summary line is printed.")
+    p.add_argument("--scenario", required=True, choices=list(SCENARIOS) + ["iso8608"],
+                   help="initial, curb, bump, random (ISO 8608 road), damper-wear (c1 falls "
+                        "linearly from --wear-start to --wear-to x nominal at the end)")
+    p.add_argument("--interface", default="virtual",
+                   help="python-can interface: virtual (default), slcan, socketcan, ...")
+    p.add_argument("--channel", default="suspid",
+                   help="python-can channel; 'pty' with slcan creates the simulated adapter "
+                        "(default 'suspid')")
+    p.add_argument("--duration", type=float, metavar="S",
+                   help="run length in seconds of data time (default: 5 s for initial/curb/bump, "
+                        "30 s random, 150 s damper-wear)")
+    p.add_argument("--speed", type=_speed, default=1.0, metavar="X",
+                   help="X times real time; 0 or 'max' = as fast as possible (default 1)")
+    p.add_argument("--model", choices=list(MODELS), default="quarter2",
+                   help="plant model and message set: quarter1/quarter2 -> QC_*, half4 -> HC_* "
+                        "(default quarter2)")
+    p.add_argument("--rate", type=float, default=500.0, metavar="HZ",
+                   help="sensor task rate, 500-1000 Hz typical (default 500)")
+    p.add_argument("--channels", metavar="LIST",
+                   help="comma-separated channels to send (default: all of the model and roads)")
+    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                   help="plant parameter (SI), e.g. --param c1=1200; repeatable")
+    p.add_argument("--noise", type=float, default=1.0, metavar="SCALE",
+                   help="sensor noise as a multiple of the defaults (20 um, 1 mm/s, 0.02 m/s^2 "
+                        "standard deviation); 0 = noise-free (default 1)")
+    p.add_argument("--fault", action="append", default=[], metavar="KIND=ARGS",
+                   help="inject a fault (repeatable): loss=P, burst=RATE_HZ:LENGTH_S, "
+                        "stuck=CHANNEL:START_S:LENGTH_S, bitflip=P, late=P:DELAY_S, "
+                        "busoff=AT_S:LENGTH_S")
+    p.add_argument("--seed", type=int, default=0, help="seed of road, noise and faults (default 0)")
+    p.add_argument("--wear-start", type=float, default=20.0, metavar="S",
+                   help="damper-wear: time the damping starts to fall (default 20 s)")
+    p.add_argument("--wear-to", type=float, default=0.5, metavar="FRACTION",
+                   help="damper-wear: damping at the end as a fraction of nominal (default 0.5)")
+    p.add_argument("--dbc", metavar="PATH", help="DBC (default: suspid's dbc/suspension.dbc)")
+    p.add_argument("--log", metavar="PATH",
+                   help="also record every transmitted frame to this CAN log (.log/.asc/.blf/...)")
+    p.add_argument("--open-timeout", type=float, default=60.0, metavar="S",
+                   help="slcan pty: how long to wait for a host to open the channel (default 60)")
+    p.add_argument("--linger", type=float, default=3.0, metavar="S",
+                   help="slcan pty: after the run, how long to wait for the host to close the "
+                        "channel before the pty disappears (default 3)")
+    return p
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the node; exit 0 after the scenario ends."""
+    from firmware_sim.faults import FaultConfig
+    from firmware_sim.node import NodeConfig, SensorNode
+    from firmware_sim.transport import SlcanPtyBus, open_bus
+    from suspid.can.logs import log_format, open_log_writer
+    from suspid.cli._common import parse_assignments
+
+    channels = [c.strip() for c in args.channels.split(",") if c.strip()] if args.channels else None
+    cfg = NodeConfig(model=args.model, scenario=args.scenario, duration=args.duration,
+                     rate=args.rate, speed=args.speed, noise=args.noise, channels=channels,
+                     params=parse_assignments(args.param, "--param"), seed=args.seed,
+                     wear_start=args.wear_start, wear_to=args.wear_to,
+                     faults=FaultConfig.parse(args.fault))
+    node = SensorNode(cfg, args.dbc)
+    if args.log:
+        log_format(args.log, "--log")
+    bus = open_bus(args.interface, args.channel)
+    writer = None
+    try:
+        if isinstance(bus, SlcanPtyBus):
+            sys.stdout.write(f"pty: {bus.path}\n")
+            sys.stdout.flush()
+            if not bus.wait_open(args.open_timeout):
+                raise UsageError(f"no host opened the SLCAN channel on {bus.path} within "
+                                 f"{args.open_timeout:g} s (open it with python-can's slcan "
+                                 "interface)")
+        target = bus
+        if args.log:
+            writer = open_log_writer(args.log)
+            target = _Tee(bus, writer)
+        summary = node.run(target)  # type: ignore[arg-type]
+        if isinstance(bus, SlcanPtyBus):
+            # let the host read everything, then give it time to close the channel (it can
+            # tell the end from the final SN_Status with State = stopping) before the pty goes
+            bus.drain(5.0)
+            bus.wait_closed(args.linger)
+            summary_extra = {"slcan": {"path": bus.path, "overflows": bus.overflows,
+                                       "dropped_closed": bus.dropped_closed,
+                                       "host_frames": bus.host_frames}}
+        else:
+            summary_extra = {}
+    finally:
+        if writer is not None:
+            writer.stop()
+        bus.shutdown()
+    out = {"node": summary.as_dict(), **summary_extra}
+    sys.stdout.write(json.dumps(out) + "\n")
+    sys.stdout.flush()
+    return 0
+
+
+class _Tee:
+    """Bus proxy that also records every sent frame to a log writer."""
+
+    def __init__(self, bus, writer) -> None:  # type: ignore[no-untyped-def]
+        self._bus = bus
+        self._writer = writer
+
+    def send(self, msg, timeout=None) -> None:  # type: ignore[no-untyped-def]
+        self._bus.send(msg, timeout)
+        self._writer.on_message_received(msg)
+
+    def recv(self, timeout=None):  # type: ignore[no-untyped-def]
+        return self._bus.recv(timeout)

@@ -1,0 +1,156 @@
+"""suspid encode -> CAN logs in every format -> Measurement; damaged logs; CLI errors."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from estimator.decode import load_log_as_measurement
+from firmware_sim.corrupt import corrupt_candump
+from suspid.can.logs import ReadStats, is_can_log, log_format, read_log
+from suspid.cli import main
+from suspid.errors import UsageError
+from suspid.io.csvio import read_measurement
+from suspid.models import get_model
+
+from tests.can.conftest import Q2_STEP
+
+#: timestamp resolution of each format as python-can writes it
+T_TOL = {".log": 0.0, ".asc": 0.0, ".trc": 0.0, ".blf": 1e-9, ".mf4": 1e-6}
+
+
+@pytest.mark.parametrize("suffix", [".log", ".asc", ".blf", ".trc", ".mf4"])
+def test_encode_round_trip_every_format(q2_csv, tmp_path, suffix, capsys):
+    out = tmp_path / f"q2{suffix}"
+    assert main(["encode", "--input", str(q2_csv), "--out", str(out)]) == 0
+    assert "frames" in capsys.readouterr().out
+    ref = read_measurement(q2_csv, get_model("quarter2"))
+    meas, stats = load_log_as_measurement(out, "quarter2")
+    n = ref.t.size
+    # per sample: SN_Sync, QC_Body, QC_Wheel, QC_Road; SN_Status at 10 Hz
+    assert stats["accepted"] == 4 * n + len(range(0, n, 50))
+    assert sum(stats["rejected"].values()) == 0 and stats["lost"] == 0
+    assert meas.t.size == n
+    np.testing.assert_allclose(meas.t, ref.t, rtol=0, atol=T_TOL[suffix] + 1e-12)
+    if T_TOL[suffix] == 0.0:
+        np.testing.assert_array_equal(meas.t, ref.t)  # the CSV's grid, bit for bit
+    for ch, step in Q2_STEP.items():
+        got = meas.measured.get(ch, meas.road.get(ch))
+        want = ref.measured.get(ch, ref.road.get(ch))
+        assert np.max(np.abs(got - want)) <= step / 2 * (1 + 1e-6), ch
+    assert meas.warnings == [] or suffix == ".mf4"
+
+
+def test_t0_shifts_times_and_model_inference(q2_csv, tmp_path):
+    out = tmp_path / "shift.asc"
+    assert main(["encode", "--input", str(q2_csv), "--out", str(out), "--t0", "1234.5678"]) == 0
+    meas, _ = load_log_as_measurement(out, "quarter2")
+    ref = read_measurement(q2_csv, get_model("quarter2"))
+    np.testing.assert_allclose(meas.t, ref.t + 1234.5678, atol=2e-9)
+
+
+def test_missing_channels_stay_missing(tmp_path):
+    csv = tmp_path / "q1.csv"
+    csv.write_text("t,x,y\n0,0.01,0\n0.002,0.02,0.001\n0.004,,0.002\n0.006,0.04,0.003\n")
+    out = tmp_path / "q1.log"
+    assert main(["encode", "--input", str(csv), "--out", str(out)]) == 0
+    meas, stats = load_log_as_measurement(out, "quarter1")
+    assert set(meas.measured) == {"x"} and set(meas.road) == {"y"}
+    assert np.isnan(meas.measured["x"][2]) and meas.measured["x"][3] == pytest.approx(0.04)
+    # x_dot, x_ddot, y_dot were never sent: absent, as in the CSV, no warning; the empty
+    # cell is a one-sample gap of x
+    assert len(meas.warnings) == 1 and "channel x: 1 of 4 samples missing" in meas.warnings[0]
+
+
+def test_damaged_log_counts_every_bad_frame(q2_log, tmp_path):
+    """Truncated lines, corrupted payloads, foreign IDs: all counted, data otherwise unchanged."""
+    clean, clean_stats = load_log_as_measurement(q2_log, "quarter2")
+    bad = tmp_path / "bad.log"
+    n = corrupt_candump(q2_log, bad, truncated=15, corrupted=20, foreign=25, seed=3)
+    meas, stats = load_log_as_measurement(bad, "quarter2")
+    rej = stats["rejected"]
+    assert rej["malformed"] + rej["dlc"] == n["truncated"] == 15
+    assert rej["crc"] == n["corrupted"] == 20
+    assert rej["unknown_id"] == n["foreign"] == 25
+    assert sum(rej.values()) == 60
+    assert stats["accepted"] == clean_stats["accepted"] - 35
+    np.testing.assert_array_equal(meas.t, clean.t)
+    for ch, v in meas.measured.items():
+        ok = ~np.isnan(v)
+        assert ok.sum() >= v.size - 35
+        np.testing.assert_array_equal(v[ok], clean.measured[ch][ok])
+
+
+def test_cli_identify_reports_frames_on_damaged_log(q2_log, tmp_path, capsys):
+    import json
+
+    bad = tmp_path / "bad.log"
+    corrupt_candump(q2_log, bad, truncated=5, corrupted=5, foreign=5, seed=1)
+    rc = main(["identify", "--model", "quarter2", "--input", str(bad), "--fix", "m1=300",
+               "--init", "c1=1400", "--init", "k1=19000", "--init", "m2=38", "--init", "c2=280",
+               "--init", "k2=190000", "--json"])
+    out = json.loads(capsys.readouterr().out.splitlines()[0])
+    assert rc == 0
+    assert out["frames"]["accepted"] > 0 and sum(out["frames"]["rejected"].values()) == 15
+    truth = get_model("quarter2").defaults()
+    for name in ("c1", "k1", "m2"):
+        assert out["params"][name] == pytest.approx(truth[name], rel=0.03), name
+
+
+def test_reader_counts_malformed_lines_and_keeps_going(tmp_path):
+    p = tmp_path / "x.log"
+    p.write_text("(0.0) can0 110#00\n(0.1 can0\nnot a line at all\n(0.2) can0 11G#00\n"
+                 "(0.3) can0 123#ABC\n(0.4) can0 123#A1B2 R\n")
+    st = ReadStats()
+    msgs = list(read_log(p, st))
+    assert [m.timestamp for m in msgs] == [0.0, 0.4]
+    assert st.malformed == 4 and st.examples[0].startswith(f"{p}:2")
+
+
+def test_asc_reader_resumes_after_a_bad_line(q2_log, tmp_path):
+    from suspid.can.logs import open_log_writer
+
+    asc = tmp_path / "x.asc"
+    with open_log_writer(asc) as w:
+        for m in list(read_log(q2_log))[:40]:
+            w.on_message_received(m)
+    lines = asc.read_text().splitlines()
+    i = [k for k, line in enumerate(lines) if " d 8 " in line][8]
+    lines[i] = lines[i].replace(" d 8 ", " d 8 ZZ ")  # a non-hex byte
+    asc.write_text("\n".join(lines) + "\n")
+    st = ReadStats()
+    assert len(list(read_log(asc, st))) == 39 and st.malformed == 1
+
+
+def test_format_registry():
+    assert log_format("a/B.MF4") == ".mf4" and is_can_log("x.BLF") and not is_can_log("x.csv")
+    with pytest.raises(UsageError, match=r"\.log \(candump -L\)"):
+        log_format("x.pcap")
+
+
+@pytest.mark.parametrize("args, fragment", [
+    (["--dbc", "missing.dbc"], "missing.dbc: no such DBC file"),
+    (["--out", "x.pcap"], "unknown output log format '.pcap'"),
+])
+def test_encode_errors_exit_2_one_line(q2_csv, tmp_path, capsys, args, fragment):
+    argv = ["encode", "--input", str(q2_csv), "--out", str(tmp_path / "o.log")] + args
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and fragment in err and err.count("\n") == 1
+    assert "Traceback" not in err
+
+
+def test_garbage_csv_exit_2(tmp_path, capsys):
+    bad = tmp_path / "g.csv"
+    bad.write_text("t,x1\n0,abc\n")
+    assert main(["encode", "--input", str(bad), "--out", str(tmp_path / "o.log")]) == 2
+    err = capsys.readouterr().err
+    assert "g.csv:2" in err and "'x1'" in err and err.count("\n") == 1
+
+
+def test_log_without_model_frames_is_input_error(tmp_path):
+    from suspid.errors import InputError
+
+    p = tmp_path / "foreign.log"
+    p.write_text("(0.0) can0 7DF#0102030405060708\n(0.1) can0 7DF#0102030405060708\n")
+    with pytest.raises(InputError, match="no accepted frame"):
+        load_log_as_measurement(p, "quarter2")

@@ -1,0 +1,158 @@
+"""The simulated sensor node: scenarios, plant, noise, faults, pacing, the CLI."""
+from __future__ import annotations
+
+import json
+import time
+
+import can
+import numpy as np
+import pytest
+
+from estimator.decode import DecodeListener, feed
+from firmware_sim.faults import FaultConfig
+from firmware_sim.node import NodeConfig, SensorNode
+from firmware_sim.scenarios import SCENARIOS
+from suspid.cli import main
+from suspid.errors import UsageError
+from suspid.models import get_model
+from suspid.simulate import simulate
+
+from tests.can.conftest import Q2_STEP
+
+
+def _decode(node, **kw):
+    lst = DecodeListener(node.model, node.db, **kw)
+    feed(lst, node.frames())
+    return lst
+
+
+@pytest.mark.parametrize("scenario", SCENARIOS)
+@pytest.mark.parametrize("model_name", ["quarter1", "quarter2", "half4"])
+def test_every_scenario_and_model_decodes_cleanly(scenario, model_name):
+    node = SensorNode(NodeConfig(model=model_name, scenario=scenario, duration=1.0, rate=500))
+    lst = _decode(node)
+    st = lst.frame_stats()
+    roads = len(get_model(model_name).roads)
+    n_msgs = {"quarter1": 3, "quarter2": 4, "half4": 7}[model_name] - roads * (scenario == "initial")
+    # 501 ticks of sensor frames; status at ticks 0, 50, ..., 500 and a final one
+    assert st["accepted"] == 501 * n_msgs + 12
+    assert sum(st["rejected"].values()) == 0
+    assert lst.node_status["sample_rate"] == 500 and lst.node_status["state"] == 4  # stopping
+
+
+def test_noise_free_node_equals_the_core_simulation():
+    node = SensorNode(NodeConfig(scenario="bump", duration=2.0, rate=1000, noise=0.0))
+    lst = _decode(node)
+    al = lst.aligned()
+    m = get_model("quarter2")
+    ref = simulate(m, m.defaults(), node.setup.t, node.setup.road, node.setup.x0)
+    np.testing.assert_allclose(al.t, node.setup.t, atol=1e-12)
+    for ch, step in Q2_STEP.items():
+        assert np.max(np.abs(al.values[ch] - ref[ch])) <= step / 2 * (1 + 1e-6), ch
+
+
+def test_sensor_noise_has_the_configured_size():
+    quiet = _decode(SensorNode(NodeConfig(scenario="random", duration=2.0, noise=0.0))).aligned()
+    noisy = _decode(SensorNode(NodeConfig(scenario="random", duration=2.0, noise=5.0))).aligned()
+    d = noisy.values["x1_ddot"] - quiet.values["x1_ddot"]
+    assert np.std(d) == pytest.approx(5 * 0.02, rel=0.1)
+
+
+def test_damper_wear_c1_drifts_down():
+    node = SensorNode(NodeConfig(scenario="damper-wear", duration=40.0, rate=500,
+                                 wear_start=10.0, wear_to=0.4))
+    assert node.truth(5.0)["c1"] == 1500.0
+    assert node.truth(25.0)["c1"] == pytest.approx(1500 * (1 - 0.6 * 0.5), rel=0.01)
+    assert node.truth(40.0)["c1"] == pytest.approx(600.0, rel=0.01)
+    assert node.setup.events["c1_below_70pct"] == pytest.approx(10 + 30 * 0.5)
+    al = _decode(node).aligned()
+    # the plant really changes: body/wheel relative velocity is damped less at the end
+    rel = al.values["x1_dot"] - al.values["x2_dot"]
+    n = rel.size // 4
+    assert np.std(rel[-n:]) > 1.1 * np.std(rel[:n])
+
+
+def test_extra_force_hook_changes_the_plant():
+    def bump_stop(t, x, u, p):  # a stiff stop when the suspension compresses > 2 cm
+        d = x[0] - x[1]
+        return np.array([-5e5 * min(0.0, d + 0.02), 5e5 * min(0.0, d + 0.02)])
+
+    cfg = NodeConfig(scenario="bump", duration=1.2, rate=500, noise=0.0)
+    plain = _decode(SensorNode(cfg)).aligned()
+    hooked = _decode(SensorNode(cfg, extra_forces=[bump_stop])).aligned()
+    diff = np.nanmax(np.abs(plain.values["x1"] - hooked.values["x1"]))
+    assert diff > 1e-3
+
+
+def test_fault_injection_shows_up_as_rejections():
+    faults = FaultConfig.parse(["loss=0.02", "bitflip=0.01", "late=0.01:0.01", "busoff=1.0:0.1",
+                                "burst=1:0.02", "stuck=x1:0.5:0.3"])
+    node = SensorNode(NodeConfig(scenario="random", duration=3.0, rate=500, faults=faults, seed=4))
+    lst = _decode(node)
+    st = lst.frame_stats()
+    dropped = node.summary.frames_dropped
+    assert st["rejected"]["crc"] == dropped["bitflip"]
+    assert st["rejected"]["counter_stale"] >= 0.8 * dropped["late"]
+    assert st["lost"] >= dropped["loss"] + dropped["busoff"]
+    assert node.summary.busoff_count == 1
+    al = lst.aligned()
+    x1 = al.values["x1"]
+    stuck = (al.t >= 0.5) & (al.t < 0.8) & ~np.isnan(x1)
+    assert np.ptp(x1[stuck]) == 0.0 and np.ptp(x1[(al.t > 1.5) & ~np.isnan(x1)]) > 0
+    busoff = (al.t >= 1.0) & (al.t < 1.1)
+    assert np.isnan(x1[busoff]).all()
+
+
+@pytest.mark.parametrize("spec, fragment", [
+    ("loss=2", "must be in"), ("melt=1", "expected one of"), ("burst=1", "RATE_HZ:LENGTH_S"),
+    ("late=0.1:x", "must be a number")])
+def test_bad_fault_specs(spec, fragment):
+    with pytest.raises(UsageError, match=fragment):
+        FaultConfig.parse([spec])
+
+
+def test_run_on_virtual_bus_paced():
+    node = SensorNode(NodeConfig(scenario="bump", duration=1.0, rate=500))
+    lst = DecodeListener("quarter2", node.db, time_source="tick")
+    with can.Bus(interface="virtual", channel="t-node") as rx, \
+            can.Bus(interface="virtual", channel="t-node") as tx:
+        notifier = can.Notifier(rx, [lst])
+        t0 = time.perf_counter()
+        summary = node.run(tx, speed=4.0)
+        wall = time.perf_counter() - t0
+        time.sleep(0.1)
+        notifier.stop()
+    assert 0.2 <= wall < 1.0  # 1 s of data at 4x real time
+    assert summary.frames_sent == lst.counts.accepted == 4 * 501 + 12
+    np.testing.assert_allclose(lst.aligned().t[-1], 1.0)
+
+
+def test_node_cli_virtual_with_log(tmp_path, capsys):
+    log = tmp_path / "node.blf"
+    rc = main(["node", "--scenario", "curb", "--duration", "0.5", "--speed", "max",
+               "--fault", "bitflip=0.02", "--log", str(log)])
+    assert rc == 0
+    summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])["node"]
+    assert summary["ticks"] == 251 and summary["scenario"] == "curb"
+    from estimator.decode import load_log_as_measurement
+
+    meas, stats = load_log_as_measurement(log, "quarter2")
+    assert stats["rejected"]["crc"] == summary["frames_dropped"]["bitflip"]
+    assert stats["accepted"] + stats["rejected"]["crc"] == summary["frames_sent"]
+
+
+@pytest.mark.parametrize("argv, fragment", [
+    (["--scenario", "flood"], "invalid choice"),
+    (["--scenario", "bump", "--interface", "udp_multicast"], "not supported"),
+    (["--scenario", "bump", "--channels", "x1,x7"], "x7"),
+    (["--scenario", "bump", "--fault", "stuck=x9:1:1"], "x9"),
+    (["--scenario", "bump", "--interface", "nosuchbus"], "cannot open CAN interface"),
+])
+def test_node_cli_errors_exit_2(capsys, argv, fragment):
+    try:
+        rc = main(["node"] + argv)
+    except SystemExit as exc:  # argparse usage errors
+        rc = exc.code
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and fragment in err and "Traceback" not in err

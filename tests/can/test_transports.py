@@ -1,0 +1,159 @@
+"""Transports: the SLCAN pty adapter (in-process and two processes), socketcan."""
+from __future__ import annotations
+
+import json
+import os
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import can
+import numpy as np
+import pytest
+import serial
+
+from estimator.decode import DecodeListener
+from firmware_sim.transport import BufferedSlcanBus, SlcanPtyBus, open_bus
+from suspid.can.codec import encode_alert
+from suspid.can.dbc import load_dbc
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def _ask(port: serial.Serial, cmd: bytes) -> bytes:
+    port.write(cmd + b"\r")
+    out = b""
+    deadline = time.monotonic() + 2
+    while not out.endswith((b"\r", b"\a")) and time.monotonic() < deadline:
+        out += port.read(1)
+    return out
+
+
+def test_slcan_adapter_protocol():
+    bus = SlcanPtyBus()
+    try:
+        with serial.Serial(bus.path, timeout=0.5) as port:
+            assert _ask(port, b"V") == b"V1013\r"
+            assert _ask(port, b"N") == b"NSUSP\r"
+            assert _ask(port, b"S6") == b"\r" and bus.bitrate == 500000
+            assert _ask(port, b"SX") == b"\a"
+            assert _ask(port, b"X") == b"\a"
+            bus.send(can.Message(arbitration_id=0x123, is_extended_id=False, data=b"\x01"))  # closed: dropped
+            assert bus.dropped_closed == 1
+            assert _ask(port, b"O") == b"\r" and bus.wait_open(1)
+            assert _ask(port, b"S4") == b"\a"  # no bitrate change while open
+            bus.send(can.Message(arbitration_id=0x123, is_extended_id=False, data=b"\x01\xAB"))
+            bus.send(can.Message(arbitration_id=0x1ABCDEF, is_extended_id=True, data=b""))
+            assert port.read(10) == b"t123201AB\r"
+            assert port.read(11) == b"T01ABCDEF0\r"
+            assert _ask(port, b"t7DF3112233") == b"z\r"
+            msg = bus.recv(1.0)
+            assert msg.arbitration_id == 0x7DF and bytes(msg.data) == b"\x11\x22\x33"
+            assert _ask(port, b"Z1") == b"\r"
+            bus.send(can.Message(arbitration_id=0x10, is_extended_id=False, data=b"", timestamp=61.5))
+            assert port.read(10) == b"t010005DC\r"  # 61.5 s -> 1500 ms mod 60000
+            assert _ask(port, b"C") == b"\r" and not bus.is_open
+    finally:
+        bus.shutdown()
+
+
+def test_slcan_pty_in_process_with_buffered_client():
+    db = load_dbc()
+    node_bus = open_bus("slcan", "pty")
+    try:
+        # suspid's own opener: python-can's slcan protocol with chunked reads
+        host = open_bus("slcan", node_bus.path, sleep_after_open=0, bitrate=500000)
+        assert isinstance(host, BufferedSlcanBus)
+        assert node_bus.wait_open(2) and host.get_version(1.0) == (10, 13)
+        lst = DecodeListener("quarter2", db, time_source="tick")
+        notifier = can.Notifier(host, [lst])
+        from firmware_sim.node import NodeConfig, SensorNode
+
+        node = SensorNode(NodeConfig(scenario="bump", duration=0.5, rate=500), db)
+        host.send(encode_alert(db, "quarter2", "c1", 1000.0, 1500.0))
+        summary = node.run(node_bus, speed=0)
+        assert node_bus.drain(5)
+        time.sleep(0.2)
+        notifier.stop()
+        host.shutdown()
+    finally:
+        node_bus.shutdown()
+    assert lst.counts.accepted == summary.frames_sent == 4 * 251 + 7
+    assert sum(lst.counts.rejected.values()) == 0 and node_bus.overflows == 0
+    assert [a["parameter"] for a in summary.alerts] == ["c1"]
+    np.testing.assert_allclose(lst.aligned().t, np.arange(251) / 500.0, atol=1e-12)
+
+
+def test_two_process_slcan_link():
+    """``suspid node --interface slcan --channel pty`` in a subprocess; python-can slcan here."""
+    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "suspid", "node", "--scenario", "bump", "--interface", "slcan",
+         "--channel", "pty", "--duration", "1.0", "--speed", "4", "--open-timeout", "20"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=REPO)
+    try:
+        first = proc.stdout.readline()
+        assert first.startswith("pty: /dev/"), first + proc.stderr.read()
+        path = first.split(":", 1)[1].strip()
+        db = load_dbc()
+        lst = DecodeListener("quarter2", db, time_source="tick")
+        with can.Bus(interface="slcan", channel=path, sleep_after_open=0) as host:
+            notifier = can.Notifier(host, [lst], timeout=0.05)
+            time.sleep(0.3)
+            host.send(encode_alert(db, "quarter2", "c1", 950.0, 1500.0))
+            deadline = time.monotonic() + 30
+            while lst.node_status.get("state") != 4 and time.monotonic() < deadline:
+                time.sleep(0.02)  # the node's last SN_Status says "stopping"
+            notifier.stop()
+        out, err = proc.communicate(timeout=30)  # the host closed: the node exits at once
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, err
+    summary = json.loads(out.strip().splitlines()[-1])
+    node = summary["node"]
+    assert summary["slcan"]["overflows"] == 0 and summary["slcan"]["host_frames"] == 1
+    assert [a["parameter"] for a in node["alerts"]] == ["c1"]
+    assert lst.counts.accepted == node["frames_sent"] == 4 * 501 + 12
+    assert sum(lst.counts.rejected.values()) == 0
+    al = lst.aligned()
+    np.testing.assert_allclose(al.t, np.arange(501) / 500.0, atol=1e-12)
+    assert np.nanmax(al.values["r"]) == pytest.approx(0.1, abs=1e-3)  # the bump went through
+
+
+def _af_can_unavailable() -> str | None:
+    if not hasattr(socket, "AF_CAN"):
+        return "this Python has no socket.AF_CAN"
+    try:
+        s = socket.socket(socket.AF_CAN, socket.SOCK_RAW, socket.CAN_RAW)
+    except OSError as exc:
+        return f"kernel has no SocketCAN (AF_CAN socket: {exc.strerror})"
+    s.close()
+    if not Path("/sys/class/net/vcan0").exists():
+        return "no vcan0 interface (run tools/setup_vcan.sh as root)"
+    return None
+
+
+@pytest.mark.skipif(_af_can_unavailable() is not None, reason=str(_af_can_unavailable()))
+def test_socketcan_vcan0_same_code_path():
+    from firmware_sim.node import NodeConfig, SensorNode
+
+    db = load_dbc()
+    lst = DecodeListener("quarter2", db, time_source="tick")
+    with open_bus("socketcan", "vcan0") as rx, open_bus("socketcan", "vcan0") as tx:
+        notifier = can.Notifier(rx, [lst])
+        summary = SensorNode(NodeConfig(scenario="bump", duration=0.5), db).run(tx, speed=0)
+        time.sleep(0.3)
+        notifier.stop()
+    assert lst.counts.accepted == summary.frames_sent
+
+
+def test_socketcan_unavailable_is_a_clear_usage_error():
+    if _af_can_unavailable() is None:
+        pytest.skip("SocketCAN is available here; the error path cannot be shown")
+    from suspid.errors import UsageError
+
+    with pytest.raises(UsageError, match="cannot open CAN interface 'socketcan' channel 'vcan0'"):
+        open_bus("socketcan", "vcan0")
