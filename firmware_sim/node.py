@@ -177,11 +177,15 @@ class SensorNode:
         Plant model instance (e.g. with ``extra_force`` set); default ``get_model(config.model)``.
     extra_forces : sequence of callables, optional
         Extra generalised forces ``f(t, x, u, params)`` added to the plant (issue-6 hook).
+    effects : sequence, optional
+        Undeclared effects of :mod:`suspid.models.effects` (e.g. ``"coulomb_friction:F=120"``)
+        injected into the plant and the sensors without telling the estimator.
     """
 
     def __init__(self, config: NodeConfig, dbc: str | Path | Database | None = None,
                  model: SuspensionModel | None = None,
-                 extra_forces: Sequence[ForceFn] | None = None) -> None:
+                 extra_forces: Sequence[ForceFn] | None = None,
+                 effects: Sequence[object] | None = None) -> None:
         self.config = config
         self.db = dbc if isinstance(dbc, Database) else load_dbc(dbc)
         self.model = model if model is not None else get_model(config.model)
@@ -189,14 +193,14 @@ class SensorNode:
             raise UsageError(f"--rate must be within 1..10000 Hz (500-1000 typical), got {config.rate}")
         if not 0 < config.status_hz <= config.rate:
             raise UsageError(f"status rate must be in (0, {config.rate}] Hz, got {config.status_hz}")
-        if config.noise < 0:
-            raise UsageError(f"--noise must be >= 0, got {config.noise}")
+        if not 0 <= config.noise < float("inf"):
+            raise UsageError(f"--noise must be a finite number >= 0, got {config.noise}")
         canonical_name(config.scenario)
         self.setup = build_scenario(self.model, config.scenario, config.duration, config.rate,
                                     config.params, config.seed, config.wear_start, config.wear_to)
         self.plant = Plant(self.model, self.setup.params, self.setup.t, self.setup.road,
                            self.setup.x0, chunk_s=0.05 if self.setup.name == "damper-wear" else 1.0,
-                           extra_forces=extra_forces)
+                           extra_forces=extra_forces, effects=effects)
         available = list(self.plant.channels)
         chans = list(config.channels) if config.channels else available
         bad = [c for c in chans if c not in available]

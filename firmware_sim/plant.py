@@ -41,6 +41,12 @@ class Plant:
         Simulation chunk length (s); parameters are constant within a chunk.
     extra_forces : sequence of callables, optional
         Added to the model's ``extra_force`` (on a copy of the model).
+    effects : sequence, optional
+        Undeclared effects from :mod:`suspid.models.effects` (objects, ``"NAME:k=v"``
+        strings or ``{"name", "params"}`` dicts). Physical ones go into the plant's
+        right-hand side (fast exponential integrator of :mod:`estimator.diagnose.nlsim`),
+        sensor ones (delay, offset) into what the sensors report; the sensor effects see
+        the previous chunk too, so a delay is continuous across chunk boundaries.
 
     Attributes
     ----------
@@ -51,7 +57,19 @@ class Plant:
     def __init__(self, model: SuspensionModel, params: Mapping[str, float] | ParamsFn,
                  t: FloatArray, road: Mapping[str, FloatArray] | None = None,
                  x0: FloatArray | None = None, chunk_s: float = 1.0,
-                 extra_forces: Sequence[ForceFn] | None = None) -> None:
+                 extra_forces: Sequence[ForceFn] | None = None,
+                 effects: Sequence[object] | None = None) -> None:
+        self._physical = None
+        self._sensor = None
+        self._prev: tuple[FloatArray, dict[str, FloatArray]] | None = None
+        if effects:
+            from suspid.models.effects import inject
+
+            inj = inject(model, effects)  # validates names, parameters and channels
+            if inj.physical:
+                self._physical = inject(model, inj.physical)
+            if inj.sensor:
+                self._sensor = inject(model, inj.sensor)
         if extra_forces:
             model = copy.copy(model)
             model.extra_force = list(model.extra_force) + list(extra_forces)
@@ -81,14 +99,37 @@ class Plant:
             out = simulate(self.model, p, np.array([tt[0], tt[0] + 1.0 / self.fs]),
                            {n: np.repeat(v, 2) for n, v in road.items()}, self.x)
             out = {n: v[:1] for n, v in out.items()}
+        elif self._physical is not None:
+            out = self._physical.simulate(p, tt, road or None, self.x)
         else:
             out = simulate(self.model, p, tt, road or None, self.x)
+        if self._sensor is not None:
+            out = self._measure(tt, out)
         nq = len(self.model.coords)
         last = len(tt) - 1
-        self.x = np.array([out[c][last] for c in self.model.coords]
-                          + [out[f"{c}_dot"][last] for c in self.model.coords][:nq])
+        true = getattr(self, "_true_last", None)
+        src = true if true is not None else out
+        self.x = np.array([src[c][last] for c in self.model.coords]
+                          + [src[f"{c}_dot"][last] for c in self.model.coords][:nq])
+        self._true_last = None
         self._cols = {c: out[c] for c in self.channels if c in out}
         self._start = k
+
+    def _measure(self, tt: FloatArray, out: dict[str, FloatArray]) -> dict[str, FloatArray]:
+        """Apply the sensor effects with the previous chunk as history; keep the true states."""
+        self._true_last = out
+        if self._prev is not None:
+            pt, pc = self._prev
+            keep = pt < tt[0]
+            t_all = np.concatenate([pt[keep], tt])
+            cols = {c: np.concatenate([pc[c][keep], out[c]]) for c in out if c in pc}
+            meas = self._sensor.measure(t_all, cols)  # type: ignore[union-attr]
+            n0 = int(keep.sum())
+            res = {c: v[n0:] for c, v in meas.items()}
+        else:
+            res = self._sensor.measure(tt, out)  # type: ignore[union-attr]
+        self._prev = (tt, out)
+        return {c: res.get(c, out[c]) for c in out}
 
     def sample(self, k: int) -> dict[str, float]:
         """Every channel at sample ``k`` (samples must be requested in increasing order)."""

@@ -65,6 +65,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                    help="inject a fault (repeatable): loss=P, burst=RATE_HZ:LENGTH_S, "
                         "stuck=CHANNEL:START_S:LENGTH_S, bitflip=P, late=P:DELAY_S, "
                         "busoff=AT_S:LENGTH_S")
+    p.add_argument("--effect", action="append", default=[], metavar="NAME:KEY=VAL,...",
+                   help="inject an effect the estimator is not told about (any of suspid "
+                        "diagnose's effects, e.g. coulomb_friction:F=120 or "
+                        "sensor_delay:channels=x2+x2_dot,delay_s=0.008); repeatable")
     p.add_argument("--seed", type=int, default=0, help="seed of road, noise and faults (default 0)")
     p.add_argument("--wear-start", type=float, default=20.0, metavar="S",
                    help="damper-wear: time the damping starts to fall (default 20 s)")
@@ -95,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
                      params=parse_assignments(args.param, "--param"), seed=args.seed,
                      wear_start=args.wear_start, wear_to=args.wear_to,
                      faults=FaultConfig.parse(args.fault))
-    node = SensorNode(cfg, args.dbc)
+    node = SensorNode(cfg, args.dbc, effects=args.effect or None)
     if args.log:
         log_format(args.log, "--log")
     bus = open_bus(args.interface, args.channel)

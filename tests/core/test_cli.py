@@ -110,3 +110,13 @@ def test_unknown_columns_and_gaps_are_tolerated(tmp_path: Path, bump_csv: Path) 
 def test_debug_shows_traceback(tmp_path: Path) -> None:
     r = run("--debug", "identify", "--model", "quarter2", "--input", str(tmp_path / "none.csv"))
     assert r.returncode != 0 and "Traceback" in r.stderr
+
+
+def test_help_does_not_import_heavy_packages() -> None:
+    """Fast start: listing commands must not pull in python-can, cantools, matplotlib, filterpy."""
+    code = ("import sys; from suspid.cli import build_parser; build_parser(); "
+            "heavy = [m for m in ('can', 'cantools', 'matplotlib', 'filterpy', 'asammdf') if m in sys.modules]; "
+            "print(','.join(heavy))")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == ""
