@@ -24,6 +24,10 @@ from suspid.errors import InputError
 
 #: alignment refuses grids longer than this (a timestamp outlier, not a real record)
 MAX_GRID = 50_000_000
+#: ... and grids of more than SPARSE_FREE cells that are SPARSE_RATIO times longer than the
+#: data (one timestamp outlier would otherwise make a mostly-NaN grid of GBs)
+SPARSE_FREE = 2_000_000
+SPARSE_RATIO = 50
 
 
 @dataclass(frozen=True)
@@ -243,7 +247,8 @@ class RollingBuffer:
         Raises
         ------
         InputError
-            No data, or a time span that would need more than 50 M grid cells.
+            No data, or a time span that would need more than 50 M grid cells, or more
+            than 2 M cells and 50 x the frames held (a timestamp outlier).
         """
         names = list(channels) if channels is not None else self.channels
         unknown = [c for c in names if c not in self._where]
@@ -279,9 +284,17 @@ class RollingBuffer:
         t0 = min(float(t.min()) for t, _ in nonempty)
         t_last = max(float(t.max()) for t, _ in nonempty)
         span = (t_last - t0) / dt
-        if span > MAX_GRID:
-            raise InputError(f"decoded frames span {t_last - t0:.6g} s, {span:.3g} samples of "
-                             f"{dt:.6g} s; expected at most {MAX_GRID} (a timestamp outlier?)")
+        rows = max(t.size for t, _ in nonempty)
+        if span > MAX_GRID or (span > SPARSE_FREE and span > SPARSE_RATIO * rows):
+            # a grid far larger than the data is a timestamp outlier (one corrupted or
+            # jumped timestamp), not a record: refuse it instead of allocating GBs of NaN
+            big = max(((float(np.max(np.abs(np.diff(t)))) if t.size > 1 else 0.0), name)
+                      for name, (t, _) in snaps.items() if t.size)
+            raise InputError(f"decoded frames span {t_last - t0:.6g} s ({t0:.6g} .. "
+                             f"{t_last:.6g}), {span:.3g} grid samples of {dt:.6g} s for "
+                             f"{rows} frames per message; expected at most "
+                             f"{min(MAX_GRID, max(SPARSE_FREE, SPARSE_RATIO * rows)):.3g} "
+                             f"(a timestamp outlier? largest step {big[0]:.6g} s in {big[1]})")
         n = int(np.rint(span)) + 1
         stamps = np.full(n, np.nan)
         values: dict[str, np.ndarray] = {}

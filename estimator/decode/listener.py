@@ -6,7 +6,8 @@ Every frame goes through, in order (the first failing check names the rejection 
 reason              check
 ==================  ====================================================================
 ``frame_type``      error and remote frames carry no data
-``time``            the frame's timestamp is earlier than the last accepted frame's
+``time``            the frame's timestamp is earlier than the last accepted frame's,
+                    or is not finite (NaN, inf)
 ``unknown_id``      the CAN ID is not a message of the DBC (foreign traffic)
 ``dlc``             payload length differs from the DBC's message length
 ``crc``             E2E CRC-8 J1850 mismatch (corrupted payload, wrong ID)
@@ -39,6 +40,7 @@ no reader thread and queue hand-off, so replay runs at decode speed and is deter
 from __future__ import annotations
 
 import math
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Literal, Sequence
@@ -60,6 +62,7 @@ from suspid.models import SuspensionModel, get_model
 REJECT_REASONS: tuple[str, ...] = ("malformed", "frame_type", "time", "unknown_id", "dlc", "crc",
                                    "counter_stale", "counter_jump", "no_sync")
 _EXT = 1 << 31
+_INF = math.inf
 #: consecutive 'time' rejections after which the time base is re-anchored (a clock reset)
 TIME_RESYNC = 16
 
@@ -204,7 +207,7 @@ class DecodeListener(can.Listener):
         self.mean_channels = [m.channel for m in smap.mappings if m.remove_mean]
         self.frames = 0
         self.time_resyncs = 0
-        self._last_ts = -math.inf
+        self._last_ts = -sys.float_info.max  # any finite time passes the first check
         self._time_rejects = 0
         self._sync_tick: int | None = None
         self._routes: dict[int, _Route] = {}
@@ -265,7 +268,10 @@ class DecodeListener(can.Listener):
             rejected["frame_type"] += 1
             return
         ts = msg.timestamp
-        if ts < self._last_ts:
+        if not self._last_ts <= ts < _INF:  # one chained compare: backwards, NaN or inf
+            if not -_INF < ts < _INF:
+                rejected["time"] += 1  # NaN/inf: never a data time, never a re-anchor
+                return
             self._time_rejects += 1
             if self._time_rejects < TIME_RESYNC:
                 rejected["time"] += 1
@@ -297,8 +303,15 @@ class DecodeListener(can.Listener):
                     return
             elif last >= 0:
                 el = ts - route.last_ts
-                if el > 0:
-                    route.period = el if route.period <= 0 else 0.9 * route.period + 0.1 * el
+                per = route.period
+                if per > 0 and el > 1.5 * per:
+                    # advance 1 mod 15 after a silence: 15, 30, ... frames were lost that
+                    # the 4-bit counter cannot show (bus-off, burst); the time can
+                    steps = int(el / per + 0.5)
+                    if steps % COUNTER_MODULUS == 1:
+                        self.counts.lost += steps - 1
+                elif el > 0:
+                    route.period = el if per <= 0 else 0.9 * per + 0.1 * el
             route.last_c = c
             route.last_ts = ts
         if route.kind == _DATA:
@@ -334,8 +347,11 @@ class DecodeListener(can.Listener):
             self.counts.lost += steps - 1
             return True
         if delta == 0 or delta >= COUNTER_MODULUS - self.stale_window:
-            rejected["counter_stale"] += 1
-            return False
+            # an old or repeated frame arrives close to the newest one; after a silence of
+            # more than a counter cycle it is a restarted sender (node reboot): re-sync
+            if not (route.period > 0 and ts - route.last_ts > COUNTER_MODULUS * route.period):
+                rejected["counter_stale"] += 1
+                return False
         route.last_c = c  # E2E profile 1: the sequence restarts from this frame
         route.last_ts = ts
         rejected["counter_jump"] += 1

@@ -18,7 +18,7 @@ import numpy as np
 from cantools.database.can import Database
 
 from suspid.can.codec import (STATE_RUNNING, SensorEncoder, encode_status, make_message)
-from suspid.can.logs import log_format, open_log_writer
+from suspid.can.logs import is_can_log, log_format, open_log_writer
 from suspid.errors import InputError, UsageError
 from suspid.io.csvio import Measurement, read_measurement
 from suspid.models import MODELS, get_model
@@ -139,6 +139,9 @@ def encode_csv(csv_path: str | Path, out_path: str | Path, db: Database,
         Unknown output suffix or undeterminable model.
     """
     log_format(out_path, "output log")
+    if is_can_log(csv_path):
+        raise InputError(f"{csv_path}: --input must be a measurement CSV, got a CAN log "
+                         f"({Path(csv_path).suffix}); encode writes logs, identify reads them")
     if model_name is None:
         model_name = infer_model(csv_header(csv_path))
     model = get_model(model_name)

@@ -40,6 +40,15 @@ class _Parser(argparse.ArgumentParser):
         sys.stderr.write(f"error: {self.prog}: {message}\n")
         raise SystemExit(2)
 
+    def _get_values(self, action: argparse.Action, arg_strings: list[str]) -> object:
+        # Python 3.11's argparse drops an explicit "--" value ("--fs=--") and hands the
+        # subcommand an empty list instead of a usage error; convert it like any value
+        if action.option_strings and action.nargs is None and arg_strings == ["--"]:
+            value = self._get_value(action, "--")
+            self._check_value(action, value)
+            return value
+        return super()._get_values(action, arg_strings)
+
 
 def build_parser() -> argparse.ArgumentParser:
     """Build the top-level parser with every available subcommand."""
@@ -65,6 +74,11 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _one_line(text: str) -> str:
+    """``text`` with every run of whitespace (newlines included) replaced by one space."""
+    return " ".join(text.split())
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``suspid`` console script."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -79,7 +93,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SuspidError as exc:
         if debug:
             raise
-        sys.stderr.write(f"error: {exc}\n")
+        sys.stderr.write(f"error: {_one_line(str(exc))}\n")
+        return 2
+    except OSError as exc:
+        # last resort for a file a subcommand opened without its own check (an output
+        # path in a missing directory, a directory given as a file, no permission, ...)
+        if debug or isinstance(exc, BrokenPipeError):
+            raise
+        where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
+        sys.stderr.write(f"error: {where}{_one_line(exc.strerror or str(exc))}\n")
         return 2
     except KeyboardInterrupt:
         return 130

@@ -41,6 +41,17 @@ def add_input_options(p: argparse.ArgumentParser) -> None:
                    help="signal map config file (JSON) for CAN input")
 
 
+def positive_int(text: str) -> int:
+    """argparse ``type``: an integer >= 1 (argparse turns the ValueError into a usage error)."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}")
+    return v
+
+
 def parse_assignments(items: list[str], option: str) -> dict[str, float]:
     """Parse ``NAME=VALUE`` strings into a dict (UsageError naming the bad item)."""
     out: dict[str, float] = {}

@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from suspid.cli._common import (add_input_options, add_model_option, add_param_options,
+from suspid.cli._common import (positive_int, add_input_options, add_model_option, add_param_options,
                                 load_measurement, model_from_args, parse_assignments, print_json)
 from suspid.cli.identify import parse_x0
 from suspid.errors import UsageError
@@ -29,7 +29,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--x0", default="estimate", metavar="estimate|rest|V1,V2,...",
                    help="initial state: estimate it (default), start at rest, or give it")
     p.add_argument("--restarts", type=int, default=3, help="Nelder-Mead restarts of the baseline fit (default 3; the augmented refit starts from the residual regression)")
-    p.add_argument("--maxfev", type=int, default=None, help="evaluation budget of the baseline fit")
+    p.add_argument("--maxfev", type=positive_int, default=None, help="evaluation budget of the baseline fit")
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
     p.add_argument("--plot", metavar="PNG", default=None,
                    help="write the evidence figure (residuals before/after, autocorrelation, "

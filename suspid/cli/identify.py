@@ -6,7 +6,7 @@ import sys
 
 import numpy as np
 
-from suspid.cli._common import (add_input_options, add_model_option, add_param_options,
+from suspid.cli._common import (positive_int, add_input_options, add_model_option, add_param_options,
                                 load_measurement, model_from_args, parse_assignments, print_json)
 from suspid.errors import UsageError
 
@@ -27,7 +27,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="initial state: estimate it (variable projection, default), start at "
                         "rest, or give [q..., q_dot...] explicitly")
     p.add_argument("--restarts", type=int, default=6, help="Nelder–Mead restarts (default 6)")
-    p.add_argument("--maxfev", type=int, default=None,
+    p.add_argument("--maxfev", type=positive_int, default=None,
                    help="evaluation budget over all restarts (default 1000 per free parameter)")
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
     p.add_argument("--plot", metavar="PNG", default=None,

@@ -65,8 +65,8 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError(f"--x0 {args.x0!r}: expected comma-separated numbers") from None
         if x0.size != model.n_states:
             raise UsageError(f"--x0: expected {model.n_states} values, got {x0.size}")
-    if args.noise < 0:
-        raise UsageError(f"--noise: expected a fraction >= 0, got {args.noise}")
+    if not 0 <= args.noise < float("inf"):
+        raise UsageError(f"--noise: expected a finite fraction >= 0, got {args.noise}")
     t, road, x0 = make_scenario(model, args.scenario, duration=args.duration, fs=args.fs,
                                 params=params, h=args.height, l=args.length, v_kmh=args.speed,
                                 t0=args.t0, road_class=args.road_class, seed=args.seed, x0=x0)

@@ -151,11 +151,21 @@ def read_measurement(path: str | Path, model: SuspensionModel) -> Measurement:
 
 def write_measurement(path: str | Path, t: FloatArray, columns: Mapping[str, FloatArray],
                       order: Iterable[str] | None = None) -> None:
-    """Write a measurement CSV with ``t`` first, then ``columns`` (SI units, ``%.10g``)."""
+    """Write a measurement CSV with ``t`` first, then ``columns`` (SI units, ``%.10g``).
+
+    Raises
+    ------
+    InputError
+        The file cannot be created (missing directory, a directory, no permission).
+    """
     names = list(order) if order is not None else list(columns)
     data = np.column_stack([np.asarray(t, dtype=float)] + [np.asarray(columns[n], dtype=float)
                                                           for n in names])
-    with open(path, "w", newline="", encoding="utf-8") as fh:
+    try:
+        fh = open(path, "w", newline="", encoding="utf-8")
+    except OSError as exc:
+        raise InputError(f"{path}: cannot create the CSV: {exc.strerror or exc}") from None
+    with fh:
         fh.write(",".join(["t"] + names) + "\n")
         for row in data:
             fh.write(",".join("" if math.isnan(v) else f"{v:.10g}" for v in row) + "\n")

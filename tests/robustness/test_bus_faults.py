@@ -1,0 +1,159 @@
+"""Bus faults: the decoder keeps running, counts and marks every gap; estimates degrade gracefully.
+
+Also the bounded-memory checks: a long candump log streamed through a bounded listener.
+"""
+from __future__ import annotations
+
+import tracemalloc
+from pathlib import Path
+
+import can
+import numpy as np
+import pytest
+
+from estimator.decode import DecodeListener, feed
+from estimator.decode.log_input import load_log_as_measurement
+from firmware_sim.faults import FaultConfig
+from firmware_sim.node import NodeConfig, SensorNode
+from suspid.can.logs import ReadStats, read_log
+from tools.fault_table import run_condition
+
+CH = ["x1", "x2", "r"]
+
+
+def _node_frames(faults: tuple[str, ...] = (), duration: float = 2.0, seed: int = 0,
+                 t_shift: float = 0.0) -> tuple[list[can.Message], SensorNode]:
+    cfg = NodeConfig(model="quarter2", scenario="bump", duration=duration, speed=0.0,
+                     channels=list(CH), seed=seed, faults=FaultConfig.parse(faults, CH))
+    node = SensorNode(cfg)
+    frames = list(node.frames())
+    for m in frames:
+        m.timestamp += t_shift
+    return frames, node
+
+
+def _data_frames(frames: list[can.Message]) -> int:
+    return sum(1 for m in frames if m.arbitration_id in (0x110, 0x111, 0x112))
+
+
+@pytest.mark.parametrize("faults", [("loss=0.01",), ("loss=0.05",), ("loss=0.10",),
+                                    ("burst=2:0.02",), ("burst=1:0.1",), ("busoff=0.7:0.3",)])
+def test_loss_is_counted_and_marked_as_gaps(faults: tuple[str, ...]) -> None:
+    clean, _ = _node_frames()
+    lossy, node = _node_frames(faults)
+    lst = DecodeListener("quarter2", node.db)
+    feed(lst, lossy)
+    st = lst.frame_stats()
+    assert sum(st["rejected"].values()) == 0 and st["accepted"] == len(lossy)
+    dropped = len(clean) - len(lossy)
+    assert dropped > 0
+    # every dropped frame (bar the ones after the last received frame of an ID) is counted
+    assert dropped - 8 <= st["lost"] <= dropped
+    al = lst.aligned()
+    missing = sum(int(np.isnan(al.values[c]).sum()) for c in CH)
+    dd = _data_frames(clean) - _data_frames(lossy)
+    # every lost data frame is a NaN grid cell (a loss after the last frame only shortens it)
+    assert dd - 6 <= missing <= dd
+    assert any(g.channel == "x1" for g in al.gaps)
+
+
+def test_node_restart_counter_reset_resynchronises() -> None:
+    """A node reboot: counters restart from 0 while time goes on; one frame per ID at most lost."""
+    a, node = _node_frames(duration=1.0)
+    b, _ = _node_frames(duration=1.0, seed=1, t_shift=1.5 + 0.002 * 7)  # tick 0 again
+    lst = DecodeListener("quarter2", node.db)
+    feed(lst, a + b)
+    st = lst.frame_stats()
+    rejected = sum(st["rejected"].values())
+    assert st["accepted"] + rejected == len(a) + len(b)
+    assert rejected <= 5  # one resynchronising frame per message ID at most
+    al = lst.aligned()
+    gap = [g for g in al.gaps if g.channel == "x1"]
+    assert gap and max(g.t_end - g.t_start for g in gap) >= 0.4  # the reboot pause is a gap
+
+
+def test_clock_jump_back_reanchors_and_forward_jump_is_a_gap() -> None:
+    a, node = _node_frames(duration=1.0)
+    b, _ = _node_frames(duration=1.0, seed=2)  # the logger clock reset to 0 (back by 1 s)
+    lst = DecodeListener("quarter2", node.db)
+    feed(lst, a + b)
+    st = lst.frame_stats()
+    assert lst.time_resyncs == 1
+    assert 0 < st["rejected"]["time"] <= 15
+    assert st["accepted"] + sum(st["rejected"].values()) == len(a) + len(b)
+    # forward jump by 20 s: accepted, the hole is one gap per channel
+    c, _ = _node_frames(duration=1.0, seed=3, t_shift=21.0)
+    lst = DecodeListener("quarter2", node.db)
+    feed(lst, a + c)
+    al = lst.aligned()
+    assert sum(lst.frame_stats()["rejected"].values()) <= 5
+    longest = max(g.samples for g in al.gaps if g.channel == "x1")
+    assert longest == pytest.approx(20.0 * 500, rel=0.01)
+
+
+def test_identification_degrades_gracefully_with_loss() -> None:
+    """Fast version of tools/fault_table.py: error stays small as loss grows."""
+    errs = {}
+    for label, faults in [("none", ()), ("5 %", ("loss=0.05",)), ("10 %", ("loss=0.10",)),
+                          ("bursts", ("burst=1:0.1",))]:
+        r = run_condition(faults, scenario="bump", duration=3.0, seed=0, maxfev=1500,
+                          restarts=1)
+        errs[label] = max(r["errors"].values())
+    assert errs["none"] < 0.01
+    assert errs["5 %"] < 0.03 and errs["10 %"] < 0.05 and errs["bursts"] < 0.10, errs
+
+
+# ---- bounded memory ----------------------------------------------------------------------
+def _write_candump(path: Path, n_samples: int) -> int:
+    """A candump log of ``n_samples`` samples: a 990-sample node block repeated (990 = 66
+    counter cycles, so counters and time run on seamlessly)."""
+    frames, _ = _node_frames(duration=2.0)
+    per = 990
+    one = [m for m in frames if m.arbitration_id != 0x310 and m.timestamp < per * 0.002 - 1e-9]
+    with path.open("w") as fh:
+        for rep in range(n_samples // per):
+            off = rep * per * 0.002
+            fh.writelines(f"({m.timestamp + off:.6f}) can0 {m.arbitration_id:03X}#"
+                          f"{m.data.hex().upper()}\n" for m in one)
+    return (n_samples // per) * len(one)
+
+
+def _peak_stream(path: Path) -> tuple[int, DecodeListener]:
+    lst = DecodeListener("quarter2", capacity=4096)
+    stats = ReadStats()
+    tracemalloc.start()
+    try:
+        feed(lst, read_log(path, stats))
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    return peak, lst
+
+
+def test_long_log_streams_in_bounded_memory(tmp_path: Path) -> None:
+    """Peak traced memory of streaming a log does not grow with its length (4x frames)."""
+    short, long_ = tmp_path / "short.log", tmp_path / "long.log"
+    n_short = _write_candump(short, 4_950)
+    n_long = _write_candump(long_, 19_800)
+    peak_s, _ = _peak_stream(short)
+    peak_l, lst = _peak_stream(long_)
+    assert lst.frame_stats()["accepted"] == n_long and n_long == 4 * n_short
+    assert lst.buffer.overwritten > 0          # the ring wrapped: memory is bounded by capacity
+    assert peak_l < 1.3 * peak_s + 256_000, (peak_s, peak_l)
+    # the listener's rings: 3 data messages x 4096 rows x (1 + 2 or 3 columns) doubles
+    assert peak_l < 2_000_000
+
+
+def test_whole_log_loading_memory_is_linear_and_compact(tmp_path: Path) -> None:
+    """Offline loading keeps ~8 bytes per value plus the aligned grid, not per-frame objects."""
+    p = tmp_path / "big.log"
+    n = _write_candump(p, 19_800)
+    tracemalloc.start()
+    try:
+        meas, frames = load_log_as_measurement(p, "quarter2")
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert frames["accepted"] == n and meas.t.size == 19_800
+    # grid: 20 k samples x 9 columns x 8 B = 1.4 MB; rings growable (doubling)
+    assert peak < 19_800 * 8 * 9 * 6, peak

@@ -1,0 +1,250 @@
+"""Every bad input or option value of every subcommand: exit 2, one ``error:`` line, no traceback.
+
+The CLI runs in-process (``suspid.cli.main``) to stay fast; a few subprocess checks make
+sure the installed console script behaves the same.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from suspid.cli import main
+from suspid.excitation import make_scenario
+from suspid.io.csvio import write_measurement
+from suspid.models import get_model
+from suspid.simulate import simulate
+
+
+@pytest.fixture(scope="module")
+def work(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A directory with a good CSV and log and a zoo of bad files."""
+    d = tmp_path_factory.mktemp("cli")
+    m = get_model("quarter2")
+    t, road, x0 = make_scenario(m, "bump", duration=0.4, fs=500.0)
+    out = simulate(m, m.defaults(), t, road, x0)
+    write_measurement(d / "q2.csv", t, {k: out[k] for k in ("r", "r_dot", "x1", "x2")})
+    assert main(["encode", "--input", str(d / "q2.csv"), "--out", str(d / "q2.log")]) == 0
+    (d / "adir").mkdir()
+    (d / "adir.log").mkdir()
+    (d / "empty.csv").write_text("")
+    (d / "empty.log").write_text("")
+    (d / "empty.dbc").write_text("")
+    (d / "tonly.csv").write_text("t\n0\n0.1\n")
+    (d / "dupt.csv").write_text("t,x1\n0,1\n0,2\n")
+    (d / "inf.csv").write_text("t,x1\n0,1\n0.1,inf\n")
+    (d / "bin.csv").write_bytes(b"\x00\xff\xfe\x01garbage")
+    (d / "bad.dbc").write_text("garbage here\nBO_ x\n")
+    (d / "foreign.dbc").write_text('VERSION ""\nBO_ 1 Foo: 8 X\n SG_ A : 0|8@1+ (1,0) [0|1] "" X\n')
+    (d / "junk.blf").write_bytes(b"x" * 10)
+    (d / "junk.mf4").write_bytes(b"x" * 10)
+    (d / "bad.json").write_text("{bad json")
+    (d / "q2.xyz").write_text("t,x1\n0,0\n")
+    return d
+
+
+IDENT = ["identify", "--model", "quarter2", "--json", "--maxfev", "5", "--restarts", "0"]
+NODE = ["node", "--scenario", "bump", "--duration", "0.05", "--speed", "0", "--log", "n.log"]
+#: (argv, text the error line must contain); file names are relative to the work dir
+CASES: list[tuple[list[str], str]] = [
+    # input files
+    (IDENT + ["--input", "missing.csv"], "missing.csv: no such file"),
+    (IDENT + ["--input", "adir"], "adir: no such file"),
+    (IDENT + ["--input", "empty.csv"], "empty.csv: empty file"),
+    (IDENT + ["--input", "tonly.csv"], "tonly.csv:1: no measured channel"),
+    (IDENT + ["--input", "dupt.csv"], "dupt.csv:3: column 't': expected increasing"),
+    (IDENT + ["--input", "inf.csv"], "inf.csv:3: column 'x1': expected a finite number"),
+    (IDENT + ["--input", "bin.csv"], "bin.csv:1: not a CSV text file"),
+    (IDENT + ["--input", "q2.xyz"], "q2.xyz: unknown input format '.xyz'"),
+    (IDENT + ["--input", "missing.log"], "missing.log: no such CAN log file"),
+    (IDENT + ["--input", "adir.log"], "adir.log: no such CAN log file"),
+    (IDENT + ["--input", "empty.log"], "empty.log: no accepted frame"),
+    (IDENT + ["--input", "junk.blf"], "junk.blf: not a readable Vector BLF file"),
+    (IDENT + ["--input", "junk.mf4"], "junk.mf4: not a readable ASAM MDF4 file"),
+    # DBC and signal maps
+    (IDENT + ["--input", "q2.log", "--dbc", "missing.dbc"], "missing.dbc: no such DBC file"),
+    (IDENT + ["--input", "q2.log", "--dbc", "adir"], "adir: no such DBC file"),
+    (IDENT + ["--input", "q2.log", "--dbc", "empty.dbc"], "empty.dbc: cannot load DBC: Invalid syntax at line 1"),
+    (IDENT + ["--input", "q2.log", "--dbc", "bad.dbc"], "bad.dbc: cannot load DBC: Invalid syntax at line 1"),
+    (IDENT + ["--input", "q2.log", "--dbc", "q2.csv"], "q2.csv: cannot load DBC"),
+    (IDENT + ["--input", "q2.log", "--dbc", "foreign.dbc"], "foreign.dbc declares no channel"),
+    (IDENT + ["--input", "q2.log", "--map-file", "bad.json"], "bad.json:1: invalid JSON"),
+    (IDENT + ["--input", "q2.log", "--map-file", "missing.json"], "missing.json: no such signal-map"),
+    (IDENT + ["--input", "q2.log", "--map", "garbage"], "cannot parse signal map 'garbage'"),
+    (IDENT + ["--input", "q2.log", "--map", "x1=Nope.Sig"], "message 'Nope' is not in"),
+    # options
+    (IDENT + ["--input", "q2.csv", "--plot", "nodir/x.png"], "nodir/x.png"),
+    (IDENT + ["--input", "q2.csv", "--maxfev", "-1"], "--maxfev: expected an integer >= 1"),
+    (IDENT + ["--input", "q2.csv", "--x0", "1,2"], "--x0: expected 4 values"),
+    (IDENT + ["--input", "q2.csv", "--fix", "zz=1"], "no parameter 'zz'"),
+    (IDENT + ["--input", "q2.csv", "--fix", "m1=nan"], "--fix 'm1=nan': expected a finite number"),
+    (IDENT + ["--input", "q2.csv", "--init", "m1=0"], "parameter m1: expected a finite value > 0"),
+    (["diagnose", "--model", "quarter2", "--input", "tonly.csv"], "tonly.csv:1: no measured channel"),
+    (["diagnose", "--model", "quarter2", "--input", "q2.csv", "--maxfev", "0"], "--maxfev"),
+    (["encode", "--input", "missing.csv", "--out", "o.log"], "missing.csv: no such file"),
+    (["encode", "--input", "q2.log", "--out", "o.log"], "q2.log: --input must be a measurement CSV"),
+    (["encode", "--input", "q2.csv", "--out", "o.txt"], "o.txt: unknown output log format"),
+    (["encode", "--input", "q2.csv", "--out", "nodir/o.log"], "nodir/o.log: cannot create log file"),
+    (["encode", "--input", "q2.csv", "--out", "o.log", "--t0", "nan"], "--t0 must be a finite"),
+    (["encode", "--input", "q2.csv", "--dbc", "empty.dbc", "--out", "o.log"], "empty.dbc"),
+    (["simulate", "--model", "quarter2", "--out", "adir"], "adir"),
+    (["simulate", "--model", "quarter2", "--out", "nodir/x.csv"], "nodir/x.csv: cannot create"),
+    (["simulate", "--model", "quarter2", "--out", "x.csv", "--duration", "nan"], "finite and > 0"),
+    (["simulate", "--model", "quarter2", "--out", "x.csv", "--fs", "inf"], "finite and > 0"),
+    (["simulate", "--model", "quarter2", "--out", "x.csv", "--duration", "1e9"], "expected at most"),
+    (["simulate", "--model", "quarter2", "--out", "x.csv", "--scenario", "iso8608",
+      "--road-class", "Z"], "road class 'Z'"),
+    (NODE + ["--dbc", "bad.dbc"], "bad.dbc: cannot load DBC"),
+    (NODE + ["--dbc", "foreign.dbc"], "foreign.dbc"),
+    (NODE + ["--noise", "nan"], "--noise must be a finite number"),
+    (NODE + ["--duration", "inf"], "finite and > 0"),
+    (NODE + ["--fault", "loss=2"], "--fault 'loss=2'"),
+    (NODE + ["--fault", "burst=nan:1"], "--fault 'burst=nan:1'"),
+    (NODE + ["--rate", "0"], "--rate must be within"),
+    (NODE + ["--channels", "zz"], "channel(s) zz not available"),
+    (["node", "--scenario", "bump", "--interface", "nope", "--duration", "0.05"],
+     "cannot open CAN interface 'nope'"),
+    (["monitor", "--model", "quarter2", "--input", "missing.log", "--jsonl"], "missing.log"),
+    (["monitor", "--model", "quarter2", "--input", "junk.blf", "--jsonl"], "junk.blf"),
+    (["monitor", "--model", "quarter2", "--input", "q2.log", "--dbc", "empty.dbc", "--jsonl"], "empty.dbc"),
+    (["monitor", "--model", "quarter2", "--input", "q2.log", "--window", "nan", "--jsonl"], "--window"),
+    (["monitor", "--model", "quarter2", "--input", "q2.log", "--alert-file", "adir", "--jsonl"], "adir"),
+    (["compare", "--model", "quarter2", "--input", "missing.log", "--json"], "missing.log"),
+    (["doe", "--model", "quarter1", "--init-scale", "nan", "--json"], "--init-scale"),
+    (["doe", "--model", "quarter1", "--ids", "999", "--json"], "--ids '999'"),
+    (["nosuchcommand"], "invalid choice"),
+    (["identify", "--model", "quarter9", "--input", "q2.csv"], "invalid choice: 'quarter9'"),
+]
+
+
+def _run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str]:
+    try:
+        rc = main(argv)
+    except SystemExit as exc:  # argparse usage errors
+        rc = int(exc.code or 0)
+    return rc, capsys.readouterr().err
+
+
+def _one_error(rc: int, err: str) -> str:
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    errors = [ln for ln in lines if ln.startswith("error: ")]
+    assert rc == 2, err
+    assert len(errors) == 1, err
+    assert "Traceback" not in err
+    return errors[0]
+
+
+@pytest.mark.parametrize("argv, expect", CASES, ids=[" ".join(a[:1] + a[-2:]) for a, _ in CASES])
+def test_bad_input_is_one_error_line(work: Path, capsys: pytest.CaptureFixture[str],
+                                     monkeypatch: pytest.MonkeyPatch, argv: list[str],
+                                     expect: str) -> None:
+    monkeypatch.chdir(work)
+    line = _one_error(*_run(argv, capsys))
+    assert expect in line
+
+
+def test_debug_shows_the_traceback(work: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(work)
+    from suspid.errors import InputError
+    with pytest.raises(InputError):
+        main(IDENT + ["--input", "missing.csv", "--debug"])
+    with pytest.raises(InputError, match="nodir/x.csv"):
+        main(["simulate", "--model", "quarter2", "--out", "nodir/x.csv", "--duration", "0.1",
+              "--debug"])
+
+
+# ---- random option values ---------------------------------------------------------------
+BAD_NUMBERS = st.one_of(
+    st.sampled_from(["nan", "inf", "-inf", "NaN", "1e999", "", " ", "0x", "--", "1,2", "1/0"]),
+    st.text(alphabet="abcxyz!@%^&=,;:", min_size=1, max_size=8),
+)
+#: (argv prefix, option) whose value must be a (positive, finite) number
+NUMERIC_OPTIONS: list[tuple[list[str], str]] = [
+    (["simulate", "--model", "quarter2", "--out", "x.csv"], "--duration"),
+    (["simulate", "--model", "quarter2", "--out", "x.csv"], "--fs"),
+    (["simulate", "--model", "quarter2", "--out", "x.csv"], "--noise"),
+    (["simulate", "--model", "quarter2", "--out", "x.csv"], "--seed"),
+    (IDENT + ["--input", "q2.csv"], "--maxfev"),
+    (IDENT + ["--input", "q2.csv"], "--restarts"),
+    (["encode", "--input", "q2.csv", "--out", "o.log"], "--t0"),
+    (NODE, "--duration"),
+    (NODE, "--rate"),
+    (NODE, "--speed"),
+    (NODE, "--noise"),
+    (NODE, "--seed"),
+    (["monitor", "--model", "quarter2", "--input", "q2.log", "--jsonl"], "--window"),
+    (["monitor", "--model", "quarter2", "--input", "q2.log", "--jsonl"], "--step"),
+    (["monitor", "--model", "quarter2", "--input", "q2.log", "--jsonl"], "--alert-drop"),
+    (["doe", "--model", "quarter1", "--json"], "--init-scale"),
+    (["doe", "--model", "quarter1", "--json"], "--noise"),
+]
+ASSIGN_OPTIONS: list[tuple[list[str], str]] = [
+    (IDENT + ["--input", "q2.csv"], "--fix"),
+    (IDENT + ["--input", "q2.csv"], "--init"),
+    (["simulate", "--model", "quarter2", "--out", "x.csv"], "--param"),
+    (NODE, "--param"),
+    (NODE, "--fault"),
+]
+
+
+@settings(max_examples=80, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(case=st.sampled_from(NUMERIC_OPTIONS), value=BAD_NUMBERS)
+def test_malformed_numeric_option_values(work: Path, capsys: pytest.CaptureFixture[str],
+                                         case: tuple[list[str], str], value: str) -> None:
+    cwd = os.getcwd()
+    os.chdir(work)
+    try:
+        prefix, opt = case
+        line = _one_error(*_run(prefix + [f"{opt}={value}"], capsys))
+        assert opt in line or "finite" in line or "> 0" in line, line
+    finally:
+        os.chdir(cwd)
+
+
+@settings(max_examples=60, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(case=st.sampled_from(ASSIGN_OPTIONS),
+       value=st.one_of(BAD_NUMBERS, BAD_NUMBERS.map(lambda v: f"m1={v}"),
+                       st.text(alphabet="=:m1kc2 .x", max_size=8)))
+def test_malformed_assignment_option_values(work: Path, capsys: pytest.CaptureFixture[str],
+                                            case: tuple[list[str], str], value: str) -> None:
+    cwd = os.getcwd()
+    os.chdir(work)
+    try:
+        prefix, opt = case
+        _one_error(*_run(prefix + [f"{opt}={value}"], capsys))
+    finally:
+        os.chdir(cwd)
+
+
+# ---- the installed console script ------------------------------------------------------
+def _suspid(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    exe = shutil.which("suspid")
+    cmd = [exe] if exe else [sys.executable, "-c", "import sys; from suspid.cli import main; "
+                                                   "sys.exit(main())"]
+    return subprocess.run([*cmd, *args], cwd=cwd, text=True, capture_output=True, timeout=120)
+
+
+def test_subprocess_bad_inputs(work: Path) -> None:
+    r = _suspid("identify", "--model", "quarter2", "--input", "missing.csv", cwd=work)
+    assert r.returncode == 2 and r.stderr.strip() == "error: missing.csv: no such file"
+    r = _suspid("encode", "--input", "q2.csv", "--dbc", "empty.dbc", "--out", "o.log", cwd=work)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
+    assert r.stderr.startswith("error: empty.dbc: cannot load DBC")
+    r = _suspid("simulate", "--model", "quarter2", "--out", "nodir/x.csv", "--duration", "0.1",
+                cwd=work)
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert r.stderr.strip().splitlines() == ["error: nodir/x.csv: cannot create the CSV: "
+                                             "No such file or directory"]
+
+
+def test_subprocess_debug_traceback(work: Path) -> None:
+    r = _suspid("identify", "--model", "quarter2", "--input", "missing.csv", "--debug", cwd=work)
+    assert r.returncode != 0 and "Traceback" in r.stderr and "InputError" in r.stderr
