@@ -22,6 +22,7 @@ For ``half4`` the rear wheel sees the front road delayed by the wheelbase over t
 """
 from __future__ import annotations
 
+import math
 from typing import Mapping
 
 import numpy as np
@@ -30,6 +31,8 @@ from suspid.errors import UsageError
 from suspid.models.base import FloatArray, SuspensionModel
 
 SCENARIOS = ("initial", "curb", "bump", "iso8608")
+#: longest record make_scenario builds (samples; 11 h at 500 Hz, 160 MB per array)
+MAX_SAMPLES = 20_000_000
 ISO8608_CLASSES = {c: 16e-6 * 4.0 ** i for i, c in enumerate("ABCDEFGH")}
 
 
@@ -127,8 +130,11 @@ def make_scenario(model: SuspensionModel, name: str, duration: float = 5.0, fs: 
     x0 : ndarray
         Initial state ``[q, q']``.
     """
-    if duration <= 0 or fs <= 0:
-        raise UsageError(f"duration and sample rate must be > 0, got {duration} s, {fs} Hz")
+    if not (0 < duration < math.inf and 0 < fs < math.inf):
+        raise UsageError(f"duration and sample rate must be finite and > 0, got {duration} s, {fs} Hz")
+    if duration * fs > MAX_SAMPLES:
+        raise UsageError(f"duration x sample rate = {duration * fs:.3g} samples; expected at most "
+                         f"{MAX_SAMPLES:.0e} ({duration} s at {fs} Hz)")
     t = np.arange(int(round(duration * fs)) + 1) / fs
     p = dict(model.defaults(), **(params or {}))
     n = model.n_states
