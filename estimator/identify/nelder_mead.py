@@ -38,8 +38,8 @@ class NMOutcome:
 
 
 def minimize_log(fun: Callable[[FloatArray], float], u0: FloatArray, step: float = 0.3,
-                 restarts: int = 6, maxfev: int | None = None, xatol: float = 1e-9,
-                 fatol: float = 1e-18, initial_simplex: FloatArray | None = None,
+                 restarts: int = 6, maxfev: int | None = None, xatol: float = 1e-7,
+                 fatol: float = 1e-14, initial_simplex: FloatArray | None = None,
                  bounds: list[tuple[float, float]] | None = None,
                  rel_improve: float = 1e-9) -> NMOutcome:
     """Minimise ``fun(u)`` with Nelder–Mead, restarting from the best vertex.
@@ -71,6 +71,7 @@ def minimize_log(fun: Callable[[FloatArray], float], u0: FloatArray, step: float
     converged = False
     run = 0
     final = None
+    last_status = -1
     while run <= restarts and nfev < budget:
         if simplex is None:
             simplex = np.vstack([best_u] + [best_u + cur_step * e for e in np.eye(n)])
@@ -78,6 +79,7 @@ def minimize_log(fun: Callable[[FloatArray], float], u0: FloatArray, step: float
                        options={"initial_simplex": simplex, "xatol": xatol, "fatol": fatol,
                                 "maxfev": budget - nfev, "adaptive": n > 4})
         nfev += int(res.nfev)
+        last_status = int(res.status)
         final = res.final_simplex[0]
         improved = best_f - res.fun
         prev = best_f
@@ -92,13 +94,23 @@ def minimize_log(fun: Callable[[FloatArray], float], u0: FloatArray, step: float
         if best_f == 0.0:
             converged = True
             break
+    else:
+        # restarts used up (not the budget): converged if the last run met its tolerances
+        converged = last_status == 0 and run > restarts
     return NMOutcome(best_u, best_f, nfev, run - 1, converged, final)
 
 
 def fit(problem: OutputErrorProblem, params: Parameters, restarts: int = 6,
         maxfev: int | None = None, step: float = 0.3,
-        initial_simplex: FloatArray | None = None, with_stderr: bool = True) -> tuple[IdentResult, NMOutcome]:
+        initial_simplex: FloatArray | None = None, with_stderr: bool = True,
+        xatol: float = 1e-7, fatol: float = 1e-14) -> tuple[IdentResult, NMOutcome]:
     """Identify the free parameters of ``problem`` by Nelder–Mead in log coordinates.
+
+    ``xatol`` (in log-parameter units, i.e. relative) and ``fatol`` (in units of the
+    normalised cost, 1 = no fit) are scipy's Nelder–Mead termination tolerances per run.
+    The defaults (1e-7, 1e-14) resolve parameters to ~1e-7 relative, far below any
+    statistical error; a tighter ``fatol`` (e.g. 1e-18) is below the rounding noise of a
+    noisy record's cost (~1e-17 x its value) and makes every noisy fit run out of budget.
 
     Returns
     -------
@@ -129,7 +141,7 @@ def fit(problem: OutputErrorProblem, params: Parameters, restarts: int = 6,
         return problem.normalized_ss(to_params(u))
 
     out = minimize_log(cost, np.zeros(len(free)), step=step, restarts=restarts, maxfev=maxfev,
-                       initial_simplex=initial_simplex, bounds=bounds)
+                       initial_simplex=initial_simplex, bounds=bounds, xatol=xatol, fatol=fatol)
     p_hat = to_params(out.u)
     res = finish(problem, params, p_hat, out.nfev, out.converged, with_stderr=with_stderr)
     res.restarts = out.restarts

@@ -27,8 +27,8 @@ import numpy as np
 from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
 from suspid.models.base import FloatArray, SuspensionModel
-from suspid.simulate import (free_coeffs_to_state, free_response_basis, modal_form, modal_powers,
-                             modal_trajectory, road_matrix, simulate_states, uniform_step)
+from suspid.simulate import (Modal, free_coeffs_to_state, free_response_basis, modal_form,
+                             modal_trajectory, powers, road_matrix, simulate_states, uniform_step)
 
 COSTS = ("sse", "frobenius")
 
@@ -91,6 +91,8 @@ class OutputErrorProblem:
         self.w = w
         self.h = uniform_step(self.t)
         self.n_obs = int(self.mask.sum())
+        self._full = bool(self.mask.all())
+        self._unit_w = bool(np.all(w == 1.0))
         self._has_road = bool(np.any(self.U))
         data_ss = float(np.sum((self.Ymeas0 * w) ** 2))
         self.scale = data_ss if data_ss > 0 else 1.0
@@ -122,45 +124,129 @@ class OutputErrorProblem:
     def predict(self, p: Mapping[str, float]) -> Prediction:
         """Predict the measured channels for parameters ``p`` (with the best ``x0``)."""
         m = self.model
-        n = m.n_states
-        nr = len(m.roads)
         modal = modal_form(m, p)
+        if modal is not None and self.h is not None:
+            Y, x0 = self._predict_modal(modal)
+        else:
+            Y, x0 = self._predict_general(p, modal)
+        if self._full:
+            res = self.Ymeas - Y
+        else:
+            res = np.where(self.mask, self.Ymeas - Y, np.nan)
+        return Prediction(Y=Y, x0=x0, residual=res)
+
+    def _base_x0(self) -> FloatArray:
+        if isinstance(self.x0, str):
+            return np.zeros(self.model.n_states)
+        return np.asarray(self.x0, dtype=float)
+
+    def _predict_modal(self, modal: Modal) -> tuple[FloatArray, FloatArray]:
+        """Fast path (uniform grid, diagonalisable ``A``): modal recursion.
+
+        With ``x0="estimate"`` and no missing sample the normal equations of the initial
+        state are formed in closed form: the Gram matrix of the free-response regressors
+        is a sum of geometric series in the products of the modes' ``exp(lam h)``, so no
+        ``(N, p, n)`` regressor array is built.
+        """
+        m = self.model
+        nr = len(m.roads)
+        N = self.t.size
+        h = float(self.h)  # type: ignore[arg-type]
+        Cm, Dm = self._output_maps(modal.A, modal.B)
+        CV = (Cm @ modal.V) * modal.fac  # (p, mm)
+        estimate = isinstance(self.x0, str) and self.x0 == "estimate"
+        base_x0 = self._base_x0()
+        E = np.exp(modal.lam * h)
+        P = powers(E, N) if (estimate or not self._has_road) else None
+        if self._has_road:
+            r = self.U[:, :nr]
+            W = modal_trajectory(modal, h, r, base_x0)
+            Y = _re_matmul(W, CV.T) + r @ (Cm @ modal.Bv).T + self.U @ Dm.T
+        elif np.any(base_x0):
+            Y = _re_matmul(P, (CV * (modal.Vinv @ base_x0)).T)
+        else:
+            Y = np.zeros((N, len(self.channels)))
+        if not estimate:
+            return Y, base_x0
+        if self._full:
+            sol = self._x0_closed_form(modal, CV, E, P, Y)
+            if sol is not None:
+                mm = modal.lam.size
+                pairs = modal.fac == 2.0
+                c = sol[:mm].astype(complex)
+                c[pairs] += 1j * sol[mm:]
+                Y = Y + _re_matmul(P, (CV * c).T)
+                return Y, free_coeffs_to_state(modal, sol)
+        G = free_response_basis(modal, h, N, Cm, P)
+        sol = self._solve_x0(G, Y)
+        Y = Y + G.reshape(-1, G.shape[2]).dot(sol).reshape(Y.shape)
+        return Y, free_coeffs_to_state(modal, sol)
+
+    def _x0_closed_form(self, modal: Modal, CV: np.ndarray, E: np.ndarray, P: np.ndarray,
+                        Y: FloatArray) -> FloatArray | None:
+        """Least-squares modal initial coefficients from closed-form normal equations.
+
+        Returns ``None`` when the Gram matrix is ill-conditioned (the caller then solves
+        the explicit least-squares problem).
+        """
+        mm = modal.lam.size
+        pairs = np.flatnonzero(modal.fac == 2.0)
+        modes = np.concatenate([np.arange(mm), pairs])
+        alpha = np.concatenate([np.ones(mm), np.full(pairs.size, 1j)])
+        Q = CV[:, modes] * alpha  # (p, n): column a's regressor is Re(Q[:, a] * E_mode^k)
+        w2 = self.w ** 2
+        Eg = E[modes]
+        EN = P[-1, modes] * Eg  # E^N
+        N = P.shape[0]
+        S1 = _geometric_sum(Eg[:, None] * Eg[None, :], EN[:, None] * EN[None, :], N)
+        S2 = _geometric_sum(Eg[:, None] * np.conj(Eg)[None, :],
+                            EN[:, None] * np.conj(EN)[None, :], N)
+        Qw = Q.T * w2
+        GtG = 0.5 * np.real((Qw @ Q) * S1 + (Qw @ np.conj(Q)) * S2)
+        R = self.Ymeas - Y
+        CVw = CV * w2[:, None]
+        RCr = R @ CVw.real  # (N, mm) real and imaginary parts of R @ CVw
+        RCi = R @ CVw.imag
+        Pr, Pi = P.real, P.imag
+        v = (np.einsum("ki,ki->i", Pr, RCr) - np.einsum("ki,ki->i", Pi, RCi)
+             + 1j * (np.einsum("ki,ki->i", Pr, RCi) + np.einsum("ki,ki->i", Pi, RCr)))
+        GtR = np.real(alpha * v[modes])
+        try:
+            sol = np.linalg.solve(GtG, GtR)
+        except np.linalg.LinAlgError:
+            return None
+        if not np.all(np.isfinite(sol)) or np.linalg.cond(GtG) > 1e12:
+            return None
+        return sol
+
+    def _solve_x0(self, G: FloatArray, Y: FloatArray) -> FloatArray:
+        """Explicit weighted least squares for the free-response coefficients."""
+        R = ((self.Ymeas0 - Y) * self.w * self.mask).reshape(-1)
+        Gm = (G * (self.w[None, :, None] * self.mask[:, :, None])).reshape(-1, G.shape[2])
+        GtG = Gm.T @ Gm
+        try:
+            sol = np.linalg.solve(GtG, Gm.T @ R)
+            if not np.all(np.isfinite(sol)) or np.linalg.cond(GtG) > 1e12:
+                raise np.linalg.LinAlgError
+        except np.linalg.LinAlgError:
+            sol, *_ = np.linalg.lstsq(Gm, R, rcond=1e-12)
+        return sol
+
+    def _predict_general(self, p: Mapping[str, float], modal: Modal | None
+                         ) -> tuple[FloatArray, FloatArray]:
+        """General path (non-uniform grid or defective ``A``): stepwise simulation."""
+        m = self.model
         A, B = (modal.A, modal.B) if modal is not None else m.state_space(p)
         Cm, Dm = self._output_maps(A, B)
-        fixed_x0 = None if isinstance(self.x0, str) else np.asarray(self.x0, dtype=float)
-        base_x0 = np.zeros(n) if fixed_x0 is None else fixed_x0
-        r = self.U[:, :nr]
-        fast = modal is not None and self.h is not None
-        P = None
-        if fast:
-            if self._has_road:
-                W = modal_trajectory(modal, self.h, r, base_x0)
-            else:
-                P = modal_powers(modal, self.h, self.t.size)
-                W = P * (modal.Vinv @ base_x0)[None, :]
-            Y = modal.real_part(W, Cm) + r @ (Cm @ modal.Bv).T + self.U @ Dm.T
-        else:
-            X = simulate_states(m, p, self.t, self.U, base_x0, modal=modal)
-            Y = X @ Cm.T + self.U @ Dm.T
-        x0 = base_x0
+        base_x0 = self._base_x0()
+        X = simulate_states(m, p, self.t, self.U, base_x0, modal=modal)
+        Y = X @ Cm.T + self.U @ Dm.T
         if isinstance(self.x0, str) and self.x0 == "estimate":
-            if fast:
-                G = free_response_basis(modal, self.h, self.t.size, Cm, P)
-            else:
-                G = self._free_basis_slow(Cm, p)
-            R = ((self.Ymeas0 - Y) * self.w * self.mask).reshape(-1)
-            Gm = (G * (self.w[None, :, None] * self.mask[:, :, None])).reshape(-1, G.shape[2])
-            GtG = Gm.T @ Gm
-            try:
-                sol = np.linalg.solve(GtG, Gm.T @ R)
-                if not np.all(np.isfinite(sol)) or np.linalg.cond(GtG) > 1e12:
-                    raise np.linalg.LinAlgError
-            except np.linalg.LinAlgError:
-                sol, *_ = np.linalg.lstsq(Gm, R, rcond=1e-12)
+            G = self._free_basis_slow(Cm, p)
+            sol = self._solve_x0(G, Y)
             Y = Y + G.reshape(-1, G.shape[2]).dot(sol).reshape(Y.shape)
-            x0 = free_coeffs_to_state(modal, sol) if fast else sol
-        res = np.where(self.mask, self.Ymeas - Y, np.nan)
-        return Prediction(Y=Y, x0=x0, residual=res)
+            return Y, sol
+        return Y, base_x0
 
     def _free_basis_slow(self, Cm: FloatArray, p: Mapping[str, float]) -> FloatArray:
         """Response of each channel to a unit initial state, shape (N, p, n) (general path)."""
@@ -182,10 +268,18 @@ class OutputErrorProblem:
     def normalized_ss(self, p: Mapping[str, float]) -> float:
         """Weighted sum of squares divided by the data's (dimensionless, 1 = no fit)."""
         try:
-            r = self.residual_vector(p)
+            if self._full:
+                r = self.predict(p).residual
+                if self._unit_w:
+                    v = float(np.einsum("ij,ij->", r, r)) / self.scale
+                else:
+                    rw = r * self.w
+                    v = float(np.einsum("ij,ij->", rw, rw)) / self.scale
+            else:
+                rv = self.residual_vector(p)
+                v = float(rv @ rv) / self.scale
         except (np.linalg.LinAlgError, ValueError, FloatingPointError):
             return np.inf
-        v = float(r @ r) / self.scale
         return v if np.isfinite(v) else np.inf
 
     def seed_cost(self, ss: float) -> float:
@@ -195,3 +289,29 @@ class OutputErrorProblem:
     def rms_by_channel(self, res: FloatArray) -> dict[str, float]:
         """RMS residual per channel (SI)."""
         return {c: float(np.sqrt(np.nanmean(res[:, j] ** 2))) for j, c in enumerate(self.channels)}
+
+
+def _geometric_sum(q: np.ndarray, qN: np.ndarray, N: int) -> np.ndarray:
+    """``sum_{k<N} q**k`` elementwise, given ``qN = q**N`` (series near ``q = 1``)."""
+    d = q - 1.0
+    near = np.abs(d) < 1e-7
+    safe = np.where(near, 1.0, d)
+    out = (qN - 1.0) / safe
+    if np.any(near):
+        series = N + N * (N - 1) / 2.0 * d + N * (N - 1) * (N - 2) / 6.0 * d * d
+        out = np.where(near, series, out)
+    return out
+
+
+def _re_matmul(P: np.ndarray, X: np.ndarray) -> FloatArray:
+    """``Re(P @ X)`` with two real products.
+
+    Real ``dgemm`` on these tall, thin operands stays single-threaded in OpenBLAS, while
+    the complex product of the same shape crosses its threading threshold; on a loaded
+    machine the spinning helper threads cost 5-10x (measured, docs/performance.md).
+    """
+    if not np.iscomplexobj(X):
+        return np.real(P) @ X
+    if not np.iscomplexobj(P):
+        return P @ X.real
+    return P.real @ X.real - P.imag @ X.imag

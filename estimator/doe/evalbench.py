@@ -1,0 +1,91 @@
+"""Cost of one identifier evaluation (``OutputErrorProblem.normalized_ss``), per case.
+
+Usage::
+
+    python -m estimator.doe.evalbench [--repeat 300]
+
+Cases: ``half4`` and ``quarter2`` free responses (DoE row 14, 20 s at 100 Hz = 2001
+samples, positions + velocities) with the initial state known or estimated (variable
+projection), and the seed's Table 1 quarter car over the speed bump (3 s at 1 kHz = 3001
+samples, initial state estimated: what ``suspid identify`` runs). Prints the median wall
+and CPU time per evaluation in microseconds; the process's own CPU time is what the
+machine's load does not distort.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+from typing import Any
+
+import numpy as np
+
+
+def _cases() -> list[tuple[str, Any, dict[str, float]]]:
+    from estimator.identify import OutputErrorProblem
+    from suspid.excitation import make_scenario
+    from suspid.io.csvio import Measurement
+    from suspid.models import get_model
+    from suspid.simulate import simulate
+
+    out = []
+    try:
+        from estimator.doe.design import experiments
+        from estimator.doe.runner import measurement
+        have_doe = True
+    except ImportError:  # an older tree without the DoE package
+        have_doe = False
+    t = np.arange(2001) / 100.0
+    for name in ("half4", "quarter2"):
+        m = get_model(name)
+        if have_doe:
+            e = experiments(m)[13]
+            truth, x0 = e.truth, e.x0
+        else:
+            truth, x0 = m.defaults(), np.linspace(0.01, 0.05, m.n_states)
+        clean = simulate(m, truth, t, None, x0)
+        meas = Measurement(t=t, road={}, measured={c: clean[c] for c in m.state_names})
+        p = {k: v * 1.05 for k, v in truth.items()}
+        out.append((f"{name} free response, x0 known, 2001 samples",
+                    OutputErrorProblem(m, meas, cost="frobenius", x0=x0), p))
+        out.append((f"{name} free response, x0 estimated, 2001 samples",
+                    OutputErrorProblem(m, meas, cost="frobenius", x0="estimate"), p))
+    T1 = {"m1": 275.0, "c1": 1120.0, "k1": 150000.0, "m2": 27.0, "c2": 3100.0, "k2": 310000.0}
+    m = get_model("quarter2")
+    tb, road, x0 = make_scenario(m, "bump", duration=3.0, fs=1000.0, params=T1)
+    clean = simulate(m, T1, tb, road, x0)
+    meas = Measurement(t=tb, road=road, measured={c: clean[c] for c in m.state_names})
+    p = {k: v * 1.05 for k, v in T1.items()}
+    out.append(("quarter2 speed bump (Table 1), x0 estimated, sse, 3001 samples",
+                OutputErrorProblem(m, meas, cost="sse", x0="estimate"), p))
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--repeat", type=int, default=300)
+    ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args(argv)
+    res = {}
+    for label, prob, p in _cases():
+        walls, cpus = [], []
+        prob.normalized_ss(p)
+        for _ in range(args.rounds):
+            w, c = time.perf_counter(), time.process_time()
+            for _ in range(args.repeat):
+                prob.normalized_ss(p)
+            walls.append((time.perf_counter() - w) / args.repeat * 1e6)
+            cpus.append((time.process_time() - c) / args.repeat * 1e6)
+        res[label] = {"wall_us": statistics.median(walls), "cpu_us": statistics.median(cpus)}
+        if not args.json:
+            print(f"{label:>62}: {res[label]['wall_us']:8.0f} us wall {res[label]['cpu_us']:8.0f} us CPU",
+                  flush=True)
+    if args.json:
+        print(json.dumps(res, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,228 @@
+"""Run the seed's designs: simulate each target curve, identify, score.
+
+:func:`run_experiment` is one row; :func:`run_design` the whole table (optionally with a
+progress callback). Starting values are ``init_scale`` times the truth for every free
+parameter; masses (and the pitch inertia) are fixed at the truth unless ``free_masses``.
+Noise-free success = every identified parameter within 1 % of the truth; noisy success =
+every free parameter within its run's reported 3-sigma band.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from estimator.doe.design import DESIGNS, FS, HORIZON, Experiment, experiments, time_grid
+from estimator.identify import OutputErrorProblem, Parameters, fit
+from estimator.identify.result import IdentResult
+from suspid.errors import UsageError
+from suspid.io.csvio import Measurement
+from suspid.models import SuspensionModel, get_model
+from suspid.simulate import simulate
+
+#: noise-free success tolerance (relative), the contract's 1 %
+TOL = 0.01
+#: noisy success band (standard errors)
+SIGMAS = 3.0
+
+
+@dataclass
+class Settings:
+    """How one design is run.
+
+    Attributes
+    ----------
+    cost : {"sse", "frobenius"}
+    init_scale : float
+        Free parameters start at ``init_scale`` x truth.
+    free_masses : bool
+        Identify masses and inertia too (unrestricted; scale-ambiguous).
+    noise : float
+        Gaussian noise std as a fraction of each channel's std (0 = noise-free).
+    seed : int
+        Base seed of the noise generator (experiment ``i`` uses ``seed + i``).
+    restarts, step, maxfev, xatol, fatol
+        Nelder-Mead settings passed to :func:`estimator.identify.fit` (``maxfev`` per
+        stage; ``restarts`` of the last stage, which is itself a restart of the earlier
+        stages' answer with a fresh simplex).
+    stages : tuple of float
+        Horizon continuation: fit the first ``stages[0]`` fraction of the record first,
+        then restart from that answer on the next fraction, ..., ending with the whole
+        record (``(1.0,)`` = a single fit of the whole record). Short records make the
+        output-error cost far less multimodal for lightly damped oscillators.
+    polish_step : float
+        Initial simplex edge (log units) of every stage after the first.
+    early_restarts, early_xatol
+        Restarts and ``xatol`` of the stages before the last (they only find the basin).
+    horizon, fs : float
+        Record length (s) and sample rate (Hz).
+    """
+
+    cost: str = "sse"
+    init_scale: float = 0.5
+    free_masses: bool = False
+    noise: float = 0.0
+    seed: int = 0
+    restarts: int = 0
+    step: float = 0.3
+    maxfev: int | None = None
+    xatol: float = 1e-5
+    fatol: float = 1e-11
+    stages: tuple[float, ...] = (0.125, 1.0)
+    polish_step: float = 0.02
+    early_restarts: int = 0
+    early_xatol: float = 1e-4
+    horizon: float = HORIZON
+    fs: float = FS
+
+
+@dataclass
+class Outcome:
+    """Result of one experiment (JSON via :meth:`to_json`)."""
+
+    id: int
+    true: dict[str, float]
+    identified: dict[str, float]
+    max_rel_error: float
+    success: bool
+    start: dict[str, float]
+    stderr: dict[str, float]
+    nfev: int
+    cost: float
+    seconds: float
+    identifiable: bool
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        def f(x: float) -> float | None:
+            return float(x) if math.isfinite(x) else None
+
+        out = {"id": self.id, "true": self.true, "identified": self.identified,
+               "max_rel_error": f(self.max_rel_error), "success": self.success,
+               "start": self.start, "stderr": {k: f(v) for k, v in self.stderr.items()},
+               "nfev": self.nfev, "cost": f(self.cost), "seconds": round(self.seconds, 4),
+               "identifiable": self.identifiable}
+        out.update(self.extra)
+        return out
+
+
+def measurement(model: SuspensionModel, exp: Experiment, noise: float = 0.0, seed: int = 0,
+                horizon: float = HORIZON, fs: float = FS) -> tuple[Measurement, dict[str, np.ndarray]]:
+    """Target curve of ``exp``: measured positions and velocities, and the clean ones.
+
+    Noise is Gaussian with std ``noise`` x the channel's own std (seed §6.2).
+    """
+    t = time_grid(horizon, fs)
+    clean = simulate(model, exp.truth, t, None, exp.x0)
+    rng = np.random.default_rng(seed)
+    meas: dict[str, np.ndarray] = {}
+    for c in model.state_names:
+        y = clean[c]
+        meas[c] = y + noise * float(np.std(y)) * rng.standard_normal(t.size) if noise > 0 else y.copy()
+    return (Measurement(t=t, road={}, measured=meas, warnings=[], source=f"doe:{model.name}:{exp.id}"),
+            {c: clean[c] for c in model.state_names})
+
+
+def free_names(model: SuspensionModel, free_masses: bool) -> list[str]:
+    """Free parameters of a run: all, or all but the masses and inertia."""
+    return [p.name for p in model.params if free_masses or p.kind not in ("mass", "inertia")]
+
+
+def truncate(meas: Measurement, fraction: float) -> Measurement:
+    """The first ``fraction`` of a record (at least 10 samples)."""
+    n = max(10, int(round(fraction * (meas.t.size - 1))) + 1)
+    n = min(n, meas.t.size)
+    return Measurement(t=meas.t[:n], road={k: v[:n] for k, v in meas.road.items()},
+                       measured={k: v[:n] for k, v in meas.measured.items()},
+                       warnings=list(meas.warnings), source=meas.source)
+
+
+def identify_staged(model: SuspensionModel, meas: Measurement, x0: np.ndarray,
+                    params: Parameters, settings: Settings,
+                    weights: dict[str, float] | None = None) -> IdentResult:
+    """Nelder-Mead in log coordinates with horizon continuation (see :class:`Settings`).
+
+    ``weights`` (channel -> factor on its residual) default to 1, the seed's raw cost.
+    Returns the :class:`IdentResult` of the last (whole-record) stage with ``nfev``
+    summed over the stages.
+    """
+    stages = tuple(settings.stages) if settings.stages else (1.0,)
+    if stages[-1] != 1.0:
+        stages = stages + (1.0,)
+    cur = params
+    nfev = 0
+    res: IdentResult | None = None
+    for i, frac in enumerate(stages):
+        last = i == len(stages) - 1
+        data = meas if frac >= 1.0 else truncate(meas, frac)
+        problem = OutputErrorProblem(model, data, cost=settings.cost, x0=x0, weights=weights)
+        res, _ = fit(problem, cur, restarts=settings.restarts if last else settings.early_restarts,
+                     maxfev=settings.maxfev,
+                     step=settings.step if i == 0 else settings.polish_step,
+                     with_stderr=last and (settings.noise > 0 or settings.free_masses),
+                     xatol=settings.xatol if last else settings.early_xatol, fatol=settings.fatol)
+        nfev += res.nfev
+        if not last:
+            cur = cur.copy()
+            for k in cur.free:
+                cur[k].value = float(res.params[k])
+    if res is None:  # pragma: no cover - stages always ends with 1.0
+        raise RuntimeError("no identification stage ran")
+    res.nfev = nfev
+    return res
+
+
+def run_experiment(model: SuspensionModel, exp: Experiment, settings: Settings) -> tuple[Outcome, IdentResult]:
+    """Identify one experiment and score it against the truth."""
+    if settings.cost not in ("sse", "frobenius"):
+        raise UsageError(f"unknown cost {settings.cost!r}; expected sse or frobenius")
+    if not (settings.init_scale > 0 and math.isfinite(settings.init_scale)):
+        raise UsageError(f"--init-scale: expected a finite number > 0, got {settings.init_scale}")
+    if not (0 <= settings.noise < 10):
+        raise UsageError(f"--noise: expected a fraction in [0, 10), got {settings.noise}")
+    meas, _ = measurement(model, exp, settings.noise, settings.seed + exp.id,
+                          settings.horizon, settings.fs)
+    free = free_names(model, settings.free_masses)
+    fix = {k: v for k, v in exp.truth.items() if k not in free}
+    init = {k: settings.init_scale * exp.truth[k] for k in free}
+    params = Parameters.for_model(model, fix=fix, init=init)
+    t0 = time.perf_counter()
+    res = identify_staged(model, meas, exp.x0, params, settings)
+    dt = time.perf_counter() - t0
+    rel = {k: (res.params[k] - exp.truth[k]) / exp.truth[k] for k in free}
+    max_rel = max((abs(v) for v in rel.values()), default=0.0)
+    if settings.noise > 0:
+        success = all(math.isfinite(res.stderr[k]) and
+                      abs(res.params[k] - exp.truth[k]) <= SIGMAS * res.stderr[k] for k in free)
+    else:
+        success = max_rel <= TOL
+    out = Outcome(exp.id, dict(exp.truth), {k: float(v) for k, v in res.params.items()},
+                  float(max_rel), bool(success), init, dict(res.stderr), int(res.nfev),
+                  float(res.cost), dt, bool(res.identifiable),
+                  {"rel_error": {k: float(v) for k, v in rel.items()}})
+    return out, res
+
+
+def run_design(model: SuspensionModel | str, settings: Settings,
+               ids: list[int] | None = None,
+               progress: Callable[[int, int, Outcome], None] | None = None) -> dict[str, Any]:
+    """Run every (or the listed) experiment of the model's design.
+
+    Returns the contract's object ``{"design", "experiments", "successes", "total"}``.
+    """
+    if isinstance(model, str):
+        model = get_model(model)
+    exps = [e for e in experiments(model) if ids is None or e.id in ids]
+    rows = []
+    for i, e in enumerate(exps):
+        o, _ = run_experiment(model, e, settings)
+        rows.append(o)
+        if progress is not None:
+            progress(i + 1, len(exps), o)
+    return {"design": DESIGNS[model.name],
+            "experiments": [o.to_json() for o in rows],
+            "successes": int(sum(o.success for o in rows)),
+            "total": len(rows)}

@@ -1,0 +1,154 @@
+"""``suspid doe``: run the seed's Taguchi designs (L16 for quarter1, L27 for quarter2/half4).
+
+Every row of the design is simulated (noise-free, or with Gaussian noise of ``--noise``
+times each channel's std), identified from ``--init-scale`` times the truth, and scored:
+noise-free success = every identified parameter within 1 % of the truth; noisy success =
+every free parameter within its run's reported 3-sigma band. The JSON output is the
+contract's ``{"design", "experiments", "successes", "total"}`` plus the design choices the
+seed leaves out (``setup``) and the method's settings (``method``).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from dataclasses import asdict
+from typing import Any, TextIO
+
+from suspid.cli._common import print_json
+from suspid.errors import UsageError
+
+MODELS = ("quarter1", "quarter2", "half4")
+
+
+def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("doe", help="run the seed's Taguchi designs of experiments (L16/L27)",
+                       description="Run the seed's design of experiments: L16-4 (Tables 3-4) for "
+                                   "quarter1, L27-3 (Tables 5-6) for quarter2 and half4. Each row "
+                                   "is simulated, identified from --init-scale x the truth and "
+                                   "scored (1 %% of the truth noise-free, 3 sigma when noisy).")
+    p.add_argument("--model", required=True, choices=list(MODELS),
+                   help="quarter1 (L16-4), quarter2 or half4 (L27-3)")
+    p.add_argument("--cost", choices=["sse", "frobenius"], default="sse",
+                   help="sse: squared position differences (seed cost 1); frobenius: Frobenius "
+                        "norm over positions and velocities (seed cost 2); default sse")
+    p.add_argument("--init-scale", type=float, default=0.5, metavar="S",
+                   help="start every free parameter at S x its true value (default 0.5)")
+    p.add_argument("--free-masses", action="store_true",
+                   help="identify the masses (and pitch inertia) too; by default they are "
+                        "fixed at the truth, as in the seed's restricted optimisation")
+    p.add_argument("--noise", type=float, default=0.0, metavar="FRACTION",
+                   help="Gaussian noise std as a fraction of each measured channel's std "
+                        "(seed §6.2 uses 0.1-0.5); default 0 (noise-free)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="noise seed; experiment i uses SEED + i (default 0)")
+    p.add_argument("--ids", default=None, metavar="I,J,...",
+                   help="run only these experiment numbers (default: the whole design)")
+    p.add_argument("--single-stage", action="store_true",
+                   help="fit the whole record at once (no horizon continuation; ablation)")
+    p.add_argument("--restarts", type=int, default=None,
+                   help="Nelder-Mead restarts of the final stage (default 0; 6 with "
+                        "--single-stage)")
+    p.add_argument("--json", action="store_true", help="print the result as one JSON object")
+    p.add_argument("--progress", action="store_true",
+                   help="draw the progress bar on stderr even when it is not a terminal")
+    return p
+
+
+def _parse_ids(text: str | None, total: int) -> list[int] | None:
+    if text is None:
+        return None
+    try:
+        ids = sorted({int(s) for s in text.split(",") if s.strip()})
+    except ValueError:
+        raise UsageError(f"--ids {text!r}: expected comma-separated experiment numbers") from None
+    bad = [i for i in ids if not 1 <= i <= total]
+    if bad or not ids:
+        raise UsageError(f"--ids {text!r}: expected numbers between 1 and {total}")
+    return ids
+
+
+class ProgressBar:
+    """A one-line progress bar on a text stream (stderr), redrawn with carriage returns."""
+
+    def __init__(self, stream: TextIO, total: int, label: str, width: int = 28) -> None:
+        self.stream = stream
+        self.total = total
+        self.label = label
+        self.width = width
+        self.ok = 0
+        self.t0 = time.perf_counter()
+        self.draw(0)
+
+    def draw(self, done: int) -> None:
+        filled = int(self.width * done / max(self.total, 1))
+        bar = "#" * filled + "." * (self.width - filled)
+        el = time.perf_counter() - self.t0
+        self.stream.write(f"\r{self.label} [{bar}] {done}/{self.total} "
+                          f"ok {self.ok} {el:5.1f}s")
+        self.stream.flush()
+
+    def update(self, done: int, success: bool) -> None:
+        self.ok += int(success)
+        self.draw(done)
+        if done >= self.total:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+def run(args: argparse.Namespace) -> int:
+    from estimator.doe.blas import single_thread_blas
+    from estimator.doe.design import DESIGNS, experiments, setup_record
+    from estimator.doe.runner import Settings, run_design
+    from suspid.models import get_model
+
+    single_thread_blas()  # small matrices: OpenBLAS threads only cost (docs/performance.md)
+    model = get_model(args.model)
+    if not (args.init_scale > 0 and args.init_scale < 1e6):
+        raise UsageError(f"--init-scale: expected a number > 0, got {args.init_scale}")
+    if not (0 <= args.noise < 10):
+        raise UsageError(f"--noise: expected a fraction >= 0 (e.g. 0.5), got {args.noise}")
+    if args.restarts is not None and args.restarts < 0:
+        raise UsageError(f"--restarts: expected >= 0, got {args.restarts}")
+    total = len(experiments(model))
+    ids = _parse_ids(args.ids, total)
+    settings = Settings(cost=args.cost, init_scale=args.init_scale, free_masses=args.free_masses,
+                        noise=args.noise, seed=args.seed)
+    if args.single_stage:
+        settings.stages = (1.0,)
+        settings.step = 0.3
+        settings.restarts = 6
+    if args.restarts is not None:
+        settings.restarts = args.restarts
+    n = len(ids) if ids is not None else total
+    bar = None
+    if args.progress or sys.stderr.isatty():
+        bar = ProgressBar(sys.stderr, n, f"doe {args.model} {args.cost}")
+    t0 = time.perf_counter()
+    out = run_design(model, settings, ids=ids,
+                     progress=(lambda i, _n, o: bar.update(i, o.success)) if bar else None)
+    seconds = time.perf_counter() - t0
+    result: dict[str, Any] = {
+        "design": out["design"], "experiments": out["experiments"],
+        "successes": out["successes"], "total": out["total"],
+        "model": model.name, "cost": args.cost, "init_scale": args.init_scale,
+        "free_masses": bool(args.free_masses), "noise": args.noise,
+        "success_rule": ("every free parameter within its 3-sigma band" if args.noise > 0
+                         else "every identified parameter within 1 % of the truth"),
+        "setup": setup_record(model, settings.horizon, settings.fs),
+        "method": {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(settings).items()},
+        "seconds": round(seconds, 3),
+    }
+    if args.json:
+        print_json(result)
+    else:
+        w = sys.stdout.write
+        w(f"{DESIGNS[model.name]} {model.name} cost {args.cost} start {args.init_scale}x "
+          f"{'free masses' if args.free_masses else 'masses fixed'} noise {args.noise}\n")
+        w(f"{'exp':>4} {'success':>8} {'max rel error':>14} {'nfev':>6}\n")
+        for e in out["experiments"]:
+            mre = e["max_rel_error"]
+            w(f"{e['id']:>4} {str(e['success']):>8} {mre if mre is not None else float('nan'):>14.3e} "
+              f"{e['nfev']:>6}\n")
+        w(f"successes {out['successes']}/{out['total']} in {seconds:.1f} s\n")
+    return 0

@@ -1,0 +1,54 @@
+"""Issue 3's Must-show items: the designs identify every row (noise-free, 1 %)."""
+from __future__ import annotations
+
+import pytest
+
+from estimator.doe.runner import Settings, run_design
+
+
+def _check(out: dict, total: int) -> None:
+    assert out["total"] == total
+    bad = [(e["id"], e["max_rel_error"]) for e in out["experiments"] if not e["success"]]
+    assert out["successes"] == total, bad
+    for e in out["experiments"]:
+        free = e["rel_error"]
+        assert max(abs(v) for v in free.values()) == pytest.approx(e["max_rel_error"])
+        assert e["max_rel_error"] <= 0.01
+
+
+def test_quarter1_l16_sse_16_of_16() -> None:
+    _check(run_design("quarter1", Settings(cost="sse")), 16)
+
+
+@pytest.mark.parametrize("cost", ["sse", "frobenius"])
+def test_quarter2_l27_27_of_27(cost: str) -> None:
+    _check(run_design("quarter2", Settings(cost=cost)), 27)
+
+
+def test_half4_l27_sse_27_of_27_from_half_the_truth() -> None:
+    _check(run_design("half4", Settings(cost="sse")), 27)
+
+
+def test_half4_frobenius_hard_rows_from_half_the_truth() -> None:
+    """Row 20 is the one single-stage Nelder-Mead gets wrong; 12 and 27 are slow ones.
+
+    (The full frobenius L27 is ``tools/bench_doe.py``; it doubles this file's run time.)
+    """
+    out = run_design("half4", Settings(cost="frobenius"), ids=[12, 20, 27])
+    assert out["successes"] == 3, [(e["id"], e["max_rel_error"]) for e in out["experiments"]]
+
+
+def test_half4_row20_single_stage_fails_so_the_continuation_matters() -> None:
+    out = run_design("half4", Settings(cost="sse", stages=(1.0,), restarts=6), ids=[20])
+    assert out["successes"] == 0
+    assert out["experiments"][0]["max_rel_error"] > 0.5
+
+
+def test_free_masses_hit_the_scale_ambiguity() -> None:
+    out = run_design("quarter1", Settings(cost="sse", free_masses=True), ids=[3, 9])
+    for e in out["experiments"]:
+        assert e["identifiable"] is False
+        assert e["success"] is False
+        r = {k: e["identified"][k] / e["true"][k] for k in ("m", "c", "k")}
+        assert r["c"] == pytest.approx(r["m"], rel=1e-4)
+        assert r["k"] == pytest.approx(r["m"], rel=1e-4)
