@@ -5,7 +5,7 @@ Two paths share the one model definition (:mod:`suspid.models`):
 * :func:`simulate` — exact for the linear models. The road between samples is taken as
   piecewise linear (first-order hold, FOH) and the state equation is solved in closed form
   per sample with the modal decomposition of ``A``; the per-mode recursions run as
-  first-order IIR filters (:func:`scipy.signal.lfilter`), so a 10 s record at 1 kHz costs
+  blocked first-order scans (:func:`first_order_scan`), so a 10 s record at 1 kHz costs
   well under a millisecond for ``quarter2``. The road-velocity input (tyre damping ``c2``)
   is absorbed by the change of variables ``z = x - B_v r``, so no derivative of the road is
   needed for the state: ``z' = A z + (A B_v + B_r) r``.
@@ -20,9 +20,6 @@ from dataclasses import dataclass
 from typing import Mapping
 
 import numpy as np
-from scipy.integrate import solve_ivp
-from scipy.linalg import expm
-from scipy.signal import lfilter
 
 from suspid.errors import UsageError
 from suspid.models.base import FloatArray, SuspensionModel
@@ -129,6 +126,55 @@ def _foh_weights(lam: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray, np.
     return E, i0 - i1, i1
 
 
+_SCAN_BLOCK = 32
+
+
+def first_order_scan(E: np.ndarray, d: np.ndarray, w0: np.ndarray,
+                     block: int = _SCAN_BLOCK) -> np.ndarray:
+    """Solve ``w[k+1] = E * w[k] + d[k]`` for every column at once; returns ``w[1:]``.
+
+    Parameters
+    ----------
+    E : ndarray, shape (m,)
+        Per-column multipliers (the modes' ``exp(lam h)``, ``|E| <= 1`` for a passive model).
+    d : ndarray, shape (n, m)
+        Drive sequence.
+    w0 : ndarray, shape (m,)
+        Initial value.
+
+    Notes
+    -----
+    Blocked scan: inside a block of ``L`` samples the response is a lower-triangular
+    Toeplitz product with the powers ``E**0 .. E**(L-1)`` (one batched matrix product for
+    all blocks and modes); the block-start values follow from the same recursion with
+    ``E**L`` on ``n / L`` samples, solved recursively. Only powers up to ``E**L`` appear, so
+    it is as stable as the plain recursion, and it needs nothing beyond numpy (importing
+    :mod:`scipy.signal` for ``lfilter`` costs ~0.7 s per process start).
+    """
+    n, m = d.shape
+    if n == 0:
+        return np.empty((0, m), dtype=complex)
+    L = min(block, n)
+    nb = -(-n // L)
+    pw = np.empty((m, L + 1), dtype=complex)
+    pw[:, 0] = 1.0
+    for k in range(1, L + 1):
+        pw[:, k] = pw[:, k - 1] * E
+    j = np.arange(L)
+    lag = j[:, None] - j[None, :]
+    K = np.where(lag >= 0, pw[:, np.clip(lag, 0, L)], 0.0)  # (m, L, L), K[j, i] = E^(j-i)
+    D = np.zeros((m, nb * L), dtype=complex)
+    D[:, :n] = d.T
+    P = np.matmul(D.reshape(m, nb, L), K.transpose(0, 2, 1))  # (m, nb, L) zero-start blocks
+    if nb == 1:
+        starts = w0[:, None]
+    else:
+        carry = first_order_scan(pw[:, L], P[:, :-1, L - 1].T, w0, block)  # (nb-1, m)
+        starts = np.concatenate([w0[:, None], carry.T], axis=1)  # (m, nb)
+    W = pw[:, None, 1:] * starts[:, :, None] + P  # (m, nb, L)
+    return W.reshape(m, nb * L)[:, :n].T
+
+
 def modal_trajectory(modal: Modal, h: float, r: FloatArray, x0: FloatArray) -> np.ndarray:
     """Kept modal coordinates ``W`` (N, m) for road ``r`` (N, nr) and initial state ``x0``.
 
@@ -145,8 +191,7 @@ def modal_trajectory(modal: Modal, h: float, r: FloatArray, x0: FloatArray) -> n
         if np.any(r):
             S = r @ (modal.Vinv @ modal.Bz).T
             drive = g0[None, :] * S[:-1] + g1[None, :] * S[1:]
-            for i in range(m):
-                W[1:, i] = lfilter([1.0], [1.0, -E[i]], drive[:, i], zi=[E[i] * w0[i]])[0]
+            W[1:] = first_order_scan(E, drive, w0)
         else:
             W[1:] = powers(np.exp(modal.lam * h), N)[1:] * w0[None, :]
     return W
@@ -235,6 +280,8 @@ def simulate_states(model: SuspensionModel, p: Mapping[str, float], t: FloatArra
 def _simulate_states_loop(model: SuspensionModel, p: Mapping[str, float], t: FloatArray,
                           U: FloatArray, x0: FloatArray) -> FloatArray:
     """Exact FOH stepping with block matrix exponentials (non-uniform grids, defective A)."""
+    from scipy.linalg import expm
+
     A, B = model.state_space(p)
     n = model.n_states
     nr = len(model.roads)
@@ -321,6 +368,8 @@ def simulate_ode(model: SuspensionModel, params: Mapping[str, float], t: FloatAr
     u`` gives the input as a continuous function. Integration restarts at every sample so
     the kinks of the interpolated road do not cost accuracy.
     """
+    from scipy.integrate import solve_ivp
+
     t = np.asarray(t, dtype=float)
     U = road_matrix(model, t, road)
     nr = len(model.roads)

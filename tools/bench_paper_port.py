@@ -89,7 +89,7 @@ def main() -> int:
         c0 = time.process_time()
         m2 = read_measurement(csv, model)
         params = Parameters.for_model(model, fix=fixed, init=start)
-        res, _ = fit(OutputErrorProblem(model, m2, cost="sse"), params)
+        res, _ = fit(OutputErrorProblem(model, m2, cost="sse"), params, polish=True)  # as the CLI
         times.append(time.perf_counter() - t0)
         cpus.append(time.process_time() - c0)
     t_fast = min(times)

@@ -29,6 +29,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--restarts", type=int, default=6, help="Nelder–Mead restarts (default 6)")
     p.add_argument("--maxfev", type=positive_int, default=None,
                    help="evaluation budget over all restarts (default 1000 per free parameter)")
+    p.add_argument("--no-polish", dest="polish", action="store_false",
+                   help="pure Nelder–Mead to full tolerance (default: Nelder–Mead to 1e-4, then "
+                        "a Levenberg–Marquardt polish of the last digits)")
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
     p.add_argument("--plot", metavar="PNG", default=None,
                    help="write the seed-style comparison (measured vs identified) to this PNG")
@@ -58,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--restarts: expected >= 0, got {args.restarts}")
     meas, frames = load_measurement(args, model)
     problem = OutputErrorProblem(model, meas, cost=args.cost, x0=parse_x0(args.x0, model.n_states))
-    result, _ = fit(problem, params, restarts=args.restarts, maxfev=args.maxfev)
+    result, _ = fit(problem, params, restarts=args.restarts, maxfev=args.maxfev, polish=args.polish)
     if frames is not None:
         result.frames = frames
     if args.plot:
