@@ -1,0 +1,245 @@
+"""When is a parameter *confidently* below its limit? Confidence bound, persistence, hysteresis.
+
+For a watched parameter with nominal value ``N`` and drop fraction ``D`` (default 0.3) the
+limit is ``L = (1 - D) N``. Each estimate ``v`` with standard error ``s`` (which includes the
+identifier's ``sigma_floor``) gives the one-sided bounds ``v +/- z s`` (``z = 2.326``, 99 %).
+
+raise
+    the *upper* bound ``v + z s`` is below ``L`` in consecutive estimates spanning at least
+    ``persistence_s`` of data time and at least ``min_count`` estimates (defaults: one
+    window step, 2 estimates). Noise or one bad window therefore never raises an alert, and
+    a parameter that is merely *uncertain* (large ``s``) never does either.
+clear (hysteresis)
+    an active alert is cleared only when the *lower* bound ``v - z s`` exceeds
+    ``(1 - D + H) N`` (``H = 0.05``) with the same persistence, so an estimate hovering
+    around the limit cannot make the alert flap.
+
+Estimates of skipped windows do not exist, so they neither confirm nor reset a pending
+condition. An alert (and a clear) is emitted once per episode; its ``t`` is the data time at
+the end of the window that confirmed it, ``onset`` the first window of the episode.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Iterable, Mapping, Protocol
+
+from suspid.errors import UsageError
+
+
+@dataclass
+class AlertConfig:
+    """Alert settings.
+
+    Attributes
+    ----------
+    nominal : dict
+        ``parameter -> nominal value`` (SI) of every watched parameter.
+    drop : float
+        Alert when confidently below ``(1 - drop) x nominal`` (0 < drop < 1).
+    z : float
+        One-sided normal quantile of the confidence bound (2.326: 99 %).
+    persistence_s : float
+        Data time (s) the condition must hold.
+    min_count : int
+        Consecutive estimates the condition must hold in.
+    hysteresis : float
+        Clear only above ``(1 - drop + hysteresis) x nominal`` (fraction of nominal).
+    """
+
+    nominal: dict[str, float]
+    drop: float = 0.3
+    z: float = 2.326
+    persistence_s: float = 1.5
+    min_count: int = 2
+    hysteresis: float = 0.05
+
+    def validate(self) -> None:
+        """Raise :class:`UsageError` for settings that cannot work."""
+        if not 0 < self.drop < 1:
+            raise UsageError(f"--alert-drop: expected a fraction in (0, 1), got {self.drop}")
+        if self.persistence_s < 0 or self.min_count < 1:
+            raise UsageError(f"alert persistence must be >= 0 s and >= 1 estimate, got "
+                             f"{self.persistence_s} s, {self.min_count}")
+        if not 0 <= self.hysteresis < self.drop:
+            raise UsageError(f"alert hysteresis must be in [0, drop), got {self.hysteresis}")
+        for k, v in self.nominal.items():
+            if not (v > 0 and math.isfinite(v)):
+                raise UsageError(f"--nominal {k}: expected a finite value > 0, got {v}")
+
+    def limit(self, name: str) -> float:
+        return (1.0 - self.drop) * self.nominal[name]
+
+    def clear_level(self, name: str) -> float:
+        return (1.0 - self.drop + self.hysteresis) * self.nominal[name]
+
+
+@dataclass
+class AlertEvent:
+    """An alert (or the end of one).
+
+    Attributes
+    ----------
+    kind : {"alert", "clear"}
+    t : float
+        Data time (s) at which the condition was confirmed.
+    onset : float
+        Data time (s) of the first estimate of the episode.
+    parameter : str
+    value, stderr, nominal : float
+        Estimate, its standard error and the nominal value (SI).
+    bound : float
+        The confidence bound that decided (upper for alerts, lower for clears).
+    severity : str
+        ``"warning"``, or ``"critical"`` when the upper bound is below ``(1 - 2 drop) N``.
+    model : str
+    unit : str
+    """
+
+    kind: str
+    t: float
+    onset: float
+    parameter: str
+    value: float
+    stderr: float
+    nominal: float
+    bound: float
+    limit: float
+    severity: str
+    model: str
+    unit: str = ""
+
+    @property
+    def id(self) -> str:
+        """Deterministic identity of the event (deduplication across restarts)."""
+        return f"{self.model}:{self.parameter}:{self.kind}@{self.t:.6f}"
+
+    @property
+    def message(self) -> str:
+        u = f" {self.unit}" if self.unit else ""
+        pct = 100.0 * self.limit / self.nominal
+        if self.kind == "alert":
+            return (f"{self.parameter} = {self.value:.6g}{u} is confidently below {pct:.0f} % of "
+                    f"nominal {self.nominal:.6g}{u} (99 % upper bound {self.bound:.6g}{u} < "
+                    f"{self.limit:.6g}{u} since t={self.onset:.2f} s); {self.severity}: "
+                    f"inspect the {'damper' if self.parameter.startswith('c') else 'part'}")
+        return (f"{self.parameter} = {self.value:.6g}{u} is back above the clear level "
+                f"(99 % lower bound {self.bound:.6g}{u}); alert cleared")
+
+    def to_json(self) -> dict[str, Any]:
+        """The monitor's JSON line (contract fields first)."""
+        return {"type": self.kind, "t": self.t, "parameter": self.parameter, "value": self.value,
+                "nominal": self.nominal, "message": self.message, "stderr": self.stderr,
+                "bound": self.bound, "limit": self.limit, "onset": self.onset,
+                "severity": self.severity, "model": self.model, "id": self.id}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> "AlertEvent":
+        return cls(kind=str(d["type"]), t=float(d["t"]), onset=float(d.get("onset", d["t"])),
+                   parameter=str(d["parameter"]), value=float(d["value"]),
+                   stderr=float(d.get("stderr") or 0.0), nominal=float(d["nominal"]),
+                   bound=float(d.get("bound") or d["value"]), limit=float(d.get("limit") or 0.0),
+                   severity=str(d.get("severity", "warning")), model=str(d.get("model", "")))
+
+
+class AlertSink(Protocol):
+    """Anything that delivers an event (stdout, a CAN bus)."""
+
+    def emit(self, event: AlertEvent) -> None: ...
+
+
+@dataclass
+class _State:
+    active: bool = False
+    since: float | None = None
+    count: int = 0
+
+
+@dataclass
+class AlertEngine:
+    """Per-parameter alert state machines feeding sinks through a durable store.
+
+    Parameters
+    ----------
+    config : AlertConfig
+    model : str
+        Model name (for the alert frame and event ids).
+    units : dict, optional
+        ``parameter -> unit`` for the messages.
+    store : AlertStore, optional
+        Durable log; events are written (flushed, fsynced) *before* any sink sees them, and
+        events already in the log (same id, or not newer than the log's last event of the
+        parameter) are suppressed, so a restarted monitor neither loses nor repeats alerts.
+    sinks : list
+        Outputs called for each new event.
+    """
+
+    config: AlertConfig
+    model: str
+    units: dict[str, str] = field(default_factory=dict)
+    store: Any = None
+    sinks: list[Any] = field(default_factory=list)
+    states: dict[str, _State] = field(default_factory=dict)
+    emitted: list[AlertEvent] = field(default_factory=list)
+    suppressed: int = 0
+
+    def __post_init__(self) -> None:
+        self.config.validate()
+        for k in self.config.nominal:
+            self.states[k] = _State()
+        if self.store is not None:
+            for k, ev in self.store.last_event.items():
+                if k in self.states and ev.kind == "alert":
+                    self.states[k].active = True
+
+    def update(self, t: float, values: Mapping[str, float], stderr: Mapping[str, float]
+               ) -> list[AlertEvent]:
+        """Fold in one estimate (data time ``t``); returns the events emitted now."""
+        cfg = self.config
+        out: list[AlertEvent] = []
+        for k, st in self.states.items():
+            if k not in values or k not in stderr:
+                continue
+            v, s = float(values[k]), float(stderr[k])
+            if not (math.isfinite(v) and math.isfinite(s)):
+                # an unidentifiable window says nothing: neither confirms nor resets
+                continue
+            nom = cfg.nominal[k]
+            if not st.active:
+                bound = v + cfg.z * s
+                cond = bound < cfg.limit(k)
+            else:
+                bound = v - cfg.z * s
+                cond = bound > cfg.clear_level(k)
+            if not cond:
+                st.since, st.count = None, 0
+                continue
+            if st.since is None:
+                st.since = t
+            st.count += 1
+            if t - st.since + 1e-9 < cfg.persistence_s or st.count < cfg.min_count:
+                continue
+            kind = "clear" if st.active else "alert"
+            severity = "critical" if (kind == "alert" and bound < (1 - 2 * cfg.drop) * nom) else \
+                ("info" if kind == "clear" else "warning")
+            ev = AlertEvent(kind, float(t), float(st.since), k, v, s, nom, bound, cfg.limit(k),
+                            severity, self.model, self.units.get(k, ""))
+            st.active = not st.active
+            st.since, st.count = None, 0
+            if self._publish(ev):
+                out.append(ev)
+        return out
+
+    def _publish(self, ev: AlertEvent) -> bool:
+        if self.store is not None:
+            if not self.store.is_new(ev):
+                self.suppressed += 1
+                return False
+            self.store.append(ev)
+        for s in self.sinks:
+            s.emit(ev)
+        self.emitted.append(ev)
+        return True
+
+    def watched(self) -> Iterable[str]:
+        return self.states.keys()

@@ -1,0 +1,295 @@
+"""Output-only monitoring: the body mode from a body accelerometer alone.
+
+A car with only a body accelerometer (no road, no wheel sensor) cannot be identified
+input-to-output, but the body bounce -- its natural frequency ``f_n`` and damping ratio
+``zeta`` -- shows in the acceleration spectrum because the road is a broadband excitation.
+Two estimators per window:
+
+``carma`` (default): parametric spectral fit of a continuous-time ARMA model
+    A quarter car's body over an ISO 8608 road (displacement PSD ~ n^-2, i.e. *white road
+    velocity* at constant speed) has the body-acceleration spectrum of the base-excited
+    single mode::
+
+        S_a(f) = K w^2 (w_n^4 + 4 zeta^2 w_n^2 w^2) / ((w_n^2 - w^2)^2 + 4 zeta^2 w_n^2 w^2) + B
+
+    (``w = 2 pi f``, ``w_n = 2 pi f_n``; ``B`` the sensor-noise floor). The window's Welch
+    spectrum (16 s Hann segments, 50 % overlap) is fitted in log amplitude over 0.3-5 Hz by
+    nonlinear least squares from a grid of starts; standard errors from the Jacobian.
+``ar``: AR(p) poles
+    Mean removed, decimated to 10 Hz (zero-phase FIR), AR(p) (default p = 6) by least
+    squares; the pole pair in 0.5-4 Hz with the highest AR spectral peak is the body mode:
+    ``f_n = |s| / 2 pi``, ``zeta = -Re(s) / |s|`` with ``s = fs ln z``.
+
+On the synthetic quarter car (body mode 1.256 Hz, zeta 0.268) with 60 s windows the
+``carma`` fit finds 1.16-1.35 Hz and zeta 0.28-0.35 (the single-mode shape ignores the
+wheel's coupling); the AR poles scatter more. Results on the real CANedge recording are in
+``docs/monitoring.md``.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.signal import decimate, welch
+
+from estimator.stream.monitor import StepResult
+from estimator.stream.tracker import ParameterTracker
+from suspid.errors import InputError, UsageError
+from suspid.models.base import FloatArray
+
+#: defaults of the output-only windows (s): a spectral estimate needs many body periods
+DEFAULT_WINDOW_S = 60.0
+DEFAULT_STEP_S = 30.0
+METHODS = ("carma", "ar")
+
+
+@dataclass
+class BodyMode:
+    """Body-mode estimate of one window.
+
+    Attributes
+    ----------
+    f_hz, zeta : float
+        Natural frequency (Hz) and damping ratio.
+    f_se, zeta_se : float
+        Standard errors (NaN when not available).
+    method : str
+    """
+
+    f_hz: float
+    zeta: float
+    f_se: float
+    zeta_se: float
+    method: str
+
+
+def carma_psd(f: FloatArray, fn: float, zeta: float) -> FloatArray:
+    """Unit-gain body-acceleration spectrum shape under white road velocity (see module doc)."""
+    w = 2 * np.pi * np.asarray(f, dtype=float)
+    wn = 2 * np.pi * fn
+    num = w ** 2 * (wn ** 4 + 4 * zeta ** 2 * wn ** 2 * w ** 2)
+    den = (wn ** 2 - w ** 2) ** 2 + 4 * zeta ** 2 * wn ** 2 * w ** 2
+    return num / den
+
+
+def fit_carma(y: FloatArray, fs: float, band: tuple[float, float] = (0.3, 5.0),
+              segment_s: float = 16.0) -> BodyMode:
+    """Fit the body mode to the Welch spectrum of ``y`` (m/s^2) sampled at ``fs`` (Hz)."""
+    y = np.asarray(y, dtype=float) - float(np.mean(y))
+    nper = min(y.size, max(16, int(round(segment_s * fs))))
+    f, P = welch(y, fs, nperseg=nper)
+    m = (f >= band[0]) & (f <= band[1]) & (P > 0)
+    f, P = f[m], P[m]
+    if f.size < 8:
+        raise ValueError(f"only {f.size} spectral lines in {band[0]}-{band[1]} Hz; window too short")
+    lp = np.log(P)
+
+    def res(th: FloatArray) -> FloatArray:
+        fn, zeta, lk, lb = th
+        return np.log(np.exp(lk) * carma_psd(f, fn, zeta) + np.exp(lb)) - lp
+
+    best = None
+    for fn0 in (0.8, 1.2, 1.6, 2.2):
+        for z0 in (0.15, 0.3, 0.5):
+            lk0 = math.log(float(np.median(P)) / float(carma_psd(np.array([fn0]), fn0, z0)[0]) * 0.5)
+            th0 = [fn0, z0, lk0, math.log(float(np.min(P)))]
+            r = least_squares(res, th0, bounds=([band[0], 0.02, -80, -120], [band[1], 1.5, 80, 80]))
+            if best is None or r.cost < best.cost:
+                best = r
+    if best is None:  # pragma: no cover - the grid always yields a result
+        raise ValueError("spectral fit failed")
+    s2 = 2 * best.cost / max(1, f.size - 4)
+    # covariance from the Jacobian; a parameter parked on its bound (e.g. no visible noise
+    # floor B) has a null column and is left out through the pseudo-inverse
+    try:
+        cov = np.linalg.pinv(best.jac.T @ best.jac, rcond=1e-10) * s2
+        se = np.sqrt(np.clip(np.diag(cov), 0, None))
+    except np.linalg.LinAlgError:
+        se = np.full(4, np.nan)
+    return BodyMode(float(best.x[0]), float(best.x[1]), float(se[0]), float(se[1]), "carma")
+
+
+def fit_ar(y: FloatArray, fs: float, order: int = 6, fs_ar: float = 10.0,
+           band: tuple[float, float] = (0.5, 4.0)) -> BodyMode:
+    """Body mode as the dominant AR(p) pole pair in ``band`` (see module doc)."""
+    y = np.asarray(y, dtype=float) - float(np.mean(y))
+    q = max(1, int(round(fs / fs_ar)))
+    if q > 1:
+        y = decimate(y, q, ftype="fir", zero_phase=True)
+    fs2 = fs / q
+    sd = float(np.std(y))
+    if not sd > 0:
+        raise ValueError("constant signal")
+    y = y / sd
+    n = y.size
+    if n < 10 * order:
+        raise ValueError(f"{n} samples after decimation, too few for AR({order})")
+    X = np.column_stack([y[order - k - 1:n - k - 1] for k in range(order)])
+    b = y[order:]
+    a, *_ = np.linalg.lstsq(X, b, rcond=None)
+    s2 = float(np.var(b - X @ a))
+    z = np.roots(np.concatenate([[1.0], -a]))
+    best = None
+    for zi in z:
+        s = np.log(complex(zi)) * fs2
+        if s.imag <= 0:
+            continue
+        fn = abs(s) / (2 * np.pi)
+        zeta = -s.real / abs(s)
+        if not (band[0] <= fn <= band[1] and 0 < zeta < 1):
+            continue
+        w = np.exp(-1j * s.imag / fs2 * np.arange(1, order + 1))
+        peak = s2 / abs(1 - np.dot(a, w)) ** 2
+        if best is None or peak > best[0]:
+            best = (peak, fn, zeta)
+    if best is None:
+        raise ValueError(f"no AR({order}) pole pair in {band[0]}-{band[1]} Hz")
+    return BodyMode(float(best[1]), float(best[2]), float("nan"), float("nan"), "ar")
+
+
+class OutputOnlyEstimator:
+    """Per-window body-mode tracking from one acceleration channel.
+
+    Parameters
+    ----------
+    channel : str
+        The body acceleration channel (``x1_ddot``).
+    method : {"carma", "ar"}
+    max_missing : float
+        Skip a window with more than this fraction of missing samples (shorter gaps are
+        bridged by linear interpolation, reported).
+    min_rms : float
+        Skip a window whose acceleration RMS (mean removed) is below this (m/s^2): a parked
+        car shows no body mode.
+    """
+
+    name = "output_only"
+
+    def __init__(self, channel: str, method: str = "carma", max_missing: float = 0.1,
+                 min_rms: float = 0.02, ar_order: int = 6) -> None:
+        if method not in METHODS:
+            raise UsageError(f"output-only method {method!r} unknown; expected one of {', '.join(METHODS)}")
+        self.channel = channel
+        self.method = method
+        self.max_missing = max_missing
+        self.min_rms = min_rms
+        self.ar_order = ar_order
+        self.tracker = ParameterTracker(q=0.005, overlap=1.0)
+        self.windows = 0
+        self.skipped = 0
+        self.cpu = 0.0
+
+    def process(self, t: FloatArray, data: Mapping[str, FloatArray]) -> StepResult:
+        """Body mode of one window (or a skip with the reason)."""
+        c0 = time.process_time()
+        y = data.get(self.channel)
+        base = {"t": float(t[-1]), "t_start": float(t[0]), "baseline": self.name}
+        if y is None:
+            raise InputError(f"output-only mode: the stream has no channel {self.channel!r}; "
+                             f"it has {', '.join(data)} (map one with --map {self.channel}=MSG.SIGNAL)")
+        y = np.asarray(y, dtype=float)
+        ok = np.isfinite(y)
+        frac = 1.0 - float(ok.mean())
+        warns = []
+
+        def skip(reason: str) -> StepResult:
+            self.skipped += 1
+            self.cpu += time.process_time() - c0
+            return StepResult(dict(base, type="skip", reason=reason))
+
+        if frac > self.max_missing or ok.sum() < 16:
+            return skip(f"channel {self.channel}: {frac:.0%} of the window's samples missing "
+                        f"(> {self.max_missing:.0%})")
+        if frac > 0:
+            y = np.interp(t, t[ok], y[ok])
+            warns.append(f"{int((~ok).sum())} missing samples bridged by linear interpolation")
+        rms = float(np.std(y))
+        if rms < self.min_rms:
+            return skip(f"too little excitation: body acceleration RMS {rms:.3g} m/s^2 < "
+                        f"{self.min_rms:g} m/s^2 (vehicle at rest?)")
+        dt = float(np.median(np.diff(t)))
+        fs = 1.0 / dt
+        try:
+            mode = (fit_carma(y, fs) if self.method == "carma"
+                    else fit_ar(y, fs, order=self.ar_order))
+        except ValueError as exc:
+            return skip(f"no body mode found: {exc}")
+        params = {"f_body": mode.f_hz, "zeta_body": mode.zeta}
+        se = {"f_body": mode.f_se, "zeta_body": mode.zeta_se}
+        track = self.tracker.update(float(t[-1]), params,
+                                    {k: (v if math.isfinite(v) else 0.1 * params[k])
+                                     for k, v in se.items()})
+        self.windows += 1
+        cpu = time.process_time() - c0
+        self.cpu += cpu
+        line = dict(base, type="estimate", mode="output_only", method=mode.method,
+                    params=params, stderr=se, f_hz=mode.f_hz, zeta=mode.zeta,
+                    accel_rms=rms, track=track, cpu_ms=1e3 * cpu, warnings=warns)
+        finite = {k: v for k, v in se.items() if math.isfinite(v)}
+        return StepResult(line, params, finite)
+
+    def summary(self) -> dict[str, Any]:
+        """Windows fitted and skipped, CPU time."""
+        return {"windows": self.windows, "skipped": self.skipped, "cpu_s": self.cpu}
+
+
+def run_output_only_cli(args: Any, model: Any, emit: Any) -> int:
+    """``suspid monitor --output-only``: body-mode tracking from a body accelerometer."""
+    from pathlib import Path
+
+    from estimator.alerts import AlertConfig, AlertEngine, AlertStore, CallbackSink
+    from estimator.stream.config import WindowConfig
+    from estimator.stream.monitor import StreamMonitor
+    from suspid.cli._common import CAN_LOG_SUFFIXES, parse_assignments
+    from suspid.cli.monitor import _run_csv, _run_live, _run_log
+
+    channel = args.accel_channel or f"{model.coords[0]}_ddot"
+    if channel not in model.channels:
+        raise UsageError(f"--accel-channel {channel!r} is not a channel of model {model.name}")
+    method = getattr(args, "oo_method", None) or "carma"
+    est = OutputOnlyEstimator(channel, method=method)
+    window = args.window if args.window is not None else DEFAULT_WINDOW_S
+    step = args.step if args.step is not None else (window / 2.0 if args.window else DEFAULT_STEP_S)
+    cfg = WindowConfig(window_s=window, step_s=step)
+    cfg.validate()
+    nominal = parse_assignments(args.nominal, "--nominal")
+    bad = [k for k in nominal if k not in ("f_body", "zeta_body")]
+    if bad:
+        raise UsageError(f"--nominal {bad[0]}: output-only mode monitors f_body and zeta_body")
+    sinks: list[Any] = [CallbackSink(emit)]
+    store = AlertStore(args.alert_file) if args.alert_file else None
+    engine = None
+    if nominal:
+        engine = AlertEngine(AlertConfig(nominal, drop=args.alert_drop, persistence_s=step,
+                                         hysteresis=min(args.hysteresis, args.alert_drop / 2)),
+                             model.name, units={"f_body": "Hz", "zeta_body": ""},
+                             store=store, sinks=sinks)
+    mon = StreamMonitor(est, emit, engine)
+    buses: list[Any] = []
+    extra: dict[str, Any] = {"mode": "output_only", "channel": channel, "method": method}
+    try:
+        if args.input is not None:
+            path = Path(args.input)
+            if not path.is_file():
+                raise InputError(f"{path}: no such file")
+            if path.suffix.lower() in CAN_LOG_SUFFIXES:
+                extra.update(_run_log(args, model, cfg, mon, sinks, buses))
+            else:
+                extra.update(_run_csv(args, model, cfg, mon))
+        else:
+            extra.update(_run_live(args, model, cfg, mon, sinks, buses))
+    finally:
+        for b in buses:
+            try:
+                b.shutdown()
+            except Exception:  # pragma: no cover
+                pass
+        if store is not None:
+            store.close()
+    if not args.no_summary:
+        emit(mon.summary(extra))
+    return 0

@@ -1,0 +1,99 @@
+"""Bounded window accumulator: the last ``window`` samples of every channel, preallocated.
+
+Samples arrive in blocks of any size (one CAN sample, a decoder batch, a whole CSV); a
+window is handed out every ``step`` samples once ``window`` samples have arrived. Memory is
+fixed at construction (``2 x window + max_block`` samples per channel), so a monitor that
+runs for hours keeps a flat footprint. Missing samples are NaN (gaps are marked by the
+decoder, never interpolated here).
+"""
+from __future__ import annotations
+
+from typing import Iterator, Mapping, Sequence
+
+import numpy as np
+
+from suspid.models.base import FloatArray
+
+
+class WindowAccumulator:
+    """Collect samples and yield overlapping windows.
+
+    Parameters
+    ----------
+    names : sequence of str
+        Channels kept (others in pushed blocks are ignored; absent ones are NaN).
+    window : int
+        Window length (samples).
+    step : int
+        Samples between window ends.
+    max_block : int
+        Largest block accepted by one :meth:`push` call without splitting.
+    """
+
+    def __init__(self, names: Sequence[str], window: int, step: int, max_block: int = 4096) -> None:
+        if window < 2 or step < 1:
+            raise ValueError(f"window must be >= 2 and step >= 1 samples, got {window}, {step}")
+        self.names = list(names)
+        self.window = int(window)
+        self.step = int(step)
+        self.max_block = int(max_block)
+        self.capacity = 2 * self.window + self.max_block
+        self._t = np.empty(self.capacity)
+        self._d = np.full((len(self.names), self.capacity), np.nan)
+        self._n = 0            # valid samples in the buffer
+        self.total = 0         # samples received
+        self._next_end = self.window
+
+    def push(self, t: FloatArray, data: Mapping[str, FloatArray]) -> Iterator[tuple[FloatArray, dict[str, FloatArray]]]:
+        """Append a block and yield every window completed by it.
+
+        Parameters
+        ----------
+        t : ndarray, shape (n,)
+            Sample times (s), increasing.
+        data : mapping
+            ``channel -> ndarray (n,)``.
+
+        Yields
+        ------
+        (t, data)
+            Copies of the window's times and channel arrays.
+        """
+        t = np.asarray(t, dtype=float)
+        for s in range(0, t.size, self.max_block):
+            e = min(s + self.max_block, t.size)
+            yield from self._push_part(t[s:e], {k: v[s:e] for k, v in data.items()})
+
+    def _push_part(self, t: FloatArray, data: Mapping[str, FloatArray]
+                   ) -> Iterator[tuple[FloatArray, dict[str, FloatArray]]]:
+        n = t.size
+        pos = 0
+        while pos < n:
+            if self._n + 1 > self.capacity:
+                self._compact()
+            # copy up to the next window end (so windows are cut exactly)
+            until_end = self._next_end - self.total
+            take = min(n - pos, self.capacity - self._n, max(until_end, 1))
+            a, b = self._n, self._n + take
+            self._t[a:b] = t[pos:pos + take]
+            for i, name in enumerate(self.names):
+                v = data.get(name)
+                if v is None:
+                    self._d[i, a:b] = np.nan
+                else:
+                    self._d[i, a:b] = v[pos:pos + take]
+            self._n = b
+            self.total += take
+            pos += take
+            if self.total == self._next_end:
+                lo = self._n - self.window
+                yield (self._t[lo:self._n].copy(),
+                       {name: self._d[i, lo:self._n].copy() for i, name in enumerate(self.names)})
+                self._next_end += self.step
+
+    def _compact(self) -> None:
+        keep = min(self._n, self.window)
+        lo = self._n - keep
+        self._t[:keep] = self._t[lo:self._n]
+        self._d[:, :keep] = self._d[:, lo:self._n]
+        self._n = keep

@@ -1,0 +1,180 @@
+"""Window configuration of the streaming identifier and its defaults from the physics.
+
+Defaults are derived from the modes of the model at the nominal parameters (eigenvalues
+``lambda_i`` of ``A``; natural frequency ``w_i = |lambda_i|``, damping ratio
+``zeta_i = -Re(lambda_i) / |lambda_i|``, damped period ``T_i = 2 pi / Im(lambda_i)``,
+decay time ``tau_i = 1 / (zeta_i w_i)``):
+
+``window_s``
+    ``max(3 T_slow, 6 tau_slow)`` rounded up to 0.5 s, where *slow* is the mode of lowest
+    natural frequency (the body bounce): three oscillations and six decay times of the
+    slowest mode in every window make its damping visible, while the window stays short
+    because a window's estimate describes its middle -- it lags a drifting parameter by
+    ``window_s / 2``, which is most of the alert delay. quarter2 defaults (body mode
+    1.26 Hz, zeta 0.27, T 0.83 s, tau 0.47 s): 3.0 s.
+``step_s``
+    ``window_s / 2`` rounded to 0.05 s (1.5 s for quarter2): every sample is fitted twice;
+    a third of the window would cut the alert delay by ~0.5 s for 50 % more CPU (every sample is fitted three times; the estimate
+    lags the truth by about half a window).
+``decimate``
+    keep every ``d``-th sample with ``d = max(1, floor(fs / (20 f_fast)))``: at least 20
+    samples per period of the fastest mode (the wheel hop, 11.8 Hz for quarter2), so the
+    first-order-hold road assumption of the exact simulator stays accurate (250 Hz of a
+    500 Hz stream).
+``maxfev`` / ``first_maxfev``
+    Nelder-Mead evaluation budget of a warm-started window (default ``40 n_free``) and of
+    the first, cold-started one (``250 n_free``). Every window reports the evaluations used.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Mapping
+
+import numpy as np
+
+from suspid.errors import UsageError
+from suspid.models.base import SuspensionModel
+
+
+@dataclass(frozen=True)
+class Mode:
+    """One vibration mode (complex-conjugate pair or real pole) of a linear model.
+
+    Attributes
+    ----------
+    f_n : float
+        Natural frequency (Hz).
+    zeta : float
+        Damping ratio (dimensionless).
+    period : float
+        Damped period (s); ``inf`` for a real (overdamped) pole.
+    tau : float
+        Decay time constant ``1 / (zeta w_n)`` (s).
+    """
+
+    f_n: float
+    zeta: float
+    period: float
+    tau: float
+
+
+def modes(model: SuspensionModel, params: Mapping[str, float]) -> list[Mode]:
+    """Modes of ``model`` at ``params``, slowest first (one per conjugate pair)."""
+    A, _ = model.state_space(params)
+    lam = np.linalg.eigvals(A)
+    out = []
+    for l in lam:
+        if l.imag < -1e-12:
+            continue
+        wn = abs(l)
+        if wn == 0:
+            continue
+        zeta = -l.real / wn
+        period = 2 * math.pi / l.imag if l.imag > 1e-12 else math.inf
+        tau = 1.0 / (zeta * wn) if zeta > 0 else math.inf
+        out.append(Mode(float(wn / (2 * math.pi)), float(zeta), float(period), float(tau)))
+    return sorted(out, key=lambda m: m.f_n)
+
+
+@dataclass
+class WindowConfig:
+    """Sliding-window settings (see the module docstring for the defaults).
+
+    Attributes
+    ----------
+    window_s, step_s : float
+        Window length and step (s of data time).
+    decimate : int
+        Keep every ``decimate``-th sample for the fit.
+    maxfev, first_maxfev : int
+        Evaluation budgets (warm windows, first window).
+    xatol : float
+        Nelder-Mead simplex size tolerance in log-parameter units (2e-3 = 0.2 %, 2.5 times
+        below the default ``sigma_floor``); the only termination test besides the budget
+        (1e-3 costs a third more evaluations for a 0.01 % better track).
+    warm_step : float
+        Smallest edge (log units) of the warm-start simplex per parameter (0.005 = 0.5 %:
+        a window step moves a wearing damper by less; Nelder-Mead expands the simplex when a
+        parameter jumps further).
+    max_missing : float
+        Skip a window when more than this fraction of a needed channel is missing.
+    min_deflection : float
+        Skip a window when the RMS suspension deflection (or, without a wheel channel, body
+        motion) is below this (m) ...
+    min_snr : float
+        ... or below ``min_snr`` times the noise floor estimated from the data.
+    sigma_floor : float
+        Relative standard error added in quadrature to every window's stderr (model error,
+        within-window drift); 0.005 = 0.5 %, 2.5 x the RMS error of the window
+        estimates against the truth at the window centre on the damper-wear stream.
+    cost : str
+        ``"sse"`` (positions) or ``"frobenius"`` (every measured channel).
+    """
+
+    window_s: float
+    step_s: float
+    decimate: int = 1
+    maxfev: int = 160
+    first_maxfev: int = 1000
+    xatol: float = 2e-3
+    warm_step: float = 0.005
+    max_missing: float = 0.2
+    min_deflection: float = 5e-4
+    min_snr: float = 20.0
+    sigma_floor: float = 0.005
+    cost: str = "sse"
+
+    def validate(self) -> None:
+        """Raise :class:`UsageError` naming the first inconsistent setting."""
+        if not (self.window_s > 0 and math.isfinite(self.window_s)):
+            raise UsageError(f"--window: expected a window length > 0 s, got {self.window_s}")
+        if not (0 < self.step_s <= 10 * self.window_s):
+            raise UsageError(f"--step: expected 0 < step <= 10 x window, got {self.step_s} s")
+        if self.decimate < 1:
+            raise UsageError(f"--decimate: expected an integer >= 1, got {self.decimate}")
+        if self.maxfev < 10 or self.first_maxfev < 10:
+            raise UsageError(f"--budget: expected at least 10 evaluations, got {self.maxfev}")
+        if not 0 <= self.max_missing < 1:
+            raise UsageError(f"max_missing must be in [0, 1), got {self.max_missing}")
+
+
+def default_decimation(model: SuspensionModel, params: Mapping[str, float], fs: float) -> int:
+    """``max(1, floor(fs / (20 f_fast)))``: at least 20 fitted samples per fastest period."""
+    ms = modes(model, params)
+    if not ms or not fs > 0:
+        return 1
+    return max(1, int(math.floor(fs / (20.0 * ms[-1].f_n))))
+
+
+def default_config(model: SuspensionModel, params: Mapping[str, float], fs: float,
+                   n_free: int) -> WindowConfig:
+    """Window defaults for ``model`` at nominal ``params`` sampled at ``fs`` (Hz).
+
+    Parameters
+    ----------
+    model : SuspensionModel
+    params : mapping
+        Nominal parameter values (SI).
+    fs : float
+        Sample rate of the stream (Hz); 0 when not known yet (``decimate`` is then 1; set it
+        with :func:`default_decimation` once the rate is known).
+    n_free : int
+        Number of free parameters (scales the evaluation budget).
+
+    Returns
+    -------
+    WindowConfig
+    """
+    ms = modes(model, params)
+    if not ms:
+        raise UsageError(f"model {model.name} has no oscillating mode at the nominal parameters")
+    slow = ms[0]
+    period = slow.period if math.isfinite(slow.period) else 1.0 / slow.f_n
+    tau = slow.tau if math.isfinite(slow.tau) else period
+    window = math.ceil(max(3.0 * period, 6.0 * tau) * 2.0) / 2.0
+    step = max(0.05, round(round(window / 2.0 / 0.05) * 0.05, 2))
+    dec = default_decimation(model, params, fs)
+    n = max(1, n_free)
+    return WindowConfig(window_s=window, step_s=step, decimate=dec, maxfev=40 * n,
+                        first_maxfev=250 * n)

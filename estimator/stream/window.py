@@ -1,0 +1,296 @@
+"""Sliding-window identification: one warm-started, budgeted Nelder-Mead fit per window.
+
+Each window of the stream becomes a small :class:`~estimator.identify.OutputErrorProblem`
+(decimated as :mod:`estimator.stream.config` documents) and is fitted with the core's
+:func:`~estimator.identify.minimize_log` / :func:`~estimator.identify.finish` (the same
+log-coordinate Nelder-Mead and the same sandwich standard errors as ``suspid identify``).
+
+Warm start
+    The first window starts cold from the nominal values with restarts and budget
+    ``first_maxfev``. Every later window starts from the previous window's *final simplex*:
+    its best vertex (the previous estimate) becomes the origin of the new log coordinates
+    and its shape is kept, with each axis stretched to at least
+    ``max(0.02, 3 x previous relative stderr)`` (a converged simplex is ~1e-4 wide, too
+    small to follow a parameter that moved between windows). Windows whose fit is not
+    identifiable do not update the warm state.
+Budget
+    Nelder-Mead stops at ``maxfev`` evaluations (the stderr Jacobian costs another
+    ``2 n_free + 2``); every estimate reports ``nfev``, ``budget``, ``converged`` and the CPU
+    time of the window.
+Excitation
+    A window is skipped, with the reason, when a needed channel misses more than
+    ``max_missing`` of its samples, when its time base is not uniform, or when the RMS
+    suspension deflection ``x1 - x2`` (body motion when no wheel channel is measured) is
+    below ``min_deflection`` or below ``min_snr`` times the noise floor. The noise floor is
+    estimated from the data as ``std(diff4(y)) / sqrt(70)`` at the full rate (the fourth
+    difference removes the smooth suspension motion, 70 = C(8,4) is its white-noise gain).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+import numpy as np
+
+from estimator.identify import Parameters, OutputErrorProblem, finish, minimize_log
+from estimator.stream.config import WindowConfig
+from suspid.errors import UsageError
+from suspid.io.csvio import Measurement
+from suspid.models.base import FloatArray, SuspensionModel
+from suspid.simulate import uniform_step
+
+
+@dataclass
+class WindowResult:
+    """Outcome of one window.
+
+    Attributes
+    ----------
+    t : float
+        Data time at the window end (s).
+    t_start : float
+        Data time at the window start (s).
+    skipped : bool
+        ``True`` when the window was not fitted; ``reason`` says why.
+    params : dict
+        Every parameter (SI), fixed ones included (empty when skipped).
+    stderr : dict
+        Standard error of each free parameter (SI) including the ``sigma_floor``.
+    stderr_fit : dict
+        The fit's own standard error (noise only).
+    nfev, budget : int
+        Evaluations used by Nelder-Mead and its budget.
+    converged : bool
+    cost : float
+        The seed's cost of the window fit (SI).
+    rms_residual : dict
+    cpu_s : float
+        Process CPU time spent on the window (s).
+    excitation : dict
+        ``deflection_rms`` (m), ``noise`` (m), ``snr``, ``missing`` (fraction).
+    warnings : list of str
+    reason : str
+    """
+
+    t: float
+    t_start: float
+    skipped: bool = False
+    params: dict[str, float] = field(default_factory=dict)
+    stderr: dict[str, float] = field(default_factory=dict)
+    stderr_fit: dict[str, float] = field(default_factory=dict)
+    nfev: int = 0
+    budget: int = 0
+    converged: bool = False
+    identifiable: bool = True
+    cost: float = float("nan")
+    rms_residual: dict[str, float] = field(default_factory=dict)
+    cpu_s: float = 0.0
+    excitation: dict[str, float] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+    reason: str = ""
+
+    def to_json(self) -> dict[str, Any]:
+        """The monitor's JSON line (``estimate`` or ``skip``)."""
+        if self.skipped:
+            return {"type": "skip", "t": self.t, "t_start": self.t_start, "reason": self.reason,
+                    "excitation": self.excitation}
+        return {"type": "estimate", "t": self.t, "t_start": self.t_start,
+                "params": self.params, "stderr": self.stderr, "stderr_fit": self.stderr_fit,
+                "nfev": self.nfev, "budget": self.budget, "converged": self.converged,
+                "identifiable": self.identifiable, "cost": self.cost,
+                "rms_residual": self.rms_residual, "cpu_ms": 1e3 * self.cpu_s,
+                "excitation": self.excitation, "warnings": self.warnings}
+
+
+def noise_floor(y: FloatArray) -> float:
+    """White-noise standard deviation of ``y`` from its fourth difference (same units).
+
+    ``var(diff4(e)) = 70 var(e)`` for white ``e``; smooth motion sampled well above its
+    frequencies contributes ``(w h)^4`` of its amplitude, negligible here.
+    """
+    y = y[np.isfinite(y)]
+    if y.size < 10:
+        return float("nan")
+    return float(np.std(np.diff(y, 4)) / math.sqrt(70.0))
+
+
+class SlidingWindowIdentifier:
+    """Fit the free parameters on successive windows of a stream.
+
+    Parameters
+    ----------
+    model : SuspensionModel
+    params : Parameters
+        Starting values (nominal) and which parameters are fixed.
+    config : WindowConfig
+    channels : list of str
+        Measured channels to fit (a subset of ``model.channels``).
+    """
+
+    def __init__(self, model: SuspensionModel, params: Parameters, config: WindowConfig,
+                 channels: list[str]) -> None:
+        config.validate()
+        self.model = model
+        self.config = config
+        self.channels = [c for c in model.channels if c in channels]
+        if not self.channels:
+            raise UsageError(f"no measured channel of model {model.name} in the stream; "
+                             f"expected some of {', '.join(model.channels)}")
+        self.params = params.copy()
+        self.free = self.params.free
+        if not self.free:
+            raise UsageError("every parameter is fixed (--fix); nothing to monitor")
+        self.nominal = self.params.valuesdict()
+        self._warm: tuple[dict[str, float], FloatArray, dict[str, float]] | None = None
+        self.n_windows = 0
+        self.n_skipped = 0
+        self.total_nfev = 0
+        self.total_cpu = 0.0
+        coords = model.coords
+        self._defl = (coords[0], coords[1]) if len(coords) > 1 and coords[0] in self.channels \
+            and coords[1] in self.channels else None
+        self._motion = next((c for c in self.channels if c in coords), self.channels[0])
+
+    # ---- excitation --------------------------------------------------------------------
+    def excitation(self, t: FloatArray, data: Mapping[str, FloatArray]) -> tuple[dict[str, float], str]:
+        """Excitation statistics of a window and the reason to skip it (``""`` to fit)."""
+        cfg = self.config
+        needed = list(self.channels) + [r for r in self.model.roads if r in data]
+        worst = max(((float(np.mean(~np.isfinite(data[c]))), c) for c in needed), default=(0.0, ""))
+        ex: dict[str, float] = {"missing": worst[0]}
+        if worst[0] > cfg.max_missing:
+            return ex, (f"channel {worst[1]}: {worst[0]:.0%} of the window's samples missing "
+                        f"(> {cfg.max_missing:.0%}); gap in the data")
+        h = uniform_step(t)
+        if h is None:
+            d = np.diff(t)
+            k = int(np.argmax(d))
+            return ex, (f"time base not uniform: step {d[k]:.4g} s at t={t[k]:.3f} s "
+                        f"(median {np.median(d):.4g} s)")
+        if self._defl is not None:
+            y = data[self._defl[0]] - data[self._defl[1]]
+            what = f"suspension deflection {self._defl[0]}-{self._defl[1]}"
+        else:
+            y = data[self._motion]
+            what = f"motion {self._motion}"
+        yf = y[np.isfinite(y)]
+        rms = float(np.std(yf)) if yf.size else 0.0
+        nf = noise_floor(y)
+        snr = rms / nf if nf > 0 else math.inf
+        ex.update({"deflection_rms": rms, "noise": nf, "snr": snr})
+        is_pos = (self._defl is not None) or (self._motion in self.model.coords)
+        if is_pos and rms < cfg.min_deflection:
+            return ex, (f"too little excitation: {what} RMS {rms * 1e3:.3g} mm < "
+                        f"{cfg.min_deflection * 1e3:.3g} mm")
+        if snr < cfg.min_snr:
+            return ex, (f"too little excitation: {what} RMS is {snr:.3g} x the noise floor "
+                        f"({nf:.3g}), below {cfg.min_snr:g}")
+        return ex, ""
+
+    # ---- fit ----------------------------------------------------------------------------
+    def _problem(self, t: FloatArray, data: Mapping[str, FloatArray]) -> OutputErrorProblem:
+        d = self.config.decimate
+        road = {k: np.asarray(data[k][::d], dtype=float) for k in
+                [r for r in self.model.roads] + [f"{r}_dot" for r in self.model.roads] if k in data}
+        meas = Measurement(t[::d].copy(), road,
+                           {c: np.asarray(data[c][::d], dtype=float) for c in self.channels},
+                           source="window")
+        return OutputErrorProblem(self.model, meas, cost=self.config.cost)
+
+    def _start(self) -> tuple[Parameters, FloatArray | None, bool]:
+        """Starting parameters, initial simplex (or ``None``) and whether this is a warm start."""
+        p = self.params.copy()
+        if self._warm is None:
+            return p, None, False
+        values, simplex, rel_se = self._warm
+        for k in self.free:
+            p[k].value = values[k]
+        S = simplex - simplex[0]
+        n = len(self.free)
+        floor = np.array([min(0.3, max(self.config.warm_step, 3.0 * rel_se.get(k, 0.0)))
+                          for k in self.free])
+        edges = S[1:]
+        ok = edges.shape == (n, n) and np.all(np.isfinite(edges))
+        if ok:
+            size = np.max(np.abs(edges), axis=0)
+            if np.any(size <= 0):
+                ok = False
+            else:
+                edges = edges * np.maximum(1.0, floor / size)[None, :]
+                ok = np.linalg.cond(edges) < 1e6
+        if not ok:
+            edges = np.diag(floor)
+        return p, np.vstack([np.zeros(n), edges]), True
+
+    def process(self, t: FloatArray, data: Mapping[str, FloatArray]) -> WindowResult:
+        """Fit one window (or skip it).
+
+        Parameters
+        ----------
+        t : ndarray
+            Sample times of the window (s).
+        data : mapping
+            Channel and road arrays on ``t`` (SI), NaN for missing samples.
+
+        Returns
+        -------
+        WindowResult
+        """
+        c0 = time.process_time()
+        out = WindowResult(t=float(t[-1]), t_start=float(t[0]))
+        ex, reason = self.excitation(t, data)
+        out.excitation = ex
+        if reason:
+            out.skipped, out.reason = True, reason
+            self.n_skipped += 1
+            out.cpu_s = time.process_time() - c0
+            self.total_cpu += out.cpu_s
+            return out
+        cfg = self.config
+        prob = self._problem(t, data)
+        params, simplex, warm = self._start()
+        free = self.free
+        theta0 = np.array([params[k].value for k in free])
+        base = params.valuesdict()
+
+        def to_params(u: FloatArray) -> dict[str, float]:
+            p = dict(base)
+            p.update(zip(free, theta0 * np.exp(u)))
+            return p
+
+        def cost(u: FloatArray) -> float:
+            if not np.all(np.abs(u) < 30):
+                return math.inf
+            return prob.normalized_ss(to_params(u))
+
+        budget = cfg.maxfev if warm else cfg.first_maxfev
+        # termination on the simplex size alone (xatol, log units): the cost's own scale
+        # says nothing about the precision that matters here (sigma_floor)
+        nm = minimize_log(cost, np.zeros(len(free)), step=0.3, restarts=0 if warm else 4,
+                          maxfev=budget, xatol=cfg.xatol, fatol=math.inf,
+                          initial_simplex=simplex)
+        converged = nm.nfev < budget
+        p_hat = to_params(nm.u)
+        res = finish(prob, params, p_hat, nm.nfev, True, with_stderr=True)
+        out.params = res.params
+        out.stderr_fit = dict(res.stderr)
+        out.stderr = {k: float(math.hypot(v, cfg.sigma_floor * res.params[k]))
+                      for k, v in res.stderr.items()}
+        out.nfev, out.budget, out.converged = nm.nfev, budget, bool(converged)
+        out.identifiable = bool(res.identifiable)
+        out.cost = res.cost
+        out.rms_residual = res.rms_residual
+        out.warnings = [w for w in res.warnings if "evaluation budget" not in w]
+        if not converged:
+            out.warnings.append(f"Nelder-Mead used its budget of {budget} evaluations "
+                                f"before meeting xatol={cfg.xatol:g}")
+        rel = {k: (v / res.params[k]) for k, v in res.stderr.items()}
+        if res.identifiable and all(np.isfinite(v) and v < 0.5 for v in rel.values()):
+            self._warm = (dict(res.params), nm.final_simplex, rel)
+        self.n_windows += 1
+        self.total_nfev += nm.nfev
+        out.cpu_s = time.process_time() - c0
+        self.total_cpu += out.cpu_s
+        return out

@@ -1,0 +1,71 @@
+"""Virtual damper test: the frequency-domain EUSAMA / EGEA numbers equal a time-domain shaker."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from estimator.inspection import (EGEA_CRITERION_DEG, G, PLATE_AMPLITUDE, contact_force_response,
+                                  eusama_band, inspect)
+from suspid.simulate import simulate
+
+
+def shaker(model, p, f, periods=60, per=200):
+    """Steady-state contact force of a time-domain simulation with a sinusoidal plate."""
+    t = np.arange(periods * per + 1) / (per * f)
+    w = 2 * np.pi * f
+    r = PLATE_AMPLITUDE * np.sin(w * t)
+    out = simulate(model, p, t, {"r": r, "r_dot": PLATE_AMPLITUDE * w * np.cos(w * t)})
+    F = p["k2"] * (r - out["x2"]) + p["c2"] * (out["r_dot"] - out["x2_dot"])
+    last = slice(-10 * per - 1, None)  # ten periods after the transient died out
+    return t[last], r[last], F[last]
+
+
+@pytest.mark.parametrize("c1_frac", [1.0, 0.4])
+def test_eusama_equals_the_time_domain_minimum_wheel_load(quarter2, c1_frac) -> None:
+    p = dict(quarter2.defaults(), c1=1500.0 * c1_frac)
+    res = inspect(p, quarter2)
+    Fs = (p["m1"] + p["m2"]) * G
+    assert res.static_load_n == pytest.approx(Fs)
+    _, _, F = shaker(quarter2, p, res.eusama_f_hz)
+    rh_time = 100 * (Fs + F.min()) / Fs
+    assert rh_time == pytest.approx(res.eusama_pct, abs=0.2)
+    # and it is the minimum over the sweep: neighbouring frequencies hold the wheel better
+    for df in (-0.5, 0.5):
+        _, _, F2 = shaker(quarter2, p, res.eusama_f_hz + df)
+        assert 100 * (Fs + F2.min()) / Fs > res.eusama_pct - 0.2
+
+
+def test_phase_equals_the_time_domain_phase(quarter2) -> None:
+    p = dict(quarter2.defaults(), c1=600.0)
+    for f in (2.5, 6.0, 11.0):
+        t, r, F = shaker(quarter2, p, f)
+        w = 2 * np.pi * f
+        # phase of F relative to r = A sin(w t): project on sin and cos
+        a = 2 * np.mean(F * np.sin(w * t))
+        b = 2 * np.mean(F * np.cos(w * t))
+        ph_time = np.degrees(np.arctan2(b, a)) % 360
+        H = contact_force_response(quarter2, p, np.array([f]))[0]
+        assert ph_time == pytest.approx(np.degrees(np.angle(H)) % 360, abs=0.2)
+
+
+def test_worn_damper_fails_both_tests_good_one_passes(quarter2) -> None:
+    base = quarter2.defaults()
+    good = inspect(base, quarter2)
+    assert good.eusama_band == "good" and good.egea_pass and good.phi_min_deg > EGEA_CRITERION_DEG
+    worn = inspect(dict(base, c1=300.0), quarter2)
+    assert not worn.egea_pass and worn.eusama_pct < good.eusama_pct
+    fr = [inspect(dict(base, c1=base["c1"] * k), quarter2) for k in (1.0, 0.7, 0.5, 0.3)]
+    assert all(a.phi_min_deg > b.phi_min_deg for a, b in zip(fr, fr[1:]))
+    assert all(a.eusama_pct > b.eusama_pct for a, b in zip(fr, fr[1:]))
+    assert good.f_body_hz == pytest.approx(1.2565, abs=1e-3)
+    assert good.f_wheel_hz == pytest.approx(11.64, abs=0.01)
+
+
+def test_bands() -> None:
+    assert [eusama_band(x) for x in (0, 20, 20.5, 40, 41, 90)] == \
+        ["poor", "poor", "sufficient", "sufficient", "good", "good"]
+
+
+def test_liftoff_clips_at_zero(quarter2) -> None:
+    res = inspect(dict(quarter2.defaults(), c1=50.0, m1=150.0), quarter2)
+    assert res.eusama_pct == 0.0 and res.eusama_band == "poor"

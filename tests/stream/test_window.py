@@ -1,0 +1,139 @@
+"""Sliding-window identifier: defaults from the physics, warm start, budget, skips, accumulator."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from estimator.identify import Parameters
+from estimator.stream.accumulator import WindowAccumulator
+from estimator.stream.config import default_config, default_decimation, modes
+from estimator.stream.drivers import run_arrays
+from estimator.stream.monitor import NMWindowEstimator
+from estimator.stream.scenarios import damper_wear
+from estimator.stream.tracker import ParameterTracker
+from estimator.stream.window import SlidingWindowIdentifier, noise_floor
+
+
+def test_defaults_follow_the_modes(quarter2) -> None:
+    p = quarter2.defaults()
+    body, wheel = modes(quarter2, p)
+    assert body.f_n == pytest.approx(1.2565, abs=1e-3) and wheel.f_n == pytest.approx(11.639, abs=1e-2)
+    cfg = default_config(quarter2, p, 500.0, 2)
+    assert cfg.window_s == math.ceil(max(3 * body.period, 6 * body.tau) * 2) / 2 == 3.0
+    assert cfg.step_s == 1.5
+    assert cfg.decimate == 2 and default_decimation(quarter2, p, 1000.0) == 4
+    assert cfg.maxfev == 80 and cfg.first_maxfev == 500
+    # a stiffer, faster suspension gets shorter windows
+    stiff = dict(p, k1=80000.0, c1=3000.0)
+    assert default_config(quarter2, stiff, 500.0, 2).window_s < cfg.window_s
+
+
+def test_accumulator_cuts_exact_windows_with_bounded_memory() -> None:
+    acc = WindowAccumulator(["a"], window=10, step=4, max_block=7)
+    t = np.arange(100.0)
+    wins = []
+    for s in range(0, 100, 13):  # odd block sizes
+        wins += list(acc.push(t[s:s + 13], {"a": t[s:s + 13] * 2}))
+    ends = [w[0][-1] for w in wins]
+    assert ends == list(np.arange(9.0, 100.0, 4.0))
+    for tw, dw in wins:
+        assert tw.size == 10 and np.array_equal(dw["a"], tw * 2) and np.all(np.diff(tw) == 1)
+    assert acc._t.size == acc.capacity == 2 * 10 + 7
+
+
+def test_noise_floor_recovers_white_noise_under_smooth_motion() -> None:
+    rng = np.random.default_rng(1)
+    t = np.arange(0, 3, 0.002)
+    y = 0.01 * np.sin(2 * np.pi * 1.3 * t) + 0.002 * np.sin(2 * np.pi * 11 * t) + rng.normal(0, 2e-5, t.size)
+    assert noise_floor(y) == pytest.approx(2e-5, rel=0.1)
+
+
+@pytest.fixture(scope="module")
+def const_stream(quarter2):
+    return damper_wear(quarter2, duration=12.0, wear_start=1e6, wear_end=2e6, seed=5)
+
+
+def test_constant_parameters_recovered_with_honest_stderr(quarter2, const_stream) -> None:
+    s = const_stream
+    params = Parameters.for_model(quarter2, fix={"m1": 300, "m2": 40},
+                                  init={"c1": 1200, "k1": 24000, "c2": 250, "k2": 170000})
+    cfg = default_config(quarter2, s.nominal, 500.0, 4)
+    ident = SlidingWindowIdentifier(quarter2, params, cfg, ["x1", "x2"])
+    res = []
+    run_arrays(s.t, s.data, cfg.window_s, cfg.step_s, lambda t, d: res.append(ident.process(t, d)))
+    assert len(res) == 7 and not any(r.skipped for r in res)
+    for r in res:
+        for k in ("c1", "k1"):
+            assert abs(r.params[k] - s.nominal[k]) < 3 * r.stderr[k]
+            assert r.params[k] == pytest.approx(s.nominal[k], rel=0.01)
+        assert r.nfev <= r.budget
+    assert res[0].budget == cfg.first_maxfev and res[1].budget == cfg.maxfev
+    assert np.mean([r.nfev for r in res[1:]]) < res[0].nfev / 2  # the warm start pays
+
+
+def test_budget_is_a_hard_limit(quarter2, const_stream) -> None:
+    s = const_stream
+    params = Parameters.for_model(quarter2, fix={"m1": 300, "m2": 40})
+    cfg = default_config(quarter2, s.nominal, 500.0, 4)
+    cfg.first_maxfev = 30
+    ident = SlidingWindowIdentifier(quarter2, params, cfg, ["x1", "x2"])
+    n = int(cfg.window_s * 500) + 1
+    r = ident.process(s.t[:n], {k: v[:n] for k, v in s.data.items()})
+    assert r.nfev <= 30 and not r.converged
+    assert any("budget" in w for w in r.warnings)
+
+
+def test_skip_reasons(quarter2, const_stream) -> None:
+    s = const_stream
+    params = Parameters.for_model(quarter2, fix={"m1": 300, "m2": 40, "c2": 300, "k2": 2e5})
+    cfg = default_config(quarter2, s.nominal, 500.0, 2)
+    est = NMWindowEstimator(quarter2, params, cfg, ["x1", "x2"], inspection=False)
+    n = int(cfg.window_s * 500) + 1
+    t = s.t[:n]
+    d = {k: v[:n].copy() for k, v in s.data.items()}
+    # a hole of 40 % in the body channel
+    gap = {k: v.copy() for k, v in d.items()}
+    gap["x1"][100:700] = np.nan
+    r = est.process(t, gap)
+    assert r.line["type"] == "skip" and "x1" in r.line["reason"] and "missing" in r.line["reason"]
+    # a hole in the road is bridged when short, skipped when long
+    short = {k: v.copy() for k, v in d.items()}
+    short["r"][200:210] = np.nan
+    r = est.process(t, short)
+    assert r.line["type"] == "estimate" and any("bridged" in w for w in r.line["warnings"])
+    long = {k: v.copy() for k, v in d.items()}
+    long["r"][100:900] = np.nan
+    assert "road channel r" in est.process(t, long).line["reason"]
+    # a parked car: sensor noise only
+    rng = np.random.default_rng(0)
+    quiet = {"x1": rng.normal(0, 1e-5, n), "x2": rng.normal(0, 1e-5, n), "r": np.zeros(n)}
+    r = est.process(t, quiet)
+    assert r.line["type"] == "skip" and "too little excitation" in r.line["reason"]
+    # the tracker and alert-relevant values come only from real estimates
+    assert r.values is None
+
+
+def test_tracker_combines_windows_and_grows_over_gaps() -> None:
+    tr = ParameterTracker(q=0.01, overlap=3.0)
+    a = tr.update(0.0, {"c1": 1500.0}, {"c1": 15.0})
+    b = tr.update(1.0, {"c1": 1500.0}, {"c1": 15.0})
+    assert b["c1"]["stderr"] < a["c1"]["stderr"]
+    c = tr.update(100.0, {"c1": 1200.0}, {"c1": 12.0})
+    assert c["c1"]["value"] < 1300  # after a long gap the new estimate dominates
+
+
+def test_sudden_damper_failure_is_followed(quarter2) -> None:
+    """A step from 1500 to 900 N s/m (a burst seal): the small warm simplex must expand."""
+    from estimator.stream.scenarios import damper_wear as dw
+
+    s = dw(quarter2, duration=20.0, wear_start=9.999, wear_end=10.0, c_end_fraction=0.6, seed=9)
+    params = Parameters.for_model(quarter2, fix={k: s.nominal[k] for k in ("m1", "m2", "c2", "k2")})
+    cfg = default_config(quarter2, s.nominal, 500.0, 2)
+    est = NMWindowEstimator(quarter2, params, cfg, ["x1", "x2"], inspection=False)
+    res = []
+    run_arrays(s.t, s.data, cfg.window_s, cfg.step_s, lambda t, d: res.append(est.process(t, d)))
+    after = [r.line for r in res if r.line["t_start"] >= 10.0]
+    assert after and all(l["params"]["c1"] == pytest.approx(900.0, rel=0.01) for l in after)
+    assert all(l["nfev"] <= l["budget"] for l in after)

@@ -1,0 +1,237 @@
+#!/usr/bin/env python
+"""Benchmarks of ``suspid monitor`` (issue 5): replay speed, CPU share on a saturated bus, RSS.
+
+Usage (from the repository root)::
+
+    python tools/bench_monitor.py replay      # 150 s, 4 channels, 500 Hz log: real-time factor
+    python tools/bench_monitor.py saturated   # frame rate of a saturated 1 Mbit/s bus: CPU share
+    python tools/bench_monitor.py rss         # 1 hour of simulated stream: RSS over time
+    python tools/bench_monitor.py all --json
+
+``replay``
+    Writes the damper-wear stream (x1, x2, x1_ddot and the road r, r_dot at 500 Hz, 150 s;
+    SN_Sync + QC_Body + QC_Wheel + QC_Road per sample = 2000 frames/s plus status) as a
+    candump log and runs ``suspid monitor --input LOG --jsonl`` in a subprocess, end to end
+    (interpreter start, decoding, windows, fits, JSON lines). Real-time factor = data
+    seconds / wall seconds, and data seconds / CPU seconds of that process (what one
+    dedicated core would give; the wall figure depends on the machine's load). Also reports
+    the parts in-process: decoding alone (:class:`estimator.decode.DecodeListener`,
+    frames/s) and the window fits alone.
+``saturated``
+    Classic CAN at 1 Mbit/s carries at most about 7.4-9.0 k frames/s (8-byte frames, 111-135
+    bits with stuffing). A 2 kHz sensor node with the same 4 frames per sample sends 8 k
+    frames/s -- a saturated bus. The monitor replays 60 s of it in-process; CPU share = CPU
+    seconds / data seconds (target <= 5 % of one core).
+``rss``
+    Feeds one hour of data time (a 60 s encoded stream looped with continuous timestamps and
+    E2E counters) through the live path (decoder, rolling buffer, windows, fits) and samples
+    the resident set size every simulated minute. Flat = no growth after warm-up.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+FIX = ["--fix", "m1=300", "--fix", "m2=40", "--fix", "c2=300", "--fix", "k2=200000"]
+
+
+def _rss_mb() -> float:
+    with open("/proc/self/status") as fh:
+        for line in fh:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024.0
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def _stream(duration: float, fs: float, seed: int = 0):
+    from estimator.stream.scenarios import damper_wear
+    from suspid.models import get_model
+
+    return damper_wear(get_model("quarter2"), duration=duration, fs=fs, seed=seed)
+
+
+def bench_replay(tmp: Path, duration: float = 150.0) -> dict[str, Any]:
+    """End-to-end replay of a 150 s, 4-channel, 500 Hz log through ``suspid monitor``."""
+    from estimator.decode import DecodeListener, feed
+    from estimator.identify import Parameters
+    from estimator.stream.config import default_config
+    from estimator.stream.drivers import run_arrays
+    from estimator.stream.monitor import NMWindowEstimator, StreamMonitor
+    from estimator.stream.scenarios import write_log
+    from suspid.can.logs import read_log
+    from suspid.models import get_model
+
+    s = _stream(duration, 500.0)
+    log = tmp / "replay.log"
+    frames = write_log(s, str(log))
+    cmd = [sys.executable, "-m", "suspid", "monitor", "--model", "quarter2", "--input", str(log),
+           *FIX, "--jsonl"]
+    ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    w0 = time.perf_counter()
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    wall = time.perf_counter() - w0
+    ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    child_cpu = (ru1.ru_utime - ru0.ru_utime) + (ru1.ru_stime - ru0.ru_stime)
+    if r.returncode != 0:
+        raise SystemExit(f"monitor failed: {r.stderr}")
+    lines = [json.loads(l) for l in r.stdout.splitlines()]
+    summ = lines[-1]
+    alerts = [l for l in lines if l["type"] == "alert"]
+    # the parts, in-process
+    L = DecodeListener("quarter2", capacity=1 << 13)
+    msgs = list(read_log(log))
+    c0 = time.process_time()
+    feed(L, msgs)
+    dec_cpu = time.process_time() - c0
+    m = get_model("quarter2")
+    params = Parameters.for_model(m, fix={k: s.nominal[k] for k in ("m1", "m2", "c2", "k2")})
+    cfg = default_config(m, s.nominal, 500.0, 2)
+    mon = StreamMonitor(NMWindowEstimator(m, params, cfg, ["x1", "x2", "x1_ddot"]), lambda d: None)
+    c0 = time.process_time()
+    run_arrays(s.t, s.data, cfg.window_s, cfg.step_s, mon.window)
+    fit_cpu = time.process_time() - c0
+    return {"command": " ".join(["suspid"] + cmd[3:]).replace(str(log), "LOG"),
+            "data_s": duration, "frames": frames, "wall_s": wall,
+            "realtime_factor_end_to_end": duration / wall,
+            "process_cpu_s": child_cpu,
+            "realtime_factor_per_cpu_second": duration / child_cpu,
+            "monitor_internal_realtime_factor": summ.get("realtime_factor"),
+            "windows": summ.get("windows"), "nfev": summ.get("nfev"),
+            "alerts": [(a["parameter"], a["t"]) for a in alerts],
+            "decode_cpu_s": dec_cpu, "decode_frames_per_s": len(msgs) / dec_cpu,
+            "windows_cpu_s_with_inspection": fit_cpu,
+            "windows_realtime_factor_cpu": duration / fit_cpu,
+            "load_average": os.getloadavg()}
+
+
+def bench_saturated(seconds: float = 60.0) -> dict[str, Any]:
+    """CPU share of the monitor at a saturated 1 Mbit/s bus (8 k frames/s)."""
+    import can
+
+    from estimator.decode import DecodeListener
+    from estimator.identify import Parameters
+    from estimator.stream.config import default_config, default_decimation
+    from estimator.stream.drivers import CanWindowDriver, replay
+    from estimator.stream.monitor import NMWindowEstimator, StreamMonitor
+    from suspid.can.dbc import load_dbc
+    from suspid.can.encoder import measurement_frames
+    from suspid.io.csvio import Measurement
+    from suspid.models import get_model
+
+    fs = 2000.0
+    s = _stream(seconds, fs, seed=4)
+    roads = {k: s.data[k] for k in ("r", "r_dot")}
+    meas = Measurement(s.t, roads, {k: s.data[k] for k in ("x1", "x2", "x1_ddot")})
+    msgs = list(measurement_frames(meas, "quarter2", load_dbc()))
+    rate = len(msgs) / seconds
+    m = get_model("quarter2")
+    params = Parameters.for_model(m, fix={k: s.nominal[k] for k in ("m1", "m2", "c2", "k2")})
+    cfg = default_config(m, s.nominal, fs, 2)
+    cfg.decimate = default_decimation(m, s.nominal, fs)
+    est = NMWindowEstimator(m, params, cfg, ["x1", "x2", "x1_ddot"])
+    mon = StreamMonitor(est, lambda d: None)
+    L = DecodeListener(m, capacity=1 << 14)
+    drv = CanWindowDriver(L, cfg.window_s, cfg.step_s, mon.window)
+    c0 = time.process_time()
+    replay(drv, msgs)
+    cpu = time.process_time() - c0
+    dec = DecodeListener(m, capacity=1 << 14)
+    c0 = time.process_time()
+    for msg in msgs:
+        dec.on_message_received(msg)
+    dec_cpu = time.process_time() - c0
+    return {"frames_per_s": rate, "data_s": seconds, "sample_rate_hz": fs,
+            "decimate": cfg.decimate, "cpu_s": cpu, "cpu_share_pct": 100 * cpu / seconds,
+            "decode_only_cpu_share_pct": 100 * dec_cpu / seconds,
+            "windows_cpu_share_pct": 100 * est.ident.total_cpu / seconds,
+            "windows": drv.windows, "load_average": os.getloadavg()}
+
+
+def bench_rss(hours: float = 1.0, chunk_s: float = 60.0) -> dict[str, Any]:
+    """RSS while one hour of data time streams through the live path."""
+    import can
+
+    from estimator.alerts import AlertConfig, AlertEngine
+    from estimator.decode import DecodeListener
+    from estimator.identify import Parameters
+    from estimator.stream.config import default_config
+    from estimator.stream.drivers import CanWindowDriver
+    from estimator.stream.monitor import NMWindowEstimator, StreamMonitor
+    from suspid.can.dbc import load_dbc
+    from suspid.can.encoder import measurement_frames
+    from suspid.io.csvio import Measurement
+    from suspid.models import get_model
+
+    fs = 500.0
+    s = _stream(chunk_s, fs, seed=6)
+    # constant parameters (no alert storm), the loop must join smoothly: drop the last sample
+    n = s.t.size - 1
+    roads = {k: s.data[k][:n] for k in ("r", "r_dot")}
+    meas = Measurement(s.t[:n], roads, {k: s.data[k][:n] for k in ("x1", "x2", "x1_ddot")})
+    proto = [(m.arbitration_id, bytes(m.data), m.timestamp)
+             for m in measurement_frames(meas, "quarter2", load_dbc(), status_hz=10.0)]
+    m = get_model("quarter2")
+    params = Parameters.for_model(m, fix={k: s.nominal[k] for k in ("m1", "m2", "c2", "k2")})
+    cfg = default_config(m, s.nominal, fs, 2)
+    est = NMWindowEstimator(m, params, cfg, ["x1", "x2", "x1_ddot"])
+    devnull = open(os.devnull, "w")
+    mon = StreamMonitor(est, lambda d: devnull.write(json.dumps(d) + "\n"),
+                        AlertEngine(AlertConfig({"c1": 1500.0, "k1": 20000.0}), "quarter2"))
+    L = DecodeListener(m, capacity=1 << 13)
+    drv = CanWindowDriver(L, cfg.window_s, cfg.step_s, mon.window)
+    loops = int(round(hours * 3600.0 / chunk_s))
+    samples: list[tuple[float, float]] = []
+    w0 = time.perf_counter()
+    c0 = time.process_time()
+    for k in range(loops):
+        off = k * chunk_s
+        for fid, data, ts in proto:
+            drv.on_message(can.Message(timestamp=ts + off, arbitration_id=fid, data=data,
+                                       is_extended_id=False, check=False))
+        samples.append(((k + 1) * chunk_s / 60.0, _rss_mb()))
+    drv.flush()
+    cpu = time.process_time() - c0
+    rss = [r for _, r in samples]
+    warm = [r for mnt, r in samples if mnt >= 5.0] or rss
+    return {"data_h": hours, "frames": len(proto) * loops, "windows": drv.windows,
+            "wall_s": time.perf_counter() - w0, "cpu_s": cpu,
+            "rss_mb_at_min": {f"{mnt:g}": round(r, 1) for mnt, r in samples
+                              if mnt in (1, 5, 10, 20, 30, 40, 50, 60) or mnt == samples[-1][0]},
+            "rss_growth_after_5_min_mb": round(max(warm) - min(warm), 2),
+            "rss_growth_last_30_min_mb": round(rss[-1] - rss[len(rss) // 2], 2),
+            "buffer_overwritten_rows": L.buffer.overwritten,
+            "load_average": os.getloadavg()}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("what", choices=["replay", "saturated", "rss", "all"])
+    ap.add_argument("--hours", type=float, default=1.0, help="rss: data hours (default 1)")
+    ap.add_argument("--duration", type=float, default=150.0, help="replay: log length (s)")
+    ap.add_argument("--json", action="store_true", help="print one JSON object")
+    a = ap.parse_args(argv)
+    out: dict[str, Any] = {}
+    with tempfile.TemporaryDirectory() as d:
+        if a.what in ("replay", "all"):
+            out["replay"] = bench_replay(Path(d), a.duration)
+        if a.what in ("saturated", "all"):
+            out["saturated"] = bench_saturated()
+        if a.what in ("rss", "all"):
+            out["rss"] = bench_rss(a.hours)
+    print(json.dumps(out, indent=None if a.json else 2))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
