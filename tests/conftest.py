@@ -4,6 +4,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
+
+# Deterministic fuzzing in every run (CI included): the examples depend only on the
+# hypothesis version, so a red CI is reproducible and a green one is not luck.
+settings.register_profile("suspid", derandomize=True, deadline=None, database=None)
+settings.load_profile("suspid")
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"

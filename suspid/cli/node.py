@@ -11,14 +11,15 @@ from suspid.models import MODELS
 
 def _speed(text: str) -> float:
     t = text.strip().lower()
-    if t in ("max", "inf", "0"):
+    if t in ("max", "0"):
         return 0.0
     try:
         v = float(t)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a number or 'max', got {text!r}") from None
-    if not v >= 0:
-        raise argparse.ArgumentTypeError(f"expected >= 0, got {text!r}")
+    if not (v >= 0 and v < float("inf")):
+        raise argparse.ArgumentTypeError(f"expected a finite number >= 0 (0 or 'max' = as fast as "
+                                         f"possible), got {text!r}")
     return v
 
 
