@@ -15,7 +15,9 @@ reason              check
 ``counter_jump``    counter advanced by more than ``max_counter_delta`` (too many frames
                     lost to trust the sequence) or is the invalid value 15; the frame
                     re-synchronises the sequence, as in AUTOSAR E2E profile 1
-``no_sync``         ``time_source="tick"`` and no ``SN_Sync`` frame received yet
+``no_sync``         ``time_source="tick"`` and no ``SN_Sync`` frame received yet, or none
+                    since this message's last frame after a silence longer than 7
+                    periods (a link reopened: the last tick is stale)
 ==================  ====================================================================
 
 Frames of DBC messages that carry none of the mapped channels are counted as ``ignored``
@@ -30,7 +32,8 @@ Accepted frames are decoded with the precompiled :class:`suspid.can.codec.Messag
 (``time_source="timestamp"``: logs, and buses that timestamp on reception), or the sensor
 node's sample tick (``time_source="tick"``: ``Tick * PeriodUs`` of the last ``SN_Sync``,
 matched through the frame's counter -- exact whatever the transport's latency and
-``--speed``; use it for SLCAN, whose host-side timestamps are arrival times).
+``--speed``; use it for SLCAN, whose host-side timestamps are arrival times). In tick mode
+the loss rules (counter advance vs time since the last frame) use that data time too.
 
 Feed it like any python-can listener: ``can.Notifier(bus, [listener])`` on a live bus, or
 :func:`estimator.decode.replay.feed` for a log (one loop calling ``on_message_received``:
@@ -84,6 +87,8 @@ class _Route:
     last_ts: float = 0.0
     period: float = 0.0
     accepted: int = 0
+    last_arrival: float = 0.0   # tick mode: frame timestamp (arrival) of the last frame
+    sync_n: int = -1            # tick mode: SN_Sync frames seen at the last frame
 
 
 def _compile_row(msg: Message, maps: Sequence[SignalMapping]) -> Callable[[bytes], tuple]:
@@ -210,6 +215,7 @@ class DecodeListener(can.Listener):
         self._last_ts = -sys.float_info.max  # any finite time passes the first check
         self._time_rejects = 0
         self._sync_tick: int | None = None
+        self._sync_n = 0
         self._routes: dict[int, _Route] = {}
         self._known: set[int] = set()
         self._rejected = self.counts.rejected
@@ -298,6 +304,30 @@ class DecodeListener(can.Listener):
                 return
             c = data[1] & 0x0F
             last = route.last_c
+            arrival = ts
+            if self._tick_time:
+                # the gap rules below need data time: a host's arrival times bunch (a
+                # serial reader hands over a chunk of frames at once), which made the
+                # period estimate tiny and counted thousands of frames 'lost'
+                if route.kind == _SYNC:
+                    tick, period_us = route.decode(data)
+                    if period_us > 0:
+                        ts = int(tick) * period_us * 1e-6
+                elif route.kind == _DATA and self._sync_tick is not None and self.period:
+                    if (route.sync_n == self._sync_n and last >= 0
+                            and arrival - route.last_arrival
+                            > COUNTER_MODULUS // 2 * max(route.period, self.period)):
+                        # no SN_Sync since this message's last frame, and a silence longer
+                        # than the counter can match (a link closed and reopened): the last
+                        # tick is stale and would place the frame in the past
+                        rejected["no_sync"] += 1
+                        return
+                    d = (self._sync_tick - c) % COUNTER_MODULUS
+                    tick = self._sync_tick - d if d <= COUNTER_MODULUS // 2 else \
+                        self._sync_tick - d + COUNTER_MODULUS
+                    ts = tick * self.period
+                route.last_arrival = arrival
+                route.sync_n = self._sync_n
             if last >= 0 and (c - last) % COUNTER_MODULUS != 1:
                 if not self._counter_gap(route, c, last, ts):
                     return
@@ -316,13 +346,10 @@ class DecodeListener(can.Listener):
             route.last_ts = ts
         if route.kind == _DATA:
             if self._tick_time:
-                tick = self._sync_tick
-                if tick is None or c < 0:
+                if self._sync_tick is None or c < 0:
                     rejected["no_sync"] += 1
                     return
-                d = (tick - c) % COUNTER_MODULUS
-                tick = tick - d if d <= COUNTER_MODULUS // 2 else tick - d + COUNTER_MODULUS
-                ts = tick * self.period  # type: ignore[operator]
+                # ts is the data time matched through the counter above
             route.source.push(ts, route.row(data))  # type: ignore[union-attr]
         elif not self._special(route, data, ts):
             return
@@ -336,13 +363,14 @@ class DecodeListener(can.Listener):
             rejected["counter_jump"] += 1
             return False
         delta = (c - last) % COUNTER_MODULUS
-        if 2 <= delta <= self.max_counter_delta:
-            self.counts.lost += delta - 1
-            return True
-        # a 4-bit counter cannot tell 11 lost frames from a frame 4 steps old; the time
-        # since the last frame of this ID can: accept a gap whose length in periods
-        # matches the counter advance
+        # a 4-bit counter cannot tell 11 lost frames from a frame 4 steps old, nor 2 lost
+        # frames from 17; the time since the last frame of this ID can: a gap whose length
+        # in periods matches the counter advance is counted from the time
         steps = int((ts - route.last_ts) / route.period + 0.5) if route.period > 0 else 0
+        if 2 <= delta <= self.max_counter_delta:
+            matched = steps > delta and (steps - delta) % COUNTER_MODULUS == 0
+            self.counts.lost += (steps if matched else delta) - 1
+            return True
         if steps >= 2 and (steps - delta) % COUNTER_MODULUS == 0:
             self.counts.lost += steps - 1
             return True
@@ -362,6 +390,7 @@ class DecodeListener(can.Listener):
         if route.kind == _SYNC:
             tick, period_us = route.decode(data)
             self._sync_tick = int(tick)
+            self._sync_n += 1
             if period_us > 0:
                 self.period = period_us * 1e-6
         elif route.kind == _STATUS:
