@@ -239,13 +239,11 @@ class OutputOnlyEstimator:
 
 def run_output_only_cli(args: Any, model: Any, emit: Any) -> int:
     """``suspid monitor --output-only``: body-mode tracking from a body accelerometer."""
-    from pathlib import Path
-
     from estimator.alerts import AlertConfig, AlertEngine, AlertStore, CallbackSink
     from estimator.stream.config import WindowConfig
     from estimator.stream.monitor import StreamMonitor
-    from suspid.cli._common import CAN_LOG_SUFFIXES, parse_assignments
-    from suspid.cli.monitor import _run_csv, _run_live, _run_log
+    from suspid.cli._common import parse_assignments
+    from suspid.cli.monitor import run_source
 
     channel = args.accel_channel or f"{model.coords[0]}_ddot"
     if channel not in model.channels:
@@ -269,25 +267,10 @@ def run_output_only_cli(args: Any, model: Any, emit: Any) -> int:
                              model.name, units={"f_body": "Hz", "zeta_body": ""},
                              store=store, sinks=sinks)
     mon = StreamMonitor(est, emit, engine)
-    buses: list[Any] = []
     extra: dict[str, Any] = {"mode": "output_only", "channel": channel, "method": method}
     try:
-        if args.input is not None:
-            path = Path(args.input)
-            if not path.is_file():
-                raise InputError(f"{path}: no such file")
-            if path.suffix.lower() in CAN_LOG_SUFFIXES:
-                extra.update(_run_log(args, model, cfg, mon, sinks, buses))
-            else:
-                extra.update(_run_csv(args, model, cfg, mon))
-        else:
-            extra.update(_run_live(args, model, cfg, mon, sinks, buses))
+        extra.update(run_source(args, model, cfg, mon, sinks))
     finally:
-        for b in buses:
-            try:
-                b.shutdown()
-            except Exception:  # pragma: no cover
-                pass
         if store is not None:
             store.close()
     if not args.no_summary:

@@ -127,7 +127,6 @@ def fit(problem: OutputErrorProblem, params: Parameters, restarts: int = 6,
     NMOutcome
         Raw optimiser outcome (``final_simplex`` for warm starts).
     """
-    model = problem.model
     free = params.free
     theta0 = np.array([params[k].value for k in free])
     base = params.valuesdict()

@@ -211,7 +211,7 @@ def _skip_mf4_backend(args: argparse.Namespace) -> None:
 
 def run(args: argparse.Namespace) -> int:
     _skip_mf4_backend(args)
-    from estimator.alerts import AlertConfig, AlertEngine, AlertStore, BusAlertSink, CallbackSink
+    from estimator.alerts import AlertConfig, AlertEngine, AlertStore, CallbackSink
     from estimator.identify import Parameters
     from estimator.stream.config import default_config, default_decimation
     from estimator.stream.monitor import NMWindowEstimator, StreamMonitor
@@ -312,25 +312,9 @@ def run(args: argparse.Namespace) -> int:
     engine = AlertEngine(acfg, model.name, units={k: model.spec(k).unit for k in nominal},
                          store=store, sinks=sinks)
     mon = StreamMonitor(estimator, emit, engine)
-    extra: dict[str, Any] = {}
-    buses: list[Any] = []
     try:
-        if args.input is not None:
-            path = Path(args.input)
-            if not path.is_file():
-                raise InputError(f"{path}: no such file")
-            if path.suffix.lower() in CAN_LOG_SUFFIXES:
-                extra.update(_run_log(args, model, cfg, mon, sinks, buses))
-            else:
-                extra.update(_run_csv(args, model, cfg, mon))
-        else:
-            extra.update(_run_live(args, model, cfg, mon, sinks, buses))
+        extra = run_source(args, model, cfg, mon, sinks)
     finally:
-        for b in buses:
-            try:
-                b.shutdown()
-            except Exception:  # pragma: no cover - best effort on the way out
-                pass
         if store is not None:
             store.close()
     if not args.no_summary:
@@ -338,6 +322,30 @@ def run(args: argparse.Namespace) -> int:
             extra["alert_file"] = str(store.path)
         emit(mon.summary(extra))
     return 0
+
+
+def run_source(args: argparse.Namespace, model: Any, cfg: Any, mon: Any,
+               sinks: list[Any]) -> dict[str, Any]:
+    """Stream ``--input`` (CAN log or CSV) or the live bus through ``mon``; shut buses down.
+
+    Returns the source's summary fields (frames, timing) for the final ``summary`` line.
+    """
+    buses: list[Any] = []
+    try:
+        if args.input is not None:
+            path = Path(args.input)
+            if not path.is_file():
+                raise InputError(f"{path}: no such file")
+            if path.suffix.lower() in CAN_LOG_SUFFIXES:
+                return _run_log(args, model, cfg, mon, sinks, buses)
+            return _run_csv(args, model, cfg, mon)
+        return _run_live(args, model, cfg, mon, sinks, buses)
+    finally:
+        for b in buses:
+            try:
+                b.shutdown()
+            except Exception:  # pragma: no cover - best effort on the way out
+                pass
 
 
 def _listener(args: argparse.Namespace, model: Any, cfg: Any, time_source: str) -> Any:
