@@ -107,9 +107,10 @@ def fit(problem: OutputErrorProblem, params: Parameters, restarts: int = 6,
         polish: bool = False) -> tuple[IdentResult, NMOutcome]:
     """Identify the free parameters of ``problem`` by Nelder–Mead in log coordinates.
 
-    With ``polish=True`` Nelder–Mead runs to a loose tolerance (``xatol = 1e-4``, at most
-    two restarts) and a Levenberg–Marquardt (Gauss–Newton) polish on the residual vector
-    finishes from its best vertex, kept only if it lowers the cost. Near the optimum the
+    With ``polish=True`` Nelder–Mead runs to a loose tolerance (``xatol = 1e-2``, i.e. about
+    1 % per parameter, at most two restarts) and a Levenberg–Marquardt (Gauss–Newton) polish
+    on the residual vector finishes from its best vertex; if the polish does not lower the
+    cost, Nelder–Mead carries on at full tolerance instead. Near the optimum the
     output-error problem is almost linear, so the polish converges in a handful of
     Jacobians instead of the hundreds of simplex steps Nelder–Mead spends resolving the
     last digits (unbounded problems only).
@@ -151,7 +152,8 @@ def fit(problem: OutputErrorProblem, params: Parameters, restarts: int = 6,
     out = minimize_log(cost, np.zeros(len(free)), step=step,
                        restarts=min(restarts, 2) if use_polish else restarts, maxfev=maxfev,
                        initial_simplex=initial_simplex, bounds=bounds,
-                       xatol=max(xatol, 1e-4) if use_polish else xatol, fatol=fatol)
+                       xatol=max(xatol, 1e-2) if use_polish else xatol,
+                       fatol=max(fatol, 1e-6) if use_polish else fatol)
     converged = out.converged
     if use_polish:
         u_lm, nfev_lm, ok = _lm_polish(problem, to_params, out.u, out.fun)
@@ -159,6 +161,13 @@ def fit(problem: OutputErrorProblem, params: Parameters, restarts: int = 6,
         if ok:
             out.u, out.fun = u_lm, cost(u_lm)
             converged = True
+        else:  # the polish did not help: finish with Nelder-Mead at full tolerance
+            left = None if maxfev is None else max(maxfev - out.nfev, 1)
+            more = minimize_log(cost, out.u, step=0.05, restarts=restarts, maxfev=left,
+                                xatol=xatol, fatol=fatol)
+            more.nfev += out.nfev
+            more.restarts += out.restarts + 1
+            out, converged = more, more.converged
     p_hat = to_params(out.u)
     res = finish(problem, params, p_hat, out.nfev, converged, with_stderr=with_stderr)
     res.restarts = out.restarts
