@@ -104,13 +104,17 @@ def fit(problem: OutputErrorProblem, params: Parameters, restarts: int = 6,
         maxfev: int | None = None, step: float = 0.3,
         initial_simplex: FloatArray | None = None, with_stderr: bool = True,
         xatol: float = 1e-7, fatol: float = 1e-14,
-        polish: bool = False) -> tuple[IdentResult, NMOutcome]:
+        polish: bool = False, multistart: int = 0) -> tuple[IdentResult, NMOutcome]:
     """Identify the free parameters of ``problem`` by Nelder–Mead in log coordinates.
 
     With ``polish=True`` Nelder–Mead runs to a loose tolerance (``xatol = 1e-2``, i.e. about
     1 % per parameter, at most two restarts) and a Levenberg–Marquardt (Gauss–Newton) polish
     on the residual vector finishes from its best vertex; if the polish does not lower the
-    cost, Nelder–Mead carries on at full tolerance instead. Near the optimum the
+    cost, Nelder–Mead carries on at full tolerance instead.
+
+    ``multistart > 0`` allows up to that many further starts (log-normal scatter of 0.7
+    around the start, fixed seed) when the answer looks like a spurious local minimum: a
+    parameter more than 50x away from its start, or no convergence. The lowest cost wins. Near the optimum the
     output-error problem is almost linear, so the polish converges in a handful of
     Jacobians instead of the hundreds of simplex steps Nelder–Mead spends resolving the
     last digits (unbounded problems only).
@@ -149,25 +153,50 @@ def fit(problem: OutputErrorProblem, params: Parameters, restarts: int = 6,
         return problem.normalized_ss(to_params(u))
 
     use_polish = polish and bounds is None and len(free) > 0
-    out = minimize_log(cost, np.zeros(len(free)), step=step,
-                       restarts=min(restarts, 2) if use_polish else restarts, maxfev=maxfev,
-                       initial_simplex=initial_simplex, bounds=bounds,
-                       xatol=max(xatol, 1e-2) if use_polish else xatol,
-                       fatol=max(fatol, 1e-6) if use_polish else fatol)
-    converged = out.converged
-    if use_polish:
-        u_lm, nfev_lm, ok = _lm_polish(problem, to_params, out.u, out.fun)
-        out.nfev += nfev_lm
-        if ok:
-            out.u, out.fun = u_lm, cost(u_lm)
-            converged = True
-        else:  # the polish did not help: finish with Nelder-Mead at full tolerance
-            left = None if maxfev is None else max(maxfev - out.nfev, 1)
-            more = minimize_log(cost, out.u, step=0.05, restarts=restarts, maxfev=left,
-                                xatol=xatol, fatol=fatol)
-            more.nfev += out.nfev
-            more.restarts += out.restarts + 1
-            out, converged = more, more.converged
+
+    def run_from(u_start: FloatArray, simplex: FloatArray | None,
+                 budget: int | None) -> tuple[NMOutcome, bool]:
+        out = minimize_log(cost, u_start, step=step,
+                           restarts=min(restarts, 2) if use_polish else restarts, maxfev=budget,
+                           initial_simplex=simplex, bounds=bounds,
+                           xatol=max(xatol, 1e-2) if use_polish else xatol,
+                           fatol=max(fatol, 1e-6) if use_polish else fatol)
+        converged = out.converged
+        if use_polish:
+            u_lm, nfev_lm, ok = _lm_polish(problem, to_params, out.u, out.fun)
+            out.nfev += nfev_lm
+            if ok:
+                out.u, out.fun = u_lm, cost(u_lm)
+                converged = True
+            else:  # the polish did not help: finish with Nelder-Mead at full tolerance
+                left = None if budget is None else max(budget - out.nfev, 1)
+                more = minimize_log(cost, out.u, step=0.05, restarts=restarts, maxfev=left,
+                                    xatol=xatol, fatol=fatol)
+                more.nfev += out.nfev
+                more.restarts += out.restarts + 1
+                out, converged = more, more.converged
+        return out, converged
+
+    out, converged = run_from(np.zeros(len(free)), initial_simplex, maxfev)
+    # Multi-start only when the answer looks like a spurious local minimum: a parameter run
+    # off by more than 50x from its start (e.g. a damper collapsing to zero while another
+    # compensates), a fit that did not converge, or a cost far above the best possible.
+    tries = 0
+    rng = np.random.default_rng(12345)
+    while (multistart > tries and len(free) > 0
+           and (np.max(np.abs(out.u)) > math.log(50.0) or not converged)):
+        tries += 1
+        u_start = rng.normal(0.0, 0.7, len(free))
+        budget = None if maxfev is None else max(maxfev - out.nfev, 1)
+        alt, alt_conv = run_from(u_start, None, budget)
+        alt.nfev += out.nfev
+        alt.restarts += out.restarts + 1
+        if alt.fun < out.fun:
+            out, converged = alt, alt_conv
+        else:
+            out.nfev, out.restarts = alt.nfev, alt.restarts
+        if maxfev is not None and out.nfev >= maxfev:
+            break
     p_hat = to_params(out.u)
     res = finish(problem, params, p_hat, out.nfev, converged, with_stderr=with_stderr)
     res.restarts = out.restarts

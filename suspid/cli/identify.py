@@ -29,6 +29,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--restarts", type=int, default=6, help="Nelder–Mead restarts (default 6)")
     p.add_argument("--maxfev", type=positive_int, default=None,
                    help="evaluation budget over all restarts (default 1000 per free parameter)")
+    p.add_argument("--multistart", type=int, default=4, metavar="N",
+                   help="further starts (up to N) when the fit lands on a suspicious local "
+                        "minimum: a parameter > 50x from its start or no convergence (default 4)")
     p.add_argument("--no-polish", dest="polish", action="store_false",
                    help="pure Nelder–Mead to full tolerance (default: Nelder–Mead to 1e-4, then "
                         "a Levenberg–Marquardt polish of the last digits)")
@@ -57,11 +60,14 @@ def run(args: argparse.Namespace) -> int:
     fix = parse_assignments(args.fix, "--fix")
     init = parse_assignments(args.init, "--init")
     params = Parameters.for_model(model, fix=fix, init=init)
+    if args.multistart < 0:
+        raise UsageError(f"--multistart: expected >= 0, got {args.multistart}")
     if args.restarts < 0:
         raise UsageError(f"--restarts: expected >= 0, got {args.restarts}")
     meas, frames = load_measurement(args, model)
     problem = OutputErrorProblem(model, meas, cost=args.cost, x0=parse_x0(args.x0, model.n_states))
-    result, _ = fit(problem, params, restarts=args.restarts, maxfev=args.maxfev, polish=args.polish)
+    result, _ = fit(problem, params, restarts=args.restarts, maxfev=args.maxfev, polish=args.polish,
+                     multistart=args.multistart)
     if frames is not None:
         result.frames = frames
     if args.plot:

@@ -90,3 +90,16 @@ def test_x0_is_estimated_from_initial_state_data() -> None:
     res, _ = fit(OutputErrorProblem(m, meas, x0="estimate"), params)
     assert np.allclose(res.x0, [0.20, 0.10, 0.50, 0.05], atol=1e-6)
     assert res.params["c1"] == pytest.approx(1120.0, rel=1e-4)
+
+
+def test_default_start_escapes_the_collapsed_damper_minimum() -> None:
+    """From the model defaults (k1 7.5x too low) one start lands on c1 -> 0; multistart recovers."""
+    m = get_model("quarter2")
+    meas = _measure(m, TABLE1, "bump", ["x1", "x2", "x1_dot", "x2_dot"])
+    params = Parameters.for_model(m, fix={"m1": 275.0, "m2": 27.0})
+    single, _ = fit(OutputErrorProblem(m, meas), params.copy(), polish=True, multistart=0)
+    multi, _ = fit(OutputErrorProblem(m, meas), params.copy(), polish=True, multistart=4)
+    assert multi.success
+    for k in ("c1", "k1", "c2", "k2"):
+        assert multi.params[k] == pytest.approx(TABLE1[k], rel=1e-4)
+    assert multi.cost <= single.cost
