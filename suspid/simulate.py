@@ -309,17 +309,28 @@ def _simulate_states_loop(model: SuspensionModel, p: Mapping[str, float], t: Flo
     return X
 
 
-def outputs(model: SuspensionModel, p: Mapping[str, float], X: FloatArray,
-            U: FloatArray) -> dict[str, FloatArray]:
-    """Every channel (positions, velocities, accelerations) from states and inputs."""
+def pack_channels(model: SuspensionModel, X: FloatArray, acc: FloatArray,
+                  U: FloatArray | None = None) -> dict[str, FloatArray]:
+    """Channel dict from states ``X`` (N, n), accelerations ``acc`` (N, nq) and, if given,
+    inputs ``U`` (N, 2 nr) for the road columns."""
     nq = len(model.coords)
-    acc = model.accelerations(X, U, p)
     out: dict[str, FloatArray] = {}
     for i, c in enumerate(model.coords):
         out[c] = X[:, i]
         out[f"{c}_dot"] = X[:, nq + i]
         out[f"{c}_ddot"] = acc[:, i]
+    if U is not None:
+        nr = len(model.roads)
+        for i, name in enumerate(model.roads):
+            out[name] = U[:, i]
+            out[f"{name}_dot"] = U[:, nr + i]
     return out
+
+
+def outputs(model: SuspensionModel, p: Mapping[str, float], X: FloatArray,
+            U: FloatArray) -> dict[str, FloatArray]:
+    """Every channel (positions, velocities, accelerations) from states and inputs."""
+    return pack_channels(model, X, model.accelerations(X, U, p))
 
 
 def simulate(model: SuspensionModel, params: Mapping[str, float], t: FloatArray,
@@ -349,12 +360,7 @@ def simulate(model: SuspensionModel, params: Mapping[str, float], t: FloatArray,
     if model.extra_force:
         return simulate_ode(model, params, t, road, x0)
     X = simulate_states(model, params, t, U, x0)
-    out = outputs(model, params, X, U)
-    nr = len(model.roads)
-    for i, name in enumerate(model.roads):
-        out[name] = U[:, i]
-        out[f"{name}_dot"] = U[:, nr + i]
-    return out
+    return pack_channels(model, X, model.accelerations(X, U, params), U)
 
 
 def simulate_ode(model: SuspensionModel, params: Mapping[str, float], t: FloatArray,
@@ -395,14 +401,6 @@ def simulate_ode(model: SuspensionModel, params: Mapping[str, float], t: FloatAr
             x = sol.y[:, -1]
             X[k + 1] = x
         Uo = U
-    out: dict[str, FloatArray] = {}
     nq = len(model.coords)
     acc = np.array([model.rhs(tt, xx, uu, params)[nq:] for tt, xx, uu in zip(t, X, Uo)])
-    for i, c in enumerate(model.coords):
-        out[c] = X[:, i]
-        out[f"{c}_dot"] = X[:, nq + i]
-        out[f"{c}_ddot"] = acc[:, i]
-    for i, name in enumerate(model.roads):
-        out[name] = Uo[:, i]
-        out[f"{name}_dot"] = Uo[:, nr + i]
-    return out
+    return pack_channels(model, X, acc, Uo)

@@ -30,7 +30,7 @@ from scipy.linalg import expm
 from suspid.errors import UsageError
 from suspid.models.base import FloatArray, SuspensionModel
 from suspid.models.effects import Law, PhysicalEffect, Site
-from suspid.simulate import _foh_weights, road_matrix, uniform_step
+from suspid.simulate import _foh_weights, pack_channels, road_matrix, uniform_step
 
 
 @functools.lru_cache(maxsize=16)
@@ -235,15 +235,7 @@ def simulate_effects(model: SuspensionModel, params: Mapping[str, float],
     PH = np.asarray(PHl).reshape(Nf, max(S, 1))[::substeps, :S]
     X = Z + U[:, :nr] @ st.Bv.T
     acc = X @ st.A[nq:].T + U @ st.B[nq:].T + PH @ st.Bfs[nq:].T
-    out: dict[str, FloatArray] = {}
-    for i, c in enumerate(model.coords):
-        out[c] = X[:, i]
-        out[f"{c}_dot"] = X[:, nq + i]
-        out[f"{c}_ddot"] = acc[:, i]
-    for i, name in enumerate(model.roads):
-        out[name] = U[:, i]
-        out[f"{name}_dot"] = U[:, nr + i]
-    return out
+    return pack_channels(model, X, acc, U)
 
 
 def effect_forces(model: SuspensionModel, params: Mapping[str, float],

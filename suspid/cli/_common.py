@@ -108,5 +108,16 @@ def print_json(obj: Any) -> None:
     sys.stdout.flush()
 
 
+def params_from_args(args: argparse.Namespace, model: SuspensionModel):
+    """``Parameters`` of ``model`` from ``--fix``/``--init``, with ``--restarts`` checked."""
+    from estimator.identify import Parameters
+
+    params = Parameters.for_model(model, fix=parse_assignments(args.fix, "--fix"),
+                                  init=parse_assignments(args.init, "--init"))
+    if getattr(args, "restarts", 0) < 0:
+        raise UsageError(f"--restarts: expected >= 0, got {args.restarts}")
+    return params
+
+
 def model_from_args(args: argparse.Namespace) -> SuspensionModel:
     return get_model(args.model)

@@ -5,9 +5,8 @@ import argparse
 import sys
 
 from suspid.cli._common import (positive_int, add_input_options, add_model_option, add_param_options,
-                                load_measurement, model_from_args, parse_assignments, print_json)
+                                load_measurement, model_from_args, params_from_args, print_json)
 from suspid.cli.identify import parse_x0
-from suspid.errors import UsageError
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -39,14 +38,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     from estimator.diagnose import diagnose
-    from estimator.identify import Parameters
 
     model = model_from_args(args)
-    fix = parse_assignments(args.fix, "--fix")
-    init = parse_assignments(args.init, "--init")
-    params = Parameters.for_model(model, fix=fix, init=init)
-    if args.restarts < 0:
-        raise UsageError(f"--restarts: expected >= 0, got {args.restarts}")
+    params = params_from_args(args, model)
     meas, frames = load_measurement(args, model)
     res = diagnose(model, meas, params, cost=args.cost, x0=parse_x0(args.x0, model.n_states),
                    restarts=args.restarts, maxfev=args.maxfev)

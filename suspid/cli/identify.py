@@ -7,7 +7,7 @@ import sys
 import numpy as np
 
 from suspid.cli._common import (positive_int, add_input_options, add_model_option, add_param_options,
-                                load_measurement, model_from_args, parse_assignments, print_json)
+                                load_measurement, model_from_args, params_from_args, print_json)
 from suspid.errors import UsageError
 
 
@@ -54,16 +54,12 @@ def parse_x0(text: str, n: int):
 
 
 def run(args: argparse.Namespace) -> int:
-    from estimator.identify import OutputErrorProblem, Parameters, fit
+    from estimator.identify import OutputErrorProblem, fit
 
     model = model_from_args(args)
-    fix = parse_assignments(args.fix, "--fix")
-    init = parse_assignments(args.init, "--init")
-    params = Parameters.for_model(model, fix=fix, init=init)
+    params = params_from_args(args, model)
     if args.multistart < 0:
         raise UsageError(f"--multistart: expected >= 0, got {args.multistart}")
-    if args.restarts < 0:
-        raise UsageError(f"--restarts: expected >= 0, got {args.restarts}")
     meas, frames = load_measurement(args, model)
     problem = OutputErrorProblem(model, meas, cost=args.cost, x0=parse_x0(args.x0, model.n_states))
     result, _ = fit(problem, params, restarts=args.restarts, maxfev=args.maxfev, polish=args.polish,
