@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import heapq
 import threading
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterator, Mapping, Sequence
@@ -334,7 +335,7 @@ class SensorNode:
         return s
 
     def run(self, bus: can.BusABC, speed: float | None = None,
-            stop: threading.Event | None = None) -> NodeSummary:
+            stop: threading.Event | None = None, linger: float = 0.0) -> NodeSummary:
         """Run the scenario on a python-can bus.
 
         Parameters
@@ -345,12 +346,20 @@ class SensorNode:
             Overrides ``config.speed`` (0 = as fast as possible).
         stop : threading.Event, optional
             Set it to end the run early.
+        linger : float, optional
+            Seconds (wall) to stay on the bus after the last sample, still receiving (e.g. an
+            alert frame from an estimator that lags behind), until ``stop`` is set. Default 0.
         """
         self._bus = bus
         self._driver = CanDriver(bus.send, self.faults)
         sched = self._scheduler(self.config.speed if speed is None else speed)
         stats = sched.run(self.n_ticks, stop)
         self._status_task(max(0, stats.ticks - 1), stopping=True)
+        deadline = time.perf_counter() + max(0.0, linger)
+        while time.perf_counter() < deadline and not (stop is not None and stop.is_set()):
+            self._rx_task(stats.ticks)
+            time.sleep(0.01)
+        self._rx_task(stats.ticks)
         return self._finish(stats)
 
     def frames(self) -> Iterator[can.Message]:

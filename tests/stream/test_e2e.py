@@ -21,9 +21,9 @@ FIX = ["--fix", "m1=300", "--fix", "m2=40", "--fix", "c2=300", "--fix", "k2=2000
 def test_node_virtual_bus_monitor_alert(capsys, tmp_path) -> None:
     ch = f"suspid-e2e-{os.getpid()}"
     # damper-wear: c1 falls linearly from 1500 N s/m at 5 s towards 5 % at 120 s, crossing
-    # 70 % of nominal at 41.3 s. The node runs until a bus participant has seen the alert
-    # frame (or its 120 s end), so the node receives the alert even when the monitor lags
-    # behind the node on a busy machine.
+    # 70 % of nominal at 41.3 s. The node runs, and lingers on the bus after its last sample,
+    # until a bus participant has seen the alert frame, so the node receives the alert even
+    # when the monitor lags behind the node on a busy machine.
     cfg = NodeConfig(model="quarter2", scenario="damper-wear", duration=120.0, wear_start=5.0,
                      wear_to=0.05, seed=2)
     node = SensorNode(cfg)
@@ -39,7 +39,7 @@ def test_node_virtual_bus_monitor_alert(capsys, tmp_path) -> None:
 
     def run_node() -> None:
         time.sleep(1.5)  # let the monitor attach first
-        summary["node"] = node.run(node_bus, speed=6.0, stop=stop)
+        summary["node"] = node.run(node_bus, speed=6.0, stop=stop, linger=30.0)
 
     def watch() -> None:
         while not stop.is_set():
