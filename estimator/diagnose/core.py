@@ -2,23 +2,29 @@
 
 :func:`diagnose` runs
 
-1. the ordinary linear fit (:func:`estimator.identify.fit`) — the *baseline*;
+1. the ordinary linear fit (:func:`estimator.identify.fit`, with the Levenberg–Marquardt
+   polish and multistart of ``suspid identify``) — the *baseline*;
 2. residual analysis (:mod:`estimator.diagnose.residuals`): per-channel RMS, Ljung–Box
-   whiteness, noise level, cross-correlation with the road and the suspension states, the
-   residual force regressed on every physical candidate, the output residual on the sensor
-   candidates;
-3. if the residual is structured (Ljung–Box rejects whiteness on some channel at
-   ``whiteness_p`` and the residual is above numerical precision), an output-error refit
-   (Nelder–Mead) of the most promising candidates — up to ``max_physical`` physical
-   effects by screening score and every sensor effect whose screen explains at least
-   ``min_screen`` of the residual;
+   whiteness and a zero-mean test, noise level, cross-correlation with the road and the
+   suspension states, the residual force regressed on every physical candidate (in the
+   library's form and, for a model with several struts, in each strut alone), the output
+   residual on the sensor candidates;
+3. if the residual is structured (Ljung–Box or the mean test rejects whiteness on some
+   channel at ``whiteness_p``, also after refitting the linear model on every channel with
+   noise weights, and the residual is above numerical precision), an output-error refit
+   (short Nelder–Mead, then Levenberg–Marquardt) of the most promising candidates — up to
+   ``max_physical`` physical effects by screening score and every sensor effect whose
+   screen explains at least ``min_screen`` of the residual; a strut effect the residual
+   force shows in every strut with different parameters, which no candidate form
+   expresses, is reported as not identifiable instead (:mod:`estimator.diagnose.corners`);
 4. selection by evidence: a candidate is accepted when its refit lowers the Bayesian
    information criterion by more than ``dbic`` (computed with the per-channel Gaussian
    likelihood and an effective sample count that discounts serial correlation), its
    likelihood-ratio p-value is below ``lr_p``, and it removes at least ``explained`` of
    the *structured* part of the residual (residual minus the white-noise floor). The
    accepted candidate with the lowest BIC wins; with none accepted the result says whether
-   the residual was white (nothing to explain) or structured but unexplained.
+   the residual was white (nothing to explain) or structured but unexplained, and what
+   the model cannot identify (``evidence.limits``).
 """
 from __future__ import annotations
 
@@ -29,7 +35,9 @@ from typing import Any, Mapping
 import numpy as np
 from scipy.stats import chi2
 
-from estimator.diagnose.refit import ModelFit, PhysicalRefit, SensorRefit, baseline_fit
+from estimator.diagnose.corners import SiteRestricted, effect_sites, model_limits
+from estimator.diagnose.refit import (ModelFit, PhysicalRefit, SensorRefit, baseline_fit,
+                                      reweighted_linear_fit)
 from estimator.diagnose.residuals import (ChannelStats, Motion, Screen, channel_stats, effective_n,
                                           motion_from, noise_variance, screen_delay,
                                           screen_physical, screen_sensor, xcorr_peak)
@@ -68,9 +76,15 @@ class Verdict:
     params: dict[str, Any]
     accepted: bool
     reason: str
+    #: every setting refitted when the screen had close alternatives (``params``, ``dbic``,
+    #: ``explained``); the verdict is the best of them by dBIC
+    alternatives: list[dict[str, Any]] = field(default_factory=list)
 
     def to_json(self) -> dict[str, Any]:
-        return asdict(self)
+        out = asdict(self)
+        if not self.alternatives:
+            out.pop("alternatives")
+        return out
 
 
 @dataclass
@@ -149,7 +163,8 @@ def compare(base: ModelFit, aug: ModelFit, noise_var: Mapping[str, float],
 
 def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost: str = "sse",
              x0: str | FloatArray = "estimate", restarts: int = 3, maxfev: int | None = None,
-             thresholds: Thresholds | None = None) -> DiagnoseResult:
+             thresholds: Thresholds | None = None, polish: bool = True,
+             multistart: int = 4) -> DiagnoseResult:
     """Fit ``model``, trace its residual to a missing effect, add it and refit.
 
     Parameters
@@ -168,6 +183,9 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
         Nelder–Mead settings of the baseline fit.
     thresholds : Thresholds, optional
         Decision thresholds.
+    polish, multistart
+        Baseline fit settings as for ``suspid identify`` (Levenberg–Marquardt polish;
+        further starts when the fit lands on a suspicious local minimum).
 
     Returns
     -------
@@ -175,7 +193,8 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
     """
     th = thresholds or Thresholds()
     problem = OutputErrorProblem(model, meas, cost=cost, x0=x0)
-    ident, _ = fit(problem, params, restarts=restarts, maxfev=maxfev)
+    ident, _ = fit(problem, params, restarts=restarts, maxfev=maxfev, polish=polish,
+                   multistart=multistart)
     free = params.free
     p0 = dict(ident.params)
     base = baseline_fit(problem, p0, np.asarray(ident.x0), ident.nfev, len(free))
@@ -188,6 +207,9 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
     warnings = list(ident.warnings)
     evidence: dict[str, Any] = {"thresholds": asdict(th),
                                 "channels": {c: s.to_json() for c, s in stats.items()}}
+    limits = model_limits(model)
+    if limits:
+        evidence["limits"] = limits
     # cross-correlation with inputs and states
     mo = motion_from(model, meas, base.predicted, problem.U)
     h = problem.h or float(np.median(np.diff(meas.t)))
@@ -205,14 +227,27 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
         c: {k: dict(zip(("rho", "lag_s"), (lambda rl: (rl[0], rl[1] * h))(xcorr_peak(base.residual[c], v, maxlag))))
             for k, v in refs.items() if np.any(v)} for c in channels}
     structured = [c for c, s in stats.items()
-                  if s.ljung_box_p < th.whiteness_p and s.rms > th.min_relative_rms * max(s.signal_rms, 1e-300)]
+                  if s.white_p < th.whiteness_p and s.rms > th.min_relative_rms * max(s.signal_rms, 1e-300)]
+    if structured and len(problem.channels) < len(channels):
+        # channels outside the cost carry the echo of the baseline's parameter and
+        # initial-state errors; structure the linear model itself removes once it is fitted
+        # on every channel (noise-weighted) is not a missing effect
+        p_lin, r_lin = reweighted_linear_fit(problem, p0, free, noise_var)
+        lin_stats = {c: channel_stats(c, r_lin[c], np.asarray(meas.measured[c], dtype=float), skip=skip)
+                     for c in channels}
+        evidence["linear_refit_all_channels"] = {
+            "params": p_lin, "ljung_box_p": {c: s.ljung_box_p for c, s in lin_stats.items()},
+            "mean_p": {c: s.mean_p for c, s in lin_stats.items()}}
+        structured = [c for c in structured if lin_stats[c].white_p < th.whiteness_p]
     evidence["structured_channels"] = structured
     result = DiagnoseResult(model.name, base, base, None, evidence, ident, stats, motion=mo,
                             warnings=warnings)
     if not structured:
-        evidence["verdict"] = ("residual is white noise (Ljung-Box p >= "
-                               f"{th.whiteness_p:g} on every channel) or at numerical precision: "
-                               "no missing effect")
+        how = (", once the linear model is refitted on every channel"
+               if "linear_refit_all_channels" in evidence else "")
+        evidence["verdict"] = ("residual is white noise (Ljung-Box and zero-mean p >= "
+                               f"{th.whiteness_p:g} on every channel{how}) or at numerical "
+                               "precision: no missing effect")
         return result
     # screening
     screens, force_summary = screen_physical(model, p0, free, mo)
@@ -222,20 +257,34 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
         screens.append(dscreen)
     screens += screen_sensor(model, meas.t, base.residual, base.predicted, th.max_delay_s)
     result.screens = screens
-    force = sorted([s for s in screens if s.domain == "force" and s.plausible and s.explained >= th.min_screen],
-                   key=lambda s: -s.explained)
+    blocked = _not_identifiable(model, screens, limits, th)
+    if blocked:
+        evidence["not_identifiable"] = blocked
+    force = sorted([s for s in screens if s.domain == "force" and s.plausible and s.explained >= th.min_screen
+                    and s.name not in blocked], key=lambda s: -s.explained)
     if force:
         force = [s for s in force if s.explained >= 0.5 * force[0].explained][: th.max_physical]
     sens = [s for s in screens if s.domain == "output" and s.plausible and s.explained >= th.min_screen]
     verdicts: list[Verdict] = []
     fits: dict[str, ModelFit] = {}
     for sc in force + sens:
-        try:
-            fm = _refit(problem, p0, free, base, sc, th, mo)
-        except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:
-            warnings.append(f"refit with {sc.name} failed: {exc}")
+        best_try: tuple[float, float, float, float, dict[str, float], ModelFit] | None = None
+        tried: list[dict[str, Any]] = []
+        for option in [sc] + list(sc.alternatives):
+            try:
+                fm = _refit(problem, p0, free, base, option, th, mo, noise_var)
+            except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:
+                warnings.append(f"refit with {option.name} {option.params} failed: {exc}")
+                continue
+            cmp = compare(base, fm, noise_var, channels)
+            if sc.alternatives:
+                tried.append({"params": fm.effect.to_json()["params"] if fm.effect else {},
+                              "dbic": cmp[0], "explained": cmp[2]})
+            if best_try is None or cmp[0] < best_try[0]:
+                best_try = (*cmp, fm)
+        if best_try is None:
             continue
-        dbic, p, expl, f, rms = compare(base, fm, noise_var, channels)
+        dbic, p, expl, f, rms, fm = best_try
         ok = dbic < th.dbic and p < th.lr_p and expl >= th.explained
         reason = "accepted" if ok else "; ".join(
             r for r, bad in ((f"dBIC {dbic:.3g} not below {th.dbic:g}", dbic >= th.dbic),
@@ -243,7 +292,7 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
                              (f"explains {expl:.0%} of the structured residual, needs "
                               f"{th.explained:.0%}", expl < th.explained)) if bad)
         verdicts.append(Verdict(sc.name, dbic, p, expl, f, rms, fm.effect.to_json()["params"] if fm.effect else {},
-                                ok, reason))
+                                ok, reason, tried))
         fits[sc.name] = fm
     result.verdicts = verdicts
     result.fits = fits
@@ -251,18 +300,44 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
     for v in verdicts:
         evidence["candidates"][v.name]["refit"] = v.to_json()
     accepted = sorted([v for v in verdicts if v.accepted], key=lambda v: v.dbic)
-    worst = max(structured, key=lambda c: stats[c].ljung_box_q)
-    lb = f"Ljung-Box p = {stats[worst].ljung_box_p:.2g} on {worst}"
+    worst = min(structured, key=lambda c: (stats[c].white_p, -stats[c].ljung_box_q))
+    if stats[worst].mean_p < stats[worst].ljung_box_p:
+        lb = f"mean {stats[worst].mean:.3g} is not zero, p = {stats[worst].mean_p:.2g}, on {worst}"
+    else:
+        lb = f"Ljung-Box p = {stats[worst].ljung_box_p:.2g} on {worst}"
     if accepted:
         best = accepted[0]
         result.effect = fits[best.name].effect
         result.augmented = fits[best.name]
-        evidence["verdict"] = (f"residual structured ({lb}); {best.name} explains "
+        where = ""
+        if isinstance(result.effect, PhysicalEffect):
+            sites = effect_sites(result.effect, model, result.augmented.params)
+            evidence["effect_sites"] = sites
+            if isinstance(result.effect, SiteRestricted):
+                where = f" in the {' and '.join(sites)} only"
+                warnings.append(
+                    f"{best.name} acts in the {' and '.join(sites)} only (evidence.effect_sites); "
+                    f"the effect library's {model.name} form applies it to every strut, so "
+                    "'effect' alone does not reproduce it")
+            scr = next((s for s in screens if s.name == best.name), None)
+            if scr is not None and scr.per_site and scr.per_site["explained"] > scr.explained + 0.05:
+                vals = "; ".join(f"{k}: {_fmt(v)}" for k, v in scr.per_site["sites"].items())
+                warnings.append(f"the struts disagree on {best.name} in the screening regression "
+                                f"({vals}); the fitted form is{where or ' shared by every strut'}")
+        evidence["verdict"] = (f"residual structured ({lb}); {best.name}{where} explains "
                                f"{best.explained:.0%} of the structured residual, dBIC "
                                f"{best.dbic:.4g}, LR p {best.lr_p:.2g}")
+        for name, why in blocked.items():
+            warnings.append(f"{name}: {why}")
+        for key, why in limits.items():
+            if key.split(" ")[0] == best.name:
+                warnings.append(f"{key}: {why}")
     else:
         tried = sorted(verdicts, key=lambda v: -v.explained)
-        if tried:
+        if blocked:
+            evidence["verdict"] = (f"residual structured ({lb}) but no candidate effect explains it: "
+                                   + "; ".join(blocked.values()))
+        elif tried:
             bv = tried[0]
             evidence["verdict"] = (f"residual structured ({lb}) but no candidate effect explains it: "
                                    f"best {bv.name} explains {bv.explained:.0%} of the structured "
@@ -270,11 +345,52 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
         else:
             evidence["verdict"] = (f"residual structured ({lb}) but no candidate effect explains it: "
                                    "no candidate's regressor correlates with the residual")
+        if limits and not blocked:
+            evidence["verdict"] += ("; not identifiable with " + model.name + ": "
+                                    + "; ".join(limits))
         evidence["unexplained"] = True
     aug_stats = {c: channel_stats(c, result.augmented.residual[c],
                                   np.asarray(meas.measured[c], dtype=float), skip=skip) for c in channels}
     evidence["augmented_channels"] = {c: s.to_json() for c, s in aug_stats.items()}
     return result
+
+
+def _fmt(v: Mapping[str, Any]) -> str:
+    return ", ".join(f"{k}={x:.4g}" if isinstance(x, float) else f"{k}={x}" for k, x in v.items())
+
+
+def _not_identifiable(model: SuspensionModel, screens: list[Screen], limits: Mapping[str, str],
+                      th: Thresholds) -> dict[str, str]:
+    """Strut effects the residual force points to in a form no candidate can express.
+
+    A strut effect of a model with several struts is *not identifiable* here when one
+    coefficient per strut explains at least 30 % of the residual force and 1.5 times what
+    its best expressible form (shared, or one strut alone) explains, with physical values
+    in every strut: the effect is in every strut with different parameters, which the
+    contract's effect parameters cannot state. It is then reported, not refitted.
+
+    Returns
+    -------
+    dict
+        ``effect name -> plain sentence`` (empty when nothing is blocked).
+    """
+    out: dict[str, str] = {}
+    for s in screens:
+        ps = s.per_site
+        if s.domain != "force" or not ps or not ps.get("plausible"):
+            continue
+        pe = float(ps["explained"])
+        if pe < 0.3 or pe < 1.5 * (s.explained if s.plausible else 0.0) or pe < th.min_screen:
+            continue
+        vals = "; ".join(f"{k}: {_fmt(v)}" for k, v in ps["sites"].items())
+        key = next((k for k in limits if k.startswith(s.name)),
+                   "strut effect of different size front and rear")
+        why = limits.get(key, "the effect library has no form with separate parameters per strut")
+        out[s.name] = (f"the residual force points to {s.name} in every strut with different "
+                       f"parameters (one coefficient per strut explains {pe:.0%} of it, the best "
+                       f"expressible form {s.explained:.0%}; {vals}), which cannot be identified "
+                       f"with {model.name}: {why}")
+    return out
 
 
 def _x0_start(problem: OutputErrorProblem, base: ModelFit, motion: Motion) -> FloatArray:
@@ -294,13 +410,20 @@ def _x0_start(problem: OutputErrorProblem, base: ModelFit, motion: Motion) -> Fl
 
 
 def _refit(problem: OutputErrorProblem, p0: Mapping[str, float], free: list[str], base: ModelFit,
-           sc: Screen, th: Thresholds, motion: Motion) -> ModelFit:
-    """Refit the model augmented with the screened candidate ``sc``."""
+           sc: Screen, th: Thresholds, motion: Motion,
+           noise_var: Mapping[str, float] | None = None) -> ModelFit:
+    """Refit the model augmented with the screened candidate ``sc``.
+
+    ``noise_var`` (channel -> white-noise variance of the baseline residual) weights the
+    channels a sensor effect changes outside the cost (see :class:`SensorRefit`).
+    """
     if sc.name in REGISTRY and REGISTRY[sc.name].kind == "physical":
         values = dict(sc.params)
         eff = make_effect(sc.name, **values)
         if not isinstance(eff, PhysicalEffect):
             raise ValueError(f"{sc.name} is not a physical effect")
+        if sc.sites is not None:
+            eff = SiteRestricted(eff, sc.sites)
         start_base = {k: (sc.base.get(k, p0[k]) if sc.base.get(k, 0) > 0 else p0[k]) for k in p0}
         rf = PhysicalRefit(problem, start_base, free, eff, _x0_start(problem, base, motion))
         start = dict(start_base)
@@ -309,7 +432,7 @@ def _refit(problem: OutputErrorProblem, p0: Mapping[str, float], free: list[str]
     eff = make_effect(sc.name, **sc.params)
     if not isinstance(eff, SensorEffect):
         raise ValueError(f"{sc.name} is not a sensor effect")
-    rf2 = SensorRefit(problem, p0, free, eff, th.max_delay_s)
+    rf2 = SensorRefit(problem, p0, free, eff, th.max_delay_s, noise_var)
     start_base = {k: (sc.base[k] if sc.base.get(k, 0) > 0 else p0[k]) for k in p0}
     return rf2.fit(start_base, sc.params)
 

@@ -9,7 +9,7 @@ from estimator.diagnose.core import DiagnoseResult
 from estimator.diagnose.residuals import autocorr, residual_force
 from suspid.io.csvio import Measurement
 from suspid.models import get_model
-from suspid.models.effects import strut_sites
+from suspid.models.effects import PhysicalEffect, strut_sites
 from suspid.plots import _plt
 
 #: which strut coordinate the residual force is plotted against, per effect
@@ -63,6 +63,8 @@ def plot_evidence(res: DiagnoseResult, meas: Measurement, path: str | Path) -> N
     if res.motion is not None:
         R = residual_force(model, res.baseline.params, res.motion)
         site = strut_sites(model, res.baseline.params)[0]
+        if isinstance(res.effect, PhysicalEffect) and res.effect.site_kind == "strut":
+            site = res.effect.sites(model, res.baseline.params)[0]   # e.g. the rear strut alone
         s, sd = site.coordinate(np.column_stack([res.motion.q, res.motion.qd]),
                                 np.column_stack([res.motion.r, res.motion.rd]))
         name = res.effect.name if res.effect is not None else ""
@@ -96,7 +98,7 @@ def plot_evidence(res: DiagnoseResult, meas: Measurement, path: str | Path) -> N
     ax.legend(fontsize=7, loc="lower right")
     ax.set_title("candidate effects", fontsize=9)
     fig.suptitle(res.evidence.get("verdict", ""), fontsize=8)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.3 / fig.get_figheight()))   # room for the verdict
     fig.savefig(path, dpi=100)
     plt.close(fig)
 

@@ -33,7 +33,8 @@ from scipy.stats import chi2
 
 from suspid.io.csvio import Measurement
 from suspid.models.base import FloatArray, SuspensionModel
-from suspid.models.effects import REGISTRY, V_EPS, PhysicalEffect, Site, make_effect
+from suspid.models.effects import (REGISTRY, V_EPS, PhysicalEffect, Site, make_effect, strut_sites,
+                                   tyre_sites)
 
 # ------------------------------------------------------------------------- statistics
 
@@ -112,25 +113,54 @@ class ChannelStats:
     ljung_box_q: float
     ljung_box_p: float
     acf_lag1: float
+    mean: float = 0.0
+    mean_p: float = 1.0
+
+    @property
+    def white_p(self) -> float:
+        """Smallest p-value of the whiteness tests (Ljung–Box, zero mean)."""
+        return min(self.ljung_box_p, self.mean_p)
 
     def to_json(self) -> dict[str, float | str]:
         return {"rms": self.rms, "signal_rms": self.signal_rms, "noise_rms": self.noise_rms,
                 "structured_rms": self.structured_rms, "ljung_box_q": self.ljung_box_q,
-                "ljung_box_p": self.ljung_box_p, "acf_lag1": self.acf_lag1}
+                "ljung_box_p": self.ljung_box_p, "acf_lag1": self.acf_lag1,
+                "mean": self.mean, "mean_p": self.mean_p}
 
 
 def channel_stats(name: str, e: FloatArray, y: FloatArray, lags: int = 20, skip: int = 0) -> ChannelStats:
     """:class:`ChannelStats` of residual ``e`` of measured signal ``y``.
 
-    The whiteness statistics (Ljung–Box, lag-1 autocorrelation) ignore the first ``skip``
-    samples, where the fitted initial state's error still decays (it is estimated from the
-    cost channels and shows as a short transient on the others).
+    The whiteness statistics (Ljung–Box, lag-1 autocorrelation, zero-mean test) ignore the
+    first ``skip`` samples, where the fitted initial state's error still decays (it is
+    estimated from the cost channels and shows as a short transient on the others).
     """
     rms = float(np.sqrt(np.nanmean(e ** 2)))
     nv = noise_variance(e)
     q, p = ljung_box(e[skip:], lags)
+    m, mp = mean_test(e[skip:])
     return ChannelStats(name, rms, float(np.sqrt(np.nanmean(y ** 2))), math.sqrt(nv),
-                        math.sqrt(max(rms ** 2 - nv, 0.0)), q, p, float(autocorr(e[skip:], 1)[1]))
+                        math.sqrt(max(rms ** 2 - nv, 0.0)), q, p, float(autocorr(e[skip:], 1)[1]),
+                        m, mp)
+
+
+def mean_test(e: FloatArray) -> tuple[float, float]:
+    """Mean of ``e`` and the two-sided p-value of ``mean = 0`` (effective sample count).
+
+    Ljung–Box works on the autocorrelation of the mean-removed residual and cannot see a
+    constant offset; on a channel outside the cost (a velocity under ``sse``) nothing else
+    would show it.
+    """
+    x = np.asarray(e, dtype=float)
+    x = x[~np.isnan(x)]
+    if x.size < 3:
+        return 0.0, 1.0
+    m = float(np.mean(x))
+    sd = float(np.std(x))
+    if sd <= 0:
+        return m, (1.0 if m == 0 else 0.0)
+    z = abs(m) / (sd / math.sqrt(effective_n(x)))
+    return m, float(math.erfc(z / math.sqrt(2.0)))
 
 
 # ------------------------------------------------------------------------- signals
@@ -259,6 +289,17 @@ class Screen:
     base : dict
         Refined base parameters from the regression (start of the refit).
     note : str
+    sites : list of str or None
+        For a physical effect, the sites it was screened at when not the library's form
+        (``["front strut"]`` of a half car); ``None`` = every site, shared parameters.
+    alternatives : list of Screen
+        Close runners-up of the same effect with other settings (``sensor_delay``: other
+        channel groups), refitted alongside it.
+    per_site : dict
+        For a strut effect of a model with several struts, the regression with one
+        coefficient per strut: ``"sites"`` (site name -> params), ``"explained"`` (share of
+        the residual force) and ``"plausible"`` (every strut's values physical) — do front
+        and rear agree?
     """
 
     name: str
@@ -269,10 +310,21 @@ class Screen:
     params: dict[str, Any]
     base: dict[str, float] = field(default_factory=dict)
     note: str = ""
+    sites: list[str] | None = None
+    alternatives: list["Screen"] = field(default_factory=list)
+    per_site: dict[str, Any] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
-        return {"domain": self.domain, "explained": self.explained, "tstat": self.tstat,
-                "plausible": self.plausible, "params": self.params, "note": self.note}
+        out = {"domain": self.domain, "explained": self.explained, "tstat": self.tstat,
+               "plausible": self.plausible, "params": self.params, "note": self.note}
+        if self.sites is not None:
+            out["sites"] = list(self.sites)
+        if self.per_site:
+            out["per_site"] = dict(self.per_site)
+        if self.alternatives:
+            out["alternatives"] = [{"params": a.params, "explained": a.explained}
+                                   for a in self.alternatives]
+        return out
 
 
 def _regress(y: FloatArray, X: FloatArray) -> tuple[FloatArray, float, FloatArray]:
@@ -313,6 +365,10 @@ def screen_physical(model: SuspensionModel, p: Mapping[str, float], free: list[s
                     mo: Motion) -> tuple[list[Screen], dict[str, Any]]:
     """Regress the residual force on base sensitivities plus each physical candidate.
 
+    Every physical effect is screened in the library's form where the library offers it
+    for the model (all its sites, one shared parameter set) and, for a model with several
+    struts, in each strut alone; the best plausible form is kept (:attr:`Screen.sites`).
+
     Returns the screens (one per applicable candidate) and the force-domain summary
     (weighted RMS of the residual force per coordinate before and after the base refinement).
     """
@@ -332,48 +388,81 @@ def screen_physical(model: SuspensionModel, p: Mapping[str, float], free: list[s
     screens: list[Screen] = []
     Xs = np.column_stack([mo.q, mo.qd])
     Us = np.column_stack([mo.r, mo.rd])
+
+    def fit_columns(cols: list[FloatArray]) -> tuple[FloatArray, float, FloatArray, dict[str, float]] | None:
+        """Regress on base sensitivities plus ``cols``: (coef, explained, coef se, refined base)."""
+        E = [(c * wrow).reshape(-1) for c in cols]
+        if any(not np.any(e) for e in E):
+            return None
+        X = np.column_stack([X0] + [e[:, None] for e in E]) if D else np.column_stack(E)
+        beta, ss1, se = _regress(y, X)
+        explained = max(0.0, (ss0 - ss1) / ss0) if ss0 > 0 else 0.0
+        refined = dict(p)
+        for k, d in zip(base_names, beta[: len(D)]):
+            if p[k] - d > 0:
+                refined[k] = float(p[k] - d)
+        return beta[len(D):], explained, se[len(D):] * infl, refined
+
+    def site_columns(name: str, sites: list[Site], gap: float | None) -> list[FloatArray]:
+        """One column per regressor, summed over ``sites`` (shared parameters)."""
+        cols: list[FloatArray] = []
+        for site in sites:
+            s, sd = site.coordinate(Xs, Us)
+            for j, reg in enumerate(_site_regressors(name, site, s, sd, p, gap)):
+                while len(cols) <= j:
+                    cols.append(np.zeros((n, nq)))
+                cols[j] = cols[j] + reg[:, None] * site.b[None, :]
+        return cols
+
     for name, cls in REGISTRY.items():
-        if cls.kind != "physical" or model.name not in cls.models:
+        if cls.kind != "physical":
             continue
         probe = make_effect(name, **_dummy_values(cls))
         if not isinstance(probe, PhysicalEffect):
             continue
-        sites = probe.sites(model, p)
-        coords = [site.coordinate(Xs, Us) for site in sites]
-        gaps: list[float | None] = [None]
-        if name == "bump_stop":
-            comp = np.concatenate([-s for s, _ in coords])
-            hi = float(np.quantile(comp, 0.995))
-            if hi <= 0:
-                continue
-            gaps = list(np.linspace(0.15, 0.9, 16) * hi)
+        every = strut_sites(model, p) if probe.site_kind == "strut" else tyre_sites(model, p)
+        # candidate forms: the library's (every site, shared parameters) where the library
+        # offers the effect for this model, and each strut alone where there are several
+        variants: list[list[Site] | None] = [None] if model.name in cls.models else []
+        if probe.site_kind == "strut" and len(every) > 1:
+            variants += [[site] for site in every]
         best: Screen | None = None
-        for gap in gaps:
-            cols = []
-            for site, (s, sd) in zip(sites, coords):
-                for j, reg in enumerate(_site_regressors(name, site, s, sd, p, gap)):
-                    while len(cols) <= j:
-                        cols.append(np.zeros((n, nq)))
-                    cols[j] = cols[j] + reg[:, None] * site.b[None, :]
-            E = [(c * wrow).reshape(-1) for c in cols]
-            if any(not np.any(e) for e in E):
-                continue
-            X = np.column_stack([X0] + [e[:, None] for e in E]) if D else np.column_stack(E)
-            beta, ss1, se = _regress(y, X)
-            coef = beta[len(D):]
-            cse = se[len(D):] * infl
-            tstat = float(np.max(np.abs(coef) / np.maximum(cse, 1e-300)))
-            explained = max(0.0, (ss0 - ss1) / ss0) if ss0 > 0 else 0.0
-            refined = dict(p)
-            for k, d in zip(base_names, beta[: len(D)]):
-                if p[k] - d > 0:
-                    refined[k] = float(p[k] - d)
-            params, plausible, note = _effect_params(name, coef, refined, model, gap)
-            cand = Screen(name, "force", explained, tstat, plausible, params, refined, note)
-            if best is None or cand.explained > best.explained:
-                best = cand
-        if best is not None:
-            screens.append(best)
+        for var in variants:
+            sites = every if var is None else var
+            gaps: list[float | None] = [None]
+            if name == "bump_stop":
+                comp = np.concatenate([-site.coordinate(Xs, Us)[0] for site in sites])
+                hi = float(np.quantile(comp, 0.995))
+                if hi <= 0:
+                    continue
+                gaps = list(np.linspace(0.15, 0.9, 16) * hi)
+            for gap in gaps:
+                fitted = fit_columns(site_columns(name, sites, gap))
+                if fitted is None:
+                    continue
+                coef, explained, cse, refined = fitted
+                tstat = float(np.max(np.abs(coef) / np.maximum(cse, 1e-300)))
+                params, plausible, note = _effect_params(name, coef, refined, model, gap, sites)
+                cand = Screen(name, "force", explained, tstat, plausible, params, refined, note,
+                              sites=None if var is None else [site.name for site in var])
+                if best is None or (cand.plausible, cand.explained) > (best.plausible, best.explained):
+                    best = cand
+        if best is None:
+            continue
+        if probe.site_kind == "strut" and len(every) > 1:
+            # diagnostic: one coefficient per strut (does the front agree with the rear?)
+            gap = best.params.get("gap")
+            cols = [c for site in every for c in site_columns(name, [site], gap)]
+            fitted = fit_columns(cols)
+            if fitted is not None:
+                coef, explained, cse, _ = fitted
+                k = len(cols) // len(every)
+                per = [_effect_params(name, coef[i * k:(i + 1) * k], best.base, model, gap, [site])
+                       for i, site in enumerate(every)]
+                best.per_site = {"explained": explained,
+                                 "plausible": all(ok for _, ok, _ in per),
+                                 "sites": {site.name: prm for site, (prm, _, _) in zip(every, per)}}
+        screens.append(best)
     summary = {"rms_force": {c: float(v) for c, v in zip(model.coords, np.sqrt(np.mean(R ** 2, axis=0)))},
                "base_refit_explained": float(1 - ss0 / ss_raw) if ss_raw > 0 else 0.0,
                "samples": n, "effective_samples": neff}
@@ -388,8 +477,13 @@ def _dummy_values(cls: type) -> dict[str, Any]:
 
 
 def _effect_params(name: str, coef: FloatArray, base: Mapping[str, float], model: SuspensionModel,
-                   gap: float | None) -> tuple[dict[str, Any], bool, str]:
-    """Effect parameters from regression coefficients, and whether they are physical."""
+                   gap: float | None, sites: list[Site] | None = None) -> tuple[dict[str, Any], bool, str]:
+    """Effect parameters from regression coefficients, and whether they are physical.
+
+    ``sites`` (where the effect acts) gives the damper whose symmetric part an
+    ``asymmetric_damping`` estimate is centred on (``c1`` of the quarter car's strut, ``c2``
+    of the half car's rear strut).
+    """
     c = [float(v) for v in coef]
     if name == "coulomb_friction":
         return {"F": c[0]}, c[0] > 0, ""
@@ -403,7 +497,7 @@ def _effect_params(name: str, coef: FloatArray, base: Mapping[str, float], model
         ok = 0.3 < c[0] < 3.0
         return {}, ok, f"coefficient of the pulling-force regressor {c[0]:.3g} (1 if the tyre lifts off)"
     if name == "asymmetric_damping":
-        cname = "c" if model.name == "quarter1" else "c1"
+        cname = sites[0].c_name if sites and sites[0].c_name else ("c" if model.name == "quarter1" else "c1")
         cbar = base[cname]
         cr, cc = cbar + c[0], cbar - c[0]
         return {"c_rebound": cr, "c_compression": cc}, cr > 0 and cc > 0, ""
@@ -446,7 +540,8 @@ def screen_delay(model: SuspensionModel, meas: Measurement, p: Mapping[str, floa
     and the residual force is regressed on the base sensitivities; a lag makes position,
     velocity and acceleration of different coordinates inconsistent, so the right
     compensation removes most of the residual force. The best grid point is refined by a
-    parabola through its neighbours.
+    parabola through its neighbours. Close runners-up (other channel groups) are returned in
+    :attr:`Screen.alternatives`.
     """
     t = meas.t
     h = float(np.median(np.diff(t)))
@@ -482,7 +577,6 @@ def screen_delay(model: SuspensionModel, meas: Measurement, p: Mapping[str, floa
             groups.append(g)
             groups += [[ch] for ch in g] if len(g) > 1 else []
     grid = [d for d in h * np.array([0.5, 1, 1.5, 2, 3, 4, 6, 8, 11, 16, 22, 32]) if d <= max_delay]
-    best: tuple[float, list[str], float, list[float]] | None = None
     nq = len(model.coords)
     # which measured channel each smoothed column comes from (a lag moves what it feeds)
     feeds: list[tuple[str, int, str]] = []
@@ -494,7 +588,8 @@ def screen_delay(model: SuspensionModel, meas: Measurement, p: Mapping[str, floa
                 if ch in meas.measured:
                     feeds.append((kind, i, ch))
                     break
-    for g in groups:
+    per_group: list[tuple[float, int, list[float]]] = []   # (best ss, group index, ss per grid point)
+    for gi, g in enumerate(groups):
         cols = [(kind, i) for kind, i, ch in feeds if ch in g]
         if not cols:
             continue
@@ -505,28 +600,47 @@ def screen_delay(model: SuspensionModel, meas: Measurement, p: Mapping[str, floa
                 a = arrs[kind]
                 a[:, i] = np.interp(t + d, t, a[:, i])  # advance; the tail is trimmed
             m2 = Motion(arrs["q"], arrs["qd"], arrs["qdd"], mo0.r, mo0.rd, mo0.source)
-            shifted[(groups.index(g), float(d))] = m2
+            shifted[(gi, float(d))] = m2
             sss.append(ss_for(m2))
-        i = int(np.argmin(sss))
-        if best is None or sss[i] < best[0]:
-            best = (sss[i], g, float(grid[i]), sss)
+        per_group.append((float(min(sss)), gi, sss))
     _ = nq
-    if best is None or ss0 <= 0:
+    if not per_group or ss0 <= 0:
         return None
-    ssb, g, d, sss = best
-    i = grid.index(d)
-    if 0 < i < len(grid) - 1:
-        x = np.array(grid[i - 1:i + 2])
-        yv = np.array(sss[i - 1:i + 2])
-        A = np.vstack([x ** 2, x, np.ones(3)]).T
-        a, b, _ = np.linalg.solve(A, yv)
-        if a > 0 and x[0] < -b / (2 * a) < x[2]:
-            d = float(-b / (2 * a))
-    explained = max(0.0, (ss0 - ssb) / ss0)
-    _, refined = regress_for(shifted[(groups.index(g), float(grid[i]))])
-    return Screen("sensor_delay", "force", explained, float("nan"), True,
-                  {"channels": g, "delay_s": d}, refined,
-                  note=f"time shift of {', '.join(g)} against the other channels, from the residual force")
+    per_group.sort(key=lambda r: r[0])
+
+    def screen_of(gi: int, sss: list[float]) -> Screen:
+        g = groups[gi]
+        i = int(np.argmin(sss))
+        d = float(grid[i])
+        if 0 < i < len(grid) - 1:
+            x = np.array(grid[i - 1:i + 2])
+            yv = np.array(sss[i - 1:i + 2])
+            A = np.vstack([x ** 2, x, np.ones(3)]).T
+            a, b, _ = np.linalg.solve(A, yv)
+            if a > 0 and x[0] < -b / (2 * a) < x[2]:
+                d = float(-b / (2 * a))
+        explained = max(0.0, (ss0 - sss[i]) / ss0)
+        _, refined = regress_for(shifted[(gi, float(grid[i]))])
+        return Screen("sensor_delay", "force", explained, float("nan"), True,
+                      {"channels": list(g), "delay_s": d}, refined,
+                      note=f"time shift of {', '.join(g)} against the other channels, from the "
+                           "residual force")
+
+    best = screen_of(per_group[0][1], per_group[0][2])
+    # Near ties between channel groups (one channel of a coordinate or all of them) are
+    # common: the residual force is dominated by the stiff terms, which see positions only.
+    # The refit decides between them on the output residual of every channel, so keep the
+    # close runners-up and the whole coordinate's group of a single-channel winner.
+    g0 = groups[per_group[0][1]]
+    closure = next((gi for gi, g in enumerate(groups)
+                    if len(g0) == 1 and len(g) > 1 and g0[0] in g), None)
+    for ss_g, gi, sss in per_group[1:]:
+        alt = screen_of(gi, sss)
+        if gi == closure or alt.explained >= 0.8 * best.explained:
+            best.alternatives.append(alt)
+        if len(best.alternatives) >= 2:
+            break
+    return best
 
 
 def _rate(ch: str, t: FloatArray, predicted: Mapping[str, FloatArray]) -> FloatArray:
@@ -538,6 +652,6 @@ def _rate(ch: str, t: FloatArray, predicted: Mapping[str, FloatArray]) -> FloatA
     return predicted[f"{ch}_dot"]
 
 
-__all__ = ["autocorr", "ljung_box", "noise_variance", "xcorr_peak", "effective_n", "ChannelStats",
+__all__ = ["autocorr", "ljung_box", "mean_test", "noise_variance", "xcorr_peak", "effective_n", "ChannelStats",
            "channel_stats", "Motion", "motion_from", "residual_force", "force_sensitivity", "Screen",
            "screen_physical", "screen_sensor", "screen_delay"]

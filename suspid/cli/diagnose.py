@@ -7,6 +7,7 @@ import sys
 from suspid.cli._common import (positive_int, add_input_options, add_model_option, add_param_options,
                                 load_measurement, model_from_args, params_from_args, print_json)
 from suspid.cli.identify import parse_x0
+from suspid.errors import UsageError
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -29,6 +30,12 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="initial state: estimate it (default), start at rest, or give it")
     p.add_argument("--restarts", type=int, default=3, help="Nelder-Mead restarts of the baseline fit (default 3; the augmented refit starts from the residual regression)")
     p.add_argument("--maxfev", type=positive_int, default=None, help="evaluation budget of the baseline fit")
+    p.add_argument("--multistart", type=int, default=4, metavar="N",
+                   help="baseline fit: further starts (up to N) when it lands on a suspicious "
+                        "local minimum, as for identify (default 4)")
+    p.add_argument("--no-polish", dest="polish", action="store_false",
+                   help="baseline fit: pure Nelder-Mead to full tolerance (default: Nelder-Mead "
+                        "to 1e-2, then a Levenberg-Marquardt polish, as identify)")
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
     p.add_argument("--plot", metavar="PNG", default=None,
                    help="write the evidence figure (residuals before/after, autocorrelation, "
@@ -37,13 +44,17 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run ``suspid diagnose`` (JSON or text on stdout, warnings on stderr); exit status 0."""
     from estimator.diagnose import diagnose
 
     model = model_from_args(args)
     params = params_from_args(args, model)
+    if args.multistart < 0:
+        raise UsageError(f"--multistart: expected >= 0, got {args.multistart}")
     meas, frames = load_measurement(args, model)
     res = diagnose(model, meas, params, cost=args.cost, x0=parse_x0(args.x0, model.n_states),
-                   restarts=args.restarts, maxfev=args.maxfev)
+                   restarts=args.restarts, maxfev=args.maxfev, polish=args.polish,
+                   multistart=args.multistart)
     out = res.to_json()
     if frames is not None:
         out["frames"] = frames
@@ -55,17 +66,21 @@ def run(args: argparse.Namespace) -> int:
     else:
         w = sys.stdout.write
         eff = out["effect"]
-        w(f"model {model.name}: effect {eff['name'] if eff else 'none'}\n")
+        sites = out["evidence"].get("effect_sites")
+        w(f"model {model.name}: effect {eff['name'] if eff else 'none'}"
+          + (f" ({', '.join(sites)})" if eff and sites else "") + "\n")
         if eff and eff["params"]:
             w("  effect parameters: " + ", ".join(f"{k}={v}" for k, v in eff["params"].items()) + "\n")
         w(f"  {out['evidence']['verdict']}\n")
-        w(f"  {'':>8} {'baseline':>14} {'augmented':>14}\n")
-        for k in out["baseline"]["params"]:
-            w(f"  {k:>8} {out['baseline']['params'][k]:>14.6g} {out['augmented']['params'][k]:>14.6g}\n")
-        for c in out["baseline"]["rms_residual"]:
-            w(f"  rms {c:>4} {out['baseline']['rms_residual'][c]:>14.4g} "
-              f"{out['augmented']['rms_residual'][c]:>14.4g}\n")
-        w(f"  {'cost':>8} {out['baseline']['cost']:>14.6g} {out['augmented']['cost']:>14.6g}\n")
+        rows = [(k, out["baseline"]["params"][k], out["augmented"]["params"][k], ".6g")
+                for k in out["baseline"]["params"]]
+        rows += [(f"rms {c}", out["baseline"]["rms_residual"][c], out["augmented"]["rms_residual"][c], ".4g")
+                 for c in out["baseline"]["rms_residual"]]
+        rows.append(("cost", out["baseline"]["cost"], out["augmented"]["cost"], ".6g"))
+        width = max(8, *(len(r[0]) for r in rows))
+        w(f"  {'':>{width}} {'baseline':>14} {'augmented':>14}\n")
+        for label, before, after, fmt in rows:
+            w(f"  {label:>{width}} {before:>14{fmt}} {after:>14{fmt}}\n")
     for msg in out["warnings"]:
         sys.stderr.write(f"warning: {msg}\n")
     return 0

@@ -71,3 +71,47 @@ def test_works_on_a_can_log(tmp_path: Path) -> None:
     assert math.isclose(out["effect"]["params"]["gap"], 0.01, rel_tol=0.25)
     assert math.isclose(out["effect"]["params"]["k_stop"], 3e5, rel_tol=0.25)
     assert out["frames"]["accepted"] > 0
+
+
+def test_half4_through_the_cli(tmp_path: Path, capsys) -> None:
+    from suspid.cli import main
+
+    csv, png = tmp_path / "h4.csv", tmp_path / "h4.png"
+    rc = main(["simulate", "--model", "half4", "--scenario", "bump", "--duration", "1.6", "--fs", "200",
+               "--effect", "bump_stop:gap=0.02,k_stop=200000", "--noise", "0.005", "--out", str(csv)])
+    assert rc == 0
+    capsys.readouterr()
+    fixed = [a for k, v in (("m", 1200), ("I", 1500), ("m1", 40), ("m2", 40), ("a1", 1.2), ("a2", 1.4))
+             for a in ("--fix", f"{k}={v}")]
+    rough = [a for k, v in (("c1", 2000), ("c2", 2000), ("k1", 30000), ("k2", 30000), ("k3", 2e5), ("k4", 2e5))
+             for a in ("--init", f"{k}={0.7 * v}")]
+    rc = main(["diagnose", "--model", "half4", "--input", str(csv), *fixed, *rough, "--maxfev", "1200",
+               "--json", "--plot", str(png)])
+    assert rc == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["effect"]["name"] == "bump_stop"
+    assert math.isclose(out["effect"]["params"]["gap"], 0.02, rel_tol=0.25)
+    assert out["evidence"]["effect_sites"] == ["front strut", "rear strut"]
+    assert "asymmetric_damping (both struts)" in out["evidence"]["limits"]
+    for k in ("c1", "c2", "k1", "k2"):
+        assert math.isclose(out["augmented"]["params"][k], 2000 if k[0] == "c" else 30000, rel_tol=0.05), k
+    assert png.stat().st_size > 10_000
+
+
+def test_quarter1_text_output_and_option_errors(tmp_path: Path, capsys) -> None:
+    from suspid.cli import main
+
+    csv = tmp_path / "q1.csv"
+    rc = main(["simulate", "--model", "quarter1", "--scenario", "curb", "--duration", "1.6", "--fs", "200",
+               "--height", "0.05", "--effect", "sensor_offset:channel=x_dot,offset=0.01", "--noise", "0.005",
+               "--out", str(csv)])
+    assert rc == 0
+    capsys.readouterr()
+    args = ["diagnose", "--model", "quarter1", "--input", str(csv), "--fix", "m=300", "--init", "c=1050",
+            "--init", "k=14000"]
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    assert text.startswith("model quarter1: effect sensor_offset") and "offset=0.0" in text
+    assert main([*args, "--multistart", "-1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error:") and "--multistart" in err[0]
