@@ -6,6 +6,13 @@ costs ~50 ns, a third of a NumPy scalar store; NumPy reads the columns without c
 through :func:`numpy.frombuffer`). When a ring is full the oldest row is overwritten and
 counted in :attr:`RollingBuffer.overwritten` -- memory stays flat on an endless stream. For
 offline loading of a whole log, ``growable=True`` doubles the rings in place instead.
+:meth:`Source.push_many` stores a block of rows at once (the decoder's batch path); the
+ring ends up exactly as after the same rows pushed one by one.
+
+A producer that holds rows back (the decoder batches frames) sets
+:attr:`RollingBuffer.before_read`: every read of the buffer (``sources``, ``latest_time``,
+``series``, ``align``, ``overwritten``, ``clear``, ``Source.snapshot``) calls it first, so
+readers always see every frame received so far.
 
 :meth:`RollingBuffer.align` puts the channels on one uniform time base: every sample goes
 to the grid cell nearest its time; cells without a sample stay NaN and are listed as
@@ -87,10 +94,10 @@ class Source:
     """Ring of rows ``(t, v_0, ..., v_{k-1})`` of one message; created by :meth:`RollingBuffer.source`."""
 
     __slots__ = ("name", "channels", "t", "cols", "w", "n", "cap", "growable", "overwritten",
-                 "_lock", "push")
+                 "_lock", "push", "_views", "_owner")
 
     def __init__(self, name: str, channels: Sequence[str], capacity: int, growable: bool,
-                 lock: threading.Lock) -> None:
+                 lock: threading.Lock, owner: "RollingBuffer | None" = None) -> None:
         self.name = name
         self.channels = tuple(channels)
         self.cap = capacity
@@ -102,6 +109,8 @@ class Source:
         self.growable = growable
         self.overwritten = 0
         self._lock = lock
+        self._views: list[np.ndarray] | None = None   # NumPy views of (t, *cols) for push_many
+        self._owner = owner
         self.push = self._compile_push()
 
     def _compile_push(self) -> Callable[[float, Sequence[float]], None]:
@@ -131,15 +140,68 @@ class Source:
         """The write index reached the end: grow (growable) or wrap to 0; new write index."""
         if not self.growable:
             return 0
-        more = bytes(8 * self.cap)
+        self._grow(2 * self.cap)
+        return self.cap // 2
+
+    def _grow(self, cap: int) -> None:
+        """Enlarge the columns to ``cap`` rows (zeros appended); caller holds the lock."""
+        self._views = None   # an array.array cannot resize while a view of it exists
+        more = bytes(8 * (cap - self.cap))
         self.t.frombytes(more)
         for col in self.cols:
             col.frombytes(more)
-        self.cap *= 2
-        return self.cap // 2
+        self.cap = cap
+
+    def push_many(self, t: np.ndarray, values: np.ndarray | Sequence[np.ndarray]) -> None:
+        """Append rows ``(t[i], values[i, 0], ..., values[i, k-1])`` in order.
+
+        The ring ends up exactly as after :attr:`push` of every row in turn: the same
+        overwritten rows and count when bounded, the same doublings when growable.
+
+        Parameters
+        ----------
+        t : ndarray of float64, shape (m,)
+            Row times (s).
+        values : ndarray, shape (m, k), or sequence of k arrays of shape (m,)
+            Channel values, one column per channel of the source.
+        """
+        m = int(np.shape(t)[0])
+        if m == 0:
+            return
+        cols = [values[:, j] for j in range(len(self.cols))] if isinstance(values, np.ndarray) \
+            else list(values)
+        if len(cols) != len(self.cols):
+            raise ValueError(f"{self.name}: {len(cols)} value columns for {len(self.cols)} channels")
+        with self._lock:
+            cap = self.cap
+            if self.growable:
+                need = self.w + m
+                if need >= cap:   # push doubles the ring each time the write index reaches it
+                    while cap <= need:
+                        cap *= 2
+                    self._grow(cap)
+            elif self.n + m > cap:
+                self.overwritten += self.n + m - cap
+            views = self._views
+            if views is None:
+                views = [np.frombuffer(c, dtype=np.float64, count=self.cap)
+                         for c in (self.t, *self.cols)]
+                self._views = views
+            skip = max(0, m - cap)          # rows overwritten within this block itself
+            p = (self.w + skip) % cap
+            c = m - skip
+            first = min(c, cap - p)
+            for view, src in zip(views, (t, *cols)):
+                view[p:p + first] = src[skip:skip + first]
+                if first < c:
+                    view[:c - first] = src[skip + first:]
+            self.w = (self.w + m) % cap if not self.growable else self.w + m
+            self.n = min(cap, self.n + m)
 
     def snapshot(self) -> tuple[np.ndarray, np.ndarray]:
         """Copies ``(t (n,), values (n, k))`` in arrival order (oldest first)."""
+        if self._owner is not None and self._owner.before_read is not None:
+            self._owner.before_read()
         with self._lock:
             n, w, cap = self.n, self.w, self.cap
             # zero-copy views of the columns, released before the lock is: a growable ring
@@ -178,19 +240,31 @@ class RollingBuffer:
             raise ValueError(f"buffer capacity must be >= 2 rows, got {capacity}")
         self.capacity = int(capacity)
         self.growable = growable
-        self.sources: dict[str, Source] = {}
+        self._sources: dict[str, Source] = {}
         self._where: dict[str, tuple[Source, int]] = {}
         self._lock = threading.Lock()
+        #: called before every read (a producer's flush of held-back rows), or None
+        self.before_read: Callable[[], None] | None = None
+
+    def _sync(self) -> None:
+        if self.before_read is not None:
+            self.before_read()
+
+    @property
+    def sources(self) -> dict[str, Source]:
+        """``message name -> Source`` (every row received so far stored)."""
+        self._sync()
+        return self._sources
 
     def source(self, name: str, channels: Sequence[str]) -> Source:
         """Create (or return) the ring of message ``name`` carrying ``channels``."""
-        if name in self.sources:
-            return self.sources[name]
+        if name in self._sources:
+            return self._sources[name]
         for ch in channels:
             if ch in self._where:
                 raise ValueError(f"channel {ch!r} already comes from {self._where[ch][0].name}")
-        src = Source(name, channels, self.capacity, self.growable, self._lock)
-        self.sources[name] = src
+        src = Source(name, channels, self.capacity, self.growable, self._lock, self)
+        self._sources[name] = src
         for k, ch in enumerate(channels):
             self._where[ch] = (src, k)
         return src
@@ -207,9 +281,10 @@ class RollingBuffer:
 
     def latest_time(self) -> float:
         """Time (s) of the newest row of any source (NaN if empty)."""
+        self._sync()
         best = float("nan")
         with self._lock:
-            for s in self.sources.values():
+            for s in self._sources.values():
                 if s.n:
                     t = s.t[(s.w - 1) % s.cap]
                     if not best >= t:
@@ -218,6 +293,7 @@ class RollingBuffer:
 
     def series(self, channel: str) -> tuple[np.ndarray, np.ndarray]:
         """``(t, v)`` of one channel in arrival order."""
+        self._sync()
         src, k = self._where[channel]
         t, v = src.snapshot()
         return t, v[:, k]
@@ -250,6 +326,7 @@ class RollingBuffer:
             No data, or a time span that would need more than 50 M grid cells, or more
             than 2 M cells and 50 x the frames held (a timestamp outlier).
         """
+        self._sync()
         names = list(channels) if channels is not None else self.channels
         unknown = [c for c in names if c not in self._where]
         if unknown:

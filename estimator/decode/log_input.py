@@ -1,8 +1,9 @@
 """A CAN log as a :class:`suspid.io.csvio.Measurement` -- what ``suspid identify --input LOG`` uses.
 
-The log is read tolerantly (:func:`suspid.can.logs.read_log`), every frame is validated
-and decoded by :class:`~estimator.decode.listener.DecodeListener`, and the channels are
-aligned on a uniform grid. For a log written by ``suspid encode`` from a measurement CSV
+The log is read tolerantly (:func:`estimator.decode.replay.feed_log`: a candump log as
+arrays, the other formats through python-can), every frame is validated and decoded by
+:class:`~estimator.decode.listener.DecodeListener`, and the channels are aligned on a
+uniform grid. For a log written by ``suspid encode`` from a measurement CSV
 the grid is the CSV's time column and the values differ from the CSV by quantization
 only (at most half a DBC resolution step).
 
@@ -19,8 +20,8 @@ import numpy as np
 
 from estimator.decode.buffer import Aligned
 from estimator.decode.listener import DecodeListener
-from estimator.decode.replay import feed
-from suspid.can.logs import ReadStats, read_log
+from estimator.decode.replay import feed_log
+from suspid.can.logs import ReadStats
 from suspid.can.signal_map import SignalMapLike
 from suspid.errors import InputError
 from suspid.io.csvio import Measurement
@@ -120,7 +121,7 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
     listener = DecodeListener(m, dbc_path, signal_map, capacity=1 << 14, growable=True,
                               time_source=time_source, max_counter_delta=max_counter_delta)
     stats = ReadStats()
-    feed(listener, read_log(path, stats))
+    feed_log(listener, path, stats)
     listener.count_malformed(stats.malformed)
     frame_stats = listener.frame_stats()
     warnings = [f"{path}: skipped {e}" for e in stats.examples]

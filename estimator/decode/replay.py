@@ -1,17 +1,25 @@
-"""Feeding logged frames to listeners: a direct loop, or a bus for ``can.Notifier``.
+"""Feeding logged frames to listeners: arrays, a direct loop, or a bus for ``can.Notifier``.
 
-A live bus and a replayed log go through the same :meth:`can.Listener.on_message_received`.
-For logs, :func:`feed` calls it in a plain loop: ``can.Notifier`` would add a reader thread,
-a ``recv`` per frame and a thread hand-off (about 3x slower) and nothing is gained when the
-source is a file. :class:`ReplayBus` is the same log as a python-can bus, for code that
-wants a Notifier either way (a test checks both paths give identical results).
+A live bus and a replayed log go through the same listener. For a log file,
+:func:`feed_log` reads a candump log straight into arrays
+(:func:`suspid.can.logs.read_log_arrays`) and hands them to
+:meth:`DecodeListener.feed_arrays <estimator.decode.listener.DecodeListener.feed_arrays>`:
+no :class:`can.Message` is built at all (the other formats are read as messages by
+python-can and converted). :func:`feed` calls ``on_message_received`` in a plain loop for
+messages already in memory. ``can.Notifier`` would add a reader thread, a ``recv`` per frame
+and a thread hand-off (about 3x slower) and nothing is gained when the source is a file;
+:class:`ReplayBus` is the same log as a python-can bus, for code that wants a Notifier
+either way (a test checks both paths give identical results).
 """
 from __future__ import annotations
 
 import time
-from typing import Any, Iterable, Iterator, Optional
+from pathlib import Path
+from typing import Any, Callable, Iterable, Iterator, Optional
 
 import can
+
+from suspid.can.logs import ReadStats, read_log, read_log_arrays
 
 
 def feed(listener: can.Listener, messages: Iterable[can.Message]) -> int:
@@ -21,6 +29,70 @@ def feed(listener: can.Listener, messages: Iterable[can.Message]) -> int:
     for msg in messages:
         on(msg)
         n += 1
+    return n
+
+
+def feed_log(listener: can.Listener, path: str | Path, stats: Optional[ReadStats] = None, *,
+             poll: Optional[Callable[[], int]] = None) -> int:
+    """Feed every frame of a CAN log to a listener, as fast as possible.
+
+    A :class:`~estimator.decode.listener.DecodeListener` gets the frames as arrays
+    (:meth:`~estimator.decode.listener.DecodeListener.feed_arrays`: a candump log is parsed
+    without building a message per frame); any other listener gets python-can messages.
+    The results equal feeding :func:`suspid.can.logs.read_log` message by message.
+
+    Parameters
+    ----------
+    listener : can.Listener
+    path : str or Path
+        ``.log``, ``.asc``, ``.blf``, ``.trc`` or ``.mf4``.
+    stats : ReadStats, optional
+        Filled with frames read and lines skipped (the caller counts
+        ``stats.malformed`` into the listener).
+    poll : callable, optional
+        Called after the first frame, then again after as many frames as it returns (at
+        least 1) -- e.g. a window driver checking the buffer's newest time, exactly where a
+        frame-by-frame loop with that countdown would have checked it.
+
+    Returns
+    -------
+    int
+        Frames fed.
+
+    Raises
+    ------
+    InputError
+        Missing or unreadable file.
+    UsageError
+        Unknown suffix.
+    """
+    left = 1
+    n = 0
+    feed_arrays = getattr(listener, "feed_arrays", None)
+    if feed_arrays is None:
+        on = listener.on_message_received
+        for msg in read_log(path, stats):
+            on(msg)
+            n += 1
+            if poll is not None:
+                left -= 1
+                if left <= 0:
+                    left = max(1, int(poll()))
+        return n
+    for fa in read_log_arrays(path, stats):
+        size = len(fa)
+        if poll is None:
+            n += feed_arrays(fa)
+            continue
+        pos = 0
+        while pos < size:
+            take = min(left, size - pos)
+            feed_arrays(fa, pos, pos + take)
+            pos += take
+            n += take
+            left -= take
+            if left <= 0:
+                left = max(1, int(poll()))
     return n
 
 

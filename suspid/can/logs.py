@@ -17,6 +17,12 @@ on; a binary file cut short ends the iteration with ``ReadStats.truncated`` set.
 candump parser exists for speed: python-can's reader builds each payload byte by byte and
 stops at the first bad line; ours uses ``bytearray.fromhex`` and reads ~2x faster.
 
+For the decoder's batch path, :func:`read_log_arrays` gives the same frames as
+:class:`FrameArrays` (parallel NumPy arrays): candump logs are parsed with array
+operations on the file's bytes (:func:`read_candump_arrays`, ~10x the message reader, bad
+lines still counted with the same reasons and line numbers), the other formats are
+converted from python-can messages.
+
 Timestamps written equal the frames' ``timestamp`` to the format's resolution (1 µs for
 ``.log``/``.asc``/``.trc``; BLF stores nanoseconds); the ASC writer anchors the
 ``Begin Triggerblock`` date on the whole millisecond so that absolute times read back
@@ -26,12 +32,15 @@ from __future__ import annotations
 
 import logging
 import math
+from bisect import bisect_left
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
-from typing import Iterator, Optional
+from typing import Iterable, Iterator, Optional, Sequence
 
 import can
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 
 from suspid.errors import InputError, UsageError
 
@@ -148,8 +157,10 @@ def _candump_special(ts: float, can_id: int, ext: bool, data_s: str, channel: st
     raise ValueError(f"payload {data_s[:24]!r} is not hex")
 
 
-def _read_candump(path: Path, stats: ReadStats) -> Iterator[can.Message]:
-    """candump -L lines ``(ts) iface ID#DATA`` (also ``ID##F DATA`` FD, ``ID#R`` remote).
+def _candump_messages(path: Path, numbered: Iterable[tuple[int, str]],
+                      stats: ReadStats) -> Iterator[can.Message]:
+    """Parse numbered candump -L lines ``(ts) iface ID#DATA`` (also FD ``ID##F DATA``, remote
+    ``ID#R``) into messages; bad lines are counted in ``stats`` as ``path:lineno``.
 
     The common line takes one ``split``, one ``partition`` and three conversions; the
     rare kinds (FD, remote, error frames) and bad lines leave the fast path through the
@@ -158,52 +169,464 @@ def _read_candump(path: Path, stats: ReadStats) -> Iterator[can.Message]:
     fromhex = bytearray.fromhex
     fast = _fast_message
     err_flag = _CAN_ERR_FLAG
+    frames = 0
+    try:
+        for lineno, line in numbered:
+            parts = line.split()
+            try:
+                ts_s = parts[0]
+                if ts_s[0] != "(" or ts_s[-1] != ")":
+                    if not parts:
+                        continue
+                    raise ValueError(f"expected '(seconds)' first, got {ts_s[:24]!r}")
+                ts = float(ts_s[1:-1])
+                id_s, sep, data_s = parts[2].partition("#")
+                if not sep:
+                    raise ValueError(f"expected ID#DATA, got {parts[2][:24]!r}")
+                can_id = int(id_s, 16)
+                ext = len(id_s) > 3
+                is_rx = len(parts) < 4 or parts[3] != "T"
+                try:
+                    payload = fromhex(data_s)
+                except ValueError:
+                    msg = _candump_special(ts, can_id, ext, data_s, parts[1], is_rx)
+                    frames += 1
+                    yield msg
+                    continue
+                if len(payload) > 8:
+                    raise ValueError(f"{len(payload)} data bytes in a classic CAN frame")
+            except IndexError:
+                if parts:
+                    stats.bad(f"{path}:{lineno}", "expected '(seconds) interface ID#DATA'")
+                continue
+            except ValueError as exc:
+                stats.bad(f"{path}:{lineno}", str(exc) or "unparseable line")
+                continue
+            frames += 1
+            if can_id & err_flag and ext:
+                yield can.Message(timestamp=ts, is_error_frame=True, channel=parts[1],
+                                  check=False)
+                continue
+            yield fast(ts, can_id, ext, payload, parts[1], is_rx)  # type: ignore[operator]
+    finally:
+        stats.frames += frames
+
+
+def _read_candump(path: Path, stats: ReadStats) -> Iterator[can.Message]:
+    """candump -L lines as :class:`can.Message` (see :func:`_candump_messages`)."""
     try:
         fh = path.open("r", encoding="ascii", errors="replace")
     except OSError as exc:
         raise InputError(f"{path}: cannot open CAN log: {exc.strerror}") from None
-    frames = 0
+    with fh:
+        yield from _candump_messages(path, enumerate(fh, 1), stats)
+
+
+# ---- frames as arrays ----------------------------------------------------------------------
+@dataclass
+class FrameArrays:
+    """A batch of CAN frames as parallel NumPy arrays (the decoder's vectorized input).
+
+    Attributes
+    ----------
+    timestamp : ndarray of float64, shape (N,)
+        Frame times (s), as :attr:`can.Message.timestamp`.
+    arbitration_id : ndarray of int64, shape (N,)
+        CAN identifiers (without the extended flag).
+    is_extended : ndarray of bool, shape (N,)
+        29-bit identifier.
+    frame_type : ndarray of bool, shape (N,)
+        Error or remote frame (no data; the decoder rejects it as ``frame_type``).
+    length : ndarray of int64, shape (N,)
+        Payload length (bytes), ``len(msg.data)``.
+    data : ndarray of uint8, shape (N, 8)
+        Payloads, zero beyond ``length``; frames longer than 8 bytes (CAN FD) hold their
+        first 8 bytes here and the whole payload in ``long_data``.
+    long_data : dict
+        ``row index -> payload`` of the frames longer than 8 bytes.
+    """
+
+    timestamp: np.ndarray
+    arbitration_id: np.ndarray
+    is_extended: np.ndarray
+    frame_type: np.ndarray
+    length: np.ndarray
+    data: np.ndarray
+    long_data: dict[int, bytes] = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return int(self.timestamp.shape[0])
+
+    @classmethod
+    def empty(cls) -> "FrameArrays":
+        """A batch of no frames."""
+        return cls(np.empty(0), np.empty(0, np.int64), np.empty(0, bool), np.empty(0, bool),
+                   np.empty(0, np.int64), np.empty((0, 8), np.uint8))
+
+    @classmethod
+    def from_messages(cls, messages: Sequence[can.Message]) -> "FrameArrays":
+        """The fields of python-can messages as arrays (what the decoder reads of a frame)."""
+        n = len(messages)
+        ts = np.array([m.timestamp for m in messages], dtype=np.float64).reshape(n)
+        ids = np.array([m.arbitration_id for m in messages], dtype=np.int64).reshape(n)
+        ext = np.frombuffer(bytes([bool(m.is_extended_id) for m in messages]), dtype=bool)
+        odd = [bool(m.is_error_frame or m.is_remote_frame) for m in messages]
+        ft = np.frombuffer(bytes(odd), dtype=bool) if True in odd else np.zeros(n, dtype=bool)
+        payloads = [m.data for m in messages]
+        lens = np.array(list(map(len, payloads)), dtype=np.int64).reshape(n)
+        try:
+            joined = b"".join(payloads)
+        except TypeError:  # a payload that is not bytes-like (assigned after construction)
+            payloads = [bytes(p) for p in payloads]
+            joined = b"".join(payloads)
+        flat = np.frombuffer(joined, dtype=np.uint8)
+        long_data: dict[int, bytes] = {}
+        if n and flat.size == 8 * n and bool((lens == 8).all()):
+            data = flat.reshape(n, 8)
+        else:
+            data = np.zeros((n, 8), dtype=np.uint8)
+            if n:
+                offs = np.zeros(n, dtype=np.int64)
+                np.cumsum(lens[:-1], out=offs[1:])
+                cols = np.arange(8)
+                mask = cols[None, :] < np.minimum(lens, 8)[:, None]
+                data[mask] = flat[(offs[:, None] + cols[None, :])[mask]]
+                for i in np.flatnonzero(lens > 8).tolist():
+                    long_data[i] = bytes(payloads[i])
+        return cls(ts, ids, ext, ft, lens, data, long_data)
+
+    def payload(self, i: int) -> bytes:
+        """Payload of frame ``i``."""
+        got = self.long_data.get(i)
+        if got is not None:
+            return got
+        return self.data[i, :int(self.length[i])].tobytes()
+
+    def messages(self) -> list[can.Message]:
+        """The frames as python-can messages (data frames, or an error/remote flag)."""
+        out = []
+        for i in range(len(self)):
+            ft = bool(self.frame_type[i])
+            out.append(can.Message(timestamp=float(self.timestamp[i]),
+                                   arbitration_id=int(self.arbitration_id[i]),
+                                   is_extended_id=bool(self.is_extended[i]),
+                                   is_error_frame=ft, data=self.payload(i), check=False))
+        return out
+
+
+#: hex digit value per byte, 255 = not a hex digit
+_HEXVAL = np.full(256, 255, dtype=np.uint8)
+for _k, _c in enumerate(b"0123456789abcdef"):
+    _HEXVAL[_c] = _k
+for _k, _c in enumerate(b"ABCDEF"):
+    _HEXVAL[_c] = 10 + _k
+#: decimal digit value per byte, 255 = not a digit
+_DIGVAL = np.full(256, 255, dtype=np.uint8)
+_DIGVAL[48:58] = np.arange(10)
+#: byte value of two hex digits read as a little-endian uint16; 0x100 = not two hex digits
+_HEXPAIR = np.full(1 << 16, 0x100, dtype=np.uint16)
+_hv = np.flatnonzero(_HEXVAL != 255)
+_HEXPAIR[(_hv[:, None] | (_hv[None, :] << 8)).ravel()] = \
+    ((_HEXVAL[_hv][:, None] << 4) | _HEXVAL[_hv][None, :]).ravel()
+#: longest line (bytes) the array parser takes; longer ones go through the message parser
+_MAX_FAST_LINE = 160
+#: line layouts tried per line length before the rest of that length goes line by line
+_MAX_LAYOUTS = 8
+
+
+def _line_layout(line: bytes) -> tuple[int, int, int, int, int, int] | None:
+    """Byte positions ``(close, dot, sp1, sp2, hash, sp3)`` of a regular candump line.
+
+    Regular: ``(DIGITS.DIGITS) IFACE HEXID#HEXDATA[ ...]`` with single spaces, 1-15
+    timestamp digits, 1-8 ID digits and an even number (<= 16) of data digits; ``None``
+    otherwise. Only positions are read here: the characters are checked by the caller for
+    every line sharing the layout.
+    """
+    if line[:1] != b"(":
+        return None
+    close = line.find(b")")
+    sp1 = close + 1
+    if close < 3 or line[sp1:sp1 + 1] != b" ":
+        return None
+    dot = line.find(b".", 1, close)
+    if dot < 2 or dot > close - 2 or close - 2 > 15:
+        return None
+    sp2 = line.find(b" ", sp1 + 1)
+    if sp2 <= sp1 + 1:
+        return None
+    sp3 = line.find(b" ", sp2 + 1)
+    if sp3 < 0:
+        sp3 = len(line)
+    hs = line.find(b"#", sp2 + 1, sp3)
+    if hs < 0 or not 1 <= hs - sp2 - 1 <= 8 or (sp3 - hs - 1) % 2 or sp3 - hs - 1 > 16:
+        return None
+    return close, dot, sp1, sp2, hs, sp3
+
+
+def _digits_value(chars: np.ndarray, lut: np.ndarray, base: float
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """``(value, ok)`` of rows of digit characters (decimal or hex by ``lut``/``base``).
+
+    At most 15 decimal or 8 hex digits per row: every partial value is an integer below
+    2**53, so the float arithmetic is exact.
+    """
+    d = lut[chars]
+    acc = d[:, 0].astype(np.float64)
+    bad = d[:, 0].copy()
+    for j in range(1, chars.shape[1]):
+        col = d[:, j]
+        acc *= base
+        acc += col
+        bad |= col
+    return acc, bad < 16   # digit values 0..15; 255 marks any other character
+
+
+def _parse_layout(rows: np.ndarray, layout: tuple[int, int, int, int, int, int]
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Parse lines of one layout (``rows`` (m, L) uint8, one line per row).
+
+    Returns ``(good, timestamp, arbitration_id, data)``; ``good`` is False for a row whose
+    characters do not fit the layout (it goes through the message parser instead).
+    """
+    close, dot, sp1, sp2, hs, sp3 = layout
+    m, length = rows.shape
+    good = (rows[:, 0] == 40) & (rows[:, close] == 41) & (rows[:, sp1] == 32)
+    good &= (rows[:, dot] == 46) & (rows[:, sp2] == 32) & (rows[:, hs] == 35)
+    if sp3 < length:
+        good &= rows[:, sp3] == 32
+    for j in range(sp1 + 1, sp2):                                   # interface: no blank
+        good &= rows[:, j] > 32
+    n_int, ok_int = _digits_value(rows[:, 1:dot], _DIGVAL, 10.0)
+    n_frac, ok_frac = _digits_value(rows[:, dot + 1:close], _DIGVAL, 10.0)
+    nf = close - dot - 1
+    good &= ok_int & ok_frac
+    # INT * 10**FRAC + FRAC < 1e15 is exact, and so is 10**FRAC: the quotient is the
+    # correctly rounded decimal, i.e. float(str)
+    ts = (n_int * float(10 ** nf) + n_frac) / float(10 ** nf)
+    id_value, ok_id = _digits_value(rows[:, sp2 + 1:hs], _HEXVAL, 16.0)
+    good &= ok_id
+    ids = id_value.astype(np.int64)
+    data = np.zeros((m, 8), dtype=np.uint8)
+    nb = (sp3 - hs - 1) // 2
+    if nb:
+        pairs = _HEXPAIR[np.ascontiguousarray(rows[:, hs + 1:sp3]).view(np.uint16)]
+        bad = pairs[:, 0] >> 8
+        for j in range(1, nb):
+            bad |= pairs[:, j] >> 8
+        good &= bad == 0
+        data[:, :nb] = pairs
+    return good, ts, ids, data
+
+
+def _candump_chunk(buf: bytes, path: Path, line0: int, stats: ReadStats
+                   ) -> tuple[FrameArrays, int]:
+    """Parse whole candump -L lines (``buf`` ends at a line end or at the file end).
+
+    Lines are grouped by length; a group's first line gives the byte positions of the
+    fields (:func:`_line_layout`) and every line of that layout is parsed at once with
+    column operations (:func:`_parse_layout`). Lines that fit no layout -- malformed, FD,
+    remote, odd spacing, control characters -- go through :func:`_candump_messages`, in file
+    order, so bad lines are counted with the same reasons and line numbers as the message
+    reader. Returns the frames in file order and the number of lines (for numbering the
+    next chunk; a lone ``\\r`` is a line break of its own, as for a text reader).
+    """
+    b = np.frombuffer(buf, dtype=np.uint8)
+    nl = np.flatnonzero(b == 10)
+    ends = nl if (b.size == 0 or b[-1] == 10) else np.append(nl, b.size)
+    nlines = int(ends.size)
+    starts = np.zeros(nlines, dtype=np.int64)
+    starts[1:] = ends[:-1] + 1
+    e = ends.astype(np.int64)
+    nonempty = e > starts
+    slow = np.zeros(nlines, dtype=bool)
+    extra_at: list[tuple[int, int]] = []   # (line, lone "\\r" in it)
+    if buf.find(b"\r") >= 0:
+        # "\\r\\n" is one line break (universal newlines): the "\\r" is not part of the line
+        cr = nonempty & (b[np.maximum(e - 1, 0)] == 13)
+        e[cr] -= 1
+        crs = np.flatnonzero(b == 13)
+        li = np.searchsorted(starts, crs, side="right") - 1
+        inner = crs < e[li]
+        if inner.any():
+            u, cnt = np.unique(li[inner], return_counts=True)
+            slow[u] = True
+            extra_at = list(zip(u.tolist(), cnt.tolist()))
+    length = e - starts
+    lt = np.zeros(nlines)
+    lid = np.zeros(nlines, dtype=np.int64)
+    lidlen = np.zeros(nlines, dtype=np.int64)
+    lnb = np.zeros(nlines, dtype=np.int64)
+    ldata = np.zeros((nlines, 8), dtype=np.uint8)
+    ldata64 = ldata.view(np.uint64).reshape(nlines)    # one 8-byte store per row
+    fast = np.zeros(nlines, dtype=bool)
+    cand = (length >= 10) & (length <= _MAX_FAST_LINE) & ~slow
+    cidx = np.flatnonzero(cand)
+    if cidx.size:
+        clen = length[cidx]
+        padded = np.concatenate((b, np.zeros(_MAX_FAST_LINE, dtype=np.uint8)))
+        for L in np.flatnonzero(np.bincount(clen)).tolist():
+            sel = clen == L
+            idx = cidx if sel.all() else cidx[sel]
+            rows = sliding_window_view(padded, L)[starts[idx]]
+            left = np.arange(idx.size)
+            for _ in range(_MAX_LAYOUTS):
+                if not left.size:
+                    break
+                layout = _line_layout(rows[left[0]].tobytes())
+                if layout is None:
+                    left = left[1:]
+                    continue
+                whole = left.size == idx.size
+                good, ts, ids, data = _parse_layout(rows if whole else rows[left], layout)
+                all_good = bool(good.all())
+                at = idx if whole and all_good else idx[left[good]]
+                if not all_good:
+                    ts, ids, data = ts[good], ids[good], data[good]
+                fast[at] = True
+                lt[at] = ts
+                lid[at] = ids
+                lidlen[at] = layout[4] - layout[3] - 1
+                lnb[at] = (layout[5] - layout[4] - 1) // 2
+                ldata64[at] = data.view(np.uint64).reshape(-1)
+                left = left[~good]
+    # every other non-empty line: the message parser, in file order
+    slow_msgs: dict[int, list[can.Message]] = {}
+    slow_lines = np.flatnonzero(nonempty & ~fast).tolist()
+    per_line = fast.astype(np.int64) if slow_lines else fast
+    if slow_lines:
+        extra_lines = [x for x, _ in extra_at]
+        extra_cum = np.cumsum([0] + [c for _, c in extra_at]).tolist()
+        for i in slow_lines:
+            lineno = line0 + i + 1 + extra_cum[bisect_left(extra_lines, i)]
+            text = buf[int(starts[i]):int(e[i])].decode("ascii", errors="replace")
+            sub_lines = text.split("\r")
+            got = list(_candump_messages(path, zip(range(lineno, lineno + len(sub_lines)),
+                                                   sub_lines), stats))
+            if got:
+                slow_msgs[i] = got
+                per_line[i] = len(got)
+    n_fast = int(np.count_nonzero(fast))
+    stats.frames += n_fast
+    total_lines = nlines + sum(c for _, c in extra_at)
+    ext = lidlen > 3
+    ft = ((lid & _CAN_ERR_FLAG) != 0) & ext
+    if ft.any():   # error frames: no identifier, no data (as the message reader makes them)
+        lid[ft] = 0
+        lnb[ft] = 0
+        ldata[ft] = 0
+    if not slow_msgs:   # every frame from a regular line: in file order already
+        if n_fast == nlines:
+            return FrameArrays(lt, lid, ext, ft, lnb, ldata), total_lines
+        return FrameArrays(lt[fast], lid[fast], ext[fast], ft[fast], lnb[fast],
+                           ldata[fast]), total_lines
+    n = int(per_line.sum())
+    offs = np.cumsum(per_line) - per_line
+    out = FrameArrays(np.zeros(n), np.zeros(n, np.int64), np.zeros(n, bool), np.zeros(n, bool),
+                      np.zeros(n, np.int64), np.zeros((n, 8), np.uint8))
+    at = offs[fast]
+    out.timestamp[at] = lt[fast]
+    out.arbitration_id[at] = lid[fast]
+    out.is_extended[at] = ext[fast]
+    out.frame_type[at] = ft[fast]
+    out.length[at] = lnb[fast]
+    out.data[at] = ldata[fast]
+    for i, msgs in slow_msgs.items():
+        extra = FrameArrays.from_messages(msgs)
+        o = int(offs[i])
+        sl = slice(o, o + len(msgs))
+        out.timestamp[sl] = extra.timestamp
+        out.arbitration_id[sl] = extra.arbitration_id
+        out.is_extended[sl] = extra.is_extended
+        out.frame_type[sl] = extra.frame_type
+        out.length[sl] = extra.length
+        out.data[sl] = extra.data
+        for j, payload in extra.long_data.items():
+            out.long_data[o + j] = payload
+    return out, total_lines
+
+
+def read_candump_arrays(path: str | Path, stats: Optional[ReadStats] = None, *,
+                        chunk_bytes: int = 1 << 19) -> Iterator[FrameArrays]:
+    """The frames of a candump -L log as :class:`FrameArrays`, about ``chunk_bytes`` at a time.
+
+    Same frames, malformed-line counts, reasons and line numbers as the message reader
+    (:func:`read_log`), ~10x faster: the regular lines are parsed with array operations on
+    the file's bytes, the rest line by line.
+
+    Parameters
+    ----------
+    path : str or Path
+        A candump -L log.
+    stats : ReadStats, optional
+        Filled with frames read and lines skipped.
+    chunk_bytes : int
+        Bytes read per step (a chunk ends at a line end; 512 KiB is ~12 k frames). The
+        parse's temporaries are about 7x the chunk, so this bounds the reader's memory
+        whatever the log's length; larger chunks are no faster (measured: 8 MiB and 512 KiB
+        load a 79 k-frame log in the same 100 ms, with a peak of 21.7 MB against 7.9 MB).
+
+    Raises
+    ------
+    InputError
+        The file cannot be opened.
+    """
+    p = Path(path)
+    st = stats if stats is not None else ReadStats()
     try:
-        with fh:
-            for lineno, line in enumerate(fh, 1):
-                parts = line.split()
-                try:
-                    ts_s = parts[0]
-                    if ts_s[0] != "(" or ts_s[-1] != ")":
-                        if not parts:
-                            continue
-                        raise ValueError(f"expected '(seconds)' first, got {ts_s[:24]!r}")
-                    ts = float(ts_s[1:-1])
-                    id_s, sep, data_s = parts[2].partition("#")
-                    if not sep:
-                        raise ValueError(f"expected ID#DATA, got {parts[2][:24]!r}")
-                    can_id = int(id_s, 16)
-                    ext = len(id_s) > 3
-                    is_rx = len(parts) < 4 or parts[3] != "T"
-                    try:
-                        payload = fromhex(data_s)
-                    except ValueError:
-                        msg = _candump_special(ts, can_id, ext, data_s, parts[1], is_rx)
-                        frames += 1
-                        yield msg
-                        continue
-                    if len(payload) > 8:
-                        raise ValueError(f"{len(payload)} data bytes in a classic CAN frame")
-                except IndexError:
-                    if parts:
-                        stats.bad(f"{path}:{lineno}", "expected '(seconds) interface ID#DATA'")
+        fh = p.open("rb")
+    except OSError as exc:
+        raise InputError(f"{p}: cannot open CAN log: {exc.strerror}") from None
+    with fh:
+        rest = b""
+        line0 = 0
+        while True:
+            blk = fh.read(max(1, chunk_bytes))
+            if blk:
+                buf = rest + blk
+                cut = buf.rfind(b"\n") + 1
+                if cut == 0:
+                    rest = buf
                     continue
-                except ValueError as exc:
-                    stats.bad(f"{path}:{lineno}", str(exc) or "unparseable line")
-                    continue
-                frames += 1
-                if can_id & err_flag and ext:
-                    yield can.Message(timestamp=ts, is_error_frame=True, channel=parts[1],
-                                      check=False)
-                    continue
-                yield fast(ts, can_id, ext, payload, parts[1], is_rx)  # type: ignore[operator]
-    finally:
-        stats.frames += frames
+                buf, rest = buf[:cut], buf[cut:]
+            else:
+                buf, rest = rest, b""
+                if not buf:
+                    return
+            fa, nlines = _candump_chunk(buf, p, line0, st)
+            line0 += nlines
+            if len(fa):
+                yield fa
+            if not blk:
+                return
+
+
+def read_log_arrays(path: str | Path, stats: Optional[ReadStats] = None, *,
+                    chunk: int = 65536) -> Iterator[FrameArrays]:
+    """The frames of a CAN log (format by suffix) as :class:`FrameArrays` batches.
+
+    candump -L (``.log``) goes through :func:`read_candump_arrays`; the python-can formats
+    are read as messages (:func:`read_log`) and converted ``chunk`` frames at a time.
+    Same checks, errors and :class:`ReadStats` as :func:`read_log`.
+    """
+    p = Path(path)
+    suf = log_format(p, "CAN log")
+    if not p.is_file():
+        raise InputError(f"{p}: no such CAN log file")
+    st = stats if stats is not None else ReadStats()
+    if suf == ".log":
+        return read_candump_arrays(p, st)
+    return _message_batches(read_log(p, st), chunk)
+
+
+def _message_batches(messages: Iterable[can.Message], chunk: int) -> Iterator[FrameArrays]:
+    batch: list[can.Message] = []
+    for msg in messages:
+        batch.append(msg)
+        if len(batch) >= chunk:
+            yield FrameArrays.from_messages(batch)
+            batch = []
+    if batch:
+        yield FrameArrays.from_messages(batch)
 
 
 class _LineCounter:

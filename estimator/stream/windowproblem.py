@@ -1,0 +1,783 @@
+"""A window's output-error problem with a lean per-evaluation path.
+
+:class:`WindowProblem` is :class:`~estimator.identify.OutputErrorProblem` -- same cost, same
+residuals, same variable projection of the initial state -- specialised for what a monitor
+window almost always is: a uniform time grid, no missing sample in the fitted channels,
+unit weights and ``x0="estimate"``. A warm window is fitted with ~10 Nelder-Mead
+evaluations on ~750 samples, so the fixed cost of an evaluation (dozens of numpy calls on
+2x2..4x4 arrays, 1-4 us each) matters as much as its O(N) part. For a parameter vector
+``p`` the lean path computes:
+
+1. ``A, B`` -- when the model's matrices are affine in the free parameters with the mass
+   matrix fixed (checked numerically once per monitor, :class:`StateSpaceMap`), as
+   ``A0 + sum_k theta_k A_k``; otherwise by :meth:`SuspensionModel.state_space`;
+2. the modal form ``A = V diag(lam) V^-1`` from one LAPACK ``dgeev`` (eigenvalues, right
+   and left eigenvectors; the rows of ``V^-1`` are the left eigenvectors scaled by
+   ``1 / (u^H v)``), with the acceptance test of :func:`suspid.simulate.modal_form`
+   (condition number of ``V`` below 1e8);
+3. the forced modal trajectory of the first-order-hold road,
+   ``w[k+1] = E w[k] + g0 s[k] + g1 s[k+1]``, in closed form:
+   ``w[k] = E^k (w[0] + sum_{l<k} d[l] E^-(l+1))`` -- one ``cumsum`` of ``r[l] E^-l``
+   instead of a recursion. Exact in exact arithmetic; the partial sums are dominated by
+   their newest terms, so the rounding error stays ~``eps`` relative to ``|w|``. It is used
+   only while ``|E|^-N`` stays far from overflow (``max(-Re(lam)) h N < 600``);
+4. the least-squares initial state from the explicit free-response regressors (``n``
+   real columns, ``p N`` rows: cheaper than the parent's closed-form geometric sums at
+   this size), then the residual.
+
+Evaluations are cached per window, so the estimate's residual and Nelder-Mead's final
+simplex are reused by :meth:`WindowProblem.finish` (stderr from the secant through the
+final simplex: no further evaluation). Every case the lean path does not cover (missing
+samples, non-uniform grid, weights, a fixed ``x0``, a (nearly) defective ``A``, the
+overflow guard, a Gram matrix with condition number > 1e12) goes to the parent class, so
+results never depend on the path beyond rounding (~1e-12 relative in the cost;
+``tests/stream/test_windowproblem.py`` checks it).
+"""
+from __future__ import annotations
+
+import cmath
+import math
+from dataclasses import dataclass, field
+from typing import Mapping
+
+import numpy as np
+from scipy.linalg.lapack import dgeev as _dgeev
+from scipy.linalg.lapack import dgeqrf as _dgeqrf
+from scipy.linalg.lapack import dgesv as _dgesv
+from scipy.linalg.lapack import dsyev as _dsyev
+
+from estimator.identify import OutputErrorProblem, Parameters, finish
+from estimator.identify.identifiability import WEAK_TOL, Identifiability, assess
+from estimator.identify.problem import Prediction
+from estimator.identify.result import IdentResult
+from suspid.models.base import FloatArray, SuspensionModel
+from suspid.simulate import outputs, simulate_states
+
+#: largest ``max(-Re(lam)) h N`` for which ``E**-N`` is formed (e^600 ~ 1e260 < 1.8e308)
+MAX_DECAY_EXPONENT = 600.0
+#: Gram-matrix condition number above which the parent's path is used (as the parent does)
+MAX_GRAM_COND = 1e12
+#: condition number of ``V`` above which ``A`` counts as defective (as modal_form)
+MAX_V_COND = 1e8
+#: lean evaluations kept per window (Nelder-Mead's final simplex is among the latest)
+CACHE_SIZE = 32
+#: largest final-simplex edge (log units) and edge-matrix condition number (1-norm) for
+#: which the Jacobian is taken from the simplex's residuals (secant) instead of forward
+#: differences
+SECANT_MAX_EDGE = 0.02
+SECANT_MAX_COND = 1e3
+
+_UPPER: dict[int, FloatArray] = {}
+_PATTERNS: dict[tuple[int, ...], "_Pattern"] = {}
+
+
+def small_inverse(M: FloatArray) -> tuple[FloatArray | None, float]:
+    """Inverse of a small square matrix and its 1-norm condition number.
+
+    Closed form for 1x1 and 2x2, one LAPACK ``dgesv`` (LU with partial pivoting) on the
+    identity otherwise; ``(None, inf)`` when ``M`` is singular or not finite.
+    ``cond_1 = ||M||_1 ||M^-1||_1``.
+    """
+    n = M.shape[0]
+    if n <= 2:
+        if n == 1:
+            a = float(M[0, 0])
+            if a == 0.0 or not math.isfinite(a):
+                return None, math.inf
+            return np.array([[1.0 / a]]), 1.0
+        (a, b), (c, d) = M.tolist()
+        det = a * d - b * c
+        if det == 0.0 or not math.isfinite(det):
+            return None, math.inf
+        inv = [[d / det, -b / det], [-c / det, a / det]]
+        n1 = max(abs(a) + abs(c), abs(b) + abs(d))
+        n2 = max(abs(inv[0][0]) + abs(inv[1][0]), abs(inv[0][1]) + abs(inv[1][1]))
+        return np.array(inv), n1 * n2
+    if not np.isfinite(M).all():
+        return None, math.inf
+    _, _, Minv, info = _dgesv(M, np.eye(n))
+    if info != 0 or not np.isfinite(Minv).all():
+        return None, math.inf
+    return Minv, float(np.abs(M).sum(axis=0).max() * np.abs(Minv).sum(axis=0).max())
+
+
+def _verdict(small: FloatArray, free: list[str], kinds: dict[str, str]) -> Identifiability:
+    """:func:`~estimator.identify.identifiability.assess` of a square QR factor.
+
+    When every relative singular value is at least the weak-identifiability threshold the
+    verdict is "identifiable, no warning" and only the singular values are needed: closed
+    form for 2x2; otherwise (or for larger factors) ``assess`` itself.
+    """
+    if small.shape == (2, 2):
+        (a, b), (c, d) = small.tolist()
+        ssq = a * a + b * b + c * c + d * d
+        det = abs(a * d - b * c)
+        if math.isfinite(ssq) and ssq > 0.0:
+            s1 = math.sqrt(0.5 * (ssq + math.sqrt(max(ssq * ssq - 4.0 * det * det, 0.0))))
+            s2 = det / s1
+            if s2 / s1 >= WEAK_TOL:
+                return Identifiability(True, [1.0, s2 / s1])
+    return assess(small, free, kinds)
+
+
+class StateSpaceMap:
+    """``p -> (A, B, Bz)`` of a model, affine in the free parameters when that is exact.
+
+    ``Bz = A B_v + B_r`` is the input matrix of the road in the simulator's
+    ``z = x - B_v r`` coordinates (:mod:`suspid.simulate`). ``A`` and ``B`` are affine in
+    the free parameters when the mass matrix does not depend on them and the damping,
+    stiffness and input matrices are affine in them (quarter and half cars with the masses
+    fixed); ``Bz`` is affine too when ``B_v`` (tyre damping over wheel mass) is fixed.
+    Affinity is checked once per block, numerically, at two random points (agreement with
+    :meth:`SuspensionModel.state_space` to 1e-12 relative); a block that is not affine,
+    or any block when a fixed parameter differs from ``base``, is computed from the model.
+
+    Parameters
+    ----------
+    model : SuspensionModel
+    base : mapping
+        Parameter values (SI); the fixed ones are held at these values.
+    free : list of str
+        Free parameter names.
+    """
+
+    def __init__(self, model: SuspensionModel, base: Mapping[str, float], free: list[str]) -> None:
+        self.model = model
+        self.free = list(free)
+        self.names = [q.name for q in model.params]
+        fset = set(self.free)
+        self._ifree = [self.names.index(k) for k in self.free]
+        self._ifix = [i for i, k in enumerate(self.names) if k not in fset]
+        self._vfix = [float(base[self.names[i]]) for i in self._ifix]
+        n = model.n_states
+        nr = len(model.roads)
+        self._n, self._nr = n, nr
+        self._sizes = (n * n, 2 * n * nr, n * nr)  # A, B, Bz (column-major)
+        self.affine_ab = False
+        self.affine_bz = False
+        if not self.free:
+            return
+        vals0 = [float(base[k]) for k in self.names]
+        th0 = np.array([vals0[i] for i in self._ifree])
+
+        def flat(vals: list[float]) -> FloatArray:
+            A, B, Bz = self._from_model(vals)
+            return np.concatenate([A.ravel(order="F"), B.ravel(order="F"), Bz.ravel(order="F")])
+
+        ok = np.zeros(3, dtype=bool)
+        try:
+            f0 = flat(vals0)
+            D = []
+            for j, i in enumerate(self._ifree):
+                q = list(vals0)
+                q[i] = 2.0 * vals0[i]
+                D.append((flat(q) - f0) / vals0[i])
+            Dm = np.array(D)  # (n_free, n*n + 2 n nr + n nr)
+            c0 = f0 - th0 @ Dm
+            rng = np.random.default_rng(7)
+            edges = np.cumsum((0,) + self._sizes)
+            ok[:] = True
+            for _ in range(2):
+                th = th0 * np.exp(rng.normal(0.0, 0.5, th0.size))
+                q = list(vals0)
+                for i, v in zip(self._ifree, th.tolist()):
+                    q[i] = v
+                ref = flat(q)
+                got = c0 + th @ Dm
+                for blk in range(3):
+                    r = ref[edges[blk]:edges[blk + 1]]
+                    g = got[edges[blk]:edges[blk + 1]]
+                    if not np.all(np.abs(g - r) <= 1e-12 * (np.abs(r).max() + 1e-300)):
+                        ok[blk] = False
+        except (np.linalg.LinAlgError, ValueError, ZeroDivisionError, FloatingPointError):
+            ok[:] = False
+        self.affine_ab = bool(ok[0] and ok[1])
+        self.affine_bz = bool(self.affine_ab and ok[2])
+        if self.affine_ab:
+            k = self._sizes[0] + self._sizes[1] + (self._sizes[2] if self.affine_bz else 0)
+            self._c0 = c0[:k].copy()
+            self._D = np.ascontiguousarray(Dm[:, :k])
+
+    def _from_model(self, vals: list[float]) -> tuple[FloatArray, FloatArray, FloatArray]:
+        A, B = self.model.state_space(dict(zip(self.names, vals)))
+        nr = self._nr
+        return A, B, A @ B[:, nr:] + B[:, :nr]
+
+    def __call__(self, p: Mapping[str, float]) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """``(A, B, Bz)`` at ``p`` (SI parameters)."""
+        return self.from_values([p[k] for k in self.names])[:3]
+
+    def from_values(self, vals: list[float]
+                    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """``(A, B, Bz, [B | Bz])`` for the values of every parameter in model order.
+
+        ``vals`` follows ``names``. Affine blocks are Fortran-ordered views of one vector
+        (as LAPACK wants ``A``); the last item is the input matrices side by side,
+        ``[B_r | B_v | Bz]`` (n x 3 n_roads).
+        """
+        if self.affine_ab and [vals[i] for i in self._ifix] == self._vfix:
+            f = self._c0 + np.array([vals[i] for i in self._ifree]) @ self._D
+            n, nr = self._n, self._nr
+            k1 = n * n
+            k2 = k1 + 2 * n * nr
+            A = f[:k1].reshape((n, n), order="F")
+            B = f[k1:k2].reshape((n, 2 * nr), order="F")
+            if self.affine_bz:
+                BB = f[k1:].reshape((n, 3 * nr), order="F")
+                return A, B, BB[:, 2 * nr:], BB
+            Bz = A @ B[:, nr:] + B[:, :nr]
+            return A, B, Bz, np.concatenate([B, Bz], axis=1)
+        A, B, Bz = self._from_model(vals)
+        return A, B, Bz, np.concatenate([B, Bz], axis=1)
+
+
+@dataclass
+class _Pattern:
+    """Bookkeeping of one eigenvalue pattern (which ``dgeev`` columns form which mode)."""
+
+    k1: list[int]  # column of the real part (or of the real eigenvector) of each kept mode
+    k2: list[int]  # column of the imaginary part (= k1 for a real mode)
+    is_pair: list[bool]
+    fac: FloatArray  # (m,) 2 for a complex pair, 1 for a real mode
+    pairs: np.ndarray  # indices of the complex modes
+    sel_v: np.ndarray  # (n, m) complex: V = vr @ sel_v
+    sel_cv: np.ndarray  # (n, m) complex: (C V) fac = (C vr) @ sel_cv
+
+
+@dataclass
+class _Traj:
+    """Road-driven modal trajectory ``sum_j (Ca_j E^k Q_j[k] - Cb_j r_j[k]) + cc E^k``."""
+
+    PQ: list[np.ndarray]  # per road: (m, N) E^k Q[k]
+    Ca: np.ndarray  # (m, nr) a0 + a1
+    Cb: np.ndarray  # (m, nr) a0
+    cc: np.ndarray  # (m,) w0 - a1 r[0]
+
+
+@dataclass
+class _Eval:
+    """One lean evaluation, kept for reuse at the same parameters."""
+
+    key: tuple[float, ...]
+    vr: FloatArray  # (n, n) LAPACK right eigenvectors (real and imaginary parts)
+    pat: _Pattern
+    A: FloatArray
+    B: FloatArray
+    P: np.ndarray  # (m, N) powers E^k
+    traj: _Traj | None  # the road-driven part of the modal trajectory (None: no road)
+    sol: FloatArray  # least-squares coefficients (real parts, then imaginary parts)
+    R: FloatArray  # (p, N) final residual, measured - predicted
+
+    @property
+    def coef(self) -> np.ndarray:
+        """Complex modal coefficients of the fitted free response (m,)."""
+        mm = self.P.shape[0]
+        c = self.sol[:mm].astype(complex)
+        if self.pat.pairs.size:
+            c[self.pat.pairs] += 1j * self.sol[mm:]
+        return c
+
+    @property
+    def c(self) -> np.ndarray:
+        """Complex free modal coefficients of the initial state (m,).
+
+        The fit absorbed the forced response's own free term ``(w0 - a1 r[0]) E^k``;
+        it is taken out again here.
+        """
+        c = self.coef
+        return c if self.traj is None else c - self.traj.cc
+
+    def modal(self, r: FloatArray) -> np.ndarray:
+        """Complete modal trajectory (m, N): road-driven part plus the fitted free response."""
+        W = self.coef[:, None] * self.P
+        if self.traj is not None:
+            for jr, PQ in enumerate(self.traj.PQ):
+                W += self.traj.Ca[:, jr:jr + 1] * PQ
+                W -= np.outer(self.traj.Cb[:, jr], r[jr])
+        return W
+
+
+@dataclass
+class WindowProblem(OutputErrorProblem):
+    """:class:`~estimator.identify.OutputErrorProblem` with a lean evaluation path.
+
+    Parameters are those of the parent class plus ``ssmap``, an optional
+    :class:`StateSpaceMap` built once for the monitor. The lean path is taken when the time
+    grid is uniform, every fitted sample is finite, the weights are 1 and
+    ``x0="estimate"`` (attribute ``lean``); ``n_fallback`` counts evaluations that needed
+    the parent's path.
+    """
+
+    ssmap: StateSpaceMap | None = None
+    lean: bool = field(init=False, default=False)
+    n_fallback: int = field(init=False, default=0)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        m = self.model
+        self._cache: dict[tuple[float, ...], _Eval] = {}
+        self.lean = bool(self._full and self.h is not None and self._unit_w
+                         and isinstance(self.x0, str) and self.x0 == "estimate"
+                         and self.t.size >= 2)
+        if not self.lean:
+            return
+        if self.ssmap is None or self.ssmap.model is not m:
+            self.ssmap = StateSpaceMap(m, {q.name: q.default for q in m.params}, [])
+        nr = len(m.roads)
+        self._nr = nr
+        self._N = int(self.t.size)
+        self._names = [q.name for q in m.params]
+        self._r = np.ascontiguousarray(self.U[:, :nr].T)  # (nr, N)
+        self._r0 = self._r[:, 0].copy()
+        self._r0l = self._r0.tolist()
+        self._rc = self._r.astype(complex)
+        self._hf = float(self.h)  # type: ignore[arg-type]
+        self._UT = np.ascontiguousarray(self.U.T)  # (2 nr, N)
+        self._Yflat = np.ascontiguousarray(self.Ymeas.T).ravel()  # (p N,) channel-major
+        self._road = bool(np.any(self._r))
+        self._YT = np.ascontiguousarray(self.Ymeas.T)  # (p, N)
+        self._rdot = bool(np.any(self.U[:, nr:]))
+        # fitted channels that are states (positions/velocities): CV = V[rows] * fac
+        self._rows = [i + (self._nq if order == 1 else 0) for i, order in self._kind]
+        self._state_rows = all(order < 2 for _, order in self._kind)
+        self._prow = len(self._rows)
+        self._rows_are_range = self._rows == list(range(self._prow))
+        self._pos_only = all(order == 0 for _, order in self._kind)
+        # every measured model channel (for the RMS of all channels at the optimum)
+        self._all = [c for c in m.channels if c in self.meas.measured]
+        idx = {q: i for i, q in enumerate(m.coords)}
+        self._all_kind = [(idx[c.split("_")[0]],
+                           2 if c.endswith("_ddot") else (1 if c.endswith("_dot") else 0))
+                          for c in self._all]
+        self._Mall = np.array([np.asarray(self.meas.measured[c], dtype=float) for c in self._all])
+        # RMS of each fitted channel (the identifiability scale of a noise-free channel)
+        self._ref = np.sqrt((self.Ymeas0 * self.Ymeas0).mean(axis=0))
+
+    # ---- helpers -------------------------------------------------------------------------
+    def _maps(self, kinds: list[tuple[int, int]], A: FloatArray, B: FloatArray
+              ) -> tuple[FloatArray, FloatArray]:
+        """Output maps ``y = Cm x + Dm u`` of the channels ``kinds``."""
+        nq = self._nq
+        Cm = np.zeros((len(kinds), A.shape[0]))
+        Dm = np.zeros((len(kinds), B.shape[1]))
+        for j, (i, order) in enumerate(kinds):
+            if order == 0:
+                Cm[j, i] = 1.0
+            elif order == 1:
+                Cm[j, nq + i] = 1.0
+            else:
+                Cm[j] = A[nq + i]
+                Dm[j] = B[nq + i]
+        return Cm, Dm
+
+    def _pattern(self, wi: list[float]) -> _Pattern | None:
+        """Mode bookkeeping for the eigenvalue pattern of ``dgeev`` (cached per pattern).
+
+        ``None`` when the pattern is not a clean sequence of real eigenvalues and
+        conjugate pairs (positive imaginary part first), as LAPACK returns them.
+        """
+        sig = tuple(0 if v == 0.0 else (1 if v > 0 else -1) for v in wi)
+        got = _PATTERNS.get(sig)
+        if got is not None:
+            return got
+        k1: list[int] = []
+        k2: list[int] = []
+        j = 0
+        n = len(sig)
+        while j < n:
+            if sig[j] == 0:
+                k1.append(j)
+                k2.append(j)
+                j += 1
+            elif sig[j] > 0 and j + 1 < n and sig[j + 1] < 0:
+                k1.append(j)
+                k2.append(j + 1)
+                j += 2
+            else:
+                return None
+        mm = len(k1)
+        is_pair = [x != y for x, y in zip(k1, k2)]
+        fac = np.array([2.0 if q else 1.0 for q in is_pair])
+        sel_v = np.zeros((n, mm), dtype=complex)  # V = vr @ sel_v
+        for i, (x, y) in enumerate(zip(k1, k2)):
+            sel_v[x, i] = 1.0
+            if is_pair[i]:
+                sel_v[y, i] = 1j
+        got = _Pattern(k1, k2, is_pair, fac, np.flatnonzero(is_pair), sel_v, sel_v * fac)
+        _PATTERNS[sig] = got
+        return got
+
+    # ---- the lean evaluation ------------------------------------------------------------
+    def _evaluate(self, p: Mapping[str, float]) -> _Eval | None:
+        """Residual of the fitted channels at ``p`` by the lean path (``None``: not covered).
+
+        Arrays are laid out modes x samples so every elementwise operation runs over
+        contiguous rows of ``N`` samples; per-mode scalars are Python complex numbers, and
+        the complex eigenvectors are never formed (real products with LAPACK's real and
+        imaginary parts instead).
+        """
+        vals = [p[k] for k in self._names]
+        key = tuple(vals)
+        got = self._cache.get(key)
+        if got is not None:
+            return got
+        A, B, Bz, BB = self.ssmap.from_values(vals)  # type: ignore[union-attr]
+        nr = self._nr
+        wr, wi, vl, vr, info = _dgeev(A, compute_vl=1, compute_vr=1)
+        if info != 0:
+            return None
+        wrl = wr.tolist()
+        wil = wi.tolist()
+        lim = 0.0
+        for x, y in zip(wrl, wil):
+            a = math.hypot(x, y)
+            if not a < math.inf:  # NaN or inf
+                return None
+            if a > lim:
+                lim = a
+        tol = 1e-12 * (lim if lim > 1.0 else 1.0)
+        for v in wil:
+            if v != 0.0 and abs(v) <= tol:
+                return None  # within rounding of the real axis: the parent decides
+        pat = self._pattern(wil)
+        if pat is None:
+            return None
+        n = len(wrl)
+        # u_i^H v_i from the real parts: (a - ib)^T (c + id) = a.c + b.d + i (a.d - b.c)
+        Mv = (vl.T @ vr).tolist()
+        uv: list[complex] = []
+        bound = 0.0
+        for j, jj, pr in zip(pat.k1, pat.k2, pat.is_pair):
+            x = (complex(Mv[j][j] + Mv[jj][jj], Mv[j][jj] - Mv[jj][j]) if pr
+                 else complex(Mv[j][j], 0.0))
+            if x == 0.0:
+                return None
+            uv.append(x)
+            bound += (2.0 if pr else 1.0) / abs(x)
+        # cond_1(V) <= sqrt(n) sum_i fac_i / |u_i^H v_i| for unit eigenvectors; the exact
+        # test of modal_form only when that bound is not already below the limit
+        if math.sqrt(n) * bound > MAX_V_COND:
+            V = vr @ pat.sel_v
+            Vinv = (vl @ pat.sel_v).conj().T / np.array(uv)[:, None]
+            if (np.abs(V).sum(axis=0).max() * (np.abs(Vinv) * pat.fac[:, None]).sum(axis=0).max()
+                    > MAX_V_COND):
+                return None
+        mm = len(uv)
+        N = self._N
+        h = self._hf
+        lam = [complex(wrl[j], wil[j]) for j in pat.k1]
+        if max(-x.real for x in lam) * h * (N - 1) > MAX_DECAY_EXPONENT:
+            return None
+        # fitted channels per mode: CV = (Cm V) fac
+        if self._state_rows:
+            CV = (vr[:self._prow] if self._rows_are_range else vr[self._rows]) @ pat.sel_cv
+            Cm = Dm = None
+        else:
+            Cm, Dm = self._maps(self._kind, A, B)
+            CV = (Cm @ vr) @ pat.sel_cv
+        # per mode: E = exp(lam h), first-order-hold weights (as suspid.simulate._foh_weights)
+        # and, with b = V^-1 Bz and w0 = -V^-1 Bv r[0] (forced response from rest),
+        #   w[k] = E^k (w0 + sum_{l<k} b (g0 r[l] + g1 r[l+1]) E^-(l+1))
+        #        = (a0 + a1) E^k Q[k] - a0 r[k] + (w0 - a1 r[0]) E^k,
+        # q[l] = r[l] E^-l, Q = cumsum(q), a0 = b g0 / E, a1 = b g1 (w[0] = w0 exactly).
+        # The last term is a free response: the least-squares initial state absorbs it, so
+        # it is left out of the residual and subtracted from the free coefficients after.
+        road = self._road
+        if road:
+            VZ = (vl.T @ BB).tolist()  # rows a^T [Br | Bv | Bz], b^T [...] of left eigenvectors
+        El: list[complex] = []
+        ca: list[list[complex]] = []  # a0 + a1 per mode and road
+        cb: list[list[complex]] = []  # a0
+        cc: list[complex] = []  # w0 - a1 r[0]
+        r0l = self._r0l
+        for i, lm in enumerate(lam):
+            z = lm * h
+            e = cmath.exp(z)
+            if abs(z) < 1e-3:
+                i0 = h * (1 + z / 2 + z * z / 6 + z ** 3 / 24)
+                i1 = h * (0.5 + z / 6 + z * z / 24 + z ** 3 / 120)
+            else:
+                i0 = (e - 1) / z * h
+                i1 = (e - 1 - z) / (z * z) * h
+            g0, g1 = i0 - i1, i1
+            El.append(e)
+            if road:
+                j, jj = pat.k1[i], pat.k2[i]
+                # row i of V^-1 [Br | Bv | Bz]
+                if pat.is_pair[i]:
+                    X = [complex(x, -y) / uv[i] for x, y in zip(VZ[j], VZ[jj])]
+                else:
+                    X = [x / uv[i] for x in VZ[j]]
+                c0 = 0j
+                ra, rb = [], []
+                for jr in range(nr):
+                    xb = X[2 * nr + jr]  # b = V^-1 Bz
+                    a0 = xb * g0 / e
+                    a1 = xb * g1
+                    ra.append(a0 + a1)
+                    rb.append(a0)
+                    c0 -= (X[nr + jr] + a1) * r0l[jr]  # w0 = -V^-1 Bv r[0]
+                ca.append(ra)
+                cb.append(rb)
+                cc.append(c0)
+        P = np.empty((mm, N), dtype=complex)
+        P[:] = np.array(El)[:, None]
+        P[:, 0] = 1.0
+        np.cumprod(P, axis=1, out=P)
+        if road:
+            Ca = np.array(ca)  # (m, nr)
+            Cb = np.array(cb)
+            PQ = []
+            R = self._YT.copy()
+            for jr in range(nr):
+                # rows 0..m-1: E^k Q[k]; row m: the road itself (complex copy made once)
+                buf = np.empty((mm + 1, N), dtype=complex)
+                np.cumsum(np.divide(self._r[jr], P), axis=1, out=buf[:mm])
+                buf[:mm] *= P
+                buf[mm] = self._rc[jr]
+                PQ.append(buf[:mm])
+                # R -= Re(CV diag(a) PQ - (CV a0) r), one product
+                M = np.empty((CV.shape[0], mm + 1), dtype=complex)
+                np.multiply(CV, Ca[:, jr], out=M[:, :mm])
+                M[:, mm] = -(CV @ Cb[:, jr])
+                R -= (M @ buf).real
+            if not self._pos_only:
+                CB = B[self._rows, nr:] if Cm is None else Cm @ B[:, nr:]
+                R -= CB @ self._r
+                if Dm is not None and self._rdot:
+                    R -= Dm @ self._UT
+            R = R.ravel()
+            traj = _Traj(PQ, Ca, Cb, np.array(cc))
+        else:
+            R = self._Yflat.copy()
+            traj = None
+        # least-squares free modal coefficients from the explicit regressors:
+        # column a = Re(CV[:, i] E_i^k) for every mode, then -Im(...) for the complex ones
+        T = CV.T[:, :, None] * P[:, None, :]  # (m, p, N)
+        pairs = pat.pairs
+        npair = pairs.size
+        pch = CV.shape[0]
+        G = np.empty((mm + npair, pch, N))
+        G[:mm] = T.real
+        if npair:
+            np.negative(T.imag[pairs], out=G[mm:])
+        Gf = G.reshape(mm + npair, pch * N)
+        ev, vec, info = _dsyev(Gf @ Gf.T)
+        evl = ev.tolist()
+        if info != 0 or not (evl[0] > 0 and evl[-1] <= MAX_GRAM_COND * evl[0]):
+            return None
+        sol = vec @ ((Gf @ R) @ vec / ev)  # not finite only if R is: the cost is then inf
+        R -= sol @ Gf
+        out = _Eval(key, vr, pat, A, B, P, traj, sol, R.reshape(pch, N))
+        cache = self._cache
+        if len(cache) >= CACHE_SIZE:
+            del cache[next(iter(cache))]  # oldest first
+        cache[key] = out
+        return out
+
+    def _x0(self, ev: _Eval) -> FloatArray:
+        """Initial state of an evaluation (the free part; the forced part starts at rest)."""
+        return np.real((ev.vr @ ev.pat.sel_v) @ (ev.c * ev.pat.fac))
+
+    # ---- the parent's interface -----------------------------------------------------------
+    def predict(self, p: Mapping[str, float]) -> Prediction:
+        """Predict the fitted channels for ``p`` with the best ``x0`` (lean path if possible)."""
+        if self.lean:
+            ev = self._evaluate(p)
+            if ev is not None:
+                res = ev.R.T.copy()
+                return Prediction(Y=self.Ymeas - res, x0=self._x0(ev), residual=res)
+            self.n_fallback += 1
+        return super().predict(p)
+
+    def residual_vector(self, p: Mapping[str, float]) -> FloatArray:
+        """Residuals of the fitted samples, flattened sample-major (as the parent's)."""
+        if self.lean:
+            ev = self._evaluate(p)
+            if ev is not None:
+                return ev.R.T.ravel()
+            self.n_fallback += 1
+        return super().residual_vector(p)
+
+    def normalized_ss(self, p: Mapping[str, float]) -> float:
+        """Sum of squared residuals divided by the data's (dimensionless, 1 = no fit)."""
+        if self.lean:
+            try:
+                ev = self._evaluate(p)
+            except (np.linalg.LinAlgError, ValueError, FloatingPointError, OverflowError,
+                    ZeroDivisionError):
+                return math.inf
+            if ev is not None:
+                r = ev.R.ravel()
+                v = float(r @ r) / self.scale
+                return v if math.isfinite(v) else math.inf
+            self.n_fallback += 1
+        return super().normalized_ss(p)
+
+    def _all_outputs(self, ev: _Eval) -> FloatArray:
+        """Every measured model channel (rows) of an evaluation, from its estimated ``x0``."""
+        Cm, Dm = self._maps(self._all_kind, ev.A, ev.B)
+        CV = (Cm @ ev.vr) @ ev.pat.sel_cv
+        Y = (CV @ ev.modal(self._r)).real + (Cm @ ev.B[:, self._nr:]) @ self._r + Dm @ self._UT
+        return Y
+
+    def all_outputs(self, p: Mapping[str, float], x0: FloatArray) -> dict[str, FloatArray]:
+        """Every measured channel at ``p`` from the initial state ``x0`` (SI).
+
+        Reuses the lean evaluation at ``p`` when ``x0`` is its estimated initial state;
+        otherwise the core's simulation (:func:`suspid.simulate.simulate_states`).
+        """
+        if self.lean:
+            ev = self._evaluate(p)
+            if ev is not None and np.array_equal(self._x0(ev), np.asarray(x0, dtype=float)):
+                Y = self._all_outputs(ev)
+                return {c: Y[j] for j, c in enumerate(self._all)}
+        X = simulate_states(self.model, p, self.t, self.U, np.asarray(x0, dtype=float))
+        out = outputs(self.model, p, X, self.U)
+        return {c: out[c] for c in self.model.channels if c in self.meas.measured}
+
+    # ---- result at the optimum ----------------------------------------------------------------
+    def finish(self, params: Parameters, p_hat: Mapping[str, float], nfev: int,
+               converged: bool, simplex: list[Mapping[str, float]] | None = None,
+               rel_step: float = 1e-6) -> IdentResult:
+        """:func:`estimator.identify.finish` for a window: result, stderr, identifiability.
+
+        Same quantities and formulas (RMS of every measured channel, per-channel residual
+        variance, sandwich covariance of the log-parameters, identifiability verdict on the
+        noise-normalised Jacobian), with the evaluations reused on the lean path:
+
+        * the residual at ``p_hat`` is Nelder-Mead's best vertex (cached);
+        * the Jacobian of the residuals with respect to the log-parameters is the *secant*
+          through Nelder-Mead's final simplex (``simplex``: its vertices, best first, all
+          evaluated already): ``J = dR D^-1`` with ``D`` the edges from the best vertex
+          (log units) and ``dR`` the residual differences. With edges of ~``xatol``
+          (0.2 %) its truncation error is ~0.1-1 % of the Jacobian, i.e. of ``stderr_fit``
+          (itself a small part of ``stderr`` next to the ``sigma_floor``). When an edge
+          is longer than :data:`SECANT_MAX_EDGE`, the edge matrix is ill-conditioned
+          (condition number > :data:`SECANT_MAX_COND`) or a vertex was not evaluated on
+          the lean path, a forward difference (``rel_step``, ``n_free`` evaluations)
+          is used instead.
+
+        Not lean: :func:`estimator.identify.finish` (central differences).
+
+        Parameters
+        ----------
+        params : Parameters
+            Free/fixed split (the values are not used).
+        p_hat : mapping
+            The estimate, every parameter (SI).
+        nfev : int
+            Nelder-Mead evaluations (reported).
+        converged : bool
+        simplex : list of mapping, optional
+            Nelder-Mead's final simplex as parameter sets (SI), best vertex first.
+        rel_step : float
+            Forward-difference step in log-parameter units.
+
+        Returns
+        -------
+        IdentResult
+        """
+        free = params.free
+        ev = self._evaluate(p_hat) if self.lean else None
+        if ev is None or not free:
+            return finish(self, params, p_hat, nfev, converged, with_stderr=True)
+        model = self.model
+        pch, N = ev.R.shape
+        r0 = ev.R.ravel()
+        x0 = self._x0(ev)
+        Yall = self._all_outputs(ev)
+        rms = dict(zip(self._all, np.sqrt(((self._Mall - Yall) ** 2).mean(axis=1)).tolist()))
+        nf = len(free)
+        J = self._secant(free, p_hat, r0, simplex)
+        if J is None:
+            cols = []
+            for k in free:
+                q = dict(p_hat)
+                q[k] = p_hat[k] * math.exp(rel_step)
+                ek = self._evaluate(q)
+                if ek is None:
+                    return finish(self, params, p_hat, nfev, converged, with_stderr=True)
+                cols.append((ek.R.ravel() - r0) / rel_step)
+            J = np.column_stack(cols)
+        # residual = y - yhat, so -d(residual) = d(yhat); rows channel-major (j*N + k)
+        J = -J
+        n_obs = pch * N
+        ss = float(r0 @ r0)
+        dof = max(n_obs - nf, 1) / n_obs
+        sig2 = (ev.R * ev.R).sum(axis=1) / (N * dof)
+        warnings = list(self.meas.warnings) + list(self.warnings)
+        scale_c = np.sqrt(np.where(sig2 > 0, sig2, 0.0))
+        ref = self._ref
+        scale_c = np.where(scale_c > 1e-9 * np.maximum(ref, 1e-300), scale_c,
+                           np.maximum(ref, 1e-300))
+        J3 = J.reshape(pch, N, nf)
+        Jn = (J3 / scale_c[:, None, None]).reshape(n_obs, nf)
+        # the verdict needs the singular values and right singular vectors of Jn only:
+        # those of its QR factor R (n_free x n_free), computed without an SVD of Jn
+        qr, _, _, info = _dgeqrf(Jn)
+        small = qr[:nf] * self._upper(nf)
+        if info != 0 or not np.isfinite(small).all():
+            small = Jn
+        verdict = _verdict(small, free, {q.name: q.kind for q in model.params})
+        identifiable = verdict.identifiable
+        warnings += verdict.warnings
+        stderr: dict[str, float] = {k: float("nan") for k in free}
+        cov_log = None
+        H = J.T @ J
+        # pseudo-inverse of the symmetric H (as numpy's pinv with rcond=1e-12)
+        w, Q, info = _dsyev(H)
+        wl = w.tolist()
+        cut = 1e-12 * max(abs(x) for x in wl) if wl else 0.0
+        if info == 0 and all(math.isfinite(x) for x in wl) and cut > 0:
+            Hinv = (Q * np.array([1.0 / x if abs(x) > cut else 0.0 for x in wl])) @ Q.T
+            Bm = (J3 * sig2[:, None, None]).reshape(n_obs, nf).T @ J
+            cov_log = Hinv @ Bm @ Hinv
+            for i, k in enumerate(free):
+                d = math.sqrt(max(float(cov_log[i, i]), 0.0))
+                stderr[k] = float(p_hat[k] * d) if identifiable else float("inf")
+        else:
+            warnings.append("could not invert the sensitivity matrix for standard errors")
+        nss = ss / self.scale
+        aic = n_obs * math.log(max(nss, 1e-300) / n_obs) + 2 * nf
+        bic = n_obs * math.log(max(nss, 1e-300) / n_obs) + nf * math.log(n_obs)
+        if not converged:
+            warnings.append("Nelder–Mead stopped on its evaluation budget before converging")
+        return IdentResult(
+            model=model.name, params={k: float(v) for k, v in p_hat.items()},
+            fixed=params.fixed, stderr=stderr, cost=self.seed_cost(ss), nfev=nfev,
+            success=bool(converged and identifiable), rms_residual=rms,
+            identifiable=identifiable, warnings=warnings, x0=[float(v) for v in x0],
+            aic=aic, bic=bic, n_obs=n_obs, singular_values=verdict.singular_values,
+            cov_log=cov_log)
+
+    def _secant(self, free: list[str], p_hat: Mapping[str, float], r0: FloatArray,
+                simplex: list[Mapping[str, float]] | None) -> FloatArray | None:
+        """Residual Jacobian (log-parameters) from the final simplex, or ``None``."""
+        nf = len(free)
+        if simplex is None or len(simplex) != nf + 1:
+            return None
+        l0 = [math.log(p_hat[k]) for k in free]
+        D = np.empty((nf, nf))
+        dR = np.empty((r0.size, nf))
+        for i, q in enumerate(simplex[1:]):
+            ek = self._cache.get(tuple([q[k] for k in self._names]))
+            if ek is None:
+                return None
+            D[i] = [math.log(q[k]) - a for k, a in zip(free, l0)]
+            dR[:, i] = ek.R.ravel() - r0
+        if not np.abs(D).max() <= SECANT_MAX_EDGE:
+            return None
+        Dinv, cond = small_inverse(D)
+        if Dinv is None or cond > SECANT_MAX_COND:
+            return None
+        # dR = J D^T  ->  J = dR D^-T
+        return dR @ Dinv.T
+
+    @staticmethod
+    def _upper(n: int) -> FloatArray:
+        """Upper-triangular 0/1 mask (n x n), cached for the process."""
+        got = _UPPER.get(n)
+        if got is None:
+            got = _UPPER[n] = np.triu(np.ones((n, n)))
+        return got

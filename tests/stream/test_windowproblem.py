@@ -1,0 +1,164 @@
+"""The window problem's lean evaluation path equals the core's OutputErrorProblem.
+
+The lean path (:mod:`estimator.stream.windowproblem`) only changes how a window's cost is
+computed (affine state-space map, one LAPACK eigen-decomposition, closed-form FOH scan,
+explicit least squares for the initial state) and how the stderr Jacobian is obtained
+(secant through the final simplex); these tests pin it to the core's results.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from estimator.identify import OutputErrorProblem, Parameters, finish
+from estimator.inspection import contact_force_response, inspect
+from estimator.stream.scenarios import damper_wear
+from estimator.stream.windowproblem import StateSpaceMap, WindowProblem, small_inverse
+from suspid.io.csvio import Measurement
+from suspid.simulate import outputs, simulate_states
+
+FIX = ("m1", "m2", "c2", "k2")
+
+
+@pytest.fixture(scope="module")
+def window(quarter2):
+    """One 3 s window of the damper-wear stream at 250 Hz, as the monitor fits it."""
+    s = damper_wear(quarter2, duration=12.0, fs=500.0, seed=2)
+    sl = slice(1000, 2501, 2)
+    road = {k: s.data[k][sl] for k in ("r", "r_dot")}
+    meas = Measurement(s.t[sl].copy(), road, {c: s.data[c][sl] for c in ("x1", "x2", "x1_ddot")},
+                       source="window")
+    params = Parameters.for_model(quarter2, fix={k: s.nominal[k] for k in FIX})
+    return s, meas, params
+
+
+def _points(p0, n=12, spread=0.3, seed=0):
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(n):
+        q = dict(p0)
+        for k in ("c1", "k1"):
+            q[k] = p0[k] * math.exp(rng.normal(0.0, spread))
+        out.append(q)
+    return out
+
+
+@pytest.mark.parametrize("cost", ["sse", "frobenius"])
+def test_lean_cost_residual_and_x0_equal_the_core(quarter2, window, cost) -> None:
+    s, meas, params = window
+    ref = OutputErrorProblem(quarter2, meas, cost=cost)
+    ssm = StateSpaceMap(quarter2, params.valuesdict(), params.free)
+    assert ssm.affine_ab and ssm.affine_bz
+    lean = WindowProblem(quarter2, meas, cost=cost, ssmap=ssm)
+    assert lean.lean
+    for q in _points(s.nominal):
+        a, b = ref.normalized_ss(q), lean.normalized_ss(q)
+        assert b == pytest.approx(a, rel=1e-10)
+        ra, rb = ref.residual_vector(q), lean.residual_vector(q)
+        assert np.max(np.abs(ra - rb)) <= 1e-10 * np.max(np.abs(ra))
+        pa, pb = ref.predict(q), lean.predict(q)
+        # the estimated initial state, and the trajectory it starts (every channel)
+        assert np.allclose(pb.x0, pa.x0, rtol=1e-7, atol=1e-12 * np.max(np.abs(pa.x0)))
+        oa = outputs(quarter2, q, simulate_states(quarter2, q, ref.t, ref.U, pa.x0), ref.U)
+        ob = lean.all_outputs(q, pb.x0)
+        for c in ("x1", "x2", "x1_ddot"):
+            assert np.max(np.abs(oa[c] - ob[c])) <= 1e-9 * np.max(np.abs(oa[c]))
+    assert lean.n_fallback == 0
+
+
+def test_window_finish_equals_the_core_finish(quarter2, window) -> None:
+    s, meas, params = window
+    ref = OutputErrorProblem(quarter2, meas)
+    lean = WindowProblem(quarter2, meas, ssmap=StateSpaceMap(quarter2, params.valuesdict(), params.free))
+    p = dict(s.nominal)
+    p["c1"] *= 1.004  # near, not at, the optimum
+    a = finish(ref, params, p, 12, True)
+    # forward differences (no simplex given)
+    b = lean.finish(params, p, 12, True)
+    # secant through a small simplex around p (as Nelder-Mead's final simplex)
+    simplex = [p, dict(p, c1=p["c1"] * math.exp(2e-3)),
+               dict(p, k1=p["k1"] * math.exp(1.5e-3), c1=p["c1"] * math.exp(-1e-3))]
+    for q in simplex:
+        lean.normalized_ss(q)
+    c = lean.finish(params, p, 12, True, simplex=simplex)
+    for res, tol in ((b, 1e-4), (c, 2e-2)):
+        assert res.identifiable == a.identifiable
+        assert res.cost == pytest.approx(a.cost, rel=1e-10)
+        assert res.warnings == a.warnings
+        for k in ("c1", "k1"):
+            assert res.stderr[k] == pytest.approx(a.stderr[k], rel=tol)
+        for ch in ("x1", "x2", "x1_ddot"):
+            assert res.rms_residual[ch] == pytest.approx(a.rms_residual[ch], rel=1e-9)
+        assert np.allclose(res.x0, a.x0, rtol=1e-7, atol=1e-12)
+        assert np.allclose(res.singular_values, a.singular_values, rtol=tol)
+
+
+def test_missing_samples_and_irregular_grids_use_the_core(quarter2, window) -> None:
+    s, meas, params = window
+    x1 = meas.measured["x1"].copy()
+    x1[100:110] = np.nan
+    gappy = Measurement(meas.t, meas.road, dict(meas.measured, x1=x1), source="window")
+    t2 = meas.t.copy()
+    t2[5:] += 1e-3
+    irregular = Measurement(t2, meas.road, meas.measured, source="window")
+    q = dict(s.nominal)
+    for m in (gappy, irregular):
+        lean = WindowProblem(quarter2, m)
+        assert not lean.lean
+        assert lean.normalized_ss(q) == OutputErrorProblem(quarter2, m).normalized_ss(q)
+
+
+def test_state_space_map_is_exact_and_knows_when_it_is_not_affine(quarter2) -> None:
+    base = quarter2.defaults()
+    rng = np.random.default_rng(3)
+    for free, affine in ((["c1", "k1"], True), (["c1", "k1", "c2", "k2"], True),
+                         (["m1", "c1", "k1"], False)):
+        ssm = StateSpaceMap(quarter2, base, free)
+        assert ssm.affine_ab is affine
+        for _ in range(5):
+            q = dict(base)
+            for k in free:
+                q[k] = base[k] * math.exp(rng.normal(0.0, 0.5))
+            A, B, Bz = ssm(q)
+            A0, B0 = quarter2.state_space(q)
+            assert np.allclose(A, A0, rtol=1e-12, atol=1e-12 * np.abs(A0).max())
+            assert np.allclose(B, B0, rtol=1e-12, atol=1e-12 * np.abs(B0).max())
+            assert np.allclose(Bz, A0 @ B0[:, 1:] + B0[:, :1], rtol=1e-10,
+                               atol=1e-12 * np.abs(A0 @ B0[:, 1:]).max())
+    # c2 free: B_v varies, so Bz = A B_v + B_r is not affine (computed, still exact)
+    assert not StateSpaceMap(quarter2, base, ["c1", "k1", "c2", "k2"]).affine_bz
+    # a fixed parameter away from its base value: the model's own matrices
+    ssm = StateSpaceMap(quarter2, base, ["c1", "k1"])
+    q = dict(base, m1=2 * base["m1"])
+    assert np.allclose(ssm(q)[0], quarter2.state_space(q)[0])
+
+
+def test_small_inverse() -> None:
+    rng = np.random.default_rng(4)
+    for n in (1, 2, 3):
+        M = rng.normal(size=(n, n)) + 3 * np.eye(n)
+        inv, cond = small_inverse(M)
+        assert np.allclose(inv, np.linalg.inv(M))
+        assert cond == pytest.approx(np.linalg.cond(M, 1))
+    assert small_inverse(np.array([[1.0, 2.0], [2.0, 4.0]])) == (None, math.inf)
+
+
+def test_inspection_search_finds_the_dense_grid_extrema(quarter2) -> None:
+    """Two nested grids + a parabolic vertex give the minimum of a 200 001-point sweep."""
+    base = quarter2.defaults()
+    for c1 in (1500.0, 900.0, 450.0):
+        p = dict(base, c1=c1)
+        res = inspect(p, quarter2)
+        f = np.geomspace(2.0, 25.0, 200_001)
+        H = contact_force_response(quarter2, p, f)
+        fs = (p["m1"] + p["m2"]) * 9.80665
+        rh = 100 * (fs - 0.003 * np.abs(H)) / fs
+        assert res.eusama_pct == pytest.approx(max(0.0, rh.min()), abs=1e-6)
+        assert res.eusama_f_hz == pytest.approx(f[np.argmin(rh)], rel=1e-4)
+        fb = np.geomspace(max(2.0, res.f_body_hz), min(25.0, res.f_wheel_hz), 200_001)
+        ph = np.degrees(np.unwrap(np.angle(contact_force_response(
+            quarter2, p, np.concatenate([[1e-3], fb])))))
+        ph = (ph - 360 * np.round((ph[0] - 180) / 360))[1:]
+        assert res.phi_min_deg == pytest.approx(ph.min(), abs=1e-6)
