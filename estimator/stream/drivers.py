@@ -156,6 +156,51 @@ def replay(driver: CanWindowDriver, messages: Iterable[Any]) -> int:
     return n
 
 
+def replay_log(driver: CanWindowDriver, path: Any, stats: Any = None) -> int:
+    """Replay a CAN log file as fast as possible; returns the number of frames.
+
+    The log is read and decoded in NumPy batches (:func:`estimator.decode.feed_log`: a
+    candump log never becomes :class:`can.Message` objects). Between checks for due
+    windows it feeds as many frames as it expects before the next window end (the frame
+    rate seen so far), at least ``check_every`` and at most half a step's worth, so the
+    decoder works on large batches. A window is aligned from the samples inside it only
+    and the buffer holds a window plus two steps, so cutting it up to half a step late
+    changes nothing: windows, estimates, alerts and frame statistics equal a
+    frame-by-frame :func:`replay` (``tests/stream/test_monitor_cli.py``).
+
+    Parameters
+    ----------
+    driver : CanWindowDriver
+    path : str or Path
+        ``.log``, ``.asc``, ``.blf``, ``.trc`` or ``.mf4``.
+    stats : ReadStats, optional
+        Filled with frames read and lines skipped.
+    """
+    from estimator.decode.replay import feed_log
+
+    every = max(1, driver.check_every)
+    fed = 1   # frames fed when poll() is called (it is first called after one frame)
+
+    def poll() -> int:
+        nonlocal fed
+        driver.poll()
+        k = 1
+        if math.isfinite(driver.t_first):
+            k = every
+            span = driver.listener.buffer.latest_time() - driver.t_first
+            if span > 0:
+                rate = fed / span                      # frames per second of data
+                ahead = (driver.next_end - driver.t_first - span) * rate
+                k = int(min(max(ahead, every), max(every, 0.5 * driver.step_s * rate)))
+        fed += k
+        return k
+
+    n = feed_log(driver.listener, path, stats, poll=poll)
+    driver.frames += n
+    driver.flush()
+    return n
+
+
 @dataclass
 class LiveStop:
     """Stop conditions of a live run (SIGINT/SIGTERM also stop it cleanly)."""

@@ -382,14 +382,14 @@ def _alert_bus(args: argparse.Namespace, sinks: list[Any], listener: Any, buses:
 def _run_log(args: argparse.Namespace, model: Any, cfg: Any, mon: Any, sinks: list[Any],
              buses: list[Any]) -> dict[str, Any]:
     """Replay a CAN log as fast as possible through the decoder and the windows."""
-    from estimator.stream.drivers import CanWindowDriver, replay
-    from suspid.can.logs import ReadStats, read_log
+    from estimator.stream.drivers import CanWindowDriver, replay_log
+    from suspid.can.logs import ReadStats
 
     listener = _listener(args, model, cfg, args.time_source or "timestamp")
     _alert_bus(args, sinks, listener, buses)
     drv = CanWindowDriver(listener, cfg.window_s, cfg.step_s, mon.window)
     stats = ReadStats()
-    replay(drv, read_log(args.input, stats))
+    replay_log(drv, args.input, stats)
     listener.count_malformed(stats.malformed)
     if drv.windows == 0:
         raise InputError(f"{args.input}: {drv.frames} frames but less data than one window "

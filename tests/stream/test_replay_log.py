@@ -1,0 +1,78 @@
+"""The batch log replay (``replay_log``) cuts exactly the windows a frame-by-frame replay cuts.
+
+``suspid monitor --input LOG`` reads the log as arrays and checks for due windows only every
+few hundred frames; this must not change a single window, estimate input or counter, on a
+clean log and on one with damaged lines, foreign frames and a hole in the data.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from estimator.decode import DecodeListener
+from estimator.stream.drivers import CanWindowDriver, replay, replay_log
+from estimator.stream.scenarios import damper_wear, write_log
+from firmware_sim.corrupt import corrupt_candump
+from suspid.can.logs import ReadStats, read_log
+from suspid.models import get_model
+
+
+def _windows(path: Path, batch: bool, check_every: int) -> tuple[list, dict, int]:
+    got: list[tuple[np.ndarray, dict[str, np.ndarray]]] = []
+    lst = DecodeListener("quarter2", capacity=1 << 12)
+    drv = CanWindowDriver(lst, 3.0, 1.5, lambda t, d: got.append((t.copy(), {k: v.copy() for k, v in d.items()})),
+                          check_every=check_every)
+    stats = ReadStats()
+    if batch:
+        n = replay_log(drv, path, stats)
+    else:
+        n = replay(drv, read_log(path, stats))
+    lst.count_malformed(stats.malformed)
+    return got, lst.frame_stats(), n
+
+
+def _with_hole(src: Path, dst: Path, t_from: float, t_to: float) -> None:
+    """Copy a candump log without the frames stamped in [t_from, t_to) (a dead link)."""
+    keep = []
+    for line in src.read_text().splitlines(keepends=True):
+        try:
+            t = float(line[1:line.index(")")])
+        except ValueError:      # a truncated line: keep it (it is rejected either way)
+            t = -1.0
+        if not t_from <= t < t_to:
+            keep.append(line)
+    dst.write_text("".join(keep))
+
+
+@pytest.fixture(scope="module")
+def logs(tmp_path_factory) -> dict[str, Path]:
+    d = tmp_path_factory.mktemp("replay")
+    s = damper_wear(get_model("quarter2"), duration=20.0, wear_start=2.0, seed=5)
+    clean = d / "clean.log"
+    write_log(s, str(clean))
+    damaged = d / "damaged.log"
+    corrupt_candump(clean, damaged, truncated=40, corrupted=40, foreign=60, seed=2)
+    holed = d / "holed.log"
+    _with_hole(damaged, holed, 7.2, 8.1)
+    return {"clean": clean, "damaged": damaged, "holed": holed}
+
+
+@pytest.mark.parametrize("name", ["clean", "damaged", "holed"])
+@pytest.mark.parametrize("check_every", [1, 32])
+def test_batch_replay_cuts_the_same_windows(logs: dict[str, Path], name: str, check_every: int) -> None:
+    ref, ref_stats, ref_n = _windows(logs[name], batch=False, check_every=check_every)
+    got, stats, n = _windows(logs[name], batch=True, check_every=check_every)
+    assert n == ref_n and stats == ref_stats
+    assert len(ref) == 12                     # 3 s windows every 1.5 s over 20 s
+    assert len(got) == len(ref)
+    for (t0, d0), (t1, d1) in zip(ref, got):
+        np.testing.assert_array_equal(t1, t0)
+        assert d1.keys() == d0.keys()
+        for k in d0:
+            np.testing.assert_array_equal(d1[k], d0[k])   # NaN where the hole is, on both
+    if name == "holed":
+        assert sum(np.isnan(d["x1"]).any() for _, d in got) >= 1
+    if name != "clean":
+        assert sum(stats["rejected"].values()) > 0
