@@ -7,8 +7,12 @@ PY=${PYTHON:-python3}
 if [[ ! -x .venv/bin/python ]]; then
   "$PY" -m venv .venv
 fi
-.venv/bin/python -m pip install --quiet --upgrade pip >/dev/null
-.venv/bin/python -m pip install --quiet -e ".[test]"
+# pip's and setuptools' chatter goes to .venv/install.log, shown only if the install fails
+install() { .venv/bin/python -m pip install --quiet "$@" >>.venv/install.log 2>&1 || { cat .venv/install.log >&2; exit 1; }; }
+: >.venv/install.log
+echo "setting up .venv (pip log: .venv/install.log) ..." >&2
+install --upgrade pip
+install -e ".[test]"
 export MPLBACKEND=Agg
 # small matrices: BLAS threads only add contention (see suspid/cli/__init__.py)
 export OPENBLAS_NUM_THREADS=${OPENBLAS_NUM_THREADS:-1} OMP_NUM_THREADS=${OMP_NUM_THREADS:-1}
