@@ -20,7 +20,7 @@ the termination test), not by the square root.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Mapping
+from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -40,6 +40,33 @@ class Prediction:
     Y: FloatArray  # (N, p) predicted channels
     x0: FloatArray  # initial state used (n,)
     residual: FloatArray  # (N, p) measured - predicted, NaN where missing
+
+
+def channel_kinds(coords: Sequence[str], channels: Sequence[str]) -> list[tuple[int, int]]:
+    """``(coordinate index, derivative order)`` of each channel name (``x1_dot`` -> (i, 1))."""
+    idx = {c: i for i, c in enumerate(coords)}
+    return [(idx[c.split("_")[0]], 2 if c.endswith("_ddot") else (1 if c.endswith("_dot") else 0))
+            for c in channels]
+
+
+def output_maps(kinds: Sequence[tuple[int, int]], A: FloatArray, B: FloatArray, nq: int
+                ) -> tuple[FloatArray, FloatArray]:
+    """Output maps ``y = Cm x + Dm u`` of channels given by :func:`channel_kinds`.
+
+    Positions and velocities are rows of the identity on the state ``x = [q, q']``;
+    an acceleration is the model's row ``q'' = A[nq + i] x + B[nq + i] u``.
+    """
+    Cm = np.zeros((len(kinds), A.shape[0]))
+    Dm = np.zeros((len(kinds), B.shape[1]))
+    for j, (i, order) in enumerate(kinds):
+        if order == 0:
+            Cm[j, i] = 1.0
+        elif order == 1:
+            Cm[j, nq + i] = 1.0
+        else:
+            Cm[j] = A[nq + i]
+            Dm[j] = B[nq + i]
+    return Cm, Dm
 
 
 @dataclass
@@ -96,30 +123,12 @@ class OutputErrorProblem:
         self._has_road = bool(np.any(self.U))
         data_ss = float(np.sum((self.Ymeas0 * w) ** 2))
         self.scale = data_ss if data_ss > 0 else 1.0
-        nq = len(m.coords)
-        idx = {c: i for i, c in enumerate(m.coords)}
-        self._kind = []
-        for c in self.channels:
-            base = c.split("_")[0]
-            order = 2 if c.endswith("_ddot") else (1 if c.endswith("_dot") else 0)
-            self._kind.append((idx[base], order))
-        self._nq = nq
+        self._kind = channel_kinds(m.coords, self.channels)
+        self._nq = len(m.coords)
 
     # ---- linear maps from states to channels --------------------------------------
     def _output_maps(self, A: FloatArray, B: FloatArray) -> tuple[FloatArray, FloatArray]:
-        n = self.model.n_states
-        nq = self._nq
-        Cm = np.zeros((len(self.channels), n))
-        Dm = np.zeros((len(self.channels), B.shape[1]))
-        for j, (i, order) in enumerate(self._kind):
-            if order == 0:
-                Cm[j, i] = 1.0
-            elif order == 1:
-                Cm[j, nq + i] = 1.0
-            else:
-                Cm[j] = A[nq + i]
-                Dm[j] = B[nq + i]
-        return Cm, Dm
+        return output_maps(self._kind, A, B, self._nq)
 
     def predict(self, p: Mapping[str, float]) -> Prediction:
         """Predict the measured channels for parameters ``p`` (with the best ``x0``)."""

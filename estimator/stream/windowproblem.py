@@ -48,7 +48,7 @@ from scipy.linalg.lapack import dsyev as _dsyev
 
 from estimator.identify import OutputErrorProblem, Parameters, finish
 from estimator.identify.identifiability import WEAK_TOL, Identifiability, assess
-from estimator.identify.problem import Prediction
+from estimator.identify.problem import Prediction, channel_kinds, output_maps
 from estimator.identify.result import IdentResult
 from suspid.models.base import FloatArray, SuspensionModel
 from suspid.simulate import outputs, simulate_states
@@ -345,10 +345,7 @@ class WindowProblem(OutputErrorProblem):
         self._pos_only = all(order == 0 for _, order in self._kind)
         # every measured model channel (for the RMS of all channels at the optimum)
         self._all = [c for c in m.channels if c in self.meas.measured]
-        idx = {q: i for i, q in enumerate(m.coords)}
-        self._all_kind = [(idx[c.split("_")[0]],
-                           2 if c.endswith("_ddot") else (1 if c.endswith("_dot") else 0))
-                          for c in self._all]
+        self._all_kind = channel_kinds(m.coords, self._all)
         self._Mall = np.array([np.asarray(self.meas.measured[c], dtype=float) for c in self._all])
         # RMS of each fitted channel (the identifiability scale of a noise-free channel)
         self._ref = np.sqrt((self.Ymeas0 * self.Ymeas0).mean(axis=0))
@@ -357,18 +354,7 @@ class WindowProblem(OutputErrorProblem):
     def _maps(self, kinds: list[tuple[int, int]], A: FloatArray, B: FloatArray
               ) -> tuple[FloatArray, FloatArray]:
         """Output maps ``y = Cm x + Dm u`` of the channels ``kinds``."""
-        nq = self._nq
-        Cm = np.zeros((len(kinds), A.shape[0]))
-        Dm = np.zeros((len(kinds), B.shape[1]))
-        for j, (i, order) in enumerate(kinds):
-            if order == 0:
-                Cm[j, i] = 1.0
-            elif order == 1:
-                Cm[j, nq + i] = 1.0
-            else:
-                Cm[j] = A[nq + i]
-                Dm[j] = B[nq + i]
-        return Cm, Dm
+        return output_maps(kinds, A, B, self._nq)
 
     def _pattern(self, wi: list[float]) -> _Pattern | None:
         """Mode bookkeeping for the eigenvalue pattern of ``dgeev`` (cached per pattern).

@@ -73,6 +73,14 @@ def log_format(path: str | Path, option: str = "log") -> str:
     return suf
 
 
+def _open_log(path: str | Path, stats: Optional["ReadStats"]) -> tuple[Path, str, "ReadStats"]:
+    """Path, format suffix and the stats to fill of a log about to be read (checks both)."""
+    p = Path(path)
+    suf = log_format(p, "CAN log")
+    if not p.is_file():
+        raise InputError(f"{p}: no such CAN log file")
+    return p, suf, (stats if stats is not None else ReadStats())
+
 def is_can_log(path: str | Path) -> bool:
     """``True`` if the path's suffix names a CAN log format (case-insensitive)."""
     return Path(path).suffix.lower() in FORMATS
@@ -608,11 +616,7 @@ def read_log_arrays(path: str | Path, stats: Optional[ReadStats] = None, *,
     are read as messages (:func:`read_log`) and converted ``chunk`` frames at a time.
     Same checks, errors and :class:`ReadStats` as :func:`read_log`.
     """
-    p = Path(path)
-    suf = log_format(p, "CAN log")
-    if not p.is_file():
-        raise InputError(f"{p}: no such CAN log file")
-    st = stats if stats is not None else ReadStats()
+    p, suf, st = _open_log(path, stats)
     if suf == ".log":
         return read_candump_arrays(p, st)
     return _message_batches(read_log(p, st), chunk)
@@ -712,11 +716,7 @@ def read_log(path: str | Path, stats: Optional[ReadStats] = None) -> Iterator[ca
     UsageError
         Unknown suffix.
     """
-    p = Path(path)
-    suf = log_format(p, "CAN log")
-    if not p.is_file():
-        raise InputError(f"{p}: no such CAN log file")
-    st = stats if stats is not None else ReadStats()
+    p, suf, st = _open_log(path, stats)
     if suf == ".log":
         return _read_candump(p, st)
     try:
