@@ -99,6 +99,23 @@ def iso8608_profile(t: FloatArray, road_class: str = "C", v_kmh: float = 50.0, s
     return r, rd
 
 
+def time_grid(duration: float, fs: float) -> FloatArray:
+    """Sample times ``0, 1/fs, ..., duration`` (s).
+
+    Raises
+    ------
+    UsageError
+        A duration or rate that is not finite and > 0, or more than :data:`MAX_SAMPLES`
+        samples.
+    """
+    if not (0 < duration < math.inf and 0 < fs < math.inf):
+        raise UsageError(f"duration and sample rate must be finite and > 0, got {duration} s, {fs} Hz")
+    if duration * fs > MAX_SAMPLES:
+        raise UsageError(f"duration x sample rate = {duration * fs:.3g} samples; expected at most "
+                         f"{MAX_SAMPLES:.0e} ({duration} s at {fs} Hz)")
+    return np.arange(int(round(duration * fs)) + 1) / fs
+
+
 def make_scenario(model: SuspensionModel, name: str, duration: float = 5.0, fs: float = 1000.0,
                   params: Mapping[str, float] | None = None, h: float = 0.1, l: float = 3.0,
                   v_kmh: float = 20.0, t0: float = 0.5, rise: float = 0.02,
@@ -130,12 +147,7 @@ def make_scenario(model: SuspensionModel, name: str, duration: float = 5.0, fs: 
     x0 : ndarray
         Initial state ``[q, q']``.
     """
-    if not (0 < duration < math.inf and 0 < fs < math.inf):
-        raise UsageError(f"duration and sample rate must be finite and > 0, got {duration} s, {fs} Hz")
-    if duration * fs > MAX_SAMPLES:
-        raise UsageError(f"duration x sample rate = {duration * fs:.3g} samples; expected at most "
-                         f"{MAX_SAMPLES:.0e} ({duration} s at {fs} Hz)")
-    t = np.arange(int(round(duration * fs)) + 1) / fs
+    t = time_grid(duration, fs)
     p = dict(model.defaults(), **(params or {}))
     n = model.n_states
     road: dict[str, FloatArray] = {}

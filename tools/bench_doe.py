@@ -18,7 +18,13 @@ import resource
 import subprocess
 import sys
 import time
+from pathlib import Path
 
+
+#: the console script of the running interpreter's environment (as a user runs it), or
+#: ``python -m suspid`` when it is not installed as a script
+SUSPID = ([str(Path(sys.executable).with_name("suspid"))]
+          if Path(sys.executable).with_name("suspid").exists() else [sys.executable, "-m", "suspid"])
 
 def _cpu_children() -> float:
     r = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -35,13 +41,13 @@ def main() -> int:
     t_all = time.perf_counter()
     cpu_all = _cpu_children()
     for cost in ("sse", "frobenius"):
-        cmd = ["suspid", "doe", "--model", args.model, "--cost", cost,
+        cmd = [*SUSPID, "doe", "--model", args.model, "--cost", cost,
                "--init-scale", args.init_scale, "--json"]
         t0 = time.perf_counter()
         c0 = _cpu_children()
         proc = subprocess.run(cmd, capture_output=True, text=True, check=True)
         out = json.loads(proc.stdout)
-        rows.append({"command": " ".join(cmd), "successes": out["successes"], "total": out["total"],
+        rows.append({"command": " ".join(["suspid"] + cmd[len(SUSPID):]), "successes": out["successes"], "total": out["total"],
                      "wall_s": time.perf_counter() - t0, "cpu_s": _cpu_children() - c0,
                      "mean_nfev": sum(e["nfev"] for e in out["experiments"]) / out["total"]})
     total = {"wall_s": time.perf_counter() - t_all, "cpu_s": _cpu_children() - cpu_all}

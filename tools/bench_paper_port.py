@@ -44,6 +44,11 @@ from suspid.io.csvio import read_measurement, write_measurement
 from suspid.models import get_model
 from suspid.simulate import simulate
 
+#: the console script of the running interpreter's environment (as a user runs it), or
+#: ``python -m suspid`` when it is not installed as a script
+SUSPID = ([str(Path(sys.executable).with_name("suspid"))]
+          if Path(sys.executable).with_name("suspid").exists() else [sys.executable, "-m", "suspid"])
+
 TABLE1 = {"m1": 275.0, "c1": 1120.0, "k1": 150000.0, "m2": 27.0, "c2": 3100.0, "k2": 310000.0}
 FREE = ("c1", "k1", "c2", "k2")
 
@@ -96,7 +101,7 @@ def main() -> int:
     cpu_fast = min(cpus)
 
     # --- suspid end to end ------------------------------------------------------------
-    cmd = ["suspid", "identify", "--model", "quarter2", "--input", str(csv), "--cost", "sse",
+    cmd = [*SUSPID, "identify", "--model", "quarter2", "--input", str(csv), "--cost", "sse",
            "--fix", "m1=275", "--fix", "m2=27"] + [f"--init={k}={v}" for k, v in start.items()] + ["--json"]
     e2e = []
     out = {}

@@ -12,7 +12,7 @@ from typing import Mapping
 
 import numpy as np
 
-from suspid.excitation import iso8608_profile
+from suspid.excitation import iso8608_profile, time_grid
 from suspid.models.base import FloatArray, SuspensionModel
 from suspid.simulate import outputs, road_matrix, simulate_states
 
@@ -89,8 +89,8 @@ def damper_wear(model: SuspensionModel, duration: float = 150.0, fs: float = 500
     """
     p0 = dict(model.defaults(), **(params or {}))
     wear_end = duration if wear_end is None else wear_end
-    n = int(round(duration * fs)) + 1
-    t = np.arange(n) / fs
+    t = time_grid(duration, fs)        # finite, > 0 and at most MAX_SAMPLES, or a UsageError
+    n = t.size
     r, rd = iso8608_profile(t, road_class, v_kmh, seed)
     road = {model.roads[0]: r, f"{model.roads[0]}_dot": rd}
     U = road_matrix(model, t, road)

@@ -72,6 +72,29 @@ def parse_assignments(items: list[str], option: str) -> dict[str, float]:
     return out
 
 
+def parse_state(text: str, n: int, option: str) -> Any:
+    """A state vector given as ``n`` comma-separated finite numbers (``[q..., q_dot...]``, SI).
+
+    Raises
+    ------
+    UsageError
+        Not numbers, not ``n`` of them, or one that is not finite (named).
+    """
+    import numpy as np
+
+    parts = text.split(",")
+    try:
+        v = np.array([float(s) for s in parts])
+    except ValueError:
+        raise UsageError(f"{option} {text!r}: expected {n} comma-separated numbers") from None
+    if v.size != n:
+        raise UsageError(f"{option}: expected {n} values [q..., q_dot...], got {v.size}")
+    bad = np.flatnonzero(~np.isfinite(v))
+    if bad.size:
+        raise UsageError(f"{option} {text!r}: value {int(bad[0]) + 1} is {parts[int(bad[0])].strip()!r}; "
+                         "expected a finite number")
+    return v
+
 def load_measurement(args: argparse.Namespace, model: SuspensionModel):
     """Read ``--input`` as a CSV or a CAN log; returns ``(Measurement, frames or None)``."""
     path = Path(args.input)

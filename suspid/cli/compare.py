@@ -96,8 +96,6 @@ def _stream(args: argparse.Namespace, model: Any
     data.update(meas.road)
     truth = None
     if args.truth:
-        from suspid.io.csvio import read_measurement as _rm  # noqa: F401 - same CSV rules
-
         import csv
 
         try:

@@ -3,10 +3,10 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import Any
 
-import numpy as np
 
-from suspid.cli._common import (positive_int, add_input_options, add_model_option, add_param_options,
+from suspid.cli._common import (parse_state, positive_int, add_input_options, add_model_option, add_param_options,
                                 load_measurement, model_from_args, params_from_args, print_json)
 from suspid.errors import UsageError
 
@@ -41,16 +41,11 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     return p
 
 
-def parse_x0(text: str, n: int):
+def parse_x0(text: str, n: int) -> Any:
+    """``--x0`` of identify/diagnose: ``estimate``, ``rest`` or ``n`` finite numbers."""
     if text in ("estimate", "rest"):
         return text
-    try:
-        v = np.array([float(s) for s in text.split(",")])
-    except ValueError:
-        raise UsageError(f"--x0 {text!r}: expected 'estimate', 'rest' or {n} comma-separated numbers") from None
-    if v.size != n:
-        raise UsageError(f"--x0: expected {n} values [q..., q_dot...], got {v.size}")
-    return v
+    return parse_state(text, n, "--x0")
 
 
 def run(args: argparse.Namespace) -> int:

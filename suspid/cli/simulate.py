@@ -5,7 +5,8 @@ import argparse
 
 import numpy as np
 
-from suspid.cli._common import add_model_option, model_from_args, parse_assignments, print_json
+from suspid.cli._common import (add_model_option, model_from_args, parse_assignments, parse_state,
+                                print_json)
 from suspid.errors import UsageError
 from suspid.excitation import SCENARIOS, make_scenario
 
@@ -57,14 +58,7 @@ def run(args: argparse.Namespace) -> int:
         if v <= 0:
             raise UsageError(f"--param {k}={v}: expected a value > 0")
     params.update(given)
-    x0 = None
-    if args.x0:
-        try:
-            x0 = np.array([float(s) for s in args.x0.split(",")])
-        except ValueError:
-            raise UsageError(f"--x0 {args.x0!r}: expected comma-separated numbers") from None
-        if x0.size != model.n_states:
-            raise UsageError(f"--x0: expected {model.n_states} values, got {x0.size}")
+    x0 = parse_state(args.x0, model.n_states, "--x0") if args.x0 else None
     if not 0 <= args.noise < float("inf"):
         raise UsageError(f"--noise: expected a finite fraction >= 0, got {args.noise}")
     t, road, x0 = make_scenario(model, args.scenario, duration=args.duration, fs=args.fs,

@@ -121,7 +121,7 @@ def read_measurement(path: str | Path, model: SuspensionModel) -> Measurement:
     if (d <= 0).any():
         k = int(np.flatnonzero(d <= 0)[0])
         raise InputError(f"{name}:{k + 3}: column 't': expected increasing time, got "
-                         f"{t[k + 1]!r} after {t[k]!r}")
+                         f"{float(t[k + 1]):.17g} after {float(t[k]):.17g}")
     road: dict[str, FloatArray] = {}
     measured: dict[str, FloatArray] = {}
     for h, vals in cols.items():

@@ -45,10 +45,26 @@ def test_half4_row20_single_stage_fails_so_the_continuation_matters() -> None:
 
 
 def test_free_masses_hit_the_scale_ambiguity() -> None:
-    out = run_design("quarter1", Settings(cost="sse", free_masses=True), ids=[3, 9])
+    """The seed's unrestricted runs: masses started at the truth, the rest at 0.5x.
+
+    The optimiser walks along the flat valley to a scaled copy of the truth (perfect fit,
+    wrong parameters by one common factor, neither the start's 1.0 nor 0.5) and says so.
+    """
+    out = run_design("quarter1", Settings(cost="sse", free_masses=True, mass_init_scale=1.0),
+                     ids=[3, 9])
     for e in out["experiments"]:
         assert e["identifiable"] is False
         assert e["success"] is False
         r = {k: e["identified"][k] / e["true"][k] for k in ("m", "c", "k")}
         assert r["c"] == pytest.approx(r["m"], rel=1e-4)
         assert r["k"] == pytest.approx(r["m"], rel=1e-4)
+        assert 0.55 < r["m"] < 0.95          # it moved: not the start (1.0 for m, 0.5 for c, k)
+
+
+def test_free_masses_from_a_common_scale_start_stay_put() -> None:
+    """Every parameter at 0.5x (the contract's default start) is already a perfect fit."""
+    out = run_design("quarter1", Settings(cost="sse", free_masses=True), ids=[3])
+    e = out["experiments"][0]
+    assert e["identifiable"] is False and e["success"] is False
+    for k in ("m", "c", "k"):
+        assert e["identified"][k] / e["true"][k] == pytest.approx(0.5, rel=1e-6)

@@ -50,6 +50,8 @@ def work(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 IDENT = ["identify", "--model", "quarter2", "--json", "--maxfev", "5", "--restarts", "0"]
+#: compare on its own scenario: the bad value must stop it before any simulation
+COMPARE = ["compare", "--model", "quarter2", "--json"]
 NODE = ["node", "--scenario", "bump", "--duration", "0.05", "--speed", "0", "--log", "n.log"]
 #: (argv, text the error line must contain); file names are relative to the work dir
 CASES: list[tuple[list[str], str]] = [
@@ -183,6 +185,10 @@ NUMERIC_OPTIONS: list[tuple[list[str], str]] = [
     (["monitor", "--model", "quarter2", "--input", "q2.log", "--jsonl"], "--alert-drop"),
     (["doe", "--model", "quarter1", "--json"], "--init-scale"),
     (["doe", "--model", "quarter1", "--json"], "--noise"),
+    (["doe", "--model", "quarter1", "--json", "--free-masses"], "--mass-init-scale"),
+    (COMPARE, "--duration"),
+    (COMPARE, "--fs"),
+    (COMPARE, "--wear-to"),
 ]
 ASSIGN_OPTIONS: list[tuple[list[str], str]] = [
     (IDENT + ["--input", "q2.csv"], "--fix"),
@@ -220,6 +226,26 @@ def test_malformed_assignment_option_values(work: Path, capsys: pytest.CaptureFi
     try:
         prefix, opt = case
         _one_error(*_run(prefix + [f"{opt}={value}"], capsys))
+    finally:
+        os.chdir(cwd)
+
+
+@pytest.mark.parametrize("argv", [
+    ["simulate", "--model", "quarter2", "--scenario", "initial", "--out", "x.csv", "--x0", "nan,0,0,0"],
+    IDENT + ["--input", "q2.csv", "--x0", "0,inf,0,0"],
+    ["diagnose", "--model", "quarter2", "--input", "q2.csv", "--x0", "0,0,-inf,0", "--json"],
+    COMPARE + ["--duration", "1e9"],
+    COMPARE + ["--fs", "1e12"],
+])
+def test_non_finite_state_and_oversized_streams(work: Path, capsys: pytest.CaptureFixture[str],
+                                                argv: list[str]) -> None:
+    """A NaN initial state once gave a cost of 0 and 'no missing effect' (exit 0); a 1e9 s
+    compare stream a 3.6 TiB allocation."""
+    cwd = os.getcwd()
+    os.chdir(work)
+    try:
+        line = _one_error(*_run(argv, capsys))
+        assert "finite" in line or "at most" in line, line
     finally:
         os.chdir(cwd)
 
