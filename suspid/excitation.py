@@ -27,7 +27,7 @@ from typing import Mapping
 
 import numpy as np
 
-from suspid.errors import UsageError
+from suspid.errors import InputError, UsageError
 from suspid.models.base import FloatArray, SuspensionModel
 
 SCENARIOS = ("initial", "curb", "bump", "iso8608")
@@ -114,6 +114,38 @@ def time_grid(duration: float, fs: float) -> FloatArray:
         raise UsageError(f"duration x sample rate = {duration * fs:.3g} samples; expected at most "
                          f"{MAX_SAMPLES:.0e} ({duration} s at {fs} Hz)")
     return np.arange(int(round(duration * fs)) + 1) / fs
+
+
+def measured_road(model: SuspensionModel, t: FloatArray, road: Mapping[str, FloatArray],
+                  params: Mapping[str, float] | None = None, v_kmh: float = 20.0,
+                  source: str = "road") -> dict[str, FloatArray]:
+    """A measured road (e.g. a profilometer or a rig actuator record) as the model's input.
+
+    Every road of the model must be given, except that ``half4`` with only ``r1`` gets the
+    rear road ``r2(t) = r1(t - (a1 + a2) / v)`` (held at ``r1``'s first value before the
+    record starts). A road without its ``_dot`` is differentiated numerically later
+    (:func:`suspid.simulate.road_matrix`).
+
+    Raises
+    ------
+    InputError
+        A road of the model is missing (named).
+    """
+    out = {k: np.asarray(v, dtype=float) for k, v in road.items()}
+    first = model.roads[0]
+    if first not in out:
+        raise InputError(f"{source}: no road column {first!r} for model {model.name}; expected "
+                         f"{', '.join(model.roads)} (and optionally their _dot)")
+    if len(model.roads) == 2 and model.roads[1] not in out:
+        if not 0 < v_kmh < math.inf:
+            raise UsageError(f"speed must be finite and > 0 km/h to delay the rear road, got {v_kmh}")
+        p = dict(model.defaults(), **(params or {}))
+        delay = (p["a1"] + p["a2"]) / (v_kmh / 3.6)
+        rear = model.roads[1]
+        out[rear] = np.interp(t - delay, t, out[first])
+        if f"{first}_dot" in out:
+            out[f"{rear}_dot"] = np.interp(t - delay, t, out[f"{first}_dot"], left=0.0)
+    return out
 
 
 def make_scenario(model: SuspensionModel, name: str, duration: float = 5.0, fs: float = 1000.0,

@@ -19,6 +19,11 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--scenario", choices=SCENARIOS, default="bump",
                    help="initial (state away from equilibrium), curb, bump (speed bump) or "
                         "iso8608 (random road)")
+    p.add_argument("--road", default=None, metavar="CSV",
+                   help="simulate over a measured road instead of a scenario's: a CSV with 't' "
+                        "and the model's road columns (r; half4: r1 and r2, or r1 alone with the "
+                        "rear delayed by (a1 + a2) / --speed), optional _dot columns; its t is "
+                        "the time grid (--duration/--fs are not used)")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                    help="true parameter value (SI); others use the model defaults; repeatable")
     p.add_argument("--duration", type=float, default=5.0, help="record length in s (default 5)")
@@ -61,9 +66,20 @@ def run(args: argparse.Namespace) -> int:
     x0 = parse_state(args.x0, model.n_states, "--x0") if args.x0 else None
     if not 0 <= args.noise < float("inf"):
         raise UsageError(f"--noise: expected a finite fraction >= 0, got {args.noise}")
-    t, road, x0 = make_scenario(model, args.scenario, duration=args.duration, fs=args.fs,
-                                params=params, h=args.height, l=args.length, v_kmh=args.speed,
-                                t0=args.t0, road_class=args.road_class, seed=args.seed, x0=x0)
+    if args.road:
+        from suspid.excitation import measured_road
+        from suspid.io.csvio import read_measurement
+
+        given_road = read_measurement(args.road, model, require_measured=False)
+        t = given_road.t
+        road = measured_road(model, t, given_road.road, params, args.speed, source=args.road)
+        x0 = np.zeros(model.n_states) if x0 is None else x0
+        scenario = f"measured road {args.road}"
+    else:
+        t, road, x0 = make_scenario(model, args.scenario, duration=args.duration, fs=args.fs,
+                                    params=params, h=args.height, l=args.length, v_kmh=args.speed,
+                                    t0=args.t0, road_class=args.road_class, seed=args.seed, x0=x0)
+        scenario = args.scenario
     if args.effect:
         from suspid.models.effects import inject
         out = inject(model, args.effect).simulate(params, t, road, x0)
@@ -91,9 +107,9 @@ def run(args: argparse.Namespace) -> int:
     write_measurement(args.out, t, cols)
     if args.plot:
         from suspid.plots import plot_channels
-        plot_channels(model, t, {"simulated": cols}, args.plot, title=f"{model.name}: {args.scenario}")
+        plot_channels(model, t, {"simulated": cols}, args.plot, title=f"{model.name}: {scenario}")
     if args.json:
-        print_json({"model": model.name, "scenario": args.scenario, "params": params,
+        print_json({"model": model.name, "scenario": scenario, "params": params,
                     "x0": [float(v) for v in x0], "samples": int(t.size), "out": args.out,
                     "channels": list(cols), "effects": list(args.effect)})
     return 0

@@ -58,8 +58,17 @@ def _parse_float(text: str, path: str, line: int, col: str) -> float:
     return v
 
 
-def read_measurement(path: str | Path, model: SuspensionModel) -> Measurement:
+def read_measurement(path: str | Path, model: SuspensionModel, *,
+                     require_measured: bool = True) -> Measurement:
     """Read a measurement CSV for ``model``.
+
+    Parameters
+    ----------
+    path : str or Path
+    model : SuspensionModel
+    require_measured : bool
+        Whether a file without any measured channel of the model is an error (``False``
+        to read a road-only file, e.g. ``suspid simulate --road``).
 
     Raises
     ------
@@ -143,7 +152,7 @@ def read_measurement(path: str | Path, model: SuspensionModel) -> Measurement:
     for r in model.roads:
         if f"{r}_dot" in road and r not in road:
             raise InputError(f"{name}:1: road velocity column '{r}_dot' given without '{r}'")
-    if not measured:
+    if not measured and require_measured:
         raise InputError(f"{name}:1: no measured channel for model {model.name}; expected any of "
                          f"{', '.join(model.channels)}")
     return Measurement(t=t, road=road, measured=measured, warnings=warnings, source=name)

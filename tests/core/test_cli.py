@@ -44,17 +44,23 @@ def test_identify_json_contract(bump_csv: Path) -> None:
 
 
 def test_identify_quarter1_free_mass_warns(tmp_path: Path) -> None:
+    """Truth away from the defaults (which are the free start), so the fit has to move."""
     csv = tmp_path / "q1.csv"
     assert run("simulate", "--model", "quarter1", "--scenario", "initial", "--duration", "3",
+               "--param", "m=450", "--param", "c=2500", "--param", "k=40000",
                "--out", str(csv)).returncode == 0
     r = run("identify", "--model", "quarter1", "--input", str(csv), "--json")
     out = json.loads(r.stdout)
     assert r.returncode == 0 and out["identifiable"] is False
     assert any("m" in w and "--fix" in w for w in out["warnings"])
-    r = run("identify", "--model", "quarter1", "--input", str(csv), "--fix", "m=300", "--json")
+    # a perfect fit on a scaled copy: c/m and k/m right, the scale not
+    p = out["params"]
+    assert p["c"] / p["m"] == pytest.approx(2500 / 450, rel=1e-5)
+    assert p["k"] / p["m"] == pytest.approx(40000 / 450, rel=1e-5)
+    r = run("identify", "--model", "quarter1", "--input", str(csv), "--fix", "m=450", "--json")
     out = json.loads(r.stdout)
     assert out["identifiable"] is True
-    assert abs(out["params"]["c"] / 1500 - 1) < 1e-6 and abs(out["params"]["k"] / 20000 - 1) < 1e-6
+    assert abs(out["params"]["c"] / 2500 - 1) < 1e-6 and abs(out["params"]["k"] / 40000 - 1) < 1e-6
 
 
 @pytest.mark.parametrize("content, needle", [
