@@ -29,13 +29,9 @@ def test_half4_l27_sse_27_of_27_from_half_the_truth() -> None:
     _check(run_design("half4", Settings(cost="sse")), 27)
 
 
-def test_half4_frobenius_hard_rows_from_half_the_truth() -> None:
-    """Row 20 is the one single-stage Nelder-Mead gets wrong; 12 and 27 are slow ones.
-
-    (The full frobenius L27 is ``tools/bench_doe.py``; it doubles this file's run time.)
-    """
-    out = run_design("half4", Settings(cost="frobenius"), ids=[12, 20, 27])
-    assert out["successes"] == 3, [(e["id"], e["max_rel_error"]) for e in out["experiments"]]
+def test_half4_l27_frobenius_27_of_27_from_half_the_truth() -> None:
+    """The seed got 22/27 with this cost; row 20 is the one single-stage Nelder-Mead loses."""
+    _check(run_design("half4", Settings(cost="frobenius")), 27)
 
 
 def test_half4_row20_single_stage_fails_so_the_continuation_matters() -> None:
