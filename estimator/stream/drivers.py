@@ -227,12 +227,25 @@ class LiveStop:
 
 
 def run_bus(driver: CanWindowDriver, bus: Any, stop: LiveStop) -> int:
-    """Receive from a live python-can bus until a stop condition; returns frames received."""
+    """Receive from a live python-can bus until a stop condition; returns frames received.
+
+    Stops on ``stop`` (SIGINT/SIGTERM, duration, idle timeout) or when the bus reports that
+    it can no longer be read (``can.CanOperationError``: the adapter or the pty of an SLCAN
+    node went away); either way the windows the received frames complete are cut.
+    """
     start = time.monotonic()
     last_rx = start
     n = 0
+    import can
+
     while not stop.stop:
-        msg = bus.recv(timeout=0.1)
+        try:
+            msg = bus.recv(timeout=0.1)
+        except can.CanOperationError as exc:
+            # the adapter went away (an SLCAN node closed its pty, a USB-CAN unplugged): the
+            # stream has ended; what was received is processed and reported, not lost
+            stop.reason = f"bus closed: {' '.join(str(exc).split())}"
+            break
         now = time.monotonic()
         if msg is not None:
             driver.on_message(msg)

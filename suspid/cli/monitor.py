@@ -176,23 +176,20 @@ class _Lazy:
 
 
 def _open_bus(interface: str, channel: str | None, bitrate: int | None, what: str) -> Any:
-    import can
+    """The bus through the node's and the estimator's one opener (:func:`suspid.can.bus.open_bus`:
+    chunked SLCAN reads, data timestamps on ``virtual``, ``udp_multicast`` refused)."""
+    from suspid.can.bus import open_bus
 
-    if interface == "udp_multicast":
-        raise UsageError(f"{what}: interface udp_multicast is not supported (no network use); "
-                         "use virtual, slcan or socketcan")
     if channel is None:
         raise UsageError(f"{what}: --channel is required with --interface {interface}")
-    kw: dict[str, Any] = {}
-    if bitrate:
-        kw["bitrate"] = bitrate
-    if interface == "virtual":
-        kw["receive_own_messages"] = False
+    if interface == "slcan" and str(channel).lower() in ("pty", "pty:"):
+        raise UsageError(f"{what}: --channel pty creates a node-side adapter (suspid node); give "
+                         "the monitor the /dev/pts/N path the node printed")
+    kw: dict[str, Any] = {"bitrate": bitrate} if bitrate else {}
     try:
-        return can.Bus(interface=interface, channel=channel, **kw)
-    except (can.CanError, OSError, ValueError, ImportError, NotImplementedError) as exc:
-        raise InputError(f"{what}: cannot open bus interface={interface} channel={channel}: "
-                         f"{' '.join(str(exc).split())}") from None
+        return open_bus(interface, channel, **kw)
+    except UsageError as exc:
+        raise UsageError(f"{what}: {exc}") from None
 
 
 def _skip_mf4_backend(args: argparse.Namespace) -> None:

@@ -157,3 +157,46 @@ def test_socketcan_unavailable_is_a_clear_usage_error():
 
     with pytest.raises(UsageError, match="cannot open CAN interface 'socketcan' channel 'vcan0'"):
         open_bus("socketcan", "vcan0")
+
+
+def test_two_process_node_and_monitor_cli_over_slcan():
+    """The contract's pair: ``suspid node --interface slcan --channel pty`` and
+    ``suspid monitor --interface slcan --channel /dev/pts/N`` as two processes.
+
+    The monitor estimates window by window, sends its alert frame back to the node, and
+    ends cleanly (exit 0, summary line) when the node closes its pty -- it once died with a
+    ``CanOperationError`` traceback there.
+    """
+    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    node = subprocess.Popen(
+        [sys.executable, "-m", "suspid", "node", "--scenario", "damper-wear", "--interface", "slcan",
+         "--channel", "pty", "--duration", "24", "--speed", "4", "--open-timeout", "30",
+         "--linger", "1", "--param", "c1=1500"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=REPO)
+    mon = None
+    try:
+        first = node.stdout.readline()
+        assert first.startswith("pty: /dev/"), first + node.stderr.read()
+        path = first.split(":", 1)[1].strip()
+        mon = subprocess.run(
+            [sys.executable, "-m", "suspid", "monitor", "--model", "quarter2", "--interface", "slcan",
+             "--channel", path, "--fix", "m1=300", "--fix", "m2=40", "--fix", "c2=300",
+             "--fix", "k2=200000", "--nominal", "c1=1500", "--nominal", "k1=20000",
+             "--idle-timeout", "30", "--jsonl"],
+            capture_output=True, text=True, env=env, cwd=REPO, timeout=180)
+        out, err = node.communicate(timeout=60)
+    finally:
+        if node.poll() is None:
+            node.kill()
+    assert mon.returncode == 0, mon.stderr
+    assert "Traceback" not in mon.stderr
+    lines = [json.loads(l) for l in mon.stdout.splitlines() if l.strip()]
+    est = [d for d in lines if d["type"] == "estimate"]
+    summary = lines[-1]
+    assert summary["type"] == "summary"
+    assert summary["stopped"].startswith("bus closed"), summary["stopped"]
+    assert len(est) >= 10
+    assert summary["frames"]["accepted"] > 0.95 * 4 * 500 * 24
+    c1 = [d["params"]["c1"] for d in est]
+    assert c1[0] == pytest.approx(1500, rel=0.05)      # the damper wears from t = 20 s on
+    assert node.returncode == 0, err
