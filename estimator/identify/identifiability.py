@@ -43,7 +43,8 @@ class Identifiability:
     null_directions: list[dict[str, float]] = field(default_factory=list)
 
 
-def _describe(names: list[str], v: FloatArray) -> tuple[str, dict[str, float]]:
+def _describe(names: list[str], v: FloatArray) -> tuple[str, str, dict[str, float]]:
+    """``(subject, unidentifiable predicate, components)`` of a log-space direction."""
     v = v / np.max(np.abs(v))
     if v[np.argmax(np.abs(v))] < 0:
         v = -v
@@ -52,15 +53,23 @@ def _describe(names: list[str], v: FloatArray) -> tuple[str, dict[str, float]]:
     same = all(abs(c - 1.0) < 0.1 for _, c in involved)
     plist = ", ".join(n for n, _ in involved)
     if same and len(involved) > 1:
-        text = (f"{plist} can all be scaled by one common factor without changing the response "
-                f"(only their ratios are identifiable)")
-    else:
-        combo = " + ".join(f"{c:+.2f}*log({n})" for n, c in involved)
-        text = f"the combination {combo} does not change the response"
-    return text, comps
+        return (f"the common scale of {plist}",
+                f"{plist} can all be scaled by one common factor without changing the response "
+                f"(only their ratios are identifiable)", comps)
+    combo = " + ".join(f"{c:+.2f}*log({n})" for n, c in involved)
+    return (f"the combination {combo}", f"the combination {combo} does not change the response",
+            comps)
 
 
-def assess(J: FloatArray, names: list[str], kinds: dict[str, str]) -> Identifiability:
+def _null_warning(text: str, comps: dict[str, float], kinds: dict[str, str]) -> str:
+    masses = [n for n in comps if kinds.get(n) in ("mass", "inertia")]
+    fix = masses[0] if masses else next(iter(comps))
+    return (f"unidentifiable: {text}; fix one of them (e.g. --fix {fix}=VALUE) to make the "
+            f"rest identifiable")
+
+
+def assess(J: FloatArray, names: list[str], kinds: dict[str, str],
+           structural: tuple[str, ...] | list[str] = ()) -> Identifiability:
     """Judge identifiability from the log-parameter Jacobian ``J`` (rows: residuals).
 
     Parameters
@@ -71,29 +80,48 @@ def assess(J: FloatArray, names: list[str], kinds: dict[str, str]) -> Identifiab
         Free parameter names (columns of ``J``).
     kinds : dict
         ``name -> kind`` (mass, inertia, ...) to suggest which parameter to fix.
+    structural : sequence of str
+        Parameters whose common scale leaves every response of the model unchanged
+        (:attr:`SuspensionModel.scale_invariant`). When all are free that direction is
+        unidentifiable whatever the data -- decided exactly, not from a singular value that
+        finite differences at a poor optimum can blur -- and the other directions are judged
+        on ``J`` restricted to its orthogonal complement.
     """
     if J.size == 0 or len(names) == 0:
         return Identifiability(True, [])
     if not np.all(np.isfinite(J)):
         return Identifiability(False, [], ["sensitivity matrix is not finite at the optimum; "
                                            "the fit did not reach a valid model"])
-    _, s, Vt = np.linalg.svd(J, full_matrices=False)
+    n = len(names)
+    basis = np.eye(n)
+    out = Identifiability(True, [])
+    if structural and set(structural) <= set(names):
+        v = np.array([1.0 if k in structural else 0.0 for k in names])
+        _, text, comps = _describe(names, v)
+        out.identifiable = False
+        out.null_directions.append(comps)
+        out.warnings.append(_null_warning(text, comps, kinds))
+        # orthonormal basis of the complement of v: the last n - 1 columns of a QR of [v, I]
+        q, _ = np.linalg.qr(np.column_stack([v / np.linalg.norm(v), np.eye(n)]))
+        basis = q[:, 1:n]
+    Jr = J @ basis
+    if Jr.shape[1] == 0:
+        out.singular_values = [0.0]
+        return out
+    _, s, Vt = np.linalg.svd(Jr, full_matrices=False)
     if s[0] == 0:
-        return Identifiability(False, [0.0] * len(names),
+        return Identifiability(False, [0.0] * n,
                                ["the measured channels do not depend on any free parameter"])
     rel = s / s[0]
-    out = Identifiability(True, [float(x) for x in rel])
+    out.singular_values = [float(x) for x in rel] + ([0.0] if basis.shape[1] < n else [])
     for i, r in enumerate(rel):
         if r < WEAK_TOL:
-            text, comps = _describe(names, Vt[i])
-            masses = [n for n in comps if kinds.get(n) in ("mass", "inertia")]
-            fix = masses[0] if masses else next(iter(comps))
+            subject, text, comps = _describe(names, basis @ Vt[i])
             if r < RANK_TOL:
                 out.identifiable = False
                 out.null_directions.append(comps)
-                out.warnings.append(f"unidentifiable: {text}; fix one of them "
-                                    f"(e.g. --fix {fix}=VALUE) to make the rest identifiable")
+                out.warnings.append(_null_warning(text, comps, kinds))
             else:
                 out.warnings.append(f"poorly identifiable (relative singular value {r:.1e}): "
-                                    f"{text} is only weakly determined by this data")
+                                    f"{subject} is only weakly determined by this data")
     return out

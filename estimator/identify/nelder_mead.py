@@ -273,7 +273,7 @@ def finish(problem: OutputErrorProblem, params: Parameters, p_hat: Mapping[str, 
         ref = np.sqrt(np.nanmean((problem.Ymeas * problem.w) ** 2, axis=0))
         scale_c = np.where(scale_c > 1e-9 * np.maximum(ref, 1e-300), scale_c, np.maximum(ref, 1e-300))
         Jn = J / scale_c[ch_of_row][:, None]
-        verdict = assess(Jn, free, {p.name: p.kind for p in model.params})
+        verdict = assess(Jn, free, {p.name: p.kind for p in model.params}, model.scale_invariant)
         identifiable, sv = verdict.identifiable, verdict.singular_values
         warnings += verdict.warnings
         H = J.T @ J

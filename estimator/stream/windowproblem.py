@@ -101,14 +101,15 @@ def small_inverse(M: FloatArray) -> tuple[FloatArray | None, float]:
     return Minv, float(np.abs(M).sum(axis=0).max() * np.abs(Minv).sum(axis=0).max())
 
 
-def _verdict(small: FloatArray, free: list[str], kinds: dict[str, str]) -> Identifiability:
+def _verdict(small: FloatArray, free: list[str], kinds: dict[str, str],
+             structural: tuple[str, ...] = ()) -> Identifiability:
     """:func:`~estimator.identify.identifiability.assess` of a square QR factor.
 
     When every relative singular value is at least the weak-identifiability threshold the
     verdict is "identifiable, no warning" and only the singular values are needed: closed
     form for 2x2; otherwise (or for larger factors) ``assess`` itself.
     """
-    if small.shape == (2, 2):
+    if small.shape == (2, 2) and not (structural and set(structural) <= set(free)):
         (a, b), (c, d) = small.tolist()
         ssq = a * a + b * b + c * c + d * d
         det = abs(a * d - b * c)
@@ -117,7 +118,7 @@ def _verdict(small: FloatArray, free: list[str], kinds: dict[str, str]) -> Ident
             s2 = det / s1
             if s2 / s1 >= WEAK_TOL:
                 return Identifiability(True, [1.0, s2 / s1])
-    return assess(small, free, kinds)
+    return assess(small, free, kinds, structural)
 
 
 class StateSpaceMap:
@@ -705,7 +706,8 @@ class WindowProblem(OutputErrorProblem):
         small = qr[:nf] * self._upper(nf)
         if info != 0 or not np.isfinite(small).all():
             small = Jn
-        verdict = _verdict(small, free, {q.name: q.kind for q in model.params})
+        verdict = _verdict(small, free, {q.name: q.kind for q in model.params},
+                           model.scale_invariant)
         identifiable = verdict.identifiable
         warnings += verdict.warnings
         stderr: dict[str, float] = {k: float("nan") for k in free}

@@ -95,6 +95,7 @@ def parse_state(text: str, n: int, option: str) -> Any:
                          "expected a finite number")
     return v
 
+
 def load_measurement(args: argparse.Namespace, model: SuspensionModel):
     """Read ``--input`` as a CSV or a CAN log; returns ``(Measurement, frames or None)``."""
     path = Path(args.input)
@@ -108,12 +109,43 @@ def load_measurement(args: argparse.Namespace, model: SuspensionModel):
             from suspid.can.signal_map import SignalMap
             signal_map = SignalMap.from_args(getattr(args, "map", []), getattr(args, "map_file", None))
         meas, frames = load_log_as_measurement(path, model, dbc_path=args.dbc, signal_map=signal_map)
-        return meas, frames
-    if path.suffix.lower() not in (".csv", ".txt", ""):
-        raise InputError(f"{path}: unknown input format {path.suffix!r}; expected .csv or a CAN log "
-                         f"({', '.join(CAN_LOG_SUFFIXES)})")
-    from suspid.io.csvio import read_measurement
-    return read_measurement(path, model), None
+    else:
+        if path.suffix.lower() not in (".csv", ".txt", ""):
+            raise InputError(f"{path}: unknown input format {path.suffix!r}; expected .csv or a CAN "
+                             f"log ({', '.join(CAN_LOG_SUFFIXES)})")
+        from suspid.io.csvio import read_measurement
+        meas, frames = read_measurement(path, model), None
+    if model.roads and not meas.road and not _decays(meas.measured):
+        meas.warnings.append(
+            f"{path}: no road input ({', '.join(model.roads)}) and the motion does not decay: "
+            "the model can only fit it as a free response from an initial state (a release or "
+            "drop test), so these parameters do not describe it; for driving data without a "
+            "road or wheel-motion sensor use `suspid monitor --output-only` (body mode "
+            "frequency and damping)")
+    return meas, frames
+
+
+def _decays(measured: dict[str, Any]) -> bool:
+    """Whether every channel's motion in the last quarter of the record is below half of
+    that in the first quarter (a free response decays everywhere; driving vibration does not).
+
+    Motion is the RMS of sample-to-sample increments: a road's displacement wanders like a
+    random walk (ISO 8608 PSD ~ n^-2), its increments are stationary.
+    """
+    import numpy as np
+
+    for v in measured.values():
+        v = np.diff(np.asarray(v, dtype=float))
+        q = v.size // 4
+        if q < 2:
+            return True          # too short to tell: no claim
+        first, last = v[:q], v[-q:]
+        first, last = first[np.isfinite(first)], last[np.isfinite(last)]
+        if first.size < 2 or last.size < 2:
+            continue
+        if not np.sqrt(np.mean(last * last)) < 0.5 * np.sqrt(np.mean(first * first)):
+            return False
+    return True
 
 
 def print_json(obj: Any) -> None:

@@ -126,3 +126,25 @@ def test_help_does_not_import_heavy_packages() -> None:
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert r.returncode == 0, r.stderr
     assert r.stdout.strip() == ""
+
+
+def test_no_road_and_no_decay_is_called_out(tmp_path: Path) -> None:
+    """Driving vibration without a road column cannot be a free response: say so."""
+    sim = tmp_path / "road.csv"
+    assert run("simulate", "--model", "quarter2", "--scenario", "iso8608", "--duration", "6",
+               "--fs", "200", "--out", str(sim)).returncode == 0
+    lines = sim.read_text().splitlines()
+    head = lines[0].split(",")
+    keep = [i for i, h in enumerate(head) if h in ("t", "x1", "x2")]
+    noroad = tmp_path / "noroad.csv"
+    noroad.write_text("\n".join(",".join(l.split(",")[i] for i in keep) for l in lines) + "\n")
+    r = run("identify", "--model", "quarter2", "--input", str(noroad), "--fix", "m1=300",
+            "--fix", "m2=40", "--json", "--maxfev", "50")
+    assert r.returncode == 0, r.stderr
+    assert any("does not decay" in w and "--output-only" in w for w in json.loads(r.stdout)["warnings"])
+    free = tmp_path / "free.csv"                     # a release test decays: no such warning
+    assert run("simulate", "--model", "quarter2", "--scenario", "initial", "--duration", "5",
+               "--out", str(free)).returncode == 0
+    r = run("identify", "--model", "quarter2", "--input", str(free), "--fix", "m1=300",
+            "--fix", "m2=40", "--json")
+    assert not any("does not decay" in w for w in json.loads(r.stdout)["warnings"])

@@ -81,3 +81,21 @@ def test_half4_rear_road_is_delayed_front_road() -> None:
     lag = int(round((p["a1"] + p["a2"]) / 10.0 * 1000))
     assert np.allclose(road["r2"][lag:], road["r1"][:-lag], atol=1e-9)
     assert road["r1"].max() == pytest.approx(0.1, rel=1e-3)
+
+
+def test_epoch_stamped_grid_is_uniform_and_takes_the_fast_path() -> None:
+    """Real loggers stamp epoch seconds (~1.6e9 s, float spacing 2.4e-7 s): such a grid is
+    uniform, and simulating on it equals simulating on the same grid from zero (it once fell
+    to the per-sample matrix-exponential loop: minutes per fit on a 10-minute log)."""
+    from suspid.simulate import uniform_step
+
+    t0 = np.arange(60_000) * 0.01
+    te = 1_627_280_000.0 + t0
+    assert np.ptp(np.diff(te)) > 1e-8                     # rounding scatter of the stamps
+    assert uniform_step(te) == pytest.approx(0.01, rel=1e-9)
+    assert uniform_step(np.r_[te[:100], te[100:] + 0.003]) is None   # a real jump is not uniform
+    m = get_model("quarter2")
+    _, road, _ = make_scenario(m, "iso8608", duration=599.99, fs=100.0)
+    a = simulate(m, m.defaults(), t0, road)
+    b = simulate(m, m.defaults(), te, road)
+    np.testing.assert_allclose(b["x1"], a["x1"], rtol=0, atol=1e-9 * np.abs(a["x1"]).max())
