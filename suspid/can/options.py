@@ -13,8 +13,10 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from suspid.can.signal_map import SignalMap, merge_maps
+if TYPE_CHECKING:  # the parsers are built without importing cantools (fast --help)
+    from suspid.can.signal_map import SignalMap
 
 
 def add_can_arguments(parser: argparse.ArgumentParser, dbc: bool = False) -> None:
@@ -32,8 +34,10 @@ def add_can_arguments(parser: argparse.ArgumentParser, dbc: bool = False) -> Non
                         help="signal map file (.toml or .json: a [map] table, optional dbc = ...)")
 
 
-def can_inputs(args: argparse.Namespace) -> tuple[Path | None, SignalMap | None]:
+def can_inputs(args: argparse.Namespace) -> "tuple[Path | None, SignalMap | None]":
     """``(dbc_path, signal_map)`` from parsed options (the map file's ``dbc`` if no ``--dbc``)."""
+    from suspid.can.signal_map import SignalMap, merge_maps
+
     maps = []
     if getattr(args, "signal_map_file", None):
         maps.append(SignalMap.from_file(args.signal_map_file))

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from suspid.can.options import add_can_arguments, can_inputs
 from suspid.errors import InputError, UsageError
 from suspid.models import MODELS, SuspensionModel, get_model
 
@@ -35,10 +36,7 @@ def add_input_options(p: argparse.ArgumentParser) -> None:
                         "decoded with --dbc")
     p.add_argument("--dbc", metavar="PATH", default=None,
                    help="DBC for CAN-log input (default: the bundled dbc/suspension.dbc)")
-    p.add_argument("--map", action="append", default=[], metavar="MSG.SIGNAL=CHANNEL[*SCALE][+OFFSET]",
-                   help="map a signal of your own DBC onto a model channel (CAN input); repeatable")
-    p.add_argument("--map-file", metavar="PATH", default=None,
-                   help="signal map config file (JSON) for CAN input")
+    add_can_arguments(p)
 
 
 def positive_int(text: str) -> int:
@@ -104,11 +102,8 @@ def load_measurement(args: argparse.Namespace, model: SuspensionModel):
             from estimator.decode.log_input import load_log_as_measurement
         except ModuleNotFoundError as exc:  # pragma: no cover - during bring-up
             raise UsageError(f"{path}: CAN-log input is not available ({exc})") from None
-        signal_map = None
-        if getattr(args, "map", None) or getattr(args, "map_file", None):
-            from suspid.can.signal_map import SignalMap
-            signal_map = SignalMap.from_args(getattr(args, "map", []), getattr(args, "map_file", None))
-        meas, frames = load_log_as_measurement(path, model, dbc_path=args.dbc, signal_map=signal_map)
+        dbc_path, signal_map = can_inputs(args)
+        meas, frames = load_log_as_measurement(path, model, dbc_path=dbc_path, signal_map=signal_map)
     else:
         if path.suffix.lower() not in (".csv", ".txt", ""):
             raise InputError(f"{path}: unknown input format {path.suffix!r}; expected .csv or a CAN "

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from suspid.cli._common import CAN_LOG_SUFFIXES, add_model_option, parse_assignments, print_json
-from suspid.cli.monitor import _add_map_arguments
+from suspid.can.options import add_can_arguments
 from suspid.errors import InputError, UsageError
 
 
@@ -33,7 +33,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     src.add_argument("--scenario", choices=["damper-wear"], default=None,
                      help="synthetic stream with known truth (default when --input is absent)")
     p.add_argument("--dbc", metavar="PATH", default=None, help="DBC for a CAN log")
-    _add_map_arguments(p)
+    add_can_arguments(p)
     p.add_argument("--truth", metavar="CSV", default=None,
                    help="true parameter values over time for --input: columns t and parameter names")
     p.add_argument("--duration", type=float, default=150.0, help="scenario length (s), default 150")

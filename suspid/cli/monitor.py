@@ -15,19 +15,8 @@ from pathlib import Path
 from typing import Any, Callable
 
 from suspid.cli._common import CAN_LOG_SUFFIXES, add_model_option, parse_assignments, print_json
+from suspid.can.options import add_can_arguments
 from suspid.errors import InputError, UsageError
-
-
-def _add_map_arguments(p: argparse.ArgumentParser) -> None:
-    """``--map`` / ``--map-file`` exactly as :func:`suspid.can.options.add_can_arguments` defines
-    them (same ``dest``), without importing cantools while the CLI parser is built."""
-    p.add_argument("--map", metavar="CHANNEL=MSG.SIGNAL", action="append", default=[],
-                   dest="signal_map",
-                   help="map a DBC signal onto a model channel, e.g. "
-                        "'x1_ddot=gnss_imu.AccelerationX-9.81' (repeatable; see suspid identify "
-                        "--help); default: the SuspidChannel attributes of suspid's DBC")
-    p.add_argument("--map-file", metavar="PATH", dest="signal_map_file",
-                   help="signal map file (.toml or .json: a [map] table, optional dbc = ...)")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -49,7 +38,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--bitrate", type=int, default=None, help="bitrate for --interface (if needed)")
     p.add_argument("--dbc", metavar="PATH", default=None,
                    help="DBC of the CAN data (default: suspid's dbc/suspension.dbc)")
-    _add_map_arguments(p)
+    add_can_arguments(p)
     p.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE",
                    help="hold a parameter at a known value (SI), e.g. --fix m1=300; repeatable")
     p.add_argument("--nominal", action="append", default=[], metavar="NAME=VALUE",
