@@ -19,7 +19,7 @@ from pathlib import Path
 import cantools
 from cantools.database.can import Database, Message
 
-from suspid.errors import InputError
+from suspid.errors import InputError, require_file
 
 log = logging.getLogger(__name__)
 
@@ -71,9 +71,7 @@ def load_dbc(path: str | Path | None = None, strict: bool = True) -> Database:
     InputError
         Missing or unreadable file, or a parse error (the message names file, line and column).
     """
-    p = Path(path) if path is not None else default_dbc_path()
-    if not p.is_file():
-        raise InputError(f"{p}: no such DBC file")
+    p = require_file(path if path is not None else default_dbc_path(), "DBC file")
     try:
         text = p.read_text(encoding="utf-8", errors="replace")
     except OSError as exc:

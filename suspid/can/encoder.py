@@ -19,7 +19,7 @@ from cantools.database.can import Database
 
 from suspid.can.codec import (STATE_RUNNING, SensorEncoder, encode_status, make_message)
 from suspid.can.logs import is_can_log, log_format, open_log_writer
-from suspid.errors import InputError, UsageError
+from suspid.errors import InputError, UsageError, require_file
 from suspid.io.csvio import Measurement, read_measurement
 from suspid.models import MODELS, get_model
 
@@ -54,9 +54,7 @@ def infer_model(columns: Iterable[str]) -> str:
 
 def csv_header(path: str | Path) -> list[str]:
     """Column names of a CSV's header row (InputError if unreadable)."""
-    p = Path(path)
-    if not p.is_file():
-        raise InputError(f"{p}: no such file")
+    p = require_file(path)
     try:
         with p.open(encoding="utf-8-sig", errors="strict") as fh:
             first = fh.readline()

@@ -18,7 +18,7 @@ import numpy as np
 
 from suspid.cli._common import CAN_LOG_SUFFIXES, add_model_option, parse_assignments, print_json
 from suspid.can.options import add_can_arguments
-from suspid.errors import InputError, UsageError
+from suspid.errors import InputError, UsageError, require_file
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -77,9 +77,7 @@ def _stream(args: argparse.Namespace, model: Any
         s = damper_wear(model, duration=args.duration, fs=args.fs, seed=args.seed,
                         c_end_fraction=args.wear_to)
         return s.t, s.data, s.truth, dict(s.nominal)
-    path = Path(args.input)
-    if not path.is_file():
-        raise InputError(f"{path}: no such file")
+    path = require_file(args.input)
     if path.suffix.lower() in CAN_LOG_SUFFIXES:
         from estimator.decode import load_log_as_measurement
         from suspid.can.options import can_inputs

@@ -16,7 +16,7 @@ from typing import Any, Callable
 
 from suspid.cli._common import CAN_LOG_SUFFIXES, add_model_option, parse_assignments, print_json
 from suspid.can.options import add_can_arguments
-from suspid.errors import InputError, UsageError
+from suspid.errors import InputError, UsageError, require_file
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -319,9 +319,7 @@ def run_source(args: argparse.Namespace, model: Any, cfg: Any, mon: Any,
     buses: list[Any] = []
     try:
         if args.input is not None:
-            path = Path(args.input)
-            if not path.is_file():
-                raise InputError(f"{path}: no such file")
+            path = require_file(args.input)
             if path.suffix.lower() in CAN_LOG_SUFFIXES:
                 return _run_log(args, model, cfg, mon, sinks, buses)
             return _run_csv(args, model, cfg, mon)

@@ -16,7 +16,7 @@ from typing import Iterable, Mapping
 
 import numpy as np
 
-from suspid.errors import InputError
+from suspid.errors import InputError, require_file
 from suspid.models.base import FloatArray, SuspensionModel
 
 
@@ -76,10 +76,8 @@ def read_measurement(path: str | Path, model: SuspensionModel, *,
         Missing/empty file, no ``t`` column, non-numeric cells, non-increasing ``t``,
         rows with the wrong number of cells, no measured channel of the model.
     """
-    p = Path(path)
+    p = require_file(path)
     name = str(path)
-    if not p.is_file():
-        raise InputError(f"{name}: no such file")
     try:
         fh = p.open(newline="", encoding="utf-8-sig")
     except OSError as exc:

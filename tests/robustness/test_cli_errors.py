@@ -57,7 +57,7 @@ NODE = ["node", "--scenario", "bump", "--duration", "0.05", "--speed", "0", "--l
 CASES: list[tuple[list[str], str]] = [
     # input files
     (IDENT + ["--input", "missing.csv"], "missing.csv: no such file"),
-    (IDENT + ["--input", "adir"], "adir: no such file"),
+    (IDENT + ["--input", "adir"], "adir: is a directory, expected a file"),
     (IDENT + ["--input", "empty.csv"], "empty.csv: empty file"),
     (IDENT + ["--input", "tonly.csv"], "tonly.csv:1: no measured channel"),
     (IDENT + ["--input", "dupt.csv"], "dupt.csv:3: column 't': expected increasing"),
@@ -71,7 +71,7 @@ CASES: list[tuple[list[str], str]] = [
     (IDENT + ["--input", "junk.mf4"], "junk.mf4: not a readable ASAM MDF4 file"),
     # DBC and signal maps
     (IDENT + ["--input", "q2.log", "--dbc", "missing.dbc"], "missing.dbc: no such DBC file"),
-    (IDENT + ["--input", "q2.log", "--dbc", "adir"], "adir: no such DBC file"),
+    (IDENT + ["--input", "q2.log", "--dbc", "adir"], "adir: is a directory, expected a DBC file"),
     (IDENT + ["--input", "q2.log", "--dbc", "empty.dbc"], "empty.dbc: cannot load DBC: Invalid syntax at line 1"),
     (IDENT + ["--input", "q2.log", "--dbc", "bad.dbc"], "bad.dbc: cannot load DBC: Invalid syntax at line 1"),
     (IDENT + ["--input", "q2.log", "--dbc", "q2.csv"], "q2.csv: cannot load DBC"),

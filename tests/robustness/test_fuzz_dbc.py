@@ -92,7 +92,7 @@ def test_empty_and_messageless_dbc(tmp_path: Path, text: str, expect: str) -> No
 
 
 def test_directory_and_missing_dbc(tmp_path: Path) -> None:
-    with pytest.raises(InputError, match="no such DBC file"):
+    with pytest.raises(InputError, match="is a directory, expected a DBC file"):
         load_dbc(tmp_path)
     with pytest.raises(InputError, match="nope.dbc: no such DBC file"):
         load_dbc(tmp_path / "nope.dbc")
