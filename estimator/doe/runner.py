@@ -181,6 +181,21 @@ def identify_staged(model: SuspensionModel, meas: Measurement, x0: np.ndarray,
     return res
 
 
+def start_parameters(model: SuspensionModel, exp: Experiment, settings: Settings) -> Parameters:
+    """The design's known values fixed at the truth, the free ones at their start.
+
+    Free parameters start at ``init_scale`` x truth; with ``free_masses`` the masses and
+    inertia start at ``mass_init_scale`` x truth when that is given.
+    """
+    free = free_names(model, settings.free_masses)
+    mass_scale = settings.init_scale if settings.mass_init_scale is None else settings.mass_init_scale
+    kind = {p.name: p.kind for p in model.params}
+    init = {k: (mass_scale if kind[k] in ("mass", "inertia") else settings.init_scale) * exp.truth[k]
+            for k in free}
+    return Parameters.for_model(model, fix={k: v for k, v in exp.truth.items() if k not in free},
+                                init=init)
+
+
 def run_experiment(model: SuspensionModel, exp: Experiment, settings: Settings) -> tuple[Outcome, IdentResult]:
     """Identify one experiment and score it against the truth."""
     if settings.cost not in ("sse", "frobenius"):
@@ -195,12 +210,8 @@ def run_experiment(model: SuspensionModel, exp: Experiment, settings: Settings) 
     meas, _ = measurement(model, exp, settings.noise, settings.seed + exp.id,
                           settings.horizon, settings.fs)
     free = free_names(model, settings.free_masses)
-    fix = {k: v for k, v in exp.truth.items() if k not in free}
-    mass_scale = settings.init_scale if settings.mass_init_scale is None else settings.mass_init_scale
-    kind = {p.name: p.kind for p in model.params}
-    init = {k: (mass_scale if kind[k] in ("mass", "inertia") else settings.init_scale) * exp.truth[k]
-            for k in free}
-    params = Parameters.for_model(model, fix=fix, init=init)
+    params = start_parameters(model, exp, settings)
+    init = {k: params[k].value for k in free}
     t0 = time.perf_counter()
     res = identify_staged(model, meas, exp.x0, params, settings)
     dt = time.perf_counter() - t0

@@ -27,12 +27,11 @@ from typing import Any
 import numpy as np
 
 from estimator.doe.baseline import seed_identify
-from estimator.doe.design import experiments, time_grid
+from estimator.doe.design import experiments
 from estimator.doe.identifiability import prior_study, scale_ambiguity
 from estimator.doe.noise import monte_carlo
 from estimator.doe.runner import (TOL, Settings, free_names, identify_staged, measurement,
-                                  run_design)
-from estimator.identify import Parameters
+                                  run_design, start_parameters)
 from suspid.models import get_model
 from suspid.simulate import simulate
 
@@ -154,8 +153,8 @@ def identifiability(out: Path) -> dict[str, Any]:
     return res
 
 
-def figures(out: Path) -> list[str]:
-    """Seed-style target-vs-identified figures and the CRLB bar chart."""
+def figures(out: Path, only: str | None = None) -> list[str]:
+    """Seed-style target-vs-identified figures and the CRLB bar chart (``only``: one by name)."""
     from suspid.plots import plot_channels
 
     figdir = out / "figures"
@@ -167,16 +166,16 @@ def figures(out: Path) -> list[str]:
         e = next(x for x in experiments(model) if x.id == exp_id)
         meas, clean = measurement(model, e, settings.noise, settings.seed + e.id)
         free = free_names(model, settings.free_masses)
-        params = Parameters.for_model(model, fix={k: v for k, v in e.truth.items() if k not in free},
-                                      init={k: settings.init_scale * e.truth[k] for k in free})
+        params = start_parameters(model, e, settings)
         res = identify_staged(model, meas, e.x0, params, settings)
         ident = simulate(model, res.params, meas.t, None, e.x0)
         err = max(abs(res.params[k] - e.truth[k]) / e.truth[k] for k in free)
         return model, e, meas, clean, res, ident, err
 
     specs = [
-        ("quarter1_unrestricted_sse", "quarter1", 6, Settings(cost="sse", free_masses=True),
-         "quarter1 L16 exp 6, mass free (seed Fig. 17)"),
+        ("quarter1_unrestricted_sse", "quarter1", 6,
+         Settings(cost="sse", free_masses=True, mass_init_scale=1.0),
+         "quarter1 L16 exp 6, mass free from the truth, c and k from 0.5x (seed Fig. 17)"),
         ("quarter1_restricted_sse", "quarter1", 6, Settings(cost="sse"),
          "quarter1 L16 exp 6, mass fixed (seed Fig. 19)"),
         ("quarter2_restricted_frobenius", "quarter2", 14, Settings(cost="frobenius"),
@@ -186,7 +185,12 @@ def figures(out: Path) -> list[str]:
         ("half4_noise05_frobenius", "half4", 14, Settings(cost="frobenius", noise=0.5),
          "half4 L27 exp 14, 0.5 sigma noise, cost frobenius (seed Figs. 44-46)"),
     ]
+    names = [sp[0] for sp in specs] + ["half4_single_stage_sse_exp20", "half4_noise05_crlb"]
+    if only is not None and only not in names:
+        raise SystemExit(f"error: --only {only!r}: expected one of {', '.join(names)}")
     for fname, model_name, exp_id, s, title in specs:
+        if only is not None and fname != only:
+            continue
         model, e, meas, clean, res, ident, err = fit_exp(model_name, exp_id, s)
         series: dict[str, dict[str, np.ndarray]] = {}
         if s.noise > 0:
@@ -200,15 +204,16 @@ def figures(out: Path) -> list[str]:
         plot_channels(model, meas.t, series, path, title=f"{title}: max parameter error {err:.2%}")
         written.append(str(path))
     # the failure the continuation fixes: single-stage fit of half4 exp 20
-    model, e, meas, clean, res, ident, err = fit_exp(
-        "half4", 20, Settings(cost="sse", stages=(1.0,), restarts=6))
-    path = figdir / "half4_single_stage_sse_exp20.png"
-    plot_channels(model, meas.t, {"target": clean, "identified (single stage)": ident}, path,
-                  title=f"half4 exp 20, single-stage Nelder-Mead from 0.5x: max parameter error {err:.0%}")
-    written.append(str(path))
+    if only in (None, "half4_single_stage_sse_exp20"):
+        model, e, meas, clean, res, ident, err = fit_exp(
+            "half4", 20, Settings(cost="sse", stages=(1.0,), restarts=6))
+        path = figdir / "half4_single_stage_sse_exp20.png"
+        plot_channels(model, meas.t, {"target": clean, "identified (single stage)": ident}, path,
+                      title=f"half4 exp 20, single-stage Nelder-Mead from 0.5x: max parameter error {err:.0%}")
+        written.append(str(path))
     # CRLB chart from the noise study if present
     data = out / "data" / "noise.json"
-    if data.is_file():
+    if only in (None, "half4_noise05_crlb") and data.is_file():
         import matplotlib
 
         matplotlib.use("Agg")
@@ -242,6 +247,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("study", choices=["ablation", "noise", "identifiability", "figures"])
     ap.add_argument("--out", default="docs", help="output folder (default docs)")
     ap.add_argument("--seeds", type=int, default=20, help="noise realisations (noise study)")
+    ap.add_argument("--only", default=None, metavar="NAME",
+                    help="figures: regenerate one figure (its file name without .png)")
     args = ap.parse_args(argv)
     out = Path(args.out)
     t0 = time.perf_counter()
@@ -252,7 +259,7 @@ def main(argv: list[str] | None = None) -> int:
     elif args.study == "identifiability":
         identifiability(out)
     else:
-        figures(out)
+        figures(out, args.only)
     sys.stderr.write(f"{args.study}: {time.perf_counter() - t0:.0f} s\n")
     return 0
 
