@@ -338,6 +338,8 @@ _HEXPAIR[(_hv[:, None] | (_hv[None, :] << 8)).ravel()] = \
     ((_HEXVAL[_hv][:, None] << 4) | _HEXVAL[_hv][None, :]).ravel()
 #: longest line (bytes) the array parser takes; longer ones go through the message parser
 _MAX_FAST_LINE = 160
+#: integers below this are exact in float64
+_EXACT_INT = float(2 ** 53)
 #: line layouts tried per line length before the rest of that length goes line by line
 _MAX_LAYOUTS = 8
 
@@ -345,10 +347,11 @@ _MAX_LAYOUTS = 8
 def _line_layout(line: bytes) -> tuple[int, int, int, int, int, int] | None:
     """Byte positions ``(close, dot, sp1, sp2, hash, sp3)`` of a regular candump line.
 
-    Regular: ``(DIGITS.DIGITS) IFACE HEXID#HEXDATA[ ...]`` with single spaces, 1-15
-    timestamp digits, 1-8 ID digits and an even number (<= 16) of data digits; ``None``
-    otherwise. Only positions are read here: the characters are checked by the caller for
-    every line sharing the layout.
+    Regular: ``(DIGITS.DIGITS) IFACE HEXID#HEXDATA[ ...]`` with single spaces, any number
+    of timestamp digits (epoch times such as ``1631416514.717133`` have 16; the value is
+    converted exactly whatever the count, see :func:`_parse_layout`), 1-8 ID digits and an
+    even number (<= 16) of data digits; ``None`` otherwise. Only positions are read here:
+    the characters are checked by the caller for every line sharing the layout.
     """
     if line[:1] != b"(":
         return None
@@ -357,7 +360,7 @@ def _line_layout(line: bytes) -> tuple[int, int, int, int, int, int] | None:
     if close < 3 or line[sp1:sp1 + 1] != b" ":
         return None
     dot = line.find(b".", 1, close)
-    if dot < 2 or dot > close - 2 or close - 2 > 15:
+    if dot < 2 or dot > close - 2:
         return None
     sp2 = line.find(b" ", sp1 + 1)
     if sp2 <= sp1 + 1:
@@ -375,8 +378,10 @@ def _digits_value(chars: np.ndarray, lut: np.ndarray, base: float
                   ) -> tuple[np.ndarray, np.ndarray]:
     """``(value, ok)`` of rows of digit characters (decimal or hex by ``lut``/``base``).
 
-    At most 15 decimal or 8 hex digits per row: every partial value is an integer below
-    2**53, so the float arithmetic is exact.
+    Exact while the value is below 2**53 (up to 15 decimal or 13 hex digits): every partial
+    value is then an integer below 2**53. A longer row may be rounded, but never below
+    2**53 once the exact value reaches it (each step rounds a non-decreasing result to
+    nearest and 2**53 is a float), so ``value < 2**53`` proves the value exact.
     """
     d = lut[chars]
     acc = d[:, 0].astype(np.float64)
@@ -408,9 +413,21 @@ def _parse_layout(rows: np.ndarray, layout: tuple[int, int, int, int, int, int]
     n_frac, ok_frac = _digits_value(rows[:, dot + 1:close], _DIGVAL, 10.0)
     nf = close - dot - 1
     good &= ok_int & ok_frac
-    # INT * 10**FRAC + FRAC < 1e15 is exact, and so is 10**FRAC: the quotient is the
-    # correctly rounded decimal, i.e. float(str)
-    ts = (n_int * float(10 ** nf) + n_frac) / float(10 ** nf)
+    # The timestamp INT.FRAC is the integer N = INT * 10**nf + FRAC over 10**nf. While
+    # N < 2**53 (every candump/python-can time "%.6f" before the year 2255: 1631416514.717133
+    # is N = 1.6e15) N is exact, and so is 10**nf for nf <= 22: one IEEE division then
+    # gives the correctly rounded quotient, which is what float(str) returns (Clinger's
+    # fast path). INT + FRAC / 10**nf would round twice: 1 ulp off for 3.794462 and for
+    # ~5 % of random one-digit-second times.
+    # A computed N below 2**53 proves the exact one is (see _digits_value); the other rows
+    # (17+ significant digits, e.g. nanosecond epoch times) are converted by float() itself.
+    if nf <= 22:
+        p10 = float(10 ** nf)
+        num = n_int * p10 + n_frac
+        ts = num / p10
+    else:   # 10**nf is not a float: every row by float()
+        num = np.full(m, _EXACT_INT)
+        ts = np.zeros(m)
     id_value, ok_id = _digits_value(rows[:, sp2 + 1:hs], _HEXVAL, 16.0)
     good &= ok_id
     ids = id_value.astype(np.int64)
@@ -423,6 +440,10 @@ def _parse_layout(rows: np.ndarray, layout: tuple[int, int, int, int, int, int]
             bad |= pairs[:, j] >> 8
         good &= bad == 0
         data[:, :nb] = pairs
+    inexact = np.flatnonzero(good & ~(num < _EXACT_INT))
+    if inexact.size:
+        text = np.ascontiguousarray(rows[inexact, 1:close]).view(f"S{close - 1}").ravel()
+        ts[inexact] = [float(t) for t in text.tolist()]
     return good, ts, ids, data
 
 
@@ -497,22 +518,34 @@ def _candump_chunk(buf: bytes, path: Path, line0: int, stats: ReadStats
                 lnb[at] = (layout[5] - layout[4] - 1) // 2
                 ldata64[at] = data.view(np.uint64).reshape(-1)
                 left = left[~good]
-    # every other non-empty line: the message parser, in file order
-    slow_msgs: dict[int, list[can.Message]] = {}
+    # every other non-empty line: the message parser, in file order, in one pass
+    slow_msgs: list[can.Message] = []
+    slow_line: list[int] = []     # per message: its line (index in this chunk)
     slow_lines = np.flatnonzero(nonempty & ~fast).tolist()
     per_line = fast.astype(np.int64) if slow_lines else fast
     if slow_lines:
         extra_lines = [x for x, _ in extra_at]
         extra_cum = np.cumsum([0] + [c for _, c in extra_at]).tolist()
-        for i in slow_lines:
-            lineno = line0 + i + 1 + extra_cum[bisect_left(extra_lines, i)]
-            text = buf[int(starts[i]):int(e[i])].decode("ascii", errors="replace")
-            sub_lines = text.split("\r")
-            got = list(_candump_messages(path, zip(range(lineno, lineno + len(sub_lines)),
-                                                   sub_lines), stats))
-            if got:
-                slow_msgs[i] = got
-                per_line[i] = len(got)
+        line_start = starts.tolist()
+        line_end = e.tolist()
+        current = [0]
+
+        def numbered() -> Iterator[tuple[int, str]]:
+            for i in slow_lines:
+                lineno = line0 + i + 1
+                if extra_lines:
+                    lineno += extra_cum[bisect_left(extra_lines, i)]
+                text = buf[line_start[i]:line_end[i]].decode("ascii", errors="replace")
+                current[0] = i   # the parser yields a line's frames before reading on
+                if "\r" in text:
+                    for k, sub in enumerate(text.split("\r")):
+                        yield lineno + k, sub
+                else:
+                    yield lineno, text
+
+        for msg in _candump_messages(path, numbered(), stats):
+            slow_msgs.append(msg)
+            slow_line.append(current[0])
     n_fast = int(np.count_nonzero(fast))
     stats.frames += n_fast
     total_lines = nlines + sum(c for _, c in extra_at)
@@ -527,6 +560,8 @@ def _candump_chunk(buf: bytes, path: Path, line0: int, stats: ReadStats
             return FrameArrays(lt, lid, ext, ft, lnb, ldata), total_lines
         return FrameArrays(lt[fast], lid[fast], ext[fast], ft[fast], lnb[fast],
                            ldata[fast]), total_lines
+    where = np.array(slow_line, dtype=np.int64)
+    np.add.at(per_line, where, 1)
     n = int(per_line.sum())
     offs = np.cumsum(per_line) - per_line
     out = FrameArrays(np.zeros(n), np.zeros(n, np.int64), np.zeros(n, bool), np.zeros(n, bool),
@@ -538,18 +573,20 @@ def _candump_chunk(buf: bytes, path: Path, line0: int, stats: ReadStats
     out.frame_type[at] = ft[fast]
     out.length[at] = lnb[fast]
     out.data[at] = ldata[fast]
-    for i, msgs in slow_msgs.items():
-        extra = FrameArrays.from_messages(msgs)
-        o = int(offs[i])
-        sl = slice(o, o + len(msgs))
-        out.timestamp[sl] = extra.timestamp
-        out.arbitration_id[sl] = extra.arbitration_id
-        out.is_extended[sl] = extra.is_extended
-        out.frame_type[sl] = extra.frame_type
-        out.length[sl] = extra.length
-        out.data[sl] = extra.data
-        for j, payload in extra.long_data.items():
-            out.long_data[o + j] = payload
+    # the line-by-line frames, converted at once (a conversion per line made a log of
+    # irregular lines ~10x slower to read)
+    extra = FrameArrays.from_messages(slow_msgs)
+    first = np.flatnonzero(np.r_[True, where[1:] != where[:-1]])   # a line's first frame
+    nth = np.arange(where.size) - np.repeat(first, np.diff(np.r_[first, where.size]))
+    at = offs[where] + nth
+    out.timestamp[at] = extra.timestamp
+    out.arbitration_id[at] = extra.arbitration_id
+    out.is_extended[at] = extra.is_extended
+    out.frame_type[at] = extra.frame_type
+    out.length[at] = extra.length
+    out.data[at] = extra.data
+    for j, payload in extra.long_data.items():
+        out.long_data[int(at[j])] = payload
     return out, total_lines
 
 
