@@ -124,8 +124,6 @@ def bench_replay(tmp: Path, duration: float = 150.0) -> dict[str, Any]:
 
 def bench_saturated(seconds: float = 60.0) -> dict[str, Any]:
     """CPU share of the monitor at a saturated 1 Mbit/s bus (8 k frames/s)."""
-    import can
-
     from estimator.decode import DecodeListener
     from estimator.identify import Parameters
     from estimator.stream.config import default_config, default_decimation

@@ -16,7 +16,6 @@ import logging
 from importlib import resources
 from pathlib import Path
 
-import cantools
 from cantools.database.can import Database, Message
 
 from suspid.errors import InputError, require_file

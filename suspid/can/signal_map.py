@@ -87,7 +87,7 @@ class SignalMapping:
 
 
 _RE_REVERSED = re.compile(
-    rf"""^\s*(?P<message>[A-Za-z_]\w*|0[xX][0-9A-Fa-f]+|\d+)\.(?P<signal>[A-Za-z_]\w*)\s*=\s*
+    r"""^\s*(?P<message>[A-Za-z_]\w*|0[xX][0-9A-Fa-f]+|\d+)\.(?P<signal>[A-Za-z_]\w*)\s*=\s*
     (?P<channel>[A-Za-z_]\w*)\s*(?P<rest>.*)$""",
     re.VERBOSE,
 )
