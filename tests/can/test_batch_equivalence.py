@@ -310,13 +310,25 @@ def test_log_arrays_equal_messages(tmp_path: Path, seed: int, rates: dict[str, f
               if math.isfinite(m.timestamp) and m.timestamp >= 0]
     path = tmp_path / f"s{seed}.log"
     _write_candump(path, frames)
-    if garbage:
-        rng = np.random.default_rng(seed)
-        lines = path.read_text().splitlines()
-        for _ in range(garbage):
-            k = int(rng.integers(0, len(lines)))
-            lines[k] = lines[k][:int(rng.integers(0, len(lines[k]) + 1))]   # truncated line
-        path.write_text("\n".join(lines) + "\n")
+    truncate_lines(path, seed, garbage)
+    assert_feed_log_equals_messages(path, time_source)
+
+
+def truncate_lines(path: Path, seed: int, count: int) -> None:
+    """Cut ``count`` random lines of a text log short (damaged records)."""
+    if not count:
+        return
+    rng = np.random.default_rng(seed)
+    lines = path.read_text().splitlines()
+    for _ in range(count):
+        k = int(rng.integers(0, len(lines)))
+        lines[k] = lines[k][:int(rng.integers(0, len(lines[k]) + 1))]   # truncated line
+    path.write_text("\n".join(lines) + "\n")
+
+
+def assert_feed_log_equals_messages(path: Path, time_source: str) -> None:
+    """``feed_log`` (array reader + batches) leaves a listener exactly as ``read_log``
+    messages fed one by one do: read statistics and every observable state."""
     ref, lst = _listeners(time_source, 4096, False, 4)
     s_ref = ReadStats()
     for m in read_log(path, s_ref):

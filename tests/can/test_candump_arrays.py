@@ -19,10 +19,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import suspid.can.logs as logs
-from estimator.decode import feed_log
 from suspid.can.logs import FrameArrays, ReadStats, read_candump_arrays, read_log
-from tests.can.test_batch_equivalence import (RATES, _listeners, _stream, _write_candump,
-                                              snapshot)
+from tests.can.test_batch_equivalence import (RATES, _stream, _write_candump,
+                                              assert_feed_log_equals_messages, truncate_lines)
 
 EPOCH = 1631416514.717133
 
@@ -259,21 +258,6 @@ def test_epoch_log_arrays_equal_messages(tmp_path: Path, seed: int, rates: dict[
         m.timestamp += t0
     path = tmp_path / f"s{seed}.log"
     _write_candump(path, frames)
-    if garbage:
-        rng = np.random.default_rng(seed)
-        lines = path.read_text().splitlines()
-        for _ in range(garbage):
-            k = int(rng.integers(0, len(lines)))
-            lines[k] = lines[k][:int(rng.integers(0, len(lines[k]) + 1))]   # truncated line
-        path.write_text("\n".join(lines) + "\n")
+    truncate_lines(path, seed, garbage)
     _check_log(path)
-    ref, lst = _listeners(time_source, 4096, False, 4)
-    s_ref = ReadStats()
-    for m in read_log(path, s_ref):
-        ref.on_message_received(m)
-    ref.count_malformed(s_ref.malformed)
-    s_arr = ReadStats()
-    feed_log(lst, path, s_arr)
-    lst.count_malformed(s_arr.malformed)
-    assert s_arr == s_ref
-    assert snapshot(lst) == snapshot(ref)
+    assert_feed_log_equals_messages(path, time_source)
