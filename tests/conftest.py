@@ -1,6 +1,9 @@
 """Shared fixtures: the seed's parameter sets and paths."""
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -29,3 +32,26 @@ def realdata() -> Path:
     if not p.is_dir():
         pytest.skip(f"real recordings not found at {p} (../shared/realdata beside the repo)")
     return p
+
+
+def suspid_env() -> dict[str, str]:
+    """Environment for a ``python -m suspid`` subprocess that imports this checkout."""
+    return dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+
+
+def start_slcan_node(*node_args: str) -> tuple[subprocess.Popen[str], str]:
+    """Start ``suspid node --interface slcan --channel pty NODE_ARGS`` in a subprocess.
+
+    Returns the process and the pseudo-terminal path it printed as its first line (the
+    contract's ``pty: /dev/pts/N``); the caller ends the process.
+    """
+    node = subprocess.Popen(
+        [sys.executable, "-m", "suspid", "node", "--interface", "slcan", "--channel", "pty",
+         *node_args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env=suspid_env(), cwd=REPO)
+    assert node.stdout is not None and node.stderr is not None
+    first = node.stdout.readline()
+    if not first.startswith("pty: /dev/"):
+        node.kill()
+        raise AssertionError(f"node printed {first!r}, expected 'pty: /dev/...': {node.stderr.read()}")
+    return node, first.split(":", 1)[1].strip()

@@ -18,6 +18,7 @@ from estimator.decode import DecodeListener
 from firmware_sim.transport import BufferedSlcanBus, SlcanPtyBus, open_bus
 from suspid.can.codec import encode_alert
 from suspid.can.dbc import load_dbc
+from tests.conftest import start_slcan_node, suspid_env
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -167,17 +168,11 @@ def test_two_process_node_and_monitor_cli_over_slcan():
     ends cleanly (exit 0, summary line) when the node closes its pty -- it once died with a
     ``CanOperationError`` traceback there.
     """
-    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    node = subprocess.Popen(
-        [sys.executable, "-m", "suspid", "node", "--scenario", "damper-wear", "--interface", "slcan",
-         "--channel", "pty", "--duration", "24", "--speed", "4", "--open-timeout", "30",
-         "--linger", "1", "--param", "c1=1500"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=REPO)
+    env = suspid_env()
+    node, path = start_slcan_node("--scenario", "damper-wear", "--duration", "24", "--speed", "4",
+                                  "--open-timeout", "30", "--linger", "1")
     mon = None
     try:
-        first = node.stdout.readline()
-        assert first.startswith("pty: /dev/"), first + node.stderr.read()
-        path = first.split(":", 1)[1].strip()
         mon = subprocess.run(
             [sys.executable, "-m", "suspid", "monitor", "--model", "quarter2", "--interface", "slcan",
              "--channel", path, "--fix", "m1=300", "--fix", "m2=40", "--fix", "c2=300",

@@ -16,25 +16,20 @@ import sys
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[2]
+from tests.conftest import REPO, start_slcan_node, suspid_env
+
 FIX = ["--fix", "m1=300", "--fix", "m2=40", "--fix", "c2=300", "--fix", "k2=200000",
        "--nominal", "c1=1500", "--nominal", "k1=20000"]
 
 
 def test_killed_live_monitor_restarts_and_raises_the_later_alert_once(tmp_path: Path) -> None:
-    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    env = suspid_env()
     afile = tmp_path / "alerts.jsonl"
     # c1: 1500 N s/m until 5 s, then linearly to 750 at 40 s: crosses 70 % (1050) at 26 s
-    node = subprocess.Popen(
-        [sys.executable, "-m", "suspid", "node", "--scenario", "damper-wear", "--interface", "slcan",
-         "--channel", "pty", "--duration", "40", "--speed", "4", "--wear-start", "5",
-         "--wear-to", "0.5", "--open-timeout", "30", "--linger", "1"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=REPO)
-    mon_cmd = None
+    node, path = start_slcan_node("--scenario", "damper-wear", "--duration", "40", "--speed", "4",
+                                  "--wear-start", "5", "--wear-to", "0.5", "--open-timeout", "30",
+                                  "--linger", "1")
     try:
-        first = node.stdout.readline()
-        assert first.startswith("pty: /dev/"), first + node.stderr.read()
-        path = first.split(":", 1)[1].strip()
         mon_cmd = [sys.executable, "-u", "-m", "suspid", "monitor", "--model", "quarter2",
                    "--interface", "slcan", "--channel", path, *FIX, "--alert-file", str(afile),
                    "--idle-timeout", "20", "--no-inspection", "--jsonl"]
