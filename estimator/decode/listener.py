@@ -534,22 +534,8 @@ class DecodeListener(can.Listener):
                     ts = tick * self._period
                 route.last_arrival = arrival
                 route.sync_n = self._sync_n
-            if last >= 0 and (c - last) % COUNTER_MODULUS != 1:
-                if not self._counter_gap(route, c, last, ts):
-                    return
-            elif last >= 0:
-                el = ts - route.last_ts
-                per = route.period
-                if per > 0 and el > 1.5 * per:
-                    # advance 1 mod 15 after a silence: 15, 30, ... frames were lost that
-                    # the 4-bit counter cannot show (bus-off, burst); the time can
-                    steps = int(el / per + 0.5)
-                    if steps % COUNTER_MODULUS == 1:
-                        self._counts.lost += steps - 1
-                elif el > 0:
-                    route.period = el if per <= 0 else 0.9 * per + 0.1 * el
-            route.last_c = c
-            route.last_ts = ts
+            if not self._step_counter(route, c, ts):
+                return
         if route.kind == _DATA:
             if self._tick_time:
                 if self._sync_tick is None or c < 0:
@@ -561,6 +547,32 @@ class DecodeListener(can.Listener):
             return
         route.accepted += 1
         self._counts.accepted += 1
+
+    def _step_counter(self, route: _Route, c: int, t: float) -> bool:
+        """Counter continuity of one frame at time ``t`` (caller holds the lock).
+
+        The next counter value is accepted and updates the frame period; after a silence
+        an advance of 1 mod 15 means 15, 30, ... frames were lost that the 4-bit counter
+        cannot show (bus-off, burst) -- the time can, so they are counted in ``lost``. Any
+        other value goes to :meth:`_counter_gap`. Returns ``False`` if the frame is
+        rejected (counted there).
+        """
+        last = route.last_c
+        if last >= 0 and (c - last) % COUNTER_MODULUS != 1:
+            if not self._counter_gap(route, c, last, t):
+                return False
+        elif last >= 0:
+            el = t - route.last_ts
+            per = route.period
+            if per > 0 and el > 1.5 * per:
+                steps = int(el / per + 0.5)
+                if steps % COUNTER_MODULUS == 1:
+                    self._counts.lost += steps - 1
+            elif el > 0:
+                route.period = el if per <= 0 else 0.9 * per + 0.1 * el
+        route.last_c = c
+        route.last_ts = t
+        return True
 
     def _counter_gap(self, route: _Route, c: int, last: int, ts: float) -> bool:
         """Counter did not advance by one: accept (lost frames) or reject; ``True`` = accept."""
@@ -920,7 +932,6 @@ class DecodeListener(can.Listener):
         in the sorted segment arrays (tick mode: index into the SN_Sync state).
         """
         rejected = self._rejected
-        counts = self._counts
         tick = syncs is not None
         is_data = route.kind == _DATA
         is_sync = route.kind == _SYNC
@@ -947,20 +958,8 @@ class DecodeListener(can.Listener):
                         continue
                 route.last_arrival = al[k]
                 route.sync_n = sn
-            if last >= 0 and (ck - last) % COUNTER_MODULUS != 1:
-                if not self._counter_gap(route, ck, last, t):
-                    continue
-            elif last >= 0:
-                x = t - route.last_ts
-                per = route.period
-                if per > 0 and x > 1.5 * per:
-                    steps = int(x / per + 0.5)
-                    if steps % COUNTER_MODULUS == 1:
-                        counts.lost += steps - 1
-                elif x > 0:
-                    route.period = x if per <= 0 else 0.9 * per + 0.1 * x
-            route.last_c = ck
-            route.last_ts = t
+            if not self._step_counter(route, ck, t):
+                continue
             if tick and is_data and not knownl[k]:
                 rejected["no_sync"] += 1
                 continue
