@@ -66,7 +66,12 @@ class CanWindowDriver:
         Channels to align (default: every mapped channel that carries data in the first
         window -- the set of signals a node sends does not change while it runs).
     check_every : int
-        Frames between checks of the buffer's newest time (replay speed vs latency).
+        Fewest frames between checks of the buffer's newest time. Between checks the driver
+        takes as many frames as the frame rate seen so far says arrive before the next
+        window end, at most half a step's worth (:meth:`next_check`), so the decoder
+        validates large batches; a window is aligned from the samples inside it and the
+        listener's buffer holds a window plus two steps, so a window cut a little after its
+        end is the same window.
     """
 
     listener: Any
@@ -80,17 +85,34 @@ class CanWindowDriver:
     dt: float | None = None
     t_first: float = math.nan
     next_end: float = math.nan
-    _since: int = 0
+    _left: int = 1
     on_first_dt: Callable[[float], None] | None = None
 
     def on_message(self, msg: Any) -> None:
         """Validate/decode one frame (through the listener) and cut due windows."""
         self.listener.on_message_received(msg)
         self.frames += 1
-        self._since += 1
-        if self._since >= self.check_every or not math.isfinite(self.t_first):
-            self._since = 0
+        self._left -= 1
+        if self._left <= 0:
             self.poll()
+            self._left = self.next_check(self.frames)
+
+    def next_check(self, fed: int) -> int:
+        """Frames to take before the next :meth:`poll`, after ``fed`` frames in all.
+
+        1 until the first sample is in; then the frames expected before the next window end
+        at the rate seen so far (``fed`` over the data time since the first sample), at
+        least ``check_every`` and at most half a step's worth.
+        """
+        if not math.isfinite(self.t_first):
+            return 1
+        every = max(1, self.check_every)
+        span = self.listener.buffer.latest_time() - self.t_first
+        if not span > 0:
+            return every
+        rate = fed / span                                  # frames per second of data
+        ahead = (self.next_end - self.t_first - span) * rate
+        return int(min(max(ahead, every), max(every, 0.5 * self.step_s * rate)))
 
     def poll(self) -> None:
         """Cut every window whose end lies before the newest accepted sample."""
@@ -140,7 +162,6 @@ def replay(driver: CanWindowDriver, messages: Iterable[Any]) -> int:
     inlined (the listener call and a countdown to the next window check).
     """
     on = driver.listener.on_message_received
-    every = max(1, driver.check_every)
     poll = driver.poll
     n = 0
     left = 1
@@ -150,7 +171,7 @@ def replay(driver: CanWindowDriver, messages: Iterable[Any]) -> int:
         left -= 1
         if left <= 0:
             poll()
-            left = every if math.isfinite(driver.t_first) else 1
+            left = driver.next_check(driver.frames + n)
     driver.frames += n
     driver.flush()
     return n
@@ -160,13 +181,9 @@ def replay_log(driver: CanWindowDriver, path: Any, stats: Any = None) -> int:
     """Replay a CAN log file as fast as possible; returns the number of frames.
 
     The log is read and decoded in NumPy batches (:func:`estimator.decode.feed_log`: a
-    candump log never becomes :class:`can.Message` objects). Between checks for due
-    windows it feeds as many frames as it expects before the next window end (the frame
-    rate seen so far), at least ``check_every`` and at most half a step's worth, so the
-    decoder works on large batches. A window is aligned from the samples inside it only
-    and the buffer holds a window plus two steps, so cutting it up to half a step late
-    changes nothing: windows, estimates, alerts and frame statistics equal a
-    frame-by-frame :func:`replay` (``tests/stream/test_monitor_cli.py``).
+    candump log never becomes :class:`can.Message` objects), checked for due windows where
+    :meth:`CanWindowDriver.next_check` says: windows, estimates, alerts and frame statistics
+    equal a frame-by-frame :func:`replay` (``tests/stream/test_replay_log.py``).
 
     Parameters
     ----------
@@ -178,20 +195,12 @@ def replay_log(driver: CanWindowDriver, path: Any, stats: Any = None) -> int:
     """
     from estimator.decode.replay import feed_log
 
-    every = max(1, driver.check_every)
-    fed = 1   # frames fed when poll() is called (it is first called after one frame)
+    fed = driver.frames + 1   # frames fed when poll() is called (first after one frame)
 
     def poll() -> int:
         nonlocal fed
         driver.poll()
-        k = 1
-        if math.isfinite(driver.t_first):
-            k = every
-            span = driver.listener.buffer.latest_time() - driver.t_first
-            if span > 0:
-                rate = fed / span                      # frames per second of data
-                ahead = (driver.next_end - driver.t_first - span) * rate
-                k = int(min(max(ahead, every), max(every, 0.5 * driver.step_s * rate)))
+        k = driver.next_check(fed)
         fed += k
         return k
 

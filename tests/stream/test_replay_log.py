@@ -1,4 +1,4 @@
-"""The batch log replay (``replay_log``) cuts exactly the windows a frame-by-frame replay cuts.
+"""Replays that check for due windows rarely cut exactly the windows a check per frame cuts.
 
 ``suspid monitor --input LOG`` reads the log as arrays and checks for due windows only every
 few hundred frames; this must not change a single window, estimate input or counter, on a
@@ -19,16 +19,23 @@ from suspid.can.logs import ReadStats, read_log
 from suspid.models import get_model
 
 
-def _windows(path: Path, batch: bool, check_every: int) -> tuple[list, dict, int]:
+def _windows(path: Path, batch: str, check_every: int) -> tuple[list, dict, int]:
     got: list[tuple[np.ndarray, dict[str, np.ndarray]]] = []
     lst = DecodeListener("quarter2", capacity=1 << 12)
     drv = CanWindowDriver(lst, 3.0, 1.5, lambda t, d: got.append((t.copy(), {k: v.copy() for k, v in d.items()})),
                           check_every=check_every)
     stats = ReadStats()
-    if batch:
+    if batch == "log":
         n = replay_log(drv, path, stats)
-    else:
+    elif batch == "messages":
         n = replay(drv, read_log(path, stats))
+    else:   # the definition: a check after every frame, cut as soon as a window is due
+        n = 0
+        for msg in read_log(path, stats):
+            lst.on_message_received(msg)
+            drv.poll()
+            n += 1
+        drv.flush()
     lst.count_malformed(stats.malformed)
     return got, lst.frame_stats(), n
 
@@ -61,9 +68,13 @@ def logs(tmp_path_factory) -> dict[str, Path]:
 
 @pytest.mark.parametrize("name", ["clean", "damaged", "holed"])
 @pytest.mark.parametrize("check_every", [1, 32])
-def test_batch_replay_cuts_the_same_windows(logs: dict[str, Path], name: str, check_every: int) -> None:
-    ref, ref_stats, ref_n = _windows(logs[name], batch=False, check_every=check_every)
-    got, stats, n = _windows(logs[name], batch=True, check_every=check_every)
+@pytest.mark.parametrize("how", ["log", "messages"])
+def test_batch_replay_cuts_the_same_windows(logs: dict[str, Path], name: str, check_every: int,
+                                           how: str) -> None:
+    """``replay_log`` (arrays) and ``replay`` (messages, the live path's countdown) check for
+    due windows only every few hundred frames; the windows equal a check after every frame."""
+    ref, ref_stats, ref_n = _windows(logs[name], batch="every frame", check_every=check_every)
+    got, stats, n = _windows(logs[name], batch=how, check_every=check_every)
     assert n == ref_n and stats == ref_stats
     assert len(ref) == 12                     # 3 s windows every 1.5 s over 20 s
     assert len(got) == len(ref)
