@@ -7,7 +7,9 @@ is handled by an approximate variable projection (the free response of the linea
 exact when the effect is inactive near the start). Sensor effects keep the exact linear
 fast path: the measurement is *compensated* (offset removed, lagging channels advanced) and
 the ordinary :class:`~estimator.identify.OutputErrorProblem` is evaluated, with the affected
-channels added when the cost would not see them (:class:`SensorRefit`). Positive parameters
+channels added when the cost would not see them (:class:`SensorRefit`; such an effect is
+judged against the linear model fitted on the same channels, :meth:`SensorRefit.fit_null`;
+a delay is undone by an all-pass shift that leaves the noise as it is). Positive parameters
 are optimised as ``log(theta / theta_start)``; a sensor offset as
 ``(offset - offset_start) / scale``. :func:`reweighted_linear_fit` refits the declared
 linear model on every channel (the whiteness check's reference).
@@ -16,12 +18,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from types import SimpleNamespace
 from typing import Any, Callable, Mapping
 
 import numpy as np
 
 from estimator.identify import OutputErrorProblem, minimize_log
 from estimator.diagnose.nlsim import simulate_effects
+from estimator.diagnose.residuals import shift_allpass
 from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
 from suspid.models.base import FloatArray
@@ -184,6 +188,18 @@ class PhysicalRefit:
             p[self.sym_name] = 0.5 * (theta["c_rebound"] + theta["c_compression"])
         return p, eff  # type: ignore[return-value]
 
+    def _substeps_at(self, theta: Mapping[str, float]) -> bool:
+        """Re-check the internal steps at ``theta``; True if more were needed (then set)."""
+        p, eff = self.split(theta)
+        try:
+            sub = substeps_for(self.problem, p, eff, self.problem.h or 1.0, self.x0)
+        except (np.linalg.LinAlgError, ValueError, FloatingPointError, OverflowError):
+            return False
+        if sub <= self.substeps:
+            return False
+        self.substeps = sub
+        return True
+
     def simulate(self, p: Mapping[str, float], eff: PhysicalEffect,
                  x0: FloatArray) -> dict[str, FloatArray]:
         pr = self.problem
@@ -212,7 +228,8 @@ class PhysicalRefit:
         return res, x0, sim
 
     def fit(self, start: Mapping[str, float], restarts: int = 3, maxfev: int | None = None,
-            step: float = 0.15, passes: int = 3) -> ModelFit:
+            step: float = 0.15, passes: int = 3,
+            worth: Callable[[Mapping[str, FloatArray]], bool] | None = None) -> ModelFit:
         """Nelder–Mead to about 1 %, then Levenberg–Marquardt, from ``start``.
 
         Parameters
@@ -228,8 +245,16 @@ class PhysicalRefit:
             First simplex edge in log coordinates.
         passes : int
             Up to ``passes`` runs: after each the initial state is re-centred on its
-            projected value (the projection is linear around the current ``x0``) and the
-            search restarts from the best point with a smaller simplex.
+            projected value (the projection is linear around the current ``x0``), the
+            internal steps are re-checked at the current parameters (:func:`substeps_for`),
+            and the search restarts from the best point with a smaller simplex if either
+            changed the problem.
+        worth : callable, optional
+            ``worth(simulated channels) -> bool``: whether the current fit is worth
+            simulating more finely (it beats the linear baseline on the whole record). A
+            candidate that cannot beat the linear model it contains is rejected however
+            accurately it is simulated (a wrong friction candidate that trades the dampers
+            for a stiff ``F`` would need 12 steps per sample for nothing).
 
         Returns
         -------
@@ -257,16 +282,27 @@ class PhysicalRefit:
         budget = maxfev if maxfev is not None else 150 * len(names)
         nfev = 0
         u = np.zeros(len(names))
+        coarse = True
         for sweep in range(passes):
             # the initial state is projected linearly around self.x0; re-centre and repeat
             u, f, n_used = nm_then_lm(vec, u, step=step if sweep == 0 else step / 4,
-                                      restarts=restarts if sweep == 0 else 1, maxfev=budget)
+                                      restarts=restarts if sweep == 0 else 1, maxfev=budget,
+                                      coarse=coarse)
             nfev += n_used
             _, x0_new, _ = self.residual(to_theta(u))
             self.x0 = x0_new
+            # the internal steps were chosen at the start; the effect found may be stiffer
+            # (friction 40 % above the screen's estimate needs twice the steps at 200 Hz,
+            # and one step too few biases F and the damping by several per cent). The
+            # optimum moves little with the steps: Levenberg–Marquardt alone finishes it.
+            theta = to_theta(u)
+            finer = ((worth is None or worth(self.simulate(*self.split(theta), self.x0)))
+                     and self._substeps_at(theta))
             v = vec(u)
-            if not float(v @ v) < 0.98 * f:
+            recentred = float(v @ v) < 0.98 * f
+            if not (finer or recentred):
                 break
+            coarse = recentred
         theta = to_theta(u)
         r, x0, _ = self.residual(theta)
         p, eff = self.split(theta)
@@ -279,7 +315,8 @@ class PhysicalRefit:
 
 
 def nm_then_lm(vec: Callable[[FloatArray], FloatArray], u0: FloatArray, step: float = 0.15,
-               restarts: int = 3, maxfev: int | None = None) -> tuple[FloatArray, float, int]:
+               restarts: int = 3, maxfev: int | None = None,
+               coarse: bool = True) -> tuple[FloatArray, float, int]:
     """Minimise ``|vec(u)|^2``: a short Nelder–Mead, then Levenberg–Marquardt.
 
     Nelder–Mead (log coordinates, :func:`~estimator.identify.minimize_log`) gets from the
@@ -303,6 +340,9 @@ def nm_then_lm(vec: Callable[[FloatArray], FloatArray], u0: FloatArray, step: fl
     maxfev : int, optional
         Nelder–Mead evaluation budget of the fallback (default 150 per coordinate); the
         coarse run stops after 10 per coordinate.
+    coarse : bool
+        Run the coarse Nelder–Mead first (``False``: start Levenberg–Marquardt at ``u0``,
+        already in the basin).
 
     Returns
     -------
@@ -325,9 +365,12 @@ def nm_then_lm(vec: Callable[[FloatArray], FloatArray], u0: FloatArray, step: fl
     if n == 0:
         return u0, cost(u0), 1
     f0 = cost(u0)
-    out = minimize_log(cost, u0, step=step, restarts=min(restarts, 1),
-                       maxfev=min(budget, 10 * (n + 1)), xatol=1e-2, fatol=1e-4 * f0,
-                       rel_improve=1e-4)
+    if coarse:
+        out = minimize_log(cost, u0, step=step, restarts=min(restarts, 1),
+                           maxfev=min(budget, 10 * (n + 1)), xatol=1e-2, fatol=1e-4 * f0,
+                           rel_improve=1e-4)
+    else:
+        out = SimpleNamespace(u=np.asarray(u0, dtype=float), fun=f0, nfev=0)
     nfev = out.nfev + 1
     try:
         sol = least_squares(vec, out.u, method="lm", diff_step=1e-6, xtol=1e-10, ftol=1e-10,
@@ -345,11 +388,28 @@ def nm_then_lm(vec: Callable[[FloatArray], FloatArray], u0: FloatArray, step: fl
     return out.u, out.fun, nfev + more.nfev
 
 
-def compensated(meas: Measurement, effect: SensorEffect, tail: int = 0) -> Measurement:
-    """``meas`` with a sensor effect undone; the last ``tail`` samples of affected channels NaN."""
-    chans = effect.compensate(meas.t, meas.measured)
-    if tail > 0:
+def compensated(meas: Measurement, effect: SensorEffect | None, tail: int = 0,
+                affected: list[str] | None = None) -> Measurement:
+    """``meas`` with a sensor effect undone; the last ``tail`` samples of affected channels NaN.
+
+    A delay is undone by the all-pass shift (:func:`~estimator.diagnose.residuals.shift_allpass`),
+    not by interpolation: interpolating the noisy record between samples would smooth its
+    noise, and the refit would take that for evidence of a (sub-sample) delay.
+    ``effect=None`` leaves the data as they are but drops the same tail of the channels
+    ``affected`` (the reference the effect is judged against).
+    """
+    if effect is None:
+        chans = dict(meas.measured)
+    elif effect.name == "sensor_delay":
+        chans = dict(meas.measured)
         for c in effect.affected():
+            if c in chans:
+                chans[c] = shift_allpass(meas.t, np.asarray(chans[c], dtype=float),
+                                         float(effect.values["delay_s"]))
+    else:
+        chans = effect.compensate(meas.t, meas.measured)
+    if tail > 0:
+        for c in (effect.affected() if effect is not None else list(affected or [])):
             if c in chans:
                 y = np.array(chans[c], dtype=float)
                 y[-tail:] = np.nan
@@ -414,10 +474,11 @@ class SensorRefit:
             self.weights.update({c: ref / sigma(c) for c in self.extra})
             self.channels += self.extra
 
-    def sub_problem(self, eff: SensorEffect) -> OutputErrorProblem:
-        """The linear problem on the data with ``eff`` undone (plus the affected channels)."""
+    def sub_problem(self, eff: SensorEffect | None) -> OutputErrorProblem:
+        """The linear problem on the data with ``eff`` undone (plus the affected channels);
+        ``None``: the same problem without the effect (see :meth:`fit_null`)."""
         pr = self.problem
-        meas = compensated(pr.meas, eff, self.tail)
+        meas = compensated(pr.meas, eff, self.tail, self.effect0.affected())
         if not self.extra:
             return OutputErrorProblem(self.model, meas, cost=pr.cost, x0=pr.x0, weights=pr.weights)
         sub = Measurement(meas.t, meas.road, {c: meas.measured[c] for c in self.channels},
@@ -475,17 +536,73 @@ class SensorRefit:
         u, _, nfev = nm_then_lm(vec, np.zeros(len(names)), step=step, restarts=restarts,
                                 maxfev=budget)
         p, eff = split(to_theta(u))
+        return self._model_fit(p, eff, nfev, len(names))
+
+    @property
+    def needs_reference(self) -> bool:
+        """True when the refit sees channels the baseline's cost does not (:meth:`fit_null`)."""
+        return bool(self.extra)
+
+    def fit_null(self, start_base: Mapping[str, float]) -> ModelFit:
+        """The declared linear model fitted exactly as :meth:`fit` fits the augmented one —
+        same channels, weights and left-out tail — but without the effect.
+
+        When the effect adds channels outside the baseline's cost, the baseline is the
+        wrong reference: refitting the base parameters on those channels lowers their
+        residual whether or not the effect exists (a "delay" of 1e-11 s would be credited
+        with it). The effect is judged against this fit instead.
+        """
+        from scipy.optimize import least_squares
+
+        sp = self.sub_problem(None)
+        th0 = np.array([float(start_base[k]) for k in self.free])
+        inv = 1.0 / math.sqrt(sp.scale)
+        big = np.full(sp.n_obs, 1e3)
+
+        def params_of(u: FloatArray) -> dict[str, float]:
+            q = dict(self.base)
+            q.update(zip(self.free, th0 * np.exp(u)))
+            return q
+
+        def vec(u: FloatArray) -> FloatArray:
+            if not np.all(np.abs(u) < 20):
+                return big
+            try:
+                r = sp.residual_vector(params_of(u)) * inv
+            except (np.linalg.LinAlgError, ValueError, FloatingPointError, UsageError):
+                return big
+            return r if r.size == big.size and np.all(np.isfinite(r)) else big
+
+        u0 = np.zeros(len(self.free))
+        u, nfev = u0, 1
+        if self.free:
+            try:
+                sol = least_squares(vec, u0, method="lm", diff_step=1e-6, xtol=1e-10, ftol=1e-10,
+                                    gtol=1e-10, max_nfev=30 * (len(self.free) + 1))
+                nfev = int(sol.nfev)
+                r0 = vec(u0)
+                if float(2 * sol.cost) <= float(r0 @ r0):
+                    u = np.asarray(sol.x, dtype=float)
+            except (ValueError, np.linalg.LinAlgError):
+                pass
+        out = self._model_fit(params_of(u), None, nfev, len(self.free))
+        out.notes.append("declared linear model fitted on " + ", ".join(self.channels)
+                         + " (noise-weighted), without the effect")
+        return out
+
+    def _model_fit(self, p: dict[str, float], eff: SensorEffect | None, nfev: int, k: int) -> ModelFit:
+        """Residuals of every measured channel (compensated data) and the seed cost."""
         sp = self.sub_problem(eff)
         pred = sp.predict(p)
         X = simulate_states(self.model, p, sp.t, sp.U, pred.x0)
         allout = outputs(self.model, p, X, sp.U)
-        comp = compensated(self.problem.meas, eff, self.tail).measured
+        comp = compensated(self.problem.meas, eff, self.tail, self.effect0.affected()).measured
         resid = {c: np.asarray(comp[c], dtype=float) - allout[c]
                  for c in self.model.channels if c in comp}
         pr = self.problem
         ss = float(sum(np.nansum((float((pr.weights or {}).get(c, 1.0)) * resid[c]) ** 2)
                        for c in pr.channels))
-        return ModelFit(p, eff, resid, allout, pr.seed_cost(ss), nfev, pred.x0, len(names))
+        return ModelFit(p, eff, resid, allout, pr.seed_cost(ss), nfev, pred.x0, k)
 
 
 def reweighted_linear_fit(problem: OutputErrorProblem, p: Mapping[str, float], free: list[str],

@@ -164,6 +164,61 @@ def mean_test(e: FloatArray) -> tuple[float, float]:
 
 
 # ------------------------------------------------------------------------- signals
+def shift_allpass(t: FloatArray, y: FloatArray, dt: float) -> FloatArray:
+    """``y(t + dt)`` by an all-pass (Fourier) fractional shift (s, channel units).
+
+    Interpolating a noisy record at a fraction of a sample is a low-pass filter: linear
+    interpolation halfway between samples halves the variance of white noise, a cubic
+    spline takes a quarter off it. A trial time shift of a noisy channel then looks like
+    an improvement for no other reason than the smoothing — a spurious sub-sample
+    ``sensor_delay`` that screens and refits above any real effect at a few per cent of
+    noise. The phase-only shift keeps every frequency's amplitude (white noise stays white
+    at the same variance; integer shifts are exact). The record is extended by its mirror
+    image so the periodic continuation has no step at the ends.
+
+    Before the first sample the first value is held; beyond the last the result is NaN
+    (as :meth:`suspid.models.effects.SensorDelay.compensate`). NaN samples stay NaN where
+    they land. Non-uniform sampling falls back to a cubic spline.
+    """
+    tt = np.asarray(t, dtype=float)
+    yy = np.asarray(y, dtype=float)
+    n = tt.size
+    ok = ~np.isnan(yy)
+    if n < 4 or ok.sum() < 4:
+        return np.interp(tt + dt, tt[ok], yy[ok], right=np.nan) if ok.any() else yy.copy()
+    steps = np.diff(tt)
+    h = float(np.median(steps))
+    tq = tt + dt
+    if h <= 0 or np.max(np.abs(steps - h)) > 1e-3 * h:
+        from scipy.interpolate import CubicSpline
+
+        out = CubicSpline(tt[ok], yy[ok], extrapolate=False)(tq)
+    else:
+        yf = yy if ok.all() else np.interp(tt, tt[ok], yy[ok])
+        # take out a quadratic with the record's end slopes (shifted exactly, added back) so
+        # the mirrored continuation has no kink either
+        tau, T = tt - tt[0], tt[-1] - tt[0]
+        m = min(n, 5)
+        a0 = np.polyfit(tau[:m], yf[:m], 2)
+        a1 = np.polyfit(tau[-m:] - T, yf[-m:], 2)
+        s0, s1 = float(a0[1]), float(a1[1])   # slopes at the two ends (local quadratics)
+
+        def trend(x: FloatArray) -> FloatArray:
+            return s0 * x + (s1 - s0) * x * x / (2.0 * T)
+
+        ext = yf - trend(tau)
+        ext = np.concatenate([ext, ext[::-1]])
+        w = 2.0 * math.pi * np.fft.rfftfreq(2 * n, h)
+        out = np.fft.irfft(np.fft.rfft(ext) * np.exp(1j * w * dt), 2 * n)[:n] + trend(tau + dt)
+        if not ok.all():
+            lost = np.interp(tq, tt, (~ok).astype(float)) > 0
+            out = np.where(lost, np.nan, out)
+    first = int(np.argmax(ok))
+    out = np.where(tq < tt[first], yy[first], out)
+    last = n - 1 - int(np.argmax(ok[::-1]))
+    return np.where(tq > tt[last] + 1e-9 * h, np.nan, out)
+
+
 def _savgol_window(n: int, fs: float, seconds: float = 0.02) -> int:
     """Odd Savitzky–Golay window of about ``seconds`` (at least 7, at most the record)."""
     w = max(int(round(seconds * fs)) | 1, 7)
@@ -342,10 +397,14 @@ def _regress(y: FloatArray, X: FloatArray) -> tuple[FloatArray, float, FloatArra
 
 
 def _site_regressors(name: str, site: Site, s: FloatArray, sd: FloatArray, base: Mapping[str, float],
-                     gap: float | None = None) -> list[FloatArray]:
-    """Regressor(s) ``phi`` per unit parameter of a physical candidate at one site."""
+                     gap: float | None = None, width: float = V_EPS) -> list[FloatArray]:
+    """Regressor(s) ``phi`` per unit parameter of a physical candidate at one site.
+
+    ``gap`` is the bump stop's trial gap (m), ``width`` the friction sign's velocity scale
+    (m/s; the library's ``V_EPS`` unless the screen widens it, see :func:`screen_physical`).
+    """
     if name == "coulomb_friction":
-        return [np.tanh(sd / V_EPS)]
+        return [np.tanh(sd / width)]
     if name == "asymmetric_damping":
         return [np.abs(sd)]
     if name == "quadratic_damping":
@@ -361,13 +420,47 @@ def _site_regressors(name: str, site: Site, s: FloatArray, sd: FloatArray, base:
     raise KeyError(name)
 
 
+def velocity_noise(mo: Motion, noise_var: Mapping[str, float], coords: tuple[str, ...] | list[str],
+                   h: float) -> FloatArray:
+    """Standard deviation (per coordinate) of the white noise left in the smoothed velocities
+    ``mo.qd``: the channel's white-noise variance (e.g. of the baseline residual) through
+    the Savitzky–Golay filter of :func:`motion_from` (smoothing a measured velocity, or
+    differentiating a measured position); zero where the model supplied it."""
+    n = mo.qd.shape[0]
+    w = _savgol_window(n, 1.0 / h)
+    from scipy.signal import savgol_coeffs
+
+    g0 = float(np.sum(savgol_coeffs(w, 3) ** 2))
+    g1 = float(np.sum(savgol_coeffs(w, 3, deriv=1, delta=h) ** 2))
+    out = np.zeros(len(coords))
+    for i, c in enumerate(coords):
+        src = mo.source.get(f"{c}_dot")
+        if src == "measured":
+            out[i] = math.sqrt(max(float(noise_var.get(f"{c}_dot", 0.0)), 0.0) * g0)
+        elif src == "derived":
+            out[i] = math.sqrt(max(float(noise_var.get(c, 0.0)), 0.0) * g1)
+    return out
+
+
 def screen_physical(model: SuspensionModel, p: Mapping[str, float], free: list[str],
-                    mo: Motion) -> tuple[list[Screen], dict[str, Any]]:
+                    mo: Motion, noise_var: Mapping[str, float] | None = None,
+                    h: float | None = None) -> tuple[list[Screen], dict[str, Any]]:
     """Regress the residual force on base sensitivities plus each physical candidate.
 
     Every physical effect is screened in the library's form where the library offers it
     for the model (all its sites, one shared parameter set) and, for a model with several
     struts, in each strut alone; the best plausible form is kept (:attr:`Screen.sites`).
+    ``noise_var`` (channel -> white-noise variance) and the sample interval ``h`` give the
+    noise of the smoothed strut rates (:func:`velocity_noise`). The friction regressor is
+    a sign of the *measured* rate: with noise it flips at random while the strut sticks
+    (the true rate near zero, the measured one mostly noise), which shrinks the estimate
+    of ``F`` and its share of the residual force — a third of ``F`` at 3 % noise and
+    200 Hz, below every other candidate. The expected friction given a noisy rate is a
+    softer sign (the sign of a noisy rate is a sigmoid about 1.2 noise deviations wide,
+    and wider still where the strut sticks and the rate is all noise), so friction is
+    screened with ``tanh(d'/w)``, ``w = hypot(V_EPS, m 1.2 sigma_rate)`` for ``m`` = 1,
+    2, 4, 8, and the width that explains most is kept (like the bump stop's gap); with
+    little noise every ``w`` is the library's ``V_EPS``. The refit uses the library's law.
 
     Returns the screens (one per applicable candidate) and the force-domain summary
     (weighted RMS of the residual force per coordinate before and after the base refinement).
@@ -375,6 +468,8 @@ def screen_physical(model: SuspensionModel, p: Mapping[str, float], free: list[s
     R = residual_force(model, p, mo)
     nq = R.shape[1]
     n = R.shape[0]
+    qd_noise = (velocity_noise(mo, noise_var, model.coords, h) if noise_var and h
+                else np.zeros(nq))
     wrow = 1.0 / np.maximum(np.sqrt(np.mean(R ** 2, axis=0)), 1e-12)
     y = (R * wrow).reshape(-1)
     # base sensitivities (free parameters only); R(theta_hat) ~ sum_i D_i delta_i + Q
@@ -403,12 +498,19 @@ def screen_physical(model: SuspensionModel, p: Mapping[str, float], free: list[s
                 refined[k] = float(p[k] - d)
         return beta[len(D):], explained, se[len(D):] * infl, refined
 
-    def site_columns(name: str, sites: list[Site], gap: float | None) -> list[FloatArray]:
-        """One column per regressor, summed over ``sites`` (shared parameters)."""
+    def sign_width(site: Site, widen: float) -> float:
+        """Velocity scale (m/s) of the friction sign at ``site`` (see above)."""
+        return math.hypot(V_EPS, widen * 1.2 * float(np.sqrt(np.sum((site.g * qd_noise) ** 2))))
+
+    def site_columns(name: str, sites: list[Site], gap: float | None,
+                     widen: float = 1.0) -> list[FloatArray]:
+        """One column per regressor, summed over ``sites`` (shared parameters); ``widen``
+        scales the rate noise in the friction sign's width."""
         cols: list[FloatArray] = []
         for site in sites:
             s, sd = site.coordinate(Xs, Us)
-            for j, reg in enumerate(_site_regressors(name, site, s, sd, p, gap)):
+            width = sign_width(site, widen)
+            for j, reg in enumerate(_site_regressors(name, site, s, sd, p, gap, width)):
                 while len(cols) <= j:
                     cols.append(np.zeros((n, nq)))
                 cols[j] = cols[j] + reg[:, None] * site.b[None, :]
@@ -427,6 +529,8 @@ def screen_physical(model: SuspensionModel, p: Mapping[str, float], free: list[s
         if probe.site_kind == "strut" and len(every) > 1:
             variants += [[site] for site in every]
         best: Screen | None = None
+        best_widen = 1.0
+        widens = [1.0, 2.0, 4.0, 8.0] if name == "coulomb_friction" else [1.0]
         for var in variants:
             sites = every if var is None else var
             gaps: list[float | None] = [None]
@@ -437,22 +541,26 @@ def screen_physical(model: SuspensionModel, p: Mapping[str, float], free: list[s
                     continue
                 gaps = list(np.linspace(0.15, 0.9, 16) * hi)
             for gap in gaps:
-                fitted = fit_columns(site_columns(name, sites, gap))
-                if fitted is None:
-                    continue
-                coef, explained, cse, refined = fitted
-                tstat = float(np.max(np.abs(coef) / np.maximum(cse, 1e-300)))
-                params, plausible, note = _effect_params(name, coef, refined, model, gap, sites)
-                cand = Screen(name, "force", explained, tstat, plausible, params, refined, note,
-                              sites=None if var is None else [site.name for site in var])
-                if best is None or (cand.plausible, cand.explained) > (best.plausible, best.explained):
-                    best = cand
+                for widen in widens:
+                    fitted = fit_columns(site_columns(name, sites, gap, widen))
+                    if fitted is None:
+                        continue
+                    coef, explained, cse, refined = fitted
+                    tstat = float(np.max(np.abs(coef) / np.maximum(cse, 1e-300)))
+                    params, plausible, note = _effect_params(name, coef, refined, model, gap, sites)
+                    if name == "coulomb_friction":
+                        note = ("sign of the strut rate screened as tanh(rate / "
+                                f"{sign_width(sites[0], widen):.3g} m/s)")
+                    cand = Screen(name, "force", explained, tstat, plausible, params, refined, note,
+                                  sites=None if var is None else [site.name for site in var])
+                    if best is None or (cand.plausible, cand.explained) > (best.plausible, best.explained):
+                        best, best_widen = cand, widen
         if best is None:
             continue
         if probe.site_kind == "strut" and len(every) > 1:
             # diagnostic: one coefficient per strut (does the front agree with the rear?)
             gap = best.params.get("gap")
-            cols = [c for site in every for c in site_columns(name, [site], gap)]
+            cols = [c for site in every for c in site_columns(name, [site], gap, best_widen)]
             fitted = fit_columns(cols)
             if fitted is not None:
                 coef, explained, cse, _ = fitted
@@ -533,15 +641,24 @@ def screen_sensor(model: SuspensionModel, t: FloatArray, residual: Mapping[str, 
 
 def screen_delay(model: SuspensionModel, meas: Measurement, p: Mapping[str, float], free: list[str],
                  predicted: Mapping[str, FloatArray], U: FloatArray, max_delay: float) -> Screen | None:
-    """Screen ``sensor_delay`` in the force domain: a time shift between channels.
+    """Screen ``sensor_delay``: a time shift between channels.
 
     For every group of measured channels (all channels of one coordinate, or one channel)
     and every trial delay on a grid up to ``max_delay``, the group is advanced by the delay
     and the residual force is regressed on the base sensitivities; a lag makes position,
     velocity and acceleration of different coordinates inconsistent, so the right
     compensation removes most of the residual force. The best grid point is refined by a
-    parabola through its neighbours. Close runners-up (other channel groups) are returned in
-    :attr:`Screen.alternatives`.
+    parabola through its neighbours. The trial shifts are all-pass (:func:`shift_allpass`):
+    an interpolating shift would smooth the noise of the shifted channels and reward every
+    half-sample delay.
+
+    The residual force is built from differentiated measurements and, at a few per cent of
+    noise, is mostly their noise; a lag of a channel outside the baseline's cost is plainer
+    in its output residual, which is ``-d`` times the model's rate of that channel. Each
+    group is also scored that way (share of the channel-normalised output residual, only
+    for a lag within ``max_delay``), and the better of the two views ranks the group
+    (:attr:`Screen.domain` says which). Close runners-up (other channel groups) are
+    returned in :attr:`Screen.alternatives`.
     """
     t = meas.t
     h = float(np.median(np.diff(t)))
@@ -588,28 +705,78 @@ def screen_delay(model: SuspensionModel, meas: Measurement, p: Mapping[str, floa
                 if ch in meas.measured:
                     feeds.append((kind, i, ch))
                     break
-    per_group: list[tuple[float, int, list[float]]] = []   # (best ss, group index, ss per grid point)
+    # The same question in the output residual: a channel lagging by d reads
+    # y(t - d) ~ y - d y', so its residual is -d times the model's rate. The residual force
+    # is formed from differentiated measurements and is dominated by their noise at a few
+    # per cent (a 5 ms lag of x1_dot at 3 % noise moves it by nothing); the output residual
+    # of a channel the baseline's cost does not fit (a velocity under sse) shows the lag
+    # directly. Channels are normalised by their residual RMS (each weighs 1 / n_channels,
+    # as for sensor_offset); only a lag (d > 0) within max_delay counts.
+    resid: dict[str, FloatArray] = {}
+    for c in meas.measured:
+        if c in predicted:
+            e = np.asarray(meas.measured[c], dtype=float) - np.asarray(predicted[c], dtype=float)
+            if np.any(~np.isnan(e)):
+                resid[c] = e
+    n_out = max(len(resid), 1)
+
+    def output_screen(g: list[str]) -> tuple[float, float]:
+        """(share of the channel-normalised output residual, delay) of a common lag of ``g``."""
+        num, den, nobs = 0.0, 0.0, 0
+        for c in g:
+            if c not in resid:
+                continue
+            try:
+                r = np.asarray(_rate(c, t, predicted), dtype=float)
+            except KeyError:
+                continue
+            e = resid[c]
+            ok = ~(np.isnan(e) | np.isnan(r))
+            ok[-trim:] = False
+            var = float(np.mean(e[ok] ** 2)) if ok.any() else 0.0
+            if var <= 0:
+                continue
+            num += float(e[ok] @ r[ok]) / var
+            den += float(r[ok] @ r[ok]) / var
+            nobs = max(nobs, int(ok.sum()))
+        if den <= 0 or nobs == 0:
+            return 0.0, 0.0
+        d = -num / den
+        if not 0.0 < d <= max_delay:
+            return 0.0, d
+        return (num * num / den) / (nobs * n_out), d
+
+    # (score, group index, ss per grid point, output share, output delay)
+    per_group: list[tuple[float, int, list[float], float, float]] = []
     for gi, g in enumerate(groups):
         cols = [(kind, i) for kind, i, ch in feeds if ch in g]
-        if not cols:
-            continue
         sss = []
-        for d in grid:
+        for d in grid if cols else []:
             arrs = {"q": mo0.q.copy(), "qd": mo0.qd.copy(), "qdd": mo0.qdd.copy()}
             for kind, i in cols:
                 a = arrs[kind]
-                a[:, i] = np.interp(t + d, t, a[:, i])  # advance; the tail is trimmed
+                a[:, i] = shift_allpass(t, a[:, i], d)  # advance; the tail is trimmed
             m2 = Motion(arrs["q"], arrs["qd"], arrs["qdd"], mo0.r, mo0.rd, mo0.source)
             shifted[(gi, float(d))] = m2
             sss.append(ss_for(m2))
-        per_group.append((float(min(sss)), gi, sss))
+        f_share = max(0.0, (ss0 - min(sss)) / ss0) if sss and ss0 > 0 else 0.0
+        o_share, o_delay = output_screen(g)
+        if not sss and o_share <= 0:
+            continue
+        per_group.append((max(f_share, o_share), gi, sss, o_share, o_delay))
     _ = nq
-    if not per_group or ss0 <= 0:
+    if not per_group:
         return None
-    per_group.sort(key=lambda r: r[0])
+    per_group.sort(key=lambda r: -r[0])
 
-    def screen_of(gi: int, sss: list[float]) -> Screen:
+    def screen_of(gi: int, sss: list[float], o_share: float, o_delay: float) -> Screen:
         g = groups[gi]
+        f_share = max(0.0, (ss0 - min(sss)) / ss0) if sss and ss0 > 0 else 0.0
+        if o_share > f_share:
+            return Screen("sensor_delay", "output", o_share, float("nan"), True,
+                          {"channels": list(g), "delay_s": o_delay}, dict(p),
+                          note=f"time shift of {', '.join(g)} against the other channels, from "
+                               "the output residual against the model's rate")
         i = int(np.argmin(sss))
         d = float(grid[i])
         if 0 < i < len(grid) - 1:
@@ -619,14 +786,13 @@ def screen_delay(model: SuspensionModel, meas: Measurement, p: Mapping[str, floa
             a, b, _ = np.linalg.solve(A, yv)
             if a > 0 and x[0] < -b / (2 * a) < x[2]:
                 d = float(-b / (2 * a))
-        explained = max(0.0, (ss0 - sss[i]) / ss0)
         _, refined = regress_for(shifted[(gi, float(grid[i]))])
-        return Screen("sensor_delay", "force", explained, float("nan"), True,
+        return Screen("sensor_delay", "force", f_share, float("nan"), True,
                       {"channels": list(g), "delay_s": d}, refined,
                       note=f"time shift of {', '.join(g)} against the other channels, from the "
                            "residual force")
 
-    best = screen_of(per_group[0][1], per_group[0][2])
+    best = screen_of(*per_group[0][1:])
     # Near ties between channel groups (one channel of a coordinate or all of them) are
     # common: the residual force is dominated by the stiff terms, which see positions only.
     # The refit decides between them on the output residual of every channel, so keep the
@@ -634,9 +800,9 @@ def screen_delay(model: SuspensionModel, meas: Measurement, p: Mapping[str, floa
     g0 = groups[per_group[0][1]]
     closure = next((gi for gi, g in enumerate(groups)
                     if len(g0) == 1 and len(g) > 1 and g0[0] in g), None)
-    for ss_g, gi, sss in per_group[1:]:
-        alt = screen_of(gi, sss)
-        if gi == closure or alt.explained >= 0.8 * best.explained:
+    for row in per_group[1:]:
+        alt = screen_of(*row[1:])
+        if row[1] == closure or alt.explained >= 0.8 * best.explained:
             best.alternatives.append(alt)
         if len(best.alternatives) >= 2:
             break
@@ -653,5 +819,6 @@ def _rate(ch: str, t: FloatArray, predicted: Mapping[str, FloatArray]) -> FloatA
 
 
 __all__ = ["autocorr", "ljung_box", "mean_test", "noise_variance", "xcorr_peak", "effective_n", "ChannelStats",
+           "shift_allpass", "velocity_noise",
            "channel_stats", "Motion", "motion_from", "residual_force", "force_sensitivity", "Screen",
            "screen_physical", "screen_sensor", "screen_delay"]

@@ -22,7 +22,8 @@ from suspid.models.effects import Effect, inject
 def synthetic_record(model: str, effects: Sequence["str | Effect"], scenario: str = "bump", *,
                      params: Mapping[str, float] | None = None, fs: float = 200.0,
                      duration: float = 1.6, noise: float = 0.005, seed: int = 0,
-                     extra_force: ForceFn | None = None, **scen: Any) -> Measurement:
+                     extra_force: ForceFn | None = None, noise_seed: int | None = None,
+                     **scen: Any) -> Measurement:
     """Simulate ``model`` with ``effects`` nobody declared and return the noisy record.
 
     Parameters
@@ -46,6 +47,10 @@ def synthetic_record(model: str, effects: Sequence["str | Effect"], scenario: st
     extra_force : callable, optional
         A further generalised force ``f(t, x, u, params)`` (N, N m) outside the library
         (e.g. an engine shake); the record is then integrated by ``solve_ivp``.
+    noise_seed : int, optional
+        Seed of the noise instead of ``seed + 101``; ``suspid simulate --seed S`` draws the
+        same noise as ``noise_seed=S`` (same channel order), so a record made on the
+        command line can be rebuilt here.
     **scen
         Scenario options (``h``, ``v_kmh``, ``road_class``, ...).
 
@@ -65,7 +70,7 @@ def synthetic_record(model: str, effects: Sequence["str | Effect"], scenario: st
         out = inj.measure(t, simulate_ode(inj.model, p, t, road, x0))
     else:
         out = inj.simulate(p, t, road, x0)
-    rng = np.random.default_rng(seed + 101)
+    rng = np.random.default_rng(seed + 101 if noise_seed is None else noise_seed)
     chans = [c for c in m.channels if not c.endswith("_ddot")]
     meas = {c: out[c] + noise * np.std(out[c]) * rng.standard_normal(t.size) for c in chans}
     names = ",".join(str(e) for e in effects) or "none"

@@ -16,14 +16,17 @@ CHANNELS = ("x1", "x2", "x1_dot", "x2_dot")
 def make_measurement(effects: Sequence["str | Effect"], scenario: str = "bump", *, fs: float = 200.0,
                      duration: float = 1.6, noise: float = 0.005, seed: int = 0,
                      params: dict[str, float] | None = None, model: str = "quarter2",
-                     extra_force: ForceFn | None = None, **scen: Any) -> Measurement:
+                     extra_force: ForceFn | None = None, noise_seed: int | None = None,
+                     **scen: Any) -> Measurement:
     """Simulate ``model`` with ``effects`` injected and white noise (fraction of each channel's std).
 
     ``effects`` are spec strings or :class:`~suspid.models.effects.Effect` objects (e.g. an
     effect restricted to one strut of a half car); ``quarter2`` defaults to the seed's
-    Table 1, the other models to their documented defaults. See
+    Table 1, the other models to their documented defaults; ``noise_seed=S`` draws the
+    noise ``suspid simulate --seed S`` draws. See
     :func:`estimator.diagnose.synthetic.synthetic_record`.
     """
     p = dict(TABLE1) if params is None and model == "quarter2" else params
     return synthetic_record(model, effects, scenario, params=p, fs=fs, duration=duration,
-                            noise=noise, seed=seed, extra_force=extra_force, **scen)
+                            noise=noise, seed=seed, extra_force=extra_force, noise_seed=noise_seed,
+                            **scen)
