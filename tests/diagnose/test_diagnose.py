@@ -30,6 +30,7 @@ CASES = [
     ("bump_stop:gap=0.01,k_stop=300000", "bump", {}, {"gap": 0.01, "k_stop": 3e5}),
     ("bump_stop:gap=0.02,k_stop=150000", "curb", {"h": 0.12}, {"gap": 0.02, "k_stop": 1.5e5}),
     ("tire_liftoff", "curb", {"h": -0.1}, {}),
+    ("tire_liftoff", "bump", {"h": -0.06, "v_kmh": 40}, {}),   # a 6 cm pothole at 40 km/h
     ("sensor_delay:channels=x2+x2_dot,delay_s=0.008", "bump", {}, {"delay_s": 0.008}),
     ("sensor_delay:channels=x1,delay_s=0.02", "iso8608", {"v_kmh": 50}, {"delay_s": 0.02}),
     ("sensor_offset:channel=x1,offset=0.003", "bump", {}, {"offset": 0.003}),
