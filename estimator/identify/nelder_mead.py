@@ -1,6 +1,8 @@
 """Nelder–Mead identification in log coordinates with restarts.
 
-scipy's Nelder–Mead builds its first simplex from 5 % steps of each coordinate's value,
+The simplex is :func:`estimator.identify.simplex.nelder_mead`, a bit-identical replica of
+scipy's Nelder–Mead that spares importing ``scipy.optimize``. Its default first simplex
+(scipy's) takes 5 % steps of each coordinate's value,
 which is meaningless when parameters span six orders of magnitude (an inertia in kg m^2
 next to a tyre stiffness in N/m). suspid optimises ``u = log(theta / theta_start)``, so a
 step of 0.1 is a 10 % change of any parameter, and every coordinate starts at 0. After the
@@ -15,12 +17,12 @@ from dataclasses import dataclass
 from typing import Callable, Mapping
 
 import numpy as np
-from scipy.optimize import minimize
 
 from estimator.identify.identifiability import assess
 from estimator.identify.params import Parameters
 from estimator.identify.problem import OutputErrorProblem
 from estimator.identify.result import IdentResult
+from estimator.identify.simplex import nelder_mead
 from suspid.models.base import FloatArray
 from suspid.simulate import outputs, road_matrix, simulate_states
 
@@ -75,9 +77,8 @@ def minimize_log(fun: Callable[[FloatArray], float], u0: FloatArray, step: float
     while run <= restarts and nfev < budget:
         if simplex is None:
             simplex = np.vstack([best_u] + [best_u + cur_step * e for e in np.eye(n)])
-        res = minimize(fun, simplex[0], method="Nelder-Mead", bounds=bounds,
-                       options={"initial_simplex": simplex, "xatol": xatol, "fatol": fatol,
-                                "maxfev": budget - nfev, "adaptive": n > 4})
+        res = nelder_mead(fun, simplex[0], bounds=bounds, initial_simplex=simplex,
+                          xatol=xatol, fatol=fatol, maxfev=budget - nfev, adaptive=n > 4)
         nfev += int(res.nfev)
         last_status = int(res.status)
         final = res.final_simplex[0]

@@ -4,7 +4,7 @@ Each window of the stream becomes a small output-error problem
 (:class:`~estimator.stream.windowproblem.WindowProblem`, the core's
 :class:`~estimator.identify.OutputErrorProblem` with a lean evaluation path; decimated as
 :mod:`estimator.stream.config` documents) and is fitted with the core's
-:func:`~estimator.identify.minimize_log` (scipy's Nelder-Mead in log coordinates) and the
+:func:`~estimator.identify.minimize_log` (scipy-identical Nelder-Mead in log coordinates) and the
 same sandwich standard errors as ``suspid identify``.
 
 Warm start

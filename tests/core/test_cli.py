@@ -148,3 +148,21 @@ def test_no_road_and_no_decay_is_called_out(tmp_path: Path) -> None:
     r = run("identify", "--model", "quarter2", "--input", str(free), "--fix", "m1=300",
             "--fix", "m2=40", "--json")
     assert not any("does not decay" in w for w in json.loads(r.stdout)["warnings"])
+
+
+def test_subcommand_start_imports_only_its_own_module() -> None:
+    """``suspid monitor ...`` registers (and imports) the monitor subcommand alone."""
+    code = ("import sys; from suspid.cli import main, _subcommand; "
+            "assert _subcommand(['--debug', 'monitor', '--model', 'x']) == 'monitor'; "
+            "assert _subcommand(['--debug']) is None and _subcommand(['nope']) is None; "
+            "main(['doe', '--help'])")
+    r = subprocess.run([sys.executable, "-c", code + "\n"], capture_output=True, text=True,
+                       timeout=60)
+    assert r.returncode == 0 and "suspid doe" in r.stdout, r.stderr
+    code = ("import sys; from suspid.cli import main\n"
+            "try:\n    main(['simulate', '--help'])\nexcept SystemExit:\n    pass\n"
+            "print(','.join(sorted(m for m in sys.modules if m.startswith('suspid.cli.') "
+            "and m != 'suspid.cli._common')))")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip().splitlines()[-1] == "suspid.cli.simulate"
