@@ -16,7 +16,10 @@ readers always see every frame received so far.
 
 :meth:`RollingBuffer.align` puts the channels on one uniform time base: every sample goes
 to the grid cell nearest its time; cells without a sample stay NaN and are listed as
-:class:`Gap` records -- nothing is interpolated.
+:class:`Gap` records -- nothing is interpolated. A window reads only its own rows of each
+ring (:meth:`Source.rows_between`: found by bisection while the ring's times are in
+arrival order, which each read checks for the rows pushed since the previous one), and
+only the columns asked for; a monitor aligns a few seconds out of a ring of tens.
 """
 from __future__ import annotations
 
@@ -94,7 +97,7 @@ class Source:
     """Ring of rows ``(t, v_0, ..., v_{k-1})`` of one message; created by :meth:`RollingBuffer.source`."""
 
     __slots__ = ("name", "channels", "t", "cols", "w", "n", "cap", "growable", "overwritten",
-                 "_lock", "push", "_views", "_owner")
+                 "_lock", "push", "_views", "_owner", "_cleared", "_checked", "_drop")
 
     def __init__(self, name: str, channels: Sequence[str], capacity: int, growable: bool,
                  lock: threading.Lock, owner: "RollingBuffer | None" = None) -> None:
@@ -108,6 +111,12 @@ class Source:
         self.n = 0          # rows held (<= cap)
         self.growable = growable
         self.overwritten = 0
+        # time order of the rows held, checked at reads (rows are numbered in push order;
+        # the pushes are left alone): rows dropped by clear(), rows checked so far, and the
+        # newest row whose time is not >= its predecessor's (-1: none)
+        self._cleared = 0
+        self._checked = 0
+        self._drop = -1
         self._lock = lock
         self._views: list[np.ndarray] | None = None   # NumPy views of (t, *cols) for push_many
         self._owner = owner
@@ -217,9 +226,96 @@ class Source:
         vv = np.column_stack(parts[1:]) if len(parts) > 1 else np.empty((n, 0))
         return tt, vv
 
+    def _in_order(self) -> bool:
+        """Whether the rows held have non-decreasing times in arrival order (caller holds the lock).
+
+        Rows are numbered in push order (``overwritten + n`` plus the rows cleared is the
+        count pushed); the rows pushed since the last call are compared with their
+        predecessors here, so each row is checked once, whatever the pushes were.
+        """
+        n, cap = self.n, self.cap
+        total = self.overwritten + n + self._cleared
+        first = total - n                         # number of the oldest row held
+        lo = max(self._checked, first + 1)        # rows to compare with their predecessor
+        if lo < total:
+            pos = (self.w - (total - lo) - 1 + np.arange(total - lo + 1)) % cap
+            t = np.frombuffer(self.t, dtype=np.float64, count=cap)[pos]
+            bad = np.flatnonzero(~(t[1:] >= t[:-1]))   # NaN too
+            del t
+            if bad.size:
+                self._drop = lo + int(bad[-1])
+        self._checked = total
+        return self._drop <= first
+
+    def rows_between(self, t_start: float | None, t_end: float | None,
+                     cols: Sequence[int]) -> tuple[np.ndarray, dict[int, np.ndarray]]:
+        """Copies of the rows with ``t_start <= t <= t_end`` (a bound None: open), in arrival order.
+
+        What :meth:`snapshot` filtered by time gives, without copying the whole ring: the
+        times, and ``{column index: values}`` of the columns ``cols`` only. While the
+        times held are in order (always, for the listener's timestamp time base) the
+        window's rows are found by bisection; otherwise by comparing every time.
+        """
+        if self._owner is not None and self._owner.before_read is not None:
+            self._owner.before_read()
+        with self._lock:
+            n, w, cap = self.n, self.w, self.cap
+            # zero-copy views, released before the lock is (see snapshot)
+            tv = np.frombuffer(self.t, dtype=np.float64, count=cap)
+            if n < cap or w == 0:
+                lo = w - n if n < cap else 0
+                spans = [(lo, lo + n)]
+            else:
+                spans = [(w, cap), (0, w)]    # wrapped: the oldest rows from w on
+            pick: list[slice | np.ndarray] = []
+            if t_start is None and t_end is None:
+                pick = [slice(a, b) for a, b in spans]
+            elif (t_start is None or t_start == t_start) and (t_end is None or t_end == t_end) \
+                    and self._in_order():
+                # sorted times: t >= t_start from the left bisection on, t <= t_end up
+                # to the right one (the comparisons below, on a sorted array)
+                for a, b in spans:
+                    part = tv[a:b]
+                    i = 0 if t_start is None else int(np.searchsorted(part, t_start, "left"))
+                    j = b - a if t_end is None else int(np.searchsorted(part, t_end, "right"))
+                    if i < j:
+                        pick.append(slice(a + i, a + j))
+            else:
+                for a, b in spans:
+                    part = tv[a:b]
+                    if t_start is None:
+                        keep = part <= t_end
+                    elif t_end is None:
+                        keep = part >= t_start
+                    else:
+                        keep = part >= t_start
+                        keep &= part <= t_end
+                    at = np.flatnonzero(keep)
+                    if at.size == b - a:
+                        pick.append(slice(a, b))
+                    elif at.size and at[-1] - at[0] + 1 == at.size:
+                        pick.append(slice(a + int(at[0]), a + int(at[-1]) + 1))   # one run
+                    elif at.size:
+                        pick.append(at + a)
+            if not pick:
+                pick = [slice(0, 0)]
+
+            def take(view: np.ndarray) -> np.ndarray:
+                if len(pick) == 1:
+                    got = view[pick[0]]
+                    return got.copy() if isinstance(pick[0], slice) else got
+                return np.concatenate([view[p] for p in pick])
+
+            t = take(tv)
+            vals = {j: take(np.frombuffer(self.cols[j], dtype=np.float64, count=cap))
+                    for j in cols}
+            del tv
+        return t, vals
+
     def clear(self) -> None:
         """Forget every row (capacity kept)."""
         with self._lock:
+            self._cleared += self.n
             self.w = 0
             self.n = 0
 
@@ -331,17 +427,17 @@ class RollingBuffer:
         unknown = [c for c in names if c not in self._where]
         if unknown:
             raise KeyError(f"channel(s) not in buffer: {', '.join(unknown)}")
-        snaps: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        # per source: the rows inside the window, in arrival order, and only the value
+        # columns asked for (a copy of the whole ring per window was most of the cost)
+        want: dict[str, tuple[Source, list[int]]] = {}
         for c in names:
-            src = self._where[c][0]
-            if src.name not in snaps:
-                t, v = src.snapshot()
-                keep = np.ones(t.size, dtype=bool)
-                if t_start is not None:
-                    keep &= t >= t_start
-                if t_end is not None:
-                    keep &= t <= t_end
-                snaps[src.name] = (t[keep], v[keep])
+            src, k = self._where[c]
+            cols = want.setdefault(src.name, (src, []))[1]
+            if k not in cols:
+                cols.append(k)
+        snaps: dict[str, tuple[np.ndarray, dict[int, np.ndarray]]] = {}
+        for name, (src, cols) in want.items():
+            snaps[name] = src.rows_between(t_start, t_end, cols)
         nonempty = [s for s in snaps.values() if s[0].size]
         if not nonempty:
             raise InputError("no decoded samples to align (no accepted frame carries the channels "
@@ -377,20 +473,25 @@ class RollingBuffer:
         values: dict[str, np.ndarray] = {}
         collisions = 0
         cells: dict[str, np.ndarray] = {}
+        filled = np.zeros(n, dtype=bool)
         for name, (t, v) in snaps.items():
             k = np.rint((t - t0) / dt).astype(np.int64)
             ok = (k >= 0) & (k < n)
-            cells[name] = k
-            kk = k[ok]
-            stamps[kk] = t[ok]
-            collisions = max(collisions, int(kk.size - np.unique(kk).size))
+            whole = bool(ok.all())   # always, as t0 <= t <= t_last; kept as a guard
+            kk = k if whole else k[ok]
+            cells[name] = kk
+            stamps[kk] = t if whole else t[ok]
+            if kk.size:
+                # frames minus distinct cells (what np.unique counted, without its sort)
+                filled[:] = False
+                filled[kk] = True
+                collisions = max(collisions, int(kk.size - np.count_nonzero(filled)))
+            if not whole:
+                snaps[name] = (t, {j: x[ok] for j, x in v.items()})
         for c in names:
             src, col = self._where[c]
-            t, v = snaps[src.name]
-            k = cells[src.name]
-            ok = (k >= 0) & (k < n)
             out = np.full(n, np.nan)
-            out[k[ok]] = v[ok, col]
+            out[cells[src.name]] = snaps[src.name][1][col]
             values[c] = out
         present = ~np.isnan(stamps)
         kmax = int(np.flatnonzero(present)[-1]) if present.any() else 0

@@ -644,8 +644,7 @@ class DecodeListener(can.Listener):
         if n <= 0:
             return
         if n < self.min_batch:
-            for i in range(lo, hi):
-                self._scalar_row(fa, i)
+            self._scalar_rows(fa, lo, hi)
             return
         self._frames += n
         ft = fa.frame_type[lo:hi]
@@ -737,6 +736,32 @@ class DecodeListener(can.Listener):
             self._rejected["frame_type"] += 1
             return
         self._validate(float(fa.timestamp[i]), _row_key(fa, i), fa.payload(i))
+
+    def _scalar_rows(self, fa: FrameArrays, lo: int, hi: int) -> None:
+        """:meth:`_scalar_row` for frames ``lo:hi`` in turn, the fields read as lists first.
+
+        The small batches a window driver feeds between two checks go this way; the
+        per-frame reads of NumPy scalars (~1 µs a frame) become list and bytes indexing.
+        """
+        ts = fa.timestamp[lo:hi].tolist()
+        ids = fa.arbitration_id[lo:hi].tolist()
+        ext = fa.is_extended[lo:hi].tolist()
+        ft = fa.frame_type[lo:hi].tolist()
+        lens = fa.length[lo:hi].tolist()
+        raw = np.ascontiguousarray(fa.data[lo:hi]).tobytes()
+        long_data = fa.long_data
+        rejected = self._rejected
+        validate = self._validate
+        for k in range(hi - lo):
+            self._frames += 1
+            if ft[k]:
+                rejected["frame_type"] += 1
+                continue
+            payload = long_data.get(lo + k) if long_data else None
+            if payload is None:   # FrameArrays.payload: data[i, :length] (8 bytes at most)
+                payload = raw[8 * k:8 * k + 8][:lens[k]]
+            fid = ids[k]
+            validate(ts[k], fid | _EXT if ext[k] else fid, payload)
 
     def _segment(self, lo: int, hi: int, ts: np.ndarray, r: np.ndarray, outcome: np.ndarray,
                  rows: np.ndarray) -> None:
@@ -1171,11 +1196,30 @@ def _ema(jobs: list[tuple[float, int, int]], el: np.ndarray) -> list[float]:
     must be bit for bit the scalar one, and no array operation rounds the same way step by
     step (``scipy.signal.lfilter`` would, but importing ``scipy.signal`` costs ~1 s per
     process start).
+
+    The loop is the scalar one with two steps taken out of it, which changes no rounding:
+    the products ``0.1 * el`` are computed as one array operation (one IEEE multiplication
+    each, the same double), and the test ``period > 0`` is made once: when every product
+    is positive, a positive period stays positive (``0.9 * p`` is >= 0 and adding a
+    positive double to it rounds to at least that double), so the test would always pass.
+    A job with a non-positive (or NaN) product runs the scalar loop as it is.
     """
     out = []
     for p, a, b in jobs:
-        for x in el[a:b].tolist():
-            p = 0.9 * p + 0.1 * x if p > 0 else x
+        if a >= b:
+            out.append(p)
+            continue
+        xs = el[a:b]
+        if not p > 0:            # no estimate yet (or NaN): the first interval becomes it
+            p = float(xs[0])
+            xs = xs[1:]
+        ys = 0.1 * xs
+        if p > 0 and bool((ys > 0).all()):
+            for y in ys.tolist():
+                p = 0.9 * p + y
+        else:
+            for x in xs.tolist():
+                p = 0.9 * p + 0.1 * x if p > 0 else x
         out.append(p)
     return out
 

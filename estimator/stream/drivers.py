@@ -97,12 +97,14 @@ class CanWindowDriver:
             self.poll()
             self._left = self.next_check(self.frames)
 
-    def next_check(self, fed: int) -> int:
+    def next_check(self, fed: int, max_steps: float = 0.5) -> int:
         """Frames to take before the next :meth:`poll`, after ``fed`` frames in all.
 
         1 until the first sample is in; then the frames expected before the next window end
         at the rate seen so far (``fed`` over the data time since the first sample), at
-        least ``check_every`` and at most half a step's worth.
+        least ``check_every`` and at most ``max_steps`` steps' worth (half a step live, so
+        a window is never cut much later than its end; a replay has no such deadline and
+        takes up to a whole step: fewer, larger decoder batches).
         """
         if not math.isfinite(self.t_first):
             return 1
@@ -112,7 +114,7 @@ class CanWindowDriver:
             return every
         rate = fed / span                                  # frames per second of data
         ahead = (self.next_end - self.t_first - span) * rate
-        return int(min(max(ahead, every), max(every, 0.5 * self.step_s * rate)))
+        return int(min(max(ahead, every), max(every, max_steps * self.step_s * rate)))
 
     def poll(self) -> None:
         """Cut every window whose end lies before the newest accepted sample."""
@@ -200,7 +202,7 @@ def replay_log(driver: CanWindowDriver, path: Any, stats: Any = None) -> int:
     def poll() -> int:
         nonlocal fed
         driver.poll()
-        k = driver.next_check(fed)
+        k = driver.next_check(fed, max_steps=1.0)
         fed += k
         return k
 

@@ -1,0 +1,404 @@
+"""The decoder's fast paths equal the straightforward code they replace, exactly.
+
+* :meth:`RollingBuffer.align` reads only the window's rows of each ring
+  (:meth:`Source.rows_between`, by bisection while the times held are in order, a property
+  checked incrementally at reads) and counts collisions without ``np.unique``: equal to
+  the former snapshot-everything alignment (kept here as the reference) for random pushes,
+  gaps, dropped frames, out-of-order and NaN times, clears and ring wrap-around, with
+  windows sliding over the stream as the monitor's driver cuts them.
+* :func:`estimator.decode.listener._ema`: the period recurrence with the products taken
+  out of the loop is the scalar recurrence bit for bit, whatever the inputs.
+* The candump column parser's word ("SWAR") fields equal the digit-by-digit conversion.
+* Small ``feed_arrays`` batches (frame by frame from lists) equal frames one by one.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from estimator.decode.buffer import Aligned, RollingBuffer, _gaps
+from estimator.decode.listener import _ema
+from suspid.can import logs
+from suspid.can.logs import FrameArrays
+from suspid.errors import InputError
+from tests.can.test_batch_equivalence import RATES, _listeners, _stream, snapshot
+
+_SETTINGS = settings(max_examples=80, deadline=None,
+                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+
+
+# ---- alignment -----------------------------------------------------------------------------
+def _reference_align(buf: RollingBuffer, names: list[str], dt: float | None,
+                     t_start: float | None, t_end: float | None) -> Aligned:
+    """The alignment as it was: a snapshot of every ring, a time mask, ``np.unique``."""
+    snaps: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    for c in names:
+        src = buf._where[c][0]
+        if src.name not in snaps:
+            t, v = src.snapshot()
+            keep = np.ones(t.size, dtype=bool)
+            if t_start is not None:
+                keep &= t >= t_start
+            if t_end is not None:
+                keep &= t <= t_end
+            snaps[src.name] = (t[keep], v[keep])
+    nonempty = [s for s in snaps.values() if s[0].size]
+    if not nonempty:
+        raise InputError("no decoded samples")
+    if dt is None:
+        steps = []
+        for t, _ in nonempty:
+            if t.size >= 2:
+                d = np.diff(t)
+                d = d[d > 0]
+                if d.size:
+                    steps.append(float(np.median(d)))
+        dt = min(steps) if steps else 1.0
+    t0 = min(float(t.min()) for t, _ in nonempty)
+    t_last = max(float(t.max()) for t, _ in nonempty)
+    n = int(np.rint((t_last - t0) / dt)) + 1
+    stamps = np.full(n, np.nan)
+    values: dict[str, np.ndarray] = {}
+    collisions = 0
+    cells: dict[str, np.ndarray] = {}
+    for name, (t, v) in snaps.items():
+        k = np.rint((t - t0) / dt).astype(np.int64)
+        ok = (k >= 0) & (k < n)
+        cells[name] = k
+        kk = k[ok]
+        stamps[kk] = t[ok]
+        collisions = max(collisions, int(kk.size - np.unique(kk).size))
+    for c in names:
+        src, col = buf._where[c]
+        t, v = snaps[src.name]
+        k = cells[src.name]
+        ok = (k >= 0) & (k < n)
+        out = np.full(n, np.nan)
+        out[k[ok]] = v[ok, col]
+        values[c] = out
+    present = ~np.isnan(stamps)
+    kmax = int(np.flatnonzero(present)[-1]) if present.any() else 0
+    dt_fit = (float(stamps[kmax]) - t0) / kmax if kmax > 0 else dt
+    grid = t0 + np.arange(n) * dt_fit
+    snapped = float(np.nanmax(np.abs(stamps - grid))) if present.any() else 0.0
+    t_out = np.where(present, stamps, grid) if snapped <= 1e-9 * dt_fit else grid
+    gaps = []
+    for c in names:
+        gaps.extend(_gaps(c, values[c], t_out))
+    return Aligned(t_out, dt_fit, values, gaps, collisions, snapped)
+
+
+def _bits(x: np.ndarray) -> bytes:
+    return np.ascontiguousarray(x, dtype=np.float64).tobytes()
+
+
+def _assert_same(a: Aligned, b: Aligned) -> None:
+    assert _bits(a.t) == _bits(b.t)
+    assert np.float64(a.dt).tobytes() == np.float64(b.dt).tobytes()
+    assert list(a.values) == list(b.values)
+    for c in a.values:
+        assert _bits(a.values[c]) == _bits(b.values[c]), c
+    assert [g.as_dict() for g in a.gaps] == [g.as_dict() for g in b.gaps]
+    assert a.collisions == b.collisions
+    assert np.float64(a.snapped).tobytes() == np.float64(b.snapped).tobytes()
+
+
+_SOURCES = {"A": ["a1", "a2"], "B": ["b1"], "C": ["c1", "c2", "c3"]}
+
+
+@st.composite
+def _pushes(draw: st.DrawFn) -> list[tuple]:
+    """Operations on a buffer: blocks of rows (one by one or push_many), reads, clears."""
+    ops: list[tuple] = []
+    t = draw(st.floats(-5.0, 5.0))
+    for _ in range(draw(st.integers(1, 14))):
+        kind = draw(st.sampled_from(["rows", "rows", "rows", "read", "read", "clear"]))
+        if kind != "rows":
+            ops.append((kind,))
+            continue
+        n = draw(st.integers(1, 70))
+        # times: a 2 ms grid with dropped frames, jitter, duplicates, a late frame, a jump
+        # back (a clock reset), now and then NaN
+        steps = draw(st.lists(st.sampled_from([0.002, 0.002, 0.002, 0.004, 0.010, 0.0, 0.0021,
+                                               0.0019, -0.003, -0.5, 0.3]),
+                              min_size=n, max_size=n))
+        times = []
+        for s in steps:
+            t += s
+            times.append(t)
+        if draw(st.integers(0, 9)) == 0:
+            times[draw(st.integers(0, n - 1))] = math.nan
+        src = draw(st.sampled_from(sorted(_SOURCES)))
+        ops.append(("rows", src, times, draw(st.booleans())))
+    return ops
+
+
+def _windows(draw: st.DrawFn, t_hi: float) -> list[tuple[float | None, float | None]]:
+    out: list[tuple[float | None, float | None]] = [(None, None)]
+    w = draw(st.sampled_from([0.02, 0.05, 0.1, 0.4]))
+    step = draw(st.sampled_from([0.01, 0.03, 0.05]))
+    end = t_hi - 0.3
+    for _ in range(draw(st.integers(1, 6))):      # sliding, overlapping, as the driver cuts
+        out.append((end - w, end))
+        end += step
+    out.append((None, t_hi - 0.05))
+    out.append((t_hi - 0.1, None))
+    out.append((t_hi, t_hi - 1.0))                  # empty: start after end
+    out.append((math.nan, t_hi))                    # a NaN bound takes no row
+    return out
+
+
+@_SETTINGS
+@given(ops=_pushes(), capacity=st.sampled_from([2, 5, 16, 64]), growable=st.booleans(),
+       data=st.data())
+def test_align_equals_snapshot_alignment(ops: list[tuple], capacity: int, growable: bool,
+                                         data: st.DataObject) -> None:
+    buf = RollingBuffer(capacity, growable)
+    srcs = {name: buf.source(name, chans) for name, chans in _SOURCES.items()}
+    rng = np.random.default_rng(len(ops))
+    t_hi = 0.0
+    names = [c for chans in _SOURCES.values() for c in chans]
+    for op in ops:
+        if op[0] == "clear":
+            srcs[data.draw(st.sampled_from(sorted(srcs)))].clear()
+            continue
+        if op[0] == "rows":
+            _, name, times, many = op
+            src = srcs[name]
+            vals = rng.normal(size=(len(times), len(src.channels)))
+            vals[rng.random(vals.shape) < 0.05] = math.nan
+            if many:
+                src.push_many(np.array(times), vals)
+            else:
+                for tk, row in zip(times, vals):
+                    src.push(tk, row.tolist())
+            t_hi = max([t_hi] + [x for x in times if x == x])
+            continue
+        for t_start, t_end in _windows(data.draw, t_hi):
+            chans = data.draw(st.sampled_from([names, ["a1", "c2"], ["b1"], ["c3", "a2", "b1"]]))
+            dt = data.draw(st.sampled_from([None, 0.002, 0.0025]))
+            for c in {buf._where[c][0].name for c in chans}:   # the rows, as the reads see them
+                src = srcs[c]
+                t, v = src.snapshot()
+                keep = np.ones(t.size, bool)
+                if t_start is not None:
+                    keep &= t >= t_start
+                if t_end is not None:
+                    keep &= t <= t_end
+                got_t, got_v = src.rows_between(t_start, t_end, range(len(src.channels)))
+                assert _bits(got_t) == _bits(t[keep])
+                for j in range(len(src.channels)):
+                    assert _bits(got_v[j]) == _bits(v[keep, j])
+            try:
+                want = _reference_align(buf, chans, dt, t_start, t_end)
+            except (InputError, ValueError, MemoryError) as exc:
+                with pytest.raises(type(exc)):
+                    buf.align(chans, dt, t_start, t_end)
+                continue
+            if want.t.size > 200_000:     # a NaN/late time made a huge grid: both refuse
+                continue
+            _assert_same(buf.align(chans, dt, t_start, t_end), want)
+
+
+@pytest.mark.parametrize("capacity", [64, 1000])
+def test_sliding_windows_over_a_wrapping_ring(capacity: int) -> None:
+    """The monitor's pattern: 500 Hz sources with lost frames, late frames, one clock
+    reset, a ring wrapping many times; every sliding window equals the reference."""
+    rng = np.random.default_rng(7)
+    buf = RollingBuffer(capacity)
+    a = buf.source("A", ["x", "y"])
+    b = buf.source("B", ["z"])
+    t = 10.0
+    win, step = 0.08, 0.03
+    next_end = t + win
+    for k in range(3000):
+        t += 0.002
+        for src in (a, b):
+            if rng.random() < 0.03:
+                continue                                   # a lost frame
+            tk = t - (0.0006 if rng.random() < 0.01 else 0.0)   # late, out of order
+            src.push(tk, rng.normal(size=len(src.channels)).tolist())
+        if k == 1500:
+            t -= 2.0                                       # the logger clock jumps back
+            next_end = t + win
+        while t > next_end + 1e-9:
+            want = _reference_align(buf, ["x", "z", "y"], 0.002, next_end - win, next_end)
+            _assert_same(buf.align(["x", "z", "y"], 0.002, next_end - win, next_end), want)
+            next_end += step
+
+
+# ---- the period recurrence -----------------------------------------------------------------
+def _ema_reference(jobs: list[tuple[float, int, int]], el: np.ndarray) -> list[float]:
+    out = []
+    for p, a, b in jobs:
+        for x in el[a:b].tolist():
+            p = 0.9 * p + 0.1 * x if p > 0 else x
+        out.append(p)
+    return out
+
+
+_EL = st.one_of(st.floats(1e-4, 1e-2), st.sampled_from([0.0, -0.0, -0.001, math.nan, math.inf,
+                                                          5e-324, 1e-310, 2e-323, 0.002]))
+
+
+@settings(max_examples=300, deadline=None)
+@given(el=st.lists(_EL, min_size=0, max_size=60),
+       p0=st.lists(st.sampled_from([0.0, -1.0, math.nan, 0.002, 5e-324, math.inf, 1e-3]),
+                   min_size=1, max_size=4),
+       cuts=st.lists(st.integers(0, 60), min_size=2, max_size=8))
+def test_ema_equals_scalar_recurrence(el: list[float], p0: list[float], cuts: list[int]) -> None:
+    arr = np.array(el, dtype=np.float64)
+    cuts = sorted(min(c, arr.size) for c in cuts)
+    jobs = [(p0[k % len(p0)], a, b) for k, (a, b) in enumerate(zip(cuts[:-1], cuts[1:]))]
+    got = np.array(_ema(jobs, arr), dtype=np.float64)
+    want = np.array(_ema_reference(jobs, arr), dtype=np.float64)
+    assert got.tobytes() == want.tobytes()
+
+
+def test_ema_on_a_long_jittery_run() -> None:
+    t = np.cumsum(np.round(np.random.default_rng(3).normal(0.002, 2e-5, 20000), 6)) + 1e5
+    el = np.diff(t)
+    jobs = [(0.0, 0, 7000), (0.002, 7000, 19999), (-1.0, 3, 3)]
+    assert np.array(_ema(jobs, el)).tobytes() == np.array(_ema_reference(jobs, el)).tobytes()
+
+
+# ---- candump fields as words ---------------------------------------------------------------
+#: characters at the edges of the digit and letter ranges, blanks, bytes beyond ASCII
+_ODD = b"/:@G`g \x00\x7f\x80\xb0\xb9\xc1\xe6\xff0123456789aAfF"
+
+
+@st.composite
+def _rows(draw: st.DrawFn, alphabet: bytes) -> tuple[np.ndarray, int, int]:
+    """Rows of one width with a field [a, b) of characters from ``alphabet``, a few odd."""
+    k = draw(st.integers(1, 20))
+    a = draw(st.integers(0, 12))
+    width = a + k + draw(st.integers(0, 12))
+    m = draw(st.integers(1, 30))
+    seed = draw(st.integers(0, 2**32 - 1))
+    rng = np.random.default_rng(seed)
+    rows = rng.choice(np.frombuffer(b"(.)# xyz0123456789", np.uint8), size=(m, width))
+    rows[:, a:a + k] = rng.choice(np.frombuffer(alphabet, np.uint8), size=(m, k))
+    for _ in range(draw(st.integers(0, 4))):
+        rows[rng.integers(0, m), a + rng.integers(0, k)] = _ODD[rng.integers(0, len(_ODD))]
+    return np.ascontiguousarray(rows), a, a + k
+
+
+@settings(max_examples=400, deadline=None)
+@given(case=_rows(b"0123456789"))
+def test_decimal_words_equal_digits(case: tuple[np.ndarray, int, int]) -> None:
+    rows, a, b = case
+    want_v, want_ok = logs._digits_value(rows[:, a:b], logs._DIGVAL, 10.0)
+    got = logs._field_dec(rows, a, b)
+    if got is None:     # 1-2 or 17+ digits, or a line too short for a word: digit by digit
+        assert not 3 <= b - a <= 16 or rows.shape[1] < 8
+        return
+    got_v, got_ok = got
+    assert got_ok.tolist() == want_ok.tolist()
+    exact = got_ok & (want_v < 2.0 ** 53)
+    assert got_v[exact].tobytes() == want_v[exact].tobytes()
+    # what the caller relies on: below 2**53 exactly when the digit-by-digit value is
+    assert ((got_v < 2.0 ** 53) == (want_v < 2.0 ** 53))[got_ok].all()
+
+
+@settings(max_examples=400, deadline=None)
+@given(case=_rows(b"0123456789abcdefABCDEF"))
+def test_hex_fields_equal_pairs(case: tuple[np.ndarray, int, int]) -> None:
+    """IDs (1..8 digits, right-aligned words) and payloads (pairs, left-aligned words)
+    through the parser's word code equal the table lookups."""
+    rows, a, b = case
+    b = a + min(b - a, 16)
+    # an ID field of up to 8 digits
+    bi = a + min(b - a, 8)
+    want_v, want_ok = logs._digits_value(rows[:, a:bi], logs._HEXVAL, 16.0)
+    w = logs._word(rows, a, bi, True)
+    if w is not None:
+        x, ok = logs._word_nibbles(w | logs._fill(bi - a, True))
+        x = ((x << logs._U(4)) + (x >> logs._U(8))) & logs._E8
+        x = ((x << logs._U(8)) + (x >> logs._U(16))) & logs._E16
+        x = ((x << logs._U(16)) + (x >> logs._U(32))) & logs._E32
+        assert ok.tolist() == want_ok.tolist()
+        assert x[ok].astype(np.int64).tolist() == want_v[ok].astype(np.int64).tolist()
+    # a payload of (b - a) // 2 bytes, through _parse_layout's data branch
+    nb = (b - a) // 2
+    if nb:
+        pairs = logs._HEXPAIR[np.ascontiguousarray(rows[:, a:a + 2 * nb]).view(np.uint16)]
+        want_ok = (pairs >> 8 == 0).all(axis=1)
+        want = np.zeros((rows.shape[0], 8), np.uint8)
+        want[:, :nb] = pairs
+        words = []
+        for c in range(a, a + 2 * nb, 8):
+            d = min(c + 8, a + 2 * nb)
+            w = logs._word(rows, c, d, False)
+            if w is None:
+                return
+            x, ok = logs._word_nibbles(w | logs._fill(d - c, False) if d - c < 8 else w)
+            want_ok_w = (pairs[:, (c - a) // 2:(d - a) // 2] >> 8 == 0).all(axis=1)
+            assert ok.tolist() == want_ok_w.tolist()
+            x = ((x << logs._U(4)) | (x >> logs._U(8))) & logs._E8
+            x = (x | (x >> logs._U(8))) & logs._E16
+            words.append((x | (x >> logs._U(16))) & logs._E32)
+        u = words[0] if len(words) == 1 else words[0] | (words[1] << logs._U(32))
+        got = u.astype("<u8").view(np.uint8).reshape(-1, 8)
+        assert got[want_ok].tobytes() == want[want_ok].tobytes()
+
+
+@settings(max_examples=200, deadline=None)
+@given(ts=st.lists(st.tuples(st.integers(0, 10**18), st.integers(1, 20), st.integers(0, 9)),
+                   min_size=1, max_size=20),
+       id_digits=st.integers(1, 8), nbytes=st.integers(0, 8), seed=st.integers(0, 2**32 - 1))
+def test_parse_layout_equals_message_parser(ts: list[tuple[int, int, int]], id_digits: int,
+                                            nbytes: int, seed: int) -> None:
+    """Lines of one layout (any timestamp digits, ID digits, payload length) through the
+    column parser: the frames ``float()``/``int()``/``fromhex`` give, line by line."""
+    rng = np.random.default_rng(seed)
+    ni = max(1, min(len(str(ts[0][0])), 20))
+    nf = ts[0][1]
+    lines = []
+    for i, f, _ in ts:
+        t = f"{i % 10 ** ni:0{ni}d}.{(i * 7919) % 10 ** nf:0{nf}d}"
+        cid = int(rng.integers(0, 16 ** id_digits))
+        data = bytes(rng.integers(0, 256, nbytes, dtype=np.uint8)).hex()
+        data = "".join(ch.upper() if rng.random() < 0.5 else ch for ch in data)
+        lines.append(f"({t}) can0 {cid:0{id_digits}X}#{data}")
+    raw = "".join(lines).encode()
+    rows = np.frombuffer(raw, np.uint8).reshape(len(lines), -1)
+    layout = logs._line_layout(rows[0].tobytes())
+    assert layout is not None
+    good, t, ids, data = logs._parse_layout(rows, layout)
+    assert good.all()
+    for k, line in enumerate(lines):
+        head, _, rest = line.partition(") can0 ")
+        fid, _, payload = rest.partition("#")
+        assert t[k].tobytes() == np.float64(float(head[1:])).tobytes()
+        assert int(ids[k]) == int(fid, 16)
+        assert data[k].tobytes() == bytes.fromhex(payload).ljust(8, b"\0")
+
+
+# ---- small feed_arrays batches --------------------------------------------------------------
+@_SETTINGS
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(20, 300), rates=RATES,
+       time_source=st.sampled_from(["timestamp", "tick"]), restart=st.booleans(),
+       capacity=st.sampled_from([16, 4096]),
+       chunks=st.lists(st.integers(1, 400), min_size=1, max_size=6))
+def test_small_array_batches_equal_frame_by_frame(seed: int, n: int, rates: dict[str, float],
+                                                  time_source: str, restart: bool,
+                                                  capacity: int, chunks: list[int]) -> None:
+    """``feed_arrays`` with the default thresholds: batches below ``min_batch`` (the driver's
+    last frames before a window end) go frame by frame from lists -- error/remote frames,
+    payloads longer than 8 bytes, extended IDs included."""
+    frames = _stream(seed, n, rates, time_source == "tick", restart)
+    ref, lst = _listeners(time_source, capacity, False, 4)
+    for m in frames:
+        ref.on_message_received(m)
+    fa = FrameArrays.from_messages(frames)
+    pos = k = 0
+    while pos < len(frames):
+        step = chunks[k % len(chunks)]
+        lst.feed_arrays(fa, pos, pos + step)
+        pos += step
+        k += 1
+    assert snapshot(lst) == snapshot(ref)
