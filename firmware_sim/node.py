@@ -335,7 +335,8 @@ class SensorNode:
         return s
 
     def run(self, bus: can.BusABC, speed: float | None = None,
-            stop: threading.Event | None = None, linger: float = 0.0) -> NodeSummary:
+            stop: threading.Event | None = None, linger: float = 0.0,
+            linger_until: threading.Event | None = None) -> NodeSummary:
         """Run the scenario on a python-can bus.
 
         Parameters
@@ -348,7 +349,11 @@ class SensorNode:
             Set it to end the run early.
         linger : float, optional
             Seconds (wall) to stay on the bus after the last sample, still receiving (e.g. an
-            alert frame from an estimator that lags behind), until ``stop`` is set. Default 0.
+            alert frame from an estimator that lags behind), until ``stop`` or
+            ``linger_until`` is set. Default 0.
+        linger_until : threading.Event, optional
+            Ends the linger only (e.g. the SLCAN host closed the channel); unlike ``stop``
+            it does not end the run itself (a host may close and reopen mid-run).
         """
         self._bus = bus
         self._driver = CanDriver(bus.send, self.faults)
@@ -356,7 +361,8 @@ class SensorNode:
         stats = sched.run(self.n_ticks, stop)
         self._status_task(max(0, stats.ticks - 1), stopping=True)
         deadline = time.perf_counter() + max(0.0, linger)
-        while time.perf_counter() < deadline and not (stop is not None and stop.is_set()):
+        while time.perf_counter() < deadline and not (stop is not None and stop.is_set()) \
+                and not (linger_until is not None and linger_until.is_set()):
             self._rx_task(stats.ticks)
             time.sleep(0.01)
         self._rx_task(stats.ticks)

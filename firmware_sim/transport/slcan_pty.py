@@ -100,6 +100,11 @@ class SlcanPtyBus(can.BusABC):
     def is_open(self) -> bool:
         return self._opened.is_set()
 
+    @property
+    def closed_by_host(self) -> threading.Event:
+        """Set when the host closes the channel (``C``); cleared when it opens it again."""
+        return self._closed_by_host
+
     def wait_open(self, timeout: Optional[float] = None) -> bool:
         """Block until the host opens the channel; ``False`` on timeout."""
         return self._opened.wait(timeout)

@@ -81,8 +81,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     p.add_argument("--open-timeout", type=float, default=60.0, metavar="S",
                    help="slcan pty: how long to wait for a host to open the channel (default 60)")
     p.add_argument("--linger", type=float, default=3.0, metavar="S",
-                   help="slcan pty: after the run, how long to wait for the host to close the "
-                        "channel before the pty disappears (default 3)")
+                   help="slcan pty: after the run, how long to keep receiving while waiting for "
+                        "the host to close the channel before the pty disappears (default 3)")
     return p
 
 
@@ -117,16 +117,18 @@ def run(args: argparse.Namespace) -> int:
         if args.log:
             writer = open_log_writer(args.log)
             target = _Tee(bus, writer)
-        summary = node.run(target)  # type: ignore[arg-type]
         if isinstance(bus, SlcanPtyBus):
-            # let the host read everything, then give it time to close the channel (it can
-            # tell the end from the final SN_Status with State = stopping) before the pty goes
+            # after the last sample, keep receiving (an estimator's alert frame may lag
+            # behind) until the host closes the channel -- it can tell the end from the
+            # final SN_Status with State = stopping -- or --linger runs out
+            summary = node.run(target, linger=args.linger,  # type: ignore[arg-type]
+                               linger_until=bus.closed_by_host)
             bus.drain(5.0)
-            bus.wait_closed(args.linger)
             summary_extra = {"slcan": {"path": bus.path, "overflows": bus.overflows,
                                        "dropped_closed": bus.dropped_closed,
                                        "host_frames": bus.host_frames}}
         else:
+            summary = node.run(target)  # type: ignore[arg-type]
             summary_extra = {}
     finally:
         if writer is not None:
