@@ -50,6 +50,16 @@ def snapshot(lst: DecodeListener) -> dict[str, object]:
     return out
 
 
+def feed_in_chunks(lst: DecodeListener, fa: FrameArrays, chunks: list[int]) -> None:
+    """Feed every row of ``fa`` in chunks of the given sizes, cycling through them."""
+    pos = k = 0
+    while pos < len(fa):
+        step = chunks[k % len(chunks)]
+        lst.feed_arrays(fa, pos, pos + step)
+        pos += step
+        k += 1
+
+
 def _node_stream(rng: np.random.Generator, n: int, channels: list[str], tick0: int = 0,
                  t0: float = 0.0, status_every: int = 50) -> list[can.Message]:
     """Valid quarter-car node output: SN_Sync + sensor frames per sample, SN_Status."""
@@ -255,14 +265,7 @@ def test_arrays_equal_frame_by_frame(seed: int, n: int, rates: dict[str, float],
     lst.min_batch, lst.min_run = 1, 1
     for m in frames:
         ref.on_message_received(m)
-    fa = FrameArrays.from_messages(frames)
-    pos = 0
-    k = 0
-    while pos < len(frames):
-        step = chunks[k % len(chunks)]
-        lst.feed_arrays(fa, pos, pos + step)
-        pos += step
-        k += 1
+    feed_in_chunks(lst, FrameArrays.from_messages(frames), chunks)
     assert snapshot(lst) == snapshot(ref)
 
 

@@ -25,7 +25,8 @@ from estimator.decode.listener import _ema
 from suspid.can import logs
 from suspid.can.logs import FrameArrays
 from suspid.errors import InputError
-from tests.can.test_batch_equivalence import RATES, _listeners, _stream, snapshot
+from tests.can.test_batch_equivalence import (RATES, _listeners, _stream, feed_in_chunks,
+                                              snapshot)
 
 _SETTINGS = settings(max_examples=80, deadline=None,
                      suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
@@ -394,11 +395,5 @@ def test_small_array_batches_equal_frame_by_frame(seed: int, n: int, rates: dict
     ref, lst = _listeners(time_source, capacity, False, 4)
     for m in frames:
         ref.on_message_received(m)
-    fa = FrameArrays.from_messages(frames)
-    pos = k = 0
-    while pos < len(frames):
-        step = chunks[k % len(chunks)]
-        lst.feed_arrays(fa, pos, pos + step)
-        pos += step
-        k += 1
+    feed_in_chunks(lst, FrameArrays.from_messages(frames), chunks)
     assert snapshot(lst) == snapshot(ref)
