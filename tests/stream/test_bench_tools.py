@@ -1,0 +1,27 @@
+"""The benchmark scripts run and report what docs/monitoring.md quotes (no timing asserted)."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def test_bench_monitor_replay_reports_start_long_and_sustained_rates() -> None:
+    r = subprocess.run([sys.executable, str(REPO / "tools" / "bench_monitor.py"), "replay",
+                        "--duration", "8", "--long", "16", "--repeat", "1", "--json"],
+                       capture_output=True, text=True, timeout=600, cwd=REPO)
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)["replay"]
+    assert out["data_s"] == 8 and out["long"]["data_s"] == 16
+    # 500 Hz x 4 frames per sample plus status frames, every one accepted
+    assert 4 * 500 * 8 <= out["frames"] < 4 * 500 * 8 * 1.05
+    assert 4 * 500 * 16 <= out["long"]["frames"] < 4 * 500 * 16 * 1.05
+    assert out["windows"] >= 3 and out["long"]["windows"] > out["windows"]
+    assert out["process_start_s"] > 0 and out["long"]["wall_s"] > 0
+    # the rate of the 8 extra seconds; its size depends on the machine's load, not asserted
+    assert out["sustained_realtime_factor"] == 8 / (out["long"]["wall_s"] - out["wall_s"])
+    assert [a for a, _ in out["long"]["alerts"]] in ([], ["c1"])
+    assert out["realtime_factor_end_to_end"] == out["data_s"] / out["wall_s"]
