@@ -9,8 +9,9 @@ defaults and evaluation budget, including what happens when the budget runs out 
 middle of an iteration or of a shrink. Iterates, ``nfev``, ``nit``, the final simplex and
 ``x`` are bit-identical to scipy's for the same inputs.
 
-It exists so that ``suspid monitor`` does not import ``scipy.optimize`` (about 0.3 s of
-process start) only to run a simplex on two to four parameters.
+It exists so that ``suspid monitor`` does not import ``scipy.optimize`` only to run a simplex
+on two to four parameters: 0.13-0.19 s of every process start on top of ``scipy.linalg``,
+which the monitor needs anyway (docs/monitoring.md, benchmarks).
 """
 from __future__ import annotations
 
