@@ -245,7 +245,14 @@ class Source:
             if bad.size:
                 self._drop = lo + int(bad[-1])
         self._checked = total
-        return self._drop <= first
+        if self._drop > first:
+            return False
+        # the oldest row held is compared with no predecessor: a NaN there (a ring of one
+        # row, or the rows before it overwritten) would still sort wrongly for bisection
+        if n:
+            t0 = self.t[(self.w - n) % cap]
+            return t0 == t0
+        return True
 
     def rows_between(self, t_start: float | None, t_end: float | None,
                      cols: Sequence[int]) -> tuple[np.ndarray, dict[int, np.ndarray]]:

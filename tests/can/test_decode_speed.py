@@ -397,3 +397,15 @@ def test_small_array_batches_equal_frame_by_frame(seed: int, n: int, rates: dict
         ref.on_message_received(m)
     feed_in_chunks(lst, FrameArrays.from_messages(frames), chunks)
     assert snapshot(lst) == snapshot(ref)
+
+
+@pytest.mark.parametrize("times", [[math.nan], [math.nan, math.nan, 0.01, math.nan, 0.016, math.nan]])
+def test_rows_between_never_returns_a_nan_time(times: list[float]) -> None:
+    """A NaN time as the oldest row held (never compared with a predecessor) is not 'sorted'."""
+    buf = RollingBuffer(2, False)
+    src = buf.source("B", ["b1"])
+    for t in times:
+        src.push(t, [1.0])
+    for lo, hi in ((0.0, None), (None, 1.0), (0.0, 1.0)):
+        t, v = src.rows_between(lo, hi, [0])
+        assert not np.isnan(t).any() and t.size == v[0].size
