@@ -20,7 +20,10 @@ Prediction (nonlinear)
 
     The matrices are affine in dampers and springs, so ``dC/dp`` etc. are exact differences
     of :meth:`~suspid.models.base.SuspensionModel.matrices`. Tests compare ``F`` and ``H``
-    with central finite differences of the RK4 map and of ``h``.
+    with central finite differences of the RK4 map and of ``h``. For a model without
+    effect terms ``model.rhs`` is ``A(theta) x + B(theta) u``: the step then builds
+    ``[A | B]`` once from those affine pieces and runs the stages as small products
+    (:meth:`AugmentedEKF._rk4_linear`, tested equal to the ``model.rhs`` step to 1e-12).
 Measurement
     Positions and velocities are linear in ``z``; an acceleration channel is
     ``model.rhs(...)[nq + i]``, nonlinear in ``z`` (``c1 (v1 - v2) / m1``), with the same
@@ -138,6 +141,13 @@ class AugmentedEKF(ExtendedKalmanFilter):
         self._J0[self.nq:self.nx, :self.nq] = -Minv @ K
         self._J0[self.nq:self.nx, self.nq:self.nx] = -Minv @ C
         self._I = np.eye(nzz)
+        # the same physics as [A(theta) | B(theta)] acting on [q, q', r, r'] (rows of the
+        # accelerations): affine in the augmented parameters, used by rk4 for models
+        # without effect terms (model.rhs then is exactly A x + B u; tests compare)
+        self._AB0 = np.hstack([-Minv @ K, -Minv @ C, Minv @ Fk, Minv @ Fc])
+        self._dAB = np.array([np.hstack([-mK, -mC, mFk, mFc]) for mC, mK, mFk, mFc in self._mdmat])
+        self._dAB_flat = self._dAB.reshape(len(self.aug), -1)
+        self._linear = not model.extra_force
         self._rows = []
         for c in self.channels:
             base = c.split("_")[0]
@@ -223,6 +233,8 @@ class AugmentedEKF(ExtendedKalmanFilter):
         """
         n = max(1, self.tuning.substeps)
         h = dt / n
+        if self._linear:
+            return self._rk4_linear(z, u0, u1, h, n, with_jacobian)
         F = self._I.copy() if with_jacobian else None
         for s in range(n):
             a, b = s / n, (s + 1) / n
@@ -246,6 +258,62 @@ class AugmentedEKF(ExtendedKalmanFilter):
             z = z + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
         return z, F
 
+    def _ab(self, theta: FloatArray) -> FloatArray:
+        """``[A | B]`` rows of the accelerations at parameters ``theta`` (relative)."""
+        dp = self.nominal * (theta - 1.0)
+        return self._AB0 + (dp @ self._dAB_flat).reshape(self._AB0.shape)
+
+    def _rk4_linear(self, z: FloatArray, u0: FloatArray, u1: FloatArray, h: float, n: int,
+                    with_jacobian: bool) -> tuple[FloatArray, FloatArray | None]:
+        """:meth:`rk4` for a model without effect terms, the same arithmetic made lean.
+
+        The parameters are constant over the step, so ``f`` is linear in ``x`` with one
+        ``[A | B]`` for every stage (``model.rhs`` evaluated as ``A x + B u``, equal to
+        rounding) and the Jacobian's state block is that same ``A``; only its parameter
+        columns ``p_nom dAB_j [q, q', r, r']`` change from stage to stage.
+        """
+        nq, nx = self.nq, self.nx
+        theta = z[nx:]
+        AB = self._ab(theta)                                         # (nq, nx + 2 nr)
+        J = self._J0.copy()
+        J[nq:nx, :nx] = AB[:, :nx]
+        Af = J[:nx, :nx]                                             # A(theta), (nx, nx)
+        G = self._dAB * self.nominal[:, None, None] if with_jacobian else None
+        x = z[:nx]
+        I = self._I
+        F = I.copy() if with_jacobian else None
+        du = u1 - u0
+        W = np.empty((AB.shape[1], 4))                               # [x_i; u_i] per stage
+        for s in range(n):
+            a, b = s / n, (s + 1) / n
+            U = np.column_stack([u0 + du * a, u0 + du * ((a + b) / 2), u0 + du * b])
+            bu = AB[:, nx:] @ U                                      # B u at a, mid, b
+            W[nx:, 0], W[nx:, 1], W[nx:, 2], W[nx:, 3] = U[:, 0], U[:, 1], U[:, 1], U[:, 2]
+            W[:nx, 0] = x
+            k1 = Af @ x
+            k1[nq:] += bu[:, 0]
+            W[:nx, 1] = x2 = x + h / 2 * k1
+            k2 = Af @ x2
+            k2[nq:] += bu[:, 1]
+            W[:nx, 2] = x3 = x + h / 2 * k2
+            k3 = Af @ x3
+            k3[nq:] += bu[:, 1]
+            W[:nx, 3] = x4 = x + h * k3
+            k4 = Af @ x4
+            k4[nq:] += bu[:, 2]
+            if with_jacobian:
+                P = G @ W                     # parameter columns at the 4 stages, (naug, nq, 4)
+                D = []
+                prev = None
+                for st, c in enumerate((0.0, h / 2, h / 2, h)):
+                    Jst = J.copy()
+                    Jst[nq:nx, nx:] = P[:, :, st].T
+                    prev = Jst if prev is None else Jst @ (I + c * prev)
+                    D.append(prev)
+                F = (I + h / 6 * (D[0] + 2 * D[1] + 2 * D[2] + D[3])) @ F
+            x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        return np.concatenate([x, theta]), F
+
     # ---- measurement ----------------------------------------------------------------------
     def hx(self, x: FloatArray, u: FloatArray) -> FloatArray:
         """Predicted measurement ``h(z)`` (column vector)."""
@@ -257,7 +325,10 @@ class AugmentedEKF(ExtendedKalmanFilter):
                 out[k] = z[order * self.nq + i]
             else:
                 if acc is None:
-                    acc = self.model.rhs(0.0, z[:self.nx], u, self.param_values(z))[self.nq:]
+                    if self._linear:   # model.rhs as A x + B u (see _rk4_linear)
+                        acc = self._ab(z[self.nx:]) @ np.concatenate([z[:self.nx], u])
+                    else:
+                        acc = self.model.rhs(0.0, z[:self.nx], u, self.param_values(z))[self.nq:]
                 out[k] = acc[i]
         return out[:, None]
 

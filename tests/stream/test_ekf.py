@@ -51,6 +51,32 @@ def test_transition_jacobian_matches_finite_differences(ekf) -> None:
         assert np.max(np.abs(F - Ffd)) < 1e-6 * max(1.0, np.max(np.abs(F)))
 
 
+@pytest.mark.parametrize("substeps", [1, 2, 3])
+def test_lean_linear_step_equals_the_rhs_step(quarter2, substeps: int) -> None:
+    """The per-step [A | B] path (no effect terms) is the model.rhs RK4 step, to rounding."""
+    f = AugmentedEKF(quarter2, quarter2.defaults(), ["c1", "k1", "c2", "k2"], ["x1"],
+                     dt=0.004, tuning=EKFTuning(substeps=substeps))
+    assert f._linear
+    rng = np.random.default_rng(7)
+    for _ in range(10):
+        z = np.concatenate([rng.normal(0, 0.02, 2), rng.normal(0, 0.5, 2), rng.uniform(0.5, 1.5, 4)])
+        u0, u1 = rng.normal(0, [0.01, 0.3]), rng.normal(0, [0.01, 0.3])
+        z_lean, F_lean = f.rk4(z, u0, u1, f.dt)
+        f._linear = False
+        z_rhs, F_rhs = f.rk4(z, u0, u1, f.dt)
+        f._linear = True
+        np.testing.assert_allclose(z_lean, z_rhs, rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(F_lean, F_rhs, rtol=1e-12, atol=1e-13)
+        assert np.array_equal(f.rk4(z, u0, u1, f.dt, with_jacobian=False)[0], z_lean)
+    # the acceleration channel of the measurement the same way
+    g = AugmentedEKF(quarter2, quarter2.defaults(), ["c1", "k1"], ["x1_ddot", "x2_ddot", "x1"],
+                     dt=0.004)
+    z = np.array([0.01, -0.004, 0.2, -0.5, 0.8, 1.1])
+    u = np.array([0.003, 0.4])
+    acc = quarter2.rhs(0.0, z[:4], u, g.param_values(z))[2:]
+    np.testing.assert_allclose(g.hx(z[:, None], u)[:, 0], [acc[0], acc[1], z[0]], rtol=1e-12)
+
+
 def test_measurement_jacobian_matches_finite_differences(ekf) -> None:
     rng = np.random.default_rng(5)
     z = np.concatenate([rng.normal(0, 0.02, 2), rng.normal(0, 0.5, 2), rng.uniform(0.5, 1.5, 4)])
