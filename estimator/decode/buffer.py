@@ -444,7 +444,12 @@ class RollingBuffer:
                 cols.append(k)
         snaps: dict[str, tuple[np.ndarray, dict[int, np.ndarray]]] = {}
         for name, (src, cols) in want.items():
-            snaps[name] = src.rows_between(t_start, t_end, cols)
+            t, v = src.rows_between(t_start, t_end, cols)
+            fin = np.isfinite(t)
+            if not fin.all():   # a NaN/inf time has no place on a grid (the listener never
+                t = t[fin]      # stores one; a direct push can)
+                v = {j: x[fin] for j, x in v.items()}
+            snaps[name] = (t, v)
         nonempty = [s for s in snaps.values() if s[0].size]
         if not nonempty:
             raise InputError("no decoded samples to align (no accepted frame carries the channels "

@@ -46,6 +46,7 @@ def _reference_align(buf: RollingBuffer, names: list[str], dt: float | None,
                 keep &= t >= t_start
             if t_end is not None:
                 keep &= t <= t_end
+            keep &= np.isfinite(t)   # a NaN/inf time is never aligned
             snaps[src.name] = (t[keep], v[keep])
     nonempty = [s for s in snaps.values() if s[0].size]
     if not nonempty:
@@ -409,3 +410,14 @@ def test_rows_between_never_returns_a_nan_time(times: list[float]) -> None:
     for lo, hi in ((0.0, None), (None, 1.0), (0.0, 1.0)):
         t, v = src.rows_between(lo, hi, [0])
         assert not np.isnan(t).any() and t.size == v[0].size
+
+
+def test_align_skips_rows_without_a_finite_time() -> None:
+    """A NaN or inf time (possible through a direct push) is left out, not a crash."""
+    buf = RollingBuffer(16, False)
+    src = buf.source("A", ["a"])
+    for t, v in ((0.0, 1.0), (0.002, 2.0), (math.nan, 9.0), (math.inf, 9.0), (0.004, 3.0)):
+        src.push(t, [v])
+    al = buf.align()
+    np.testing.assert_allclose(al.t, [0.0, 0.002, 0.004])
+    np.testing.assert_array_equal(al.values["a"], [1.0, 2.0, 3.0])
