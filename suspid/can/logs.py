@@ -394,105 +394,6 @@ def _digits_value(chars: np.ndarray, lut: np.ndarray, base: float
     return acc, bad < 16   # digit values 0..15; 255 marks any other character
 
 
-# ---- fields of 1..8 characters as one 64-bit word per line ("SWAR") ------------------------
-# A field of a line layout sits at the same columns in every row, so a strided uint64 view
-# of the rows reads 8 of its characters per line without a copy; the checks and the digit
-# values are then a few integer operations on whole words (a byte never carries into the
-# next one for valid characters; a word with an invalid character is marked bad, whatever
-# its value). Every result is an exact integer, equal to what the digit-by-digit code gives
-# (tests/can/test_decode_speed.py). Fields that do not fit go digit by digit as before.
-_U = np.uint64
-_LE8 = np.dtype("<u8")
-_B80 = _U(0x8080808080808080)
-_B0F = _U(0x0F0F0F0F0F0F0F0F)
-_B01 = _U(0x0101010101010101)
-_B20 = _U(0x2020202020202020)
-_B30 = _U(0x3030303030303030)
-_E8 = _U(0x00FF00FF00FF00FF)
-_E16 = _U(0x0000FFFF0000FFFF)
-_E32 = _U(0x00000000FFFFFFFF)
-#: widest decimal field converted by words (two of them: exact below 10**16 < 2**63)
-_MAX_WORD_DIGITS = 16
-
-
-def _word(rows: np.ndarray, a: int, b: int, right: bool) -> np.ndarray | None:
-    """Characters ``rows[:, a:b]`` (1..8 of them) as one little-endian uint64 per row.
-
-    ``right``: the field's last character in the top byte (a number's digits, least
-    significant last), else its first character in the lowest byte (payload bytes in
-    order); the bytes outside the field are 0. ``rows`` is C-contiguous; None for rows
-    narrower than 8 bytes.
-    """
-    m, width = rows.shape
-    k = b - a
-    if not m or not 1 <= k <= 8 or width < 8:
-        return None
-    o = min(a, width - 8)       # the 8 bytes [o, o + 8) of each row hold the field
-    w = np.ndarray((m,), dtype=_LE8, buffer=rows, offset=o, strides=(width,))
-    lo = a - o                  # the field is bytes lo .. lo + k - 1 of the word
-    if right:
-        w = w << _U(8 * (8 - lo - k))
-        return w & _U(((1 << (8 * k)) - 1) << (64 - 8 * k)) if k < 8 else w
-    w = w >> _U(8 * lo)
-    return w & _U((1 << (8 * k)) - 1) if k < 8 else w
-
-
-def _fill(k: int, right: bool) -> np.uint64:
-    """``"0"`` characters in the 8 - k bytes of a word outside a k-character field."""
-    if k >= 8:
-        return _U(0)
-    outside = (1 << (8 * (8 - k))) - 1 if right \
-        else (1 << 64) - (1 << (8 * k))       # the low 8 - k bytes, or the high ones
-    return _U(0x3030303030303030 & outside)
-
-
-def _word_dec(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(value, ok)`` of 8 decimal characters per word (first character most significant)."""
-    ok = (w & _B80) == 0                                  # ASCII
-    ok &= ((w + _U(0x5050505050505050)) & ~(w + _U(0x4646464646464646)) & _B80) == _B80  # 0-9
-    x = w - _B30
-    x = (x * _U(10) + (x >> _U(8))) & _E8
-    x = (x * _U(100) + (x >> _U(16))) & _E16
-    x = (x * _U(10000) + (x >> _U(32))) & _E32
-    return x, ok
-
-
-def _word_nibbles(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(nibbles, ok)`` of 8 hex characters per word: each byte's digit value, all hex."""
-    ok = (w & _B80) == 0
-    dig = (w + _U(0x5050505050505050)) & ~(w + _U(0x4646464646464646))      # 0-9
-    low = w | _B20                                                          # A-F -> a-f
-    dig |= (low + _U(0x1F1F1F1F1F1F1F1F)) & ~(low + _U(0x1919191919191919))  # a-f
-    ok &= (dig & _B80) == _B80
-    return (w & _B0F) + ((w >> _U(6)) & _B01) * _U(9), ok
-
-
-def _field_dec(rows: np.ndarray, a: int, b: int) -> tuple[np.ndarray, np.ndarray] | None:
-    """``(value, ok)`` of the decimal field ``rows[:, a:b]``, or None (fewer than 3 or more
-    than 16 digits, or lines shorter than 8 bytes: :func:`_digits_value` then).
-
-    ``ok`` is :func:`_digits_value`'s; the value is the exact integer rounded once to a
-    double: equal to :func:`_digits_value`'s below 2**53, and like it >= 2**53 otherwise,
-    which is all the timestamp conversion uses (it hands such rows to ``float()``).
-    """
-    k = b - a
-    if not 3 <= k <= _MAX_WORD_DIGITS:
-        return None
-    lo_a = max(a, b - 8)
-    w = _word(rows, lo_a, b, True)
-    if w is None:
-        return None
-    v, ok = _word_dec(w | _fill(b - lo_a, True))
-    if lo_a > a:
-        w = _word(rows, a, lo_a, True)
-        if w is None:
-            return None
-        hi, ok_hi = _word_dec(w | _fill(lo_a - a, True))
-        v += hi * _U(10 ** 8)
-        ok &= ok_hi
-    return v.astype(np.float64), ok
-
-
 def _parse_layout(rows: np.ndarray, layout: tuple[int, int, int, int, int, int]
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Parse lines of one layout (``rows`` (m, L) uint8, one line per row).
@@ -508,11 +409,8 @@ def _parse_layout(rows: np.ndarray, layout: tuple[int, int, int, int, int, int]
         good &= rows[:, sp3] == 32
     for j in range(sp1 + 1, sp2):                                   # interface: no blank
         good &= rows[:, j] > 32
-    if not rows.flags.c_contiguous:
-        rows = np.ascontiguousarray(rows)
-    n_int, ok_int = _field_dec(rows, 1, dot) or _digits_value(rows[:, 1:dot], _DIGVAL, 10.0)
-    n_frac, ok_frac = _field_dec(rows, dot + 1, close) or \
-        _digits_value(rows[:, dot + 1:close], _DIGVAL, 10.0)
+    n_int, ok_int = _digits_value(rows[:, 1:dot], _DIGVAL, 10.0)
+    n_frac, ok_frac = _digits_value(rows[:, dot + 1:close], _DIGVAL, 10.0)
     nf = close - dot - 1
     good &= ok_int & ok_frac
     # The timestamp INT.FRAC is the integer N = INT * 10**nf + FRAC over 10**nf. While
@@ -521,9 +419,8 @@ def _parse_layout(rows: np.ndarray, layout: tuple[int, int, int, int, int, int]
     # gives the correctly rounded quotient, which is what float(str) returns (Clinger's
     # fast path). INT + FRAC / 10**nf would round twice: 1 ulp off for 3.794462 and for
     # ~5 % of random one-digit-second times.
-    # A computed N below 2**53 proves the exact one is (see _digits_value; the word path
-    # computes the exact integer and rounds it once); the other rows (17+ significant
-    # digits, e.g. nanosecond epoch times) are converted by float() itself.
+    # A computed N below 2**53 proves the exact one is (see _digits_value); the other rows
+    # (17+ significant digits, e.g. nanosecond epoch times) are converted by float() itself.
     if nf <= 22:
         p10 = float(10 ** nf)
         num = n_int * p10 + n_frac
@@ -531,44 +428,18 @@ def _parse_layout(rows: np.ndarray, layout: tuple[int, int, int, int, int, int]
     else:   # 10**nf is not a float: every row by float()
         num = np.full(m, _EXACT_INT)
         ts = np.zeros(m)
-    nid = hs - sp2 - 1
-    w = _word(rows, sp2 + 1, hs, True) if nid >= 2 else None
-    if w is not None:   # 2..8 hex digits: nibbles -> bytes -> 16 -> 32 bits
-        x, ok_id = _word_nibbles(w | _fill(nid, True))
-        x = ((x << _U(4)) + (x >> _U(8))) & _E8
-        x = ((x << _U(8)) + (x >> _U(16))) & _E16
-        x = ((x << _U(16)) + (x >> _U(32))) & _E32
-        ids = x.astype(np.int64)
-    else:
-        id_value, ok_id = _digits_value(rows[:, sp2 + 1:hs], _HEXVAL, 16.0)
-        ids = id_value.astype(np.int64)
+    id_value, ok_id = _digits_value(rows[:, sp2 + 1:hs], _HEXVAL, 16.0)
     good &= ok_id
+    ids = id_value.astype(np.int64)
+    data = np.zeros((m, 8), dtype=np.uint8)
     nb = (sp3 - hs - 1) // 2
-    words = []
-    for a in range(hs + 1, sp3, 8):   # 4 payload bytes per word
-        b = min(a + 8, sp3)
-        w = _word(rows, a, b, False)
-        if w is None:
-            words = None
-            break
-        x, ok_w = _word_nibbles(w | _fill(b - a, False) if b - a < 8 else w)
-        good &= ok_w
-        x = ((x << _U(4)) | (x >> _U(8))) & _E8     # byte 2i: the value of characters 2i, 2i+1
-        x = (x | (x >> _U(8))) & _E16
-        words.append((x | (x >> _U(16))) & _E32)
-    if words is None:
-        data = np.zeros((m, 8), dtype=np.uint8)
+    if nb:
         pairs = _HEXPAIR[np.ascontiguousarray(rows[:, hs + 1:sp3]).view(np.uint16)]
         bad = pairs[:, 0] >> 8
         for j in range(1, nb):
             bad |= pairs[:, j] >> 8
         good &= bad == 0
         data[:, :nb] = pairs
-    elif words:
-        u = words[0] if len(words) == 1 else words[0] | (words[1] << _U(32))
-        data = u.astype(_LE8, copy=False).view(np.uint8).reshape(m, 8)
-    else:
-        data = np.zeros((m, 8), dtype=np.uint8)
     inexact = np.flatnonzero(good & ~(num < _EXACT_INT))
     if inexact.size:
         text = np.ascontiguousarray(rows[inexact, 1:close]).view(f"S{close - 1}").ravel()

@@ -8,7 +8,8 @@
   windows sliding over the stream as the monitor's driver cuts them.
 * :func:`estimator.decode.listener._ema`: the period recurrence with the products taken
   out of the loop is the scalar recurrence bit for bit, whatever the inputs.
-* The candump column parser's word ("SWAR") fields equal the digit-by-digit conversion.
+* The candump column parser on lines of one layout (any timestamp digits, ID digits,
+  payload length) equals ``float()``/``int()``/``fromhex`` line by line.
 * Small ``feed_arrays`` batches (frame by frame from lists) equal frames one by one.
 """
 from __future__ import annotations
@@ -268,86 +269,7 @@ def test_ema_on_a_long_jittery_run() -> None:
     assert np.array(_ema(jobs, el)).tobytes() == np.array(_ema_reference(jobs, el)).tobytes()
 
 
-# ---- candump fields as words ---------------------------------------------------------------
-#: characters at the edges of the digit and letter ranges, blanks, bytes beyond ASCII
-_ODD = b"/:@G`g \x00\x7f\x80\xb0\xb9\xc1\xe6\xff0123456789aAfF"
-
-
-@st.composite
-def _rows(draw: st.DrawFn, alphabet: bytes) -> tuple[np.ndarray, int, int]:
-    """Rows of one width with a field [a, b) of characters from ``alphabet``, a few odd."""
-    k = draw(st.integers(1, 20))
-    a = draw(st.integers(0, 12))
-    width = a + k + draw(st.integers(0, 12))
-    m = draw(st.integers(1, 30))
-    seed = draw(st.integers(0, 2**32 - 1))
-    rng = np.random.default_rng(seed)
-    rows = rng.choice(np.frombuffer(b"(.)# xyz0123456789", np.uint8), size=(m, width))
-    rows[:, a:a + k] = rng.choice(np.frombuffer(alphabet, np.uint8), size=(m, k))
-    for _ in range(draw(st.integers(0, 4))):
-        rows[rng.integers(0, m), a + rng.integers(0, k)] = _ODD[rng.integers(0, len(_ODD))]
-    return np.ascontiguousarray(rows), a, a + k
-
-
-@settings(max_examples=400, deadline=None)
-@given(case=_rows(b"0123456789"))
-def test_decimal_words_equal_digits(case: tuple[np.ndarray, int, int]) -> None:
-    rows, a, b = case
-    want_v, want_ok = logs._digits_value(rows[:, a:b], logs._DIGVAL, 10.0)
-    got = logs._field_dec(rows, a, b)
-    if got is None:     # 1-2 or 17+ digits, or a line too short for a word: digit by digit
-        assert not 3 <= b - a <= 16 or rows.shape[1] < 8
-        return
-    got_v, got_ok = got
-    assert got_ok.tolist() == want_ok.tolist()
-    exact = got_ok & (want_v < 2.0 ** 53)
-    assert got_v[exact].tobytes() == want_v[exact].tobytes()
-    # what the caller relies on: below 2**53 exactly when the digit-by-digit value is
-    assert ((got_v < 2.0 ** 53) == (want_v < 2.0 ** 53))[got_ok].all()
-
-
-@settings(max_examples=400, deadline=None)
-@given(case=_rows(b"0123456789abcdefABCDEF"))
-def test_hex_fields_equal_pairs(case: tuple[np.ndarray, int, int]) -> None:
-    """IDs (1..8 digits, right-aligned words) and payloads (pairs, left-aligned words)
-    through the parser's word code equal the table lookups."""
-    rows, a, b = case
-    b = a + min(b - a, 16)
-    # an ID field of up to 8 digits
-    bi = a + min(b - a, 8)
-    want_v, want_ok = logs._digits_value(rows[:, a:bi], logs._HEXVAL, 16.0)
-    w = logs._word(rows, a, bi, True)
-    if w is not None:
-        x, ok = logs._word_nibbles(w | logs._fill(bi - a, True))
-        x = ((x << logs._U(4)) + (x >> logs._U(8))) & logs._E8
-        x = ((x << logs._U(8)) + (x >> logs._U(16))) & logs._E16
-        x = ((x << logs._U(16)) + (x >> logs._U(32))) & logs._E32
-        assert ok.tolist() == want_ok.tolist()
-        assert x[ok].astype(np.int64).tolist() == want_v[ok].astype(np.int64).tolist()
-    # a payload of (b - a) // 2 bytes, through _parse_layout's data branch
-    nb = (b - a) // 2
-    if nb:
-        pairs = logs._HEXPAIR[np.ascontiguousarray(rows[:, a:a + 2 * nb]).view(np.uint16)]
-        want_ok = (pairs >> 8 == 0).all(axis=1)
-        want = np.zeros((rows.shape[0], 8), np.uint8)
-        want[:, :nb] = pairs
-        words = []
-        for c in range(a, a + 2 * nb, 8):
-            d = min(c + 8, a + 2 * nb)
-            w = logs._word(rows, c, d, False)
-            if w is None:
-                return
-            x, ok = logs._word_nibbles(w | logs._fill(d - c, False) if d - c < 8 else w)
-            want_ok_w = (pairs[:, (c - a) // 2:(d - a) // 2] >> 8 == 0).all(axis=1)
-            assert ok.tolist() == want_ok_w.tolist()
-            x = ((x << logs._U(4)) | (x >> logs._U(8))) & logs._E8
-            x = (x | (x >> logs._U(8))) & logs._E16
-            words.append((x | (x >> logs._U(16))) & logs._E32)
-        u = words[0] if len(words) == 1 else words[0] | (words[1] << logs._U(32))
-        got = u.astype("<u8").view(np.uint8).reshape(-1, 8)
-        assert got[want_ok].tobytes() == want[want_ok].tobytes()
-
-
+# ---- candump lines of one layout ---------------------------------------------------------
 @settings(max_examples=200, deadline=None)
 @given(ts=st.lists(st.tuples(st.integers(0, 10**18), st.integers(1, 20), st.integers(0, 9)),
                    min_size=1, max_size=20),
