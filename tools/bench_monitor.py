@@ -96,7 +96,8 @@ def _monitor_run(log: Path, repeat: int) -> tuple[float, float, list[dict[str, A
         lines = [json.loads(l) for l in r.stdout.splitlines()]
         if best is None or wall < best[0]:
             best = (wall, cpu, lines, cmd)
-    assert best is not None
+    if best is None:   # unreachable: the loop runs at least once
+        raise RuntimeError("no monitor run")
     return best
 
 

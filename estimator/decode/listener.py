@@ -729,16 +729,9 @@ class DecodeListener(can.Listener):
                     self._validate(float(ts[k]), _row_key(fa, i), fa.payload(i))
                 pos = end
 
-    def _scalar_row(self, fa: FrameArrays, i: int) -> None:
-        """Frame ``i`` of ``fa`` through the frame-by-frame path (frame counted)."""
-        self._frames += 1
-        if fa.frame_type[i]:
-            self._rejected["frame_type"] += 1
-            return
-        self._validate(float(fa.timestamp[i]), _row_key(fa, i), fa.payload(i))
-
     def _scalar_rows(self, fa: FrameArrays, lo: int, hi: int) -> None:
-        """:meth:`_scalar_row` for frames ``lo:hi`` in turn, the fields read as lists first.
+        """Frames ``lo:hi`` of ``fa`` one by one through the frame-by-frame path (counted,
+        frame type checked, then :meth:`_validate`), the fields read as lists first.
 
         The small batches a window driver feeds between two checks go this way; the
         per-frame reads of NumPy scalars (~1 µs a frame) become list and bytes indexing.

@@ -117,36 +117,27 @@ class AugmentedEKF(ExtendedKalmanFilter):
         nz = self.nx + len(self.aug)
         super().__init__(dim_x=nz, dim_z=len(self.channels))
         M, C, K, Fk, Fc = model.matrices(self.params)
-        self._Minv = np.linalg.inv(M)
-        self._base = (C, K, Fk, Fc)
-        self._dmat = []
+        Minv = np.linalg.inv(M)
+        # [A(theta) | B(theta)]: the acceleration rows acting on [q, q', r, r'], affine in
+        # the augmented parameters (the matrices are affine in dampers and springs, so each
+        # slope is an exact difference of model.matrices). The Jacobian's state block is its
+        # A part; its parameter columns are p_nom dAB_j [q, q', r, r']
+        # (= p_nom M^-1 (dFk r + dFc r' - dC q' - dK q)). rk4 also steps models without
+        # effect terms with it (model.rhs is A x + B u there).
+        dAB = []
         for k in self.aug:
             p1 = dict(self.params)
             step = max(abs(self.params[k]), 1.0)
             p1[k] = self.params[k] + step
             _, C1, K1, Fk1, Fc1 = model.matrices(p1)
-            self._dmat.append(((C1 - C) / step, (K1 - K) / step, (Fk1 - Fk) / step,
-                               (Fc1 - Fc) / step))
-        # constant pieces of the Jacobian (matrices are affine in dampers and springs)
-        Minv = self._Minv
-        self._mdmat = [(Minv @ dC, Minv @ dK, Minv @ dFk, Minv @ dFc) for dC, dK, dFk, dFc in self._dmat]
-        self._dA_flat = np.array([np.hstack([-mK, -mC]).ravel() for mC, mK, _, _ in self._mdmat]
-                                 ).reshape(len(self.aug), -1)
-        # parameter columns = nominal * G_j @ [r, r', q', q]
-        self._G_all = np.array([np.hstack([mFk, mFc, -mC, -mK]) for mC, mK, mFk, mFc in self._mdmat]
-                               ).reshape(len(self.aug), self.nq, -1)
+            dAB.append(Minv @ np.hstack([K - K1, C - C1, Fk1 - Fk, Fc1 - Fc]) / step)
+        self._AB0 = Minv @ np.hstack([-K, -C, Fk, Fc])
+        self._dAB_flat = np.array(dAB).reshape(len(self.aug), -1)
+        self._G = np.array(dAB) * self.nominal[:, None, None]   # (naug, nq, nx + 2 nr)
         nzz = self.nx + len(self.aug)
-        self._J0 = np.zeros((nzz, nzz))
+        self._J0 = np.zeros((nzz, nzz))                          # dq/dt = q'
         self._J0[:self.nq, self.nq:self.nx] = np.eye(self.nq)
-        self._J0[self.nq:self.nx, :self.nq] = -Minv @ K
-        self._J0[self.nq:self.nx, self.nq:self.nx] = -Minv @ C
         self._I = np.eye(nzz)
-        # the same physics as [A(theta) | B(theta)] acting on [q, q', r, r'] (rows of the
-        # accelerations): affine in the augmented parameters, used by rk4 for models
-        # without effect terms (model.rhs then is exactly A x + B u; tests compare)
-        self._AB0 = np.hstack([-Minv @ K, -Minv @ C, Minv @ Fk, Minv @ Fc])
-        self._dAB = np.array([np.hstack([-mK, -mC, mFk, mFc]) for mC, mK, mFk, mFc in self._mdmat])
-        self._dAB_flat = self._dAB.reshape(len(self.aug), -1)
         self._linear = not model.extra_force
         self._rows = []
         for c in self.channels:
@@ -206,10 +197,8 @@ class AugmentedEKF(ExtendedKalmanFilter):
         """
         nq, nx = self.nq, self.nx
         J = self._J0.copy()
-        dp = self.nominal * (z[nx:] - 1.0)
-        J[nq:nx, :nx] += (dp @ self._dA_flat).reshape(nq, nx)
-        w = np.concatenate([u, z[nq:nx], z[:nq]])
-        J[nq:nx, nx:] = (self._G_all @ w).T * self.nominal
+        J[nq:nx, :nx] = self._ab(z[nx:])[:, :nx]
+        J[nq:nx, nx:] = (self._G @ np.concatenate([z[:nx], u])).T
         return J
 
     def rk4(self, z: FloatArray, u0: FloatArray, u1: FloatArray, dt: float,
@@ -278,7 +267,6 @@ class AugmentedEKF(ExtendedKalmanFilter):
         J = self._J0.copy()
         J[nq:nx, :nx] = AB[:, :nx]
         Af = J[:nx, :nx]                                             # A(theta), (nx, nx)
-        G = self._dAB * self.nominal[:, None, None] if with_jacobian else None
         x = z[:nx]
         I = self._I
         F = I.copy() if with_jacobian else None
@@ -302,7 +290,7 @@ class AugmentedEKF(ExtendedKalmanFilter):
             k4 = Af @ x4
             k4[nq:] += bu[:, 2]
             if with_jacobian:
-                P = G @ W                     # parameter columns at the 4 stages, (naug, nq, 4)
+                P = self._G @ W               # parameter columns at the 4 stages, (naug, nq, 4)
                 D = []
                 prev = None
                 for st, c in enumerate((0.0, h / 2, h / 2, h)):
