@@ -4,6 +4,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3}
+# Debian packages the tests use (tools/system-packages.txt), installed when missing and root
+bash tools/system_deps.sh
 if [[ ! -x .venv/bin/python ]]; then
   "$PY" -m venv .venv
 fi

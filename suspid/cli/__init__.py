@@ -36,6 +36,7 @@ SUBCOMMANDS: tuple[str, ...] = (
     "monitor",
     "compare",
     "doe",
+    "fleet",
 )
 
 
