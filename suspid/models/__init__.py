@@ -138,7 +138,10 @@ def infer_model(columns: Iterable[str]) -> str:
     cols = {c.strip() for c in columns}
     scored = []
     for order, name in enumerate(MODELS):
-        bases = get_model(name).column_bases()
+        try:
+            bases = get_model(name).column_bases()
+        except UsageError:  # a broken plug-in cannot be the CSV's model (get_model names it)
+            continue
         mine = {b for b in bases if cols & {b, f"{b}_dot", f"{b}_ddot"}}
         scored.append((name, bases, mine, order))
     known = set().union(*(m for _, _, m, _ in scored))
