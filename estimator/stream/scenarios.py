@@ -116,6 +116,7 @@ def damper_wear(model: SuspensionModel, duration: float = 150.0, fs: float = 500
     X = np.empty((n, model.n_states))
     x = np.zeros(model.n_states)
     step = max(1, int(round(chunk_s * fs)))
+    affine = model.affine(p0, [damper])  # one forward model for every chunk
     starts = list(range(0, n - 1, step))
     # acceleration needs the parameters of each sample: collect per chunk
     acc_rows = {c: np.empty(n) for c in model.channels if c.endswith("_ddot")}
@@ -124,10 +125,10 @@ def damper_wear(model: SuspensionModel, duration: float = 150.0, fs: float = 500
         p = dict(p0)
         p[damper] = float(c_true[(i0 + i1) // 2])
         seg = slice(i0, i1 + 1)
-        Xs = simulate_states(model, p, t[seg], U[seg], x)
+        Xs = simulate_states(model, p, t[seg], U[seg], x, affine=affine)
         X[seg] = Xs
         x = Xs[-1]
-        out = outputs(model, p, Xs, U[seg])
+        out = outputs(model, p, Xs, U[seg], affine)
         for c in acc_rows:
             acc_rows[c][seg] = out[c]
     p_end = dict(p0)
