@@ -27,8 +27,7 @@ import can
 from cantools.database.can import Database, Message
 
 from suspid.can.crc import COUNTER_MODULUS, e2e_protect
-from suspid.can.dbc import (ALERT_MESSAGE, STATUS_MESSAGE, SYNC_MESSAGE, channel_signals,
-                            find_message, is_e2e)
+from suspid.can.dbc import ALERT_MESSAGE, STATUS_MESSAGE, SYNC_MESSAGE, channel_signals, find_message, is_e2e
 from suspid.errors import InputError, UsageError
 from suspid.models import MODELS, get_model
 

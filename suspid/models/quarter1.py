@@ -5,7 +5,7 @@ from typing import Mapping
 
 import numpy as np
 
-from suspid.models.base import GRAVITY, FloatArray, ParamSpec, Site, SuspensionModel
+from suspid.models.base import GRAVITY, FloatArray, Matrices, ParamSpec, Site, SuspensionModel
 
 
 class Quarter1(SuspensionModel):
@@ -31,7 +31,7 @@ class Quarter1(SuspensionModel):
             scale_invariant=("m", "c", "k"),
         )
 
-    def matrices(self, p: Mapping[str, float]) -> tuple[FloatArray, ...]:
+    def matrices(self, p: Mapping[str, float]) -> Matrices:
         m, c, k = p["m"], p["c"], p["k"]
         return (np.array([[m]]), np.array([[c]]), np.array([[k]]),
                 np.array([[k]]), np.array([[c]]))

@@ -9,7 +9,7 @@ from typing import Mapping
 
 import numpy as np
 
-from suspid.models.base import GRAVITY, FloatArray, ParamSpec, Site, SuspensionModel
+from suspid.models.base import GRAVITY, FloatArray, Matrices, ParamSpec, Site, SuspensionModel
 
 
 class Quarter2(SuspensionModel):
@@ -34,7 +34,7 @@ class Quarter2(SuspensionModel):
             scale_invariant=("m1", "c1", "k1", "m2", "c2", "k2"),
         )
 
-    def matrices(self, p: Mapping[str, float]) -> tuple[FloatArray, ...]:
+    def matrices(self, p: Mapping[str, float]) -> Matrices:
         m1, c1, k1, m2, c2, k2 = (p[n] for n in ("m1", "c1", "k1", "m2", "c2", "k2"))
         M = np.array([[m1, 0.0], [0.0, m2]])
         C = np.array([[c1, -c1], [-c1, c1 + c2]])
