@@ -16,6 +16,7 @@ class Quarter1(SuspensionModel):
     """
 
     sensor_set = 1
+    known = ("m",)
     alert_id = 0
 
     def __init__(self) -> None:

@@ -16,6 +16,7 @@ class Quarter2(SuspensionModel):
     """Body ``m1`` on the suspension (``k1``, ``c1``) over wheel ``m2`` on the tyre (``k2``, ``c2``)."""
 
     sensor_set = 1
+    known = ("m1", "m2")
     alert_id = 1
 
     def __init__(self) -> None:
