@@ -100,12 +100,10 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from suspid.errors import UsageError
-from suspid.models.base import FloatArray, ForceFn, SuspensionModel
+from suspid.models.base import GRAVITY, FloatArray, ForceFn, Site, SuspensionModel
 from suspid.nlsim import Law, simulate_effects
 from suspid.simulate import simulate, simulate_ode
 
-#: gravitational acceleration (m/s^2) for static wheel loads
-GRAVITY = 9.81
 #: velocity scale (m/s) of the smoothed sign in ``coulomb_friction``: ``F tanh(d'/V_EPS)``
 V_EPS = 0.01
 
@@ -134,82 +132,16 @@ class EffectParam:
 
 
 # ------------------------------------------------------------------------- sites
-@dataclass(frozen=True)
-class Site:
-    """Where a physical effect acts: one strut or one tyre of a model.
-
-    The site coordinate is ``s = g . q + gr . r`` (m) with rate ``s' = g . q' + gr . r'``;
-    the effect's force ``phi`` enters as the generalised force ``Q = b * phi``.
-
-    Attributes
-    ----------
-    name : str
-        ``"strut"``, ``"front strut"``, ``"tyre"``, ...
-    kind : {"strut", "tyre"}
-    g : ndarray, shape (nq,)
-    gr : ndarray, shape (nr,)
-    b : ndarray, shape (nq,)
-    c_name, k_name : str or None
-        Names of the base damping / stiffness of the element at this site.
-    load : float
-        Static load carried by the element (N), for ``tire_liftoff``.
-    """
-
-    name: str
-    kind: str
-    g: FloatArray
-    gr: FloatArray
-    b: FloatArray
-    c_name: str | None
-    k_name: str | None
-    load: float = 0.0
-
-    def coordinate(self, X: FloatArray, U: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """Site coordinate ``s`` (m) and rate ``s'`` (m/s) for state rows ``X`` and inputs ``U``."""
-        nq = self.g.size
-        nr = self.gr.size
-        X2 = np.atleast_2d(X)
-        U2 = np.atleast_2d(U)
-        s = X2[:, :nq] @ self.g + U2[:, :nr] @ self.gr
-        sd = X2[:, nq:] @ self.g + U2[:, nr:] @ self.gr
-        return s, sd
-
-
+# The models own their struts and tyres (suspid.models.base.Site); these two functions are
+# the effects' way to ask for them.
 def strut_sites(model: SuspensionModel, p: Mapping[str, float]) -> list[Site]:
     """The suspension struts of ``model`` (deflection = extension, force resists extension)."""
-    if model.name == "quarter1":
-        g, gr = np.array([1.0]), np.array([-1.0])
-        return [Site("strut", "strut", g, gr, -g, "c", "k")]
-    if model.name == "quarter2":
-        g = np.array([1.0, -1.0])
-        return [Site("strut", "strut", g, np.zeros(1), -g, "c1", "k1")]
-    if model.name == "half4":
-        a1, a2 = p["a1"], p["a2"]
-        g1 = np.array([1.0, -a1, -1.0, 0.0])
-        g2 = np.array([1.0, a2, 0.0, -1.0])
-        return [Site("front strut", "strut", g1, np.zeros(2), -g1, "c1", "k1"),
-                Site("rear strut", "strut", g2, np.zeros(2), -g2, "c2", "k2")]
-    raise UsageError(f"effects: no strut geometry for model {model.name!r}")
+    return model.strut_sites(p)
 
 
 def tyre_sites(model: SuspensionModel, p: Mapping[str, float]) -> list[Site]:
     """The tyre contacts of ``model`` (coordinate = tyre compression ``r - x_wheel``)."""
-    if model.name == "quarter1":
-        g = np.array([-1.0])
-        return [Site("tyre", "tyre", g, np.array([1.0]), -g, "c", "k", p["m"] * GRAVITY)]
-    if model.name == "quarter2":
-        g = np.array([0.0, -1.0])
-        return [Site("tyre", "tyre", g, np.array([1.0]), -g, "c2", "k2",
-                     (p["m1"] + p["m2"]) * GRAVITY)]
-    if model.name == "half4":
-        a1, a2, m = p["a1"], p["a2"], p["m"]
-        wf = (m * a2 / (a1 + a2) + p["m1"]) * GRAVITY
-        wr = (m * a1 / (a1 + a2) + p["m2"]) * GRAVITY
-        g1 = np.array([0.0, 0.0, -1.0, 0.0])
-        g2 = np.array([0.0, 0.0, 0.0, -1.0])
-        return [Site("front tyre", "tyre", g1, np.array([1.0, 0.0]), -g1, None, "k3", wf),
-                Site("rear tyre", "tyre", g2, np.array([0.0, 1.0]), -g2, None, "k4", wr)]
-    raise UsageError(f"effects: no tyre geometry for model {model.name!r}")
+    return model.tyre_sites(p)
 
 
 # ------------------------------------------------------------------------- effects
@@ -697,7 +629,7 @@ class AsymmetricDamping(PhysicalEffect):
         alone = (f"the {' or the '.join(_short(s.name) for s in sites)} strut alone" if n == 2
                  else "one strut alone")
         return {f"asymmetric_damping ({'both' if n == 2 else 'all'} struts)":
-                f"one (c_rebound, c_compression) pair cannot describe {'two' if n == 2 else n} "
+                f"one (c_rebound, c_compression) pair cannot describe {_NUMBER.get(n, str(n))} "
                 f"dampers whose symmetric parts {dampers} differ, and the contract has no "
                 f"per-strut pair; asymmetric damping is tested in {alone}"}
 
@@ -863,6 +795,10 @@ class TireLiftoff(PhysicalEffect):
                           ) -> tuple[dict[str, Any], bool, str]:
         c = float(coef[0])
         return {}, 0.3 < c < 3.0, f"coefficient of the pulling-force regressor {c:.3g} (1 if the tyre lifts off)"
+
+
+#: small counts in words
+_NUMBER = {2: "two", 3: "three", 4: "four", 5: "five", 6: "six"}
 
 
 def _short(site_name: str) -> str:

@@ -14,7 +14,8 @@ from firmware_sim.node import NodeConfig, SensorNode
 from firmware_sim.scenarios import SCENARIOS
 from suspid.cli import main
 from suspid.errors import UsageError
-from suspid.models import get_model
+from suspid.can.dbc import channel_signals
+from suspid.models import MODELS, get_model
 from suspid.simulate import simulate
 
 from tests.can.conftest import Q2_STEP
@@ -27,17 +28,23 @@ def _decode(node, **kw):
 
 
 @pytest.mark.parametrize("scenario", SCENARIOS)
-@pytest.mark.parametrize("model_name", ["quarter1", "quarter2", "half4"])
+@pytest.mark.parametrize("model_name", list(MODELS))
 def test_every_scenario_and_model_decodes_cleanly(scenario, model_name):
     node = SensorNode(NodeConfig(model=model_name, scenario=scenario, duration=1.0, rate=500))
     lst = _decode(node)
     st = lst.frame_stats()
-    roads = len(get_model(model_name).roads)
-    n_msgs = {"quarter1": 3, "quarter2": 4, "half4": 7}[model_name] - roads * (scenario == "initial")
+    model = get_model(model_name)
+    roads = set(model.input_names)
+    # SN_Sync and the model's sensor messages; without a road (initial) no road messages
+    n_msgs = 1 + len({msg for ch, msg, _ in channel_signals(node.db, model_name)
+                      if scenario != "initial" or ch not in roads})
+    assert n_msgs == {"quarter1": 3, "quarter2": 4, "half4": 7, "full7": 12}.get(model_name, n_msgs) \
+        - len(model.roads) * (scenario == "initial")
     # 501 ticks of sensor frames; status at ticks 0, 50, ..., 500 and a final one
     assert st["accepted"] == 501 * n_msgs + 12
     assert sum(st["rejected"].values()) == 0
     assert lst.node_status["sample_rate"] == 500 and lst.node_status["state"] == 4  # stopping
+    assert lst.node_status["sensor_set"] == model.sensor_set
 
 
 def test_noise_free_node_equals_the_core_simulation():
