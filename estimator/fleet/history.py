@@ -13,7 +13,7 @@ Schema (``PRAGMA user_version = 1``; query it with the ``sqlite3`` shell)::
         size      INTEGER,           -- bytes
         settings  TEXT NOT NULL,     -- identify options (JSON) the result was made with
         result    TEXT,              -- the drive's `suspid identify --json` object
-        processed REAL NOT NULL      -- epoch s when it was identified
+        processed REAL NOT NULL      -- epoch s when it was stored last
     );
     CREATE TABLE estimates (
         drive_id  TEXT NOT NULL REFERENCES drives(id) ON DELETE CASCADE,

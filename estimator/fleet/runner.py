@@ -172,7 +172,7 @@ def execute(jobs: list[tuple[str, str, str | None]], settings: IdentifySettings,
     try:
         if scheduler is not None:
             try:
-                client = Client(scheduler, timeout=30)
+                client = Client(scheduler)   # timeout: distributed.comm.timeouts.connect
             except (OSError, TimeoutError, ValueError) as exc:
                 raise UsageError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler "
                                  f"({' '.join(str(exc).split())})") from None
@@ -235,43 +235,19 @@ def run_fleet(config: FleetConfig) -> FleetResult:
                 rule = AlertRule(**{**rule.to_json(), "nominal": last["rule"]["nominal"]})
         records: list[dict[str, Any]] = []
         new = reused = 0
-        if files:
-            settings = config.settings
-            assert_settings = settings  # for type checkers: not None here
-            known: dict[str, dict[str, Any]] = {}
-            jobs: list[tuple[str, str, str | None]] = []
-            reuse: dict[int, dict[str, Any]] = {}
-            if history is not None:
-                known = history.known(assert_settings.key())
-            for i, f in enumerate(files):
-                digest = None
-                if history is not None:
-                    try:
-                        digest = file_digest(f.path)
-                    except OSError:
-                        digest = None
-                if digest is not None and digest in known and known[digest]["status"] == "ok":
-                    rec = dict(known[digest])
-                    rec["path"], rec["vehicle"] = f.path, f.vehicle
-                    reuse[i] = rec
-                else:
-                    jobs.append((f.path, f.vehicle, digest))
-            done = execute(jobs, assert_settings, config.scheduler, config.workers,
-                           config.progress)
-            it = iter(done)
-            for i in range(len(files)):
-                records.append(reuse[i] if i in reuse else next(it))
-            new, reused = len(done), len(reuse)
+        settings = config.settings
+        if files and settings is not None:
+            records, new, reused = _identify(files, settings, history, config)
         records, duplicates = _dedupe(records)
         if history is not None:
-            if files:
-                history.add([r for r in records], config.settings.model,  # type: ignore[union-attr]
-                            config.settings.key())  # type: ignore[union-attr]
-                history.add_run(t_start, config.settings.model,  # type: ignore[union-attr]
-                                {"settings": config.settings.key(),  # type: ignore[union-attr]
-                                 "rule": rule.to_json(), "inputs": list(config.inputs)},
+            if files and settings is not None:
+                history.add(records, settings.model, settings.key())
+                history.add_run(t_start, settings.model,
+                                {"settings": settings.key(), "rule": rule.to_json(),
+                                 "inputs": list(config.inputs)},
                                 new, reused, sum(r["status"] != "ok" for r in records))
             records = history.drives()
+        records = sort_drives(records)
         vehicles = summarize_fleet(records, rule)
         result = FleetResult(records, vehicles, duplicates, new, reused)
         if config.report is not None:
@@ -281,6 +257,36 @@ def run_fleet(config: FleetConfig) -> FleetResult:
     finally:
         if history is not None:
             history.close()
+
+
+def _identify(files: list[DriveFile], settings: IdentifySettings, history: History | None,
+              config: FleetConfig) -> tuple[list[dict[str, Any]], int, int]:
+    """Records of ``files`` in order: drives already in the history with the same settings
+    (same content hash) are taken from it, the others identified on Dask.
+
+    Returns
+    -------
+    records : list of dict
+    new, reused : int
+        Drives identified now, and taken from the history.
+    """
+    known = history.known(settings.key()) if history is not None else {}
+    jobs: list[tuple[str, str, str | None]] = []
+    reuse: dict[int, dict[str, Any]] = {}
+    for i, f in enumerate(files):
+        digest = None
+        if history is not None:
+            try:
+                digest = file_digest(f.path)
+            except OSError:
+                digest = None       # the task reports the reason
+        if digest is not None and digest in known and known[digest]["status"] == "ok":
+            reuse[i] = {**known[digest], "path": f.path, "vehicle": f.vehicle}
+        else:
+            jobs.append((f.path, f.vehicle, digest))
+    done = iter(execute(jobs, settings, config.scheduler, config.workers, config.progress))
+    records = [reuse[i] if i in reuse else next(done) for i in range(len(files))]
+    return records, len(jobs), len(reuse)
 
 
 def _dedupe(records: list[dict[str, Any]]) -> tuple[list[dict[str, Any]], list[dict[str, str]]]:

@@ -19,7 +19,7 @@ from suspid.can.dbc import load_dbc
 from suspid.can.encoder import measurement_frames
 from suspid.can.logs import open_log_writer
 from suspid.excitation import make_scenario
-from suspid.io.csvio import Measurement, write_measurement
+from suspid.io.csvio import Measurement
 from suspid.models import get_model
 from suspid.simulate import simulate
 
@@ -116,7 +116,11 @@ def write_drive(path: Path, spec: FleetSpec, vehicle: VehicleWear, t0: float, se
                 for c in ("x1_ddot", "x2_ddot")}
     roads = {"r": out["r"], "r_dot": out["r_dot"]}
     if spec.fmt == ".csv":
-        write_measurement(path, t + t0, {**roads, **measured})
+        cols = {**roads, **measured}
+        data = np.column_stack([t + t0, *cols.values()])
+        # %.10g (write_measurement) would round an epoch time to 1 s: t gets 6 decimals
+        np.savetxt(path, data, fmt=["%.6f"] + ["%.10g"] * len(cols), delimiter=",",
+                   header=",".join(["t", *cols]), comments="")
         return p
     meas = Measurement(t=t, road=roads, measured=measured)
     frames = list(measurement_frames(meas, "quarter2", db, t0=t0))

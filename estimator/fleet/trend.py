@@ -9,7 +9,8 @@ Trend (:func:`robust_trend`)
     Theil--Sen line (median of pairwise slopes), iteratively reweighted least squares with
     Huber weights (``c = 1.345``) and then Tukey's bisquare (``c = 4.685``, scale from the
     median absolute deviation) gives a grossly wrong drive (a bad sensor, a mis-mapped log)
-    zero weight, and such drives are left out: one bad drive does not move the trend. On
+    zero weight, and such drives are left out unless they lie within the bisquare cut of
+    the final fit's own scale: one bad drive does not move the trend. On
     the rest, ``tau^2`` is estimated by Paule--Mandel (the weighted residual sum of squares
     equals its expectation ``n - 2``) and the line is the weighted least-squares fit; the
     slope's standard error is ``sqrt(phi (X'WX)^-1)`` with
@@ -179,6 +180,15 @@ def robust_trend(t: np.ndarray, v: np.ndarray, s: np.ndarray | None = None,
     if np.count_nonzero(keep) < 3 or np.ptp(x[keep]) == 0:
         keep = np.ones(n, dtype=bool)
     beta, M, tau2 = _random_effects(x[keep], v[keep], s[keep], floor)
+    # the MAD of a few residuals can be small by chance: a rejected drive within the
+    # bisquare cut of the final fit's own scale is readmitted (and the line refitted)
+    for _ in range(3):
+        u = np.abs(v - (beta[0] + beta[1] * x)) / np.sqrt(np.maximum(s * s + tau2, floor))
+        again = keep | (u < BISQUARE_C)
+        if np.array_equal(again, keep):
+            break
+        keep = again
+        beta, M, tau2 = _random_effects(x[keep], v[keep], s[keep], floor)
     r = v[keep] - (beta[0] + beta[1] * x[keep])
     w = 1.0 / np.maximum(s[keep] ** 2 + tau2, floor)
     phi = max(1.0, float(np.sum(w * r * r)) / max(np.count_nonzero(keep) - 2.0, 1.0))
