@@ -17,7 +17,7 @@ from typing import Any, Iterable
 import numpy as np
 
 from estimator.alerts.engine import AlertConfig, AlertEngine
-from estimator.fleet.trend import Forecast, Trend, forecast_crossing, robust_trend
+from estimator.fleet.trend import DAY_S, Forecast, Trend, forecast_crossing, robust_trend
 from suspid.models import get_model
 
 
@@ -37,6 +37,10 @@ class AlertRule:
         Consecutive drives the condition must hold in.
     level : float
         Two-sided level of the forecast interval.
+    horizon_days : float
+        Forecasts further ahead of the latest drive than this are not reported (a slow
+        drift that reaches the limit in years is noise for maintenance planning, and at the
+        90 % level about one flat parameter in twenty shows a 'significant' slope).
     """
 
     nominal: dict[str, float] = field(default_factory=dict)
@@ -44,6 +48,7 @@ class AlertRule:
     z: float = 2.326
     min_count: int = 2
     level: float = 0.90
+    horizon_days: float = 365.0
 
     def nominal_of(self, model: str, name: str) -> float:
         if name in self.nominal:
@@ -52,7 +57,8 @@ class AlertRule:
 
     def to_json(self) -> dict[str, Any]:
         return {"nominal": dict(self.nominal), "drop": self.drop, "z": self.z,
-                "min_count": self.min_count, "level": self.level}
+                "min_count": self.min_count, "level": self.level,
+                "horizon_days": self.horizon_days}
 
 
 @dataclass
@@ -158,7 +164,7 @@ def summarize_vehicle(vehicle: str, records: list[dict[str, Any]], rule: AlertRu
         tr = robust_trend(t, v, s)
         trends[k] = tr
         fc = forecast_crossing(tr, limits[k], rule.level)
-        if fc is not None:
+        if fc is not None and fc.crossing_t <= t[-1] + rule.horizon_days * DAY_S:
             forecasts[k] = fc
     risk = "alert" if alerts else ("forecast" if forecasts else "ok")
     return VehicleSummary(vehicle, model, ok, failed, monitored, nominal, limits, trends,

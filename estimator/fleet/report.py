@@ -79,10 +79,10 @@ def trend_svg(s: VehicleSummary, name: str, width: int = 440, height: int = 210)
                    'stroke="#eee"/>')
         out.append(f'<text x="{L - 4}" y="{Y(yy) + 4:.1f}" font-size="10" '
                    f'text-anchor="end">{_num(yy)}</text>')
-    for i in range(3):
+    for i, anchor in enumerate(("start", "middle", "end")):
         tt = t_lo + (t_hi - t_lo) * i / 2
         out.append(f'<text x="{X(tt):.1f}" y="{T + H + 16}" font-size="10" '
-                   f'text-anchor="middle">{_date(tt)}</text>')
+                   f'text-anchor="{anchor}">{_date(tt)}</text>')
     out.append(f'<rect x="{L}" y="{T}" width="{W}" height="{H}" fill="none" stroke="#999"/>')
     if fc is not None:
         x1, x2 = X(max(fc.crossing_t_low, t_lo)), X(min(fc.crossing_t_high, t_hi))

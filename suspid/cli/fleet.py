@@ -53,6 +53,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="one-sided confidence of the alert bound (default 0.99, as monitor)")
     a.add_argument("--alert-drives", type=positive_int, default=2, metavar="N",
                    help="consecutive drives the drop must hold in before an alert (default 2)")
+    a.add_argument("--horizon", type=float, default=365.0, metavar="DAYS",
+                   help="report limit-crossing forecasts up to this many days after the latest "
+                        "drive (default 365)")
     r = p.add_argument_group("execution, history, report")
     r.add_argument("--scheduler", metavar="tcp://HOST:PORT", default=None,
                    help="run on this existing Dask cluster (the workers must read the logs at "
@@ -98,12 +101,15 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--confidence: expected a probability in (0.5, 1), got {args.confidence}")
     if not 0 < args.alert_drop < 1:
         raise UsageError(f"--alert-drop: expected a fraction in (0, 1), got {args.alert_drop}")
+    if not args.horizon > 0:
+        raise UsageError(f"--horizon: expected a number of days > 0, got {args.horizon}")
     nominal = parse_assignments(args.nominal, "--nominal")
     if args.model is not None:
         for k in nominal:
             get_model(args.model).spec(k)
     rule = AlertRule(nominal=nominal, drop=args.alert_drop,
-                     z=float(NormalDist().inv_cdf(args.confidence)), min_count=args.alert_drives)
+                     z=float(NormalDist().inv_cdf(args.confidence)), min_count=args.alert_drives,
+                     horizon_days=args.horizon)
     result = run_fleet(FleetConfig(inputs=list(args.input), settings=settings, rule=rule,
                                    scheduler=args.scheduler, workers=args.workers, db=args.db,
                                    report=args.report,
@@ -137,6 +143,6 @@ def _print_table(out: dict[str, Any]) -> None:
           f"{'; '.join(notes)}\n")
     for d in out["drives"]:
         if d["status"] != "ok":
-            w(f"failed: {d['path']}: {d['error']}\n")
+            w(f"failed: {d['error']}\n")
     if out.get("report"):
         w(f"report: {out['report']}\n")
