@@ -3,7 +3,7 @@
 ``fit(problem, params)`` is the entry point; :class:`OutputErrorProblem` holds the data and
 the cost; :class:`Parameters` the values, ``vary`` flags and bounds.
 """
-from estimator.identify.nelder_mead import fit, finish, jacobian_log, minimize_log
+from estimator.identify.solver import fit, finish, jacobian_log, minimize_log
 from estimator.identify.params import Parameter, Parameters
 from estimator.identify.problem import COSTS, OutputErrorProblem
 from estimator.identify.result import IdentResult
