@@ -110,6 +110,9 @@ def metrics(rec: RunRecord, t: FloatArray, truth: Mapping[str, FloatArray] | Non
                                         if a.parameter == k and a.kind == "alert"]}
         fk = [f for f in fc if f["parameter"] == k]
         m["forecasts"] = len(fk)
+        if truth is not None and k in truth and not te.size:
+            below = np.flatnonzero(truth[k] < (1 - drop) * nom)
+            m["crossing_t"] = float(t[below[0]]) if below.size else None
         if truth is not None and k in truth and te.size:
             tv = np.interp(te, t, truth[k])
             err = ve - tv
