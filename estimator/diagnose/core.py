@@ -38,6 +38,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any, Callable, Mapping
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy.stats import chi2
 
 from estimator.diagnose.corners import SiteRestricted, effect_sites, model_limits, strut_limit_key
@@ -132,7 +133,7 @@ class DiagnoseResult:
                 "evidence": self.evidence, "warnings": list(self.warnings)}
 
 
-def _loglik_terms(fitm: ModelFit, common: Mapping[str, FloatArray]) -> dict[str, tuple[int, float]]:
+def _loglik_terms(fitm: ModelFit, common: Mapping[str, NDArray[np.bool_]]) -> dict[str, tuple[int, float]]:
     """Per channel ``(n, mean square)`` of the residual on the samples valid in every fit."""
     out = {}
     for c, ok in common.items():
