@@ -17,7 +17,7 @@ import can
 import numpy as np
 from cantools.database.can import Database
 
-from suspid.can.codec import (STATE_RUNNING, SensorEncoder, encode_status, make_message)
+from suspid.can.codec import STATE_RUNNING, SensorEncoder, encode_status, make_message
 from suspid.can.logs import is_can_log, log_format, open_log_writer
 from suspid.errors import InputError, UsageError, require_file
 from suspid.io.csvio import Measurement, read_measurement

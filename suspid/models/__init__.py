@@ -15,7 +15,8 @@ A built-in name cannot be replaced by an entry point. See ``docs/architecture.md
 from __future__ import annotations
 
 from importlib.metadata import entry_points
-from typing import Callable, Iterable
+from collections.abc import Mapping
+from typing import Callable, Iterable, Iterator
 
 from suspid.errors import UsageError
 from suspid.models.base import GRAVITY, ParamSpec, Site, SuspensionModel
@@ -34,63 +35,43 @@ BUILTIN: dict[str, ModelFactory] = {"quarter1": Quarter1, "quarter2": Quarter2, 
                                     "full7": Full7}
 
 
-class _Registry(dict[str, ModelFactory]):
+class _Registry(Mapping[str, ModelFactory]):
     """``name -> factory`` of every model: the built-ins, then the entry points (loaded once)."""
 
     def __init__(self) -> None:
-        super().__init__(BUILTIN)
+        self._items: dict[str, ModelFactory] = dict(BUILTIN)
         self._loaded = False
 
-    def _load(self) -> None:
-        if self._loaded:
-            return
-        self._loaded = True
-        for ep in entry_points(group=ENTRY_POINT_GROUP):
-            if ep.name in BUILTIN:
-                continue
-            try:
-                factory = ep.load()
-            except Exception as exc:  # a broken plug-in must not break the built-ins
-                raise UsageError(f"model entry point {ep.name!r} ({ep.value}) cannot be loaded: "
-                                 f"{type(exc).__name__}: {exc}") from None
-            if not callable(factory):
-                raise UsageError(f"model entry point {ep.name!r} ({ep.value}) is not a class or "
-                                 f"factory; expected a SuspensionModel subclass")
-            super().__setitem__(ep.name, factory)
+    def _load(self) -> dict[str, ModelFactory]:
+        if not self._loaded:
+            self._loaded = True
+            for ep in entry_points(group=ENTRY_POINT_GROUP):
+                if ep.name in BUILTIN:
+                    continue
+                try:
+                    factory = ep.load()
+                except Exception as exc:  # a broken plug-in is named, in one line
+                    raise UsageError(f"model entry point {ep.name!r} ({ep.value}) cannot be "
+                                     f"loaded: {type(exc).__name__}: {exc}") from None
+                if not callable(factory):
+                    raise UsageError(f"model entry point {ep.name!r} ({ep.value}) is not a class "
+                                     f"or factory; expected a SuspensionModel subclass")
+                self._items[ep.name] = factory
+        return self._items
 
     def reload(self) -> None:
         """Forget the loaded entry points (after installing a package at run time)."""
-        for name in [n for n in self if n not in BUILTIN]:
-            super().__delitem__(name)
+        self._items = dict(BUILTIN)
         self._loaded = False
 
     def __getitem__(self, key: str) -> ModelFactory:
-        self._load()
-        return super().__getitem__(key)
+        return self._load()[key]
 
-    def __contains__(self, key: object) -> bool:
-        self._load()
-        return super().__contains__(key)
-
-    def __iter__(self):  # type: ignore[no-untyped-def]
-        self._load()
-        return super().__iter__()
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._load())
 
     def __len__(self) -> int:
-        self._load()
-        return super().__len__()
-
-    def keys(self):  # type: ignore[no-untyped-def]
-        self._load()
-        return super().keys()
-
-    def items(self):  # type: ignore[no-untyped-def]
-        self._load()
-        return super().items()
-
-    def values(self):  # type: ignore[no-untyped-def]
-        self._load()
-        return super().values()
+        return len(self._load())
 
 
 #: every model by name (built-ins and entry points)

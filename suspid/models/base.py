@@ -30,6 +30,8 @@ from numpy.typing import NDArray
 from suspid.errors import UsageError
 
 FloatArray = NDArray[np.float64]
+#: ``(M, C, K, Fk, Fc)`` of :meth:`SuspensionModel.matrices`
+Matrices = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
 #: signature of an additional generalised force: f(t, x, u, params) -> array of len(coords)
 ForceFn = Callable[[float, FloatArray, FloatArray, Mapping[str, float]], FloatArray]
 #: standard gravity (m/s^2) for static wheel loads
@@ -296,8 +298,7 @@ class SuspensionModel:
         return set(self.coords) | set(self.roads)
 
     # ---- physics (overridden by concrete models) ---------------------------------
-    def matrices(self, p: Mapping[str, float]) -> tuple[FloatArray, FloatArray, FloatArray,
-                                                         FloatArray, FloatArray]:
+    def matrices(self, p: Mapping[str, float]) -> Matrices:
         """Return ``(M, C, K, Fk, Fc)`` for parameters ``p`` (SI units)."""
         raise NotImplementedError
 
@@ -351,7 +352,7 @@ class SuspensionModel:
 
         def rows(p: Mapping[str, float]) -> FloatArray:
             M, C, K, Fk, Fc = self.matrices(p)
-            return np.linalg.solve(M, np.hstack([-K, -C, Fk, Fc]))
+            return np.asarray(np.linalg.solve(M, np.hstack([-K, -C, Fk, Fc])), dtype=np.float64)
 
         f0 = rows(p0)
         th0 = np.array([p0[k] for k in names])

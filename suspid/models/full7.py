@@ -29,7 +29,7 @@ from typing import Mapping
 
 import numpy as np
 
-from suspid.models.base import GRAVITY, FloatArray, ParamSpec, Site, SuspensionModel
+from suspid.models.base import GRAVITY, FloatArray, Matrices, ParamSpec, Site, SuspensionModel
 
 #: corner labels in coordinate order
 CORNERS = ("front-left", "front-right", "rear-left", "rear-right")
@@ -85,7 +85,7 @@ class Full7(SuspensionModel):
         G[:, 3:] = -np.eye(4)
         return G
 
-    def matrices(self, p: Mapping[str, float]) -> tuple[FloatArray, ...]:
+    def matrices(self, p: Mapping[str, float]) -> Matrices:
         G = self.strut_directions(p)
         c = np.array([p[f"c{i}"] for i in range(1, 5)])
         k = np.array([p[f"k{i}"] for i in range(1, 5)])

@@ -17,7 +17,7 @@ from typing import Mapping
 
 import numpy as np
 
-from suspid.models.base import GRAVITY, FloatArray, ParamSpec, Site, SuspensionModel
+from suspid.models.base import GRAVITY, FloatArray, Matrices, ParamSpec, Site, SuspensionModel
 
 
 class Half4(SuspensionModel):
@@ -52,7 +52,7 @@ class Half4(SuspensionModel):
             scale_invariant=("m", "I", "m1", "m2", "c1", "c2", "k1", "k2", "k3", "k4"),
         )
 
-    def matrices(self, p: Mapping[str, float]) -> tuple[FloatArray, ...]:
+    def matrices(self, p: Mapping[str, float]) -> Matrices:
         m, I, m1, m2 = p["m"], p["I"], p["m1"], p["m2"]
         c1, c2, k1, k2, k3, k4 = p["c1"], p["c2"], p["k1"], p["k2"], p["k3"], p["k4"]
         a1, a2 = p["a1"], p["a2"]

@@ -5,7 +5,7 @@ from typing import Mapping
 
 import numpy as np
 
-from suspid.models.base import GRAVITY, FloatArray, ParamSpec, Site, SuspensionModel
+from suspid.models.base import GRAVITY, FloatArray, Matrices, ParamSpec, Site, SuspensionModel
 
 
 class Quarter1(SuspensionModel):
@@ -16,6 +16,7 @@ class Quarter1(SuspensionModel):
     """
 
     sensor_set = 1
+    known = ("m",)
     alert_id = 0
 
     def __init__(self) -> None:
@@ -31,7 +32,7 @@ class Quarter1(SuspensionModel):
             scale_invariant=("m", "c", "k"),
         )
 
-    def matrices(self, p: Mapping[str, float]) -> tuple[FloatArray, ...]:
+    def matrices(self, p: Mapping[str, float]) -> Matrices:
         m, c, k = p["m"], p["c"], p["k"]
         return (np.array([[m]]), np.array([[c]]), np.array([[k]]),
                 np.array([[k]]), np.array([[c]]))

@@ -9,13 +9,14 @@ from typing import Mapping
 
 import numpy as np
 
-from suspid.models.base import GRAVITY, FloatArray, ParamSpec, Site, SuspensionModel
+from suspid.models.base import GRAVITY, FloatArray, Matrices, ParamSpec, Site, SuspensionModel
 
 
 class Quarter2(SuspensionModel):
     """Body ``m1`` on the suspension (``k1``, ``c1``) over wheel ``m2`` on the tyre (``k2``, ``c2``)."""
 
     sensor_set = 1
+    known = ("m1", "m2")
     alert_id = 1
 
     def __init__(self) -> None:
@@ -34,7 +35,7 @@ class Quarter2(SuspensionModel):
             scale_invariant=("m1", "c1", "k1", "m2", "c2", "k2"),
         )
 
-    def matrices(self, p: Mapping[str, float]) -> tuple[FloatArray, ...]:
+    def matrices(self, p: Mapping[str, float]) -> Matrices:
         m1, c1, k1, m2, c2, k2 = (p[n] for n in ("m1", "c1", "k1", "m2", "c2", "k2"))
         M = np.array([[m1, 0.0], [0.0, m2]])
         C = np.array([[c1, -c1], [-c1, c1 + c2]])

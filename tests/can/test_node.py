@@ -163,3 +163,23 @@ def test_node_cli_errors_exit_2(capsys, argv, fragment):
     assert rc == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and fragment in err and "Traceback" not in err
+
+
+def test_full7_node_log_identifies_the_struts_and_tyres(tmp_path, capsys):
+    """The full car end to end: node (FC_* frames) -> log -> identify."""
+    log = tmp_path / "full7.log"
+    rc = main(["node", "--model", "full7", "--scenario", "random", "--duration", "4",
+               "--speed", "max", "--log", str(log)])
+    assert rc == 0
+    summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])["node"]
+    assert summary["model"] == "full7" and summary["frames_sent"] == 2001 * 12 + 42
+    m = get_model("full7")
+    p = m.defaults()
+    fix = [a for k in m.known for a in ("--fix", f"{k}={p[k]}")]
+    assert main(["identify", "--model", "full7", "--input", str(log), *fix, "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["success"] and out["identifiable"]
+    assert out["frames"]["accepted"] == summary["frames_sent"]
+    for k in out["stderr"]:
+        assert out["params"][k] == pytest.approx(p[k], rel=0.01), k
+        assert abs(out["params"][k] - p[k]) < 5 * out["stderr"][k] + 1e-4 * p[k], k
