@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
-from typing import Callable, Mapping, Protocol, Sequence
+from typing import Any, Callable, Mapping, Protocol, Sequence
 
 import numpy as np
 from scipy.linalg import expm
@@ -52,11 +52,11 @@ class SiteLike(Protocol):
 class ForceTerm(Protocol):
     """A physical effect as the simulator sees it (:class:`suspid.models.effects.PhysicalEffect`)."""
 
-    def sites(self, model: SuspensionModel, p: Mapping[str, float]) -> Sequence[SiteLike]:
-        """Sites of ``model`` where the force acts."""
+    def sites(self, model: SuspensionModel, p: Mapping[str, float]) -> Sequence[Any]:
+        """Sites of ``model`` where the force acts (:class:`SiteLike` objects)."""
         ...
 
-    def law(self, site: SiteLike, base: Mapping[str, float]) -> Law:
+    def law(self, site: Any, base: Mapping[str, float]) -> Law:
         """Scalar force law at ``site`` for base parameters ``base``."""
         ...
 
@@ -74,10 +74,10 @@ def _kernel(n: int, nq: int, S: int) -> Callable:
     a("def kernel(P, D, F, F1, AP, AV, CP, CV, laws, z, N):")
     a("    " + ", ".join(f"p{i}_{j}" for i in range(n) for j in range(n)) + ", = P")
     for s in range(S):
-        a(f"    " + ", ".join(f"f{s}_{i}" for i in range(n)) + f", = F[{s}]")
-        a(f"    " + ", ".join(f"g{s}_{i}" for i in range(n)) + f", = F1[{s}]")
-        a(f"    " + ", ".join(f"ap{s}_{i}" for i in range(nq)) + f", = AP[{s}]")
-        a(f"    " + ", ".join(f"av{s}_{i}" for i in range(nq)) + f", = AV[{s}]")
+        a("    " + ", ".join(f"f{s}_{i}" for i in range(n)) + f", = F[{s}]")
+        a("    " + ", ".join(f"g{s}_{i}" for i in range(n)) + f", = F1[{s}]")
+        a("    " + ", ".join(f"ap{s}_{i}" for i in range(nq)) + f", = AP[{s}]")
+        a("    " + ", ".join(f"av{s}_{i}" for i in range(nq)) + f", = AV[{s}]")
         a(f"    cp{s} = CP[{s}]; cv{s} = CV[{s}]; law{s} = laws[{s}]")
     a("    " + ", ".join(f"z{i}" for i in range(n)) + ", = z")
     a(f"    Z = [0.0] * (N * {n})")

@@ -2,7 +2,7 @@
 
 ``diagnose(model, meas, params)`` is the entry point (``suspid diagnose``); the effect
 library is :mod:`suspid.models.effects`, the fast nonlinear simulator
-:mod:`estimator.diagnose.nlsim`.
+:mod:`suspid.nlsim` (base layer, shared with the effect library's injection).
 """
 from estimator.diagnose.core import DiagnoseResult, Thresholds, Verdict, diagnose
 

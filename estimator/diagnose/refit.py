@@ -372,7 +372,7 @@ def nm_then_lm(vec: Callable[[FloatArray], FloatArray], u0: FloatArray, step: fl
                            maxfev=min(budget, 10 * (n + 1)), xatol=1e-2, fatol=1e-4 * f0,
                            rel_improve=1e-4)
     else:
-        out = SimpleNamespace(u=np.asarray(u0, dtype=float), fun=f0, nfev=0)
+        out = SimpleNamespace(u=np.asarray(u0, dtype=float), fun=f0, nfev=0)  # type: ignore[assignment]
     nfev = out.nfev + 1
     try:
         sol = least_squares(vec, out.u, method="lm", diff_step=1e-6, xtol=1e-10, ftol=1e-10,

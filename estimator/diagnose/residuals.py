@@ -393,7 +393,7 @@ def _regress(y: FloatArray, X: FloatArray) -> tuple[FloatArray, float, FloatArra
         se = np.sqrt(np.clip(np.diag(cov), 0, None))
     except np.linalg.LinAlgError:
         se = np.full(X.shape[1], np.inf)
-    return beta, ss, se
+    return np.asarray(beta, dtype=float), ss, np.asarray(se, dtype=float)
 
 
 def velocity_noise(mo: Motion, noise_var: Mapping[str, float], coords: tuple[str, ...] | list[str],
