@@ -181,7 +181,7 @@ class SensorNode:
     extra_forces : sequence of callables, optional
         Extra generalised forces ``f(t, x, u, params)`` added to the plant (issue-6 hook).
     effects : sequence, optional
-        Undeclared effects of :mod:`suspid.models.effects` (e.g. ``"coulomb_friction:F=120"``)
+        Undeclared effects of :mod:`suspid.effects` (e.g. ``"coulomb_friction:F=120"``)
         injected into the plant and the sensors without telling the estimator.
     """
 

@@ -23,7 +23,7 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from suspid.models.base import FloatArray, ForceFn, SuspensionModel
-from suspid.models.effects import inject
+from suspid.effects import inject
 from suspid.simulate import simulate
 
 ParamsFn = Callable[[float], Mapping[str, float]]
@@ -48,7 +48,7 @@ class Plant:
     extra_forces : sequence of callables, optional
         Added to the model's ``extra_force`` (on a copy of the model).
     effects : sequence, optional
-        Undeclared effects from :mod:`suspid.models.effects` (objects, ``"NAME:k=v"``
+        Undeclared effects from :mod:`suspid.effects` (objects, ``"NAME:k=v"``
         strings or ``{"name", "params"}`` dicts). Physical ones go into the plant's
         right-hand side (fast exponential integrator of :mod:`estimator.diagnose.nlsim`),
         sensor ones (delay, offset) into what the sensors report; the sensor effects see

@@ -39,7 +39,7 @@ from estimator.diagnose.corners import SiteRestricted
 from estimator.diagnose.synthetic import synthetic_record
 from estimator.identify import Parameters
 from suspid.models import get_model
-from suspid.models.effects import Effect, PhysicalEffect, parse_effect
+from suspid.effects import Effect, PhysicalEffect, parse_effect
 
 #: the seed's Table 1 quarter car (SI)
 TABLE1 = dict(m1=275.0, k1=150000.0, c1=1120.0, m2=27.0, k2=310000.0, c2=3100.0)

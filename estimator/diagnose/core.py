@@ -51,7 +51,7 @@ from estimator.identify import IdentResult, OutputErrorProblem, Parameters, fit
 from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
 from suspid.models.base import FloatArray, SuspensionModel
-from suspid.models.effects import PhysicalEffect, SensorEffect, effect_classes, make_effect, strut_sites
+from suspid.effects import PhysicalEffect, SensorEffect, effect_classes, make_effect, strut_sites
 
 
 #: a channel whose signal RMS is below this fraction of the largest channel's is numerically

@@ -19,7 +19,7 @@ from estimator.diagnose import diagnose
 from estimator.diagnose.corners import SiteRestricted
 from estimator.identify import Parameters
 from suspid.models import get_model
-from suspid.models.effects import Effect, PhysicalEffect, parse_effect
+from suspid.effects import Effect, PhysicalEffect, parse_effect
 
 from .conftest import make_measurement
 

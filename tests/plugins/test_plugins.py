@@ -18,7 +18,7 @@ from typing import Any
 import pytest
 
 from suspid.errors import UsageError
-from suspid.models.effects import PhysicalEffect, _check_plugin
+from suspid.effects import PhysicalEffect, _check_plugin
 
 from .conftest import env_with
 

@@ -15,7 +15,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from suspid.models.effects import EffectParam, Law, PhysicalEffect, Site, Trial
+from suspid.effects import EffectParam, Law, PhysicalEffect, Site, Trial
 
 
 class ReboundStop(PhysicalEffect):
