@@ -110,8 +110,11 @@ def build_scenario(model: SuspensionModel, name: str, duration: float | None = N
                              f"{model.name}; expected {', '.join(nominal)}")
         nominal.update(params)
     core = {"random": "iso8608", "damper-wear": "iso8608"}.get(n, n)
-    kw = {"road_class": "C", "v_kmh": 50.0} if core == "iso8608" else {}
-    t, road, x0 = make_scenario(model, core, duration=dur, fs=fs, params=nominal, seed=seed, **kw)
+    if core == "iso8608":
+        t, road, x0 = make_scenario(model, core, duration=dur, fs=fs, params=nominal, seed=seed,
+                                    road_class="C", v_kmh=50.0)
+    else:
+        t, road, x0 = make_scenario(model, core, duration=dur, fs=fs, params=nominal, seed=seed)
     events: dict[str, float] = {}
     if n != "damper-wear":
         fixed = dict(nominal)
