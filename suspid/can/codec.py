@@ -21,7 +21,7 @@ import math
 import struct
 import weakref
 from dataclasses import dataclass, field
-from typing import Callable, Iterable, Mapping, Sequence
+from typing import Callable, Iterable, Mapping, Sequence, cast
 
 import can
 from cantools.database.can import Database, Message
@@ -469,6 +469,9 @@ def encode_alert(db: Database, model_name: str, parameter: str, value: float, no
     kind = PARAM_KINDS[model.spec(parameter).kind]
     prefix = _KIND_PREFIX[kind]
     sig_v = msg.get_signal_by_name(f"{prefix}Value")
+    if sig_v.minimum is None or sig_v.maximum is None:
+        raise InputError(f"DBC: {ALERT_MESSAGE}.{sig_v.name} has no range; expected [min|max] "
+                         "to clamp alert values to")
     lo, hi = float(sig_v.minimum), float(sig_v.maximum)
     data = {"CRC": 0, "Counter": 0, "Severity": SEVERITIES[severity],
             "Model": model.alert_id, "ParamId": param_ids[parameter], "ParamKind": kind,
@@ -482,7 +485,8 @@ def encode_alert(db: Database, model_name: str, parameter: str, value: float, no
 def decode_alert(db: Database, data: bytes | bytearray) -> dict[str, object]:
     """Decode an ``SUSPID_Alert`` payload to ``{model, parameter, value, nominal, severity}``."""
     msg = find_message(db, ALERT_MESSAGE)
-    d = msg.decode(bytes(data), decode_choices=False)
+    # one message, decode_choices=False, no container: a flat mapping of signal -> number
+    d = cast("Mapping[str, float]", msg.decode(bytes(data), decode_choices=False))
     kind = int(d["ParamKind"])
     prefix = _KIND_PREFIX.get(kind)
     if prefix is None:
