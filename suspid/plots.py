@@ -2,18 +2,21 @@
 from __future__ import annotations
 
 from pathlib import Path
+from types import ModuleType
 from typing import Mapping
 
 import numpy as np
 
 from suspid.models.base import FloatArray, SuspensionModel
+from suspid.simulate import outputs, road_matrix, simulate_states
 
 
-def _plt():
-    import matplotlib
+def _plt() -> ModuleType:
+    # matplotlib.pyplot costs ~1 s to import and only plotting runs need it: loaded on first use
+    import matplotlib  # noqa: PLC0415
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # noqa: PLC0415
 
     return plt
 
@@ -46,8 +49,6 @@ def plot_channels(model: SuspensionModel, t: FloatArray, series: Mapping[str, Ma
 
 def plot_comparison(model: SuspensionModel, meas, result, path: str | Path) -> None:
     """Measured channels against the identified model's simulation (seed Figs. 17-28)."""
-    from suspid.simulate import outputs, road_matrix, simulate_states
-
     U = road_matrix(model, meas.t, meas.road)
     X = simulate_states(model, result.params, meas.t, U, np.asarray(result.x0))
     sim = outputs(model, result.params, X, U)

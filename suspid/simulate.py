@@ -308,7 +308,9 @@ def _simulate_states_loop(model: SuspensionModel, p: Mapping[str, float], t: Flo
                           U: FloatArray, x0: FloatArray,
                           affine: AffinePieces | None = None) -> FloatArray:
     """Exact FOH stepping with block matrix exponentials (non-uniform grids, defective A)."""
-    from scipy.linalg import expm
+    # scipy.linalg costs ~0.4 s to import and only non-uniform grids and defective A land
+    # here; `suspid simulate` on a uniform grid loads no scipy at all
+    from scipy.linalg import expm  # noqa: PLC0415
 
     A, B = state_matrices(model, p, affine)
     n = model.n_states
@@ -416,7 +418,9 @@ def simulate_ode(model: SuspensionModel, params: Mapping[str, float], t: FloatAr
     u`` gives the input as a continuous function. Integration restarts at every sample so
     the kinks of the interpolated road do not cost accuracy.
     """
-    from scipy.integrate import solve_ivp
+    # scipy.integrate costs ~0.6 s to import and only this reference path needs it (a module
+    # of its own would not help: simulate() calls this for models with extra forces)
+    from scipy.integrate import solve_ivp  # noqa: PLC0415
 
     t = np.asarray(t, dtype=float)
     U = road_matrix(model, t, road)
