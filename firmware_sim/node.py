@@ -23,7 +23,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterator, Mapping, Sequence
+from typing import Any, Callable, Iterator, Mapping, Protocol, Sequence
 
 import can
 import numpy as np
@@ -44,6 +44,14 @@ from suspid.effects import Effect
 
 #: default sensor noise standard deviation (SI) by derivative order: position, velocity, acceleration
 DEFAULT_NOISE = {0: 2e-5, 1: 1e-3, 2: 0.02}
+
+
+class FrameBus(Protocol):
+    """What the node needs of a bus: any python-can bus, or a proxy with these two methods."""
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None: ...
+
+    def recv(self, timeout: float | None = None) -> can.Message | None: ...
 
 
 def _order(channel: str) -> int:
@@ -232,7 +240,7 @@ class SensorNode:
         self._last_status_t = -1.0
         self._sat_seen = 0
         self._driver: CanDriver | None = None
-        self._bus: can.BusABC | None = None
+        self._bus: FrameBus | None = None
         try:
             self._alert_id = self.db.get_message_by_name(ALERT_MESSAGE).frame_id
         except KeyError:
@@ -337,15 +345,16 @@ class SensorNode:
         s.wall = stats.wall
         return s
 
-    def run(self, bus: can.BusABC, speed: float | None = None,
+    def run(self, bus: FrameBus, speed: float | None = None,
             stop: threading.Event | None = None, linger: float = 0.0,
             linger_until: threading.Event | None = None) -> NodeSummary:
         """Run the scenario on a python-can bus.
 
         Parameters
         ----------
-        bus : can.BusABC
-            Any python-can bus (virtual, slcan, socketcan, the SLCAN pty adapter).
+        bus : FrameBus
+            Any python-can bus (virtual, slcan, socketcan, the SLCAN pty adapter), or a proxy
+            with its ``send`` and ``recv``.
         speed : float, optional
             Overrides ``config.speed`` (0 = as fast as possible).
         stop : threading.Event, optional

@@ -5,6 +5,14 @@ import argparse
 import json
 import sys
 
+import can
+
+from firmware_sim.faults import FaultConfig
+from firmware_sim.node import NodeConfig, SensorNode
+from firmware_sim.scenarios import SCENARIOS
+from firmware_sim.transport import SlcanPtyBus, open_bus
+from suspid.can.logs import log_format, open_log_writer
+from suspid.cli._common import parse_assignments
 from suspid.errors import UsageError
 from suspid.models import MODELS
 
@@ -25,8 +33,6 @@ def _speed(text: str) -> float:
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """Register ``suspid node``."""
-    from firmware_sim.scenarios import SCENARIOS
-
     p = subparsers.add_parser(
         "node", help="run the simulated sensor node on a CAN bus",
         description="Run the simulated suspension sensor-node firmware: a fixed-rate "
@@ -88,12 +94,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 def run(args: argparse.Namespace) -> int:
     """Run the node; exit 0 after the scenario ends."""
-    from firmware_sim.faults import FaultConfig
-    from firmware_sim.node import NodeConfig, SensorNode
-    from firmware_sim.transport import SlcanPtyBus, open_bus
-    from suspid.can.logs import log_format, open_log_writer
-    from suspid.cli._common import parse_assignments
-
     channels = [c.strip() for c in args.channels.split(",") if c.strip()] if args.channels else None
     cfg = NodeConfig(model=args.model, scenario=args.scenario, duration=args.duration,
                      rate=args.rate, speed=args.speed, noise=args.noise, channels=channels,
@@ -113,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
                 raise UsageError(f"no host opened the SLCAN channel on {bus.path} within "
                                  f"{args.open_timeout:g} s (open it with python-can's slcan "
                                  "interface)")
-        target = bus
+        target: can.BusABC | _Tee = bus
         if args.log:
             writer = open_log_writer(args.log)
             target = _Tee(bus, writer)
@@ -121,14 +121,14 @@ def run(args: argparse.Namespace) -> int:
             # after the last sample, keep receiving (an estimator's alert frame may lag
             # behind) until the host closes the channel -- it can tell the end from the
             # final SN_Status with State = stopping -- or --linger runs out
-            summary = node.run(target, linger=args.linger,  # type: ignore[arg-type]
+            summary = node.run(target, linger=args.linger,
                                linger_until=bus.closed_by_host)
             bus.drain(5.0)
             summary_extra = {"slcan": {"path": bus.path, "overflows": bus.overflows,
                                        "dropped_closed": bus.dropped_closed,
                                        "host_frames": bus.host_frames}}
         else:
-            summary = node.run(target)  # type: ignore[arg-type]
+            summary = node.run(target)
             summary_extra = {}
     finally:
         if writer is not None:
@@ -143,13 +143,13 @@ def run(args: argparse.Namespace) -> int:
 class _Tee:
     """Bus proxy that also records every sent frame to a log writer."""
 
-    def __init__(self, bus, writer) -> None:  # type: ignore[no-untyped-def]
+    def __init__(self, bus: can.BusABC, writer: can.io.generic.MessageWriter) -> None:
         self._bus = bus
         self._writer = writer
 
-    def send(self, msg, timeout=None) -> None:  # type: ignore[no-untyped-def]
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
         self._bus.send(msg, timeout)
         self._writer.on_message_received(msg)
 
-    def recv(self, timeout=None):  # type: ignore[no-untyped-def]
+    def recv(self, timeout: float | None = None) -> can.Message | None:
         return self._bus.recv(timeout)
