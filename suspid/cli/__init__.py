@@ -16,15 +16,16 @@ import argparse
 import importlib
 import os
 import sys
+from typing import Sequence
+
+# neither imports numpy: the thread settings below still come first
+from suspid import __version__
+from suspid.errors import SuspidError
 
 # The identifier works on small matrices: BLAS threads only add contention (5-10x slower
 # per evaluation on a loaded 2-core machine). Set before numpy loads; a user's setting wins.
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
-from typing import Sequence
-
-from suspid import __version__
-from suspid.errors import SuspidError
 
 #: Subcommand modules, in the order ``suspid --help`` lists them, with their one-line help
 #: (each module's ``add_parser`` uses the same words; ``tests/core/test_cli.py`` checks).

@@ -4,6 +4,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from suspid.can.dbc import load_dbc
+from suspid.can.encoder import encode_csv
 from suspid.models import MODELS
 
 #: log formats by suffix (kept here so ``suspid --help`` does not import python-can)
@@ -35,9 +37,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 def run(args: argparse.Namespace) -> int:
     """Encode; print a one-line summary on stdout and warnings on stderr."""
-    from suspid.can.dbc import load_dbc
-    from suspid.can.encoder import encode_csv
-
     db = load_dbc(args.dbc)
     res = encode_csv(args.input, args.out, db, args.model, args.t0)
     for ch, n in res.saturated.items():

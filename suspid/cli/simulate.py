@@ -8,7 +8,10 @@ import numpy as np
 from suspid.cli._common import (add_model_option, model_from_args, parse_assignments, parse_state,
                                 print_json)
 from suspid.errors import UsageError
-from suspid.excitation import SCENARIOS, make_scenario
+from suspid.excitation import SCENARIOS, make_scenario, measured_road
+from suspid.io.csvio import read_measurement, write_measurement
+from suspid.plots import plot_channels
+from suspid.simulate import simulate
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -53,9 +56,6 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
-    from suspid.io.csvio import write_measurement
-    from suspid.simulate import simulate
-
     model = model_from_args(args)
     params = model.defaults()
     given = parse_assignments(args.param, "--param")
@@ -68,9 +68,6 @@ def run(args: argparse.Namespace) -> int:
     if not 0 <= args.noise < float("inf"):
         raise UsageError(f"--noise: expected a finite fraction >= 0, got {args.noise}")
     if args.road:
-        from suspid.excitation import measured_road
-        from suspid.io.csvio import read_measurement
-
         given_road = read_measurement(args.road, model, require_measured=False)
         t = given_road.t
         road = measured_road(model, t, given_road.road, params, args.speed, source=args.road)
@@ -82,7 +79,9 @@ def run(args: argparse.Namespace) -> int:
                                     t0=args.t0, road_class=args.road_class, seed=args.seed, x0=x0)
         scenario = args.scenario
     if args.effect:
-        from suspid.effects import inject
+        # suspid.effects brings scipy.interpolate/optimize (~0.6 s to import); only runs with
+        # --effect need it
+        from suspid.effects import inject  # noqa: PLC0415
         out = inject(model, args.effect).simulate(params, t, road, x0)
     else:
         out = simulate(model, params, t, road, x0)
@@ -107,7 +106,6 @@ def run(args: argparse.Namespace) -> int:
         cols[c] = y
     write_measurement(args.out, t, cols)
     if args.plot:
-        from suspid.plots import plot_channels
         plot_channels(model, t, {"simulated": cols}, args.plot, title=f"{model.name}: {scenario}")
     if args.json:
         print_json({"model": model.name, "scenario": scenario, "params": params,
