@@ -94,7 +94,7 @@ import copy
 import math
 from dataclasses import dataclass
 from importlib.metadata import entry_points
-from typing import Any, ClassVar, Iterable, Mapping, Sequence
+from typing import Any, ClassVar, Iterable, Mapping, Sequence, TypeVar
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -106,6 +106,9 @@ from suspid.simulate import simulate, simulate_ode
 
 #: velocity scale (m/s) of the smoothed sign in ``coulomb_friction``: ``F tanh(d'/V_EPS)``
 V_EPS = 0.01
+
+#: any effect class: ``with_values`` returns the type it is called on
+_E = TypeVar("_E", bound="Effect")
 
 
 # ------------------------------------------------------------------------- parameters
@@ -194,7 +197,7 @@ class Effect:
                 return p
         raise UsageError(f"effect {self.name} has no parameter {name!r}")
 
-    def with_values(self, **values: Any) -> "Effect":
+    def with_values(self: _E, **values: Any) -> _E:
         """A copy with some parameters replaced."""
         v = dict(self.values)
         v.update(values)
@@ -238,7 +241,7 @@ class Effect:
         return f"{type(self).__name__}({args})"
 
     def __eq__(self, other: object) -> bool:
-        return type(self) is type(other) and self.values == other.values  # type: ignore[attr-defined]
+        return isinstance(other, Effect) and type(self) is type(other) and self.values == other.values
 
 
 def _check_value(effect: str, spec: EffectParam, value: Any) -> Any:
@@ -339,6 +342,7 @@ class PhysicalEffect(Effect):
         def f(t: float, x: FloatArray, u: FloatArray, params: Mapping[str, float]) -> FloatArray:
             return self.generalized_force(model, x, u, params)[0]
 
+        # the term remembers its effect (model.extra_force terms are plain callables)
         f.effect = self  # type: ignore[attr-defined]
         return f
 

@@ -40,6 +40,7 @@ class SiteRestricted(PhysicalEffect):
         self.inner = inner
         self.site_names = list(site_names)
         self.values = inner.values
+        # the wrapped effect's class-level facts, copied per instance (ClassVars in Effect)
         self.name = inner.name  # type: ignore[misc]
         self.params = inner.params  # type: ignore[misc]
         self.site_kind = inner.site_kind  # type: ignore[misc]

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from types import SimpleNamespace
 from typing import Any, Callable, Mapping
 
 import numpy as np
@@ -186,7 +185,7 @@ class PhysicalRefit:
         eff = self.effect0.with_values(**{k: theta[k] for k in self.eff_names})
         if self.tied and isinstance(eff, PhysicalEffect):
             p.update(eff.base_overrides(self.sites))
-        return p, eff  # type: ignore[return-value]
+        return p, eff
 
     def _substeps_at(self, theta: Mapping[str, float]) -> bool:
         """Re-check the internal steps at ``theta``; True if more were needed (then set)."""
@@ -371,23 +370,23 @@ def nm_then_lm(vec: Callable[[FloatArray], FloatArray], u0: FloatArray, step: fl
         out = minimize_log(cost, u0, step=step, restarts=min(restarts, 1),
                            maxfev=min(budget, 10 * (n + 1)), xatol=1e-2, fatol=1e-4 * f0,
                            rel_improve=1e-4)
+        u1, f1, nfev = out.u, out.fun, out.nfev + 1
     else:
-        out = SimpleNamespace(u=np.asarray(u0, dtype=float), fun=f0, nfev=0)  # type: ignore[assignment]
-    nfev = out.nfev + 1
+        u1, f1, nfev = np.asarray(u0, dtype=float), f0, 1
     try:
-        sol = least_squares(vec, out.u, method="lm", diff_step=1e-6, xtol=1e-10, ftol=1e-10,
+        sol = least_squares(vec, u1, method="lm", diff_step=1e-6, xtol=1e-10, ftol=1e-10,
                             gtol=1e-10, max_nfev=12 * (n + 1))
         nfev += int(sol.nfev)
         f_lm = float(2.0 * sol.cost)
-        if np.isfinite(f_lm) and f_lm <= out.fun:
+        if np.isfinite(f_lm) and f_lm <= f1:
             return np.asarray(sol.x, dtype=float), f_lm, nfev
     except (ValueError, np.linalg.LinAlgError):
         pass
-    more = minimize_log(cost, out.u, step=0.05, restarts=restarts, maxfev=budget,
-                        xatol=1e-5, fatol=1e-7 * out.fun, rel_improve=1e-6)
-    if more.fun <= out.fun:
+    more = minimize_log(cost, u1, step=0.05, restarts=restarts, maxfev=budget,
+                        xatol=1e-5, fatol=1e-7 * f1, rel_improve=1e-6)
+    if more.fun <= f1:
         return more.u, more.fun, nfev + more.nfev
-    return out.u, out.fun, nfev + more.nfev
+    return u1, f1, nfev + more.nfev
 
 
 def compensated(meas: Measurement, effect: SensorEffect | None, tail: int = 0,
@@ -510,7 +509,7 @@ class SensorRefit:
         th0 = np.array([float(start_base[k]) for k in self.free] + [float(start_effect[k]) for k in pos + real])
         nlog = len(self.free) + len(pos)
         rscale = np.array([max(abs(float(start_effect[k])), 1e-9) for k in real])
-        sp0 = self.sub_problem(self.effect0.with_values(**{k: start_effect[k] for k in pos + real}))  # type: ignore[arg-type]
+        sp0 = self.sub_problem(self.effect0.with_values(**{k: start_effect[k] for k in pos + real}))
         inv = 1.0 / math.sqrt(sp0.scale)
         big = np.full(sp0.n_obs, 1e3)
 
@@ -522,7 +521,7 @@ class SensorRefit:
             p = dict(self.base)
             p.update({k: theta[k] for k in self.free})
             eff = self.effect0.with_values(**{k: theta[k] for k in pos + real})
-            return p, eff  # type: ignore[return-value]
+            return p, eff
 
         def vec(u: FloatArray) -> FloatArray:
             if not np.all(np.abs(u[:nlog]) < 20):
