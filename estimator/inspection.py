@@ -221,9 +221,10 @@ def _grid_min(fun: Callable[[FloatArray], FloatArray], lo: float, hi: float, n0:
     """
     a, b = lo, hi
     m = n0
-    x = v = None
+    x: FloatArray = np.empty(0)
+    v: FloatArray = np.empty(0)
     i = 0
-    for _ in range(max(1, levels)):
+    for _ in range(max(1, levels)):  # at least once: x, v, i come from a grid
         x = _log_grid(a, b, m)
         v = fun(x)
         i = int(np.argmin(v))
@@ -231,7 +232,7 @@ def _grid_min(fun: Callable[[FloatArray], FloatArray], lo: float, hi: float, n0:
         m = n
         if b <= a:
             break
-    return _vertex(x, v, i)  # type: ignore[arg-type]
+    return _vertex(x, v, i)
 
 
 def inspect(params: Mapping[str, float], model: SuspensionModel | None = None,

@@ -116,7 +116,7 @@ class Plant:
         else:
             out = simulate(self.model, p, tt, road or None, self.x, affine=self.affine)
         if self._sensor is not None:
-            out = self._measure(tt, out)
+            out = self._measure(self._sensor, tt, out)
         nq = len(self.model.coords)
         last = len(tt) - 1
         true = self._true_last
@@ -127,7 +127,8 @@ class Plant:
         self._cols = {c: out[c] for c in self.channels if c in out}
         self._start = k
 
-    def _measure(self, tt: FloatArray, out: dict[str, FloatArray]) -> dict[str, FloatArray]:
+    def _measure(self, sensor: Injection, tt: FloatArray,
+                 out: dict[str, FloatArray]) -> dict[str, FloatArray]:
         """Apply the sensor effects with the previous chunk as history; keep the true states."""
         self._true_last = out
         if self._prev is not None:
@@ -135,11 +136,11 @@ class Plant:
             keep = pt < tt[0]
             t_all = np.concatenate([pt[keep], tt])
             cols = {c: np.concatenate([pc[c][keep], out[c]]) for c in out if c in pc}
-            meas = self._sensor.measure(t_all, cols)  # type: ignore[union-attr]
+            meas = sensor.measure(t_all, cols)
             n0 = int(keep.sum())
             res = {c: v[n0:] for c, v in meas.items()}
         else:
-            res = self._sensor.measure(tt, out)  # type: ignore[union-attr]
+            res = sensor.measure(tt, out)
         self._prev = (tt, out)
         return {c: res.get(c, out[c]) for c in out}
 

@@ -202,7 +202,8 @@ class MessageCodec:
                 terms.append(self._scale_term(f"r{i}", s) if scaled else f"r{i}")
             lines.append(f"    return ({', '.join(terms)}{',' if len(terms) == 1 else ''})")
         exec("\n".join(lines), ns)  # noqa: S102 - generated from the DBC layout only
-        return ns["_dec"]  # type: ignore[return-value]
+        # exec defined it from the lines above: the type system cannot see its signature
+        return cast("Callable[[bytes], tuple]", ns["_dec"])
 
     @staticmethod
     def _scale_term(term: str, s: SignalSpec) -> str:
@@ -223,7 +224,7 @@ class MessageCodec:
                 f"    return bytearray(({terms}).to_bytes({self.length}, 'little'))\n")
         ns: dict[str, object] = {}
         exec(code, ns)  # noqa: S102
-        return ns["_pack"]  # type: ignore[return-value]
+        return cast("Callable[..., bytearray]", ns["_pack"])
 
     def pack_raw(self, raw: Sequence[int]) -> bytearray:
         """Payload with the raw values ``raw`` (in :attr:`names` order); other bits zero."""

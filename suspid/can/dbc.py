@@ -89,6 +89,7 @@ def load_dbc(path: str | Path | None = None, strict: bool = True) -> Database:
             raise InputError(f"{p}: cannot load DBC: {msg}") from None
     if not db.messages:
         raise InputError(f"{p}: DBC defines no message (BO_), expected at least one")
+    # cantools' Database has no field for its source: an extra attribute, read with getattr
     db.suspid_path = str(p)  # type: ignore[attr-defined]
     return db
 

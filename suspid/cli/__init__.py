@@ -16,7 +16,7 @@ import argparse
 import importlib
 import os
 import sys
-from typing import Sequence
+from typing import NoReturn, Sequence
 
 # neither imports numpy: the thread settings below still come first
 from suspid import __version__
@@ -46,7 +46,7 @@ SUBCOMMANDS: dict[str, str] = {
 class _Parser(argparse.ArgumentParser):
     """ArgumentParser whose usage errors are one ``error:`` line and exit status 2."""
 
-    def error(self, message: str) -> None:  # type: ignore[override]
+    def error(self, message: str) -> NoReturn:
         sys.stderr.write(f"error: {self.prog}: {message}\n")
         raise SystemExit(2)
 
