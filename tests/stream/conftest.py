@@ -19,3 +19,48 @@ def wear_stream() -> Stream:
 @pytest.fixture(scope="session")
 def quarter2():
     return get_model("quarter2")
+
+
+def half4_wear(duration: float = 80.0, fs: float = 250.0, wear_start: float = 20.0,
+               wear_end: float = 70.0, c_end_fraction: float = 0.5, noise: float = 0.01,
+               seed: int = 4) -> Stream:
+    """Half car on an ISO 8608 class C road at 50 km/h (rear wheel on the front's road,
+    delayed by the wheelbase) while the front damper c1 loses damping linearly; white noise
+    of ``noise`` x each channel's RMS on x, delta, x1, x2 and both roads."""
+    import numpy as np
+
+    from suspid.excitation import iso8608_profile, time_grid
+    from suspid.simulate import outputs, road_matrix, simulate_states
+
+    m = get_model("half4")
+    p0 = m.defaults()
+    t = time_grid(duration, fs)
+    wb = p0["a1"] + p0["a2"]
+    r1, r1d = iso8608_profile(t, "C", 50.0, seed, lag=0.0, lead=wb + 1.0)
+    r2, r2d = iso8608_profile(t, "C", 50.0, seed, lag=wb, lead=wb + 1.0)
+    road = {"r1": r1, "r1_dot": r1d, "r2": r2, "r2_dot": r2d}
+    U = road_matrix(m, t, road)
+    c_true = p0["c1"] * np.interp(t, [wear_start, wear_end], [1.0, c_end_fraction])
+    X = np.empty((t.size, m.n_states))
+    x = np.zeros(m.n_states)
+    step = max(1, int(round(0.05 * fs)))
+    for i0 in range(0, t.size - 1, step):
+        i1 = min(i0 + step, t.size - 1)
+        p = dict(p0, c1=float(c_true[(i0 + i1) // 2]))
+        seg = slice(i0, i1 + 1)
+        X[seg] = simulate_states(m, p, t[seg], U[seg], x)
+        x = X[i1]
+    out = outputs(m, p0, X, U)
+    rng = np.random.default_rng(seed + 1)
+    data = {}
+    for c in ("x", "delta", "x1", "x2", "r1", "r2"):
+        y = np.asarray(road[c] if c in road else out[c], dtype=float)
+        data[c] = y + rng.normal(0.0, noise * float(np.std(y)), t.size)
+    truth = {k: np.full(t.size, v) for k, v in p0.items()}
+    truth["c1"] = c_true
+    return Stream(t, data, truth, dict(p0))
+
+
+@pytest.fixture(scope="session")
+def half4_wear_stream() -> Stream:
+    return half4_wear()
