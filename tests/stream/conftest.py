@@ -64,3 +64,22 @@ def half4_wear(duration: float = 80.0, fs: float = 250.0, wear_start: float = 20
 @pytest.fixture(scope="session")
 def half4_wear_stream() -> Stream:
     return half4_wear()
+
+
+#: the seed's Table 1 quarter car (a stiff suspension)
+TABLE1 = {"m1": 275.0, "c1": 1120.0, "k1": 150000.0, "m2": 27.0, "c2": 3100.0, "k2": 310000.0}
+
+
+@pytest.fixture(scope="session")
+def stiff_wear_stream() -> Stream:
+    """Table 1 quarter car, random road, 2 % noise on every channel (of its RMS), c1 falling
+    linearly from 1120 to 560 N s/m between 30 and 120 s: crosses 70 % of nominal at 84 s."""
+    import numpy as np
+
+    m = get_model("quarter2")
+    kw = dict(duration=150.0, fs=500.0, params=TABLE1, c_end_fraction=0.5, wear_start=30.0,
+              wear_end=120.0, seed=3)
+    clean = damper_wear(m, noise={c: 0.0 for c in ("x1", "x2", "x1_ddot", "r", "r_dot")},
+                        quantize=False, **kw)
+    noise = {c: 0.02 * float(np.std(v)) for c, v in clean.data.items()}
+    return damper_wear(m, noise=noise, **kw)
