@@ -1,10 +1,13 @@
 """Shared streams of the streaming-estimator tests (generated once per session)."""
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from estimator.stream.scenarios import Stream, damper_wear
+from suspid.excitation import iso8608_profile, time_grid
 from suspid.models import get_model
+from suspid.simulate import outputs, road_matrix, simulate_states
 
 #: the must-show stream: c1 falls linearly from 1500 to 750 N s/m between 10 s and 100 s,
 #: crossing 70 % of nominal (1050 N s/m) at 64 s -- the damper-wear scenario, shortened
@@ -27,11 +30,6 @@ def half4_wear(duration: float = 80.0, fs: float = 250.0, wear_start: float = 20
     """Half car on an ISO 8608 class C road at 50 km/h (rear wheel on the front's road,
     delayed by the wheelbase) while the front damper c1 loses damping linearly; white noise
     of ``noise`` x each channel's RMS on x, delta, x1, x2 and both roads."""
-    import numpy as np
-
-    from suspid.excitation import iso8608_profile, time_grid
-    from suspid.simulate import outputs, road_matrix, simulate_states
-
     m = get_model("half4")
     p0 = m.defaults()
     t = time_grid(duration, fs)
@@ -74,8 +72,6 @@ TABLE1 = {"m1": 275.0, "c1": 1120.0, "k1": 150000.0, "m2": 27.0, "c2": 3100.0, "
 def stiff_wear_stream() -> Stream:
     """Table 1 quarter car, random road, 2 % noise on every channel (of its RMS), c1 falling
     linearly from 1120 to 560 N s/m between 30 and 120 s: crosses 70 % of nominal at 84 s."""
-    import numpy as np
-
     m = get_model("quarter2")
     kw = dict(duration=150.0, fs=500.0, params=TABLE1, c_end_fraction=0.5, wear_start=30.0,
               wear_end=120.0, seed=3)
