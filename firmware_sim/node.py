@@ -4,8 +4,9 @@ Main loop = :class:`firmware_sim.scheduler.Scheduler` with three tasks:
 
 * **sensor task** (500 Hz - 1 kHz): read every sensor of the plant at the tick, add sensor
   noise, apply sensor faults (stuck), quantize and pack per the DBC
-  (:class:`suspid.can.codec.SensorEncoder`: ``SN_Sync`` with the tick, then the QC_* or
-  HC_* frames, E2E counter = tick mod 15 and CRC), hand the frames to the CAN driver;
+  (:class:`suspid.can.codec.SensorEncoder`: ``SN_Sync`` with the tick, then the model's
+  sensor frames -- QC_*, HC_* or FC_* -- E2E counter = tick mod 15 and CRC), hand the frames
+  to the CAN driver;
 * **status task** (10 Hz): ``SN_Status`` with state, sample rate, fault flags, bus-off count;
 * **rx task** (every tick): drain frames from the bus (e.g. the estimator's
   ``SUSPID_Alert``), count and keep the alerts.
@@ -55,7 +56,8 @@ class NodeConfig:
     Attributes
     ----------
     model : str
-        ``quarter1``, ``quarter2`` or ``half4`` (selects the QC_* or HC_* message set).
+        A registered model (``quarter1``, ``quarter2``, ``half4``, ``full7``); selects the
+        model's sensor message set (QC_*, HC_* or FC_*) and ``SN_Status.SensorSet``.
     scenario : str
         See :mod:`firmware_sim.scenarios`.
     duration : float or None
@@ -220,7 +222,7 @@ class SensorNode:
         self.period = 1.0 / config.rate
         self.faults = FaultInjector(config.faults, np.random.default_rng(config.seed + 104729),
                                     float(self.setup.t[-1]))
-        self.sensor_set = 2 if self.model.name == "half4" else 1
+        self.sensor_set = self.model.sensor_set
         self.summary = NodeSummary(self.setup.name, self.model.name, config.rate,
                                    float(self.setup.t[-1]), events=dict(self.setup.events))
         self._status_counter = 0

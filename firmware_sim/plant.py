@@ -6,9 +6,14 @@ models; the ODE path when the model has ``extra_force`` terms) and carries the s
 ``[q, q']`` across chunk boundaries. Parameters may change with time (damper wear): they
 are evaluated once per chunk, i.e. held piecewise constant over ``chunk_s``.
 
-Undeclared effects for the diagnosis work (issue 6) go in through the model: pass a model
-whose ``extra_force`` list holds the extra generalised forces, or ``extra_forces=[...]``
-here (appended to a copy of the model's list).
+The linear chunks share one set of the model's affine pieces
+(:meth:`~suspid.models.base.SuspensionModel.affine`, computed once from the parameters at
+the start): a wearing damper or a sagging spring changes only the free parameters, so each
+chunk's state matrices are one small product instead of a new solve with the mass matrix.
+
+Undeclared effects go in through the model: pass a model whose ``extra_force`` list holds
+the extra generalised forces, or ``extra_forces=[...]`` here (appended to a copy of the
+model's list).
 """
 from __future__ import annotations
 
@@ -18,6 +23,7 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from suspid.models.base import FloatArray, ForceFn, SuspensionModel
+from suspid.models.effects import inject
 from suspid.simulate import simulate
 
 ParamsFn = Callable[[float], Mapping[str, float]]
@@ -63,8 +69,6 @@ class Plant:
         self._sensor = None
         self._prev: tuple[FloatArray, dict[str, FloatArray]] | None = None
         if effects:
-            from suspid.models.effects import inject
-
             inj = inject(model, effects)  # validates names, parameters and channels
             if inj.physical:
                 self._physical = inject(model, inj.physical)
@@ -76,6 +80,8 @@ class Plant:
         self.model = model
         self._params: ParamsFn = params if callable(params) else (lambda _t, p=dict(params): p)
         self.t = np.asarray(t, dtype=float)
+        #: the forward model's affine pieces in the dampers and springs (one set per plant)
+        self.affine = model.affine(self._params(float(self.t[0]) if self.t.size else 0.0))
         self.road = {k: np.asarray(v, dtype=float) for k, v in (road or {}).items()}
         self.fs = 1.0 / float(self.t[1] - self.t[0]) if self.t.size > 1 else 1.0
         self.chunk = max(2, int(round(chunk_s * self.fs)))
@@ -97,12 +103,13 @@ class Plant:
         p = self._params(float(tt[0]))
         if tt.size < 2:
             out = simulate(self.model, p, np.array([tt[0], tt[0] + 1.0 / self.fs]),
-                           {n: np.repeat(v, 2) for n, v in road.items()}, self.x)
+                           {n: np.repeat(v, 2) for n, v in road.items()}, self.x,
+                           affine=self.affine)
             out = {n: v[:1] for n, v in out.items()}
         elif self._physical is not None:
             out = self._physical.simulate(p, tt, road or None, self.x)
         else:
-            out = simulate(self.model, p, tt, road or None, self.x)
+            out = simulate(self.model, p, tt, road or None, self.x, affine=self.affine)
         if self._sensor is not None:
             out = self._measure(tt, out)
         nq = len(self.model.coords)

@@ -3,9 +3,10 @@
 Shapes (all documented in README and docs):
 
 * ``initial``: no road input; the body (and optionally the wheels) start away from
-  equilibrium. Default for ``quarter2`` is the seed's Table 2 (x01 = 0.20 m, v01 = 0.50 m/s,
-  x02 = 0.10 m, v02 = 0.05 m/s); for ``half4`` the seed's §6.1 body state (x = 0.05 m,
-  x' = 0.05 m/s, delta = 0.05 rad, delta' = 0.05 rad/s).
+  equilibrium, at the model's :meth:`~suspid.models.base.SuspensionModel.initial_state`
+  (``quarter2``: the seed's Table 2, x01 = 0.20 m, v01 = 0.50 m/s, x02 = 0.10 m,
+  v02 = 0.05 m/s; ``half4``: the seed's §6.1 body state, x = 0.05 m, x' = 0.05 m/s,
+  delta = 0.05 rad, delta' = 0.05 rad/s).
 * ``curb``: a step of height ``h`` (m) at ``t0`` (s) with a half-cosine rise of duration
   ``rise`` (s, default 0.02 s), so ``r' = h pi / (2 rise) sin(...)`` stays finite.
 * ``bump``: a speed bump of height ``h`` (m) and length ``l`` (m) crossed at speed ``v``
@@ -17,8 +18,13 @@ Shapes (all documented in README and docs):
   with random phases over 0.011-2.83 cycles/m.
 * measured roads come from the measurement CSV.
 
-For ``half4`` the rear wheel sees the front road delayed by the wheelbase over the speed,
-``r2(t) = r1(t - (a1 + a2) / v)``.
+Which road follows which is the model's: every road lies on a track
+(:meth:`~suspid.models.base.SuspensionModel.road_tracks`) and runs ``L_i`` metres behind the
+first axle (:meth:`~suspid.models.base.SuspensionModel.road_lags`), so at speed ``v`` it sees
+its track delayed by ``L_i / v``: for ``half4`` ``r2(t) = r1(t - (a1 + a2) / v)``, for
+``full7`` the rear roads ``r3``, ``r4`` follow ``r1``, ``r2``. Curbs and bumps span the
+whole width (every track the same); the ISO 8608 road draws one random profile per track
+(seed ``seed + 7919 j`` for track ``j``, so track 0 is the single-track road).
 """
 from __future__ import annotations
 
@@ -116,35 +122,49 @@ def time_grid(duration: float, fs: float) -> FloatArray:
     return np.arange(int(round(duration * fs)) + 1) / fs
 
 
+def _track_sources(model: SuspensionModel, p: Mapping[str, float]
+                   ) -> list[tuple[int, float]]:
+    """Per road: ``(track, lag in m)``."""
+    return list(zip(model.road_tracks(), model.road_lags(p)))
+
+
 def measured_road(model: SuspensionModel, t: FloatArray, road: Mapping[str, FloatArray],
                   params: Mapping[str, float] | None = None, v_kmh: float = 20.0,
                   source: str = "road") -> dict[str, FloatArray]:
     """A measured road (e.g. a profilometer or a rig actuator record) as the model's input.
 
-    Every road of the model must be given, except that ``half4`` with only ``r1`` gets the
-    rear road ``r2(t) = r1(t - (a1 + a2) / v)`` (held at ``r1``'s first value before the
-    record starts). A road without its ``_dot`` is differentiated numerically later
+    Every road of the model must be given, except a road that runs behind a given one on
+    the same track (:meth:`~suspid.models.base.SuspensionModel.road_lags`): it is the given
+    road delayed by the distance between them over the speed, e.g. ``half4`` with only ``r1``
+    gets ``r2(t) = r1(t - (a1 + a2) / v)`` (held at ``r1``'s first value before the record
+    starts). A road without its ``_dot`` is differentiated numerically later
     (:func:`suspid.simulate.road_matrix`).
 
     Raises
     ------
     InputError
-        A road of the model is missing (named).
+        A road of the model is missing and cannot be derived (named).
     """
     out = {k: np.asarray(v, dtype=float) for k, v in road.items()}
-    first = model.roads[0]
-    if first not in out:
-        raise InputError(f"{source}: no road column {first!r} for model {model.name}; expected "
-                         f"{', '.join(model.roads)} (and optionally their _dot)")
-    if len(model.roads) == 2 and model.roads[1] not in out:
+    p = dict(model.defaults(), **(params or {}))
+    where = _track_sources(model, p)
+    for i, name in enumerate(model.roads):
+        if name in out:
+            continue
+        track, lag = where[i]
+        given = [(where[j][1], rn) for j, rn in enumerate(model.roads)
+                 if rn in road and where[j][0] == track and where[j][1] < lag]
+        if not given:
+            raise InputError(f"{source}: no road column {name!r} for model {model.name}; expected "
+                             f"{', '.join(model.roads)} (and optionally their _dot)")
         if not 0 < v_kmh < math.inf:
-            raise UsageError(f"speed must be finite and > 0 km/h to delay the rear road, got {v_kmh}")
-        p = dict(model.defaults(), **(params or {}))
-        delay = (p["a1"] + p["a2"]) / (v_kmh / 3.6)
-        rear = model.roads[1]
-        out[rear] = np.interp(t - delay, t, out[first])
+            raise UsageError(f"speed must be finite and > 0 km/h to delay the road {name}, "
+                             f"got {v_kmh}")
+        lag0, first = max(given)
+        delay = (lag - lag0) / (v_kmh / 3.6)
+        out[name] = np.interp(t - delay, t, out[first])
         if f"{first}_dot" in out:
-            out[f"{rear}_dot"] = np.interp(t - delay, t, out[f"{first}_dot"], left=0.0)
+            out[f"{name}_dot"] = np.interp(t - delay, t, out[f"{first}_dot"], left=0.0)
     return out
 
 
@@ -164,11 +184,11 @@ def make_scenario(model: SuspensionModel, name: str, duration: float = 5.0, fs: 
     fs : float
         Sample rate (Hz).
     params : mapping, optional
-        Model parameters (``half4`` uses ``a1 + a2`` as the wheelbase for the rear delay).
+        Model parameters (the model's road lags may depend on them, e.g. the wheelbase).
     h, l, v_kmh, t0, rise, road_class, seed
         Shape parameters (see the module docstring); ``v_kmh`` is also the ISO road speed.
     x0 : ndarray, optional
-        Initial state; default the seed's initial states for ``initial``, rest otherwise.
+        Initial state; default the model's ``initial_state()`` for ``initial``, rest otherwise.
 
     Returns
     -------
@@ -185,28 +205,24 @@ def make_scenario(model: SuspensionModel, name: str, duration: float = 5.0, fs: 
     road: dict[str, FloatArray] = {}
     if name == "initial":
         if x0 is None:
-            x0 = np.zeros(n)
-            if model.name == "quarter1":
-                x0[:] = [0.20, 0.50]
-            elif model.name == "quarter2":
-                x0[:] = [0.20, 0.10, 0.50, 0.05]
-            else:
-                x0[[0, 1, 4, 5]] = [0.05, 0.05, 0.05, 0.05]
+            x0 = model.initial_state()
         return t, road, np.asarray(x0, dtype=float)
     if name not in SCENARIOS:
         raise UsageError(f"unknown scenario {name!r}; expected one of {', '.join(SCENARIOS)}")
-    delay = 0.0
-    if len(model.roads) == 2:
-        delay = (p["a1"] + p["a2"]) / (v_kmh / 3.6)
+    v = v_kmh / 3.6
+    where = _track_sources(model, p)
+    lead = max((lag for _, lag in where), default=0.0)
+    if lead > 0 and not 0 < v < math.inf:
+        raise UsageError(f"speed must be finite and > 0 km/h to delay the rear roads, got {v_kmh}")
     for i, rn in enumerate(model.roads):
-        shift = delay * i
+        track, lag = where[i]
+        shift = lag / v if lag else 0.0
         if name == "curb":
             r, rd = curb_profile(t, h, t0 + shift, rise)
         elif name == "bump":
             r, rd = bump_profile(t, h, l, v_kmh, t0 + shift)
         else:
-            wheelbase = delay * v_kmh / 3.6
-            r, rd = iso8608_profile(t, road_class, v_kmh, seed, lag=wheelbase * i, lead=wheelbase)
+            r, rd = iso8608_profile(t, road_class, v_kmh, seed + 7919 * track, lag=lag, lead=lead)
         road[rn] = r
         road[f"{rn}_dot"] = rd
     return t, road, np.zeros(n) if x0 is None else np.asarray(x0, dtype=float)

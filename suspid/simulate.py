@@ -13,6 +13,11 @@ Two paths share the one model definition (:mod:`suspid.models`):
   ``model.rhs`` for nonlinear right-hand sides (effect terms) and for validation.
 
 Both return a dict ``channel -> ndarray`` with positions, ``_dot`` and ``_ddot`` channels.
+
+The state and input matrices come from the model, or -- when the caller steps many
+parameter sets that differ only in dampers and springs (the node's plant under damper
+wear, a synthetic drifting stream) -- from the model's affine pieces
+(:meth:`~suspid.models.base.SuspensionModel.affine`), passed as ``affine=``.
 """
 from __future__ import annotations
 
@@ -22,7 +27,7 @@ from typing import Mapping
 import numpy as np
 
 from suspid.errors import UsageError
-from suspid.models.base import FloatArray, SuspensionModel
+from suspid.models.base import AffinePieces, FloatArray, SuspensionModel
 
 
 def uniform_step(t: FloatArray, rtol: float = 1e-6) -> float | None:
@@ -91,9 +96,22 @@ class Modal:
         return np.real(W @ ((Cm @ self.V) * self.fac).T)
 
 
-def modal_form(model: SuspensionModel, p: Mapping[str, float]) -> Modal | None:
-    """Eigen-decomposition of ``A`` for ``p``; ``None`` if ``A`` is (nearly) defective."""
-    A, B = model.state_space(p)
+def state_matrices(model: SuspensionModel, p: Mapping[str, float],
+                   affine: AffinePieces | None = None) -> tuple[FloatArray, FloatArray]:
+    """``(A, B)`` at ``p``: from the affine pieces when they apply to ``p``, else the model."""
+    if affine is not None and affine.matches(p):
+        return affine.state_space(affine.theta(p))
+    return model.state_space(p)
+
+
+def modal_form(model: SuspensionModel, p: Mapping[str, float],
+               affine: AffinePieces | None = None) -> Modal | None:
+    """Eigen-decomposition of ``A`` for ``p``; ``None`` if ``A`` is (nearly) defective.
+
+    ``affine`` (the model's :meth:`~suspid.models.base.SuspensionModel.affine` pieces)
+    gives ``A`` and ``B`` without solving the mass matrix when it applies to ``p``.
+    """
+    A, B = state_matrices(model, p, affine)
     nr = len(model.roads)
     Br, Bv = B[:, :nr], B[:, nr:]
     Bz = A @ Bv + Br
@@ -253,7 +271,7 @@ def free_coeffs_to_state(modal: Modal, coef: FloatArray) -> FloatArray:
 
 def simulate_states(model: SuspensionModel, p: Mapping[str, float], t: FloatArray,
                     U: FloatArray, x0: FloatArray | None = None,
-                    modal: Modal | None = None) -> FloatArray:
+                    modal: Modal | None = None, affine: AffinePieces | None = None) -> FloatArray:
     """State trajectory ``X`` (N, n) of the linear model under FOH road input ``U``.
 
     Parameters
@@ -270,6 +288,8 @@ def simulate_states(model: SuspensionModel, p: Mapping[str, float], t: FloatArra
         Initial state ``[q, q']`` at ``t[0]`` (default: rest).
     modal : Modal, optional
         Precomputed :func:`modal_form` for ``p``.
+    affine : AffinePieces, optional
+        The model's affine pieces (used for ``A``, ``B`` when they apply to ``p``).
     """
     n = model.n_states
     nr = len(model.roads)
@@ -277,19 +297,20 @@ def simulate_states(model: SuspensionModel, p: Mapping[str, float], t: FloatArra
     r = U[:, :nr]
     h = uniform_step(t)
     if modal is None:
-        modal = modal_form(model, p)
+        modal = modal_form(model, p, affine)
     if h is not None and modal is not None:
         W = modal_trajectory(modal, h, r, x0)
         return modal.real_part(W, np.eye(n)) + r @ modal.Bv.T
-    return _simulate_states_loop(model, p, t, U, x0)
+    return _simulate_states_loop(model, p, t, U, x0, affine)
 
 
 def _simulate_states_loop(model: SuspensionModel, p: Mapping[str, float], t: FloatArray,
-                          U: FloatArray, x0: FloatArray) -> FloatArray:
+                          U: FloatArray, x0: FloatArray,
+                          affine: AffinePieces | None = None) -> FloatArray:
     """Exact FOH stepping with block matrix exponentials (non-uniform grids, defective A)."""
     from scipy.linalg import expm
 
-    A, B = model.state_space(p)
+    A, B = state_matrices(model, p, affine)
     n = model.n_states
     nr = len(model.roads)
     Br, Bv = B[:, :nr], B[:, nr:]
@@ -334,15 +355,26 @@ def pack_channels(model: SuspensionModel, X: FloatArray, acc: FloatArray,
     return out
 
 
+def accelerations(model: SuspensionModel, p: Mapping[str, float], X: FloatArray, U: FloatArray,
+                  affine: AffinePieces | None = None) -> FloatArray:
+    """Accelerations ``q''`` (N, nq) for state rows ``X`` and input rows ``U``."""
+    if affine is not None and affine.matches(p):
+        AB = affine.accel_rows(affine.theta(p))
+        n = model.n_states
+        return X @ AB[:, :n].T + U @ AB[:, n:].T
+    return model.accelerations(X, U, p)
+
+
 def outputs(model: SuspensionModel, p: Mapping[str, float], X: FloatArray,
-            U: FloatArray) -> dict[str, FloatArray]:
+            U: FloatArray, affine: AffinePieces | None = None) -> dict[str, FloatArray]:
     """Every channel (positions, velocities, accelerations) from states and inputs."""
-    return pack_channels(model, X, model.accelerations(X, U, p))
+    return pack_channels(model, X, accelerations(model, p, X, U, affine))
 
 
 def simulate(model: SuspensionModel, params: Mapping[str, float], t: FloatArray,
              road: Mapping[str, FloatArray] | None = None,
-             x0: FloatArray | None = None) -> dict[str, FloatArray]:
+             x0: FloatArray | None = None,
+             affine: AffinePieces | None = None) -> dict[str, FloatArray]:
     """Simulate a linear model exactly (FOH road) and return every channel.
 
     Parameters
@@ -356,6 +388,9 @@ def simulate(model: SuspensionModel, params: Mapping[str, float], t: FloatArray,
         Road displacement arrays by road name (m), optional ``<name>_dot`` (m/s).
     x0 : ndarray, optional
         Initial state ``[q, q']`` (default: rest).
+    affine : AffinePieces, optional
+        The model's affine pieces (:meth:`~suspid.models.base.SuspensionModel.affine`),
+        for callers that simulate many damper/spring sets of one car.
 
     Returns
     -------
@@ -366,8 +401,8 @@ def simulate(model: SuspensionModel, params: Mapping[str, float], t: FloatArray,
     U = road_matrix(model, t, road)
     if model.extra_force:
         return simulate_ode(model, params, t, road, x0)
-    X = simulate_states(model, params, t, U, x0)
-    return pack_channels(model, X, model.accelerations(X, U, params), U)
+    X = simulate_states(model, params, t, U, x0, affine=affine)
+    return pack_channels(model, X, accelerations(model, params, X, U, affine), U)
 
 
 def simulate_ode(model: SuspensionModel, params: Mapping[str, float], t: FloatArray,

@@ -18,4 +18,6 @@ install -e ".[test]"
 export MPLBACKEND=Agg
 # small matrices: BLAS threads only add contention (see suspid/cli/__init__.py)
 export OPENBLAS_NUM_THREADS=${OPENBLAS_NUM_THREADS:-1} OMP_NUM_THREADS=${OMP_NUM_THREADS:-1}
+# the linter, the import contract and the type checker (pyproject.toml) must pass too
+bash tools/lint.sh
 exec .venv/bin/python -m pytest "$@"

@@ -40,16 +40,17 @@ from typing import Any, Callable, Mapping
 import numpy as np
 from scipy.stats import chi2
 
-from estimator.diagnose.corners import SiteRestricted, effect_sites, model_limits
+from estimator.diagnose.corners import SiteRestricted, effect_sites, model_limits, strut_limit_key
 from estimator.diagnose.refit import (ModelFit, PhysicalRefit, SensorRefit, baseline_fit,
                                       reweighted_linear_fit)
 from estimator.diagnose.residuals import (ChannelStats, Motion, Screen, channel_stats, effective_n,
-                                          motion_from, noise_variance, screen_delay,
-                                          screen_physical, screen_sensor, xcorr_peak)
+                                          motion_from, noise_variance, screen_physical,
+                                          screen_sensor, xcorr_peak)
 from estimator.identify import IdentResult, OutputErrorProblem, Parameters, fit
+from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
 from suspid.models.base import FloatArray, SuspensionModel
-from suspid.models.effects import REGISTRY, PhysicalEffect, SensorEffect, make_effect, strut_sites
+from suspid.models.effects import PhysicalEffect, SensorEffect, effect_classes, make_effect, strut_sites
 
 
 @dataclass
@@ -226,7 +227,11 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
     for j, rn in enumerate(model.roads):
         refs[rn] = mo.r[:, j]
         refs[f"{rn}_dot"] = mo.rd[:, j]
-    for site in strut_sites(model, p0):
+    try:
+        struts = strut_sites(model, p0)
+    except UsageError:
+        struts = []
+    for site in struts:
         s, sd = site.coordinate(np.column_stack([mo.q, mo.qd]), np.column_stack([mo.r, mo.rd]))
         tag = site.name.replace(" ", "_")
         refs[f"{tag}_deflection"] = s
@@ -260,10 +265,7 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
     # screening
     screens, force_summary = screen_physical(model, p0, free, mo, noise_var, h)
     evidence["force_residual"] = force_summary
-    dscreen = screen_delay(model, meas, p0, free, base.predicted, problem.U, th.max_delay_s)
-    if dscreen is not None:
-        screens.append(dscreen)
-    screens += screen_sensor(model, meas.t, base.residual, base.predicted, th.max_delay_s)
+    screens += screen_sensor(model, meas, p0, free, base.predicted, problem.U, th.max_delay_s)
     result.screens = screens
     blocked = _not_identifiable(model, screens, limits, th)
     if blocked:
@@ -398,8 +400,7 @@ def _not_identifiable(model: SuspensionModel, screens: list[Screen], limits: Map
         if pe < 0.3 or pe < 1.5 * (s.explained if s.plausible else 0.0) or pe < th.min_screen:
             continue
         vals = "; ".join(f"{k}: {_fmt(v)}" for k, v in ps["sites"].items())
-        key = next((k for k in limits if k.startswith(s.name)),
-                   "strut effect of different size front and rear")
+        key = next((k for k in limits if k.startswith(s.name)), strut_limit_key(model))
         why = limits.get(key, "the effect library has no form with separate parameters per strut")
         out[s.name] = (f"the residual force points to {s.name} in every strut with different "
                        f"parameters (one coefficient per strut explains {pe:.0%} of it, the best "
@@ -430,9 +431,10 @@ def select_for_refit(screens: list[Screen], blocked: Mapping[str, str],
     150 N at 3 % noise: 1–5 %). Nothing falls back when a strut effect is blocked as not
     identifiable (that already accounts for the residual).
     """
-    phys = sorted([s for s in screens if s.name in REGISTRY and REGISTRY[s.name].kind == "physical"
+    reg = effect_classes()
+    phys = sorted([s for s in screens if s.name in reg and reg[s.name].kind == "physical"
                    and s.plausible and s.name not in blocked], key=lambda s: -s.explained)
-    sens = [s for s in screens if s.name in REGISTRY and REGISTRY[s.name].kind == "sensor"
+    sens = [s for s in screens if s.name in reg and reg[s.name].kind == "sensor"
             and s.plausible and s.explained >= th.min_screen]
     if not phys:
         return sens, []
@@ -491,7 +493,7 @@ def _refit(problem: OutputErrorProblem, p0: Mapping[str, float], free: list[str]
     sensor effect that adds channels to the refit the linear model fitted on those same
     channels (:meth:`SensorRefit.fit_null`, cached in ``references`` by channel set).
     """
-    if sc.name in REGISTRY and REGISTRY[sc.name].kind == "physical":
+    if effect_classes()[sc.name].kind == "physical":
         values = dict(sc.params)
         eff = make_effect(sc.name, **values)
         if not isinstance(eff, PhysicalEffect):

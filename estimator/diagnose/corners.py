@@ -1,12 +1,14 @@
-"""Where an effect acts: one strut of a half car, and what a model cannot tell apart.
+"""Where an effect acts: one strut of a model with several, and what a model cannot tell apart.
 
-The effect library (:mod:`suspid.models.effects`) applies a strut effect of ``half4`` to
-*both* struts with one parameter set (the same hardware front and rear) and does not offer
-``asymmetric_damping`` there. A worn or sticking damper is usually one corner, though, so
-``diagnose`` also tests every strut effect in the front or the rear strut alone
-(:class:`SiteRestricted`, diagnose-internal: the contract's effect parameters are unchanged
-and the strut is reported in ``evidence.effect_sites``). What no candidate form can express
-for a model is listed by :func:`model_limits` and said in the verdict instead of guessed.
+The effect library (:mod:`suspid.models.effects`) applies a strut effect to *every* strut
+with one parameter set (the same hardware at every corner) and offers
+``asymmetric_damping`` only where one damper coefficient describes every strut. A worn or
+sticking damper is usually one corner, though, so ``diagnose`` also tests every strut
+effect in each strut alone when the model has several (:class:`SiteRestricted`,
+diagnose-internal: the contract's effect parameters are unchanged and the strut is
+reported in ``evidence.effect_sites``). What no candidate form can express for a model is
+listed by :func:`model_limits` (from the effect classes and the model's struts) and said
+in the verdict instead of guessed.
 """
 from __future__ import annotations
 
@@ -14,8 +16,7 @@ from typing import Any, Mapping, Sequence
 
 from suspid.errors import UsageError
 from suspid.models.base import SuspensionModel
-from suspid.models.effects import PhysicalEffect, Site, strut_sites, tyre_sites
-from suspid.models.effects import Law
+from suspid.models.effects import Law, PhysicalEffect, Site, effect_classes, strut_sites
 
 
 class SiteRestricted(PhysicalEffect):
@@ -30,9 +31,9 @@ class SiteRestricted(PhysicalEffect):
 
     Notes
     -----
-    The restriction bypasses the library's model list on purpose: ``asymmetric_damping`` in
-    *one* strut of ``half4`` is well defined (its symmetric part is that strut's ``c1`` or
-    ``c2``); only the shared two-strut form is not.
+    The restriction bypasses the library's availability rule on purpose:
+    ``asymmetric_damping`` in *one* strut of ``half4`` is well defined (its symmetric part
+    is that strut's ``c1`` or ``c2``); only the shared two-strut form is not.
     """
 
     def __init__(self, inner: PhysicalEffect, site_names: Sequence[str]) -> None:
@@ -42,11 +43,12 @@ class SiteRestricted(PhysicalEffect):
         self.name = inner.name  # type: ignore[misc]
         self.params = inner.params  # type: ignore[misc]
         self.site_kind = inner.site_kind  # type: ignore[misc]
+        self.plot_against = inner.plot_against  # type: ignore[misc]
         self.description = f"{inner.description} ({', '.join(self.site_names)} only)"  # type: ignore[misc]
 
     def sites(self, model: SuspensionModel, p: Mapping[str, float]) -> list[Site]:
         """The named sites of ``model`` (UsageError if it has none of them)."""
-        every = strut_sites(model, p) if self.site_kind == "strut" else tyre_sites(model, p)
+        every = self.inner.model_sites(model, p)
         chosen = [s for s in every if s.name in self.site_names]
         if not chosen:
             raise UsageError(f"effect {self.name}: model {model.name} has no site "
@@ -59,6 +61,9 @@ class SiteRestricted(PhysicalEffect):
 
     def law(self, site: Site, base: Mapping[str, float]) -> Law:
         return self.inner.law(site, base)
+
+    def base_overrides(self, sites: Sequence[Site]) -> dict[str, float]:
+        return self.inner.base_overrides(sites)
 
     def with_values(self, **values: Any) -> "SiteRestricted":
         inner = self.inner.with_values(**values)
@@ -79,35 +84,48 @@ def effect_sites(effect: PhysicalEffect, model: SuspensionModel, p: Mapping[str,
     return [s.name for s in effect.sites(model, p)]
 
 
+def _struts(model: SuspensionModel) -> list[Site]:
+    try:
+        return strut_sites(model, model.defaults())
+    except UsageError:
+        return []
+
+
+def strut_limit_key(model: SuspensionModel) -> str:
+    """Key of the limit "a strut effect of different size in each strut" for ``model``."""
+    names = [s.name.rsplit(" ", 1)[0] for s in _struts(model)]
+    return ("strut effect of different size " + (" and ".join(names) if len(names) == 2
+                                                 else "per strut"))
+
+
 def model_limits(model: SuspensionModel) -> dict[str, str]:
     """What ``diagnose`` cannot identify with ``model``, by effect (empty if nothing).
+
+    Each effect class states its own limits (:meth:`~suspid.models.effects.Effect.limits`,
+    e.g. ``asymmetric_damping`` where several dampers differ, ``tire_liftoff`` where no wheel
+    mass separates tyre and strut); a model with several struts adds that a strut effect of
+    different size in each strut has no form in the contract.
 
     Returns
     -------
     dict
         ``effect or form -> reason`` (plain sentences, printed in ``evidence.limits``).
     """
-    if model.name == "half4":
-        return {
-            "asymmetric_damping (both struts)":
-                "one (c_rebound, c_compression) pair cannot describe two dampers whose "
-                "symmetric parts c1 and c2 differ, and the contract has no per-strut pair; "
-                "asymmetric damping is tested in the front or the rear strut alone",
-            "strut effect of different size front and rear":
-                "the library's half4 strut effects share one parameter set (same hardware "
-                "front and rear); an effect is tested in both struts with one value or in "
-                "one strut alone, and a front/rear disagreement of the screening regression "
-                "is reported in evidence.candidates.NAME.screen.per_site",
-        }
-    if model.name == "quarter1":
-        return {
-            "tire_liftoff (wheel hop)":
-                "quarter1 has no wheel: its one spring/damper is suspension and tyre in "
-                "series, so tire_liftoff can only mean the whole corner leaving the road "
-                "(the element cannot pull the body down); a wheel hopping under a body "
-                "still held by its spring is not representable (use quarter2)",
-        }
-    return {}
+    out: dict[str, str] = {}
+    for cls in effect_classes().values():
+        out.update(cls.limits(model))
+    struts = _struts(model)
+    if len(struts) > 1:
+        n = len(struts)
+        names = [s.name.rsplit(" ", 1)[0] for s in struts]
+        hardware = " and ".join(names) if n == 2 else "at every corner"
+        pair = "/".join(names) if n == 2 else "strut-to-strut"
+        out[strut_limit_key(model)] = (
+            f"the library's {model.name} strut effects share one parameter set (same hardware "
+            f"{hardware}); an effect is tested in {'both' if n == 2 else 'all'} struts with one "
+            f"value or in one strut alone, and a {pair} disagreement of the screening regression "
+            "is reported in evidence.candidates.NAME.screen.per_site")
+    return out
 
 
-__all__ = ["SiteRestricted", "effect_sites", "model_limits"]
+__all__ = ["SiteRestricted", "effect_sites", "model_limits", "strut_limit_key"]

@@ -9,12 +9,9 @@ from estimator.diagnose.core import DiagnoseResult
 from estimator.diagnose.residuals import autocorr, residual_force
 from suspid.io.csvio import Measurement
 from suspid.models import get_model
-from suspid.models.effects import PhysicalEffect, strut_sites
+from suspid.errors import UsageError
+from suspid.models.effects import PhysicalEffect, Site, strut_sites, tyre_sites
 from suspid.plots import _plt
-
-#: which strut coordinate the residual force is plotted against, per effect
-_AGAINST = {"coulomb_friction": "rate", "asymmetric_damping": "rate", "quadratic_damping": "rate",
-            "progressive_spring": "deflection", "bump_stop": "deflection"}
 
 
 def plot_evidence(res: DiagnoseResult, meas: Measurement, path: str | Path) -> None:
@@ -23,7 +20,8 @@ def plot_evidence(res: DiagnoseResult, meas: Measurement, path: str | Path) -> N
     Left: residual of every measured channel before (baseline) and after (augmented).
     Right, top to bottom: autocorrelation of the most structured channel's residual with the
     white-noise 99 % band; the residual force of the first coordinate's equation (baseline
-    parameters) against the strut rate or deflection; the share of the residual each
+    parameters) against the rate or deflection of the chosen effect's site (its class's
+    ``plot_against``; the first strut when there is no effect); the share of the residual each
     candidate's screen explained and, for refitted ones, its refit.
     """
     plt = _plt()
@@ -60,15 +58,21 @@ def plot_evidence(res: DiagnoseResult, meas: Measurement, path: str | Path) -> N
     ax.legend(fontsize=8)
     # residual force against the strut coordinate
     ax = fig.add_subplot(gs[1, 1])
+    sites: list[Site] = []
+    use_rate = True
     if res.motion is not None:
         R = residual_force(model, res.baseline.params, res.motion)
-        site = strut_sites(model, res.baseline.params)[0]
+        try:
+            sites = strut_sites(model, res.baseline.params) or tyre_sites(model, res.baseline.params)
+        except UsageError:
+            sites = []
         if isinstance(res.effect, PhysicalEffect) and res.effect.site_kind == "strut":
-            site = res.effect.sites(model, res.baseline.params)[0]   # e.g. the rear strut alone
+            sites = res.effect.sites(model, res.baseline.params)   # e.g. the rear strut alone
+        use_rate = not (isinstance(res.effect, PhysicalEffect) and res.effect.plot_against == "deflection")
+    if res.motion is not None and sites:
+        site = sites[0]
         s, sd = site.coordinate(np.column_stack([res.motion.q, res.motion.qd]),
                                 np.column_stack([res.motion.r, res.motion.rd]))
-        name = res.effect.name if res.effect is not None else ""
-        use_rate = _AGAINST.get(name, "rate") == "rate"
         x = sd if use_rate else s
         ax.plot(x, R[:, 0], ".", ms=2, color="0.6", label="samples")
         edges = np.quantile(x, np.linspace(0, 1, 26))

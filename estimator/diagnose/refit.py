@@ -1,7 +1,7 @@
 """Output-error refit of the model augmented with one effect (short Nelder–Mead, then
 Levenberg–Marquardt, in log coordinates: :func:`nm_then_lm`).
 
-Physical effects are simulated by :func:`estimator.diagnose.nlsim.simulate_effects` with
+Physical effects are simulated by :func:`suspid.nlsim.simulate_effects` with
 enough internal steps for stability and accuracy (:func:`substeps_for`); the initial state
 is handled by an approximate variable projection (the free response of the linear part,
 exact when the effect is inactive near the start). Sensor effects keep the exact linear
@@ -9,9 +9,12 @@ fast path: the measurement is *compensated* (offset removed, lagging channels ad
 the ordinary :class:`~estimator.identify.OutputErrorProblem` is evaluated, with the affected
 channels added when the cost would not see them (:class:`SensorRefit`; such an effect is
 judged against the linear model fitted on the same channels, :meth:`SensorRefit.fit_null`;
-a delay is undone by an all-pass shift that leaves the noise as it is). Positive parameters
-are optimised as ``log(theta / theta_start)``; a sensor offset as
-``(offset - offset_start) / scale``. :func:`reweighted_linear_fit` refits the declared
+a time shift, :attr:`~suspid.models.effects.SensorEffect.time_shift`, is undone by an
+all-pass shift that leaves the noise as it is). Positive parameters (the effect's
+``EffectParam.kind``) are optimised as ``log(theta / theta_start)``, real ones (a sensor
+offset) as ``(theta - theta_start) / scale``; base parameters an effect determines
+(:meth:`~suspid.models.effects.PhysicalEffect.base_overrides`) follow it. Nothing here
+depends on which effect it is. :func:`reweighted_linear_fit` refits the declared
 linear model on every channel (the whiteness check's reference).
 """
 from __future__ import annotations
@@ -22,14 +25,15 @@ from types import SimpleNamespace
 from typing import Any, Callable, Mapping
 
 import numpy as np
+from scipy.optimize import least_squares
 
 from estimator.identify import OutputErrorProblem, minimize_log
-from estimator.diagnose.nlsim import simulate_effects
 from estimator.diagnose.residuals import shift_allpass
 from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
 from suspid.models.base import FloatArray
 from suspid.models.effects import Effect, PhysicalEffect, SensorEffect
+from suspid.nlsim import simulate_effects
 from suspid.simulate import (free_coeffs_to_state, free_response_basis, modal_form, outputs,
                              simulate_states)
 
@@ -168,14 +172,10 @@ class PhysicalRefit:
         self.model = problem.model
         self.effect0 = effect
         self.base = dict(base)
-        self.sym_name: str | None = None
-        if effect.name == "asymmetric_damping":
-            # the damper it replaces: the one strut's c (c1 or c2 of a half car's strut)
-            names = {site.c_name for site in effect.sites(self.model, base)}
-            if len(names) != 1 or None in names:
-                raise ValueError(f"asymmetric_damping needs exactly one damper, got {sorted(map(str, names))}")
-            self.sym_name = names.pop()
-        self.base_free = [k for k in free if k != self.sym_name]
+        # base parameters the effect determines (an asymmetric damper's symmetric part)
+        self.sites = effect.sites(self.model, base)
+        self.tied = list(effect.base_overrides(self.sites))
+        self.base_free = [k for k in free if k not in self.tied]
         self.eff_names = effect.numeric_names
         self.x0 = np.asarray(x0, dtype=float)
         self.substeps = substeps_for(problem, base, effect, problem.h or 1.0, self.x0)
@@ -184,8 +184,8 @@ class PhysicalRefit:
         p = dict(self.base)
         p.update({k: theta[k] for k in self.base_free})
         eff = self.effect0.with_values(**{k: theta[k] for k in self.eff_names})
-        if self.sym_name:
-            p[self.sym_name] = 0.5 * (theta["c_rebound"] + theta["c_compression"])
+        if self.tied and isinstance(eff, PhysicalEffect):
+            p.update(eff.base_overrides(self.sites))
         return p, eff  # type: ignore[return-value]
 
     def _substeps_at(self, theta: Mapping[str, float]) -> bool:
@@ -265,12 +265,16 @@ class PhysicalRefit:
         pr = self.problem
         inv = 1.0 / math.sqrt(pr.scale)
         big = np.full(int(pr.mask.sum()), 1e3)
+        # positive parameters in log coordinates, real ones linear in units of their start
+        logc = np.array([True] * len(self.base_free)
+                        + [self.effect0.spec(k).kind != "real" for k in self.eff_names])
+        rscale = np.where(logc, 1.0, np.maximum(np.abs(th0), 1e-9))
 
         def to_theta(u: FloatArray) -> dict[str, float]:
-            return dict(zip(names, th0 * np.exp(u)))
+            return dict(zip(names, np.where(logc, th0 * np.exp(np.where(logc, u, 0.0)), th0 + u * rscale)))
 
         def vec(u: FloatArray) -> FloatArray:
-            if not np.all(np.abs(u) < 20):
+            if not np.all(np.abs(u[logc]) < 20):
                 return big
             try:
                 r, _, _ = self.residual(to_theta(u))
@@ -353,8 +357,6 @@ def nm_then_lm(vec: Callable[[FloatArray], FloatArray], u0: FloatArray, step: fl
     nfev : int
         Evaluations used.
     """
-    from scipy.optimize import least_squares
-
     n = u0.size
     budget = maxfev if maxfev is not None else 150 * max(n, 1)
 
@@ -400,12 +402,12 @@ def compensated(meas: Measurement, effect: SensorEffect | None, tail: int = 0,
     """
     if effect is None:
         chans = dict(meas.measured)
-    elif effect.name == "sensor_delay":
+    elif effect.time_shift:
         chans = dict(meas.measured)
         for c in effect.affected():
             if c in chans:
                 chans[c] = shift_allpass(meas.t, np.asarray(chans[c], dtype=float),
-                                         float(effect.values["delay_s"]))
+                                         float(effect.values[effect.time_shift]))
     else:
         chans = effect.compensate(meas.t, meas.measured)
     if tail > 0:
@@ -453,7 +455,7 @@ class SensorRefit:
         self.free = list(free)
         self.effect0 = effect
         self.tail = 0
-        if effect.name == "sensor_delay" and problem.h:
+        if effect.time_shift and problem.h:
             self.tail = int(math.ceil(max_delay / problem.h)) + 1
         self.extra = [c for c in effect.affected()
                       if c in problem.meas.measured and c not in problem.channels]
@@ -552,8 +554,6 @@ class SensorRefit:
         residual whether or not the effect exists (a "delay" of 1e-11 s would be credited
         with it). The effect is judged against this fit instead.
         """
-        from scipy.optimize import least_squares
-
         sp = self.sub_problem(None)
         th0 = np.array([float(start_base[k]) for k in self.free])
         inv = 1.0 / math.sqrt(sp.scale)
@@ -634,8 +634,6 @@ def reweighted_linear_fit(problem: OutputErrorProblem, p: Mapping[str, float], f
     residual : dict
         ``channel -> measured - predicted`` for every measured channel of the model.
     """
-    from scipy.optimize import least_squares
-
     model = problem.model
     meas = problem.meas
     chans = [c for c in model.channels if c in meas.measured]

@@ -11,12 +11,13 @@ Two views of what the fitted linear model misses:
   ``R = M q'' + C q' + K q - Fk r - Fc r'`` at the fitted parameters (for ``quarter2`` the
   body row is ``m1 x1'' + c1 d' + k1 d``). If the truth has an effect force ``Q``, then
   ``R = Q + (linear terms of the parameter errors)``, so ``R`` is regressed on the
-  parameter sensitivities plus each candidate's regressor (``sgn d'``, ``|d'|``,
-  ``|d'| d'``, ``d^3``, gap-exceeding compression, the tyre's pulling force). The
-  regression gives each physical candidate's parameters and refined base parameters —
+  parameter sensitivities plus each candidate's regressors (each effect class supplies
+  its own: ``sgn d'`` for friction, ``d^3`` for a progressive spring, the tyre's pulling
+  force for lift-off, ...). The regression gives each physical candidate's parameters and refined base parameters —
   the starting point of the output-error refit — and the fraction of the residual force
-  it explains. Sensor effects (constant offset, time shift between channels) are screened
-  in the output residual.
+  it explains. Sensor effects are screened in the output residual (each effect class
+  gives its reading's sensitivity to its parameter), a time shift between channels also
+  in the residual force.
 
 All signals are smoothed by the same Savitzky–Golay filter before the force is formed, so
 the equation stays consistent (a linear filter commutes with the linear terms).
@@ -25,16 +26,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 import numpy as np
-from scipy.signal import savgol_filter
+from scipy.interpolate import CubicSpline
+from scipy.signal import savgol_coeffs, savgol_filter
 from scipy.stats import chi2
 
+from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
 from suspid.models.base import FloatArray, SuspensionModel
-from suspid.models.effects import (REGISTRY, V_EPS, PhysicalEffect, Site, make_effect, strut_sites,
-                                   tyre_sites)
+from suspid.models.effects import PhysicalEffect, SensorEffect, Site, Trial, effect_classes
 
 # ------------------------------------------------------------------------- statistics
 
@@ -190,8 +192,6 @@ def shift_allpass(t: FloatArray, y: FloatArray, dt: float) -> FloatArray:
     h = float(np.median(steps))
     tq = tt + dt
     if h <= 0 or np.max(np.abs(steps - h)) > 1e-3 * h:
-        from scipy.interpolate import CubicSpline
-
         out = CubicSpline(tt[ok], yy[ok], extrapolate=False)(tq)
     else:
         yf = yy if ok.all() else np.interp(tt, tt[ok], yy[ok])
@@ -396,30 +396,6 @@ def _regress(y: FloatArray, X: FloatArray) -> tuple[FloatArray, float, FloatArra
     return beta, ss, se
 
 
-def _site_regressors(name: str, site: Site, s: FloatArray, sd: FloatArray, base: Mapping[str, float],
-                     gap: float | None = None, width: float = V_EPS) -> list[FloatArray]:
-    """Regressor(s) ``phi`` per unit parameter of a physical candidate at one site.
-
-    ``gap`` is the bump stop's trial gap (m), ``width`` the friction sign's velocity scale
-    (m/s; the library's ``V_EPS`` unless the screen widens it, see :func:`screen_physical`).
-    """
-    if name == "coulomb_friction":
-        return [np.tanh(sd / width)]
-    if name == "asymmetric_damping":
-        return [np.abs(sd)]
-    if name == "quadratic_damping":
-        return [np.abs(sd) * sd]
-    if name == "progressive_spring":
-        return [s ** 3]
-    if name == "bump_stop":
-        return [-np.maximum(-s - float(gap), 0.0)]
-    if name == "tire_liftoff":
-        k = base[site.k_name] if site.k_name else 0.0
-        c = base[site.c_name] if site.c_name else 0.0
-        return [np.maximum(-(site.load + k * s + c * sd), 0.0)]
-    raise KeyError(name)
-
-
 def velocity_noise(mo: Motion, noise_var: Mapping[str, float], coords: tuple[str, ...] | list[str],
                    h: float) -> FloatArray:
     """Standard deviation (per coordinate) of the white noise left in the smoothed velocities
@@ -428,8 +404,6 @@ def velocity_noise(mo: Motion, noise_var: Mapping[str, float], coords: tuple[str
     differentiating a measured position); zero where the model supplied it."""
     n = mo.qd.shape[0]
     w = _savgol_window(n, 1.0 / h)
-    from scipy.signal import savgol_coeffs
-
     g0 = float(np.sum(savgol_coeffs(w, 3) ** 2))
     g1 = float(np.sum(savgol_coeffs(w, 3, deriv=1, delta=h) ** 2))
     out = np.zeros(len(coords))
@@ -447,20 +421,18 @@ def screen_physical(model: SuspensionModel, p: Mapping[str, float], free: list[s
                     h: float | None = None) -> tuple[list[Screen], dict[str, Any]]:
     """Regress the residual force on base sensitivities plus each physical candidate.
 
-    Every physical effect is screened in the library's form where the library offers it
-    for the model (all its sites, one shared parameter set) and, for a model with several
-    struts, in each strut alone; the best plausible form is kept (:attr:`Screen.sites`).
-    ``noise_var`` (channel -> white-noise variance) and the sample interval ``h`` give the
-    noise of the smoothed strut rates (:func:`velocity_noise`). The friction regressor is
-    a sign of the *measured* rate: with noise it flips at random while the strut sticks
-    (the true rate near zero, the measured one mostly noise), which shrinks the estimate
-    of ``F`` and its share of the residual force — a third of ``F`` at 3 % noise and
-    200 Hz, below every other candidate. The expected friction given a noisy rate is a
-    softer sign (the sign of a noisy rate is a sigmoid about 1.2 noise deviations wide,
-    and wider still where the strut sticks and the rate is all noise), so friction is
-    screened with ``tanh(d'/w)``, ``w = hypot(V_EPS, m 1.2 sigma_rate)`` for ``m`` = 1,
-    2, 4, 8, and the width that explains most is kept (like the bump stop's gap); with
-    little noise every ``w`` is the library's ``V_EPS``. The refit uses the library's law.
+    Generic over the effect registry: every registered physical effect contributes its
+    regressors (:meth:`~suspid.models.effects.PhysicalEffect.regressors`, one column per
+    coefficient, times each site's direction ``b``) for each of its screening trials
+    (:meth:`~suspid.models.effects.PhysicalEffect.screen_trials`: the bump stop's gaps,
+    the friction sign's widths), and its parameters come from the coefficients
+    (:meth:`~suspid.models.effects.PhysicalEffect.from_coefficients`). Each effect is
+    screened in the library's form where it is available for the model (all its sites,
+    one shared parameter set) and, for a model with several struts, in each strut alone;
+    the best plausible form and trial are kept (:attr:`Screen.sites`). ``noise_var``
+    (channel -> white-noise variance) and the sample interval ``h`` give the noise of the
+    smoothed strut rates (:func:`velocity_noise`), passed to the regressors (the friction
+    sign widens with it).
 
     Returns the screens (one per applicable candidate) and the force-domain summary
     (weighted RMS of the residual force per coordinate before and after the base refinement).
@@ -487,7 +459,7 @@ def screen_physical(model: SuspensionModel, p: Mapping[str, float], free: list[s
     def fit_columns(cols: list[FloatArray]) -> tuple[FloatArray, float, FloatArray, dict[str, float]] | None:
         """Regress on base sensitivities plus ``cols``: (coef, explained, coef se, refined base)."""
         E = [(c * wrow).reshape(-1) for c in cols]
-        if any(not np.any(e) for e in E):
+        if not E or any(not np.any(e) for e in E):
             return None
         X = np.column_stack([X0] + [e[:, None] for e in E]) if D else np.column_stack(E)
         beta, ss1, se = _regress(y, X)
@@ -498,74 +470,64 @@ def screen_physical(model: SuspensionModel, p: Mapping[str, float], free: list[s
                 refined[k] = float(p[k] - d)
         return beta[len(D):], explained, se[len(D):] * infl, refined
 
-    def sign_width(site: Site, widen: float) -> float:
-        """Velocity scale (m/s) of the friction sign at ``site`` (see above)."""
-        return math.hypot(V_EPS, widen * 1.2 * float(np.sqrt(np.sum((site.g * qd_noise) ** 2))))
+    def rate_noise(site: Site) -> float:
+        """Standard deviation (m/s) of the noise in the smoothed rate at ``site``."""
+        return float(np.sqrt(np.sum((site.g * qd_noise) ** 2)))
 
-    def site_columns(name: str, sites: list[Site], gap: float | None,
-                     widen: float = 1.0) -> list[FloatArray]:
-        """One column per regressor, summed over ``sites`` (shared parameters); ``widen``
-        scales the rate noise in the friction sign's width."""
+    def site_columns(cls: type[PhysicalEffect], sites: list[Site], trial: Trial) -> list[FloatArray]:
+        """One column per regressor, summed over ``sites`` (shared parameters)."""
         cols: list[FloatArray] = []
         for site in sites:
             s, sd = site.coordinate(Xs, Us)
-            width = sign_width(site, widen)
-            for j, reg in enumerate(_site_regressors(name, site, s, sd, p, gap, width)):
+            for j, reg in enumerate(cls.regressors(site, s, sd, p, trial, rate_noise(site))):
                 while len(cols) <= j:
                     cols.append(np.zeros((n, nq)))
-                cols[j] = cols[j] + reg[:, None] * site.b[None, :]
+                cols[j] = cols[j] + np.asarray(reg, dtype=float)[:, None] * site.b[None, :]
         return cols
 
-    for name, cls in REGISTRY.items():
-        if cls.kind != "physical":
+    for name, cls in effect_classes().items():
+        if not issubclass(cls, PhysicalEffect):
             continue
-        probe = make_effect(name, **_dummy_values(cls))
-        if not isinstance(probe, PhysicalEffect):
+        try:
+            every = cls.model_sites(model, p)
+        except UsageError:
             continue
-        every = strut_sites(model, p) if probe.site_kind == "strut" else tyre_sites(model, p)
-        # candidate forms: the library's (every site, shared parameters) where the library
-        # offers the effect for this model, and each strut alone where there are several
-        variants: list[list[Site] | None] = [None] if model.name in cls.models else []
-        if probe.site_kind == "strut" and len(every) > 1:
+        if not every:
+            continue
+        # candidate forms: the library's (every site, shared parameters) where the effect
+        # is available for this model, and each strut alone where there are several
+        variants: list[list[Site] | None] = [None] if cls.sites_problem(every) is None else []
+        if cls.site_kind == "strut" and len(every) > 1:
             variants += [[site] for site in every]
         best: Screen | None = None
-        best_widen = 1.0
-        widens = [1.0, 2.0, 4.0, 8.0] if name == "coulomb_friction" else [1.0]
+        best_trial: Trial = {}
         for var in variants:
             sites = every if var is None else var
-            gaps: list[float | None] = [None]
-            if name == "bump_stop":
-                comp = np.concatenate([-site.coordinate(Xs, Us)[0] for site in sites])
-                hi = float(np.quantile(comp, 0.995))
-                if hi <= 0:
+            coords = [site.coordinate(Xs, Us) for site in sites]
+            trials = cls.screen_trials(sites, [c[0] for c in coords], [c[1] for c in coords])
+            for trial in trials:
+                fitted = fit_columns(site_columns(cls, sites, trial))
+                if fitted is None:
                     continue
-                gaps = list(np.linspace(0.15, 0.9, 16) * hi)
-            for gap in gaps:
-                for widen in widens:
-                    fitted = fit_columns(site_columns(name, sites, gap, widen))
-                    if fitted is None:
-                        continue
-                    coef, explained, cse, refined = fitted
-                    tstat = float(np.max(np.abs(coef) / np.maximum(cse, 1e-300)))
-                    params, plausible, note = _effect_params(name, coef, refined, model, gap, sites)
-                    if name == "coulomb_friction":
-                        note = ("sign of the strut rate screened as tanh(rate / "
-                                f"{sign_width(sites[0], widen):.3g} m/s)")
-                    cand = Screen(name, "force", explained, tstat, plausible, params, refined, note,
-                                  sites=None if var is None else [site.name for site in var])
-                    if best is None or (cand.plausible, cand.explained) > (best.plausible, best.explained):
-                        best, best_widen = cand, widen
+                coef, explained, cse, refined = fitted
+                tstat = float(np.max(np.abs(coef) / np.maximum(cse, 1e-300)))
+                params, plausible, note = cls.from_coefficients(
+                    coef, refined, trial, sites, [rate_noise(site) for site in sites])
+                cand = Screen(name, "force", explained, tstat, plausible, params, refined, note,
+                              sites=None if var is None else [site.name for site in var])
+                if best is None or (cand.plausible, cand.explained) > (best.plausible, best.explained):
+                    best, best_trial = cand, trial
         if best is None:
             continue
-        if probe.site_kind == "strut" and len(every) > 1:
-            # diagnostic: one coefficient per strut (does the front agree with the rear?)
-            gap = best.params.get("gap")
-            cols = [c for site in every for c in site_columns(name, [site], gap, best_widen)]
+        if cls.site_kind == "strut" and len(every) > 1:
+            # diagnostic: one coefficient per strut (do the struts agree?)
+            cols = [c for site in every for c in site_columns(cls, [site], best_trial)]
             fitted = fit_columns(cols)
             if fitted is not None:
                 coef, explained, cse, _ = fitted
                 k = len(cols) // len(every)
-                per = [_effect_params(name, coef[i * k:(i + 1) * k], best.base, model, gap, [site])
+                per = [cls.from_coefficients(coef[i * k:(i + 1) * k], best.base, best_trial, [site],
+                                             [rate_noise(site)])
                        for i, site in enumerate(every)]
                 best.per_site = {"explained": explained,
                                  "plausible": all(ok for _, ok, _ in per),
@@ -577,88 +539,121 @@ def screen_physical(model: SuspensionModel, p: Mapping[str, float], free: list[s
     return screens, summary
 
 
-def _dummy_values(cls: type) -> dict[str, Any]:
-    vals: dict[str, Any] = {}
-    for sp in cls.params:
-        vals[sp.name] = 1.0 if sp.kind in ("positive", "real") else (["x"] if sp.kind == "channels" else "x")
-    return vals
+def output_residuals(meas: Measurement, predicted: Mapping[str, FloatArray]) -> dict[str, FloatArray]:
+    """``measured - predicted`` of every measured channel the model predicts (not all NaN)."""
+    resid: dict[str, FloatArray] = {}
+    for c in meas.measured:
+        if c in predicted:
+            e = np.asarray(meas.measured[c], dtype=float) - np.asarray(predicted[c], dtype=float)
+            if np.any(~np.isnan(e)):
+                resid[c] = e
+    return resid
 
 
-def _effect_params(name: str, coef: FloatArray, base: Mapping[str, float], model: SuspensionModel,
-                   gap: float | None, sites: list[Site] | None = None) -> tuple[dict[str, Any], bool, str]:
-    """Effect parameters from regression coefficients, and whether they are physical.
+def output_regression(cls: type[SensorEffect], group: Sequence[str], t: FloatArray,
+                      resid: Mapping[str, FloatArray], predicted: Mapping[str, FloatArray]
+                      ) -> tuple[float, float, float] | None:
+    """Regress the output residual of ``group`` on the effect's output sensitivity.
 
-    ``sites`` (where the effect acts) gives the damper whose symmetric part an
-    ``asymmetric_damping`` estimate is centred on (``c1`` of the quarter car's strut, ``c2``
-    of the half car's rear strut).
+    ``e_c ~ beta r_c`` over the group's channels ``c`` (``r_c`` from
+    :meth:`~suspid.models.effects.SensorEffect.output_sensitivity`), pooled:
+    ``beta = sum_c mean(e_c r_c) / sum_c mean(r_c^2)``.
+
+    Returns
+    -------
+    tuple or None
+        ``(beta, share, tstat)``: the screened parameter's value; the share of the
+        channel-normalised output residual (each of the ``resid`` channels weighs
+        ``1 / n_channels``) it removes, ``sum_c beta^2 mean(r_c^2) / mean(e_c^2) / n``; its
+        t-statistic with the effective sample count of the group's first channel
+        (serial correlation). ``None`` when no channel of the group can be regressed.
     """
-    c = [float(v) for v in coef]
-    if name == "coulomb_friction":
-        return {"F": c[0]}, c[0] > 0, ""
-    if name == "quadratic_damping":
-        return {"c_quad": c[0]}, c[0] > 0, ""
-    if name == "progressive_spring":
-        return {"k_cubic": c[0]}, c[0] > 0, ""
-    if name == "bump_stop":
-        return {"gap": float(gap or 0.0), "k_stop": c[0]}, c[0] > 0, ""
-    if name == "tire_liftoff":
-        ok = 0.3 < c[0] < 3.0
-        return {}, ok, f"coefficient of the pulling-force regressor {c[0]:.3g} (1 if the tyre lifts off)"
-    if name == "asymmetric_damping":
-        cname = sites[0].c_name if sites and sites[0].c_name else ("c" if model.name == "quarter1" else "c1")
-        cbar = base[cname]
-        cr, cc = cbar + c[0], cbar - c[0]
-        return {"c_rebound": cr, "c_compression": cc}, cr > 0 and cc > 0, ""
-    return {}, False, "unknown"
+    used: list[tuple[FloatArray, FloatArray]] = []
+    for c in group:
+        if c not in resid:
+            continue
+        r = cls.output_sensitivity(c, t, predicted)
+        if r is None:
+            continue
+        r = np.asarray(r, dtype=float)
+        e = resid[c]
+        ok = ~(np.isnan(e) | np.isnan(r))
+        if ok.sum() >= 3 and np.any(r[ok]):
+            used.append((e[ok], r[ok]))
+    if not used:
+        return None
+    er = sum(float(np.mean(e * r)) for e, r in used)
+    rr = sum(float(np.mean(r * r)) for _, r in used)
+    beta = er / rr
+    share = 0.0
+    for e, r in used:
+        ms = float(np.mean(e ** 2))
+        if ms > 0:
+            share += beta * beta * float(np.mean(r * r)) / ms
+    share /= max(len(resid), 1)
+    ss = sum(float(np.mean((e - beta * r) ** 2)) for e, r in used)
+    se = math.sqrt(ss / rr) / math.sqrt(effective_n(used[0][0]))
+    return beta, share, abs(beta) / max(se, 1e-300)
 
 
-def screen_sensor(model: SuspensionModel, t: FloatArray, residual: Mapping[str, FloatArray],
-                  predicted: Mapping[str, FloatArray], max_delay: float) -> list[Screen]:
-    """Screen ``sensor_offset`` in the output residual of every measured channel.
+def screen_sensor(model: SuspensionModel, meas: Measurement, p: Mapping[str, float], free: list[str],
+                  predicted: Mapping[str, FloatArray], U: FloatArray,
+                  max_delay: float) -> list[Screen]:
+    """Screen every registered sensor effect (one :class:`Screen` per effect with a candidate).
 
-    The candidate is the channel whose constant residual explains the largest share of the
-    residual sum of squares (t-statistic with the effective sample count).
+    A time shift (:attr:`~suspid.models.effects.SensorEffect.time_shift`) is screened by
+    :func:`screen_time_shift`; any other sensor effect by regressing the output residual of
+    each of its channel groups (:meth:`~suspid.models.effects.SensorEffect.screen_groups`)
+    on its output sensitivity (:func:`output_regression`); the group explaining the largest
+    share of the channel-normalised output residual is the candidate.
     """
     out: list[Screen] = []
-    best_off: Screen | None = None
-    nch = max(len(residual), 1)
-    for ch, e in residual.items():
-        ok = ~np.isnan(e)
-        m = float(np.mean(e[ok]))
-        sd = float(np.std(e[ok]))
-        ms = float(np.mean(e[ok] ** 2))
-        neff = effective_n(e)
-        tstat = abs(m) / max(sd / math.sqrt(neff), 1e-300)
-        # share of the channel-normalised residual (each channel weighs 1 / n_channels)
-        expl = (m * m / ms) / nch if ms > 0 else 0.0
-        cand = Screen("sensor_offset", "output", expl, tstat, True, {"channel": ch, "offset": m})
-        if best_off is None or cand.explained > best_off.explained:
-            best_off = cand
-    if best_off is not None:
-        out.append(best_off)
+    resid = output_residuals(meas, predicted)
+    for cls in effect_classes().values():
+        if not issubclass(cls, SensorEffect):
+            continue
+        if cls.time_shift:
+            sc = screen_time_shift(cls, model, meas, p, free, predicted, U, max_delay)
+            if sc is not None:
+                out.append(sc)
+            continue
+        best: Screen | None = None
+        for g in cls.screen_groups(model, list(resid)):
+            fitted = output_regression(cls, g, meas.t, resid, predicted)
+            if fitted is None:
+                continue
+            value, share, tstat = fitted
+            params = cls.params_from_screen(g, value, max_delay)
+            cand = Screen(cls.name, "output", share if params is not None else 0.0, tstat,
+                          params is not None, params or {})
+            if best is None or (cand.plausible, cand.explained) > (best.plausible, best.explained):
+                best = cand
+        if best is not None:
+            out.append(best)
     return out
 
 
-def screen_delay(model: SuspensionModel, meas: Measurement, p: Mapping[str, float], free: list[str],
-                 predicted: Mapping[str, FloatArray], U: FloatArray, max_delay: float) -> Screen | None:
-    """Screen ``sensor_delay``: a time shift between channels.
+def screen_time_shift(cls: type[SensorEffect], model: SuspensionModel, meas: Measurement,
+                      p: Mapping[str, float], free: list[str], predicted: Mapping[str, FloatArray],
+                      U: FloatArray, max_delay: float) -> Screen | None:
+    """Screen a time shift between channels (``sensor_delay``, any effect with ``time_shift``).
 
-    For every group of measured channels (all channels of one coordinate, or one channel)
-    and every trial delay on a grid up to ``max_delay``, the group is advanced by the delay
-    and the residual force is regressed on the base sensitivities; a lag makes position,
-    velocity and acceleration of different coordinates inconsistent, so the right
-    compensation removes most of the residual force. The best grid point is refined by a
-    parabola through its neighbours. The trial shifts are all-pass (:func:`shift_allpass`):
-    an interpolating shift would smooth the noise of the shifted channels and reward every
-    half-sample delay.
+    For every channel group of the effect (:meth:`~suspid.models.effects.SensorEffect.screen_groups`:
+    all channels of one coordinate, or one channel) and every trial delay on a grid up to
+    ``max_delay``, the group is advanced by the delay and the residual force is regressed
+    on the base sensitivities; a lag makes position, velocity and acceleration of different
+    coordinates inconsistent, so the right compensation removes most of the residual force.
+    The best grid point is refined by a parabola through its neighbours. The trial shifts
+    are all-pass (:func:`shift_allpass`): an interpolating shift would smooth the noise of
+    the shifted channels and reward every half-sample delay.
 
     The residual force is built from differentiated measurements and, at a few per cent of
     noise, is mostly their noise; a lag of a channel outside the baseline's cost is plainer
     in its output residual, which is ``-d`` times the model's rate of that channel. Each
-    group is also scored that way (share of the channel-normalised output residual, only
-    for a lag within ``max_delay``), and the better of the two views ranks the group
-    (:attr:`Screen.domain` says which). Close runners-up (other channel groups) are
-    returned in :attr:`Screen.alternatives`.
+    group is also scored that way (:func:`output_regression`, only for a lag the effect
+    accepts, :meth:`~suspid.models.effects.SensorEffect.params_from_screen`), and the better
+    of the two views ranks the group (:attr:`Screen.domain` says which). Close runners-up
+    (other channel groups) are returned in :attr:`Screen.alternatives`.
     """
     t = meas.t
     h = float(np.median(np.diff(t)))
@@ -687,14 +682,8 @@ def screen_delay(model: SuspensionModel, meas: Measurement, p: Mapping[str, floa
 
     ss0 = ss_for(mo0)
     shifted: dict[tuple[int, float], Motion] = {}
-    groups: list[list[str]] = []
-    for c in model.coords:
-        g = [ch for ch in (c, f"{c}_dot", f"{c}_ddot") if ch in meas.measured]
-        if g:
-            groups.append(g)
-            groups += [[ch] for ch in g] if len(g) > 1 else []
+    groups = cls.screen_groups(model, list(meas.measured))
     grid = [d for d in h * np.array([0.5, 1, 1.5, 2, 3, 4, 6, 8, 11, 16, 22, 32]) if d <= max_delay]
-    nq = len(model.coords)
     # which measured channel each smoothed column comes from (a lag moves what it feeds)
     feeds: list[tuple[str, int, str]] = []
     for i, c in enumerate(model.coords):
@@ -712,12 +701,8 @@ def screen_delay(model: SuspensionModel, meas: Measurement, p: Mapping[str, floa
     # of a channel the baseline's cost does not fit (a velocity under sse) shows the lag
     # directly. Channels are normalised by their residual RMS (each weighs 1 / n_channels,
     # as for sensor_offset); only a lag (d > 0) within max_delay counts.
-    resid: dict[str, FloatArray] = {}
-    for c in meas.measured:
-        if c in predicted:
-            e = np.asarray(meas.measured[c], dtype=float) - np.asarray(predicted[c], dtype=float)
-            if np.any(~np.isnan(e)):
-                resid[c] = e
+    resid = output_residuals(meas, predicted)
+
     n_out = max(len(resid), 1)
 
     def output_screen(g: list[str]) -> tuple[float, float]:
@@ -726,10 +711,10 @@ def screen_delay(model: SuspensionModel, meas: Measurement, p: Mapping[str, floa
         for c in g:
             if c not in resid:
                 continue
-            try:
-                r = np.asarray(_rate(c, t, predicted), dtype=float)
-            except KeyError:
+            r = cls.output_sensitivity(c, t, predicted)   # -d y/dt: a lag d reads y - d y'
+            if r is None:
                 continue
+            r = np.asarray(r, dtype=float)
             e = resid[c]
             ok = ~(np.isnan(e) | np.isnan(r))
             ok[-trim:] = False
@@ -741,8 +726,8 @@ def screen_delay(model: SuspensionModel, meas: Measurement, p: Mapping[str, floa
             nobs = max(nobs, int(ok.sum()))
         if den <= 0 or nobs == 0:
             return 0.0, 0.0
-        d = -num / den
-        if not 0.0 < d <= max_delay:
+        d = num / den
+        if cls.params_from_screen(g, d, max_delay) is None:
             return 0.0, d
         return (num * num / den) / (nobs * n_out), d
 
@@ -764,7 +749,6 @@ def screen_delay(model: SuspensionModel, meas: Measurement, p: Mapping[str, floa
         if not sss and o_share <= 0:
             continue
         per_group.append((max(f_share, o_share), gi, sss, o_share, o_delay))
-    _ = nq
     if not per_group:
         return None
     per_group.sort(key=lambda r: -r[0])
@@ -773,8 +757,8 @@ def screen_delay(model: SuspensionModel, meas: Measurement, p: Mapping[str, floa
         g = groups[gi]
         f_share = max(0.0, (ss0 - min(sss)) / ss0) if sss and ss0 > 0 else 0.0
         if o_share > f_share:
-            return Screen("sensor_delay", "output", o_share, float("nan"), True,
-                          {"channels": list(g), "delay_s": o_delay}, dict(p),
+            return Screen(cls.name, "output", o_share, float("nan"), True,
+                          cls.params_from_screen(g, o_delay, max_delay) or {}, dict(p),
                           note=f"time shift of {', '.join(g)} against the other channels, from "
                                "the output residual against the model's rate")
         i = int(np.argmin(sss))
@@ -787,8 +771,8 @@ def screen_delay(model: SuspensionModel, meas: Measurement, p: Mapping[str, floa
             if a > 0 and x[0] < -b / (2 * a) < x[2]:
                 d = float(-b / (2 * a))
         _, refined = regress_for(shifted[(gi, float(grid[i]))])
-        return Screen("sensor_delay", "force", f_share, float("nan"), True,
-                      {"channels": list(g), "delay_s": d}, refined,
+        return Screen(cls.name, "force", f_share, float("nan"), True,
+                      cls.params_from_screen(g, d, max_delay) or {}, refined,
                       note=f"time shift of {', '.join(g)} against the other channels, from the "
                            "residual force")
 
@@ -809,16 +793,7 @@ def screen_delay(model: SuspensionModel, meas: Measurement, p: Mapping[str, floa
     return best
 
 
-def _rate(ch: str, t: FloatArray, predicted: Mapping[str, FloatArray]) -> FloatArray:
-    """Time derivative of the model's prediction of channel ``ch``."""
-    if ch.endswith("_ddot"):
-        return np.gradient(predicted[ch], t)
-    if ch.endswith("_dot"):
-        return predicted[ch[:-4] + "_ddot"]
-    return predicted[f"{ch}_dot"]
-
-
 __all__ = ["autocorr", "ljung_box", "mean_test", "noise_variance", "xcorr_peak", "effective_n", "ChannelStats",
-           "shift_allpass", "velocity_noise",
+           "shift_allpass", "velocity_noise", "output_residuals", "output_regression",
            "channel_stats", "Motion", "motion_from", "residual_force", "force_sensitivity", "Screen",
-           "screen_physical", "screen_sensor", "screen_delay"]
+           "screen_physical", "screen_sensor", "screen_time_shift"]

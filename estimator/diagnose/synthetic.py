@@ -17,6 +17,7 @@ from suspid.io.csvio import Measurement
 from suspid.models import get_model
 from suspid.models.base import ForceFn
 from suspid.models.effects import Effect, inject
+from suspid.simulate import simulate_ode
 
 
 def synthetic_record(model: str, effects: Sequence["str | Effect"], scenario: str = "bump", *,
@@ -29,7 +30,7 @@ def synthetic_record(model: str, effects: Sequence["str | Effect"], scenario: st
     Parameters
     ----------
     model : str
-        ``quarter1``, ``quarter2`` or ``half4``.
+        A registered model name (``quarter1``, ``quarter2``, ``half4``, ...).
     effects : sequence
         Effect spec strings (``"coulomb_friction:F=120"``) or effect objects.
     scenario : str
@@ -64,8 +65,6 @@ def synthetic_record(model: str, effects: Sequence["str | Effect"], scenario: st
     t, road, x0 = make_scenario(m, scenario, duration=duration, fs=fs, params=p, seed=seed, **scen)
     inj = inject(m, effects)
     if extra_force is not None:
-        from suspid.simulate import simulate_ode
-
         inj.model.extra_force.append(extra_force)
         out = inj.measure(t, simulate_ode(inj.model, p, t, road, x0))
     else:

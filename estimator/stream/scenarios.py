@@ -8,17 +8,32 @@ minutes) is reproduced without approximation beyond the staircase of the chunks.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Mapping
 
 import numpy as np
 
-from suspid.excitation import iso8608_profile, time_grid
+from suspid.can.codec import signal_spec
+from suspid.can.dbc import channel_signals, load_dbc
+from suspid.can.encoder import measurement_frames
+from suspid.can.logs import open_log_writer
+from suspid.excitation import make_scenario
+from suspid.io.csvio import Measurement
+from suspid.models import get_model
 from suspid.models.base import FloatArray, SuspensionModel
 from suspid.simulate import outputs, road_matrix, simulate_states
 
-#: DBC resolutions of suspension.dbc (QC_Body/QC_Wheel/QC_Road), used for quantization
+#: DBC resolutions of suspension.dbc (QC_Body/QC_Wheel/QC_Road) for quarter2's channels
 DBC_RESOLUTION = {"x1": 1e-5, "x2": 1e-5, "x1_dot": 1e-4, "x2_dot": 2e-4, "x1_ddot": 0.005,
                   "x2_ddot": 0.02, "r": 1e-5, "r_dot": 5e-4}
+
+
+@lru_cache(maxsize=None)
+def channel_resolution(model_name: str) -> dict[str, float]:
+    """``channel -> resolution`` (SI) of the model's signals in suspid's DBC."""
+    db = load_dbc()
+    return {ch: signal_spec(db.get_message_by_name(m), sig).scale
+            for ch, m, sig in channel_signals(db, model_name)}
 
 
 @dataclass
@@ -56,12 +71,13 @@ def damper_wear(model: SuspensionModel, duration: float = 150.0, fs: float = 500
                 channels: tuple[str, ...] = ("x1", "x2", "x1_ddot"),
                 noise: Mapping[str, float] | None = None, quantize: bool = True,
                 chunk_s: float = 0.05, damper: str = "c1") -> Stream:
-    """Quarter car on an ISO 8608 road while the damper ``c1`` loses damping linearly.
+    """A car on an ISO 8608 road while the damper ``c1`` loses damping linearly.
 
     Parameters
     ----------
     model : SuspensionModel
-        ``quarter2`` (or ``quarter1`` with ``damper="c"``).
+        Any model (``quarter1`` with ``damper="c"``); its roads follow each other as the
+        model says (:func:`suspid.excitation.make_scenario`).
     duration, fs : float
         Length (s) and sample rate (Hz).
     params : mapping, optional
@@ -73,11 +89,11 @@ def damper_wear(model: SuspensionModel, duration: float = 150.0, fs: float = 500
     road_class, v_kmh, seed
         ISO 8608 road class, speed (km/h) and random seed.
     channels : tuple of str
-        Measured channels to return (the road ``r``, ``r_dot`` are always returned).
+        Measured channels to return (the roads and their ``_dot`` are always returned).
     noise : mapping, optional
         White sensor noise standard deviation per channel (SI); default 2 quantization steps.
     quantize : bool
-        Round every channel to its DBC resolution (:data:`DBC_RESOLUTION`).
+        Round every channel to its DBC resolution (:func:`channel_resolution`).
     chunk_s : float
         Parameter update interval (s).
     damper : str
@@ -89,16 +105,18 @@ def damper_wear(model: SuspensionModel, duration: float = 150.0, fs: float = 500
     """
     p0 = dict(model.defaults(), **(params or {}))
     wear_end = duration if wear_end is None else wear_end
-    t = time_grid(duration, fs)        # finite, > 0 and at most MAX_SAMPLES, or a UsageError
+    # time grid finite, > 0 and at most MAX_SAMPLES, or a UsageError
+    t, road, _ = make_scenario(model, "iso8608", duration=duration, fs=fs, params=p0,
+                               v_kmh=v_kmh, road_class=road_class, seed=seed)
     n = t.size
-    r, rd = iso8608_profile(t, road_class, v_kmh, seed)
-    road = {model.roads[0]: r, f"{model.roads[0]}_dot": rd}
+    resolution = channel_resolution(model.name)
     U = road_matrix(model, t, road)
     frac = np.interp(t, [wear_start, wear_end], [1.0, c_end_fraction])
     c_true = p0[damper] * frac
     X = np.empty((n, model.n_states))
     x = np.zeros(model.n_states)
     step = max(1, int(round(chunk_s * fs)))
+    affine = model.affine(p0, [damper])  # one forward model for every chunk
     starts = list(range(0, n - 1, step))
     # acceleration needs the parameters of each sample: collect per chunk
     acc_rows = {c: np.empty(n) for c in model.channels if c.endswith("_ddot")}
@@ -107,10 +125,10 @@ def damper_wear(model: SuspensionModel, duration: float = 150.0, fs: float = 500
         p = dict(p0)
         p[damper] = float(c_true[(i0 + i1) // 2])
         seg = slice(i0, i1 + 1)
-        Xs = simulate_states(model, p, t[seg], U[seg], x)
+        Xs = simulate_states(model, p, t[seg], U[seg], x, affine=affine)
         X[seg] = Xs
         x = Xs[-1]
-        out = outputs(model, p, Xs, U[seg])
+        out = outputs(model, p, Xs, U[seg], affine)
         for c in acc_rows:
             acc_rows[c][seg] = out[c]
     p_end = dict(p0)
@@ -120,7 +138,7 @@ def damper_wear(model: SuspensionModel, duration: float = 150.0, fs: float = 500
     data: dict[str, FloatArray] = {}
     for c in tuple(channels) + tuple(road):
         y = np.array(road[c] if c in road else allout[c], dtype=float)
-        res = DBC_RESOLUTION.get(c, 0.0)
+        res = resolution.get(c, 0.0)
         sd = (noise or {}).get(c, 2.0 * res)
         if sd > 0:
             y = y + rng.normal(0.0, sd, n)
@@ -136,15 +154,11 @@ def write_log(stream: Stream, path: str, model_name: str = "quarter2", t0: float
     """Write a stream as the CAN log the sensor node would send (format by suffix).
 
     Uses the CAN layer's encoder (:func:`suspid.can.encoder.measurement_frames`): one
-    ``SN_Sync`` plus the QC_* frames per sample, signals quantized per the DBC, E2E
-    protected. Returns the number of frames written.
+    ``SN_Sync`` plus the model's sensor frames per sample, signals quantized per the DBC,
+    E2E protected. Returns the number of frames written.
     """
-    from suspid.can.dbc import load_dbc
-    from suspid.can.encoder import measurement_frames
-    from suspid.can.logs import open_log_writer
-    from suspid.io.csvio import Measurement
-
-    roads = {k: v for k, v in stream.data.items() if k in ("r", "r_dot", "y", "y_dot")}
+    inputs = get_model(model_name).input_names
+    roads = {k: v for k, v in stream.data.items() if k in inputs}
     measured = {k: v for k, v in stream.data.items() if k not in roads}
     meas = Measurement(stream.t, roads, measured, source="stream")
     n = 0

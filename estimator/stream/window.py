@@ -25,8 +25,12 @@ Termination and budget
 Excitation
     A window is skipped, with the reason, when a needed channel misses more than
     ``max_missing`` of its samples, when its time base is not uniform, or when the RMS
-    suspension deflection ``x1 - x2`` (body motion when no wheel channel is measured) is
-    below ``min_deflection`` or below ``min_snr`` times the noise floor. The noise floor is
+    suspension deflection is below ``min_deflection`` or below ``min_snr`` times the noise
+    floor. The deflections are the model's own
+    (:meth:`~suspid.models.base.SuspensionModel.deflections`: ``x1 - x2`` for ``quarter2``,
+    ``x - x1 - a1 delta`` / ``x - x2 + a2 delta`` for ``half4``, the four corners of
+    ``full7``), of every strut whose coordinates are measured; the most excited strut
+    counts. Without any, the first measured motion channel is used. The noise floor is
     estimated from the data as ``std(diff4(y)) / sqrt(70)`` at the full rate (the fourth
     difference removes the smooth suspension motion, 70 = C(8,4) is its white-noise gain).
 """
@@ -176,10 +180,10 @@ class SlidingWindowIdentifier:
         self.n_skipped = 0
         self.total_nfev = 0
         self.total_cpu = 0.0
-        coords = model.coords
-        self._defl = (coords[0], coords[1]) if len(coords) > 1 and coords[0] in self.channels \
-            and coords[1] in self.channels else None
-        self._motion = next((c for c in self.channels if c in coords), self.channels[0])
+        probe = {c: np.zeros(1) for c in self.channels}
+        #: struts whose deflection the measured position channels give
+        self._struts = list(model.deflections(probe, self.nominal))
+        self._motion = next((c for c in self.channels if c in model.coords), self.channels[0])
 
     # ---- excitation --------------------------------------------------------------------
     def excitation(self, t: FloatArray, data: Mapping[str, FloatArray]) -> tuple[dict[str, float], str]:
@@ -197,9 +201,11 @@ class SlidingWindowIdentifier:
             k = int(np.argmax(d))
             return ex, (f"time base not uniform: step {d[k]:.4g} s at t={t[k]:.3f} s "
                         f"(median {np.median(d):.4g} s)")
-        if self._defl is not None:
-            y = data[self._defl[0]] - data[self._defl[1]]
-            what = f"suspension deflection {self._defl[0]}-{self._defl[1]}"
+        defl = {k: v for k, v in self.model.deflections(
+            {c: data[c] for c in self.channels}, self.nominal).items() if k in self._struts}
+        if defl:
+            name, y = max(defl.items(), key=lambda kv: _std(_finite(kv[1])) if kv[1].size else 0.0)
+            what = f"suspension deflection ({name})"
         else:
             y = data[self._motion]
             what = f"motion {self._motion}"
@@ -208,7 +214,7 @@ class SlidingWindowIdentifier:
         nf = noise_floor(y)
         snr = rms / nf if nf > 0 else math.inf
         ex.update({"deflection_rms": rms, "noise": nf, "snr": snr})
-        is_pos = (self._defl is not None) or (self._motion in self.model.coords)
+        is_pos = bool(defl) or (self._motion in self.model.coords)
         if is_pos and rms < cfg.min_deflection:
             return ex, (f"too little excitation: {what} RMS {rms * 1e3:.3g} mm < "
                         f"{cfg.min_deflection * 1e3:.3g} mm")

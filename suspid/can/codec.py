@@ -27,9 +27,9 @@ import can
 from cantools.database.can import Database, Message
 
 from suspid.can.crc import COUNTER_MODULUS, e2e_protect
-from suspid.can.dbc import (ALERT_MESSAGE, STATUS_MESSAGE, SYNC_MESSAGE, channel_signals,
-                            find_message, is_e2e)
+from suspid.can.dbc import ALERT_MESSAGE, STATUS_MESSAGE, SYNC_MESSAGE, channel_signals, find_message, is_e2e
 from suspid.errors import InputError, UsageError
+from suspid.models import MODELS, get_model
 
 
 @dataclass(frozen=True)
@@ -283,7 +283,8 @@ class SensorEncoder:
     db : cantools Database
         A DBC with suspid's conventions (``SuspidChannel`` attributes, ``SN_Sync``).
     model_name : str
-        ``quarter1``, ``quarter2`` or ``half4``; selects the message set.
+        A registered model; selects the message set (the signals whose ``SuspidChannel``
+        attribute names this model).
     channels : iterable of str
         Channels (and road columns) that will be given; messages carrying none of them
         are not sent. Channels of the model that the DBC does not carry raise.
@@ -397,12 +398,11 @@ STATE_INIT, STATE_RUNNING, STATE_DEGRADED, STATE_BUSOFF_RECOVERED, STATE_STOPPIN
 #: SN_Status.FaultFlags bits
 FAULT_BITS = {"loss": 0, "burst": 1, "stuck": 2, "bitflip": 3, "late": 4, "busoff": 5,
               "saturation": 6}
-#: SUSPID_Alert parameter ids (the DBC's VAL_ table) and kinds
-PARAM_IDS = {n: i + 1 for i, n in enumerate(["m", "c", "k", "m1", "c1", "k1", "m2", "c2", "k2",
-                                             "I", "k3", "k4", "a1", "a2"])}
+#: SUSPID_Alert parameter kinds. The parameter ids are the DBC's ``ParamId`` value table
+#: (:func:`alert_param_ids`); the model id is the model's ``alert_id`` (the DBC's ``Model``
+#: value table names it too).
 PARAM_KINDS = {"mass": 0, "inertia": 1, "damping": 2, "stiffness": 3, "length": 4}
 _KIND_PREFIX = {0: "Mass", 1: "Inertia", 2: "Damping", 3: "Stiffness", 4: "Length"}
-MODEL_IDS = {"quarter1": 0, "quarter2": 1, "half4": 2}
 SEVERITIES = {"info": 0, "warning": 1, "critical": 2, "forecast": 3}
 
 
@@ -423,11 +423,15 @@ def encode_status(db: Database, counter: int, state: int, sample_rate: float, fa
     return codec.frame_id, data
 
 
-def _param_kind(model_name: str, parameter: str) -> int:
-    from suspid.models import get_model
+def _choices(db: Database, signal: str) -> dict[str, int]:
+    """``name -> value`` of a ``SUSPID_Alert`` signal's value table in the DBC."""
+    sig = find_message(db, ALERT_MESSAGE).get_signal_by_name(signal)
+    return {str(v): int(k) for k, v in (sig.choices or {}).items()}
 
-    kind = get_model(model_name).spec(parameter).kind
-    return PARAM_KINDS[kind]
+
+def alert_param_ids(db: Database) -> dict[str, int]:
+    """``parameter name -> ParamId`` of ``SUSPID_Alert`` (the DBC's value table)."""
+    return _choices(db, "ParamId")
 
 
 def encode_alert(db: Database, model_name: str, parameter: str, value: float, nominal: float,
@@ -451,17 +455,19 @@ def encode_alert(db: Database, model_name: str, parameter: str, value: float, no
     -------
     can.Message
     """
-    if parameter not in PARAM_IDS:
-        raise UsageError(f"alert parameter {parameter!r} unknown; expected one of {', '.join(PARAM_IDS)}")
+    param_ids = alert_param_ids(db)
+    if parameter not in param_ids:
+        raise UsageError(f"alert parameter {parameter!r} unknown; expected one of {', '.join(param_ids)}")
     if severity not in SEVERITIES:
         raise UsageError(f"alert severity {severity!r} unknown; expected one of {', '.join(SEVERITIES)}")
     msg = find_message(db, ALERT_MESSAGE)
-    kind = _param_kind(model_name, parameter)
+    model = get_model(model_name)
+    kind = PARAM_KINDS[model.spec(parameter).kind]
     prefix = _KIND_PREFIX[kind]
     sig_v = msg.get_signal_by_name(f"{prefix}Value")
     lo, hi = float(sig_v.minimum), float(sig_v.maximum)
     data = {"CRC": 0, "Counter": 0, "Severity": SEVERITIES[severity],
-            "Model": MODEL_IDS[model_name], "ParamId": PARAM_IDS[parameter], "ParamKind": kind,
+            "Model": model.alert_id, "ParamId": param_ids[parameter], "ParamKind": kind,
             f"{prefix}Value": min(hi, max(lo, float(value))),
             f"{prefix}Nominal": min(hi, max(lo, float(nominal)))}
     payload = bytearray(msg.encode(data, strict=False))
@@ -477,8 +483,9 @@ def decode_alert(db: Database, data: bytes | bytearray) -> dict[str, object]:
     prefix = _KIND_PREFIX.get(kind)
     if prefix is None:
         raise InputError(f"alert frame: ParamKind {kind} unknown; expected 0..4")
-    names = {v: k for k, v in PARAM_IDS.items()}
-    models = {v: k for k, v in MODEL_IDS.items()}
+    names = {v: k for k, v in alert_param_ids(db).items()}
+    models = {v: k for k, v in _choices(db, "Model").items()}
+    models.update({get_model(n).alert_id: n for n in MODELS})
     sev = {v: k for k, v in SEVERITIES.items()}
     return {"model": models.get(int(d["Model"]), str(d["Model"])),
             "parameter": names.get(int(d["ParamId"]), str(d["ParamId"])),

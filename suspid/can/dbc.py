@@ -32,15 +32,12 @@ ATTR_CHANNEL = "SuspidChannel"
 
 
 def default_dbc_path() -> Path:
-    """Path of the bundled ``suspension.dbc`` (a copy of the repository's ``dbc/suspension.dbc``).
+    """Path of suspid's ``suspension.dbc``, the one source of the bus definition.
 
-    The package copy (``suspid/data/suspension.dbc``) is used so an installed ``suspid``
-    finds it; the repository's ``dbc/`` file is preferred when running from a checkout and
-    both exist (they are kept identical; a test checks it).
+    The file is the package data ``suspid/data/suspension.dbc`` (so an installed
+    ``suspid`` finds it); the repository's ``dbc/suspension.dbc`` is a symbolic link to it
+    for users who look in ``dbc/``.
     """
-    repo = Path(__file__).resolve().parents[2] / "dbc" / "suspension.dbc"
-    if repo.is_file():
-        return repo
     return Path(str(resources.files("suspid") / "data" / "suspension.dbc"))
 
 

@@ -11,45 +11,17 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable, Iterator
+from typing import Iterator
 
 import can
 import numpy as np
 from cantools.database.can import Database
 
-from suspid.can.codec import (STATE_RUNNING, SensorEncoder, encode_status, make_message)
+from suspid.can.codec import STATE_RUNNING, SensorEncoder, encode_status, make_message
 from suspid.can.logs import is_can_log, log_format, open_log_writer
 from suspid.errors import InputError, UsageError, require_file
 from suspid.io.csvio import Measurement, read_measurement
-from suspid.models import MODELS, get_model
-
-
-def infer_model(columns: Iterable[str]) -> str:
-    """Model whose CSV columns these are (the CSV has no model field).
-
-    ``delta``/``r1``/``r2`` columns, or ``x`` together with ``x1``/``x2``, mean ``half4``;
-    ``y`` or ``x`` alone mean ``quarter1``; ``x1``/``x2``/``r`` mean ``quarter2``.
-
-    Raises
-    ------
-    UsageError
-        If no column belongs to any model.
-    """
-    cols = {c.strip() for c in columns}
-
-    def has(base: str) -> bool:
-        return bool(cols & {base, f"{base}_dot", f"{base}_ddot"})
-
-    if has("delta") or has("r1") or has("r2"):
-        return "half4"
-    if has("x") and (has("x1") or has("x2")):
-        return "half4"
-    if has("x") or has("y"):
-        return "quarter1"
-    if has("x1") or has("x2") or has("r"):
-        return "quarter2"
-    raise UsageError(f"cannot tell the model from the CSV columns ({', '.join(sorted(cols)) or 'none'}); "
-                     f"give --model ({', '.join(MODELS)})")
+from suspid.models import get_model, infer_model
 
 
 def csv_header(path: str | Path) -> list[str]:
@@ -106,7 +78,7 @@ def measurement_frames(meas: Measurement, model_name: str, db: Database, t0: flo
     names = list(columns)
     arrays = [np.asarray(columns[c], dtype=float) for c in names]
     status_counter = 0
-    sensor_set = 2 if model_name == "half4" else 1
+    sensor_set = get_model(model_name).sensor_set
     rate = 1.0 / period if period > 0 else 0.0
     for i in range(n):
         ts = float(t[i]) + t0

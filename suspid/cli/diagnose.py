@@ -4,6 +4,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from estimator.diagnose import diagnose
+from estimator.diagnose.plots import plot_evidence
 from suspid.cli._common import (positive_int, add_input_options, add_model_option, add_param_options,
                                 load_measurement, model_from_args, params_from_args, print_json)
 from suspid.cli.identify import parse_x0
@@ -17,7 +19,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                                    "against candidate effects), add the effect the evidence "
                                    "supports (coulomb_friction, asymmetric_damping, "
                                    "quadratic_damping, progressive_spring, bump_stop, "
-                                   "tire_liftoff, sensor_delay, sensor_offset), refit by "
+                                   "tire_liftoff, sensor_delay, sensor_offset, and any effect "
+                                   "an installed package registers under the entry-point "
+                                   "group suspid.effects), refit by "
                                    "Nelder-Mead and report before/after. See "
                                    "docs/closing-the-loop.md.")
     add_model_option(p)
@@ -45,8 +49,6 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     """Run ``suspid diagnose`` (JSON or text on stdout, warnings on stderr); exit status 0."""
-    from estimator.diagnose import diagnose
-
     model = model_from_args(args)
     params = params_from_args(args, model)
     if args.multistart < 0:
@@ -59,7 +61,6 @@ def run(args: argparse.Namespace) -> int:
     if frames is not None:
         out["frames"] = frames
     if args.plot:
-        from estimator.diagnose.plots import plot_evidence
         plot_evidence(res, meas, args.plot)
     if args.json:
         print_json(out)

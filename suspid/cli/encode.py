@@ -27,8 +27,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     p.add_argument("--t0", type=float, default=0.0, metavar="SECONDS",
                    help="added to every timestamp (default 0)")
     p.add_argument("--model", choices=list(MODELS),
-                   help="model of the CSV columns (default: inferred from the columns; x1/x2 "
-                        "without x, delta or r1/r2 mean quarter2)")
+                   help="model of the CSV columns (default: inferred from the columns, the "
+                        "most specific model that owns them all: x1/x2 without x, delta or "
+                        "r1/r2 mean quarter2, phi/x3/x4/r3/r4 full7)")
     return p
 
 

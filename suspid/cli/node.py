@@ -51,8 +51,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     p.add_argument("--speed", type=_speed, default=1.0, metavar="X",
                    help="X times real time; 0 or 'max' = as fast as possible (default 1)")
     p.add_argument("--model", choices=list(MODELS), default="quarter2",
-                   help="plant model and message set: quarter1/quarter2 -> QC_*, half4 -> HC_* "
-                        "(default quarter2)")
+                   help="plant model and message set: quarter1/quarter2 -> QC_*, half4 -> HC_*, "
+                        "full7 -> FC_* (default quarter2)")
     p.add_argument("--rate", type=float, default=500.0, metavar="HZ",
                    help="sensor task rate, 500-1000 Hz typical (default 500)")
     p.add_argument("--channels", metavar="LIST",

@@ -22,7 +22,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--road", default=None, metavar="CSV",
                    help="simulate over a measured road instead of a scenario's: a CSV with 't' "
                         "and the model's road columns (r; half4: r1 and r2, or r1 alone with the "
-                        "rear delayed by (a1 + a2) / --speed), optional _dot columns; its t is "
+                        "rear delayed by (a1 + a2) / --speed; full7: r1..r4, or the front r1, r2 "
+                        "with the rear ones delayed), optional _dot columns; its t is "
                         "the time grid (--duration/--fs are not used)")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                    help="true parameter value (SI); others use the model defaults; repeatable")

@@ -10,11 +10,19 @@ parameters ``p`` (SI units). The state is ``x = [q, q']`` and the input vector i
 python-control) is the single source of truth for the physics: the simulator, identifier,
 EKF and sensor node all derive from it or from the matrices that define it. Optional
 effect terms (nonlinear forces) are added through :attr:`SuspensionModel.extra_force`.
+
+A model object owns everything model-specific, so no other module asks for a model by
+name: its structure (coordinates, roads, parameters), where its struts and tyres are
+(:class:`Site`, with static tyre loads), its rest and initial states, how its roads follow
+each other (:meth:`SuspensionModel.road_lags`, :meth:`SuspensionModel.road_tracks`), its
+suspension deflections (:meth:`SuspensionModel.deflections`), which CSV columns are its
+(:meth:`SuspensionModel.column_bases`) and its CAN identities (:attr:`sensor_set`,
+:attr:`alert_id`, matching the DBC). See ``docs/architecture.md`` ("Adding a model").
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable, Mapping
+from typing import Callable, ClassVar, Mapping
 
 import numpy as np
 from numpy.typing import NDArray
@@ -22,8 +30,55 @@ from numpy.typing import NDArray
 from suspid.errors import UsageError
 
 FloatArray = NDArray[np.float64]
+#: ``(M, C, K, Fk, Fc)`` of :meth:`SuspensionModel.matrices`
+Matrices = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
 #: signature of an additional generalised force: f(t, x, u, params) -> array of len(coords)
 ForceFn = Callable[[float, FloatArray, FloatArray, Mapping[str, float]], FloatArray]
+#: standard gravity (m/s^2) for static wheel loads
+GRAVITY = 9.81
+
+
+@dataclass(frozen=True)
+class Site:
+    """One strut or one tyre of a model: where a force element (and an effect) acts.
+
+    The site coordinate is ``s = g . q + gr . r`` (m) with rate ``s' = g . q' + gr . r'``;
+    a force ``phi`` of the element enters as the generalised force ``Q = b * phi``.
+    For a strut ``s`` is the extension (``s' > 0`` rebound) and ``b = -g``; for a tyre
+    ``s`` is the compression ``r - x_wheel``.
+
+    Attributes
+    ----------
+    name : str
+        ``"strut"``, ``"front strut"``, ``"front-left tyre"``, ...
+    kind : {"strut", "tyre"}
+    g : ndarray, shape (nq,)
+    gr : ndarray, shape (nr,)
+    b : ndarray, shape (nq,)
+    c_name, k_name : str or None
+        Names of the base damping / stiffness of the element at this site.
+    load : float
+        Static load carried by the element (N), for ``tire_liftoff``.
+    """
+
+    name: str
+    kind: str
+    g: FloatArray
+    gr: FloatArray
+    b: FloatArray
+    c_name: str | None
+    k_name: str | None
+    load: float = 0.0
+
+    def coordinate(self, X: FloatArray, U: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Site coordinate ``s`` (m) and rate ``s'`` (m/s) for state rows ``X`` and inputs ``U``."""
+        nq = self.g.size
+        nr = self.gr.size
+        X2 = np.atleast_2d(X)
+        U2 = np.atleast_2d(U)
+        s = X2[:, :nq] @ self.g + U2[:, :nr] @ self.gr
+        sd = X2[:, nq:] @ self.g + U2[:, nr:] @ self.gr
+        return s, sd
 
 
 @dataclass(frozen=True)
@@ -51,6 +106,64 @@ class ParamSpec:
     description: str
 
 
+@dataclass(frozen=True)
+class AffinePieces:
+    """The forward model as affine pieces: ``q'' = (AB0 + sum_j theta_j dAB_j) [q, q', r, r']``.
+
+    With the mass matrix fixed, every model's ``M^-1 [-K | -C | Fk | Fc]`` is affine in its
+    dampers and springs (each enters ``C``, ``K``, ``Fk``, ``Fc`` linearly), so the state
+    and input matrices of any parameter set that differs from ``base`` only in the free
+    parameters ``names`` are one small product: computed once, used by the simulator, the
+    identifier, the window problem, the EKF and the node's plant alike.
+
+    Attributes
+    ----------
+    names : tuple of str
+        Free parameters ``theta`` (in this order).
+    base : dict
+        Every parameter's value (SI); the fixed ones are held here.
+    AB0 : ndarray, shape (nq, 2 nq + 2 nr)
+        Acceleration rows at ``theta = 0``.
+    dAB : ndarray, shape (n_free, nq, 2 nq + 2 nr)
+        Slope of the acceleration rows per free parameter (per SI unit).
+    exact : bool
+        ``True`` when the pieces reproduce :meth:`SuspensionModel.state_space` (checked at
+        two random parameter sets to 1e-12 relative); ``False`` when a free parameter
+        enters non-affinely (a mass, an inertia, a length): use the model instead.
+    """
+
+    names: tuple[str, ...]
+    base: dict[str, float]
+    AB0: FloatArray
+    dAB: FloatArray
+    exact: bool
+
+    def theta(self, p: Mapping[str, float]) -> FloatArray:
+        """The free parameters of ``p`` as a vector (SI)."""
+        return np.array([float(p[k]) for k in self.names])
+
+    def matches(self, p: Mapping[str, float]) -> bool:
+        """Whether ``p`` equals ``base`` in every fixed parameter (the pieces then apply)."""
+        free = set(self.names)
+        return self.exact and all(p[k] == v for k, v in self.base.items() if k not in free)
+
+    def accel_rows(self, theta: FloatArray) -> FloatArray:
+        """``[A_acc | B_acc]`` (nq, 2 nq + 2 nr) at free parameters ``theta``."""
+        return self.AB0 + np.tensordot(np.asarray(theta, dtype=float), self.dAB, axes=1)
+
+    def state_space(self, theta: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """``(A, B)`` at free parameters ``theta``, as :meth:`SuspensionModel.state_space`."""
+        AB = self.accel_rows(theta)
+        nq = AB.shape[0]
+        n = 2 * nq
+        A = np.zeros((n, n))
+        A[:nq, nq:] = np.eye(nq)
+        A[nq:] = AB[:, :n]
+        B = np.zeros((n, AB.shape[1] - n))
+        B[nq:] = AB[:, n:]
+        return A, B
+
+
 @dataclass
 class SuspensionModel:
     """A linear second-order suspension model (base class; see the concrete models).
@@ -58,14 +171,26 @@ class SuspensionModel:
     Attributes
     ----------
     name : str
-        Model name used on the command line (``quarter1``, ``quarter2``, ``half4``).
+        Model name used on the command line (``quarter1``, ``quarter2``, ``half4``, ``full7``).
     coords : tuple of str
         Generalised coordinates (measured position channel names).
     roads : tuple of str
         Road input names (one per tyre); their derivatives are ``<name>_dot``.
     params : tuple of ParamSpec
         The physical parameters in canonical order.
+    sensor_set : int
+        (class attribute) ``SensorSet`` value of the DBC's ``SN_Status`` for the sensor
+        messages of this model (1 quarter-car, 2 half-car, 3 full-car set).
+    alert_id : int
+        (class attribute) ``Model`` value of the DBC's ``SUSPID_Alert`` for this model.
+    known : tuple of str
+        (class attribute) Parameters a user normally knows (weighed masses, measured
+        geometry); the documented ``--fix`` set of the examples and tests.
     """
+
+    sensor_set: ClassVar[int] = 0
+    alert_id: ClassVar[int] = -1
+    known: ClassVar[tuple[str, ...]] = ()
 
     name: str
     coords: tuple[str, ...]
@@ -112,9 +237,68 @@ class SuspensionModel:
         raise UsageError(f"model {self.name} has no parameter {name!r}; "
                          f"expected one of {', '.join(self.param_names)}")
 
+    # ---- model-owned facts (overridden by concrete models where they differ) -------
+    def initial_state(self) -> FloatArray:
+        """The ``initial`` scenario's state ``[q, q']`` (m, rad, m/s, rad/s); default rest."""
+        return np.zeros(self.n_states)
+
+    def road_tracks(self) -> tuple[int, ...]:
+        """Track (wheel path) index of every road: roads on one track see one profile.
+
+        Default: every road on track 0 (a quarter or half car).
+        """
+        return (0,) * len(self.roads)
+
+    def road_lags(self, p: Mapping[str, float]) -> tuple[float, ...]:
+        """Distance (m) each road's tyre runs behind the first axle, per road.
+
+        A road on track ``j`` with lag ``L`` sees, at speed ``v``, the profile of the
+        track delayed by ``L / v``. Default: no lag.
+        """
+        return (0.0,) * len(self.roads)
+
+    def strut_sites(self, p: Mapping[str, float]) -> list[Site]:
+        """The suspension struts (coordinate = extension; the force resists extension)."""
+        raise UsageError(f"model {self.name} defines no suspension struts")
+
+    def tyre_sites(self, p: Mapping[str, float]) -> list[Site]:
+        """The tyre contacts (coordinate = compression ``r - x_wheel``, static load in N)."""
+        raise UsageError(f"model {self.name} defines no tyres")
+
+    def deflections(self, data: Mapping[str, FloatArray],
+                    p: Mapping[str, float] | None = None) -> dict[str, FloatArray]:
+        """Suspension deflections (strut extensions, m) computable from ``data``.
+
+        Parameters
+        ----------
+        data : mapping
+            Channel arrays by name (positions in m/rad; roads in m).
+        p : mapping, optional
+            Parameters (SI) for the geometry; default the model's defaults.
+
+        Returns
+        -------
+        dict
+            ``strut name -> extension`` for every strut whose coordinates (and road, for a
+            strut standing on the road) are all in ``data``; empty if none.
+        """
+        pp = dict(self.defaults(), **(p or {}))
+        out: dict[str, FloatArray] = {}
+        names = self.coords + self.roads
+        for site in self.strut_sites(pp):
+            w = np.concatenate([site.g, site.gr])
+            used = [(names[i], float(w[i])) for i in np.flatnonzero(w)]
+            if all(n in data for n, _ in used):
+                out[site.name] = sum((c * np.asarray(data[n], dtype=float) for n, c in used),
+                                     start=np.zeros(np.shape(data[used[0][0]])))
+        return out
+
+    def column_bases(self) -> set[str]:
+        """Base names of the CSV columns of this model (coordinates and roads)."""
+        return set(self.coords) | set(self.roads)
+
     # ---- physics (overridden by concrete models) ---------------------------------
-    def matrices(self, p: Mapping[str, float]) -> tuple[FloatArray, FloatArray, FloatArray,
-                                                         FloatArray, FloatArray]:
+    def matrices(self, p: Mapping[str, float]) -> Matrices:
         """Return ``(M, C, K, Fk, Fc)`` for parameters ``p`` (SI units)."""
         raise NotImplementedError
 
@@ -142,6 +326,52 @@ class SuspensionModel:
         B[nq:, : len(self.roads)] = Minv @ Fk
         B[nq:, len(self.roads):] = Minv @ Fc
         return A, B
+
+    def affine(self, base: Mapping[str, float], free: list[str] | tuple[str, ...] | None = None
+               ) -> AffinePieces:
+        """The affine pieces of the forward model in the parameters ``free``.
+
+        Parameters
+        ----------
+        base : mapping
+            Every parameter's value (SI); missing ones take the defaults.
+        free : sequence of str, optional
+            The parameters that will change (default: every damping and stiffness).
+
+        Returns
+        -------
+        AffinePieces
+            ``exact`` tells whether the pieces are exact for these free parameters.
+        """
+        p0 = dict(self.defaults(), **dict(base))
+        names = tuple(free) if free is not None else tuple(
+            s.name for s in self.params if s.kind in ("damping", "stiffness"))
+        for k in names:
+            self.spec(k)
+        nq = len(self.coords)
+
+        def rows(p: Mapping[str, float]) -> FloatArray:
+            M, C, K, Fk, Fc = self.matrices(p)
+            return np.asarray(np.linalg.solve(M, np.hstack([-K, -C, Fk, Fc])), dtype=np.float64)
+
+        f0 = rows(p0)
+        th0 = np.array([p0[k] for k in names])
+        dAB = np.empty((len(names),) + f0.shape)
+        for j, k in enumerate(names):
+            p1 = dict(p0)
+            step = max(abs(p0[k]), 1.0)
+            p1[k] = p0[k] + step
+            dAB[j] = (rows(p1) - f0) / step
+        AB0 = f0 - np.tensordot(th0, dAB, axes=1)
+        exact = True
+        rng = np.random.default_rng(7)
+        for _ in range(2):
+            th = th0 * np.exp(rng.normal(0.0, 0.5, th0.size))
+            ref = rows(dict(p0, **dict(zip(names, th.tolist()))))
+            got = AB0 + np.tensordot(th, dAB, axes=1)
+            if not np.all(np.abs(got - ref) <= 1e-12 * (np.abs(ref).max() + 1e-300)):
+                exact = False
+        return AffinePieces(names, p0, AB0, dAB, exact and f0.shape[0] == nq)
 
     def rhs(self, t: float, x: FloatArray, u: FloatArray, params: Mapping[str, float]) -> FloatArray:
         """State derivative ``dx/dt`` (the one right-hand side of the physics).

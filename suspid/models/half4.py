@@ -17,11 +17,18 @@ from typing import Mapping
 
 import numpy as np
 
-from suspid.models.base import FloatArray, ParamSpec, SuspensionModel
+from suspid.models.base import GRAVITY, FloatArray, Matrices, ParamSpec, Site, SuspensionModel
 
 
 class Half4(SuspensionModel):
-    """Body heave and pitch over a front and a rear wheel."""
+    """Body heave and pitch over a front and a rear wheel.
+
+    The rear road ``r2`` is the front road's track ``a1 + a2`` metres later.
+    """
+
+    sensor_set = 2
+    alert_id = 2
+    known = ("m", "I", "m1", "m2", "a1", "a2")
 
     def __init__(self) -> None:
         super().__init__(
@@ -45,7 +52,7 @@ class Half4(SuspensionModel):
             scale_invariant=("m", "I", "m1", "m2", "c1", "c2", "k1", "k2", "k3", "k4"),
         )
 
-    def matrices(self, p: Mapping[str, float]) -> tuple[FloatArray, ...]:
+    def matrices(self, p: Mapping[str, float]) -> Matrices:
         m, I, m1, m2 = p["m"], p["I"], p["m1"], p["m2"]
         c1, c2, k1, k2, k3, k4 = p["c1"], p["c2"], p["k1"], p["k2"], p["k3"], p["k4"]
         a1, a2 = p["a1"], p["a2"]
@@ -61,3 +68,30 @@ class Half4(SuspensionModel):
         Fk = np.array([[0.0, 0.0], [0.0, 0.0], [k3, 0.0], [0.0, k4]])
         Fc = np.zeros((4, 2))
         return M, C, K, Fk, Fc
+
+    def initial_state(self) -> FloatArray:
+        """The seed's section 6.1 body state: x = 0.05 m, delta = 0.05 rad, both rates 0.05 /s."""
+        x0 = np.zeros(8)
+        x0[[0, 1, 4, 5]] = 0.05
+        return x0
+
+    def road_lags(self, p: Mapping[str, float]) -> tuple[float, ...]:
+        """The rear tyre runs the wheelbase ``a1 + a2`` (m) behind the front one."""
+        return (0.0, p["a1"] + p["a2"])
+
+    def strut_sites(self, p: Mapping[str, float]) -> list[Site]:
+        a1, a2 = p["a1"], p["a2"]
+        g1 = np.array([1.0, -a1, -1.0, 0.0])
+        g2 = np.array([1.0, a2, 0.0, -1.0])
+        return [Site("front strut", "strut", g1, np.zeros(2), -g1, "c1", "k1"),
+                Site("rear strut", "strut", g2, np.zeros(2), -g2, "c2", "k2")]
+
+    def tyre_sites(self, p: Mapping[str, float]) -> list[Site]:
+        """Front and rear tyres; static axle loads ``(m a2/(a1+a2) + m1) g``, ``(m a1/(a1+a2) + m2) g``."""
+        a1, a2, m = p["a1"], p["a2"], p["m"]
+        wf = (m * a2 / (a1 + a2) + p["m1"]) * GRAVITY
+        wr = (m * a1 / (a1 + a2) + p["m2"]) * GRAVITY
+        g1 = np.array([0.0, 0.0, -1.0, 0.0])
+        g2 = np.array([0.0, 0.0, 0.0, -1.0])
+        return [Site("front tyre", "tyre", g1, np.array([1.0, 0.0]), -g1, None, "k3", wf),
+                Site("rear tyre", "tyre", g2, np.array([0.0, 1.0]), -g2, None, "k4", wr)]

@@ -5,11 +5,19 @@ from typing import Mapping
 
 import numpy as np
 
-from suspid.models.base import FloatArray, ParamSpec, SuspensionModel
+from suspid.models.base import GRAVITY, FloatArray, Matrices, ParamSpec, Site, SuspensionModel
 
 
 class Quarter1(SuspensionModel):
-    """One mass ``m`` on a spring ``k`` and damper ``c`` over the road ``y``."""
+    """One mass ``m`` on a spring ``k`` and damper ``c`` over the road ``y``.
+
+    The single strut (``k``, ``c``) stands on the road, so it is also the tyre contact:
+    its extension is ``x - y`` and it carries the static load ``m g``.
+    """
+
+    sensor_set = 1
+    known = ("m",)
+    alert_id = 0
 
     def __init__(self) -> None:
         super().__init__(
@@ -24,7 +32,19 @@ class Quarter1(SuspensionModel):
             scale_invariant=("m", "c", "k"),
         )
 
-    def matrices(self, p: Mapping[str, float]) -> tuple[FloatArray, ...]:
+    def matrices(self, p: Mapping[str, float]) -> Matrices:
         m, c, k = p["m"], p["c"], p["k"]
         return (np.array([[m]]), np.array([[c]]), np.array([[k]]),
                 np.array([[k]]), np.array([[c]]))
+
+    def initial_state(self) -> FloatArray:
+        """The seed's initial state: x0 = 0.20 m, v0 = 0.50 m/s."""
+        return np.array([0.20, 0.50])
+
+    def strut_sites(self, p: Mapping[str, float]) -> list[Site]:
+        g, gr = np.array([1.0]), np.array([-1.0])
+        return [Site("strut", "strut", g, gr, -g, "c", "k")]
+
+    def tyre_sites(self, p: Mapping[str, float]) -> list[Site]:
+        g = np.array([-1.0])
+        return [Site("tyre", "tyre", g, np.array([1.0]), -g, "c", "k", p["m"] * GRAVITY)]

@@ -9,11 +9,15 @@ from typing import Mapping
 
 import numpy as np
 
-from suspid.models.base import FloatArray, ParamSpec, SuspensionModel
+from suspid.models.base import GRAVITY, FloatArray, Matrices, ParamSpec, Site, SuspensionModel
 
 
 class Quarter2(SuspensionModel):
     """Body ``m1`` on the suspension (``k1``, ``c1``) over wheel ``m2`` on the tyre (``k2``, ``c2``)."""
+
+    sensor_set = 1
+    known = ("m1", "m2")
+    alert_id = 1
 
     def __init__(self) -> None:
         super().__init__(
@@ -31,7 +35,7 @@ class Quarter2(SuspensionModel):
             scale_invariant=("m1", "c1", "k1", "m2", "c2", "k2"),
         )
 
-    def matrices(self, p: Mapping[str, float]) -> tuple[FloatArray, ...]:
+    def matrices(self, p: Mapping[str, float]) -> Matrices:
         m1, c1, k1, m2, c2, k2 = (p[n] for n in ("m1", "c1", "k1", "m2", "c2", "k2"))
         M = np.array([[m1, 0.0], [0.0, m2]])
         C = np.array([[c1, -c1], [-c1, c1 + c2]])
@@ -39,3 +43,16 @@ class Quarter2(SuspensionModel):
         Fk = np.array([[0.0], [k2]])
         Fc = np.array([[0.0], [c2]])
         return M, C, K, Fk, Fc
+
+    def initial_state(self) -> FloatArray:
+        """The seed's Table 2: x01 = 0.20 m, x02 = 0.10 m, v01 = 0.50 m/s, v02 = 0.05 m/s."""
+        return np.array([0.20, 0.10, 0.50, 0.05])
+
+    def strut_sites(self, p: Mapping[str, float]) -> list[Site]:
+        g = np.array([1.0, -1.0])
+        return [Site("strut", "strut", g, np.zeros(1), -g, "c1", "k1")]
+
+    def tyre_sites(self, p: Mapping[str, float]) -> list[Site]:
+        g = np.array([0.0, -1.0])
+        return [Site("tyre", "tyre", g, np.array([1.0]), -g, "c2", "k2",
+                     (p["m1"] + p["m2"]) * GRAVITY)]

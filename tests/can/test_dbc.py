@@ -15,7 +15,9 @@ from suspid.simulate import simulate
 
 REPO = Path(__file__).resolve().parents[2]
 SENSOR_MESSAGES = {"QC_Body", "QC_Wheel", "QC_Road", "HC_Body", "HC_Pitch", "HC_WheelFront",
-                   "HC_WheelRear", "HC_RoadFront", "HC_RoadRear"}
+                   "HC_WheelRear", "HC_RoadFront", "HC_RoadRear", "FC_Body", "FC_Pitch", "FC_Roll",
+                   "FC_WheelFL", "FC_WheelFR", "FC_WheelRL", "FC_WheelRR", "FC_RoadFL", "FC_RoadFR",
+                   "FC_RoadRL", "FC_RoadRR"}
 
 
 def test_loads_strict_with_expected_messages(db):
@@ -24,11 +26,29 @@ def test_loads_strict_with_expected_messages(db):
     assert db.get_message_by_name("SUSPID_Alert").is_multiplexed()
 
 
-def test_package_copy_is_identical():
+def test_one_dbc_source_the_repository_path_links_to_the_package_file():
     repo = REPO / "dbc" / "suspension.dbc"
     pkg = REPO / "suspid" / "data" / "suspension.dbc"
-    assert repo.read_bytes() == pkg.read_bytes()
-    assert default_dbc_path().read_bytes() == repo.read_bytes()
+    assert repo.is_symlink() and not pkg.is_symlink()
+    assert repo.resolve() == pkg.resolve()
+    assert default_dbc_path().resolve() == pkg.resolve()
+
+
+def test_alert_model_ids_and_sensor_sets_match_every_model(db):
+    alert = db.get_message_by_name("SUSPID_Alert").get_signal_by_name("Model")
+    sset = db.get_message_by_name("SN_Status").get_signal_by_name("SensorSet")
+    for name in MODELS:
+        m = get_model(name)
+        assert str(alert.choices[m.alert_id]) == name
+        assert m.sensor_set in sset.choices
+    assert len({get_model(n).alert_id for n in MODELS}) == len(MODELS)
+
+
+def test_every_parameter_has_an_alert_id(db):
+    ids = {str(v) for v in db.get_message_by_name("SUSPID_Alert")
+           .get_signal_by_name("ParamId").choices.values()}
+    for name in MODELS:
+        assert set(get_model(name).param_names) <= ids, name
 
 
 def test_every_signal_has_comment_and_unit(db):

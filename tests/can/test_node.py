@@ -14,7 +14,8 @@ from firmware_sim.node import NodeConfig, SensorNode
 from firmware_sim.scenarios import SCENARIOS
 from suspid.cli import main
 from suspid.errors import UsageError
-from suspid.models import get_model
+from suspid.can.dbc import channel_signals
+from suspid.models import MODELS, get_model
 from suspid.simulate import simulate
 
 from tests.can.conftest import Q2_STEP
@@ -27,17 +28,23 @@ def _decode(node, **kw):
 
 
 @pytest.mark.parametrize("scenario", SCENARIOS)
-@pytest.mark.parametrize("model_name", ["quarter1", "quarter2", "half4"])
+@pytest.mark.parametrize("model_name", list(MODELS))
 def test_every_scenario_and_model_decodes_cleanly(scenario, model_name):
     node = SensorNode(NodeConfig(model=model_name, scenario=scenario, duration=1.0, rate=500))
     lst = _decode(node)
     st = lst.frame_stats()
-    roads = len(get_model(model_name).roads)
-    n_msgs = {"quarter1": 3, "quarter2": 4, "half4": 7}[model_name] - roads * (scenario == "initial")
+    model = get_model(model_name)
+    roads = set(model.input_names)
+    # SN_Sync and the model's sensor messages; without a road (initial) no road messages
+    n_msgs = 1 + len({msg for ch, msg, _ in channel_signals(node.db, model_name)
+                      if scenario != "initial" or ch not in roads})
+    assert n_msgs == {"quarter1": 3, "quarter2": 4, "half4": 7, "full7": 12}.get(model_name, n_msgs) \
+        - len(model.roads) * (scenario == "initial")
     # 501 ticks of sensor frames; status at ticks 0, 50, ..., 500 and a final one
     assert st["accepted"] == 501 * n_msgs + 12
     assert sum(st["rejected"].values()) == 0
     assert lst.node_status["sample_rate"] == 500 and lst.node_status["state"] == 4  # stopping
+    assert lst.node_status["sensor_set"] == model.sensor_set
 
 
 def test_noise_free_node_equals_the_core_simulation():
@@ -156,3 +163,23 @@ def test_node_cli_errors_exit_2(capsys, argv, fragment):
     assert rc == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and fragment in err and "Traceback" not in err
+
+
+def test_full7_node_log_identifies_the_struts_and_tyres(tmp_path, capsys):
+    """The full car end to end: node (FC_* frames) -> log -> identify."""
+    log = tmp_path / "full7.log"
+    rc = main(["node", "--model", "full7", "--scenario", "random", "--duration", "4",
+               "--speed", "max", "--log", str(log)])
+    assert rc == 0
+    summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])["node"]
+    assert summary["model"] == "full7" and summary["frames_sent"] == 2001 * 12 + 42
+    m = get_model("full7")
+    p = m.defaults()
+    fix = [a for k in m.known for a in ("--fix", f"{k}={p[k]}")]
+    assert main(["identify", "--model", "full7", "--input", str(log), *fix, "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["success"] and out["identifiable"]
+    assert out["frames"]["accepted"] == summary["frames_sent"]
+    for k in out["stderr"]:
+        assert out["params"][k] == pytest.approx(p[k], rel=0.01), k
+        assert abs(out["params"][k] - p[k]) < 5 * out["stderr"][k] + 1e-4 * p[k], k

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from suspid.models import get_model
+from suspid.models import MODELS, get_model
 
 
 def test_quarter1_eq1() -> None:
@@ -44,7 +44,7 @@ def test_half4_eqs4_7() -> None:
 
 
 def test_models_are_stable_at_defaults() -> None:
-    for name in ("quarter1", "quarter2", "half4"):
+    for name in MODELS:
         m = get_model(name)
         A, _ = m.state_space(m.defaults())
         assert np.all(np.linalg.eigvals(A).real < 0)

@@ -5,10 +5,11 @@ import numpy as np
 import pytest
 
 from suspid.excitation import bump_profile, make_scenario
+from suspid.models import MODELS as REGISTRY
 from suspid.models import get_model
 from suspid.simulate import simulate, simulate_ode
 
-MODELS = ["quarter1", "quarter2", "half4"]
+MODELS = list(REGISTRY)  # every registered model gets the same tests
 
 
 def _rel_err(a: dict, b: dict, chans) -> float:

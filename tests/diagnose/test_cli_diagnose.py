@@ -1,4 +1,4 @@
-"""`suspid simulate --effect` + `suspid diagnose --json`: the issue-6 must-show through the CLI."""
+"""`suspid simulate --effect` + `suspid diagnose --json`: friction on the quarter car found through the CLI."""
 from __future__ import annotations
 
 import json
@@ -6,6 +6,8 @@ import math
 import subprocess
 import sys
 from pathlib import Path
+
+from suspid.cli import main
 
 from ..conftest import TABLE1
 
@@ -48,13 +50,6 @@ def test_bad_effect_option_is_one_line_error(tmp_path: Path) -> None:
 
 
 def test_works_on_a_can_log(tmp_path: Path) -> None:
-    import pytest
-
-    try:
-        import estimator.decode.log_input  # noqa: F401
-        import suspid.cli.encode  # noqa: F401
-    except ModuleNotFoundError:
-        pytest.skip("CAN layer not available")
     csv, log = tmp_path / "bs.csv", tmp_path / "bs.log"
     truth = [f"--param={k}={v}" for k, v in TABLE1.items()]
     r = run("simulate", "--model", "quarter2", "--scenario", "bump", "--duration", "1.6", "--fs", "200",
@@ -74,8 +69,6 @@ def test_works_on_a_can_log(tmp_path: Path) -> None:
 
 
 def test_half4_through_the_cli(tmp_path: Path, capsys) -> None:
-    from suspid.cli import main
-
     csv, png = tmp_path / "h4.csv", tmp_path / "h4.png"
     rc = main(["simulate", "--model", "half4", "--scenario", "bump", "--duration", "1.6", "--fs", "200",
                "--effect", "bump_stop:gap=0.02,k_stop=200000", "--noise", "0.005", "--out", str(csv)])
@@ -99,8 +92,6 @@ def test_half4_through_the_cli(tmp_path: Path, capsys) -> None:
 
 
 def test_quarter1_text_output_and_option_errors(tmp_path: Path, capsys) -> None:
-    from suspid.cli import main
-
     csv = tmp_path / "q1.csv"
     rc = main(["simulate", "--model", "quarter1", "--scenario", "curb", "--duration", "1.6", "--fs", "200",
                "--height", "0.05", "--effect", "sensor_offset:channel=x_dot,offset=0.01", "--noise", "0.005",

@@ -1,4 +1,4 @@
-"""diagnose names the undeclared effect, estimates it, lowers the residual, fixes c1/k1 (issue 6)."""
+"""diagnose names the undeclared effect, estimates it, lowers the residual, fixes c1/k1."""
 from __future__ import annotations
 
 import math

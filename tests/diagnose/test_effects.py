@@ -6,8 +6,8 @@ import pytest
 
 from suspid.errors import UsageError
 from suspid.models import get_model
-from suspid.models.effects import (EFFECT_NAMES, REGISTRY, PhysicalEffect, inject, make_effect,
-                                   parse_effect, strut_sites, tyre_sites)
+from suspid.models.effects import (EFFECT_NAMES, REGISTRY, PhysicalEffect, effects_for, inject,
+                                   make_effect, parse_effect, strut_sites, tyre_sites)
 
 from ..conftest import TABLE1
 
@@ -106,14 +106,22 @@ def test_sensor_effects_round_trip() -> None:
     assert ok.sum() >= 490 and np.allclose(back["x2"][ok][5:], y[ok][5:], atol=2e-3)
 
 
+def test_availability_follows_the_structure() -> None:
+    # every strut effect wherever there are struts, the tyre effect wherever there are tyres;
+    # asymmetric_damping only where one damper coefficient describes every strut
+    assert effects_for(get_model("quarter1")) == list(EFFECT_NAMES)
+    assert effects_for(get_model("quarter2")) == list(EFFECT_NAMES)
+    assert effects_for(get_model("half4")) == [n for n in EFFECT_NAMES if n != "asymmetric_damping"]
+    assert "c1 and c2 differ" in str(REGISTRY["asymmetric_damping"].unavailable_reason(get_model("half4")))
+    assert effects_for(get_model("half4"), kinds=("sensor",)) == ["sensor_delay", "sensor_offset"]
+
+
 @pytest.mark.parametrize("model", ["quarter1", "half4"])
 def test_other_models(model: str) -> None:
     m = get_model(model)
     p = m.defaults()
-    for name in EFFECT_NAMES:
+    for name in effects_for(m, kinds=("physical",)):
         cls = REGISTRY[name]
-        if model not in cls.models or cls.kind != "physical":
-            continue
         vals = {"F": 50, "c_rebound": 2000, "c_compression": 800, "c_quad": 500, "k_cubic": 1e7,
                 "gap": 0.01, "k_stop": 1e5}
         e = make_effect(name, **{k.name: vals[k.name] for k in cls.params})

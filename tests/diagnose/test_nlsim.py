@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from estimator.diagnose.nlsim import simulate_effects
+from suspid.nlsim import simulate_effects
 from suspid.excitation import make_scenario
 from suspid.models import get_model
 from suspid.models.effects import inject

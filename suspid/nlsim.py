@@ -1,8 +1,9 @@
 """Fast simulation of a linear model plus physical effect terms (exponential integrator).
 
 The augmented model is ``x' = A x + B u + B_f Q(x, u)`` with the linear part of
-:mod:`suspid.models` and ``Q = sum_sites b * phi(s, s')`` from
-:mod:`suspid.models.effects`. As in :func:`suspid.simulate.simulate`, the road-velocity
+:mod:`suspid.models` and ``Q = sum_sites b * phi(s, s')`` of the physical effects
+(:mod:`suspid.models.effects`; any object with ``sites(model, p)`` and ``law(site, p)``,
+:class:`ForceTerm`, will do). As in :func:`suspid.simulate.simulate`, the road-velocity
 input is absorbed by ``z = x - B_v r`` and the road is a first-order hold. Each effect force
 ``phi`` is a scalar per site, also interpolated linearly over the step (ETD2 /
 exponential-trapezoid predictor-corrector)::
@@ -17,20 +18,52 @@ The time loop is Python code generated and unrolled for the model's size, so a 1
 Accuracy against :func:`suspid.simulate.simulate_ode` is checked in
 ``tests/diagnose/test_nlsim.py``; use ``substeps`` when the effect is stiff (a steep
 friction ramp or bump stop) relative to the sample interval.
+
+This module is part of the base layer (next to :mod:`suspid.simulate`): the effect library
+simulates injected effects with it (:meth:`suspid.models.effects.Injection.simulate`) and
+the diagnosis refits them with it; it knows sites and force laws, not the effect classes.
 """
 from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
-from typing import Callable, Mapping, Sequence
+from typing import Callable, Mapping, Protocol, Sequence
 
 import numpy as np
 from scipy.linalg import expm
 
 from suspid.errors import UsageError
 from suspid.models.base import FloatArray, SuspensionModel
-from suspid.models.effects import Law, PhysicalEffect, Site
 from suspid.simulate import _foh_weights, pack_channels, road_matrix, uniform_step
+
+#: scalar force law at one site: ``phi(s, s_dot) -> force`` (N)
+Law = Callable[[float, float], float]
+
+
+class SiteLike(Protocol):
+    """Where a force acts (:class:`suspid.models.effects.Site`): coordinate ``s = g . q + gr . r``,
+    generalised force ``Q = b * phi``."""
+
+    g: FloatArray
+    gr: FloatArray
+    b: FloatArray
+
+
+class ForceTerm(Protocol):
+    """A physical effect as the simulator sees it (:class:`suspid.models.effects.PhysicalEffect`)."""
+
+    def sites(self, model: SuspensionModel, p: Mapping[str, float]) -> Sequence[SiteLike]:
+        """Sites of ``model`` where the force acts."""
+        ...
+
+    def law(self, site: SiteLike, base: Mapping[str, float]) -> Law:
+        """Scalar force law at ``site`` for base parameters ``base``."""
+        ...
+
+    def generalized_force(self, model: SuspensionModel, X: FloatArray, U: FloatArray,
+                          base: Mapping[str, float]) -> FloatArray:
+        """Generalised force rows ``Q`` (N, nq) at state rows ``X`` and input rows ``U``."""
+        ...
 
 
 @functools.lru_cache(maxsize=16)
@@ -123,7 +156,7 @@ def _modal_weights(A: FloatArray, Bw: FloatArray, h: float
     return Phi, W0, W1
 
 
-def _discretise(model: SuspensionModel, p: Mapping[str, float], sites: Sequence[Site],
+def _discretise(model: SuspensionModel, p: Mapping[str, float], sites: Sequence[SiteLike],
                 h: float) -> _Setup:
     A, B = model.state_space(p)
     M, *_ = model.matrices(p)
@@ -154,7 +187,7 @@ def _discretise(model: SuspensionModel, p: Mapping[str, float], sites: Sequence[
 
 
 def simulate_effects(model: SuspensionModel, params: Mapping[str, float],
-                     effects: Sequence[PhysicalEffect], t: FloatArray,
+                     effects: Sequence[ForceTerm], t: FloatArray,
                      road: Mapping[str, FloatArray] | None = None, x0: FloatArray | None = None,
                      substeps: int = 1, U: FloatArray | None = None) -> dict[str, FloatArray]:
     """Simulate ``model`` with physical ``effects`` on a uniform time grid.
@@ -165,7 +198,7 @@ def simulate_effects(model: SuspensionModel, params: Mapping[str, float],
         The linear base model (its own ``extra_force`` is ignored; pass the effects).
     params : mapping
         Base parameters (SI).
-    effects : sequence of PhysicalEffect
+    effects : sequence of ForceTerm
         The effect terms (each acting at all its sites).
     t : ndarray, shape (N,)
         Uniformly spaced sample times (s).
@@ -207,7 +240,7 @@ def simulate_effects(model: SuspensionModel, params: Mapping[str, float],
     else:
         tf, Uf = t, U
     Nf = tf.size
-    sites: list[Site] = []
+    sites: list[SiteLike] = []
     laws: list[Law] = []
     for e in effects:
         for site in e.sites(model, p):
@@ -239,7 +272,7 @@ def simulate_effects(model: SuspensionModel, params: Mapping[str, float],
 
 
 def effect_forces(model: SuspensionModel, params: Mapping[str, float],
-                  effects: Sequence[PhysicalEffect], X: FloatArray, U: FloatArray) -> FloatArray:
+                  effects: Sequence[ForceTerm], X: FloatArray, U: FloatArray) -> FloatArray:
     """Generalised effect forces ``Q`` (N, nq) at state rows ``X`` and input rows ``U``."""
     Q = np.zeros((np.atleast_2d(X).shape[0], len(model.coords)))
     for e in effects:
@@ -247,4 +280,4 @@ def effect_forces(model: SuspensionModel, params: Mapping[str, float],
     return Q
 
 
-__all__ = ["simulate_effects", "effect_forces"]
+__all__ = ["simulate_effects", "effect_forces", "ForceTerm", "SiteLike", "Law"]

@@ -1,0 +1,16 @@
+"""The fleet: identify every drive log of many vehicles on Dask, keep their history in
+SQLite, follow each vehicle's parameters (trends, alerts, limit-crossing forecasts) and
+write a static HTML report. ``run_fleet(FleetConfig(...))`` is the entry point
+(``suspid fleet``); see ``docs/fleet.md``.
+"""
+from estimator.fleet.analysis import AlertRule, VehicleSummary, summarize_fleet
+from estimator.fleet.discover import DriveFile, find_drives
+from estimator.fleet.drive import IdentifySettings, identify_drive
+from estimator.fleet.history import History
+from estimator.fleet.runner import FleetConfig, FleetResult, ProgressBar, execute, run_fleet
+from estimator.fleet.trend import Forecast, Trend, forecast_crossing, robust_trend
+
+__all__ = ["AlertRule", "VehicleSummary", "summarize_fleet", "DriveFile", "find_drives",
+           "IdentifySettings", "identify_drive", "History", "FleetConfig", "FleetResult",
+           "ProgressBar", "execute", "run_fleet", "Forecast", "Trend", "forecast_crossing",
+           "robust_trend"]

@@ -1,0 +1,187 @@
+"""Per-vehicle history, trends, alerts, forecasts and risk ranking from drive records.
+
+Alerts follow the monitor's rule (:class:`estimator.alerts.engine.AlertEngine`) with each
+drive as one estimate in time order: a parameter is in alert when the upper one-sided
+confidence bound ``v + z s`` (default 99 %, ``z = 2.326``) of its estimate is below
+``(1 - drop) x nominal`` in ``min_count`` consecutive drives (default 2, so one bad drive
+never raises an alert), and it leaves the alert only when the lower bound is back above
+``(1 - drop + 0.05) x nominal`` in as many drives. A vehicle's ``alerts`` are the parameters
+in alert after its latest drive.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Iterable
+
+import numpy as np
+
+from estimator.alerts.engine import AlertConfig, AlertEngine
+from estimator.fleet.trend import DAY_S, Forecast, Trend, forecast_crossing, robust_trend
+from suspid.models import get_model
+
+
+@dataclass
+class AlertRule:
+    """Alert and forecast settings of a fleet run.
+
+    Attributes
+    ----------
+    nominal : dict
+        ``parameter -> nominal`` (SI); parameters not listed use the model's default.
+    drop : float
+        Limit is ``(1 - drop) x nominal``.
+    z : float
+        One-sided normal quantile of the alert bound (2.326: 99 %).
+    min_count : int
+        Consecutive drives the condition must hold in.
+    level : float
+        Two-sided level of the forecast interval.
+    horizon_days : float
+        Forecasts further ahead of the latest drive than this are not reported (a slow
+        drift that reaches the limit in years is noise for maintenance planning, and at the
+        90 % level about one flat parameter in twenty shows a 'significant' slope).
+    """
+
+    nominal: dict[str, float] = field(default_factory=dict)
+    drop: float = 0.3
+    z: float = 2.326
+    min_count: int = 2
+    level: float = 0.90
+    horizon_days: float = 365.0
+
+    def nominal_of(self, model: str, name: str) -> float:
+        if name in self.nominal:
+            return float(self.nominal[name])
+        return float(get_model(model).spec(name).default)
+
+    def to_json(self) -> dict[str, Any]:
+        return {"nominal": dict(self.nominal), "drop": self.drop, "z": self.z,
+                "min_count": self.min_count, "level": self.level,
+                "horizon_days": self.horizon_days}
+
+
+@dataclass
+class VehicleSummary:
+    """One vehicle's drives and what they say."""
+
+    vehicle: str
+    model: str
+    drives: list[dict[str, Any]]
+    failed: int
+    monitored: list[str]
+    nominal: dict[str, float]
+    limits: dict[str, float]
+    trends: dict[str, Trend | None]
+    forecasts: dict[str, Forecast]
+    alerts: list[dict[str, Any]]
+    risk: str = "ok"
+    rank: int = 0
+
+    @property
+    def latest(self) -> dict[str, Any] | None:
+        return self.drives[-1] if self.drives else None
+
+    def sort_key(self) -> tuple[int, float, float, str]:
+        """Most at risk first: alerts, then the earliest forecast crossing, then the
+        smallest margin above the limit (fraction of the allowed drop)."""
+        level = {"alert": 0, "forecast": 1, "ok": 2, "no data": 3}[self.risk]
+        first = min((f.crossing_t for f in self.forecasts.values()), default=math.inf)
+        return level, first, self.margin(), self.vehicle
+
+    def margin(self) -> float:
+        """Smallest ``(latest - limit) / (nominal - limit)`` over monitored parameters."""
+        last = self.latest
+        if last is None:
+            return math.inf
+        out = math.inf
+        for k in self.monitored:
+            v = last["result"]["params"].get(k)
+            if v is not None and self.nominal[k] > self.limits[k]:
+                out = min(out, (v - self.limits[k]) / (self.nominal[k] - self.limits[k]))
+        return out
+
+    def to_json(self) -> dict[str, Any]:
+        last = self.latest
+        return {
+            "vehicle": self.vehicle,
+            "drives": len(self.drives),
+            "latest": dict(last["result"]["params"]) if last else None,
+            "trend": {k: tr.to_json() for k, tr in self.trends.items() if tr is not None},
+            "alerts": [a["parameter"] for a in self.alerts],
+            "forecast": {k: f.to_json() for k, f in self.forecasts.items()},
+            "rank": self.rank,
+            "risk": self.risk,
+            "model": self.model,
+            "failed": self.failed,
+            "latest_t": last["t"] if last else None,
+            "latest_stderr": dict(last["result"].get("stderr", {})) if last else None,
+            "limits": dict(self.limits),
+            "nominal": dict(self.nominal),
+            "alert_details": self.alerts,
+            "margin": self.margin() if math.isfinite(self.margin()) else None,
+        }
+
+
+def _model_of(rec: dict[str, Any]) -> str:
+    return str(rec.get("model") or rec["result"]["model"])
+
+
+def summarize_vehicle(vehicle: str, records: list[dict[str, Any]], rule: AlertRule
+                      ) -> VehicleSummary:
+    """History, trends, alerts and forecasts of one vehicle from its drive records."""
+    ok = sorted((r for r in records if r["status"] == "ok" and r.get("result")),
+                key=lambda r: (r["t"], r["path"]))
+    failed = sum(1 for r in records if r["status"] != "ok")
+    if not ok:
+        return VehicleSummary(vehicle, "", [], failed, [], {}, {}, {}, {}, [], "no data")
+    model = _model_of(ok[-1])
+    fixed = set(ok[-1]["result"].get("fixed", []))
+    monitored = [k for k in ok[-1]["result"]["params"] if k not in fixed]
+    nominal = {k: rule.nominal_of(model, k) for k in monitored}
+    cfg = AlertConfig(nominal=nominal, drop=rule.drop, z=rule.z, persistence_s=0.0,
+                      min_count=rule.min_count)
+    limits = {k: cfg.limit(k) for k in monitored}
+    engine = AlertEngine(cfg, model, units={k: get_model(model).spec(k).unit for k in monitored})
+    for r in ok:
+        res = r["result"]
+        se = {k: (math.nan if v is None else v) for k, v in res.get("stderr", {}).items()}
+        engine.update(float(r["t"]), res["params"], se)
+    alerts = []
+    for k in monitored:
+        if engine.states[k].active:
+            ev = next(e for e in reversed(engine.emitted) if e.parameter == k and e.kind == "alert")
+            alerts.append({"parameter": k, "value": ev.value, "stderr": ev.stderr,
+                           "bound": ev.bound, "limit": ev.limit, "nominal": ev.nominal,
+                           "since_t": ev.onset, "t": ev.t, "severity": ev.severity,
+                           "message": ev.message})
+    trends: dict[str, Trend | None] = {}
+    forecasts: dict[str, Forecast] = {}
+    t = np.array([float(r["t"]) for r in ok])
+    for k in monitored:
+        v = np.array([float(r["result"]["params"][k]) for r in ok])
+        s = np.array([_nan(r["result"].get("stderr", {}).get(k)) for r in ok])
+        tr = robust_trend(t, v, s)
+        trends[k] = tr
+        fc = forecast_crossing(tr, limits[k], rule.level)
+        if fc is not None and fc.crossing_t <= t[-1] + rule.horizon_days * DAY_S:
+            forecasts[k] = fc
+    risk = "alert" if alerts else ("forecast" if forecasts else "ok")
+    return VehicleSummary(vehicle, model, ok, failed, monitored, nominal, limits, trends,
+                          forecasts, alerts, risk)
+
+
+def _nan(x: Any) -> float:
+    return math.nan if x is None else float(x)
+
+
+def summarize_fleet(records: Iterable[dict[str, Any]], rule: AlertRule) -> list[VehicleSummary]:
+    """Every vehicle's summary, ranked most at risk first (``rank`` 1 is the first)."""
+    by_vehicle: dict[str, list[dict[str, Any]]] = {}
+    for r in records:
+        by_vehicle.setdefault(r["vehicle"], []).append(r)
+    out = [summarize_vehicle(v, recs, rule) for v, recs in by_vehicle.items()]
+    out.sort(key=VehicleSummary.sort_key)
+    for i, s in enumerate(out, 1):
+        s.rank = i
+    return out

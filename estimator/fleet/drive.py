@@ -1,0 +1,241 @@
+"""One drive: identify one log exactly as ``suspid identify`` does (the Dask task).
+
+The task is :func:`identify_drive`, a module-level function: a Dask worker imports this
+module once and runs the task for every drive it is given, so nothing is imported per task,
+and the DBC is parsed once per worker process (:func:`cached_database`, keyed by path,
+modification time and size) instead of once per drive.
+
+The identification is the same library call as ``suspid identify`` makes --
+:class:`~estimator.identify.OutputErrorProblem` + :func:`~estimator.identify.fit` with the
+same options -- on the same measurement (:func:`load_drive`, which reads a CAN log through
+:func:`~estimator.decode.log_input.load_log_as_measurement` and a CSV through
+:func:`~suspid.io.csvio.read_measurement`, and adds identify's "motion does not decay"
+warning), so a drive's parameters equal ``suspid identify --json`` on the same file to the
+last digit.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import asdict, dataclass, field
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cantools.database import Database
+
+from estimator.decode.log_input import load_log_as_measurement
+from estimator.identify import OutputErrorProblem, Parameters, fit
+from suspid.can.dbc import default_dbc_path, load_dbc
+from suspid.can.logs import FORMATS
+from suspid.can.signal_map import SignalMap
+from suspid.errors import InputError, SuspidError
+from suspid.io.csvio import Measurement, read_measurement
+from suspid.models import SuspensionModel, get_model
+
+#: suffixes read as CAN logs (python-can formats), and as measurement CSVs
+CAN_SUFFIXES: tuple[str, ...] = tuple(FORMATS)
+CSV_SUFFIXES: tuple[str, ...] = (".csv",)
+#: every suffix a drive log may have
+DRIVE_SUFFIXES: tuple[str, ...] = CAN_SUFFIXES + CSV_SUFFIXES
+_HASH_CHUNK = 1 << 20
+
+
+@dataclass(frozen=True)
+class IdentifySettings:
+    """The options of ``suspid identify`` that decide a drive's result.
+
+    Attributes
+    ----------
+    model : str
+        Model name.
+    fix, init : dict
+        ``--fix`` / ``--init`` values (SI).
+    cost : {"sse", "frobenius"}
+    x0 : str or tuple of float
+        ``"estimate"``, ``"rest"`` or an explicit state ``[q..., q_dot...]``.
+    restarts : int
+    maxfev : int or None
+    multistart : int
+    polish : bool
+    dbc : str or None
+        DBC path for CAN logs (``None``: suspid's bundled DBC).
+    signal_map : SignalMap or None
+        ``--map``/``--map-file`` mapping, as ``identify`` resolves it.
+    """
+
+    model: str
+    fix: dict[str, float] = field(default_factory=dict)
+    init: dict[str, float] = field(default_factory=dict)
+    cost: str = "sse"
+    x0: Any = "estimate"
+    restarts: int = 6
+    maxfev: int | None = None
+    multistart: int = 4
+    polish: bool = True
+    dbc: str | None = None
+    signal_map: SignalMap | None = None
+
+    def parameters(self) -> Parameters:
+        """The identifier's parameters (raises :class:`UsageError` for unknown names)."""
+        return Parameters.for_model(get_model(self.model), fix=self.fix, init=self.init)
+
+    def key(self) -> str:
+        """A stable text key of the settings (stored with each drive in the history)."""
+        d = asdict(self)
+        d["x0"] = self.x0 if isinstance(self.x0, str) else [float(v) for v in self.x0]
+        d["signal_map"] = (None if self.signal_map is None else
+                           [str(m) for m in self.signal_map.mappings])
+        return json.dumps(d, sort_keys=True)
+
+
+def file_digest(path: str | Path) -> str:
+    """SHA-256 of a file's bytes (hex): a drive's identity in the history.
+
+    Raises
+    ------
+    OSError
+        The file cannot be read.
+    """
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(_HASH_CHUNK), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+@lru_cache(maxsize=16)
+def _database(path: str, mtime_ns: int, size: int) -> Database:
+    return load_dbc(path)
+
+
+def cached_database(path: str | None) -> Database:
+    """The DBC at ``path`` (default: suspid's), parsed once per process and file version.
+
+    Raises
+    ------
+    InputError
+        Missing or unparsable DBC (as :func:`suspid.can.dbc.load_dbc`).
+    """
+    p = Path(path) if path is not None else default_dbc_path()
+    try:
+        st = p.stat()
+    except OSError:
+        return load_dbc(p)          # raises the one-line "no such DBC file" error
+    return _database(str(p), st.st_mtime_ns, st.st_size)
+
+
+def _decays(measured: dict[str, Any]) -> bool:
+    """Whether every channel's motion in the last quarter of the record is below half of
+    that in the first quarter (the same test as ``suspid identify``'s; see
+    ``suspid/cli/_common.py``: a free response decays everywhere, driving vibration does not).
+    """
+    for v in measured.values():
+        v = np.diff(np.asarray(v, dtype=float))
+        q = v.size // 4
+        if q < 2:
+            return True
+        first, last = v[:q], v[-q:]
+        first, last = first[np.isfinite(first)], last[np.isfinite(last)]
+        if first.size < 2 or last.size < 2:
+            continue
+        if not np.sqrt(np.mean(last * last)) < 0.5 * np.sqrt(np.mean(first * first)):
+            return False
+    return True
+
+
+def load_drive(path: str | Path, model: SuspensionModel, settings: IdentifySettings
+               ) -> tuple[Measurement, dict[str, Any] | None]:
+    """Read a drive log as ``suspid identify --input PATH`` does.
+
+    Returns
+    -------
+    measurement : Measurement
+    frames : dict or None
+        Frame counts of a CAN log (``None`` for a CSV).
+
+    Raises
+    ------
+    InputError, UsageError
+        Unreadable or unusable log (one-line message naming the file).
+    """
+    p = Path(path)
+    suffix = p.suffix.lower()
+    if suffix in CAN_SUFFIXES:
+        meas, frames = load_log_as_measurement(p, model, cached_database(settings.dbc),
+                                               settings.signal_map)
+    else:
+        if suffix not in (".csv", ".txt", ""):
+            raise InputError(f"{p}: unknown input format {p.suffix!r}; expected .csv or a CAN "
+                             f"log ({', '.join(CAN_SUFFIXES)})")
+        meas, frames = read_measurement(p, model), None
+    if model.roads and not meas.road and not _decays(meas.measured):
+        meas.warnings.append(
+            f"{p}: no road input ({', '.join(model.roads)}) and the motion does not decay: "
+            "the model can only fit it as a free response from an initial state (a release or "
+            "drop test), so these parameters do not describe it; for driving data without a "
+            "road or wheel-motion sensor use `suspid monitor --output-only` (body mode "
+            "frequency and damping)")
+    return meas, frames
+
+
+def one_line(text: object) -> str:
+    """``text`` on one line (runs of whitespace become one space)."""
+    return " ".join(str(text).split())
+
+
+def identify_drive(path: str, vehicle: str, settings: IdentifySettings,
+                   digest: str | None = None) -> dict[str, Any]:
+    """Identify one drive; never raises for a bad log (the Dask task).
+
+    Parameters
+    ----------
+    path : str
+        The log (CAN log or measurement CSV), readable at this path on the worker.
+    vehicle : str
+        The vehicle it belongs to (the folder holding the log).
+    settings : IdentifySettings
+    digest : str, optional
+        SHA-256 of the file if the client already computed it.
+
+    Returns
+    -------
+    dict
+        ``path``, ``vehicle``, ``sha256``, ``size`` (bytes), ``t`` (epoch s of the first
+        sample, ``None`` if unreadable), ``status`` (``"ok"``/``"failed"``), ``error``
+        (one-line reason or ``None``) and, when ok, ``result``: the ``suspid identify --json``
+        object of the drive.
+    """
+    out: dict[str, Any] = {"path": path, "vehicle": vehicle, "sha256": digest, "size": None,
+                           "t": None, "status": "failed", "error": None, "result": None}
+    try:
+        out["size"] = Path(path).stat().st_size
+        if digest is None:
+            out["sha256"] = file_digest(path)
+        model = get_model(settings.model)
+        meas, frames = load_drive(path, model, settings)
+        t0 = float(meas.t[0]) if meas.t.size else math.nan
+        if not math.isfinite(t0):
+            raise InputError(f"{path}: no sample time")
+        out["t"] = t0
+        problem = OutputErrorProblem(model, meas, cost=settings.cost,
+                                     x0=(settings.x0 if isinstance(settings.x0, str)
+                                         else np.asarray(settings.x0, dtype=float)))
+        result, _ = fit(problem, settings.parameters(), restarts=settings.restarts,
+                        maxfev=settings.maxfev, polish=settings.polish,
+                        multistart=settings.multistart)
+        if frames is not None:
+            result.frames = frames
+        out["result"] = result.to_json()
+        out["status"] = "ok"
+    except SuspidError as exc:
+        out["error"] = one_line(exc)
+    except OSError as exc:
+        where = f"{exc.filename}: " if getattr(exc, "filename", None) else f"{path}: "
+        out["error"] = one_line(f"{where}{exc.strerror or exc}")
+    except Exception as exc:  # noqa: BLE001 - a bad log must never stop the batch
+        out["error"] = one_line(f"{path}: {type(exc).__name__}: {exc}")
+    return out

@@ -1,0 +1,171 @@
+"""The fleet's history: an SQLite database (Python's standard ``sqlite3``) of every drive.
+
+Schema (``PRAGMA user_version = 1``; query it with the ``sqlite3`` shell)::
+
+    CREATE TABLE drives (
+        id        TEXT PRIMARY KEY,  -- SHA-256 of the log's bytes ('path:' + path if unreadable)
+        path      TEXT NOT NULL,     -- where it was read last
+        vehicle   TEXT NOT NULL,     -- the folder holding the log
+        t         REAL,              -- first sample, epoch s (NULL if unreadable)
+        model     TEXT NOT NULL,
+        status    TEXT NOT NULL,     -- 'ok' or 'failed'
+        error     TEXT,              -- one-line reason when failed
+        size      INTEGER,           -- bytes
+        settings  TEXT NOT NULL,     -- identify options (JSON) the result was made with
+        result    TEXT,              -- the drive's `suspid identify --json` object
+        processed REAL NOT NULL      -- epoch s when it was stored last
+    );
+    CREATE TABLE estimates (
+        drive_id  TEXT NOT NULL REFERENCES drives(id) ON DELETE CASCADE,
+        parameter TEXT NOT NULL,
+        value     REAL NOT NULL,     -- SI
+        stderr    REAL,              -- SI, NULL for fixed or unidentifiable
+        fixed     INTEGER NOT NULL,  -- 1 if held by --fix
+        PRIMARY KEY (drive_id, parameter)
+    );
+    CREATE TABLE runs (
+        id INTEGER PRIMARY KEY AUTOINCREMENT,
+        started REAL, finished REAL, model TEXT,
+        options TEXT,                -- identify options and nominal/alert settings (JSON)
+        new INTEGER, reused INTEGER, failed INTEGER
+    );
+
+A log is one drive whatever its path: processing the same bytes again replaces its row
+(``INSERT OR REPLACE`` on ``id``) instead of adding one; a log already stored with the same
+``settings`` is not identified again.
+"""
+from __future__ import annotations
+
+import json
+import sqlite3
+import time
+from pathlib import Path
+from typing import Any, Iterable
+
+from suspid.errors import InputError
+
+SCHEMA_VERSION = 1
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS drives (
+    id TEXT PRIMARY KEY, path TEXT NOT NULL, vehicle TEXT NOT NULL, t REAL,
+    model TEXT NOT NULL, status TEXT NOT NULL, error TEXT, size INTEGER,
+    settings TEXT NOT NULL, result TEXT, processed REAL NOT NULL);
+CREATE INDEX IF NOT EXISTS drives_vehicle_t ON drives (vehicle, t);
+CREATE TABLE IF NOT EXISTS estimates (
+    drive_id TEXT NOT NULL REFERENCES drives(id) ON DELETE CASCADE,
+    parameter TEXT NOT NULL, value REAL NOT NULL, stderr REAL, fixed INTEGER NOT NULL,
+    PRIMARY KEY (drive_id, parameter));
+CREATE TABLE IF NOT EXISTS runs (
+    id INTEGER PRIMARY KEY AUTOINCREMENT, started REAL, finished REAL, model TEXT,
+    options TEXT, new INTEGER, reused INTEGER, failed INTEGER);
+"""
+
+
+def drive_id(record: dict[str, Any]) -> str:
+    """A drive's key: its content hash, or its path when the file could not be read."""
+    return record.get("sha256") or f"path:{record['path']}"
+
+
+class History:
+    """An open fleet history database.
+
+    Parameters
+    ----------
+    path : str or Path
+        The SQLite file (created with its folder if missing).
+
+    Raises
+    ------
+    InputError
+        Not an SQLite database, or one of a newer schema.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        if self.path.is_dir():
+            raise InputError(f"--db {path}: is a directory, expected a database file")
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            self.conn = sqlite3.connect(str(self.path))
+            self.conn.execute("PRAGMA foreign_keys = ON")
+            version = self.conn.execute("PRAGMA user_version").fetchone()[0]
+            if version > SCHEMA_VERSION:
+                raise InputError(f"--db {path}: schema version {version}, this suspid reads "
+                                 f"up to {SCHEMA_VERSION}")
+            self.conn.executescript(_SCHEMA)
+            self.conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+            self.conn.commit()
+        except sqlite3.DatabaseError as exc:
+            raise InputError(f"--db {path}: not a usable SQLite database ({exc})") from None
+
+    def close(self) -> None:
+        self.conn.close()
+
+    def __enter__(self) -> "History":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def known(self, settings_key: str) -> dict[str, dict[str, Any]]:
+        """Stored drives made with these settings: ``id -> record``."""
+        rows = self.conn.execute("SELECT id, path, vehicle, t, status, error, size, result "
+                                 "FROM drives WHERE settings = ?", (settings_key,))
+        return {r[0]: _record(r) for r in rows}
+
+    def add(self, records: Iterable[dict[str, Any]], model: str, settings_key: str) -> int:
+        """Insert or replace drives (one transaction); returns how many."""
+        now = time.time()
+        n = 0
+        with self.conn:
+            for rec in records:
+                did = drive_id(rec)
+                res = rec.get("result")
+                self.conn.execute("DELETE FROM estimates WHERE drive_id = ?", (did,))
+                self.conn.execute(
+                    "INSERT OR REPLACE INTO drives (id, path, vehicle, t, model, status, error, "
+                    "size, settings, result, processed) VALUES (?,?,?,?,?,?,?,?,?,?,?)",
+                    (did, rec["path"], rec["vehicle"], rec.get("t"), model, rec["status"],
+                     rec.get("error"), rec.get("size"), settings_key,
+                     json.dumps(res) if res is not None else None, now))
+                if res is not None:
+                    fixed = set(res.get("fixed", []))
+                    self.conn.executemany(
+                        "INSERT INTO estimates (drive_id, parameter, value, stderr, fixed) "
+                        "VALUES (?,?,?,?,?)",
+                        [(did, k, float(v), res.get("stderr", {}).get(k), int(k in fixed))
+                         for k, v in res["params"].items()])
+                n += 1
+        return n
+
+    def drives(self) -> list[dict[str, Any]]:
+        """Every stored drive as a record (``path``, ``vehicle``, ``t``, ``status``, ...)."""
+        rows = self.conn.execute("SELECT id, path, vehicle, t, status, error, size, result, "
+                                 "model FROM drives ORDER BY vehicle, t, path")
+        out = []
+        for r in rows:
+            rec = _record(r)
+            rec["model"] = r[8]
+            out.append(rec)
+        return out
+
+    def last_options(self) -> dict[str, Any] | None:
+        """The options of the latest run (nominal values, alert settings), if any."""
+        row = self.conn.execute("SELECT options FROM runs ORDER BY id DESC LIMIT 1").fetchone()
+        return json.loads(row[0]) if row and row[0] else None
+
+    def add_run(self, started: float, model: str, options: dict[str, Any], new: int,
+                reused: int, failed: int) -> None:
+        with self.conn:
+            self.conn.execute("INSERT INTO runs (started, finished, model, options, new, reused, "
+                              "failed) VALUES (?,?,?,?,?,?,?)",
+                              (started, time.time(), model, json.dumps(options), new, reused,
+                               failed))
+
+
+def _record(r: tuple[Any, ...]) -> dict[str, Any]:
+    did = r[0]
+    return {"path": r[1], "vehicle": r[2], "t": r[3], "status": r[4], "error": r[5],
+            "size": r[6], "result": json.loads(r[7]) if r[7] else None,
+            "sha256": None if did.startswith("path:") else did}

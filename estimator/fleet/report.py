@@ -1,0 +1,190 @@
+"""The fleet report: one static HTML page (inline SVG plots, no server, no script).
+
+``index.html`` holds the vehicles ranked by risk (table ``#vehicles``: vehicles in alert
+first, then those with a forecast limit crossing, soonest first, then by the smallest
+margin above the limit), one section per vehicle with each monitored parameter's drive
+estimates (±2 standard errors), robust trend, nominal value, limit and forecast crossing
+with its 90 % interval, and the failed logs with their reasons (table ``#failed``).
+"""
+from __future__ import annotations
+
+import html
+import math
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, Sequence
+
+from estimator.fleet.analysis import AlertRule, VehicleSummary
+from estimator.fleet.trend import DAY_S
+
+_CSS = """
+body{font-family:system-ui,sans-serif;margin:1.5em;color:#222}
+table{border-collapse:collapse;margin:.5em 0 1.5em}
+th,td{border:1px solid #ccc;padding:3px 8px;text-align:left;font-size:14px}
+th{background:#f0f0f0} tr.alert td{background:#fde2e2} tr.forecast td{background:#fff4d6}
+.plots{display:flex;flex-wrap:wrap;gap:8px} svg{background:#fff;border:1px solid #ddd}
+h2{margin-top:1.6em;border-bottom:1px solid #ccc}
+"""
+
+
+def _date(t: float | None, with_time: bool = False) -> str:
+    if t is None or not math.isfinite(t):
+        return ""
+    fmt = "%Y-%m-%d %H:%M" if with_time else "%Y-%m-%d"
+    try:
+        return datetime.fromtimestamp(t, tz=timezone.utc).strftime(fmt)
+    except (OverflowError, OSError, ValueError):
+        return f"{t:.0f} s"
+
+
+def _num(v: float) -> str:
+    return f"{v:.4g}"
+
+
+def trend_svg(s: VehicleSummary, name: str, width: int = 440, height: int = 210) -> str:
+    """An inline SVG plot of one parameter's history, trend, limit and forecast."""
+    drives = s.drives
+    t = [float(d["t"]) for d in drives]
+    v = [float(d["result"]["params"][name]) for d in drives]
+    se = [d["result"].get("stderr", {}).get(name) for d in drives]
+    se = [float(x) if x is not None and math.isfinite(float(x)) else 0.0 for x in se]
+    tr = s.trends.get(name)
+    fc = s.forecasts.get(name)
+    nominal, limit = s.nominal[name], s.limits[name]
+    t_lo, t_hi = min(t), max(t)
+    if fc is not None:
+        t_hi = max(t_hi, min(fc.crossing_t_high, t_hi + 3 * max(t_hi - t_lo, DAY_S)))
+    if t_hi <= t_lo:
+        t_hi = t_lo + DAY_S
+    ys = [x - 2 * e for x, e in zip(v, se)] + [x + 2 * e for x, e in zip(v, se)] + [nominal, limit]
+    y_lo, y_hi = min(ys), max(ys)
+    pad = 0.08 * (y_hi - y_lo or abs(y_hi) or 1.0)
+    y_lo, y_hi = y_lo - pad, y_hi + pad
+    L, R, T, B = 58, 10, 22, 30
+    W, H = width - L - R, height - T - B
+
+    def X(tt: float) -> float:
+        return L + W * (tt - t_lo) / (t_hi - t_lo)
+
+    def Y(yy: float) -> float:
+        return T + H * (1 - (yy - y_lo) / (y_hi - y_lo))
+
+    out = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
+           f'class="trend" data-vehicle="{html.escape(s.vehicle)}" data-parameter="{name}">',
+           f'<text x="{L}" y="14" font-size="13" font-weight="bold">{html.escape(name)}</text>']
+    for i in range(5):
+        yy = y_lo + (y_hi - y_lo) * i / 4
+        out.append(f'<line x1="{L}" x2="{L + W}" y1="{Y(yy):.1f}" y2="{Y(yy):.1f}" '
+                   'stroke="#eee"/>')
+        out.append(f'<text x="{L - 4}" y="{Y(yy) + 4:.1f}" font-size="10" '
+                   f'text-anchor="end">{_num(yy)}</text>')
+    for i, anchor in enumerate(("start", "middle", "end")):
+        tt = t_lo + (t_hi - t_lo) * i / 2
+        out.append(f'<text x="{X(tt):.1f}" y="{T + H + 16}" font-size="10" '
+                   f'text-anchor="{anchor}">{_date(tt)}</text>')
+    out.append(f'<rect x="{L}" y="{T}" width="{W}" height="{H}" fill="none" stroke="#999"/>')
+    if fc is not None:
+        x1, x2 = X(max(fc.crossing_t_low, t_lo)), X(min(fc.crossing_t_high, t_hi))
+        out.append(f'<rect x="{x1:.1f}" y="{T}" width="{max(x2 - x1, 1):.1f}" height="{H}" '
+                   'fill="#f5a623" fill-opacity="0.25"><title>90 % interval of the limit '
+                   f'crossing: {_date(fc.crossing_t_low)} to {_date(fc.crossing_t_high)}'
+                   '</title></rect>')
+        if t_lo <= fc.crossing_t <= t_hi:
+            out.append(f'<line x1="{X(fc.crossing_t):.1f}" x2="{X(fc.crossing_t):.1f}" y1="{T}" '
+                       f'y2="{T + H}" stroke="#d4880f" stroke-width="1.5"/>')
+    out.append(f'<line x1="{L}" x2="{L + W}" y1="{Y(nominal):.1f}" y2="{Y(nominal):.1f}" '
+               'stroke="#2a7" stroke-dasharray="4 3"><title>nominal</title></line>')
+    out.append(f'<line x1="{L}" x2="{L + W}" y1="{Y(limit):.1f}" y2="{Y(limit):.1f}" '
+               'stroke="#d22" stroke-width="1.5" stroke-dasharray="6 3"><title>limit '
+               f'{_num(limit)}</title></line>')
+    if tr is not None:
+        out.append(f'<line x1="{X(t_lo):.1f}" x2="{X(t_hi):.1f}" y1="{Y(tr.at(t_lo)):.1f}" '
+                   f'y2="{Y(tr.at(t_hi)):.1f}" stroke="#36c" stroke-width="1.5"/>')
+    outliers = set(tr.outliers) if tr is not None else set()
+    for i, (tt, x, e) in enumerate(zip(t, v, se)):
+        if e > 0:
+            out.append(f'<line x1="{X(tt):.1f}" x2="{X(tt):.1f}" y1="{Y(x - 2 * e):.1f}" '
+                       f'y2="{Y(x + 2 * e):.1f}" stroke="#555"/>')
+        fill = "none" if i in outliers else "#222"
+        out.append(f'<circle cx="{X(tt):.1f}" cy="{Y(x):.1f}" r="2.6" fill="{fill}" '
+                   f'stroke="#222"><title>{_date(tt, True)}: {_num(x)}</title></circle>')
+    out.append("</svg>")
+    return "".join(out)
+
+
+def _vehicle_row(s: VehicleSummary) -> str:
+    last = s.latest
+    fc = min(s.forecasts.items(), key=lambda kv: kv[1].crossing_t, default=None)
+    fc_txt = (f"{fc[0]}: {_date(fc[1].crossing_t)} ({_date(fc[1].crossing_t_low)} to "
+              f"{_date(fc[1].crossing_t_high)})" if fc else "")
+    margin = s.margin()
+    cells = [str(s.rank), f'<a href="#v-{html.escape(s.vehicle)}">{html.escape(s.vehicle)}</a>',
+             s.risk, str(len(s.drives)), str(s.failed),
+             ", ".join(a["parameter"] for a in s.alerts), fc_txt,
+             _date(last["t"], True) if last else "",
+             f"{100 * margin:.0f} %" if math.isfinite(margin) else ""]
+    return (f'<tr class="{s.risk.replace(" ", "-")}">' +
+            "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
+
+
+def render(vehicles: Sequence[VehicleSummary], drives: Sequence[dict[str, Any]],
+           rule: AlertRule) -> str:
+    """The report page as HTML text."""
+    failed = [d for d in drives if d["status"] != "ok"]
+    parts = ["<!DOCTYPE html><html><head><meta charset='utf-8'>",
+             "<title>suspid fleet report</title>", f"<style>{_CSS}</style></head><body>",
+             "<h1>Suspension condition of the fleet</h1>",
+             f"<p>{len(vehicles)} vehicles, {len(drives) - len(failed)} drives identified, "
+             f"{len(failed)} failed logs. Limit: {100 * (1 - rule.drop):.0f} % of nominal; "
+             f"alert when the {100 * _conf(rule.z):.0f} % upper bound is below it in "
+             f"{rule.min_count} consecutive drives; forecasts with {100 * rule.level:.0f} % "
+             f"intervals. Generated {_date(time.time(), True)} UTC.</p>",
+             "<h2>Vehicles by risk</h2>", '<table id="vehicles"><thead><tr>',
+             "".join(f"<th>{h}</th>" for h in ("Rank", "Vehicle", "Risk", "Drives", "Failed logs",
+                                               "Alerts", "First forecast crossing (90 %)",
+                                               "Latest drive (UTC)", "Margin to limit")),
+             "</tr></thead><tbody>"]
+    parts += [_vehicle_row(s) for s in vehicles]
+    parts.append("</tbody></table>")
+    for s in vehicles:
+        parts.append(f'<h2 id="v-{html.escape(s.vehicle)}">{s.rank}. {html.escape(s.vehicle)} '
+                     f"({html.escape(s.model)}, {len(s.drives)} drives, {s.risk})</h2>")
+        for a in s.alerts:
+            parts.append(f'<p class="alert-msg"><b>ALERT</b> {html.escape(a["message"])}</p>')
+        if s.monitored:
+            parts.append('<table class="params"><tr><th>Parameter</th><th>Latest</th>'
+                         "<th>Nominal</th><th>Limit</th><th>Trend per day</th>"
+                         "<th>Forecast crossing</th></tr>")
+            for k in s.monitored:
+                tr = s.trends.get(k)
+                fc = s.forecasts.get(k)
+                rate = ("" if tr is None else f"{_num(tr.rate_per_day)}" +
+                        (f" ± {_num(tr.stderr)}" if math.isfinite(tr.stderr) else ""))
+                parts.append(f"<tr><td>{k}</td><td>{_num(s.drives[-1]['result']['params'][k])}</td>"
+                             f"<td>{_num(s.nominal[k])}</td><td>{_num(s.limits[k])}</td>"
+                             f"<td>{rate}</td><td>{_date(fc.crossing_t) if fc else ''}</td></tr>")
+            parts.append("</table><div class='plots'>")
+            parts += [trend_svg(s, k) for k in s.monitored]
+            parts.append("</div>")
+    parts.append('<h2>Failed logs</h2><table id="failed"><thead><tr><th>Log</th><th>Vehicle</th>'
+                 "<th>Reason</th></tr></thead><tbody>")
+    for d in failed:
+        parts.append(f"<tr><td>{html.escape(d['path'])}</td><td>{html.escape(d['vehicle'])}</td>"
+                     f"<td>{html.escape(d.get('error') or '')}</td></tr>")
+    parts.append("</tbody></table></body></html>\n")
+    return "\n".join(parts)
+
+
+def _conf(z: float) -> float:
+    return 0.5 * (1.0 + math.erf(z / math.sqrt(2.0)))
+
+
+def write_report(folder: str | Path, vehicles: Sequence[VehicleSummary],
+                 drives: Sequence[dict[str, Any]], rule: AlertRule) -> Path:
+    """Write ``folder/index.html`` (the folder is created); returns its path."""
+    d = Path(folder)
+    d.mkdir(parents=True, exist_ok=True)
+    p = d / "index.html"
+    p.write_text(render(vehicles, drives, rule), encoding="utf-8")
+    return p

@@ -1,0 +1,309 @@
+"""Running a fleet: discover the logs, identify each drive on Dask, keep the history, summarise.
+
+Execution
+    Each drive is one Dask task (:func:`estimator.fleet.drive.identify_drive`). By default a
+    :class:`distributed.LocalCluster` of worker *processes* (one thread each; ``workers``
+    of them, default this machine's cores) is started for the run and closed after it; with
+    ``scheduler="tcp://HOST:PORT"`` the tasks go to that existing cluster. The workers open
+    the logs by the path the client found them at, so on a cluster of several machines the
+    logs must be at the same path on every machine (a shared file system); see
+    ``docs/fleet.md``. ``workers=0`` runs the drives one after another in this process
+    (debugging, tiny batches).
+"""
+from __future__ import annotations
+
+import logging
+import math
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, TextIO
+
+from distributed import Client, LocalCluster, as_completed
+
+from estimator.decode.listener import DecodeListener
+from estimator.fleet.analysis import AlertRule, VehicleSummary, summarize_fleet
+from estimator.fleet.discover import DriveFile, find_drives
+from estimator.fleet.drive import (CAN_SUFFIXES, IdentifySettings, cached_database, file_digest,
+                                   identify_drive)
+from estimator.fleet.history import History, drive_id
+from estimator.fleet.report import write_report
+from suspid.errors import InputError, UsageError
+
+Progress = Callable[[int, int, int], None]
+
+
+class ProgressBar:
+    """A text progress bar on a stream (stderr): ``[#####.....] 12/40 drives, 1 failed``.
+
+    On a terminal it redraws one line; elsewhere (a log file, CI) it writes a line at each
+    tenth of the work.
+    """
+
+    def __init__(self, stream: TextIO = sys.stderr, width: int = 30) -> None:
+        self.stream = stream
+        self.width = width
+        self.tty = bool(getattr(stream, "isatty", lambda: False)())
+        self.t0 = time.perf_counter()
+        self._last_tenth = -1
+
+    def __call__(self, done: int, total: int, failed: int) -> None:
+        frac = done / total if total else 1.0
+        tenth = int(frac * 10)
+        if not self.tty and tenth == self._last_tenth and done < total:
+            return
+        self._last_tenth = tenth
+        fill = int(round(frac * self.width))
+        dt = time.perf_counter() - self.t0
+        rate = done / dt if dt > 0 else 0.0
+        line = (f"[{'#' * fill}{'.' * (self.width - fill)}] {done}/{total} drives, "
+                f"{failed} failed, {rate:.1f} drives/s")
+        if self.tty:
+            self.stream.write("\r" + line + ("\n" if done >= total else ""))
+        else:
+            self.stream.write(line + "\n")
+        self.stream.flush()
+
+
+@dataclass
+class FleetConfig:
+    """What ``suspid fleet`` was asked to do.
+
+    Attributes
+    ----------
+    inputs : list of str
+        Directories, glob patterns or files (empty: report from ``db`` alone).
+    settings : IdentifySettings or None
+        How each drive is identified (``None`` only for a history-only report).
+    rule : AlertRule
+        Nominal values, alert and forecast settings.
+    scheduler : str or None
+        Address of an existing Dask scheduler (``tcp://HOST:PORT``).
+    workers : int or None
+        Local worker processes (default: CPU count; 0: in this process, no cluster).
+    db : str or None
+        History database (SQLite file).
+    report : str or None
+        Folder for the HTML report.
+    progress : callable or None
+        ``progress(done, total, failed)`` after each drive.
+    """
+
+    inputs: list[str] = field(default_factory=list)
+    settings: IdentifySettings | None = None
+    rule: AlertRule = field(default_factory=AlertRule)
+    scheduler: str | None = None
+    workers: int | None = None
+    db: str | None = None
+    report: str | None = None
+    progress: Progress | None = None
+
+
+@dataclass
+class FleetResult:
+    """Outcome of a fleet run."""
+
+    drives: list[dict[str, Any]]
+    vehicles: list[VehicleSummary]
+    duplicates: list[dict[str, str]] = field(default_factory=list)
+    new: int = 0
+    reused: int = 0
+    report: str | None = None
+    seconds: float = 0.0
+
+    def to_json(self) -> dict[str, Any]:
+        """The contract's object: ``drives``, ``vehicles``, ``failed`` (+ run facts)."""
+        drives = [drive_json(r) for r in self.drives]
+        return {"drives": drives, "vehicles": [v.to_json() for v in self.vehicles],
+                "failed": sum(1 for d in drives if d["status"] != "ok"),
+                "new": self.new, "reused": self.reused, "duplicates": self.duplicates,
+                "report": self.report, "seconds": self.seconds}
+
+
+def drive_json(rec: dict[str, Any]) -> dict[str, Any]:
+    """A drive entry: contract fields first, then the rest of identify's result."""
+    res = rec.get("result") or {}
+    out: dict[str, Any] = {"path": rec["path"], "vehicle": rec["vehicle"], "t": rec.get("t"),
+                           "params": res.get("params"), "stderr": res.get("stderr"),
+                           "status": rec["status"], "error": rec.get("error"),
+                           "sha256": rec.get("sha256")}
+    for k in ("model", "fixed", "cost", "nfev", "success", "rms_residual", "identifiable",
+              "warnings", "frames"):
+        if k in res:
+            out[k] = res[k]
+    return out
+
+
+def check_settings(settings: IdentifySettings, files: list[DriveFile]) -> None:
+    """Fail early (exit 2) on options that would fail every drive: unknown parameters, a
+    DBC that cannot be read, a signal map that does not fit the DBC or the model."""
+    settings.parameters()
+    if any(Path(f.path).suffix.lower() in CAN_SUFFIXES for f in files):
+        DecodeListener(settings.model, cached_database(settings.dbc), settings.signal_map)
+
+
+def execute(jobs: list[tuple[str, str, str | None]], settings: IdentifySettings,
+            scheduler: str | None = None, workers: int | None = None,
+            progress: Progress | None = None) -> list[dict[str, Any]]:
+    """Identify drives ``(path, vehicle, sha256 or None)`` on Dask; records in job order.
+
+    Raises
+    ------
+    UsageError
+        The scheduler cannot be reached, or ``workers`` < 0.
+    """
+    if not jobs:
+        return []
+    total = len(jobs)
+    failed = 0
+    if scheduler is None and workers == 0:
+        out = []
+        for i, (p, v, d) in enumerate(jobs, 1):
+            out.append(identify_drive(p, v, settings, d))
+            failed += out[-1]["status"] != "ok"
+            if progress:
+                progress(i, total, failed)
+        return out
+    if workers is not None and workers < 0:
+        raise UsageError(f"--workers: expected an integer >= 0, got {workers}")
+    cluster = None
+    try:
+        if scheduler is not None:
+            try:
+                client = Client(scheduler)   # timeout: distributed.comm.timeouts.connect
+            except (OSError, TimeoutError, ValueError) as exc:
+                raise UsageError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler "
+                                 f"({' '.join(str(exc).split())})") from None
+        else:
+            n = workers if workers is not None else (os.cpu_count() or 1)
+            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                   dashboard_address=None, silence_logs=logging.ERROR)
+            client = Client(cluster)
+        try:
+            paths, vehicles, digests = (list(x) for x in zip(*jobs))
+            futures = client.map(identify_drive, paths, vehicles, [settings] * total, digests)
+            index = {f.key: i for i, f in enumerate(futures)}
+            out: list[dict[str, Any] | None] = [None] * total
+            done = 0
+            for fut in as_completed(futures):
+                rec = fut.result()
+                out[index[fut.key]] = rec
+                done += 1
+                failed += rec["status"] != "ok"
+                if progress:
+                    progress(done, total, failed)
+            return [r for r in out if r is not None]
+        finally:
+            client.close()
+    finally:
+        if cluster is not None:
+            cluster.close()
+
+
+def run_fleet(config: FleetConfig) -> FleetResult:
+    """Discover, identify, store and summarise a fleet's drives (``suspid fleet``).
+
+    Raises
+    ------
+    UsageError
+        No ``inputs`` and no ``db``; inputs without identify settings; bad options.
+    InputError
+        An input that does not exist, or no drive log found.
+    """
+    t_start = time.time()
+    wall = time.perf_counter()
+    if not config.inputs and config.db is None:
+        raise UsageError("give --input DIR_OR_GLOB... (and --model), or --db PATH to report "
+                         "from the history")
+    files: list[DriveFile] = []
+    if config.inputs:
+        if config.settings is None:
+            raise UsageError("--input needs --model")
+        files = find_drives(config.inputs)
+        if not files:
+            raise InputError(f"--input {' '.join(config.inputs)}: no drive log found (expected "
+                             f"files ending in {', '.join(CAN_SUFFIXES)} or .csv)")
+        check_settings(config.settings, files)
+    history = History(config.db) if config.db is not None else None
+    try:
+        rule = config.rule
+        if history is not None and not config.inputs and not rule.nominal:
+            last = history.last_options()
+            if last and last.get("rule", {}).get("nominal"):
+                rule = AlertRule(**{**rule.to_json(), "nominal": last["rule"]["nominal"]})
+        records: list[dict[str, Any]] = []
+        new = reused = 0
+        settings = config.settings
+        if files and settings is not None:
+            records, new, reused = _identify(files, settings, history, config)
+        records, duplicates = _dedupe(records)
+        if history is not None:
+            if files and settings is not None:
+                history.add(records, settings.model, settings.key())
+                history.add_run(t_start, settings.model,
+                                {"settings": settings.key(), "rule": rule.to_json(),
+                                 "inputs": list(config.inputs)},
+                                new, reused, sum(r["status"] != "ok" for r in records))
+            records = history.drives()
+        records = sort_drives(records)
+        vehicles = summarize_fleet(records, rule)
+        result = FleetResult(records, vehicles, duplicates, new, reused)
+        if config.report is not None:
+            result.report = str(write_report(config.report, result.vehicles, result.drives, rule))
+        result.seconds = time.perf_counter() - wall
+        return result
+    finally:
+        if history is not None:
+            history.close()
+
+
+def _identify(files: list[DriveFile], settings: IdentifySettings, history: History | None,
+              config: FleetConfig) -> tuple[list[dict[str, Any]], int, int]:
+    """Records of ``files`` in order: drives already in the history with the same settings
+    (same content hash) are taken from it, the others identified on Dask.
+
+    Returns
+    -------
+    records : list of dict
+    new, reused : int
+        Drives identified now, and taken from the history.
+    """
+    known = history.known(settings.key()) if history is not None else {}
+    jobs: list[tuple[str, str, str | None]] = []
+    reuse: dict[int, dict[str, Any]] = {}
+    for i, f in enumerate(files):
+        digest = None
+        if history is not None:
+            try:
+                digest = file_digest(f.path)
+            except OSError:
+                digest = None       # the task reports the reason
+        if digest is not None and digest in known and known[digest]["status"] == "ok":
+            reuse[i] = {**known[digest], "path": f.path, "vehicle": f.vehicle}
+        else:
+            jobs.append((f.path, f.vehicle, digest))
+    done = iter(execute(jobs, settings, config.scheduler, config.workers, config.progress))
+    records = [reuse[i] if i in reuse else next(done) for i in range(len(files))]
+    return records, len(jobs), len(reuse)
+
+
+def _dedupe(records: list[dict[str, Any]]) -> tuple[list[dict[str, Any]], list[dict[str, str]]]:
+    """One record per content (the first path in sorted order); the copies listed."""
+    seen: dict[str, str] = {}
+    out, dups = [], []
+    for r in records:
+        key = drive_id(r)
+        if key in seen:
+            dups.append({"path": r["path"], "same_as": seen[key]})
+            continue
+        seen[key] = r["path"]
+        out.append(r)
+    return out, dups
+
+
+def sort_drives(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Records by vehicle, then time (failed ones without a time last), then path."""
+    return sorted(records, key=lambda r: (r["vehicle"], r["t"] if r.get("t") is not None
+                                          else math.inf, r["path"]))

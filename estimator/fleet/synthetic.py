@@ -1,0 +1,158 @@
+"""A synthetic fleet of drive logs with known wear (benchmarks, tests, demonstrations).
+
+Each drive is a ``quarter2`` simulation over an ISO 8608 road (its own seed), with noise on
+the measured accelerations, encoded by the sensor node's encoder
+(:func:`suspid.can.encoder.measurement_frames`, the code behind ``suspid encode``) and
+written as a candump ``-L`` log stamped at the drive's epoch time. A vehicle's damper ``c1``
+(and optionally spring ``k1``) falls linearly with time at the vehicle's wear rate, so the
+true trend and the date it crosses a limit are known.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from cantools.database.can import Database
+
+from suspid.can.dbc import load_dbc
+from suspid.can.encoder import measurement_frames
+from suspid.can.logs import open_log_writer
+from suspid.excitation import make_scenario
+from suspid.io.csvio import Measurement
+from suspid.models import get_model
+from suspid.simulate import simulate
+
+DAY_S = 86400.0
+#: drive start of day 0 (2026-09-01 00:00 UTC)
+EPOCH0 = 1788220800.0
+
+
+@dataclass
+class VehicleWear:
+    """One synthetic vehicle.
+
+    Attributes
+    ----------
+    name : str
+        Folder name (the vehicle id).
+    c1_rate : float
+        Damper loss per day as a fraction of nominal (e.g. 0.005 = 0.5 %/day).
+    k1_rate : float
+        Spring loss per day as a fraction of nominal.
+    """
+
+    name: str
+    c1_rate: float = 0.0
+    k1_rate: float = 0.0
+
+
+@dataclass
+class FleetSpec:
+    """A synthetic fleet.
+
+    Attributes
+    ----------
+    vehicles : list of VehicleWear
+    drives : int
+        Drives in all (spread over the vehicles in turn).
+    days : float
+        The drives are spread evenly over this many days.
+    duration : float
+        Length of a drive (s).
+    fs : float
+        Sample rate (Hz).
+    noise : float
+        Noise on each measured channel, fraction of its standard deviation.
+    params : dict
+        Nominal ``quarter2`` parameters (SI).
+    speed_kmh : float
+        Vehicle speed on the ISO 8608 class C road.
+    fmt : str
+        Log suffix (``.log``, ``.blf``, ``.asc``, ``.csv``...).
+    """
+
+    vehicles: list[VehicleWear]
+    drives: int = 40
+    days: float = 60.0
+    duration: float = 30.0
+    fs: float = 200.0
+    noise: float = 0.02
+    params: dict[str, float] = field(default_factory=lambda: {
+        "m1": 300.0, "c1": 1500.0, "k1": 20000.0, "m2": 40.0, "c2": 300.0, "k2": 200000.0})
+    speed_kmh: float = 50.0
+    fmt: str = ".log"
+
+    def truth(self, vehicle: VehicleWear, t: float) -> dict[str, float]:
+        """True parameters of ``vehicle`` at epoch ``t`` (s)."""
+        days = (t - EPOCH0) / DAY_S
+        p = dict(self.params)
+        p["c1"] *= 1.0 - vehicle.c1_rate * days
+        p["k1"] *= 1.0 - vehicle.k1_rate * days
+        return p
+
+    def crossing_t(self, vehicle: VehicleWear, name: str, drop: float) -> float | None:
+        """Epoch s at which ``name`` truly falls to ``(1 - drop) x nominal``."""
+        rate = {"c1": vehicle.c1_rate, "k1": vehicle.k1_rate}.get(name, 0.0)
+        return EPOCH0 + drop / rate * DAY_S if rate > 0 else None
+
+
+def _candump(path: Path, frames: list) -> None:
+    with open(path, "w", encoding="ascii") as fh:
+        fh.writelines(f"({m.timestamp:.6f}) can0 {m.arbitration_id:03X}#{bytes(m.data).hex().upper()}\n"
+                      for m in frames)
+
+
+def write_drive(path: Path, spec: FleetSpec, vehicle: VehicleWear, t0: float, seed: int,
+                db: Database) -> dict[str, float]:
+    """Simulate, encode and write one drive starting at epoch ``t0``; returns the truth."""
+    model = get_model("quarter2")
+    p = spec.truth(vehicle, t0)
+    t, road, x0 = make_scenario(model, "iso8608", duration=spec.duration, fs=spec.fs, params=p,
+                                v_kmh=spec.speed_kmh, seed=seed)
+    out = simulate(model, p, t, road, x0)
+    rng = np.random.default_rng(seed + 7919)
+    measured = {c: out[c] + rng.standard_normal(t.size) * spec.noise * np.std(out[c])
+                for c in ("x1_ddot", "x2_ddot")}
+    roads = {"r": out["r"], "r_dot": out["r_dot"]}
+    if spec.fmt == ".csv":
+        cols = {**roads, **measured}
+        data = np.column_stack([t + t0, *cols.values()])
+        # %.10g (write_measurement) would round an epoch time to 1 s: t gets 6 decimals
+        np.savetxt(path, data, fmt=["%.6f"] + ["%.10g"] * len(cols), delimiter=",",
+                   header=",".join(["t", *cols]), comments="")
+        return p
+    meas = Measurement(t=t, road=roads, measured=measured)
+    frames = list(measurement_frames(meas, "quarter2", db, t0=t0))
+    if spec.fmt == ".log":
+        _candump(path, frames)
+    else:
+        with open_log_writer(path) as w:
+            for m in frames:
+                w.on_message_received(m)
+    return p
+
+
+def make_fleet(folder: str | Path, spec: FleetSpec) -> list[dict[str, object]]:
+    """Write ``spec.drives`` logs under ``folder/<vehicle>/``; returns each drive's truth.
+
+    Returns
+    -------
+    list of dict
+        ``path``, ``vehicle``, ``t`` (epoch s) and ``params`` (true values) per drive.
+    """
+    root = Path(folder)
+    db = load_dbc(None)
+    out = []
+    nv = len(spec.vehicles)
+    per = max(1, -(-spec.drives // nv))
+    for i in range(spec.drives):
+        v = spec.vehicles[i % nv]
+        k = i // nv
+        t0 = EPOCH0 + spec.days * DAY_S * k / max(per - 1, 1) + 3600.0 * (i % nv)
+        d = root / v.name
+        d.mkdir(parents=True, exist_ok=True)
+        path = d / f"drive-{k:04d}{spec.fmt}"
+        truth = write_drive(path, spec, v, t0, seed=1000 + i, db=db)
+        out.append({"path": str(path), "vehicle": v.name, "t": t0, "params": truth})
+    return out

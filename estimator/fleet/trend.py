@@ -1,0 +1,264 @@
+"""Per-vehicle trends of identified parameters across drives, and limit-crossing forecasts.
+
+Trend (:func:`robust_trend`)
+    A straight line ``v(t) = a + b (t - t_latest)`` through one parameter's drive estimates
+    ``v_i +/- s_i`` (``s_i`` the identifier's standard error), ``b`` in units per day.
+    Drive-to-drive scatter is usually larger than ``s_i`` (roads, loads, temperatures), so
+    each drive is weighted by ``1 / (s_i^2 + tau^2)``, ``tau^2`` the extra scatter estimated
+    from the residuals (a random-effects weight). Outliers first: starting from the
+    Theil--Sen line (median of pairwise slopes), iteratively reweighted least squares with
+    Huber weights (``c = 1.345``) and then Tukey's bisquare (``c = 4.685``, scale from the
+    median absolute deviation) gives a grossly wrong drive (a bad sensor, a mis-mapped log)
+    zero weight, and such drives are left out unless they lie within the bisquare cut of
+    the final fit's own scale: one bad drive does not move the trend. On
+    the rest, ``tau^2`` is estimated by Paule--Mandel (the weighted residual sum of squares
+    equals its expectation ``n - 2``) and the line is the weighted least-squares fit; the
+    slope's standard error is ``sqrt(phi (X'WX)^-1)`` with
+    ``phi = max(1, sum W r^2 / (n - 2))``, never below what the per-drive standard errors
+    allow.
+
+Forecast (:func:`forecast_crossing`)
+    Where a significantly falling trend (``b < 0`` and ``|b| > q se(b)``) meets the limit
+    ``L``: ``t_c = t_latest + (L - a) / b``, and its 90 % interval by Fieller's method --
+    the times at which the two-sided 90 % confidence band of the fitted line contains ``L``
+    (``q`` the Student-t quantile with ``n - 2`` degrees of freedom), so the interval is
+    asymmetric when the slope is uncertain, and no forecast is given when the slope is not
+    distinguishable from zero at that level (the interval would be unbounded).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.stats import t as student_t
+
+DAY_S = 86400.0
+HUBER_C = 1.345
+BISQUARE_C = 4.685
+MAD_TO_SIGMA = 1.4826
+
+
+@dataclass
+class Trend:
+    """A robust straight-line trend of one parameter.
+
+    Attributes
+    ----------
+    rate_per_day : float
+        Slope (parameter units per day).
+    stderr : float
+        Standard error of the slope (units per day); NaN with fewer than 3 drives.
+    value : float
+        The line's value at ``t_ref`` (the latest drive).
+    t_ref : float
+        Epoch s of the latest drive.
+    cov : ndarray, shape (2, 2)
+        Covariance of ``(value, rate_per_day)``.
+    n : int
+        Drives used.
+    outliers : list of int
+        Indices (into the arrays given) of drives the fit gave no weight.
+    tau : float
+        Estimated drive-to-drive scatter beyond the standard errors (parameter units).
+    """
+
+    rate_per_day: float
+    stderr: float
+    value: float
+    t_ref: float
+    cov: np.ndarray
+    n: int
+    outliers: list[int] = field(default_factory=list)
+    tau: float = 0.0
+
+    def at(self, t: float) -> float:
+        """The line's value at epoch ``t`` (s)."""
+        return self.value + self.rate_per_day * (t - self.t_ref) / DAY_S
+
+    def to_json(self) -> dict[str, object]:
+        def f(x: float) -> float | None:
+            return float(x) if math.isfinite(x) else None
+        return {"rate_per_day": f(self.rate_per_day), "stderr": f(self.stderr),
+                "value": f(self.value), "drives": int(self.n), "outliers": len(self.outliers)}
+
+
+@dataclass
+class Forecast:
+    """When a falling trend crosses its limit (epoch s, 90 % interval)."""
+
+    crossing_t: float
+    crossing_t_low: float
+    crossing_t_high: float
+    limit: float
+    level: float = 0.90
+
+    def to_json(self) -> dict[str, float]:
+        return {"crossing_t": self.crossing_t, "crossing_t_low": self.crossing_t_low,
+                "crossing_t_high": self.crossing_t_high, "limit": self.limit}
+
+
+def _wls(x: np.ndarray, v: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    X = np.column_stack([np.ones_like(x), x])
+    XtW = X.T * w
+    M = XtW @ X
+    beta = np.linalg.solve(M, XtW @ v)
+    return beta, M
+
+
+def theil_sen(x: np.ndarray, v: np.ndarray) -> tuple[float, float]:
+    """Theil--Sen line ``(intercept, slope)``: median pairwise slope (pairs with distinct x)."""
+    i, j = np.triu_indices(x.size, 1)
+    dx = x[j] - x[i]
+    ok = dx != 0
+    b = float(np.median((v[j] - v[i])[ok] / dx[ok])) if ok.any() else 0.0
+    return float(np.median(v - b * x)), b
+
+
+def robust_trend(t: np.ndarray, v: np.ndarray, s: np.ndarray | None = None,
+                 iterations: int = 50) -> Trend | None:
+    """Robust weighted straight-line trend of ``v`` over time (see the module docstring).
+
+    Parameters
+    ----------
+    t : ndarray
+        Drive times (epoch s).
+    v : ndarray
+        Estimates (SI).
+    s : ndarray, optional
+        Their standard errors (SI); NaN or missing means unknown (only the scatter counts).
+    iterations : int
+        IRLS iterations per stage (at most).
+
+    Returns
+    -------
+    Trend or None
+        ``None`` with fewer than two drives at distinct times.
+    """
+    t = np.asarray(t, dtype=float)
+    v = np.asarray(v, dtype=float)
+    s = np.full_like(v, np.nan) if s is None else np.asarray(s, dtype=float)
+    idx = np.flatnonzero(np.isfinite(t) & np.isfinite(v))
+    if idx.size < 2:
+        return None
+    t, v, s = t[idx], v[idx], s[idx]
+    s = np.where(np.isfinite(s) & (s >= 0), s, 0.0)
+    t_ref = float(t.max())
+    x = (t - t_ref) / DAY_S
+    if np.ptp(x) == 0:
+        return None
+    n = x.size
+    a, b = theil_sen(x, v)
+    if n == 2:
+        return Trend(b, math.nan, a, t_ref, np.full((2, 2), np.nan), n)
+    floor = (1e-12 * max(float(np.max(np.abs(v))), 1e-300)) ** 2
+    beta = np.array([a, b])
+    h = np.ones(n)
+    tau2 = 0.0
+    var = s * s
+    M = np.eye(2)
+    for c, kind in ((HUBER_C, "huber"), (BISQUARE_C, "bisquare")):
+        for _ in range(iterations):
+            r = v - (beta[0] + beta[1] * x)
+            mad = MAD_TO_SIGMA * float(np.median(np.abs(r - np.median(r))))
+            tau2 = max(0.0, mad * mad - float(np.median(s * s)))
+            var = np.maximum(s * s + tau2, floor)
+            u = np.abs(r) / np.sqrt(var)
+            if kind == "huber":
+                h = np.minimum(1.0, c / np.maximum(u, 1e-300))
+            else:
+                h = np.where(u < c, (1.0 - (u / c) ** 2) ** 2, 0.0)
+            w = h / var
+            if np.count_nonzero(w) < 2 or np.ptp(x[w > 0]) == 0:
+                break
+            new, M = _wls(x, v, w)
+            done = np.allclose(new, beta, rtol=1e-12, atol=0.0)
+            beta = new
+            if done:
+                break
+    keep = h > 0
+    if np.count_nonzero(keep) < 3 or np.ptp(x[keep]) == 0:
+        keep = np.ones(n, dtype=bool)
+    beta, M, tau2 = _random_effects(x[keep], v[keep], s[keep], floor)
+    # the MAD of a few residuals can be small by chance: a rejected drive within the
+    # bisquare cut of the final fit's own scale is readmitted (and the line refitted)
+    for _ in range(3):
+        u = np.abs(v - (beta[0] + beta[1] * x)) / np.sqrt(np.maximum(s * s + tau2, floor))
+        again = keep | (u < BISQUARE_C)
+        if np.array_equal(again, keep):
+            break
+        keep = again
+        beta, M, tau2 = _random_effects(x[keep], v[keep], s[keep], floor)
+    r = v[keep] - (beta[0] + beta[1] * x[keep])
+    w = 1.0 / np.maximum(s[keep] ** 2 + tau2, floor)
+    phi = max(1.0, float(np.sum(w * r * r)) / max(np.count_nonzero(keep) - 2.0, 1.0))
+    cov = phi * np.linalg.inv(M)
+    outliers = [int(idx[i]) for i in np.flatnonzero(~keep)]
+    return Trend(float(beta[1]), float(math.sqrt(max(cov[1, 1], 0.0))), float(beta[0]), t_ref,
+                 cov, int(np.count_nonzero(keep)), outliers, math.sqrt(tau2))
+
+
+def _random_effects(x: np.ndarray, v: np.ndarray, s: np.ndarray, floor: float
+                    ) -> tuple[np.ndarray, np.ndarray, float]:
+    """WLS line with weights ``1 / (s^2 + tau^2)``, ``tau^2`` by Paule--Mandel.
+
+    ``tau^2 >= 0`` is chosen so that the weighted residual sum of squares equals its
+    expectation ``n - 2`` (0 when the standard errors already explain the scatter).
+    """
+    dof = max(x.size - 2.0, 1.0)
+
+    def at(tau2: float) -> tuple[np.ndarray, np.ndarray, float]:
+        w = 1.0 / np.maximum(s * s + tau2, floor)
+        beta, M = _wls(x, v, w)
+        r = v - (beta[0] + beta[1] * x)
+        return beta, M, float(np.sum(w * r * r))
+
+    beta, M, q = at(0.0)
+    if q <= dof:
+        return beta, M, 0.0
+    lo, hi = 0.0, max(float(np.var(v)) * 4.0, float(np.max(s * s)), floor)
+    while at(hi)[2] > dof and hi < 1e300:
+        hi *= 4.0
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        if at(mid)[2] > dof:
+            lo = mid
+        else:
+            hi = mid
+        if hi - lo <= 1e-12 * hi:
+            break
+    beta, M, _ = at(hi)
+    return beta, M, hi
+
+
+def forecast_crossing(trend: Trend | None, limit: float, level: float = 0.90
+                      ) -> Forecast | None:
+    """Date a falling trend crosses ``limit``, with Fieller's ``level`` interval.
+
+    Returns
+    -------
+    Forecast or None
+        ``None`` when the trend is missing, not falling, or its slope is not distinguishable
+        from zero at ``level`` (the interval would be unbounded).
+    """
+    if trend is None or not (trend.n >= 3 and math.isfinite(trend.stderr)):
+        return None
+    a, b = trend.value - limit, trend.rate_per_day
+    if not b < 0:
+        return None
+    q = float(student_t.ppf(0.5 + level / 2.0, max(trend.n - 2, 1)))
+    vaa, vab, vbb = float(trend.cov[0, 0]), float(trend.cov[0, 1]), float(trend.cov[1, 1])
+    A = b * b - q * q * vbb
+    if not A > 0:
+        return None
+    B = 2.0 * (a * b - q * q * vab)
+    C = a * a - q * q * vaa
+    disc = B * B - 4.0 * A * C
+    tc = -a / b
+    if disc < 0:   # rounding only: the point estimate always lies inside
+        lo = hi = tc
+    else:
+        root = math.sqrt(disc)
+        lo, hi = sorted(((-B - root) / (2 * A), (-B + root) / (2 * A)))
+    to_t = lambda d: trend.t_ref + d * DAY_S  # noqa: E731
+    return Forecast(to_t(tc), to_t(lo), to_t(hi), float(limit), level)

@@ -1,0 +1,148 @@
+"""``suspid fleet``: identify every drive log of a fleet on Dask; history, trends, forecasts."""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from datetime import datetime, timezone
+from statistics import NormalDist
+from typing import Any
+
+from suspid.can.options import add_can_arguments, can_inputs
+from suspid.cli._common import (add_model_option, add_param_options, parse_assignments,
+                                positive_int, print_json)
+from suspid.cli.identify import parse_x0
+from suspid.errors import UsageError
+from suspid.models import get_model
+
+
+def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("fleet", help="identify every drive log of a fleet; trends and forecasts",
+                       description="Identify every drive log found (a folder per vehicle; CAN "
+                                   "logs or measurement CSVs) exactly as `suspid identify` "
+                                   "would, on Dask; keep the history in an SQLite file; per "
+                                   "vehicle, robust trends of the free parameters, alerts and "
+                                   "limit-crossing forecasts; an HTML report. See docs/fleet.md.")
+    add_model_option(p, required=False)
+    p.add_argument("--input", nargs="+", action="extend", default=[], metavar="DIR_OR_GLOB",
+                   help="folders (searched recursively), glob patterns or log files; the "
+                        "vehicle is the folder holding each log (quote patterns)")
+    p.add_argument("--dbc", metavar="PATH", default=None,
+                   help="DBC for CAN-log input (default: the bundled dbc/suspension.dbc)")
+    add_can_arguments(p)
+    add_param_options(p)
+    i = p.add_argument_group("identification (as suspid identify)")
+    i.add_argument("--cost", choices=["sse", "frobenius"], default="sse",
+                   help="sse (seed cost 1, default) or frobenius (seed cost 2)")
+    i.add_argument("--x0", default="estimate", metavar="estimate|rest|V1,V2,...",
+                   help="initial state: estimate (default), rest, or [q..., q_dot...]")
+    i.add_argument("--restarts", type=int, default=6, help="Nelder–Mead restarts (default 6)")
+    i.add_argument("--maxfev", type=positive_int, default=None,
+                   help="evaluation budget over all restarts (default 1000 per free parameter)")
+    i.add_argument("--multistart", type=int, default=4, metavar="N",
+                   help="further starts on a suspicious local minimum (default 4)")
+    i.add_argument("--no-polish", dest="polish", action="store_false",
+                   help="pure Nelder–Mead to full tolerance (no Levenberg–Marquardt polish)")
+    a = p.add_argument_group("alerts and forecasts")
+    a.add_argument("--nominal", action="append", default=[], metavar="NAME=VALUE",
+                   help="nominal value of a monitored (free) parameter (SI; default the "
+                        "model's documented default, or the last run's in --db)")
+    a.add_argument("--alert-drop", type=float, default=0.3, metavar="FRACTION",
+                   help="limit (1 - FRACTION) x nominal (default 0.3)")
+    a.add_argument("--confidence", type=float, default=0.99, metavar="P",
+                   help="one-sided confidence of the alert bound (default 0.99, as monitor)")
+    a.add_argument("--alert-drives", type=positive_int, default=2, metavar="N",
+                   help="consecutive drives the drop must hold in before an alert (default 2)")
+    a.add_argument("--horizon", type=float, default=365.0, metavar="DAYS",
+                   help="report limit-crossing forecasts up to this many days after the latest "
+                        "drive (default 365)")
+    r = p.add_argument_group("execution, history, report")
+    r.add_argument("--scheduler", metavar="tcp://HOST:PORT", default=None,
+                   help="run on this existing Dask cluster (the workers must read the logs at "
+                        "the same paths); default: a local cluster")
+    r.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="local Dask worker processes (default: the CPU count; 0: no cluster, "
+                        "in this process)")
+    r.add_argument("--db", metavar="PATH", default=None,
+                   help="SQLite history of the drives, appended across runs (a log seen "
+                        "again is one drive); without --input, report from it alone")
+    r.add_argument("--report", metavar="DIR", default=None,
+                   help="write DIR/index.html: vehicles by risk, trend plots, failed logs")
+    r.add_argument("--no-progress", dest="progress", action="store_false",
+                   help="no progress bar on stderr")
+    p.add_argument("--json", action="store_true", help="print the result as one JSON object")
+    return p
+
+
+def run(args: argparse.Namespace) -> int:
+    from estimator.fleet import (AlertRule, FleetConfig, IdentifySettings, ProgressBar,
+                                 run_fleet)
+
+    settings = None
+    if args.input:
+        if args.model is None:
+            raise UsageError("--input needs --model (quarter1, quarter2, half4, ...)")
+        model = get_model(args.model)
+        for opt in ("restarts", "multistart"):
+            if getattr(args, opt) < 0:
+                raise UsageError(f"--{opt}: expected >= 0, got {getattr(args, opt)}")
+        x0 = parse_x0(args.x0, model.n_states)
+        dbc, smap = can_inputs(args)
+        settings = IdentifySettings(
+            model=model.name, fix=parse_assignments(args.fix, "--fix"),
+            init=parse_assignments(args.init, "--init"), cost=args.cost,
+            x0=x0 if isinstance(x0, str) else tuple(float(v) for v in x0),
+            restarts=args.restarts, maxfev=args.maxfev, multistart=args.multistart,
+            polish=args.polish, dbc=str(dbc) if dbc is not None else None, signal_map=smap)
+    elif args.db is None:
+        raise UsageError("give --input DIR_OR_GLOB... with --model, or --db PATH to report from "
+                         "the history")
+    if not 0.5 < args.confidence < 1:
+        raise UsageError(f"--confidence: expected a probability in (0.5, 1), got {args.confidence}")
+    if not 0 < args.alert_drop < 1:
+        raise UsageError(f"--alert-drop: expected a fraction in (0, 1), got {args.alert_drop}")
+    if not args.horizon > 0:
+        raise UsageError(f"--horizon: expected a number of days > 0, got {args.horizon}")
+    nominal = parse_assignments(args.nominal, "--nominal")
+    if args.model is not None:
+        for k in nominal:
+            get_model(args.model).spec(k)
+    rule = AlertRule(nominal=nominal, drop=args.alert_drop,
+                     z=float(NormalDist().inv_cdf(args.confidence)), min_count=args.alert_drives,
+                     horizon_days=args.horizon)
+    result = run_fleet(FleetConfig(inputs=list(args.input), settings=settings, rule=rule,
+                                   scheduler=args.scheduler, workers=args.workers, db=args.db,
+                                   report=args.report,
+                                   progress=ProgressBar(sys.stderr) if args.progress else None))
+    out = result.to_json()
+    if args.json:
+        print_json(out)
+        return 0
+    _print_table(out)
+    return 0
+
+
+def _date(t: Any) -> str:
+    if t is None or not math.isfinite(t):
+        return "-"
+    return datetime.fromtimestamp(t, tz=timezone.utc).strftime("%Y-%m-%d")
+
+
+def _print_table(out: dict[str, Any]) -> None:
+    w = sys.stdout.write
+    ok = sum(1 for d in out["drives"] if d["status"] == "ok")
+    w(f"{len(out['vehicles'])} vehicles, {ok} drives identified, {out['failed']} failed "
+      f"({out['new']} new, {out['reused']} from the history) in {out['seconds']:.1f} s\n")
+    w(f"{'rank':>4}  {'vehicle':<16} {'risk':<9} {'drives':>6}  alerts / forecasts\n")
+    for v in out["vehicles"]:
+        notes = [f"ALERT {k}" for k in v["alerts"]]
+        notes += [f"{k} reaches {f['limit']:.4g} on {_date(f['crossing_t'])} "
+                  f"({_date(f['crossing_t_low'])} to {_date(f['crossing_t_high'])})"
+                  for k, f in v["forecast"].items()]
+        w(f"{v['rank']:>4}  {v['vehicle']:<16} {v['risk']:<9} {v['drives']:>6}  "
+          f"{'; '.join(notes)}\n")
+    for d in out["drives"]:
+        if d["status"] != "ok":
+            w(f"failed: {d['error']}\n")
+    if out.get("report"):
+        w(f"report: {out['report']}\n")

@@ -1,0 +1,135 @@
+"""7-DOF full car: body heave, pitch and roll over four wheels.
+
+Coordinates ``q = [x, delta, phi, x1, x2, x3, x4]``: body heave at the centre of mass (m),
+pitch (rad, the ``half4`` sign: the body at the front axle moves by ``x - a1 delta``, at the
+rear by ``x + a2 delta``), roll (rad, positive when the left side rises: a corner at lateral
+position ``y`` moves by an extra ``y phi``) and the wheels at the corners 1 front-left,
+2 front-right, 3 rear-left, 4 rear-right (m).
+
+Corner ``i`` sits at longitudinal position ``l_i`` (front ``-a1``, rear ``+a2``) and lateral
+position ``y_i`` (left ``+w/2``, right ``-w/2``; ``w1`` front, ``w2`` rear track), so its body
+point moves by ``z_i = x + l_i delta + y_i phi`` and its strut extends by
+``d_i = z_i - x_i``. The strut (spring ``ki``, damper ``ci``) acts along ``d_i``; the
+wheel ``mi`` stands on the tyre spring ``kti`` over road ``ri``::
+
+    M q'' + sum_i ci g_i g_i^T q' + (sum_i ki g_i g_i^T + diag(kt)) q = Fk r
+    g_i = e_x + l_i e_delta + y_i e_phi - e_xi,   M = diag(m, Iy, Ix, m1, m2, m3, m4)
+
+Roads: ``r1``/``r3`` run on the left track, ``r2``/``r4`` on the right; the rear tyres see
+their track ``a1 + a2`` metres after the front ones. The centre of mass is taken at
+mid-track, so each front corner carries ``m a2 / (2 (a1 + a2))`` of the body's weight and
+each rear corner ``m a1 / (2 (a1 + a2))``.
+
+With equal left and right parameters and roads the roll stays zero and heave and pitch
+equal a ``half4`` whose corner parameters are the sums of the two corners (tested).
+"""
+from __future__ import annotations
+
+from typing import Mapping
+
+import numpy as np
+
+from suspid.models.base import GRAVITY, FloatArray, Matrices, ParamSpec, Site, SuspensionModel
+
+#: corner labels in coordinate order
+CORNERS = ("front-left", "front-right", "rear-left", "rear-right")
+
+
+class Full7(SuspensionModel):
+    """Full car: heave, pitch and roll of the body over four wheels."""
+
+    sensor_set = 3
+    alert_id = 3
+    known = ("m", "Ix", "Iy", "m1", "m2", "m3", "m4", "a1", "a2", "w1", "w2")
+
+    def __init__(self) -> None:
+        corner = [("front-left", 1900.0, 28000.0), ("front-right", 1900.0, 28000.0),
+                  ("rear-left", 1600.0, 24000.0), ("rear-right", 1600.0, 24000.0)]
+        params = [ParamSpec("m", "kg", 1400.0, "mass", "body (sprung) mass"),
+                  ParamSpec("Ix", "kg m^2", 450.0, "inertia", "body roll moment of inertia"),
+                  ParamSpec("Iy", "kg m^2", 2000.0, "inertia", "body pitch moment of inertia")]
+        params += [ParamSpec(f"m{i}", "kg", 40.0, "mass", f"{c} unsprung mass")
+                   for i, (c, _, _) in enumerate(corner, 1)]
+        params += [ParamSpec(f"c{i}", "N s/m", cv, "damping", f"{c} suspension damping")
+                   for i, (c, cv, _) in enumerate(corner, 1)]
+        params += [ParamSpec(f"k{i}", "N/m", kv, "stiffness", f"{c} suspension stiffness")
+                   for i, (c, _, kv) in enumerate(corner, 1)]
+        params += [ParamSpec(f"kt{i}", "N/m", 200000.0, "stiffness", f"{c} tyre stiffness")
+                   for i, (c, _, _) in enumerate(corner, 1)]
+        params += [ParamSpec("a1", "m", 1.2, "length", "centre of mass to front axle"),
+                   ParamSpec("a2", "m", 1.4, "length", "centre of mass to rear axle"),
+                   ParamSpec("w1", "m", 1.55, "length", "front track width"),
+                   ParamSpec("w2", "m", 1.55, "length", "rear track width")]
+        super().__init__(
+            name="full7",
+            coords=("x", "delta", "phi", "x1", "x2", "x3", "x4"),
+            roads=("r1", "r2", "r3", "r4"),
+            params=tuple(params),
+            scale_invariant=tuple(s.name for s in params if s.kind != "length"),
+        )
+
+    def corner_geometry(self, p: Mapping[str, float]) -> tuple[FloatArray, FloatArray]:
+        """Longitudinal ``l_i`` and lateral ``y_i`` positions (m) of the four corners."""
+        a1, a2, w1, w2 = p["a1"], p["a2"], p["w1"], p["w2"]
+        lon = np.array([-a1, -a1, a2, a2])
+        lat = np.array([w1 / 2, -w1 / 2, w2 / 2, -w2 / 2])
+        return lon, lat
+
+    def strut_directions(self, p: Mapping[str, float]) -> FloatArray:
+        """Rows ``g_i`` (4, 7): strut extension ``d_i = g_i . q`` per corner."""
+        lon, lat = self.corner_geometry(p)
+        G = np.zeros((4, 7))
+        G[:, 0] = 1.0
+        G[:, 1] = lon
+        G[:, 2] = lat
+        G[:, 3:] = -np.eye(4)
+        return G
+
+    def matrices(self, p: Mapping[str, float]) -> Matrices:
+        G = self.strut_directions(p)
+        c = np.array([p[f"c{i}"] for i in range(1, 5)])
+        k = np.array([p[f"k{i}"] for i in range(1, 5)])
+        kt = np.array([p[f"kt{i}"] for i in range(1, 5)])
+        C = G.T @ (c[:, None] * G)
+        K = G.T @ (k[:, None] * G)
+        K[3:, 3:] += np.diag(kt)
+        M = np.diag([p["m"], p["Iy"], p["Ix"], p["m1"], p["m2"], p["m3"], p["m4"]])
+        Fk = np.zeros((7, 4))
+        Fk[3:, :] = np.diag(kt)
+        Fc = np.zeros((7, 4))
+        return M, C, K, Fk, Fc
+
+    def initial_state(self) -> FloatArray:
+        """Body released from x = 0.05 m, delta = 0.05 rad, phi = 0.03 rad, rates 0.05 /s."""
+        x0 = np.zeros(14)
+        x0[[0, 1, 2]] = [0.05, 0.05, 0.03]
+        x0[[7, 8, 9]] = [0.05, 0.05, 0.05]
+        return x0
+
+    def road_tracks(self) -> tuple[int, ...]:
+        """``r1``, ``r3`` on the left track (0); ``r2``, ``r4`` on the right (1)."""
+        return (0, 1, 0, 1)
+
+    def road_lags(self, p: Mapping[str, float]) -> tuple[float, ...]:
+        """The rear tyres run the wheelbase ``a1 + a2`` (m) behind the front ones."""
+        L = p["a1"] + p["a2"]
+        return (0.0, 0.0, L, L)
+
+    def strut_sites(self, p: Mapping[str, float]) -> list[Site]:
+        G = self.strut_directions(p)
+        return [Site(f"{name} strut", "strut", G[i], np.zeros(4), -G[i], f"c{i + 1}", f"k{i + 1}")
+                for i, name in enumerate(CORNERS)]
+
+    def tyre_sites(self, p: Mapping[str, float]) -> list[Site]:
+        """Four tyres; static corner loads with the centre of mass at mid-track (N)."""
+        a1, a2, m = p["a1"], p["a2"], p["m"]
+        body = [m * a2 / (2 * (a1 + a2))] * 2 + [m * a1 / (2 * (a1 + a2))] * 2
+        out = []
+        for i, name in enumerate(CORNERS):
+            g = np.zeros(7)
+            g[3 + i] = -1.0
+            gr = np.zeros(4)
+            gr[i] = 1.0
+            out.append(Site(f"{name} tyre", "tyre", g, gr, -g, None, f"kt{i + 1}",
+                            (body[i] + p[f"m{i + 1}"]) * GRAVITY))
+        return out
