@@ -28,7 +28,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from statistics import NormalDist
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Literal, Mapping
 
 import numpy as np
 
@@ -363,7 +363,7 @@ class Source:
     bitrate: int | None = None
     dbc: Path | None = None
     signal_map: Any = None
-    time_source: str | None = None
+    time_source: Literal["timestamp", "tick"] | None = None
     duration: float | None = None
     idle_timeout: float | None = 5.0
     alert_frames: bool = True
@@ -430,7 +430,8 @@ def run_source(source: Source, spec: MonitorSpec, mon: StreamMonitor,
                 pass
 
 
-def _listener(source: Source, spec: MonitorSpec, time_source: str) -> DecodeListener:
+def _listener(source: Source, spec: MonitorSpec,
+              time_source: Literal["timestamp", "tick"]) -> DecodeListener:
     """The CAN layer's DecodeListener with a bounded buffer sized for the windows."""
     cfg = spec.config
     # rows per message: window + step at up to 2 kHz, power of two

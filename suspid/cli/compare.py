@@ -81,7 +81,8 @@ def run(args: argparse.Namespace) -> int:
                              f"{args.fs}")
         s = damper_wear(model, duration=args.duration, fs=args.fs, seed=args.seed,
                         c_end_fraction=args.wear_to)
-        t, data, truth = s.t, s.data, s.truth
+        t, data = s.t, s.data
+        truth: dict[str, Any] | None = dict(s.truth)
         base = dict(s.nominal)
         if not fix:
             fix = {k: base[k] for k in ("m1", "m2", "c2", "k2") if k in base}

@@ -114,3 +114,33 @@ def test_half4_held_mass_is_reported(half4_wear_stream, tmp_path) -> None:
     est = [json.loads(l) for l in r.stdout.splitlines() if '"estimate"' in l]
     assert est and all("m1" in d["held"] and "mass" in d["held"]["m1"] for d in est)
     assert "m1" not in est[0]["stderr"] and "c1" in est[0]["stderr"]
+
+
+def test_full7_monitor_and_fair_ekf_on_a_stable_car(tmp_path) -> None:
+    """The full car: both estimators run on the same stream, estimate the same twelve dampers,
+    springs and tyres, stay near the truth and neither alerts nor forecasts."""
+    csv = tmp_path / "f7.csv"
+    sim = subprocess.run([sys.executable, "-m", "suspid", "simulate", "--model", "full7",
+                          "--scenario", "iso8608", "--duration", "12", "--fs", "250", "--noise",
+                          "0.01", "--seed", "2", "--out", str(csv)],
+                         capture_output=True, text=True, timeout=300)
+    assert sim.returncode == 0, sim.stderr
+    truth = get_model("full7").defaults()
+    known = ("m", "Ix", "Iy", "m1", "m2", "m3", "m4", "a1", "a2", "w1", "w2")
+    fix = [a for k in known for a in ("--fix", f"{k}={truth[k]}")]
+    outs = {}
+    for side in ("nm", "ekf"):
+        extra = ["--baseline", "ekf"] if side == "ekf" else []
+        r = subprocess.run([sys.executable, "-m", "suspid", "monitor", "--model", "full7",
+                            "--input", str(csv), *fix, *extra, "--jsonl", "--no-inspection"],
+                           capture_output=True, text=True, timeout=600)
+        assert r.returncode == 0, r.stderr
+        outs[side] = [json.loads(l) for l in r.stdout.splitlines()]
+    free = {k for k in truth if k not in known}
+    for side, out in outs.items():
+        est = [d for d in out if d["type"] == "estimate"]
+        assert len(est) >= 4 and set(est[-1]["stderr"]) == free, side
+        for k in free:
+            assert est[-1]["params"][k] == pytest.approx(truth[k], rel=0.03), (side, k)
+        assert not [d for d in out if d["type"] in ("alert", "forecast")], side
+    assert outs["ekf"][-1]["held"] == {} and len(outs["ekf"][-1]["augmented"]) == 12
