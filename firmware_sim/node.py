@@ -40,6 +40,7 @@ from suspid.can.dbc import ALERT_MESSAGE, load_dbc
 from suspid.errors import UsageError
 from suspid.models import get_model
 from suspid.models.base import ForceFn, SuspensionModel
+from suspid.effects import Effect
 
 #: default sensor noise standard deviation (SI) by derivative order: position, velocity, acceleration
 DEFAULT_NOISE = {0: 2e-5, 1: 1e-3, 2: 0.02}
@@ -181,14 +182,14 @@ class SensorNode:
     extra_forces : sequence of callables, optional
         Extra generalised forces ``f(t, x, u, params)`` added to the plant (issue-6 hook).
     effects : sequence, optional
-        Undeclared effects of :mod:`suspid.models.effects` (e.g. ``"coulomb_friction:F=120"``)
+        Undeclared effects of :mod:`suspid.effects` (e.g. ``"coulomb_friction:F=120"``)
         injected into the plant and the sensors without telling the estimator.
     """
 
     def __init__(self, config: NodeConfig, dbc: str | Path | Database | None = None,
                  model: SuspensionModel | None = None,
                  extra_forces: Sequence[ForceFn] | None = None,
-                 effects: Sequence[object] | None = None) -> None:
+                 effects: Sequence[Effect | str | Mapping[str, object]] | None = None) -> None:
         self.config = config
         self.db = dbc if isinstance(dbc, Database) else load_dbc(dbc)
         self.model = model if model is not None else get_model(config.model)

@@ -23,7 +23,7 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from suspid.models.base import FloatArray, ForceFn, SuspensionModel
-from suspid.models.effects import inject
+from suspid.effects import Effect, Injection, inject
 from suspid.simulate import simulate
 
 ParamsFn = Callable[[float], Mapping[str, float]]
@@ -48,7 +48,7 @@ class Plant:
     extra_forces : sequence of callables, optional
         Added to the model's ``extra_force`` (on a copy of the model).
     effects : sequence, optional
-        Undeclared effects from :mod:`suspid.models.effects` (objects, ``"NAME:k=v"``
+        Undeclared effects from :mod:`suspid.effects` (objects, ``"NAME:k=v"``
         strings or ``{"name", "params"}`` dicts). Physical ones go into the plant's
         right-hand side (fast exponential integrator of :mod:`estimator.diagnose.nlsim`),
         sensor ones (delay, offset) into what the sensors report; the sensor effects see
@@ -64,9 +64,10 @@ class Plant:
                  t: FloatArray, road: Mapping[str, FloatArray] | None = None,
                  x0: FloatArray | None = None, chunk_s: float = 1.0,
                  extra_forces: Sequence[ForceFn] | None = None,
-                 effects: Sequence[object] | None = None) -> None:
-        self._physical = None
-        self._sensor = None
+                 effects: Sequence[Effect | str | Mapping[str, object]] | None = None) -> None:
+        self._physical: Injection | None = None
+        self._sensor: Injection | None = None
+        self._true_last: dict[str, FloatArray] | None = None
         self._prev: tuple[FloatArray, dict[str, FloatArray]] | None = None
         if effects:
             inj = inject(model, effects)  # validates names, parameters and channels
@@ -78,7 +79,11 @@ class Plant:
             model = copy.copy(model)
             model.extra_force = list(model.extra_force) + list(extra_forces)
         self.model = model
-        self._params: ParamsFn = params if callable(params) else (lambda _t, p=dict(params): p)
+        if callable(params):
+            self._params: ParamsFn = params
+        else:
+            fixed = dict(params)
+            self._params = lambda _t: fixed
         self.t = np.asarray(t, dtype=float)
         #: the forward model's affine pieces in the dampers and springs (one set per plant)
         self.affine = model.affine(self._params(float(self.t[0]) if self.t.size else 0.0))
@@ -114,7 +119,7 @@ class Plant:
             out = self._measure(tt, out)
         nq = len(self.model.coords)
         last = len(tt) - 1
-        true = getattr(self, "_true_last", None)
+        true = self._true_last
         src = true if true is not None else out
         self.x = np.array([src[c][last] for c in self.model.coords]
                           + [src[f"{c}_dot"][last] for c in self.model.coords][:nq])

@@ -95,7 +95,8 @@ def build_scenario(model: SuspensionModel, name: str, duration: float | None = N
     wear_to : float
         Damper wear: damping at the end of the run as a fraction of nominal (0 < f <= 1).
     damper : str, optional
-        Damper parameter that wears (default ``c1``; ``c`` for quarter1).
+        Damper parameter that wears (default the model's first strut damper: ``c1``;
+        ``c`` for quarter1).
     """
     n = canonical_name(name)
     dur = DEFAULT_DURATION[n] if duration is None else float(duration)
@@ -109,13 +110,16 @@ def build_scenario(model: SuspensionModel, name: str, duration: float | None = N
                              f"{model.name}; expected {', '.join(nominal)}")
         nominal.update(params)
     core = {"random": "iso8608", "damper-wear": "iso8608"}.get(n, n)
-    kw = {"road_class": "C", "v_kmh": 50.0} if core == "iso8608" else {}
-    t, road, x0 = make_scenario(model, core, duration=dur, fs=fs, params=nominal, seed=seed, **kw)
+    if core == "iso8608":
+        t, road, x0 = make_scenario(model, core, duration=dur, fs=fs, params=nominal, seed=seed,
+                                    road_class="C", v_kmh=50.0)
+    else:
+        t, road, x0 = make_scenario(model, core, duration=dur, fs=fs, params=nominal, seed=seed)
     events: dict[str, float] = {}
     if n != "damper-wear":
         fixed = dict(nominal)
         return ScenarioSetup(n, t, road, x0, lambda _t: fixed, nominal, events)
-    dname = damper or ("c" if "c" in nominal and "c1" not in nominal else "c1")
+    dname = damper or next((s.c_name for s in model.strut_sites(nominal) if s.c_name), "c1")
     if dname not in nominal:
         raise UsageError(f"damper parameter {dname!r} not in model {model.name}")
     if not 0 < wear_to <= 1:

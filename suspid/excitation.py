@@ -84,7 +84,7 @@ def iso8608_road(length: float, road_class: str = "C", seed: int = 0,
     rng = np.random.default_rng(seed)
     amp = np.sqrt(2 * G * dn)
     spec = amp * np.exp(1j * rng.uniform(0, 2 * np.pi, n.size)) * n_pts / 2
-    z = np.fft.irfft(spec, n_pts)
+    z = np.asarray(np.fft.irfft(spec, n_pts), dtype=np.float64)
     return np.arange(n_pts) * ds, z - z[0]
 
 

@@ -2,7 +2,7 @@
 
 The augmented model is ``x' = A x + B u + B_f Q(x, u)`` with the linear part of
 :mod:`suspid.models` and ``Q = sum_sites b * phi(s, s')`` of the physical effects
-(:mod:`suspid.models.effects`; any object with ``sites(model, p)`` and ``law(site, p)``,
+(:mod:`suspid.effects`; any object with ``sites(model, p)`` and ``law(site, p)``,
 :class:`ForceTerm`, will do). As in :func:`suspid.simulate.simulate`, the road-velocity
 input is absorbed by ``z = x - B_v r`` and the road is a first-order hold. Each effect force
 ``phi`` is a scalar per site, also interpolated linearly over the step (ETD2 /
@@ -20,14 +20,14 @@ Accuracy against :func:`suspid.simulate.simulate_ode` is checked in
 friction ramp or bump stop) relative to the sample interval.
 
 This module is part of the base layer (next to :mod:`suspid.simulate`): the effect library
-simulates injected effects with it (:meth:`suspid.models.effects.Injection.simulate`) and
+simulates injected effects with it (:meth:`suspid.effects.Injection.simulate`) and
 the diagnosis refits them with it; it knows sites and force laws, not the effect classes.
 """
 from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
-from typing import Callable, Mapping, Protocol, Sequence
+from typing import Any, Callable, Mapping, Protocol, Sequence
 
 import numpy as np
 from scipy.linalg import expm
@@ -41,7 +41,7 @@ Law = Callable[[float, float], float]
 
 
 class SiteLike(Protocol):
-    """Where a force acts (:class:`suspid.models.effects.Site`): coordinate ``s = g . q + gr . r``,
+    """Where a force acts (:class:`suspid.effects.Site`): coordinate ``s = g . q + gr . r``,
     generalised force ``Q = b * phi``."""
 
     g: FloatArray
@@ -50,13 +50,13 @@ class SiteLike(Protocol):
 
 
 class ForceTerm(Protocol):
-    """A physical effect as the simulator sees it (:class:`suspid.models.effects.PhysicalEffect`)."""
+    """A physical effect as the simulator sees it (:class:`suspid.effects.PhysicalEffect`)."""
 
-    def sites(self, model: SuspensionModel, p: Mapping[str, float]) -> Sequence[SiteLike]:
-        """Sites of ``model`` where the force acts."""
+    def sites(self, model: SuspensionModel, p: Mapping[str, float]) -> Sequence[Any]:
+        """Sites of ``model`` where the force acts (:class:`SiteLike` objects)."""
         ...
 
-    def law(self, site: SiteLike, base: Mapping[str, float]) -> Law:
+    def law(self, site: Any, base: Mapping[str, float]) -> Law:
         """Scalar force law at ``site`` for base parameters ``base``."""
         ...
 
@@ -74,10 +74,10 @@ def _kernel(n: int, nq: int, S: int) -> Callable:
     a("def kernel(P, D, F, F1, AP, AV, CP, CV, laws, z, N):")
     a("    " + ", ".join(f"p{i}_{j}" for i in range(n) for j in range(n)) + ", = P")
     for s in range(S):
-        a(f"    " + ", ".join(f"f{s}_{i}" for i in range(n)) + f", = F[{s}]")
-        a(f"    " + ", ".join(f"g{s}_{i}" for i in range(n)) + f", = F1[{s}]")
-        a(f"    " + ", ".join(f"ap{s}_{i}" for i in range(nq)) + f", = AP[{s}]")
-        a(f"    " + ", ".join(f"av{s}_{i}" for i in range(nq)) + f", = AV[{s}]")
+        a("    " + ", ".join(f"f{s}_{i}" for i in range(n)) + f", = F[{s}]")
+        a("    " + ", ".join(f"g{s}_{i}" for i in range(n)) + f", = F1[{s}]")
+        a("    " + ", ".join(f"ap{s}_{i}" for i in range(nq)) + f", = AP[{s}]")
+        a("    " + ", ".join(f"av{s}_{i}" for i in range(nq)) + f", = AV[{s}]")
         a(f"    cp{s} = CP[{s}]; cv{s} = CV[{s}]; law{s} = laws[{s}]")
     a("    " + ", ".join(f"z{i}" for i in range(n)) + ", = z")
     a(f"    Z = [0.0] * (N * {n})")

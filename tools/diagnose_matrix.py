@@ -5,12 +5,15 @@ effect injected (1.6 s at 200 Hz, 0.5 % white noise on every channel; the same r
 cases as ``tests/diagnose/``) is diagnosed with the masses (and the half car's geometry)
 known and every stiffness and damping started at 0.7 x the truth. Plus, per model, a record
 without effect, one with a 9 Hz body shake no library effect explains and, for the half
-car, effects in one strut only and asymmetric dampers in both struts (not identifiable).
+car, effects in one strut only and asymmetric dampers in both struts (not identifiable);
+for the full car (masses, inertias and geometry known: the model's ``known`` set) a
+sample of effects on four struts / tyres, one corner, and none.
 
 Usage::
 
     python tools/diagnose_matrix.py                       # quarter1 and half4, Markdown
     python tools/diagnose_matrix.py --model quarter2      # the seed's quarter car
+    python tools/diagnose_matrix.py --model full7         # the 7-DOF full car
     python tools/diagnose_matrix.py --json                # one JSON object per case
 
 Columns: injected effect; road; what diagnose selected (``none`` with the verdict's
@@ -36,7 +39,7 @@ from estimator.diagnose.corners import SiteRestricted
 from estimator.diagnose.synthetic import synthetic_record
 from estimator.identify import Parameters
 from suspid.models import get_model
-from suspid.models.effects import Effect, PhysicalEffect, parse_effect
+from suspid.effects import Effect, PhysicalEffect, parse_effect
 
 #: the seed's Table 1 quarter car (SI)
 TABLE1 = dict(m1=275.0, k1=150000.0, c1=1120.0, m2=27.0, k2=310000.0, c2=3100.0)
@@ -45,11 +48,16 @@ TRUTH: dict[str, dict[str, float]] = {
     "quarter2": TABLE1,
     "half4": dict(get_model("half4").defaults(), c1=1800.0, c2=2400.0, k1=28000.0, k2=35000.0,
                   k3=220000.0, k4=190000.0),
+    # every corner different, so a mix-up of corners shows
+    "full7": dict(get_model("full7").defaults(), c1=1800.0, c2=2000.0, c3=1500.0, c4=1700.0,
+                  k1=27000.0, k2=29000.0, kt1=210000.0, kt4=190000.0),
 }
-FIXED = {"quarter1": ("m",), "quarter2": ("m1", "m2"), "half4": ("m", "I", "m1", "m2", "a1", "a2")}
+FIXED = {"quarter1": ("m",), "quarter2": ("m1", "m2"), "half4": ("m", "I", "m1", "m2", "a1", "a2"),
+         "full7": tuple(get_model("full7").known)}
 FREE = {"quarter1": ("c", "k"), "quarter2": ("c1", "k1", "c2", "k2"),
-        "half4": ("c1", "c2", "k1", "k2", "k3", "k4")}
-BODY = {"quarter1": "x", "quarter2": "x1", "half4": "x"}
+        "half4": ("c1", "c2", "k1", "k2", "k3", "k4"),
+        "full7": tuple(k for k in get_model("full7").param_names if k not in FIXED["full7"])}
+BODY = {"quarter1": "x", "quarter2": "x1", "half4": "x", "full7": "x"}
 
 
 def _in(strut: str, spec: str) -> Effect:
@@ -63,7 +71,7 @@ def _shake(model: str) -> Any:
     def f(t: float, x: np.ndarray, u: np.ndarray, p: Any) -> np.ndarray:
         out = np.zeros(len(get_model(model).coords))
         out[0] = (150.0 if model == "quarter1" else 300.0) * math.sin(2 * math.pi * 9.0 * t)
-        if model == "half4":
+        if len(out) > 1:   # pitch of a half or full car
             out[1] = 150.0 * math.sin(2 * math.pi * 7.0 * t)
         return out
     return f
@@ -116,6 +124,20 @@ CASES: dict[str, list[tuple[str, list[Any], str, dict[str, Any], Any]]] = {
         ("none", [], "bump", {}, None),
         ("none", [], "curb", {}, None),
         ("9 Hz heave + 7 Hz pitch shake", [], "bump", {}, _shake("half4")),
+    ],
+    "full7": [(s, [s], sc, o, None) for s, sc, o in [
+        ("coulomb_friction:F=150", "bump", {}),
+        ("quadratic_damping:c_quad=2500", "iso8608", {"v_kmh": 50}),
+        ("progressive_spring:k_cubic=5e6", "iso8608", {"v_kmh": 60, "road_class": "D"}),
+        ("bump_stop:gap=0.02,k_stop=200000", "bump", {}),
+        ("tire_liftoff", "curb", {"h": -0.1}),
+        ("sensor_delay:channels=x3+x3_dot,delay_s=0.01", "iso8608", {"v_kmh": 50}),
+        ("sensor_offset:channel=phi,offset=0.002", "iso8608", {"v_kmh": 50}),
+    ]] + [
+        ("front-left strut: coulomb_friction:F=200",
+         [_in("front-left strut", "coulomb_friction:F=200")], "iso8608", {"v_kmh": 50}, None),
+        ("none", [], "iso8608", {"v_kmh": 50}, None),
+        ("none", [], "bump", {}, None),
     ],
     "quarter2": [(s, [s], sc, o, None) for s, sc, o in [
         ("coulomb_friction:F=80", "bump", {}),
@@ -183,8 +205,9 @@ def run_case(model: str, label: str, effects: Sequence[Any], scenario: str, opts
 def _fmt_selected(r: dict[str, Any]) -> str:
     if r["selected"]:
         where = r["effect_sites"]
-        only = f" ({where[0]} only)" if where and len(where) == 1 and where[0].endswith("strut") and r[
-            "model"] == "half4" else ""
+        n_struts = len(get_model(r["model"]).strut_sites(TRUTH[r["model"]]))
+        only = (f" ({where[0]} only)" if where and len(where) == 1 and where[0].endswith("strut")
+                and n_struts > 1 else "")
         return f"`{r['selected']}`{only}"
     v = r["verdict"]
     if "cannot be identified" in v:

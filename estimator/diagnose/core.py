@@ -38,6 +38,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any, Callable, Mapping
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy.stats import chi2
 
 from estimator.diagnose.corners import SiteRestricted, effect_sites, model_limits, strut_limit_key
@@ -50,7 +51,12 @@ from estimator.identify import IdentResult, OutputErrorProblem, Parameters, fit
 from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
 from suspid.models.base import FloatArray, SuspensionModel
-from suspid.models.effects import PhysicalEffect, SensorEffect, effect_classes, make_effect, strut_sites
+from suspid.effects import PhysicalEffect, SensorEffect, effect_classes, make_effect, strut_sites
+
+
+#: a channel whose signal RMS is below this fraction of the largest channel's is numerically
+#: silent (e.g. roll on a road the same under both sides): neither structure nor evidence
+SILENT_RMS = 1e-9
 
 
 @dataclass
@@ -127,7 +133,7 @@ class DiagnoseResult:
                 "evidence": self.evidence, "warnings": list(self.warnings)}
 
 
-def _loglik_terms(fitm: ModelFit, common: Mapping[str, FloatArray]) -> dict[str, tuple[int, float]]:
+def _loglik_terms(fitm: ModelFit, common: Mapping[str, NDArray[np.bool_]]) -> dict[str, tuple[int, float]]:
     """Per channel ``(n, mean square)`` of the residual on the samples valid in every fit."""
     out = {}
     for c, ok in common.items():
@@ -239,8 +245,16 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
     evidence["cross_correlation"] = {
         c: {k: dict(zip(("rho", "lag_s"), (lambda rl: (rl[0], rl[1] * h))(xcorr_peak(base.residual[c], v, maxlag))))
             for k, v in refs.items() if np.any(v)} for c in channels}
+    # a motion the record never excites (a car's roll on a road the same under both
+    # sides) is numerical round-off: its "residual" is neither structure nor evidence
+    top = max((s.signal_rms for s in stats.values()), default=0.0)
+    silent = [c for c, s in stats.items() if s.signal_rms <= SILENT_RMS * top]
+    if silent:
+        evidence["silent_channels"] = silent
+    evidenced = [c for c in channels if c not in silent]
     structured = [c for c, s in stats.items()
-                  if s.white_p < th.whiteness_p and s.rms > th.min_relative_rms * max(s.signal_rms, 1e-300)]
+                  if c not in silent and s.white_p < th.whiteness_p
+                  and s.rms > th.min_relative_rms * max(s.signal_rms, 1e-300)]
     if structured and len(problem.channels) < len(channels):
         # channels outside the cost carry the echo of the baseline's parameter and
         # initial-state errors; structure the linear model itself removes once it is fitted
@@ -284,7 +298,7 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
             except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:
                 warnings.append(f"refit with {option.name} {option.params} failed: {exc}")
                 continue
-            cmp = compare(ref, fm, noise_var, channels)
+            cmp = compare(ref, fm, noise_var, evidenced)
             if sc.alternatives:
                 tried.append({"params": fm.effect.to_json()["params"] if fm.effect else {},
                               "dbic": cmp[0], "explained": cmp[2]})

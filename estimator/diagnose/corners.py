@@ -1,6 +1,6 @@
 """Where an effect acts: one strut of a model with several, and what a model cannot tell apart.
 
-The effect library (:mod:`suspid.models.effects`) applies a strut effect to *every* strut
+The effect library (:mod:`suspid.effects`) applies a strut effect to *every* strut
 with one parameter set (the same hardware at every corner) and offers
 ``asymmetric_damping`` only where one damper coefficient describes every strut. A worn or
 sticking damper is usually one corner, though, so ``diagnose`` also tests every strut
@@ -16,7 +16,7 @@ from typing import Any, Mapping, Sequence
 
 from suspid.errors import UsageError
 from suspid.models.base import SuspensionModel
-from suspid.models.effects import Law, PhysicalEffect, Site, effect_classes, strut_sites
+from suspid.effects import Law, PhysicalEffect, Site, effect_classes, strut_sites
 
 
 class SiteRestricted(PhysicalEffect):
@@ -101,7 +101,7 @@ def strut_limit_key(model: SuspensionModel) -> str:
 def model_limits(model: SuspensionModel) -> dict[str, str]:
     """What ``diagnose`` cannot identify with ``model``, by effect (empty if nothing).
 
-    Each effect class states its own limits (:meth:`~suspid.models.effects.Effect.limits`,
+    Each effect class states its own limits (:meth:`~suspid.effects.Effect.limits`,
     e.g. ``asymmetric_damping`` where several dampers differ, ``tire_liftoff`` where no wheel
     mass separates tyre and strut); a model with several struts adds that a strut effect of
     different size in each strut has no form in the contract.

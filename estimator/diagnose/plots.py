@@ -10,7 +10,7 @@ from estimator.diagnose.residuals import autocorr, residual_force
 from suspid.io.csvio import Measurement
 from suspid.models import get_model
 from suspid.errors import UsageError
-from suspid.models.effects import PhysicalEffect, Site, strut_sites, tyre_sites
+from suspid.effects import PhysicalEffect, Site, strut_sites, tyre_sites
 from suspid.plots import _plt
 
 

@@ -9,11 +9,11 @@ fast path: the measurement is *compensated* (offset removed, lagging channels ad
 the ordinary :class:`~estimator.identify.OutputErrorProblem` is evaluated, with the affected
 channels added when the cost would not see them (:class:`SensorRefit`; such an effect is
 judged against the linear model fitted on the same channels, :meth:`SensorRefit.fit_null`;
-a time shift, :attr:`~suspid.models.effects.SensorEffect.time_shift`, is undone by an
+a time shift, :attr:`~suspid.effects.SensorEffect.time_shift`, is undone by an
 all-pass shift that leaves the noise as it is). Positive parameters (the effect's
 ``EffectParam.kind``) are optimised as ``log(theta / theta_start)``, real ones (a sensor
 offset) as ``(theta - theta_start) / scale``; base parameters an effect determines
-(:meth:`~suspid.models.effects.PhysicalEffect.base_overrides`) follow it. Nothing here
+(:meth:`~suspid.effects.PhysicalEffect.base_overrides`) follow it. Nothing here
 depends on which effect it is. :func:`reweighted_linear_fit` refits the declared
 linear model on every channel (the whiteness check's reference).
 """
@@ -32,7 +32,7 @@ from estimator.diagnose.residuals import shift_allpass
 from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
 from suspid.models.base import FloatArray
-from suspid.models.effects import Effect, PhysicalEffect, SensorEffect
+from suspid.effects import Effect, PhysicalEffect, SensorEffect
 from suspid.nlsim import simulate_effects
 from suspid.simulate import (free_coeffs_to_state, free_response_basis, modal_form, outputs,
                              simulate_states)
@@ -372,7 +372,7 @@ def nm_then_lm(vec: Callable[[FloatArray], FloatArray], u0: FloatArray, step: fl
                            maxfev=min(budget, 10 * (n + 1)), xatol=1e-2, fatol=1e-4 * f0,
                            rel_improve=1e-4)
     else:
-        out = SimpleNamespace(u=np.asarray(u0, dtype=float), fun=f0, nfev=0)
+        out = SimpleNamespace(u=np.asarray(u0, dtype=float), fun=f0, nfev=0)  # type: ignore[assignment]
     nfev = out.nfev + 1
     try:
         sol = least_squares(vec, out.u, method="lm", diff_step=1e-6, xtol=1e-10, ftol=1e-10,

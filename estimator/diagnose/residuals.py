@@ -36,7 +36,7 @@ from scipy.stats import chi2
 from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
 from suspid.models.base import FloatArray, SuspensionModel
-from suspid.models.effects import PhysicalEffect, SensorEffect, Site, Trial, effect_classes
+from suspid.effects import PhysicalEffect, SensorEffect, Site, Trial, effect_classes
 
 # ------------------------------------------------------------------------- statistics
 
@@ -179,7 +179,7 @@ def shift_allpass(t: FloatArray, y: FloatArray, dt: float) -> FloatArray:
     image so the periodic continuation has no step at the ends.
 
     Before the first sample the first value is held; beyond the last the result is NaN
-    (as :meth:`suspid.models.effects.SensorDelay.compensate`). NaN samples stay NaN where
+    (as :meth:`suspid.effects.SensorDelay.compensate`). NaN samples stay NaN where
     they land. Non-uniform sampling falls back to a cubic spline.
     """
     tt = np.asarray(t, dtype=float)
@@ -393,7 +393,7 @@ def _regress(y: FloatArray, X: FloatArray) -> tuple[FloatArray, float, FloatArra
         se = np.sqrt(np.clip(np.diag(cov), 0, None))
     except np.linalg.LinAlgError:
         se = np.full(X.shape[1], np.inf)
-    return beta, ss, se
+    return np.asarray(beta, dtype=float), ss, np.asarray(se, dtype=float)
 
 
 def velocity_noise(mo: Motion, noise_var: Mapping[str, float], coords: tuple[str, ...] | list[str],
@@ -422,11 +422,11 @@ def screen_physical(model: SuspensionModel, p: Mapping[str, float], free: list[s
     """Regress the residual force on base sensitivities plus each physical candidate.
 
     Generic over the effect registry: every registered physical effect contributes its
-    regressors (:meth:`~suspid.models.effects.PhysicalEffect.regressors`, one column per
+    regressors (:meth:`~suspid.effects.PhysicalEffect.regressors`, one column per
     coefficient, times each site's direction ``b``) for each of its screening trials
-    (:meth:`~suspid.models.effects.PhysicalEffect.screen_trials`: the bump stop's gaps,
+    (:meth:`~suspid.effects.PhysicalEffect.screen_trials`: the bump stop's gaps,
     the friction sign's widths), and its parameters come from the coefficients
-    (:meth:`~suspid.models.effects.PhysicalEffect.from_coefficients`). Each effect is
+    (:meth:`~suspid.effects.PhysicalEffect.from_coefficients`). Each effect is
     screened in the library's form where it is available for the model (all its sites,
     one shared parameter set) and, for a model with several struts, in each strut alone;
     the best plausible form and trial are kept (:attr:`Screen.sites`). ``noise_var``
@@ -556,7 +556,7 @@ def output_regression(cls: type[SensorEffect], group: Sequence[str], t: FloatArr
     """Regress the output residual of ``group`` on the effect's output sensitivity.
 
     ``e_c ~ beta r_c`` over the group's channels ``c`` (``r_c`` from
-    :meth:`~suspid.models.effects.SensorEffect.output_sensitivity`), pooled:
+    :meth:`~suspid.effects.SensorEffect.output_sensitivity`), pooled:
     ``beta = sum_c mean(e_c r_c) / sum_c mean(r_c^2)``.
 
     Returns
@@ -601,9 +601,9 @@ def screen_sensor(model: SuspensionModel, meas: Measurement, p: Mapping[str, flo
                   max_delay: float) -> list[Screen]:
     """Screen every registered sensor effect (one :class:`Screen` per effect with a candidate).
 
-    A time shift (:attr:`~suspid.models.effects.SensorEffect.time_shift`) is screened by
+    A time shift (:attr:`~suspid.effects.SensorEffect.time_shift`) is screened by
     :func:`screen_time_shift`; any other sensor effect by regressing the output residual of
-    each of its channel groups (:meth:`~suspid.models.effects.SensorEffect.screen_groups`)
+    each of its channel groups (:meth:`~suspid.effects.SensorEffect.screen_groups`)
     on its output sensitivity (:func:`output_regression`); the group explaining the largest
     share of the channel-normalised output residual is the candidate.
     """
@@ -638,7 +638,7 @@ def screen_time_shift(cls: type[SensorEffect], model: SuspensionModel, meas: Mea
                       U: FloatArray, max_delay: float) -> Screen | None:
     """Screen a time shift between channels (``sensor_delay``, any effect with ``time_shift``).
 
-    For every channel group of the effect (:meth:`~suspid.models.effects.SensorEffect.screen_groups`:
+    For every channel group of the effect (:meth:`~suspid.effects.SensorEffect.screen_groups`:
     all channels of one coordinate, or one channel) and every trial delay on a grid up to
     ``max_delay``, the group is advanced by the delay and the residual force is regressed
     on the base sensitivities; a lag makes position, velocity and acceleration of different
@@ -651,7 +651,7 @@ def screen_time_shift(cls: type[SensorEffect], model: SuspensionModel, meas: Mea
     noise, is mostly their noise; a lag of a channel outside the baseline's cost is plainer
     in its output residual, which is ``-d`` times the model's rate of that channel. Each
     group is also scored that way (:func:`output_regression`, only for a lag the effect
-    accepts, :meth:`~suspid.models.effects.SensorEffect.params_from_screen`), and the better
+    accepts, :meth:`~suspid.effects.SensorEffect.params_from_screen`), and the better
     of the two views ranks the group (:attr:`Screen.domain` says which). Close runners-up
     (other channel groups) are returned in :attr:`Screen.alternatives`.
     """

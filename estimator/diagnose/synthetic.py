@@ -2,7 +2,7 @@
 
 One recipe, so the measured tables in ``docs/closing-the-loop.md`` and the tests use the
 same data: a named scenario (:func:`suspid.excitation.make_scenario`), the effects injected
-with :func:`suspid.models.effects.inject` (plus an optional arbitrary generalised force,
+with :func:`suspid.effects.inject` (plus an optional arbitrary generalised force,
 integrated by ``solve_ivp``), every position and velocity channel with white noise of a
 given fraction of the channel's standard deviation.
 """
@@ -16,7 +16,7 @@ from suspid.excitation import make_scenario
 from suspid.io.csvio import Measurement
 from suspid.models import get_model
 from suspid.models.base import ForceFn
-from suspid.models.effects import Effect, inject
+from suspid.effects import Effect, inject
 from suspid.simulate import simulate_ode
 
 

@@ -68,7 +68,7 @@ def damper_wear(model: SuspensionModel, duration: float = 150.0, fs: float = 500
                 params: Mapping[str, float] | None = None, c_end_fraction: float = 0.5,
                 wear_start: float = 20.0, wear_end: float | None = None,
                 road_class: str = "C", v_kmh: float = 50.0, seed: int = 0,
-                channels: tuple[str, ...] = ("x1", "x2", "x1_ddot"),
+                channels: tuple[str, ...] | None = None,
                 noise: Mapping[str, float] | None = None, quantize: bool = True,
                 chunk_s: float = 0.05, damper: str = "c1") -> Stream:
     """A car on an ISO 8608 road while the damper ``c1`` loses damping linearly.
@@ -88,8 +88,10 @@ def damper_wear(model: SuspensionModel, duration: float = 150.0, fs: float = 500
         Start and end of the linear decline (s); ``wear_end`` defaults to ``duration``.
     road_class, v_kmh, seed
         ISO 8608 road class, speed (km/h) and random seed.
-    channels : tuple of str
-        Measured channels to return (the roads and their ``_dot`` are always returned).
+    channels : tuple of str, optional
+        Measured channels to return (the roads and their ``_dot`` are always returned);
+        default every position and the first coordinate's acceleration (``x1``, ``x2``,
+        ``x1_ddot`` for ``quarter2``).
     noise : mapping, optional
         White sensor noise standard deviation per channel (SI); default 2 quantization steps.
     quantize : bool
@@ -104,6 +106,8 @@ def damper_wear(model: SuspensionModel, duration: float = 150.0, fs: float = 500
     Stream
     """
     p0 = dict(model.defaults(), **(params or {}))
+    if channels is None:
+        channels = tuple(model.coords) + (f"{model.coords[0]}_ddot",)
     wear_end = duration if wear_end is None else wear_end
     # time grid finite, > 0 and at most MAX_SAMPLES, or a UsageError
     t, road, _ = make_scenario(model, "iso8608", duration=duration, fs=fs, params=p0,

@@ -29,7 +29,7 @@ from cantools.database.can import Database, Message
 from suspid.can.crc import COUNTER_MODULUS, e2e_protect
 from suspid.can.dbc import ALERT_MESSAGE, STATUS_MESSAGE, SYNC_MESSAGE, channel_signals, find_message, is_e2e
 from suspid.errors import InputError, UsageError
-from suspid.models import MODELS, get_model
+from suspid.models import get_model
 
 
 @dataclass(frozen=True)
@@ -462,6 +462,10 @@ def encode_alert(db: Database, model_name: str, parameter: str, value: float, no
         raise UsageError(f"alert severity {severity!r} unknown; expected one of {', '.join(SEVERITIES)}")
     msg = find_message(db, ALERT_MESSAGE)
     model = get_model(model_name)
+    model_ids = _choices(db, "Model")
+    if model_ids.get(model_name) != model.alert_id:
+        raise UsageError(f"model {model_name} has no SUSPID_Alert.Model id in the DBC (its alert_id "
+                         f"is {model.alert_id}; the DBC lists {model_ids}); give a DBC that does")
     kind = PARAM_KINDS[model.spec(parameter).kind]
     prefix = _KIND_PREFIX[kind]
     sig_v = msg.get_signal_by_name(f"{prefix}Value")
@@ -485,7 +489,6 @@ def decode_alert(db: Database, data: bytes | bytearray) -> dict[str, object]:
         raise InputError(f"alert frame: ParamKind {kind} unknown; expected 0..4")
     names = {v: k for k, v in alert_param_ids(db).items()}
     models = {v: k for k, v in _choices(db, "Model").items()}
-    models.update({get_model(n).alert_id: n for n in MODELS})
     sev = {v: k for k, v in SEVERITIES.items()}
     return {"model": models.get(int(d["Model"]), str(d["Model"])),
             "parameter": names.get(int(d["ParamId"]), str(d["ParamId"])),

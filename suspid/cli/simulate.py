@@ -82,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
                                     t0=args.t0, road_class=args.road_class, seed=args.seed, x0=x0)
         scenario = args.scenario
     if args.effect:
-        from suspid.models.effects import inject
+        from suspid.effects import inject
         out = inject(model, args.effect).simulate(params, t, road, x0)
     else:
         out = simulate(model, params, t, road, x0)

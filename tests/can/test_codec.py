@@ -13,6 +13,7 @@ from suspid.can.codec import (MessageCodec, SensorEncoder, decode_alert, encode_
 from suspid.can.crc import e2e_check
 from suspid.can.dbc import channel_signals, load_dbc
 from suspid.can.signal_map import SignalMap
+from suspid.errors import UsageError
 from suspid.models import MODELS, get_model
 
 from estimator.decode.listener import _compile_row
@@ -136,6 +137,25 @@ def test_alert_round_trip(db):
     assert out["nominal"] == pytest.approx(1500.0, abs=0.05)
     k = decode_alert(db, encode_alert(db, "half4", "k3", 201234.0, 200000.0).data)
     assert k["value"] == pytest.approx(201234.0, abs=1.0) and k["parameter"] == "k3"
+
+
+@pytest.mark.parametrize("model_name", list(MODELS))
+def test_alert_round_trip_for_every_parameter_of_every_model(db, model_name):
+    m = get_model(model_name)
+    for k, v in m.defaults().items():
+        out = decode_alert(db, encode_alert(db, model_name, k, 0.6 * v, v).data)
+        assert out["model"] == model_name and out["parameter"] == k
+        assert out["value"] == pytest.approx(0.6 * v, rel=1e-3)
+
+
+def test_alert_for_a_model_the_dbc_does_not_list_is_refused(db):
+    m = get_model("full7")
+    type(m).alert_id, old = 2, type(m).alert_id   # pretend full7 claimed half4's id
+    try:
+        with pytest.raises(UsageError, match="no SUSPID_Alert.Model id"):
+            encode_alert(db, "full7", "c1", 1.0, 2.0)
+    finally:
+        type(m).alert_id = old
 
 
 def test_encoder_refuses_channels_the_dbc_does_not_carry(db):

@@ -166,3 +166,17 @@ def test_subcommand_start_imports_only_its_own_module() -> None:
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert r.returncode == 0, r.stderr
     assert r.stdout.strip().splitlines()[-1] == "suspid.cli.simulate"
+
+
+def test_listing_matches_each_subcommand_module() -> None:
+    """`suspid --help` lists from a table; each module's own parser says the same words."""
+    import argparse
+    import importlib
+
+    from suspid.cli import SUBCOMMANDS
+
+    for name, summary in SUBCOMMANDS.items():
+        sub = argparse.ArgumentParser().add_subparsers()
+        importlib.import_module(f"suspid.cli.{name}").add_parser(sub)
+        helps = {a.dest: a.help for a in sub._choices_actions}
+        assert helps == {name: summary}, name

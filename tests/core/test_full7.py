@@ -198,3 +198,17 @@ def test_cli_simulate_encode_identify(tmp_path: Path) -> None:
     assert set(FULL7.coords) <= set(meas.measured)
     for k in FREE:       # quantised to the DBC's resolution: a little off, well within 5 %
         assert out["params"][k] == pytest.approx(P[k], rel=0.05), k
+
+
+@pytest.mark.parametrize("cost", ["sse", "frobenius"])
+def test_closed_form_x0_projection_equals_explicit_least_squares(cost: str) -> None:
+    """The identifier's fast path (closed-form initial-state projection) on the full car."""
+    meas = _measurement(noise=0.3, seed=2, duration=2.0)
+    w = {c: 1.0 + i for i, c in enumerate(FULL7.state_names)}
+    prob = OutputErrorProblem(FULL7, meas, cost=cost, x0="estimate", weights=w)
+    p = {k: v * 1.1 for k, v in P.items()}
+    fast = prob.predict(p)
+    prob._full = False  # force the explicit (N, p, n) regressor path
+    slow = prob.predict(p)
+    np.testing.assert_allclose(fast.Y, slow.Y, rtol=0, atol=1e-11 * np.max(np.abs(slow.Y)))
+    np.testing.assert_allclose(fast.x0, slow.x0, rtol=1e-8, atol=1e-12)

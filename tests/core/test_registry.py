@@ -128,3 +128,17 @@ def test_every_model_owns_consistent_facts(name: str) -> None:
     Ks = sum(p[s.k_name] * np.outer(s.g, s.g) for s in sites if s.k_name)
     np.testing.assert_allclose(Cs, C, rtol=1e-12, atol=1e-9)
     np.testing.assert_allclose(Ks, K, rtol=1e-12, atol=1e-9)
+
+
+@pytest.mark.parametrize("name", list(BUILTIN))
+def test_every_road_follows_the_first_road_of_its_track(name: str) -> None:
+    m = get_model(name)
+    p = m.defaults()
+    v = 36.0
+    t, road, _ = make_scenario(m, "iso8608", duration=3.0, fs=1000.0, v_kmh=v)
+    tracks, lags = m.road_tracks(), m.road_lags(p)
+    for i, rn in enumerate(m.roads):
+        j = next(k for k in range(len(m.roads)) if tracks[k] == tracks[i])  # track's first road
+        k = int(round((lags[i] - lags[j]) / (v / 3.6) * 1000.0))
+        ref = road[m.roads[j]]
+        np.testing.assert_allclose(road[rn][k:], ref[:ref.size - k], atol=2e-5 * np.ptp(ref))

@@ -6,7 +6,7 @@ from typing import Any, Sequence
 from estimator.diagnose.synthetic import synthetic_record
 from suspid.io.csvio import Measurement
 from suspid.models.base import ForceFn
-from suspid.models.effects import Effect
+from suspid.effects import Effect
 
 from ..conftest import TABLE1
 
@@ -20,7 +20,7 @@ def make_measurement(effects: Sequence["str | Effect"], scenario: str = "bump", 
                      **scen: Any) -> Measurement:
     """Simulate ``model`` with ``effects`` injected and white noise (fraction of each channel's std).
 
-    ``effects`` are spec strings or :class:`~suspid.models.effects.Effect` objects (e.g. an
+    ``effects`` are spec strings or :class:`~suspid.effects.Effect` objects (e.g. an
     effect restricted to one strut of a half car); ``quarter2`` defaults to the seed's
     Table 1, the other models to their documented defaults; ``noise_seed=S`` draws the
     noise ``suspid simulate --seed S`` draws. See

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from suspid.cli import main
+from suspid.models import get_model
 
 from ..conftest import TABLE1
 
@@ -106,3 +107,28 @@ def test_quarter1_text_output_and_option_errors(tmp_path: Path, capsys) -> None:
     assert main([*args, "--multistart", "-1"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error:") and "--multistart" in err[0]
+
+
+def test_full7_through_the_cli(tmp_path: Path, capsys) -> None:
+    csv, png = tmp_path / "f7.csv", tmp_path / "f7.png"
+    rc = main(["simulate", "--model", "full7", "--scenario", "iso8608", "--speed", "50", "--duration", "1.6",
+               "--fs", "200", "--effect", "progressive_spring:k_cubic=5e6", "--noise", "0.005",
+               "--out", str(csv)])
+    assert rc == 0
+    capsys.readouterr()
+    truth = get_model("full7").defaults()
+    free = [k for k in truth if k not in get_model("full7").known]
+    rc = main(["diagnose", "--model", "full7", "--input", str(csv),
+               *[f"--fix={k}={truth[k]}" for k in get_model("full7").known],
+               *[f"--init={k}={0.7 * truth[k]}" for k in free], "--maxfev", "2000", "--json",
+               "--plot", str(png)])
+    assert rc == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["model"] == "full7"
+    assert out["effect"]["name"] == "progressive_spring"
+    assert math.isclose(out["effect"]["params"]["k_cubic"], 5e6, rel_tol=0.25)
+    assert out["evidence"]["effect_sites"] == ["front-left strut", "front-right strut", "rear-left strut",
+                                               "rear-right strut"]
+    for k in free:
+        assert math.isclose(out["augmented"]["params"][k], truth[k], rel_tol=0.05), k
+    assert png.stat().st_size > 10_000

@@ -1,9 +1,11 @@
-"""diagnose on quarter1 and half4: every applicable effect, no effect, unexplained, not identifiable.
+"""diagnose on quarter1, half4 and full7: every applicable effect, no effect, unexplained,
+not identifiable.
 
 Same protocol as the quarter2 tests (``test_diagnose.py``): 1.6 s at 200 Hz, 0.5 % white
-noise on every channel, masses (and the half car's geometry) known, the free stiffnesses and
-dampings started at 0.7 x the truth. The half car's truth has different front and rear
-parameters so a mix-up of the two struts shows.
+noise on every channel, masses (and the half and full car's inertias and geometry: the
+model's ``known`` set) known, the free stiffnesses and dampings started at 0.7 x the truth.
+The half and full car's truths have different parameters at every corner so a mix-up of
+struts shows.
 """
 from __future__ import annotations
 
@@ -17,7 +19,7 @@ from estimator.diagnose import diagnose
 from estimator.diagnose.corners import SiteRestricted
 from estimator.identify import Parameters
 from suspid.models import get_model
-from suspid.models.effects import Effect, PhysicalEffect, parse_effect
+from suspid.effects import Effect, PhysicalEffect, parse_effect
 
 from .conftest import make_measurement
 
@@ -27,10 +29,17 @@ Q1 = get_model("quarter1").defaults()
 #: half4 truth: defaults with different front/rear suspension and tyres
 H4 = dict(get_model("half4").defaults(), c1=1800.0, c2=2400.0, k1=28000.0, k2=35000.0,
           k3=220000.0, k4=190000.0)
-TRUTH = {"quarter1": Q1, "half4": H4}
-FIXED = {"quarter1": ("m",), "half4": ("m", "I", "m1", "m2", "a1", "a2")}
-FREE = {"quarter1": ("c", "k"), "half4": ("c1", "c2", "k1", "k2", "k3", "k4")}
+#: full7 truth: defaults with a different damper at every corner, springs and tyres mixed
+F7 = dict(get_model("full7").defaults(), c1=1800.0, c2=2000.0, c3=1500.0, c4=1700.0,
+          k1=27000.0, k2=29000.0, kt1=210000.0, kt4=190000.0)
+TRUTH = {"quarter1": Q1, "half4": H4, "full7": F7}
+FIXED = {"quarter1": ("m",), "half4": ("m", "I", "m1", "m2", "a1", "a2"),
+         "full7": tuple(get_model("full7").known)}
+FREE = {"quarter1": ("c", "k"), "half4": ("c1", "c2", "k1", "k2", "k3", "k4"),
+        "full7": tuple(k for k in get_model("full7").param_names if k not in FIXED["full7"])}
 BOTH = ["front strut", "rear strut"]
+FOUR = ["front-left strut", "front-right strut", "rear-left strut", "rear-right strut"]
+TYRES = ["front-left tyre", "front-right tyre", "rear-left tyre", "rear-right tyre"]
 
 
 def _params(model: str) -> Parameters:
@@ -89,13 +98,23 @@ CASES: list[tuple[str, Any, str, dict[str, Any], list[str] | None]] = [
     ("half4", _in("front strut", "coulomb_friction:F=200"), "bump", {}, ["front strut"]),
     ("half4", _in("rear strut", "asymmetric_damping:c_rebound=3400,c_compression=1400"), "bump", {},
      ["rear strut"]),
+    # the full car: strut effects on all four struts, lift-off of all four tyres, sensors
+    # (the bump and curb are the same under both sides: roll stays numerically zero)
+    ("full7", "coulomb_friction:F=150", "bump", {}, FOUR),
+    ("full7", "quadratic_damping:c_quad=2500", "iso8608", {"v_kmh": 50}, FOUR),
+    ("full7", "bump_stop:gap=0.02,k_stop=200000", "bump", {}, FOUR),
+    ("full7", "tire_liftoff", "curb", {"h": -0.1}, TYRES),
+    ("full7", "sensor_delay:channels=x3+x3_dot,delay_s=0.01", "iso8608", {"v_kmh": 50}, None),
+    ("full7", "sensor_offset:channel=phi,offset=0.002", "iso8608", {"v_kmh": 50}, None),
+    ("full7", _in("front-left strut", "coulomb_friction:F=200"), "iso8608", {"v_kmh": 50},
+     ["front-left strut"]),
 ]
 
 
 def _id(case: tuple[str, Any, str, dict[str, Any], list[str] | None]) -> str:
     model, eff, scenario, _, sites = case
     name = eff.split(":")[0] if isinstance(eff, str) else eff.name
-    where = f"-{sites[0].split()[0]}" if isinstance(eff, SiteRestricted) and sites else ""
+    where = f"-{sites[0].rsplit(' ', 1)[0]}" if isinstance(eff, SiteRestricted) and sites else ""
     return f"{model}-{name}{where}-{scenario}"
 
 
@@ -197,6 +216,25 @@ def test_half4_asymmetric_dampers_in_both_struts_are_not_guessed(scenario: str, 
     assert per["front strut"]["c_rebound"] > per["front strut"]["c_compression"]
     assert per["rear strut"]["c_rebound"] > per["rear strut"]["c_compression"]
     assert "asymmetric_damping (both struts)" in ev["limits"]
+
+
+@pytest.mark.parametrize("symmetric", [False, True])
+def test_full7_no_effect_reports_none(symmetric: bool) -> None:
+    # a left/right symmetric car on a road the same under both sides (the bump) never rolls:
+    # the roll channels are round-off, neither structure nor evidence
+    # (evidence.silent_channels)
+    truth = get_model("full7").defaults() if symmetric else F7
+    meas = make_measurement([], "bump" if symmetric else "iso8608", model="full7", params=truth,
+                            noise=0.01, seed=3, **({} if symmetric else {"v_kmh": 50}))
+    params = Parameters.for_model(get_model("full7"), fix={k: truth[k] for k in FIXED["full7"]},
+                                  init={k: 0.7 * truth[k] for k in FREE["full7"]})
+    out = diagnose(get_model("full7"), meas, params, maxfev=BASELINE_FEV).to_json()
+    assert out["effect"] is None, out["evidence"]["verdict"]
+    assert "no missing effect" in out["evidence"]["verdict"], out["evidence"]["verdict"]
+    assert out["evidence"].get("silent_channels", []) == (["phi", "phi_dot"] if symmetric else [])
+    assert "asymmetric_damping (all struts)" in out["evidence"]["limits"]
+    for k in FREE["full7"]:
+        assert math.isclose(out["baseline"]["params"][k], truth[k], rel_tol=0.05), k
 
 
 def test_quarter1_tire_liftoff_says_what_it_means() -> None:

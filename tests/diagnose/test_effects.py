@@ -6,7 +6,7 @@ import pytest
 
 from suspid.errors import UsageError
 from suspid.models import get_model
-from suspid.models.effects import (EFFECT_NAMES, REGISTRY, PhysicalEffect, effects_for, inject,
+from suspid.effects import (EFFECT_NAMES, REGISTRY, PhysicalEffect, effects_for, inject,
                                    make_effect, parse_effect, strut_sites, tyre_sites)
 
 from ..conftest import TABLE1

@@ -7,7 +7,7 @@ import pytest
 from suspid.nlsim import simulate_effects
 from suspid.excitation import make_scenario
 from suspid.models import get_model
-from suspid.models.effects import inject
+from suspid.effects import inject
 from suspid.simulate import simulate, simulate_ode
 
 from ..conftest import TABLE1

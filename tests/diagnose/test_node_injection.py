@@ -11,7 +11,7 @@ from firmware_sim.plant import Plant
 from suspid.cli import main
 from suspid.excitation import make_scenario
 from suspid.models import get_model
-from suspid.models.effects import inject
+from suspid.effects import inject
 
 from ..conftest import TABLE1
 

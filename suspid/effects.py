@@ -65,7 +65,7 @@ Undeclared effects (data generation)
 :func:`inject` is the entry point for tests, demos and the sensor-node firmware::
 
     from suspid.models import get_model
-    from suspid.models.effects import inject
+    from suspid.effects import inject
 
     inj = inject(get_model("quarter2"), ["coulomb_friction:F=120",
                                          "sensor_offset:channel=x1,offset=0.004"])
@@ -94,7 +94,7 @@ import copy
 import math
 from dataclasses import dataclass
 from importlib.metadata import entry_points
-from typing import Any, Callable, ClassVar, Iterable, Mapping, Sequence
+from typing import Any, ClassVar, Iterable, Mapping, Sequence
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -524,7 +524,7 @@ def load_plugins(force: bool = False) -> None:
 
 def _check_plugin(where: str, name: str, cls: Any) -> None:
     if not (isinstance(cls, type) and issubclass(cls, (PhysicalEffect, SensorEffect))):
-        raise UsageError(f"{where}: expected a subclass of suspid.models.effects.PhysicalEffect "
+        raise UsageError(f"{where}: expected a subclass of suspid.effects.PhysicalEffect "
                          f"or SensorEffect, got {cls!r}")
     if cls.name != name:
         raise UsageError(f"{where}: the class's name is {cls.name!r}, expected {name!r}")

@@ -1,0 +1,1 @@
+"""A plug-in that declares the effect ``ghost`` but defines no class ``Ghost``."""

@@ -1,0 +1,1 @@
+"""A suspid plug-in: the strut effect ``rebound_stop`` and the model ``qcar5``."""
