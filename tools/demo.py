@@ -92,10 +92,16 @@ def main(out: Path) -> None:
         w(f"   t = {e['t']:5.1f} s   c1 = {c1:7.1f} ± {e['stderr'].get('c1', float('nan')):5.1f} N s/m"
           f"   k1 = {k1:8.0f} ± {e['stderr'].get('k1', float('nan')):4.0f} N/m\n")
     w(f"   c1 truly crosses 70 % of nominal at t = {crossing:.1f} s\n")
+    forecasts = [e for e in events if e["type"] == "forecast"]
+    if forecasts:
+        f = forecasts[0]
+        w(f"   FORECAST t = {f['t']:.1f} s: {f['message']}\n")
     for a in alerts:
         w(f"   ALERT t = {a['t']:.1f} s: {a['message']}\n")
     if node_summary is not None and getattr(node_summary, "alerts", None):
-        w(f"   the node received {len(node_summary.alerts)} alert frame(s) on the bus\n")
+        frames = node_summary.alerts
+        nf = sum(1 for a in frames if a.get("severity") == "forecast")
+        w(f"   the node received {len(frames) - nf} alert and {nf} forecast frame(s) on the bus\n")
     w(f"   JSON lines: {out / 'monitor.jsonl'}, durable alerts: {out / 'alerts.jsonl'}\n\n")
 
     w("2) sliding-window Nelder–Mead vs filterpy EKF on the same stream (suspid compare)\n")
@@ -108,6 +114,8 @@ def main(out: Path) -> None:
             ("alert delay (s)", lambda r: f"{r['params']['c1']['alert_delay_s']:.1f}"
              if r["params"]["c1"]["alert_delay_s"] is not None else "none"),
             ("false alarms", lambda r: str(r["params"]["c1"]["false_alarms"])),
+            ("first forecast lead (s)", lambda r: f"{r['params']['c1']['forecast_lead_s']:.1f}"
+             if r["params"]["c1"].get("forecast_lead_s") is not None else "none"),
             ("CPU per sample (us)", lambda r: f"{r['cpu_us_per_sample']:.0f}")]
     for label, f in rows:
         w(f"   {label:22}{f(nm):>14}{f(ekf):>12}\n")

@@ -17,7 +17,8 @@ say): no forecast. A part already inside the band at ``tau = 0`` gets ``crossing
 squares (one vehicle's drives, a list of window estimates); the monitor's tracker
 (:class:`estimator.stream.tracker.TrendTracker`) produces the same :class:`Trend` from its
 Kalman state. :class:`ForecastEngine` turns trends into forecast events: one when a
-crossing is first predicted within the horizon, a new one when the predicted crossing
+crossing is first predicted within the horizon (and the late end of its interval within two
+horizons: a crossing that may as well come much later is not announced yet), a new one when the predicted crossing
 leaves the last announced interval, and a withdrawal when the trend no longer predicts a
 crossing within 1.5 horizons (a part that stopped wearing, or recovered after a repair).
 """
@@ -295,7 +296,8 @@ class ForecastEngine:
                 # crossed: the alert engine takes over; the forecast is fulfilled, not withdrawn
                 self.active.pop(k, None)
                 continue
-            within = cr is not None and cr.t - tr.t <= self.horizon_s
+            within = (cr is not None and cr.t - tr.t <= self.horizon_s
+                      and cr.high - tr.t <= 2.0 * self.horizon_s)
             if prev is None:
                 if within and cr is not None:
                     ev = self._event("forecast", tr, k, cr)

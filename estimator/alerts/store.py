@@ -60,6 +60,7 @@ class AlertStore:
         self.last_event: dict[str, AlertEvent] = {}
         self.last_forecast: dict[str, ForecastEvent] = {}
         self.skipped_lines = 0
+        self._fd: int | None = None
         needs_newline = False
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -103,6 +104,8 @@ class AlertStore:
         return last is None or ev.t > last.t + 1e-9
 
     def _write(self, data: bytes) -> None:
+        if self._fd is None:
+            raise InputError(f"{self.path}: the alert log is closed")
         view = memoryview(data)
         while view:
             n = os.write(self._fd, view)
@@ -115,7 +118,7 @@ class AlertStore:
         self._remember(ev)
 
     def close(self) -> None:
-        if getattr(self, "_fd", None) is not None:
+        if self._fd is not None:
             os.close(self._fd)
             self._fd = None
 

@@ -227,7 +227,7 @@ class AugmentedEKF(ExtendedKalmanFilter):
         h = dt / n
         if self._linear:
             return self._rk4_linear(z, u0, u1, h, n, with_jacobian)
-        F = self._I.copy() if with_jacobian else None
+        F = self._I.copy()
         for s in range(n):
             a, b = s / n, (s + 1) / n
             ua = u0 + (u1 - u0) * a
@@ -248,7 +248,7 @@ class AugmentedEKF(ExtendedKalmanFilter):
                 D4 = self.jac(z4, ub) @ (I + h * D3)
                 F = (I + h / 6 * (D1 + 2 * D2 + 2 * D3 + D4)) @ F
             z = z + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-        return z, F
+        return z, (F if with_jacobian else None)
 
     def _ab(self, theta: FloatArray) -> FloatArray:
         """``[A | B]`` rows of the accelerations at parameters ``theta`` (relative)."""
@@ -272,7 +272,7 @@ class AugmentedEKF(ExtendedKalmanFilter):
         Af = J[:nx, :nx]                                             # A(theta), (nx, nx)
         x = z[:nx]
         I = self._I
-        F = I.copy() if with_jacobian else None
+        F = I.copy()
         du = u1 - u0
         W = np.empty((AB.shape[1], 4))                               # [x_i; u_i] per stage
         for s in range(n):
@@ -294,16 +294,14 @@ class AugmentedEKF(ExtendedKalmanFilter):
             k4[nq:] += bu[:, 2]
             if with_jacobian:
                 P = self._G @ W               # parameter columns at the 4 stages, (naug, nq, 4)
-                D = []
-                prev = None
+                D: list[FloatArray] = []
                 for st, c in enumerate((0.0, h / 2, h / 2, h)):
                     Jst = J.copy()
                     Jst[nq:nx, nx:] = P[:, :, st].T
-                    prev = Jst if prev is None else Jst @ (I + c * prev)
-                    D.append(prev)
+                    D.append(Jst if not D else Jst @ (I + c * D[-1]))
                 F = (I + h / 6 * (D[0] + 2 * D[1] + 2 * D[2] + D[3])) @ F
             x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-        return np.concatenate([x, theta]), F
+        return np.concatenate([x, theta]), (F if with_jacobian else None)
 
     # ---- measurement ----------------------------------------------------------------------
     def hx(self, x: FloatArray, u: FloatArray) -> FloatArray:
@@ -345,7 +343,7 @@ class AugmentedEKF(ExtendedKalmanFilter):
         self._znext = znext
         self.predict()
 
-    def predict_x(self, u: FloatArray = 0) -> None:  # type: ignore[override]
+    def predict_x(self, u: Any = 0) -> None:  # type: ignore[override]
         """filterpy hook: the state prediction is the RK4 step computed in :meth:`predict_step`."""
         self.x = self._znext[:, None]
 
@@ -369,7 +367,9 @@ class AugmentedEKF(ExtendedKalmanFilter):
             args = (args,)
         if not isinstance(hx_args, tuple):
             hx_args = (hx_args,)
-        Rm = self.R if R is None else (np.eye(self.dim_z) * R if np.isscalar(R) else R)
+        Rm: FloatArray = (np.asarray(self.R, dtype=float) if R is None
+                          else np.eye(self.dim_z) * float(R) if isinstance(R, (int, float))
+                          else np.asarray(R, dtype=float))
         H = HJacobian(self.x, *args)
         hx = Hx(self.x, *hx_args)[:, 0]
         if not ok.all():

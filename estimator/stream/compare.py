@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
+from matplotlib.figure import Figure
 
 from estimator.decode import load_log_as_measurement
 from estimator.stream.drivers import run_arrays
@@ -227,12 +228,8 @@ def compare(model: SuspensionModel, t: FloatArray, data: Mapping[str, FloatArray
 def plot(path: str | Path, t: FloatArray, truth: Mapping[str, FloatArray] | None, recs: list[RunRecord],
          param: str, nominal: float, drop: float) -> None:
     """One figure: the parameter's tracks (with 2-sigma bands) against the truth and limit."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(9, 4.5))
+    fig = Figure(figsize=(9, 4.5))
+    ax = fig.subplots()
     if truth is not None and param in truth:
         ax.plot(t, truth[param], "k-", lw=1.5, label=f"true {param}")
     ax.axhline((1 - drop) * nominal, color="r", ls="--", lw=1,
@@ -250,7 +247,8 @@ def plot(path: str | Path, t: FloatArray, truth: Mapping[str, FloatArray] | None
             v = np.array([l["track"][param]["value"] for l in est])
             s = np.array([l["track"][param]["stderr"] for l in est], dtype=float)
         c = colors.get(rec.name, None)
-        ax.plot(te, v, ".-", ms=3, color=c, label=f"{rec.name.upper()} estimate")
+        what = "estimate" if rec.own_track else "tracked (window end)"
+        ax.plot(te, v, ".-", ms=3, color=c, label=f"{rec.name.upper()} {what}")
         ax.fill_between(te, v - 2 * s, v + 2 * s, color=c, alpha=0.2, lw=0)
         for a in rec.alerts:
             if a.parameter == param and a.kind == "alert":
@@ -265,4 +263,3 @@ def plot(path: str | Path, t: FloatArray, truth: Mapping[str, FloatArray] | None
     ax.legend(fontsize=8, loc="best")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)

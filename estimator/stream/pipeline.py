@@ -28,7 +28,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from statistics import NormalDist
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Literal, Mapping
 
 import numpy as np
 
@@ -118,7 +118,7 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
                  window: float | None = None, step: float | None = None,
                  window_overrides: Mapping[str, Any] | None = None,
                  decimate: int | None = None, fs: float = 0.0, inspection: bool = True,
-                 forecast_horizon: float = DEFAULT_HORIZON_S,
+                 forecast_horizon: float | None = None,
                  ekf_params: list[str] | None = None, ekf_q: float | None = None,
                  ekf_decimate: int | None = None, accel_channel: str | None = None,
                  oo_method: str = "carma") -> MonitorSpec:
@@ -142,8 +142,9 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
     fs : float
         Sample rate (Hz) when known (else the decimation is derived on the first window).
     inspection : bool
-    forecast_horizon : float
-        Data time (s) within which a predicted crossing is announced.
+    forecast_horizon : float, optional
+        Data time (s) within which a predicted crossing is announced (default
+        :data:`~estimator.alerts.forecast.DEFAULT_HORIZON_S`, 60 s).
     ekf_params, ekf_q, ekf_decimate
         EKF state parameters (default every free damper and spring), parameter random walk
         and decimation.
@@ -161,6 +162,8 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
     """
     fix = dict(fix or {})
     nominal_in = dict(nominal or {})
+    if forecast_horizon is None:
+        forecast_horizon = DEFAULT_HORIZON_S
     init = dict(init or {})
     if not 0 < alert_drop < 1:
         raise UsageError(f"--alert-drop: expected a fraction in (0, 1), got {alert_drop}")
@@ -363,7 +366,7 @@ class Source:
     bitrate: int | None = None
     dbc: Path | None = None
     signal_map: Any = None
-    time_source: str | None = None
+    time_source: Literal["timestamp", "tick"] | None = None
     duration: float | None = None
     idle_timeout: float | None = 5.0
     alert_frames: bool = True
@@ -430,7 +433,8 @@ def run_source(source: Source, spec: MonitorSpec, mon: StreamMonitor,
                 pass
 
 
-def _listener(source: Source, spec: MonitorSpec, time_source: str) -> DecodeListener:
+def _listener(source: Source, spec: MonitorSpec,
+              time_source: Literal["timestamp", "tick"]) -> DecodeListener:
     """The CAN layer's DecodeListener with a bounded buffer sized for the windows."""
     cfg = spec.config
     # rows per message: window + step at up to 2 kHz, power of two

@@ -17,7 +17,7 @@ The alerts (:class:`estimator.alerts.AlertEngine`) are decided on the tracked va
 standard error, the forecasts (:class:`estimator.alerts.ForecastEngine`) on the trend
 (:meth:`TrendTracker.trends`).
 
-Defaults (``q_level = 0.002 /sqrt(s)``, ``q_rate = 3e-4 /s/sqrt(s)``, prior rate
+Defaults (``q_level = 0.002 /sqrt(s)``, ``q_rate = 1e-3 /s/sqrt(s)``, prior rate
 uncertainty ``0.01 N/s``) measured on the damper-wear streams of
 ``tools/bench_maintenance.py`` (docs/monitoring.md).
 """
@@ -62,7 +62,7 @@ class TrendTracker:
     """
 
     q_level: float = 0.002
-    q_rate: float = 3e-4
+    q_rate: float = 1e-3
     rate0: float = 0.01
     lag: float = 0.0
     overlap: float = 1.0
@@ -128,9 +128,12 @@ class TrendTracker:
             if t is not None and t > tr.t:
                 self._predict(tr, t)
             n2 = tr.nominal * tr.nominal
+            # the extrapolation keeps the level's random walk but not the rate's: a forecast
+            # assumes the wear goes on at the estimated rate, with that rate's uncertainty
+            # (with the rate walk the band widens as tau^1.5 and no crossing further than a
+            # few tens of seconds could ever be bounded)
             out[k] = Trend(tr.t, float(tr.x[0]), float(tr.x[1]), float(tr.P[0, 0]),
-                           float(tr.P[0, 1]), float(tr.P[1, 1]), self.q_level ** 2 * n2,
-                           self.q_rate ** 2 * n2)
+                           float(tr.P[0, 1]), float(tr.P[1, 1]), self.q_level ** 2 * n2, 0.0)
         return out
 
 def ParameterTracker(q: float = 0.01, overlap: float = 1.0) -> TrendTracker:  # noqa: N802

@@ -169,7 +169,7 @@ class StateSpaceMap:
         try:
             f0 = flat(vals0)
             D = []
-            for j, i in enumerate(self._ifree):
+            for i in self._ifree:
                 q = list(vals0)
                 q[i] = 2.0 * vals0[i]
                 D.append((flat(q) - f0) / vals0[i])

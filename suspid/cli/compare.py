@@ -14,8 +14,6 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from estimator.stream.compare import compare, load_stream, plot
-from estimator.stream.scenarios import damper_wear
 from suspid.can.options import add_can_arguments, can_inputs
 from suspid.cli._common import add_model_option, parse_assignments, print_json
 from suspid.errors import UsageError
@@ -69,6 +67,11 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
+    # imported here, not at the top: ``suspid --help`` imports every subcommand module and
+    # must not load python-can or matplotlib
+    from estimator.stream.compare import compare, load_stream, plot  # noqa: PLC0415
+    from estimator.stream.scenarios import damper_wear  # noqa: PLC0415
+
     model = get_model(args.model)
     fix = parse_assignments(args.fix, "--fix")
     nominal = parse_assignments(args.nominal, "--nominal")
@@ -81,7 +84,8 @@ def run(args: argparse.Namespace) -> int:
                              f"{args.fs}")
         s = damper_wear(model, duration=args.duration, fs=args.fs, seed=args.seed,
                         c_end_fraction=args.wear_to)
-        t, data, truth = s.t, s.data, s.truth
+        t, data = s.t, s.data
+        truth: dict[str, Any] | None = dict(s.truth)
         base = dict(s.nominal)
         if not fix:
             fix = {k: base[k] for k in ("m1", "m2", "c2", "k2") if k in base}

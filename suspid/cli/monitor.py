@@ -11,14 +11,19 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
-from estimator.alerts import DEFAULT_HORIZON_S
-from estimator.stream.pipeline import Source, monitor_spec, run_monitor, warn
 from suspid.can.options import add_can_arguments, can_inputs
 from suspid.cli._common import add_model_option, parse_assignments, print_json
 from suspid.errors import UsageError
 from suspid.models import get_model
+
+if TYPE_CHECKING:
+    from estimator.stream.pipeline import Source
+
+#: the library's default forecast horizon (estimator.alerts.forecast.DEFAULT_HORIZON_S), for
+#: the help text only: importing the estimator here would load python-can for ``--help``
+HORIZON_HELP_S = 60.0
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -89,9 +94,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     a.add_argument("--alert-interface", metavar="I", default=None,
                    help="send SUSPID_Alert frames on this bus (default: the live bus)")
     a.add_argument("--alert-channel", metavar="C", default=None, help="channel of --alert-interface")
-    a.add_argument("--forecast-horizon", type=float, default=DEFAULT_HORIZON_S, metavar="SECONDS",
+    a.add_argument("--forecast-horizon", type=float, default=None, metavar="SECONDS",
                    help="announce a predicted crossing of (1 - FRACTION) x nominal when it is "
-                        f"due within this much data time (default {DEFAULT_HORIZON_S:g} s)")
+                        f"due within this much data time (default {HORIZON_HELP_S:g} s)")
     e = p.add_argument_group("EKF baseline")
     e.add_argument("--ekf-params", default=None, metavar="LIST",
                    help="parameters in the EKF's augmented state (default: every free damper "
@@ -174,8 +179,10 @@ def _skip_mf4_backend(args: argparse.Namespace) -> None:
     sys.modules["asammdf"] = None  # type: ignore[assignment]
 
 
-def source_from_args(args: argparse.Namespace) -> Source:
+def source_from_args(args: argparse.Namespace) -> "Source":
     """The stream options of ``monitor`` as a :class:`~estimator.stream.pipeline.Source`."""
+    from estimator.stream.pipeline import Source  # noqa: PLC0415 - see run()
+
     dbc_path, smap = can_inputs(args)
     if args.dbc:
         dbc_path = Path(args.dbc)
@@ -188,6 +195,10 @@ def source_from_args(args: argparse.Namespace) -> Source:
 
 def run(args: argparse.Namespace) -> int:
     _skip_mf4_backend(args)
+    # the estimator is imported here, not at the top: ``suspid --help`` imports every
+    # subcommand module and must not load python-can, and _skip_mf4_backend must run first
+    from estimator.stream.pipeline import monitor_spec, run_monitor, warn  # noqa: PLC0415
+
     model = get_model(args.model)
     if args.interface is not None and args.channel is None:
         raise UsageError("--interface needs --channel (e.g. --interface virtual --channel vcan0)")

@@ -48,7 +48,9 @@ def test_killed_live_monitor_restarts_and_raises_the_later_alert_once(tmp_path: 
         assert not [d for d in seen if d["type"] == "alert"]
         killed_at = max(d["t"] for d in seen if d["type"] == "estimate")
         assert killed_at < 20.0                             # well before the crossing
-        assert not afile.exists() or afile.read_text().strip() == ""
+        # no alert on disk yet (a forecast of the coming crossing may be)
+        assert not afile.exists() or all(json.loads(l)["type"].startswith("forecast")
+                                         for l in afile.read_text().splitlines() if l.strip())
         time.sleep(0.2)
         second = subprocess.run(mon_cmd, capture_output=True, text=True, env=env, cwd=REPO,
                                 timeout=180)
