@@ -369,7 +369,7 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
     nyq = 0.5 / h
     if bandwidths_hz is None:
         top = nyq / 5.0
-        bandwidths_hz = [float(f) for f in np.geomspace(0.2, max(top, 0.3), 6)]
+        bandwidths_hz = [float(f) for f in np.geomspace(0.2, max(top, 0.3), 4)]
     best = StartEstimate(reason="no filter bandwidth gave a usable estimate")
     reasons: list[str] = []
     seeds: list[FloatArray] = []
@@ -404,19 +404,20 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
 
         if nonlin:
             lifted = _lifted_seed(reg, model, base, lin, nonlin, wts)
+            tries = seeds + ([last_u] if last_u is not None else [])
             if lifted is not None and np.all(np.abs(lifted) < 3.5):
-                seeds = [lifted]
+                seeds = tries = [lifted]
             elif not seeds:  # the grid once, at the first bandwidth; later ones reuse it
                 grid = list(itertools.product(NONLIN_GRID, repeat=len(nonlin))) \
                     if len(nonlin) <= 2 else [tuple([1.0] * len(nonlin))]
                 scored = sorted((solve_at(np.array(g))[1], g) for g in grid)
                 seeds = [np.log(np.array(g, dtype=float)) for _, g in scored[:3]]
             best_u, best_r = np.zeros(len(nonlin)), math.inf
-            for g0 in seeds + ([last_u] if last_u is not None else []):
+            for g0 in tries if tries else seeds:
                 res = nelder_mead(
                     lambda u: solve_at(np.exp(u))[1] if np.all(np.abs(u) < 3.5) else np.inf, g0,
                     initial_simplex=np.vstack([g0] + [g0 + 0.1 * e for e in np.eye(len(nonlin))]),
-                    xatol=1e-5, fatol=1e-14, maxfev=150 * len(nonlin))
+                    xatol=1e-5, fatol=1e-14, maxfev=60 * len(nonlin))
                 if res.fun < best_r:
                     best_u, best_r = np.asarray(res.x, dtype=float), float(res.fun)
             last_u = best_u
