@@ -86,7 +86,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--grid", action="store_true", help="success grid instead of timing")
     ap.add_argument("--models", default="quarter1,quarter2,half4")
     ap.add_argument("--costs", default="sse")
-    ap.add_argument("--scales", default=None, help="init scales (default 0.1,10 for timing)")
+    ap.add_argument("--scales", default=None,
+                    help="init scales (default 0.1,10 for timing, 0.1,0.2,0.5,2,5,10 for the "
+                         "grid; an empty string for none)")
     ap.add_argument("--noise", default="", help="noise levels (grid; at init scale 0.5)")
     ap.add_argument("--ids", default=None, help="design rows (timing; default all)")
     ap.add_argument("--compare", action="store_true", help="grid: also the init-only path")
@@ -98,7 +100,7 @@ def main(argv: list[str] | None = None) -> int:
     rows: list[dict[str, Any]] = []
     w = sys.stdout.write
     if a.grid:
-        scales = _floats(a.scales or "0.1,0.2,0.5,2,5,10")
+        scales = _floats("0.1,0.2,0.5,2,5,10" if a.scales is None else a.scales)
         cases = [(m, c, s, 0.0) for m in models for c in costs for s in scales]
         cases += [(m, c, 0.5, n) for m in models for c in costs for n in _floats(a.noise)]
         for m, c, s, n in cases:
