@@ -582,8 +582,9 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
     IdentResult
         The lowest-cost result, with ``starts`` (every start and what it reached),
         ``data_start`` and ``nfev`` summed over the runs. A result whose parameters ran
-        orders of magnitude away from its start and from the data-driven estimate is not
-        reported as a success; its warnings say which parameter and why.
+        orders of magnitude away from its start and from the data-driven estimate is
+        reported neither as a success nor as identifiable; its warnings say which parameter
+        and why, and the costs reached from each start.
     """
     free = params.free
     est = estimate_start(problem, params) if data_start and free else None
@@ -641,7 +642,10 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
             res.warnings.append(f"no data-driven start: {est.reason}")
     bad = _plausibility(res, free, usable(best[0], best[1]), data_vals)
     if bad:
+        # a parameter that ran orders of magnitude away along a flat direction of the cost
+        # is not identified by this record, whatever the curvature at the end point says
         res.success = False
+        res.identifiable = False
         alts = ", ".join(f"{label} start: cost {r.cost:.4g}" for label, _, r in ran)
         res.warnings += [f"implausible result: {b}" for b in bad]
         res.warnings.append(f"costs reached from each start: {alts}")
