@@ -54,7 +54,10 @@ def doe_row(model: str, cost: str, scale: float, noise: float, data: bool,
     false_ok = [e["id"] for e in out["experiments"]
                 if any(s.get("chosen") and s.get("success") for s in e.get("starts", []))
                 and any(not 0.1 <= 1.0 + v <= 10.0 for v in e["rel_error"].values())]
+    unflagged = [e["id"] for e in out["experiments"] if not e["success"] and e["identifiable"]
+                 and not any("implausible" in w for w in e.get("warnings", []))]
     return {"model": model, "cost": cost, "init_scale": scale, "noise": noise,
+            "failed_unflagged": unflagged,
             "path": "data" if data else "init", "successes": out["successes"],
             "total": out["total"], "s_per_row": dt / out["total"], "worst_rel": worst,
             "failed": [e["id"] for e in out["experiments"] if not e["success"]],
@@ -110,7 +113,8 @@ def main(argv: list[str] | None = None) -> int:
                 if not a.json:
                     w(f"{m:9} {c:9} scale {s:<5g} noise {n:<4g} {r['path']:5} "
                       f"{r['successes']:>2}/{r['total']:<2} {r['s_per_row']:6.2f} s/row "
-                      f"failed {r['failed']} success-true>10x {r['success_true_beyond_10x']}\n")
+                      f"failed {r['failed']} (not flagged: {r['failed_unflagged']}) "
+                      f"success-true>10x {r['success_true_beyond_10x']}\n")
                     sys.stdout.flush()
     else:
         scales = _floats(a.scales or "0.1,10")

@@ -184,12 +184,14 @@ class _Regression:
         self.R = proj(self.R)
         self.S = np.concatenate([self.Q[2], self.Q[1], self.Q[0], self.R[0], self.R[1]], axis=0)
         self.G = self.S @ self.S.T  # Gram matrix of the filtered signals: all the LS needs
+        self.iv = False  # True: G pairs instruments with the signals (not symmetric)
 
     def with_instruments(self, inst: "_Regression") -> "_Regression":
         """A copy whose normal equations use ``inst``'s signals as instruments."""
         out = object.__new__(_Regression)
         out.__dict__.update(self.__dict__)
         out.G = inst.S @ self.S.T
+        out.iv = True
         return out
 
     @staticmethod
@@ -257,7 +259,7 @@ def _lifted_seed(reg: "_Regression", model: SuspensionModel, base: Mapping[str, 
     Atb = np.einsum("jit,it->j", GC, b)
     d = np.sqrt(np.where(np.abs(np.diag(AtA)) > 0, np.abs(np.diag(AtA)), 1.0))
     H = AtA / np.outer(d, d)
-    if not np.allclose(H, H.T, rtol=1e-10, atol=1e-12):  # instrumental variables
+    if reg.iv:  # instrumental variables: a square, non-symmetric system
         z = np.linalg.lstsq(H, -Atb / d, rcond=1e-12)[0] / d
     else:
         ev, V = np.linalg.eigh(H)
@@ -312,7 +314,7 @@ def _solve_linear(reg: _Regression, model: SuspensionModel, p: Mapping[str, floa
     btb = float(np.einsum("is,st,it->", b, reg.G, b))
     d = np.sqrt(np.where(np.abs(np.diag(AtA)) > 0, np.abs(np.diag(AtA)), 1.0))
     H = AtA / np.outer(d, d)
-    if not np.allclose(H, H.T, rtol=1e-10, atol=1e-12):  # instrumental variables
+    if reg.iv:  # instrumental variables: a square, non-symmetric system
         sol, *_ = np.linalg.lstsq(H, -Atb / d, rcond=1e-12)
         sv = np.linalg.svd(H, compute_uv=False)
         return sol / d, 0.0, float(sv[-1] / sv[0]) if sv[0] > 0 else 0.0
