@@ -52,7 +52,7 @@ def doe_row(model: str, cost: str, scale: float, noise: float, data: bool,
     dt = time.perf_counter() - t0
     worst = max((e["max_rel_error"] or float("inf")) for e in out["experiments"])
     false_ok = [e["id"] for e in out["experiments"]
-                if any(s.get("chosen") and s.get("success") for s in e.get("starts", []))
+                if e.get("reported_success")
                 and any(not 0.1 <= 1.0 + v <= 10.0 for v in e["rel_error"].values())]
     unflagged = [e["id"] for e in out["experiments"] if not e["success"] and e["identifiable"]
                  and not any("implausible" in w for w in e.get("warnings", []))]

@@ -235,6 +235,7 @@ def run_experiment(model: SuspensionModel, exp: Experiment, settings: Settings) 
                   float(res.cost), dt, bool(res.identifiable),
                   {"rel_error": {k: float(v) for k, v in rel.items()},
                    "warnings": list(res.warnings),
+                   "reported_success": bool(res.success),
                    **({"starts": res.starts} if res.starts is not None else {})})
     return out, res
 

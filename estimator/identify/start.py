@@ -648,6 +648,9 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         # is not identified by this record, whatever the curvature at the end point says
         res.success = False
         res.identifiable = False
+        for entry in res.starts:
+            if entry.get("chosen"):
+                entry["success"] = False
         alts = ", ".join(f"{label} start: cost {r.cost:.4g}" for label, _, r in ran)
         res.warnings += [f"implausible result: {b}" for b in bad]
         res.warnings.append(f"costs reached from each start: {alts}")
