@@ -103,6 +103,12 @@ def _filter_bank(w: float, h: float) -> tuple[FloatArray, FloatArray, FloatArray
 def _filter(U: FloatArray, w: float, h: float) -> tuple[FloatArray, FloatArray]:
     """Filter the columns of ``U`` (N, m): outputs ``s^k / D`` for k = 0..4 and the modes.
 
+    The recursion ``z[n+1] = Phi z[n] + a u[n] + b u[n+1]`` (zero state before the record,
+    ``a = G1 - G2/h``, ``b = G2/h``) is a convolution with the impulse response
+    ``Phi^(i-1) a + Phi^i b``, less ``Phi^n b u[0]`` (the record has no sample before
+    ``u[0]``); the responses come from one loop over 4 x 4 products and the convolution
+    from an FFT of every column at once.
+
     Returns
     -------
     Y : ndarray, shape (5, N, m)
@@ -112,20 +118,23 @@ def _filter(U: FloatArray, w: float, h: float) -> tuple[FloatArray, FloatArray]:
     """
     Phi, G1, G2, d = _filter_bank(w, h)
     N, m = U.shape
-    Z = np.zeros((N, 4, m))
-    z = np.zeros((4, m))
-    slope = np.vstack([np.diff(U, axis=0) / h, np.zeros((1, m))])
+    a, b = G1 - G2 / h, G2 / h
+    Pa = np.empty((N, 4))  # Phi^i a
+    Pb = np.empty((N, 4))  # Phi^i b
+    T = np.empty((N, 4))  # first row of Phi^n
+    va, vb, row = a.copy(), b.copy(), np.eye(4)[0]
     for n in range(N):
-        Z[n] = z
-        z = Phi @ z + np.outer(G1, U[n]) + np.outer(G2, slope[n])
+        Pa[n], Pb[n], T[n] = va, vb, row
+        va, vb, row = Phi @ va, Phi @ vb, row @ Phi
+    H = Pb.copy()
+    H[1:] += Pa[:-1]
+    L = 1 << int(np.ceil(np.log2(2 * N)))
+    Fu = np.fft.rfft(U, L, axis=0)
+    Fh = np.fft.rfft(H, L, axis=0)
     Y = np.empty((5, N, m))
-    Y[:4] = np.moveaxis(Z, 1, 0)
-    Y[4] = U - np.einsum("j,njm->nm", d, Z)
-    T = np.empty((N, 4))
-    zt = np.eye(4)
-    for n in range(N):
-        T[n] = zt[0]
-        zt = Phi @ zt
+    for i in range(4):
+        Y[i] = np.fft.irfft(Fh[:, i:i + 1] * Fu, L, axis=0)[:N] - np.outer(Pb[:, i], U[0])
+    Y[4] = U - np.einsum("j,jnm->nm", d, Y[:4])
     return Y, T
 
 
