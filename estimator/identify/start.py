@@ -537,6 +537,10 @@ def data_driven_start(model: SuspensionModel, data: Measurement, fixed: Mapping[
     return dict(estimate_start(problem, params).values)
 
 
+#: normalised output-error cost of a data-driven estimate above which the given start is
+#: always run as well (the estimate explains less than half of the record)
+POOR_ESTIMATE = 0.5
+
 #: a free parameter this far (factor) from its start and from the data-driven estimate ran away
 RUNAWAY = 100.0
 
@@ -584,7 +588,8 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
     keep_init : bool
         Also consider ``params`` as a start (always done when no data-driven start exists).
         It is run when the fit from the data-driven start is not a clean success (not
-        converged, not identifiable, or implausible) or when ``params`` begins at a lower
+        converged, not identifiable, or implausible), when the estimate itself fits poorly
+        (normalised cost above ``POOR_ESTIMATE``), or when ``params`` begins at a lower
         cost than the data-driven start; otherwise it is listed as skipped, so the time per
         identification does not grow.
 
@@ -621,6 +626,7 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         # a further start only runs when the fits so far are not clean, or when it begins
         # lower than the start they came from (it may then be in a better basin)
         if done and all(r.success for r in done) and at_start[i] >= min(at_start[:i]) \
+                and est is not None and est.cost < POOR_ESTIMATE \
                 and not _plausibility(done[0], free, usable(runs[0][0], runs[0][1]), data_vals):
             results.append((label, start, None))
             continue
@@ -639,8 +645,9 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         entry: dict[str, Any] = {"start": label, "from": {k: float(s[k].value) for k in free},
                                  "cost_at_start": _finite(problem.seed_cost(c0 * problem.scale))}
         if r is None:
-            entry.update({"cost": None, "skipped": "the fit from the first start is clean "
-                                                   "and this start begins at a higher cost"})
+            entry.update({"cost": None, "skipped": "the fit from the data-driven start is "
+                                                   "clean, the estimate fits the record and "
+                                                   "this start begins at a higher cost"})
         else:
             entry.update({"cost": _finite(r.cost), "params": {k: float(r.params[k]) for k in free},
                           "success": bool(r.success), "chosen": r is res})
