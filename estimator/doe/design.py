@@ -56,7 +56,58 @@ QUARTER2_COLUMNS: dict[str, str] = {"A": "x1", "B": "x1_dot", "C": "x2", "D": "x
 #: Table 3 column -> quarter1 initial-state name or parameter
 QUARTER1_COLUMNS: dict[str, str] = {"A": "x", "B": "x_dot", "C": "m", "D": "c", "E": "k"}
 
-DESIGNS: dict[str, str] = {"quarter1": "L16-4", "quarter2": "L27-3", "half4": "L27-3"}
+@dataclass(frozen=True)
+class DesignSpec:
+    """One model's seed design: the orthogonal array, its factor levels, the column map.
+
+    Attributes
+    ----------
+    name : str
+        The design's name (``L16-4``, ``L27-3``).
+    array : ndarray
+        Rows of factor levels (1-based).
+    levels : dict
+        Factor letter -> (name, unit, level values).
+    columns : dict
+        Factor letter -> the model's parameter or initial-state name.
+    constants : dict
+        Further true parameter values every row shares (SI).
+    body_x0 : dict
+        Further initial-state values every row shares.
+    choices : dict
+        The design choices the seed leaves out, with their reasons (for ``setup_record``).
+    """
+
+    name: str
+    array: Any
+    levels: dict[str, Any]
+    columns: dict[str, str]
+    constants: dict[str, float] = field(default_factory=dict)
+    body_x0: dict[str, float] = field(default_factory=dict)
+    choices: dict[str, str] = field(default_factory=dict)
+
+
+#: seed §6.1 half car: what the seed leaves out, and why
+HALF4_CHOICES: dict[str, str] = {
+    "column_mapping": "Table 5 by name: E,F,G = front wheel mass m1, front damper c1, "
+                      "front spring k1; H,J,K = rear m2, c2, k2; A-D = front/rear wheel "
+                      "initial position and velocity",
+    "m": "200 kg: two corners at Table 5's top sprung-mass level (100 kg each)",
+    "I": "40 kg m^2: dynamic index I/(m a1 a2) = 0.80 (typical car; 1 would make "
+         "front and rear dynamically independent)",
+    "horizon_s": "20 s: >= 2/3 of the slowest period of every design row",
+    "sample_rate_hz": "100 Hz: resolves the fastest decay (~42 1/s) over several samples",
+}
+
+
+#: the registry of designs, by model name (the one place that names the models)
+DESIGN_SPECS: dict[str, DesignSpec] = {
+    "quarter1": DesignSpec("L16-4", L16_ARRAY, L16_LEVELS, QUARTER1_COLUMNS),
+    "quarter2": DesignSpec("L27-3", L27_ARRAY, L27_LEVELS, QUARTER2_COLUMNS),
+    "half4": DesignSpec("L27-3", L27_ARRAY, L27_LEVELS, HALF4_COLUMNS, HALF4_CONSTANTS,
+                        HALF4_BODY_X0, HALF4_CHOICES),
+}
+DESIGNS: dict[str, str] = {k: v.name for k, v in DESIGN_SPECS.items()}
 
 
 @dataclass
@@ -81,14 +132,13 @@ class Experiment:
     x0: FloatArray = field(repr=False)
 
 
-def _columns(model: SuspensionModel) -> tuple[np.ndarray, dict[str, Any], dict[str, str]]:
-    if model.name == "quarter1":
-        return L16_ARRAY, L16_LEVELS, QUARTER1_COLUMNS
-    if model.name == "quarter2":
-        return L27_ARRAY, L27_LEVELS, QUARTER2_COLUMNS
-    if model.name == "half4":
-        return L27_ARRAY, L27_LEVELS, HALF4_COLUMNS
-    raise UsageError(f"no design for model {model.name!r}; expected one of {', '.join(DESIGNS)}")
+def design_spec(model: SuspensionModel) -> DesignSpec:
+    """The seed design registered for ``model`` (UsageError naming the known ones if none)."""
+    try:
+        return DESIGN_SPECS[model.name]
+    except KeyError:
+        raise UsageError(f"no design for model {model.name!r}; "
+                         f"expected one of {', '.join(DESIGN_SPECS)}") from None
 
 
 def experiments(model: SuspensionModel | str) -> list[Experiment]:
@@ -101,17 +151,17 @@ def experiments(model: SuspensionModel | str) -> list[Experiment]:
     """
     if isinstance(model, str):
         model = get_model(model)
-    array, levels, cols = _columns(model)
+    spec = design_spec(model)
+    array, levels, cols = spec.array, spec.levels, spec.columns
     letters = list(levels)
     states = {s: i for i, s in enumerate(model.state_names)}
     out = []
     for row_id, row in enumerate(array, start=1):
         truth: dict[str, float] = {}
         x0 = np.zeros(model.n_states)
-        if model.name == "half4":
-            truth.update(HALF4_CONSTANTS)
-            for s, v in HALF4_BODY_X0.items():
-                x0[states[s]] = v
+        truth.update(spec.constants)
+        for s, v in spec.body_x0.items():
+            x0[states[s]] = v
         lv = {}
         for j, letter in enumerate(letters):
             value = float(levels[letter][2][int(row[j]) - 1])
@@ -136,7 +186,8 @@ def setup_record(model: SuspensionModel | str, horizon: float = HORIZON,
     """The design choices the seed leaves out, as a JSON-ready dict."""
     name = model if isinstance(model, str) else model.name
     m = get_model(name)
-    array, levels, cols = _columns(m)
+    spec = design_spec(m)
+    levels, cols = spec.levels, spec.columns
     rec: dict[str, Any] = {
         "excitation": "free response from the design's known initial state (no road input)",
         "horizon_s": horizon,
@@ -148,17 +199,10 @@ def setup_record(model: SuspensionModel | str, horizon: float = HORIZON,
         "column_mapping": {k: f"{levels[k][0]} -> {v}" for k, v in cols.items()},
         "simulation": "exact modal solution (suspid.simulate), not ode45",
     }
-    if name == "half4":
-        rec["constants"] = dict(HALF4_CONSTANTS)
-        rec["body_initial_state"] = dict(HALF4_BODY_X0)
-        rec["choices"] = {
-            "column_mapping": "Table 5 by name: E,F,G = front wheel mass m1, front damper c1, "
-                              "front spring k1; H,J,K = rear m2, c2, k2; A-D = front/rear wheel "
-                              "initial position and velocity",
-            "m": "200 kg: two corners at Table 5's top sprung-mass level (100 kg each)",
-            "I": "40 kg m^2: dynamic index I/(m a1 a2) = 0.80 (typical car; 1 would make "
-                 "front and rear dynamically independent)",
-            "horizon_s": "20 s: >= 2/3 of the slowest period of every design row",
-            "sample_rate_hz": "100 Hz: resolves the fastest decay (~42 1/s) over several samples",
-        }
+    if spec.constants:
+        rec["constants"] = dict(spec.constants)
+    if spec.body_x0:
+        rec["body_initial_state"] = dict(spec.body_x0)
+    if spec.choices:
+        rec["choices"] = dict(spec.choices)
     return rec

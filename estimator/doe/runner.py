@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
 import numpy as np
@@ -219,8 +219,11 @@ def run_experiment(model: SuspensionModel, exp: Experiment, settings: Settings) 
     init = {k: params[k].value for k in free}
     t0 = time.perf_counter()
     whole = OutputErrorProblem(model, meas, cost=settings.cost, x0=exp.x0)
+    # from the data-driven estimate the basin is already found: the whole record at once
+    direct = replace(settings, stages=(1.0,))
     res = fit_from_starts(whole, params,
-                          lambda start: identify_staged(model, meas, exp.x0, start, settings),
+                          lambda start: identify_staged(model, meas, exp.x0, start,
+                                                        settings if start is params else direct),
                           data_start=settings.data_start)
     dt = time.perf_counter() - t0
     rel = {k: (res.params[k] - exp.truth[k]) / exp.truth[k] for k in free}
@@ -235,6 +238,7 @@ def run_experiment(model: SuspensionModel, exp: Experiment, settings: Settings) 
                   float(res.cost), dt, bool(res.identifiable),
                   {"rel_error": {k: float(v) for k, v in rel.items()},
                    "warnings": list(res.warnings),
+                   "reported_success": bool(res.success),
                    **({"starts": res.starts} if res.starts is not None else {})})
     return out, res
 

@@ -27,6 +27,10 @@ from suspid.models.base import FloatArray
 from suspid.simulate import outputs, road_matrix, simulate_states
 
 
+#: relative standard error above which a free parameter counts as not determined
+UNDETERMINED = 1.0
+
+
 @dataclass
 class NMOutcome:
     """Raw outcome of :func:`minimize_log`."""
@@ -287,6 +291,14 @@ def finish(problem: OutputErrorProblem, params: Parameters, p_hat: Mapping[str, 
                 stderr[k] = float(p_hat[k] * d[i]) if identifiable else float("inf")
         except np.linalg.LinAlgError:
             warnings.append("could not invert the sensitivity matrix for standard errors")
+        # a standard error above the value itself: the local curvature does not pin the
+        # parameter down (it could as well be zero or several times larger)
+        loose = [k for k in free if math.isfinite(stderr[k]) and stderr[k] > UNDETERMINED * p_hat[k]]
+        if loose:
+            identifiable = False
+            warnings += [f"not determined by this record: {k} = {p_hat[k]:.4g} has a standard "
+                         f"error of {stderr[k]:.3g} (more than {UNDETERMINED:g}x its value)"
+                         for k in loose]
     n_obs = problem.n_obs
     k = len(free)
     nss = ss / problem.scale

@@ -39,9 +39,10 @@ from estimator.identify.params import Parameters
 from estimator.identify.problem import OutputErrorProblem
 from estimator.identify.result import IdentResult
 from estimator.identify.simplex import nelder_mead
+from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
 from suspid.models.base import FloatArray, SuspensionModel
-from suspid.simulate import uniform_step
+from suspid.simulate import simulate_states, uniform_step
 
 #: damping ratio of the filter's double pole pair
 FILTER_ZETA = 0.8
@@ -49,6 +50,8 @@ FILTER_ZETA = 0.8
 NONLIN_GRID = np.exp(np.linspace(math.log(0.05), math.log(20.0), 21))
 #: normalised output-error cost below which an estimate is taken as exact (no further bandwidth)
 EXACT_COST = 1e-7
+#: floor of an estimate relative to the geometric mean of the others of its kind
+FLOOR = 0.02
 #: smallest relative singular value of the regression accepted as "determined"
 RANK_TOL = 1e-9
 
@@ -69,6 +72,8 @@ class StartEstimate:
         Normalised output-error cost at the estimate (1 = no fit).
     notes : list of str
         Adjustments made (e.g. a negative estimate replaced by a small positive value).
+    undetermined : list of str
+        Parameters whose estimate was not usable and was replaced by a floor value.
     """
 
     values: dict[str, float] = field(default_factory=dict)
@@ -76,6 +81,7 @@ class StartEstimate:
     bandwidth_hz: float = float("nan")
     cost: float = float("inf")
     notes: list[str] = field(default_factory=list)
+    undetermined: list[str] = field(default_factory=list)
 
 
 def _filter_bank(w: float, h: float) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
@@ -97,6 +103,12 @@ def _filter_bank(w: float, h: float) -> tuple[FloatArray, FloatArray, FloatArray
 def _filter(U: FloatArray, w: float, h: float) -> tuple[FloatArray, FloatArray]:
     """Filter the columns of ``U`` (N, m): outputs ``s^k / D`` for k = 0..4 and the modes.
 
+    The recursion ``z[n+1] = Phi z[n] + a u[n] + b u[n+1]`` (zero state before the record,
+    ``a = G1 - G2/h``, ``b = G2/h``) is a convolution with the impulse response
+    ``Phi^(i-1) a + Phi^i b``, less ``Phi^n b u[0]`` (the record has no sample before
+    ``u[0]``); the responses come from one loop over 4 x 4 products and the convolution
+    from an FFT of every column at once.
+
     Returns
     -------
     Y : ndarray, shape (5, N, m)
@@ -106,20 +118,23 @@ def _filter(U: FloatArray, w: float, h: float) -> tuple[FloatArray, FloatArray]:
     """
     Phi, G1, G2, d = _filter_bank(w, h)
     N, m = U.shape
-    Z = np.zeros((N, 4, m))
-    z = np.zeros((4, m))
-    slope = np.vstack([np.diff(U, axis=0) / h, np.zeros((1, m))])
+    a, b = G1 - G2 / h, G2 / h
+    Pa = np.empty((N, 4))  # Phi^i a
+    Pb = np.empty((N, 4))  # Phi^i b
+    T = np.empty((N, 4))  # first row of Phi^n
+    va, vb, row = a.copy(), b.copy(), np.eye(4)[0]
     for n in range(N):
-        Z[n] = z
-        z = Phi @ z + np.outer(G1, U[n]) + np.outer(G2, slope[n])
+        Pa[n], Pb[n], T[n] = va, vb, row
+        va, vb, row = Phi @ va, Phi @ vb, row @ Phi
+    H = Pb.copy()
+    H[1:] += Pa[:-1]
+    L = 1 << int(np.ceil(np.log2(2 * N)))
+    Fu = np.fft.rfft(U, L, axis=0)
+    Fh = np.fft.rfft(H, L, axis=0)
     Y = np.empty((5, N, m))
-    Y[:4] = np.moveaxis(Z, 1, 0)
-    Y[4] = U - np.einsum("j,njm->nm", d, Z)
-    T = np.empty((N, 4))
-    zt = np.eye(4)
-    for n in range(N):
-        T[n] = zt[0]
-        zt = Phi @ zt
+    for i in range(4):
+        Y[i] = np.fft.irfft(Fh[:, i:i + 1] * Fu, L, axis=0)[:N] - np.outer(Pb[:, i], U[0])
+    Y[4] = U - np.einsum("j,jnm->nm", d, Y[:4])
     return Y, T
 
 
@@ -176,8 +191,17 @@ class _Regression:
             return Xk - (Xk @ Tq) @ Tq.T
         self.Q = proj(self.Q)
         self.R = proj(self.R)
-        S = np.concatenate([self.Q[2], self.Q[1], self.Q[0], self.R[0], self.R[1]], axis=0)
-        self.G = S @ S.T  # Gram matrix of every filtered signal: the LS needs nothing else
+        self.S = np.concatenate([self.Q[2], self.Q[1], self.Q[0], self.R[0], self.R[1]], axis=0)
+        self.G = self.S @ self.S.T  # Gram matrix of the filtered signals: all the LS needs
+        self.iv = False  # True: G pairs instruments with the signals (not symmetric)
+
+    def with_instruments(self, inst: "_Regression") -> "_Regression":
+        """A copy whose normal equations use ``inst``'s signals as instruments."""
+        out = object.__new__(_Regression)
+        out.__dict__.update(self.__dict__)
+        out.G = inst.S @ self.S.T
+        out.iv = True
+        return out
 
     @staticmethod
     def coef(mats: tuple[FloatArray, ...]) -> FloatArray:
@@ -188,6 +212,78 @@ class _Regression:
     def norms(self, coef: FloatArray) -> FloatArray:
         """Norm of each equation's residual for coefficients ``coef``."""
         return np.sqrt(np.maximum(np.einsum("is,st,it->i", coef, self.G, coef), 0.0))
+
+
+def _monomials(eta: FloatArray) -> FloatArray:
+    """``1, eta_i, eta_i eta_j (i <= j)``: the monomials of degree <= 2."""
+    n = eta.size
+    quad = [eta[i] * eta[j] for i in range(n) for j in range(i, n)]
+    return np.concatenate([[1.0], eta, quad])
+
+
+def _lifted_seed(reg: "_Regression", model: SuspensionModel, base: Mapping[str, float],
+                 lin: list[str], nonlin: list[str], wts: FloatArray) -> FloatArray | None:
+    """Log-factors of the nonlinear parameters from the *lifted* linear problem.
+
+    Lengths enter the matrices as polynomials (``c1 a1``, ``k1 a1**2``, ...). Each product
+    of a linear parameter and a monomial of the lengths is taken as its own unknown, which
+    makes the equation-error problem linear again; the lengths follow as ratios
+    ``(theta a) / theta``. ``None`` when the dependence is not a polynomial of degree <= 2
+    or no ratio is determined.
+    """
+    rng = np.random.default_rng(7)
+    x0 = np.array([base[k] for k in nonlin])
+    pts = [x0 * np.exp(rng.normal(0.0, 0.5, x0.size)) for _ in range(3 * (x0.size + 1) ** 2)]
+    names = [None] + lin  # None: the part no linear parameter multiplies
+
+    def coef_of(j: str | None, eta: FloatArray) -> FloatArray:
+        p = {**base, **dict(zip(nonlin, eta)), **{k: 0.0 for k in lin}}
+        c0 = reg.coef(model.matrices(p))
+        return c0 if j is None else reg.coef(model.matrices({**p, j: 1.0})) - c0
+
+    Phi = np.array([_monomials(e) for e in pts])
+    cols: list[FloatArray] = []
+    tags: list[tuple[str | None, int]] = []
+    b = np.zeros_like(coef_of(None, x0))
+    for j in names:
+        vals = np.array([coef_of(j, e).ravel() for e in pts])
+        P, *_ = np.linalg.lstsq(Phi[:-1], vals[:-1], rcond=None)
+        if not np.allclose(Phi[-1] @ P, vals[-1], rtol=1e-8, atol=1e-10 * (1 + np.abs(vals).max())):
+            return None
+        for mi in range(P.shape[0]):
+            cm = P[mi].reshape(b.shape)
+            if np.max(np.abs(cm)) <= 1e-12 * (1 + np.abs(vals).max()):
+                continue
+            if j is None and mi == 0:
+                b = cm
+            else:
+                cols.append(cm * wts[:, None])
+                tags.append((j, mi))
+    if not cols:
+        return None
+    b = b * wts[:, None]
+    Cs = np.stack(cols)
+    GC = np.einsum("jis,st->jit", Cs, reg.G)
+    AtA = np.einsum("jit,lit->jl", GC, Cs)
+    Atb = np.einsum("jit,it->j", GC, b)
+    d = np.sqrt(np.where(np.abs(np.diag(AtA)) > 0, np.abs(np.diag(AtA)), 1.0))
+    H = AtA / np.outer(d, d)
+    if reg.iv:  # instrumental variables: a square, non-symmetric system
+        z = np.linalg.lstsq(H, -Atb / d, rcond=1e-12)[0] / d
+    else:
+        ev, V = np.linalg.eigh(H)
+        keep = ev > 1e-12 * ev[-1]
+        z = (V[:, keep] @ ((V[:, keep].T @ (-Atb / d)) / ev[keep])) / d
+    val = dict(zip(tags, z))
+    out = []
+    for i in range(x0.size):
+        ratios = [val[(j, 1 + i)] / val[(j, 0)] for j in lin
+                  if (j, 0) in val and (j, 1 + i) in val and val[(j, 0)] > 0]
+        ratios = [r for r in ratios if r > 0]
+        if not ratios:
+            return None
+        out.append(math.log(float(np.median(ratios)) / x0[i]))
+    return np.array(out)
 
 
 def _split_linear(model: SuspensionModel, base: Mapping[str, float], free: list[str]
@@ -225,8 +321,12 @@ def _solve_linear(reg: _Regression, model: SuspensionModel, p: Mapping[str, floa
     AtA = np.einsum("jit,lit->jl", GC, Cs)
     Atb = np.einsum("jit,it->j", GC, b)
     btb = float(np.einsum("is,st,it->", b, reg.G, b))
-    d = np.sqrt(np.where(np.diag(AtA) > 0, np.diag(AtA), 1.0))
+    d = np.sqrt(np.where(np.abs(np.diag(AtA)) > 0, np.abs(np.diag(AtA)), 1.0))
     H = AtA / np.outer(d, d)
+    if reg.iv:  # instrumental variables: a square, non-symmetric system
+        sol, *_ = np.linalg.lstsq(H, -Atb / d, rcond=1e-12)
+        sv = np.linalg.svd(H, compute_uv=False)
+        return sol / d, 0.0, float(sv[-1] / sv[0]) if sv[0] > 0 else 0.0
     ev, V = np.linalg.eigh(H)
     if ev[-1] <= 0:
         return np.zeros(len(lin)), 1.0, 0.0
@@ -280,11 +380,12 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
     nyq = 0.5 / h
     if bandwidths_hz is None:
         top = nyq / 5.0
-        bandwidths_hz = [float(f) for f in np.geomspace(0.2, max(top, 0.3), 6)]
+        bandwidths_hz = [float(f) for f in np.geomspace(0.2, max(top, 0.3), 4)]
     best = StartEstimate(reason="no filter bandwidth gave a usable estimate")
     reasons: list[str] = []
     seeds: list[FloatArray] = []
     last_u: FloatArray | None = None
+    best_reg: tuple[_Regression, FloatArray] | None = None
     for fc in bandwidths_hz:
         if best.cost < EXACT_COST:
             break
@@ -313,17 +414,21 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
             return p, rel + (1.0 if np.any(theta < 0) else 0.0), sv
 
         if nonlin:
-            if not seeds:  # the grid once, at the first bandwidth; later ones reuse it
+            lifted = _lifted_seed(reg, model, base, lin, nonlin, wts)
+            tries = seeds + ([last_u] if last_u is not None else [])
+            if lifted is not None and np.all(np.abs(lifted) < 3.5):
+                seeds = tries = [lifted]
+            elif not seeds:  # the grid once, at the first bandwidth; later ones reuse it
                 grid = list(itertools.product(NONLIN_GRID, repeat=len(nonlin))) \
                     if len(nonlin) <= 2 else [tuple([1.0] * len(nonlin))]
                 scored = sorted((solve_at(np.array(g))[1], g) for g in grid)
                 seeds = [np.log(np.array(g, dtype=float)) for _, g in scored[:3]]
             best_u, best_r = np.zeros(len(nonlin)), math.inf
-            for g0 in seeds + ([last_u] if last_u is not None else []):
+            for g0 in tries if tries else seeds:
                 res = nelder_mead(
-                    lambda u: solve_at(np.exp(u))[1] if np.all(np.abs(u) < 8) else np.inf, g0,
+                    lambda u: solve_at(np.exp(u))[1] if np.all(np.abs(u) < 3.5) else np.inf, g0,
                     initial_simplex=np.vstack([g0] + [g0 + 0.1 * e for e in np.eye(len(nonlin))]),
-                    xatol=1e-5, fatol=1e-14, maxfev=150 * len(nonlin))
+                    xatol=1e-5, fatol=1e-14, maxfev=60 * len(nonlin))
                 if res.fun < best_r:
                     best_u, best_r = np.asarray(res.x, dtype=float), float(res.fun)
             last_u = best_u
@@ -336,18 +441,71 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
             continue
         notes = []
         vals = {k: float(p[k]) for k in free}
-        bad = [k for k in lin if not (vals[k] > 0 and math.isfinite(vals[k]))]
-        for k in bad:
+        floored: list[str] = []
+        ok = [k for k in lin if vals[k] > 0 and math.isfinite(vals[k])]
+        for k in lin:
             kind = model.spec(k).kind
-            same = [vals[j] for j in lin if model.spec(j).kind == kind and j not in bad]
-            vals[k] = 1e-2 * (math.exp(np.mean(np.log(same))) if same else base[k])
-            notes.append(f"{k}: the equation-error estimate was not positive; started at {vals[k]:.3g}")
+            same = [vals[j] for j in ok if model.spec(j).kind == kind and j != k]
+            floor = FLOOR * (math.exp(float(np.mean(np.log(same)))) if same else base[k])
+            if not (vals[k] >= floor and math.isfinite(vals[k])):
+                notes.append(f"{k}: the equation-error estimate {vals[k]:.3g} is not a usable "
+                             f"positive value; started at {floor:.3g}")
+                vals[k] = floor
+                floored.append(k)
         cost = problem.normalized_ss({**base, **vals})
         if cost < best.cost:
-            best = StartEstimate(values=vals, bandwidth_hz=fc, cost=float(cost), notes=notes)
+            best = StartEstimate(values=vals, bandwidth_hz=fc, cost=float(cost), notes=notes,
+                                 undetermined=floored)
+            best_reg = (reg, wts)
     if not best.values and reasons:
         best.reason = "; ".join(reasons)
+    if best.values and best.cost >= EXACT_COST and best_reg is not None:
+        best = _refine_iv(problem, best, best_reg[0], best_reg[1], base, lin, nonlin, h)
     return best
+
+
+def _refine_iv(problem: OutputErrorProblem, est: StartEstimate, reg: "_Regression",
+               wts: FloatArray, base: Mapping[str, float], lin: list[str], nonlin: list[str],
+               h: float, iterations: int = 4) -> StartEstimate:
+    """Instrumental-variable iterations against the bias that noise puts in the regressors.
+
+    The instruments are the same filters applied to the model's noise-free simulated
+    motion at the current estimate (refined instrumental variables); an iterate is kept
+    only when it lowers the output-error cost.
+    """
+    model = problem.model
+    nq = len(model.coords)
+    for _ in range(iterations):
+        p = {**base, **est.values}
+        try:
+            x0 = problem.predict(p).x0
+            X = simulate_states(model, p, problem.t, problem.U, x0)
+        except (np.linalg.LinAlgError, ValueError, FloatingPointError):
+            break
+        if not np.all(np.isfinite(X)):
+            break
+        sim = Measurement(t=problem.t, road=problem.meas.road,
+                          measured={**{c: X[:, i] for i, c in enumerate(model.coords)},
+                                    **{f"{c}_dot": X[:, nq + i] for i, c in enumerate(model.coords)}})
+        iv = reg.with_instruments(_Regression(model, sim, problem.t, h, problem.U,
+                                              2 * math.pi * est.bandwidth_hz))
+        q = dict(p)
+        if nonlin:
+            u = _lifted_seed(iv, model, p, lin, nonlin, wts)
+            if u is not None and np.all(np.abs(u) < 3):
+                q.update({k: p[k] * math.exp(v) for k, v in zip(nonlin, u)})
+        theta, _, _ = _solve_linear(iv, model, q, lin, wts)
+        if not np.all(theta > 0):
+            break
+        q.update(zip(lin, (float(v) for v in theta)))
+        vals = {k: float(q[k]) for k in est.values}
+        cost = problem.normalized_ss({**base, **vals})
+        if not cost < est.cost:
+            break
+        est = StartEstimate(values=vals, bandwidth_hz=est.bandwidth_hz, cost=float(cost),
+                            notes=est.notes + ["refined by instrumental variables"],
+                            undetermined=est.undetermined)
+    return est
 
 
 def data_driven_start(model: SuspensionModel, data: Measurement, fixed: Mapping[str, float],
@@ -379,6 +537,10 @@ def data_driven_start(model: SuspensionModel, data: Measurement, fixed: Mapping[
     return dict(estimate_start(problem, params).values)
 
 
+#: normalised output-error cost of a data-driven estimate above which the given start is
+#: always run as well (the estimate explains less than half of the record)
+POOR_ESTIMATE = 0.5
+
 #: a free parameter this far (factor) from its start and from the data-driven estimate ran away
 RUNAWAY = 100.0
 
@@ -396,12 +558,15 @@ def _plausibility(res: IdentResult, free: list[str], start: Mapping[str, float],
         if not (math.isfinite(v) and v > 0):
             out.append(f"{k} reached {v!r}, not a finite positive value")
             continue
-        far_start = abs(math.log(v / start[k])) > math.log(RUNAWAY)
+        far_start = k not in start or abs(math.log(v / start[k])) > math.log(RUNAWAY)
         far_data = k not in data or abs(math.log(v / data[k])) > math.log(RUNAWAY)
         if far_start and far_data:
             ref = f" and from the data-driven estimate {data[k]:.4g}" if k in data else ""
-            out.append(f"{k} ran to {v:.4g}, more than {RUNAWAY:g}x from its start "
-                       f"{start[k]:.4g}{ref}; the record does not support it")
+            if k not in start and k not in data:
+                continue  # neither a given start nor a usable estimate to compare with
+            st = f"its start {start[k]:.4g}" if k in start else "its start"
+            out.append(f"{k} ran to {v:.4g}, more than {RUNAWAY:g}x from {st}{ref}; "
+                       "the record does not support it")
     return out
 
 
@@ -423,7 +588,8 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
     keep_init : bool
         Also consider ``params`` as a start (always done when no data-driven start exists).
         It is run when the fit from the data-driven start is not a clean success (not
-        converged, not identifiable, or implausible) or when ``params`` begins at a lower
+        converged, not identifiable, or implausible), when the estimate itself fits poorly
+        (normalised cost above ``POOR_ESTIMATE``), or when ``params`` begins at a lower
         cost than the data-driven start; otherwise it is listed as skipped, so the time per
         identification does not grow.
 
@@ -432,8 +598,9 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
     IdentResult
         The lowest-cost result, with ``starts`` (every start and what it reached),
         ``data_start`` and ``nfev`` summed over the runs. A result whose parameters ran
-        orders of magnitude away from its start and from the data-driven estimate is not
-        reported as a success; its warnings say which parameter and why.
+        orders of magnitude away from its start and from the data-driven estimate is
+        reported neither as a success nor as identifiable; its warnings say which parameter
+        and why, and the costs reached from each start.
     """
     free = params.free
     est = estimate_start(problem, params) if data_start and free else None
@@ -446,14 +613,21 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
     if keep_init or not runs:
         runs.append(("init", params))
     at_start = [problem.normalized_ss(s.valuesdict()) for _, s in runs]
+    data_vals = ({k: v for k, v in est.values.items() if k not in est.undetermined}
+                 if est is not None else {})
+
+    def usable(label: str, start: Parameters) -> dict[str, float]:
+        """Start values to judge a run-away against (not the floor of an unusable estimate)."""
+        return {k: start[k].value for k in free if label != "data" or k in data_vals}
+
     results: list[tuple[str, Parameters, IdentResult | None]] = []
     for i, (label, start) in enumerate(runs):
         done = [r for _, _, r in results if r is not None]
         # a further start only runs when the fits so far are not clean, or when it begins
         # lower than the start they came from (it may then be in a better basin)
         if done and all(r.success for r in done) and at_start[i] >= min(at_start[:i]) \
-                and not _plausibility(done[0], free, {k: runs[0][1][k].value for k in free},
-                                      est.values if est is not None else {}):
+                and est is not None and est.cost < POOR_ESTIMATE \
+                and not _plausibility(done[0], free, usable(runs[0][0], runs[0][1]), data_vals):
             results.append((label, start, None))
             continue
         results.append((label, start, run(start)))
@@ -466,14 +640,14 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
     best = min(ran, key=key)
     res = best[2]
     res.nfev = int(sum(r.nfev for _, _, r in ran))
-    data_vals = est.values if est is not None else {}
     res.starts = []
     for (label, s, r), c0 in zip(results, at_start):
         entry: dict[str, Any] = {"start": label, "from": {k: float(s[k].value) for k in free},
                                  "cost_at_start": _finite(problem.seed_cost(c0 * problem.scale))}
         if r is None:
-            entry.update({"cost": None, "skipped": "the fit from the first start is clean "
-                                                   "and this start begins at a higher cost"})
+            entry.update({"cost": None, "skipped": "the fit from the data-driven start is "
+                                                   "clean, the estimate fits the record and "
+                                                   "this start begins at a higher cost"})
         else:
             entry.update({"cost": _finite(r.cost), "params": {k: float(r.params[k]) for k in free},
                           "success": bool(r.success), "chosen": r is res})
@@ -484,10 +658,43 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
                           else {"reason": est.reason})
         if not est.values:
             res.warnings.append(f"no data-driven start: {est.reason}")
-    bad = _plausibility(res, free, {k: best[1][k].value for k in free}, data_vals)
+    bad = _plausibility(res, free, usable(best[0], best[1]), data_vals)
     if bad:
+        # a parameter that ran orders of magnitude away along a flat direction of the cost
+        # is not identified by this record, whatever the curvature at the end point says
         res.success = False
+        res.identifiable = False
+        for entry in res.starts:
+            if entry.get("chosen"):
+                entry["success"] = False
         alts = ", ".join(f"{label} start: cost {r.cost:.4g}" for label, _, r in ran)
         res.warnings += [f"implausible result: {b}" for b in bad]
         res.warnings.append(f"costs reached from each start: {alts}")
     return res
+
+
+def cold_start(model: SuspensionModel, meas: Measurement, params: Parameters,
+               cost: str = "sse") -> Parameters:
+    """``params`` with its free values replaced by the data-driven start when that fits better.
+
+    For a fit with no earlier estimate to start from (a monitor's first window): the
+    data-driven estimate is used when its output-error cost on ``meas`` is lower than the
+    given (nominal) start's, so a far-off ``--nominal``/``--init`` does not decide the
+    basin. Returns ``params`` itself when there is no usable estimate or it fits worse.
+    """
+    if not params.free:
+        return params
+    try:
+        problem = OutputErrorProblem(model, meas, cost=cost)
+    except (UsageError, ValueError, np.linalg.LinAlgError):
+        return params
+    est = estimate_start(problem, params)
+    vals = {k: v for k, v in est.values.items() if k not in est.undetermined}
+    if not vals:
+        return params
+    out = params.copy()
+    for k, v in vals.items():
+        out[k].value = float(v)
+    if problem.normalized_ss(out.valuesdict()) < problem.normalized_ss(params.valuesdict()):
+        return out
+    return params

@@ -44,6 +44,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from estimator.identify import Parameters, minimize_log
+from estimator.identify.start import cold_start
 from estimator.stream.config import WindowConfig
 from estimator.stream.windowproblem import StateSpaceMap, WindowProblem
 from suspid.errors import UsageError
@@ -312,6 +313,8 @@ class SlidingWindowIdentifier:
         cfg = self.config
         prob = self._problem(t, data)
         params, simplex, warm = self._start(float(t[-1]))
+        if not warm:  # cold: the record's own estimate when the nominal start fits worse
+            params = cold_start(self.model, prob.meas, params, self.config.cost)
         free = self.free
         th0 = [params[k].value for k in free]
         base = params.valuesdict()

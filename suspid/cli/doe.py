@@ -15,10 +15,9 @@ import time
 from dataclasses import asdict
 from typing import Any, TextIO
 
+from estimator.doe.design import DESIGNS
 from suspid.cli._common import print_json
 from suspid.errors import UsageError
-
-MODELS = ("quarter1", "quarter2", "half4")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -26,9 +25,10 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                        description="Run the seed's design of experiments: L16-4 (Tables 3-4) for "
                                    "quarter1, L27-3 (Tables 5-6) for quarter2 and half4. Each row "
                                    "is simulated, identified from --init-scale x the truth and "
-                                   "scored (1 %% of the truth noise-free, 3 sigma when noisy).")
-    p.add_argument("--model", required=True, choices=list(MODELS),
-                   help="quarter1 (L16-4), quarter2 or half4 (L27-3)")
+                                   "scored (1 % of the truth noise-free, 3 sigma when noisy).")
+    p.add_argument("--model", required=True, choices=list(DESIGNS),
+                   help="the model whose seed design to run: "
+                        + ", ".join(f"{m} ({d})" for m, d in DESIGNS.items()))
     p.add_argument("--cost", choices=["sse", "frobenius"], default="sse",
                    help="sse: squared position differences (seed cost 1); frobenius: Frobenius "
                         "norm over positions and velocities (seed cost 2); default sse")
@@ -106,7 +106,7 @@ class ProgressBar:
 
 def run(args: argparse.Namespace) -> int:
     from estimator.doe.blas import single_thread_blas
-    from estimator.doe.design import DESIGNS, experiments, setup_record
+    from estimator.doe.design import experiments, setup_record
     from estimator.doe.runner import Settings, run_design
     from suspid.models import get_model
 

@@ -1,0 +1,151 @@
+#!/usr/bin/env python3
+"""Benchmark: identification with the data-driven start vs the given start alone.
+
+Two parts, both printed side by side for the two paths in one run:
+
+* ``timing`` (default): seconds per identification of the seed's designs (``suspid doe``
+  rows) and of ``suspid identify`` on the Table 1 bump, with the data-driven start
+  (``data``) and without it (``init``: the ``--init-scale`` start alone, the earlier
+  behaviour), with the success count of each.
+* ``--grid``: success counts of every design row for the models, costs, ``--init-scale``
+  values and noise levels given (the study behind docs/performance.md's table); with
+  ``--compare`` also for the ``init`` path.
+
+Usage::
+
+    python tools/bench_start.py [--models half4,quarter2] [--scales 0.1,10] [--ids 1,2,3]
+    python tools/bench_start.py --grid [--models ...] [--costs sse,frobenius]
+        [--scales 0.1,0.2,0.5,2,5,10] [--noise 0.1,0.2,0.3,0.4,0.5] [--compare] [--json]
+"""
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # small matrices: threads only cost here
+
+import argparse
+import json
+import sys
+import time
+from typing import Any
+
+from estimator.doe.runner import Settings, run_design
+from estimator.identify import OutputErrorProblem, Parameters, fit, fit_from_starts
+from suspid.excitation import make_scenario
+from suspid.io.csvio import Measurement
+from suspid.models import get_model
+from suspid.simulate import simulate
+
+TABLE1 = dict(m1=275.0, k1=150000.0, c1=1120.0, m2=27.0, k2=310000.0, c2=3100.0)
+
+
+def _floats(text: str) -> list[float]:
+    return [float(s) for s in text.split(",") if s.strip()]
+
+
+def doe_row(model: str, cost: str, scale: float, noise: float, data: bool,
+            ids: list[int] | None) -> dict[str, Any]:
+    """One design (or its rows ``ids``): successes, total and seconds per row."""
+    t0 = time.perf_counter()
+    out = run_design(model, Settings(cost=cost, init_scale=scale, noise=noise,
+                                     data_start=data), ids=ids)
+    dt = time.perf_counter() - t0
+    worst = max((e["max_rel_error"] or float("inf")) for e in out["experiments"])
+    false_ok = [e["id"] for e in out["experiments"]
+                if e.get("reported_success")
+                and any(not 0.1 <= 1.0 + v <= 10.0 for v in e["rel_error"].values())]
+    unflagged = [e["id"] for e in out["experiments"] if not e["success"] and e["identifiable"]
+                 and not any("implausible" in w for w in e.get("warnings", []))]
+    return {"model": model, "cost": cost, "init_scale": scale, "noise": noise,
+            "failed_unflagged": unflagged,
+            "path": "data" if data else "init", "successes": out["successes"],
+            "total": out["total"], "s_per_row": dt / out["total"], "worst_rel": worst,
+            "failed": [e["id"] for e in out["experiments"] if not e["success"]],
+            "success_true_beyond_10x": false_ok}
+
+
+def identify_bump(scale: float, data: bool) -> dict[str, Any]:
+    """``suspid identify`` on the Table 1 bump (springs/dampers x ``scale``), no --init."""
+    m = get_model("quarter2")
+    truth = {k: v * (scale if k not in ("m1", "m2") else 1.0) for k, v in TABLE1.items()}
+    t, road, x0 = make_scenario(m, "bump", duration=3.0, fs=1000.0, params=truth)
+    sim = simulate(m, truth, t, road, x0)
+    meas = Measurement(t=t, road=road, measured={c: sim[c] for c in
+                                                 ("x1", "x2", "x1_dot", "x2_dot")})
+    problem = OutputErrorProblem(m, meas)
+    params = Parameters.for_model(m, fix={"m1": 275.0, "m2": 27.0})
+    t0 = time.perf_counter()
+    res = fit_from_starts(problem, params,
+                          lambda s: fit(problem, s, polish=True, multistart=4)[0],
+                          data_start=data, keep_init=not data)
+    dt = time.perf_counter() - t0
+    err = max(abs(res.params[k] / truth[k] - 1) for k in ("c1", "k1", "c2", "k2"))
+    return {"case": f"identify bump x{scale:g}", "path": "data" if data else "init",
+            "seconds": dt, "max_rel_error": err, "success": res.success}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--grid", action="store_true", help="success grid instead of timing")
+    ap.add_argument("--models", default="quarter1,quarter2,half4")
+    ap.add_argument("--costs", default="sse")
+    ap.add_argument("--scales", default=None,
+                    help="init scales (default 0.1,10 for timing, 0.1,0.2,0.5,2,5,10 for the "
+                         "grid; an empty string for none)")
+    ap.add_argument("--noise", default="", help="noise levels (grid; at init scale 0.5)")
+    ap.add_argument("--ids", default=None, help="design rows (timing; default all)")
+    ap.add_argument("--compare", action="store_true", help="grid: also the init-only path")
+    ap.add_argument("--json", action="store_true")
+    a = ap.parse_args(argv)
+    models = [s for s in a.models.split(",") if s]
+    costs = [s for s in a.costs.split(",") if s]
+    ids = [int(s) for s in a.ids.split(",")] if a.ids else None
+    rows: list[dict[str, Any]] = []
+    w = sys.stdout.write
+    if a.grid:
+        scales = _floats("0.1,0.2,0.5,2,5,10" if a.scales is None else a.scales)
+        cases = [(m, c, s, 0.0) for m in models for c in costs for s in scales]
+        cases += [(m, c, 0.5, n) for m in models for c in costs for n in _floats(a.noise)]
+        for m, c, s, n in cases:
+            for data in ([True, False] if a.compare else [True]):
+                r = doe_row(m, c, s, n, data, ids)
+                rows.append(r)
+                if not a.json:
+                    w(f"{m:9} {c:9} scale {s:<5g} noise {n:<4g} {r['path']:5} "
+                      f"{r['successes']:>2}/{r['total']:<2} {r['s_per_row']:6.2f} s/row "
+                      f"failed {r['failed']} (not flagged: {r['failed_unflagged']}) "
+                      f"success-true>10x {r['success_true_beyond_10x']}\n")
+                    sys.stdout.flush()
+    else:
+        scales = _floats(a.scales or "0.1,10")
+        if not a.json:
+            w(f"{'case':34} {'init s/id':>10} {'data s/id':>10} {'ratio':>6} "
+              f"{'init ok':>8} {'data ok':>8}\n")
+        for m in models:
+            for c in costs:
+                for s in scales:
+                    old = doe_row(m, c, s, 0.0, False, ids)
+                    new = doe_row(m, c, s, 0.0, True, ids)
+                    rows += [old, new]
+                    if not a.json:
+                        w(f"{f'doe {m} {c} x{s:g}':34} {old['s_per_row']:10.3f} "
+                          f"{new['s_per_row']:10.3f} {new['s_per_row'] / old['s_per_row']:6.2f} "
+                          f"{old['successes']:>4}/{old['total']:<3} "
+                          f"{new['successes']:>4}/{new['total']:<3}\n")
+                        sys.stdout.flush()
+        for s in (1.0, 5.0, 0.2):
+            old, new = identify_bump(s, False), identify_bump(s, True)
+            rows += [old, new]
+            if not a.json:
+                w(f"{old['case']:34} {old['seconds']:10.3f} {new['seconds']:10.3f} "
+                  f"{new['seconds'] / old['seconds']:6.2f} {str(old['success']):>8} "
+                  f"{str(new['success']):>8}   max rel error init {old['max_rel_error']:.1e}, "
+                  f"data {new['max_rel_error']:.1e}\n")
+    if a.json:
+        json.dump(rows, sys.stdout)
+        w("\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
