@@ -188,7 +188,7 @@ class SensorNode:
     model : SuspensionModel, optional
         Plant model instance (e.g. with ``extra_force`` set); default ``get_model(config.model)``.
     extra_forces : sequence of callables, optional
-        Extra generalised forces ``f(t, x, u, params)`` added to the plant (issue-6 hook).
+        Extra generalised forces ``f(t, x, u, params)`` added to the plant (the undeclared-effect hook).
     effects : sequence, optional
         Undeclared effects of :mod:`suspid.effects` (e.g. ``"coulomb_friction:F=120"``)
         injected into the plant and the sensors without telling the estimator.

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Benchmark (issue 3): the full half4 L27 design with both costs, from 0.5x the truth.
+"""Benchmark: the full half4 L27 design with both costs, from 0.5x the truth.
 
 Runs ``suspid doe --model half4 --cost C --json`` for C = sse and frobenius as
 subprocesses (process start included), one after the other, and prints successes, wall

@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""Benchmarks of ``suspid monitor`` (issue 5): replay speed, CPU share on a saturated bus, RSS.
+"""Benchmarks of ``suspid monitor``: replay speed, CPU share on a saturated bus, RSS.
 
 Usage (from the repository root)::
 

@@ -1,4 +1,4 @@
-"""Issue 3's Must-show items: the designs identify every row (noise-free, 1 %)."""
+"""The seed's designs identify every row (noise-free, within 1 %)."""
 from __future__ import annotations
 
 import pytest

@@ -1,4 +1,4 @@
-"""Issue 5 must-show: a damper falling through 70 % of nominal is flagged a few seconds after
+"""The damper-wear stream: a damper falling through 70 % of nominal is flagged a few seconds after
 the crossing and never before; c1 is tracked within 5 % RMS; the EKF's track is reported beside."""
 from __future__ import annotations
 
