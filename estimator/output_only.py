@@ -36,8 +36,8 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.signal import decimate, welch
 
+from estimator.stream.events import Estimate, Skip
 from estimator.stream.monitor import StepResult
-from estimator.stream.tracker import ParameterTracker
 from suspid.errors import InputError, UsageError
 from suspid.models.base import FloatArray
 
@@ -168,6 +168,7 @@ class OutputOnlyEstimator:
     """
 
     name = "output_only"
+    own_track = False
 
     def __init__(self, channel: str, method: str = "carma", max_missing: float = 0.1,
                  min_rms: float = 0.02, ar_order: int = 6) -> None:
@@ -178,7 +179,8 @@ class OutputOnlyEstimator:
         self.max_missing = max_missing
         self.min_rms = min_rms
         self.ar_order = ar_order
-        self.tracker = ParameterTracker(q=0.005, overlap=1.0)
+        self.lag = 0.0
+        self.overlap = 1.0
         self.windows = 0
         self.skipped = 0
         self.cpu = 0.0
@@ -187,7 +189,7 @@ class OutputOnlyEstimator:
         """Body mode of one window (or a skip with the reason)."""
         c0 = time.process_time()
         y = data.get(self.channel)
-        base = {"t": float(t[-1]), "t_start": float(t[0]), "baseline": self.name}
+        t0, t1 = float(t[0]), float(t[-1])
         if y is None:
             raise InputError(f"output-only mode: the stream has no channel {self.channel!r}; "
                              f"it has {', '.join(data)} (map one with --map {self.channel}=MSG.SIGNAL)")
@@ -199,7 +201,7 @@ class OutputOnlyEstimator:
         def skip(reason: str) -> StepResult:
             self.skipped += 1
             self.cpu += time.process_time() - c0
-            return StepResult(dict(base, type="skip", reason=reason))
+            return StepResult(Skip(t1, t0, self.name, reason))
 
         if frac > self.max_missing or ok.sum() < 16:
             return skip(f"channel {self.channel}: {frac:.0%} of the window's samples missing "
@@ -220,59 +222,20 @@ class OutputOnlyEstimator:
             return skip(f"no body mode found: {exc}")
         params = {"f_body": mode.f_hz, "zeta_body": mode.zeta}
         se = {"f_body": mode.f_se, "zeta_body": mode.zeta_se}
-        track = self.tracker.update(float(t[-1]), params,
-                                    {k: (v if math.isfinite(v) else 0.1 * params[k])
-                                     for k, v in se.items()})
         self.windows += 1
         cpu = time.process_time() - c0
         self.cpu += cpu
-        line = dict(base, type="estimate", mode="output_only", method=mode.method,
-                    params=params, stderr=se, f_hz=mode.f_hz, zeta=mode.zeta,
-                    accel_rms=rms, track=track, cpu_ms=1e3 * cpu, warnings=warns)
-        finite = {k: v for k, v in se.items() if math.isfinite(v)}
-        return StepResult(line, params, finite)
+        info = {"mode": "output_only", "method": mode.method, "f_hz": mode.f_hz,
+                "zeta": mode.zeta, "accel_rms": rms, "cpu_ms": 1e3 * cpu, "warnings": warns}
+        # the tracker needs an uncertainty: without one (AR poles), 10 % of the value
+        track_se = {k: (v if math.isfinite(v) else 0.1 * params[k]) for k, v in se.items()}
+        return StepResult(Estimate(t1, t0, self.name, params, se, info=info), params, track_se)
 
     def summary(self) -> dict[str, Any]:
         """Windows fitted and skipped, CPU time."""
         return {"windows": self.windows, "skipped": self.skipped, "cpu_s": self.cpu}
 
 
-def run_output_only_cli(args: Any, model: Any, emit: Any) -> int:
-    """``suspid monitor --output-only``: body-mode tracking from a body accelerometer."""
-    from estimator.alerts import AlertConfig, AlertEngine, AlertStore, CallbackSink
-    from estimator.stream.config import WindowConfig
-    from estimator.stream.monitor import StreamMonitor
-    from suspid.cli._common import parse_assignments
-    from suspid.cli.monitor import run_source
-
-    channel = args.accel_channel or f"{model.coords[0]}_ddot"
-    if channel not in model.channels:
-        raise UsageError(f"--accel-channel {channel!r} is not a channel of model {model.name}")
-    method = getattr(args, "oo_method", None) or "carma"
-    est = OutputOnlyEstimator(channel, method=method)
-    window = args.window if args.window is not None else DEFAULT_WINDOW_S
-    step = args.step if args.step is not None else (window / 2.0 if args.window else DEFAULT_STEP_S)
-    cfg = WindowConfig(window_s=window, step_s=step)
-    cfg.validate()
-    nominal = parse_assignments(args.nominal, "--nominal")
-    bad = [k for k in nominal if k not in ("f_body", "zeta_body")]
-    if bad:
-        raise UsageError(f"--nominal {bad[0]}: output-only mode monitors f_body and zeta_body")
-    sinks: list[Any] = [CallbackSink(emit)]
-    store = AlertStore(args.alert_file) if args.alert_file else None
-    engine = None
-    if nominal:
-        engine = AlertEngine(AlertConfig(nominal, drop=args.alert_drop, persistence_s=step,
-                                         hysteresis=min(args.hysteresis, args.alert_drop / 2)),
-                             model.name, units={"f_body": "Hz", "zeta_body": ""},
-                             store=store, sinks=sinks)
-    mon = StreamMonitor(est, emit, engine)
-    extra: dict[str, Any] = {"mode": "output_only", "channel": channel, "method": method}
-    try:
-        extra.update(run_source(args, model, cfg, mon, sinks))
-    finally:
-        if store is not None:
-            store.close()
-    if not args.no_summary:
-        emit(mon.summary(extra))
-    return 0
+def make_output_only_estimator(spec: Any, channels: list[str], fs: float) -> OutputOnlyEstimator:
+    """The output-only estimator of a :class:`~estimator.stream.pipeline.MonitorSpec`."""
+    return OutputOnlyEstimator(spec.accel_channel, method=spec.oo_method)

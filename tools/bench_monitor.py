@@ -280,7 +280,7 @@ def bench_rss(hours: float = 1.0, chunk_s: float = 60.0) -> dict[str, Any]:
     cfg = default_config(m, s.nominal, fs, 2)
     est = NMWindowEstimator(m, params, cfg, ["x1", "x2", "x1_ddot"])
     devnull = open(os.devnull, "w")
-    mon = StreamMonitor(est, lambda d: devnull.write(json.dumps(d) + "\n"),
+    mon = StreamMonitor(est, lambda d: devnull.write(json.dumps(d.to_json()) + "\n"),
                         AlertEngine(AlertConfig({"c1": 1500.0, "k1": 20000.0}), "quarter2"))
     L = DecodeListener(m, capacity=1 << 13)
     drv = CanWindowDriver(L, cfg.window_s, cfg.step_s, mon.window)

@@ -180,7 +180,7 @@ class AlertEngine:
     store: Any = None
     sinks: list[Any] = field(default_factory=list)
     states: dict[str, _State] = field(default_factory=dict)
-    emitted: list[AlertEvent] = field(default_factory=list)
+    emitted: list[Any] = field(default_factory=list)
     suppressed: int = 0
 
     def __post_init__(self) -> None:
@@ -226,11 +226,15 @@ class AlertEngine:
                             severity, self.model, self.units.get(k, ""))
             st.active = not st.active
             st.since, st.count = None, 0
-            if self._publish(ev):
+            if self.publish(ev):
                 out.append(ev)
         return out
 
-    def _publish(self, ev: AlertEvent) -> bool:
+    def publish(self, ev: Any) -> bool:
+        """Write ``ev`` (an alert, clear or forecast event) to the store, then to the sinks.
+
+        Returns ``False`` (and delivers nothing) when the store already holds it.
+        """
         if self.store is not None:
             if not self.store.is_new(ev):
                 self.suppressed += 1

@@ -1,28 +1,30 @@
-"""Alert outputs: a callback (JSON lines on stdout) and the DBC ``SUSPID_Alert`` frame on a bus."""
+"""Alert outputs: a callback (the monitor's event sink) and the DBC ``SUSPID_Alert`` frame on a bus."""
 from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-from estimator.alerts.engine import AlertEvent
+from suspid.can.codec import encode_alert
 
 log = logging.getLogger(__name__)
 
 
 @dataclass
 class CallbackSink:
-    """Call ``fn(event.to_json())`` for every event (the monitor prints JSON lines)."""
+    """Call ``fn(event)`` for every event (the monitor's sink turns it into a line)."""
 
-    fn: Callable[[dict[str, Any]], None]
+    fn: Callable[[Any], None]
 
-    def emit(self, event: AlertEvent) -> None:
-        self.fn(event.to_json())
+    def emit(self, event: Any) -> None:
+        self.fn(event)
 
 
 @dataclass
 class BusAlertSink:
-    """Send each *alert* (not clears) as the DBC's ``SUSPID_Alert`` frame.
+    """Send each *alert* and *forecast* (not clears or withdrawals) as the DBC's ``SUSPID_Alert``
+    frame; a forecast has severity ``forecast`` (3), its value the tracked value and its
+    nominal the nominal value.
 
     Parameters
     ----------
@@ -39,13 +41,12 @@ class BusAlertSink:
     sent: int = 0
     errors: list[str] = field(default_factory=list)
 
-    def emit(self, event: AlertEvent) -> None:
-        if event.kind != "alert":
+    def emit(self, event: Any) -> None:
+        if event.kind not in ("alert", "forecast"):
             return
-        from suspid.can.codec import encode_alert
-
+        severity = "forecast" if event.kind == "forecast" else event.severity
         msg = encode_alert(self.db, event.model, event.parameter, event.value, event.nominal,
-                           severity=event.severity, counter=self.counter)
+                           severity=severity, counter=self.counter)
         self.counter = (self.counter + 1) % 15
         try:
             self.bus.send(msg)

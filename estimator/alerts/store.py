@@ -16,8 +16,20 @@ import json
 import os
 from pathlib import Path
 
+from typing import Any, Mapping, Union
+
 from estimator.alerts.engine import AlertEvent
+from estimator.alerts.forecast import ForecastEvent
 from suspid.errors import InputError
+
+StoredEvent = Union[AlertEvent, ForecastEvent]
+
+
+def event_from_json(d: Mapping[str, Any]) -> StoredEvent:
+    """An alert, clear, forecast or forecast withdrawal from its JSON line."""
+    if str(d.get("type", "")).startswith("forecast"):
+        return ForecastEvent.from_json(d)
+    return AlertEvent.from_json(d)
 
 
 class AlertStore:
@@ -30,19 +42,23 @@ class AlertStore:
 
     Attributes
     ----------
-    events : list of AlertEvent
-        Events read at open plus those appended since.
+    events : list
+        Events (:class:`AlertEvent`, :class:`ForecastEvent`) read at open plus those
+        appended since.
     last_event : dict
-        ``parameter -> latest event`` (by data time).
+        ``parameter -> latest alert or clear`` (by data time).
+    last_forecast : dict
+        ``parameter -> latest forecast or withdrawal`` (by data time).
     skipped_lines : int
         Unreadable lines found at open (a torn last write).
     """
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
-        self.events: list[AlertEvent] = []
+        self.events: list[StoredEvent] = []
         self.ids: set[str] = set()
         self.last_event: dict[str, AlertEvent] = {}
+        self.last_forecast: dict[str, ForecastEvent] = {}
         self.skipped_lines = 0
         needs_newline = False
         try:
@@ -54,7 +70,7 @@ class AlertStore:
                     if not line.strip():
                         continue
                     try:
-                        ev = AlertEvent.from_json(json.loads(line))
+                        ev = event_from_json(json.loads(line))
                     except (ValueError, KeyError, TypeError):
                         self.skipped_lines += 1
                         continue
@@ -65,18 +81,25 @@ class AlertStore:
         if needs_newline:
             self._write(b"\n")
 
-    def _remember(self, ev: AlertEvent) -> None:
+    def _remember(self, ev: StoredEvent) -> None:
         self.events.append(ev)
         self.ids.add(ev.id)
+        if isinstance(ev, ForecastEvent):
+            lastf = self.last_forecast.get(ev.parameter)
+            if lastf is None or ev.t >= lastf.t:
+                self.last_forecast[ev.parameter] = ev
+            return
         last = self.last_event.get(ev.parameter)
         if last is None or ev.t >= last.t:
             self.last_event[ev.parameter] = ev
 
-    def is_new(self, ev: AlertEvent) -> bool:
+    def is_new(self, ev: StoredEvent) -> bool:
         """``True`` if ``ev`` is not yet in the log (see the module docstring)."""
         if ev.id in self.ids:
             return False
-        last = self.last_event.get(ev.parameter)
+        last: StoredEvent | None = (self.last_forecast.get(ev.parameter)
+                                    if isinstance(ev, ForecastEvent)
+                                    else self.last_event.get(ev.parameter))
         return last is None or ev.t > last.t + 1e-9
 
     def _write(self, data: bytes) -> None:
@@ -86,7 +109,7 @@ class AlertStore:
             view = view[n:]
         os.fsync(self._fd)
 
-    def append(self, ev: AlertEvent) -> None:
+    def append(self, ev: StoredEvent) -> None:
         """Append one event as a JSON line and fsync it."""
         self._write((json.dumps(ev.to_json()) + "\n").encode("utf-8"))
         self._remember(ev)

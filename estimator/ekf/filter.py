@@ -151,6 +151,9 @@ class AugmentedEKF(ExtendedKalmanFilter):
         self.P = np.diag([tu.p0_pos ** 2] * self.nq + [tu.p0_vel ** 2] * self.nq
                          + [tu.p0_param ** 2] * len(self.aug))
         self.x = np.concatenate([np.zeros(self.nx), np.ones(len(self.aug))])[:, None]
+        #: running sum of the normalised innovations squared and their degrees of freedom
+        self.nis_sum = 0.0
+        self.nis_dof = 0
         self.set_q(self.dt)
 
     # ---- parameters ----------------------------------------------------------------------
@@ -379,6 +382,10 @@ class AugmentedEKF(ExtendedKalmanFilter):
         I_KH = self._I - K @ H
         self.P = I_KH @ self.P @ I_KH.T + K @ Rm @ K.T
         self.y, self.K, self.S = y, K, S
+        # normalised innovation squared: chi-square with y.size degrees of freedom when the
+        # filter's model and noise levels fit the data
+        self.nis_sum += float(y @ np.linalg.solve(S, y))
+        self.nis_dof += int(y.size)
         self.x_post = self.x.copy()
         self.P_post = self.P.copy()
 

@@ -1,8 +1,30 @@
-"""The EKF as a window estimator for the monitor: same interface as the Nelder-Mead one.
+"""The EKF as a window estimator for the monitor: same interface and same information as the
+sliding window.
 
 Every call gets the current window; the filter runs over the samples it has not seen yet
 (one predict/update per sample, at the stream's rate divided by ``decimate``) and reports
 its parameter state and standard deviations at the window end.
+
+A fair baseline gets what the sliding window gets:
+
+free parameters
+    every free damper and spring is in the filter's state (``--ekf-params`` narrows it); a
+    free parameter the filter cannot estimate (a mass, a length: not affine in its
+    matrices) is *held* at its starting value and every estimate says so, with the reason
+    (``held``).
+starting values
+    ``--init`` or ``--nominal`` when given; otherwise the first window's sliding-window
+    estimate (a cold Nelder-Mead fit of that window, its CPU counted as the EKF's), so
+    neither side starts from a default the other does not use.
+measurement noise
+    ``R`` from the data's own noise floor on the first window (fourth differences,
+    :func:`estimator.stream.window.noise_floor`), never below the DBC quantization.
+consistency
+    the normalised innovation squared (NIS) of every update is summed per window; its mean
+    per degree of freedom is ``1`` for a filter whose model and noise fit the data. Each
+    estimate reports it (``nis``) and warns when it leaves the chi-square 99.9 % band of the
+    window (``nis_warn``): the filter no longer fits the data and its error bars are not
+    to be trusted.
 """
 from __future__ import annotations
 
@@ -12,10 +34,15 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from scipy.stats import chi2
+
 from estimator.ekf.filter import AugmentedEKF, EKFTuning
+from estimator.identify import Parameters
+from estimator.stream.config import WindowConfig, default_decimation
+from estimator.stream.events import Estimate
 from estimator.stream.monitor import StepResult
 from estimator.stream.scenarios import DBC_RESOLUTION
-from estimator.stream.window import noise_floor
+from estimator.stream.window import SlidingWindowIdentifier, noise_floor
 from suspid.models.base import FloatArray, SuspensionModel
 from suspid.simulate import uniform_step
 
@@ -35,14 +62,34 @@ class EKFWindowEstimator:
     tuning : EKFTuning, optional
     decimate : int
         Use every ``decimate``-th sample.
+    held : dict, optional
+        ``parameter -> reason`` of free parameters the filter holds (reported per estimate).
+    first_window : tuple, optional
+        ``(Parameters, WindowConfig, names)``: start ``names`` from a sliding-window fit of
+        the first window instead of ``params``.
+    nis_level : float
+        Two-sided probability of the NIS band (0.999).
     """
 
     name = "ekf"
+    #: the filter's state is itself the tracked parameter (alerts use it directly)
+    own_track = True
+    lag = 0.0
+    overlap = 1.0
 
     def __init__(self, model: SuspensionModel, params: Mapping[str, float],
                  augmented: Sequence[str], channels: Sequence[str],
-                 tuning: EKFTuning | None = None, decimate: int = 1) -> None:
+                 tuning: EKFTuning | None = None, decimate: int = 1,
+                 held: Mapping[str, str] | None = None,
+                 first_window: tuple[Parameters, WindowConfig, Sequence[str]] | None = None,
+                 nis_level: float = 0.999) -> None:
         self.model = model
+        self.held = dict(held or {})
+        self.first_window = first_window
+        self.nis_level = nis_level
+        self.start_from: dict[str, float] = {}
+        self.nis_windows_out = 0
+        self._nis0 = (0.0, 0)
         self.params = dict(params)
         self.augmented = list(augmented)
         self.channels = [c for c in model.channels if c in channels]
@@ -54,6 +101,7 @@ class EKFWindowEstimator:
         self.cpu = 0.0
         self._u_prev: FloatArray | None = None
         self._phase = 0
+        self.held_note = ""
 
     def _road(self, data: Mapping[str, FloatArray], t: FloatArray) -> FloatArray:
         n = t.size
@@ -77,7 +125,24 @@ class EKFWindowEstimator:
                 U[:, nr + i] = np.gradient(v, t) if n > 2 else 0.0
         return U
 
+    def _first_window_start(self, t: FloatArray, data: Mapping[str, FloatArray]) -> None:
+        """Start the parameters named in ``first_window`` from a fit of this window."""
+        if self.first_window is None:
+            return
+        params, cfg, names = self.first_window
+        ident = SlidingWindowIdentifier(self.model, params, cfg, self.channels)
+        res = ident.process(t, data)
+        if res.skipped or not res.identifiable:
+            self.held_note = (f"first window not identified ({res.reason or 'unidentifiable'}); "
+                              "the EKF starts from the defaults")
+            return
+        for k in names:
+            if k in res.params and k in self.params:
+                self.params[k] = float(res.params[k])
+                self.start_from[k] = float(res.params[k])
+
     def _start(self, t: FloatArray, data: Mapping[str, FloatArray]) -> None:
+        self._first_window_start(t, data)
         h = uniform_step(t) or float(np.median(np.diff(t)))
         dt = h * self.decimate
         self.ekf = AugmentedEKF(self.model, self.params, self.augmented, self.channels, dt,
@@ -137,12 +202,94 @@ class EKFWindowEstimator:
         vals = ekf.param_values()
         se = ekf.param_stderr()
         ok = all(math.isfinite(v) and v > 0 for v in vals.values())
-        line = {"type": "estimate", "t": float(t[-1]), "t_start": float(t[0]), "baseline": self.name,
-                "params": vals, "stderr": se, "samples": self.samples, "cpu_ms": 1e3 * cpu,
-                "warnings": [] if ok else ["EKF parameter state left the physical range"]}
-        return StepResult(line, vals if ok else None, se if ok else None)
+        warns = [] if ok else ["EKF parameter state left the physical range"]
+        s0, n0 = self._nis0
+        dof = ekf.nis_dof - n0
+        nis = (ekf.nis_sum - s0) / dof if dof > 0 else float("nan")
+        self._nis0 = (ekf.nis_sum, ekf.nis_dof)
+        lo = hi = float("nan")
+        if dof > 0:
+            a = (1.0 - self.nis_level) / 2.0
+            lo, hi = float(chi2.ppf(a, dof)) / dof, float(chi2.ppf(1.0 - a, dof)) / dof
+            if not lo <= nis <= hi:
+                self.nis_windows_out += 1
+                warns.append(f"EKF inconsistent: mean normalised innovation squared {nis:.3g} "
+                             f"per degree of freedom outside [{lo:.3g}, {hi:.3g}] "
+                             f"({100 * self.nis_level:g} % band of {dof} dof); the filter no "
+                             "longer fits the data and its stderr is not to be trusted")
+        if self.held_note and self.samples == 0:
+            warns.append(self.held_note)
+        info: dict[str, Any] = {"samples": self.samples, "cpu_ms": 1e3 * cpu,
+                                "augmented": list(self.augmented),
+                                "nis": nis, "nis_band": [lo, hi], "warnings": warns}
+        if self.held:
+            info["held"] = dict(self.held)
+        if self.start_from:
+            info["start_from_first_window"] = dict(self.start_from)
+        ev = Estimate(float(t[-1]), float(t[0]), self.name, vals, se, info=info)
+        return StepResult(ev, vals if ok else None, se if ok else None)
 
     def summary(self) -> dict[str, Any]:
         """Samples filtered and CPU time."""
+        ekf = self.ekf
         return {"samples": self.samples, "cpu_s": self.cpu,
-                "cpu_us_per_sample": 1e6 * self.cpu / self.samples if self.samples else None}
+                "cpu_us_per_sample": 1e6 * self.cpu / self.samples if self.samples else None,
+                "augmented": list(self.augmented), "held": dict(self.held),
+                "nis": (ekf.nis_sum / ekf.nis_dof) if ekf is not None and ekf.nis_dof else None,
+                "nis_windows_inconsistent": self.nis_windows_out}
+
+
+#: parameter kinds the augmented EKF can carry in its state (affine in the model's matrices)
+EKF_KINDS = ("damping", "stiffness")
+
+
+def ekf_plan(model: SuspensionModel, free: Sequence[str], requested: Sequence[str] | None = None
+             ) -> tuple[list[str], dict[str, str]]:
+    """Which free parameters the EKF estimates, and which it holds with the reason.
+
+    Parameters
+    ----------
+    model : SuspensionModel
+    free : sequence of str
+        The free parameters (the sliding window estimates all of them).
+    requested : sequence of str, optional
+        ``--ekf-params``; default every free damper and spring.
+
+    Returns
+    -------
+    augmented : list of str
+    held : dict
+        ``parameter -> reason`` for every free parameter left out.
+    """
+    held: dict[str, str] = {}
+    aug: list[str] = []
+    for k in free:
+        kind = model.spec(k).kind
+        if kind not in EKF_KINDS:
+            held[k] = (f"a {kind} is not affine in the model's matrices, so the augmented EKF "
+                       "cannot carry it in its state; held at its starting value")
+        elif requested is not None and k not in requested:
+            held[k] = "left out by --ekf-params; held at its starting value"
+        else:
+            aug.append(k)
+    return aug, held
+
+
+def make_ekf_estimator(spec: Any, channels: list[str], fs: float) -> EKFWindowEstimator:
+    """The fair EKF of a :class:`~estimator.stream.pipeline.MonitorSpec` (module docstring)."""
+    model = spec.model
+    aug, held = ekf_plan(model, spec.params.free, spec.ekf_params)
+    tun = EKFTuning()
+    if spec.ekf_q is not None:
+        tun.q_param = spec.ekf_q
+    dec = spec.ekf_decimate or max(1, int(math.floor(fs / 250.0 + 1e-9)))
+    meas = [c for c in channels if c in model.channels]
+    unknown = [k for k in spec.params.free if k not in spec.start_given]
+    first = None
+    if unknown:
+        cfg = WindowConfig(**vars(spec.config))
+        if not spec.decimate_given:
+            cfg.decimate = default_decimation(model, spec.params.valuesdict(), fs)
+        first = (spec.params, cfg, unknown)
+    return EKFWindowEstimator(model, spec.params.valuesdict(), aug, meas, tun, decimate=dec,
+                              held=held, first_window=first)

@@ -1,7 +1,9 @@
 """Nelder-Mead windows vs the EKF on the same stream: accuracy, speed, alerts.
 
 Both estimators see the same samples through the same windows (the NM one fits each
-window, the EKF filters the samples new in each window) and feed identical alert engines.
+window, the EKF filters the samples new in each window), are built by the same wiring
+(:mod:`estimator.stream.pipeline`) from the same options and feed identical alert and
+forecast engines.
 Metrics (``truth`` known for synthetic streams):
 
 ``rmse`` / ``rmse_pct``
@@ -16,47 +18,75 @@ Metrics (``truth`` known for synthetic streams):
     alerts raised while the truth was still above the limit.
 ``cpu_us_per_sample``
     process CPU time of the estimator divided by the samples of the stream.
+``forecast_lead_s``, ``forecast_first_error_s``, ``forecast_first_contains``
+    the first forecast before the true crossing: how long before it came, the error of its
+    predicted crossing time and whether its 90 % interval holds the true crossing.
+
+The values compared with the truth are those the alerts are decided on: the tracker's value
+at the window end for the sliding window, the filter's own state for the EKF.
 """
 from __future__ import annotations
 
+import csv
 import math
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
 
-from estimator.alerts import AlertConfig, AlertEngine
+from estimator.decode import load_log_as_measurement
 from estimator.stream.drivers import run_arrays
-from estimator.stream.monitor import StreamMonitor
-from suspid.models.base import FloatArray
+from estimator.stream.pipeline import (CAN_LOG_SUFFIXES, MonitorSpec, build_monitor,
+                                       make_estimator, monitor_spec)
+from suspid.errors import InputError, require_file
+from suspid.io.csvio import read_measurement
+from suspid.models.base import FloatArray, SuspensionModel
 
 
 @dataclass
 class RunRecord:
-    """Everything one estimator produced on the stream."""
+    """Everything one estimator produced on the stream (JSON lines of its events)."""
 
     name: str
     lines: list[dict[str, Any]] = field(default_factory=list)
     alerts: list[Any] = field(default_factory=list)
     cpu_s: float = 0.0
     wall_s: float = 0.0
+    own_track: bool = False
+    summary: dict[str, Any] = field(default_factory=dict)
 
 
-def run_one(estimator: Any, t: FloatArray, data: Mapping[str, FloatArray], window_s: float,
-            step_s: float, alert_cfg: AlertConfig, model_name: str) -> RunRecord:
-    """Stream ``(t, data)`` through ``estimator`` with an alert engine; collect the lines."""
-    rec = RunRecord(estimator.name)
-    eng = AlertEngine(AlertConfig(dict(alert_cfg.nominal), alert_cfg.drop, alert_cfg.z,
-                                  alert_cfg.persistence_s, alert_cfg.min_count,
-                                  alert_cfg.hysteresis), model_name)
-    mon = StreamMonitor(estimator, rec.lines.append, eng)
+def run_one(spec: MonitorSpec, t: FloatArray, data: Mapping[str, FloatArray]) -> RunRecord:
+    """Stream ``(t, data)`` through the monitor of ``spec``; collect its events."""
+    fs = 1.0 / float(np.median(np.diff(t)))
+    channels = [c for c in data if c in spec.model.channels or c in spec.model.roads
+                or c[:-4] in spec.model.roads]
     c0, w0 = time.process_time(), time.perf_counter()
-    run_arrays(t, data, window_s, step_s, mon.window)
+    est = make_estimator(spec, channels, fs)
+    rec = RunRecord(spec.baseline, own_track=bool(getattr(est, "own_track", False)))
+    mon = build_monitor(spec, lambda ev: rec.lines.append(ev.to_json()), estimator=est)
+    run_arrays(t, data, spec.config.window_s, spec.config.step_s, mon.window)
     rec.cpu_s = time.process_time() - c0
     rec.wall_s = time.perf_counter() - w0
-    rec.alerts = list(eng.emitted)
+    rec.alerts = list(mon.alerts.emitted) if mon.alerts is not None else []
+    rec.summary = mon.summary().to_json()
     return rec
+
+
+def _series(rec: RunRecord, k: str) -> tuple[FloatArray, FloatArray]:
+    """Times and the values the alerts were decided on: the tracker's for the sliding window,
+    the filter's own state for the EKF."""
+    te, ve = [], []
+    for l in rec.lines:
+        if l["type"] != "estimate" or k not in l.get("stderr", {}):
+            continue
+        tr = (l.get("track") or {}).get(k)
+        v = l["params"][k] if rec.own_track or tr is None else tr["value"]
+        te.append(l["t"])
+        ve.append(v)
+    return np.array(te, dtype=float), np.array(ve, dtype=float)
 
 
 def metrics(rec: RunRecord, t: FloatArray, truth: Mapping[str, FloatArray] | None,
@@ -69,13 +99,21 @@ def metrics(rec: RunRecord, t: FloatArray, truth: Mapping[str, FloatArray] | Non
                            "cpu_s": rec.cpu_s, "wall_s": rec.wall_s,
                            "cpu_us_per_sample": 1e6 * rec.cpu_s / max(n_samples, 1),
                            "params": {}}
+    for key in ("augmented", "held", "nis", "nis_windows_inconsistent"):
+        if key in rec.summary:
+            out[key] = rec.summary[key]
     t0 = float(t[0])
+    fc = [l for l in rec.lines if l["type"] == "forecast"]
     for k, nom in nominal.items():
-        pts = [(l["t"], l["params"][k]) for l in est if k in l.get("params", {})]
-        m: dict[str, Any] = {"alerts": [a.t for a in rec.alerts if a.parameter == k and a.kind == "alert"]}
-        if truth is not None and k in truth and pts:
-            te = np.array([p[0] for p in pts])
-            ve = np.array([p[1] for p in pts])
+        te, ve = _series(rec, k)
+        m: dict[str, Any] = {"alerts": [a.t for a in rec.alerts
+                                        if a.parameter == k and a.kind == "alert"]}
+        fk = [f for f in fc if f["parameter"] == k]
+        m["forecasts"] = len(fk)
+        if truth is not None and k in truth and not te.size:
+            below = np.flatnonzero(truth[k] < (1 - drop) * nom)
+            m["crossing_t"] = float(t[below[0]]) if below.size else None
+        if truth is not None and k in truth and te.size:
             tv = np.interp(te, t, truth[k])
             err = ve - tv
             rel = err / tv
@@ -95,11 +133,98 @@ def metrics(rec: RunRecord, t: FloatArray, truth: Mapping[str, FloatArray] | Non
             m["false_alarms"] = sum(1 for a in m["alerts"] if a < crossing)
             after = [a for a in m["alerts"] if a >= crossing]
             m["alert_delay_s"] = (after[0] - crossing) if after else None
+            early = [f for f in fk if f["t"] < crossing]
+            if early and math.isfinite(crossing):
+                f0 = early[0]
+                m["forecast_first_t"] = f0["t"]
+                m["forecast_lead_s"] = crossing - f0["t"]
+                m["forecast_first_error_s"] = f0["crossing_t"] - crossing
+                m["forecast_first_contains"] = bool(f0["crossing_t_low"] <= crossing
+                                                    <= f0["crossing_t_high"])
+                m["forecast_contains_fraction"] = float(np.mean(
+                    [f["crossing_t_low"] <= crossing <= f["crossing_t_high"] for f in early]))
+            m["false_forecasts"] = (len(fk) if not math.isfinite(crossing) else 0)
         out["params"][k] = m
     return out
 
 
-def plot(path: str, t: FloatArray, truth: Mapping[str, FloatArray] | None, recs: list[RunRecord],
+def load_stream(model: SuspensionModel, path: str | Path, dbc: Path | None = None,
+                signal_map: Any = None, truth_csv: str | Path | None = None
+                ) -> tuple[FloatArray, dict[str, FloatArray], dict[str, FloatArray] | None]:
+    """``(t, data, truth or None)`` of a CAN log or measurement CSV and its truth file."""
+    p = require_file(str(path))
+    if p.suffix.lower() in CAN_LOG_SUFFIXES:
+        meas, _ = load_log_as_measurement(p, model, dbc, signal_map)
+    else:
+        meas = read_measurement(p, model)
+    data = dict(meas.measured)
+    data.update(meas.road)
+    truth = None
+    if truth_csv:
+        try:
+            with open(truth_csv, newline="") as fh:
+                rows = list(csv.DictReader(fh))
+        except OSError as exc:
+            raise InputError(f"{truth_csv}: cannot read: {exc.strerror}") from None
+        if not rows or "t" not in rows[0]:
+            raise InputError(f"{truth_csv}: expected a header with a 't' column")
+        try:
+            tt = np.array([float(r["t"]) for r in rows])
+            truth = {k: np.interp(meas.t, tt, [float(r[k]) for r in rows])
+                     for k in rows[0] if k != "t" and k in model.param_names}
+        except ValueError as exc:
+            raise InputError(f"{truth_csv}: non-numeric value ({exc})") from None
+    return np.asarray(meas.t), data, truth
+
+
+def compare(model: SuspensionModel, t: FloatArray, data: Mapping[str, FloatArray],
+            truth: Mapping[str, FloatArray] | None, *, fix: Mapping[str, float],
+            nominal: Mapping[str, float] | None = None, init: Mapping[str, float] | None = None,
+            alert_drop: float = 0.3, window: float | None = None, step: float | None = None,
+            ekf_params: list[str] | None = None, ekf_q: float | None = None,
+            ekf_decimate: int | None = None, forecast_horizon: float | None = None,
+            source: str = "") -> tuple[dict[str, Any], list[RunRecord]]:
+    """The sliding window and the EKF on one stream, on the same footing.
+
+    Both get the same free parameters, starting values (``init``, else ``nominal``, else
+    the defaults -- the EKF then starts from the first window's estimate, as the sliding
+    window does), windows, alert rule and forecast horizon. Returns the report (one JSON
+    object) and the two run records.
+    """
+    if not all(r in data for r in model.roads):
+        raise InputError("the stream has no road input; compare needs input-output data")
+    fs = 1.0 / float(np.median(np.diff(t)))
+    kw: dict[str, Any] = dict(fix=fix, nominal=nominal, init=init, alert_drop=alert_drop,
+                              window=window, step=step, fs=fs, inspection=False,
+                              ekf_params=ekf_params, ekf_q=ekf_q, ekf_decimate=ekf_decimate)
+    if forecast_horizon is not None:
+        kw["forecast_horizon"] = forecast_horizon
+    nm_spec = monitor_spec(model, baseline="nm", **kw)
+    ekf_spec = monitor_spec(model, baseline="ekf", **kw)
+    rec_nm = run_one(nm_spec, t, data)
+    rec_ekf = run_one(ekf_spec, t, data)
+    n = int(t.size)
+    cfg = nm_spec.config
+    channels = [c for c in model.channels if c in data]
+    out: dict[str, Any] = {
+        "model": model.name,
+        "stream": {"source": source, "duration_s": float(t[-1] - t[0]), "fs_hz": fs,
+                   "samples": n, "channels": channels},
+        "window": {"window_s": cfg.window_s, "step_s": cfg.step_s, "decimate": cfg.decimate,
+                   "budget": cfg.maxfev},
+        "ekf": {"augmented": rec_ekf.summary.get("augmented"),
+                "held": rec_ekf.summary.get("held"),
+                "q_param": ekf_q if ekf_q is not None else 0.005},
+        "nominal": dict(nm_spec.nominal),
+        "start": {k: nm_spec.params[k].value for k in nm_spec.nominal},
+        "alert_drop": alert_drop, "forecast_horizon_s": nm_spec.forecast_horizon_s,
+        "nm": metrics(rec_nm, t, truth, nm_spec.alert.nominal, alert_drop, n),
+        "ekf_result": metrics(rec_ekf, t, truth, ekf_spec.alert.nominal, alert_drop, n),
+    }
+    return out, [rec_nm, rec_ekf]
+
+
+def plot(path: str | Path, t: FloatArray, truth: Mapping[str, FloatArray] | None, recs: list[RunRecord],
          param: str, nominal: float, drop: float) -> None:
     """One figure: the parameter's tracks (with 2-sigma bands) against the truth and limit."""
     import matplotlib
@@ -114,12 +239,16 @@ def plot(path: str, t: FloatArray, truth: Mapping[str, FloatArray] | None, recs:
                label=f"alert limit {(1 - drop):.0%} x nominal")
     colors = {"nm": "C0", "ekf": "C1"}
     for rec in recs:
-        est = [l for l in rec.lines if l["type"] == "estimate" and param in l["params"]]
+        est = [l for l in rec.lines if l["type"] == "estimate" and param in l["stderr"]]
         if not est:
             continue
         te = np.array([l["t"] for l in est])
-        v = np.array([l["params"][param] for l in est])
-        s = np.array([l["stderr"].get(param) or np.nan for l in est], dtype=float)
+        if rec.own_track:
+            v = np.array([l["params"][param] for l in est])
+            s = np.array([l["stderr"].get(param) or np.nan for l in est], dtype=float)
+        else:
+            v = np.array([l["track"][param]["value"] for l in est])
+            s = np.array([l["track"][param]["stderr"] for l in est], dtype=float)
         c = colors.get(rec.name, None)
         ax.plot(te, v, ".-", ms=3, color=c, label=f"{rec.name.upper()} estimate")
         ax.fill_between(te, v - 2 * s, v + 2 * s, color=c, alpha=0.2, lw=0)

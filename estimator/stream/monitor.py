@@ -1,12 +1,13 @@
 """The monitor: windows of a stream -> estimates (NM or EKF) -> tracking, inspection, alerts.
 
 :class:`NMWindowEstimator` (the default) fits every window with
-:class:`~estimator.stream.window.SlidingWindowIdentifier`, tracks the parameters
-(:class:`~estimator.stream.tracker.ParameterTracker`) and runs the virtual damper test
+:class:`~estimator.stream.window.SlidingWindowIdentifier` and runs the virtual damper test
 (:mod:`estimator.inspection`) on each estimate of a quarter car. The EKF baseline
 (:class:`estimator.ekf.EKFWindowEstimator`) has the same ``process(t, data)`` interface and
 consumes only the samples it has not seen. :class:`StreamMonitor` turns their results into
-JSON lines and feeds the alert engine.
+typed events (:mod:`estimator.stream.events`), tracks them with a trend
+(:class:`~estimator.stream.tracker.TrendTracker`) and feeds the alert and forecast engines
+from the tracker.
 """
 from __future__ import annotations
 
@@ -17,10 +18,12 @@ from typing import Any, Callable, Mapping, Protocol
 
 import numpy as np
 
-from estimator.alerts import AlertEngine
+from estimator.alerts import AlertEngine, ForecastEngine
 from estimator.identify import Parameters
+from estimator.inspection import inspect
 from estimator.stream.config import WindowConfig
-from estimator.stream.tracker import ParameterTracker
+from estimator.stream.events import Estimate, Skip, Summary
+from estimator.stream.tracker import TrendTracker
 from estimator.stream.window import SlidingWindowIdentifier
 from suspid.models.base import FloatArray, SuspensionModel
 
@@ -31,15 +34,20 @@ class StepResult:
 
     Attributes
     ----------
-    line : dict
-        The JSON line (``estimate`` or ``skip``).
+    event : Estimate or Skip
+        The window's typed event.
     values, stderr : dict or None
-        Parameter values and standard errors for the alert engine (``None`` when skipped).
+        Parameter values and standard errors for the tracker (``None`` when skipped).
     """
 
-    line: dict[str, Any]
+    event: Estimate | Skip
     values: dict[str, float] | None = None
     stderr: dict[str, float] | None = None
+
+    @property
+    def line(self) -> dict[str, Any]:
+        """The event's JSON line."""
+        return self.event.to_json()
 
 
 class WindowEstimator(Protocol):
@@ -84,55 +92,63 @@ def fill_road_gaps(model: SuspensionModel, data: Mapping[str, FloatArray], t: Fl
 
 
 class NMWindowEstimator:
-    """Sliding-window Nelder-Mead estimates with tracking and the virtual damper test.
+    """Sliding-window Nelder-Mead estimates with the virtual damper test.
 
     Parameters
     ----------
     model : SuspensionModel
     params : Parameters
-        Nominal starting values and fixed parameters.
+        Starting values and fixed parameters.
     config : WindowConfig
     channels : list of str
         Measured channels in the stream.
     inspection : bool
         Add EUSAMA / EGEA results to every quarter-car estimate.
-    track_q : float
-        Random-walk intensity of the tracker (1/sqrt(s)).
+
+    Attributes
+    ----------
+    lag : float
+        A window's estimate describes the parameters near the window's middle:
+        ``window_s / 2`` before its end (the tracker refers it to the end).
+    overlap : float
+        ``window_s / step_s``: windows sharing data count as that many fewer looks.
     """
 
     name = "nm"
+    own_track = False
 
     def __init__(self, model: SuspensionModel, params: Parameters, config: WindowConfig,
-                 channels: list[str], inspection: bool = True, track_q: float = 0.01) -> None:
+                 channels: list[str], inspection: bool = True) -> None:
         self.model = model
         self.ident = SlidingWindowIdentifier(model, params, config, channels)
         self.config = config
-        self.tracker = ParameterTracker(q=track_q, overlap=max(1.0, config.window_s / config.step_s))
+        self.lag = config.window_s / 2.0
+        self.overlap = max(1.0, config.window_s / config.step_s)
         self.inspection = inspection and model.name == "quarter2"
 
     def process(self, t: FloatArray, data: Mapping[str, FloatArray]) -> StepResult:
         data, warns, reason = fill_road_gaps(self.model, data, t, self.config.max_missing)
         if reason:
             self.ident.n_skipped += 1
-            return StepResult({"type": "skip", "t": float(t[-1]), "t_start": float(t[0]),
-                               "reason": reason, "baseline": self.name})
+            return StepResult(Skip(float(t[-1]), float(t[0]), self.name, reason))
         res = self.ident.process(t, data)
         line = res.to_json()
-        line["baseline"] = self.name
         if res.skipped:
-            return StepResult(line)
-        line["warnings"] = warns + line.get("warnings", [])
-        line["track"] = self.tracker.update(res.t, res.params, res.stderr)
+            return StepResult(Skip(res.t, res.t_start, self.name, res.reason,
+                                   {"excitation": res.excitation}))
+        info = {k: v for k, v in line.items()
+                if k not in ("type", "t", "t_start", "params", "stderr")}
+        info["warnings"] = warns + list(info.get("warnings", []))
         if self.inspection:
-            from estimator.inspection import inspect
-
             try:
-                line["inspection"] = inspect(res.params, self.model).to_json()
+                info["inspection"] = inspect(res.params, self.model).to_json()
             except (np.linalg.LinAlgError, ValueError) as exc:
-                line["inspection"] = None
-                line["warnings"].append(f"virtual damper test failed: {exc}")
+                info["inspection"] = None
+                info["warnings"].append(f"virtual damper test failed: {exc}")
         finite = {k: v for k, v in res.stderr.items() if math.isfinite(v)}
-        return StepResult(line, dict(res.params), finite if res.identifiable else {})
+        return StepResult(Estimate(res.t, res.t_start, self.name, dict(res.params),
+                                   dict(res.stderr), info=info),
+                          dict(res.params), finite if res.identifiable else {})
 
     def summary(self) -> dict[str, Any]:
         i = self.ident
@@ -142,24 +158,44 @@ class NMWindowEstimator:
 
 @dataclass
 class StreamMonitor:
-    """Drive an estimator window by window; print JSON lines; raise alerts.
+    """Drive an estimator window by window: track, alert, forecast, hand events to a sink.
+
+    Every estimate goes through the tracker (:class:`TrendTracker`, referred to the window's
+    end); the alert engine decides on the tracked value and its standard error, the forecast
+    engine on the tracked trend. An estimator that is itself a tracker (``own_track``: the
+    EKF, whose state is the filtered parameter) feeds the alerts with its own estimate and
+    the trend tracker only for the forecast.
 
     Parameters
     ----------
     estimator : WindowEstimator
     emit : callable
-        Receives every JSON line (dict).
+        Receives every event (:class:`Estimate`, :class:`Skip`; alerts and forecasts go
+        through the alert engine's sinks).
     alerts : AlertEngine, optional
+    tracker : TrendTracker, optional
+        Built from the estimator's ``lag`` and ``overlap`` when not given.
+    forecasts : ForecastEngine, optional
     """
 
     estimator: Any
-    emit: Callable[[dict[str, Any]], None]
+    emit: Callable[[Any], None]
     alerts: AlertEngine | None = None
+    tracker: TrendTracker | None = None
+    forecasts: ForecastEngine | None = None
     lines: int = 0
     started: float = field(default_factory=time.perf_counter)
     cpu_started: float = field(default_factory=time.process_time)
     t_first: float = math.nan
     t_last: float = math.nan
+
+    def _tracker(self) -> TrendTracker:
+        if self.tracker is None:
+            nominal = dict(self.alerts.config.nominal) if self.alerts is not None else {}
+            self.tracker = TrendTracker(lag=float(getattr(self.estimator, "lag", 0.0)),
+                                        overlap=float(getattr(self.estimator, "overlap", 1.0)),
+                                        nominal=nominal)
+        return self.tracker
 
     def window(self, t: FloatArray, data: Mapping[str, FloatArray]) -> StepResult:
         """Process one window (times ``t``, channels ``data``)."""
@@ -167,23 +203,44 @@ class StreamMonitor:
             self.t_first = float(t[0])
         self.t_last = float(t[-1])
         res = self.estimator.process(t, data)
-        self.emit(res.line)
+        ev = res.event
+        tracked: dict[str, dict[str, float]] = {}
+        if isinstance(ev, Estimate) and res.values is not None and res.stderr:
+            tracked = self._tracker().update(ev.t, res.values, res.stderr)
+            if ev.track is None:
+                ev.track = tracked
+        self.emit(ev)
         self.lines += 1
-        if self.alerts is not None and res.values is not None and res.stderr:
-            self.alerts.update(float(res.line["t"]), res.values, res.stderr)
+        if isinstance(ev, Estimate) and res.values is not None and res.stderr:
+            if self.alerts is not None:
+                if getattr(self.estimator, "own_track", False):
+                    self.alerts.update(ev.t, res.values, res.stderr)
+                else:
+                    self.alerts.update(ev.t, {k: v["value"] for k, v in tracked.items()},
+                                       {k: v["stderr"] for k, v in tracked.items()})
+            if self.forecasts is not None:
+                self.forecasts.update(self._tracker().trends(ev.t))
         return res
 
-    def summary(self, extra: Mapping[str, Any] | None = None) -> dict[str, Any]:
-        """The closing ``summary`` line: counts, budget, speed."""
+    def summary(self, extra: Mapping[str, Any] | None = None) -> Summary:
+        """The closing ``summary`` event: counts, budget, speed."""
         wall = time.perf_counter() - self.started
         cpu = time.process_time() - self.cpu_started
         span = self.t_last - self.t_first if math.isfinite(self.t_first) else 0.0
-        out: dict[str, Any] = {"type": "summary", "baseline": self.estimator.name,
+        out: dict[str, Any] = {"baseline": self.estimator.name,
                                "data_s": span, "wall_s": wall, "cpu_s": cpu,
                                "realtime_factor": span / wall if wall > 0 else None}
         out.update(self.estimator.summary())
         if self.alerts is not None:
             out["alerts"] = sum(1 for e in self.alerts.emitted if e.kind == "alert")
+            out["forecasts"] = sum(1 for e in self.alerts.emitted if e.kind == "forecast")
             out["alerts_suppressed_as_logged"] = self.alerts.suppressed
         out.update(extra or {})
-        return out
+        return Summary(out)
+
+
+def make_nm_estimator(spec: Any, channels: list[str], fs: float) -> NMWindowEstimator:
+    """The sliding-window estimator of a :class:`~estimator.stream.pipeline.MonitorSpec`."""
+    meas = [c for c in channels if c in spec.model.channels]
+    return NMWindowEstimator(spec.model, spec.params, spec.config, meas,
+                             inspection=spec.inspection)

@@ -403,7 +403,7 @@ PARAM_IDS = {n: i + 1 for i, n in enumerate(["m", "c", "k", "m1", "c1", "k1", "m
 PARAM_KINDS = {"mass": 0, "inertia": 1, "damping": 2, "stiffness": 3, "length": 4}
 _KIND_PREFIX = {0: "Mass", 1: "Inertia", 2: "Damping", 3: "Stiffness", 4: "Length"}
 MODEL_IDS = {"quarter1": 0, "quarter2": 1, "half4": 2}
-SEVERITIES = {"info": 0, "warning": 1, "critical": 2}
+SEVERITIES = {"info": 0, "warning": 1, "critical": 2, "forecast": 3}
 
 
 _STATUS_CODECS: "weakref.WeakKeyDictionary[Database, MessageCodec]" = weakref.WeakKeyDictionary()
@@ -443,7 +443,7 @@ def encode_alert(db: Database, model_name: str, parameter: str, value: float, no
         Parameter name (``c1``, ``k1``, ...).
     value, nominal : float
         Identified and nominal value (SI); clamped to the DBC range of the kind.
-    severity : {"info", "warning", "critical"}
+    severity : {"info", "warning", "critical", "forecast"}
     counter : int
         E2E alive counter of the alert (the sender increments it per alert).
 

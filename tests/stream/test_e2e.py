@@ -46,8 +46,9 @@ def test_node_virtual_bus_monitor_alert(capsys, tmp_path) -> None:
             m = spy.recv(0.2)
             if m is not None and m.arbitration_id == aid:
                 seen.append(decode_alert(db, m.data))
-                time.sleep(1.0)  # let the node's rx task pick it up too
-                stop.set()
+                if seen[-1]["severity"] != "forecast":
+                    time.sleep(1.0)  # let the node's rx task pick it up too
+                    stop.set()
 
     th = threading.Thread(target=run_node, daemon=True)
     wt = threading.Thread(target=watch, daemon=True)
@@ -75,6 +76,12 @@ def test_node_virtual_bus_monitor_alert(capsys, tmp_path) -> None:
     assert [a["parameter"] for a in alerts] == ["c1"]
     assert crossing < alerts[0]["t"] < crossing + 8.0
     # the alert went out as the DBC frame: the node and a third bus participant received it
-    assert [s["parameter"] for s in seen] == ["c1"]
-    assert [a["parameter"] for a in summary["node"].alerts] == ["c1"]
-    assert json.loads(afile.read_text().splitlines()[0])["parameter"] == "c1"
+    # a forecast frame (severity "forecast") came before the alert frame
+    assert [(s["parameter"], s["severity"]) for s in seen][-1] == ("c1", "warning")
+    assert {s["severity"] for s in seen[:-1]} <= {"forecast"}
+    forecasts = [o for o in out if o["type"] == "forecast"]
+    assert forecasts and forecasts[0]["t"] < crossing
+    assert forecasts[0]["crossing_t_low"] <= crossing <= forecasts[0]["crossing_t_high"]
+    assert [a["parameter"] for a in summary["node"].alerts][-1] == "c1"
+    logged = [json.loads(l) for l in afile.read_text().splitlines()]
+    assert [l["type"] for l in logged if l["type"] == "alert"] == ["alert"]

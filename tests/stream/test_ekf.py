@@ -97,9 +97,9 @@ def test_converges_from_a_wrong_start_and_handles_missing_samples(quarter2) -> N
     est = EKFWindowEstimator(quarter2, start, ["c1", "k1"], ["x1", "x2", "x1_ddot"], decimate=2)
     res = []
     run_arrays(s.t, data, 3.0, 1.0, lambda t, d: res.append(est.process(t, d)))
-    last = res[-1].line
+    last = res[-1].event.to_json()
     assert last["params"]["c1"] == pytest.approx(1500.0, rel=0.03)
     assert last["params"]["k1"] == pytest.approx(20000.0, rel=0.03)
     assert last["stderr"]["c1"] < 0.05 * 1500
     assert est.samples == pytest.approx((s.t.size - 1) / 2, abs=2)
-    assert all(np.isfinite(r.line["params"]["c1"]) for r in res)
+    assert all(np.isfinite(r.event.params["c1"]) for r in res)

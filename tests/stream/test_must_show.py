@@ -7,12 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from estimator.alerts import AlertConfig
-from estimator.ekf import EKFWindowEstimator
-from estimator.identify import Parameters
-from estimator.stream.compare import metrics, run_one
+from estimator.stream.compare import compare
 from estimator.stream.config import default_config
-from estimator.stream.monitor import NMWindowEstimator
 
 #: "within a few seconds": half a window of lag + the confidence margin + one step of
 #: persistence is about 5-6 s for the default 3 s windows on this drift (0.42 %/s)
@@ -23,19 +19,10 @@ MAX_DELAY_S = 8.0
 def runs(wear_stream, quarter2):
     s = wear_stream
     fix = {k: s.nominal[k] for k in ("m1", "m2", "c2", "k2")}
-    params = Parameters.for_model(quarter2, fix=fix)
-    cfg = default_config(quarter2, s.nominal, 500.0, len(params.free))
-    nominal = {k: s.nominal[k] for k in params.free}
-    acfg = AlertConfig(nominal, drop=0.3, persistence_s=cfg.step_s)
-    nm = NMWindowEstimator(quarter2, params, cfg, ["x1", "x2", "x1_ddot"], inspection=False)
-    rec_nm = run_one(nm, s.t, s.data, cfg.window_s, cfg.step_s, acfg, "quarter2")
-    ekf = EKFWindowEstimator(quarter2, s.nominal, ["c1", "k1"], ["x1", "x2", "x1_ddot"], decimate=2)
-    rec_ekf = run_one(ekf, s.t, s.data, cfg.window_s, cfg.step_s,
-                      AlertConfig({"c1": nominal["c1"], "k1": nominal["k1"]}, persistence_s=cfg.step_s),
-                      "quarter2")
-    m_nm = metrics(rec_nm, s.t, s.truth, nominal, 0.3, s.t.size)
-    m_ekf = metrics(rec_ekf, s.t, s.truth, {"c1": nominal["c1"], "k1": nominal["k1"]}, 0.3, s.t.size)
-    return rec_nm, m_nm, rec_ekf, m_ekf, cfg
+    nominal = {k: v for k, v in s.nominal.items() if k not in fix}
+    out, (rec_nm, rec_ekf) = compare(quarter2, s.t, s.data, s.truth, fix=fix, nominal=nominal)
+    cfg = default_config(quarter2, s.nominal, 500.0, 2)
+    return rec_nm, out["nm"], rec_ekf, out["ekf_result"], cfg
 
 
 def test_first_c1_alert_after_crossing_within_a_few_seconds(runs, wear_stream) -> None:
@@ -50,6 +37,10 @@ def test_first_c1_alert_after_crossing_within_a_few_seconds(runs, wear_stream) -
     # one episode, one alert; k1 did not change and never alerts
     assert len(c1["alerts"]) == 1
     assert m_nm["params"]["k1"]["alerts"] == []
+    # the forecast came well before the crossing and its 90 % interval holds it
+    assert c1["forecast_lead_s"] >= 10.0, c1
+    assert c1["forecast_first_contains"], c1
+    assert m_nm["params"]["k1"]["forecasts"] == 0
 
 
 def test_c1_tracking_error_below_5_percent(runs) -> None:
@@ -67,6 +58,9 @@ def test_ekf_c1_track_reported_beside(runs, capsys) -> None:
     # the EKF is a working baseline, not a straw man: it also tracks the wearing damper
     assert ekf_c1["rmse_pct"] < 10.0
     assert m_ekf["estimates"] == m_nm["estimates"]
+    # the fair EKF estimates what the window estimates, holds nothing silently
+    assert m_ekf["augmented"] == ["c1", "k1"] and m_ekf["held"] == {}
+    assert math.isfinite(m_ekf["nis"])
     with capsys.disabled():
         print(f"\n  c1 tracking RMS error: NM windows {m_nm['params']['c1']['rmse_pct']:.2f} %, "
               f"EKF {ekf_c1['rmse_pct']:.2f} %; alert delay NM "

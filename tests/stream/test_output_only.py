@@ -27,7 +27,7 @@ def test_body_mode_found_on_synthetic_acceleration(quarter2, accel_stream) -> No
     est = OutputOnlyEstimator("x1_ddot")
     res = []
     run_arrays(s.t, {"x1_ddot": s.data["x1_ddot"]}, 60.0, 30.0, lambda t, d: res.append(est.process(t, d)))
-    lines = [r.line for r in res]
+    lines = [r.event.to_json() for r in res]
     assert all(l["type"] == "estimate" for l in lines) and len(lines) == 19
     healthy = [l for l in lines if l["t"] <= 300.0]
     f = np.median([l["f_hz"] for l in healthy])
@@ -52,7 +52,8 @@ def test_parked_vehicle_is_skipped() -> None:
     t = np.arange(0, 60, 0.01)
     est = OutputOnlyEstimator("x1_ddot")
     r = est.process(t, {"x1_ddot": 9.81 + np.random.default_rng(0).normal(0, 0.005, t.size)})
-    assert r.line["type"] == "skip" and "too little excitation" in r.line["reason"]
+    line = r.event.to_json()
+    assert line["type"] == "skip" and "too little excitation" in line["reason"]
 
 
 def test_real_canedge_drive_body_bounce(realdata) -> None:

@@ -1,0 +1,330 @@
+"""When will a wearing part cross its limit? Trends with uncertainty and their crossing time.
+
+A trend is a level ``v`` (SI) at data time ``t0`` and a rate ``r`` (SI/s) with their 2x2
+covariance ``P``. Extrapolated, the level at ``t0 + tau`` is ``m(tau) = v + r tau`` with
+variance ``s^2(tau) = P_vv + 2 tau P_vr + tau^2 P_rr``. The limit ``L`` is crossed at
+``tau* = (L - v) / r``; the two-sided 90 % interval of the crossing time is where the
+band ``m(tau) -/+ z s(tau)`` (``z = 1.645``) meets ``L``: with ``a = v - L`` the edges solve
+``(a + r tau)^2 = z^2 s^2(tau)``, a quadratic::
+
+    (r^2 - z^2 P_rr) tau^2 + 2 (a r - z^2 P_vr) tau + (a^2 - z^2 P_vv) = 0
+
+which has two roots exactly when the rate is significant at ``z`` (``r^2 > z^2 P_rr``).
+Otherwise the crossing is not predicted at all (a stable part, or a trend too uncertain to
+say): no forecast. A part already inside the band at ``tau = 0`` gets ``crossing_t_low = t0``.
+
+:func:`linear_trend` fits the trend to any ``(t, value, stderr)`` series by weighted least
+squares (one vehicle's drives, a list of window estimates); the monitor's tracker
+(:class:`estimator.stream.tracker.TrendTracker`) produces the same :class:`Trend` from its
+Kalman state. :class:`ForecastEngine` turns trends into forecast events: one when a
+crossing is first predicted within the horizon, a new one when the predicted crossing
+leaves the last announced interval, and a withdrawal when the trend no longer predicts a
+crossing within 1.5 horizons (a part that stopped wearing, or recovered after a repair).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from suspid.errors import UsageError
+
+#: two-sided 90 % normal quantile
+Z90 = 1.6448536269514722
+
+#: default forecast horizon (s of data time)
+DEFAULT_HORIZON_S = 60.0
+
+
+@dataclass(frozen=True)
+class Trend:
+    """A level and rate with covariance.
+
+    Attributes
+    ----------
+    t : float
+        Reference time of ``value`` (s; data time, or epoch s for drives).
+    value : float
+        Level at ``t`` (SI).
+    rate : float
+        Rate of change (SI per s).
+    var_value, cov, var_rate : float
+        Covariance of (value, rate).
+    q_value, q_rate : float
+        Process-noise intensities of the level (SI^2/s) and the rate (SI^2/s^3): the
+        extrapolated variance grows by ``q_value tau + q_rate tau^3 / 3`` as well (the wear
+        may speed up, slow down or stop).
+    """
+
+    t: float
+    value: float
+    rate: float
+    var_value: float
+    cov: float
+    var_rate: float
+    q_value: float = 0.0
+    q_rate: float = 0.0
+
+    @property
+    def value_stderr(self) -> float:
+        return math.sqrt(max(self.var_value, 0.0))
+
+    @property
+    def rate_stderr(self) -> float:
+        return math.sqrt(max(self.var_rate, 0.0))
+
+
+@dataclass(frozen=True)
+class Crossing:
+    """Predicted time at which a trend meets its limit, with the 90 % interval (s)."""
+
+    t: float
+    low: float
+    high: float
+
+
+def linear_trend(t: Sequence[float], value: Sequence[float], stderr: Sequence[float],
+                 t_ref: float | None = None) -> Trend:
+    """Weighted least-squares straight line through ``(t, value +/- stderr)``.
+
+    Parameters
+    ----------
+    t : sequence of float
+        Times (s, any origin).
+    value : sequence of float
+        Values (SI).
+    stderr : sequence of float
+        Their standard errors (SI, > 0). The covariance is scaled by the reduced chi-square
+        when that exceeds 1 (scatter larger than the stated errors widens the trend).
+    t_ref : float, optional
+        Time the level refers to (default the last ``t``).
+
+    Returns
+    -------
+    Trend
+    """
+    tt = np.asarray(t, dtype=float)
+    y = np.asarray(value, dtype=float)
+    s = np.asarray(stderr, dtype=float)
+    ok = np.isfinite(tt) & np.isfinite(y) & np.isfinite(s) & (s > 0)
+    tt, y, s = tt[ok], y[ok], s[ok]
+    if tt.size < 2 or float(np.ptp(tt)) <= 0:
+        raise UsageError(f"a trend needs at least two points at different times, got {tt.size}")
+    tr = float(tt[-1]) if t_ref is None else float(t_ref)
+    X = np.column_stack([np.ones_like(tt), tt - tr]) / s[:, None]
+    b = y / s
+    XtX = X.T @ X
+    cov = np.linalg.inv(XtX)
+    coef = cov @ (X.T @ b)
+    dof = tt.size - 2
+    if dof > 0:
+        chi2 = float(np.sum((X @ coef - b) ** 2)) / dof
+        cov = cov * max(1.0, chi2)
+    return Trend(tr, float(coef[0]), float(coef[1]), float(cov[0, 0]), float(cov[0, 1]),
+                 float(cov[1, 1]))
+
+
+def crossing(trend: Trend, limit: float, z: float = Z90) -> Crossing | None:
+    """When ``trend`` reaches ``limit`` (module docstring); ``None`` when not predicted.
+
+    ``None`` also when the trend moves away from the limit or its rate is not significant
+    at ``z``. With process noise (``q_value``, ``q_rate``) the band edges are found by
+    bisection; the late edge is capped at 100 times the predicted time to the crossing.
+    """
+    a = trend.value - limit
+    r = trend.rate
+    if a == 0 or r == 0 or (a > 0) == (r > 0):
+        return None
+    if r * r <= z * z * trend.var_rate:
+        return None
+    # work with a > 0 and r < 0 (a falling part above its limit, or the mirror image)
+    a, r = abs(a), -abs(r)
+    tau = a / -r
+
+    def var(x: float) -> float:
+        return (trend.var_value + 2.0 * x * trend.cov
+                + x * x * trend.var_rate + trend.q_value * x + trend.q_rate * x ** 3 / 3.0)
+
+    def edge(sign: float) -> float:
+        """First tau >= 0 where a + r tau + sign z s(tau) <= 0 (sign -1: early, +1: late)."""
+        def g(x: float) -> float:
+            return a + r * x + sign * z * math.sqrt(max(var(x), 0.0))
+        if g(0.0) <= 0:
+            return 0.0
+        hi = tau
+        while g(hi) > 0:
+            hi *= 2.0
+            if hi > 100.0 * tau:
+                return math.inf
+        lo = 0.0 if sign > 0 else 0.0
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            if g(mid) > 0:
+                lo = mid
+            else:
+                hi = mid
+        return hi
+
+    lo = edge(-1.0)
+    hi = edge(+1.0)
+    if not math.isfinite(hi):
+        return None
+    return Crossing(trend.t + tau, trend.t + lo, trend.t + max(hi, lo))
+
+
+@dataclass
+class ForecastEvent:
+    """A predicted limit crossing (``kind="forecast"``) or its withdrawal.
+
+    Attributes
+    ----------
+    kind : {"forecast", "forecast_withdrawn"}
+    t : float
+        Data time (s) of the estimate the forecast is based on.
+    parameter : str
+    value, rate, rate_stderr : float
+        Tracked level (SI) and rate (SI/s) at ``t``.
+    limit, nominal : float
+        The alert limit ``(1 - drop) x nominal`` and the nominal value (SI).
+    crossing_t, crossing_t_low, crossing_t_high : float or None
+        Predicted data time of the crossing and its 90 % interval (s); ``None`` in a
+        withdrawal.
+    model, unit : str
+    """
+
+    kind: str
+    t: float
+    parameter: str
+    value: float
+    rate: float
+    rate_stderr: float
+    limit: float
+    nominal: float
+    crossing_t: float | None
+    crossing_t_low: float | None
+    crossing_t_high: float | None
+    model: str
+    unit: str = ""
+
+    @property
+    def id(self) -> str:
+        """Deterministic identity (deduplication across restarts)."""
+        return f"{self.model}:{self.parameter}:{self.kind}@{self.t:.6f}"
+
+    @property
+    def message(self) -> str:
+        u = f" {self.unit}" if self.unit else ""
+        pct = 100.0 * self.limit / self.nominal if self.nominal else float("nan")
+        if self.kind != "forecast" or self.crossing_t is None:
+            return (f"{self.parameter} = {self.value:.6g}{u} no longer trends towards {pct:.0f} % "
+                    f"of nominal within the horizon (rate {self.rate:+.3g}{u}/s); "
+                    "forecast withdrawn")
+        lo = self.crossing_t_low if self.crossing_t_low is not None else self.crossing_t
+        hi = self.crossing_t_high if self.crossing_t_high is not None else self.crossing_t
+        return (f"{self.parameter} = {self.value:.6g}{u} falling at {self.rate:.3g}{u}/s will "
+                f"cross {pct:.0f} % of nominal ({self.limit:.6g}{u}) at t = {self.crossing_t:.1f} s "
+                f"(90 % interval {lo:.1f}-{hi:.1f} s, in {self.crossing_t - self.t:.1f} s); "
+                "plan the replacement")
+
+    def to_json(self) -> dict[str, Any]:
+        """The ``forecast`` (or ``forecast_withdrawn``) JSON line."""
+        return {"type": self.kind, "t": self.t, "parameter": self.parameter,
+                "value": self.value, "rate": self.rate, "rate_stderr": self.rate_stderr,
+                "limit": self.limit, "nominal": self.nominal, "crossing_t": self.crossing_t,
+                "crossing_t_low": self.crossing_t_low, "crossing_t_high": self.crossing_t_high,
+                "message": self.message, "model": self.model, "id": self.id}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> "ForecastEvent":
+        def opt(k: str) -> float | None:
+            v = d.get(k)
+            return None if v is None else float(v)
+
+        return cls(kind=str(d["type"]), t=float(d["t"]), parameter=str(d["parameter"]),
+                   value=float(d["value"]), rate=float(d["rate"]),
+                   rate_stderr=float(d.get("rate_stderr") or 0.0), limit=float(d["limit"]),
+                   nominal=float(d.get("nominal") or 0.0), crossing_t=opt("crossing_t"),
+                   crossing_t_low=opt("crossing_t_low"), crossing_t_high=opt("crossing_t_high"),
+                   model=str(d.get("model", "")))
+
+
+@dataclass
+class ForecastEngine:
+    """Per-parameter forecast state: announce, update and withdraw predicted crossings.
+
+    Parameters
+    ----------
+    limits : dict
+        ``parameter -> limit`` (SI), the alert engine's ``(1 - drop) x nominal``.
+    nominal : dict
+        ``parameter -> nominal`` (SI).
+    horizon_s : float
+        Announce a crossing predicted within this much data time (s).
+    model : str
+    units : dict, optional
+    publish : callable, optional
+        Receives each new event and returns whether it was delivered (the alert engine's
+        write-ahead publisher); by default the events are only collected.
+    """
+
+    limits: dict[str, float]
+    nominal: dict[str, float]
+    horizon_s: float = DEFAULT_HORIZON_S
+    model: str = ""
+    units: dict[str, str] = field(default_factory=dict)
+    publish: Any = None
+    active: dict[str, ForecastEvent] = field(default_factory=dict)
+    emitted: list[ForecastEvent] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        if not (self.horizon_s > 0 and math.isfinite(self.horizon_s)):
+            raise UsageError(f"--forecast-horizon: expected a time > 0 s, got {self.horizon_s}")
+
+    def update(self, trends: Mapping[str, Trend]) -> list[ForecastEvent]:
+        """Fold in the tracker's trends at one estimate; returns the events emitted now."""
+        out: list[ForecastEvent] = []
+        for k, tr in trends.items():
+            if k not in self.limits:
+                continue
+            lim = self.limits[k]
+            cr = crossing(tr, lim) if tr.value > lim else None
+            prev = self.active.get(k)
+            if tr.value <= lim:
+                # crossed: the alert engine takes over; the forecast is fulfilled, not withdrawn
+                self.active.pop(k, None)
+                continue
+            within = cr is not None and cr.t - tr.t <= self.horizon_s
+            if prev is None:
+                if within and cr is not None:
+                    ev = self._event("forecast", tr, k, cr)
+                    self.active[k] = ev
+                    self._publish(ev, out)
+                continue
+            keep = cr is not None and cr.t - tr.t <= 1.5 * self.horizon_s
+            if not keep:
+                ev = self._event("forecast_withdrawn", tr, k, None)
+                del self.active[k]
+                self._publish(ev, out)
+            elif cr is not None and prev.crossing_t_low is not None \
+                    and prev.crossing_t_high is not None \
+                    and not prev.crossing_t_low <= cr.t <= prev.crossing_t_high:
+                ev = self._event("forecast", tr, k, cr)
+                self.active[k] = ev
+                self._publish(ev, out)
+        return out
+
+    def _event(self, kind: str, tr: Trend, k: str, cr: Crossing | None) -> ForecastEvent:
+        return ForecastEvent(kind, float(tr.t), k, float(tr.value), float(tr.rate),
+                             float(tr.rate_stderr), float(self.limits[k]),
+                             float(self.nominal.get(k, 0.0)),
+                             None if cr is None else float(cr.t),
+                             None if cr is None else float(cr.low),
+                             None if cr is None else float(cr.high),
+                             self.model, self.units.get(k, ""))
+
+    def _publish(self, ev: ForecastEvent, out: list[ForecastEvent]) -> None:
+        if self.publish is None or self.publish(ev):
+            self.emitted.append(ev)
+            out.append(ev)

@@ -1,0 +1,525 @@
+"""The monitor's wiring, once: options -> estimator -> tracker -> alerts and forecasts -> sinks.
+
+``suspid monitor`` (sliding window, EKF, output-only) and ``suspid compare`` build the same
+objects here:
+
+1. :func:`monitor_spec` checks the options and derives the window defaults
+   (:class:`MonitorSpec`);
+2. :func:`build_monitor` makes the :class:`~estimator.stream.monitor.StreamMonitor`: the
+   estimator (built on the first window, when the channels and the sample rate are known),
+   the trend tracker, the alert engine (with its durable store and sinks) and the forecast
+   engine;
+3. :func:`run_monitor` streams a :class:`Source` through it -- a CAN log replayed as fast as
+   possible, a measurement CSV, or a live python-can bus -- and returns the closing
+   :class:`~estimator.stream.events.Summary`.
+
+Every output is a typed event (:mod:`estimator.stream.events`,
+:class:`~estimator.alerts.AlertEvent`, :class:`~estimator.alerts.ForecastEvent`) handed to
+one callback; the caller's sink turns it into a JSON line or text.
+
+The estimators are found by name in :data:`ESTIMATORS` and imported on first use, so a
+replay with the sliding window does not pay for the EKF's or the output-only mode's imports.
+"""
+from __future__ import annotations
+
+import importlib
+import math
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from statistics import NormalDist
+from typing import Any, Callable, Mapping
+
+import numpy as np
+
+from estimator.alerts import (DEFAULT_HORIZON_S, AlertConfig, AlertEngine, AlertStore,
+                              BusAlertSink, CallbackSink, ForecastEngine)
+from estimator.decode import DecodeListener
+from estimator.identify import Parameters
+from estimator.stream.config import WindowConfig, default_config, default_decimation
+from estimator.stream.drivers import CanWindowDriver, LiveStop, replay_log, run_arrays, run_bus
+from estimator.stream.events import Summary
+from estimator.stream.monitor import StreamMonitor
+from suspid.can.bus import open_bus
+from suspid.can.logs import ReadStats
+from suspid.errors import InputError, UsageError, require_file
+from suspid.io.csvio import read_measurement
+from suspid.models.base import FloatArray, SuspensionModel
+
+#: CAN log formats replayed through the decoder (others are read as a measurement CSV)
+CAN_LOG_SUFFIXES = (".log", ".asc", ".blf", ".trc", ".mf4")
+
+#: estimator name -> "module:factory"; a factory takes ``(spec, channels, fs)``
+ESTIMATORS = {"nm": "estimator.stream.monitor:make_nm_estimator",
+              "ekf": "estimator.ekf.stream:make_ekf_estimator",
+              "output_only": "estimator.output_only:make_output_only_estimator"}
+
+#: output-only windows (s): a spectral estimate needs many body periods
+OUTPUT_ONLY_WINDOW_S = 60.0
+OUTPUT_ONLY_STEP_S = 30.0
+
+
+@dataclass
+class MonitorSpec:
+    """Everything the monitor needs besides the stream.
+
+    Attributes
+    ----------
+    model : SuspensionModel
+    params : Parameters
+        Starting values of the free parameters and the fixed ones.
+    nominal : dict
+        ``parameter -> nominal`` (SI) of every monitored parameter.
+    start_given : set of str
+        Free parameters whose start was given (``--init`` or ``--nominal``); the EKF starts
+        the others from the first window's sliding-window estimate.
+    config : WindowConfig
+    alert : AlertConfig
+    baseline : {"nm", "ekf", "output_only"}
+    decimate_given : bool
+        ``config.decimate`` was set explicitly (else derived from the sample rate).
+    inspection : bool
+        Virtual damper test on each quarter-car estimate.
+    forecast_horizon_s : float
+    ekf_params : list of str or None
+        Parameters in the EKF's state (default: every free damper and spring).
+    ekf_q : float or None
+    ekf_decimate : int or None
+    accel_channel : str
+    oo_method : str
+    units : dict
+    warnings : list of str
+    """
+
+    model: SuspensionModel
+    params: Parameters
+    nominal: dict[str, float]
+    config: WindowConfig
+    alert: AlertConfig
+    baseline: str = "nm"
+    start_given: set[str] = field(default_factory=set)
+    decimate_given: bool = False
+    inspection: bool = True
+    forecast_horizon_s: float = DEFAULT_HORIZON_S
+    ekf_params: list[str] | None = None
+    ekf_q: float | None = None
+    ekf_decimate: int | None = None
+    accel_channel: str = ""
+    oo_method: str = "carma"
+    units: dict[str, str] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+
+
+def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = None,
+                 nominal: Mapping[str, float] | None = None,
+                 init: Mapping[str, float] | None = None, baseline: str = "nm",
+                 alert_drop: float = 0.3, confidence: float = 0.99,
+                 persistence: float | None = None, hysteresis: float = 0.05,
+                 window: float | None = None, step: float | None = None,
+                 window_overrides: Mapping[str, Any] | None = None,
+                 decimate: int | None = None, fs: float = 0.0, inspection: bool = True,
+                 forecast_horizon: float = DEFAULT_HORIZON_S,
+                 ekf_params: list[str] | None = None, ekf_q: float | None = None,
+                 ekf_decimate: int | None = None, accel_channel: str | None = None,
+                 oo_method: str = "carma") -> MonitorSpec:
+    """Check the monitor's options and derive its defaults.
+
+    Parameters
+    ----------
+    model : SuspensionModel
+    fix, nominal, init : mapping, optional
+        Known parameters; nominal values of monitored ones (also their start); starting
+        values that differ from nominal (SI).
+    baseline : {"nm", "ekf", "output_only"}
+    alert_drop, confidence, persistence, hysteresis
+        Alert settings (:class:`~estimator.alerts.AlertConfig`); ``persistence`` defaults
+        to one window step.
+    window, step : float, optional
+        Window length and step (s); defaults from the model's modes.
+    window_overrides : mapping, optional
+        Further :class:`WindowConfig` fields (``maxfev``, ``sigma_floor``, ...).
+    decimate : int, optional
+    fs : float
+        Sample rate (Hz) when known (else the decimation is derived on the first window).
+    inspection : bool
+    forecast_horizon : float
+        Data time (s) within which a predicted crossing is announced.
+    ekf_params, ekf_q, ekf_decimate
+        EKF state parameters (default every free damper and spring), parameter random walk
+        and decimation.
+    accel_channel, oo_method
+        Output-only channel (default the body's ``_ddot``) and method.
+
+    Returns
+    -------
+    MonitorSpec
+
+    Raises
+    ------
+    UsageError
+        Naming the first inconsistent option.
+    """
+    fix = dict(fix or {})
+    nominal_in = dict(nominal or {})
+    init = dict(init or {})
+    if not 0 < alert_drop < 1:
+        raise UsageError(f"--alert-drop: expected a fraction in (0, 1), got {alert_drop}")
+    if not 0.5 < confidence < 1:
+        raise UsageError(f"--confidence: expected a probability in (0.5, 1), got {confidence}")
+    if not (forecast_horizon > 0 and math.isfinite(forecast_horizon)):
+        raise UsageError(f"--forecast-horizon: expected a time > 0 s, got {forecast_horizon}")
+    z = float(NormalDist().inv_cdf(confidence))
+    if baseline == "output_only":
+        return _output_only_spec(model, nominal_in, alert_drop, z, persistence, hysteresis,
+                                 window, step, forecast_horizon, accel_channel, oo_method)
+    for k in list(fix) + list(nominal_in) + list(init):
+        model.spec(k)
+    both = set(fix) & set(nominal_in)
+    if both:
+        raise UsageError(f"parameter(s) {', '.join(sorted(both))} given both --fix and --nominal; "
+                         "a fixed parameter is not monitored")
+    bad = set(fix) & set(init)
+    if bad:
+        raise UsageError(f"--init {sorted(bad)[0]}: the parameter is fixed (--fix)")
+    params = Parameters.for_model(model, fix=fix, init=nominal_in)
+    warnings: list[str] = []
+    if model.scale_invariant and set(model.scale_invariant) <= set(params.free):
+        m0 = next(p.name for p in model.params if p.kind in ("mass", "inertia"))
+        params[m0].vary = False
+        warnings.append(f"every mass, damper and spring is free, so only their ratios are "
+                        f"identifiable; holding {m0} at {params[m0].value:g} "
+                        f"{model.spec(m0).unit} (give --fix {m0}=VALUE)")
+    if not params.free:
+        raise UsageError("every parameter is fixed (--fix); nothing to monitor")
+    values = params.valuesdict()
+    nominal_all = {k: values[k] for k in params.free}
+    for k, v in init.items():
+        if k not in nominal_all:
+            raise UsageError(f"--init {k}: not a free parameter")
+        params[k].value = v
+    cfg = default_config(model, values, fs, len(params.free))
+    if window is not None:
+        cfg.window_s = window
+        if step is None:
+            cfg.step_s = max(0.05, round(window / 2.0, 2))
+    if step is not None:
+        cfg.step_s = step
+    for attr, v in (window_overrides or {}).items():
+        if v is not None:
+            setattr(cfg, attr, v)
+    if decimate is not None:
+        cfg.decimate = decimate
+    cfg.validate()
+    acfg = AlertConfig(nominal=dict(nominal_all), drop=alert_drop, z=z,
+                       persistence_s=cfg.step_s if persistence is None else persistence,
+                       hysteresis=hysteresis)
+    acfg.validate()
+    aug = None
+    if baseline == "ekf":
+        if ekf_params:
+            for k in ekf_params:
+                model.spec(k)
+            aug = [k for k in ekf_params if k in nominal_all]
+            if not aug:
+                raise UsageError(f"--ekf-params {','.join(ekf_params)}: none of them is a free "
+                                 "parameter")
+            acfg.nominal = {k: v for k, v in nominal_all.items() if k in aug}
+    elif baseline != "nm":
+        raise UsageError(f"unknown estimator {baseline!r}; expected nm, ekf or output_only")
+    return MonitorSpec(model, params, nominal_all, cfg, acfg, baseline=baseline,
+                       start_given=set(nominal_in) | set(init),
+                       decimate_given=decimate is not None, inspection=inspection,
+                       forecast_horizon_s=forecast_horizon, ekf_params=aug, ekf_q=ekf_q,
+                       ekf_decimate=ekf_decimate,
+                       units={k: model.spec(k).unit for k in nominal_all}, warnings=warnings)
+
+
+def _output_only_spec(model: SuspensionModel, nominal: Mapping[str, float], drop: float, z: float,
+                      persistence: float | None, hysteresis: float, window: float | None,
+                      step: float | None, horizon: float, accel_channel: str | None,
+                      method: str) -> MonitorSpec:
+    """:func:`monitor_spec` for the output-only mode (body mode from one accelerometer)."""
+    channel = accel_channel or f"{model.coords[0]}_ddot"
+    if channel not in model.channels:
+        raise UsageError(f"--accel-channel {channel!r} is not a channel of model {model.name}")
+    w = window if window is not None else OUTPUT_ONLY_WINDOW_S
+    s = step if step is not None else (w / 2.0 if window is not None else OUTPUT_ONLY_STEP_S)
+    cfg = WindowConfig(window_s=w, step_s=s)
+    cfg.validate()
+    bad = [k for k in nominal if k not in ("f_body", "zeta_body")]
+    if bad:
+        raise UsageError(f"--nominal {bad[0]}: output-only mode monitors f_body and zeta_body")
+    acfg = AlertConfig(dict(nominal), drop=drop, z=z,
+                       persistence_s=s if persistence is None else persistence,
+                       hysteresis=min(hysteresis, drop / 2))
+    acfg.validate()
+    return MonitorSpec(model, Parameters.for_model(model), dict(nominal), cfg, acfg,
+                       baseline="output_only", forecast_horizon_s=horizon,
+                       accel_channel=channel, oo_method=method,
+                       units={"f_body": "Hz", "zeta_body": ""})
+
+
+def make_estimator(spec: MonitorSpec, channels: list[str], fs: float) -> Any:
+    """The spec's estimator for a stream with ``channels`` sampled at ``fs`` (Hz)."""
+    if spec.baseline == "nm" and not spec.decimate_given:
+        spec.config.decimate = default_decimation(spec.model, spec.params.valuesdict(), fs)
+    if spec.baseline != "output_only":
+        roads = [r for r in spec.model.roads if r in channels]
+        if len(roads) < len(spec.model.roads):
+            raise InputError(f"the stream carries no road input {', '.join(spec.model.roads)} "
+                             f"(channels: {', '.join(channels) or 'none'}); input-output "
+                             "identification needs it -- use --output-only for a body "
+                             "accelerometer alone")
+    mod, _, fn = ESTIMATORS[spec.baseline].partition(":")
+    factory: Callable[[MonitorSpec, list[str], float], Any] = getattr(
+        importlib.import_module(mod), fn)
+    return factory(spec, channels, fs)
+
+
+class LazyEstimator:
+    """Builds the estimator on the first window (channels and sample rate known then)."""
+
+    def __init__(self, spec: MonitorSpec) -> None:
+        self.spec = spec
+        self.inner: Any = None
+        self.name = spec.baseline
+
+    def _build(self, t: FloatArray, data: Mapping[str, FloatArray]) -> Any:
+        present = [c for c, v in data.items() if np.mean(np.isfinite(v)) > 0.5]
+        dt = float(np.median(np.diff(t)))
+        self.inner = make_estimator(self.spec, present, 1.0 / dt if dt > 0 else 0.0)
+        for a in ("lag", "overlap", "own_track"):
+            if hasattr(self.inner, a):
+                setattr(self, a, getattr(self.inner, a))
+        return self.inner
+
+    def process(self, t: FloatArray, data: Mapping[str, FloatArray]) -> Any:
+        """Build the estimator from the first window, then delegate."""
+        inner = self.inner if self.inner is not None else self._build(t, data)
+        return inner.process(t, data)
+
+    def summary(self) -> dict[str, Any]:
+        return self.inner.summary() if self.inner is not None else {}
+
+
+def build_monitor(spec: MonitorSpec, emit: Callable[[Any], None], store: AlertStore | None = None,
+                  sinks: list[Any] | None = None, estimator: Any = None) -> StreamMonitor:
+    """The monitor of ``spec``: estimator (lazy unless given), tracker, alerts, forecasts.
+
+    Parameters
+    ----------
+    spec : MonitorSpec
+    emit : callable
+        Receives every event (estimates, skips, alerts, clears, forecasts).
+    store : AlertStore, optional
+        Durable alert log (write-ahead).
+    sinks : list, optional
+        Further alert sinks (the bus); ``emit`` is always one.
+    estimator : optional
+        A ready estimator (``compare`` builds it from the known stream).
+    """
+    est = estimator if estimator is not None else LazyEstimator(spec)
+    all_sinks: list[Any] = [CallbackSink(emit)] + list(sinks or [])
+    engine = None
+    forecasts = None
+    if spec.alert.nominal:
+        engine = AlertEngine(spec.alert, spec.model.name, units=dict(spec.units), store=store,
+                             sinks=all_sinks)
+        forecasts = ForecastEngine({k: spec.alert.limit(k) for k in spec.alert.nominal},
+                                   dict(spec.alert.nominal), spec.forecast_horizon_s,
+                                   spec.model.name, dict(spec.units), publish=engine.publish)
+        if store is not None:
+            for k, ev in store.last_forecast.items():
+                if ev.kind == "forecast" and k in forecasts.limits:
+                    forecasts.active[k] = ev
+    return StreamMonitor(est, emit, engine, forecasts=forecasts)
+
+
+@dataclass
+class Source:
+    """Where the frames come from.
+
+    Attributes
+    ----------
+    input : str or None
+        A CAN log (replayed as fast as possible) or a measurement CSV.
+    interface, channel, bitrate
+        A live python-can bus (when ``input`` is ``None``).
+    dbc : Path or None
+        DBC of the CAN data (default suspid's).
+    signal_map : SignalMap or None
+    time_source : {"timestamp", "tick"} or None
+        Default: frame timestamps for logs, SN_Sync ticks live.
+    duration, idle_timeout : float or None
+        Live stop conditions (s of wall time).
+    alert_frames : bool
+        Send SUSPID_Alert frames (live bus, or ``alert_interface``).
+    alert_interface, alert_channel : str or None
+    """
+
+    input: str | None = None
+    interface: str | None = None
+    channel: str | None = None
+    bitrate: int | None = None
+    dbc: Path | None = None
+    signal_map: Any = None
+    time_source: str | None = None
+    duration: float | None = None
+    idle_timeout: float | None = 5.0
+    alert_frames: bool = True
+    alert_interface: str | None = None
+    alert_channel: str | None = None
+
+
+def open_checked_bus(interface: str, channel: str | None, bitrate: int | None, what: str) -> Any:
+    """The bus through the node's and the estimator's one opener (:func:`suspid.can.bus.open_bus`:
+    chunked SLCAN reads, data timestamps on ``virtual``, ``udp_multicast`` refused)."""
+    if channel is None:
+        raise UsageError(f"{what}: --channel is required with --interface {interface}")
+    if interface == "slcan" and str(channel).lower() in ("pty", "pty:"):
+        raise UsageError(f"{what}: --channel pty creates a node-side adapter (suspid node); give "
+                         "the monitor the /dev/pts/N path the node printed")
+    kw: dict[str, Any] = {"bitrate": bitrate} if bitrate else {}
+    try:
+        return open_bus(interface, channel, **kw)
+    except UsageError as exc:
+        raise UsageError(f"{what}: {exc}") from None
+
+
+def run_monitor(spec: MonitorSpec, source: Source, emit: Callable[[Any], None],
+                alert_file: str | Path | None = None) -> Summary:
+    """Stream ``source`` through the monitor of ``spec``; every event goes to ``emit``.
+
+    Returns the closing summary (not emitted: the caller decides).
+    """
+    store = AlertStore(alert_file) if alert_file else None
+    sinks: list[Any] = []
+    mon = build_monitor(spec, emit, store, sinks)
+    extra: dict[str, Any] = {}
+    if spec.baseline == "output_only":
+        extra = {"mode": "output_only", "channel": spec.accel_channel, "method": spec.oo_method}
+    try:
+        extra.update(run_source(source, spec, mon, sinks))
+    finally:
+        if store is not None:
+            store.close()
+    if store is not None:
+        extra["alert_file"] = str(store.path)
+    return mon.summary(extra)
+
+
+def run_source(source: Source, spec: MonitorSpec, mon: StreamMonitor,
+               sinks: list[Any]) -> dict[str, Any]:
+    """Stream a log, a CSV or the live bus through ``mon``; shut buses down.
+
+    Returns the source's summary fields (frames, timing) for the final ``summary`` line.
+    """
+    buses: list[Any] = []
+    try:
+        if source.input is not None:
+            path = require_file(source.input)
+            if path.suffix.lower() in CAN_LOG_SUFFIXES:
+                return _run_log(source, spec, mon, sinks, buses)
+            return _run_csv(source, spec, mon)
+        return _run_live(source, spec, mon, sinks, buses)
+    finally:
+        for b in buses:
+            try:
+                b.shutdown()
+            except Exception:  # pragma: no cover - best effort on the way out
+                pass
+
+
+def _listener(source: Source, spec: MonitorSpec, time_source: str) -> DecodeListener:
+    """The CAN layer's DecodeListener with a bounded buffer sized for the windows."""
+    cfg = spec.config
+    # rows per message: window + step at up to 2 kHz, power of two
+    rows = 1 << max(12, math.ceil(math.log2(max(2.0, (cfg.window_s + 2 * cfg.step_s) * 2000.0))))
+    return DecodeListener(spec.model, source.dbc, source.signal_map, capacity=rows,
+                          growable=False, time_source=time_source)
+
+
+def _alert_bus(source: Source, sinks: list[Any], listener: DecodeListener, buses: list[Any],
+               live_bus: Any = None) -> None:
+    """Add the SUSPID_Alert frame sink (live bus, or ``alert_interface`` for a replay)."""
+    if not source.alert_frames:
+        return
+    bus = None
+    if source.alert_interface:
+        bus = open_checked_bus(source.alert_interface, source.alert_channel, source.bitrate,
+                               "--alert-interface")
+        buses.append(bus)
+    elif live_bus is not None:
+        bus = live_bus
+    if bus is not None:
+        sinks.append(BusAlertSink(bus, listener.db))
+
+
+def _attach(mon: StreamMonitor, sinks: list[Any]) -> None:
+    """Give the alert engine the sinks added after it was built (the bus)."""
+    if mon.alerts is not None:
+        for s in sinks:
+            if s not in mon.alerts.sinks:
+                mon.alerts.sinks.append(s)
+
+
+def _run_log(source: Source, spec: MonitorSpec, mon: StreamMonitor, sinks: list[Any],
+             buses: list[Any]) -> dict[str, Any]:
+    """Replay a CAN log as fast as possible through the decoder and the windows."""
+    cfg = spec.config
+    listener = _listener(source, spec, source.time_source or "timestamp")
+    _alert_bus(source, sinks, listener, buses)
+    _attach(mon, sinks)
+    drv = CanWindowDriver(listener, cfg.window_s, cfg.step_s, mon.window)
+    stats = ReadStats()
+    replay_log(drv, source.input, stats)
+    listener.count_malformed(stats.malformed)
+    if drv.windows == 0:
+        raise InputError(f"{source.input}: {drv.frames} frames but less data than one window "
+                         f"({cfg.window_s:g} s); give a shorter --window")
+    out: dict[str, Any] = {"frames": listener.frame_stats(), "windows_cut": drv.windows}
+    if stats.truncated:
+        out["warnings"] = [f"{source.input}: the file ends inside a record (truncated)"]
+    return out
+
+
+def _run_csv(source: Source, spec: MonitorSpec, mon: StreamMonitor) -> dict[str, Any]:
+    """Stream a measurement CSV through the same windows."""
+    cfg = spec.config
+    meas = read_measurement(str(source.input), spec.model)
+    data = dict(meas.measured)
+    data.update(meas.road)
+    if meas.t.size < 3 or meas.t[-1] - meas.t[0] < cfg.window_s:
+        raise InputError(f"{source.input}: {meas.t[-1] - meas.t[0]:.3g} s of data, less than one "
+                         f"window ({cfg.window_s:g} s); give a shorter --window")
+    n = run_arrays(np.asarray(meas.t), data, cfg.window_s, cfg.step_s, mon.window)
+    return {"windows_cut": n, "warnings": list(meas.warnings)}
+
+
+def _run_live(source: Source, spec: MonitorSpec, mon: StreamMonitor, sinks: list[Any],
+              buses: list[Any]) -> dict[str, Any]:
+    """Receive from a live python-can bus until idle, ``duration``, SIGINT or SIGTERM."""
+    cfg = spec.config
+    if source.interface is None:
+        raise UsageError("give --input LOG or --interface I --channel C")
+    bus = open_checked_bus(source.interface, source.channel, source.bitrate, "--interface")
+    buses.append(bus)
+    listener = _listener(source, spec, source.time_source or "tick")
+    _alert_bus(source, sinks, listener, buses, live_bus=bus)
+    _attach(mon, sinks)
+    drv = CanWindowDriver(listener, cfg.window_s, cfg.step_s, mon.window)
+    stop = LiveStop(duration=source.duration,
+                    idle_timeout=None if not source.idle_timeout else source.idle_timeout)
+    stop.install()
+    try:
+        n = run_bus(drv, bus, stop)
+    finally:
+        stop.restore()
+    return {"frames": listener.frame_stats(), "frames_received": n, "windows_cut": drv.windows,
+            "stopped": stop.reason}
+
+
+def warn(spec: MonitorSpec) -> None:
+    """Write the spec's warnings to stderr (one ``warning: ...`` line each)."""
+    for w in spec.warnings:
+        sys.stderr.write(f"warning: {w}\n")
