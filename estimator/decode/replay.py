@@ -78,9 +78,16 @@ def feed_log(listener: can.Listener, path: str | Path, stats: Optional[ReadStats
                 left -= 1
                 if left <= 0:
                     left = max(1, int(poll()))
+        finish = getattr(listener, "finish", None)
+        if finish is not None:
+            finish()
         return n
+    settle = getattr(listener, "choose_time_base", None)
     for fa in read_log_arrays(path, stats):
         size = len(fa)
+        if settle is not None:
+            settle(fa.arbitration_id, final=True)   # "auto": decided on the first chunk
+            settle = None
         if poll is None:
             n += feed_arrays(fa)
             continue
@@ -93,6 +100,9 @@ def feed_log(listener: can.Listener, path: str | Path, stats: Optional[ReadStats
             left -= take
             if left <= 0:
                 left = max(1, int(poll()))
+    finish = getattr(listener, "finish", None)
+    if finish is not None:
+        finish()
     return n
 
 

@@ -150,6 +150,10 @@ class CanWindowDriver:
 
     def flush(self) -> None:
         """At the end of the input: cut the windows that the last frames completed."""
+        finish = getattr(self.listener, "finish", None)
+        if finish is not None:
+            finish()
+            self.poll()
         latest = self.listener.buffer.latest_time()
         if math.isfinite(latest) and math.isfinite(self.next_end):
             while latest >= self.next_end - 1e-9:
