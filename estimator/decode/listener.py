@@ -35,8 +35,8 @@ matched through the frame's counter -- exact whatever the transport's latency an
 ``--speed``; use it for SLCAN, whose host-side timestamps are arrival times). In tick mode
 the loss rules (counter advance vs time since the last frame) use that data time too.
 ``time_source="auto"`` takes the sensor clock whenever the stream carries one: the tick
-once an ``SN_Sync`` frame is among the first frames (up to ``AUTO_FRAMES`` frames are held
-until one comes), the timestamps otherwise (a foreign stream, or a DBC without
+once an ``SN_Sync`` frame is among the first frames (up to ``AUTO_FRAMES`` frames of the
+DBC's messages are held until one comes; foreign frames do not count), the timestamps otherwise (a foreign stream, or a DBC without
 ``SN_Sync``). :attr:`DecodeListener.time_source` then names the base taken, and
 :meth:`DecodeListener.frame_stats` reports it as ``time_base``.
 
@@ -76,6 +76,7 @@ resets.
 """
 from __future__ import annotations
 
+import copy
 import math
 import sys
 import threading
@@ -279,6 +280,8 @@ class DecodeListener(can.Listener):
             raise UsageError(f"time_source must be 'timestamp', 'tick' or 'auto', "
                              f"got {time_source!r}")
         self._auto = time_source == "auto"
+        #: the time source asked for ("auto" keeps its name here once decided)
+        self.time_source_requested = time_source
         self.time_source = "timestamp" if self._auto else time_source
         if not 1 <= max_counter_delta <= COUNTER_MODULUS - 2:
             raise UsageError(f"max_counter_delta must be 1..13, got {max_counter_delta}")
@@ -315,6 +318,7 @@ class DecodeListener(can.Listener):
         self._outbox: list[dict[str, object]] = []   # accepted alerts for on_alert
         self._prompt = frozenset(r.key & ~_EXT for r in self._routes.values() if r.kind == _ALERT)
         self._buffer.before_read = self.flush
+        self._known_ids = np.array(sorted(k & ~_EXT for k in self._known), dtype=np.int64)
         self._sync_ids = frozenset(r.key & ~_EXT for r in self._routes.values() if r.kind == _SYNC)
         if not self._sync_ids:
             self._auto = False   # no SN_Sync in the DBC: the timestamps are the only clock
@@ -440,10 +444,26 @@ class DecodeListener(can.Listener):
         arr = np.asarray(ids, dtype=np.int64) & ~_EXT
         if np.isin(arr, list(self._sync_ids)).any():
             self.time_source, self._tick_time = "tick", True
-        elif not (final or arr.size >= AUTO_FRAMES):
-            return False
+        elif not (final or int(np.isin(arr, self._known_ids).sum()) >= AUTO_FRAMES):
+            return False   # foreign traffic does not count: only frames of the DBC decide
         self._auto = False
         return True
+
+    def sync_first_index(self, ids: Any) -> int:
+        """Tick base, start of a stream: where the first ``SN_Sync`` frame lies among the
+        first frames ``ids`` (-1: none, or not the start of a stream).
+
+        Frames of the first sample that arrived before its ``SN_Sync`` (arrival jitter) have
+        no tick yet; the callers move that SN_Sync to the front, with the first frame's
+        arrival time, so they are placed in their sample instead of rejected (``no_sync``).
+        """
+        c = self._counts
+        if not self._tick_time or self._sync_tick is not None or \
+                c.accepted + c.ignored + sum(c.rejected.values()) > 0:
+            return -1
+        arr = np.asarray(ids, dtype=np.int64)[:AUTO_FRAMES] & ~_EXT
+        hit = np.flatnonzero(np.isin(arr, list(self._sync_ids)))
+        return int(hit[0]) if hit.size else -1
 
     def finish(self) -> None:
         """The input has ended: process every held frame (see ``time_source="auto"``)."""
@@ -461,8 +481,15 @@ class DecodeListener(can.Listener):
         """
         with self._lock:
             pend = self._pending
-            if self._auto and not self.choose_time_base([m.arbitration_id for m in pend], False):
-                return
+            if self._auto:
+                if not self.choose_time_base([m.arbitration_id for m in pend], False):
+                    return
+                k = self.sync_first_index([m.arbitration_id for m in pend])
+                if k > 0:
+                    first = copy.copy(pend[k])
+                    first.timestamp = pend[0].timestamp
+                    del pend[k]
+                    pend.appendleft(first)
             n = len(pend)
             if n:
                 msgs = [pend.popleft() for _ in range(n)]

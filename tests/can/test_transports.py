@@ -137,6 +137,7 @@ def _af_can_unavailable() -> str | None:
     return None
 
 
+@pytest.mark.socketcan
 @pytest.mark.skipif(_af_can_unavailable() is not None, reason=str(_af_can_unavailable()))
 def test_socketcan_vcan0_same_code_path():
     from firmware_sim.node import NodeConfig, SensorNode
