@@ -420,6 +420,18 @@ def run_bus(driver: CanWindowDriver, bus: Any, stop: LiveStop) -> int:
         for msg in rx.take(0.0):   # what arrived before the thread stopped
             on(msg)
             n += 1
+        if rx.error is None:
+            # and what the kernel still holds for this socket (a stop while lagging)
+            while True:
+                try:
+                    msg = bus.recv(0.0)
+                except (can.CanError, OSError, ValueError):
+                    break
+                if msg is None:
+                    break
+                rx.read += 1
+                on(msg)
+                n += 1
         driver.flush()
         rstats = rx.stats()
         counts = getattr(driver.listener, "counts", None)
