@@ -5,7 +5,8 @@ Run with vcan0 up (natively, or under User-Mode Linux)::
     tools/vcan_bench.sh .venv/bin/python tools/bench_vcan.py [--duration 10] [--fit-s 1.5]
 
 Next to ``suspid node --interface socketcan --channel vcan0`` (500 Hz quarter car, 4
-messages per sample) ``cangen`` fills the bus with foreign frames as fast as it can, and
+messages per sample) ``cangen`` fills the bus with foreign frames (``--gap-ms``, default about a saturated
+1 Mbit/s bus), and
 ``candump`` records everything. This process receives with the monitor's live path
 (:func:`estimator.stream.drivers.run_bus`: a receiver thread into a bounded buffer, the
 decoder, the window cutter) while each window's "fit" deliberately takes ``--fit-s`` of
@@ -46,6 +47,9 @@ def main() -> int:
     ap.add_argument("--fit-s", type=float, default=1.5, help="wall time of each window's fit")
     ap.add_argument("--window", type=float, default=2.0)
     ap.add_argument("--step", type=float, default=1.0)
+    ap.add_argument("--gap-ms", type=float, default=0.12,
+                    help="cangen gap (ms); 0.12 ms ~ 8 k frames/s, a saturated 1 Mbit/s bus")
+    ap.add_argument("--timeout", type=float, default=300.0, help="give up after (s of wall)")
     args = ap.parse_args()
     for tool in ("candump", "cangen"):
         if shutil.which(tool) is None:
@@ -66,7 +70,7 @@ def main() -> int:
                             stdout=(tmp / "candump.log").open("wb"))
     while _receivers() <= before:
         time.sleep(0.02)
-    gen = subprocess.Popen(["cangen", "vcan0", "-g", "0", "-I", "7FF", "-L", "8"])
+    gen = subprocess.Popen(["cangen", "vcan0", "-g", f"{args.gap_ms:g}", "-I", "7FF", "-L", "8"])
     node = subprocess.Popen([sys.executable, "-m", "suspid", "node", "--scenario", "random",
                              "--duration", str(args.duration), "--interface", "socketcan",
                              "--channel", "vcan0"], stdout=subprocess.PIPE, cwd=REPO)
@@ -78,7 +82,10 @@ def main() -> int:
 
     # stop 1 s after the node ends: run_bus polls ``stop.stop``
     def watch() -> None:
-        node.wait()
+        try:
+            node.wait(timeout=args.timeout)
+        except subprocess.TimeoutExpired:
+            node.kill()
         time.sleep(1.0)
         gen.terminate()
         time.sleep(0.5)
