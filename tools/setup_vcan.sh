@@ -6,10 +6,12 @@
 # Then, e.g.:
 #   suspid node --scenario bump --interface socketcan --channel vcan0 &
 #   candump -L vcan0            # can-utils, to watch the frames
-#   python -m pytest tests/can -k socketcan
+#   python -m pytest -m socketcan
 #
-# Containers and minimal VMs often lack the vcan module (or AF_CAN altogether); the tests
-# then skip the socketcan case with the reason, and the virtual / SLCAN transports remain.
+# Containers and minimal VMs often lack the vcan module (or AF_CAN altogether): there
+# tools/vcan_bench.sh COMMAND runs COMMAND with vcan0 up inside User-Mode Linux (it calls
+# this script itself on a host that has SocketCAN), e.g.
+#   tools/vcan_bench.sh .venv/bin/python -m pytest -m socketcan
 set -eu
 IFACE="${1:-vcan0}"
 SUDO=""

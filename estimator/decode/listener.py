@@ -34,6 +34,11 @@ node's sample tick (``time_source="tick"``: ``Tick * PeriodUs`` of the last ``SN
 matched through the frame's counter -- exact whatever the transport's latency and
 ``--speed``; use it for SLCAN, whose host-side timestamps are arrival times). In tick mode
 the loss rules (counter advance vs time since the last frame) use that data time too.
+``time_source="auto"`` takes the sensor clock whenever the stream carries one: the tick
+once an ``SN_Sync`` frame is among the first frames (up to ``AUTO_FRAMES`` frames of the
+DBC's messages are held until one comes; foreign frames do not count), the timestamps otherwise (a foreign stream, or a DBC without
+``SN_Sync``). :attr:`DecodeListener.time_source` then names the base taken, and
+:meth:`DecodeListener.frame_stats` reports it as ``time_base``.
 
 Feed it like any python-can listener: ``can.Notifier(bus, [listener])`` on a live bus, or
 :func:`estimator.decode.replay.feed_log` for a log (no reader thread and queue hand-off, so
@@ -71,6 +76,7 @@ resets.
 """
 from __future__ import annotations
 
+import copy
 import math
 import sys
 import threading
@@ -102,6 +108,9 @@ _EXT = 1 << 31
 _INF = math.inf
 #: consecutive 'time' rejections after which the time base is re-anchored (a clock reset)
 TIME_RESYNC = 16
+#: ``time_source="auto"``: frames held while waiting for an ``SN_Sync`` before the time base
+#: falls back to the frame timestamps (the node sends SN_Sync with every sample)
+AUTO_FRAMES = 64
 #: frames waiting before ``on_message_received`` processes the queue (default batch size)
 BATCH_SIZE = 2048
 #: default ``min_batch``: fewer frames than this are validated one by one (below it the
@@ -206,8 +215,9 @@ class DecodeListener(can.Listener):
         Rows per message in the rolling buffer.
     growable : bool
         Grow the buffer instead of overwriting (offline loading of a whole log).
-    time_source : {"timestamp", "tick"}
-        Data time from the frame timestamps, or from the node's ``SN_Sync`` tick.
+    time_source : {"timestamp", "tick", "auto"}
+        Data time from the frame timestamps, from the node's ``SN_Sync`` tick, or from the
+        tick when the stream carries ``SN_Sync`` frames and the timestamps otherwise.
     max_counter_delta : int
         Largest accepted counter advance (1 = no frame may be lost).
     stale_window : int
@@ -246,7 +256,7 @@ class DecodeListener(can.Listener):
     def __init__(self, model: str | SuspensionModel, dbc: str | Path | Database | None = None,
                  signal_map: SignalMapLike = None, *, capacity: int = 1 << 16,
                  growable: bool = False,
-                 time_source: Literal["timestamp", "tick"] = "timestamp",
+                 time_source: Literal["timestamp", "tick", "auto"] = "timestamp",
                  max_counter_delta: int = 4, stale_window: int = 5,
                  batch_size: int = BATCH_SIZE,
                  on_alert: Callable[[dict[str, object]], None] | None = None) -> None:
@@ -266,9 +276,13 @@ class DecodeListener(can.Listener):
                                  "signal map, e.g. --map x1_ddot=MESSAGE.SIGNAL")
         smap.validate(db, model_channels(self.model))
         self.signal_map = smap
-        if time_source not in ("timestamp", "tick"):
-            raise UsageError(f"time_source must be 'timestamp' or 'tick', got {time_source!r}")
-        self.time_source = time_source
+        if time_source not in ("timestamp", "tick", "auto"):
+            raise UsageError(f"time_source must be 'timestamp', 'tick' or 'auto', "
+                             f"got {time_source!r}")
+        self._auto = time_source == "auto"
+        #: the time source asked for ("auto" keeps its name here once decided)
+        self.time_source_requested = time_source
+        self.time_source = "timestamp" if self._auto else time_source
         if not 1 <= max_counter_delta <= COUNTER_MODULUS - 2:
             raise UsageError(f"max_counter_delta must be 1..13, got {max_counter_delta}")
         if batch_size < 0:
@@ -291,6 +305,8 @@ class DecodeListener(can.Listener):
         self._known: set[int] = set()
         self._rejected = self._counts.rejected
         self._tick_time = time_source == "tick"
+        #: live reception's own counters (frames read, lost by cause), set by the receiver
+        self.receive_stats: dict[str, object] = {}
         self._build_routes()
         # ---- batching
         self.batch_size = batch_size
@@ -302,6 +318,10 @@ class DecodeListener(can.Listener):
         self._outbox: list[dict[str, object]] = []   # accepted alerts for on_alert
         self._prompt = frozenset(r.key & ~_EXT for r in self._routes.values() if r.kind == _ALERT)
         self._buffer.before_read = self.flush
+        self._known_ids = np.array(sorted(k & ~_EXT for k in self._known), dtype=np.int64)
+        self._sync_ids = frozenset(r.key & ~_EXT for r in self._routes.values() if r.kind == _SYNC)
+        if not self._sync_ids:
+            self._auto = False   # no SN_Sync in the DBC: the timestamps are the only clock
         if batch_size == 0:
             self.on_message_received = self._on_message_now  # type: ignore[method-assign]
         elif on_alert is None:
@@ -394,19 +414,82 @@ class DecodeListener(can.Listener):
 
     def _on_message_now(self, msg: can.Message) -> None:
         """``batch_size=0``: validate one frame on arrival (the frame-by-frame path)."""
+        if self._auto:
+            self._pending.append(msg)
+            self.flush()
+            return
         with self._lock:
             self._scalar_msg(msg)
         if self._outbox:
             self._deliver()
 
+    def choose_time_base(self, ids: Any, final: bool = False) -> bool:
+        """``time_source="auto"``: take the tick if ``ids`` hold an SN_Sync frame, the
+        timestamps once ``AUTO_FRAMES`` frames (or the end of the input) came without one.
+
+        Parameters
+        ----------
+        ids : array_like of int
+            CAN IDs of the first frames.
+        final : bool
+            Decide now even with fewer than ``AUTO_FRAMES`` frames.
+
+        Returns
+        -------
+        bool
+            True when the base is decided.
+        """
+        if not self._auto:
+            return True
+        arr = np.asarray(ids, dtype=np.int64) & ~_EXT
+        if np.isin(arr, list(self._sync_ids)).any():
+            self.time_source, self._tick_time = "tick", True
+        elif not (final or int(np.isin(arr, self._known_ids).sum()) >= AUTO_FRAMES):
+            return False   # foreign traffic does not count: only frames of the DBC decide
+        self._auto = False
+        return True
+
+    def sync_first_index(self, ids: Any) -> int:
+        """Tick base, start of a stream: where the first ``SN_Sync`` frame lies among the
+        first frames ``ids`` (-1: none, or not the start of a stream).
+
+        Frames of the first sample that arrived before its ``SN_Sync`` (arrival jitter) have
+        no tick yet; the callers move that SN_Sync to the front, with the first frame's
+        arrival time, so they are placed in their sample instead of rejected (``no_sync``).
+        """
+        c = self._counts
+        if not self._tick_time or self._sync_tick is not None or \
+                c.accepted + c.ignored + sum(c.rejected.values()) > 0:
+            return -1
+        arr = np.asarray(ids, dtype=np.int64)[:AUTO_FRAMES] & ~_EXT
+        hit = np.flatnonzero(np.isin(arr, list(self._sync_ids)))
+        return int(hit[0]) if hit.size else -1
+
+    def finish(self) -> None:
+        """The input has ended: process every held frame (see ``time_source="auto"``)."""
+        with self._lock:
+            if self._auto:
+                self.choose_time_base([m.arbitration_id for m in self._pending], final=True)
+        self.flush()
+
     def flush(self) -> None:
         """Validate, decode and buffer every queued frame (readers call it implicitly).
 
         Also waits for a batch another thread (a ``can.Notifier``) is processing, so a
-        reader never sees half a batch.
+        reader never sees half a batch. With ``time_source="auto"`` frames stay queued
+        until the time base is decided (:meth:`finish` decides it at the end of an input).
         """
         with self._lock:
             pend = self._pending
+            if self._auto:
+                if not self.choose_time_base([m.arbitration_id for m in pend], False):
+                    return
+                k = self.sync_first_index([m.arbitration_id for m in pend])
+                if k > 0:
+                    first = copy.copy(pend[k])
+                    first.timestamp = pend[0].timestamp
+                    del pend[k]
+                    pend.appendleft(first)
             n = len(pend)
             if n:
                 msgs = [pend.popleft() for _ in range(n)]
@@ -442,6 +525,12 @@ class DecodeListener(can.Listener):
         stop = len(frames) if stop is None else min(stop, len(frames))
         if stop <= start:
             return 0
+        if self._auto:
+            with self._lock:
+                self.choose_time_base(
+                    np.concatenate([np.array([m.arbitration_id for m in self._pending], np.int64),
+                                    np.asarray(frames.arbitration_id[start:stop], np.int64)]),
+                    final=True)
         self.flush()
         with self._lock:
             self._process(frames, start, stop)
@@ -518,7 +607,7 @@ class DecodeListener(can.Listener):
                 if route.kind == _SYNC:
                     tick, period_us = route.decode(data)
                     if period_us > 0:
-                        ts = int(tick) * period_us * 1e-6
+                        ts = int(tick) * period_us / 1e6   # the exact decimal time
                 elif route.kind == _DATA and self._sync_tick is not None and self._period:
                     if (route.sync_n == self._sync_n and last >= 0
                             and arrival - route.last_arrival
@@ -531,7 +620,7 @@ class DecodeListener(can.Listener):
                     d = (self._sync_tick - c) % COUNTER_MODULUS
                     tick = self._sync_tick - d if d <= COUNTER_MODULUS // 2 else \
                         self._sync_tick - d + COUNTER_MODULUS
-                    ts = tick * self._period
+                    ts = round(tick * self._period * 1e6) / 1e6   # as SN_Sync's: PeriodUs is an integer
                 route.last_arrival = arrival
                 route.sync_n = self._sync_n
             if not self._step_counter(route, c, ts):
@@ -809,9 +898,9 @@ class DecodeListener(can.Listener):
             t_s = arr[a:b]
             if route.check is not None:
                 if isinstance(tk, np.ndarray):
-                    t_s = np.where(pus > 0, (tk * pus).astype(np.float64) * 1e-6, t_s)
+                    t_s = np.where(pus > 0, (tk * pus).astype(np.float64) / 1e6, t_s)
                 else:
-                    t_s = np.array([int(t) * u * 1e-6 if u > 0 else x
+                    t_s = np.array([int(t) * u / 1e6 if u > 0 else x
                                     for t, u, x in zip(tk, pus, t_s.tolist())], dtype=np.float64)
                 acc = self._runs(runs[:1], rows, arr, t_s, a, syncs)
             else:
@@ -834,7 +923,7 @@ class DecodeListener(can.Listener):
                 d = (st - c) % COUNTER_MODULUS
                 tk = st - d + np.where(d <= COUNTER_MODULUS // 2, 0, COUNTER_MODULUS)
                 tsd = arr.copy()
-                tsd[a0:] = np.where(conv, tk * per, arr[a0:])
+                tsd[a0:] = np.where(conv, np.round(tk * per * 1e6) / 1e6, arr[a0:])
         e2e_runs = [x for x in runs if self._route_list[x[0]].check is not None]
         if e2e_runs:
             a0, b0 = e2e_runs[0][1], e2e_runs[-1][2]
@@ -1112,8 +1201,12 @@ class DecodeListener(can.Listener):
     def frame_stats(self) -> dict[str, object]:
         """``{"accepted": N, "rejected": {reason: n}, "ignored": n, "lost": n}`` (JSON-ready)."""
         c = self.counts
-        return {"accepted": c.accepted, "rejected": dict(c.rejected), "ignored": c.ignored,
-                "lost": c.lost}
+        out: dict[str, object] = {"accepted": c.accepted, "rejected": dict(c.rejected),
+                                  "ignored": c.ignored, "lost": c.lost,
+                                  "time_base": "tick" if self._tick_time else "timestamp"}
+        if self.receive_stats:
+            out["receive"] = dict(self.receive_stats)
+        return out
 
     def per_message(self) -> dict[str, int]:
         """Accepted frames per DBC message name."""

@@ -82,7 +82,7 @@ def aligned_to_measurement(aligned: Aligned, model: SuspensionModel, source: str
 def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
                             dbc_path: str | Path | None = None,
                             signal_map: SignalMapLike = None, *,
-                            time_source: Literal["timestamp", "tick"] = "timestamp",
+                            time_source: Literal["timestamp", "tick", "auto"] = "auto",
                             dt: float | None = None,
                             max_counter_delta: int = 4) -> tuple[Measurement, dict[str, object]]:
     """Decode a CAN log into a measurement on a uniform time grid.
@@ -96,8 +96,9 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
         Default: the signal map file's ``dbc``, else suspid's ``suspension.dbc``.
     signal_map : SignalMap, path or list of str, optional
         Needed for a foreign DBC (see :mod:`suspid.can.signal_map`).
-    time_source : {"timestamp", "tick"}
-        Frame timestamps (default) or the node's ``SN_Sync`` ticks.
+    time_source : {"timestamp", "tick", "auto"}
+        Frame timestamps, the node's ``SN_Sync`` ticks, or (default) the ticks when the log
+        carries ``SN_Sync`` frames and the timestamps otherwise.
     dt : float, optional
         Grid step (s); default the median frame interval.
     max_counter_delta : int
@@ -108,7 +109,8 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
     measurement : Measurement
         ``t`` (s), ``road``, ``measured`` (NaN for missing samples), ``warnings``.
     frame_stats : dict
-        ``{"accepted": N, "rejected": {reason: n, ...}, "ignored": n, "lost": n}``.
+        ``{"accepted": N, "rejected": {reason: n, ...}, "ignored": n, "lost": n,
+        "time_base": "tick" | "timestamp"}``.
 
     Raises
     ------

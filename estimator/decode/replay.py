@@ -14,12 +14,14 @@ either way (a test checks both paths give identical results).
 from __future__ import annotations
 
 import time
+from dataclasses import fields
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Optional
 
 import can
+import numpy as np
 
-from suspid.can.logs import ReadStats, read_log, read_log_arrays
+from suspid.can.logs import FrameArrays, ReadStats, read_log, read_log_arrays
 
 
 def feed(listener: can.Listener, messages: Iterable[can.Message]) -> int:
@@ -78,9 +80,20 @@ def feed_log(listener: can.Listener, path: str | Path, stats: Optional[ReadStats
                 left -= 1
                 if left <= 0:
                     left = max(1, int(poll()))
+        finish = getattr(listener, "finish", None)
+        if finish is not None:
+            finish()
         return n
+    settle = getattr(listener, "choose_time_base", None)
     for fa in read_log_arrays(path, stats):
         size = len(fa)
+        if settle is not None:
+            settle(fa.arbitration_id, final=True)   # "auto": decided on the first chunk
+            settle = None
+            k = listener.sync_first_index(fa.arbitration_id) \
+                if getattr(listener, "time_source_requested", "") == "auto" else -1
+            if k > 0:
+                fa = sync_to_front(fa, k)
         if poll is None:
             n += feed_arrays(fa)
             continue
@@ -93,7 +106,22 @@ def feed_log(listener: can.Listener, path: str | Path, stats: Optional[ReadStats
             left -= take
             if left <= 0:
                 left = max(1, int(poll()))
+    finish = getattr(listener, "finish", None)
+    if finish is not None:
+        finish()
     return n
+
+
+def sync_to_front(fa: FrameArrays, k: int) -> FrameArrays:
+    """``fa`` with row ``k`` (the stream's first SN_Sync) moved to the front, with the first
+    row's timestamp (see :meth:`DecodeListener.sync_first_index`)."""
+    order = np.r_[k, np.arange(k), np.arange(k + 1, len(fa))]
+    out = FrameArrays(**{f.name: getattr(fa, f.name)[order] for f in fields(fa)
+                         if f.name != "long_data"})
+    out.long_data = {(0 if i == k else i + 1 if i < k else i): v for i, v in fa.long_data.items()}
+    out.timestamp = out.timestamp.copy()
+    out.timestamp[0] = fa.timestamp[0]
+    return out
 
 
 class ReplayBus(can.BusABC):

@@ -8,12 +8,16 @@ accepted, so every frame of its last sample is in.
 """
 from __future__ import annotations
 
+import collections
 import math
 import signal
+import socket
+import threading
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable, Mapping
 
+import can
 import numpy as np
 
 from estimator.stream.accumulator import WindowAccumulator
@@ -63,8 +67,10 @@ class CanWindowDriver:
     on_window : callable
         ``(t, data)`` per window.
     channels : list of str
-        Channels to align (default: every mapped channel that carries data in the first
-        window -- the set of signals a node sends does not change while it runs).
+        Channels to align (default: every channel the listener's signal map takes from the
+        DBC, whose message has delivered a frame when the first window starts; the first
+        window waits up to ``start_wait_s`` of data time for messages that start late, e.g.
+        a road message, instead of deciding from whichever frames came first).
     check_every : int
         Fewest frames between checks of the buffer's newest time. Between checks the driver
         takes as many frames as the frame rate seen so far says arrive before the next
@@ -87,6 +93,21 @@ class CanWindowDriver:
     next_end: float = math.nan
     _left: int = 1
     on_first_dt: Callable[[float], None] | None = None
+    start_wait_s: float | None = None
+    _t_seen: float = math.nan
+
+    def _sources_started(self, latest: float) -> bool:
+        """Every mapped message has delivered, or the start has waited long enough."""
+        buf = self.listener.buffer
+        srcs = getattr(buf, "sources", None)
+        if not isinstance(srcs, dict) or not srcs:
+            return True
+        if not math.isfinite(self._t_seen):
+            self._t_seen = latest
+        if all(src.n > 0 for src in srcs.values()):
+            return True
+        wait = self.window_s if self.start_wait_s is None else self.start_wait_s
+        return latest - self._t_seen >= wait
 
     def on_message(self, msg: Any) -> None:
         """Validate/decode one frame (through the listener) and cut due windows."""
@@ -122,6 +143,12 @@ class CanWindowDriver:
         if not math.isfinite(latest):
             return
         if not math.isfinite(self.t_first):
+            if not self._sources_started(latest):
+                return
+            if self.channels is None:
+                live = [c for name, src in self.listener.buffer.sources.items() if src.n > 0
+                        for c in src.channels]
+                self.channels = live or None
             self.t_first = latest
             self.next_end = latest + self.window_s
             return
@@ -136,13 +163,12 @@ class CanWindowDriver:
             self.dt = float(al.dt)
             if self.on_first_dt is not None:
                 self.on_first_dt(self.dt)
-            if self.channels is None:
-                # align only what the node actually sends (a QC_Body frame maps x1, x1_dot
-                # and x1_ddot; channels never valid in the first window stay out)
-                live = [c for c, v in al.values.items() if np.isfinite(v).any()]
-                if live:
-                    self.channels = live
-                    al.values = {c: al.values[c] for c in live}
+            # of the messages that started, the channels that carry data (a node's --channels
+            # subset sends the others' validity bits as 0: they stay out)
+            live = [c for c, v in al.values.items() if np.isfinite(v).any()]
+            if live:
+                self.channels = live
+                al.values = {c: al.values[c] for c in live}
         if al.t.size < 3:
             return
         self.on_window(al.t, al.values)
@@ -150,6 +176,10 @@ class CanWindowDriver:
 
     def flush(self) -> None:
         """At the end of the input: cut the windows that the last frames completed."""
+        finish = getattr(self.listener, "finish", None)
+        if finish is not None:
+            finish()
+            self.poll()
         latest = self.listener.buffer.latest_time()
         if math.isfinite(latest) and math.isfinite(self.next_end):
             while latest >= self.next_end - 1e-9:
@@ -237,38 +267,176 @@ class LiveStop:
             signal.signal(s, h)
 
 
+#: the receiver's buffer in seconds of data at the highest frame rate it is sized for
+RECEIVE_BUFFER_S = 5.0
+#: frames per second the receiver's buffer is sized for (a saturated 1 Mbit/s CAN bus
+#: carries about 8.5 k frames/s; a node at 1 kHz with four messages 4 k)
+RECEIVE_RATE = 10_000
+#: kernel socket receive buffer asked for on a SocketCAN bus (bytes; a CAN frame costs about
+#: 1 kB of it), so the reader thread may be held up a while without the kernel dropping frames
+SOCKET_RCVBUF = 8 << 20
+
+
+def enlarge_socket_buffer(bus: Any, size: int = SOCKET_RCVBUF) -> int:
+    """Ask for a larger kernel receive queue on a SocketCAN bus; returns its size (bytes).
+
+    ``SO_RCVBUFFORCE`` (root) passes ``net.core.rmem_max``; otherwise ``SO_RCVBUF`` up to
+    it. 0 when the bus has no socket (other interfaces).
+    """
+    sock = getattr(bus, "socket", None)
+    if not isinstance(sock, socket.socket):
+        return 0
+    for opt in (getattr(socket, "SO_RCVBUFFORCE", 33), socket.SO_RCVBUF):
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, opt, size)
+            break
+        except OSError:
+            continue
+    return int(sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF))
+
+
+class Receiver:
+    """Read a python-can bus on its own thread into a bounded buffer (seconds of data).
+
+    The window fits run on the caller's thread; this thread only takes frames off the
+    socket, so a fit that outlasts its step delays the decoding, not the reception, and
+    the kernel's socket queue does not overflow. When the buffer is full the newest frame
+    is dropped and counted (``buffer_overflow``).
+
+    Parameters
+    ----------
+    bus : can.BusABC
+    capacity : int
+        Frames the buffer holds (default ``RECEIVE_BUFFER_S`` x ``RECEIVE_RATE``).
+    """
+
+    def __init__(self, bus: Any, capacity: int = int(RECEIVE_BUFFER_S * RECEIVE_RATE)) -> None:
+        self.bus = bus
+        self.capacity = capacity
+        self.queue: collections.deque[Any] = collections.deque()
+        self.read = 0
+        self.overflow = 0
+        self.max_queued = 0
+        self.error: str | None = None
+        self.socket_rcvbuf = enlarge_socket_buffer(bus)
+        self._stop = threading.Event()
+        self._ready = threading.Condition()
+        self._thread = threading.Thread(target=self._run, name="can-receiver", daemon=True)
+
+    def start(self) -> "Receiver":
+        self._thread.start()
+        return self
+
+    def _run(self) -> None:
+        q = self.queue
+        recv = self.bus.recv
+        while not self._stop.is_set():
+            try:
+                msg = recv(0.1)
+            except can.CanOperationError as exc:
+                # the adapter went away (an SLCAN node closed its pty, a USB-CAN unplugged)
+                self.error = f"bus closed: {' '.join(str(exc).split())}"
+                break
+            if msg is None:
+                continue
+            self.read += 1
+            if len(q) >= self.capacity:
+                self.overflow += 1
+                continue
+            q.append(msg)
+            k = len(q)
+            if k > self.max_queued:
+                self.max_queued = k
+            if k == 1:
+                with self._ready:
+                    self._ready.notify()
+        with self._ready:
+            self._ready.notify()
+
+    def take(self, timeout: float) -> list[Any]:
+        """Every buffered frame (waits up to ``timeout`` s for one)."""
+        q = self.queue
+        if not q and self._thread.is_alive():
+            with self._ready:
+                if not q:
+                    self._ready.wait(timeout)
+        n = len(q)
+        return [q.popleft() for _ in range(n)]
+
+    @property
+    def alive(self) -> bool:
+        return self._thread.is_alive()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2.0)
+
+    def stats(self) -> dict[str, object]:
+        """Frames read off the bus and lost by cause (JSON-ready)."""
+        return {"read": self.read, "buffer_overflow": self.overflow, "max_queued": self.max_queued,
+                "buffer_capacity": self.capacity, "socket_rcvbuf": self.socket_rcvbuf}
+
+
 def run_bus(driver: CanWindowDriver, bus: Any, stop: LiveStop) -> int:
     """Receive from a live python-can bus until a stop condition; returns frames received.
 
-    Stops on ``stop`` (SIGINT/SIGTERM, duration, idle timeout) or when the bus reports that
-    it can no longer be read (``can.CanOperationError``: the adapter or the pty of an SLCAN
-    node went away); either way the windows the received frames complete are cut.
+    A :class:`Receiver` thread reads the bus into a bounded buffer; this thread decodes the
+    frames and cuts and fits the windows. Stops on ``stop`` (SIGINT/SIGTERM, duration,
+    idle timeout) or when the bus reports that it can no longer be read
+    (``can.CanOperationError``: the adapter or the pty of an SLCAN node went away); either
+    way every frame received is processed and the windows it completes are cut. The
+    listener's frame statistics then carry ``receive``: frames read, frames lost to a full
+    buffer, and frames lost on the way (counter gaps: socket overrun or bus loss).
     """
     start = time.monotonic()
     last_rx = start
     n = 0
-    import can
-
-    while not stop.stop:
-        try:
-            msg = bus.recv(timeout=0.1)
-        except can.CanOperationError as exc:
-            # the adapter went away (an SLCAN node closed its pty, a USB-CAN unplugged): the
-            # stream has ended; what was received is processed and reported, not lost
-            stop.reason = f"bus closed: {' '.join(str(exc).split())}"
-            break
-        now = time.monotonic()
-        if msg is not None:
-            driver.on_message(msg)
-            n += 1
-            last_rx = now
-        else:
-            driver.poll()
-            if stop.idle_timeout is not None and now - last_rx > stop.idle_timeout:
-                stop.reason = f"no frame for {stop.idle_timeout:g} s"
+    rx = Receiver(bus).start()
+    on = driver.on_message
+    try:
+        while True:
+            msgs = rx.take(0.1)
+            now = time.monotonic()
+            for msg in msgs:
+                on(msg)
+            if msgs:
+                n += len(msgs)
+                last_rx = now
+            else:
+                driver.poll()
+                if not rx.alive:
+                    stop.reason = rx.error or "bus closed"
+                    break
+                if stop.idle_timeout is not None and now - last_rx > stop.idle_timeout:
+                    stop.reason = f"no frame for {stop.idle_timeout:g} s"
+                    break
+            if stop.stop:
                 break
-        if stop.duration is not None and now - start > stop.duration:
-            stop.reason = f"duration {stop.duration:g} s reached"
-            break
-    driver.flush()
+            if stop.duration is not None and now - start > stop.duration:
+                stop.reason = f"duration {stop.duration:g} s reached"
+                break
+    finally:
+        rx.stop()
+        for msg in rx.take(0.0):   # what arrived before the thread stopped
+            on(msg)
+            n += 1
+        if rx.error is None:
+            # and what the kernel still holds for this socket (a stop while lagging)
+            while True:
+                try:
+                    msg = bus.recv(0.0)
+                except (can.CanError, OSError, ValueError):
+                    break
+                if msg is None:
+                    break
+                rx.read += 1
+                on(msg)
+                n += 1
+        driver.flush()
+        rstats = rx.stats()
+        counts = getattr(driver.listener, "counts", None)
+        if counts is not None:
+            rstats["counter_gap"] = counts.lost
+        if isinstance(getattr(driver.listener, "receive_stats", None), dict):
+            driver.listener.receive_stats.update(rstats)
     return n

@@ -352,7 +352,8 @@ class Source:
         DBC of the CAN data (default suspid's).
     signal_map : SignalMap or None
     time_source : {"timestamp", "tick"} or None
-        Default: frame timestamps for logs, SN_Sync ticks live.
+        None (logs and live): the sensor's tick when the stream carries SN_Sync frames,
+        the frame timestamps otherwise.
     duration, idle_timeout : float or None
         Live stop conditions (s of wall time).
     alert_frames : bool
@@ -471,7 +472,7 @@ def _run_log(source: Source, spec: MonitorSpec, mon: StreamMonitor, sinks: list[
              buses: list[Any]) -> dict[str, Any]:
     """Replay a CAN log as fast as possible through the decoder and the windows."""
     cfg = spec.config
-    listener = _listener(source, spec, source.time_source or "timestamp")
+    listener = _listener(source, spec, source.time_source or "auto")
     _alert_bus(source, sinks, listener, buses)
     _attach(mon, sinks)
     drv = CanWindowDriver(listener, cfg.window_s, cfg.step_s, mon.window)
@@ -508,7 +509,7 @@ def _run_live(source: Source, spec: MonitorSpec, mon: StreamMonitor, sinks: list
         raise UsageError("give --input LOG or --interface I --channel C")
     bus = open_checked_bus(source.interface, source.channel, source.bitrate, "--interface")
     buses.append(bus)
-    listener = _listener(source, spec, source.time_source or "tick")
+    listener = _listener(source, spec, source.time_source or "auto")
     _alert_bus(source, sinks, listener, buses, live_bus=bus)
     _attach(mon, sinks)
     drv = CanWindowDriver(listener, cfg.window_s, cfg.step_s, mon.window)

@@ -9,6 +9,8 @@ path: ``--interface I --channel C`` becomes ``can.Bus(interface=I, channel=C)``,
 from __future__ import annotations
 
 from firmware_sim.transport.slcan_pty import SlcanPtyBus
-from suspid.can.bus import REFUSED, BufferedSlcanBus, open_bus
+from suspid.can.bus import CHANNEL_FACTORIES, REFUSED, BufferedSlcanBus, open_bus
+
+CHANNEL_FACTORIES[("slcan", "pty")] = SlcanPtyBus
 
 __all__ = ["open_bus", "SlcanPtyBus", "BufferedSlcanBus", "REFUSED"]

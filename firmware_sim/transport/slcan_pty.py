@@ -241,7 +241,8 @@ class SlcanPtyBus(can.BusABC):
             head = f"{'r' if msg.is_remote_frame else 't'}{msg.arbitration_id:03X}{msg.dlc:d}"
         line = head if msg.is_remote_frame else head + msg.data.hex().upper()
         if self.timestamps:
-            ms = int((msg.timestamp if msg.timestamp else time.monotonic() - self._t0) * 1000)
+            # the node stamps every frame with its data time (0.0 for the first sample)
+            ms = int(round(msg.timestamp * 1000))
             line += f"{ms % 60000:04X}"
         if not self._write((line + "\r").encode("ascii")):
             self.overflows += 1

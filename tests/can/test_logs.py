@@ -43,9 +43,13 @@ def test_encode_round_trip_every_format(q2_csv, tmp_path, suffix, capsys):
 def test_t0_shifts_times_and_model_inference(q2_csv, tmp_path):
     out = tmp_path / "shift.asc"
     assert main(["encode", "--input", str(q2_csv), "--out", str(out), "--t0", "1234.5678"]) == 0
-    meas, _ = load_log_as_measurement(out, "quarter2")
+    meas, _ = load_log_as_measurement(out, "quarter2", time_source="timestamp")
     ref = read_measurement(q2_csv, get_model("quarter2"))
     np.testing.assert_allclose(meas.t, ref.t + 1234.5678, atol=2e-9)
+    # by default the data time is the sensor's clock (SN_Sync tick), whatever the log's origin
+    tick, stats = load_log_as_measurement(out, "quarter2")
+    assert stats["time_base"] == "tick"
+    np.testing.assert_array_equal(tick.t, ref.t)
 
 
 def test_missing_channels_stay_missing(tmp_path):

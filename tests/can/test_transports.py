@@ -87,6 +87,38 @@ def test_slcan_pty_in_process_with_buffered_client():
     np.testing.assert_allclose(lst.aligned().t, np.arange(251) / 500.0, atol=1e-12)
 
 
+def test_slcan_adapter_timestamps_give_the_frame_times():
+    """``timestamps=True``: the host switches the adapter to Lawicel timestamp mode (``Z1``)
+    and takes each frame's time from the adapter (the simulated node stamps its data time),
+    not from its own arrival clock; without it, host arrival times."""
+    from firmware_sim.node import NodeConfig, SensorNode
+    from suspid.can.bus import adapter_ms
+
+    assert adapter_ms("t1108" + "00" * 8 + "EA5F\r") == 0xEA5F
+    assert adapter_ms("t1102ABCD\r") is None and adapter_ms("r1230" + "0010") == 0x10
+    db = load_dbc()
+    node_bus = open_bus("slcan", "pty")
+    try:
+        host = open_bus("slcan", node_bus.path, sleep_after_open=0, timestamps=True)
+        assert isinstance(host, BufferedSlcanBus)
+        assert node_bus.wait_open(2) and node_bus.timestamps
+        got: list[can.Message] = []
+        notifier = can.Notifier(host, [got.append])
+        SensorNode(NodeConfig(scenario="bump", duration=0.5, rate=500), db).run(node_bus, speed=0)
+        assert node_bus.drain(5)
+        time.sleep(0.2)
+        notifier.stop()
+        host.shutdown()
+    finally:
+        node_bus.shutdown()
+    sync = np.array([m.timestamp for m in got if m.arbitration_id == 0x100])
+    assert sync.size == 251 and host.adapter_timed == len(got) and host.host_timed == 0
+    # the node ran as fast as possible (--speed max): arrival times are bunched, the
+    # adapter's times are the 2 ms sample ticks (to its 1 ms resolution)
+    np.testing.assert_allclose(np.diff(sync), 0.002, atol=1.001e-3)
+    assert sync[-1] - sync[0] == pytest.approx(0.5, abs=1.001e-3)
+
+
 def test_two_process_slcan_link():
     """``suspid node --interface slcan --channel pty`` in a subprocess; python-can slcan here."""
     env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
@@ -137,6 +169,7 @@ def _af_can_unavailable() -> str | None:
     return None
 
 
+@pytest.mark.socketcan
 @pytest.mark.skipif(_af_can_unavailable() is not None, reason=str(_af_can_unavailable()))
 def test_socketcan_vcan0_same_code_path():
     from firmware_sim.node import NodeConfig, SensorNode

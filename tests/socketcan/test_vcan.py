@@ -1,0 +1,257 @@
+"""suspid on a real kernel CAN stack (vcan0), with can-utils as the other end.
+
+* ``suspid node`` -> vcan0 -> ``suspid monitor``, separate processes; ``candump`` records
+  the bus, the alert frame included; the monitor receives every frame candump receives;
+* ``canplayer`` replays the node's own log into vcan0: the live monitor's estimates equal
+  ``suspid monitor --input`` on that log;
+* ``canplayer`` and ``cangen`` inject foreign, malformed and out-of-sequence frames: each
+  is counted under its reason and no valid frame is lost;
+* the ``candump -L`` recording (wall-clock timestamps) is read back by identify, diagnose
+  and monitor, on the sensor's clock.
+
+Run through ``tools/vcan_bench.sh`` where the host kernel has no SocketCAN.
+"""
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tests.conftest import REPO, suspid_env
+
+pytestmark = pytest.mark.socketcan
+
+MON_ARGS = ["--model", "quarter2", "--fix", "m1=300", "--fix", "m2=40", "--fix", "c2=300",
+            "--fix", "k2=200000", "--nominal", "c1=1500", "--nominal", "k1=20000", "--jsonl"]
+NODE_ARGS = ["--scenario", "damper-wear", "--duration", "24", "--wear-start", "4",
+             "--wear-to", "0.3"]
+ALERT_ID = 0x300
+
+
+def _receivers() -> int:
+    """CAN_RAW receivers registered on vcan0 (``/proc/net/can/rcvlist_all``)."""
+    try:
+        text = Path("/proc/net/can/rcvlist_all").read_text()
+    except OSError:
+        return 0
+    return sum(1 for line in text.splitlines() if line.split()[:1] == ["vcan0"])
+
+
+def _start(args: list[str], out: Path, wait_rx: bool = True) -> subprocess.Popen[bytes]:
+    """Start a process writing stdout to ``out``; wait until it listens on vcan0."""
+    before = _receivers()
+    proc = subprocess.Popen(args, stdout=out.open("wb"), stderr=subprocess.PIPE,
+                            env=suspid_env(), cwd=REPO)
+    if wait_rx:
+        deadline = time.monotonic() + 120
+        while _receivers() <= before:
+            if proc.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError(f"{args[:4]} did not start listening on vcan0: "
+                                   f"{proc.stderr.read().decode() if proc.stderr else ''}")
+            time.sleep(0.05)
+    return proc
+
+
+def _stop(proc: subprocess.Popen[bytes], sig: int = signal.SIGINT) -> str:
+    if proc.poll() is None:
+        proc.send_signal(sig)
+    try:
+        _, err = proc.communicate(timeout=120)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        _, err = proc.communicate()
+    return (err or b"").decode()
+
+
+def _suspid(*args: str, timeout: float = 300) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "suspid", *args], capture_output=True,
+                          text=True, env=suspid_env(), cwd=REPO, timeout=timeout)
+
+
+def _jsonl(path: Path) -> list[dict[str, Any]]:
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+
+
+def _candump_ids(path: Path) -> Counter[int]:
+    ids: Counter[int] = Counter()
+    for line in path.read_text().splitlines():
+        parts = line.split()
+        if len(parts) >= 3 and "#" in parts[2]:
+            ids[int(parts[2].split("#")[0], 16)] += 1
+    return ids
+
+
+def _live_monitor(tmp: Path, name: str, *extra: str) -> subprocess.Popen[bytes]:
+    return _start([sys.executable, "-m", "suspid", "monitor", "--interface", "socketcan",
+                   "--channel", "vcan0", "--idle-timeout", "0", *MON_ARGS, *extra],
+                  tmp / name)
+
+
+def _candump(tmp: Path, name: str) -> subprocess.Popen[bytes]:
+    # -r: a larger socket queue, so candump itself keeps up on a slow guest
+    return _start(["candump", "-L", "-r", str(8 << 20), "vcan0"], tmp / name)
+
+
+@pytest.fixture(scope="module")
+def node_run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    """node -> vcan0 -> monitor (separate processes), candump recording the bus."""
+    tmp = tmp_path_factory.mktemp("vcan")
+    dump = _candump(tmp, "candump.log")
+    mon = _live_monitor(tmp, "monitor.jsonl")
+    node = subprocess.run([sys.executable, "-m", "suspid", "node", *NODE_ARGS, "--interface",
+                           "socketcan", "--channel", "vcan0", "--log", str(tmp / "node.log")],
+                          capture_output=True, text=True, env=suspid_env(), cwd=REPO, timeout=600)
+    time.sleep(2.0)   # the monitor's last windows and alert frame
+    mon_err = _stop(mon)
+    time.sleep(0.5)
+    _stop(dump)
+    return {"tmp": tmp, "node": node, "node_summary": json.loads(node.stdout.splitlines()[-1])["node"],
+            "mon": mon, "mon_err": mon_err, "lines": _jsonl(tmp / "monitor.jsonl"),
+            "candump": tmp / "candump.log", "node_log": tmp / "node.log"}
+
+
+def test_node_to_monitor_with_alert_frame_on_the_bus(node_run: dict[str, Any]) -> None:
+    assert node_run["node"].returncode == 0, node_run["node"].stderr
+    assert node_run["mon"].returncode == 0, node_run["mon_err"]
+    assert "Traceback" not in node_run["mon_err"]
+    lines = node_run["lines"]
+    summary = lines[-1]
+    assert summary["type"] == "summary" and summary["stopped"] == "signal SIGINT"
+    assert summary["frames"]["time_base"] == "tick"
+    est = [d for d in lines if d["type"] == "estimate"]
+    assert len(est) >= 8
+    assert est[0]["params"]["c1"] == pytest.approx(1500, rel=0.1)
+    assert any(d["type"] == "alert" and d["parameter"] == "c1" for d in lines), \
+        [(d["type"], d.get("t"), d.get("params", {}).get("c1")) for d in lines]
+    # candump saw the monitor's SUSPID_Alert frame on the bus
+    ids = _candump_ids(node_run["candump"])
+    assert ids[ALERT_ID] >= 1
+    # the monitor received every frame candump received (its own alert frames aside), and
+    # that is every frame the node sent
+    sent = node_run["node_summary"]["frames_sent"]
+    bus_frames = sum(n for i, n in ids.items() if i != ALERT_ID)
+    assert bus_frames == sent
+    frames = summary["frames"]
+    assert summary["frames_received"] == bus_frames
+    assert frames["accepted"] == sent and frames["lost"] == 0
+    assert sum(frames["rejected"].values()) == 0
+    assert frames["receive"]["buffer_overflow"] == 0 and frames["receive"]["counter_gap"] == 0
+
+
+def test_canplayer_replay_equals_monitor_input(node_run: dict[str, Any]) -> None:
+    tmp: Path = node_run["tmp"]
+    log: Path = node_run["node_log"]
+    ref = _suspid("monitor", "--input", str(log), "--no-alert-frames", *MON_ARGS)
+    assert ref.returncode == 0, ref.stderr
+    ref_est = [json.loads(x) for x in ref.stdout.splitlines() if '"estimate"' in x]
+    mon = _live_monitor(tmp, "replay.jsonl", "--no-alert-frames")
+    play = subprocess.run(["canplayer", "-I", str(log), "vcan0=can0"], capture_output=True,
+                          text=True, timeout=300)
+    assert play.returncode == 0, play.stderr
+    time.sleep(2.0)
+    err = _stop(mon)
+    assert mon.returncode == 0, err
+    lines = _jsonl(tmp / "replay.jsonl")
+    est = [d for d in lines if d["type"] == "estimate"]
+    assert len(est) == len(ref_est) >= 8, lines[-1]
+    for a, b in zip(est, ref_est):
+        assert a["t"] == b["t"]
+        for k, v in b["params"].items():
+            assert a["params"][k] == pytest.approx(v, rel=1e-9, abs=1e-9), (a["t"], k)
+    assert lines[-1]["frames"]["accepted"] == sum(1 for _ in log.open())
+
+
+def _frames_of(log: Path) -> list[tuple[str, str]]:
+    out = []
+    for line in log.read_text().splitlines():
+        parts = line.split()
+        out.append((parts[0], parts[2]))
+    return out
+
+
+def test_injected_foreign_malformed_and_out_of_sequence_frames(node_run: dict[str, Any]) -> None:
+    """canplayer plays the node's log with injected bad frames, cangen adds foreign traffic:
+    each bad frame is counted under its reason, every valid frame is accepted."""
+    tmp: Path = node_run["tmp"]
+    frames = _frames_of(node_run["node_log"])[:4 * 500 * 8]     # 8 s of the node's stream
+    n_valid = len(frames)
+    bad: Counter[str] = Counter()
+    lines = []
+    for k, (ts, fr) in enumerate(frames):
+        lines.append(f"{ts} can0 {fr}")
+        ident, data = fr.split("#")
+        if ident != "110" or k % 97:
+            continue
+        # after every 97th QC_Body frame: a repeat (out of sequence), a flipped payload bit
+        # (CRC), a short payload (DLC) and a foreign ID
+        lines.append(f"{ts} can0 {fr}")
+        bad["counter_stale"] += 1
+        flipped = f"{int(data[:2], 16) ^ 0x01:02X}{data[2:]}"
+        lines.append(f"{ts} can0 {ident}#{flipped}")
+        bad["crc"] += 1
+        lines.append(f"{ts} can0 {ident}#{data[:8]}")
+        bad["dlc"] += 1
+        lines.append(f"{ts} can0 7AB#{data}")
+        bad["unknown_id"] += 1
+    log = tmp / "injected.log"
+    log.write_text("\n".join(lines) + "\n")
+    mon = _live_monitor(tmp, "injected.jsonl", "--no-alert-frames", "--window", "2", "--step", "1")
+    n_gen = 300
+    gen = subprocess.Popen(["cangen", "vcan0", "-I", "5A5", "-L", "8", "-g", "5", "-n", str(n_gen)])
+    play = subprocess.run(["canplayer", "-I", str(log), "vcan0=can0"], capture_output=True,
+                          text=True, timeout=300)
+    assert play.returncode == 0, play.stderr
+    assert gen.wait(timeout=120) == 0
+    time.sleep(2.0)
+    err = _stop(mon)
+    assert mon.returncode == 0, err
+    assert "Traceback" not in err
+    summary = _jsonl(tmp / "injected.jsonl")[-1]
+    f = summary["frames"]
+    assert f["accepted"] == n_valid and f["lost"] == 0, summary
+    want = {r: 0 for r in f["rejected"]}
+    want.update(bad)
+    want["unknown_id"] += n_gen
+    got = dict(f["rejected"])
+    # a repeat that reaches the monitor more than 7 sample periods after its original (a
+    # starved guest) has a stale tick: rejected as no_sync instead of counter_stale
+    got["counter_stale"] += got.pop("no_sync")
+    want["counter_stale"] += want.pop("no_sync")
+    assert got == want, f["rejected"]
+    assert summary["frames_received"] == len(lines) + n_gen
+
+
+def test_candump_recording_read_back(node_run: dict[str, Any]) -> None:
+    """A ``candump -L`` recording (wall-clock arrival times) gives the node log's results:
+    the data time is the sensor's tick in identify, diagnose and monitor."""
+    rec: Path = node_run["candump"]
+    log: Path = node_run["node_log"]
+    fix = ["--fix", "m1=300", "--fix", "m2=40"]
+    a = _suspid("identify", "--model", "quarter2", "--input", str(rec), *fix, "--json")
+    b = _suspid("identify", "--model", "quarter2", "--input", str(log), *fix, "--json")
+    assert a.returncode == 0 and b.returncode == 0, a.stderr + b.stderr
+    ja, jb = json.loads(a.stdout), json.loads(b.stdout)
+    assert ja["frames"]["time_base"] == "tick"
+    # the recording also holds the monitor's SUSPID_Alert frames (valid frames of the DBC)
+    assert ja["frames"]["accepted"] == jb["frames"]["accepted"] + _candump_ids(rec)[ALERT_ID]
+    for k, v in jb["params"].items():
+        assert ja["params"][k] == pytest.approx(v, rel=1e-9), k
+    d = _suspid("diagnose", "--model", "quarter2", "--input", str(rec), *fix, "--json")
+    assert d.returncode == 0, d.stderr
+    assert json.loads(d.stdout)
+    m = _suspid("monitor", "--input", str(rec), "--no-alert-frames", *MON_ARGS)
+    r = _suspid("monitor", "--input", str(log), "--no-alert-frames", *MON_ARGS)
+    assert m.returncode == 0 and r.returncode == 0, m.stderr + r.stderr
+    em = [json.loads(x)["params"] for x in m.stdout.splitlines() if '"estimate"' in x]
+    er = [json.loads(x)["params"] for x in r.stdout.splitlines() if '"estimate"' in x]
+    assert len(em) == len(er) >= 8
+    for x, y in zip(em, er):
+        for k in y:
+            assert x[k] == pytest.approx(y[k], rel=1e-9), k
