@@ -29,6 +29,7 @@ from cantools.database import Database
 
 from estimator.decode.log_input import load_log_as_measurement
 from estimator.identify import OutputErrorProblem, Parameters, fit
+from suspid import __version__
 from suspid.can.dbc import default_dbc_path, load_dbc
 from suspid.can.logs import FORMATS
 from suspid.can.signal_map import SignalMap
@@ -84,8 +85,16 @@ class IdentifySettings:
         return Parameters.for_model(get_model(self.model), fix=self.fix, init=self.init)
 
     def key(self) -> str:
-        """A stable text key of the settings (stored with each drive in the history)."""
+        """A stable text key of the settings (stored with each drive in the history): the
+        options, the DBC's content hash and the suspid version, so a changed DBC or a new
+        identifier makes stored results stale."""
         d = asdict(self)
+        dbc = Path(self.dbc) if self.dbc is not None else default_dbc_path()
+        try:
+            d["dbc_sha256"] = file_digest(dbc)
+        except OSError:
+            d["dbc_sha256"] = None
+        d["suspid"] = __version__
         d["x0"] = self.x0 if isinstance(self.x0, str) else [float(v) for v in self.x0]
         d["signal_map"] = (None if self.signal_map is None else
                            [str(m) for m in self.signal_map.mappings])
