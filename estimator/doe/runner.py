@@ -18,6 +18,7 @@ import numpy as np
 from estimator.doe.design import DESIGNS, FS, HORIZON, Experiment, experiments, time_grid
 from estimator.identify import OutputErrorProblem, Parameters, fit
 from estimator.identify.result import IdentResult
+from estimator.identify.start import fit_from_starts
 from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
 from suspid.models import SuspensionModel, get_model
@@ -64,6 +65,9 @@ class Settings:
         Restarts and ``xatol`` of the stages before the last (they only find the basin).
     horizon, fs : float
         Record length (s) and sample rate (Hz).
+    data_start : bool
+        Also start from the data-driven estimate (:mod:`estimator.identify.start`) and keep
+        the lower-cost answer (``False``: the ``init_scale`` start only, as before).
     """
 
     cost: str = "sse"
@@ -83,6 +87,7 @@ class Settings:
     early_xatol: float = 1e-4
     horizon: float = HORIZON
     fs: float = FS
+    data_start: bool = True
 
 
 @dataclass
@@ -213,7 +218,10 @@ def run_experiment(model: SuspensionModel, exp: Experiment, settings: Settings) 
     params = start_parameters(model, exp, settings)
     init = {k: params[k].value for k in free}
     t0 = time.perf_counter()
-    res = identify_staged(model, meas, exp.x0, params, settings)
+    whole = OutputErrorProblem(model, meas, cost=settings.cost, x0=exp.x0)
+    res = fit_from_starts(whole, params,
+                          lambda start: identify_staged(model, meas, exp.x0, start, settings),
+                          data_start=settings.data_start)
     dt = time.perf_counter() - t0
     rel = {k: (res.params[k] - exp.truth[k]) / exp.truth[k] for k in free}
     max_rel = max((abs(v) for v in rel.values()), default=0.0)
@@ -225,7 +233,9 @@ def run_experiment(model: SuspensionModel, exp: Experiment, settings: Settings) 
     out = Outcome(exp.id, dict(exp.truth), {k: float(v) for k, v in res.params.items()},
                   float(max_rel), bool(success), init, dict(res.stderr), int(res.nfev),
                   float(res.cost), dt, bool(res.identifiable),
-                  {"rel_error": {k: float(v) for k, v in rel.items()}})
+                  {"rel_error": {k: float(v) for k, v in rel.items()},
+                   "warnings": list(res.warnings),
+                   **({"starts": res.starts} if res.starts is not None else {})})
     return out, res
 
 

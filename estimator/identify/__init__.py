@@ -3,10 +3,12 @@
 ``fit(problem, params)`` is the entry point; :class:`OutputErrorProblem` holds the data and
 the cost; :class:`Parameters` the values, ``vary`` flags and bounds.
 """
-from estimator.identify.nelder_mead import fit, finish, jacobian_log, minimize_log
+from estimator.identify.solver import fit, finish, jacobian_log, minimize_log
 from estimator.identify.params import Parameter, Parameters
 from estimator.identify.problem import COSTS, OutputErrorProblem
 from estimator.identify.result import IdentResult
+from estimator.identify.start import data_driven_start, estimate_start, fit_from_starts
 
 __all__ = ["fit", "finish", "jacobian_log", "minimize_log", "Parameter", "Parameters",
-           "COSTS", "OutputErrorProblem", "IdentResult"]
+           "COSTS", "OutputErrorProblem", "IdentResult", "data_driven_start", "estimate_start",
+           "fit_from_starts"]

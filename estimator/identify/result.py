@@ -34,6 +34,14 @@ class IdentResult:
         Initial state used (estimated or given).
     aic, bic : float
         Information criteria of the (normalised) least-squares fit.
+    starts : list of dict, optional
+        One entry per start the fit was run from: ``start`` (``"data"`` for the
+        data-driven estimate, ``"init"`` for the given one), ``from`` (its values),
+        ``cost`` (the seed's cost reached), ``params`` (free parameters reached) and
+        ``chosen``.
+    data_start : dict, optional
+        The data-driven estimate (``values``, ``bandwidth_hz``) or why there is none
+        (``reason``).
     """
 
     model: str
@@ -54,6 +62,8 @@ class IdentResult:
     singular_values: list[float] = field(default_factory=list)
     cov_log: Any = None  # covariance of log-parameters (free ones), ndarray
     frames: dict[str, Any] | None = None
+    starts: list[dict[str, Any]] | None = None
+    data_start: dict[str, Any] | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The contract's JSON object."""
@@ -79,4 +89,8 @@ class IdentResult:
         }
         if self.frames is not None:
             out["frames"] = self.frames
+        if self.starts is not None:
+            out["starts"] = self.starts
+        if self.data_start is not None:
+            out["data_start"] = self.data_start
         return out

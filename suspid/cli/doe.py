@@ -54,6 +54,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--restarts", type=int, default=None,
                    help="Nelder-Mead restarts of the final stage (default 0; 6 with "
                         "--single-stage)")
+    p.add_argument("--no-data-start", dest="data_start", action="store_false",
+                   help="start from --init-scale x the truth only (default: also from the "
+                        "data-driven estimate, keeping the lower-cost answer)")
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
     p.add_argument("--progress", action="store_true",
                    help="draw the progress bar on stderr even when it is not a terminal")
@@ -120,7 +123,8 @@ def run(args: argparse.Namespace) -> int:
     if args.mass_init_scale is not None and not args.free_masses:
         raise UsageError("--mass-init-scale: only with --free-masses (fixed masses are the truth)")
     settings = Settings(cost=args.cost, init_scale=args.init_scale, free_masses=args.free_masses,
-                        mass_init_scale=args.mass_init_scale, noise=args.noise, seed=args.seed)
+                        mass_init_scale=args.mass_init_scale, noise=args.noise, seed=args.seed,
+                        data_start=args.data_start)
     if args.single_stage:
         settings.stages = (1.0,)
         settings.step = 0.3

@@ -35,6 +35,10 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--no-polish", dest="polish", action="store_false",
                    help="pure Nelder–Mead to full tolerance (default: Nelder–Mead to 1e-4, then "
                         "a Levenberg–Marquardt polish of the last digits)")
+    p.add_argument("--no-data-start", dest="data_start", action="store_false",
+                   help="start only from --init and the defaults (default: estimate a start "
+                        "from the record by a filtered equation-error least-squares fit, used "
+                        "as the start when no --init is given and as a further start with it)")
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
     p.add_argument("--plot", metavar="PNG", default=None,
                    help="write the seed-style comparison (measured vs identified) to this PNG")
@@ -49,7 +53,7 @@ def parse_x0(text: str, n: int) -> Any:
 
 
 def run(args: argparse.Namespace) -> int:
-    from estimator.identify import OutputErrorProblem, fit
+    from estimator.identify import OutputErrorProblem, fit, fit_from_starts
 
     model = model_from_args(args)
     params = params_from_args(args, model)
@@ -57,8 +61,11 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--multistart: expected >= 0, got {args.multistart}")
     meas, frames = load_measurement(args, model)
     problem = OutputErrorProblem(model, meas, cost=args.cost, x0=parse_x0(args.x0, model.n_states))
-    result, _ = fit(problem, params, restarts=args.restarts, maxfev=args.maxfev, polish=args.polish,
-                     multistart=args.multistart)
+    result = fit_from_starts(
+        problem, params,
+        lambda start: fit(problem, start, restarts=args.restarts, maxfev=args.maxfev,
+                          polish=args.polish, multistart=args.multistart)[0],
+        data_start=args.data_start, keep_init=bool(args.init) or not args.data_start)
     if frames is not None:
         result.frames = frames
     if args.plot:

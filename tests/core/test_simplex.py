@@ -221,7 +221,7 @@ def test_random_quadratics(n: int, data: st.DataObject, adaptive: bool, use_sim:
 
 def test_minimize_log_unchanged() -> None:
     """``minimize_log`` with the replica equals the scipy-driven original, restarts included."""
-    from estimator.identify import nelder_mead as nm_mod
+    from estimator.identify import solver as nm_mod
 
     def cost(u: np.ndarray) -> float:
         if not np.all(np.abs(u) < 30):

@@ -1,4 +1,4 @@
-"""Nelder–Mead identification in log coordinates with restarts.
+"""The solver: Nelder–Mead identification in log coordinates with restarts and a polish.
 
 The simplex is :func:`estimator.identify.simplex.nelder_mead`, a bit-identical replica of
 scipy's Nelder–Mead that spares importing ``scipy.optimize``. Its default first simplex

@@ -1,0 +1,493 @@
+"""Starting values from the record itself: a filtered equation-error least-squares fit.
+
+Every model is ``M q'' + C q' + K q = Fk r + Fc r'`` with matrices *linear* in the masses,
+dampers and springs. Passing every signal through the same linear filter keeps the
+equation (the filter commutes with it), so with ``F_k = s^(k+2) / D(s)`` applied to a
+position (``s^(k+1)/D`` to a velocity, ``s^k/D`` to an acceleration) and
+``D(s) = (s^2 + 2 zeta w s + w^2)^2`` the filtered equation
+
+    M F_2 q + C F_1 q + K F_0 q - Fk F_0 r - Fc F_1 r = transient
+
+holds for any measured channel set that has one channel per coordinate, with no numerical
+differentiation. The transient (the filter's own free response to the record's start) is a
+combination of the filter's four modes and is projected out. The free parameters that
+enter linearly follow from one linear least-squares problem given the known ones (masses,
+inertia, geometry); parameters that do not enter linearly (lengths) are searched on a
+log grid with the linear ones solved at each point (variable projection) and refined by
+Nelder-Mead. Several filter bandwidths are tried and the estimate whose *output-error*
+cost is lowest wins, so the choice adapts to where the record has its signal and its noise.
+
+The estimate needs neither a starting guess nor derivatives; it cannot apply when a
+coordinate has no measured channel at all (then the equations hold an unmeasured signal),
+when the time grid is not uniform, or when the record holds too little motion to separate
+the parameters (rank-deficient regression); the reason is reported and the caller falls
+back to its other starts. With measurement noise the estimate is biased (noise in the
+regressors), which is why it is only a start: Nelder-Mead and the polish refine it on
+the output-error cost.
+"""
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, field
+from typing import Any, Callable, Mapping
+
+import numpy as np
+from scipy.linalg import expm
+
+from estimator.identify.params import Parameters
+from estimator.identify.problem import OutputErrorProblem
+from estimator.identify.result import IdentResult
+from estimator.identify.simplex import nelder_mead
+from suspid.io.csvio import Measurement
+from suspid.models.base import FloatArray, SuspensionModel
+from suspid.simulate import uniform_step
+
+#: damping ratio of the filter's double pole pair
+FILTER_ZETA = 0.8
+#: grid factors (relative to the start value) for parameters that enter nonlinearly
+NONLIN_GRID = np.exp(np.linspace(math.log(0.05), math.log(20.0), 21))
+#: normalised output-error cost below which an estimate is taken as exact (no further bandwidth)
+EXACT_COST = 1e-7
+#: smallest relative singular value of the regression accepted as "determined"
+RANK_TOL = 1e-9
+
+
+@dataclass
+class StartEstimate:
+    """A data-driven starting point.
+
+    Attributes
+    ----------
+    values : dict
+        Free parameter -> estimate (SI); empty when the method could not apply.
+    reason : str or None
+        Why no estimate was made (``None`` when ``values`` is filled).
+    bandwidth_hz : float
+        Filter bandwidth of the chosen estimate (Hz).
+    cost : float
+        Normalised output-error cost at the estimate (1 = no fit).
+    notes : list of str
+        Adjustments made (e.g. a negative estimate replaced by a small positive value).
+    """
+
+    values: dict[str, float] = field(default_factory=dict)
+    reason: str | None = None
+    bandwidth_hz: float = float("nan")
+    cost: float = float("inf")
+    notes: list[str] = field(default_factory=list)
+
+
+def _filter_bank(w: float, h: float) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """FOH discretisation ``(Phi, G1, G2, d)`` of ``1/D(s)`` in controllable form."""
+    z = FILTER_ZETA
+    # D(s) = (s^2 + 2 z w s + w^2)^2 = s^4 + d3 s^3 + d2 s^2 + d1 s + d0
+    d = np.array([w ** 4, 4 * z * w ** 3, 2 * w ** 2 + 4 * z * z * w * w, 4 * z * w])
+    A = np.zeros((4, 4))
+    A[:3, 1:] = np.eye(3)
+    A[3] = -d
+    aug = np.zeros((6, 6))
+    aug[:4, :4] = A
+    aug[3, 4] = 1.0  # b = e4
+    aug[4, 5] = 1.0  # u' = slope (first-order hold)
+    E = expm(aug * h)
+    return E[:4, :4], E[:4, 4], E[:4, 5], d
+
+
+def _filter(U: FloatArray, w: float, h: float) -> tuple[FloatArray, FloatArray]:
+    """Filter the columns of ``U`` (N, m): outputs ``s^k / D`` for k = 0..4 and the modes.
+
+    Returns
+    -------
+    Y : ndarray, shape (5, N, m)
+        ``Y[k]`` is ``s^k / D(s)`` applied to each column (zero initial filter state).
+    T : ndarray, shape (N, 4)
+        The filter's free-response functions (the transient's span).
+    """
+    Phi, G1, G2, d = _filter_bank(w, h)
+    N, m = U.shape
+    Z = np.zeros((N, 4, m))
+    z = np.zeros((4, m))
+    slope = np.vstack([np.diff(U, axis=0) / h, np.zeros((1, m))])
+    for n in range(N):
+        Z[n] = z
+        z = Phi @ z + np.outer(G1, U[n]) + np.outer(G2, slope[n])
+    Y = np.empty((5, N, m))
+    Y[:4] = np.moveaxis(Z, 1, 0)
+    Y[4] = U - np.einsum("j,njm->nm", d, Z)
+    T = np.empty((N, 4))
+    zt = np.eye(4)
+    for n in range(N):
+        T[n] = zt[0]
+        zt = Phi @ zt
+    return Y, T
+
+
+def _fill(y: FloatArray, t: FloatArray) -> FloatArray | None:
+    """Linear interpolation over missing samples (None if fewer than half are present)."""
+    ok = np.isfinite(y)
+    if ok.sum() < max(10, y.size // 2):
+        return None
+    if ok.all():
+        return y
+    return np.interp(t, t[ok], y[ok])
+
+
+class _Regression:
+    """Filtered signals of one record, ready for the equation-error least squares."""
+
+    def __init__(self, model: SuspensionModel, meas: Measurement, t: FloatArray, h: float,
+                 U: FloatArray, w: float) -> None:
+        nq = len(model.coords)
+        nr = len(model.roads)
+        cols: list[FloatArray] = []
+        plan: list[list[tuple[int, int]]] = []  # per coordinate: (column, derivative order)
+        for c in model.coords:
+            srcs = []
+            for order, name in enumerate((c, f"{c}_dot", f"{c}_ddot")):
+                if name in meas.measured:
+                    y = _fill(np.asarray(meas.measured[name], dtype=float), t)
+                    if y is not None:
+                        srcs.append((len(cols), order))
+                        cols.append(y)
+            plan.append(srcs[:2])  # at most two sources, averaged
+        self.missing = [c for c, s in zip(model.coords, plan) if not s]
+        road_cols = []
+        for j in range(nr):
+            road_cols.append(len(cols))
+            cols.append(U[:, j])
+        Y, T = _filter(np.column_stack(cols), w, h)
+        N = t.size
+        # Q[k] (nq, N): F_k q = s^(k+2)/D q from a position, s^(k+1)/D from a velocity, ...
+        self.Q = np.zeros((3, nq, N))
+        for i, srcs in enumerate(plan):
+            for col, order in srcs:
+                for k in range(3):
+                    self.Q[k, i] += Y[k + 2 - order, :, col] / len(srcs)
+        self.R = np.zeros((2, nr, N))
+        for j, col in enumerate(road_cols):
+            for k in range(2):
+                self.R[k, j] = Y[k + 2, :, col]
+        # project out the transient (the filter's modes) and the first samples
+        keep = slice(2, N)
+        Tq, _ = np.linalg.qr(T[keep])
+        def proj(X: FloatArray) -> FloatArray:
+            Xk = X[..., keep]
+            return Xk - (Xk @ Tq) @ Tq.T
+        self.Q = proj(self.Q)
+        self.R = proj(self.R)
+        S = np.concatenate([self.Q[2], self.Q[1], self.Q[0], self.R[0], self.R[1]], axis=0)
+        self.G = S @ S.T  # Gram matrix of every filtered signal: the LS needs nothing else
+
+    @staticmethod
+    def coef(mats: tuple[FloatArray, ...]) -> FloatArray:
+        """Coefficients (nq, n_signals) of ``M F2q + C F1q + K F0q - Fk F0r - Fc F1r``."""
+        M, C, K, Fk, Fc = mats
+        return np.hstack([M, C, K, -Fk, -Fc])
+
+    def norms(self, coef: FloatArray) -> FloatArray:
+        """Norm of each equation's residual for coefficients ``coef``."""
+        return np.sqrt(np.maximum(np.einsum("is,st,it->i", coef, self.G, coef), 0.0))
+
+
+def _split_linear(model: SuspensionModel, base: Mapping[str, float], free: list[str]
+                  ) -> tuple[list[str], list[str]]:
+    """Free parameters that enter the matrices linearly (jointly), and the others."""
+    def mats(p: Mapping[str, float]) -> FloatArray:
+        return np.concatenate([np.ravel(a) for a in model.matrices(p)])
+
+    lin: list[str] = []
+    for k in free:
+        vals = [mats({**base, k: base[k] * f}) for f in (1.0, 2.0, 3.5)]
+        d1, d2 = vals[1] - vals[0], vals[2] - vals[0]
+        if np.allclose(d2, 2.5 * d1, rtol=1e-9, atol=1e-12 * (1 + np.max(np.abs(vals[0])))):
+            lin.append(k)
+    if lin:  # joint check: affine in all of them at once
+        p1 = {**base, **{k: base[k] * 1.7 for k in lin}}
+        rec = mats(base) + sum(mats({**base, k: base[k] * 1.7}) - mats(base) for k in lin)
+        if not np.allclose(mats(p1), rec, rtol=1e-9, atol=1e-12 * (1 + np.max(np.abs(rec)))):
+            lin = []
+    return lin, [k for k in free if k not in lin]
+
+
+def _solve_linear(reg: _Regression, model: SuspensionModel, p: Mapping[str, float],
+                  lin: list[str], wts: FloatArray) -> tuple[FloatArray, float, float]:
+    """Linear least squares for ``lin`` at the other values of ``p`` (normal equations).
+
+    Returns ``(theta, relative residual, relative smallest singular value)``.
+    """
+    ones = {**p, **{k: 1.0 for k in lin}}
+    c1 = reg.coef(model.matrices(ones)) * wts[:, None]
+    cols = [reg.coef(model.matrices({**ones, k: 2.0})) * wts[:, None] - c1 for k in lin]
+    b = c1 - sum(cols)  # the part that does not depend on lin
+    Cs = np.stack(cols)  # (nl, nq, ns)
+    GC = np.einsum("jis,st->jit", Cs, reg.G)
+    AtA = np.einsum("jit,lit->jl", GC, Cs)
+    Atb = np.einsum("jit,it->j", GC, b)
+    btb = float(np.einsum("is,st,it->", b, reg.G, b))
+    d = np.sqrt(np.where(np.diag(AtA) > 0, np.diag(AtA), 1.0))
+    H = AtA / np.outer(d, d)
+    ev, V = np.linalg.eigh(H)
+    if ev[-1] <= 0:
+        return np.zeros(len(lin)), 1.0, 0.0
+    rel_sv = float(math.sqrt(max(ev[0], 0.0) / ev[-1]))
+    if btb <= 1e-24 * float(np.sum(AtA)):
+        # homogeneous: every scale-setting parameter is free; take the null vector
+        theta = V[:, 0] / d
+        theta = theta * np.sign(np.sum(theta))
+        rel_sv = float(math.sqrt(max(ev[1], 0.0) / ev[-1])) if ev.size > 1 else 1.0
+        return theta, float(math.sqrt(max(ev[0], 0.0) / ev[-1])), rel_sv
+    keep = ev > 1e-13 * ev[-1]
+    sol = V[:, keep] @ ((V[:, keep].T @ (-Atb / d)) / ev[keep])
+    theta = sol / d
+    res2 = btb + 2 * float(Atb @ theta) + float(theta @ AtA @ theta)
+    return theta, math.sqrt(max(res2, 0.0) / btb) if btb > 0 else 0.0, rel_sv
+
+
+def estimate_start(problem: OutputErrorProblem, params: Parameters,
+                   bandwidths_hz: list[float] | None = None) -> StartEstimate:
+    """Data-driven start of the free parameters of ``params`` for ``problem``'s record.
+
+    Parameters
+    ----------
+    problem : OutputErrorProblem
+        The record (any measured channel set with one channel per coordinate), its road
+        and the cost used to rank candidate estimates.
+    params : Parameters
+        Fixed values (known masses, inertia, geometry) and, for parameters that do not
+        enter the equations linearly, the centre of their search grid.
+    bandwidths_hz : list of float, optional
+        Filter bandwidths (Hz) tried; default five from 0.5 Hz to a fifth of Nyquist.
+
+    Returns
+    -------
+    StartEstimate
+        ``values`` holds the estimate; ``reason`` says why there is none.
+    """
+    model = problem.model
+    meas = problem.meas
+    free = params.free
+    if not free:
+        return StartEstimate(reason="no free parameter")
+    t = problem.t
+    h = uniform_step(t)
+    if h is None:
+        return StartEstimate(reason="the time grid is not uniform")
+    base = params.valuesdict()
+    lin, nonlin = _split_linear(model, base, free)
+    if not lin:
+        return StartEstimate(reason="no free parameter enters the equations of motion linearly")
+    nyq = 0.5 / h
+    if bandwidths_hz is None:
+        top = nyq / 5.0
+        bandwidths_hz = [float(f) for f in np.geomspace(0.2, max(top, 0.3), 6)]
+    best = StartEstimate(reason="no filter bandwidth gave a usable estimate")
+    reasons: list[str] = []
+    seeds: list[FloatArray] = []
+    last_u: FloatArray | None = None
+    for fc in bandwidths_hz:
+        if best.cost < EXACT_COST:
+            break
+        reg = _Regression(model, meas, t, h, problem.U, 2 * math.pi * fc)
+        if reg.missing:
+            return StartEstimate(reason="no measured channel of coordinate(s) "
+                                        f"{', '.join(reg.missing)}: the equations of motion "
+                                        "hold an unmeasured signal")
+        if not np.any(reg.Q):
+            return StartEstimate(reason="the record holds no motion")
+        # equation weights: the known (mass) term of each equation at the start values
+        mats = model.matrices(base)
+        mk = reg.norms(reg.coef(mats))
+        mass_term = reg.norms(reg.coef((mats[0],) + tuple(np.zeros_like(a) for a in mats[1:])))
+        scale = np.where(mass_term > 0, mass_term, mk)
+        wts = 1.0 / np.where(scale > 0, scale, 1.0)
+
+        def solve_at(eta: FloatArray, fc: float = fc, reg: _Regression = reg,
+                     wts: FloatArray = wts) -> tuple[dict[str, float], float, float]:
+            p = dict(base)
+            p.update({k: base[k] * float(f) for k, f in zip(nonlin, eta)})
+            theta, rel, sv = _solve_linear(reg, model, p, lin, wts)
+            p.update(zip(lin, (float(v) for v in theta)))
+            # a negative spring or damper is no physical answer: such a point of the
+            # length search ranks behind every physical one
+            return p, rel + (1.0 if np.any(theta < 0) else 0.0), sv
+
+        if nonlin:
+            if not seeds:  # the grid once, at the first bandwidth; later ones reuse it
+                grid = list(itertools.product(NONLIN_GRID, repeat=len(nonlin))) \
+                    if len(nonlin) <= 2 else [tuple([1.0] * len(nonlin))]
+                scored = sorted((solve_at(np.array(g))[1], g) for g in grid)
+                seeds = [np.log(np.array(g, dtype=float)) for _, g in scored[:3]]
+            best_u, best_r = np.zeros(len(nonlin)), math.inf
+            for g0 in seeds + ([last_u] if last_u is not None else []):
+                res = nelder_mead(
+                    lambda u: solve_at(np.exp(u))[1] if np.all(np.abs(u) < 8) else np.inf, g0,
+                    initial_simplex=np.vstack([g0] + [g0 + 0.1 * e for e in np.eye(len(nonlin))]),
+                    xatol=1e-5, fatol=1e-14, maxfev=150 * len(nonlin))
+                if res.fun < best_r:
+                    best_u, best_r = np.asarray(res.x, dtype=float), float(res.fun)
+            last_u = best_u
+            p, rel, sv = solve_at(np.exp(best_u))
+        else:
+            p, rel, sv = solve_at(np.zeros(0))
+        if sv < RANK_TOL:
+            reasons.append(f"{fc:.3g} Hz: too little excitation to separate "
+                           f"{', '.join(lin)} (relative singular value {sv:.1e})")
+            continue
+        notes = []
+        vals = {k: float(p[k]) for k in free}
+        bad = [k for k in lin if not (vals[k] > 0 and math.isfinite(vals[k]))]
+        for k in bad:
+            kind = model.spec(k).kind
+            same = [vals[j] for j in lin if model.spec(j).kind == kind and j not in bad]
+            vals[k] = 1e-2 * (math.exp(np.mean(np.log(same))) if same else base[k])
+            notes.append(f"{k}: the equation-error estimate was not positive; started at {vals[k]:.3g}")
+        cost = problem.normalized_ss({**base, **vals})
+        if cost < best.cost:
+            best = StartEstimate(values=vals, bandwidth_hz=fc, cost=float(cost), notes=notes)
+    if not best.values and reasons:
+        best.reason = "; ".join(reasons)
+    return best
+
+
+def data_driven_start(model: SuspensionModel, data: Measurement, fixed: Mapping[str, float],
+                      init: Mapping[str, float] | None = None, cost: str = "sse") -> dict[str, float]:
+    """Starting values of every free parameter of ``model`` from the record ``data``.
+
+    Parameters
+    ----------
+    model : SuspensionModel
+    data : Measurement
+        The record (measured channels, road).
+    fixed : mapping
+        Known parameters (SI); every other parameter is free.
+    init : mapping, optional
+        Centre of the search for parameters that do not enter the equations linearly
+        (default: the model's documented defaults).
+    cost : {"sse", "frobenius"}
+        Cost used to rank the candidate estimates.
+
+    Returns
+    -------
+    dict
+        Free parameter -> estimate (SI); empty when the record does not allow one (see
+        :func:`estimate_start` for the reasons).
+    """
+    free_init = {k: v for k, v in (init or {}).items() if k not in fixed}
+    params = Parameters.for_model(model, fix=fixed, init=free_init)
+    problem = OutputErrorProblem(model, data, cost=cost)
+    return dict(estimate_start(problem, params).values)
+
+
+#: a free parameter this far (factor) from its start and from the data-driven estimate ran away
+RUNAWAY = 100.0
+
+
+def _finite(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
+
+
+def _plausibility(res: IdentResult, free: list[str], start: Mapping[str, float],
+                  data: Mapping[str, float]) -> list[str]:
+    """Reasons why ``res`` sits at an absurd place (empty when it does not)."""
+    out = []
+    for k in free:
+        v = res.params[k]
+        if not (math.isfinite(v) and v > 0):
+            out.append(f"{k} reached {v!r}, not a finite positive value")
+            continue
+        far_start = abs(math.log(v / start[k])) > math.log(RUNAWAY)
+        far_data = k not in data or abs(math.log(v / data[k])) > math.log(RUNAWAY)
+        if far_start and far_data:
+            ref = f" and from the data-driven estimate {data[k]:.4g}" if k in data else ""
+            out.append(f"{k} ran to {v:.4g}, more than {RUNAWAY:g}x from its start "
+                       f"{start[k]:.4g}{ref}; the record does not support it")
+    return out
+
+
+def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
+                    run: Callable[[Parameters], IdentResult], *, data_start: bool = True,
+                    keep_init: bool = True) -> IdentResult:
+    """Run the fit ``run`` from the data-driven start and from ``params``; keep the best.
+
+    Parameters
+    ----------
+    problem : OutputErrorProblem
+        The whole record (for the data-driven estimate).
+    params : Parameters
+        Fixed values and the given start of the free parameters.
+    run : callable
+        ``run(start) -> IdentResult``: one identification from the start ``start``.
+    data_start : bool
+        Compute the data-driven start (:func:`estimate_start`) and run from it.
+    keep_init : bool
+        Also consider ``params`` as a start (always done when no data-driven start exists).
+        It is run when the fit from the data-driven start is not a clean success (not
+        converged, not identifiable, or implausible) or when ``params`` begins at a lower
+        cost than the data-driven start; otherwise it is listed as skipped, so the time per
+        identification does not grow.
+
+    Returns
+    -------
+    IdentResult
+        The lowest-cost result, with ``starts`` (every start and what it reached),
+        ``data_start`` and ``nfev`` summed over the runs. A result whose parameters ran
+        orders of magnitude away from its start and from the data-driven estimate is not
+        reported as a success; its warnings say which parameter and why.
+    """
+    free = params.free
+    est = estimate_start(problem, params) if data_start and free else None
+    runs: list[tuple[str, Parameters]] = []
+    if est is not None and est.values:
+        p = params.copy()
+        for k, v in est.values.items():
+            p[k].value = float(v)
+        runs.append(("data", p))
+    if keep_init or not runs:
+        runs.append(("init", params))
+    at_start = [problem.normalized_ss(s.valuesdict()) for _, s in runs]
+    results: list[tuple[str, Parameters, IdentResult | None]] = []
+    for i, (label, start) in enumerate(runs):
+        done = [r for _, _, r in results if r is not None]
+        # a further start only runs when the fits so far are not clean, or when it begins
+        # lower than the start they came from (it may then be in a better basin)
+        if done and all(r.success for r in done) and at_start[i] >= min(at_start[:i]) \
+                and not _plausibility(done[0], free, {k: runs[0][1][k].value for k in free},
+                                      est.values if est is not None else {}):
+            results.append((label, start, None))
+            continue
+        results.append((label, start, run(start)))
+    ran = [(label, s, r) for label, s, r in results if r is not None]
+
+    def key(item: tuple[str, Parameters, IdentResult]) -> float:
+        c = item[2].cost
+        return c if math.isfinite(c) else math.inf
+
+    best = min(ran, key=key)
+    res = best[2]
+    res.nfev = int(sum(r.nfev for _, _, r in ran))
+    data_vals = est.values if est is not None else {}
+    res.starts = []
+    for (label, s, r), c0 in zip(results, at_start):
+        entry: dict[str, Any] = {"start": label, "from": {k: float(s[k].value) for k in free},
+                                 "cost_at_start": _finite(problem.seed_cost(c0 * problem.scale))}
+        if r is None:
+            entry.update({"cost": None, "skipped": "the fit from the first start is clean "
+                                                   "and this start begins at a higher cost"})
+        else:
+            entry.update({"cost": _finite(r.cost), "params": {k: float(r.params[k]) for k in free},
+                          "success": bool(r.success), "chosen": r is res})
+        res.starts.append(entry)
+    if est is not None:
+        res.data_start = ({"values": dict(est.values), "bandwidth_hz": est.bandwidth_hz,
+                           "notes": list(est.notes)} if est.values
+                          else {"reason": est.reason})
+        if not est.values:
+            res.warnings.append(f"no data-driven start: {est.reason}")
+    bad = _plausibility(res, free, {k: best[1][k].value for k in free}, data_vals)
+    if bad:
+        res.success = False
+        alts = ", ".join(f"{label} start: cost {r.cost:.4g}" for label, _, r in ran)
+        res.warnings += [f"implausible result: {b}" for b in bad]
+        res.warnings.append(f"costs reached from each start: {alts}")
+    return res
