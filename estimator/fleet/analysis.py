@@ -136,6 +136,8 @@ def summarize_vehicle(vehicle: str, records: list[dict[str, Any]], rule: AlertRu
     if not ok:
         return VehicleSummary(vehicle, "", [], failed, [], {}, {}, {}, {}, [], "no data")
     model = _model_of(ok[-1])
+    # a history may mix models or --fix sets over the years: follow the latest drive's
+    ok = [r for r in ok if _model_of(r) == model]
     fixed = set(ok[-1]["result"].get("fixed", []))
     monitored = [k for k in ok[-1]["result"]["params"] if k not in fixed]
     nominal = {k: rule.nominal_of(model, k) for k in monitored}
@@ -157,14 +159,15 @@ def summarize_vehicle(vehicle: str, records: list[dict[str, Any]], rule: AlertRu
                            "message": ev.message})
     trends: dict[str, Trend | None] = {}
     forecasts: dict[str, Forecast] = {}
-    t = np.array([float(r["t"]) for r in ok])
     for k in monitored:
-        v = np.array([float(r["result"]["params"][k]) for r in ok])
-        s = np.array([_nan(r["result"].get("stderr", {}).get(k)) for r in ok])
+        free = [r for r in ok if k not in r["result"].get("fixed", [])]
+        t = np.array([float(r["t"]) for r in free])
+        v = np.array([float(r["result"]["params"][k]) for r in free])
+        s = np.array([_nan(r["result"].get("stderr", {}).get(k)) for r in free])
         tr = robust_trend(t, v, s)
         trends[k] = tr
         fc = forecast_crossing(tr, limits[k], rule.level)
-        if fc is not None and fc.crossing_t <= t[-1] + rule.horizon_days * DAY_S:
+        if fc is not None and fc.crossing_t <= tr.t_ref + rule.horizon_days * DAY_S:
             forecasts[k] = fc
     risk = "alert" if alerts else ("forecast" if forecasts else "ok")
     return VehicleSummary(vehicle, model, ok, failed, monitored, nominal, limits, trends,

@@ -6,8 +6,9 @@ and the DBC is parsed once per worker process (:func:`cached_database`, keyed by
 modification time and size) instead of once per drive.
 
 The identification is the same library call as ``suspid identify`` makes --
-:class:`~estimator.identify.OutputErrorProblem` + :func:`~estimator.identify.fit` with the
-same options -- on the same measurement (:func:`load_drive`, which reads a CAN log through
+:class:`~estimator.identify.OutputErrorProblem`, then
+:func:`~estimator.identify.fit_from_starts` over :func:`~estimator.identify.fit` with the
+same options (:func:`identify`) -- on the same measurement (:func:`load_drive`, which reads a CAN log through
 :func:`~estimator.decode.log_input.load_log_as_measurement` and a CSV through
 :func:`~suspid.io.csvio.read_measurement`, and adds identify's "motion does not decay"
 warning), so a drive's parameters equal ``suspid identify --json`` on the same file to the
@@ -28,7 +29,8 @@ import numpy as np
 from cantools.database import Database
 
 from estimator.decode.log_input import load_log_as_measurement
-from estimator.identify import OutputErrorProblem, Parameters, fit
+from estimator.identify import IdentResult, OutputErrorProblem, Parameters, fit, fit_from_starts
+from suspid import __version__
 from suspid.can.dbc import default_dbc_path, load_dbc
 from suspid.can.logs import FORMATS
 from suspid.can.signal_map import SignalMap
@@ -61,6 +63,8 @@ class IdentifySettings:
     maxfev : int or None
     multistart : int
     polish : bool
+    data_start : bool
+        Also start from the data-driven estimate (``identify``'s default; ``--no-data-start``).
     dbc : str or None
         DBC path for CAN logs (``None``: suspid's bundled DBC).
     signal_map : SignalMap or None
@@ -76,6 +80,7 @@ class IdentifySettings:
     maxfev: int | None = None
     multistart: int = 4
     polish: bool = True
+    data_start: bool = True
     dbc: str | None = None
     signal_map: SignalMap | None = None
 
@@ -84,8 +89,16 @@ class IdentifySettings:
         return Parameters.for_model(get_model(self.model), fix=self.fix, init=self.init)
 
     def key(self) -> str:
-        """A stable text key of the settings (stored with each drive in the history)."""
+        """A stable text key of the settings (stored with each drive in the history): the
+        options, the DBC's content hash and the suspid version, so a changed DBC or a new
+        identifier makes stored results stale."""
         d = asdict(self)
+        dbc = Path(self.dbc) if self.dbc is not None else default_dbc_path()
+        try:
+            d["dbc_sha256"] = file_digest(dbc)
+        except OSError:
+            d["dbc_sha256"] = None
+        d["suspid"] = __version__
         d["x0"] = self.x0 if isinstance(self.x0, str) else [float(v) for v in self.x0]
         d["signal_map"] = (None if self.signal_map is None else
                            [str(m) for m in self.signal_map.mappings])
@@ -187,6 +200,16 @@ def one_line(text: object) -> str:
     return " ".join(str(text).split())
 
 
+def identify(problem: OutputErrorProblem, settings: IdentifySettings) -> IdentResult:
+    """The fit ``suspid identify`` runs on a measurement, with the same arguments."""
+    def run(start: Parameters) -> IdentResult:
+        return fit(problem, start, restarts=settings.restarts, maxfev=settings.maxfev,
+                   polish=settings.polish, multistart=settings.multistart)[0]
+
+    return fit_from_starts(problem, settings.parameters(), run, data_start=settings.data_start,
+                           keep_init=bool(settings.init) or not settings.data_start)
+
+
 def identify_drive(path: str, vehicle: str, settings: IdentifySettings,
                    digest: str | None = None) -> dict[str, Any]:
     """Identify one drive; never raises for a bad log (the Dask task).
@@ -224,9 +247,7 @@ def identify_drive(path: str, vehicle: str, settings: IdentifySettings,
         problem = OutputErrorProblem(model, meas, cost=settings.cost,
                                      x0=(settings.x0 if isinstance(settings.x0, str)
                                          else np.asarray(settings.x0, dtype=float)))
-        result, _ = fit(problem, settings.parameters(), restarts=settings.restarts,
-                        maxfev=settings.maxfev, polish=settings.polish,
-                        multistart=settings.multistart)
+        result = identify(problem, settings)
         if frames is not None:
             result.frames = frames
         out["result"] = result.to_json()

@@ -11,7 +11,7 @@ Schema (``PRAGMA user_version = 1``; query it with the ``sqlite3`` shell)::
         status    TEXT NOT NULL,     -- 'ok' or 'failed'
         error     TEXT,              -- one-line reason when failed
         size      INTEGER,           -- bytes
-        settings  TEXT NOT NULL,     -- identify options (JSON) the result was made with
+        settings  TEXT NOT NULL,     -- identify options, DBC hash, suspid version (JSON)
         result    TEXT,              -- the drive's `suspid identify --json` object
         processed REAL NOT NULL      -- epoch s when it was stored last
     );

@@ -151,7 +151,8 @@ def render(vehicles: Sequence[VehicleSummary], drives: Sequence[dict[str, Any]],
         parts.append(f'<h2 id="v-{html.escape(s.vehicle)}">{s.rank}. {html.escape(s.vehicle)} '
                      f"({html.escape(s.model)}, {len(s.drives)} drives, {s.risk})</h2>")
         for a in s.alerts:
-            parts.append(f'<p class="alert-msg"><b>ALERT</b> {html.escape(a["message"])}</p>')
+            parts.append(f'<p class="alert-msg"><b>ALERT</b> {html.escape(a["message"])} '
+                         f'(first below in the drive of {_date(a["since_t"], True)} UTC)</p>')
         if s.monitored:
             parts.append('<table class="params"><tr><th>Parameter</th><th>Latest</th>'
                          "<th>Nominal</th><th>Limit</th><th>Trend per day</th>"

@@ -226,6 +226,9 @@ def run_fleet(config: FleetConfig) -> FleetResult:
             raise InputError(f"--input {' '.join(config.inputs)}: no drive log found (expected "
                              f"files ending in {', '.join(CAN_SUFFIXES)} or .csv)")
         check_settings(config.settings, files)
+    if not config.inputs and config.db is not None and not Path(config.db).is_file():
+        raise InputError(f"--db {config.db}: no such history database (a run with --input "
+                         "creates it)")
     history = History(config.db) if config.db is not None else None
     try:
         rule = config.rule

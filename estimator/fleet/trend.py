@@ -260,5 +260,6 @@ def forecast_crossing(trend: Trend | None, limit: float, level: float = 0.90
     else:
         root = math.sqrt(disc)
         lo, hi = sorted(((-B - root) / (2 * A), (-B + root) / (2 * A)))
-    to_t = lambda d: trend.t_ref + d * DAY_S  # noqa: E731
-    return Forecast(to_t(tc), to_t(lo), to_t(hi), float(limit), level)
+    day = trend.t_ref, DAY_S
+    return Forecast(day[0] + tc * day[1], day[0] + lo * day[1], day[0] + hi * day[1],
+                    float(limit), level)

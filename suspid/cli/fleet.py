@@ -43,6 +43,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="further starts on a suspicious local minimum (default 4)")
     i.add_argument("--no-polish", dest="polish", action="store_false",
                    help="pure Nelder–Mead to full tolerance (no Levenberg–Marquardt polish)")
+    i.add_argument("--no-data-start", dest="data_start", action="store_false",
+                   help="start only from --init and the defaults (as identify's option)")
     a = p.add_argument_group("alerts and forecasts")
     a.add_argument("--nominal", action="append", default=[], metavar="NAME=VALUE",
                    help="nominal value of a monitored (free) parameter (SI; default the "
@@ -93,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
             init=parse_assignments(args.init, "--init"), cost=args.cost,
             x0=x0 if isinstance(x0, str) else tuple(float(v) for v in x0),
             restarts=args.restarts, maxfev=args.maxfev, multistart=args.multistart,
-            polish=args.polish, dbc=str(dbc) if dbc is not None else None, signal_map=smap)
+            polish=args.polish, data_start=args.data_start, dbc=str(dbc) if dbc is not None else None, signal_map=smap)
     elif args.db is None:
         raise UsageError("give --input DIR_OR_GLOB... with --model, or --db PATH to report from "
                          "the history")

@@ -54,7 +54,7 @@ def test_progress_bar_and_bad_usage(fleet: Fleet) -> None:
     for args, words in ((["--input", str(fleet.root)], "--model"),
                         (["--model", "quarter2", "--input", str(fleet.root / "nope")], "nope"),
                         (["--model", "quarter2", "--input", str(fleet.root), "--fix", "zz=1"], "zz"),
-                        ([], "--db")):
+                        (["--db", str(fleet.root / "none.sqlite")], "none.sqlite")):
         proc = run_fleet_cli(*args, "--workers", "0", "--json", check=False)
         assert proc.returncode == 2, proc.stderr
         lines = proc.stderr.strip().splitlines()

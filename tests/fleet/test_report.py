@@ -6,11 +6,10 @@ import shutil
 import subprocess
 from html.parser import HTMLParser
 from pathlib import Path
-from typing import Any
 
 import pytest
 
-from tests.fleet.conftest import FIX, Fleet, fleet_json
+from tests.fleet.conftest import Fleet, HistoryRuns, fleet_json
 
 
 class _Tables(HTMLParser):
@@ -66,13 +65,10 @@ def _browser(args: list[str], profile: Path) -> subprocess.CompletedProcess[str]
                           capture_output=True, text=True, timeout=300)
 
 
-def test_report_in_headless_chromium(fleet: Fleet, inprocess: dict[str, Any],
+def test_report_in_headless_chromium(fleet: Fleet, history: HistoryRuns,
                                      tmp_path: Path) -> None:
-    db = tmp_path / "fleet.sqlite"
-    fleet_json("--model", "quarter2", "--input", str(fleet.root), *FIX, "--workers", "0",
-               "--db", str(db))
     report = tmp_path / "report"
-    out = fleet_json("--db", str(db), "--report", str(report))    # from the history alone
+    out = fleet_json("--db", str(history.db), "--report", str(report))   # from the history
     page = report / "index.html"
     assert out["report"] == str(page)
     proc = _browser(["--dump-dom", page.resolve().as_uri()], tmp_path / "profile")
@@ -89,6 +85,7 @@ def test_report_in_headless_chromium(fleet: Fleet, inprocess: dict[str, Any],
     assert fc["crossing_t_low"] < fc["crossing_t"]
     failed = dom.tables["failed"][1:]
     assert sorted(r[0] for r in failed) == sorted(str(p) for p in fleet.bad)
+    assert len(rows) == 3 and int(rows[2][header.index("Drives")]) == 8
     assert all(r[1] == "VAN-OK" and r[2] for r in failed)
     assert sorted(dom.svgs) == sorted((v, k) for v in ("VAN-WORN", "VAN-WEAR", "VAN-OK")
                                       for k in ("c1", "k1", "c2", "k2"))
