@@ -188,8 +188,16 @@ def execute(jobs: list[tuple[str, str, str | None]], settings: IdentifySettings,
             out: list[dict[str, Any] | None] = [None] * total
             done = 0
             for fut in as_completed(futures):
-                rec = fut.result()
-                out[index[fut.key]] = rec
+                i = index[fut.key]
+                try:
+                    rec = fut.result()
+                except Exception as exc:  # noqa: BLE001 - a lost worker fails its drive only
+                    p, v, d = jobs[i]
+                    rec = {"path": p, "vehicle": v, "sha256": d, "size": None, "t": None,
+                           "status": "failed", "result": None,
+                           "error": " ".join(f"{p}: the Dask task failed: "
+                                             f"{type(exc).__name__}: {exc}".split())}
+                out[i] = rec
                 done += 1
                 failed += rec["status"] != "ok"
                 if progress:
