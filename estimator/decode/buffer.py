@@ -290,12 +290,10 @@ class Source:
             else:
                 for a, b in spans:
                     part = tv[a:b]
-                    if t_start is None:
-                        keep = part <= t_end
-                    elif t_end is None:
-                        keep = part >= t_start
-                    else:
-                        keep = part >= t_start
+                    keep = np.ones(part.shape, dtype=bool)   # one bound at least is set
+                    if t_start is not None:
+                        keep &= part >= t_start
+                    if t_end is not None:
                         keep &= part <= t_end
                     at = np.flatnonzero(keep)
                     if at.size == b - a:
@@ -487,10 +485,10 @@ class RollingBuffer:
         cells: dict[str, np.ndarray] = {}
         filled = np.zeros(n, dtype=bool)
         for name, (t, v) in snaps.items():
-            k = np.rint((t - t0) / dt).astype(np.int64)
-            ok = (k >= 0) & (k < n)
+            cell = np.rint((t - t0) / dt).astype(np.int64)
+            ok = (cell >= 0) & (cell < n)
             whole = bool(ok.all())   # always, as t0 <= t <= t_last; kept as a guard
-            kk = k if whole else k[ok]
+            kk = cell if whole else cell[ok]
             cells[name] = kk
             stamps[kk] = t if whole else t[ok]
             if kk.size:
