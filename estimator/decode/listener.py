@@ -84,7 +84,7 @@ from bisect import bisect_left
 from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Literal, Sequence
+from typing import Any, Callable, Literal, Sequence, Union, cast
 
 import can
 import numpy as np
@@ -128,6 +128,27 @@ _DATA, _SYNC, _STATUS, _ALERT = range(4)
 _O_UNKNOWN, _O_IGNORED, _O_DLC, _O_CRC = 1, 2, 3, 4
 
 
+#: a frame payload (python-can gives ``bytearray``, the batch path ``bytes``)
+Payload = Union[bytes, bytearray]
+#: payload -> decoded values
+Unpack = Callable[[Payload], tuple]
+
+
+def _any_buffer(unpack: Callable[[bytes], tuple]) -> Unpack:
+    """A :class:`MessageCodec` unpacker as a payload decoder.
+
+    The codec types its compiled unpackers for ``bytes``; they unpack with ``struct`` (or
+    cantools), which take any buffer, ``bytearray`` included.
+    """
+    return cast(Unpack, unpack)
+
+
+def _decoded_elsewhere(data: Payload) -> tuple:
+    """``decode`` of routes never decoded by it: data messages (``row``/``vrow``) and
+    SUSPID_Alert (:func:`~suspid.can.codec.decode_alert`)."""
+    return ()
+
+
 @dataclass(eq=False)
 class _Route:
     """How to validate and store one CAN ID."""
@@ -135,10 +156,10 @@ class _Route:
     name: str
     kind: int
     dlc: int
-    check: Callable[[bytes], bool] | None   # E2E CRC checker, None if not protected
-    decode: Callable[[bytes], tuple]         # special messages
+    check: Callable[[Payload], bool] | None   # E2E CRC checker, None if not protected
+    decode: Unpack                             # special messages
     source: Source | None = None
-    row: Callable[[bytes], tuple] | None = None   # data messages: payload -> channel values
+    row: Unpack | None = None   # data messages: payload -> channel values
     last_c: int = -1
     last_ts: float = 0.0
     period: float = 0.0
@@ -151,7 +172,7 @@ class _Route:
     vsync: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None  # Tick, PeriodUs
 
 
-def _compile_row(msg: Message, maps: Sequence[SignalMapping]) -> Callable[[bytes], tuple]:
+def _compile_row(msg: Message, maps: Sequence[SignalMapping]) -> Unpack:
     """``row(payload) -> (value per mapping, ...)``: decode, validity bit, scale and offset.
 
     The values come from one :class:`MessageCodec` decode (a ``struct`` unpack for our DBC);
@@ -181,7 +202,7 @@ def _compile_row(msg: Message, maps: Sequence[SignalMapping]) -> Callable[[bytes
             "    v = _dec(data)\n"
             f"    return ({', '.join(terms)},)\n")
     exec(code, ns)  # noqa: S102 - generated from the DBC layout and numeric map entries
-    return ns["_row"]  # type: ignore[return-value]
+    return cast(Unpack, ns["_row"])   # defined by the exec above
 
 
 @dataclass
@@ -342,7 +363,7 @@ class DecodeListener(can.Listener):
         for name, maps in per_msg.items():
             msg = db.get_message_by_name(name)
             src = self._buffer.source(name, [m.channel for m in maps])
-            route = self._add_route(msg, _DATA, bytes, src, _compile_row(msg, maps))
+            route = self._add_route(msg, _DATA, _decoded_elsewhere, src, _compile_row(msg, maps))
             route.vrow = compile_vector_row(msg, maps)
         for special, kind in ((SYNC_MESSAGE, _SYNC), (STATUS_MESSAGE, _STATUS),
                               (ALERT_MESSAGE, _ALERT)):
@@ -354,15 +375,15 @@ class DecodeListener(can.Listener):
                 continue
             if kind == _SYNC:
                 codec = MessageCodec(msg, ["Tick", "PeriodUs"])
-                dec = codec.decode
+                dec = _any_buffer(codec.decode)
                 route = self._add_route(msg, kind, dec)
                 route.vsync = _compile_sync(codec)
                 continue
             if kind == _STATUS:
-                dec = MessageCodec(msg, ["State", "SampleRate", "FaultFlags", "BusOffCount",
-                                         "SensorSet"]).decode
+                dec = _any_buffer(MessageCodec(msg, ["State", "SampleRate", "FaultFlags",
+                                                     "BusOffCount", "SensorSet"]).decode)
             else:
-                dec = bytes  # decoded with cantools (multiplexed, rare)
+                dec = _decoded_elsewhere  # decode_alert, with cantools (multiplexed, rare)
             self._add_route(msg, kind, dec)
         if self.time_source == "tick" and not any(r.kind == _SYNC for r in self._routes.values()):
             raise UsageError(f"time_source 'tick' needs message {SYNC_MESSAGE} in the DBC "
@@ -382,9 +403,8 @@ class DecodeListener(can.Listener):
         self._rstart = np.array([r.start_reg for r in rl], dtype=np.uint8)
         self._rdata_e2e = np.array([r.kind == _DATA and r.check is not None for r in rl])
 
-    def _add_route(self, msg: Message, kind: int, decode: Callable[[bytes], tuple],
-                   source: Source | None = None,
-                   row: Callable[[bytes], tuple] | None = None) -> _Route:
+    def _add_route(self, msg: Message, kind: int, decode: Unpack,
+                   source: Source | None = None, row: Unpack | None = None) -> _Route:
         check = make_e2e_checker(msg.frame_id, msg.length) if is_e2e(msg) else None
         route = _Route(msg.name, kind, msg.length, check, decode, source, row)
         route.key = self._key(msg.frame_id, msg.is_extended_frame)
@@ -631,7 +651,9 @@ class DecodeListener(can.Listener):
                     rejected["no_sync"] += 1
                     return
                 # ts is the data time matched through the counter above
-            route.source.push(ts, route.row(data))  # type: ignore[union-attr, misc]
+            if route.source is None or route.row is None:   # every _DATA route has both
+                raise RuntimeError(f"data route {route.name} without a source or decoder")
+            route.source.push(ts, route.row(data))
         elif not self._special(route, data, ts):
             return
         route.accepted += 1
@@ -940,9 +962,10 @@ class DecodeListener(can.Listener):
                 self._rejected["no_sync"] += b - a
                 continue
             b8 = rows[a:b].view(np.uint8).reshape(b - a, 8)
-            vals = self._sync_values(route, b8) if syncs is not None and \
+            sync_vals = self._sync_values(route, b8) if syncs is not None and \
                 route.kind == _SYNC else None
-            self._accepted(route, b8, arr[a:b], np.ones(b - a, dtype=bool), vals, syncs, h[a:b])
+            self._accepted(route, b8, arr[a:b], np.ones(b - a, dtype=bool), sync_vals, syncs,
+                           h[a:b])
 
     def _runs(self, runs: list[tuple[int, int, int]], rows: np.ndarray, arr: np.ndarray,
               tsd: np.ndarray, lo: int, syncs: "_SyncTrack | None") -> np.ndarray:
@@ -1020,10 +1043,10 @@ class DecodeListener(can.Listener):
                 route.period = p
                 route.last_c = int(c[fb - 1])
                 route.last_ts = float(tsd[fb - 1])
-                if tick:
+                if syncs is not None:   # tick mode
                     route.last_arrival = float(arr[lo + fb - 1])
                     route.sync_n = syncs.n0 + n_fast - 1 if route.kind == _SYNC else \
-                        int(syncs.sn[lo + fb - 1 - syncs.lo])  # type: ignore[union-attr]
+                        int(syncs.sn[lo + fb - 1 - syncs.lo])
             if fb < s1:
                 acc[fb:s1] = self._route_rest(route, c[fb:s1].tolist(), tsd[fb:s1].tolist(),
                                               arr[lo + fb:lo + s1].tolist(), n_fast,
@@ -1095,6 +1118,8 @@ class DecodeListener(can.Listener):
             return
         kind = route.kind
         if kind == _DATA:
+            if route.source is None or route.row is None:   # every _DATA route has both
+                raise RuntimeError(f"data route {route.name} without a source or decoder")
             if n_acc < acc.size:
                 rows = rows.view(np.uint64).reshape(-1)[acc].view(np.uint8).reshape(n_acc, 8)
                 tsd = tsd[acc]
@@ -1102,9 +1127,9 @@ class DecodeListener(can.Listener):
                 vals = route.vrow(rows)
             else:
                 L = route.dlc
-                vals = np.array([route.row(r.tobytes()) for r in rows[:, :L]],  # type: ignore[misc]
+                vals = np.array([route.row(r.tobytes()) for r in rows[:, :L]],
                                 dtype=np.float64).reshape(n_acc, -1)
-            route.source.push_many(tsd, vals)  # type: ignore[union-attr]
+            route.source.push_many(tsd, vals)
         elif kind == _SYNC:
             at = np.flatnonzero(acc)
             if sync_vals is None:   # timestamp mode: only the last frames matter
