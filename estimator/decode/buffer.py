@@ -26,7 +26,7 @@ from __future__ import annotations
 import threading
 from array import array
 from dataclasses import dataclass, field
-from typing import Callable, Iterable, Sequence
+from typing import Callable, Iterable, Sequence, cast
 
 import numpy as np
 
@@ -143,7 +143,7 @@ class Source:
             "        src.w = i if i < src.cap else src._at_end()",
         ])
         exec(code, ns)  # noqa: S102 - generated from the column count only
-        return ns["push"]  # type: ignore[return-value]
+        return cast("Callable[[float, Sequence[float]], None]", ns["push"])   # exec'd above
 
     def _at_end(self) -> int:
         """The write index reached the end: grow (growable) or wrap to 0; new write index."""

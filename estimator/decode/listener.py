@@ -344,9 +344,11 @@ class DecodeListener(can.Listener):
         if not self._sync_ids:
             self._auto = False   # no SN_Sync in the DBC: the timestamps are the only clock
         if batch_size == 0:
+            # the per-frame entry bound once, not dispatched per frame (mypy forbids assigning
+            # to a method; the signatures are the same)
             self.on_message_received = self._on_message_now  # type: ignore[method-assign]
         elif on_alert is None:
-            self.on_message_received = self._queue  # type: ignore[method-assign]
+            self.on_message_received = self._queue  # type: ignore[method-assign]  # as above
 
     # ---- setup -----------------------------------------------------------------------
     def _key(self, frame_id: int, extended: bool) -> int:
@@ -982,7 +984,6 @@ class DecodeListener(can.Listener):
         hi = runs[-1][2]
         m = hi - lo
         routes = self._route_list
-        tick = syncs is not None
         c = (rows[lo:hi] >> np.uint64(8) & np.uint64(0x0F)).astype(np.int64)
         starts = np.array([a - lo for _, a, _ in runs], dtype=np.int64)
         rid = np.repeat(np.arange(len(runs)), [b - a for _, a, b in runs])
@@ -1005,14 +1006,14 @@ class DecodeListener(can.Listener):
         good &= (e > 0) & (e <= _SILENCE_SAFE * bound[rid])
         good[fresh] = True
         is_data = np.array([routes[r].kind == _DATA for r, _, _ in runs])
-        if tick and is_data.any():
+        if syncs is not None and is_data.any():
             # tick mode: a data frame is accepted only with a known tick and period, and
             # none may qualify for the stale-tick rule (no SN_Sync since the message's last
             # frame and a silence longer than 7 periods)
-            o = lo - syncs.lo  # type: ignore[union-attr]
-            sn = syncs.sn[o:o + m]  # type: ignore[union-attr]
-            per = syncs.per[o:o + m]  # type: ignore[union-attr]
-            known = syncs.known[o:o + m]  # type: ignore[union-attr]
+            o = lo - syncs.lo
+            sn = syncs.sn[o:o + m]
+            per = syncs.per[o:o + m]
+            known = syncs.known[o:o + m]
             prev_sn = np.empty(m, dtype=np.int64)
             prev_sn[1:] = sn[:-1]
             prev_sn[starts] = [routes[r].sync_n for r, _, _ in runs]
@@ -1067,14 +1068,14 @@ class DecodeListener(can.Listener):
         is_sync = route.kind == _SYNC
         n = len(cl)
         acc = np.zeros(n, dtype=bool)
-        if tick:
-            o = at - syncs.lo  # type: ignore[union-attr]
+        if syncs is not None:   # tick mode
+            o = at - syncs.lo
             if is_sync:
-                sn_sync = syncs.n0 + n_before  # type: ignore[union-attr]
+                sn_sync = syncs.n0 + n_before
             else:
-                snl = syncs.sn[o:o + n].tolist()  # type: ignore[union-attr]
-                perl = syncs.per[o:o + n].tolist()  # type: ignore[union-attr]
-                knownl = syncs.known[o:o + n].tolist()  # type: ignore[union-attr]
+                snl = syncs.sn[o:o + n].tolist()
+                perl = syncs.per[o:o + n].tolist()
+                knownl = syncs.known[o:o + n].tolist()
         for k in range(n):
             ck = cl[k]
             t = tl[k]
@@ -1141,13 +1142,15 @@ class DecodeListener(can.Listener):
                         self._period = period_us * 1e-6
                         break
             else:
+                if syncs is None:   # sync_vals are computed in tick mode only
+                    raise RuntimeError("SN_Sync values without the tick-mode sync state")
                 tk, pus = sync_vals
                 if isinstance(tk, np.ndarray):
                     tk_acc, pus_acc = tk[at], pus[at]
                 else:
                     tk_acc = np.array([int(tk[i]) for i in at.tolist()], dtype=np.int64)
                     pus_acc = np.array([pus[i] for i in at.tolist()], dtype=np.float64)
-                syncs.add(q[at], tk_acc, pus_acc)  # type: ignore[union-attr]
+                syncs.add(q[at], tk_acc, pus_acc)
                 self._sync_tick = int(tk_acc[-1])
                 pos = np.flatnonzero(pus_acc > 0)
                 if pos.size:
@@ -1346,13 +1349,12 @@ def _compile_sync(codec: MessageCodec) -> Callable[[np.ndarray], tuple[np.ndarra
     specs = codec.specs
     if any(s.is_float or s.scale != 1.0 or s.offset != 0.0 for s in specs):
         return None
-    raws = [compile_raw(s, codec.length) for s in specs]
-    if any(r is None for r in raws) or any(s.length > 31 + 1 for s in specs):
+    f_tick, f_per = (compile_raw(s, codec.length) for s in specs)
+    if f_tick is None or f_per is None or any(s.length > 31 + 1 for s in specs):
         return None
-    f_tick, f_per = raws
 
     def values(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return f_tick(rows), f_per(rows)  # type: ignore[misc]
+        return f_tick(rows), f_per(rows)
 
     return values
 
