@@ -10,6 +10,12 @@ suffix    format                      reader / writer
 ``.mf4``  ASAM MDF 4 (CANedge)        python-can ``MF4Reader`` / ``MF4Writer`` (asammdf)
 ========  ==========================  =====================================================
 
+The formats are one table, :data:`LOG_FORMATS` (suffix -> :class:`LogFormat`: name, reader,
+writer, batch reader), which :func:`read_log`, :func:`read_log_arrays` and
+:func:`open_log_writer` dispatch on; :func:`is_can_log` and :func:`log_format` answer
+"is this a CAN log" for other modules, and an unknown suffix is a one-line
+:class:`~suspid.errors.UsageError` listing the known ones.
+
 Suffixes are matched case-insensitively (CANedge writes ``.MF4``). Readers are iterators
 of :class:`can.Message` that never stop on a bad line: an unparseable line is counted in
 :class:`ReadStats` (and reported as rejected ``malformed`` by the decoder) and reading goes
