@@ -22,6 +22,7 @@ All random choices come from one seeded generator, so a run is reproducible.
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from typing import Iterable
 
@@ -82,16 +83,7 @@ class FaultConfig:
                 raise UsageError(f"--fault {spec!r}: expected one of "
                                  f"{', '.join(forms.values())}")
             parts = [a.strip() for a in arg.split(":")]
-
-            def num(s: str, lo: float, hi: float, what: str) -> float:
-                try:
-                    v = float(s)
-                except ValueError:
-                    raise UsageError(f"--fault {spec!r}: {what} must be a number, got {s!r} "
-                                     f"(form {forms[kind]})") from None
-                if not lo <= v <= hi:
-                    raise UsageError(f"--fault {spec!r}: {what} must be in [{lo:g}, {hi:g}], got {v:g}")
-                return v
+            num = functools.partial(_fault_number, spec, forms[kind])
 
             want = {"loss": 1, "bitflip": 1, "burst": 2, "late": 2, "busoff": 2, "stuck": 3}[kind]
             if len(parts) != want:
@@ -114,6 +106,24 @@ class FaultConfig:
                                      f"of {', '.join(sorted(chans))}")
                 cfg.stuck.append((ch, num(parts[1], 0, inf, "start"), num(parts[2], 0, inf, "length")))
         return cfg
+
+
+def _fault_number(spec: str, form: str, s: str, lo: float, hi: float, what: str) -> float:
+    """Parse one number of a ``--fault`` spec, in ``[lo, hi]``.
+
+    Raises
+    ------
+    UsageError
+        Naming the spec, the field, its expected form or range and the value got.
+    """
+    try:
+        v = float(s)
+    except ValueError:
+        raise UsageError(f"--fault {spec!r}: {what} must be a number, got {s!r} "
+                         f"(form {form})") from None
+    if not lo <= v <= hi:
+        raise UsageError(f"--fault {spec!r}: {what} must be in [{lo:g}, {hi:g}], got {v:g}")
+    return v
 
 
 class FaultInjector:

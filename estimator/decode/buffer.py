@@ -26,7 +26,7 @@ from __future__ import annotations
 import threading
 from array import array
 from dataclasses import dataclass, field
-from typing import Callable, Iterable, Sequence
+from typing import Callable, Iterable, Sequence, cast
 
 import numpy as np
 
@@ -143,7 +143,7 @@ class Source:
             "        src.w = i if i < src.cap else src._at_end()",
         ])
         exec(code, ns)  # noqa: S102 - generated from the column count only
-        return ns["push"]  # type: ignore[return-value]
+        return cast("Callable[[float, Sequence[float]], None]", ns["push"])   # exec'd above
 
     def _at_end(self) -> int:
         """The write index reached the end: grow (growable) or wrap to 0; new write index."""
@@ -290,12 +290,10 @@ class Source:
             else:
                 for a, b in spans:
                     part = tv[a:b]
-                    if t_start is None:
-                        keep = part <= t_end
-                    elif t_end is None:
-                        keep = part >= t_start
-                    else:
-                        keep = part >= t_start
+                    keep = np.ones(part.shape, dtype=bool)   # one bound at least is set
+                    if t_start is not None:
+                        keep &= part >= t_start
+                    if t_end is not None:
                         keep &= part <= t_end
                     at = np.flatnonzero(keep)
                     if at.size == b - a:
@@ -487,10 +485,10 @@ class RollingBuffer:
         cells: dict[str, np.ndarray] = {}
         filled = np.zeros(n, dtype=bool)
         for name, (t, v) in snaps.items():
-            k = np.rint((t - t0) / dt).astype(np.int64)
-            ok = (k >= 0) & (k < n)
+            cell = np.rint((t - t0) / dt).astype(np.int64)
+            ok = (cell >= 0) & (cell < n)
             whole = bool(ok.all())   # always, as t0 <= t <= t_last; kept as a guard
-            kk = k if whole else k[ok]
+            kk = cell if whole else cell[ok]
             cells[name] = kk
             stamps[kk] = t if whole else t[ok]
             if kk.size:

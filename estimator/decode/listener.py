@@ -84,7 +84,7 @@ from bisect import bisect_left
 from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Literal, Sequence
+from typing import Any, Callable, Literal, Sequence, Union, cast
 
 import can
 import numpy as np
@@ -128,6 +128,27 @@ _DATA, _SYNC, _STATUS, _ALERT = range(4)
 _O_UNKNOWN, _O_IGNORED, _O_DLC, _O_CRC = 1, 2, 3, 4
 
 
+#: a frame payload (python-can gives ``bytearray``, the batch path ``bytes``)
+Payload = Union[bytes, bytearray]
+#: payload -> decoded values
+Unpack = Callable[[Payload], tuple]
+
+
+def _any_buffer(unpack: Callable[[bytes], tuple]) -> Unpack:
+    """A :class:`MessageCodec` unpacker as a payload decoder.
+
+    The codec types its compiled unpackers for ``bytes``; they unpack with ``struct`` (or
+    cantools), which take any buffer, ``bytearray`` included.
+    """
+    return cast(Unpack, unpack)
+
+
+def _decoded_elsewhere(data: Payload) -> tuple:
+    """``decode`` of routes never decoded by it: data messages (``row``/``vrow``) and
+    SUSPID_Alert (:func:`~suspid.can.codec.decode_alert`)."""
+    return ()
+
+
 @dataclass(eq=False)
 class _Route:
     """How to validate and store one CAN ID."""
@@ -135,10 +156,10 @@ class _Route:
     name: str
     kind: int
     dlc: int
-    check: Callable[[bytes], bool] | None   # E2E CRC checker, None if not protected
-    decode: Callable[[bytes], tuple]         # special messages
+    check: Callable[[Payload], bool] | None   # E2E CRC checker, None if not protected
+    decode: Unpack                             # special messages
     source: Source | None = None
-    row: Callable[[bytes], tuple] | None = None   # data messages: payload -> channel values
+    row: Unpack | None = None   # data messages: payload -> channel values
     last_c: int = -1
     last_ts: float = 0.0
     period: float = 0.0
@@ -151,7 +172,7 @@ class _Route:
     vsync: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None  # Tick, PeriodUs
 
 
-def _compile_row(msg: Message, maps: Sequence[SignalMapping]) -> Callable[[bytes], tuple]:
+def _compile_row(msg: Message, maps: Sequence[SignalMapping]) -> Unpack:
     """``row(payload) -> (value per mapping, ...)``: decode, validity bit, scale and offset.
 
     The values come from one :class:`MessageCodec` decode (a ``struct`` unpack for our DBC);
@@ -181,7 +202,7 @@ def _compile_row(msg: Message, maps: Sequence[SignalMapping]) -> Callable[[bytes
             "    v = _dec(data)\n"
             f"    return ({', '.join(terms)},)\n")
     exec(code, ns)  # noqa: S102 - generated from the DBC layout and numeric map entries
-    return ns["_row"]  # type: ignore[return-value]
+    return cast(Unpack, ns["_row"])   # defined by the exec above
 
 
 @dataclass
@@ -323,9 +344,11 @@ class DecodeListener(can.Listener):
         if not self._sync_ids:
             self._auto = False   # no SN_Sync in the DBC: the timestamps are the only clock
         if batch_size == 0:
+            # the per-frame entry bound once, not dispatched per frame (mypy forbids assigning
+            # to a method; the signatures are the same)
             self.on_message_received = self._on_message_now  # type: ignore[method-assign]
         elif on_alert is None:
-            self.on_message_received = self._queue  # type: ignore[method-assign]
+            self.on_message_received = self._queue  # type: ignore[method-assign]  # as above
 
     # ---- setup -----------------------------------------------------------------------
     def _key(self, frame_id: int, extended: bool) -> int:
@@ -342,7 +365,7 @@ class DecodeListener(can.Listener):
         for name, maps in per_msg.items():
             msg = db.get_message_by_name(name)
             src = self._buffer.source(name, [m.channel for m in maps])
-            route = self._add_route(msg, _DATA, bytes, src, _compile_row(msg, maps))
+            route = self._add_route(msg, _DATA, _decoded_elsewhere, src, _compile_row(msg, maps))
             route.vrow = compile_vector_row(msg, maps)
         for special, kind in ((SYNC_MESSAGE, _SYNC), (STATUS_MESSAGE, _STATUS),
                               (ALERT_MESSAGE, _ALERT)):
@@ -354,15 +377,15 @@ class DecodeListener(can.Listener):
                 continue
             if kind == _SYNC:
                 codec = MessageCodec(msg, ["Tick", "PeriodUs"])
-                dec = codec.decode
+                dec = _any_buffer(codec.decode)
                 route = self._add_route(msg, kind, dec)
                 route.vsync = _compile_sync(codec)
                 continue
             if kind == _STATUS:
-                dec = MessageCodec(msg, ["State", "SampleRate", "FaultFlags", "BusOffCount",
-                                         "SensorSet"]).decode
+                dec = _any_buffer(MessageCodec(msg, ["State", "SampleRate", "FaultFlags",
+                                                     "BusOffCount", "SensorSet"]).decode)
             else:
-                dec = bytes  # decoded with cantools (multiplexed, rare)
+                dec = _decoded_elsewhere  # decode_alert, with cantools (multiplexed, rare)
             self._add_route(msg, kind, dec)
         if self.time_source == "tick" and not any(r.kind == _SYNC for r in self._routes.values()):
             raise UsageError(f"time_source 'tick' needs message {SYNC_MESSAGE} in the DBC "
@@ -382,9 +405,8 @@ class DecodeListener(can.Listener):
         self._rstart = np.array([r.start_reg for r in rl], dtype=np.uint8)
         self._rdata_e2e = np.array([r.kind == _DATA and r.check is not None for r in rl])
 
-    def _add_route(self, msg: Message, kind: int, decode: Callable[[bytes], tuple],
-                   source: Source | None = None,
-                   row: Callable[[bytes], tuple] | None = None) -> _Route:
+    def _add_route(self, msg: Message, kind: int, decode: Unpack,
+                   source: Source | None = None, row: Unpack | None = None) -> _Route:
         check = make_e2e_checker(msg.frame_id, msg.length) if is_e2e(msg) else None
         route = _Route(msg.name, kind, msg.length, check, decode, source, row)
         route.key = self._key(msg.frame_id, msg.is_extended_frame)
@@ -631,7 +653,9 @@ class DecodeListener(can.Listener):
                     rejected["no_sync"] += 1
                     return
                 # ts is the data time matched through the counter above
-            route.source.push(ts, route.row(data))  # type: ignore[union-attr, misc]
+            if route.source is None or route.row is None:   # every _DATA route has both
+                raise RuntimeError(f"data route {route.name} without a source or decoder")
+            route.source.push(ts, route.row(data))
         elif not self._special(route, data, ts):
             return
         route.accepted += 1
@@ -940,9 +964,10 @@ class DecodeListener(can.Listener):
                 self._rejected["no_sync"] += b - a
                 continue
             b8 = rows[a:b].view(np.uint8).reshape(b - a, 8)
-            vals = self._sync_values(route, b8) if syncs is not None and \
+            sync_vals = self._sync_values(route, b8) if syncs is not None and \
                 route.kind == _SYNC else None
-            self._accepted(route, b8, arr[a:b], np.ones(b - a, dtype=bool), vals, syncs, h[a:b])
+            self._accepted(route, b8, arr[a:b], np.ones(b - a, dtype=bool), sync_vals, syncs,
+                           h[a:b])
 
     def _runs(self, runs: list[tuple[int, int, int]], rows: np.ndarray, arr: np.ndarray,
               tsd: np.ndarray, lo: int, syncs: "_SyncTrack | None") -> np.ndarray:
@@ -959,7 +984,6 @@ class DecodeListener(can.Listener):
         hi = runs[-1][2]
         m = hi - lo
         routes = self._route_list
-        tick = syncs is not None
         c = (rows[lo:hi] >> np.uint64(8) & np.uint64(0x0F)).astype(np.int64)
         starts = np.array([a - lo for _, a, _ in runs], dtype=np.int64)
         rid = np.repeat(np.arange(len(runs)), [b - a for _, a, b in runs])
@@ -982,14 +1006,14 @@ class DecodeListener(can.Listener):
         good &= (e > 0) & (e <= _SILENCE_SAFE * bound[rid])
         good[fresh] = True
         is_data = np.array([routes[r].kind == _DATA for r, _, _ in runs])
-        if tick and is_data.any():
+        if syncs is not None and is_data.any():
             # tick mode: a data frame is accepted only with a known tick and period, and
             # none may qualify for the stale-tick rule (no SN_Sync since the message's last
             # frame and a silence longer than 7 periods)
-            o = lo - syncs.lo  # type: ignore[union-attr]
-            sn = syncs.sn[o:o + m]  # type: ignore[union-attr]
-            per = syncs.per[o:o + m]  # type: ignore[union-attr]
-            known = syncs.known[o:o + m]  # type: ignore[union-attr]
+            o = lo - syncs.lo
+            sn = syncs.sn[o:o + m]
+            per = syncs.per[o:o + m]
+            known = syncs.known[o:o + m]
             prev_sn = np.empty(m, dtype=np.int64)
             prev_sn[1:] = sn[:-1]
             prev_sn[starts] = [routes[r].sync_n for r, _, _ in runs]
@@ -1020,10 +1044,10 @@ class DecodeListener(can.Listener):
                 route.period = p
                 route.last_c = int(c[fb - 1])
                 route.last_ts = float(tsd[fb - 1])
-                if tick:
+                if syncs is not None:   # tick mode
                     route.last_arrival = float(arr[lo + fb - 1])
                     route.sync_n = syncs.n0 + n_fast - 1 if route.kind == _SYNC else \
-                        int(syncs.sn[lo + fb - 1 - syncs.lo])  # type: ignore[union-attr]
+                        int(syncs.sn[lo + fb - 1 - syncs.lo])
             if fb < s1:
                 acc[fb:s1] = self._route_rest(route, c[fb:s1].tolist(), tsd[fb:s1].tolist(),
                                               arr[lo + fb:lo + s1].tolist(), n_fast,
@@ -1044,14 +1068,14 @@ class DecodeListener(can.Listener):
         is_sync = route.kind == _SYNC
         n = len(cl)
         acc = np.zeros(n, dtype=bool)
-        if tick:
-            o = at - syncs.lo  # type: ignore[union-attr]
+        if syncs is not None:   # tick mode
+            o = at - syncs.lo
             if is_sync:
-                sn_sync = syncs.n0 + n_before  # type: ignore[union-attr]
+                sn_sync = syncs.n0 + n_before
             else:
-                snl = syncs.sn[o:o + n].tolist()  # type: ignore[union-attr]
-                perl = syncs.per[o:o + n].tolist()  # type: ignore[union-attr]
-                knownl = syncs.known[o:o + n].tolist()  # type: ignore[union-attr]
+                snl = syncs.sn[o:o + n].tolist()
+                perl = syncs.per[o:o + n].tolist()
+                knownl = syncs.known[o:o + n].tolist()
         for k in range(n):
             ck = cl[k]
             t = tl[k]
@@ -1095,6 +1119,8 @@ class DecodeListener(can.Listener):
             return
         kind = route.kind
         if kind == _DATA:
+            if route.source is None or route.row is None:   # every _DATA route has both
+                raise RuntimeError(f"data route {route.name} without a source or decoder")
             if n_acc < acc.size:
                 rows = rows.view(np.uint64).reshape(-1)[acc].view(np.uint8).reshape(n_acc, 8)
                 tsd = tsd[acc]
@@ -1102,9 +1128,9 @@ class DecodeListener(can.Listener):
                 vals = route.vrow(rows)
             else:
                 L = route.dlc
-                vals = np.array([route.row(r.tobytes()) for r in rows[:, :L]],  # type: ignore[misc]
+                vals = np.array([route.row(r.tobytes()) for r in rows[:, :L]],
                                 dtype=np.float64).reshape(n_acc, -1)
-            route.source.push_many(tsd, vals)  # type: ignore[union-attr]
+            route.source.push_many(tsd, vals)
         elif kind == _SYNC:
             at = np.flatnonzero(acc)
             if sync_vals is None:   # timestamp mode: only the last frames matter
@@ -1116,13 +1142,15 @@ class DecodeListener(can.Listener):
                         self._period = period_us * 1e-6
                         break
             else:
+                if syncs is None:   # sync_vals are computed in tick mode only
+                    raise RuntimeError("SN_Sync values without the tick-mode sync state")
                 tk, pus = sync_vals
                 if isinstance(tk, np.ndarray):
                     tk_acc, pus_acc = tk[at], pus[at]
                 else:
                     tk_acc = np.array([int(tk[i]) for i in at.tolist()], dtype=np.int64)
                     pus_acc = np.array([pus[i] for i in at.tolist()], dtype=np.float64)
-                syncs.add(q[at], tk_acc, pus_acc)  # type: ignore[union-attr]
+                syncs.add(q[at], tk_acc, pus_acc)
                 self._sync_tick = int(tk_acc[-1])
                 pos = np.flatnonzero(pus_acc > 0)
                 if pos.size:
@@ -1321,13 +1349,12 @@ def _compile_sync(codec: MessageCodec) -> Callable[[np.ndarray], tuple[np.ndarra
     specs = codec.specs
     if any(s.is_float or s.scale != 1.0 or s.offset != 0.0 for s in specs):
         return None
-    raws = [compile_raw(s, codec.length) for s in specs]
-    if any(r is None for r in raws) or any(s.length > 31 + 1 for s in specs):
+    f_tick, f_per = (compile_raw(s, codec.length) for s in specs)
+    if f_tick is None or f_per is None or any(s.length > 31 + 1 for s in specs):
         return None
-    f_tick, f_per = raws
 
     def values(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return f_tick(rows), f_per(rows)  # type: ignore[misc]
+        return f_tick(rows), f_per(rows)
 
     return values
 

@@ -14,7 +14,7 @@ bridged by linear interpolation -- reported in ``warnings`` with their count, ne
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Literal
+from typing import Literal, cast
 
 import numpy as np
 
@@ -135,7 +135,8 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
         warnings.append(f"{path}: timestamps jumped back {listener.time_resyncs} time(s); "
                         "the time base was re-anchored")
     if not any(s.n for s in listener.buffer.sources.values()):
-        rej = {k: v for k, v in frame_stats["rejected"].items() if v}  # type: ignore[union-attr]
+        rejected = cast("dict[str, int]", frame_stats["rejected"])   # reason -> count
+        rej = {k: v for k, v in rejected.items() if v}
         raise InputError(f"{path}: no accepted frame carries a channel of model {m.name} "
                          f"({stats.frames} frames read, {frame_stats['accepted']} accepted, "
                          f"rejected {rej or 'none'}; map: "

@@ -16,12 +16,23 @@ from __future__ import annotations
 import time
 from dataclasses import fields
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator, Optional
+from typing import Any, Callable, Iterable, Iterator, Optional, Protocol, runtime_checkable
 
 import can
 import numpy as np
 
 from suspid.can.logs import FrameArrays, ReadStats, read_log, read_log_arrays
+
+
+@runtime_checkable
+class _TimeBaseChooser(Protocol):
+    """A listener that picks its time base from the first frames (``DecodeListener``)."""
+
+    time_source_requested: str
+
+    def choose_time_base(self, ids: Any, final: bool = False) -> Any: ...
+
+    def sync_first_index(self, ids: Any) -> int: ...
 
 
 def feed(listener: can.Listener, messages: Iterable[can.Message]) -> int:
@@ -84,14 +95,15 @@ def feed_log(listener: can.Listener, path: str | Path, stats: Optional[ReadStats
         if finish is not None:
             finish()
         return n
-    settle = getattr(listener, "choose_time_base", None)
+    chooser = listener if isinstance(listener, _TimeBaseChooser) else None
     for fa in read_log_arrays(path, stats):
         size = len(fa)
-        if settle is not None:
-            settle(fa.arbitration_id, final=True)   # "auto": decided on the first chunk
-            settle = None
-            k = listener.sync_first_index(fa.arbitration_id) \
-                if getattr(listener, "time_source_requested", "") == "auto" else -1
+        if chooser is not None:
+            # "auto": decided on the first chunk
+            chooser.choose_time_base(fa.arbitration_id, final=True)
+            k = chooser.sync_first_index(fa.arbitration_id) \
+                if chooser.time_source_requested == "auto" else -1
+            chooser = None
             if k > 0:
                 fa = sync_to_front(fa, k)
         if poll is None:

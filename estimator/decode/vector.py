@@ -120,8 +120,9 @@ def compile_vector_row(msg: Message, maps: Sequence[SignalMapping]) -> RowsFn | 
     names = list(dict.fromkeys(m.signal for m in maps))
     codec = MessageCodec(msg, names)
     specs = codec.specs
-    raws = [compile_raw(s, msg.length) for s in specs]
-    if any(r is None for r in raws):
+    maybe = [compile_raw(s, msg.length) for s in specs]
+    raws = [r for r in maybe if r is not None]
+    if len(raws) < len(maybe):
         return None
     k = len(specs)
     # raw values: one view for all signals when they are integers of one width at offsets
@@ -185,7 +186,7 @@ def compile_vector_row(msg: Message, maps: Sequence[SignalMapping]) -> RowsFn | 
         else:
             v = np.empty((m, k))
             for j, f in enumerate(raws):
-                v[:, j] = f(rows)  # type: ignore[misc]
+                v[:, j] = f(rows)
             if any_dbc_scale:
                 v *= dbc_scale
         if any_dbc_off:

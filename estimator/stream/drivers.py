@@ -20,6 +20,7 @@ from typing import Any, Callable, Iterable, Mapping
 import can
 import numpy as np
 
+from estimator.decode.replay import feed_log
 from estimator.stream.accumulator import WindowAccumulator
 from suspid.models.base import FloatArray
 
@@ -225,8 +226,6 @@ def replay_log(driver: CanWindowDriver, path: Any, stats: Any = None) -> int:
     stats : ReadStats, optional
         Filled with frames read and lines skipped.
     """
-    from estimator.decode.replay import feed_log
-
     fed = driver.frames + 1   # frames fed when poll() is called (first after one frame)
 
     def poll() -> int:

@@ -10,6 +10,12 @@ suffix    format                      reader / writer
 ``.mf4``  ASAM MDF 4 (CANedge)        python-can ``MF4Reader`` / ``MF4Writer`` (asammdf)
 ========  ==========================  =====================================================
 
+The formats are one table, :data:`LOG_FORMATS` (suffix -> :class:`LogFormat`: name, reader,
+writer, batch reader), which :func:`read_log`, :func:`read_log_arrays` and
+:func:`open_log_writer` dispatch on; :func:`is_can_log` and :func:`log_format` answer
+"is this a CAN log" for other modules, and an unknown suffix is a one-line
+:class:`~suspid.errors.UsageError` listing the known ones.
+
 Suffixes are matched case-insensitively (CANedge writes ``.MF4``). Readers are iterators
 of :class:`can.Message` that never stop on a bad line: an unparseable line is counted in
 :class:`ReadStats` (and reported as rejected ``malformed`` by the decoder) and reading goes
@@ -30,28 +36,20 @@ exactly (python-can's would drop the sub-millisecond part of the first timestamp
 """
 from __future__ import annotations
 
+import locale
 import logging
 import math
 from bisect import bisect_left
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
-from typing import Iterable, Iterator, Optional, Sequence
+from typing import Callable, Iterable, Iterator, Optional, Sequence, TextIO, cast
 
 import can
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from suspid.errors import InputError, UsageError
-
-#: suffix -> human name, for messages and docs
-FORMATS: dict[str, str] = {
-    ".log": "candump -L",
-    ".asc": "Vector ASC",
-    ".blf": "Vector BLF",
-    ".trc": "PEAK TRC",
-    ".mf4": "ASAM MDF4",
-}
 
 _CAN_ERR_FLAG = 0x20000000
 _CAN_EFF_FLAG = 0x80000000
@@ -66,8 +64,8 @@ def log_format(path: str | Path, option: str = "log") -> str:
         For a suffix that is not a known CAN log format, naming the known ones.
     """
     suf = Path(path).suffix.lower()
-    if suf not in FORMATS:
-        known = ", ".join(f"{s} ({n})" for s, n in FORMATS.items())
+    if suf not in LOG_FORMATS:
+        known = ", ".join(f"{s} ({f.name})" for s, f in LOG_FORMATS.items())
         raise UsageError(f"{path}: unknown {option} format {Path(path).suffix or '(no suffix)'!r}; "
                          f"expected one of {known}")
     return suf
@@ -81,9 +79,11 @@ def _open_log(path: str | Path, stats: Optional["ReadStats"]) -> tuple[Path, str
         raise InputError(f"{p}: no such CAN log file")
     return p, suf, (stats if stats is not None else ReadStats())
 
+
 def is_can_log(path: str | Path) -> bool:
-    """``True`` if the path's suffix names a CAN log format (case-insensitive)."""
-    return Path(path).suffix.lower() in FORMATS
+    """``True`` if the path's suffix names a CAN log format of :data:`LOG_FORMATS`
+    (case-insensitive)."""
+    return Path(path).suffix.lower() in LOG_FORMATS
 
 
 @dataclass
@@ -114,7 +114,11 @@ class ReadStats:
             self.examples.append(f"{where}: {' '.join(reason.split())[:120]}")
 
 
-def _compile_fast_message() -> "object":
+#: ``(timestamp, arbitration_id, is_extended_id, data, channel, is_rx) -> can.Message``
+FastMessage = Callable[[float, int, bool, bytearray, str, bool], can.Message]
+
+
+def _compile_fast_message() -> FastMessage:
     """A constructor of classic data frames that skips ``can.Message.__init__``'s checks.
 
     ``Message.__init__`` validates and converts every argument (~1.2 µs); a log parser
@@ -141,7 +145,7 @@ def _compile_fast_message() -> "object":
         lines.append(f"    m.{slot} = _d_{slot}")
     lines.append("    return m")
     exec("\n".join(lines), ns)  # noqa: S102 - generated from python-can's slot names
-    return ns["_fast_message"]
+    return cast(FastMessage, ns["_fast_message"])   # exec'd above
 
 
 _fast_message = _compile_fast_message()
@@ -215,7 +219,7 @@ def _candump_messages(path: Path, numbered: Iterable[tuple[int, str]],
                 yield can.Message(timestamp=ts, is_error_frame=True, channel=parts[1],
                                   check=False)
                 continue
-            yield fast(ts, can_id, ext, payload, parts[1], is_rx)  # type: ignore[operator]
+            yield fast(ts, can_id, ext, payload, parts[1], is_rx)
     finally:
         stats.frames += frames
 
@@ -280,7 +284,7 @@ class FrameArrays:
         ext = np.frombuffer(bytes([bool(m.is_extended_id) for m in messages]), dtype=bool)
         odd = [bool(m.is_error_frame or m.is_remote_frame) for m in messages]
         ft = np.frombuffer(bytes(odd), dtype=bool) if True in odd else np.zeros(n, dtype=bool)
-        payloads = [m.data for m in messages]
+        payloads: list[bytes | bytearray] = [m.data for m in messages]
         lens = np.array(list(map(len, payloads)), dtype=np.int64).reshape(n)
         try:
             joined = b"".join(payloads)
@@ -654,8 +658,9 @@ def read_log_arrays(path: str | Path, stats: Optional[ReadStats] = None, *,
     Same checks, errors and :class:`ReadStats` as :func:`read_log`.
     """
     p, suf, st = _open_log(path, stats)
-    if suf == ".log":
-        return read_candump_arrays(p, st)
+    batches = LOG_FORMATS[suf].read_arrays
+    if batches is not None:
+        return batches(p, st)
     return _message_batches(read_log(p, st), chunk)
 
 
@@ -673,7 +678,7 @@ def _message_batches(messages: Iterable[can.Message], chunk: int) -> Iterator[Fr
 class _LineCounter:
     """File wrapper counting the lines a python-can text reader consumes."""
 
-    def __init__(self, fh) -> None:  # type: ignore[no-untyped-def]
+    def __init__(self, fh: TextIO) -> None:
         self.fh = fh
         self.lineno = 0
 
@@ -689,21 +694,35 @@ class _LineCounter:
         return getattr(self.fh, name)
 
 
-def _read_text_resumable(path: Path, reader: can.io.generic.MessageReader,
-                         stats: ReadStats) -> Iterator[can.Message]:
-    """Run a python-can text reader, restarting it after a line that raises.
+def _open_text(path: Path) -> _LineCounter:
+    """A text log opened as python-can would open it, its lines counted."""
+    try:
+        fh = path.open("r", encoding=locale.getpreferredencoding(False))
+    except OSError as exc:
+        raise InputError(f"{path}: cannot open CAN log: {exc.strerror}") from None
+    return _LineCounter(fh)
+
+
+def _skip_header(*_args: object, **_kwargs: object) -> None:
+    """Stands in for a python-can text reader's header parser once the header is read."""
+    return None
+
+
+def _read_text_resumable(path: Path, reader: can.ASCReader | can.TRCReader,
+                         counter: _LineCounter, stats: ReadStats) -> Iterator[can.Message]:
+    """Run a python-can text reader on ``counter``, restarting it after a line that raises.
 
     python-can's ASC/TRC readers parse the header inside ``__iter__`` and die on the
     first bad data line. The reader keeps its state (base, start time, version) in
     ``self``; after an exception the file is positioned after the bad line, so a new
-    ``__iter__`` with the header step disabled resumes exactly there.
+    ``__iter__`` with the header step disabled resumes exactly there. python-can has no
+    public way to resume a reader or to skip its header, hence the instance patch of
+    ``_extract_header`` below (tested in ``tests/can/test_logs.py`` on damaged logs).
     """
-    counter = _LineCounter(reader.file)
-    reader.file = counter  # type: ignore[assignment]
     first = True
     while True:
         try:
-            for msg in type(reader).__iter__(reader):
+            for msg in reader:   # a new __iter__ each time (a generator method)
                 stats.frames += 1
                 yield msg
             return
@@ -712,7 +731,38 @@ def _read_text_resumable(path: Path, reader: can.io.generic.MessageReader,
         if first:
             first = False
             # header already parsed (state kept in the reader): do not consume lines again
-            reader._extract_header = lambda *a, **k: None  # type: ignore[method-assign]
+            # no public API (see above); ASC's parser returns None, TRC's the first data line
+            reader._extract_header = _skip_header  # type: ignore[method-assign, assignment]
+
+
+def _read_asc(path: Path, stats: ReadStats) -> Iterator[can.Message]:
+    counter = _open_text(path)
+    try:
+        reader = can.ASCReader(cast(TextIO, counter), relative_timestamp=False)   # duck-typed
+    except BaseException:
+        counter.fh.close()
+        raise
+    return _read_text_resumable(path, reader, counter, stats)
+
+
+def _read_trc(path: Path, stats: ReadStats) -> Iterator[can.Message]:
+    # the TRC reader logs a warning per line it cannot parse; we count them instead
+    logging.getLogger("can.io.trc").setLevel(logging.ERROR)
+    counter = _open_text(path)
+    try:
+        reader = can.TRCReader(cast(TextIO, counter))   # duck-typed text stream
+    except BaseException:
+        counter.fh.close()
+        raise
+    return _read_text_resumable(path, reader, counter, stats)
+
+
+def _read_blf(path: Path, stats: ReadStats) -> Iterator[can.Message]:
+    return _read_binary(path, can.BLFReader(str(path)), stats)
+
+
+def _read_mf4(path: Path, stats: ReadStats) -> Iterator[can.Message]:
+    return _read_binary(path, can.MF4Reader(str(path)), stats)
 
 
 def _read_binary(path: Path, reader: can.io.generic.MessageReader,
@@ -754,27 +804,16 @@ def read_log(path: str | Path, stats: Optional[ReadStats] = None) -> Iterator[ca
         Unknown suffix.
     """
     p, suf, st = _open_log(path, stats)
-    if suf == ".log":
-        return _read_candump(p, st)
+    fmt = LOG_FORMATS[suf]
     try:
-        if suf == ".asc":
-            reader = can.ASCReader(str(p), relative_timestamp=False)
-            return _read_text_resumable(p, reader, st)
-        if suf == ".trc":
-            # the TRC reader logs a warning per line it cannot parse; we count them instead
-            logging.getLogger("can.io.trc").setLevel(logging.ERROR)
-            reader = can.TRCReader(str(p))
-            return _read_text_resumable(p, reader, st)
-        if suf == ".blf":
-            reader = can.BLFReader(str(p))
-        else:
-            reader = can.MF4Reader(str(p))
+        return fmt.read(p, st)
+    except InputError:
+        raise
     except ImportError as exc:  # asammdf missing
-        raise InputError(f"{p}: reading {FORMATS[suf]} needs an extra package: {exc}") from None
+        raise InputError(f"{p}: reading {fmt.name} needs an extra package: {exc}") from None
     except Exception as exc:
-        raise InputError(f"{p}: not a readable {FORMATS[suf]} file: {type(exc).__name__}: "
+        raise InputError(f"{p}: not a readable {fmt.name} file: {type(exc).__name__}: "
                          f"{' '.join(str(exc).split())[:160]}") from None
-    return _read_binary(p, reader, st)
 
 
 class _ASCWriter(can.ASCWriter):
@@ -819,18 +858,58 @@ def open_log_writer(path: str | Path) -> can.io.generic.MessageWriter:
         The file cannot be created.
     """
     p = Path(path)
-    suf = log_format(p, "output log")
+    fmt = LOG_FORMATS[log_format(p, "output log")]
     try:
-        if suf == ".log":
-            return can.CanutilsLogWriter(str(p), channel="can0")
-        if suf == ".asc":
-            return _ASCWriter(str(p))
-        if suf == ".blf":
-            return can.BLFWriter(str(p))
-        if suf == ".trc":
-            return can.TRCWriter(str(p))
-        return can.MF4Writer(str(p))
+        return fmt.write(str(p))
     except ImportError as exc:
-        raise InputError(f"{p}: writing {FORMATS[suf]} needs an extra package: {exc}") from None
+        raise InputError(f"{p}: writing {fmt.name} needs an extra package: {exc}") from None
     except OSError as exc:
         raise InputError(f"{p}: cannot create log file: {exc.strerror or exc}") from None
+
+
+# ---- the registry ----------------------------------------------------------------------------
+def _candump_writer(path: str) -> can.io.generic.MessageWriter:
+    return can.CanutilsLogWriter(path, channel="can0")
+
+
+def _candump_batches(path: Path, stats: ReadStats) -> Iterator[FrameArrays]:
+    return read_candump_arrays(path, stats)
+
+
+@dataclass(frozen=True)
+class LogFormat:
+    """One CAN log format of :data:`LOG_FORMATS`.
+
+    Attributes
+    ----------
+    name : str
+        Human name, for messages and docs.
+    read : callable
+        ``read(path, stats) -> iterator of can.Message``, tolerant (see the module doc); may
+        raise on a file it cannot open as this format (:func:`read_log` reports it).
+    write : callable
+        ``write(path) -> python-can writer``.
+    read_arrays : callable or None
+        ``read_arrays(path, stats) -> iterator of FrameArrays`` where the format has a batch
+        parser; ``None``: :func:`read_log_arrays` converts the messages of ``read``.
+    """
+
+    name: str
+    read: Callable[[Path, ReadStats], Iterator[can.Message]]
+    write: Callable[[str], can.io.generic.MessageWriter]
+    read_arrays: Optional[Callable[[Path, ReadStats], Iterator[FrameArrays]]] = None
+
+
+#: suffix (lower case) -> format: the one table choosing readers and writers, as python-can's
+#: ``can.io`` does with its reader and writer tables. Use :func:`is_can_log` or
+#: :func:`log_format` rather than a list of suffixes of your own.
+LOG_FORMATS: dict[str, LogFormat] = {
+    ".log": LogFormat("candump -L", _read_candump, _candump_writer, _candump_batches),
+    ".asc": LogFormat("Vector ASC", _read_asc, _ASCWriter),
+    ".blf": LogFormat("Vector BLF", _read_blf, can.BLFWriter),
+    ".trc": LogFormat("PEAK TRC", _read_trc, can.TRCWriter),
+    ".mf4": LogFormat("ASAM MDF4", _read_mf4, can.MF4Writer),
+}
+
+#: suffix -> human name (derived from :data:`LOG_FORMATS`)
+FORMATS: dict[str, str] = {suf: fmt.name for suf, fmt in LOG_FORMATS.items()}

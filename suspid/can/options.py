@@ -36,7 +36,8 @@ def add_can_arguments(parser: argparse.ArgumentParser, dbc: bool = False) -> Non
 
 def can_inputs(args: argparse.Namespace) -> "tuple[Path | None, SignalMap | None]":
     """``(dbc_path, signal_map)`` from parsed options (the map file's ``dbc`` if no ``--dbc``)."""
-    from suspid.can.signal_map import SignalMap, merge_maps
+    # lazy: suspid.can.signal_map imports cantools (slow), and the parsers must build without it
+    from suspid.can.signal_map import SignalMap, merge_maps  # noqa: PLC0415
 
     maps = []
     if getattr(args, "signal_map_file", None):

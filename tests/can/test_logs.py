@@ -6,7 +6,10 @@ import pytest
 
 from estimator.decode import load_log_as_measurement
 from firmware_sim.corrupt import corrupt_candump
-from suspid.can.logs import ReadStats, is_can_log, log_format, read_log
+import can
+
+from suspid.can.logs import (FORMATS, LOG_FORMATS, ReadStats, is_can_log, log_format,
+                              open_log_writer, read_log, read_log_arrays)
 from suspid.cli import main
 from suspid.errors import UsageError
 from suspid.io.csvio import read_measurement
@@ -129,6 +132,50 @@ def test_format_registry():
     assert log_format("a/B.MF4") == ".mf4" and is_can_log("x.BLF") and not is_can_log("x.csv")
     with pytest.raises(UsageError, match=r"\.log \(candump -L\)"):
         log_format("x.pcap")
+
+
+def test_registry_is_the_one_suffix_table():
+    assert list(LOG_FORMATS) == [".log", ".asc", ".blf", ".trc", ".mf4"]
+    assert FORMATS == {s: f.name for s, f in LOG_FORMATS.items()}
+    assert all(is_can_log(f"dir/X{s.upper()}") for s in LOG_FORMATS)
+    with pytest.raises(UsageError) as err:
+        log_format("x.pcap", "--log")
+    msg = str(err.value)
+    assert "\n" not in msg and "'.pcap'" in msg and "--log" in msg
+    assert all(f"{s} ({f.name})" in msg for s, f in LOG_FORMATS.items())
+
+
+@pytest.mark.parametrize("suffix", list(LOG_FORMATS))
+def test_registry_writer_and_readers_round_trip(tmp_path, suffix):
+    path = tmp_path / f"f{suffix}"
+    sent = [can.Message(timestamp=100.0 + 0.01 * k, arbitration_id=0x100 + k,
+                        data=bytes([k, 0xA5, k ^ 0xFF]), is_extended_id=False) for k in range(5)]
+    with open_log_writer(path) as w:
+        for m in sent:
+            w.on_message_received(m)
+    st = ReadStats()
+    got = list(read_log(path, st))
+    assert st.frames == 5 and st.malformed == 0
+    assert [m.arbitration_id for m in got] == [m.arbitration_id for m in sent]
+    assert [bytes(m.data) for m in got] == [bytes(m.data) for m in sent]
+    fa = list(read_log_arrays(path))
+    assert sum(len(b) for b in fa) == 5
+    assert np.concatenate([b.arbitration_id for b in fa]).tolist() == [0x100 + k for k in range(5)]
+
+
+def test_trc_reader_resumes_after_a_bad_line(tmp_path):
+    path = tmp_path / "f.trc"
+    with open_log_writer(path) as w:
+        for k in range(6):
+            w.on_message_received(can.Message(timestamp=1.0 + 0.01 * k, arbitration_id=0x200,
+                                              data=bytes([k] * 8), is_extended_id=False))
+    lines = path.read_text().splitlines()
+    i = [k for k, line in enumerate(lines) if not line.startswith(";") and line.strip()][2]
+    lines[i] = lines[i].replace(lines[i].split()[-1], "ZZ")   # a non-hex last byte
+    path.write_text("\n".join(lines) + "\n")
+    st = ReadStats()
+    got = list(read_log(path, st))
+    assert len(got) == 5 and st.malformed == 1 and st.examples[0].startswith(f"{path}:{i + 1}")
 
 
 @pytest.mark.parametrize("args, fragment", [
