@@ -6,11 +6,8 @@ import sys
 
 from suspid.can.dbc import load_dbc
 from suspid.can.encoder import encode_csv
+from suspid.can.logs import FORMATS
 from suspid.models import MODELS
-
-#: log formats by suffix (kept here so ``suspid --help`` does not import python-can)
-_FORMATS = {".log": "candump -L", ".asc": "Vector ASC", ".blf": "Vector BLF", ".trc": "PEAK TRC",
-            ".mf4": "ASAM MDF4"}
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -22,7 +19,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "model's message set (signals quantized as the DBC defines them, E2E counter and "
         "CRC), SN_Status at 10 Hz. Every frame is stamped with the row's t (+ --t0), so "
         "times read back from the log equal the CSV's. Log format by --out suffix: "
-        + ", ".join(f"{s} ({n})" for s, n in _FORMATS.items()) + ".")
+        + ", ".join(f"{s} ({n})" for s, n in FORMATS.items()) + ".")
     p.add_argument("--input", required=True, metavar="CSV", help="measurement CSV (see CONTRACT)")
     p.add_argument("--dbc", metavar="PATH", help="DBC (default: suspid's dbc/suspension.dbc)")
     p.add_argument("--out", required=True, metavar="PATH", help="CAN log to write")
