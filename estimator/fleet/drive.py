@@ -32,7 +32,7 @@ from estimator.decode.log_input import load_log_as_measurement
 from estimator.identify import IdentResult, OutputErrorProblem, Parameters, fit, fit_from_starts
 from suspid import __version__
 from suspid.can.dbc import default_dbc_path, load_dbc
-from suspid.can.logs import FORMATS
+from suspid.can.logs import FORMATS, first_timestamp
 from suspid.can.signal_map import SignalMap
 from suspid.errors import InputError, SuspidError
 from suspid.io.csvio import Measurement, read_measurement
@@ -240,7 +240,10 @@ def identify_drive(path: str, vehicle: str, settings: IdentifySettings,
             out["sha256"] = file_digest(path)
         model = get_model(settings.model)
         meas, frames = load_drive(path, model, settings)
-        t0 = float(meas.t[0]) if meas.t.size else math.nan
+        # the drive's time is the log's own first timestamp (epoch s), not the data time,
+        # which a stream with the sensor's tick counts from the node's start
+        stamp = first_timestamp(path) if frames is not None else None
+        t0 = stamp if stamp is not None else (float(meas.t[0]) if meas.t.size else math.nan)
         if not math.isfinite(t0):
             raise InputError(f"{path}: no sample time")
         out["t"] = t0

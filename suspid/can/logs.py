@@ -781,6 +781,27 @@ def _read_binary(path: Path, reader: can.io.generic.MessageReader,
             pass
 
 
+def first_timestamp(path: str | Path) -> float | None:
+    """The timestamp (s; epoch where the format stores absolute times) of a log's first frame.
+
+    This is the log's own clock -- when the logger recorded the frame -- not the data time
+    the decoder derives from the sensor's tick.
+
+    Parameters
+    ----------
+    path : str or Path
+        A CAN log of any registered format.
+
+    Returns
+    -------
+    float or None
+        ``None`` for a log without a readable frame.
+    """
+    for msg in read_log(path):
+        return float(msg.timestamp)
+    return None
+
+
 def read_log(path: str | Path, stats: Optional[ReadStats] = None) -> Iterator[can.Message]:
     """Iterate over the frames of a CAN log (format by suffix), skipping bad lines.
 
