@@ -166,17 +166,20 @@ class OutputErrorProblem:
         estimate = isinstance(self.x0, str) and self.x0 == "estimate"
         base_x0 = self._base_x0()
         E = np.exp(modal.lam * h)
-        P = powers(E, N) if (estimate or not self._has_road) else None
+        P: np.ndarray | None = None  # powers of E, built once and only where needed
         if self._has_road:
             r = self.U[:, :nr]
             W = modal_trajectory(modal, h, r, base_x0)
             Y = _re_matmul(W, CV.T) + r @ (Cm @ modal.Bv).T + self.U @ Dm.T
         elif np.any(base_x0):
+            P = powers(E, N)
             Y = _re_matmul(P, (CV * (modal.Vinv @ base_x0)).T)
         else:
             Y = np.zeros((N, len(self.channels)))
         if not estimate:
             return Y, base_x0
+        if P is None:
+            P = powers(E, N)
         if self._full:
             sol = self._x0_closed_form(modal, CV, E, P, Y)
             if sol is not None:
