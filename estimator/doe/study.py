@@ -27,11 +27,13 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from estimator.doe.baseline import seed_identify
-from estimator.doe.design import experiments
+from estimator.doe.design import Experiment, experiments
 from estimator.doe.identifiability import prior_study, scale_ambiguity
 from estimator.doe.noise import monte_carlo
 from estimator.doe.runner import (TOL, Settings, free_names, identify_staged, measurement,
                                   run_design, start_parameters)
+from estimator.identify import IdentResult
+from suspid.io.csvio import Measurement
 from suspid.models import SuspensionModel, get_model
 from suspid.models.base import FloatArray
 from suspid.plots import plot_channels
@@ -168,7 +170,9 @@ def figures(out: Path, only: str | None = None) -> list[str]:
     figdir.mkdir(parents=True, exist_ok=True)
     written = []
 
-    def fit_exp(model_name: str, exp_id: int, settings: Settings):
+    def fit_exp(model_name: str, exp_id: int, settings: Settings
+                ) -> tuple[SuspensionModel, Experiment, Measurement, dict[str, FloatArray],
+                           IdentResult, dict[str, FloatArray], float]:
         model = get_model(model_name)
         e = next(x for x in experiments(model) if x.id == exp_id)
         meas, clean = measurement(model, e, settings.noise, settings.seed + e.id)
