@@ -12,6 +12,8 @@ from __future__ import annotations
 import ctypes
 import sys
 
+import numpy  # noqa: F401  (makes sure numpy's BLAS is loaded before the search)
+
 _SYMBOLS = ("scipy_openblas_set_num_threads64_", "scipy_openblas_set_num_threads_64_",
             "openblas_set_num_threads64_", "openblas_set_num_threads_64_",
             "openblas_set_num_threads")
@@ -38,8 +40,6 @@ def single_thread_blas(threads: int = 1) -> int:
 
     Harmless (returns 0) where OpenBLAS is not used or the platform has no ``/proc``.
     """
-    import numpy  # noqa: F401  (make sure numpy's BLAS is loaded)
-
     done = 0
     for path in _loaded_openblas():
         try:

@@ -21,29 +21,21 @@ from typing import Any
 
 import numpy as np
 
+from estimator.doe.design import experiments
+from estimator.identify import OutputErrorProblem
+from suspid.excitation import make_scenario
+from suspid.io.csvio import Measurement
+from suspid.models import get_model
+from suspid.simulate import simulate
+
 
 def _cases() -> list[tuple[str, Any, dict[str, float]]]:
-    from estimator.identify import OutputErrorProblem
-    from suspid.excitation import make_scenario
-    from suspid.io.csvio import Measurement
-    from suspid.models import get_model
-    from suspid.simulate import simulate
-
     out = []
-    try:
-        from estimator.doe.design import experiments
-        from estimator.doe.runner import measurement
-        have_doe = True
-    except ImportError:  # an older tree without the DoE package
-        have_doe = False
     t = np.arange(2001) / 100.0
     for name in ("half4", "quarter2"):
         m = get_model(name)
-        if have_doe:
-            e = experiments(m)[13]
-            truth, x0 = e.truth, e.x0
-        else:
-            truth, x0 = m.defaults(), np.linspace(0.01, 0.05, m.n_states)
+        e = experiments(m)[13]
+        truth, x0 = e.truth, e.x0
         clean = simulate(m, truth, t, None, x0)
         meas = Measurement(t=t, road={}, measured={c: clean[c] for c in m.state_names})
         p = {k: v * 1.05 for k, v in truth.items()}

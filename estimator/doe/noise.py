@@ -111,7 +111,7 @@ def monte_carlo(model: SuspensionModel | str, exp_id: int, settings: Settings, s
     t = np.arange(next(iter(clean.values())).size) / settings.fs
     F = fisher_information(model, exp, free, chans, sig, t)
     bound = crlb_relative(F)
-    runs = []
+    runs: list[dict[str, Any]] = []
     for i in range(seeds):
         seed = settings.seed + 1000 * i + exp.id
         meas, _ = measurement(model, exp, settings.noise, seed, settings.horizon, settings.fs)

@@ -22,17 +22,21 @@ import sys
 import time
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
 from estimator.doe.baseline import seed_identify
-from estimator.doe.design import experiments
+from estimator.doe.design import Experiment, experiments
 from estimator.doe.identifiability import prior_study, scale_ambiguity
 from estimator.doe.noise import monte_carlo
 from estimator.doe.runner import (TOL, Settings, free_names, identify_staged, measurement,
                                   run_design, start_parameters)
-from suspid.models import get_model
+from estimator.identify import IdentResult
+from suspid.io.csvio import Measurement
+from suspid.models import SuspensionModel, get_model
+from suspid.models.base import FloatArray
+from suspid.plots import plot_channels
 from suspid.simulate import simulate
 
 
@@ -41,6 +45,17 @@ def _save(out: Path, name: str, obj: Any) -> Path:
     path = out / "data" / f"{name}.json"
     path.write_text(json.dumps(obj, indent=1, default=float) + "\n")
     return path
+
+
+def _state_simulator(model: SuspensionModel, t: FloatArray,
+                     x0: FloatArray) -> Callable[[Mapping[str, float]], FloatArray]:
+    """The states of ``model`` from ``x0`` on ``t`` (no road) as columns, per parameter set."""
+
+    def sim(p: Mapping[str, float]) -> FloatArray:
+        out = simulate(model, p, t, None, x0)
+        return np.column_stack([out[c] for c in model.state_names])
+
+    return sim
 
 
 def seed_port_design(model_name: str, cost: str, init_scale: float = 0.5) -> dict[str, Any]:
@@ -57,11 +72,7 @@ def seed_port_design(model_name: str, cost: str, init_scale: float = 0.5) -> dic
         fixed = {k: v for k, v in e.truth.items() if k not in free}
         start = {k: init_scale * e.truth[k] for k in free}
         t = meas.t
-
-        def sim(p: dict[str, float], e=e, t=t) -> np.ndarray:
-            out = simulate(model, p, t, None, e.x0)
-            return np.column_stack([out[c] for c in model.state_names])
-
+        sim = _state_simulator(model, t, e.x0)
         t0 = time.perf_counter()
         p, res = seed_identify(model, Y, t, e.x0, fixed, start, cost, sim)
         rel = max(abs(p[k] - e.truth[k]) / e.truth[k] for k in free)
@@ -155,13 +166,13 @@ def identifiability(out: Path) -> dict[str, Any]:
 
 def figures(out: Path, only: str | None = None) -> list[str]:
     """Seed-style target-vs-identified figures and the CRLB bar chart (``only``: one by name)."""
-    from suspid.plots import plot_channels
-
     figdir = out / "figures"
     figdir.mkdir(parents=True, exist_ok=True)
     written = []
 
-    def fit_exp(model_name: str, exp_id: int, settings: Settings):
+    def fit_exp(model_name: str, exp_id: int, settings: Settings
+                ) -> tuple[SuspensionModel, Experiment, Measurement, dict[str, FloatArray],
+                           IdentResult, dict[str, FloatArray], float]:
         model = get_model(model_name)
         e = next(x for x in experiments(model) if x.id == exp_id)
         meas, clean = measurement(model, e, settings.noise, settings.seed + e.id)
@@ -214,10 +225,12 @@ def figures(out: Path, only: str | None = None) -> list[str]:
     # CRLB chart from the noise study if present
     data = out / "data" / "noise.json"
     if only in (None, "half4_noise05_crlb") and data.is_file():
-        import matplotlib
+        # matplotlib costs about 1 s to import and only this chart needs it (suspid.plots
+        # loads it the same way)
+        import matplotlib  # noqa: PLC0415
 
         matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # noqa: PLC0415
 
         nz = json.loads(data.read_text())
         fig, axes = plt.subplots(1, 2, figsize=(11, 3.6), sharey=True)

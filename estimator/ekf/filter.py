@@ -343,11 +343,11 @@ class AugmentedEKF(ExtendedKalmanFilter):
         self._znext = znext
         self.predict()
 
-    def predict_x(self, u: Any = 0) -> None:  # type: ignore[override]
+    def predict_x(self, u: Any = 0) -> None:
         """filterpy hook: the state prediction is the RK4 step computed in :meth:`predict_step`."""
         self.x = self._znext[:, None]
 
-    def update(self, z: FloatArray, HJacobian: Callable[..., FloatArray],  # type: ignore[override]
+    def update(self, z: FloatArray, HJacobian: Callable[..., FloatArray],
                Hx: Callable[..., FloatArray], R: FloatArray | float | None = None,
                args: Any = (), hx_args: Any = (),
                residual: Callable[[FloatArray, FloatArray], FloatArray] = np.subtract) -> None:

@@ -135,7 +135,7 @@ class OutputErrorProblem:
         m = self.model
         modal = modal_form(m, p)
         if modal is not None and self.h is not None:
-            Y, x0 = self._predict_modal(modal)
+            Y, x0 = self._predict_modal(modal, self.h)
         else:
             Y, x0 = self._predict_general(p, modal)
         if self._full:
@@ -149,7 +149,7 @@ class OutputErrorProblem:
             return np.zeros(self.model.n_states)
         return np.asarray(self.x0, dtype=float)
 
-    def _predict_modal(self, modal: Modal) -> tuple[FloatArray, FloatArray]:
+    def _predict_modal(self, modal: Modal, h: float) -> tuple[FloatArray, FloatArray]:
         """Fast path (uniform grid, diagonalisable ``A``): modal recursion.
 
         With ``x0="estimate"`` and no missing sample the normal equations of the initial
@@ -160,23 +160,26 @@ class OutputErrorProblem:
         m = self.model
         nr = len(m.roads)
         N = self.t.size
-        h = float(self.h)  # type: ignore[arg-type]
+        h = float(h)
         Cm, Dm = self._output_maps(modal.A, modal.B)
         CV = (Cm @ modal.V) * modal.fac  # (p, mm)
         estimate = isinstance(self.x0, str) and self.x0 == "estimate"
         base_x0 = self._base_x0()
         E = np.exp(modal.lam * h)
-        P = powers(E, N) if (estimate or not self._has_road) else None
+        P: np.ndarray | None = None  # powers of E, built once and only where needed
         if self._has_road:
             r = self.U[:, :nr]
             W = modal_trajectory(modal, h, r, base_x0)
             Y = _re_matmul(W, CV.T) + r @ (Cm @ modal.Bv).T + self.U @ Dm.T
         elif np.any(base_x0):
+            P = powers(E, N)
             Y = _re_matmul(P, (CV * (modal.Vinv @ base_x0)).T)
         else:
             Y = np.zeros((N, len(self.channels)))
         if not estimate:
             return Y, base_x0
+        if P is None:
+            P = powers(E, N)
         if self._full:
             sol = self._x0_closed_form(modal, CV, E, P, Y)
             if sol is not None:

@@ -44,7 +44,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Sequence, cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -213,7 +213,8 @@ def nelder_mead(fun: Callable[[NDArray[Any]], Any], x0: ArrayLike, *,
         if np.any(lower_bound > x0) or np.any(x0 > upper_bound):
             warnings.warn("Initial guess is not within the specified bounds",
                           SimplexWarning, stacklevel=2)
-        x0 = np.clip(x0, lower_bound, upper_bound)
+        # numpy's stubs type np.clip of an ndarray of unknown dtype as Any
+        x0 = cast("NDArray[Any]", np.clip(x0, lower_bound, upper_bound))
 
     if initial_simplex is None:
         N = len(x0)
@@ -236,15 +237,18 @@ def nelder_mead(fun: Callable[[NDArray[Any]], Any], x0: ArrayLike, *,
             raise ValueError("Size of `initial_simplex` is not consistent with `x0`")
         N = sim.shape[1]
 
-    if maxiter is None and maxfun is None:
-        maxiter = N * 200
-        maxfun = N * 200
-    elif maxiter is None:
-        maxiter = N * 200 if maxfun == np.inf else np.inf
+    # scipy's `if maxiter is None and maxfun is None: ... elif maxiter is None: ... elif
+    # maxfun is None: ...`, nested so that the type checker sees neither stays None
+    if maxiter is None:
+        if maxfun is None:
+            maxiter = N * 200
+            maxfun = N * 200
+        else:
+            maxiter = N * 200 if maxfun == np.inf else np.inf
     elif maxfun is None:
         maxfun = N * 200 if maxiter == np.inf else np.inf
 
-    if lower_bound is not None:
+    if lower_bound is not None and upper_bound is not None:  # both are set together
         # reflect vertices above an upper bound into the interior, then clip
         msk = sim > upper_bound
         sim = np.where(msk, 2 * upper_bound - sim, sim)

@@ -33,14 +33,18 @@ UNDETERMINED = 1.0
 
 @dataclass
 class NMOutcome:
-    """Raw outcome of :func:`minimize_log`."""
+    """Raw outcome of :func:`minimize_log`.
+
+    ``final_simplex`` is the last run's simplex, shape ``(n + 1, n)`` in ``u``; ``None``
+    when no run happened (``maxfev <= 0`` or ``restarts < 0``).
+    """
 
     u: FloatArray
     fun: float
     nfev: int
     restarts: int
     converged: bool
-    final_simplex: FloatArray
+    final_simplex: FloatArray | None
 
 
 def minimize_log(fun: Callable[[FloatArray], float], u0: FloatArray, step: float = 0.3,
@@ -76,7 +80,7 @@ def minimize_log(fun: Callable[[FloatArray], float], u0: FloatArray, step: float
     cur_step = step
     converged = False
     run = 0
-    final = None
+    final: FloatArray | None = None
     last_status = -1
     while run <= restarts and nfev < budget:
         if simplex is None:
@@ -211,7 +215,8 @@ def fit(problem: OutputErrorProblem, params: Parameters, restarts: int = 6,
 def _lm_polish(problem: OutputErrorProblem, to_params: Callable[[FloatArray], dict[str, float]],
                u0: FloatArray, f0: float) -> tuple[FloatArray, int, bool]:
     """Levenberg–Marquardt from ``u0`` on the normalised residuals; ``(u, nfev, improved)``."""
-    from scipy.optimize import least_squares
+    # lazy: scipy.optimize costs the monitor's start time and only the polish needs it
+    from scipy.optimize import least_squares  # noqa: PLC0415
 
     inv = 1.0 / math.sqrt(problem.scale)
     n = problem.n_obs
@@ -300,10 +305,11 @@ def finish(problem: OutputErrorProblem, params: Parameters, p_hat: Mapping[str, 
                          f"error of {stderr[k]:.3g} (more than {UNDETERMINED:g}x its value)"
                          for k in loose]
     n_obs = problem.n_obs
-    k = len(free)
+    n_free = len(free)
     nss = ss / problem.scale
-    aic = n_obs * math.log(max(nss, 1e-300) / n_obs) + 2 * k if n_obs else float("nan")
-    bic = n_obs * math.log(max(nss, 1e-300) / n_obs) + k * math.log(max(n_obs, 1)) if n_obs else float("nan")
+    aic = n_obs * math.log(max(nss, 1e-300) / n_obs) + 2 * n_free if n_obs else float("nan")
+    bic = (n_obs * math.log(max(nss, 1e-300) / n_obs) + n_free * math.log(max(n_obs, 1))
+           if n_obs else float("nan"))
     if not converged:
         warnings.append("Nelder–Mead stopped on its evaluation budget before converging")
     return IdentResult(

@@ -339,7 +339,8 @@ class SlidingWindowIdentifier:
         converged = nm.nfev < budget
         p_hat = to_params(nm.u)
         res = prob.finish(params, p_hat, nm.nfev, True,
-                          simplex=[to_params(v) for v in nm.final_simplex])
+                          simplex=(None if nm.final_simplex is None
+                                   else [to_params(v) for v in nm.final_simplex]))
         out.params = res.params
         out.stderr_fit = dict(res.stderr)
         out.stderr = {k: float(math.hypot(v, cfg.sigma_floor * res.params[k]))

@@ -320,10 +320,11 @@ class WindowProblem(OutputErrorProblem):
         self.lean = bool(self._full and self.h is not None and self._unit_w
                          and isinstance(self.x0, str) and self.x0 == "estimate"
                          and self.t.size >= 2)
-        if not self.lean:
+        if not self.lean or self.h is None:  # (lean implies a uniform grid, h is not None)
             return
         if self.ssmap is None or self.ssmap.model is not m:
             self.ssmap = StateSpaceMap(m, {q.name: q.default for q in m.params}, [])
+        self._ssmap: StateSpaceMap = self.ssmap  # the lean path's map
         nr = len(m.roads)
         self._nr = nr
         self._N = int(self.t.size)
@@ -332,7 +333,7 @@ class WindowProblem(OutputErrorProblem):
         self._r0 = self._r[:, 0].copy()
         self._r0l = self._r0.tolist()
         self._rc = self._r.astype(complex)
-        self._hf = float(self.h)  # type: ignore[arg-type]
+        self._hf = float(self.h)
         self._UT = np.ascontiguousarray(self.U.T)  # (2 nr, N)
         self._Yflat = np.ascontiguousarray(self.Ymeas.T).ravel()  # (p N,) channel-major
         self._road = bool(np.any(self._r))
@@ -408,7 +409,7 @@ class WindowProblem(OutputErrorProblem):
         got = self._cache.get(key)
         if got is not None:
             return got
-        A, B, Bz, BB = self.ssmap.from_values(vals)  # type: ignore[union-attr]
+        A, B, Bz, BB = self._ssmap.from_values(vals)
         nr = self._nr
         wr, wi, vl, vr, info = _dgeev(A, compute_vl=1, compute_vr=1)
         if info != 0:

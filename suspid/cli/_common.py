@@ -8,9 +8,14 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from estimator.identify import Parameters
 from suspid.can.options import add_can_arguments, can_inputs
 from suspid.errors import InputError, UsageError
+from suspid.io.csvio import Measurement, read_measurement
 from suspid.models import MODELS, SuspensionModel, get_model
+from suspid.models.base import FloatArray
 
 #: suffixes read as CAN logs through python-can (the rest must be a measurement CSV)
 CAN_LOG_SUFFIXES = (".log", ".asc", ".blf", ".trc", ".mf4")
@@ -70,7 +75,7 @@ def parse_assignments(items: list[str], option: str) -> dict[str, float]:
     return out
 
 
-def parse_state(text: str, n: int, option: str) -> Any:
+def parse_state(text: str, n: int, option: str) -> FloatArray:
     """A state vector given as ``n`` comma-separated finite numbers (``[q..., q_dot...]``, SI).
 
     Raises
@@ -78,8 +83,6 @@ def parse_state(text: str, n: int, option: str) -> Any:
     UsageError
         Not numbers, not ``n`` of them, or one that is not finite (named).
     """
-    import numpy as np
-
     parts = text.split(",")
     try:
         v = np.array([float(s) for s in parts])
@@ -94,12 +97,16 @@ def parse_state(text: str, n: int, option: str) -> Any:
     return v
 
 
-def load_measurement(args: argparse.Namespace, model: SuspensionModel):
-    """Read ``--input`` as a CSV or a CAN log; returns ``(Measurement, frames or None)``."""
+def load_measurement(args: argparse.Namespace,
+                     model: SuspensionModel) -> tuple[Measurement, dict[str, object] | None]:
+    """Read ``--input`` as a CSV or a CAN log; returns ``(Measurement, frame statistics or None)``."""
     path = Path(args.input)
+    frames: dict[str, object] | None
     if path.suffix.lower() in CAN_LOG_SUFFIXES:
         try:
-            from estimator.decode.log_input import load_log_as_measurement
+            # lazy: the CAN-log reader loads python-can, which monitor and compare (importers
+            # of this module) may load only after their MF4-backend skip has run
+            from estimator.decode.log_input import load_log_as_measurement  # noqa: PLC0415
         except ModuleNotFoundError as exc:  # pragma: no cover - during bring-up
             raise UsageError(f"{path}: CAN-log input is not available ({exc})") from None
         dbc_path, signal_map = can_inputs(args)
@@ -108,7 +115,6 @@ def load_measurement(args: argparse.Namespace, model: SuspensionModel):
         if path.suffix.lower() not in (".csv", ".txt", ""):
             raise InputError(f"{path}: unknown input format {path.suffix!r}; expected .csv or a CAN "
                              f"log ({', '.join(CAN_LOG_SUFFIXES)})")
-        from suspid.io.csvio import read_measurement
         meas, frames = read_measurement(path, model), None
     if model.roads and not meas.road and not _decays(meas.measured):
         meas.warnings.append(
@@ -127,8 +133,6 @@ def _decays(measured: dict[str, Any]) -> bool:
     Motion is the RMS of sample-to-sample increments: a road's displacement wanders like a
     random walk (ISO 8608 PSD ~ n^-2), its increments are stationary.
     """
-    import numpy as np
-
     for v in measured.values():
         v = np.diff(np.asarray(v, dtype=float))
         q = v.size // 4
@@ -158,10 +162,8 @@ def print_json(obj: Any) -> None:
     sys.stdout.flush()
 
 
-def params_from_args(args: argparse.Namespace, model: SuspensionModel):
+def params_from_args(args: argparse.Namespace, model: SuspensionModel) -> Parameters:
     """``Parameters`` of ``model`` from ``--fix``/``--init``, with ``--restarts`` checked."""
-    from estimator.identify import Parameters
-
     params = Parameters.for_model(model, fix=parse_assignments(args.fix, "--fix"),
                                   init=parse_assignments(args.init, "--init"))
     if getattr(args, "restarts", 0) < 0:

@@ -14,6 +14,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from estimator.stream.compare import compare, load_stream, plot
+from estimator.stream.scenarios import damper_wear
 from suspid.can.options import add_can_arguments, can_inputs
 from suspid.cli._common import add_model_option, parse_assignments, print_json
 from suspid.errors import UsageError
@@ -67,11 +69,6 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
-    # imported here, not at the top: ``suspid --help`` imports every subcommand module and
-    # must not load python-can or matplotlib
-    from estimator.stream.compare import compare, load_stream, plot  # noqa: PLC0415
-    from estimator.stream.scenarios import damper_wear  # noqa: PLC0415
-
     model = get_model(args.model)
     fix = parse_assignments(args.fix, "--fix")
     nominal = parse_assignments(args.nominal, "--nominal")

@@ -15,9 +15,12 @@ import time
 from dataclasses import asdict
 from typing import Any, TextIO
 
-from estimator.doe.design import DESIGNS
+from estimator.doe.blas import single_thread_blas
+from estimator.doe.design import DESIGNS, experiments, setup_record
+from estimator.doe.runner import Settings, run_design
 from suspid.cli._common import print_json
 from suspid.errors import UsageError
+from suspid.models import get_model
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -105,11 +108,6 @@ class ProgressBar:
 
 
 def run(args: argparse.Namespace) -> int:
-    from estimator.doe.blas import single_thread_blas
-    from estimator.doe.design import experiments, setup_record
-    from estimator.doe.runner import Settings, run_design
-    from suspid.models import get_model
-
     single_thread_blas()  # small matrices: OpenBLAS threads only cost (docs/performance.md)
     model = get_model(args.model)
     if not (args.init_scale > 0 and args.init_scale < 1e6):

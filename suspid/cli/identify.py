@@ -3,12 +3,12 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Any
-
-
+from estimator.identify import OutputErrorProblem, fit, fit_from_starts
 from suspid.cli._common import (parse_state, positive_int, add_input_options, add_model_option, add_param_options,
                                 load_measurement, model_from_args, params_from_args, print_json)
 from suspid.errors import UsageError
+from suspid.models.base import FloatArray
+from suspid.plots import plot_comparison
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -45,7 +45,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     return p
 
 
-def parse_x0(text: str, n: int) -> Any:
+def parse_x0(text: str, n: int) -> str | FloatArray:
     """``--x0`` of identify/diagnose: ``estimate``, ``rest`` or ``n`` finite numbers."""
     if text in ("estimate", "rest"):
         return text
@@ -53,8 +53,6 @@ def parse_x0(text: str, n: int) -> Any:
 
 
 def run(args: argparse.Namespace) -> int:
-    from estimator.identify import OutputErrorProblem, fit, fit_from_starts
-
     model = model_from_args(args)
     params = params_from_args(args, model)
     if args.multistart < 0:
@@ -69,7 +67,6 @@ def run(args: argparse.Namespace) -> int:
     if frames is not None:
         result.frames = frames
     if args.plot:
-        from suspid.plots import plot_comparison
         plot_comparison(model, meas, result, args.plot)
     if args.json:
         print_json(result.to_json())

@@ -22,7 +22,8 @@ if TYPE_CHECKING:
     from estimator.stream.pipeline import Source
 
 #: the library's default forecast horizon (estimator.alerts.forecast.DEFAULT_HORIZON_S), for
-#: the help text only: importing the estimator here would load python-can for ``--help``
+#: the help text only: importing the estimator at the top would load python-can before
+#: run()'s MF4-backend skip
 HORIZON_HELP_S = 60.0
 
 
@@ -176,7 +177,7 @@ def _skip_mf4_backend(args: argparse.Namespace) -> None:
     src = str(getattr(args, "input", "") or "")
     if src.lower().endswith(".mf4") or "can" in sys.modules or "asammdf" in sys.modules:
         return
-    sys.modules["asammdf"] = None  # type: ignore[assignment]
+    sys.modules["asammdf"] = None  # type: ignore[assignment]  # None is the documented "fails" marker
 
 
 def source_from_args(args: argparse.Namespace) -> "Source":
@@ -195,8 +196,8 @@ def source_from_args(args: argparse.Namespace) -> "Source":
 
 def run(args: argparse.Namespace) -> int:
     _skip_mf4_backend(args)
-    # the estimator is imported here, not at the top: ``suspid --help`` imports every
-    # subcommand module and must not load python-can, and _skip_mf4_backend must run first
+    # the estimator is imported here, not at the top: it loads python-can, and
+    # _skip_mf4_backend must run before that (python-can imports asammdf when it loads)
     from estimator.stream.pipeline import monitor_spec, run_monitor, warn  # noqa: PLC0415
 
     model = get_model(args.model)
