@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Literal, cast
 
 import numpy as np
+from cantools.database import Database
 
 from estimator.decode.buffer import Aligned
 from estimator.decode.listener import DecodeListener
@@ -80,7 +81,7 @@ def aligned_to_measurement(aligned: Aligned, model: SuspensionModel, source: str
 
 
 def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
-                            dbc_path: str | Path | None = None,
+                            dbc_path: str | Path | Database | None = None,
                             signal_map: SignalMapLike = None, *,
                             time_source: Literal["timestamp", "tick", "auto"] = "auto",
                             dt: float | None = None,
@@ -92,8 +93,9 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
     path : str or Path
         ``.log`` (candump -L), ``.asc``, ``.blf``, ``.trc`` or ``.mf4``.
     model : str or SuspensionModel
-    dbc_path : str or Path, optional
-        Default: the signal map file's ``dbc``, else suspid's ``suspension.dbc``.
+    dbc_path : str, Path or cantools Database, optional
+        Default: the signal map file's ``dbc``, else suspid's ``suspension.dbc``; a loaded
+        Database is used as it is (no parsing per log).
     signal_map : SignalMap, path or list of str, optional
         Needed for a foreign DBC (see :mod:`suspid.can.signal_map`).
     time_source : {"timestamp", "tick", "auto"}

@@ -167,7 +167,7 @@ def summarize_vehicle(vehicle: str, records: list[dict[str, Any]], rule: AlertRu
         tr = robust_trend(t, v, s)
         trends[k] = tr
         fc = forecast_crossing(tr, limits[k], rule.level)
-        if fc is not None and fc.crossing_t <= tr.t_ref + rule.horizon_days * DAY_S:
+        if fc is not None and tr is not None and fc.crossing_t <= tr.t_ref + rule.horizon_days * DAY_S:
             forecasts[k] = fc
     risk = "alert" if alerts else ("forecast" if forecasts else "ok")
     return VehicleSummary(vehicle, model, ok, failed, monitored, nominal, limits, trends,

@@ -159,13 +159,13 @@ def execute(jobs: list[tuple[str, str, str | None]], settings: IdentifySettings,
     total = len(jobs)
     failed = 0
     if scheduler is None and workers == 0:
-        out = []
+        inline: list[dict[str, Any]] = []
         for i, (p, v, d) in enumerate(jobs, 1):
-            out.append(identify_drive(p, v, settings, d))
-            failed += out[-1]["status"] != "ok"
+            inline.append(identify_drive(p, v, settings, d))
+            failed += inline[-1]["status"] != "ok"
             if progress:
                 progress(i, total, failed)
-        return out
+        return inline
     if workers is not None and workers < 0:
         raise UsageError(f"--workers: expected an integer >= 0, got {workers}")
     cluster = None

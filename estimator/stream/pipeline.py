@@ -435,7 +435,7 @@ def run_source(source: Source, spec: MonitorSpec, mon: StreamMonitor,
 
 
 def _listener(source: Source, spec: MonitorSpec,
-              time_source: Literal["timestamp", "tick"]) -> DecodeListener:
+              time_source: Literal["timestamp", "tick", "auto"]) -> DecodeListener:
     """The CAN layer's DecodeListener with a bounded buffer sized for the windows."""
     cfg = spec.config
     # rows per message: window + step at up to 2 kHz, power of two

@@ -8,6 +8,7 @@ from datetime import datetime, timezone
 from statistics import NormalDist
 from typing import Any
 
+from estimator.fleet import AlertRule, FleetConfig, IdentifySettings, ProgressBar, run_fleet
 from suspid.can.options import add_can_arguments, can_inputs
 from suspid.cli._common import (add_model_option, add_param_options, parse_assignments,
                                 positive_int, print_json)
@@ -77,9 +78,6 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
-    from estimator.fleet import (AlertRule, FleetConfig, IdentifySettings, ProgressBar,
-                                 run_fleet)
-
     settings = None
     if args.input:
         if args.model is None:
