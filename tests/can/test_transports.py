@@ -101,7 +101,12 @@ def test_slcan_adapter_timestamps_give_the_frame_times():
     try:
         host = open_bus("slcan", node_bus.path, sleep_after_open=0, timestamps=True)
         assert isinstance(host, BufferedSlcanBus)
-        assert node_bus.wait_open(2) and node_bus.timestamps
+        assert node_bus.wait_open(5)
+        # the host's Z1 may reach the adapter just after its O: wait for it (loaded machine)
+        deadline = time.monotonic() + 5.0
+        while not node_bus.timestamps and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert node_bus.timestamps
         got: list[can.Message] = []
         notifier = can.Notifier(host, [got.append])
         SensorNode(NodeConfig(scenario="bump", duration=0.5, rate=500), db).run(node_bus, speed=0)
