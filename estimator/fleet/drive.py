@@ -28,14 +28,14 @@ import numpy as np
 
 from cantools.database import Database
 
-from estimator.decode.log_input import load_log_as_measurement
+from estimator.identify.inputs import read_input
 from estimator.identify import IdentResult, OutputErrorProblem, Parameters, fit, fit_from_starts
 from suspid import __version__
 from suspid.can.dbc import default_dbc_path, load_dbc
 from suspid.can.logs import FORMATS, first_timestamp
 from suspid.can.signal_map import SignalMap
 from suspid.errors import InputError, SuspidError
-from suspid.io.csvio import Measurement, read_measurement
+from suspid.io.csvio import Measurement
 from suspid.models import SuspensionModel, get_model
 
 #: suffixes read as CAN logs (python-can formats), and as measurement CSVs
@@ -141,25 +141,6 @@ def cached_database(path: str | None) -> Database:
     return _database(str(p), st.st_mtime_ns, st.st_size)
 
 
-def _decays(measured: dict[str, Any]) -> bool:
-    """Whether every channel's motion in the last quarter of the record is below half of
-    that in the first quarter (the same test as ``suspid identify``'s; see
-    ``suspid/cli/_common.py``: a free response decays everywhere, driving vibration does not).
-    """
-    for v in measured.values():
-        v = np.diff(np.asarray(v, dtype=float))
-        q = v.size // 4
-        if q < 2:
-            return True
-        first, last = v[:q], v[-q:]
-        first, last = first[np.isfinite(first)], last[np.isfinite(last)]
-        if first.size < 2 or last.size < 2:
-            continue
-        if not np.sqrt(np.mean(last * last)) < 0.5 * np.sqrt(np.mean(first * first)):
-            return False
-    return True
-
-
 def load_drive(path: str | Path, model: SuspensionModel, settings: IdentifySettings
                ) -> tuple[Measurement, dict[str, Any] | None]:
     """Read a drive log as ``suspid identify --input PATH`` does.
@@ -175,24 +156,7 @@ def load_drive(path: str | Path, model: SuspensionModel, settings: IdentifySetti
     InputError, UsageError
         Unreadable or unusable log (one-line message naming the file).
     """
-    p = Path(path)
-    suffix = p.suffix.lower()
-    if suffix in CAN_SUFFIXES:
-        meas, frames = load_log_as_measurement(p, model, cached_database(settings.dbc),
-                                               settings.signal_map)
-    else:
-        if suffix not in (".csv", ".txt", ""):
-            raise InputError(f"{p}: unknown input format {p.suffix!r}; expected .csv or a CAN "
-                             f"log ({', '.join(CAN_SUFFIXES)})")
-        meas, frames = read_measurement(p, model), None
-    if model.roads and not meas.road and not _decays(meas.measured):
-        meas.warnings.append(
-            f"{p}: no road input ({', '.join(model.roads)}) and the motion does not decay: "
-            "the model can only fit it as a free response from an initial state (a release or "
-            "drop test), so these parameters do not describe it; for driving data without a "
-            "road or wheel-motion sensor use `suspid monitor --output-only` (body mode "
-            "frequency and damping)")
-    return meas, frames
+    return read_input(path, model, cached_database(settings.dbc), settings.signal_map)
 
 
 def one_line(text: object) -> str:

@@ -39,8 +39,9 @@ from matplotlib.figure import Figure
 
 from estimator.decode import load_log_as_measurement
 from estimator.stream.drivers import run_arrays
-from estimator.stream.pipeline import (CAN_LOG_SUFFIXES, MonitorSpec, build_monitor,
+from estimator.stream.pipeline import (MonitorSpec, build_monitor,
                                        make_estimator, monitor_spec)
+from suspid.can.logs import is_can_log
 from suspid.errors import InputError, require_file
 from suspid.io.csvio import read_measurement
 from suspid.models.base import FloatArray, SuspensionModel
@@ -154,7 +155,7 @@ def load_stream(model: SuspensionModel, path: str | Path, dbc: Path | None = Non
                 ) -> tuple[FloatArray, dict[str, FloatArray], dict[str, FloatArray] | None]:
     """``(t, data, truth or None)`` of a CAN log or measurement CSV and its truth file."""
     p = require_file(str(path))
-    if p.suffix.lower() in CAN_LOG_SUFFIXES:
+    if is_can_log(p):
         meas, _ = load_log_as_measurement(p, model, dbc, signal_map)
     else:
         meas = read_measurement(p, model)

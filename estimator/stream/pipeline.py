@@ -41,13 +41,11 @@ from estimator.stream.drivers import CanWindowDriver, LiveStop, replay_log, run_
 from estimator.stream.events import Summary
 from estimator.stream.monitor import StreamMonitor
 from suspid.can.bus import open_bus
-from suspid.can.logs import ReadStats
+from suspid.can.logs import ReadStats, is_can_log
 from suspid.errors import InputError, UsageError, require_file
 from suspid.io.csvio import read_measurement
 from suspid.models.base import FloatArray, SuspensionModel
 
-#: CAN log formats replayed through the decoder (others are read as a measurement CSV)
-CAN_LOG_SUFFIXES = (".log", ".asc", ".blf", ".trc", ".mf4")
 
 #: estimator name -> "module:factory"; a factory takes ``(spec, channels, fs)``
 ESTIMATORS = {"nm": "estimator.stream.monitor:make_nm_estimator",
@@ -422,7 +420,7 @@ def run_source(source: Source, spec: MonitorSpec, mon: StreamMonitor,
     try:
         if source.input is not None:
             path = require_file(source.input)
-            if path.suffix.lower() in CAN_LOG_SUFFIXES:
+            if is_can_log(path):
                 return _run_log(source, spec, mon, sinks, buses)
             return _run_csv(source, spec, mon)
         return _run_live(source, spec, mon, sinks, buses)

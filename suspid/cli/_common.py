@@ -5,20 +5,18 @@ import argparse
 import json
 import math
 import sys
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from estimator.identify import Parameters
 from suspid.can.options import add_can_arguments, can_inputs
-from suspid.errors import InputError, UsageError
-from suspid.io.csvio import Measurement, read_measurement
+from suspid.errors import UsageError
+from suspid.io.csvio import Measurement
 from suspid.models import MODELS, SuspensionModel, get_model
 from suspid.models.base import FloatArray
 
 #: suffixes read as CAN logs through python-can (the rest must be a measurement CSV)
-CAN_LOG_SUFFIXES = (".log", ".asc", ".blf", ".trc", ".mf4")
 
 
 def add_model_option(p: argparse.ArgumentParser, required: bool = True) -> None:
@@ -100,51 +98,11 @@ def parse_state(text: str, n: int, option: str) -> FloatArray:
 def load_measurement(args: argparse.Namespace,
                      model: SuspensionModel) -> tuple[Measurement, dict[str, object] | None]:
     """Read ``--input`` as a CSV or a CAN log; returns ``(Measurement, frame statistics or None)``."""
-    path = Path(args.input)
-    frames: dict[str, object] | None
-    if path.suffix.lower() in CAN_LOG_SUFFIXES:
-        try:
-            # lazy: the CAN-log reader loads python-can, which monitor and compare (importers
-            # of this module) may load only after their MF4-backend skip has run
-            from estimator.decode.log_input import load_log_as_measurement  # noqa: PLC0415
-        except ModuleNotFoundError as exc:  # pragma: no cover - during bring-up
-            raise UsageError(f"{path}: CAN-log input is not available ({exc})") from None
-        dbc_path, signal_map = can_inputs(args)
-        meas, frames = load_log_as_measurement(path, model, dbc_path=dbc_path, signal_map=signal_map)
-    else:
-        if path.suffix.lower() not in (".csv", ".txt", ""):
-            raise InputError(f"{path}: unknown input format {path.suffix!r}; expected .csv or a CAN "
-                             f"log ({', '.join(CAN_LOG_SUFFIXES)})")
-        meas, frames = read_measurement(path, model), None
-    if model.roads and not meas.road and not _decays(meas.measured):
-        meas.warnings.append(
-            f"{path}: no road input ({', '.join(model.roads)}) and the motion does not decay: "
-            "the model can only fit it as a free response from an initial state (a release or "
-            "drop test), so these parameters do not describe it; for driving data without a "
-            "road or wheel-motion sensor use `suspid monitor --output-only` (body mode "
-            "frequency and damping)")
-    return meas, frames
-
-
-def _decays(measured: dict[str, Any]) -> bool:
-    """Whether every channel's motion in the last quarter of the record is below half of
-    that in the first quarter (a free response decays everywhere; driving vibration does not).
-
-    Motion is the RMS of sample-to-sample increments: a road's displacement wanders like a
-    random walk (ISO 8608 PSD ~ n^-2), its increments are stationary.
-    """
-    for v in measured.values():
-        v = np.diff(np.asarray(v, dtype=float))
-        q = v.size // 4
-        if q < 2:
-            return True          # too short to tell: no claim
-        first, last = v[:q], v[-q:]
-        first, last = first[np.isfinite(first)], last[np.isfinite(last)]
-        if first.size < 2 or last.size < 2:
-            continue
-        if not np.sqrt(np.mean(last * last)) < 0.5 * np.sqrt(np.mean(first * first)):
-            return False
-    return True
+    # lazy: the reader loads python-can, which monitor and compare (importers of this
+    # module) may load only after their MF4-backend skip has run
+    from estimator.identify.inputs import read_input  # noqa: PLC0415
+    dbc_path, signal_map = can_inputs(args)
+    return read_input(args.input, model, dbc_path, signal_map)
 
 
 def print_json(obj: Any) -> None:

@@ -1,0 +1,93 @@
+"""What ``suspid identify`` reads: a measurement CSV or a CAN log, as one :class:`Measurement`.
+
+:func:`read_input` is the one reader behind ``suspid identify``, ``suspid diagnose`` and each
+drive of ``suspid fleet``, so they see the same samples and the same warnings. It imports the
+CAN decoder (and so python-can); :mod:`estimator.identify` itself does not import this module.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from cantools.database import Database
+
+from estimator.decode.log_input import load_log_as_measurement
+from suspid.can.logs import LOG_FORMATS, is_can_log
+from suspid.can.signal_map import SignalMapLike
+from suspid.errors import InputError
+from suspid.io.csvio import Measurement, read_measurement
+from suspid.models.base import SuspensionModel
+
+#: suffixes read as a measurement CSV
+CSV_SUFFIXES = (".csv", ".txt", "")
+
+
+def read_input(path: str | Path, model: SuspensionModel,
+               dbc: str | Path | Database | None = None,
+               signal_map: SignalMapLike = None) -> tuple[Measurement, dict[str, Any] | None]:
+    """Read a measurement CSV or a CAN log (format by suffix) for ``model``.
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.csv`` (or ``.txt``, no suffix) or a CAN log of a registered format.
+    model : SuspensionModel
+        The model whose channels are read.
+    dbc : str, Path or cantools Database, optional
+        DBC for a CAN log (default suspid's ``suspension.dbc``); a loaded Database is used as
+        it is.
+    signal_map : optional
+        The user's signal map for a foreign DBC.
+
+    Returns
+    -------
+    measurement : Measurement
+        With a warning appended when the record has no road and does not decay (driving
+        data the model can only fit as a free response).
+    frames : dict or None
+        Frame statistics of a CAN log (``None`` for a CSV).
+
+    Raises
+    ------
+    InputError
+        Unknown suffix, unreadable or unusable file (one line naming the file).
+    """
+    p = Path(path)
+    frames: dict[str, Any] | None
+    if is_can_log(p):
+        meas, frames = load_log_as_measurement(p, model, dbc, signal_map)
+    else:
+        if p.suffix.lower() not in CSV_SUFFIXES:
+            raise InputError(f"{p}: unknown input format {p.suffix!r}; expected .csv or a CAN "
+                             f"log ({', '.join(LOG_FORMATS)})")
+        meas, frames = read_measurement(p, model), None
+    if model.roads and not meas.road and not decays(meas.measured):
+        meas.warnings.append(
+            f"{p}: no road input ({', '.join(model.roads)}) and the motion does not decay: "
+            "the model can only fit it as a free response from an initial state (a release or "
+            "drop test), so these parameters do not describe it; for driving data without a "
+            "road or wheel-motion sensor use `suspid monitor --output-only` (body mode "
+            "frequency and damping)")
+    return meas, frames
+
+
+def decays(measured: dict[str, Any]) -> bool:
+    """Whether every channel's motion in the last quarter of the record is below half of
+    that in the first quarter (a free response decays everywhere; driving vibration does not).
+
+    Motion is the RMS of sample-to-sample increments: a road's displacement wanders like a
+    random walk (ISO 8608 PSD ~ n^-2), its increments are stationary.
+    """
+    for v in measured.values():
+        v = np.diff(np.asarray(v, dtype=float))
+        q = v.size // 4
+        if q < 2:
+            return True          # too short to tell: no claim
+        first, last = v[:q], v[-q:]
+        first, last = first[np.isfinite(first)], last[np.isfinite(last)]
+        if first.size < 2 or last.size < 2:
+            continue
+        if not np.sqrt(np.mean(last * last)) < 0.5 * np.sqrt(np.mean(first * first)):
+            return False
+    return True
