@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from estimator.stream.compare import compare
-from estimator.stream.scenarios import Stream, damper_wear
+from estimator.stream.wear_streams import Stream, damper_wear
 from suspid.models import get_model
 
 TABLE1 = {"m1": 275.0, "c1": 1120.0, "k1": 150000.0, "m2": 27.0, "c2": 3100.0, "k2": 310000.0}

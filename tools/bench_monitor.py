@@ -70,7 +70,7 @@ def _rss_mb() -> float:
 
 
 def _stream(duration: float, fs: float, seed: int = 0):
-    from estimator.stream.scenarios import damper_wear
+    from estimator.stream.wear_streams import damper_wear
     from suspid.models import get_model
 
     return damper_wear(get_model("quarter2"), duration=duration, fs=fs, seed=seed)
@@ -109,7 +109,7 @@ def bench_replay(tmp: Path, duration: float = 150.0, long_s: float = 1200.0,
     from estimator.stream.config import default_config
     from estimator.stream.drivers import run_arrays
     from estimator.stream.monitor import NMWindowEstimator, StreamMonitor
-    from estimator.stream.scenarios import write_log
+    from estimator.stream.wear_streams import write_log
     from suspid.can.logs import read_log
     from suspid.models import get_model
 

@@ -28,7 +28,7 @@ import numpy as np
 
 from estimator.doe.baseline import seed_identify
 from estimator.doe.design import Experiment, experiments
-from estimator.doe.identifiability import prior_study, scale_ambiguity
+from estimator.doe.prior import prior_study, scale_ambiguity
 from estimator.doe.noise import monte_carlo
 from estimator.doe.runner import (TOL, Settings, free_names, identify_staged, measurement,
                                   run_design, start_parameters)

@@ -41,7 +41,7 @@ from estimator.identify import Parameters
 from estimator.stream.config import WindowConfig, default_decimation
 from estimator.stream.events import Estimate
 from estimator.stream.monitor import StepResult
-from estimator.stream.scenarios import DBC_RESOLUTION
+from estimator.stream.wear_streams import DBC_RESOLUTION
 from estimator.stream.window import SlidingWindowIdentifier, noise_floor
 from suspid.models.base import FloatArray, SuspensionModel
 from suspid.simulate import uniform_step

@@ -12,7 +12,7 @@
     parameter tracking with uncertainty;
 :mod:`~estimator.stream.compare`
     the NM identifier against the EKF baseline;
-:mod:`~estimator.stream.scenarios`
+:mod:`~estimator.stream.wear_streams`
     synthetic streams with drifting parameters (damper wear) and their CAN logs.
 
 See ``docs/monitoring.md``.

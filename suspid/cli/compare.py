@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from estimator.stream.compare import compare, load_stream, plot
-from estimator.stream.scenarios import damper_wear
+from estimator.stream.wear_streams import damper_wear
 from suspid.can.options import add_can_arguments, can_inputs
 from suspid.cli._common import add_model_option, parse_assignments, print_json
 from suspid.errors import UsageError

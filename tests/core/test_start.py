@@ -11,7 +11,7 @@ from estimator.identify import (OutputErrorProblem, Parameters, data_driven_star
                                 estimate_start, fit, fit_from_starts)
 from estimator.stream.config import default_config
 from estimator.stream.drivers import run_arrays
-from estimator.stream.scenarios import damper_wear
+from estimator.stream.wear_streams import damper_wear
 from estimator.stream.window import SlidingWindowIdentifier
 from suspid.excitation import make_scenario
 from suspid.io.csvio import Measurement

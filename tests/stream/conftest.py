@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from estimator.stream.scenarios import Stream, damper_wear
+from estimator.stream.wear_streams import Stream, damper_wear
 from suspid.excitation import iso8608_profile, time_grid
 from suspid.models import get_model
 from suspid.simulate import outputs, road_matrix, simulate_states

@@ -7,7 +7,7 @@ from filterpy.kalman import ExtendedKalmanFilter
 
 from estimator.ekf import AugmentedEKF, EKFTuning, EKFWindowEstimator
 from estimator.stream.drivers import run_arrays
-from estimator.stream.scenarios import damper_wear
+from estimator.stream.wear_streams import damper_wear
 
 
 @pytest.fixture

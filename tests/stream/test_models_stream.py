@@ -13,7 +13,7 @@ import pytest
 from estimator.identify import Parameters
 from estimator.stream.config import default_config
 from estimator.stream.drivers import run_arrays
-from estimator.stream.scenarios import damper_wear, write_log
+from estimator.stream.wear_streams import damper_wear, write_log
 from estimator.stream.window import SlidingWindowIdentifier
 from suspid.models import get_model
 

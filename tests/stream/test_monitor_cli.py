@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from estimator.stream.scenarios import damper_wear, write_log
+from estimator.stream.wear_streams import damper_wear, write_log
 from suspid.io.csvio import write_measurement
 from suspid.models import get_model
 

@@ -11,7 +11,7 @@ import pytest
 from estimator.output_only import OutputOnlyEstimator, fit_ar, fit_carma
 from estimator.stream.config import modes
 from estimator.stream.drivers import run_arrays
-from estimator.stream.scenarios import damper_wear
+from estimator.stream.wear_streams import damper_wear
 
 
 @pytest.fixture(scope="module")

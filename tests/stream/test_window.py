@@ -11,7 +11,7 @@ from estimator.stream.accumulator import WindowAccumulator
 from estimator.stream.config import default_config, default_decimation, modes
 from estimator.stream.drivers import run_arrays
 from estimator.stream.monitor import NMWindowEstimator
-from estimator.stream.scenarios import damper_wear
+from estimator.stream.wear_streams import damper_wear
 from estimator.stream.tracker import ParameterTracker
 from estimator.stream.window import SlidingWindowIdentifier, noise_floor
 
@@ -126,7 +126,7 @@ def test_tracker_combines_windows_and_grows_over_gaps() -> None:
 
 def test_sudden_damper_failure_is_followed(quarter2) -> None:
     """A step from 1500 to 900 N s/m (a burst seal): the small warm simplex must expand."""
-    from estimator.stream.scenarios import damper_wear as dw
+    from estimator.stream.wear_streams import damper_wear as dw
 
     s = dw(quarter2, duration=20.0, wear_start=9.999, wear_end=10.0, c_end_fraction=0.6, seed=9)
     params = Parameters.for_model(quarter2, fix={k: s.nominal[k] for k in ("m1", "m2", "c2", "k2")})

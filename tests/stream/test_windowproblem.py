@@ -14,7 +14,7 @@ import pytest
 
 from estimator.identify import OutputErrorProblem, Parameters, finish
 from estimator.inspection import contact_force_response, inspect
-from estimator.stream.scenarios import damper_wear
+from estimator.stream.wear_streams import damper_wear
 from estimator.stream.windowproblem import StateSpaceMap, WindowProblem, small_inverse
 from suspid.io.csvio import Measurement
 from suspid.simulate import outputs, simulate_states
