@@ -109,3 +109,31 @@ def test_unreachable_scheduler_is_one_error_line(fleet: Fleet) -> None:
     assert proc.returncode == 2
     lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
     assert lines[-1].startswith("error: --scheduler") and len(lines) == 1, proc.stderr
+
+
+def test_a_worker_that_dies_fails_only_its_drive(fleet: Fleet, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A drive whose task kills its worker process (as a crash in a native library would) is
+    listed as failed with the reason; the other drives on the same cluster are identified."""
+    import os
+
+    from estimator.fleet import runner
+    from estimator.fleet.drive import IdentifySettings, identify_drive
+
+    logs = sorted((fleet.root / "VAN-OK").glob("drive-*.log"))[:2]
+    poison = str(logs[1])
+
+    def crashing(path: str, vehicle: str, settings: IdentifySettings,
+                 digest: str | None = None) -> dict[str, Any]:
+        if path == poison:
+            os._exit(13)
+        return identify_drive(path, vehicle, settings, digest)
+
+    monkeypatch.setattr(runner, "identify_drive", crashing)
+    settings = IdentifySettings(model="quarter2", fix={"m1": 300.0, "m2": 40.0})
+    jobs: list[tuple[str, str, str | None]] = [(str(p), "VAN-OK", None) for p in logs]
+    out = runner.execute(jobs, settings, workers=2)
+    assert [r["path"] for r in out] == [str(p) for p in logs]
+    assert out[0]["status"] == "ok" and out[0]["result"]["params"]["c1"] > 0
+    assert out[1]["status"] == "failed"
+    assert out[1]["error"].startswith(f"{poison}: the Dask task failed: KilledWorker")
+    assert "\n" not in out[1]["error"]
