@@ -414,8 +414,14 @@ class PhysicalEffect(Effect):
             Whether they are physically possible (e.g. a friction force > 0).
         note : str
             A sentence for the evidence (may be empty).
+
+        The default serves an effect with one numeric parameter and one regressor: the
+        coefficient is that parameter, plausible when positive.
         """
-        raise NotImplementedError(f"effect {cls.name}: no screening coefficients")
+        names = [p.name for p in cls.params if p.kind in ("positive", "real")]
+        if len(names) != 1 or len(cls.params) != 1:
+            raise NotImplementedError(f"effect {cls.name}: no screening coefficients")
+        return {names[0]: float(coef[0])}, float(coef[0]) > 0, ""
 
 
 class SensorEffect(Effect):
@@ -676,12 +682,6 @@ class QuadraticDamping(PhysicalEffect):
                    trial: Trial, rate_noise: float) -> list[FloatArray]:
         return [np.abs(sd) * sd]
 
-    @classmethod
-    def from_coefficients(cls, coef: FloatArray, base: Mapping[str, float], trial: Trial,
-                          sites: Sequence[Site], rate_noise: Sequence[float]
-                          ) -> tuple[dict[str, Any], bool, str]:
-        return {"c_quad": float(coef[0])}, float(coef[0]) > 0, ""
-
 
 @register
 class ProgressiveSpring(PhysicalEffect):
@@ -700,12 +700,6 @@ class ProgressiveSpring(PhysicalEffect):
     def regressors(cls, site: Site, s: FloatArray, sd: FloatArray, base: Mapping[str, float],
                    trial: Trial, rate_noise: float) -> list[FloatArray]:
         return [s ** 3]
-
-    @classmethod
-    def from_coefficients(cls, coef: FloatArray, base: Mapping[str, float], trial: Trial,
-                          sites: Sequence[Site], rate_noise: Sequence[float]
-                          ) -> tuple[dict[str, Any], bool, str]:
-        return {"k_cubic": float(coef[0])}, float(coef[0]) > 0, ""
 
 
 @register
