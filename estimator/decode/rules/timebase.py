@@ -1,0 +1,231 @@
+"""Data time: which clock places a frame, the time order check, the tick of a frame.
+
+Two clocks can give a frame its data time:
+
+* ``"tick"``, the sensor's own: every sample the node sends ``SN_Sync`` with its ``Tick``
+  and ``PeriodUs``; an E2E data frame's sample is the tick nearest the last SN_Sync's
+  whose residue mod 15 is the frame's alive counter (:func:`tick_of_counter`), its data
+  time ``tick x period`` (:func:`tick_time`) -- exact whatever the transport's latency.
+* ``"timestamp"``, the frame's arrival time (logs, buses that stamp on reception), for
+  foreign streams that carry no sensor clock.
+
+``"auto"`` takes the tick once an ``SN_Sync`` frame is among the first ``AUTO_FRAMES``
+frames of the DBC's messages (:func:`choose_time_base`), the arrival times otherwise.
+
+Every frame must also arrive in time order: a timestamp earlier than the last accepted
+frame's, NaN or inf is rejected as ``time`` (:class:`TimeOrder`); after ``TIME_RESYNC``
+such frames in a row the clock was reset and the time base is re-anchored.
+
+In tick mode a data frame after a silence longer than 7 periods with no SN_Sync since its
+message's last frame is ``no_sync`` (:func:`stale_tick`): a link closed and reopened, the
+last tick is stale and would place the frame in the past.
+
+Scalar and array forms: :func:`tick_of_counter` / :func:`ticks_of_counters`,
+:func:`tick_time` / :func:`tick_times`, :func:`sync_time` / :func:`sync_times`,
+:meth:`TimeOrder.admit` / :func:`time_breaks`, :func:`stale_tick` / :func:`fresh_ticks`;
+:class:`SyncTrack` gives every frame of a batch the SN_Sync state it would have seen.
+"""
+from __future__ import annotations
+
+import math
+import sys
+from typing import Any, Protocol
+
+import numpy as np
+
+from suspid.can.crc import COUNTER_MODULUS
+
+_INF = math.inf
+#: consecutive 'time' rejections after which the time base is re-anchored (a clock reset)
+TIME_RESYNC = 16
+#: ``time_source="auto"``: frames held while waiting for an ``SN_Sync`` before the time base
+#: falls back to the frame timestamps (the node sends SN_Sync with every sample)
+AUTO_FRAMES = 64
+#: silence (in periods, half the counter cycle) after which a data frame needs a new SN_Sync
+STALE_PERIODS = COUNTER_MODULUS // 2
+
+
+# ---- the time order ---------------------------------------------------------------------
+class TimeOrder:
+    """The time order check of a decoder (frame by frame: the reference).
+
+    Attributes
+    ----------
+    last : float
+        Timestamp of the last frame that passed (any finite time passes the first check).
+    rejects : int
+        Consecutive frames rejected for their time.
+    resyncs : int
+        Times the time base was re-anchored after a clock reset.
+    """
+
+    __slots__ = ("last", "rejects", "resyncs")
+
+    def __init__(self) -> None:
+        self.last = -sys.float_info.max
+        self.rejects = 0
+        self.resyncs = 0
+
+    def admit(self, ts: float) -> bool:
+        """Whether a frame stamped ``ts`` passes (and becomes the last); ``False``: ``time``."""
+        if not self.last <= ts < _INF:  # one chained compare: backwards, NaN or inf
+            if not self.out_of_order(ts):
+                return False
+        self.rejects = 0
+        self.last = ts
+        return True
+
+    def out_of_order(self, ts: float) -> bool:
+        """A frame that failed ``last <= ts < inf``: ``True`` when it re-anchors the time base
+        (the caller then takes it as the new last), ``False`` when it is rejected."""
+        if not -_INF < ts < _INF:
+            return False  # NaN/inf: never a data time, never a re-anchor
+        self.rejects += 1
+        if self.rejects < TIME_RESYNC:
+            return False
+        self.resyncs += 1  # the clock was reset: re-anchor on this frame
+        return True
+
+
+def time_breaks(last: float, ts: np.ndarray) -> np.ndarray:
+    """Frames of a batch that fail the time order against their predecessor (the first one
+    against ``last``): the places where :meth:`TimeOrder.admit` may reject or re-anchor."""
+    prev = np.empty(ts.size)
+    prev[0] = last
+    prev[1:] = ts[:-1]
+    return ~((prev <= ts) & (ts < _INF))
+
+
+# ---- the sensor tick --------------------------------------------------------------------
+def tick_of_counter(sync_tick: int, c: int) -> int:
+    """The tick nearest ``sync_tick`` (at most half a counter cycle later) whose residue
+    mod 15 is the alive counter ``c``."""
+    d = (sync_tick - c) % COUNTER_MODULUS
+    return sync_tick - d if d <= COUNTER_MODULUS // 2 else sync_tick - d + COUNTER_MODULUS
+
+
+def ticks_of_counters(sync_tick: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """:func:`tick_of_counter` of many frames (int64 arrays)."""
+    d = (sync_tick - c) % COUNTER_MODULUS
+    return sync_tick - d + np.where(d <= COUNTER_MODULUS // 2, 0, COUNTER_MODULUS)
+
+
+def tick_time(tick: int, period: float) -> float:
+    """Data time (s) of sample ``tick`` at ``period`` s, rounded to the µs as SN_Sync's own
+    (``PeriodUs`` is an integer)."""
+    return round(tick * period * 1e6) / 1e6
+
+
+def tick_times(ticks: np.ndarray, period: np.ndarray) -> np.ndarray:
+    """:func:`tick_time` of many frames."""
+    return np.round(ticks * period * 1e6) / 1e6
+
+
+def sync_time(tick: Any, period_us: Any) -> float:
+    """Data time (s) of an SN_Sync frame: its ``Tick x PeriodUs`` (the exact decimal time)."""
+    return int(tick) * period_us / 1e6
+
+
+def sync_times(ticks: np.ndarray, period_us: np.ndarray, arrival: np.ndarray) -> np.ndarray:
+    """:func:`sync_time` of SN_Sync frames with integer fields; ``arrival`` where PeriodUs is 0."""
+    return np.where(period_us > 0, (ticks * period_us).astype(np.float64) / 1e6, arrival)
+
+
+class TickState(Protocol):
+    """What the stale-tick rule keeps per message."""
+
+    last_c: int
+    period: float
+    last_arrival: float
+    sync_n: int
+
+
+def stale_tick(route: TickState, sync_n: int, period: float, arrival: float) -> bool:
+    """Tick mode: a data frame arriving at ``arrival`` (s) with ``sync_n`` SN_Sync frames
+    seen must wait for a new SN_Sync (``no_sync``): none came since its message's last frame
+    and the silence is longer than the counter can match."""
+    return (route.sync_n == sync_n and route.last_c >= 0 and arrival - route.last_arrival
+            > STALE_PERIODS * max(route.period, period))
+
+
+def fresh_ticks(sn: np.ndarray, prev_sn: np.ndarray, arrival: np.ndarray,
+                prev_arrival: np.ndarray, period: np.ndarray, known: np.ndarray) -> np.ndarray:
+    """Data frames that certainly have a usable tick: known tick and period, and an SN_Sync
+    since the message's previous frame or a silence short enough (:func:`stale_tick` is then
+    False whatever the message's own period estimate)."""
+    return known & ~np.isnan(period) & ((sn != prev_sn)
+                                        | (arrival - prev_arrival <= STALE_PERIODS * period))
+
+
+class SyncTrack:
+    """SN_Sync state along a batch segment (tick mode): what every frame position sees.
+
+    Parameters
+    ----------
+    tick0 : int or None
+        ``Tick`` of the last accepted SN_Sync before the segment.
+    n0 : int
+        SN_Sync frames accepted before the segment.
+    period0 : float or None
+        Period (s) before the segment.
+    """
+
+    def __init__(self, tick0: int | None, n0: int, period0: float | None) -> None:
+        self.tick0 = tick0
+        self.n0 = n0
+        self.period0 = period0
+        self.pos = np.empty(0, dtype=np.int64)
+        self.ticks = np.empty(0, dtype=np.int64)
+        self.periods = np.empty(0)
+        # filled by the segment for the frames of the other messages (from index lo of the
+        # sorted segment arrays on): SN_Sync count, tick known, period (NaN unknown)
+        self.lo = 0
+        self.sn = np.empty(0, dtype=np.int64)
+        self.known = np.empty(0, dtype=bool)
+        self.per = np.empty(0)
+
+    def add(self, pos: np.ndarray, ticks: np.ndarray, period_us: np.ndarray) -> None:
+        """The accepted SN_Sync frames of the segment: positions, ticks, periods (µs)."""
+        given = period_us > 0
+        last = np.maximum.accumulate(np.where(given, np.arange(given.size), -1))
+        per = (period_us * 1e-6) if period_us.dtype.kind == "f" else \
+            period_us.astype(np.float64) * 1e-6
+        self.pos = np.asarray(pos, dtype=np.int64)
+        self.ticks = np.asarray(ticks, dtype=np.int64)
+        self.periods = np.where(last >= 0, per[np.maximum(last, 0)],
+                                math.nan if self.period0 is None else self.period0)
+
+    def at(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """At segment positions ``q``: SN_Sync count, tick, tick known, period (NaN unknown)."""
+        k = np.searchsorted(self.pos, q)
+        sn = self.n0 + k
+        has = k > 0
+        km1 = np.maximum(k - 1, 0)
+        if self.ticks.size:
+            st = np.where(has, self.ticks[km1], 0 if self.tick0 is None else self.tick0)
+            per = np.where(has, self.periods[km1],
+                           math.nan if self.period0 is None else self.period0)
+        else:
+            st = np.full(q.size, 0 if self.tick0 is None else self.tick0, dtype=np.int64)
+            per = np.full(q.size, math.nan if self.period0 is None else self.period0)
+        known = has | (self.tick0 is not None)
+        return sn, st.astype(np.int64), known, per
+
+
+# ---- which clock ------------------------------------------------------------------------
+def choose_time_base(ids: np.ndarray, sync_ids: np.ndarray, known_ids: np.ndarray,
+                     final: bool) -> str | None:
+    """``time_source="auto"``: ``"tick"`` if the first frames ``ids`` hold an SN_Sync,
+    ``"timestamp"`` once ``AUTO_FRAMES`` frames of the DBC (or, ``final``, the whole input)
+    came without one, ``None`` while undecided. Foreign frames do not count."""
+    if np.isin(ids, sync_ids).any():
+        return "tick"
+    if final or int(np.isin(ids, known_ids).sum()) >= AUTO_FRAMES:
+        return "timestamp"
+    return None
+
+
+def first_sync(ids: np.ndarray, sync_ids: np.ndarray) -> int:
+    """Index of the first SN_Sync among the first ``AUTO_FRAMES`` frames ``ids`` (-1: none)."""
+    hit = np.flatnonzero(np.isin(ids[:AUTO_FRAMES], sync_ids))
+    return int(hit[0]) if hit.size else -1
