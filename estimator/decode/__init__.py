@@ -1,18 +1,28 @@
 """CAN front end of the estimator: frame validation, decoding, rolling buffer, log input.
 
-Public entry points
--------------------
-:class:`~estimator.decode.listener.DecodeListener`
-    python-can Listener: validate (ID, DLC, CRC, counter, time), decode, buffer -- in
-    NumPy batches, identical to frame by frame.
-:class:`~estimator.decode.buffer.RollingBuffer`
+Parts, by file
+--------------
+``listener.py`` :class:`~estimator.decode.listener.DecodeListener`
+    the python-can Listener (a ``can.Notifier`` drives it, or a log replay): queues frames
+    and hands them to the engine in batches; the results.
+``engine.py`` :class:`~estimator.decode.engine.DecodeEngine`
+    frames (one message, or arrays of many) -> validated, decoded samples in the buffer;
+    a frame-by-frame path and an identical batch path.
+``rules/`` (``e2e.py``, ``counters.py``, ``timebase.py``)
+    the checks: E2E CRC and alive counter, counter continuity and lost frames, which clock
+    gives data time; scalar and array forms side by side.
+``routes.py``
+    per CAN ID of the DBC: kind, length, E2E check, decoders, buffer ring.
+``vector.py``
+    signals of many payloads at once, bit for bit the per-frame decoder.
+``buffer.py`` :class:`~estimator.decode.buffer.RollingBuffer`
     bounded preallocated store; :meth:`~estimator.decode.buffer.RollingBuffer.align`.
-:func:`~estimator.decode.log_input.load_log_as_measurement`
+``log_input.py`` :func:`~estimator.decode.log_input.load_log_as_measurement`
     a CAN log as a Measurement plus frame statistics (``suspid identify --input LOG``).
-:func:`~estimator.decode.replay.feed_log`
-    a CAN log into a listener as arrays (candump: no message objects at all).
-:func:`~estimator.decode.replay.feed`, :class:`~estimator.decode.replay.ReplayBus`
-    messages into listeners, directly or through ``can.Notifier``.
+``replay.py`` :func:`~estimator.decode.replay.feed_log`, :func:`~estimator.decode.replay.feed`,
+:class:`~estimator.decode.replay.ReplayBus`
+    a CAN log into a listener as arrays, messages into listeners directly or through
+    ``can.Notifier``.
 """
 from estimator.decode.buffer import Aligned, Gap, RollingBuffer
 from estimator.decode.listener import REJECT_REASONS, DecodeListener

@@ -9,10 +9,9 @@ offline loading of a whole log, ``growable=True`` doubles the rings in place ins
 :meth:`Source.push_many` stores a block of rows at once (the decoder's batch path); the
 ring ends up exactly as after the same rows pushed one by one.
 
-A producer that holds rows back (the decoder batches frames) sets
-:attr:`RollingBuffer.before_read`: every read of the buffer (``sources``, ``latest_time``,
-``series``, ``align``, ``overwritten``, ``clear``, ``Source.snapshot``) calls it first, so
-readers always see every frame received so far.
+The buffer calls nobody: it holds what was pushed. A producer that holds rows back (the
+decoder batches frames) hands out the buffer only after storing them
+(:attr:`DecodeListener.buffer <estimator.decode.listener.DecodeListener.buffer>`).
 
 :meth:`RollingBuffer.align` puts the channels on one uniform time base: every sample goes
 to the grid cell nearest its time; cells without a sample stay NaN and are listed as
@@ -97,10 +96,10 @@ class Source:
     """Ring of rows ``(t, v_0, ..., v_{k-1})`` of one message; created by :meth:`RollingBuffer.source`."""
 
     __slots__ = ("name", "channels", "t", "cols", "w", "n", "cap", "growable", "overwritten",
-                 "_lock", "push", "_views", "_owner", "_cleared", "_checked", "_drop")
+                 "_lock", "push", "_views", "_cleared", "_checked", "_drop")
 
     def __init__(self, name: str, channels: Sequence[str], capacity: int, growable: bool,
-                 lock: threading.Lock, owner: "RollingBuffer | None" = None) -> None:
+                 lock: threading.Lock) -> None:
         self.name = name
         self.channels = tuple(channels)
         self.cap = capacity
@@ -119,7 +118,6 @@ class Source:
         self._drop = -1
         self._lock = lock
         self._views: list[np.ndarray] | None = None   # NumPy views of (t, *cols) for push_many
-        self._owner = owner
         self.push = self._compile_push()
 
     def _compile_push(self) -> Callable[[float, Sequence[float]], None]:
@@ -209,8 +207,6 @@ class Source:
 
     def snapshot(self) -> tuple[np.ndarray, np.ndarray]:
         """Copies ``(t (n,), values (n, k))`` in arrival order (oldest first)."""
-        if self._owner is not None and self._owner.before_read is not None:
-            self._owner.before_read()
         with self._lock:
             n, w, cap = self.n, self.w, self.cap
             # zero-copy views of the columns, released before the lock is: a growable ring
@@ -263,8 +259,6 @@ class Source:
         times held are in order (always, for the listener's timestamp time base) the
         window's rows are found by bisection; otherwise by comparing every time.
         """
-        if self._owner is not None and self._owner.before_read is not None:
-            self._owner.before_read()
         with self._lock:
             n, w, cap = self.n, self.w, self.cap
             # zero-copy views, released before the lock is (see snapshot)
@@ -344,17 +338,10 @@ class RollingBuffer:
         self._sources: dict[str, Source] = {}
         self._where: dict[str, tuple[Source, int]] = {}
         self._lock = threading.Lock()
-        #: called before every read (a producer's flush of held-back rows), or None
-        self.before_read: Callable[[], None] | None = None
-
-    def _sync(self) -> None:
-        if self.before_read is not None:
-            self.before_read()
 
     @property
     def sources(self) -> dict[str, Source]:
         """``message name -> Source`` (every row received so far stored)."""
-        self._sync()
         return self._sources
 
     def source(self, name: str, channels: Sequence[str]) -> Source:
@@ -364,7 +351,7 @@ class RollingBuffer:
         for ch in channels:
             if ch in self._where:
                 raise ValueError(f"channel {ch!r} already comes from {self._where[ch][0].name}")
-        src = Source(name, channels, self.capacity, self.growable, self._lock, self)
+        src = Source(name, channels, self.capacity, self.growable, self._lock)
         self._sources[name] = src
         for k, ch in enumerate(channels):
             self._where[ch] = (src, k)
@@ -382,7 +369,6 @@ class RollingBuffer:
 
     def latest_time(self) -> float:
         """Time (s) of the newest row of any source (NaN if empty)."""
-        self._sync()
         best = float("nan")
         with self._lock:
             for s in self._sources.values():
@@ -394,7 +380,6 @@ class RollingBuffer:
 
     def series(self, channel: str) -> tuple[np.ndarray, np.ndarray]:
         """``(t, v)`` of one channel in arrival order."""
-        self._sync()
         src, k = self._where[channel]
         t, v = src.snapshot()
         return t, v[:, k]
@@ -427,7 +412,6 @@ class RollingBuffer:
             No data, or a time span that would need more than 50 M grid cells, or more
             than 2 M cells and 50 x the frames held (a timestamp outlier).
         """
-        self._sync()
         names = list(channels) if channels is not None else self.channels
         unknown = [c for c in names if c not in self._where]
         if unknown:

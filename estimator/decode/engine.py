@@ -1,0 +1,628 @@
+"""The decoder's engine: frames (one python-can message, or arrays of many) -> validated,
+decoded samples in the :class:`~estimator.decode.buffer.RollingBuffer`.
+
+Every frame goes through, in order (the first failing check names the rejection reason):
+frame type; time order (:class:`~estimator.decode.rules.timebase.TimeOrder`); a CAN ID of
+the DBC (:class:`~estimator.decode.routes.Routes`); its DLC; the E2E CRC
+(:mod:`~estimator.decode.rules.e2e`); the alive counter
+(:class:`~estimator.decode.rules.counters.CounterRules`); in tick mode a known tick
+(:mod:`~estimator.decode.rules.timebase`). Accepted data frames are decoded and pushed into
+the buffer with their data time; SN_Sync, SN_Status and SUSPID_Alert frames update the
+engine's state.
+
+Two paths, one result:
+
+* :meth:`DecodeEngine.message` / :meth:`DecodeEngine.validate`: one frame at a time (the
+  reference);
+* :meth:`DecodeEngine.process`: a batch of frames in :class:`~suspid.can.logs.FrameArrays`.
+  The stateless checks (frame type, ID, DLC, E2E CRC) run over all frames at once; the
+  time check splits the batch into segments of frames in time order; per message the
+  frames whose counter advances by one with a steady interval need only the period
+  recurrence (:func:`~estimator.decode.rules.counters.steady_frames`,
+  :func:`~estimator.decode.rules.counters.period_after`); the signals of the accepted
+  frames are decoded column-wise (:mod:`estimator.decode.vector`) and stored with
+  :meth:`~estimator.decode.buffer.Source.push_many`. Whatever a batch holds that the array
+  code does not cover -- a timestamp going back, NaN or inf, a counter that does not
+  advance by exactly one, a silence, a CAN FD payload, a message without an array decoder
+  -- goes through the frame-by-frame rules from that frame on, and the batch resumes after
+  it. Counters, buffer contents (bit for bit) and every piece of state are identical to
+  the frame-by-frame path (``tests/can/test_batch_equivalence.py``).
+
+The engine holds no lock and no queue: :class:`~estimator.decode.listener.DecodeListener`
+serialises the calls.
+"""
+from __future__ import annotations
+
+import math
+from bisect import bisect_left
+from typing import Any
+
+import can
+import numpy as np
+from cantools.database.can import Database
+
+from estimator.decode.buffer import RollingBuffer
+from estimator.decode.routes import ALERT, DATA, EXT, STATUS, SYNC, Route, Routes
+from estimator.decode.rules.counters import CounterRules, period_after, steady_frames
+from estimator.decode.rules.e2e import Payload, alive_counter, alive_counters, crc_ok_rows
+from estimator.decode.rules.timebase import (SyncTrack, TimeOrder, fresh_ticks, stale_tick,
+                                             sync_time, sync_times, tick_of_counter, tick_time,
+                                             tick_times, ticks_of_counters, time_breaks)
+from estimator.decode.stats import FrameCounts
+from suspid.can.codec import decode_alert
+from suspid.can.logs import FrameArrays
+
+_INF = math.inf
+#: default ``min_batch``: fewer frames than this are validated one by one (below it the
+#: array code's fixed cost, ~100 NumPy calls, exceeds the per-frame path's)
+SMALL_BATCH = 192
+#: default ``min_run``: a run between two time anomalies shorter than this goes frame by frame
+MIN_RUN = 192
+#: stateless outcome of a frame in a batch (0: passed ID, DLC and CRC)
+_O_UNKNOWN, _O_IGNORED, _O_DLC, _O_CRC = 1, 2, 3, 4
+
+
+def _row_key(fa: FrameArrays, i: int) -> int:
+    """Route key (CAN ID | extended flag) of frame ``i``."""
+    fid = int(fa.arbitration_id[i])
+    return fid | EXT if fa.is_extended[i] else fid
+
+
+class DecodeEngine:
+    """Validate, decode and store frames; the state that carries from frame to frame.
+
+    Parameters
+    ----------
+    db : cantools Database
+        For the alert frames' decoder.
+    routes : Routes
+    buffer : RollingBuffer
+    tick_time : bool
+        Data time from the SN_Sync tick (else the frame timestamps).
+    max_counter_delta, stale_window : int
+        See :class:`~estimator.decode.rules.counters.CounterRules`.
+    collect_alerts : bool
+        Keep accepted alerts in :attr:`outbox` for a callback.
+
+    Attributes
+    ----------
+    counts : FrameCounts
+    order : TimeOrder
+    tick_time : bool
+        The time base in use (may be switched on before the first frame: ``auto``).
+    sync_tick : int or None
+        ``Tick`` of the last SN_Sync.
+    sync_n : int
+        SN_Sync frames accepted.
+    period : float or None
+        Sample period (s) announced by SN_Sync.
+    node_status : dict
+    alerts : list of dict
+    outbox : list of dict
+        Accepted alerts not yet delivered (``collect_alerts``).
+    frames : int
+        Frames processed.
+    min_batch, min_run : int
+        Tuning of the batch path (same results).
+    """
+
+    def __init__(self, db: Database, routes: Routes, buffer: RollingBuffer, *, tick_time: bool,
+                 max_counter_delta: int, stale_window: int, collect_alerts: bool) -> None:
+        self.db = db
+        self.routes = routes
+        self.buffer = buffer
+        self.counts = FrameCounts()
+        self._rejected = self.counts.rejected
+        self.counters = CounterRules(self.counts, max_counter_delta, stale_window)
+        self.order = TimeOrder()
+        self.tick_time = tick_time
+        self.sync_tick: int | None = None
+        self.sync_n = 0
+        self.period: float | None = None
+        self.node_status: dict[str, object] = {}
+        self.alerts: list[dict[str, object]] = []
+        self.collect_alerts = collect_alerts
+        self.outbox: list[dict[str, object]] = []
+        self.frames = 0
+        self.min_batch = SMALL_BATCH
+        self.min_run = MIN_RUN
+        self._by_key = routes.by_key
+        self._known = routes.known
+
+    # ---- one frame ------------------------------------------------------------------------
+    def message(self, msg: can.Message) -> None:
+        """Validate one python-can message."""
+        self.frames += 1
+        if msg.is_error_frame or msg.is_remote_frame:
+            self._rejected["frame_type"] += 1
+            return
+        self.validate(msg.timestamp, msg.arbitration_id | EXT if msg.is_extended_id
+                      else msg.arbitration_id, msg.data)
+
+    def validate(self, ts: float, key: int, data: Payload) -> None:
+        """Every check after the frame type, decode and store (one frame; the reference)."""
+        rejected = self._rejected
+        order = self.order
+        if not order.last <= ts < _INF:  # one chained compare: backwards, NaN or inf
+            if not order.out_of_order(ts):
+                rejected["time"] += 1
+                return
+        order.rejects = 0
+        order.last = ts
+        route = self._by_key.get(key)
+        if route is None:
+            if key in self._known:
+                self.counts.ignored += 1
+            else:
+                rejected["unknown_id"] += 1
+            return
+        if len(data) != route.dlc:
+            rejected["dlc"] += 1
+            return
+        c = -1
+        if route.check is not None:
+            if not route.check(data):
+                rejected["crc"] += 1
+                return
+            c = alive_counter(data)
+            arrival = ts
+            if self.tick_time:
+                # the gap rules below need data time: a host's arrival times bunch (a
+                # serial reader hands over a chunk of frames at once), which made the
+                # period estimate tiny and counted thousands of frames 'lost'
+                if route.kind == SYNC:
+                    tick, period_us = route.decode(data)
+                    if period_us > 0:
+                        ts = sync_time(tick, period_us)
+                elif route.kind == DATA and self.sync_tick is not None and self.period:
+                    if stale_tick(route, self.sync_n, self.period, arrival):
+                        rejected["no_sync"] += 1
+                        return
+                    ts = tick_time(tick_of_counter(self.sync_tick, c), self.period)
+                route.last_arrival = arrival
+                route.sync_n = self.sync_n
+            if not self.counters.step(route, c, ts):
+                return
+        if route.kind == DATA:
+            if self.tick_time:
+                if self.sync_tick is None or c < 0:
+                    rejected["no_sync"] += 1
+                    return
+                # ts is the data time matched through the counter above
+            if route.source is None or route.row is None:   # every DATA route has both
+                raise RuntimeError(f"data route {route.name} without a source or decoder")
+            route.source.push(ts, route.row(data))
+        elif not self._special(route, data, ts):
+            return
+        route.accepted += 1
+        self.counts.accepted += 1
+
+    def _special(self, route: Route, data: Payload, ts: float) -> bool:
+        """SN_Sync, SN_Status and SUSPID_Alert frames; ``False`` if rejected."""
+        if route.kind == SYNC:
+            tick, period_us = route.decode(data)
+            self.sync_tick = int(tick)
+            self.sync_n += 1
+            if period_us > 0:
+                self.period = period_us * 1e-6
+        elif route.kind == STATUS:
+            state, rate, flags, busoff, sset = route.decode(data)
+            self.node_status = {"t": ts, "state": int(state), "sample_rate": float(rate),
+                                "fault_flags": int(flags), "busoff_count": int(busoff),
+                                "sensor_set": int(sset)}
+        else:
+            try:
+                alert = decode_alert(self.db, data)
+            except Exception:  # an unknown ParamKind: a corrupted but CRC-valid alert
+                self._rejected["crc"] += 1
+                return False
+            alert["t"] = ts
+            self.alerts.append(alert)
+            if self.collect_alerts:
+                self.outbox.append(alert)
+        return True
+
+    # ---- a batch --------------------------------------------------------------------------
+    def process(self, fa: FrameArrays, lo: int, hi: int) -> None:
+        """Frames ``lo:hi`` of ``fa``, as the frame-by-frame path would.
+
+        The stateless checks (frame type, ID, DLC, E2E CRC) are done for the whole batch;
+        their counts are taken per segment because a frame rejected for its time is
+        counted as ``time`` only. The time check is the state every frame shares: runs
+        of frames that pass it (each timestamp finite and not earlier than the previous
+        frame's) are processed as one segment (:meth:`_segment`); a frame that fails it,
+        a payload longer than 8 bytes, and runs shorter than ``min_run`` go through
+        :meth:`validate`.
+        """
+        n = hi - lo
+        if n <= 0:
+            return
+        if n < self.min_batch:
+            self.scalar_rows(fa, lo, hi)
+            return
+        self.frames += n
+        ft = fa.frame_type[lo:hi]
+        data64 = np.ascontiguousarray(fa.data).view(np.uint64).reshape(-1)
+        if ft.any():
+            self._rejected["frame_type"] += int(np.count_nonzero(ft))
+            nf = np.flatnonzero(~ft) + lo
+            m = int(nf.size)
+            if not m:
+                return
+            ts = fa.timestamp[nf]
+            fid = fa.arbitration_id[nf]
+            ext = fa.is_extended[nf]
+            length = fa.length[nf]
+            rows = data64[nf]
+        else:
+            nf = None
+            m = n
+            ts = fa.timestamp[lo:hi]
+            fid = fa.arbitration_id[lo:hi]
+            ext = fa.is_extended[lo:hi]
+            length = fa.length[lo:hi]
+            rows = data64[lo:hi]
+        # ---- stateless checks: outcome per frame, route, payload
+        rt = self.routes
+        keys = fid | (ext.astype(np.int64) << 31) if ext.any() else fid
+        rkeys = rt.keys   # never empty: a decoder has at least one data message
+        p = np.searchsorted(rkeys, keys)
+        p[p >= rkeys.size] = 0
+        hit = rkeys[p] == keys
+        r = rt.num[p]
+        outcome = np.zeros(m, dtype=np.int8)
+        if not hit.all():
+            miss = ~hit
+            known = np.isin(keys, rt.ignored_keys) if rt.ignored_keys.size \
+                else np.zeros(m, bool)
+            outcome[miss] = np.where(known[miss], _O_IGNORED, _O_UNKNOWN)
+            r = np.where(hit, r, -1)
+        rdlc = rt.dlc[r]
+        bad = hit & (length != rdlc)
+        if bad.any():
+            outcome[bad] = _O_DLC
+        e2e = rt.e2e[r] & (outcome == 0)
+        if e2e.any():
+            ok = crc_ok_rows(rows.view(np.uint8).reshape(m, 8), rt.start[r], rdlc, e2e)
+            outcome[~ok] = _O_CRC
+        # ---- the time check, segment by segment
+        badt = time_breaks(self.order.last, ts)
+        long_rows = None
+        if fa.long_data:
+            long_rows = length > 8
+            badt |= long_rows
+        bad_at = np.flatnonzero(badt).tolist()
+        nb = len(bad_at)
+        b = 0
+        pos = 0
+        while pos < m:
+            # the frame at pos against the time base as it is now (an earlier frame may
+            # have been rejected), the later ones against their predecessor
+            while b < nb and bad_at[b] <= pos:
+                b += 1
+            if not self.order.last <= float(ts[pos]) < _INF or (long_rows is not None
+                                                                 and long_rows[pos]):
+                j = pos
+            else:
+                j = bad_at[b] if b < nb else m
+            if j - pos >= max(1, self.min_run):
+                self._segment(pos, j, ts, r, outcome, rows)
+                pos = j
+            else:
+                end = min(j + 1, m)
+                for k in range(pos, end):
+                    i = int(nf[k]) if nf is not None else lo + k
+                    self.validate(float(ts[k]), _row_key(fa, i), fa.payload(i))
+                pos = end
+
+    def scalar_rows(self, fa: FrameArrays, lo: int, hi: int) -> None:
+        """Frames ``lo:hi`` of ``fa`` one by one through the frame-by-frame path (counted,
+        frame type checked, then :meth:`validate`), the fields read as lists first.
+
+        The small batches a window driver feeds between two checks go this way; the
+        per-frame reads of NumPy scalars (~1 µs a frame) become list and bytes indexing.
+        """
+        ts = fa.timestamp[lo:hi].tolist()
+        ids = fa.arbitration_id[lo:hi].tolist()
+        ext = fa.is_extended[lo:hi].tolist()
+        ft = fa.frame_type[lo:hi].tolist()
+        lens = fa.length[lo:hi].tolist()
+        raw = np.ascontiguousarray(fa.data[lo:hi]).tobytes()
+        long_data = fa.long_data
+        rejected = self._rejected
+        validate = self.validate
+        for k in range(hi - lo):
+            self.frames += 1
+            if ft[k]:
+                rejected["frame_type"] += 1
+                continue
+            payload = long_data.get(lo + k) if long_data else None
+            if payload is None:   # FrameArrays.payload: data[i, :length] (8 bytes at most)
+                payload = raw[8 * k:8 * k + 8][:lens[k]]
+            fid = ids[k]
+            validate(ts[k], fid | EXT if ext[k] else fid, payload)
+
+    def _segment(self, lo: int, hi: int, ts: np.ndarray, r: np.ndarray, outcome: np.ndarray,
+                 rows: np.ndarray) -> None:
+        """Batch frames ``lo:hi`` (in order, all passing the time check).
+
+        The stateless outcomes are counted; the frames that passed them are grouped by
+        message (a stable sort keeps their order) for the counter and period rules
+        (:meth:`_runs`) -- in tick mode SN_Sync first, whose accepted frames give every
+        other frame its tick and period -- and per message decoded and stored
+        (:meth:`_accepted`).
+        """
+        self.order.last = float(ts[hi - 1])
+        self.order.rejects = 0
+        oc = outcome[lo:hi]
+        if oc.any():
+            cnt = np.bincount(oc, minlength=5).tolist()
+            rejected = self._rejected
+            rejected["unknown_id"] += cnt[_O_UNKNOWN]
+            self.counts.ignored += cnt[_O_IGNORED]
+            rejected["dlc"] += cnt[_O_DLC]
+            rejected["crc"] += cnt[_O_CRC]
+            h = np.flatnonzero(oc == 0) + lo
+            if not h.size:
+                return
+            r_h = r[h]
+        else:
+            h = None
+            r_h = r[lo:hi]
+        route_list = self.routes.ordered
+        nroutes = len(route_list)
+        if r_h.size > 1 and (r_h[1:] < r_h[:-1]).any():
+            order = np.argsort(r_h.astype(np.uint8 if nroutes < 256 else np.uint16),
+                               kind="stable")
+            h = order + lo if h is None else h[order]
+            r_h = r_h[order]
+        elif h is None:
+            h = np.arange(lo, hi)
+        rows = rows[h]
+        arr = ts[h]
+        cnt_r = np.bincount(r_h, minlength=nroutes)
+        ends = np.cumsum(cnt_r).tolist()
+        runs = [(k, ends[k] - c, ends[k]) for k, c in enumerate(cnt_r.tolist()) if c]
+        syncs = SyncTrack(self.sync_tick, self.sync_n, self.period) if self.tick_time \
+            else None
+        tsd = arr
+        if syncs is not None and route_list[runs[0][0]].kind == SYNC:
+            # tick mode: SN_Sync first (its data time is its own Tick x PeriodUs)
+            k, a, b = runs[0]
+            route = route_list[k]
+            b8 = rows[a:b].view(np.uint8).reshape(b - a, 8)
+            vals = self._sync_values(route, b8)
+            tk, pus = vals
+            t_s = arr[a:b]
+            if route.check is not None:
+                if isinstance(tk, np.ndarray):
+                    t_s = sync_times(tk, pus, t_s)
+                else:
+                    t_s = np.array([sync_time(t, u) if u > 0 else x
+                                    for t, u, x in zip(tk, pus, t_s.tolist())], dtype=np.float64)
+                acc = self._runs(runs[:1], rows, arr, t_s, a, syncs)
+            else:
+                acc = np.ones(b - a, dtype=bool)
+            self._accepted(route, b8, t_s, acc, vals, syncs, h[a:b])
+            runs = runs[1:]
+            if not runs:
+                return
+        if syncs is not None:
+            # every other message: the SN_Sync state each frame sees, and the data time of
+            # the E2E data frames: the tick nearest the last SN_Sync's with their counter's
+            # residue mod 15, times the period
+            a0 = runs[0][1]
+            sn, st, known, per = syncs.at(h[a0:])
+            syncs.sn, syncs.known, syncs.per, syncs.lo = sn, known, per, a0
+            conv = known & ~np.isnan(per) & self.routes.data_e2e[r_h[a0:]]
+            tsd = arr
+            if conv.any():
+                tk = ticks_of_counters(st, alive_counters(rows[a0:]))
+                tsd = arr.copy()
+                tsd[a0:] = np.where(conv, tick_times(tk, per), arr[a0:])
+        e2e_runs = [x for x in runs if route_list[x[0]].check is not None]
+        if e2e_runs:
+            a0, b0 = e2e_runs[0][1], e2e_runs[-1][2]
+            acc = self._runs(e2e_runs, rows, arr, tsd[a0:b0], a0, syncs)
+            for k, a, b in e2e_runs:
+                self._accepted(route_list[k], rows[a:b].view(np.uint8).reshape(b - a, 8),
+                               tsd[a:b], acc[a - a0:b - a0], None, syncs, h[a:b])
+        for k, a, b in runs:
+            route = route_list[k]
+            if route.check is not None:
+                continue
+            # not E2E protected: no counter, the data time is the frame time
+            if route.kind == DATA and syncs is not None:
+                self._rejected["no_sync"] += b - a
+                continue
+            b8 = rows[a:b].view(np.uint8).reshape(b - a, 8)
+            sync_vals = self._sync_values(route, b8) if syncs is not None and \
+                route.kind == SYNC else None
+            self._accepted(route, b8, arr[a:b], np.ones(b - a, dtype=bool), sync_vals, syncs,
+                           h[a:b])
+
+    def _runs(self, runs: list[tuple[int, int, int]], rows: np.ndarray, arr: np.ndarray,
+              tsd: np.ndarray, lo: int, syncs: SyncTrack | None) -> np.ndarray:
+        """Counter and period rules of consecutive message runs ``rows[lo:hi]``; accepted mask.
+
+        ``runs`` are ``(route index, start, end)`` in the sorted frame arrays (``rows``:
+        payloads as uint64, ``arr``: frame times), contiguous from ``lo``; ``tsd`` the data
+        times of ``lo:hi``. In every run the prefix of steady frames
+        (:func:`~estimator.decode.rules.counters.steady_frames`; in tick mode also no data
+        frame that could be ``no_sync``) needs only the period recurrence; from its first
+        other frame on, the rules of :meth:`validate` run frame by frame.
+        """
+        hi = runs[-1][2]
+        m = hi - lo
+        routes = self.routes.ordered
+        c = alive_counters(rows[lo:hi])
+        starts = np.array([a - lo for _, a, _ in runs], dtype=np.int64)
+        last_c = np.array([routes[r].last_c for r, _, _ in runs], dtype=np.int64)
+        good, el, rid = steady_frames(c, tsd, starts, last_c,
+                                      np.array([routes[r].last_ts for r, _, _ in runs]),
+                                      np.array([routes[r].period for r, _, _ in runs]))
+        fresh = starts[last_c < 0]          # first frame ever of its message
+        is_data = np.array([routes[r].kind == DATA for r, _, _ in runs])
+        if syncs is not None and is_data.any():
+            # tick mode: a data frame is accepted only with a known tick and period, and
+            # none may qualify for the stale-tick rule
+            o = lo - syncs.lo
+            sn = syncs.sn[o:o + m]
+            per = syncs.per[o:o + m]
+            known = syncs.known[o:o + m]
+            prev_sn = np.empty(m, dtype=np.int64)
+            prev_sn[1:] = sn[:-1]
+            prev_sn[starts] = [routes[r].sync_n for r, _, _ in runs]
+            prev_a = np.empty(m)
+            prev_a[1:] = arr[lo:hi - 1]
+            prev_a[starts] = [routes[r].last_arrival for r, _, _ in runs]
+            ok = fresh_ticks(sn, prev_sn, arr[lo:hi], prev_a, per, known)
+            ok[fresh] = known[fresh] & ~np.isnan(per[fresh])
+            good &= ok | ~is_data[rid]
+        bad = np.flatnonzero(~good).tolist()
+        acc = np.ones(m, dtype=bool)
+        # the fast prefix of every run: [s0 + skip, fb) of el feeds the period estimate
+        fast: list[tuple[int, int, int, int]] = []
+        for r, a, b in runs:
+            s0, s1 = a - lo, b - lo
+            fb = s1
+            if bad:
+                k = bisect_left(bad, s0)
+                if k < len(bad) and bad[k] < s1:
+                    fb = bad[k]
+            fast.append((r, s0, s1, fb))
+        periods = period_after([(routes[r].period, s0 + (1 if routes[r].last_c < 0 else 0), fb)
+                                for r, s0, _, fb in fast], el)
+        for (r, s0, s1, fb), p in zip(fast, periods):
+            route = routes[r]
+            n_fast = fb - s0
+            if n_fast:
+                route.period = p
+                route.last_c = int(c[fb - 1])
+                route.last_ts = float(tsd[fb - 1])
+                if syncs is not None:   # tick mode
+                    route.last_arrival = float(arr[lo + fb - 1])
+                    route.sync_n = syncs.n0 + n_fast - 1 if route.kind == SYNC else \
+                        int(syncs.sn[lo + fb - 1 - syncs.lo])
+            if fb < s1:
+                acc[fb:s1] = self._route_rest(route, c[fb:s1].tolist(), tsd[fb:s1].tolist(),
+                                              arr[lo + fb:lo + s1].tolist(), n_fast,
+                                              lo + fb, syncs)
+        return acc
+
+    def _route_rest(self, route: Route, cl: list[int], tl: list[float], al: list[float],
+                    n_before: int, at: int, syncs: SyncTrack | None) -> np.ndarray:
+        """The rules of :meth:`validate` for frames of one message, one by one; accepted mask.
+
+        ``cl``, ``tl``, ``al``: counters, data times, arrival times; ``n_before``: frames of
+        this message accepted earlier in the segment; ``at``: position of the first frame
+        in the sorted segment arrays (tick mode: index into the SN_Sync state).
+        """
+        rejected = self._rejected
+        step = self.counters.step
+        tick = syncs is not None
+        is_data = route.kind == DATA
+        is_sync = route.kind == SYNC
+        n = len(cl)
+        acc = np.zeros(n, dtype=bool)
+        if syncs is not None:   # tick mode
+            o = at - syncs.lo
+            if is_sync:
+                sn_sync = syncs.n0 + n_before
+            else:
+                snl = syncs.sn[o:o + n].tolist()
+                perl = syncs.per[o:o + n].tolist()
+                knownl = syncs.known[o:o + n].tolist()
+        for k in range(n):
+            ck = cl[k]
+            t = tl[k]
+            if tick:
+                sn = sn_sync if is_sync else snl[k]
+                if is_data and knownl[k] and perl[k] == perl[k]:   # tick and period known
+                    if stale_tick(route, sn, perl[k], al[k]):
+                        rejected["no_sync"] += 1
+                        continue
+                route.last_arrival = al[k]
+                route.sync_n = sn
+            if not step(route, ck, t):
+                continue
+            if tick and is_data and not knownl[k]:
+                rejected["no_sync"] += 1
+                continue
+            acc[k] = True
+            if tick and is_sync:
+                sn_sync += 1
+        return acc
+
+    def _sync_values(self, route: Route, rows: np.ndarray) -> tuple[Any, Any]:
+        """``(Tick, PeriodUs)`` of SN_Sync payloads: int64 arrays, or lists of decoded values."""
+        if route.vsync is not None:
+            return route.vsync(rows)
+        vals = [route.decode(r.tobytes()) for r in rows[:, :route.dlc]]
+        return [v[0] for v in vals], [v[1] for v in vals]
+
+    def _accepted(self, route: Route, rows: np.ndarray, tsd: np.ndarray,
+                  acc: np.ndarray, sync_vals: tuple[Any, Any] | None,
+                  syncs: SyncTrack | None, q: np.ndarray) -> None:
+        """Decode and store (data) or apply (SN_Sync, SN_Status, alert) the accepted frames.
+
+        ``rows`` (m, 8) uint8 payloads, ``tsd`` data times, ``acc`` accepted mask,
+        ``sync_vals`` (tick mode SN_Sync) Tick and PeriodUs, ``q`` segment positions.
+        """
+        n_acc = int(np.count_nonzero(acc))
+        if not n_acc:
+            return
+        kind = route.kind
+        if kind == DATA:
+            if route.source is None or route.row is None:   # every DATA route has both
+                raise RuntimeError(f"data route {route.name} without a source or decoder")
+            if n_acc < acc.size:
+                rows = rows.view(np.uint64).reshape(-1)[acc].view(np.uint8).reshape(n_acc, 8)
+                tsd = tsd[acc]
+            if route.vrow is not None:
+                vals = route.vrow(rows)
+            else:
+                L = route.dlc
+                vals = np.array([route.row(r.tobytes()) for r in rows[:, :L]],
+                                dtype=np.float64).reshape(n_acc, -1)
+            route.source.push_many(tsd, vals)
+        elif kind == SYNC:
+            at = np.flatnonzero(acc)
+            if sync_vals is None:   # timestamp mode: only the last frames matter
+                tick, _ = route.decode(rows[at[-1], :route.dlc].tobytes())
+                self.sync_tick = int(tick)
+                for i in at[::-1].tolist():
+                    _, period_us = route.decode(rows[i, :route.dlc].tobytes())
+                    if period_us > 0:
+                        self.period = period_us * 1e-6
+                        break
+            else:
+                if syncs is None:   # sync_vals are computed in tick mode only
+                    raise RuntimeError("SN_Sync values without the tick-mode sync state")
+                tk, pus = sync_vals
+                if isinstance(tk, np.ndarray):
+                    tk_acc, pus_acc = tk[at], pus[at]
+                else:
+                    tk_acc = np.array([int(tk[i]) for i in at.tolist()], dtype=np.int64)
+                    pus_acc = np.array([pus[i] for i in at.tolist()], dtype=np.float64)
+                syncs.add(q[at], tk_acc, pus_acc)
+                self.sync_tick = int(tk_acc[-1])
+                pos = np.flatnonzero(pus_acc > 0)
+                if pos.size:
+                    self.period = pus_acc[pos[-1]].item() * 1e-6
+            self.sync_n += n_acc
+        elif kind == STATUS:
+            i = int(np.flatnonzero(acc)[-1])
+            state, rate, flags, busoff, sset = route.decode(rows[i, :route.dlc].tobytes())
+            self.node_status = {"t": float(tsd[i]), "state": int(state),
+                                "sample_rate": float(rate), "fault_flags": int(flags),
+                                "busoff_count": int(busoff), "sensor_set": int(sset)}
+        else:
+            for i in np.flatnonzero(acc).tolist():
+                if not self._special(route, rows[i, :route.dlc].tobytes(), float(tsd[i])):
+                    n_acc -= 1
+        route.accepted += n_acc
+        self.counts.accepted += n_acc
+
+
+__all__ = ["ALERT", "DecodeEngine", "MIN_RUN", "SMALL_BATCH"]
