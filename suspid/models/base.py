@@ -114,7 +114,7 @@ class AffinePieces:
     dampers and springs (each enters ``C``, ``K``, ``Fk``, ``Fc`` linearly), so the state
     and input matrices of any parameter set that differs from ``base`` only in the free
     parameters ``names`` are one small product: computed once, used by the simulator, the
-    identifier, the window problem, the EKF and the node's plant alike.
+    identifier, the window problem, the effects simulator, the EKF and the node's plant alike.
 
     Attributes
     ----------
@@ -130,6 +130,9 @@ class AffinePieces:
         ``True`` when the pieces reproduce :meth:`SuspensionModel.state_space` (checked at
         two random parameter sets to 1e-12 relative); ``False`` when a free parameter
         enters non-affinely (a mass, an inertia, a length): use the model instead.
+    Minv : ndarray, shape (nq, nq), optional
+        Inverse mass matrix at ``base`` (1/kg, 1/(kg m^2)): the accelerations per unit
+        generalised force of an added force term (``None`` if not given).
     """
 
     names: tuple[str, ...]
@@ -137,6 +140,18 @@ class AffinePieces:
     AB0: FloatArray
     dAB: FloatArray
     exact: bool
+    Minv: FloatArray | None = None
+    _flat: FloatArray = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        # the slopes as one (n_free, nq * (2 nq + 2 nr)) matrix: accel_rows is one product
+        object.__setattr__(self, "_flat", np.ascontiguousarray(
+            self.dAB.reshape(self.dAB.shape[0], -1)))
+
+    @property
+    def nq(self) -> int:
+        """Number of generalised coordinates."""
+        return int(self.AB0.shape[0])
 
     def theta(self, p: Mapping[str, float]) -> FloatArray:
         """The free parameters of ``p`` as a vector (SI)."""
@@ -148,8 +163,13 @@ class AffinePieces:
         return self.exact and all(p[k] == v for k, v in self.base.items() if k not in free)
 
     def accel_rows(self, theta: FloatArray) -> FloatArray:
-        """``[A_acc | B_acc]`` (nq, 2 nq + 2 nr) at free parameters ``theta``."""
-        return self.AB0 + np.tensordot(np.asarray(theta, dtype=float), self.dAB, axes=1)
+        """``[A_acc | B_acc]`` (nq, 2 nq + 2 nr) at free parameters ``theta``.
+
+        ``q'' = accel_rows(theta) @ [q, q', r, r']``; equal to the rows ``nq:`` of
+        :meth:`SuspensionModel.state_space`'s ``[A | B]`` to rounding.
+        """
+        th = np.asarray(theta, dtype=float)
+        return self.AB0 + (th @ self._flat).reshape(self.AB0.shape)
 
     def state_space(self, theta: FloatArray) -> tuple[FloatArray, FloatArray]:
         """``(A, B)`` at free parameters ``theta``, as :meth:`SuspensionModel.state_space`."""
@@ -162,6 +182,28 @@ class AffinePieces:
         B = np.zeros((n, AB.shape[1] - n))
         B[nq:] = AB[:, n:]
         return A, B
+
+    def accelerations(self, X: FloatArray, U: FloatArray, theta: FloatArray) -> FloatArray:
+        """Accelerations ``q''`` (N, nq) for state rows ``X`` (N, 2 nq) and inputs ``U`` (N, 2 nr)."""
+        AB = self.accel_rows(theta)
+        n = 2 * AB.shape[0]
+        return np.asarray(X @ AB[:, :n].T + U @ AB[:, n:].T, dtype=np.float64)
+
+    def slopes(self, w: FloatArray) -> FloatArray:
+        """Derivatives of the accelerations in the free parameters: ``dq''/dtheta_j``.
+
+        Parameters
+        ----------
+        w : ndarray, shape (2 nq + 2 nr,) or (2 nq + 2 nr, k)
+            ``[q, q', r, r']`` (one point, or ``k`` points as columns).
+
+        Returns
+        -------
+        ndarray, shape (n_free, nq) or (n_free, nq, k)
+            ``dAB_j @ w`` (per SI unit of each free parameter); exact, as the rows are
+            affine in ``theta``. The EKF's Jacobian columns of its augmented parameters.
+        """
+        return np.asarray(self.dAB @ w, dtype=np.float64)
 
 
 @dataclass
@@ -371,7 +413,15 @@ class SuspensionModel:
             got = AB0 + np.tensordot(th, dAB, axes=1)
             if not np.all(np.abs(got - ref) <= 1e-12 * (np.abs(ref).max() + 1e-300)):
                 exact = False
-        return AffinePieces(names, p0, AB0, dAB, exact and f0.shape[0] == nq)
+        Minv = np.asarray(np.linalg.inv(self.matrices(p0)[0]), dtype=np.float64)
+        return AffinePieces(names, p0, AB0, dAB, exact and f0.shape[0] == nq, Minv)
+
+    def mass_inverse(self, p: Mapping[str, float]) -> FloatArray:
+        """``M(p)^-1`` (nq, nq): the accelerations per unit generalised force (1/kg, 1/(kg m^2)).
+
+        The input direction of an added force term ``Q`` (an effect) is ``[0; M^-1 Q]``.
+        """
+        return np.asarray(np.linalg.inv(self.matrices(p)[0]), dtype=np.float64)
 
     def rhs(self, t: float, x: FloatArray, u: FloatArray, params: Mapping[str, float]) -> FloatArray:
         """State derivative ``dx/dt`` (the one right-hand side of the physics).
