@@ -16,8 +16,8 @@ name: its structure (coordinates, roads, parameters), where its struts and tyres
 (:class:`Site`, with static tyre loads), its rest and initial states, how its roads follow
 each other (:meth:`SuspensionModel.road_lags`, :meth:`SuspensionModel.road_tracks`), its
 suspension deflections (:meth:`SuspensionModel.deflections`), which CSV columns are its
-(:meth:`SuspensionModel.column_bases`) and its CAN identities (:attr:`sensor_set`,
-:attr:`alert_id`, matching the DBC). See ``docs/architecture.md`` ("Adding a model").
+(:meth:`SuspensionModel.column_bases`), its CAN identities (:attr:`sensor_set`,
+:attr:`alert_id`, matching the DBC) and its design of experiments (:attr:`doe_design`). See ``docs/architecture.md`` ("Adding a model").
 """
 from __future__ import annotations
 
@@ -104,6 +104,46 @@ class ParamSpec:
     default: float
     kind: str
     description: str
+
+
+@dataclass(frozen=True)
+class DoeDesign:
+    """A model's design of experiments: an orthogonal array's factors mapped onto the model.
+
+    ``suspid doe --model NAME`` runs the design of the model's :attr:`SuspensionModel.doe_design`
+    (:mod:`estimator.doe.design` makes each row an identification problem: the true
+    parameters, the known initial state, a free response).
+
+    Attributes
+    ----------
+    array : str
+        The orthogonal array: one of the seed's, ``"L16-4"`` (Tables 3-4: 16 runs, 5 factors
+        A-E at 4 levels) or ``"L27-3"`` (Tables 5-6: 27 runs, factors A-H, J, K at 3
+        levels), or the name of the model's own array given in ``rows`` and ``levels``.
+    columns : mapping
+        Factor letter -> the parameter or state (``x1``, ``x1_dot``) whose value the
+        factor sets. A factor of the array not listed here is not used.
+    constants : mapping
+        Further true parameter values (SI) every row shares; with ``columns`` they must
+        give every parameter of the model.
+    body_x0 : mapping
+        Further initial-state values every row shares (state name -> m, rad, m/s, rad/s).
+    choices : mapping
+        What the design's source leaves out and how it is chosen, with the reasons
+        (recorded in ``suspid doe --json``'s ``setup.choices``).
+    rows : tuple of tuple of int, optional
+        The model's own array: one row of factor levels (1-based) per run.
+    levels : mapping, optional
+        The model's own array's factors: letter -> ``(name, unit, level values)`` (SI).
+    """
+
+    array: str
+    columns: Mapping[str, str]
+    constants: Mapping[str, float] = field(default_factory=dict)
+    body_x0: Mapping[str, float] = field(default_factory=dict)
+    choices: Mapping[str, str] = field(default_factory=dict)
+    rows: tuple[tuple[int, ...], ...] | None = None
+    levels: Mapping[str, tuple[str, str, tuple[float, ...]]] | None = None
 
 
 @dataclass(frozen=True)
@@ -228,11 +268,15 @@ class SuspensionModel:
     known : tuple of str
         (class attribute) Parameters a user normally knows (weighed masses, measured
         geometry); the documented ``--fix`` set of the examples and tests.
+    doe_design : DoeDesign or None
+        (class attribute) The model's design of experiments for ``suspid doe`` (``None``:
+        the model has none).
     """
 
     sensor_set: ClassVar[int] = 0
     alert_id: ClassVar[int] = -1
     known: ClassVar[tuple[str, ...]] = ()
+    doe_design: ClassVar[DoeDesign | None] = None
 
     name: str
     coords: tuple[str, ...]
