@@ -13,6 +13,8 @@ exponential-trapezoid predictor-corrector)::
 
 with ``Phi, G0, G1, F0, F1`` from one block matrix exponential. The linear part is exact,
 the effect term second-order accurate (first order across a kink such as ``sgn(d')``).
+The linear part is the model's one forward model (its state-space matrices, or its affine
+pieces when the caller passes them, as :func:`suspid.simulate.simulate` takes them).
 The time loop is Python code generated and unrolled for the model's size, so a 1000-sample
 ``quarter2`` record costs a few milliseconds (``solve_ivp`` per sample: about a second).
 Accuracy against :func:`suspid.simulate.simulate_ode` is checked in
@@ -33,8 +35,9 @@ import numpy as np
 from scipy.linalg import expm
 
 from suspid.errors import UsageError
-from suspid.models.base import FloatArray, SuspensionModel
-from suspid.simulate import _foh_weights, pack_channels, road_matrix, uniform_step
+from suspid.models.base import AffinePieces, FloatArray, SuspensionModel
+from suspid.simulate import (_foh_weights, mass_inverse, pack_channels, road_matrix,
+                             state_matrices, uniform_step)
 
 #: scalar force law at one site: ``phi(s, s_dot) -> force`` (N)
 Law = Callable[[float, float], float]
@@ -157,15 +160,19 @@ def _modal_weights(A: FloatArray, Bw: FloatArray, h: float
 
 
 def _discretise(model: SuspensionModel, p: Mapping[str, float], sites: Sequence[SiteLike],
-                h: float) -> _Setup:
-    A, B = model.state_space(p)
-    M, *_ = model.matrices(p)
+                h: float, affine: AffinePieces | None = None) -> _Setup:
+    """Discretise the linear part and the site forces' input directions for step ``h`` (s).
+
+    ``A``, ``B`` and ``M^-1`` are the model's (:func:`suspid.simulate.state_matrices`,
+    :func:`suspid.simulate.mass_inverse`): its affine pieces when they apply to ``p``.
+    """
+    A, B = state_matrices(model, p, affine)
+    Minv = mass_inverse(model, p, affine)
     n = model.n_states
     nq = len(model.coords)
     nr = len(model.roads)
     Br, Bv = B[:, :nr], B[:, nr:]
     Bz = A @ Bv + Br
-    Minv = np.linalg.inv(M)
     S = len(sites)
     Bfs = np.zeros((n, S))
     for j, site in enumerate(sites):
@@ -189,7 +196,8 @@ def _discretise(model: SuspensionModel, p: Mapping[str, float], sites: Sequence[
 def simulate_effects(model: SuspensionModel, params: Mapping[str, float],
                      effects: Sequence[ForceTerm], t: FloatArray,
                      road: Mapping[str, FloatArray] | None = None, x0: FloatArray | None = None,
-                     substeps: int = 1, U: FloatArray | None = None) -> dict[str, FloatArray]:
+                     substeps: int = 1, U: FloatArray | None = None,
+                     affine: AffinePieces | None = None) -> dict[str, FloatArray]:
     """Simulate ``model`` with physical ``effects`` on a uniform time grid.
 
     Parameters
@@ -210,6 +218,10 @@ def simulate_effects(model: SuspensionModel, params: Mapping[str, float],
         Internal steps per sample interval (road interpolated linearly in between).
     U : ndarray, optional
         Precomputed :func:`suspid.simulate.road_matrix` rows (skips recomputing them).
+    affine : AffinePieces, optional
+        The model's affine pieces (:meth:`~suspid.models.base.SuspensionModel.affine`),
+        used for ``A``, ``B`` and ``M^-1`` when they apply to ``params`` (a caller that
+        simulates many damper/spring sets of one car builds them once).
 
     Returns
     -------
@@ -246,7 +258,7 @@ def simulate_effects(model: SuspensionModel, params: Mapping[str, float],
         for site in e.sites(model, p):
             sites.append(site)
             laws.append(e.law(site, p))
-    st = _discretise(model, p, sites, h / substeps)
+    st = _discretise(model, p, sites, h / substeps, affine)
     r = Uf[:, :nr]
     D = r[:-1] @ st.G0.T + r[1:] @ st.G1.T  # (Nf-1, n)
     x0v = np.zeros(n) if x0 is None else np.asarray(x0, dtype=float)

@@ -104,6 +104,14 @@ def state_matrices(model: SuspensionModel, p: Mapping[str, float],
     return model.state_space(p)
 
 
+def mass_inverse(model: SuspensionModel, p: Mapping[str, float],
+                 affine: AffinePieces | None = None) -> FloatArray:
+    """``M(p)^-1`` (accelerations per unit generalised force): the pieces' when they apply."""
+    if affine is not None and affine.Minv is not None and affine.matches(p):
+        return affine.Minv
+    return model.mass_inverse(p)
+
+
 def modal_form(model: SuspensionModel, p: Mapping[str, float],
                affine: AffinePieces | None = None) -> Modal | None:
     """Eigen-decomposition of ``A`` for ``p``; ``None`` if ``A`` is (nearly) defective.
@@ -361,9 +369,7 @@ def accelerations(model: SuspensionModel, p: Mapping[str, float], X: FloatArray,
                   affine: AffinePieces | None = None) -> FloatArray:
     """Accelerations ``q''`` (N, nq) for state rows ``X`` and input rows ``U``."""
     if affine is not None and affine.matches(p):
-        AB = affine.accel_rows(affine.theta(p))
-        n = model.n_states
-        return X @ AB[:, :n].T + U @ AB[:, n:].T
+        return affine.accelerations(X, U, affine.theta(p))
     return model.accelerations(X, U, p)
 
 

@@ -14,20 +14,16 @@ here and reported by :func:`setup_record` (it goes into ``suspid doe --json``):
   information each record holds, not its accuracy.
 * **Measured channels**: positions and velocities of every coordinate (the state matrix
   MATLAB's ode45 returns); cost ``sse`` uses the positions, ``frobenius`` all of them.
-* **Half car** (seed §6.1): Table 5's columns map onto the half car *by name*: E, F, G
-  (``m1``, ``c1``, ``k1``) are the front wheel mass, front damper and front spring; H, J,
-  K (``m2``, ``c2``, ``k2``) the rear ones; A-D (``x01``, ``v01``, ``x02``, ``v02``) the
-  initial position and velocity of the front (``x1``) and rear (``x2``) wheels. The body
-  starts at x = 0.05 m, x' = 0.05 m/s, delta = 0.05 rad, delta' = 0.05 rad/s; targets
-  a1 = 0.48 m, a2 = 0.52 m, k3 = 1000 N/m, k4 = 500 N/m (all identified, not fixed).
-  The seed gives no body mass or pitch inertia: ``m`` = 200 kg (a half car carries two
-  corners, each up to Table 5's top sprung-mass level of 100 kg) and ``I`` = 40 kg m^2
-  (radius of gyration 0.447 m, dynamic index I / (m a1 a2) = 0.80, typical of passenger
-  cars; an index of exactly 1 would make the front and rear dynamically independent, a
-  special case we avoid).
+* **The model's own part**: which array, which factor sets which parameter or initial
+  state, the constants every row shares and the choices behind them belong to the model
+  (:attr:`~suspid.models.base.SuspensionModel.doe_design`, a
+  :class:`~suspid.models.base.DoeDesign`; e.g. the seed's section 6.1 half car in
+  ``suspid/models/half4.py``). This module is generic: a model with a design, built in or
+  from another package, runs under ``suspid doe`` without a change here.
 """
 from __future__ import annotations
 
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -35,30 +31,23 @@ import numpy as np
 
 from estimator.doe.arrays import L16_ARRAY, L16_LEVELS, L27_ARRAY, L27_LEVELS
 from suspid.errors import UsageError
-from suspid.models import SuspensionModel, get_model
+from suspid.models import MODELS, SuspensionModel, get_model
 from suspid.models.base import FloatArray
 
 #: record length (s) of every target curve
 HORIZON = 20.0
 #: sample rate (Hz) of every target curve
 FS = 100.0
-#: seed §6.1 half-car constants (targets, identified) and our choices for m, I
-HALF4_CONSTANTS: dict[str, float] = {"a1": 0.48, "a2": 0.52, "k3": 1000.0, "k4": 500.0,
-                                     "m": 200.0, "I": 40.0}
-#: seed §6.1 body initial state [x (m), delta (rad), x' (m/s), delta' (rad/s)]
-HALF4_BODY_X0: dict[str, float] = {"x": 0.05, "delta": 0.05, "x_dot": 0.05, "delta_dot": 0.05}
-#: Table 5 column -> half4 initial-state name or parameter (mapping by name)
-HALF4_COLUMNS: dict[str, str] = {"A": "x1", "B": "x1_dot", "C": "x2", "D": "x2_dot",
-                                 "E": "m1", "F": "c1", "G": "k1", "H": "m2", "J": "c2", "K": "k2"}
-#: Table 5 column -> quarter2 initial-state name or parameter
-QUARTER2_COLUMNS: dict[str, str] = {"A": "x1", "B": "x1_dot", "C": "x2", "D": "x2_dot",
-                                    "E": "m1", "F": "c1", "G": "k1", "H": "m2", "J": "c2", "K": "k2"}
-#: Table 3 column -> quarter1 initial-state name or parameter
-QUARTER1_COLUMNS: dict[str, str] = {"A": "x", "B": "x_dot", "C": "m", "D": "c", "E": "k"}
+#: the seed's orthogonal arrays by name: (rows, factor letter -> (name, unit, levels))
+SEED_ARRAYS: dict[str, tuple[Any, dict[str, Any]]] = {
+    "L16-4": (L16_ARRAY, L16_LEVELS),
+    "L27-3": (L27_ARRAY, L27_LEVELS),
+}
+
 
 @dataclass(frozen=True)
 class DesignSpec:
-    """One model's seed design: the orthogonal array, its factor levels, the column map.
+    """One model's design resolved: the orthogonal array, its factor levels, the column map.
 
     Attributes
     ----------
@@ -67,7 +56,7 @@ class DesignSpec:
     array : ndarray
         Rows of factor levels (1-based).
     levels : dict
-        Factor letter -> (name, unit, level values).
+        Factor letter -> (name, unit, level values), the used factors only.
     columns : dict
         Factor letter -> the model's parameter or initial-state name.
     constants : dict
@@ -87,27 +76,94 @@ class DesignSpec:
     choices: dict[str, str] = field(default_factory=dict)
 
 
-#: seed §6.1 half car: what the seed leaves out, and why
-HALF4_CHOICES: dict[str, str] = {
-    "column_mapping": "Table 5 by name: E,F,G = front wheel mass m1, front damper c1, "
-                      "front spring k1; H,J,K = rear m2, c2, k2; A-D = front/rear wheel "
-                      "initial position and velocity",
-    "m": "200 kg: two corners at Table 5's top sprung-mass level (100 kg each)",
-    "I": "40 kg m^2: dynamic index I/(m a1 a2) = 0.80 (typical car; 1 would make "
-         "front and rear dynamically independent)",
-    "horizon_s": "20 s: >= 2/3 of the slowest period of every design row",
-    "sample_rate_hz": "100 Hz: resolves the fastest decay (~42 1/s) over several samples",
-}
+def design_spec(model: SuspensionModel) -> DesignSpec:
+    """The design ``model`` declares (:attr:`~suspid.models.base.SuspensionModel.doe_design`).
+
+    Raises
+    ------
+    UsageError
+        The model has no design (naming the models that have one), names an unknown array,
+        maps a factor onto something that is neither its parameter nor its state, or leaves
+        a parameter without a value.
+    """
+    d = model.doe_design
+    if d is None:
+        raise UsageError(f"no design for model {model.name!r}; "
+                         f"expected one of {', '.join(DESIGNS)}")
+    if d.rows is not None and d.levels is not None:
+        rows: Any = np.asarray(d.rows, dtype=np.int64)
+        all_levels: Mapping[str, Any] = d.levels
+    elif d.array in SEED_ARRAYS:
+        rows, all_levels = SEED_ARRAYS[d.array]
+    else:
+        raise UsageError(f"model {model.name}: design array {d.array!r} is not one of the seed's "
+                         f"({', '.join(SEED_ARRAYS)}) and the model gives no rows and levels")
+    letters = list(all_levels)
+    targets = set(model.param_names) | set(model.state_names)
+    bad = [f"{k} -> {v}" for k, v in d.columns.items() if k not in all_levels or v not in targets]
+    if bad:
+        raise UsageError(f"model {model.name}: design {d.array} maps {', '.join(bad)}; expected "
+                         f"factors {', '.join(letters)} onto its parameters or states")
+    bad = [k for k in list(d.body_x0) if k not in model.state_names]
+    bad += [k for k in list(d.constants) if k not in model.param_names]
+    if bad:
+        raise UsageError(f"model {model.name}: design {d.array} sets {', '.join(bad)}, which "
+                         f"are not its parameters or states")
+    missing = [k for k in model.param_names if k not in d.constants and k not in d.columns.values()]
+    if missing:
+        raise UsageError(f"model {model.name}: design {d.array} gives no value to "
+                         f"{', '.join(missing)}")
+    used = [j for j, k in enumerate(letters) if k in d.columns]
+    return DesignSpec(d.array, rows[:, used], {k: all_levels[k] for k in letters if k in d.columns},
+                      {k: d.columns[k] for k in letters if k in d.columns}, dict(d.constants),
+                      dict(d.body_x0), dict(d.choices))
 
 
-#: the registry of designs, by model name (the one place that names the models)
-DESIGN_SPECS: dict[str, DesignSpec] = {
-    "quarter1": DesignSpec("L16-4", L16_ARRAY, L16_LEVELS, QUARTER1_COLUMNS),
-    "quarter2": DesignSpec("L27-3", L27_ARRAY, L27_LEVELS, QUARTER2_COLUMNS),
-    "half4": DesignSpec("L27-3", L27_ARRAY, L27_LEVELS, HALF4_COLUMNS, HALF4_CONSTANTS,
-                        HALF4_BODY_X0, HALF4_CHOICES),
-}
-DESIGNS: dict[str, str] = {k: v.name for k, v in DESIGN_SPECS.items()}
+class _Designs(Mapping[str, DesignSpec]):
+    """``model name -> DesignSpec`` of every registered model that declares a design."""
+
+    def _names(self) -> list[str]:
+        out = []
+        for name in MODELS:
+            try:
+                if get_model(name).doe_design is not None:
+                    out.append(name)
+            except UsageError:  # a broken plug-in has no design to offer
+                continue
+        return out
+
+    def __getitem__(self, name: str) -> DesignSpec:
+        if name not in MODELS:
+            raise KeyError(name)
+        model = get_model(name)
+        if model.doe_design is None:
+            raise KeyError(name)
+        return design_spec(model)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._names())
+
+    def __len__(self) -> int:
+        return len(self._names())
+
+
+class _DesignNames(Mapping[str, str]):
+    """``model name -> design name`` (``L16-4``, ``L27-3``) of every model with a design."""
+
+    def __getitem__(self, name: str) -> str:
+        return DESIGN_SPECS[name].name
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(DESIGN_SPECS)
+
+    def __len__(self) -> int:
+        return len(DESIGN_SPECS)
+
+
+#: every model's design, by model name (read from the models; nothing here names one)
+DESIGN_SPECS: Mapping[str, DesignSpec] = _Designs()
+#: the design's name of every model that has one (``suspid doe --model`` choices)
+DESIGNS: Mapping[str, str] = _DesignNames()
 
 
 @dataclass
@@ -132,22 +188,14 @@ class Experiment:
     x0: FloatArray = field(repr=False)
 
 
-def design_spec(model: SuspensionModel) -> DesignSpec:
-    """The seed design registered for ``model`` (UsageError naming the known ones if none)."""
-    try:
-        return DESIGN_SPECS[model.name]
-    except KeyError:
-        raise UsageError(f"no design for model {model.name!r}; "
-                         f"expected one of {', '.join(DESIGN_SPECS)}") from None
-
-
 def experiments(model: SuspensionModel | str) -> list[Experiment]:
     """All experiments of the seed's design for ``model`` in the seed's order.
 
     Parameters
     ----------
     model : SuspensionModel or str
-        ``quarter1`` (L16-4, Tables 3-4), ``quarter2`` or ``half4`` (L27-3, Tables 5-6).
+        A model with a design (e.g. ``quarter1``: L16-4, Tables 3-4; ``quarter2``,
+        ``half4``: L27-3, Tables 5-6).
     """
     if isinstance(model, str):
         model = get_model(model)
@@ -184,8 +232,7 @@ def time_grid(horizon: float = HORIZON, fs: float = FS) -> FloatArray:
 def setup_record(model: SuspensionModel | str, horizon: float = HORIZON,
                  fs: float = FS) -> dict[str, Any]:
     """The design choices the seed leaves out, as a JSON-ready dict."""
-    name = model if isinstance(model, str) else model.name
-    m = get_model(name)
+    m = get_model(model) if isinstance(model, str) else model
     spec = design_spec(m)
     levels, cols = spec.levels, spec.columns
     rec: dict[str, Any] = {

@@ -18,11 +18,13 @@ Prediction (nonlinear)
         df/dx     = A(theta)                                  (model.state_space)
         dv'/dtheta_p = p_nom M^-1 (dFk/dp r + dFc/dp r' - dC/dp q' - dK/dp q)
 
-    The matrices are affine in dampers and springs, so ``dC/dp`` etc. are exact differences
-    of :meth:`~suspid.models.base.SuspensionModel.matrices`. Tests compare ``F`` and ``H``
-    with central finite differences of the RK4 map and of ``h``. For a model without
-    effect terms ``model.rhs`` is ``A(theta) x + B(theta) u``: the step then builds
-    ``[A | B]`` once from those affine pieces and runs the stages as small products
+    The matrices are affine in dampers and springs: ``[A(theta) | B(theta)]`` and these
+    slopes are the model's affine pieces
+    (:meth:`~suspid.models.base.SuspensionModel.affine`, ``AB0``, ``dAB``), built once per
+    filter. Tests compare ``F`` and ``H`` with central finite differences of the RK4 map
+    and of ``h``, and the pieces' slopes with the model. For a model without effect terms
+    ``model.rhs`` is ``A(theta) x + B(theta) u``: the step then builds ``[A | B]`` once
+    from the pieces and runs the stages as small products
     (:meth:`AugmentedEKF._rk4_linear`, tested equal to the ``model.rhs`` step to 1e-12).
 Measurement
     Positions and velocities are linear in ``z``; an acceleration channel is
@@ -116,24 +118,16 @@ class AugmentedEKF(ExtendedKalmanFilter):
         self.dt = float(dt)
         nz = self.nx + len(self.aug)
         super().__init__(dim_x=nz, dim_z=len(self.channels))
-        M, C, K, Fk, Fc = model.matrices(self.params)
-        Minv = np.linalg.inv(M)
         # [A(theta) | B(theta)]: the acceleration rows acting on [q, q', r, r'], affine in
-        # the augmented parameters (the matrices are affine in dampers and springs, so each
-        # slope is an exact difference of model.matrices). The Jacobian's state block is its
-        # A part; its parameter columns are p_nom dAB_j [q, q', r, r']
-        # (= p_nom M^-1 (dFk r + dFc r' - dC q' - dK q)). rk4 also steps models without
-        # effect terms with it (model.rhs is A x + B u there).
-        dAB = []
-        for k in self.aug:
-            p1 = dict(self.params)
-            step = max(abs(self.params[k]), 1.0)
-            p1[k] = self.params[k] + step
-            _, C1, K1, Fk1, Fc1 = model.matrices(p1)
-            dAB.append(Minv @ np.hstack([K - K1, C - C1, Fk1 - Fk, Fc1 - Fc]) / step)
-        self._AB0 = Minv @ np.hstack([-K, -C, Fk, Fc])
-        self._dAB_flat = np.array(dAB).reshape(len(self.aug), -1)
-        self._G = np.array(dAB) * self.nominal[:, None, None]   # (naug, nq, nx + 2 nr)
+        # the augmented parameters: the model's forward model as affine pieces. The
+        # Jacobian's state block is its A part; its parameter columns are the pieces'
+        # slopes p_nom dAB_j [q, q', r, r'] (= p_nom M^-1 (dFk r + dFc r' - dC q' - dK q)).
+        # rk4 also steps models without effect terms with it (model.rhs is A x + B u there).
+        self.pieces = model.affine(self.params, self.aug)
+        if not self.pieces.exact:
+            raise UsageError(f"model {model.name}: the parameters {', '.join(self.aug)} do not "
+                             f"enter its matrices affinely; the EKF needs them to")
+        self._G = self.pieces.dAB * self.nominal[:, None, None]  # per relative unit
         nzz = self.nx + len(self.aug)
         self._J0 = np.zeros((nzz, nzz))                          # dq/dt = q'
         self._J0[:self.nq, self.nq:self.nx] = np.eye(self.nq)
@@ -252,8 +246,7 @@ class AugmentedEKF(ExtendedKalmanFilter):
 
     def _ab(self, theta: FloatArray) -> FloatArray:
         """``[A | B]`` rows of the accelerations at parameters ``theta`` (relative)."""
-        dp = self.nominal * (theta - 1.0)
-        return self._AB0 + (dp @ self._dAB_flat).reshape(self._AB0.shape)
+        return self.pieces.accel_rows(self.nominal * theta)
 
     def _rk4_linear(self, z: FloatArray, u0: FloatArray, u1: FloatArray, h: float, n: int,
                     with_jacobian: bool) -> tuple[FloatArray, FloatArray | None]:

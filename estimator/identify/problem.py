@@ -26,9 +26,10 @@ import numpy as np
 
 from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
-from suspid.models.base import FloatArray, SuspensionModel
+from suspid.models.base import AffinePieces, FloatArray, SuspensionModel
 from suspid.simulate import (Modal, free_coeffs_to_state, free_response_basis, modal_form,
-                             modal_trajectory, powers, road_matrix, simulate_states, uniform_step)
+                             modal_trajectory, powers, road_matrix, simulate_states,
+                             state_matrices, uniform_step)
 
 COSTS = ("sse", "frobenius")
 
@@ -82,6 +83,11 @@ class OutputErrorProblem:
         Initial-state handling (see module docstring).
     weights : mapping, optional
         Per-channel weights multiplying the residual (default 1: the seed's raw SI cost).
+    affine : AffinePieces, optional
+        The model's forward model as affine pieces
+        (:meth:`~suspid.models.base.SuspensionModel.affine`); default: built from the first
+        predicted parameter set with every damper and spring free. A parameter set they do
+        not apply to (another mass, inertia or length) is predicted from the model itself.
     """
 
     model: SuspensionModel
@@ -89,6 +95,7 @@ class OutputErrorProblem:
     cost: str = "sse"
     x0: str | FloatArray = "estimate"
     weights: Mapping[str, float] | None = None
+    affine: AffinePieces | None = None
     channels: list[str] = field(init=False)
     warnings: list[str] = field(init=False, default_factory=list)
 
@@ -130,14 +137,21 @@ class OutputErrorProblem:
     def _output_maps(self, A: FloatArray, B: FloatArray) -> tuple[FloatArray, FloatArray]:
         return output_maps(self._kind, A, B, self._nq)
 
+    def pieces(self, p: Mapping[str, float]) -> AffinePieces | None:
+        """The forward model's affine pieces (built from the first finite ``p``)."""
+        if self.affine is None and all(np.isfinite(v) for v in p.values()):
+            self.affine = self.model.affine(p)
+        return self.affine
+
     def predict(self, p: Mapping[str, float]) -> Prediction:
         """Predict the measured channels for parameters ``p`` (with the best ``x0``)."""
         m = self.model
-        modal = modal_form(m, p)
+        aff = self.pieces(p)
+        modal = modal_form(m, p, aff)
         if modal is not None and self.h is not None:
             Y, x0 = self._predict_modal(modal, self.h)
         else:
-            Y, x0 = self._predict_general(p, modal)
+            Y, x0 = self._predict_general(p, modal, aff)
         if self._full:
             res = self.Ymeas - Y
         else:
@@ -244,23 +258,24 @@ class OutputErrorProblem:
             sol, *_ = np.linalg.lstsq(Gm, R, rcond=1e-12)
         return sol
 
-    def _predict_general(self, p: Mapping[str, float], modal: Modal | None
-                         ) -> tuple[FloatArray, FloatArray]:
+    def _predict_general(self, p: Mapping[str, float], modal: Modal | None,
+                         aff: AffinePieces | None = None) -> tuple[FloatArray, FloatArray]:
         """General path (non-uniform grid or defective ``A``): stepwise simulation."""
         m = self.model
-        A, B = (modal.A, modal.B) if modal is not None else m.state_space(p)
+        A, B = (modal.A, modal.B) if modal is not None else state_matrices(m, p, aff)
         Cm, Dm = self._output_maps(A, B)
         base_x0 = self._base_x0()
-        X = simulate_states(m, p, self.t, self.U, base_x0, modal=modal)
+        X = simulate_states(m, p, self.t, self.U, base_x0, modal=modal, affine=aff)
         Y = X @ Cm.T + self.U @ Dm.T
         if isinstance(self.x0, str) and self.x0 == "estimate":
-            G = self._free_basis_slow(Cm, p)
+            G = self._free_basis_slow(Cm, p, aff)
             sol = self._solve_x0(G, Y)
             Y = Y + G.reshape(-1, G.shape[2]).dot(sol).reshape(Y.shape)
             return Y, sol
         return Y, base_x0
 
-    def _free_basis_slow(self, Cm: FloatArray, p: Mapping[str, float]) -> FloatArray:
+    def _free_basis_slow(self, Cm: FloatArray, p: Mapping[str, float],
+                         aff: AffinePieces | None = None) -> FloatArray:
         """Response of each channel to a unit initial state, shape (N, p, n) (general path)."""
         N = self.t.size
         n = self.model.n_states
@@ -269,7 +284,7 @@ class OutputErrorProblem:
         for j in range(n):
             e = np.zeros(n)
             e[j] = 1.0
-            G[:, :, j] = simulate_states(self.model, p, self.t, zeroU, e) @ Cm.T
+            G[:, :, j] = simulate_states(self.model, p, self.t, zeroU, e, affine=aff) @ Cm.T
         return G
 
     def residual_vector(self, p: Mapping[str, float]) -> FloatArray:

@@ -16,11 +16,12 @@ name: its structure (coordinates, roads, parameters), where its struts and tyres
 (:class:`Site`, with static tyre loads), its rest and initial states, how its roads follow
 each other (:meth:`SuspensionModel.road_lags`, :meth:`SuspensionModel.road_tracks`), its
 suspension deflections (:meth:`SuspensionModel.deflections`), which CSV columns are its
-(:meth:`SuspensionModel.column_bases`) and its CAN identities (:attr:`sensor_set`,
-:attr:`alert_id`, matching the DBC). See ``docs/architecture.md`` ("Adding a model").
+(:meth:`SuspensionModel.column_bases`), its CAN identities (:attr:`sensor_set`,
+:attr:`alert_id`, matching the DBC) and its design of experiments (:attr:`doe_design`). See ``docs/architecture.md`` ("Adding a model").
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from typing import Callable, ClassVar, Mapping
 
@@ -36,6 +37,15 @@ Matrices = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
 ForceFn = Callable[[float, FloatArray, FloatArray, Mapping[str, float]], FloatArray]
 #: standard gravity (m/s^2) for static wheel loads
 GRAVITY = 9.81
+
+
+@functools.lru_cache(maxsize=32)
+def _check_factors(n: int) -> FloatArray:
+    """Two fixed random sets of ``n`` log-normal factors (sigma 0.5): where the affine
+    pieces are checked against the model (:meth:`SuspensionModel.affine`)."""
+    f = np.exp(np.random.default_rng(7).normal(0.0, 0.5, (2, n)))
+    f.setflags(write=False)
+    return f
 
 
 @dataclass(frozen=True)
@@ -107,6 +117,46 @@ class ParamSpec:
 
 
 @dataclass(frozen=True)
+class DoeDesign:
+    """A model's design of experiments: an orthogonal array's factors mapped onto the model.
+
+    ``suspid doe --model NAME`` runs the design of the model's :attr:`SuspensionModel.doe_design`
+    (:mod:`estimator.doe.design` makes each row an identification problem: the true
+    parameters, the known initial state, a free response).
+
+    Attributes
+    ----------
+    array : str
+        The orthogonal array: one of the seed's, ``"L16-4"`` (Tables 3-4: 16 runs, 5 factors
+        A-E at 4 levels) or ``"L27-3"`` (Tables 5-6: 27 runs, factors A-H, J, K at 3
+        levels), or the name of the model's own array given in ``rows`` and ``levels``.
+    columns : mapping
+        Factor letter -> the parameter or state (``x1``, ``x1_dot``) whose value the
+        factor sets. A factor of the array not listed here is not used.
+    constants : mapping
+        Further true parameter values (SI) every row shares; with ``columns`` they must
+        give every parameter of the model.
+    body_x0 : mapping
+        Further initial-state values every row shares (state name -> m, rad, m/s, rad/s).
+    choices : mapping
+        What the design's source leaves out and how it is chosen, with the reasons
+        (recorded in ``suspid doe --json``'s ``setup.choices``).
+    rows : tuple of tuple of int, optional
+        The model's own array: one row of factor levels (1-based) per run.
+    levels : mapping, optional
+        The model's own array's factors: letter -> ``(name, unit, level values)`` (SI).
+    """
+
+    array: str
+    columns: Mapping[str, str]
+    constants: Mapping[str, float] = field(default_factory=dict)
+    body_x0: Mapping[str, float] = field(default_factory=dict)
+    choices: Mapping[str, str] = field(default_factory=dict)
+    rows: tuple[tuple[int, ...], ...] | None = None
+    levels: Mapping[str, tuple[str, str, tuple[float, ...]]] | None = None
+
+
+@dataclass(frozen=True)
 class AffinePieces:
     """The forward model as affine pieces: ``q'' = (AB0 + sum_j theta_j dAB_j) [q, q', r, r']``.
 
@@ -114,7 +164,7 @@ class AffinePieces:
     dampers and springs (each enters ``C``, ``K``, ``Fk``, ``Fc`` linearly), so the state
     and input matrices of any parameter set that differs from ``base`` only in the free
     parameters ``names`` are one small product: computed once, used by the simulator, the
-    identifier, the window problem, the EKF and the node's plant alike.
+    identifier, the window problem, the effects simulator, the EKF and the node's plant alike.
 
     Attributes
     ----------
@@ -130,6 +180,9 @@ class AffinePieces:
         ``True`` when the pieces reproduce :meth:`SuspensionModel.state_space` (checked at
         two random parameter sets to 1e-12 relative); ``False`` when a free parameter
         enters non-affinely (a mass, an inertia, a length): use the model instead.
+    Minv : ndarray, shape (nq, nq), optional
+        Inverse mass matrix at ``base`` (1/kg, 1/(kg m^2)): the accelerations per unit
+        generalised force of an added force term (``None`` if not given).
     """
 
     names: tuple[str, ...]
@@ -137,6 +190,18 @@ class AffinePieces:
     AB0: FloatArray
     dAB: FloatArray
     exact: bool
+    Minv: FloatArray | None = None
+    _flat: FloatArray = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        # the slopes as one (n_free, nq * (2 nq + 2 nr)) matrix: accel_rows is one product
+        object.__setattr__(self, "_flat", np.ascontiguousarray(
+            self.dAB.reshape(self.dAB.shape[0], -1)))
+
+    @property
+    def nq(self) -> int:
+        """Number of generalised coordinates."""
+        return int(self.AB0.shape[0])
 
     def theta(self, p: Mapping[str, float]) -> FloatArray:
         """The free parameters of ``p`` as a vector (SI)."""
@@ -148,8 +213,13 @@ class AffinePieces:
         return self.exact and all(p[k] == v for k, v in self.base.items() if k not in free)
 
     def accel_rows(self, theta: FloatArray) -> FloatArray:
-        """``[A_acc | B_acc]`` (nq, 2 nq + 2 nr) at free parameters ``theta``."""
-        return self.AB0 + np.tensordot(np.asarray(theta, dtype=float), self.dAB, axes=1)
+        """``[A_acc | B_acc]`` (nq, 2 nq + 2 nr) at free parameters ``theta``.
+
+        ``q'' = accel_rows(theta) @ [q, q', r, r']``; equal to the rows ``nq:`` of
+        :meth:`SuspensionModel.state_space`'s ``[A | B]`` to rounding.
+        """
+        th = np.asarray(theta, dtype=float)
+        return self.AB0 + (th @ self._flat).reshape(self.AB0.shape)
 
     def state_space(self, theta: FloatArray) -> tuple[FloatArray, FloatArray]:
         """``(A, B)`` at free parameters ``theta``, as :meth:`SuspensionModel.state_space`."""
@@ -162,6 +232,28 @@ class AffinePieces:
         B = np.zeros((n, AB.shape[1] - n))
         B[nq:] = AB[:, n:]
         return A, B
+
+    def accelerations(self, X: FloatArray, U: FloatArray, theta: FloatArray) -> FloatArray:
+        """Accelerations ``q''`` (N, nq) for state rows ``X`` (N, 2 nq) and inputs ``U`` (N, 2 nr)."""
+        AB = self.accel_rows(theta)
+        n = 2 * AB.shape[0]
+        return np.asarray(X @ AB[:, :n].T + U @ AB[:, n:].T, dtype=np.float64)
+
+    def slopes(self, w: FloatArray) -> FloatArray:
+        """Derivatives of the accelerations in the free parameters: ``dq''/dtheta_j``.
+
+        Parameters
+        ----------
+        w : ndarray, shape (2 nq + 2 nr,) or (2 nq + 2 nr, k)
+            ``[q, q', r, r']`` (one point, or ``k`` points as columns).
+
+        Returns
+        -------
+        ndarray, shape (n_free, nq) or (n_free, nq, k)
+            ``dAB_j @ w`` (per SI unit of each free parameter); exact, as the rows are
+            affine in ``theta``. The EKF's Jacobian columns of its augmented parameters.
+        """
+        return np.asarray(self.dAB @ w, dtype=np.float64)
 
 
 @dataclass
@@ -186,11 +278,15 @@ class SuspensionModel:
     known : tuple of str
         (class attribute) Parameters a user normally knows (weighed masses, measured
         geometry); the documented ``--fix`` set of the examples and tests.
+    doe_design : DoeDesign or None
+        (class attribute) The model's design of experiments for ``suspid doe`` (``None``:
+        the model has none).
     """
 
     sensor_set: ClassVar[int] = 0
     alert_id: ClassVar[int] = -1
     known: ClassVar[tuple[str, ...]] = ()
+    doe_design: ClassVar[DoeDesign | None] = None
 
     name: str
     coords: tuple[str, ...]
@@ -350,28 +446,45 @@ class SuspensionModel:
             self.spec(k)
         nq = len(self.coords)
 
-        def rows(p: Mapping[str, float]) -> FloatArray:
+        def parts(p: Mapping[str, float]) -> tuple[FloatArray, FloatArray]:
             M, C, K, Fk, Fc = self.matrices(p)
-            return np.asarray(np.linalg.solve(M, np.hstack([-K, -C, Fk, Fc])), dtype=np.float64)
+            return M, np.hstack([-K, -C, Fk, Fc])
 
-        f0 = rows(p0)
+        def rows(p: Mapping[str, float]) -> FloatArray:
+            M, H = parts(p)
+            return np.asarray(np.linalg.solve(M, H), dtype=np.float64)
+
+        M0, H0 = parts(p0)
+        Minv = np.asarray(np.linalg.inv(M0), dtype=np.float64)
+        f0 = Minv @ H0
         th0 = np.array([p0[k] for k in names])
         dAB = np.empty((len(names),) + f0.shape)
         for j, k in enumerate(names):
             p1 = dict(p0)
             step = max(abs(p0[k]), 1.0)
             p1[k] = p0[k] + step
-            dAB[j] = (rows(p1) - f0) / step
+            M1, H1 = parts(p1)
+            # a damper or spring leaves M as it is: the slope is M^-1 times the change of
+            # [-K -C Fk Fc] (no cancellation); anything else is differenced as it comes
+            dAB[j] = (Minv @ (H1 - H0) if np.array_equal(M1, M0)
+                      else np.linalg.solve(M1, H1) - f0) / step
         AB0 = f0 - np.tensordot(th0, dAB, axes=1)
+        # checked against the model's own rows at two random parameter sets
         exact = True
-        rng = np.random.default_rng(7)
-        for _ in range(2):
-            th = th0 * np.exp(rng.normal(0.0, 0.5, th0.size))
+        for factors in _check_factors(th0.size):
+            th = th0 * factors
             ref = rows(dict(p0, **dict(zip(names, th.tolist()))))
             got = AB0 + np.tensordot(th, dAB, axes=1)
             if not np.all(np.abs(got - ref) <= 1e-12 * (np.abs(ref).max() + 1e-300)):
                 exact = False
-        return AffinePieces(names, p0, AB0, dAB, exact and f0.shape[0] == nq)
+        return AffinePieces(names, p0, AB0, dAB, exact and f0.shape[0] == nq, Minv)
+
+    def mass_inverse(self, p: Mapping[str, float]) -> FloatArray:
+        """``M(p)^-1`` (nq, nq): the accelerations per unit generalised force (1/kg, 1/(kg m^2)).
+
+        The input direction of an added force term ``Q`` (an effect) is ``[0; M^-1 Q]``.
+        """
+        return np.asarray(np.linalg.inv(self.matrices(p)[0]), dtype=np.float64)
 
     def rhs(self, t: float, x: FloatArray, u: FloatArray, params: Mapping[str, float]) -> FloatArray:
         """State derivative ``dx/dt`` (the one right-hand side of the physics).

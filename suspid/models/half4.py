@@ -17,7 +17,26 @@ from typing import Mapping
 
 import numpy as np
 
-from suspid.models.base import GRAVITY, FloatArray, Matrices, ParamSpec, Site, SuspensionModel
+from suspid.models.base import (GRAVITY, DoeDesign, FloatArray, Matrices, ParamSpec, Site,
+                                SuspensionModel)
+
+
+#: seed section 6.1 half-car constants (targets, identified) and the choices for m, I
+DOE_CONSTANTS: dict[str, float] = {"a1": 0.48, "a2": 0.52, "k3": 1000.0, "k4": 500.0,
+                                   "m": 200.0, "I": 40.0}
+#: seed section 6.1 body initial state [x (m), delta (rad), x' (m/s), delta' (rad/s)]
+DOE_BODY_X0: dict[str, float] = {"x": 0.05, "delta": 0.05, "x_dot": 0.05, "delta_dot": 0.05}
+#: what the seed leaves out of its half-car design, and why
+DOE_CHOICES: dict[str, str] = {
+    "column_mapping": "Table 5 by name: E,F,G = front wheel mass m1, front damper c1, "
+                      "front spring k1; H,J,K = rear m2, c2, k2; A-D = front/rear wheel "
+                      "initial position and velocity",
+    "m": "200 kg: two corners at Table 5's top sprung-mass level (100 kg each)",
+    "I": "40 kg m^2: dynamic index I/(m a1 a2) = 0.80 (typical car; 1 would make "
+         "front and rear dynamically independent)",
+    "horizon_s": "20 s: >= 2/3 of the slowest period of every design row",
+    "sample_rate_hz": "100 Hz: resolves the fastest decay (~42 1/s) over several samples",
+}
 
 
 class Half4(SuspensionModel):
@@ -29,6 +48,20 @@ class Half4(SuspensionModel):
     sensor_set = 2
     alert_id = 2
     known = ("m", "I", "m1", "m2", "a1", "a2")
+    #: the seed's section 6.1 half car: Table 5's columns map onto the half car by name
+    #: (E, F, G = m1, c1, k1 front wheel, damper, spring; H, J, K = m2, c2, k2 rear; A-D
+    #: the front ``x1`` and rear ``x2`` wheels' initial position and velocity). The body
+    #: starts at x = 0.05 m, x' = 0.05 m/s, delta = 0.05 rad, delta' = 0.05 rad/s; targets
+    #: a1 = 0.48 m, a2 = 0.52 m, k3 = 1000 N/m, k4 = 500 N/m (all identified, not fixed).
+    #: The seed gives no body mass or pitch inertia: m = 200 kg (a half car carries two
+    #: corners, each up to Table 5's top sprung-mass level of 100 kg) and I = 40 kg m^2
+    #: (radius of gyration 0.447 m, dynamic index I / (m a1 a2) = 0.80, typical of
+    #: passenger cars; an index of exactly 1 would make the front and rear dynamically
+    #: independent, a special case avoided)
+    doe_design = DoeDesign("L27-3", {"A": "x1", "B": "x1_dot", "C": "x2", "D": "x2_dot",
+                                     "E": "m1", "F": "c1", "G": "k1", "H": "m2", "J": "c2",
+                                     "K": "k2"},
+                           DOE_CONSTANTS, DOE_BODY_X0, DOE_CHOICES)
 
     def __init__(self) -> None:
         super().__init__(

@@ -5,7 +5,8 @@ from typing import Mapping
 
 import numpy as np
 
-from suspid.models.base import GRAVITY, FloatArray, Matrices, ParamSpec, Site, SuspensionModel
+from suspid.models.base import (GRAVITY, DoeDesign, FloatArray, Matrices, ParamSpec, Site,
+                                SuspensionModel)
 
 
 class Quarter1(SuspensionModel):
@@ -18,6 +19,8 @@ class Quarter1(SuspensionModel):
     sensor_set = 1
     known = ("m",)
     alert_id = 0
+    #: the seed's L16-4 design (Tables 3-4): initial position and velocity, m, c, k
+    doe_design = DoeDesign("L16-4", {"A": "x", "B": "x_dot", "C": "m", "D": "c", "E": "k"})
 
     def __init__(self) -> None:
         super().__init__(

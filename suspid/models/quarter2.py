@@ -9,7 +9,8 @@ from typing import Mapping
 
 import numpy as np
 
-from suspid.models.base import GRAVITY, FloatArray, Matrices, ParamSpec, Site, SuspensionModel
+from suspid.models.base import (GRAVITY, DoeDesign, FloatArray, Matrices, ParamSpec, Site,
+                                SuspensionModel)
 
 
 class Quarter2(SuspensionModel):
@@ -18,6 +19,11 @@ class Quarter2(SuspensionModel):
     sensor_set = 1
     known = ("m1", "m2")
     alert_id = 1
+    #: the seed's L27-3 design (Tables 5-6): body and wheel initial states, then
+    #: m1, c1, k1 (body, suspension) and m2, c2, k2 (wheel, tyre)
+    doe_design = DoeDesign("L27-3", {"A": "x1", "B": "x1_dot", "C": "x2", "D": "x2_dot",
+                                     "E": "m1", "F": "c1", "G": "k1", "H": "m2", "J": "c2",
+                                     "K": "k2"})
 
     def __init__(self) -> None:
         super().__init__(

@@ -117,6 +117,17 @@ def test_plugin_model_through_monitor(plugin_site: Path, tmp_path: Path) -> None
     assert alerts and {a["parameter"] for a in alerts} == {"c1"}
 
 
+def test_plugin_model_brings_its_own_doe_design(plugin_site: Path) -> None:
+    r = suspid(plugin_site, "doe", "--model", "qcar5", "--ids", "1,14", "--json")
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    assert (out["design"], out["model"], out["total"], out["successes"]) == ("L27-3", "qcar5", 2, 2)
+    assert "J" not in out["setup"]["column_mapping"]
+    assert out["setup"]["column_mapping"]["K"] == "k2 -> k2"
+    r = suspid(None, "doe", "--model", "qcar5")
+    assert r.returncode == 2 and "invalid choice: 'qcar5'" in r.stderr
+
+
 def test_broken_plugin_is_a_one_line_error(broken_site: Path, tmp_path: Path) -> None:
     r = suspid(broken_site, "simulate", "--model", "quarter2", "--effect", "coulomb_friction:F=100",
                "--out", str(tmp_path / "x.csv"))

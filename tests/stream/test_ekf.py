@@ -8,6 +8,7 @@ from filterpy.kalman import ExtendedKalmanFilter
 from estimator.ekf import AugmentedEKF, EKFTuning, EKFWindowEstimator
 from estimator.stream.drivers import run_arrays
 from estimator.stream.wear_streams import damper_wear
+from suspid.models import MODELS, get_model
 
 
 @pytest.fixture
@@ -103,3 +104,44 @@ def test_converges_from_a_wrong_start_and_handles_missing_samples(quarter2) -> N
     assert last["stderr"]["c1"] < 0.05 * 1500
     assert est.samples == pytest.approx((s.t.size - 1) / 2, abs=2)
     assert all(np.isfinite(r.event.params["c1"]) for r in res)
+
+
+@pytest.mark.parametrize("name", list(MODELS))
+def test_the_filter_runs_on_the_models_affine_pieces(name: str) -> None:
+    """The EKF's [A | B] and Jacobian are the model's affine pieces, equal to the model."""
+    m = get_model(name)
+    p = m.defaults()
+    aug = [s.name for s in m.params if s.kind in ("damping", "stiffness")]
+    nq, nx, nr = len(m.coords), 2 * len(m.coords), len(m.roads)
+    f = AugmentedEKF(m, p, aug, [f"{m.coords[0]}_ddot", m.coords[-1]], dt=0.002,
+                     tuning=EKFTuning(substeps=2))
+    ref = m.affine(p, aug)
+    assert f.pieces.names == tuple(aug) and f.pieces.exact
+    np.testing.assert_array_equal(f.pieces.dAB, ref.dAB)
+    rng = np.random.default_rng(9)
+    for _ in range(3):
+        z = np.concatenate([rng.normal(0, 0.02, nq), rng.normal(0, 0.3, nq),
+                            rng.uniform(0.6, 1.4, len(aug))])
+        u = np.concatenate([rng.normal(0, 0.01, nr), rng.normal(0, 0.3, nr)])
+        pv = f.param_values(z)
+        J = f.jac(z, u)
+        A, _ = m.state_space(pv)
+        np.testing.assert_allclose(J[nq:nx, :nx], A[nq:], rtol=0, atol=1e-11 * np.abs(A).max())
+        # parameter columns: central differences of the model's own right-hand side in each
+        # relative parameter (exact up to rounding: the accelerations are affine in it)
+        for j, k in enumerate(aug):
+            e = 0.1
+            hi = m.rhs(0.0, z[:nx], u, dict(pv, **{k: pv[k] + e * f.nominal[j]}))[nq:]
+            lo = m.rhs(0.0, z[:nx], u, dict(pv, **{k: pv[k] - e * f.nominal[j]}))[nq:]
+            fd = (hi - lo) / (2 * e)
+            np.testing.assert_allclose(J[nq:nx, nx + j], fd, rtol=0,
+                                       atol=1e-9 * (np.abs(fd).max() + np.abs(A).max() * 1e-6))
+        # the lean step on the pieces is the model.rhs step
+        u1 = u + rng.normal(0, 0.01, 2 * nr)
+        z_lean, F_lean = f.rk4(z, u, u1, f.dt)
+        f._linear = False
+        z_rhs, F_rhs = f.rk4(z, u, u1, f.dt)
+        f._linear = True
+        assert F_lean is not None and F_rhs is not None
+        np.testing.assert_allclose(z_lean, z_rhs, rtol=1e-11, atol=1e-14)
+        np.testing.assert_allclose(F_lean, F_rhs, rtol=1e-10, atol=1e-12 * np.abs(F_rhs).max())

@@ -12,7 +12,7 @@ from typing import Mapping
 
 import numpy as np
 
-from suspid.models.base import GRAVITY, ParamSpec, Site, SuspensionModel
+from suspid.models.base import GRAVITY, DoeDesign, ParamSpec, Site, SuspensionModel
 
 
 class QCar5(SuspensionModel):
@@ -21,6 +21,10 @@ class QCar5(SuspensionModel):
     sensor_set = 1
     alert_id = 1
     known = ("m1", "m2")
+    #: ``suspid doe --model qcar5``: the seed's L27-3 array as quarter2 uses it, without
+    #: the tyre damper's factor J (qcar5 has none)
+    doe_design = DoeDesign("L27-3", {"A": "x1", "B": "x1_dot", "C": "x2", "D": "x2_dot",
+                                     "E": "m1", "F": "c1", "G": "k1", "H": "m2", "K": "k2"})
 
     def __init__(self) -> None:
         super().__init__(
