@@ -97,10 +97,13 @@ class BufferedSlcanBus(slcanBus):
         self.adapter_timed = 0
         self.host_timed = 0
         super().__init__(*args, **kwargs)
-        if timestamps:
-            self.close()
+
+    def open(self) -> None:
+        """Open the channel (``O``); with timestamps, ``Z1`` goes first (the mode can only be
+        set while the channel is closed), so no frame arrives without its timestamp."""
+        if self._ts_on:
             self._write("Z1")
-            self.open()
+        super().open()
 
     def _recv_internal(self, timeout: Optional[float]) -> tuple[Optional[can.Message], bool]:
         msg, filtered = super()._recv_internal(timeout)
