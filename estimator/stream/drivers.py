@@ -22,6 +22,9 @@ import numpy as np
 
 from estimator.decode.replay import feed_log
 from estimator.stream.accumulator import WindowAccumulator
+from suspid.can.bus import LOSS_CLASSES, SocketcanReader
+from suspid.can.dbc import is_e2e
+from suspid.can.options import RECEIVE_BUFFER_S
 from suspid.models.base import FloatArray
 
 WindowFn = Callable[[FloatArray, Mapping[str, FloatArray]], Any]
@@ -266,21 +269,46 @@ class LiveStop:
             signal.signal(s, h)
 
 
-#: the receiver's buffer in seconds of data at the highest frame rate it is sized for
-RECEIVE_BUFFER_S = 5.0
-#: frames per second the receiver's buffer is sized for (a saturated 1 Mbit/s CAN bus
-#: carries about 8.5 k frames/s; a node at 1 kHz with four messages 4 k)
-RECEIVE_RATE = 10_000
+#: fewest frames per second the receiver's buffer is sized for: a saturated 1 Mbit/s
+#: classic CAN bus carries about 8.5 k frames/s of 8 bytes
+RECEIVE_RATE = 10_000.0
 #: kernel socket receive buffer asked for on a SocketCAN bus (bytes; a CAN frame costs about
 #: 1 kB of it), so the reader thread may be held up a while without the kernel dropping frames
 SOCKET_RCVBUF = 8 << 20
+#: counter gaps the decoder finds within this long (s of frame time) after a socket overrun,
+#: a controller loss (error frame) or a buffer overflow are frames lost there
+LOSS_ATTRIBUTION_S = 1.0
+
+
+def bus_frame_rate(db: Any) -> float:
+    """Frames per second the receiver's buffer is sized for.
+
+    The DBC describes the bus: every message with a cycle time (``GenMsgCycleTime``, ms) at
+    that rate, and at least :data:`RECEIVE_RATE` (foreign traffic the DBC does not list).
+
+    Parameters
+    ----------
+    db : cantools Database or None
+    """
+    rate = 0.0
+    for msg in getattr(db, "messages", None) or ():
+        cycle = getattr(msg, "cycle_time", None)
+        if cycle:
+            rate += 1000.0 / float(cycle)
+    return max(rate, RECEIVE_RATE)
+
+
+def receive_capacity(seconds: float, db: Any = None) -> int:
+    """Frames the receiver's buffer holds for ``seconds`` of data (:func:`bus_frame_rate`)."""
+    return max(1, int(math.ceil(seconds * bus_frame_rate(db))))
 
 
 def enlarge_socket_buffer(bus: Any, size: int = SOCKET_RCVBUF) -> int:
     """Ask for a larger kernel receive queue on a SocketCAN bus; returns its size (bytes).
 
     ``SO_RCVBUFFORCE`` (root) passes ``net.core.rmem_max``; otherwise ``SO_RCVBUF`` up to
-    it. 0 when the bus has no socket (other interfaces).
+    it. The kernel doubles the size asked for (its bookkeeping) and keeps a floor of a few
+    kB. 0 when the bus has no socket (other interfaces).
     """
     sock = getattr(bus, "socket", None)
     if not isinstance(sock, socket.socket):
@@ -299,25 +327,54 @@ class Receiver:
 
     The window fits run on the caller's thread; this thread only takes frames off the
     socket, so a fit that outlasts its step delays the decoding, not the reception, and
-    the kernel's socket queue does not overflow. When the buffer is full the newest frame
-    is dropped and counted (``buffer_overflow``).
+    the kernel's socket queue does not overflow. Frames lost anyway are counted by cause:
+
+    * ``buffer_overflow``: the buffer was full; the newest frame is dropped;
+    * ``socket_overrun`` (SocketCAN): the kernel dropped frames because this socket's
+      receive queue was full (``SO_RXQ_OVFL``; ``None`` on other interfaces: unknown);
+    * error frames (SocketCAN: every class; other interfaces: whatever their bus returns as
+      error frames) are counted by class (``bus_errors``) and never reach the decoder; an RX
+      overflow in the controller or a bus-off means frames were lost on the bus side.
+
+    Each loss is also noted as an event at its place in the frame sequence (:attr:`events`)
+    so that :func:`run_bus` can tell which counter gaps it explains.
 
     Parameters
     ----------
     bus : can.BusABC
-    capacity : int
-        Frames the buffer holds (default ``RECEIVE_BUFFER_S`` x ``RECEIVE_RATE``).
+    capacity : int, optional
+        Frames the buffer holds (default :data:`RECEIVE_BUFFER_S` s at
+        :data:`RECEIVE_RATE`; :func:`receive_capacity` sizes it from a DBC).
+    rcvbuf : int or None
+        Kernel receive queue asked for on a SocketCAN bus (bytes; ``None``: as it is).
     """
 
-    def __init__(self, bus: Any, capacity: int = int(RECEIVE_BUFFER_S * RECEIVE_RATE)) -> None:
+    def __init__(self, bus: Any, capacity: int | None = None,
+                 rcvbuf: int | None = SOCKET_RCVBUF) -> None:
         self.bus = bus
-        self.capacity = capacity
+        self.capacity = int(capacity) if capacity else receive_capacity(RECEIVE_BUFFER_S)
         self.queue: collections.deque[Any] = collections.deque()
         self.read = 0
+        self.queued = 0
         self.overflow = 0
         self.max_queued = 0
+        self.error_frames = 0
         self.error: str | None = None
-        self.socket_rcvbuf = enlarge_socket_buffer(bus)
+        #: ``(frames queued before it, cause)`` per loss, in order (cause
+        #: ``socket_overrun``, ``bus`` or ``buffer_overflow``)
+        self.events: collections.deque[tuple[int, str]] = collections.deque()
+        try:
+            self.reader: SocketcanReader | None = SocketcanReader(bus)
+        except (TypeError, OSError):
+            self.reader = None
+        sock = getattr(bus, "socket", None)
+        if rcvbuf is not None:
+            self.socket_rcvbuf = enlarge_socket_buffer(bus, rcvbuf)
+        else:
+            self.socket_rcvbuf = (int(sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF))
+                                  if isinstance(sock, socket.socket) else 0)
+        self._dropped = 0
+        self._overflowing = False
         self._stop = threading.Event()
         self._ready = threading.Condition()
         self._thread = threading.Thread(target=self._run, name="can-receiver", daemon=True)
@@ -326,9 +383,28 @@ class Receiver:
         self._thread.start()
         return self
 
+    def _recv(self, timeout: float) -> Any:
+        """One frame off the bus (the SocketCAN reader or the bus's own ``recv``)."""
+        return self.reader.recv(timeout) if self.reader is not None else self.bus.recv(timeout)
+
+    def _got(self, msg: Any) -> bool:
+        """Count one frame read; ``True`` if it is data for the decoder."""
+        self.read += 1
+        reader = self.reader
+        if reader is not None and reader.dropped != self._dropped:
+            self._dropped = reader.dropped
+            self.events.append((self.queued, "socket_overrun"))
+        if msg.is_error_frame:
+            self.error_frames += 1
+            if reader is not None and LOSS_CLASSES.intersection(reader.last_error):
+                self.events.append((self.queued, "bus"))
+            return False
+        return True
+
     def _run(self) -> None:
         q = self.queue
-        recv = self.bus.recv
+        recv = self._recv
+        got = self._got
         while not self._stop.is_set():
             try:
                 msg = recv(0.1)
@@ -336,13 +412,17 @@ class Receiver:
                 # the adapter went away (an SLCAN node closed its pty, a USB-CAN unplugged)
                 self.error = f"bus closed: {' '.join(str(exc).split())}"
                 break
-            if msg is None:
+            if msg is None or not got(msg):
                 continue
-            self.read += 1
             if len(q) >= self.capacity:
                 self.overflow += 1
+                if not self._overflowing:
+                    self._overflowing = True
+                    self.events.append((self.queued, "buffer_overflow"))
                 continue
+            self._overflowing = False
             q.append(msg)
+            self.queued += 1
             k = len(q)
             if k > self.max_queued:
                 self.max_queued = k
@@ -362,6 +442,24 @@ class Receiver:
         n = len(q)
         return [q.popleft() for _ in range(n)]
 
+    def drain(self) -> list[Any]:
+        """After :meth:`stop`: the buffered frames, then what the kernel still holds for the
+        socket (a stop while lagging), error frames counted as on the thread."""
+        out = self.take(0.0)
+        if self.error is not None:
+            return out
+        while True:
+            try:
+                msg = self._recv(0.0)
+            except (can.CanError, OSError, ValueError):
+                break
+            if msg is None:
+                break
+            if self._got(msg):
+                out.append(msg)
+                self.queued += 1
+        return out
+
     @property
     def alive(self) -> bool:
         return self._thread.is_alive()
@@ -370,13 +468,106 @@ class Receiver:
         self._stop.set()
         self._thread.join(timeout=2.0)
 
+    @property
+    def socket_overrun(self) -> int | None:
+        """Frames the kernel dropped at the full socket queue (``None``: not a SocketCAN bus)."""
+        if self.reader is None:
+            return None
+        now = self.reader.kernel_drops()
+        return max(self.reader.dropped, now if now is not None else 0)
+
     def stats(self) -> dict[str, object]:
         """Frames read off the bus and lost by cause (JSON-ready)."""
-        return {"read": self.read, "buffer_overflow": self.overflow, "max_queued": self.max_queued,
-                "buffer_capacity": self.capacity, "socket_rcvbuf": self.socket_rcvbuf}
+        out: dict[str, object] = {
+            "read": self.read, "buffer_overflow": self.overflow,
+            "socket_overrun": self.socket_overrun, "error_frames": self.error_frames,
+            "max_queued": self.max_queued, "buffer_capacity": self.capacity,
+            "socket_rcvbuf": self.socket_rcvbuf}
+        if self.reader is not None:
+            out["bus_errors"] = dict(sorted(self.reader.errors.items()))
+        for name in ("adapter_timed", "host_timed"):   # SLCAN: which clock timed the frames
+            if isinstance(getattr(self.bus, name, None), int):
+                out[name] = getattr(self.bus, name)
+        return out
 
 
-def run_bus(driver: CanWindowDriver, bus: Any, stop: LiveStop) -> int:
+class LossLedger:
+    """Which loss the decoder's counter gaps follow, so that no lost frame counts twice.
+
+    A sensor frame lost in the socket (or in the controller, or at the full buffer) also
+    leaves a gap in its message's alive counter, which the decoder finds at that message's
+    next frame. After each loss event the ledger watches, for every counter-carrying (E2E)
+    message the decoder has accepted frames of, its first frame after the event: the
+    counter gap found at that frame (``counts.lost`` just before and just after it, which
+    processes the decoder's pending batch) is booked to the event's cause. Gaps found
+    elsewhere (``none``) were lost before this receiver saw any trace of a loss: at the
+    sender, or on a bus that reports no errors. The watch ends when every such message has
+    delivered, or after :data:`LOSS_ATTRIBUTION_S` of frame time (a message that stopped).
+
+    Parameters
+    ----------
+    listener : DecodeListener
+    span : float
+        Longest watch after an event (s of frame time).
+    """
+
+    def __init__(self, listener: Any, span: float = LOSS_ATTRIBUTION_S) -> None:
+        self.listener = listener
+        self.span = span
+        self.gaps: collections.Counter[str] = collections.Counter()
+        self.cause: str | None = None
+        self.until = math.inf
+        self.pending: set[int] = set()
+        db = getattr(listener, "db", None)
+        self._ids = {m.name: int(m.frame_id) for m in getattr(db, "messages", None) or ()
+                     if is_e2e(m)}
+
+    def _lost(self) -> int:
+        return int(getattr(getattr(self.listener, "counts", None), "lost", 0))
+
+    def event(self, cause: str, t: float) -> None:
+        """A loss of ``cause`` before the next frame (its time ``t``, s)."""
+        if cause != self.cause:
+            self.cause = cause
+        per = getattr(self.listener, "per_message", None)
+        seen = per() if callable(per) else {}
+        self.pending = {self._ids[name] for name, n in seen.items() if n and name in self._ids}
+        self.until = t + self.span
+        if not self.pending:
+            self.cause = None
+
+    def feed(self, msgs: list[Any], on: Callable[[Any], None]) -> None:
+        """Hand ``msgs`` to ``on`` (the driver), booking the gaps at watched frames."""
+        i = 0
+        k = len(msgs)
+        while self.cause is not None and i < k:
+            msg = msgs[i]
+            i += 1
+            if not msg.timestamp <= self.until:
+                self.cause = None
+                on(msg)
+                break
+            if msg.arbitration_id in self.pending:
+                self.pending.discard(msg.arbitration_id)
+                lost0 = self._lost()
+                on(msg)
+                self.gaps[self.cause] += self._lost() - lost0
+                if not self.pending:
+                    self.cause = None
+            else:
+                on(msg)
+        for msg in msgs[i:] if i else msgs:
+            on(msg)
+
+    def summary(self, total: int) -> dict[str, int]:
+        """Counter gaps by the loss they followed (``none``: no loss event seen)."""
+        out = {c: int(self.gaps.get(c, 0)) for c in ("socket_overrun", "bus", "buffer_overflow")}
+        out["none"] = max(0, total - sum(out.values()))
+        return out
+
+
+def run_bus(driver: CanWindowDriver, bus: Any, stop: LiveStop,
+            buffer_s: float = RECEIVE_BUFFER_S, rcvbuf: int | None = SOCKET_RCVBUF) -> int:
     """Receive from a live python-can bus until a stop condition; returns frames received.
 
     A :class:`Receiver` thread reads the bus into a bounded buffer; this thread decodes the
@@ -384,22 +575,50 @@ def run_bus(driver: CanWindowDriver, bus: Any, stop: LiveStop) -> int:
     idle timeout) or when the bus reports that it can no longer be read
     (``can.CanOperationError``: the adapter or the pty of an SLCAN node went away); either
     way every frame received is processed and the windows it completes are cut. The
-    listener's frame statistics then carry ``receive``: frames read, frames lost to a full
-    buffer, and frames lost on the way (counter gaps: socket overrun or bus loss).
+    listener's frame statistics then carry ``receive`` (:meth:`Receiver.stats`): frames read,
+    frames lost by cause -- ``buffer_overflow``, ``socket_overrun``, error frames by class
+    (``bus_errors``) -- and ``counter_gap``, the frames missing from the sensor's counter
+    sequences, split in ``counter_gap_after`` by the loss they followed
+    (:class:`LossLedger`); ``lost_by_cause`` counts every lost frame once.
+
+    Parameters
+    ----------
+    driver : CanWindowDriver
+    bus : can.BusABC
+    stop : LiveStop
+    buffer_s : float
+        The receiver's buffer in seconds of data (:func:`receive_capacity` with the
+        listener's DBC).
+    rcvbuf : int or None
+        Kernel receive queue asked for on a SocketCAN bus (bytes).
     """
     start = time.monotonic()
     last_rx = start
     n = 0
-    rx = Receiver(bus).start()
+    rx = Receiver(bus, receive_capacity(buffer_s, getattr(driver.listener, "db", None)),
+                  rcvbuf=rcvbuf).start()
+    ledger = LossLedger(driver.listener)
     on = driver.on_message
+    events = rx.events
+
+    def feed(msgs: list[Any]) -> None:
+        nonlocal n
+        lo = 0
+        while events and events[0][0] < n + len(msgs):
+            seq, cause = events.popleft()
+            k = max(seq - n, lo)
+            ledger.feed(msgs[lo:k], on)
+            lo = k
+            ledger.event(cause, msgs[k].timestamp)
+        ledger.feed(msgs[lo:] if lo else msgs, on)
+        n += len(msgs)
+
     try:
         while True:
             msgs = rx.take(0.1)
             now = time.monotonic()
-            for msg in msgs:
-                on(msg)
             if msgs:
-                n += len(msgs)
+                feed(msgs)
                 last_rx = now
             else:
                 driver.poll()
@@ -416,26 +635,18 @@ def run_bus(driver: CanWindowDriver, bus: Any, stop: LiveStop) -> int:
                 break
     finally:
         rx.stop()
-        for msg in rx.take(0.0):   # what arrived before the thread stopped
-            on(msg)
-            n += 1
-        if rx.error is None:
-            # and what the kernel still holds for this socket (a stop while lagging)
-            while True:
-                try:
-                    msg = bus.recv(0.0)
-                except (can.CanError, OSError, ValueError):
-                    break
-                if msg is None:
-                    break
-                rx.read += 1
-                on(msg)
-                n += 1
+        feed(rx.drain())
         driver.flush()
         rstats = rx.stats()
         counts = getattr(driver.listener, "counts", None)
-        if counts is not None:
-            rstats["counter_gap"] = counts.lost
+        gap = int(getattr(counts, "lost", 0)) if counts is not None else 0
+        after = ledger.summary(gap)
+        rstats["counter_gap"] = gap
+        rstats["counter_gap_after"] = after
+        overrun = rstats["socket_overrun"]
+        rstats["lost_by_cause"] = {
+            "buffer_overflow": rx.overflow, "socket_overrun": overrun,
+            "bus": after["bus"], "counter_gap": after["none"]}
         if isinstance(getattr(driver.listener, "receive_stats", None), dict):
             driver.listener.receive_stats.update(rstats)
     return n

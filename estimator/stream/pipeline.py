@@ -42,6 +42,7 @@ from estimator.stream.events import Summary
 from estimator.stream.monitor import StreamMonitor
 from suspid.can.bus import open_bus
 from suspid.can.logs import ReadStats, is_can_log
+from suspid.can.options import RECEIVE_BUFFER_S
 from suspid.errors import InputError, UsageError, require_file
 from suspid.io.csvio import read_measurement
 from suspid.models.base import FloatArray, SuspensionModel
@@ -354,6 +355,10 @@ class Source:
         the frame timestamps otherwise.
     duration, idle_timeout : float or None
         Live stop conditions (s of wall time).
+    rx_buffer_s : float
+        Live: the receiver's buffer in seconds of data (:func:`estimator.stream.drivers.receive_capacity`).
+    slcan_timestamps : bool
+        Live SLCAN: switch the adapter's timestamp mode on and time frames by its clock.
     alert_frames : bool
         Send SUSPID_Alert frames (live bus, or ``alert_interface``).
     alert_interface, alert_channel : str or None
@@ -368,20 +373,28 @@ class Source:
     time_source: Literal["timestamp", "tick"] | None = None
     duration: float | None = None
     idle_timeout: float | None = 5.0
+    rx_buffer_s: float = RECEIVE_BUFFER_S
+    slcan_timestamps: bool = False
     alert_frames: bool = True
     alert_interface: str | None = None
     alert_channel: str | None = None
 
 
-def open_checked_bus(interface: str, channel: str | None, bitrate: int | None, what: str) -> Any:
+def open_checked_bus(interface: str, channel: str | None, bitrate: int | None, what: str,
+                     slcan_timestamps: bool = False) -> Any:
     """The bus through the node's and the estimator's one opener (:func:`suspid.can.bus.open_bus`:
-    chunked SLCAN reads, data timestamps on ``virtual``, ``udp_multicast`` refused)."""
+    chunked SLCAN reads, data timestamps on ``virtual``, ``udp_multicast`` refused);
+    ``slcan_timestamps``: the SLCAN adapter's own frame times (Lawicel ``Z1``)."""
     if channel is None:
         raise UsageError(f"{what}: --channel is required with --interface {interface}")
     if interface == "slcan" and str(channel).lower() in ("pty", "pty:"):
         raise UsageError(f"{what}: --channel pty creates a node-side adapter (suspid node); give "
                          "the monitor the /dev/pts/N path the node printed")
     kw: dict[str, Any] = {"bitrate": bitrate} if bitrate else {}
+    if slcan_timestamps:
+        if interface != "slcan":
+            raise UsageError(f"{what}: --slcan-timestamps needs --interface slcan, got {interface}")
+        kw["timestamps"] = True
     try:
         return open_bus(interface, channel, **kw)
     except UsageError as exc:
@@ -505,7 +518,8 @@ def _run_live(source: Source, spec: MonitorSpec, mon: StreamMonitor, sinks: list
     cfg = spec.config
     if source.interface is None:
         raise UsageError("give --input LOG or --interface I --channel C")
-    bus = open_checked_bus(source.interface, source.channel, source.bitrate, "--interface")
+    bus = open_checked_bus(source.interface, source.channel, source.bitrate, "--interface",
+                           slcan_timestamps=source.slcan_timestamps)
     buses.append(bus)
     listener = _listener(source, spec, source.time_source or "auto")
     _alert_bus(source, sinks, listener, buses, live_bus=bus)
@@ -515,7 +529,7 @@ def _run_live(source: Source, spec: MonitorSpec, mon: StreamMonitor, sinks: list
                     idle_timeout=None if not source.idle_timeout else source.idle_timeout)
     stop.install()
     try:
-        n = run_bus(drv, bus, stop)
+        n = run_bus(drv, bus, stop, buffer_s=source.rx_buffer_s)
     finally:
         stop.restore()
     return {"frames": listener.frame_stats(), "frames_received": n, "windows_cut": drv.windows,

@@ -17,9 +17,18 @@ adjustments:
 * ``virtual``: ``preserve_timestamps=True`` so a frame keeps the sender's (data) time.
 
 ``udp_multicast`` is refused: suspid uses no network transport.
+
+:class:`SocketcanReader` reads a SocketCAN bus's raw socket itself, to learn what
+python-can does not pass on: the kernel's count of frames dropped because the socket's
+receive queue was full (``SO_RXQ_OVFL``) and the controller's error frames by class
+(``CAN_RAW_ERR_FILTER``: RX overflow in the controller, bus-off, ...).
 """
 from __future__ import annotations
 
+import select
+import socket
+import struct
+from collections import Counter
 from typing import Any, Callable, Optional
 
 import can
@@ -88,10 +97,13 @@ class BufferedSlcanBus(slcanBus):
         self.adapter_timed = 0
         self.host_timed = 0
         super().__init__(*args, **kwargs)
-        if timestamps:
-            self.close()
+
+    def open(self) -> None:
+        """Open the channel (``O``); with timestamps, ``Z1`` goes first (the mode can only be
+        set while the channel is closed), so no frame arrives without its timestamp."""
+        if self._ts_on:
             self._write("Z1")
-            self.open()
+        super().open()
 
     def _recv_internal(self, timeout: Optional[float]) -> tuple[Optional[can.Message], bool]:
         msg, filtered = super()._recv_internal(timeout)
@@ -142,6 +154,161 @@ class BufferedSlcanBus(slcanBus):
                 continue
             if deadline.expired():
                 return None
+
+
+#: ``SO_RXQ_OVFL`` (``SOL_SOCKET``): the kernel attaches its count of frames dropped at the
+#: socket's full receive queue to each received frame
+SO_RXQ_OVFL = 40
+#: ``SO_TIMESTAMPNS`` (``SOL_SOCKET``): a ``struct timespec`` arrival time per frame
+SO_TIMESTAMPNS = 35
+#: ``SO_MEMINFO`` (``SOL_SOCKET``): the socket's memory counters, the 9th (``SK_MEMINFO_DROPS``)
+#: being its drop count
+SO_MEMINFO = 55
+_MEMINFO_SIZE = 9 * 4
+SOL_CAN_RAW = 101
+CAN_RAW_ERR_FILTER = 2
+CAN_EFF_FLAG = 0x80000000
+CAN_RTR_FLAG = 0x40000000
+CAN_ERR_FLAG = 0x20000000
+#: every error class (``CAN_ERR_MASK``)
+CAN_ERR_MASK = 0x1FFFFFFF
+CAN_MTU = 16
+CANFD_MTU = 72
+#: ``struct can_frame`` / ``canfd_frame`` head: ID, length, flags, (reserved), len8_dlc
+_FRAME_HEAD = struct.Struct("=IBB1xB")
+_TIMESPEC = struct.Struct("@ll")
+_DROPS = struct.Struct("=I")
+_ANC_SIZE = socket.CMSG_SPACE(_TIMESPEC.size) + socket.CMSG_SPACE(_DROPS.size)
+
+#: error frame classes (bits of the CAN ID, ``linux/can/error.h``) by the name counted
+ERROR_CLASSES = {0x001: "tx_timeout", 0x002: "lost_arbitration", 0x004: "controller",
+                 0x008: "protocol", 0x010: "transceiver", 0x020: "no_ack", 0x040: "bus_off",
+                 0x080: "bus_error", 0x100: "restarted", 0x200: "counters"}
+#: controller problem details (``data[1]`` of a ``CAN_ERR_CRTL`` frame)
+CONTROLLER_DETAILS = {0x01: "rx_overflow", 0x02: "tx_overflow", 0x04: "rx_warning",
+                      0x08: "tx_warning", 0x10: "rx_passive", 0x20: "tx_passive",
+                      0x40: "active"}
+#: error-frame classes after which received frames may be missing (the controller dropped
+#: frames, or it was off the bus)
+LOSS_CLASSES = frozenset({"rx_overflow", "bus_off"})
+
+
+def error_frame_classes(msg: can.Message) -> list[str]:
+    """The classes an error frame reports (``ERROR_CLASSES``, ``CONTROLLER_DETAILS``).
+
+    Parameters
+    ----------
+    msg : can.Message
+        An error frame (``is_error_frame``); its ``arbitration_id`` holds the class bits.
+    """
+    ident = int(msg.arbitration_id)
+    out = [name for bit, name in ERROR_CLASSES.items() if ident & bit]
+    if ident & 0x004 and len(msg.data) > 1:
+        out += [name for bit, name in CONTROLLER_DETAILS.items() if msg.data[1] & bit]
+    return out
+
+
+class SocketcanReader:
+    """Receive from a python-can SocketCAN bus with the kernel's drop count and error frames.
+
+    Switches ``SO_RXQ_OVFL`` on the bus's raw socket (the kernel then hands each frame the
+    socket's drop count so far, in the ancillary data of ``recvmsg``) and error frames on
+    (``CAN_RAW_ERR_FILTER``, every class), and parses frames as python-can's
+    ``capture_message`` does (whose ancillary-data parser expects the timestamp alone).
+
+    Parameters
+    ----------
+    bus : can.interfaces.socketcan.SocketcanBus
+        The open bus (its ``socket`` and ``channel`` are used).
+
+    Attributes
+    ----------
+    dropped : int
+        Frames the kernel dropped at this socket's full receive queue, as of the newest frame
+        received (drops after it show with the next frame).
+    error_frames : int
+        Error frames received (they are counted, not returned).
+    errors : collections.Counter
+        Error frames by class (:func:`error_frame_classes`).
+    """
+
+    def __init__(self, bus: Any) -> None:
+        sock = getattr(bus, "socket", None)
+        if not isinstance(sock, socket.socket) or sock.family != getattr(socket, "AF_CAN", -1):
+            raise TypeError(f"{type(bus).__name__} has no SocketCAN socket")
+        self.sock: socket.socket = sock
+        self.channel = getattr(bus, "channel", None) or None
+        self.dropped = 0
+        self.error_frames = 0
+        self.errors: Counter[str] = Counter()
+        #: the newest error frame's classes (until the next one)
+        self.last_error: list[str] = []
+        sock.setsockopt(socket.SOL_SOCKET, SO_RXQ_OVFL, 1)
+        sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+        sock.setsockopt(SOL_CAN_RAW, CAN_RAW_ERR_FILTER, CAN_ERR_MASK)
+
+    def kernel_drops(self) -> Optional[int]:
+        """The socket's drop count now (``SO_MEMINFO``), including drops after the newest
+        frame received; ``None`` where the kernel does not report it."""
+        try:
+            info = self.sock.getsockopt(socket.SOL_SOCKET, SO_MEMINFO, _MEMINFO_SIZE)
+        except OSError:
+            return None
+        if len(info) < _MEMINFO_SIZE:
+            return None
+        return int(_DROPS.unpack_from(info, _MEMINFO_SIZE - _DROPS.size)[0])
+
+    def recv(self, timeout: Optional[float]) -> Optional[can.Message]:
+        """The next frame or error frame (``None`` after ``timeout`` s without one).
+
+        Raises
+        ------
+        can.CanOperationError
+            The socket can no longer be read (the interface went away).
+        """
+        sock = self.sock
+        try:
+            if timeout is not None:
+                ready, _, _ = select.select([sock], [], [], timeout)
+                if not ready:
+                    return None
+            frame, anc, flags, _ = sock.recvmsg(CANFD_MTU, _ANC_SIZE)
+        except (OSError, ValueError) as exc:
+            raise can.CanOperationError(f"Error receiving: {exc}") from exc
+        stamp = 0.0
+        for level, kind, data in anc:
+            if level != socket.SOL_SOCKET:
+                continue
+            if kind == SO_TIMESTAMPNS and len(data) >= _TIMESPEC.size:
+                sec, nsec = _TIMESPEC.unpack_from(data)
+                stamp = sec + nsec * 1e-9
+            elif kind == SO_RXQ_OVFL and len(data) >= _DROPS.size:
+                self.dropped = _DROPS.unpack_from(data)[0]
+        return self._message(frame, flags, stamp)
+
+    def _message(self, frame: bytes, flags: int, stamp: float) -> can.Message:
+        ident, size, fdflags, len8 = _FRAME_HEAD.unpack_from(frame)
+        fd = len(frame) == CANFD_MTU
+        dlc = size
+        if not fd:
+            fdflags = 0
+            size = min(size, 8)
+            if size == 8 and 8 < len8 <= 15:
+                dlc = len8
+        msg = can.Message(
+            timestamp=stamp, channel=self.channel,
+            arbitration_id=ident & (0x1FFFFFFF if ident & (CAN_EFF_FLAG | CAN_ERR_FLAG)
+                                    else 0x7FF),
+            is_extended_id=bool(ident & CAN_EFF_FLAG),
+            is_remote_frame=bool(ident & CAN_RTR_FLAG),
+            is_error_frame=bool(ident & CAN_ERR_FLAG), is_fd=fd,
+            is_rx=not flags & socket.MSG_DONTROUTE, bitrate_switch=bool(fdflags & 0x01),
+            error_state_indicator=bool(fdflags & 0x02), dlc=dlc, data=frame[8:8 + size])
+        if msg.is_error_frame:
+            self.error_frames += 1
+            self.last_error = error_frame_classes(msg)
+            self.errors.update(self.last_error)
+        return msg
 
 
 def open_bus(interface: str = "virtual", channel: str = "suspid", **kwargs: Any) -> can.BusABC:

@@ -8,6 +8,9 @@ on their parser and :func:`can_inputs` on the parsed arguments::
     meas, frames = load_log_as_measurement(args.input, model, dbc_path, signal_map)
 
 (``--dbc`` is part of the contract and stays defined by each command unless ``dbc=True``.)
+
+A command that reads a live bus adds :func:`add_receive_arguments` (``--rx-buffer``,
+``--slcan-timestamps``).
 """
 from __future__ import annotations
 
@@ -17,6 +20,37 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # the parsers are built without importing cantools (fast --help)
     from suspid.can.signal_map import SignalMap
+
+
+#: default length of the live receiver's buffer (s of data at the DBC's frame rate, at least
+#: a saturated 1 Mbit/s bus; ``estimator.stream.drivers.receive_capacity``)
+RECEIVE_BUFFER_S = 10.0
+
+
+def positive_seconds(text: str) -> float:
+    """argparse ``type``: a finite number of seconds > 0."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected seconds > 0, got {text!r}") from None
+    if not 0 < v < float("inf"):
+        raise argparse.ArgumentTypeError(f"expected seconds > 0, got {text!r}")
+    return v
+
+
+def add_receive_arguments(parser: "argparse.ArgumentParser | argparse._ArgumentGroup") -> None:
+    """Add the live receiver's options: ``--rx-buffer SECONDS`` and ``--slcan-timestamps``."""
+    parser.add_argument("--rx-buffer", type=positive_seconds, default=RECEIVE_BUFFER_S,
+                        metavar="SECONDS",
+                        help="frames the receiver thread may hold while the decoder and the "
+                             "fits lag behind, in seconds of data at the DBC's frame rate "
+                             "(every message at its GenMsgCycleTime, at least 10 k frames/s: "
+                             f"a saturated 1 Mbit/s bus); default {RECEIVE_BUFFER_S:g}")
+    parser.add_argument("--slcan-timestamps", action="store_true",
+                        help="--interface slcan: switch the adapter's timestamp mode on "
+                             "(Lawicel Z1) and time each frame by the adapter's clock "
+                             "(ms, unwrapped over its 60 s period) instead of the host's "
+                             "arrival time")
 
 
 def add_can_arguments(parser: argparse.ArgumentParser, dbc: bool = False) -> None:

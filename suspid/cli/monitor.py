@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
 
-from suspid.can.options import add_can_arguments, can_inputs
+from suspid.can.options import add_can_arguments, add_receive_arguments, can_inputs
 from suspid.cli._common import add_model_option, parse_assignments, print_json
 from suspid.errors import UsageError
 from suspid.models import get_model
@@ -114,6 +114,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     l.add_argument("--time-source", choices=["timestamp", "tick"], default=None,
                    help="data time from frame timestamps (logs) or SN_Sync ticks (default for "
                         "a live bus)")
+    add_receive_arguments(l)
     o = p.add_argument_group("output-only mode (body accelerometer only)")
     o.add_argument("--output-only", action="store_true",
                    help="no road/wheel sensor: track the body mode's frequency and damping "
@@ -190,7 +191,8 @@ def source_from_args(args: argparse.Namespace) -> "Source":
     return Source(input=args.input, interface=args.interface, channel=args.channel,
                   bitrate=args.bitrate, dbc=dbc_path, signal_map=smap,
                   time_source=args.time_source, duration=args.duration,
-                  idle_timeout=args.idle_timeout, alert_frames=not args.no_alert_frames,
+                  idle_timeout=args.idle_timeout, rx_buffer_s=args.rx_buffer,
+                  slcan_timestamps=args.slcan_timestamps, alert_frames=not args.no_alert_frames,
                   alert_interface=args.alert_interface, alert_channel=args.alert_channel)
 
 

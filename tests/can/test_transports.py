@@ -233,3 +233,64 @@ def test_two_process_node_and_monitor_cli_over_slcan():
     c1 = [d["params"]["c1"] for d in est]
     assert c1[0] == pytest.approx(1500, rel=0.05)      # the damper wears from t = 20 s on
     assert node.returncode == 0, err
+
+
+def _slcan_monitor(*flags: str, duration: float = 3.0) -> dict:
+    """``suspid node`` at half real time over the pty adapter and ``suspid monitor
+    --time-source timestamp FLAGS`` on it; the monitor's summary line."""
+    node, path = start_slcan_node("--scenario", "random", "--duration", str(duration),
+                                  "--speed", "0.5", "--open-timeout", "60", "--linger", "1")
+    try:
+        mon = subprocess.run(
+            [sys.executable, "-m", "suspid", "monitor", "--model", "quarter2", "--interface",
+             "slcan", "--channel", path, *flags, "--time-source", "timestamp", "--fix",
+             "m1=300", "--fix", "m2=40", "--fix", "c2=300", "--fix", "k2=200000",
+             "--window", "1", "--step", "0.5", "--idle-timeout", "30", "--no-alert-frames",
+             "--jsonl"], capture_output=True, text=True, env=suspid_env(), cwd=REPO,
+            timeout=300)
+        node.communicate(timeout=60)
+    finally:
+        if node.poll() is None:
+            node.kill()
+    assert mon.returncode == 0, mon.stderr
+    lines = [json.loads(x) for x in mon.stdout.splitlines() if x.strip()]
+    assert lines[-1]["type"] == "summary"
+    return {"summary": lines[-1], "estimates": [d for d in lines if d["type"] == "estimate"]}
+
+
+def test_monitor_cli_slcan_timestamps_time_frames_by_the_adapter():
+    """``monitor --slcan-timestamps``: the frames' times are the adapter's (Lawicel ``Z1``).
+
+    The node runs at half real time and its adapter stamps the node's data time, so the
+    adapter's clock runs at half the host's: 3 s of data take 6 s to arrive. Timed by the
+    adapter the monitor sees 3 s of data (5 windows of 1 s every 0.5 s, exactly 0.5 s
+    apart); timed by the host (without the flag) 6 s.
+    """
+    a = _slcan_monitor("--slcan-timestamps")
+    s = a["summary"]
+    rx = s["frames"]["receive"]
+    assert s["frames"]["time_base"] == "timestamp"
+    assert rx["adapter_timed"] == rx["read"] == s["frames"]["accepted"] > 0
+    assert rx["host_timed"] == 0
+    assert s["data_s"] == pytest.approx(3.0, abs=0.005)
+    t = np.array([d["t"] for d in a["estimates"]])
+    assert t.size == 5
+    np.testing.assert_allclose(np.diff(t), 0.5, atol=1e-6)
+
+    h = _slcan_monitor()
+    s = h["summary"]
+    rx = s["frames"]["receive"]
+    assert rx["host_timed"] == rx["read"] == s["frames"]["accepted"] > 0
+    assert rx["adapter_timed"] == 0
+    assert s["data_s"] > 5.0              # the host's clock: about twice the adapter's
+    assert s["windows_cut"] >= 9
+
+
+def test_monitor_cli_slcan_timestamps_needs_slcan():
+    out = subprocess.run([sys.executable, "-m", "suspid", "monitor", "--model", "quarter2",
+                          "--interface", "virtual", "--channel", "ts-flag", "--slcan-timestamps",
+                          "--idle-timeout", "1"], capture_output=True, text=True,
+                         env=suspid_env(), cwd=REPO, timeout=120)
+    assert out.returncode == 2
+    assert out.stderr.strip().splitlines()[-1] == \
+        "error: --interface: --slcan-timestamps needs --interface slcan, got virtual"

@@ -4,6 +4,10 @@ Also the bounded-memory checks: a long candump log streamed through a bounded li
 """
 from __future__ import annotations
 
+import math
+import re
+import threading
+import time
 import tracemalloc
 from pathlib import Path
 
@@ -13,8 +17,12 @@ import pytest
 
 from estimator.decode import DecodeListener, feed
 from estimator.decode.log_input import load_log_as_measurement
+from estimator.stream.drivers import (RECEIVE_RATE, CanWindowDriver, LiveStop, LossLedger,
+                                      receive_capacity, run_bus)
 from firmware_sim.faults import FaultConfig
 from firmware_sim.node import NodeConfig, SensorNode
+from suspid.can.bus import error_frame_classes, open_bus
+from suspid.can.dbc import load_dbc
 from suspid.can.logs import ReadStats, read_log
 from tools.fault_table import run_condition
 
@@ -158,3 +166,112 @@ def test_whole_log_loading_memory_is_linear_and_compact(tmp_path: Path) -> None:
     assert frames["accepted"] == n and meas.t.size == 19_800
     # grid: 20 k samples x 9 columns x 8 B = 1.4 MB; rings growable (doubling)
     assert peak < 19_800 * 8 * 9 * 6, peak
+
+
+# ---- live reception: lost frames by cause ------------------------------------------------
+def _without(frames: list[can.Message], drop: set[int]) -> list[can.Message]:
+    return [m for i, m in enumerate(frames) if i not in drop]
+
+
+def _sample_starts(frames: list[can.Message]) -> list[int]:
+    """Indices of the SN_Sync frames (each sample's first frame)."""
+    return [i for i, m in enumerate(frames) if m.arbitration_id == 0x100]
+
+
+def test_loss_ledger_books_counter_gaps_to_the_loss_they_follow() -> None:
+    """A gap found at a message's first frame after a loss event is that loss's; a gap
+    elsewhere is nobody's (``none``): each lost frame is counted once."""
+    frames, node = _node_frames(duration=1.0)
+    starts = _sample_starts(frames)
+    # one whole sample lost just before the event (4 E2E frames; none is an SN_Status)
+    a, b = starts[201], starts[202]
+    assert all(m.arbitration_id in (0x100, 0x110, 0x111, 0x112) for m in frames[a:b])
+    # and one QC_Body frame lost 100 samples later, with no event
+    late = next(i for i in range(starts[300], starts[301]) if frames[i].arbitration_id == 0x110)
+    kept = _without(frames, set(range(a, b)) | {late})
+    cut = a                                   # the event sits where the sample went missing
+    lst = DecodeListener("quarter2", node.db)
+    drv = CanWindowDriver(lst, 0.5, 0.25, lambda t, d: None)
+    ledger = LossLedger(lst)
+    ledger.feed(kept[:cut], drv.on_message)
+    ledger.event("socket_overrun", kept[cut].timestamp)
+    ledger.feed(kept[cut:], drv.on_message)
+    drv.flush()
+    assert lst.counts.lost == 5
+    assert ledger.summary(lst.counts.lost) == {"socket_overrun": 4, "bus": 0,
+                                               "buffer_overflow": 0, "none": 1}
+
+
+def test_loss_ledger_watch_ends_after_each_message_delivered() -> None:
+    """An event with nothing lost books nothing, and a later gap of the same message is not
+    the event's (the watch ended at that message's first frame after it)."""
+    frames, node = _node_frames(duration=1.0)
+    starts = _sample_starts(frames)
+    late = next(i for i in range(starts[203], starts[204]) if frames[i].arbitration_id == 0x111)
+    kept = _without(frames, {late})
+    lst = DecodeListener("quarter2", node.db)
+    drv = CanWindowDriver(lst, 0.5, 0.25, lambda t, d: None)
+    ledger = LossLedger(lst)
+    ledger.feed(kept[:starts[200]], drv.on_message)
+    ledger.event("bus", kept[starts[200]].timestamp)
+    ledger.feed(kept[starts[200]:], drv.on_message)
+    assert lst.counts.lost == 1
+    assert ledger.summary(lst.counts.lost) == {"socket_overrun": 0, "bus": 0,
+                                               "buffer_overflow": 0, "none": 1}
+
+
+def test_live_receiver_counts_error_frames_apart_and_overrun_unknown_off_socketcan() -> None:
+    """A virtual bus: error frames are counted (not decoded), counter gaps are ``none``'s,
+    and the socket overrun is unknown (``None``), not 0."""
+    frames, node = _node_frames(duration=2.0)
+    starts = _sample_starts(frames)
+    drop = {i for k in (100, 400, 700) for i in range(starts[k], starts[k] + 4)
+            if frames[i].arbitration_id == 0x110}
+    sent = _without(frames, drop)
+    err = can.Message(arbitration_id=0x004, is_error_frame=True, data=bytes([0, 0x01, 0, 0, 0, 0, 0, 0]),
+                      timestamp=sent[500].timestamp)
+    assert error_frame_classes(err) == ["controller", "rx_overflow"]
+    sent.insert(500, err)
+    chan = f"faults-{time.monotonic_ns()}"
+    rx = open_bus("virtual", chan)
+    tx = can.Bus(interface="virtual", channel=chan, preserve_timestamps=True)
+    lst = DecodeListener("quarter2", node.db)
+    drv = CanWindowDriver(lst, 0.5, 0.25, lambda t, d: None)
+    stop = LiveStop(idle_timeout=1.0)
+
+    def send() -> None:
+        for m in sent:
+            tx.send(m)
+
+    th = threading.Thread(target=send)
+    th.start()
+    try:
+        n = run_bus(drv, rx, stop)
+    finally:
+        th.join()
+        tx.shutdown()
+        rx.shutdown()
+    f = lst.frame_stats()
+    r = f["receive"]
+    assert n == len(sent) - 1 and r["read"] == len(sent)
+    assert r["error_frames"] == 1 and f["rejected"]["frame_type"] == 0
+    assert f["accepted"] == len(sent) - 1
+    assert r["socket_overrun"] is None and "bus_errors" not in r
+    assert r["counter_gap"] == len(drop) == 3
+    assert r["counter_gap_after"] == {"socket_overrun": 0, "bus": 0, "buffer_overflow": 0,
+                                      "none": 3}
+    assert r["lost_by_cause"] == {"buffer_overflow": 0, "socket_overrun": None, "bus": 0,
+                                  "counter_gap": 3}
+
+
+def test_receive_buffer_is_sized_in_seconds_of_the_dbc_frame_rate() -> None:
+    """Every DBC message with a cycle time at that rate (read here from the DBC's text),
+    at least a saturated 1 Mbit/s bus."""
+    db = load_dbc()
+    text = Path(db.suspid_path).read_text() if hasattr(db, "suspid_path") else \
+        (Path(__file__).resolve().parents[2] / "suspid" / "data" / "suspension.dbc").read_text()
+    cycles = [int(x) for x in re.findall(r'BA_ "GenMsgCycleTime" BO_ \d+ (\d+);', text)]
+    rate = sum(1000.0 / c for c in cycles if c)
+    assert rate > RECEIVE_RATE
+    assert receive_capacity(10.0, db) == math.ceil(10.0 * rate)
+    assert receive_capacity(2.5, None) == math.ceil(2.5 * RECEIVE_RATE)

@@ -7,13 +7,18 @@
 * ``canplayer`` and ``cangen`` inject foreign, malformed and out-of-sequence frames: each
   is counted under its reason and no valid frame is lost;
 * the ``candump -L`` recording (wall-clock timestamps) is read back by identify, diagnose
-  and monitor, on the sensor's clock.
+  and monitor, on the sensor's clock;
+* lost frames by cause: a stopped monitor whose kernel socket queue overflows under a
+  ``cangen`` flood (socket overrun = frames candump saw minus frames received), error
+  frames from ``cansend`` (a controller RX overflow, a bus-off), deliberate counter gaps:
+  each lost frame is counted once, under its cause.
 
 Run through ``tools/vcan_bench.sh`` where the host kernel has no SocketCAN.
 """
 from __future__ import annotations
 
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -24,6 +29,7 @@ from typing import Any
 
 import pytest
 
+from firmware_sim.node import NodeConfig, SensorNode
 from tests.conftest import REPO, suspid_env
 
 pytestmark = pytest.mark.socketcan
@@ -255,3 +261,123 @@ def test_candump_recording_read_back(node_run: dict[str, Any]) -> None:
     for x, y in zip(em, er):
         for k in y:
             assert x[k] == pytest.approx(y[k], rel=1e-9), k
+
+
+def _write_log(path: Path, frames: list[Any]) -> int:
+    """A candump ``-L`` log of ``frames`` (can.Message, data time), for canplayer."""
+    path.write_text("".join(f"({m.timestamp:.6f}) can0 {m.arbitration_id:03X}#{bytes(m.data).hex().upper()}\n"
+                            for m in frames))
+    return len(frames)
+
+
+def _stopped(pid: int) -> bool:
+    """The process is stopped (state T in /proc/PID/stat)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] in ("T", "t")
+    except (OSError, IndexError):
+        return False
+
+
+def _play(log: Path) -> None:
+    play = subprocess.run(["canplayer", "-I", str(log), "vcan0=can0"], capture_output=True,
+                          text=True, timeout=300)
+    assert play.returncode == 0, play.stderr
+
+
+def _cansend(frame: str) -> None:
+    out = subprocess.run(["cansend", "vcan0", frame], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+
+
+def test_lost_frames_counted_by_cause(tmp_path: Path) -> None:
+    """The live monitor's ``frames.receive`` names every lost frame's cause, once.
+
+    The node's stream goes through canplayer in segments: A (clean), B (every 50th QC_Body
+    frame left out: counter gaps made at the source), then the monitor is stopped
+    (SIGSTOP: a receiver that sleeps), cangen floods vcan0 until its kernel socket queue
+    overflows and C (2 samples) is dropped with the flood; after SIGCONT, D, a controller
+    error frame (RX overflow) with the next sample left out, E, and a bus-off error frame.
+    candump (a large queue of its own) is the independent count.
+    """
+    # without the 10 Hz SN_Status: its loss rule goes by arrival time, and the replay's
+    # pause (the flood) would read as 15 of them lost whenever it lasts 16 status periods
+    frames = [m for m in SensorNode(NodeConfig(scenario="random", duration=5.0, rate=500)).frames()
+              if m.arbitration_id != 0x310]
+    starts = [i for i, m in enumerate(frames) if m.arbitration_id == 0x100]
+
+    def samples(a: int, b: int) -> list[Any]:
+        return frames[starts[a]:starts[b]]
+
+    def plain(seg: list[Any]) -> bool:   # the 4 E2E frames of each sample
+        return len(seg) == 4 * len({m.timestamp for m in seg}) and \
+            all(m.arbitration_id in (0x100, 0x110, 0x111, 0x112) for m in seg)
+
+    seg_a = samples(0, 500)
+    seg_b, cut = [], []
+    for k in range(500, 1001):
+        for m in samples(k, k + 1):
+            (cut if k % 50 == 25 and m.arbitration_id == 0x110 else seg_b).append(m)
+    seg_c = samples(1001, 1003)
+    seg_d = samples(1003, 1501)
+    lost_bus = samples(1501, 1502)
+    seg_e = samples(1502, 2000)
+    assert plain(seg_c) and plain(lost_bus) and len(cut) == 10
+    logs = {}
+    for name, seg in (("a", seg_a), ("b", seg_b), ("c", seg_c), ("d", seg_d), ("e", seg_e)):
+        logs[name] = tmp_path / f"{name}.log"
+        _write_log(logs[name], seg)
+    dump = _start(["candump", "-L", "-r", str(64 << 20), "vcan0"], tmp_path / "candump.log")
+    mon = _live_monitor(tmp_path, "lost.jsonl", "--no-alert-frames", "--window", "2",
+                        "--step", "1")
+    flood = 50_000
+    try:
+        _play(logs["a"])
+        _play(logs["b"])
+        os.kill(mon.pid, signal.SIGSTOP)
+        deadline = time.monotonic() + 60
+        while not _stopped(mon.pid):
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
+        gen = subprocess.run(["cangen", "vcan0", "-I", "5A5", "-L", "8", "-g", "0", "-n",
+                              str(flood)], capture_output=True, text=True, timeout=600)
+        assert gen.returncode == 0, gen.stderr
+        _play(logs["c"])
+    finally:
+        os.kill(mon.pid, signal.SIGCONT)
+    time.sleep(3.0)    # the resumed monitor reads its full queue
+    _play(logs["d"])
+    _cansend("20000004#0001000000000000")      # controller problem: RX overflow
+    _play(logs["e"])
+    _cansend("20000040#0000000000000000")      # bus-off
+    time.sleep(2.0)
+    err = _stop(mon)
+    time.sleep(0.5)
+    _stop(dump)
+    assert mon.returncode == 0, err
+    assert "Traceback" not in err
+    summary = _jsonl(tmp_path / "lost.jsonl")[-1]
+    f = summary["frames"]
+    r = f["receive"]
+    seen = sum(1 for _ in (tmp_path / "candump.log").open())   # candump takes no error frames
+    node_sent = len(seg_a) + len(seg_b) + len(seg_c) + len(seg_d) + len(seg_e)
+    assert seen == node_sent + flood
+    # the kernel's drop count is exactly what reached the bus but not the monitor
+    assert r["socket_overrun"] > len(seg_c)
+    assert r["read"] + r["socket_overrun"] == seen + 2
+    assert r["error_frames"] == 2 and summary["frames_received"] == r["read"] - 2
+    assert r["bus_errors"] == {"bus_off": 1, "controller": 1, "rx_overflow": 1}
+    assert f["rejected"]["frame_type"] == 0          # error frames never reach the decoder
+    # node frames the kernel dropped: C, and any of D that came while the resumed monitor's
+    # queue was still full of the flood
+    node_lost = node_sent - f["accepted"]
+    assert node_lost >= len(seg_c)
+    assert f["rejected"]["unknown_id"] == flood - (r["socket_overrun"] - node_lost)
+    assert sum(f["rejected"].values()) == f["rejected"]["unknown_id"]
+    # counter gaps: the node frames lost in the socket, the sample after the RX overflow,
+    # and the 10 left out at the source -- each once, under its cause
+    assert r["counter_gap"] == node_lost + len(lost_bus) + len(cut), (r, f)
+    assert r["counter_gap_after"] == {"socket_overrun": node_lost, "bus": len(lost_bus),
+                                      "buffer_overflow": 0, "none": len(cut)}
+    assert r["lost_by_cause"] == {"buffer_overflow": 0, "socket_overrun": r["socket_overrun"],
+                                  "bus": len(lost_bus), "counter_gap": len(cut)}
+    assert r["buffer_overflow"] == 0
