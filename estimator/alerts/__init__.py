@@ -7,10 +7,11 @@ for trends and predicted limit crossings.
 """
 from estimator.alerts.engine import AlertConfig, AlertEngine, AlertEvent
 from estimator.alerts.forecast import (DEFAULT_HORIZON_S, Crossing, ForecastEngine, ForecastEvent,
-                                       Trend, crossing, linear_trend)
+                                       Trend, band_crossing, crossing,
+                                       linear_trend)
 from estimator.alerts.sinks import BusAlertSink, CallbackSink
 from estimator.alerts.store import AlertStore
 
 __all__ = ["AlertConfig", "AlertEngine", "AlertEvent", "AlertStore", "BusAlertSink", "CallbackSink",
-           "DEFAULT_HORIZON_S", "Crossing", "ForecastEngine", "ForecastEvent", "Trend", "crossing",
+           "DEFAULT_HORIZON_S", "Crossing", "band_crossing", "ForecastEngine", "ForecastEvent", "Trend", "crossing",
            "linear_trend"]

@@ -24,6 +24,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Mapping, Protocol
 
+from estimator.alerts.event import ParameterEvent
 from suspid.errors import UsageError
 
 
@@ -75,7 +76,7 @@ class AlertConfig:
 
 
 @dataclass
-class AlertEvent:
+class AlertEvent(ParameterEvent):
     """An alert (or the end of one).
 
     Attributes
@@ -110,14 +111,8 @@ class AlertEvent:
     unit: str = ""
 
     @property
-    def id(self) -> str:
-        """Deterministic identity of the event (deduplication across restarts)."""
-        return f"{self.model}:{self.parameter}:{self.kind}@{self.t:.6f}"
-
-    @property
     def message(self) -> str:
-        u = f" {self.unit}" if self.unit else ""
-        pct = 100.0 * self.limit / self.nominal
+        u, pct = self.unit_suffix, self.limit_pct
         if self.kind == "alert":
             return (f"{self.parameter} = {self.value:.6g}{u} is confidently below {pct:.0f} % of "
                     f"nominal {self.nominal:.6g}{u} (99 % upper bound {self.bound:.6g}{u} < "

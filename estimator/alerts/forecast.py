@@ -30,6 +30,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from estimator.alerts.event import ParameterEvent
 from suspid.errors import UsageError
 
 #: two-sided 90 % normal quantile
@@ -127,12 +128,42 @@ def linear_trend(t: Sequence[float], value: Sequence[float], stderr: Sequence[fl
                  float(cov[1, 1]))
 
 
+def band_crossing(a: float, r: float, var_value: float, cov: float, var_rate: float,
+                  z: float = Z90) -> tuple[float, float, float] | None:
+    """Time to a crossing and the edges of its interval, without process noise (closed form).
+
+    The line ``a + r tau`` (``a`` = level minus limit, ``r`` the rate, with covariance
+    ``[[var_value, cov], [cov, var_rate]]``) meets zero at ``tau* = -a / r``; the band
+    ``a + r tau -/+ z s(tau)`` meets it at the roots of the quadratic of the module docstring
+    (Fieller's interval), which are finite exactly when ``r^2 > z^2 var_rate``.
+
+    Returns
+    -------
+    tuple of float or None
+        ``(tau*, tau_low, tau_high)`` (same time unit as ``r``), ``None`` when the rate is not
+        significant at ``z``. The edges may be negative (the band holds the limit already).
+    """
+    qa = r * r - z * z * var_rate
+    if r == 0 or not qa > 0:
+        return None
+    qb = 2.0 * (a * r - z * z * cov)
+    qc = a * a - z * z * var_value
+    disc = qb * qb - 4.0 * qa * qc
+    tc = -a / r
+    if disc < 0:   # rounding only: the point estimate always lies inside
+        return tc, tc, tc
+    root = math.sqrt(disc)
+    lo, hi = sorted(((-qb - root) / (2 * qa), (-qb + root) / (2 * qa)))
+    return tc, lo, hi
+
+
 def crossing(trend: Trend, limit: float, z: float = Z90) -> Crossing | None:
     """When ``trend`` reaches ``limit`` (module docstring); ``None`` when not predicted.
 
     ``None`` also when the trend moves away from the limit or its rate is not significant
-    at ``z``. With process noise (``q_value``, ``q_rate``) the band edges are found by
-    bisection; the late edge is capped at 100 times the predicted time to the crossing.
+    at ``z``. Without process noise the interval is :func:`band_crossing`'s closed form;
+    with it (``q_value``, ``q_rate``) the band edges are found by bisection and the late
+    edge is capped at 100 times the predicted time to the crossing.
     """
     a = trend.value - limit
     r = trend.rate
@@ -140,6 +171,12 @@ def crossing(trend: Trend, limit: float, z: float = Z90) -> Crossing | None:
         return None
     if r * r <= z * z * trend.var_rate:
         return None
+    if trend.q_value == 0.0 and trend.q_rate == 0.0:
+        fc = band_crossing(a, r, trend.var_value, trend.cov, trend.var_rate, z)
+        if fc is None:
+            return None
+        tc, lo, hi = fc
+        return Crossing(trend.t + tc, trend.t + max(lo, 0.0), trend.t + max(hi, lo, 0.0))
     # work with a > 0 and r < 0 (a falling part above its limit, or the mirror image)
     a, r = abs(a), -abs(r)
     tau = a / -r
@@ -159,7 +196,7 @@ def crossing(trend: Trend, limit: float, z: float = Z90) -> Crossing | None:
             hi *= 2.0
             if hi > 100.0 * tau:
                 return math.inf
-        lo = 0.0 if sign > 0 else 0.0
+        lo = 0.0
         for _ in range(60):
             mid = 0.5 * (lo + hi)
             if g(mid) > 0:
@@ -176,7 +213,7 @@ def crossing(trend: Trend, limit: float, z: float = Z90) -> Crossing | None:
 
 
 @dataclass
-class ForecastEvent:
+class ForecastEvent(ParameterEvent):
     """A predicted limit crossing (``kind="forecast"``) or its withdrawal.
 
     Attributes
@@ -210,14 +247,8 @@ class ForecastEvent:
     unit: str = ""
 
     @property
-    def id(self) -> str:
-        """Deterministic identity (deduplication across restarts)."""
-        return f"{self.model}:{self.parameter}:{self.kind}@{self.t:.6f}"
-
-    @property
     def message(self) -> str:
-        u = f" {self.unit}" if self.unit else ""
-        pct = 100.0 * self.limit / self.nominal if self.nominal else float("nan")
+        u, pct = self.unit_suffix, self.limit_pct
         if self.kind != "forecast" or self.crossing_t is None:
             return (f"{self.parameter} = {self.value:.6g}{u} no longer trends towards {pct:.0f} % "
                     f"of nominal within the horizon (rate {self.rate:+.3g}{u}/s); "

@@ -23,7 +23,8 @@ Forecast (:func:`forecast_crossing`)
     the times at which the two-sided 90 % confidence band of the fitted line contains ``L``
     (``q`` the Student-t quantile with ``n - 2`` degrees of freedom), so the interval is
     asymmetric when the slope is uncertain, and no forecast is given when the slope is not
-    distinguishable from zero at that level (the interval would be unbounded).
+    distinguishable from zero at that level (the interval would be unbounded). The roots
+    are those of the monitor's forecasts (:func:`estimator.alerts.forecast.band_crossing`).
 """
 from __future__ import annotations
 
@@ -32,6 +33,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.stats import t as student_t
+
+from estimator.alerts.forecast import band_crossing
 
 DAY_S = 86400.0
 HUBER_C = 1.345
@@ -247,19 +250,10 @@ def forecast_crossing(trend: Trend | None, limit: float, level: float = 0.90
     if not b < 0:
         return None
     q = float(student_t.ppf(0.5 + level / 2.0, max(trend.n - 2, 1)))
-    vaa, vab, vbb = float(trend.cov[0, 0]), float(trend.cov[0, 1]), float(trend.cov[1, 1])
-    A = b * b - q * q * vbb
-    if not A > 0:
+    fc = band_crossing(a, b, float(trend.cov[0, 0]), float(trend.cov[0, 1]),
+                       float(trend.cov[1, 1]), q)
+    if fc is None:
         return None
-    B = 2.0 * (a * b - q * q * vab)
-    C = a * a - q * q * vaa
-    disc = B * B - 4.0 * A * C
-    tc = -a / b
-    if disc < 0:   # rounding only: the point estimate always lies inside
-        lo = hi = tc
-    else:
-        root = math.sqrt(disc)
-        lo, hi = sorted(((-B - root) / (2 * A), (-B + root) / (2 * A)))
-    day = trend.t_ref, DAY_S
-    return Forecast(day[0] + tc * day[1], day[0] + lo * day[1], day[0] + hi * day[1],
+    tc, lo, hi = fc
+    return Forecast(trend.t_ref + tc * DAY_S, trend.t_ref + lo * DAY_S, trend.t_ref + hi * DAY_S,
                     float(limit), level)

@@ -16,6 +16,10 @@ Metrics (``truth`` known for synthetic streams):
     first alert of the parameter minus the time the truth crossed ``(1 - drop) x nominal``.
 ``false_alarms``
     alerts raised while the truth was still above the limit.
+``error_over_stderr_rms``
+    RMS of ``(estimate - truth) / stderr`` with the stderr the alerts use: about 1 when the
+    stated uncertainty is honest, above 1 when it understates the error (alerts then come
+    earlier than their confidence level warrants), below 1 when it is conservative.
 ``cpu_us_per_sample``
     process CPU time of the estimator divided by the samples of the stream.
 ``forecast_lead_s``, ``forecast_first_error_s``, ``forecast_first_contains``
@@ -30,7 +34,7 @@ from __future__ import annotations
 import csv
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -77,18 +81,24 @@ def run_one(spec: MonitorSpec, t: FloatArray, data: Mapping[str, FloatArray]) ->
     return rec
 
 
-def _series(rec: RunRecord, k: str) -> tuple[FloatArray, FloatArray]:
-    """Times and the values the alerts were decided on: the tracker's for the sliding window,
-    the filter's own state for the EKF."""
-    te, ve = [], []
+def _series(rec: RunRecord, k: str) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Times, the values the alerts were decided on (the tracker's for the sliding window,
+    the filter's own state for the EKF) and their standard errors."""
+    te, ve, se = [], [], []
     for l in rec.lines:
         if l["type"] != "estimate" or k not in l.get("stderr", {}):
             continue
         tr = (l.get("track") or {}).get(k)
-        v = l["params"][k] if rec.own_track or tr is None else tr["value"]
         te.append(l["t"])
-        ve.append(v)
-    return np.array(te, dtype=float), np.array(ve, dtype=float)
+        if rec.own_track or tr is None:
+            ve.append(l["params"][k])
+            s = l["stderr"].get(k)
+        else:
+            ve.append(tr["value"])
+            s = tr["stderr"]
+        se.append(np.nan if s is None else s)
+    return (np.array(te, dtype=float), np.array(ve, dtype=float),
+            np.array(se, dtype=float))
 
 
 def metrics(rec: RunRecord, t: FloatArray, truth: Mapping[str, FloatArray] | None,
@@ -107,7 +117,7 @@ def metrics(rec: RunRecord, t: FloatArray, truth: Mapping[str, FloatArray] | Non
     t0 = float(t[0])
     fc = [l for l in rec.lines if l["type"] == "forecast"]
     for k, nom in nominal.items():
-        te, ve = _series(rec, k)
+        te, ve, se = _series(rec, k)
         m: dict[str, Any] = {"alerts": [a.t for a in rec.alerts
                                         if a.parameter == k and a.kind == "alert"]}
         fk = [f for f in fc if f["parameter"] == k]
@@ -121,6 +131,8 @@ def metrics(rec: RunRecord, t: FloatArray, truth: Mapping[str, FloatArray] | Non
             rel = err / tv
             m["rmse"] = float(np.sqrt(np.mean(err ** 2)))
             m["rmse_pct"] = float(100 * np.sqrt(np.mean(rel ** 2)))
+            if se.size == te.size and np.all(se > 0):
+                m["error_over_stderr_rms"] = float(np.sqrt(np.mean((err / se) ** 2)))
             bad = np.flatnonzero(np.abs(rel) > tol)
             if bad.size == 0:
                 m["convergence_s"] = float(te[0] - t0)
@@ -185,13 +197,15 @@ def compare(model: SuspensionModel, t: FloatArray, data: Mapping[str, FloatArray
             alert_drop: float = 0.3, window: float | None = None, step: float | None = None,
             ekf_params: list[str] | None = None, ekf_q: float | None = None,
             ekf_decimate: int | None = None, forecast_horizon: float | None = None,
-            source: str = "") -> tuple[dict[str, Any], list[RunRecord]]:
+            source: str = "", window_options: Mapping[str, Any] | None = None
+            ) -> tuple[dict[str, Any], list[RunRecord]]:
     """The sliding window and the EKF on one stream, on the same footing.
 
     Both get the same free parameters, starting values (``init``, else ``nominal``, else
     the defaults -- the EKF then starts from the first window's estimate, as the sliding
-    window does), windows, alert rule and forecast horizon. Returns the report (one JSON
-    object) and the two run records.
+    window does), windows, alert rule and forecast horizon. ``window_options`` overrides
+    fields of the sliding window's :class:`~estimator.stream.config.WindowConfig` (e.g.
+    ``road_fusion_hz``). Returns the report (one JSON object) and the two run records.
     """
     if not all(r in data for r in model.roads):
         raise InputError("the stream has no road input; compare needs input-output data")
@@ -202,6 +216,8 @@ def compare(model: SuspensionModel, t: FloatArray, data: Mapping[str, FloatArray
     if forecast_horizon is not None:
         kw["forecast_horizon"] = forecast_horizon
     nm_spec = monitor_spec(model, baseline="nm", **kw)
+    if window_options:
+        nm_spec = replace(nm_spec, config=replace(nm_spec.config, **dict(window_options)))
     ekf_spec = monitor_spec(model, baseline="ekf", **kw)
     rec_nm = run_one(nm_spec, t, data)
     rec_ekf = run_one(ekf_spec, t, data)

@@ -124,6 +124,11 @@ class WindowConfig:
         estimates against the truth at the window centre on the damper-wear stream.
     cost : str
         ``"sse"`` (positions) or ``"frobenius"`` (every measured channel).
+    road_fusion_hz : float
+        Crossover (Hz) of the complementary filter that builds each road displacement fed to
+        the fit from its measured displacement (below) and the integral of its measured
+        velocity (above), when both are in the stream (:func:`estimator.stream.window.fuse_road`);
+        0 uses the measured displacement as it is.
     """
 
     window_s: float
@@ -139,6 +144,7 @@ class WindowConfig:
     min_snr: float = 3.0
     sigma_floor: float = 0.005
     cost: str = "sse"
+    road_fusion_hz: float = 0.0
 
     def validate(self) -> None:
         """Raise :class:`UsageError` naming the first inconsistent setting."""

@@ -2,7 +2,9 @@
 
 The monitor (:mod:`estimator.stream.pipeline`) passes these objects to its sinks; only the
 sinks turn them into JSON lines (:meth:`to_json`) or text. Alerts and clears are
-:class:`estimator.alerts.AlertEvent`, forecasts :class:`estimator.alerts.ForecastEvent`.
+:class:`estimator.alerts.AlertEvent`, forecasts :class:`estimator.alerts.ForecastEvent`; both
+share their identity (``model:parameter:kind@t``, the alert store's deduplication key) and
+message pieces through :class:`estimator.alerts.event.ParameterEvent`.
 """
 from __future__ import annotations
 

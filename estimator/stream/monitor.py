@@ -192,9 +192,12 @@ class StreamMonitor:
     def _tracker(self) -> TrendTracker:
         if self.tracker is None:
             nominal = dict(self.alerts.config.nominal) if self.alerts is not None else {}
+            # a filter's own outputs are serially correlated: their scatter says nothing
+            # about their error, so only window estimates are calibrated
             self.tracker = TrendTracker(lag=float(getattr(self.estimator, "lag", 0.0)),
                                         overlap=float(getattr(self.estimator, "overlap", 1.0)),
-                                        nominal=nominal)
+                                        nominal=nominal,
+                                        calibrate=not getattr(self.estimator, "own_track", False))
         return self.tracker
 
     def window(self, t: FloatArray, data: Mapping[str, FloatArray]) -> StepResult:

@@ -1,24 +1,41 @@
-"""Parameter tracking with a trend: a local-linear-trend Kalman filter over window estimates.
+"""Parameter tracking with a trend: a two-model local-linear-trend filter over window estimates.
 
 Each monitored parameter has a state ``[v, r]`` -- its value (SI) and its rate of change
 (SI/s) -- at the data time of the last estimate. Between estimates ``dt`` apart the state
 moves as ``v += r dt`` and picks up process noise scaled by the nominal value ``N``: a
-level random walk ``(q_level N)^2 dt`` (sudden small changes) and an integrated rate random
-walk ``(q_rate N)^2 [[dt^3/3, dt^2/2], [dt^2/2, dt]]`` (wear that starts, speeds up or stops).
+level random walk ``(q_level N)^2 dt`` and an integrated rate random walk
+``(q N)^2 [[dt^3/3, dt^2/2], [dt^2/2, dt]]``.
+
+Two rate random walks (an interacting-multiple-model filter, IMM): a *steady* model
+(``q = q_rate``, small: the part keeps its value or wears at a constant rate) and a
+*changing* one (``q = q_rate_change``: a wear that starts, speeds up or stops), with
+probability ``p_switch`` of a switch between estimates. Each estimate updates both; their
+likelihoods weight them, and the tracked state and covariance are the mixture. A stable
+part is averaged over many windows (the steady model), a kink in the wear is followed
+within a few windows (the changing model takes over while the innovations say so); a
+single random walk has to trade one for the other.
 
 A window estimate ``y +/- s`` ending at ``t`` describes the parameter over the window, i.e.
 near its middle ``t - lag`` (``lag = window / 2`` for the sliding window; 0 for the EKF,
 whose state refers to its last sample): it is folded in with ``y = v(t) - lag r(t)``, so the
-tracked value refers to the window's *end* and no longer lags a drifting parameter by half
-a window. Windows that share data have correlated errors: the measurement variance is
-``s^2 x overlap`` (``overlap = window / step``). Skipped windows only let the variance grow.
+tracked value refers to the window's *end*. Windows that share data have correlated errors:
+the measurement variance is ``lambda s^2 overlap`` (``overlap = window / step``).
+
+``lambda`` (``calibrate``) scales the window's stated variance to its actual scatter: the
+stated stderr carries the ``sigma_floor`` and is 3 times the actual error on a quantization-
+only stream and half of it at 5 % noise. It is estimated from the second differences of the
+estimates, ``d_i = y_i - 2 y_{i-1} + y_{i-2}`` (free of a linear trend), as the
+exponentially weighted mean of ``d_i^2 / (s_i^2 + 4 s_{i-1}^2 + s_{i-2}^2)`` (memory
+``calib_memory`` estimates, ``calib_prior`` pseudo-observations of 1), clipped to
+``[calib_min, calib_max]``. So the alerts' confidence bound and the forecasts' intervals
+rest on the scatter the estimates actually show. Not for an estimator whose outputs are
+themselves filtered (the EKF): their differences understate the error.
 
 The alerts (:class:`estimator.alerts.AlertEngine`) are decided on the tracked value and its
 standard error, the forecasts (:class:`estimator.alerts.ForecastEngine`) on the trend
 (:meth:`TrendTracker.trends`).
 
-Defaults (``q_level = 0.002 /sqrt(s)``, ``q_rate = 1e-3 /s/sqrt(s)``, prior rate
-uncertainty ``0.01 N/s``) measured on the damper-wear streams of
+Defaults measured with the damper- and spring-wear streams of
 ``tools/bench_maintenance.py`` (docs/monitoring.md).
 """
 from __future__ import annotations
@@ -34,53 +51,133 @@ from estimator.alerts.forecast import Trend
 
 @dataclass
 class _Track:
-    x: np.ndarray       # [value, rate] (SI, SI/s)
-    P: np.ndarray       # 2x2 covariance
+    x: np.ndarray       # [value, rate] (SI, SI/s): the mixture
+    P: np.ndarray       # 2x2 covariance of the mixture
     t: float
     nominal: float
+    xs: list[np.ndarray] = field(default_factory=list)   # per model
+    Ps: list[np.ndarray] = field(default_factory=list)
+    mu: np.ndarray = field(default_factory=lambda: np.ones(1))
+    recent: list[tuple[float, float]] = field(default_factory=list)  # (value, stderr), last 3
+    calib: tuple[float, float] = (0.0, 0.0)   # weighted sum of d^2/var, weighted count
 
 
 @dataclass
 class TrendTracker:
-    """Per-parameter local-linear-trend Kalman filter (see the module docstring).
+    """Per-parameter two-model local-linear-trend filter (see the module docstring).
 
     Parameters
     ----------
     q_level : float
         Level random walk, relative to nominal per sqrt(s).
     q_rate : float
-        Rate random walk, relative to nominal per s per sqrt(s).
+        Rate random walk of the steady model, relative to nominal per s per sqrt(s).
+    q_rate_change : float
+        Rate random walk of the changing model (same unit); ``<= q_rate`` gives a single
+        filter with ``q_rate``.
+    p_switch : float
+        Probability of a switch between the two models from one estimate to the next.
     rate0 : float
         Prior standard deviation of the rate, relative to nominal per s.
     lag : float
         Data time (s) between a window's end and the time its estimate describes.
     overlap : float
         Measurement-variance inflation for overlapping windows (``window / step``).
+    calibrate : bool
+        Scale each parameter's stated variances by the scatter of its estimates.
+    calib_prior, calib_memory, calib_min, calib_max : float
+        Pseudo-observations of ``lambda = 1``, memory (estimates) of the weighted mean,
+        and the clip range of ``lambda``.
     nominal : dict, optional
         ``parameter -> nominal`` (SI) scaling the noise; a parameter without one is scaled by
         its first estimate.
     """
 
-    q_level: float = 0.002
-    q_rate: float = 1e-3
+    q_level: float = 5e-4
+    q_rate: float = 5e-5
+    q_rate_change: float = 1e-3
+    p_switch: float = 0.01
     rate0: float = 0.01
     lag: float = 0.0
     overlap: float = 1.0
+    calibrate: bool = True
+    calib_prior: float = 2.0
+    calib_memory: float = 50.0
+    calib_min: float = 0.05
+    calib_max: float = 20.0
     nominal: dict[str, float] = field(default_factory=dict)
     tracks: dict[str, _Track] = field(default_factory=dict)
+
+    @property
+    def _qs(self) -> tuple[float, ...]:
+        if self.q_rate_change > self.q_rate:
+            return (self.q_rate, self.q_rate_change)
+        return (self.q_rate,)
+
+    def _Q(self, dt: float, nominal: float, q: float) -> np.ndarray:  # noqa: N802
+        n2 = nominal * nominal
+        Q = q * q * n2 * np.array([[dt ** 3 / 3.0, dt * dt / 2.0], [dt * dt / 2.0, dt]])
+        Q[0, 0] += self.q_level ** 2 * n2 * dt
+        return Q
+
+    def _mix(self, tr: _Track) -> tuple[list[np.ndarray], list[np.ndarray], np.ndarray]:
+        """IMM interaction: the models' starting states before a prediction, and the
+        predicted model probabilities."""
+        m = len(tr.xs)
+        if m == 1:
+            return [tr.xs[0]], [tr.Ps[0]], tr.mu
+        p = self.p_switch
+        Pi = np.full((m, m), p / (m - 1))
+        np.fill_diagonal(Pi, 1.0 - p)
+        c = Pi.T @ tr.mu
+        W = (Pi * tr.mu[:, None]) / c[None, :]      # W[i, j]: P(model i before | j after)
+        x0, P0 = [], []
+        for j in range(m):
+            xj = sum(W[i, j] * tr.xs[i] for i in range(m))
+            Pj = sum(W[i, j] * (tr.Ps[i] + np.outer(tr.xs[i] - xj, tr.xs[i] - xj))
+                     for i in range(m))
+            x0.append(np.asarray(xj))
+            P0.append(np.asarray(Pj))
+        return x0, P0, c
+
+    def _combine(self, tr: _Track) -> None:
+        x = sum(w * xi for w, xi in zip(tr.mu, tr.xs))
+        P = sum(w * (Pi + np.outer(xi - x, xi - x)) for w, xi, Pi in zip(tr.mu, tr.xs, tr.Ps))
+        tr.x = np.asarray(x, dtype=float)
+        tr.P = np.asarray(P, dtype=float)
 
     def _predict(self, tr: _Track, t: float) -> None:
         dt = max(t - tr.t, 0.0)
         if dt == 0.0:
             return
         F = np.array([[1.0, dt], [0.0, 1.0]])
-        n2 = tr.nominal * tr.nominal
-        qr = self.q_rate ** 2 * n2
-        Q = qr * np.array([[dt ** 3 / 3.0, dt * dt / 2.0], [dt * dt / 2.0, dt]])
-        Q[0, 0] += self.q_level ** 2 * n2 * dt
-        tr.x = F @ tr.x
-        tr.P = F @ tr.P @ F.T + Q
+        x0, P0, c = self._mix(tr)
+        tr.xs = [F @ x for x in x0]
+        tr.Ps = [F @ P @ F.T + self._Q(dt, tr.nominal, q) for P, q in zip(P0, self._qs)]
+        tr.mu = c
         tr.t = t
+        self._combine(tr)
+
+    def scale(self, name: str) -> float:
+        """The calibrated variance scale ``lambda`` of a parameter (1 without calibration)."""
+        tr = self.tracks.get(name)
+        if tr is None or not self.calibrate:
+            return 1.0
+        num, den = tr.calib
+        lam = (self.calib_prior + num) / (self.calib_prior + den)
+        return min(self.calib_max, max(self.calib_min, lam))
+
+    def _calibrate(self, tr: _Track, v: float, se: float) -> None:
+        tr.recent.append((v, se))
+        del tr.recent[:-3]
+        if not self.calibrate or len(tr.recent) < 3:
+            return
+        (y0, s0), (y1, s1), (y2, s2) = tr.recent
+        d = y2 - 2.0 * y1 + y0
+        z = d * d / (s0 * s0 + 4.0 * s1 * s1 + s2 * s2)
+        f = 1.0 - 1.0 / self.calib_memory
+        num, den = tr.calib
+        tr.calib = (f * num + z, f * den + 1.0)
 
     def update(self, t: float, values: Mapping[str, float], stderr: Mapping[str, float]
                ) -> dict[str, dict[str, float]]:
@@ -95,22 +192,37 @@ class TrendTracker:
             v = values.get(k)
             if v is None or not (math.isfinite(v) and math.isfinite(se) and se > 0):
                 continue
-            r = se * se * self.overlap
             tr = self.tracks.get(k)
             if tr is None:
                 nom = self.nominal.get(k) or abs(v) or 1.0
-                tr = self.tracks[k] = _Track(np.array([float(v), 0.0]),
-                                             np.diag([r, (self.rate0 * nom) ** 2]), t, nom)
+                P = np.diag([se * se * self.overlap, (self.rate0 * nom) ** 2])
                 # the first estimate describes t - lag: move the level to t with the prior rate
-                tr.P[0, 0] += (self.lag * self.rate0 * nom) ** 2
+                P[0, 0] += (self.lag * self.rate0 * nom) ** 2
+                x = np.array([float(v), 0.0])
+                m = len(self._qs)
+                mu = np.ones(1) if m == 1 else np.array([1.0 - self.p_switch, self.p_switch])
+                tr = self.tracks[k] = _Track(x.copy(), P.copy(), t, nom,
+                                             [x.copy() for _ in range(m)],
+                                             [P.copy() for _ in range(m)], mu)
+                self._calibrate(tr, float(v), float(se))
                 continue
+            self._calibrate(tr, float(v), float(se))
+            r = se * se * self.overlap * self.scale(k)
             self._predict(tr, t)
             H = np.array([1.0, -self.lag])
-            S = float(H @ tr.P @ H) + r
-            K = (tr.P @ H) / S
-            tr.x = tr.x + K * (float(v) - float(H @ tr.x))
-            tr.P = tr.P - np.outer(K, H @ tr.P)
-            tr.P = 0.5 * (tr.P + tr.P.T)
+            like = np.empty(len(tr.xs))
+            for j, (x, P) in enumerate(zip(tr.xs, tr.Ps)):
+                S = float(H @ P @ H) + r
+                K = (P @ H) / S
+                nu = float(v) - float(H @ x)
+                tr.xs[j] = x + K * nu
+                Pn = P - np.outer(K, H @ P)
+                tr.Ps[j] = 0.5 * (Pn + Pn.T)
+                like[j] = math.exp(-0.5 * nu * nu / S) / math.sqrt(S)
+            mu = tr.mu * like
+            total = float(mu.sum())
+            tr.mu = mu / total if total > 0 and math.isfinite(total) else tr.mu
+            self._combine(tr)
         return self.state(t)
 
     def state(self, t: float | None = None) -> dict[str, dict[str, float]]:
@@ -136,7 +248,10 @@ class TrendTracker:
                            float(tr.P[0, 1]), float(tr.P[1, 1]), self.q_level ** 2 * n2, 0.0)
         return out
 
+
 def ParameterTracker(q: float = 0.01, overlap: float = 1.0) -> TrendTracker:  # noqa: N802
     """A random-walk tracker without trend (the former interface): ``TrendTracker`` with level
-    noise ``q`` (relative per sqrt(s)), no rate noise and a rate prior of zero width."""
-    return TrendTracker(q_level=q, q_rate=0.0, rate0=1e-12, overlap=overlap)
+    noise ``q`` (relative per sqrt(s)), no rate noise, a rate prior of zero width, one model
+    and the stated variances as they are."""
+    return TrendTracker(q_level=q, q_rate=0.0, q_rate_change=0.0, rate0=1e-12,
+                        overlap=overlap, calibrate=False)

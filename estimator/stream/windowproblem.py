@@ -8,8 +8,8 @@ evaluations on ~750 samples, so the fixed cost of an evaluation (dozens of numpy
 2x2..4x4 arrays, 1-4 us each) matters as much as its O(N) part. For a parameter vector
 ``p`` the lean path computes:
 
-1. ``A, B`` -- when the model's matrices are affine in the free parameters with the mass
-   matrix fixed (checked numerically once per monitor, :class:`StateSpaceMap`), as
+1. ``A, B`` -- when the model's affine pieces are exact (the mass matrix fixed:
+   :meth:`SuspensionModel.affine`, laid out once per monitor by :class:`StateSpaceMap`), as
    ``A0 + sum_k theta_k A_k``; otherwise by :meth:`SuspensionModel.state_space`;
 2. the modal form ``A = V diag(lam) V^-1`` from one LAPACK ``dgeev`` (eigenvalues, right
    and left eigenvectors; the rows of ``V^-1`` are the left eigenvectors scaled by
@@ -125,13 +125,13 @@ class StateSpaceMap:
     """``p -> (A, B, Bz)`` of a model, affine in the free parameters when that is exact.
 
     ``Bz = A B_v + B_r`` is the input matrix of the road in the simulator's
-    ``z = x - B_v r`` coordinates (:mod:`suspid.simulate`). ``A`` and ``B`` are affine in
-    the free parameters when the mass matrix does not depend on them and the damping,
-    stiffness and input matrices are affine in them (quarter and half cars with the masses
-    fixed); ``Bz`` is affine too when ``B_v`` (tyre damping over wheel mass) is fixed.
-    Affinity is checked once per block, numerically, at two random points (agreement with
-    :meth:`SuspensionModel.state_space` to 1e-12 relative); a block that is not affine,
-    or any block when a fixed parameter differs from ``base``, is computed from the model.
+    ``z = x - B_v r`` coordinates (:mod:`suspid.simulate`). ``A`` and ``B`` come from the
+    model's own affine pieces (:meth:`SuspensionModel.affine`, ``AB0 + sum_k theta_k dAB_k``
+    laid out as the state-space blocks) when those are exact (the mass matrix fixed:
+    ``AffinePieces.exact``); ``Bz`` is affine too when ``B_v`` (tyre damping over wheel
+    mass) does not depend on the free parameters (``dAB`` zero in the road-rate columns).
+    When the pieces are not exact, or a fixed parameter differs from ``base``, every block
+    is computed from the model.
 
     Parameters
     ----------
@@ -153,51 +153,40 @@ class StateSpaceMap:
         n = model.n_states
         nr = len(model.roads)
         self._n, self._nr = n, nr
-        self._sizes = (n * n, 2 * n * nr, n * nr)  # A, B, Bz (column-major)
         self.affine_ab = False
         self.affine_bz = False
         if not self.free:
             return
-        vals0 = [float(base[k]) for k in self.names]
-        th0 = np.array([vals0[i] for i in self._ifree])
-
-        def flat(vals: list[float]) -> FloatArray:
-            A, B, Bz = self._from_model(vals)
-            return np.concatenate([A.ravel(order="F"), B.ravel(order="F"), Bz.ravel(order="F")])
-
-        ok = np.zeros(3, dtype=bool)
         try:
-            f0 = flat(vals0)
-            D = []
-            for i in self._ifree:
-                q = list(vals0)
-                q[i] = 2.0 * vals0[i]
-                D.append((flat(q) - f0) / vals0[i])
-            Dm = np.array(D)  # (n_free, n*n + 2 n nr + n nr)
-            c0 = f0 - th0 @ Dm
-            rng = np.random.default_rng(7)
-            edges = np.cumsum((0,) + self._sizes)
-            ok[:] = True
-            for _ in range(2):
-                th = th0 * np.exp(rng.normal(0.0, 0.5, th0.size))
-                q = list(vals0)
-                for i, v in zip(self._ifree, th.tolist()):
-                    q[i] = v
-                ref = flat(q)
-                got = c0 + th @ Dm
-                for blk in range(3):
-                    r = ref[edges[blk]:edges[blk + 1]]
-                    g = got[edges[blk]:edges[blk + 1]]
-                    if not np.all(np.abs(g - r) <= 1e-12 * (np.abs(r).max() + 1e-300)):
-                        ok[blk] = False
+            pieces = model.affine({k: float(base[k]) for k in self.names}, self.free)
         except (np.linalg.LinAlgError, ValueError, ZeroDivisionError, FloatingPointError):
-            ok[:] = False
-        self.affine_ab = bool(ok[0] and ok[1])
-        self.affine_bz = bool(self.affine_ab and ok[2])
-        if self.affine_ab:
-            k = self._sizes[0] + self._sizes[1] + (self._sizes[2] if self.affine_bz else 0)
-            self._c0 = c0[:k].copy()
-            self._D = np.ascontiguousarray(Dm[:, :k])
+            return
+        if not pieces.exact:
+            return
+        nq = n // 2
+        # the pieces' acceleration rows laid out as [A | B | Bz], each block column-major
+        # (the order LAPACK wants A in): theta -> c0 + theta @ D
+        A0, B0 = pieces.state_space(np.zeros(len(self.free)))
+        dA = np.zeros((len(self.free), n, n))
+        dB = np.zeros((len(self.free), n, 2 * nr))
+        dA[:, nq:, :] = pieces.dAB[:, :, :n]
+        dB[:, nq:, :] = pieces.dAB[:, :, n:]
+        Bv0 = B0[:, nr:]
+        scale = float(np.abs(Bv0).max()) + 1e-300
+        th0 = np.abs(pieces.theta(pieces.base))
+        self.affine_ab = True
+        self.affine_bz = bool(np.all(np.abs(dB[:, :, nr:]) * th0[:, None, None]
+                                     <= 1e-12 * scale))
+        blocks0 = [A0.ravel(order="F"), B0.ravel(order="F")]
+        blocksD = [np.stack([a.ravel(order="F") for a in dA]),
+                   np.stack([b.ravel(order="F") for b in dB])]
+        if self.affine_bz:
+            # Bz = A B_v + B_r with B_v fixed: affine in theta
+            blocks0.append((A0 @ Bv0 + B0[:, :nr]).ravel(order="F"))
+            blocksD.append(np.stack([(a @ Bv0 + b[:, :nr]).ravel(order="F")
+                                     for a, b in zip(dA, dB)]))
+        self._c0 = np.concatenate(blocks0)
+        self._D = np.ascontiguousarray(np.concatenate(blocksD, axis=1))
 
     def _from_model(self, vals: list[float]) -> tuple[FloatArray, FloatArray, FloatArray]:
         A, B = self.model.state_space(dict(zip(self.names, vals)))

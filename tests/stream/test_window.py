@@ -13,7 +13,7 @@ from estimator.stream.drivers import run_arrays
 from estimator.stream.monitor import NMWindowEstimator
 from estimator.stream.wear_streams import damper_wear
 from estimator.stream.tracker import ParameterTracker
-from estimator.stream.window import SlidingWindowIdentifier, noise_floor
+from estimator.stream.window import SlidingWindowIdentifier, fuse_road, noise_floor
 
 
 def test_defaults_follow_the_modes(quarter2) -> None:
@@ -137,3 +137,27 @@ def test_sudden_damper_failure_is_followed(quarter2) -> None:
     after = [r.line for r in res if r.line["t_start"] >= 10.0]
     assert after and all(l["params"]["c1"] == pytest.approx(900.0, rel=0.01) for l in after)
     assert all(l["nfev"] <= l["budget"] for l in after)
+
+
+def test_fused_road_keeps_a_consistent_road_and_averages_displacement_noise() -> None:
+    """A road whose velocity is its displacement's derivative comes back unchanged (to the
+    trapezoid's error); white noise on the displacement is cut to a fraction above the
+    crossover; a window with a missing sample is left alone."""
+    fs = 500.0
+    t = np.arange(0.0, 3.0, 1.0 / fs)
+    f = np.array([0.3, 1.1, 2.7, 6.0, 11.0])
+    a = np.array([8e-3, 3e-3, 1e-3, 4e-4, 2e-4])
+    ph = np.array([0.1, 1.0, 2.0, 0.5, 1.5])
+    w = 2 * np.pi * f
+    r = (a[:, None] * np.sin(w[:, None] * t + ph[:, None])).sum(axis=0)
+    rd = (a[:, None] * w[:, None] * np.cos(w[:, None] * t + ph[:, None])).sum(axis=0)
+    fused = fuse_road(t, r, rd, 2.0)
+    assert np.max(np.abs(fused - r)) < 2e-3 * np.max(np.abs(r))
+    rng = np.random.default_rng(1)
+    noise = 5e-4
+    noisy = fuse_road(t, r + rng.normal(0.0, noise, t.size), rd, 2.0)
+    inner = slice(100, -100)
+    assert np.std((noisy - r)[inner]) < 0.25 * noise
+    gap = r.copy()
+    gap[10] = np.nan
+    assert np.array_equal(fuse_road(t, gap, rd, 2.0), gap, equal_nan=True)
