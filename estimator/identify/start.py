@@ -37,6 +37,7 @@ from scipy.linalg import expm
 
 from estimator.identify.params import Parameters
 from estimator.identify.problem import OutputErrorProblem
+from estimator.identify.profile import apply_bands
 from estimator.identify.result import IdentResult
 from estimator.identify.simplex import nelder_mead
 from suspid.errors import UsageError
@@ -572,7 +573,7 @@ def _plausibility(res: IdentResult, free: list[str], start: Mapping[str, float],
 
 def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
                     run: Callable[[Parameters], IdentResult], *, data_start: bool = True,
-                    keep_init: bool = True) -> IdentResult:
+                    keep_init: bool = True, intervals: bool = True) -> IdentResult:
     """Run the fit ``run`` from the data-driven start and from ``params``; keep the best.
 
     Parameters
@@ -592,6 +593,11 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         (normalised cost above ``POOR_ESTIMATE``), or when ``params`` begins at a lower
         cost than the data-driven start; otherwise it is listed as skipped, so the time per
         identification does not grow.
+    intervals : bool
+        Attach honest 3-sigma bands (:func:`estimator.identify.profile.apply_bands`) to a
+        result with standard errors: the curvature band where the cost is quadratic out to
+        its ends, the profile likelihood where it is not; a parameter the profile does not
+        bound makes the result not identifiable.
 
     Returns
     -------
@@ -670,6 +676,8 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         alts = ", ".join(f"{label} start: cost {r.cost:.4g}" for label, _, r in ran)
         res.warnings += [f"implausible result: {b}" for b in bad]
         res.warnings.append(f"costs reached from each start: {alts}")
+    elif intervals:
+        apply_bands(problem, res, free)
     return res
 
 
