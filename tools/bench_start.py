@@ -51,13 +51,23 @@ def doe_row(model: str, cost: str, scale: float, noise: float, data: bool,
                                      data_start=data), ids=ids)
     dt = time.perf_counter() - t0
     worst = max((e["max_rel_error"] or float("inf")) for e in out["experiments"])
+    # rows reported a success (by the identifier, or by the study's rule) with a parameter
+    # more than 10x from the truth
     false_ok = [e["id"] for e in out["experiments"]
-                if e.get("reported_success")
+                if (e.get("reported_success") or e["success"])
                 and any(not 0.1 <= 1.0 + v <= 10.0 for v in e["rel_error"].values())]
     unflagged = [e["id"] for e in out["experiments"] if not e["success"] and e["identifiable"]
                  and not any("implausible" in w for w in e.get("warnings", []))]
+    flagged = [e["id"] for e in out["experiments"] if not e["success"] and e["id"] not in unflagged]
+    # the rule before the honest bands: inside value +- 3 (curvature) standard errors
+    curvature_ok = sum(all(e["stderr"].get(k) is not None
+                           and abs(e["identified"][k] - e["true"][k]) <= 3 * e["stderr"][k]
+                           for k in e["rel_error"]) for e in out["experiments"])
+    profiled = [e["id"] for e in out["experiments"]
+                if "profile" in e.get("band_method", {}).values()]
     return {"model": model, "cost": cost, "init_scale": scale, "noise": noise,
-            "failed_unflagged": unflagged,
+            "failed_unflagged": unflagged, "failed_flagged": flagged, "profiled": profiled,
+            "curvature_band_successes": curvature_ok,
             "path": "data" if data else "init", "successes": out["successes"],
             "total": out["total"], "s_per_row": dt / out["total"], "worst_rel": worst,
             "failed": [e["id"] for e in out["experiments"] if not e["success"]],
@@ -114,7 +124,9 @@ def main(argv: list[str] | None = None) -> int:
                     w(f"{m:9} {c:9} scale {s:<5g} noise {n:<4g} {r['path']:5} "
                       f"{r['successes']:>2}/{r['total']:<2} {r['s_per_row']:6.2f} s/row "
                       f"failed {r['failed']} (not flagged: {r['failed_unflagged']}) "
-                      f"success-true>10x {r['success_true_beyond_10x']}\n")
+                      f"success-true>10x {r['success_true_beyond_10x']}"
+                      + (f" | curvature band alone {r['curvature_band_successes']}/{r['total']}, "
+                         f"profile bands in {len(r['profiled'])} rows" if n > 0 else "") + "\n")
                     sys.stdout.flush()
     else:
         scales = _floats(a.scales or "0.1,10")
