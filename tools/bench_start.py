@@ -16,6 +16,7 @@ Usage::
     python tools/bench_start.py [--models half4,quarter2] [--scales 0.1,10] [--ids 1,2,3]
     python tools/bench_start.py --grid [--models ...] [--costs sse,frobenius]
         [--scales 0.1,0.2,0.5,2,5,10] [--noise 0.1,0.2,0.3,0.4,0.5] [--compare] [--json]
+    python tools/bench_start.py --data-only [--models ...] [--scales ...] [--noise ...]
 """
 from __future__ import annotations
 
@@ -51,13 +52,23 @@ def doe_row(model: str, cost: str, scale: float, noise: float, data: bool,
                                      data_start=data), ids=ids)
     dt = time.perf_counter() - t0
     worst = max((e["max_rel_error"] or float("inf")) for e in out["experiments"])
+    # rows reported a success (by the identifier, or by the study's rule) with a parameter
+    # more than 10x from the truth
     false_ok = [e["id"] for e in out["experiments"]
-                if e.get("reported_success")
+                if (e.get("reported_success") or e["success"])
                 and any(not 0.1 <= 1.0 + v <= 10.0 for v in e["rel_error"].values())]
     unflagged = [e["id"] for e in out["experiments"] if not e["success"] and e["identifiable"]
                  and not any("implausible" in w for w in e.get("warnings", []))]
+    flagged = [e["id"] for e in out["experiments"] if not e["success"] and e["id"] not in unflagged]
+    # the rule before the honest bands: inside value +- 3 (curvature) standard errors
+    curvature_ok = sum(all(e["stderr"].get(k) is not None
+                           and abs(e["identified"][k] - e["true"][k]) <= 3 * e["stderr"][k]
+                           for k in e["rel_error"]) for e in out["experiments"])
+    profiled = [e["id"] for e in out["experiments"]
+                if "profile" in e.get("band_method", {}).values()]
     return {"model": model, "cost": cost, "init_scale": scale, "noise": noise,
-            "failed_unflagged": unflagged,
+            "failed_unflagged": unflagged, "failed_flagged": flagged, "profiled": profiled,
+            "curvature_band_successes": curvature_ok,
             "path": "data" if data else "init", "successes": out["successes"],
             "total": out["total"], "s_per_row": dt / out["total"], "worst_rel": worst,
             "failed": [e["id"] for e in out["experiments"] if not e["success"]],
@@ -95,6 +106,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--noise", default="", help="noise levels (grid; at init scale 0.5)")
     ap.add_argument("--ids", default=None, help="design rows (timing; default all)")
     ap.add_argument("--compare", action="store_true", help="grid: also the init-only path")
+    ap.add_argument("--data-only", action="store_true",
+                    help="timing: the data-driven path only (to compare two versions of the "
+                         "code: run once per version, e.g. with PYTHONPATH at an unpacked "
+                         "`git archive` of the other)")
     ap.add_argument("--json", action="store_true")
     a = ap.parse_args(argv)
     models = [s for s in a.models.split(",") if s]
@@ -114,8 +129,29 @@ def main(argv: list[str] | None = None) -> int:
                     w(f"{m:9} {c:9} scale {s:<5g} noise {n:<4g} {r['path']:5} "
                       f"{r['successes']:>2}/{r['total']:<2} {r['s_per_row']:6.2f} s/row "
                       f"failed {r['failed']} (not flagged: {r['failed_unflagged']}) "
-                      f"success-true>10x {r['success_true_beyond_10x']}\n")
+                      f"success-true>10x {r['success_true_beyond_10x']}"
+                      + (f" | curvature band alone {r['curvature_band_successes']}/{r['total']}, "
+                         f"profile bands in {len(r['profiled'])} rows" if n > 0 else "") + "\n")
                     sys.stdout.flush()
+    elif a.data_only:
+        scales = _floats(a.scales or "0.1,10")
+        noises = _floats(a.noise) or [0.0]
+        for m in models:
+            for c in costs:
+                for s in scales:
+                    for n in noises:
+                        r = doe_row(m, c, s, n, True, ids)
+                        rows.append(r)
+                        if not a.json:
+                            w(f"{f'doe {m} {c} x{s:g} noise {n:g}':40} {r['s_per_row']:8.3f} s/id "
+                              f"{r['successes']:>3}/{r['total']:<3}\n")
+                            sys.stdout.flush()
+        for s in (1.0, 5.0, 0.2):
+            r = identify_bump(s, True)
+            rows.append(r)
+            if not a.json:
+                w(f"{r['case']:40} {r['seconds']:8.3f} s/id {str(r['success']):>7} "
+                  f"max rel error {r['max_rel_error']:.1e}\n")
     else:
         scales = _floats(a.scales or "0.1,10")
         if not a.json:

@@ -42,6 +42,13 @@ class IdentResult:
     data_start : dict, optional
         The data-driven estimate (``values``, ``bandwidth_hz``) or why there is none
         (``reason``).
+    bands : dict, optional
+        ``name -> (lo, hi)``: the 3-sigma band of each free parameter (SI), from the
+        curvature where the cost is quadratic out to its ends, from the profile likelihood
+        where it is not (:mod:`estimator.identify.profile`); ``inf`` for a side the record
+        does not bound.
+    band_method : dict, optional
+        ``name -> "curvature"`` or ``"profile"``.
     """
 
     model: str
@@ -64,6 +71,8 @@ class IdentResult:
     frames: dict[str, Any] | None = None
     starts: list[dict[str, Any]] | None = None
     data_start: dict[str, Any] | None = None
+    bands: dict[str, tuple[float, float]] | None = None
+    band_method: dict[str, str] | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The contract's JSON object."""
@@ -93,4 +102,7 @@ class IdentResult:
             out["starts"] = self.starts
         if self.data_start is not None:
             out["data_start"] = self.data_start
+        if self.bands is not None:
+            out["band_3sigma"] = {k: [f(lo), f(hi)] for k, (lo, hi) in self.bands.items()}
+            out["band_method"] = dict(self.band_method or {})
         return out

@@ -37,6 +37,7 @@ from scipy.linalg import expm
 
 from estimator.identify.params import Parameters
 from estimator.identify.problem import OutputErrorProblem
+from estimator.identify.profile import apply_bands
 from estimator.identify.result import IdentResult
 from estimator.identify.simplex import nelder_mead
 from suspid.errors import UsageError
@@ -541,6 +542,13 @@ def data_driven_start(model: SuspensionModel, data: Measurement, fixed: Mapping[
 #: always run as well (the estimate explains less than half of the record)
 POOR_ESTIMATE = 0.5
 
+#: normalised output-error cost below which a fit explains the record exactly (noise-free):
+#: no other start can do better, so a further start is skipped. Any noisy record stays
+#: above it, and there the estimate is biased (its regressors are the noisy channels
+#: themselves: errors in variables) and may lead to a local minimum, so the given start runs
+#: as well and the lower cost wins.
+EXACT_FIT = 1e-10
+
 #: a free parameter this far (factor) from its start and from the data-driven estimate ran away
 RUNAWAY = 100.0
 
@@ -572,7 +580,7 @@ def _plausibility(res: IdentResult, free: list[str], start: Mapping[str, float],
 
 def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
                     run: Callable[[Parameters], IdentResult], *, data_start: bool = True,
-                    keep_init: bool = True) -> IdentResult:
+                    keep_init: bool = True, intervals: bool = True) -> IdentResult:
     """Run the fit ``run`` from the data-driven start and from ``params``; keep the best.
 
     Parameters
@@ -589,9 +597,16 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         Also consider ``params`` as a start (always done when no data-driven start exists).
         It is run when the fit from the data-driven start is not a clean success (not
         converged, not identifiable, or implausible), when the estimate itself fits poorly
-        (normalised cost above ``POOR_ESTIMATE``), or when ``params`` begins at a lower
-        cost than the data-driven start; otherwise it is listed as skipped, so the time per
-        identification does not grow.
+        (normalised cost above ``POOR_ESTIMATE``), when that fit does not explain the record
+        exactly (normalised cost above ``EXACT_FIT``: a noisy record, whose estimate is
+        biased), or when ``params`` begins at a lower cost than the data-driven start;
+        otherwise (noise-free) it is listed as skipped, so the time per identification does
+        not grow.
+    intervals : bool
+        Attach honest 3-sigma bands (:func:`estimator.identify.profile.apply_bands`) to a
+        result with standard errors: the curvature band where the cost is quadratic out to
+        its ends, the profile likelihood where it is not; a parameter the profile does not
+        bound makes the result not identifiable.
 
     Returns
     -------
@@ -627,6 +642,7 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         # lower than the start they came from (it may then be in a better basin)
         if done and all(r.success for r in done) and at_start[i] >= min(at_start[:i]) \
                 and est is not None and est.cost < POOR_ESTIMATE \
+                and all(problem.normalized_ss(r.params) < EXACT_FIT for r in done) \
                 and not _plausibility(done[0], free, usable(runs[0][0], runs[0][1]), data_vals):
             results.append((label, start, None))
             continue
@@ -646,8 +662,8 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
                                  "cost_at_start": _finite(problem.seed_cost(c0 * problem.scale))}
         if r is None:
             entry.update({"cost": None, "skipped": "the fit from the data-driven start is "
-                                                   "clean, the estimate fits the record and "
-                                                   "this start begins at a higher cost"})
+                                                   "clean and explains the record exactly, "
+                                                   "and this start begins at a higher cost"})
         else:
             entry.update({"cost": _finite(r.cost), "params": {k: float(r.params[k]) for k in free},
                           "success": bool(r.success), "chosen": r is res})
@@ -670,6 +686,8 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         alts = ", ".join(f"{label} start: cost {r.cost:.4g}" for label, _, r in ran)
         res.warnings += [f"implausible result: {b}" for b in bad]
         res.warnings.append(f"costs reached from each start: {alts}")
+    elif intervals:
+        apply_bands(problem, res, free)
     return res
 
 

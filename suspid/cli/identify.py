@@ -77,6 +77,9 @@ def run(args: argparse.Namespace) -> int:
         for k, v in result.params.items():
             se = result.stderr.get(k)
             tag = "fixed" if k in result.fixed else (f"± {se:.4g}" if se is not None else "")
+            if (result.band_method or {}).get(k) == "profile" and result.bands is not None:
+                lo, hi = result.bands[k]
+                tag += f" (3-sigma band {lo:.4g} .. {hi:.4g}, profile likelihood)"
             w(f"  {k:>6} = {v:.6g} {model.spec(k).unit} {tag}\n")
         for c, v in result.rms_residual.items():
             w(f"  rms residual {c}: {v:.3g}\n")
