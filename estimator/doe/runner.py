@@ -17,8 +17,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from estimator.doe.design import DESIGN_SPECS, DESIGNS, FS, HORIZON, Experiment, experiments, time_grid
-from estimator.doe.full7_design import FULL7_DESIGN
+from estimator.doe.design import DESIGNS, FS, HORIZON, Experiment, experiments, time_grid
 from estimator.identify import OutputErrorProblem, Parameters, fit
 from estimator.identify.result import IdentResult
 from estimator.identify.start import fit_from_starts
@@ -26,11 +25,6 @@ from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
 from suspid.models import SuspensionModel, get_model
 from suspid.simulate import simulate
-
-# the full car's design (not one of the seed's) joins the registry here; it belongs next to
-# the seed's designs once those live with their models
-DESIGN_SPECS.setdefault("full7", FULL7_DESIGN)
-DESIGNS.setdefault("full7", FULL7_DESIGN.name)
 
 #: noise-free success tolerance (relative), the contract's 1 %
 TOL = 0.01
