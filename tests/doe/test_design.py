@@ -67,19 +67,20 @@ def test_every_design_row_is_stable_and_underdamped_or_overdamped_not_defective(
 
 def test_the_designs_are_the_models_own() -> None:
     """Each model declares its design; the registry of designs is read from the models."""
-    assert dict(DESIGNS) == {"quarter1": "L16-4", "quarter2": "L27-3", "half4": "L27-3"}
+    assert {k: DESIGNS[k] for k in ("quarter1", "quarter2", "half4", "full7")} == {
+        "quarter1": "L16-4", "quarter2": "L27-3", "half4": "L27-3", "full7": "L27-3"}
     for name in MODELS:
         m = get_model(name)
         assert (name in DESIGNS) == (m.doe_design is not None)
-    with pytest.raises(UsageError, match="no design for model 'full7'; expected one of "
-                                         "quarter1, quarter2, half4"):
-        experiments("full7")
+    with pytest.raises(UsageError, match="no design for model 'spring1'; expected one of "
+                                         "quarter1, quarter2, half4, full7"):
+        experiments(_Spring(None))
 
 
 class _Spring(SuspensionModel):
     """A one-mass model from outside the project, with a design of its own array."""
 
-    def __init__(self, design: DoeDesign) -> None:
+    def __init__(self, design: DoeDesign | None) -> None:
         super().__init__(name="spring1", coords=("z",), roads=("y",),
                          params=(ParamSpec("m", "kg", 10.0, "mass", "mass"),
                                  ParamSpec("c", "N s/m", 5.0, "damping", "damper"),
@@ -87,7 +88,7 @@ class _Spring(SuspensionModel):
         self._design = design
 
     @property  # type: ignore[override]
-    def doe_design(self) -> DoeDesign:  # an instance's design (a class attribute also does)
+    def doe_design(self) -> DoeDesign | None:  # an instance's design (a class attribute also does)
         return self._design
 
     def matrices(self, p: Mapping[str, float]) -> Matrices:
