@@ -39,6 +39,10 @@ once an ``SN_Sync`` frame is among the first frames (up to ``AUTO_FRAMES`` frame
 DBC's messages are held until one comes; foreign frames do not count), the timestamps otherwise (a foreign stream, or a DBC without
 ``SN_Sync``). :attr:`DecodeListener.time_source` then names the base taken, and
 :meth:`DecodeListener.frame_stats` reports it as ``time_base``.
+With the timestamps and ``arrival_slots=True``, a whole log fed through
+:func:`~estimator.decode.replay.feed_log` has its data frames placed in their sample slots
+from their arrival times first (:mod:`estimator.decode.rules.arrival`); the frame
+statistics then list per message what was placed (``arrival_slots``).
 
 Feed it like any python-can listener: ``can.Notifier(bus, [listener])`` on a live bus, or
 :func:`estimator.decode.replay.feed_log` for a log (no reader thread and queue hand-off, so
@@ -240,13 +244,16 @@ class DecodeListener(can.Listener):
         reads the results), as python-can's ``BufferedReader`` keeps messages: do not modify
         a message after handing it over. With ``batch_size=0`` the frame is validated now.
         """
-        pend = self._pending
-        pend.append(msg)
-        if len(pend) >= self.batch_size or msg.arbitration_id in self._prompt:
-            if self.batch_size == 0 and not self._auto:
-                self._one(pend.popleft())
-            else:
+        if self.batch_size:
+            pend = self._pending
+            pend.append(msg)
+            if len(pend) >= self.batch_size or msg.arbitration_id in self._prompt:
                 self.flush()
+        elif self._auto:     # frames wait for the time base (the first SN_Sync)
+            self._pending.append(msg)
+            self.flush()
+        else:
+            self._one(msg)
 
     def _one(self, msg: can.Message) -> None:
         """``batch_size=0``: validate one frame on arrival (the frame-by-frame path)."""
@@ -521,7 +528,9 @@ class DecodeListener(can.Listener):
 
     def frame_stats(self) -> dict[str, object]:
         """``{"accepted": N, "rejected": {reason: n}, "ignored": n, "lost": n,
-        "time_base": "tick" | "timestamp"}`` (JSON-ready; ``receive`` when live)."""
+        "time_base": "tick" | "timestamp"}`` (JSON-ready); ``arrival_slots`` (message ->
+        ``period``, ``missing``, ``retimed``) when a log was placed in sample slots,
+        ``receive`` when live."""
         c = self.counts
         out: dict[str, object] = {"accepted": c.accepted, "rejected": dict(c.rejected),
                                   "ignored": c.ignored, "lost": c.lost,
