@@ -42,7 +42,7 @@ import numpy as np
 from cantools.database.can import Database
 
 from estimator.decode.buffer import RollingBuffer
-from estimator.decode.routes import ALERT, DATA, EXT, STATUS, SYNC, Route, Routes
+from estimator.decode.routes import DATA, EXT, STATUS, SYNC, Route, Routes
 from estimator.decode.rules.counters import CounterRules, period_after, steady_frames
 from estimator.decode.rules.e2e import Payload, alive_counter, alive_counters, crc_ok_rows
 from estimator.decode.rules.timebase import (SyncTrack, TimeOrder, fresh_ticks, stale_tick,
@@ -624,5 +624,3 @@ class DecodeEngine:
         route.accepted += n_acc
         self.counts.accepted += n_acc
 
-
-__all__ = ["ALERT", "DecodeEngine", "MIN_RUN", "SMALL_BATCH"]

@@ -39,6 +39,10 @@ once an ``SN_Sync`` frame is among the first frames (up to ``AUTO_FRAMES`` frame
 DBC's messages are held until one comes; foreign frames do not count), the timestamps otherwise (a foreign stream, or a DBC without
 ``SN_Sync``). :attr:`DecodeListener.time_source` then names the base taken, and
 :meth:`DecodeListener.frame_stats` reports it as ``time_base``.
+With the timestamps and ``arrival_slots=True``, a whole log fed through
+:func:`~estimator.decode.replay.feed_log` has its data frames placed in their sample slots
+from their arrival times first (:mod:`estimator.decode.rules.arrival`); the frame
+statistics then list per message what was placed (``arrival_slots``).
 
 Feed it like any python-can listener: ``can.Notifier(bus, [listener])`` on a live bus, or
 :func:`estimator.decode.replay.feed_log` for a log (no reader thread and queue hand-off, so
@@ -78,7 +82,9 @@ from cantools.database.can import Database
 
 from estimator.decode.buffer import Aligned, RollingBuffer
 from estimator.decode.engine import MIN_RUN, SMALL_BATCH, DecodeEngine
-from estimator.decode.routes import EXT, SYNC, Routes, compile_row, model_channels
+from estimator.decode.frames import sort_frames
+from estimator.decode.routes import DATA, EXT, SYNC, Routes, compile_row, model_channels
+from estimator.decode.rules.arrival import arrival_slots, place_messages
 from estimator.decode.rules.counters import period_after
 from estimator.decode.rules.timebase import AUTO_FRAMES, TIME_RESYNC, choose_time_base, first_sync
 from estimator.decode.stats import REJECT_REASONS, FrameCounts
@@ -129,6 +135,11 @@ class DecodeListener(can.Listener):
     on_alert : callable, optional
         Called with each accepted ``SUSPID_Alert`` (the dict appended to ``alerts``), in
         order, as soon as the frame is received (an alert frame flushes the queue).
+    arrival_slots : bool
+        A whole log fed with the timestamp time base
+        (:func:`~estimator.decode.replay.feed_log`) has its data frames placed in their
+        sample slots from their arrival times first (:meth:`place_arrivals`), so arrival
+        jitter, bursts and delivery delay lose no frame and move no sample.
 
     Attributes
     ----------
@@ -150,7 +161,8 @@ class DecodeListener(can.Listener):
                  time_source: Literal["timestamp", "tick", "auto"] = "timestamp",
                  max_counter_delta: int = 4, stale_window: int = 5,
                  batch_size: int = BATCH_SIZE,
-                 on_alert: Callable[[dict[str, object]], None] | None = None) -> None:
+                 on_alert: Callable[[dict[str, object]], None] | None = None,
+                 arrival_slots: bool = False) -> None:
         self.model = get_model(model) if isinstance(model, str) else model
         smap = as_signal_map(signal_map)
         if isinstance(dbc, Database):
@@ -183,6 +195,10 @@ class DecodeListener(can.Listener):
         self._buffer = RollingBuffer(capacity, growable)
         self.mean_channels = [m.channel for m in smap.mappings if m.remove_mean]
         self.receive_stats: dict[str, object] = {}
+        self.arrival_slots = arrival_slots
+        #: what :meth:`place_arrivals` did, per message (empty: not used)
+        self.arrival_stats: dict[str, dict[str, object]] = {}
+        self._slot_period = 0.0
         routes = Routes(db, smap, self._buffer)
         if time_source == "tick" and not any(r.kind == SYNC for r in routes.ordered):
             raise UsageError(f"time_source 'tick' needs message {SYNC_MESSAGE} in the DBC "
@@ -228,13 +244,16 @@ class DecodeListener(can.Listener):
         reads the results), as python-can's ``BufferedReader`` keeps messages: do not modify
         a message after handing it over. With ``batch_size=0`` the frame is validated now.
         """
-        pend = self._pending
-        pend.append(msg)
-        if len(pend) >= self.batch_size or msg.arbitration_id in self._prompt:
-            if self.batch_size == 0 and not self._auto:
-                self._one(pend.popleft())
-            else:
+        if self.batch_size:
+            pend = self._pending
+            pend.append(msg)
+            if len(pend) >= self.batch_size or msg.arbitration_id in self._prompt:
                 self.flush()
+        elif self._auto:     # frames wait for the time base (the first SN_Sync)
+            self._pending.append(msg)
+            self.flush()
+        else:
+            self._one(msg)
 
     def _one(self, msg: can.Message) -> None:
         """``batch_size=0``: validate one frame on arrival (the frame-by-frame path)."""
@@ -373,6 +392,75 @@ class DecodeListener(can.Listener):
             self.flush()
         return n
 
+    def places_arrivals(self) -> bool:
+        """Whether a whole log fed now is placed in sample slots first (``arrival_slots``
+        and the timestamp time base decided)."""
+        return self.arrival_slots and not self._auto and not self.engine.tick_time
+
+    def data_keys(self) -> list[int]:
+        """Route keys (CAN ID | extended flag, bit 31) of the data messages."""
+        return [r.key for r in self.routes.ordered if r.kind == DATA]
+
+    def message_slot_times(self, arrivals: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
+        """Data times of the data messages' frames placed in their sample slots
+        (:mod:`estimator.decode.rules.arrival`).
+
+        Parameters
+        ----------
+        arrivals : dict
+            Route key (:meth:`data_keys`) -> arrival times (s) of the message's frames in a
+            whole log (error and remote frames left out), in log order.
+
+        Returns
+        -------
+        dict
+            Route key -> data times (s) of the messages that are moved. Messages whose
+            arrival times already lie on a uniform grid (or were stamped by a clock that
+            ticks with the samples), or that cannot be placed (too few frames, times not
+            finite or going back), keep their timestamps and are not listed. What was done
+            is kept in :attr:`arrival_stats` and reported by :meth:`frame_stats`.
+        """
+        names, keys, slots = [], [], []
+        for r in self.routes.ordered:
+            t = arrivals.get(r.key)
+            if r.kind != DATA or t is None or not t.size:
+                continue
+            sl = arrival_slots(t)
+            if sl is not None:
+                names.append(r.name)
+                keys.append(r.key)
+                slots.append(sl)
+        out: dict[int, np.ndarray] = {}
+        for name, key, sl, tm in zip(names, keys, slots, place_messages(slots)):
+            if tm is not None:
+                out[key] = tm
+                self._slot_period = sl.period if not self._slot_period else \
+                    min(self._slot_period, sl.period)
+            self.arrival_stats[name] = {"period": sl.period, "missing": sl.missing,
+                                        "retimed": tm is not None}
+        return out
+
+    def place_arrivals(self, frames: FrameArrays) -> FrameArrays:
+        """``frames`` (a whole log, in log order) with the data frames' timestamps replaced
+        by :meth:`message_slot_times`, sorted by time; ``frames`` itself when no frame
+        moves or the timestamps are not all finite and in order (the time check handles
+        those)."""
+        ts = frames.timestamp
+        if ts.size < 2 or not bool(np.isfinite(ts).all()) or bool((np.diff(ts) < 0).any()):
+            return frames
+        keys = frames.arbitration_id | (frames.is_extended.astype(np.int64) << 31)
+        good = ~frames.frame_type
+        where = {k: np.flatnonzero((keys == k) & good) for k in self.data_keys()}
+        moved = self.message_slot_times({k: ts[i] for k, i in where.items()})
+        if not moved:
+            return frames
+        out = ts.copy()
+        for k, tm in moved.items():
+            out[where[k]] = tm
+        placed = copy.copy(frames)
+        placed.timestamp = out
+        return sort_frames(placed)
+
     def _deliver(self) -> None:
         """Hand accepted alerts to ``on_alert`` (outside the processing lock)."""
         with self._lock:
@@ -440,11 +528,15 @@ class DecodeListener(can.Listener):
 
     def frame_stats(self) -> dict[str, object]:
         """``{"accepted": N, "rejected": {reason: n}, "ignored": n, "lost": n,
-        "time_base": "tick" | "timestamp"}`` (JSON-ready; ``receive`` when live)."""
+        "time_base": "tick" | "timestamp"}`` (JSON-ready); ``arrival_slots`` (message ->
+        ``period``, ``missing``, ``retimed``) when a log was placed in sample slots,
+        ``receive`` when live."""
         c = self.counts
         out: dict[str, object] = {"accepted": c.accepted, "rejected": dict(c.rejected),
                                   "ignored": c.ignored, "lost": c.lost,
                                   "time_base": "tick" if self.engine.tick_time else "timestamp"}
+        if self.arrival_stats:
+            out["arrival_slots"] = {k: dict(v) for k, v in self.arrival_stats.items()}
         if self.receive_stats:
             out["receive"] = dict(self.receive_stats)
         return out
@@ -507,6 +599,11 @@ class DecodeListener(can.Listener):
             end = buf.latest_time() if t_end is None else t_end
             t_start = end - window
             t_end = end
+            if self._slot_period:
+                # slot times a + k P: a sample on a window's edge is in it whatever the
+                # last bits of the estimated P
+                t_start -= 0.25 * self._slot_period
+                t_end += 0.25 * self._slot_period
         al = buf.align(channels if channels is not None else self.channels, dt, t_start, t_end)
         for ch in self.mean_channels:
             if ch in al.values:

@@ -85,7 +85,8 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
                             signal_map: SignalMapLike = None, *,
                             time_source: Literal["timestamp", "tick", "auto"] = "auto",
                             dt: float | None = None,
-                            max_counter_delta: int = 4) -> tuple[Measurement, dict[str, object]]:
+                            max_counter_delta: int = 4,
+                            arrival_slots: bool = True) -> tuple[Measurement, dict[str, object]]:
     """Decode a CAN log into a measurement on a uniform time grid.
 
     Parameters
@@ -105,6 +106,11 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
         Grid step (s); default the median frame interval.
     max_counter_delta : int
         See :class:`~estimator.decode.listener.DecodeListener`.
+    arrival_slots : bool
+        With the timestamp time base (no sensor clock in the log), place each frame in its
+        sample slot from its arrival time and its order within its message
+        (:mod:`estimator.decode.rules.arrival`) instead of the nearest grid cell of its
+        timestamp: arrival jitter, bursts and delivery delay then lose no frame.
 
     Returns
     -------
@@ -123,7 +129,8 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
     """
     m = get_model(model) if isinstance(model, str) else model
     listener = DecodeListener(m, dbc_path, signal_map, capacity=1 << 14, growable=True,
-                              time_source=time_source, max_counter_delta=max_counter_delta)
+                              time_source=time_source, max_counter_delta=max_counter_delta,
+                              arrival_slots=arrival_slots)
     stats = ReadStats()
     feed_log(listener, path, stats)
     listener.count_malformed(stats.malformed)
@@ -136,6 +143,13 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
     if listener.time_resyncs:
         warnings.append(f"{path}: timestamps jumped back {listener.time_resyncs} time(s); "
                         "the time base was re-anchored")
+    retimed = {k: v for k, v in listener.arrival_stats.items() if v["retimed"]}
+    if retimed:
+        warnings.append(f"{path}: no sensor clock: frames of {', '.join(retimed)} placed in "
+                        "their sample slots from their arrival times (period "
+                        + ", ".join(f"{float(cast(float, v['period'])):.6g} s" for v in retimed.values())
+                        + f"; {sum(int(cast(int, v['missing'])) for v in retimed.values())} "
+                        "frames missing)")
     if not any(s.n for s in listener.buffer.sources.values()):
         rejected = cast("dict[str, int]", frame_stats["rejected"])   # reason -> count
         rej = {k: v for k, v in rejected.items() if v}

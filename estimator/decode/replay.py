@@ -13,6 +13,7 @@ either way (a test checks both paths give identical results).
 """
 from __future__ import annotations
 
+import itertools
 import time
 from dataclasses import fields
 from pathlib import Path
@@ -21,6 +22,7 @@ from typing import Any, Callable, Iterable, Iterator, Optional, Protocol, runtim
 import can
 import numpy as np
 
+from estimator.decode.frames import concat_frames, sort_frames
 from suspid.can.logs import FrameArrays, ReadStats, read_log, read_log_arrays
 
 
@@ -96,7 +98,7 @@ def feed_log(listener: can.Listener, path: str | Path, stats: Optional[ReadStats
             finish()
         return n
     chooser = listener if isinstance(listener, _TimeBaseChooser) else None
-    for fa in read_log_arrays(path, stats):
+    for fa in _placed(listener, path, stats):
         size = len(fa)
         if chooser is not None:
             # "auto": decided on the first chunk
@@ -122,6 +124,59 @@ def feed_log(listener: can.Listener, path: str | Path, stats: Optional[ReadStats
     if finish is not None:
         finish()
     return n
+
+
+def _placed(listener: can.Listener, path: str | Path,
+            stats: Optional[ReadStats]) -> Iterator[FrameArrays]:
+    """The chunks of a log; for a listener that places arrival times in sample slots
+    (``DecodeListener(arrival_slots=True)`` with the timestamp time base, decided on the
+    first chunk) the log is read twice: first its times and IDs alone (the slots), then its
+    frames -- as they are when no frame moves, else as one chunk with the slot times,
+    sorted by them."""
+    chunks = read_log_arrays(path, stats)
+    first = next(chunks, None)
+    if first is None:
+        return
+    chooser = listener if isinstance(listener, _TimeBaseChooser) else None
+    if chooser is not None:
+        chooser.choose_time_base(first.arbitration_id, final=True)
+    places = getattr(listener, "places_arrivals", None)
+    if places is None or not places():
+        yield first
+        yield from chunks
+        return
+    # pass 1: the arrival times of each data message, and whether the log's times are
+    # finite and in order (else it is decoded as it is: the time check handles it)
+    per: dict[int, list[np.ndarray]] = {k: [] for k in listener.data_keys()}  # type: ignore[attr-defined]
+    ordered = True
+    last = -np.inf
+    for fa in itertools.chain((first,), chunks):
+        ts = fa.timestamp
+        if ordered and ts.size:
+            ordered = bool(np.isfinite(ts).all()) and ts[0] >= last and \
+                not bool((np.diff(ts) < 0).any())
+            last = ts[-1]
+        keys = fa.arbitration_id | (fa.is_extended.astype(np.int64) << 31)
+        good = ~fa.frame_type
+        for k, got in per.items():
+            got.append(ts[(keys == k) & good])
+    del first, fa, ts, keys, good   # the loop ran at least once (over `first`)
+    moved = listener.message_slot_times(   # type: ignore[attr-defined]
+        {k: np.concatenate(v) for k, v in per.items()}) if ordered else {}
+    del per
+    # pass 2: the frames (read and counted once already)
+    again = read_log_arrays(path, ReadStats())
+    if not moved:
+        yield from again
+        return
+    whole = concat_frames(list(again))
+    keys = whole.arbitration_id | (whole.is_extended.astype(np.int64) << 31)
+    good = ~whole.frame_type
+    times = whole.timestamp.copy()
+    for k, tm in moved.items():
+        times[(keys == k) & good] = tm
+    whole.timestamp = times
+    yield sort_frames(whole)
 
 
 def sync_to_front(fa: FrameArrays, k: int) -> FrameArrays:

@@ -452,7 +452,7 @@ def _listener(source: Source, spec: MonitorSpec,
     # rows per message: window + step at up to 2 kHz, power of two
     rows = 1 << max(12, math.ceil(math.log2(max(2.0, (cfg.window_s + 2 * cfg.step_s) * 2000.0))))
     return DecodeListener(spec.model, source.dbc, source.signal_map, capacity=rows,
-                          growable=False, time_source=time_source)
+                          growable=False, time_source=time_source, arrival_slots=True)
 
 
 def _alert_bus(source: Source, sinks: list[Any], listener: DecodeListener, buses: list[Any],

@@ -10,9 +10,11 @@ module                    rule
 :mod:`.timebase`          which clock gives data time (sensor tick or arrival), the time
                           order check and its re-anchoring, the tick of a frame from its
                           counter, the stale-tick rule after a silence
+:mod:`.arrival`           without a sensor clock: each frame's sample slot from the
+                          arrival times of its message (a whole log at once)
 ========================  ==================================================================
 
-Each rule has a scalar function (the reference, used frame by frame) and an array function
+Each frame rule has a scalar function (the reference, used frame by frame) and an array function
 over many frames (used by :class:`~estimator.decode.engine.DecodeEngine`'s batches) that
 gives the same result bit for bit; ``tests/can/test_rules.py`` compares them directly.
 """
