@@ -8,7 +8,9 @@ from filterpy.kalman import ExtendedKalmanFilter
 from estimator.ekf import AugmentedEKF, EKFTuning, EKFWindowEstimator
 from estimator.stream.drivers import run_arrays
 from estimator.stream.wear_streams import damper_wear
+from suspid.errors import UsageError
 from suspid.models import MODELS, get_model
+from suspid.models.quarter1 import Quarter1
 
 
 @pytest.fixture
@@ -145,3 +147,18 @@ def test_the_filter_runs_on_the_models_affine_pieces(name: str) -> None:
         assert F_lean is not None and F_rhs is not None
         np.testing.assert_allclose(z_lean, z_rhs, rtol=1e-11, atol=1e-14)
         np.testing.assert_allclose(F_lean, F_rhs, rtol=1e-10, atol=1e-12 * np.abs(F_rhs).max())
+
+
+def test_a_damper_that_enters_non_affinely_is_refused() -> None:
+    """The filter's [A | B] is affine in its parameters; a model where it is not is refused."""
+
+    class Squared(Quarter1):
+        def matrices(self, p):  # the damping grows as c^2: not affine in c
+            M, C, K, Fk, Fc = super().matrices(p)
+            return M, C * p["c"] / 1500.0, K, Fk, Fc * p["c"] / 1500.0
+
+    m = Squared()
+    assert not m.affine(m.defaults(), ["c"]).exact
+    with pytest.raises(UsageError, match="the parameters c do not enter its matrices affinely"):
+        AugmentedEKF(m, m.defaults(), ["c"], ["x"], dt=0.002)
+    assert AugmentedEKF(m, m.defaults(), ["k"], ["x"], dt=0.002).pieces.exact
