@@ -268,8 +268,7 @@ def test_receive_buffer_is_sized_in_seconds_of_the_dbc_frame_rate() -> None:
     """Every DBC message with a cycle time at that rate (read here from the DBC's text),
     at least a saturated 1 Mbit/s bus."""
     db = load_dbc()
-    text = Path(db.suspid_path).read_text() if hasattr(db, "suspid_path") else \
-        (Path(__file__).resolve().parents[2] / "suspid" / "data" / "suspension.dbc").read_text()
+    text = (Path(__file__).resolve().parents[2] / "suspid" / "data" / "suspension.dbc").read_text()
     cycles = [int(x) for x in re.findall(r'BA_ "GenMsgCycleTime" BO_ \d+ (\d+);', text)]
     rate = sum(1000.0 / c for c in cycles if c)
     assert rate > RECEIVE_RATE
