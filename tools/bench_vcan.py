@@ -3,6 +3,7 @@
 Run with vcan0 up (natively, or under User-Mode Linux)::
 
     tools/vcan_bench.sh .venv/bin/python tools/bench_vcan.py [--duration 10] [--fit-s 1.5]
+        [--fit-kind sleep|cpu] [--rx-buffer SECONDS]
 
 Next to ``suspid node --interface socketcan --channel vcan0`` (500 Hz quarter car, 4
 messages per sample) ``cangen`` fills the bus with foreign frames (``--gap-ms``, default about a saturated
@@ -10,9 +11,12 @@ messages per sample) ``cangen`` fills the bus with foreign frames (``--gap-ms``,
 ``candump`` records everything. This process receives with the monitor's live path
 (:func:`estimator.stream.drivers.run_bus`: a receiver thread into a bounded buffer, the
 decoder, the window cutter) while each window's "fit" deliberately takes ``--fit-s`` of
-wall time -- longer than the window step. Printed side by side: frames candump saw, frames
-the live path received, node frames accepted, lost frames by cause, and the live path's CPU
-share of one core.
+wall time -- longer than the window step: sleeping (``--fit-kind sleep``, a fit in compiled
+code that lets the receiver thread run) or spinning in Python (``cpu``, a fit that holds
+the interpreter lock as a pure-Python optimiser would). Printed side by side: frames
+candump saw, frames the live path received, node frames accepted, lost frames by cause
+(receiver buffer overflow, kernel socket overrun, bus error frames, counter gaps and the
+loss each followed), the receiver buffer's peak, and the live path's CPU share of one core.
 """
 from __future__ import annotations
 
@@ -27,8 +31,9 @@ from pathlib import Path
 from typing import Any
 
 from estimator.decode import DecodeListener
-from estimator.stream.drivers import CanWindowDriver, LiveStop, run_bus
+from estimator.stream.drivers import CanWindowDriver, LiveStop, bus_frame_rate, run_bus
 from suspid.can.bus import open_bus
+from suspid.can.options import RECEIVE_BUFFER_S
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -45,6 +50,10 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration", type=float, default=10.0, help="node run (s of data)")
     ap.add_argument("--fit-s", type=float, default=1.5, help="wall time of each window's fit")
+    ap.add_argument("--fit-kind", choices=["sleep", "cpu"], default="sleep",
+                    help="the slow fit sleeps (default) or spins in Python holding the GIL")
+    ap.add_argument("--rx-buffer", type=float, default=RECEIVE_BUFFER_S,
+                    help=f"receiver buffer, s of data at the DBC's frame rate (default {RECEIVE_BUFFER_S:g})")
     ap.add_argument("--window", type=float, default=2.0)
     ap.add_argument("--step", type=float, default=1.0)
     ap.add_argument("--gap-ms", type=float, default=0.12,
@@ -59,7 +68,14 @@ def main() -> int:
     windows = []
 
     def slow_fit(t: Any, data: Any) -> None:
-        time.sleep(args.fit_s)
+        if args.fit_kind == "sleep":
+            time.sleep(args.fit_s)
+        else:
+            end = time.monotonic() + args.fit_s
+            x = 0
+            while time.monotonic() < end:
+                for _ in range(1000):
+                    x += 1
         windows.append(float(t[-1]))
 
     lst = DecodeListener("quarter2", capacity=1 << 15, time_source="auto")
@@ -93,7 +109,7 @@ def main() -> int:
         stop.reason = "node ended"
 
     threading.Thread(target=watch, daemon=True).start()
-    received = run_bus(drv, bus, stop)
+    received = run_bus(drv, bus, stop, buffer_s=args.rx_buffer)
     cpu, wall = time.process_time() - cpu0, time.monotonic() - wall0
     gen.wait(timeout=10)
     time.sleep(0.3)
@@ -111,17 +127,27 @@ def main() -> int:
           f"({received / max(seen, 1):.4f} of candump's)")
     print(f"{'node frames sent / accepted':34s} {sent:>10d} / {f['accepted']}")
     print(f"{'foreign frames (unknown_id)':34s} {f['rejected']['unknown_id']:>10d}")
-    print(f"{'lost: buffer overflow':34s} {rx.get('buffer_overflow', 0):>10d}")
-    print(f"{'lost: counter gaps (socket/bus)':34s} {rx.get('counter_gap', 0):>10d}")
-    print(f"{'receiver buffer peak / capacity':34s} {rx.get('max_queued', 0):>10d} / "
-          f"{rx.get('buffer_capacity', 0)}")
+    after = rx.get("counter_gap_after", {})
+    errors = rx.get("bus_errors") or {}
+    print(f"{'lost: receiver buffer overflow':34s} {rx.get('buffer_overflow', 0):>10d}")
+    print(f"{'lost: kernel socket overrun':34s} {rx.get('socket_overrun')!s:>10s}")
+    print(f"{'bus error frames':34s} {rx.get('error_frames', 0):>10d}   "
+          f"{' '.join(f'{k}={v}' for k, v in errors.items())}")
+    print(f"{'counter gaps (node frames missing)':34s} {rx.get('counter_gap', 0):>10d}   "
+          f"(after overrun {after.get('socket_overrun', 0)}, bus error {after.get('bus', 0)}, "
+          f"buffer overflow {after.get('buffer_overflow', 0)}, none {after.get('none', 0)})")
+    cap = rx.get("buffer_capacity", 0)
+    rate = bus_frame_rate(lst.db)
+    print(f"{'receiver buffer peak / capacity':34s} {rx.get('max_queued', 0):>10d} / {cap}   "
+          f"({args.rx_buffer:g} s at {rate:.0f} frames/s; peak {rx.get('max_queued', 0) / max(cap, 1):.2f})")
     print(f"{'kernel socket queue (bytes)':34s} {rx.get('socket_rcvbuf', 0):>10d}")
-    print(f"{'windows fitted (fit {:.2f} s, step {:.2f} s)'.format(args.fit_s, args.step):34s} "
+    print(f"{'windows fitted ({} fit {:.2f} s, step {:.2f} s)'.format(args.fit_kind, args.fit_s, args.step):34s} "
           f"{len(windows):>10d}")
     print(f"{'live path CPU share of one core':34s} {cpu / wall:>10.3f}   "
           f"({cpu:.2f} s CPU in {wall:.2f} s, sleeping fits included in wall)")
     print(f"{'time base':34s} {f['time_base']:>10s}")
-    return 0 if received == seen and f["lost"] == 0 and ended() else 1
+    lost = rx.get("lost_by_cause", {})
+    return 0 if received == seen and not any(lost.values()) and ended() else 1
 
 
 if __name__ == "__main__":

@@ -275,8 +275,9 @@ RECEIVE_RATE = 10_000.0
 #: kernel socket receive buffer asked for on a SocketCAN bus (bytes; a CAN frame costs about
 #: 1 kB of it), so the reader thread may be held up a while without the kernel dropping frames
 SOCKET_RCVBUF = 8 << 20
-#: counter gaps the decoder finds within this long (s of frame time) after a socket overrun,
-#: a controller loss (error frame) or a buffer overflow are frames lost there
+#: longest wait (s of frame time) after a socket overrun, a controller loss (error frame) or
+#: a buffer overflow for each counter-carrying message's next frame, whose counter gap is
+#: booked to that loss (:class:`LossLedger`)
 LOSS_ATTRIBUTION_S = 1.0
 
 

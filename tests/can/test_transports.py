@@ -294,3 +294,20 @@ def test_monitor_cli_slcan_timestamps_needs_slcan():
     assert out.returncode == 2
     assert out.stderr.strip().splitlines()[-1] == \
         "error: --interface: --slcan-timestamps needs --interface slcan, got virtual"
+
+
+def test_monitor_cli_rx_buffer_is_seconds_of_the_dbc_frame_rate():
+    """``--rx-buffer 0.5``: the receiver holds 0.5 s at suspid's DBC rate (10,510 frames/s);
+    a live bus other than SocketCAN reports its socket overrun as unknown (null)."""
+    out = subprocess.run([sys.executable, "-m", "suspid", "monitor", "--model", "quarter2",
+                          "--interface", "virtual", "--channel", "rx-buffer-flag",
+                          "--rx-buffer", "0.5", "--idle-timeout", "0.5", "--jsonl"],
+                         capture_output=True, text=True, env=suspid_env(), cwd=REPO, timeout=120)
+    assert out.returncode == 0, out.stderr
+    rx = json.loads(out.stdout.splitlines()[-1])["frames"]["receive"]
+    assert rx["buffer_capacity"] == 5255 and rx["read"] == 0
+    assert rx["socket_overrun"] is None and rx["lost_by_cause"]["socket_overrun"] is None
+    bad = subprocess.run([sys.executable, "-m", "suspid", "monitor", "--model", "quarter2",
+                          "--interface", "virtual", "--channel", "x", "--rx-buffer", "0"],
+                         capture_output=True, text=True, env=suspid_env(), cwd=REPO, timeout=120)
+    assert bad.returncode == 2 and "--rx-buffer: expected seconds > 0, got '0'" in bad.stderr

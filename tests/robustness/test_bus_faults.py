@@ -268,10 +268,52 @@ def test_receive_buffer_is_sized_in_seconds_of_the_dbc_frame_rate() -> None:
     """Every DBC message with a cycle time at that rate (read here from the DBC's text),
     at least a saturated 1 Mbit/s bus."""
     db = load_dbc()
-    text = Path(db.suspid_path).read_text() if hasattr(db, "suspid_path") else \
-        (Path(__file__).resolve().parents[2] / "suspid" / "data" / "suspension.dbc").read_text()
+    text = (Path(__file__).resolve().parents[2] / "suspid" / "data" / "suspension.dbc").read_text()
     cycles = [int(x) for x in re.findall(r'BA_ "GenMsgCycleTime" BO_ \d+ (\d+);', text)]
     rate = sum(1000.0 / c for c in cycles if c)
     assert rate > RECEIVE_RATE
     assert receive_capacity(10.0, db) == math.ceil(10.0 * rate)
     assert receive_capacity(2.5, None) == math.ceil(2.5 * RECEIVE_RATE)
+
+
+def test_live_receiver_buffer_overflow_gaps_are_not_counted_again() -> None:
+    """A receiver buffer of a hundred frames and a first fit that stalls for 0.3 s while
+    the frames keep coming: frames are dropped at the full buffer (``buffer_overflow``),
+    and the counter gaps they leave are booked to that loss
+    (``counter_gap_after.buffer_overflow``), none to ``none``."""
+    frames, node = _node_frames(duration=3.0)
+    chan = f"overflow-{time.monotonic_ns()}"
+    rx = open_bus("virtual", chan)
+    tx = can.Bus(interface="virtual", channel=chan, preserve_timestamps=True)
+    slept = threading.Event()
+
+    def slow_first_fit(t: object, d: object) -> None:
+        if not slept.is_set():
+            time.sleep(0.3)
+            slept.set()
+
+    lst = DecodeListener("quarter2", node.db)
+    drv = CanWindowDriver(lst, 0.5, 0.25, slow_first_fit)
+
+    def send() -> None:
+        for k, m in enumerate(frames):      # about 4 k frames/s: the decoder keeps up
+            tx.send(m)
+            if k % 20 == 19:
+                time.sleep(0.005)
+
+    th = threading.Thread(target=send)
+    th.start()
+    try:
+        n = run_bus(drv, rx, LiveStop(idle_timeout=1.0), buffer_s=0.01)
+    finally:
+        th.join()
+        tx.shutdown()
+        rx.shutdown()
+    r = lst.frame_stats()["receive"]
+    assert r["buffer_capacity"] == math.ceil(0.01 * 10510) and r["max_queued"] <= 106
+    assert r["buffer_overflow"] > 0 and n + r["buffer_overflow"] == len(frames) == r["read"]
+    after = r["counter_gap_after"]
+    assert 0 < after["buffer_overflow"] <= r["buffer_overflow"]
+    assert after["none"] == 0 and after["socket_overrun"] == after["bus"] == 0, r
+    assert r["lost_by_cause"] == {"buffer_overflow": r["buffer_overflow"], "socket_overrun": None,
+                                  "bus": 0, "counter_gap": 0}

@@ -148,7 +148,12 @@ def test_node_to_monitor_with_alert_frame_on_the_bus(node_run: dict[str, Any]) -
     assert summary["frames_received"] == bus_frames
     assert frames["accepted"] == sent and frames["lost"] == 0
     assert sum(frames["rejected"].values()) == 0
-    assert frames["receive"]["buffer_overflow"] == 0 and frames["receive"]["counter_gap"] == 0
+    rx = frames["receive"]
+    assert rx["buffer_overflow"] == 0 and rx["counter_gap"] == 0
+    # the kernel's own count: no frame dropped at the socket, no error frame
+    assert rx["socket_overrun"] == 0 and rx["error_frames"] == 0 and rx["bus_errors"] == {}
+    assert rx["lost_by_cause"] == {"buffer_overflow": 0, "socket_overrun": 0, "bus": 0,
+                                   "counter_gap": 0}
 
 
 def test_canplayer_replay_equals_monitor_input(node_run: dict[str, Any]) -> None:
