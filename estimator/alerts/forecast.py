@@ -58,6 +58,8 @@ class Trend:
         Process-noise intensities of the level (SI^2/s) and the rate (SI^2/s^3): the
         extrapolated variance grows by ``q_value tau + q_rate tau^3 / 3`` as well (the wear
         may speed up, slow down or stop).
+    span : float
+        Data time (s) the trend's data cover (``inf`` when unknown).
     """
 
     t: float
@@ -68,6 +70,7 @@ class Trend:
     var_rate: float
     q_value: float = 0.0
     q_rate: float = 0.0
+    span: float = math.inf
 
     @property
     def value_stderr(self) -> float:
@@ -299,6 +302,9 @@ class ForecastEngine:
     publish : callable, optional
         Receives each new event and returns whether it was delivered (the alert engine's
         write-ahead publisher); by default the events are only collected.
+    min_span_s : float
+        Announce nothing from a trend whose data span less than this (s; 15): a trend of a
+        few windows cannot tell a wear that started inside them from a steady one.
     """
 
     limits: dict[str, float]
@@ -307,6 +313,7 @@ class ForecastEngine:
     model: str = ""
     units: dict[str, str] = field(default_factory=dict)
     publish: Any = None
+    min_span_s: float = 15.0
     active: dict[str, ForecastEvent] = field(default_factory=dict)
     emitted: list[ForecastEvent] = field(default_factory=list)
 
@@ -330,7 +337,7 @@ class ForecastEngine:
             within = (cr is not None and cr.t - tr.t <= self.horizon_s
                       and cr.high - tr.t <= 2.0 * self.horizon_s)
             if prev is None:
-                if within and cr is not None:
+                if within and cr is not None and tr.span >= self.min_span_s:
                     ev = self._event("forecast", tr, k, cr)
                     self.active[k] = ev
                     self._publish(ev, out)

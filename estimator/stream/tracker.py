@@ -33,7 +33,10 @@ themselves filtered (the EKF): their differences understate the error.
 
 The alerts (:class:`estimator.alerts.AlertEngine`) are decided on the tracked value and its
 standard error, the forecasts (:class:`estimator.alerts.ForecastEngine`) on the trend
-(:meth:`TrendTracker.trends`).
+(:meth:`TrendTracker.trends`): right after a kink the trend's rate variance gets the
+changing model's rate walk over ``forecast_settle_s`` more seconds, weighted by that model's
+probability to the power ``forecast_settle_power`` (the windows straddling the start of a
+wear cannot pin its rate down yet), and each trend carries the data time it spans.
 
 Defaults measured with the damper- and spring-wear streams of
 ``tools/bench_maintenance.py`` (docs/monitoring.md).
@@ -55,6 +58,7 @@ class _Track:
     P: np.ndarray       # 2x2 covariance of the mixture
     t: float
     nominal: float
+    t0: float = math.nan    # data time the first estimate describes
     xs: list[np.ndarray] = field(default_factory=list)   # per model
     Ps: list[np.ndarray] = field(default_factory=list)
     mu: np.ndarray = field(default_factory=lambda: np.ones(1))
@@ -88,6 +92,8 @@ class TrendTracker:
     calib_prior, calib_memory, calib_min, calib_max : float
         Pseudo-observations of ``lambda = 1``, memory (estimates) of the weighted mean,
         and the clip range of ``lambda``.
+    forecast_settle_s, forecast_settle_power : float
+        Extra rate variance of the trends right after a kink (see the module docstring).
     nominal : dict, optional
         ``parameter -> nominal`` (SI) scaling the noise; a parameter without one is scaled by
         its first estimate.
@@ -105,6 +111,8 @@ class TrendTracker:
     calib_memory: float = 50.0
     calib_min: float = 0.05
     calib_max: float = 20.0
+    forecast_settle_s: float = 20.0
+    forecast_settle_power: float = 8.0
     nominal: dict[str, float] = field(default_factory=dict)
     tracks: dict[str, _Track] = field(default_factory=dict)
 
@@ -201,7 +209,7 @@ class TrendTracker:
                 x = np.array([float(v), 0.0])
                 m = len(self._qs)
                 mu = np.ones(1) if m == 1 else np.array([1.0 - self.p_switch, self.p_switch])
-                tr = self.tracks[k] = _Track(x.copy(), P.copy(), t, nom,
+                tr = self.tracks[k] = _Track(x.copy(), P.copy(), t, nom, t - 2.0 * self.lag,
                                              [x.copy() for _ in range(m)],
                                              [P.copy() for _ in range(m)], mu)
                 self._calibrate(tr, float(v), float(se))
@@ -243,9 +251,15 @@ class TrendTracker:
             # the extrapolation keeps the level's random walk but not the rate's: a forecast
             # assumes the wear goes on at the estimated rate, with that rate's uncertainty
             # (with the rate walk the band widens as tau^1.5 and no crossing further than a
-            # few tens of seconds could ever be bounded)
+            # few tens of seconds could ever be bounded). While the changing model holds
+            # (right after a wear started or changed), the rate may still move: its variance
+            # gets the rate walk of ``forecast_settle_s`` more seconds, weighted by that
+            # model's probability
+            extra = (float(tr.mu[1]) ** self.forecast_settle_power * self.q_rate_change ** 2
+                     * n2 * self.forecast_settle_s if tr.mu.size > 1 else 0.0)
             out[k] = Trend(tr.t, float(tr.x[0]), float(tr.x[1]), float(tr.P[0, 0]),
-                           float(tr.P[0, 1]), float(tr.P[1, 1]), self.q_level ** 2 * n2, 0.0)
+                           float(tr.P[0, 1]), float(tr.P[1, 1]) + extra,
+                           self.q_level ** 2 * n2, 0.0, tr.t - tr.t0)
         return out
 
 

@@ -10,9 +10,11 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from estimator.stream.compare import compare
+from estimator.stream.wear_streams import damper_wear
 from suspid.io.csvio import write_measurement
 from suspid.models import get_model
 
@@ -144,3 +146,46 @@ def test_full7_monitor_and_fair_ekf_on_a_stable_car(tmp_path) -> None:
             assert est[-1]["params"][k] == pytest.approx(truth[k], rel=0.03), (side, k)
         assert not [d for d in out if d["type"] in ("alert", "forecast")], side
     assert outs["ekf"][-1]["held"] == {} and len(outs["ekf"][-1]["augmented"]) == 12
+
+
+def test_demo_stream_forecast_ten_seconds_ahead_and_alert_no_later_than_the_ekf() -> None:
+    """``suspid compare``'s default stream (quantization only, c1 -50 % over 130 s, crossing
+    at 98 s): the window's stated stderr is mostly its sigma_floor; with the tracker's
+    calibrated variances the first forecast comes >= 10 s ahead with the crossing inside
+    its interval, the alert no later than the EKF's, the tracked c1 no less accurate."""
+    m = get_model("quarter2")
+    s = damper_wear(m, duration=150.0, fs=500.0, seed=0, c_end_fraction=0.5)
+    fix = {k: s.nominal[k] for k in ("m1", "m2", "c2", "k2")}
+    nominal = {k: s.nominal[k] for k in ("c1", "k1")}
+    out, _ = compare(m, s.t, s.data, s.truth, fix=fix, nominal=nominal)
+    c1n, c1e = out["nm"]["params"]["c1"], out["ekf_result"]["params"]["c1"]
+    assert c1n["crossing_t"] == pytest.approx(98.0, abs=0.01)
+    assert c1n["forecast_lead_s"] >= 10.0 and c1n["forecast_first_contains"]
+    assert c1n["alert_delay_s"] is not None and c1e["alert_delay_s"] is not None
+    assert 0.0 <= c1n["alert_delay_s"] <= c1e["alert_delay_s"]
+    assert c1n["rmse_pct"] <= c1e["rmse_pct"]
+    # the stderr the alerts use is neither far below nor far above the actual error
+    assert 0.3 < c1n["error_over_stderr_rms"] < 1.5
+    for side in (out["nm"], out["ekf_result"]):
+        assert all(p.get("false_alarms", 0) == 0 for p in side["params"].values())
+        assert side["params"]["k1"]["forecasts"] == 0
+
+
+def test_stable_stream_tracked_no_worse_than_the_ekf() -> None:
+    """A soft quarter car at 2 % noise without wear: the tracker's steady model averages the
+    windows (c1 no less accurate than the EKF's state), and neither side alerts or
+    forecasts."""
+    m = get_model("quarter2")
+    soft = {"m1": 300.0, "c1": 1500.0, "k1": 20000.0, "m2": 40.0, "c2": 300.0, "k2": 200000.0}
+    kw = dict(duration=90.0, fs=500.0, params=soft, c_end_fraction=1.0, wear_start=30.0,
+              wear_end=80.0, seed=11)
+    clean = damper_wear(m, noise={c: 0.0 for c in ("x1", "x2", "x1_ddot", "r", "r_dot")},
+                        quantize=False, **kw)
+    s = damper_wear(m, noise={c: 0.02 * float(np.std(v)) for c, v in clean.data.items()}, **kw)
+    fix = {"m1": 300.0, "m2": 40.0}
+    nominal = {k: v for k, v in soft.items() if k not in fix}
+    out, _ = compare(m, s.t, s.data, s.truth, fix=fix, nominal=nominal)
+    assert out["nm"]["params"]["c1"]["rmse_pct"] <= out["ekf_result"]["params"]["c1"]["rmse_pct"]
+    for side in (out["nm"], out["ekf_result"]):
+        for p in side["params"].values():
+            assert p["alerts"] == [] and p["forecasts"] == 0
