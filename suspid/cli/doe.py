@@ -140,6 +140,7 @@ def run(args: argparse.Namespace) -> int:
     result: dict[str, Any] = {
         "design": out["design"], "experiments": out["experiments"],
         "successes": out["successes"], "total": out["total"],
+        "success_beyond_10x": out["success_beyond_10x"],
         "model": model.name, "cost": args.cost, "init_scale": args.init_scale,
         "free_masses": bool(args.free_masses), "mass_init_scale": args.mass_init_scale,
         "noise": args.noise,
@@ -161,4 +162,7 @@ def run(args: argparse.Namespace) -> int:
             w(f"{e['id']:>4} {str(e['success']):>8} {mre if mre is not None else float('nan'):>14.3e} "
               f"{e['nfev']:>6}\n")
         w(f"successes {out['successes']}/{out['total']} in {seconds:.1f} s\n")
+        if out["success_beyond_10x"]:
+            w(f"reported a success with a parameter more than 10x from the truth: rows "
+              f"{out['success_beyond_10x']}\n")
     return 0
