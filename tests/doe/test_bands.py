@@ -39,13 +39,13 @@ def test_noise_free_band_is_the_curvature_band() -> None:
 
 def test_nearly_linear_band_is_kept_and_its_ends_are_3_sigma_points() -> None:
     """Low noise on a well-determined row: curvature band kept, and the check that kept it
-    saw r^2 within 20 % of 9 at both ends."""
+    saw r^2 within 10 % of 9 at both ends."""
     m, e, problem, params, res = _noisy_fit("quarter2", 18, 0.1)
     b = honest_bands(problem, res, params.free)
     assert set(b.method.values()) == {"curvature"}
     for k in params.free:
         lo_ratio, hi_ratio = b.nonlinearity[k]
-        assert abs(lo_ratio - 1) < 0.2 and abs(hi_ratio - 1) < 0.2, (k, b.nonlinearity[k])
+        assert abs(lo_ratio - 1) < 0.1 and abs(hi_ratio - 1) < 0.1, (k, b.nonlinearity[k])
 
 
 def test_profile_band_end_is_where_the_refitted_cost_rises_by_9_sigma2() -> None:
