@@ -273,7 +273,9 @@ def run_design(model: SuspensionModel | str, settings: Settings,
                progress: Callable[[int, int, Outcome], None] | None = None) -> dict[str, Any]:
     """Run every (or the listed) experiment of the model's design.
 
-    Returns the contract's object ``{"design", "experiments", "successes", "total"}``.
+    Returns the contract's object ``{"design", "experiments", "successes", "total"}`` and
+    ``success_beyond_10x``: the rows reported a success (by the study's rule or by the
+    identifier) with a free parameter more than 10x from the truth, which must stay empty.
     """
     if isinstance(model, str):
         model = get_model(model)
@@ -287,4 +289,17 @@ def run_design(model: SuspensionModel | str, settings: Settings,
     return {"design": DESIGNS[model.name],
             "experiments": [o.to_json() for o in rows],
             "successes": int(sum(o.success for o in rows)),
-            "total": len(rows)}
+            "total": len(rows),
+            "success_beyond_10x": [o.id for o in rows if success_beyond(o, FAR_OFF)]}
+
+
+#: a parameter this far (factor) from the truth must never be part of a success
+FAR_OFF = 10.0
+
+
+def success_beyond(o: Outcome, factor: float) -> bool:
+    """Whether ``o`` is a success (by the study's rule or the identifier's) with a free
+    parameter more than ``factor`` times from the truth (either way)."""
+    rel = o.extra.get("rel_error", {})
+    far = any(not (1.0 / factor <= 1.0 + v <= factor) for v in rel.values())
+    return bool(far and (o.success or o.extra.get("reported_success")))

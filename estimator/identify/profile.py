@@ -44,7 +44,7 @@ from suspid.models.base import FloatArray
 SIGMAS = 3.0
 #: relative deviation of the cost's rise at a band end from the quadratic prediction above
 #: which the profile replaces the curvature band
-NONLINEARITY = 0.2
+NONLINEARITY = 0.1
 #: relative standard error below which a record counts as noise-free (band kept)
 NOISE_FREE = 1e-6
 #: how far (factor) a profile is followed before it counts as not closing

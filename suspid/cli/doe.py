@@ -1,4 +1,5 @@
-"""``suspid doe``: run the seed's Taguchi designs (L16 for quarter1, L27 for quarter2/half4).
+"""``suspid doe``: run the seed's Taguchi designs (L16 for quarter1, L27 for quarter2/half4;
+an L27 for full7, not the seed's: ``estimator/doe/full7_design.py``).
 
 Every row of the design is simulated (noise-free, or with Gaussian noise of ``--noise``
 times each channel's std), identified from ``--init-scale`` times the truth, and scored:
@@ -26,7 +27,9 @@ from suspid.models import get_model
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser("doe", help="run the seed's Taguchi designs of experiments (L16/L27)",
                        description="Run the seed's design of experiments: L16-4 (Tables 3-4) for "
-                                   "quarter1, L27-3 (Tables 5-6) for quarter2 and half4. Each row "
+                                   "quarter1, L27-3 (Tables 5-6) for quarter2 and half4, and "
+                                   "Table 5's L27-3 on the full car's left corners for full7. "
+                                   "Each row "
                                    "is simulated, identified from --init-scale x the truth and "
                                    "scored (1 % of the truth noise-free, 3 sigma when noisy).")
     p.add_argument("--model", required=True, choices=list(DESIGNS),
@@ -140,6 +143,7 @@ def run(args: argparse.Namespace) -> int:
     result: dict[str, Any] = {
         "design": out["design"], "experiments": out["experiments"],
         "successes": out["successes"], "total": out["total"],
+        "success_beyond_10x": out["success_beyond_10x"],
         "model": model.name, "cost": args.cost, "init_scale": args.init_scale,
         "free_masses": bool(args.free_masses), "mass_init_scale": args.mass_init_scale,
         "noise": args.noise,
@@ -161,4 +165,7 @@ def run(args: argparse.Namespace) -> int:
             w(f"{e['id']:>4} {str(e['success']):>8} {mre if mre is not None else float('nan'):>14.3e} "
               f"{e['nfev']:>6}\n")
         w(f"successes {out['successes']}/{out['total']} in {seconds:.1f} s\n")
+        if out["success_beyond_10x"]:
+            w(f"reported a success with a parameter more than 10x from the truth: rows "
+              f"{out['success_beyond_10x']}\n")
     return 0

@@ -66,3 +66,14 @@ def test_free_masses_from_a_common_scale_start_stay_put() -> None:
     assert e["identifiable"] is False and e["success"] is False
     for k in ("m", "c", "k"):
         assert e["identified"][k] / e["true"][k] == pytest.approx(0.5, rel=1e-6)
+
+
+@pytest.mark.parametrize("scale", [0.1, 10.0])
+def test_full7_design_rows_from_far_starts(scale: float) -> None:
+    """The full car's L27 (16 free parameters): rows succeed from 0.1x and 10x the truth
+    and no row reports a success with a parameter more than 10x off."""
+    out = run_design("full7", Settings(cost="sse", init_scale=scale), ids=[1, 14, 27])
+    assert out["design"] == "L27-3" and out["total"] == 3
+    assert out["successes"] == 3, [(e["id"], e["max_rel_error"]) for e in out["experiments"]]
+    assert out["success_beyond_10x"] == []
+    assert len(out["experiments"][0]["rel_error"]) == 16
