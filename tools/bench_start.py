@@ -71,6 +71,7 @@ def doe_row(model: str, cost: str, scale: float, noise: float, data: bool,
             "curvature_band_successes": curvature_ok,
             "path": "data" if data else "init", "successes": out["successes"],
             "total": out["total"], "s_per_row": dt / out["total"], "worst_rel": worst,
+            "nfev_per_row": sum(e["nfev"] for e in out["experiments"]) / out["total"],
             "failed": [e["id"] for e in out["experiments"] if not e["success"]],
             "success_true_beyond_10x": false_ok}
 
@@ -92,7 +93,7 @@ def identify_bump(scale: float, data: bool) -> dict[str, Any]:
     dt = time.perf_counter() - t0
     err = max(abs(res.params[k] / truth[k] - 1) for k in ("c1", "k1", "c2", "k2"))
     return {"case": f"identify bump x{scale:g}", "path": "data" if data else "init",
-            "seconds": dt, "max_rel_error": err, "success": res.success}
+            "seconds": dt, "max_rel_error": err, "success": res.success, "nfev": res.nfev}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -144,14 +145,14 @@ def main(argv: list[str] | None = None) -> int:
                         rows.append(r)
                         if not a.json:
                             w(f"{f'doe {m} {c} x{s:g} noise {n:g}':40} {r['s_per_row']:8.3f} s/id "
-                              f"{r['successes']:>3}/{r['total']:<3}\n")
+                              f"{r['successes']:>3}/{r['total']:<3} {r['nfev_per_row']:8.0f} nfev/id\n")
                             sys.stdout.flush()
         for s in (1.0, 5.0, 0.2):
             r = identify_bump(s, True)
             rows.append(r)
             if not a.json:
                 w(f"{r['case']:40} {r['seconds']:8.3f} s/id {str(r['success']):>7} "
-                  f"max rel error {r['max_rel_error']:.1e}\n")
+                  f"{r['nfev']:8d} nfev/id max rel error {r['max_rel_error']:.1e}\n")
     else:
         scales = _floats(a.scales or "0.1,10")
         if not a.json:
