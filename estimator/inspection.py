@@ -7,8 +7,13 @@ For identified quarter-car parameters the steady-state response at every frequen
 matrices ``M, C, K, Fk, Fc`` (:meth:`~suspid.models.base.SuspensionModel.matrices`)::
 
     (s^2 M + s C + K) Q(s) = (Fk + s Fc) R          (Q = [X1, X2], body and wheel)
-    F(s) = (k2 + s c2) (R - X2(s))                   (dynamic contact force, compression +)
+    F(s) = (kt + s ct) S(s)                          (dynamic contact force, compression +)
     Fs   = (m1 + m2) g                               (static wheel load, g = 9.80665 m/s^2)
+
+with the tyre's compression ``S = g . Q + gr R`` (its :class:`~suspid.models.base.Site`:
+``R - X2`` for ``quarter2``, whose tyre is ``kt = k2``, ``ct = c2``). Any model with two
+coordinates, one road and one tyre site is a quarter car here (:func:`quarter_car_problem`),
+a plug-in model as well as ``quarter2``.
 
 EUSAMA road holding
     ``RH = min over f in [2, 25] Hz of (Fs - A |F(f)/R|) / Fs x 100 %`` — the lowest
@@ -39,7 +44,7 @@ import numpy as np
 from estimator.stream.config import modes
 from suspid.errors import UsageError
 from suspid.models import get_model
-from suspid.models.base import FloatArray, SuspensionModel
+from suspid.models.base import GRAVITY, FloatArray, Site, SuspensionModel
 
 G = 9.80665
 PLATE_AMPLITUDE = 0.003
@@ -47,18 +52,83 @@ SWEEP_HZ = (2.0, 25.0)
 EGEA_CRITERION_DEG = 35.0
 
 
+def quarter_car_problem(model: SuspensionModel, p: Mapping[str, float] | None = None) -> str | None:
+    """What keeps ``model`` from the virtual damper test, or ``None`` when it qualifies.
+
+    The shaker's plate is the model's only road; the contact force is the force of its
+    only tyre site; the response is solved as a 2x2 system (two coordinates, body and
+    wheel). Any model with this structure qualifies (``quarter2``, a plug-in quarter car).
+
+    Parameters
+    ----------
+    model : SuspensionModel
+        The model to test.
+    p : mapping, optional
+        Parameters (SI); default the model's defaults (the sites' geometry and loads).
+
+    Returns
+    -------
+    str or None
+        One sentence naming what the model lacks (two coordinates, one road, one tyre site
+        with a spring and a static load), or ``None``.
+    """
+    need = "the virtual damper test needs a quarter car (two coordinates, one road, one tyre)"
+    if len(model.coords) != 2:
+        return (f"{need}: model {model.name} has {len(model.coords)} coordinates "
+                f"({', '.join(model.coords)}), expected 2")
+    if len(model.roads) != 1:
+        return (f"{need}: model {model.name} has {len(model.roads)} roads "
+                f"({', '.join(model.roads) or 'none'}), expected 1")
+    tyres = model.tyre_sites(model.defaults() if p is None else p)
+    if len(tyres) != 1:
+        return f"{need}: model {model.name} has {len(tyres)} tyre sites, expected 1"
+    if tyres[0].k_name is None:
+        return f"{need}: the tyre site of model {model.name} names no tyre spring (k_name)"
+    if not tyres[0].load > 0.0:
+        return (f"{need}: the tyre site of model {model.name} carries no static load "
+                f"(load = {tyres[0].load} N)")
+    return None
+
+
+def tyre_site(model: SuspensionModel, p: Mapping[str, float]) -> Site:
+    """The one tyre of a quarter car (:func:`quarter_car_problem`) at parameters ``p`` (SI).
+
+    Returns
+    -------
+    Site
+        The tyre site (its ``k_name`` the tyre spring, its ``c_name`` the tyre damper or
+        ``None``, its ``load`` the static wheel load).
+
+    Raises
+    ------
+    UsageError
+        When the model is no quarter car, naming what it lacks.
+    """
+    why = quarter_car_problem(model, p)
+    if why is not None:
+        raise UsageError(why)
+    return model.tyre_sites(p)[0]
+
+
+def static_load(site: Site) -> float:
+    """Static wheel load (N) of a tyre site, with the standard gravity :data:`G`."""
+    return float(site.load) * (G / GRAVITY)
+
+
 def response_function(model: SuspensionModel, p: Mapping[str, float]
                       ) -> Callable[[FloatArray], np.ndarray]:
     """``f -> F(f) / R`` (Hz -> N/m) for fixed parameters, coefficients precomputed.
 
     The 2x2 system ``Z(s) Q = (Fk + s Fc) R``, ``Z = s^2 M + s C + K``, is solved by
-    Cramer's rule, vectorised over the frequencies: ``X2 / R = (Z11 b2 - Z21 b1) / det Z``
-    with ``b = Fk + s Fc``, and ``F / R = (k2 + s c2) (1 - X2 / R)``.
+    Cramer's rule, vectorised over the frequencies: ``X1 / R = (Z22 b1 - Z12 b2) / det Z``,
+    ``X2 / R = (Z11 b2 - Z21 b1) / det Z`` with ``b = Fk + s Fc``. The tyre site
+    (:func:`tyre_site`) gives the compression ``S = g . Q + gr R`` and
+    ``F / R = (kt + s ct) S / R`` (``quarter2``: ``(k2 + s c2) (1 - X2 / R)``).
 
     Parameters
     ----------
     model : SuspensionModel
-        ``quarter2``.
+        A quarter car (:func:`tyre_site`): ``quarter2`` or a plug-in model alike.
     p : mapping
         Parameters (SI).
 
@@ -67,15 +137,17 @@ def response_function(model: SuspensionModel, p: Mapping[str, float]
     callable
         ``H(f)``: complex ``F/R`` (N/m) at the frequencies ``f`` (Hz, ndarray).
     """
-    if model.name != "quarter2":
-        raise UsageError(f"the virtual damper test needs model quarter2, got {model.name}")
+    site = tyre_site(model, p)
     M, C, K, Fk, Fc = model.matrices(p)
     m11, m12, m21, m22 = (float(v) for v in M.ravel())
     c11, c12, c21, c22 = (float(v) for v in C.ravel())
     k11, k12, k21, k22 = (float(v) for v in K.ravel())
     fk1, fk2 = float(Fk[0, 0]), float(Fk[1, 0])
     fc1, fc2 = float(Fc[0, 0]), float(Fc[1, 0])
-    kt, ct = float(p["k2"]), float(p["c2"])
+    kt = float(p[site.k_name]) if site.k_name is not None else 0.0
+    ct = float(p[site.c_name]) if site.c_name is not None else 0.0
+    g1, g2 = (float(v) for v in site.g)
+    gr = float(site.gr[0])
     sym = (m12, c12, k12) == (m21, c21, k21)
     two_pi = 2.0 * math.pi
 
@@ -87,12 +159,22 @@ def response_function(model: SuspensionModel, p: Mapping[str, float]
         z22 = (k22 - m22 * w2) + c22 * s
         z12 = (k12 - m12 * w2) + c12 * s
         z21 = z12 if sym else (k21 - m21 * w2) + c21 * s
+        b1 = fk1 + fc1 * s if (fk1 != 0.0 or fc1 != 0.0) else None
         b2 = fk2 + fc2 * s
-        num = z11 * b2
-        if fk1 != 0.0 or fc1 != 0.0:
-            num -= z21 * (fk1 + fc1 * s)
-        x2 = num / (z11 * z22 - z12 * z21)
-        return (kt + ct * s) * (1.0 - x2)
+        det = z11 * z22 - z12 * z21
+        # compression per unit plate motion: only the terms the tyre's geometry has
+        comp: Any = gr
+        if g2 != 0.0:
+            num2 = z11 * b2
+            if b1 is not None:
+                num2 -= z21 * b1
+            comp = comp + g2 * (num2 / det)
+        if g1 != 0.0:
+            num1 = -z12 * b2
+            if b1 is not None:
+                num1 += z22 * b1
+            comp = comp + g1 * (num1 / det)
+        return np.asarray((kt + ct * s) * comp)
 
     return H
 
@@ -103,7 +185,7 @@ def contact_force_response(model: SuspensionModel, p: Mapping[str, float], f: Fl
     Parameters
     ----------
     model : SuspensionModel
-        ``quarter2``.
+        A quarter car (:func:`quarter_car_problem`).
     p : mapping
         Parameters (SI).
     f : ndarray
@@ -147,7 +229,7 @@ class Inspection:
     f_body_hz, f_wheel_hz : float
         Natural frequencies of the body and wheel modes (Hz).
     static_load_n : float
-        ``(m1 + m2) g`` (N).
+        ``(m1 + m2) g`` (N): the tyre site's static load at ``g =`` :data:`G`.
     """
 
     eusama_pct: float
@@ -243,9 +325,9 @@ def inspect(params: Mapping[str, float], model: SuspensionModel | None = None,
     Parameters
     ----------
     params : mapping
-        Quarter-car parameters ``m1, c1, k1, m2, c2, k2`` (SI).
+        Quarter-car parameters (SI), ``m1, c1, k1, m2, c2, k2`` for ``quarter2``.
     model : SuspensionModel, optional
-        Default ``quarter2``.
+        Any quarter car (:func:`quarter_car_problem`); default ``quarter2``.
     amplitude : float
         Plate amplitude (m), default 3 mm.
     sweep : (float, float)
@@ -259,7 +341,7 @@ def inspect(params: Mapping[str, float], model: SuspensionModel | None = None,
     Inspection
     """
     model = model or get_model("quarter2")
-    fs = (params["m1"] + params["m2"]) * G
+    fs = static_load(tyre_site(model, params))
     f_lo, f_hi = sweep
     a2 = (amplitude / fs) ** 2
 

@@ -30,11 +30,11 @@ from estimator.identify import OutputErrorProblem, minimize_log
 from estimator.diagnose.residuals import shift_allpass
 from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
-from suspid.models.base import FloatArray
+from suspid.models.base import AffinePieces, FloatArray
 from suspid.effects import Effect, PhysicalEffect, SensorEffect
 from suspid.nlsim import simulate_effects
-from suspid.simulate import (free_coeffs_to_state, free_response_basis, modal_form, outputs,
-                             simulate_states)
+from suspid.simulate import (free_coeffs_to_state, free_response_basis, mass_inverse, modal_form,
+                             outputs, simulate_states)
 
 
 @dataclass
@@ -74,8 +74,27 @@ class ModelFit:
         return {c: float(np.sqrt(np.nanmean(e ** 2))) for c, e in self.residual.items()}
 
 
+def all_channels(problem: OutputErrorProblem, p: Mapping[str, float],
+                 x0: FloatArray) -> dict[str, FloatArray]:
+    """Every channel of the linear model at ``p`` from ``x0`` on the problem's record.
+
+    Simulated through the problem's forward-model pieces
+    (:meth:`~estimator.identify.OutputErrorProblem.pieces`) where they apply.
+    """
+    aff = problem.pieces(p)
+    X = simulate_states(problem.model, p, problem.t, problem.U, x0, affine=aff)
+    return outputs(problem.model, p, X, problem.U, aff)
+
+
+def residuals_of(model_channels: tuple[str, ...] | list[str], measured: Mapping[str, FloatArray],
+                 predicted: Mapping[str, FloatArray]) -> dict[str, FloatArray]:
+    """``channel -> measured - predicted`` for each of ``model_channels`` that is measured."""
+    return {c: np.asarray(measured[c], dtype=float) - predicted[c]
+            for c in model_channels if c in measured}
+
+
 def substeps_for(problem: OutputErrorProblem, p: Mapping[str, float], effect: PhysicalEffect,
-                 h: float, x0: FloatArray | None = None) -> int:
+                 h: float, x0: FloatArray | None = None, affine: AffinePieces | None = None) -> int:
     """Internal steps per sample so the explicit effect term stays well inside stability.
 
     Uses the effect's stiffness at each of its sites (``d phi / d s'`` and ``d phi / d s``
@@ -100,6 +119,9 @@ def substeps_for(problem: OutputErrorProblem, p: Mapping[str, float], effect: Ph
         Sample interval (s).
     x0 : ndarray, optional
         Initial state of the linear response used to bound the site coordinates (m, m/s).
+    affine : AffinePieces, optional
+        The model's affine pieces (:meth:`~suspid.models.base.SuspensionModel.affine`):
+        the forward model and ``M^-1`` when they apply to ``p``.
 
     Returns
     -------
@@ -107,9 +129,8 @@ def substeps_for(problem: OutputErrorProblem, p: Mapping[str, float], effect: Ph
         Substeps per sample, 1 to :data:`MAX_SUBSTEPS`.
     """
     model = problem.model
-    M, *_ = model.matrices(p)
-    Minv = np.linalg.inv(M)
-    X = simulate_states(model, p, problem.t, problem.U, x0)
+    Minv = mass_inverse(model, p, affine)
+    X = simulate_states(model, p, problem.t, problem.U, x0, affine=affine)
     rate_c, rate_k = 0.0, 0.0
     for site in effect.sites(model, p):
         phi = effect.law(site, p)
@@ -138,10 +159,11 @@ def substeps_for(problem: OutputErrorProblem, p: Mapping[str, float], effect: Ph
     data_ss = sum(float(np.nansum(np.asarray(problem.meas.measured[c], dtype=float) ** 2)) for c in chans)
     if data_ss <= 0:
         return sub
-    prev = simulate_effects(model, p, [effect], problem.t, U=problem.U, x0=x0, substeps=sub)
+    prev = simulate_effects(model, p, [effect], problem.t, U=problem.U, x0=x0, substeps=sub,
+                            affine=affine)
     while sub < MAX_SUBSTEPS:
         nxt = simulate_effects(model, p, [effect], problem.t, U=problem.U, x0=x0,
-                               substeps=min(2 * sub, MAX_SUBSTEPS))
+                               substeps=min(2 * sub, MAX_SUBSTEPS), affine=affine)
         change = sum(float(np.sum((nxt[c] - prev[c]) ** 2)) for c in chans)
         if change <= ACCURACY * data_ss:
             break
@@ -162,8 +184,29 @@ _RATE_C_LIMIT = 4.5 / 1.82
 _RATE_K_LIMIT = 0.75 / math.sqrt(1.82)
 
 
+def forward_pieces(problem: OutputErrorProblem, base: Mapping[str, float],
+                   free: list[str] | None = None) -> AffinePieces:
+    """The forward model's affine pieces for a refit that moves ``free`` away from ``base``.
+
+    The problem's own pieces (:meth:`~estimator.identify.OutputErrorProblem.pieces`) when
+    they apply to ``base`` and leave every parameter of ``free`` free, else new ones
+    (:meth:`~suspid.models.base.SuspensionModel.affine`; default: every damper and spring).
+    Built once per refit, they serve each of its many simulations.
+    """
+    own = problem.affine
+    if own is not None and own.matches(base) and set(free or own.names) <= set(own.names):
+        return own
+    return problem.model.affine(base, free)
+
+
 class PhysicalRefit:
-    """Output-error problem of the base model plus one physical effect."""
+    """Output-error problem of the base model plus one physical effect.
+
+    The forward model's affine pieces in the parameters the refit moves (the free base
+    parameters and those the effect determines) are built once
+    (:meth:`~suspid.models.base.SuspensionModel.affine`) and passed to every simulation;
+    where they do not apply (a free mass) the model is used, as without them.
+    """
 
     def __init__(self, problem: OutputErrorProblem, base: Mapping[str, float], free: list[str],
                  effect: PhysicalEffect, x0: FloatArray) -> None:
@@ -177,7 +220,9 @@ class PhysicalRefit:
         self.base_free = [k for k in free if k not in self.tied]
         self.eff_names = effect.numeric_names
         self.x0 = np.asarray(x0, dtype=float)
-        self.substeps = substeps_for(problem, base, effect, problem.h or 1.0, self.x0)
+        moving = list(dict.fromkeys(self.base_free + self.tied))
+        self.affine = forward_pieces(problem, self.base, moving)
+        self.substeps = substeps_for(problem, base, effect, problem.h or 1.0, self.x0, self.affine)
 
     def split(self, theta: Mapping[str, float]) -> tuple[dict[str, float], PhysicalEffect]:
         p = dict(self.base)
@@ -191,7 +236,7 @@ class PhysicalRefit:
         """Re-check the internal steps at ``theta``; True if more were needed (then set)."""
         p, eff = self.split(theta)
         try:
-            sub = substeps_for(self.problem, p, eff, self.problem.h or 1.0, self.x0)
+            sub = substeps_for(self.problem, p, eff, self.problem.h or 1.0, self.x0, self.affine)
         except (np.linalg.LinAlgError, ValueError, FloatingPointError, OverflowError):
             return False
         if sub <= self.substeps:
@@ -202,7 +247,8 @@ class PhysicalRefit:
     def simulate(self, p: Mapping[str, float], eff: PhysicalEffect,
                  x0: FloatArray) -> dict[str, FloatArray]:
         pr = self.problem
-        return simulate_effects(self.model, p, [eff], pr.t, U=pr.U, x0=x0, substeps=self.substeps)
+        return simulate_effects(self.model, p, [eff], pr.t, U=pr.U, x0=x0, substeps=self.substeps,
+                                affine=self.affine)
 
     def residual(self, theta: Mapping[str, float]) -> tuple[FloatArray, FloatArray, dict[str, FloatArray]]:
         """Weighted residual (N, p) on the cost channels, the initial state used, all channels."""
@@ -212,7 +258,7 @@ class PhysicalRefit:
         Y = np.column_stack([sim[c] for c in pr.channels])
         x0 = self.x0
         if isinstance(pr.x0, str) and pr.x0 == "estimate":
-            modal = modal_form(self.model, p)
+            modal = modal_form(self.model, p, self.affine)
             if modal is not None and pr.h is not None:
                 Cm, _ = pr._output_maps(modal.A, modal.B)
                 G = free_response_basis(modal, pr.h, pr.t.size, Cm)
@@ -312,8 +358,7 @@ class PhysicalRefit:
         self.x0 = x0
         sim = self.simulate(p, eff, x0)
         ss = float(np.sum(r * r))
-        resid = {c: np.asarray(pr.meas.measured[c], dtype=float) - sim[c]
-                 for c in self.model.channels if c in pr.meas.measured}
+        resid = residuals_of(self.model.channels, pr.meas.measured, sim)
         return ModelFit(p, eff, resid, sim, pr.seed_cost(ss), nfev, x0, len(names))
 
 
@@ -474,6 +519,8 @@ class SensorRefit:
             self.weights = dict(w_user)
             self.weights.update({c: ref / sigma(c) for c in self.extra})
             self.channels += self.extra
+        # one set of forward-model pieces for every compensated sub-problem
+        self.affine = forward_pieces(problem, self.base)
 
     def sub_problem(self, eff: SensorEffect | None) -> OutputErrorProblem:
         """The linear problem on the data with ``eff`` undone (plus the affected channels);
@@ -481,10 +528,12 @@ class SensorRefit:
         pr = self.problem
         meas = compensated(pr.meas, eff, self.tail, self.effect0.affected())
         if not self.extra:
-            return OutputErrorProblem(self.model, meas, cost=pr.cost, x0=pr.x0, weights=pr.weights)
+            return OutputErrorProblem(self.model, meas, cost=pr.cost, x0=pr.x0, weights=pr.weights,
+                                      affine=self.affine)
         sub = Measurement(meas.t, meas.road, {c: meas.measured[c] for c in self.channels},
                           list(meas.warnings), meas.source)
-        return OutputErrorProblem(self.model, sub, cost="frobenius", x0=pr.x0, weights=self.weights)
+        return OutputErrorProblem(self.model, sub, cost="frobenius", x0=pr.x0, weights=self.weights,
+                                  affine=self.affine)
 
     def fit(self, start_base: Mapping[str, float], start_effect: Mapping[str, Any],
             restarts: int = 3, maxfev: int | None = None, step: float = 0.15) -> ModelFit:
@@ -593,11 +642,9 @@ class SensorRefit:
         """Residuals of every measured channel (compensated data) and the seed cost."""
         sp = self.sub_problem(eff)
         pred = sp.predict(p)
-        X = simulate_states(self.model, p, sp.t, sp.U, pred.x0)
-        allout = outputs(self.model, p, X, sp.U)
+        allout = all_channels(sp, p, pred.x0)
         comp = compensated(self.problem.meas, eff, self.tail, self.effect0.affected()).measured
-        resid = {c: np.asarray(comp[c], dtype=float) - allout[c]
-                 for c in self.model.channels if c in comp}
+        resid = residuals_of(self.model.channels, comp, allout)
         pr = self.problem
         ss = float(sum(np.nansum((float((pr.weights or {}).get(c, 1.0)) * resid[c]) ** 2)
                        for c in pr.channels))
@@ -643,7 +690,8 @@ def reweighted_linear_fit(problem: OutputErrorProblem, p: Mapping[str, float], f
         w[c] = 1.0 / max(math.sqrt(max(float(noise_var.get(c, 0.0)), 0.0)), 1e-9 * ref, 1e-300)
     sub = Measurement(meas.t, meas.road, {c: meas.measured[c] for c in chans}, list(meas.warnings),
                       meas.source)
-    pr = OutputErrorProblem(model, sub, cost="frobenius", x0=problem.x0, weights=w)
+    pr = OutputErrorProblem(model, sub, cost="frobenius", x0=problem.x0, weights=w,
+                            affine=forward_pieces(problem, p))
     th0 = np.array([float(p[k]) for k in free])
     big = np.full(pr.n_obs, 1e6)
 
@@ -671,9 +719,7 @@ def reweighted_linear_fit(problem: OutputErrorProblem, p: Mapping[str, float], f
         except (ValueError, np.linalg.LinAlgError):
             pass
     pred = pr.predict(q)
-    X = simulate_states(model, q, pr.t, pr.U, pred.x0)
-    allout = outputs(model, q, X, pr.U)
-    return q, {c: np.asarray(meas.measured[c], dtype=float) - allout[c] for c in chans}
+    return q, residuals_of(chans, meas.measured, all_channels(pr, q, pred.x0))
 
 
 def baseline_fit(problem: OutputErrorProblem, p: Mapping[str, float], x0: FloatArray, nfev: int,
@@ -681,10 +727,8 @@ def baseline_fit(problem: OutputErrorProblem, p: Mapping[str, float], x0: FloatA
     """Wrap an ordinary linear fit as a :class:`ModelFit` (residuals on every measured channel)."""
     pred = problem.predict(p)
     ss = float(np.nansum((pred.residual * problem.w) ** 2))
-    X = simulate_states(problem.model, p, problem.t, problem.U, pred.x0)
-    allout = outputs(problem.model, p, X, problem.U)
-    resid = {c: np.asarray(problem.meas.measured[c], dtype=float) - allout[c]
-             for c in problem.model.channels if c in problem.meas.measured}
+    allout = all_channels(problem, p, pred.x0)
+    resid = residuals_of(problem.model.channels, problem.meas.measured, allout)
     return ModelFit(dict(p), None, resid, allout, problem.seed_cost(ss), nfev, pred.x0, k)
 
 

@@ -270,36 +270,20 @@ def motion_from(model: SuspensionModel, meas: Measurement, predicted: Mapping[st
     def smooth(y: FloatArray, deriv: int = 0) -> FloatArray:
         return savgol_filter(y, w, 3, deriv=deriv, delta=h)
 
-    Q, QD, QDD = (np.empty((n, nq)) for _ in range(3))
+    suffixes = ("", "_dot", "_ddot")
+    Q, QD, QDD = derivs = [np.empty((n, nq)) for _ in suffixes]
     for i, c in enumerate(model.coords):
-        x, xd, xdd = get(c), get(f"{c}_dot"), get(f"{c}_ddot")
-        if x is not None:
-            Q[:, i] = smooth(x)
-            src[c] = "measured"
-        else:
-            Q[:, i] = smooth(predicted[c])
-            src[c] = "model"
-        if xd is not None:
-            QD[:, i] = smooth(xd)
-            src[f"{c}_dot"] = "measured"
-        elif x is not None:
-            QD[:, i] = smooth(x, 1)
-            src[f"{c}_dot"] = "derived"
-        else:
-            QD[:, i] = smooth(predicted[f"{c}_dot"])
-            src[f"{c}_dot"] = "model"
-        if xdd is not None:
-            QDD[:, i] = smooth(xdd)
-            src[f"{c}_ddot"] = "measured"
-        elif xd is not None:
-            QDD[:, i] = smooth(xd, 1)
-            src[f"{c}_ddot"] = "derived"
-        elif x is not None:
-            QDD[:, i] = smooth(x, 2)
-            src[f"{c}_ddot"] = "derived"
-        else:
-            QDD[:, i] = smooth(predicted[f"{c}_ddot"])
-            src[f"{c}_ddot"] = "model"
+        ys = [get(c + sfx) for sfx in suffixes]
+        for k, sfx in enumerate(suffixes):
+            # the highest measured order up to k, differentiated to k; else the model's
+            j, y = next(((j, y) for j in range(k, -1, -1) if (y := ys[j]) is not None),
+                        (k, None))
+            if y is None:
+                derivs[k][:, i] = smooth(predicted[c + sfx])
+                src[c + sfx] = "model"
+            else:
+                derivs[k][:, i] = smooth(y, k - j)
+                src[c + sfx] = "measured" if j == k else "derived"
     nr = len(model.roads)
     r = np.column_stack([smooth(U[:, j]) for j in range(nr)])
     rd = np.column_stack([smooth(U[:, nr + j]) for j in range(nr)])

@@ -17,6 +17,7 @@ from typing import Any
 from estimator.stream.compare import compare, load_stream, plot
 from estimator.stream.wear_streams import damper_wear
 from suspid.can.options import add_can_arguments, can_inputs
+from suspid.cli._args import comma_list
 from suspid.cli._common import add_model_option, parse_assignments, print_json
 from suspid.errors import UsageError
 from suspid.models import get_model
@@ -94,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
         t, data, truth = load_stream(model, args.input, Path(args.dbc) if args.dbc else dbc,
                                      smap, args.truth)
         source = args.input
-    aug = [x.strip() for x in args.ekf_params.split(",") if x.strip()] if args.ekf_params else None
+    aug = comma_list(args.ekf_params)
     out, recs = compare(model, t, data, truth, fix=fix, nominal=nominal, init=init,
                         alert_drop=args.alert_drop, window=args.window, step=args.step,
                         ekf_params=aug, ekf_q=args.ekf_q, ekf_decimate=args.ekf_decimate,

@@ -6,10 +6,22 @@ import sys
 
 from estimator.diagnose import diagnose
 from estimator.diagnose.plots import plot_evidence
-from suspid.cli._common import (positive_int, add_input_options, add_model_option, add_param_options,
-                                load_measurement, model_from_args, params_from_args, print_json)
+from suspid.cli._args import FitHelp, add_fit_options, fit_inputs
+from suspid.cli._common import add_input_options, add_model_option, add_param_options, print_json
 from suspid.cli.identify import parse_x0
-from suspid.errors import UsageError
+
+#: help of the identifier's options as diagnose words them (the baseline fit's settings)
+FIT_HELP = FitHelp(
+    cost="sse: sum of squared position differences (seed cost 1); frobenius: "
+         "Frobenius norm over all measured channels (seed cost 2)",
+    x0="initial state: estimate it (default), start at rest, or give it",
+    restarts="Nelder-Mead restarts of the baseline fit (default 3; the augmented refit starts "
+             "from the residual regression)",
+    maxfev="evaluation budget of the baseline fit",
+    multistart="baseline fit: further starts (up to N) when it lands on a suspicious "
+               "local minimum, as for identify (default 4)",
+    polish="baseline fit: pure Nelder-Mead to full tolerance (default: Nelder-Mead "
+           "to 1e-2, then a Levenberg-Marquardt polish, as identify)")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -27,19 +39,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     add_model_option(p)
     add_input_options(p)
     add_param_options(p)
-    p.add_argument("--cost", choices=["sse", "frobenius"], default="sse",
-                   help="sse: sum of squared position differences (seed cost 1); frobenius: "
-                        "Frobenius norm over all measured channels (seed cost 2)")
-    p.add_argument("--x0", default="estimate", metavar="estimate|rest|V1,V2,...",
-                   help="initial state: estimate it (default), start at rest, or give it")
-    p.add_argument("--restarts", type=int, default=3, help="Nelder-Mead restarts of the baseline fit (default 3; the augmented refit starts from the residual regression)")
-    p.add_argument("--maxfev", type=positive_int, default=None, help="evaluation budget of the baseline fit")
-    p.add_argument("--multistart", type=int, default=4, metavar="N",
-                   help="baseline fit: further starts (up to N) when it lands on a suspicious "
-                        "local minimum, as for identify (default 4)")
-    p.add_argument("--no-polish", dest="polish", action="store_false",
-                   help="baseline fit: pure Nelder-Mead to full tolerance (default: Nelder-Mead "
-                        "to 1e-2, then a Levenberg-Marquardt polish, as identify)")
+    add_fit_options(p, FIT_HELP, restarts=3)
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
     p.add_argument("--plot", metavar="PNG", default=None,
                    help="write the evidence figure (residuals before/after, autocorrelation, "
@@ -49,11 +49,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     """Run ``suspid diagnose`` (JSON or text on stdout, warnings on stderr); exit status 0."""
-    model = model_from_args(args)
-    params = params_from_args(args, model)
-    if args.multistart < 0:
-        raise UsageError(f"--multistart: expected >= 0, got {args.multistart}")
-    meas, frames = load_measurement(args, model)
+    model, params, meas, frames = fit_inputs(args)
     res = diagnose(model, meas, params, cost=args.cost, x0=parse_x0(args.x0, model.n_states),
                    restarts=args.restarts, maxfev=args.maxfev, polish=args.polish,
                    multistart=args.multistart)

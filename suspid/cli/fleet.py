@@ -10,11 +10,22 @@ from typing import Any
 
 from estimator.fleet import AlertRule, FleetConfig, IdentifySettings, ProgressBar, run_fleet
 from suspid.can.options import add_can_arguments, can_inputs
+from suspid.cli._args import FitHelp, add_fit_options, check_counts
 from suspid.cli._common import (add_model_option, add_param_options, parse_assignments,
                                 positive_int, print_json)
 from suspid.cli.identify import parse_x0
 from suspid.errors import UsageError
 from suspid.models import get_model
+
+
+#: help of the identifier's options as fleet words them (each drive fitted as identify does)
+FIT_HELP = FitHelp(
+    cost="sse (seed cost 1, default) or frobenius (seed cost 2)",
+    x0="initial state: estimate (default), rest, or [q..., q_dot...]",
+    restarts="Nelder–Mead restarts (default 6)",
+    maxfev="evaluation budget over all restarts (default 1000 per free parameter)",
+    multistart="further starts on a suspicious local minimum (default 4)",
+    polish="pure Nelder–Mead to full tolerance (no Levenberg–Marquardt polish)")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -33,17 +44,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     add_can_arguments(p)
     add_param_options(p)
     i = p.add_argument_group("identification (as suspid identify)")
-    i.add_argument("--cost", choices=["sse", "frobenius"], default="sse",
-                   help="sse (seed cost 1, default) or frobenius (seed cost 2)")
-    i.add_argument("--x0", default="estimate", metavar="estimate|rest|V1,V2,...",
-                   help="initial state: estimate (default), rest, or [q..., q_dot...]")
-    i.add_argument("--restarts", type=int, default=6, help="Nelder–Mead restarts (default 6)")
-    i.add_argument("--maxfev", type=positive_int, default=None,
-                   help="evaluation budget over all restarts (default 1000 per free parameter)")
-    i.add_argument("--multistart", type=int, default=4, metavar="N",
-                   help="further starts on a suspicious local minimum (default 4)")
-    i.add_argument("--no-polish", dest="polish", action="store_false",
-                   help="pure Nelder–Mead to full tolerance (no Levenberg–Marquardt polish)")
+    add_fit_options(i, FIT_HELP, restarts=6)
     i.add_argument("--no-data-start", dest="data_start", action="store_false",
                    help="start only from --init and the defaults (as identify's option)")
     a = p.add_argument_group("alerts and forecasts")
@@ -83,9 +84,7 @@ def run(args: argparse.Namespace) -> int:
         if args.model is None:
             raise UsageError("--input needs --model (quarter1, quarter2, half4, ...)")
         model = get_model(args.model)
-        for opt in ("restarts", "multistart"):
-            if getattr(args, opt) < 0:
-                raise UsageError(f"--{opt}: expected >= 0, got {getattr(args, opt)}")
+        check_counts(args, "restarts", "multistart")
         x0 = parse_x0(args.x0, model.n_states)
         dbc, smap = can_inputs(args)
         settings = IdentifySettings(

@@ -12,6 +12,7 @@ from firmware_sim.node import NodeConfig, SensorNode
 from firmware_sim.scenarios import SCENARIOS
 from firmware_sim.transport import SlcanPtyBus, open_bus
 from suspid.can.logs import log_format, open_log_writer
+from suspid.cli._args import comma_list
 from suspid.cli._common import parse_assignments
 from suspid.errors import UsageError
 from suspid.models import MODELS
@@ -94,7 +95,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 def run(args: argparse.Namespace) -> int:
     """Run the node; exit 0 after the scenario ends."""
-    channels = [c.strip() for c in args.channels.split(",") if c.strip()] if args.channels else None
+    channels = comma_list(args.channels)
     cfg = NodeConfig(model=args.model, scenario=args.scenario, duration=args.duration,
                      rate=args.rate, speed=args.speed, noise=args.noise, channels=channels,
                      params=parse_assignments(args.param, "--param"), seed=args.seed,

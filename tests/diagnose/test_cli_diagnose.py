@@ -1,13 +1,14 @@
 """`suspid simulate --effect` + `suspid diagnose --json`: friction on the quarter car found through the CLI."""
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import subprocess
 import sys
 from pathlib import Path
 
-from suspid.cli import main
+from suspid.cli import diagnose, fleet, identify, main
 from suspid.models import get_model
 
 from ..conftest import TABLE1
@@ -132,3 +133,28 @@ def test_full7_through_the_cli(tmp_path: Path, capsys) -> None:
     for k in free:
         assert math.isclose(out["augmented"]["params"][k], truth[k], rel_tol=0.05), k
     assert png.stat().st_size > 10_000
+
+
+def test_the_fitting_commands_share_the_identifier_s_options(tmp_path: Path, capsys) -> None:
+    """diagnose and fleet take identify's fit options with the same names, types and
+    defaults (one definition in suspid.cli._args); negative counts are refused in one line."""
+    def options(mod) -> dict:
+        p = argparse.ArgumentParser()
+        mod.add_parser(p.add_subparsers())
+        sub = next(a for a in p._actions if isinstance(a, argparse._SubParsersAction))
+        cmd = next(iter(sub.choices.values()))
+        return {a.dest: (a.option_strings, a.default, a.type, a.metavar, a.choices)
+                for a in cmd._actions if a.dest in ("cost", "x0", "maxfev", "multistart", "polish")}
+
+    ref = options(identify)
+    assert len(ref) == 5 and ref["cost"][4] == ["sse", "frobenius"]
+    assert options(diagnose) == ref and options(fleet) == ref
+    csv = tmp_path / "q1.csv"
+    assert main(["simulate", "--model", "quarter1", "--duration", "1", "--fs", "100", "--out", str(csv)]) == 0
+    capsys.readouterr()
+    for argv, opt in ((["diagnose", "--model", "quarter1", "--input", str(csv), "--restarts", "-1"], "--restarts"),
+                      (["fleet", "--model", "quarter1", "--input", str(csv), "--restarts", "-2"], "--restarts"),
+                      (["fleet", "--model", "quarter1", "--input", str(csv), "--multistart", "-1"], "--multistart")):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err == [f"error: {opt}: expected >= 0, got {argv[-1]}"], err
