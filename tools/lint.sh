@@ -9,5 +9,5 @@ echo "lint: ruff ..." >&2
 echo "lint: import-linter ..." >&2
 .venv/bin/lint-imports --no-cache >/tmp/suspid-lint-imports.log 2>&1 || { cat /tmp/suspid-lint-imports.log >&2; exit 1; }
 echo "lint: mypy ..." >&2
-"$PY" -m mypy --no-error-summary --cache-dir=/tmp/suspid-mypy-cache
+"$PY" -m mypy --no-error-summary --cache-dir="${MYPY_CACHE_DIR:-.mypy_cache}"
 echo "lint: ruff, import-linter, mypy clean" >&2

@@ -20,7 +20,7 @@ import numpy as np
 
 from estimator.alerts import AlertEngine, ForecastEngine
 from estimator.identify import Parameters
-from estimator.inspection import inspect
+from estimator.inspection import inspect, quarter_car_problem
 from estimator.stream.config import WindowConfig
 from estimator.stream.events import Estimate, Skip, Summary
 from estimator.stream.tracker import TrendTracker
@@ -103,7 +103,8 @@ class NMWindowEstimator:
     channels : list of str
         Measured channels in the stream.
     inspection : bool
-        Add EUSAMA / EGEA results to every quarter-car estimate.
+        Add EUSAMA / EGEA results to every estimate of a model that takes the virtual
+        damper test (:func:`estimator.inspection.quarter_car_problem`).
 
     Attributes
     ----------
@@ -124,7 +125,7 @@ class NMWindowEstimator:
         self.config = config
         self.lag = config.window_s / 2.0
         self.overlap = max(1.0, config.window_s / config.step_s)
-        self.inspection = inspection and model.name == "quarter2"
+        self.inspection = inspection and quarter_car_problem(model) is None
 
     def process(self, t: FloatArray, data: Mapping[str, FloatArray]) -> StepResult:
         data, warns, reason = fill_road_gaps(self.model, data, t, self.config.max_missing)
