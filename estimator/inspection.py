@@ -41,7 +41,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from estimator.stream.config import modes
+from suspid.models.modes import modes
 from suspid.errors import UsageError
 from suspid.models import get_model
 from suspid.models.base import GRAVITY, FloatArray, Site, SuspensionModel

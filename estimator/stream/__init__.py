@@ -17,7 +17,8 @@
 
 See ``docs/monitoring.md``.
 """
-from estimator.stream.config import WindowConfig, default_config, default_decimation, modes
+from estimator.stream.config import WindowConfig, default_config, default_decimation
+from suspid.models.modes import modes
 from estimator.stream.monitor import NMWindowEstimator, StepResult, StreamMonitor
 from estimator.stream.window import SlidingWindowIdentifier, WindowResult
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from estimator.output_only import OutputOnlyEstimator, fit_ar, fit_carma
-from estimator.stream.config import modes
+from suspid.models.modes import modes
 from estimator.stream.drivers import run_arrays
 from estimator.stream.wear_streams import damper_wear
 

@@ -8,7 +8,8 @@ import pytest
 
 from estimator.identify import Parameters
 from estimator.stream.accumulator import WindowAccumulator
-from estimator.stream.config import default_config, default_decimation, modes
+from estimator.stream.config import default_config, default_decimation
+from suspid.models.modes import modes
 from estimator.stream.drivers import run_arrays
 from estimator.stream.monitor import NMWindowEstimator
 from estimator.stream.wear_streams import damper_wear
