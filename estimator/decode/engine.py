@@ -8,7 +8,9 @@ the DBC (:class:`~estimator.decode.routes.Routes`); its DLC; the E2E CRC
 (:class:`~estimator.decode.rules.counters.CounterRules`); in tick mode a known tick
 (:mod:`~estimator.decode.rules.timebase`). Accepted data frames are decoded and pushed into
 the buffer with their data time; SN_Sync, SN_Status and SUSPID_Alert frames update the
-engine's state.
+engine's state. In tick mode the counter rules see data times: a data frame's tick from its
+counter, SN_Sync's own Tick, and for E2E SN_Status and SUSPID_Alert frames the last SN_Sync's
+tick (:mod:`~estimator.decode.rules.timebase`).
 
 Two paths, one result:
 
@@ -179,6 +181,11 @@ class DecodeEngine:
                         rejected["no_sync"] += 1
                         return
                     ts = tick_time(tick_of_counter(self.sync_tick, c), self.period)
+                elif route.kind != DATA and self.sync_tick is not None and self.period:
+                    # SN_Status (SUSPID_Alert): its own counter and rate, sent in the tick
+                    # of the last SN_Sync -- timed by it, a host's late delivery of a
+                    # status is no silence of the sender
+                    ts = tick_time(self.sync_tick, self.period)
                 route.last_arrival = arrival
                 route.sync_n = self.sync_n
             if not self.counters.step(route, c, ts):
@@ -410,16 +417,20 @@ class DecodeEngine:
         if syncs is not None:
             # every other message: the SN_Sync state each frame sees, and the data time of
             # the E2E data frames: the tick nearest the last SN_Sync's with their counter's
-            # residue mod 15, times the period
+            # residue mod 15, times the period; of the E2E SN_Status and SUSPID_Alert frames:
+            # the last SN_Sync's tick times the period
             a0 = runs[0][1]
             sn, st, known, per = syncs.at(h[a0:])
             syncs.sn, syncs.known, syncs.per, syncs.lo = sn, known, per, a0
-            conv = known & ~np.isnan(per) & self.routes.data_e2e[r_h[a0:]]
+            has = known & ~np.isnan(per)
+            conv = has & self.routes.data_e2e[r_h[a0:]]
+            at_sync = has & self.routes.tick_e2e[r_h[a0:]]
             tsd = arr
-            if conv.any():
-                tk = ticks_of_counters(st, alive_counters(rows[a0:]))
+            if conv.any() or at_sync.any():
+                # SN_Status and SUSPID_Alert: the last SN_Sync's tick
+                tk = np.where(conv, ticks_of_counters(st, alive_counters(rows[a0:])), st)
                 tsd = arr.copy()
-                tsd[a0:] = np.where(conv, tick_times(tk, per), arr[a0:])
+                tsd[a0:] = np.where(conv | at_sync, tick_times(tk, per), arr[a0:])
         e2e_runs = [x for x in runs if route_list[x[0]].check is not None]
         if e2e_runs:
             a0, b0 = e2e_runs[0][1], e2e_runs[-1][2]

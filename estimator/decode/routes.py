@@ -150,8 +150,9 @@ class Routes:
         Sorted route keys and their index in ``ordered``.
     ignored_keys : ndarray of int64
         Sorted keys of DBC messages without a route.
-    dlc, e2e, start, data_e2e : ndarray
-        Per route of ``ordered``: length, E2E protected, CRC start register, E2E data.
+    dlc, e2e, start, data_e2e, tick_e2e : ndarray
+        Per route of ``ordered``: length, E2E protected, CRC start register, E2E data,
+        E2E SN_Status or SUSPID_Alert (tick mode: timed by the last SN_Sync's tick).
     known_ids, sync_ids, alert_ids : ndarray / frozenset
         CAN IDs of the DBC, of SN_Sync, of SUSPID_Alert.
     """
@@ -198,6 +199,8 @@ class Routes:
         self.e2e = np.array([r.check is not None for r in rl], dtype=bool)
         self.start = np.array([r.start_reg for r in rl], dtype=np.uint8)
         self.data_e2e = np.array([r.kind == DATA and r.check is not None for r in rl])
+        self.tick_e2e = np.array([r.kind in (STATUS, ALERT) and r.check is not None
+                                  for r in rl])
         self.alert_ids = frozenset(r.key & ~EXT for r in rl if r.kind == ALERT)
         self.known_ids = np.array(sorted(k & ~EXT for k in self.known), dtype=np.int64)
         self.sync_ids = np.array(sorted(r.key & ~EXT for r in rl if r.kind == SYNC),

@@ -6,6 +6,10 @@ Two clocks can give a frame its data time:
   and ``PeriodUs``; an E2E data frame's sample is the tick nearest the last SN_Sync's
   whose residue mod 15 is the frame's alive counter (:func:`tick_of_counter`), its data
   time ``tick x period`` (:func:`tick_time`) -- exact whatever the transport's latency.
+  An E2E ``SN_Status`` (or ``SUSPID_Alert``) frame has a counter of its own, not the tick's:
+  the node sends its status in the tick of the SN_Sync just before it, so its data time is
+  that SN_Sync's tick x period (a host that delivers frames late, in a bunch, then shows no
+  silence of the sender to the counter rules).
 * ``"timestamp"``, the frame's arrival time (logs, buses that stamp on reception), for
   foreign streams that carry no sensor clock.
 
