@@ -176,6 +176,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--road-fusion", type=float, default=None, metavar="HZ",
                     help="sliding window: fuse each road displacement with its velocity's "
                          "integral above HZ (WindowConfig.road_fusion_hz)")
+    ap.add_argument("--drift", nargs="?", const="free", default=None, choices=("free", "prior"),
+                    help="sliding window: refit the wearing part with a linear drift over "
+                         "each window (WindowConfig.drift), its estimate at the window end; "
+                         "the rate fitted per window (free, default) or that of the last "
+                         "estimates (prior)")
     args = ap.parse_args(argv)
     cases = CASES[:args.cases]
     if args.only:
@@ -184,8 +189,13 @@ def main(argv: list[str] | None = None) -> int:
         if unknown:
             ap.error(f"--only: unknown case {', '.join(unknown)}")
         cases = [c for c in CASES if c.key in keys]
-    opts = None if args.road_fusion is None else {"road_fusion_hz": args.road_fusion}
-    rows = [run_case(c, opts) for c in cases]
+    opts: dict[str, Any] = {}
+    if args.road_fusion is not None:
+        opts["road_fusion_hz"] = args.road_fusion
+    rows = []
+    for c in cases:
+        o = dict(opts, drift=(c.part,), drift_rate=args.drift) if args.drift else opts
+        rows.append(run_case(c, o or None))
     if args.json:
         json.dump({"cases": rows}, sys.stdout, indent=1)
         sys.stdout.write("\n")

@@ -334,6 +334,94 @@ class SlidingWindowIdentifier:
         sim -= sim.mean(axis=0)
         return p, sim, True
 
+    def _drift_fit(self, prob: WindowProblem, t_end: float, width: float,
+                   p_const: Mapping[str, float], drift: list[str], out: WindowResult) -> None:
+        """Refit ``drift`` with a linear drift over the window; their values at its end.
+
+        The unknowns are ``log(theta_end / theta_const)`` and ``g width / 2`` per drifting
+        parameter (both the change over half a window), the other parameters held at the
+        constant fit. Starting from the constant fit and the rate of the recent estimates,
+        a few Gauss-Newton steps (forward differences, step halved when the cost does not
+        fall) find them: the residual is close to linear in them over a window's drift.
+        The stderr are Gauss-Newton ones with the rates free and every free parameter's
+        column (the constant fit's other parameters) in the Jacobian. With
+        ``drift_rate="prior"`` the rates stay at that of the recent estimates and only the
+        end values are fitted.
+        """
+        cfg = self.config
+        chunk = cfg.drift_chunk_s
+        half = 0.5 * width
+        h = self._hist
+        nd = len(drift)
+        u = np.zeros(2 * nd)
+        if len(h) >= 2 and h[-1][0] > h[0][0]:
+            for j, k in enumerate(drift):
+                i = self.free.index(k)
+                g = (h[-1][1][i] - h[0][1][i]) / (h[-1][0] - h[0][0])
+                u[j] = u[nd + j] = max(-0.2, min(0.2, g * half))
+
+        def unpack(v: FloatArray) -> tuple[dict[str, float], dict[str, float]]:
+            p = dict(p_const)
+            rates = {}
+            for j, k in enumerate(drift):
+                p[k] = p_const[k] * math.exp(float(v[j]))
+                rates[k] = float(v[nd + j]) / half
+            return p, rates
+
+        def resid(v: FloatArray) -> FloatArray | None:
+            p, rates = unpack(v)
+            try:
+                return prob.drift_residual(p, rates, t_end, chunk)
+            except (np.linalg.LinAlgError, ValueError, FloatingPointError, OverflowError):
+                return None
+
+        free_rate = cfg.drift_rate == "free"
+        step = 1e-4
+        R = resid(u)
+        ok = R is not None
+        for _ in range(cfg.drift_iterations):
+            if R is None:
+                break
+            cols = []
+            for j in range(2 * nd if free_rate else nd):
+                e = u.copy()
+                e[j] += step
+                Rj = resid(e)
+                if Rj is None:
+                    ok = False
+                    break
+                cols.append(((Rj - R) / step).ravel())
+            if not ok:
+                break
+            J = np.column_stack(cols)
+            du = np.zeros(2 * nd)
+            du[:J.shape[1]] = np.linalg.lstsq(J, -R.ravel(), rcond=None)[0]
+            ss = float((R * R).sum())
+            for _half in range(4):
+                un = u + du
+                Rn = resid(un) if np.all(np.abs(un) < 0.5) else None
+                if Rn is not None and float((Rn * Rn).sum()) < ss:
+                    u, R = un, Rn
+                    break
+                du = 0.5 * du
+            else:
+                break
+            if np.abs(du).max() < cfg.xatol:
+                break
+        if not ok or R is None:
+            out.warnings.append("drift fit failed; constant-window estimate kept")
+            return
+        p, rates = unpack(u)
+        se = prob.drift_stderr(p, self.free, rates if free_rate else {}, t_end, chunk,
+                               fixed_rates=None if free_rate else rates)
+        if se is None:
+            out.warnings.append("drift fit: no stderr; constant-window estimate kept")
+            return
+        for k in drift:
+            out.params[k] = p[k]
+            out.stderr_fit[k] = se[k]
+            out.stderr[k] = float(math.hypot(se[k], cfg.sigma_floor * p[k]))
+
     def process(self, t: FloatArray, data: Mapping[str, FloatArray]) -> WindowResult:
         """Fit one window (or skip it).
 
@@ -402,6 +490,9 @@ class SlidingWindowIdentifier:
             out.warnings.append(f"Nelder-Mead used its budget of {budget} evaluations "
                                 f"before meeting xatol={cfg.xatol:g}")
         rel = {k: (v / res.params[k]) for k, v in res.stderr.items()}
+        drift = [k for k in cfg.drift if k in free]
+        if drift and res.identifiable and prob.drift_ok:
+            self._drift_fit(prob, float(t[-1]), float(t[-1] - t[0]), res.params, drift, out)
         if res.identifiable and all(np.isfinite(v) and v < 0.5 for v in rel.values()):
             self._warm = (dict(res.params), rel)
             self._hist = (self._hist + [(out.t, [math.log(res.params[k]) for k in free])])[-3:]
