@@ -215,6 +215,10 @@ class SlidingWindowIdentifier:
             raise UsageError("every parameter is fixed (--fix); nothing to monitor")
         self.nominal = self.params.valuesdict()
         self._ssmap = StateSpaceMap(model, self.nominal, self.free)
+        fixed_drift = [k for k in config.drift if k not in self.free]
+        if fixed_drift:
+            raise UsageError(f"drift: {', '.join(fixed_drift)} not among the free parameters "
+                             f"({', '.join(self.free)})")
         #: previous accepted estimate (SI) and its relative stderr_fit per free parameter
         self._warm: tuple[dict[str, float], dict[str, float]] | None = None
         #: (window end time (s), log of the free parameters) of the last accepted windows
@@ -334,6 +338,22 @@ class SlidingWindowIdentifier:
         sim -= sim.mean(axis=0)
         return p, sim, True
 
+    @staticmethod
+    def _to_end(drift: list[str], g: list[float], half: float, out: WindowResult,
+                why: str) -> None:
+        """Move constant-window estimates to the window end with the recent rates ``g``.
+
+        The tracker takes the drifting parameters' estimates as describing the window end;
+        when a window cannot be fitted with the drift, its middle estimate is carried there.
+        """
+        for k, gk in zip(drift, g):
+            f = math.exp(max(-0.2, min(0.2, gk * half)))
+            out.params[k] *= f
+            out.stderr[k] *= f
+            out.stderr_fit[k] *= f
+        out.warnings.append(f"{why}; the constant-window estimate of "
+                            f"{', '.join(drift)} moved to the window end at the recent rate")
+
     def _drift_fit(self, prob: WindowProblem, t_end: float, width: float,
                    p_const: Mapping[str, float], drift: list[str], out: WindowResult) -> None:
         """Refit ``drift`` with a linear drift over the window; their values at its end.
@@ -354,11 +374,12 @@ class SlidingWindowIdentifier:
         h = self._hist
         nd = len(drift)
         u = np.zeros(2 * nd)
+        g_hist = [0.0] * nd
         if len(h) >= 2 and h[-1][0] > h[0][0]:
             for j, k in enumerate(drift):
                 i = self.free.index(k)
-                g = (h[-1][1][i] - h[0][1][i]) / (h[-1][0] - h[0][0])
-                u[j] = u[nd + j] = max(-0.2, min(0.2, g * half))
+                g_hist[j] = (h[-1][1][i] - h[0][1][i]) / (h[-1][0] - h[0][0])
+                u[j] = u[nd + j] = max(-0.2, min(0.2, g_hist[j] * half))
 
         def unpack(v: FloatArray) -> tuple[dict[str, float], dict[str, float]]:
             p = dict(p_const)
@@ -409,13 +430,13 @@ class SlidingWindowIdentifier:
             if np.abs(du).max() < cfg.xatol:
                 break
         if not ok or R is None:
-            out.warnings.append("drift fit failed; constant-window estimate kept")
+            self._to_end(drift, g_hist, half, out, "drift fit not possible on this window")
             return
         p, rates = unpack(u)
         se = prob.drift_stderr(p, self.free, rates if free_rate else {}, t_end, chunk,
                                fixed_rates=None if free_rate else rates)
         if se is None:
-            out.warnings.append("drift fit: no stderr; constant-window estimate kept")
+            self._to_end(drift, g_hist, half, out, "drift fit without stderr")
             return
         for k in drift:
             out.params[k] = p[k]
@@ -491,7 +512,7 @@ class SlidingWindowIdentifier:
                                 f"before meeting xatol={cfg.xatol:g}")
         rel = {k: (v / res.params[k]) for k, v in res.stderr.items()}
         drift = [k for k in cfg.drift if k in free]
-        if drift and res.identifiable and prob.drift_ok:
+        if drift and res.identifiable:
             self._drift_fit(prob, float(t[-1]), float(t[-1] - t[0]), res.params, drift, out)
         if res.identifiable and all(np.isfinite(v) and v < 0.5 for v in rel.values()):
             self._warm = (dict(res.params), rel)

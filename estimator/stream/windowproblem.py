@@ -756,8 +756,8 @@ class WindowProblem(OutputErrorProblem):
     # ---- linear drift inside the window --------------------------------------------------
     @property
     def drift_ok(self) -> bool:
-        """Whether :meth:`drift_residual` applies (lean window, state channels, fixed ``B_v``)."""
-        return bool(self.lean and self._state_rows and self._ssmap.affine_bz)
+        """Whether :meth:`drift_residual` applies (lean window, fitted channels are states)."""
+        return bool(self.lean and self._state_rows)
 
     def drift_residual(self, p: Mapping[str, float], rates: Mapping[str, float],
                        t_ref: float, chunk_s: float) -> FloatArray | None:
@@ -769,7 +769,8 @@ class WindowProblem(OutputErrorProblem):
         first-order-hold road is discretised exactly (one matrix exponential per chunk).
         The initial state is fitted by least squares as on the constant path; with every
         rate zero the residual equals the lean evaluation's to rounding. ``None`` when
-        :attr:`drift_ok` is false or a chunk's matrices are not finite.
+        :attr:`drift_ok` is false, a chunk's matrices are not finite or a drifting parameter
+        enters ``B_v`` (the road-rate input).
         """
         if not self.drift_ok:
             return None
@@ -797,7 +798,10 @@ class WindowProblem(OutputErrorProblem):
                 if v[i] <= 0.0:
                     return None
             A, B, Bz, _ = self._ssmap.from_values(v)
-            Bv = B[:, nr:]
+            if Bv is None:
+                Bv = B[:, nr:].copy()
+            elif not np.allclose(B[:, nr:], Bv, rtol=1e-12, atol=0.0):
+                return None  # a drifting tyre damping: z = x - B_v r would change in time
             aug[c, :n, :n] = A * h
             aug[c, :n, n:n + nr] = Bz * h
         F = _expm(aug)

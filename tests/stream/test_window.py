@@ -14,6 +14,7 @@ from estimator.stream.monitor import NMWindowEstimator
 from estimator.stream.wear_streams import damper_wear
 from estimator.stream.tracker import ParameterTracker
 from estimator.stream.window import SlidingWindowIdentifier, fuse_road, noise_floor
+from suspid.errors import UsageError
 
 
 def test_defaults_follow_the_modes(quarter2) -> None:
@@ -191,3 +192,26 @@ def test_drift_model_refers_a_ramping_damper_to_the_window_end(quarter2) -> None
     # the other parameters are those of the constant fit
     assert drift.params["k1"] == const.params["k1"]
     assert 0 < drift.stderr_fit["c1"] < 0.05 * c_end
+
+
+def test_drift_needs_free_parameters_and_falls_back_to_the_recent_rate(quarter2) -> None:
+    s = damper_wear(quarter2, duration=8.0, wear_start=0.0, wear_end=8.0, seed=3)
+    fix = {k: s.nominal[k] for k in ("m1", "m2", "c2", "k2")}
+    cfg = default_config(quarter2, s.nominal, 500.0, 4)
+    cfg.drift = ("c2",)
+    with pytest.raises(UsageError, match="c2 not among the free parameters"):
+        SlidingWindowIdentifier(quarter2, Parameters.for_model(quarter2, fix=fix), cfg,
+                                ["x1", "x2"])
+    # acceleration channels fitted: no drift window; the estimate is moved to the end
+    cfg.drift = ("c1",)
+    cfg.cost = "frobenius"
+    ident = SlidingWindowIdentifier(quarter2, Parameters.for_model(quarter2, fix=fix), cfg,
+                                    ["x1", "x2", "x1_ddot"])
+    res = []
+    run_arrays(s.t, s.data, cfg.window_s, cfg.step_s, lambda t, d: res.append(ident.process(t, d)))
+    assert len(res) >= 3
+    for r in res:
+        assert any("moved to the window end at the recent rate" in w for w in r.warnings)
+    # the first windows have no recent rate (unchanged); later ones are moved down
+    assert res[-1].params["c1"] < float(np.interp(res[-1].t - cfg.window_s / 2, s.t,
+                                                  s.truth["c1"]))
