@@ -181,6 +181,9 @@ def main(argv: list[str] | None = None) -> int:
                          "each window (WindowConfig.drift), its estimate at the window end; "
                          "the rate fitted per window (free, default) or that of the last "
                          "estimates (prior)")
+    ap.add_argument("--drift-rate-sd", type=float, default=0.0, metavar="PER_S",
+                    help="with --drift free: prior sd of each window's relative rate around "
+                         "the recent estimates' (WindowConfig.drift_rate_sd)")
     args = ap.parse_args(argv)
     cases = CASES[:args.cases]
     if args.only:
@@ -194,7 +197,8 @@ def main(argv: list[str] | None = None) -> int:
         opts["road_fusion_hz"] = args.road_fusion
     rows = []
     for c in cases:
-        o = dict(opts, drift=(c.part,), drift_rate=args.drift) if args.drift else opts
+        o = (dict(opts, drift=(c.part,), drift_rate=args.drift, drift_rate_sd=args.drift_rate_sd)
+             if args.drift else opts)
         rows.append(run_case(c, o or None))
     if args.json:
         json.dump({"cases": rows}, sys.stdout, indent=1)

@@ -142,6 +142,9 @@ class WindowConfig:
     drift_rate : str
         ``"free"``: each window fits its drift rate; ``"prior"``: the rate is that of the
         last (up to 3) estimates, only the end value is fitted.
+    drift_rate_sd : float
+        With ``drift_rate="free"``: standard deviation (relative, 1/s) of a prior on each
+        window's rate centred on that of the last estimates; 0 (default): no prior.
     """
 
     window_s: float
@@ -162,6 +165,7 @@ class WindowConfig:
     drift_chunk_s: float = 0.1
     drift_iterations: int = 3
     drift_rate: str = "free"
+    drift_rate_sd: float = 0.0
 
     def validate(self) -> None:
         """Raise :class:`UsageError` naming the first inconsistent setting."""

@@ -400,6 +400,18 @@ class SlidingWindowIdentifier:
         step = 1e-4
         R = resid(u)
         ok = R is not None
+        # optional prior on the rates: the recent estimates' rate, sd drift_rate_sd (1/s)
+        sd_u = cfg.drift_rate_sd * half if (free_rate and len(h) >= 2) else 0.0
+        u_prior = u[nd:].copy()
+        # with a prior the residuals are weighted by their channel's RMS (noise units)
+        sig = (np.ones(1) if R is None or sd_u == 0 else
+               np.maximum(np.sqrt((R * R).mean(axis=1)), 1e-300))[:, None]
+
+        def objective(Rv: FloatArray, v: FloatArray) -> float:
+            ss = float(((Rv / sig) ** 2).sum())
+            if sd_u > 0:
+                ss += float((((v[nd:] - u_prior) / sd_u) ** 2).sum())
+            return ss
         for _ in range(cfg.drift_iterations):
             if R is None:
                 break
@@ -411,17 +423,23 @@ class SlidingWindowIdentifier:
                 if Rj is None:
                     ok = False
                     break
-                cols.append(((Rj - R) / step).ravel())
+                cols.append(((Rj - R) / step / sig).ravel())
             if not ok:
                 break
             J = np.column_stack(cols)
+            rhs = -(R / sig).ravel()
+            if sd_u > 0:
+                P = np.zeros((nd, J.shape[1]))
+                P[:, nd:] = np.eye(nd) / sd_u
+                J = np.vstack([J, P])
+                rhs = np.concatenate([rhs, -(u[nd:] - u_prior) / sd_u])
             du = np.zeros(2 * nd)
-            du[:J.shape[1]] = np.linalg.lstsq(J, -R.ravel(), rcond=None)[0]
-            ss = float((R * R).sum())
+            du[:J.shape[1]] = np.linalg.lstsq(J, rhs, rcond=None)[0]
+            ss = objective(R, u)
             for _half in range(4):
                 un = u + du
                 Rn = resid(un) if np.all(np.abs(un) < 0.5) else None
-                if Rn is not None and float((Rn * Rn).sum()) < ss:
+                if Rn is not None and objective(Rn, un) < ss:
                     u, R = un, Rn
                     break
                 du = 0.5 * du
@@ -434,7 +452,8 @@ class SlidingWindowIdentifier:
             return
         p, rates = unpack(u)
         se = prob.drift_stderr(p, self.free, rates if free_rate else {}, t_end, chunk,
-                               fixed_rates=None if free_rate else rates)
+                               fixed_rates=None if free_rate else rates,
+                               rate_prior_sd=(cfg.drift_rate_sd if sd_u > 0 else None))
         if se is None:
             self._to_end(drift, g_hist, half, out, "drift fit without stderr")
             return

@@ -858,11 +858,12 @@ class WindowProblem(OutputErrorProblem):
 
     def drift_stderr(self, p: Mapping[str, float], free: list[str], rates: Mapping[str, float],
                      t_ref: float, chunk_s: float, rel_step: float = 1e-4,
-                     fixed_rates: Mapping[str, float] | None = None
-                     ) -> dict[str, float] | None:
+                     fixed_rates: Mapping[str, float] | None = None,
+                     rate_prior_sd: float | None = None) -> dict[str, float] | None:
         """Gauss-Newton standard errors (SI) of the free parameters at ``t_ref`` with the
         drift ``rates`` free as well (forward differences, noise per channel from the
-        residual); ``fixed_rates`` drift too but are known.
+        residual); ``fixed_rates`` drift too but are known; ``rate_prior_sd`` (1/s) adds a
+        prior of that standard deviation on each free rate.
         """
         known = dict(fixed_rates or {})
         rates = dict(rates)
@@ -892,8 +893,12 @@ class WindowProblem(OutputErrorProblem):
         sig = np.sqrt((R0 * R0).sum(axis=1) / max(N - len(cols), 1))
         sig = np.where(sig > 0, sig, 1.0)
         J = (np.column_stack(cols).reshape(pch, N, -1) / sig[:, None, None]).reshape(pch * N, -1)
+        H = J.T @ J
+        if rate_prior_sd:
+            nf = len(free)
+            H[nf:, nf:] += np.eye(len(rates)) / rate_prior_sd ** 2
         try:
-            cov = np.linalg.inv(J.T @ J)
+            cov = np.linalg.inv(H)
         except np.linalg.LinAlgError:
             return None
         return {k: float(p[k] * math.sqrt(max(float(cov[i, i]), 0.0)))
