@@ -16,6 +16,8 @@ Usage::
     python tools/bench_maintenance.py                  # every stream (~1-2 min on one core)
     python tools/bench_maintenance.py --only demo,fast # a subset, by key
     python tools/bench_maintenance.py --json           # one JSON object
+    python tools/bench_maintenance.py --drift          # the window with a linear drift of
+                                                       # the wearing part (WindowConfig.drift)
 """
 from __future__ import annotations
 
@@ -184,6 +186,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--drift-rate-sd", type=float, default=0.0, metavar="PER_S",
                     help="with --drift free: prior sd of each window's relative rate around "
                          "the recent estimates' (WindowConfig.drift_rate_sd)")
+    ap.add_argument("--drift-chunk", type=float, default=0.1, metavar="S",
+                    help="with --drift: chunk over which the drift is held constant "
+                         "(WindowConfig.drift_chunk_s, default 0.1 s)")
     args = ap.parse_args(argv)
     cases = CASES[:args.cases]
     if args.only:
@@ -197,7 +202,8 @@ def main(argv: list[str] | None = None) -> int:
         opts["road_fusion_hz"] = args.road_fusion
     rows = []
     for c in cases:
-        o = (dict(opts, drift=(c.part,), drift_rate=args.drift, drift_rate_sd=args.drift_rate_sd)
+        o = (dict(opts, drift=(c.part,), drift_rate=args.drift, drift_rate_sd=args.drift_rate_sd,
+                  drift_chunk_s=args.drift_chunk)
              if args.drift else opts)
         rows.append(run_case(c, o or None))
     if args.json:
