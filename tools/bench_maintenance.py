@@ -183,12 +183,12 @@ def main(argv: list[str] | None = None) -> int:
                          "each window (WindowConfig.drift), its estimate at the window end; "
                          "the rate fitted per window (free, default) or that of the last "
                          "estimates (prior)")
-    ap.add_argument("--drift-rate-sd", type=float, default=0.0, metavar="PER_S",
+    ap.add_argument("--drift-rate-sd", type=float, default=None, metavar="PER_S",
                     help="with --drift free: prior sd of each window's relative rate around "
-                         "the recent estimates' (WindowConfig.drift_rate_sd)")
-    ap.add_argument("--drift-chunk", type=float, default=0.1, metavar="S",
+                         "the recent estimates' (WindowConfig.drift_rate_sd; 0: none)")
+    ap.add_argument("--drift-chunk", type=float, default=None, metavar="S",
                     help="with --drift: chunk over which the drift is held constant "
-                         "(WindowConfig.drift_chunk_s, default 0.1 s)")
+                         "(WindowConfig.drift_chunk_s)")
     args = ap.parse_args(argv)
     cases = CASES[:args.cases]
     if args.only:
@@ -202,9 +202,13 @@ def main(argv: list[str] | None = None) -> int:
         opts["road_fusion_hz"] = args.road_fusion
     rows = []
     for c in cases:
-        o = (dict(opts, drift=(c.part,), drift_rate=args.drift, drift_rate_sd=args.drift_rate_sd,
-                  drift_chunk_s=args.drift_chunk)
-             if args.drift else opts)
+        o = dict(opts)
+        if args.drift:
+            o.update(drift=(c.part,), drift_rate=args.drift)
+            if args.drift_rate_sd is not None:
+                o["drift_rate_sd"] = args.drift_rate_sd
+            if args.drift_chunk is not None:
+                o["drift_chunk_s"] = args.drift_chunk
         rows.append(run_case(c, o or None))
     if args.json:
         json.dump({"cases": rows}, sys.stdout, indent=1)
