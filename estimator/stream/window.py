@@ -453,7 +453,7 @@ class SlidingWindowIdentifier:
         p, rates = unpack(u)
         se = prob.drift_stderr(p, self.free, rates if free_rate else {}, t_end, chunk,
                                fixed_rates=None if free_rate else rates,
-                               rate_prior_sd=(cfg.drift_rate_sd if sd_u > 0 else None))
+                               rate_prior_sd=(cfg.drift_rate_sd if sd_u > 0 else None), R0=R)
         if se is None:
             self._to_end(drift, g_hist, half, out, "drift fit without stderr")
             return

@@ -32,6 +32,11 @@ samples, non-uniform grid, weights, a fixed ``x0``, a (nearly) defective ``A``, 
 overflow guard, a Gram matrix with condition number > 1e12) goes to the parent class, so
 results never depend on the path beyond rounding (~1e-12 relative in the cost;
 ``tests/stream/test_windowproblem.py`` checks it).
+
+:meth:`WindowProblem.drift_residual` is the window with some parameters drifting linearly in
+time (``WindowConfig.drift``): ``A`` and ``Bz`` per chunk of the window, one batched matrix
+exponential for every chunk's first-order-hold discretisation, the initial state again by
+least squares; with zero rates it equals the lean evaluation to rounding.
 """
 from __future__ import annotations
 
@@ -859,11 +864,13 @@ class WindowProblem(OutputErrorProblem):
     def drift_stderr(self, p: Mapping[str, float], free: list[str], rates: Mapping[str, float],
                      t_ref: float, chunk_s: float, rel_step: float = 1e-4,
                      fixed_rates: Mapping[str, float] | None = None,
-                     rate_prior_sd: float | None = None) -> dict[str, float] | None:
+                     rate_prior_sd: float | None = None, R0: FloatArray | None = None
+                     ) -> dict[str, float] | None:
         """Gauss-Newton standard errors (SI) of the free parameters at ``t_ref`` with the
         drift ``rates`` free as well (forward differences, noise per channel from the
         residual); ``fixed_rates`` drift too but are known; ``rate_prior_sd`` (1/s) adds a
-        prior of that standard deviation on each free rate.
+        prior of that standard deviation on each free rate. ``R0``: the residual at ``p``
+        when already computed (as :meth:`drift_residual` returns it).
         """
         known = dict(fixed_rates or {})
         rates = dict(rates)
@@ -871,7 +878,8 @@ class WindowProblem(OutputErrorProblem):
         def resid(q: Mapping[str, float], g: Mapping[str, float]) -> FloatArray | None:
             return self.drift_residual(q, {**known, **g}, t_ref, chunk_s)
 
-        R0 = resid(p, rates)
+        if R0 is None:
+            R0 = resid(p, rates)
         if R0 is None:
             return None
         pch, N = R0.shape
