@@ -16,6 +16,8 @@ Usage::
     python tools/bench_maintenance.py                  # every stream (~1-2 min on one core)
     python tools/bench_maintenance.py --only demo,fast # a subset, by key
     python tools/bench_maintenance.py --json           # one JSON object
+    python tools/bench_maintenance.py --drift          # the window with a linear drift of
+                                                       # the wearing part (WindowConfig.drift)
 """
 from __future__ import annotations
 
@@ -176,6 +178,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--road-fusion", type=float, default=None, metavar="HZ",
                     help="sliding window: fuse each road displacement with its velocity's "
                          "integral above HZ (WindowConfig.road_fusion_hz)")
+    ap.add_argument("--drift", nargs="?", const="free", default=None, choices=("free", "prior"),
+                    help="sliding window: refit the wearing part with a linear drift over "
+                         "each window (WindowConfig.drift), its estimate at the window end; "
+                         "the rate fitted per window (free, default) or that of the last "
+                         "estimates (prior)")
+    ap.add_argument("--drift-rate-sd", type=float, default=None, metavar="PER_S",
+                    help="with --drift free: prior sd of each window's relative rate around "
+                         "the recent estimates' (WindowConfig.drift_rate_sd; 0: none)")
+    ap.add_argument("--drift-chunk", type=float, default=None, metavar="S",
+                    help="with --drift: chunk over which the drift is held constant "
+                         "(WindowConfig.drift_chunk_s)")
     args = ap.parse_args(argv)
     cases = CASES[:args.cases]
     if args.only:
@@ -184,8 +197,19 @@ def main(argv: list[str] | None = None) -> int:
         if unknown:
             ap.error(f"--only: unknown case {', '.join(unknown)}")
         cases = [c for c in CASES if c.key in keys]
-    opts = None if args.road_fusion is None else {"road_fusion_hz": args.road_fusion}
-    rows = [run_case(c, opts) for c in cases]
+    opts: dict[str, Any] = {}
+    if args.road_fusion is not None:
+        opts["road_fusion_hz"] = args.road_fusion
+    rows = []
+    for c in cases:
+        o = dict(opts)
+        if args.drift:
+            o.update(drift=(c.part,), drift_rate=args.drift)
+            if args.drift_rate_sd is not None:
+                o["drift_rate_sd"] = args.drift_rate_sd
+            if args.drift_chunk is not None:
+                o["drift_chunk_s"] = args.drift_chunk
+        rows.append(run_case(c, o or None))
     if args.json:
         json.dump({"cases": rows}, sys.stdout, indent=1)
         sys.stdout.write("\n")

@@ -124,6 +124,7 @@ class NMWindowEstimator:
         self.ident = SlidingWindowIdentifier(model, params, config, channels)
         self.config = config
         self.lag = config.window_s / 2.0
+        self.lags = {k: 0.0 for k in config.drift}
         self.overlap = max(1.0, config.window_s / config.step_s)
         self.inspection = inspection and quarter_car_problem(model) is None
 
@@ -196,6 +197,7 @@ class StreamMonitor:
             # a filter's own outputs are serially correlated: their scatter says nothing
             # about their error, so only window estimates are calibrated
             self.tracker = TrendTracker(lag=float(getattr(self.estimator, "lag", 0.0)),
+                                        lags=dict(getattr(self.estimator, "lags", {})),
                                         overlap=float(getattr(self.estimator, "overlap", 1.0)),
                                         nominal=nominal,
                                         calibrate=not getattr(self.estimator, "own_track", False))

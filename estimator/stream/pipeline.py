@@ -290,7 +290,7 @@ class LazyEstimator:
         present = [c for c, v in data.items() if np.mean(np.isfinite(v)) > 0.5]
         dt = float(np.median(np.diff(t)))
         self.inner = make_estimator(self.spec, present, 1.0 / dt if dt > 0 else 0.0)
-        for a in ("lag", "overlap", "own_track"):
+        for a in ("lag", "lags", "overlap", "own_track"):
             if hasattr(self.inner, a):
                 setattr(self, a, getattr(self.inner, a))
         return self.inner

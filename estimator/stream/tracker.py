@@ -85,6 +85,9 @@ class TrendTracker:
         Prior standard deviation of the rate, relative to nominal per s.
     lag : float
         Data time (s) between a window's end and the time its estimate describes.
+    lags : dict
+        ``parameter -> lag`` (s) for parameters whose estimates describe another time
+        (0 for those the window fits with a linear drift, :attr:`WindowConfig.drift`).
     overlap : float
         Measurement-variance inflation for overlapping windows (``window / step``).
     calibrate : bool
@@ -105,6 +108,7 @@ class TrendTracker:
     p_switch: float = 0.01
     rate0: float = 0.01
     lag: float = 0.0
+    lags: dict[str, float] = field(default_factory=dict)
     overlap: float = 1.0
     calibrate: bool = True
     calib_prior: float = 2.0
@@ -201,15 +205,16 @@ class TrendTracker:
             if v is None or not (math.isfinite(v) and math.isfinite(se) and se > 0):
                 continue
             tr = self.tracks.get(k)
+            lag = self.lags.get(k, self.lag)
             if tr is None:
                 nom = self.nominal.get(k) or abs(v) or 1.0
                 P = np.diag([se * se * self.overlap, (self.rate0 * nom) ** 2])
                 # the first estimate describes t - lag: move the level to t with the prior rate
-                P[0, 0] += (self.lag * self.rate0 * nom) ** 2
+                P[0, 0] += (lag * self.rate0 * nom) ** 2
                 x = np.array([float(v), 0.0])
                 m = len(self._qs)
                 mu = np.ones(1) if m == 1 else np.array([1.0 - self.p_switch, self.p_switch])
-                tr = self.tracks[k] = _Track(x.copy(), P.copy(), t, nom, t - 2.0 * self.lag,
+                tr = self.tracks[k] = _Track(x.copy(), P.copy(), t, nom, t - 2.0 * lag,
                                              [x.copy() for _ in range(m)],
                                              [P.copy() for _ in range(m)], mu)
                 self._calibrate(tr, float(v), float(se))
@@ -217,7 +222,7 @@ class TrendTracker:
             self._calibrate(tr, float(v), float(se))
             r = se * se * self.overlap * self.scale(k)
             self._predict(tr, t)
-            H = np.array([1.0, -self.lag])
+            H = np.array([1.0, -lag])
             like = np.empty(len(tr.xs))
             for j, (x, P) in enumerate(zip(tr.xs, tr.Ps)):
                 S = float(H @ P @ H) + r

@@ -215,6 +215,10 @@ class SlidingWindowIdentifier:
             raise UsageError("every parameter is fixed (--fix); nothing to monitor")
         self.nominal = self.params.valuesdict()
         self._ssmap = StateSpaceMap(model, self.nominal, self.free)
+        fixed_drift = [k for k in config.drift if k not in self.free]
+        if fixed_drift:
+            raise UsageError(f"drift: {', '.join(fixed_drift)} not among the free parameters "
+                             f"({', '.join(self.free)})")
         #: previous accepted estimate (SI) and its relative stderr_fit per free parameter
         self._warm: tuple[dict[str, float], dict[str, float]] | None = None
         #: (window end time (s), log of the free parameters) of the last accepted windows
@@ -334,6 +338,130 @@ class SlidingWindowIdentifier:
         sim -= sim.mean(axis=0)
         return p, sim, True
 
+    @staticmethod
+    def _to_end(drift: list[str], g: list[float], half: float, out: WindowResult,
+                why: str) -> None:
+        """Move constant-window estimates to the window end with the recent rates ``g``.
+
+        The tracker takes the drifting parameters' estimates as describing the window end;
+        when a window cannot be fitted with the drift, its middle estimate is carried there.
+        """
+        for k, gk in zip(drift, g):
+            f = math.exp(max(-0.2, min(0.2, gk * half)))
+            out.params[k] *= f
+            out.stderr[k] *= f
+            out.stderr_fit[k] *= f
+        out.warnings.append(f"{why}; the constant-window estimate of "
+                            f"{', '.join(drift)} moved to the window end at the recent rate")
+
+    def _drift_fit(self, prob: WindowProblem, t_end: float, width: float,
+                   p_const: Mapping[str, float], drift: list[str], out: WindowResult) -> None:
+        """Refit ``drift`` with a linear drift over the window; their values at its end.
+
+        The unknowns are ``log(theta_end / theta_const)`` and ``g width / 2`` per drifting
+        parameter (both the change over half a window), the other parameters held at the
+        constant fit. Starting from the constant fit and the rate of the recent estimates,
+        a few Gauss-Newton steps (forward differences, step halved when the cost does not
+        fall) find them: the residual is close to linear in them over a window's drift.
+        The stderr are Gauss-Newton ones with the rates free and every free parameter's
+        column (the constant fit's other parameters) in the Jacobian. With
+        ``drift_rate="prior"`` the rates stay at that of the recent estimates and only the
+        end values are fitted.
+        """
+        cfg = self.config
+        chunk = cfg.drift_chunk_s
+        half = 0.5 * width
+        h = self._hist
+        nd = len(drift)
+        u = np.zeros(2 * nd)
+        g_hist = [0.0] * nd
+        if len(h) >= 2 and h[-1][0] > h[0][0]:
+            for j, k in enumerate(drift):
+                i = self.free.index(k)
+                g_hist[j] = (h[-1][1][i] - h[0][1][i]) / (h[-1][0] - h[0][0])
+                u[j] = u[nd + j] = max(-0.2, min(0.2, g_hist[j] * half))
+
+        def unpack(v: FloatArray) -> tuple[dict[str, float], dict[str, float]]:
+            p = dict(p_const)
+            rates = {}
+            for j, k in enumerate(drift):
+                p[k] = p_const[k] * math.exp(float(v[j]))
+                rates[k] = float(v[nd + j]) / half
+            return p, rates
+
+        def resid(v: FloatArray) -> FloatArray | None:
+            p, rates = unpack(v)
+            try:
+                return prob.drift_residual(p, rates, t_end, chunk)
+            except (np.linalg.LinAlgError, ValueError, FloatingPointError, OverflowError):
+                return None
+
+        free_rate = cfg.drift_rate == "free"
+        step = 1e-4
+        R = resid(u)
+        ok = R is not None
+        # optional prior on the rates: the recent estimates' rate, sd drift_rate_sd (1/s)
+        sd_u = cfg.drift_rate_sd * half if (free_rate and len(h) >= 2) else 0.0
+        u_prior = u[nd:].copy()
+        # with a prior the residuals are weighted by their channel's RMS (noise units)
+        sig = (np.ones(1) if R is None or sd_u == 0 else
+               np.maximum(np.sqrt((R * R).mean(axis=1)), 1e-300))[:, None]
+
+        def objective(Rv: FloatArray, v: FloatArray) -> float:
+            ss = float(((Rv / sig) ** 2).sum())
+            if sd_u > 0:
+                ss += float((((v[nd:] - u_prior) / sd_u) ** 2).sum())
+            return ss
+        for _ in range(cfg.drift_iterations):
+            if R is None:
+                break
+            cols = []
+            for j in range(2 * nd if free_rate else nd):
+                e = u.copy()
+                e[j] += step
+                Rj = resid(e)
+                if Rj is None:
+                    ok = False
+                    break
+                cols.append(((Rj - R) / step / sig).ravel())
+            if not ok:
+                break
+            J = np.column_stack(cols)
+            rhs = -(R / sig).ravel()
+            if sd_u > 0:
+                P = np.zeros((nd, J.shape[1]))
+                P[:, nd:] = np.eye(nd) / sd_u
+                J = np.vstack([J, P])
+                rhs = np.concatenate([rhs, -(u[nd:] - u_prior) / sd_u])
+            du = np.zeros(2 * nd)
+            du[:J.shape[1]] = np.linalg.lstsq(J, rhs, rcond=None)[0]
+            ss = objective(R, u)
+            for _half in range(4):
+                un = u + du
+                Rn = resid(un) if np.all(np.abs(un) < 0.5) else None
+                if Rn is not None and objective(Rn, un) < ss:
+                    u, R = un, Rn
+                    break
+                du = 0.5 * du
+            else:
+                break
+            if np.abs(du).max() < cfg.xatol:
+                break
+        if not ok or R is None:
+            self._to_end(drift, g_hist, half, out, "drift fit not possible on this window")
+            return
+        p, rates = unpack(u)
+        se = prob.drift_stderr(p, self.free, rates if free_rate else {}, t_end, chunk,
+                               fixed_rates=None if free_rate else rates,
+                               rate_prior_sd=(cfg.drift_rate_sd if sd_u > 0 else None), R0=R)
+        if se is None:
+            self._to_end(drift, g_hist, half, out, "drift fit without stderr")
+            return
+        for k in drift:
+            out.params[k] = p[k]
+            out.stderr_fit[k] = se[k]
+            out.stderr[k] = float(math.hypot(se[k], cfg.sigma_floor * p[k]))
+
     def process(self, t: FloatArray, data: Mapping[str, FloatArray]) -> WindowResult:
         """Fit one window (or skip it).
 
@@ -402,6 +530,9 @@ class SlidingWindowIdentifier:
             out.warnings.append(f"Nelder-Mead used its budget of {budget} evaluations "
                                 f"before meeting xatol={cfg.xatol:g}")
         rel = {k: (v / res.params[k]) for k, v in res.stderr.items()}
+        drift = [k for k in cfg.drift if k in free]
+        if drift and res.identifiable:
+            self._drift_fit(prob, float(t[-1]), float(t[-1] - t[0]), res.params, drift, out)
         if res.identifiable and all(np.isfinite(v) and v < 0.5 for v in rel.values()):
             self._warm = (dict(res.params), rel)
             self._hist = (self._hist + [(out.t, [math.log(res.params[k]) for k in free])])[-3:]

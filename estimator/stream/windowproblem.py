@@ -32,6 +32,11 @@ samples, non-uniform grid, weights, a fixed ``x0``, a (nearly) defective ``A``, 
 overflow guard, a Gram matrix with condition number > 1e12) goes to the parent class, so
 results never depend on the path beyond rounding (~1e-12 relative in the cost;
 ``tests/stream/test_windowproblem.py`` checks it).
+
+:meth:`WindowProblem.drift_residual` is the window with some parameters drifting linearly in
+time (``WindowConfig.drift``): ``A`` and ``Bz`` per chunk of the window, one batched matrix
+exponential for every chunk's first-order-hold discretisation, the initial state again by
+least squares; with zero rates it equals the lean evaluation to rounding.
 """
 from __future__ import annotations
 
@@ -41,6 +46,7 @@ from dataclasses import dataclass, field
 from typing import Mapping
 
 import numpy as np
+from scipy.linalg import expm as _expm
 from scipy.linalg.lapack import dgeev as _dgeev
 from scipy.linalg.lapack import dgeqrf as _dgeqrf
 from scipy.linalg.lapack import dgesv as _dgesv
@@ -751,6 +757,164 @@ class WindowProblem(OutputErrorProblem):
             return None
         # dR = J D^T  ->  J = dR D^-T
         return dR @ Dinv.T
+
+    # ---- linear drift inside the window --------------------------------------------------
+    @property
+    def drift_ok(self) -> bool:
+        """Whether :meth:`drift_residual` applies (lean window, fitted channels are states)."""
+        return bool(self.lean and self._state_rows)
+
+    def drift_residual(self, p: Mapping[str, float], rates: Mapping[str, float],
+                       t_ref: float, chunk_s: float) -> FloatArray | None:
+        """Residual (p, N) of a window whose parameters drift linearly in time.
+
+        ``theta_k(t) = p_k (1 + g_k (t - t_ref))`` for every ``k`` in ``rates`` (``g_k``
+        relative rate, 1/s), the others constant at ``p``. The window is cut into chunks of
+        ``chunk_s``; in each ``A`` and ``Bz`` are taken at the chunk's middle time and the
+        first-order-hold road is discretised exactly (one matrix exponential per chunk).
+        The initial state is fitted by least squares as on the constant path; with every
+        rate zero the residual equals the lean evaluation's to rounding. ``None`` when
+        :attr:`drift_ok` is false, a chunk's matrices are not finite or a drifting parameter
+        enters ``B_v`` (the road-rate input).
+        """
+        if not self.drift_ok:
+            return None
+        h = self._hf
+        N = self._N
+        n = self.model.n_states
+        nr = self._nr
+        K = max(1, int(round(chunk_s / h)))
+        vals = [float(p[k]) for k in self._names]
+        idx = [(self._names.index(k), float(p[k]), float(g)) for k, g in rates.items()]
+        t = self.t
+        rows = self._rows
+        # chunks c = 0..C-1 of K steps each (the last one padded), all discretised at once
+        C = -(-(N - 1) // K)
+        tc = np.minimum(np.arange(C + 1) * K, N - 1)
+        tm = 0.5 * (t[tc[:-1]] + t[tc[1:]]) - t_ref
+        nb = n + 2 * nr
+        aug = np.zeros((C, nb, nb))
+        aug[:, n:n + nr, n + nr:] = np.eye(nr)
+        Bv = None
+        for c in range(C):
+            v = list(vals)
+            for i, base, g in idx:
+                v[i] = base * (1.0 + g * float(tm[c]))
+                if v[i] <= 0.0:
+                    return None
+            A, B, Bz, _ = self._ssmap.from_values(v)
+            if Bv is None:
+                Bv = B[:, nr:].copy()
+            elif c == C - 1 and float(np.abs(B[:, nr:] - Bv).max()) > 1e-12 * float(
+                    np.abs(Bv).max()):
+                # B_v is affine in the parameters, which move linearly in time: equal at
+                # the first and last chunk means constant. Otherwise a drifting tyre
+                # damping: z = x - B_v r would change in time
+                return None
+            aug[c, :n, :n] = A * h
+            aug[c, :n, n:n + nr] = Bz * h
+        F = _expm(aug)
+        if not np.isfinite(F).all():
+            return None
+        Phi = F[:, :n, :n]
+        rp = np.empty((nr, C * K + 1))
+        rp[:, :N] = self._r
+        rp[:, N:] = self._r[:, -1:]
+        r0 = rp[:, :-1].reshape(nr, C, K)
+        dr = np.diff(rp, axis=1).reshape(nr, C, K)
+        # forcing of step i of chunk c: G1 r[k] + G2 (r[k+1] - r[k])  -> (C, K, n)
+        f = (np.einsum("cnj,jci->cin", F[:, :n, n:n + nr], r0)
+             + np.einsum("cnj,jci->cin", F[:, :n, n + nr:], dr))
+        # within each chunk (all chunks at once): powers Phi^i and the forced part from rest
+        Pw = np.empty((C, K + 1, n, n))
+        Z = np.empty((C, K + 1, n))
+        Pw[:, 0] = np.eye(n)
+        Z[:, 0] = 0.0
+        for i in range(K):
+            Pw[:, i + 1] = Phi @ Pw[:, i]
+            Z[:, i + 1] = (Phi @ Z[:, i, :, None])[:, :, 0] + f[:, i]
+        # chunk starts, sequentially: [x(t_c) as a function of x0 | forced part]
+        Xs = np.empty((C + 1, n, n + 1))
+        Xs[0, :, :n] = np.eye(n)
+        Xs[0, :, n] = 0.0
+        for c in range(C):
+            Xs[c + 1] = Pw[c, K] @ Xs[c]
+            Xs[c + 1, :, n] += Z[c, K]
+        Yc = np.einsum("cirn,cnm->cirm", Pw[:, :K][:, :, rows], Xs[:C])
+        Yc[:, :, :, n] += Z[:, :K][:, :, rows]
+        Yp = np.concatenate([Yc.reshape(C * K, len(rows), n + 1), Xs[C:, rows]])[:N]
+        G = Yp[:, :, :n].transpose(1, 0, 2).reshape(len(rows) * N, n)
+        R = self._Yflat - Yp[:, :, n].T.ravel()
+        if not self._pos_only and Bv is not None:
+            # velocity channels: x = z + B_v r (B_v fixed on this path)
+            R -= (Bv[rows] @ self._r).ravel()
+        sol, *_ = np.linalg.lstsq(G, R, rcond=None)
+        R = R - G @ sol
+        return R.reshape(len(rows), N)
+
+    def drift_ss(self, p: Mapping[str, float], rates: Mapping[str, float], t_ref: float,
+                 chunk_s: float) -> float:
+        """:meth:`normalized_ss` of the drifting window (``inf`` when it cannot be formed)."""
+        try:
+            R = self.drift_residual(p, rates, t_ref, chunk_s)
+        except (np.linalg.LinAlgError, ValueError, FloatingPointError, OverflowError):
+            return math.inf
+        if R is None:
+            return math.inf
+        r = R.ravel()
+        v = float(r @ r) / self.scale
+        return v if math.isfinite(v) else math.inf
+
+    def drift_stderr(self, p: Mapping[str, float], free: list[str], rates: Mapping[str, float],
+                     t_ref: float, chunk_s: float, rel_step: float = 1e-4,
+                     fixed_rates: Mapping[str, float] | None = None,
+                     rate_prior_sd: float | None = None, R0: FloatArray | None = None
+                     ) -> dict[str, float] | None:
+        """Gauss-Newton standard errors (SI) of the free parameters at ``t_ref`` with the
+        drift ``rates`` free as well (forward differences, noise per channel from the
+        residual); ``fixed_rates`` drift too but are known; ``rate_prior_sd`` (1/s) adds a
+        prior of that standard deviation on each free rate. ``R0``: the residual at ``p``
+        when already computed (as :meth:`drift_residual` returns it).
+        """
+        known = dict(fixed_rates or {})
+        rates = dict(rates)
+
+        def resid(q: Mapping[str, float], g: Mapping[str, float]) -> FloatArray | None:
+            return self.drift_residual(q, {**known, **g}, t_ref, chunk_s)
+
+        if R0 is None:
+            R0 = resid(p, rates)
+        if R0 is None:
+            return None
+        pch, N = R0.shape
+        cols = []
+        for k in free:
+            q = dict(p)
+            q[k] = p[k] * math.exp(rel_step)
+            Rk = resid(q, rates)
+            if Rk is None:
+                return None
+            cols.append(((Rk - R0) / rel_step).ravel())
+        for k in rates:
+            g = dict(rates)
+            g[k] = rates[k] + rel_step
+            Rk = resid(p, g)
+            if Rk is None:
+                return None
+            cols.append(((Rk - R0) / rel_step).ravel())
+        sig = np.sqrt((R0 * R0).sum(axis=1) / max(N - len(cols), 1))
+        sig = np.where(sig > 0, sig, 1.0)
+        J = (np.column_stack(cols).reshape(pch, N, -1) / sig[:, None, None]).reshape(pch * N, -1)
+        H = J.T @ J
+        if rate_prior_sd:
+            nf = len(free)
+            H[nf:, nf:] += np.eye(len(rates)) / rate_prior_sd ** 2
+        try:
+            cov = np.linalg.inv(H)
+        except np.linalg.LinAlgError:
+            return None
+        return {k: float(p[k] * math.sqrt(max(float(cov[i, i]), 0.0)))
+                for i, k in enumerate(free)}
 
     @staticmethod
     def _upper(n: int) -> FloatArray:

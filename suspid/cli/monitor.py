@@ -80,6 +80,11 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     w.add_argument("--min-deflection", type=float, default=None, metavar="M",
                    help="skip windows whose RMS suspension deflection is below this (m, "
                         "default 0.0005)")
+    w.add_argument("--window-drift", default=None, metavar="NAMES",
+                   help="comma-separated free parameters fitted with a linear drift over each "
+                        "window, so their estimate refers to the window's end (default none; "
+                        "docs/monitoring.md: it helps on quantization-only streams, not at "
+                        "2-5 %% sensor noise)")
     a = p.add_argument_group("alerts")
     a.add_argument("--alert-file", metavar="PATH", default=None,
                    help="durable append-only alert log (JSON lines, fsynced); a restarted "
@@ -215,7 +220,9 @@ def run(args: argparse.Namespace) -> int:
         alert_drop=args.alert_drop, confidence=args.confidence, persistence=args.persistence,
         hysteresis=args.hysteresis, window=args.window, step=args.step,
         window_overrides={"maxfev": args.budget, "first_maxfev": args.first_budget,
-                          "sigma_floor": args.sigma_floor, "min_deflection": args.min_deflection},
+                          "sigma_floor": args.sigma_floor, "min_deflection": args.min_deflection,
+                          "drift": (None if args.window_drift is None else tuple(
+                              x.strip() for x in args.window_drift.split(",") if x.strip()))},
         decimate=args.decimate, inspection=not args.no_inspection,
         forecast_horizon=args.forecast_horizon, ekf_params=ekf_params, ekf_q=args.ekf_q,
         ekf_decimate=args.ekf_decimate, accel_channel=args.accel_channel,

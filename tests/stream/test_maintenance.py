@@ -189,3 +189,37 @@ def test_stable_stream_tracked_no_worse_than_the_ekf() -> None:
     for side in (out["nm"], out["ekf_result"]):
         for p in side["params"].values():
             assert p["alerts"] == [] and p["forecasts"] == 0
+
+
+def test_monitor_cli_window_drift_refers_estimates_to_the_window_end(tmp_path) -> None:
+    """``--window-drift c1`` on a quantization-only ramp (c1 -2 %/s): the window estimates
+    describe the window end (the constant windows lag it by half a window); a parameter
+    that is not free is a one-line usage error."""
+    m = get_model("quarter2")
+    s = damper_wear(m, duration=20.0, fs=500.0, wear_start=0.0, wear_end=20.0,
+                    c_end_fraction=0.6, seed=7)
+    csv = tmp_path / "ramp.csv"
+    write_measurement(csv, s.t, s.data)
+    fix = [a for k in ("m1", "m2", "c2", "k2") for a in ("--fix", f"{k}={s.nominal[k]}")]
+    base = [sys.executable, "-m", "suspid", "monitor", "--model", "quarter2", "--input", str(csv),
+            *fix, "--nominal", f"c1={s.nominal['c1']}", "--no-inspection", "--jsonl"]
+    err = {}
+    for extra in ([], ["--window-drift", "c1"]):
+        r = subprocess.run(base + extra, capture_output=True, text=True, timeout=300)
+        assert r.returncode == 0, r.stderr
+        est = [d for d in map(json.loads, r.stdout.splitlines()) if d["type"] == "estimate"]
+        assert len(est) >= 10
+        e = [d["params"]["c1"] / float(np.interp(d["t"], s.t, s.truth["c1"])) - 1.0
+             for d in est[3:]]
+        err[bool(extra)] = float(np.sqrt(np.mean(np.square(e))))
+        # the tracked value (window end) takes no lag for a drift window's estimate
+        e = [d["track"]["c1"]["value"] / float(np.interp(d["t"], s.t, s.truth["c1"])) - 1.0
+             for d in est[5:]]
+        err[("track", bool(extra))] = float(np.sqrt(np.mean(np.square(e))))
+    assert err[False] > 0.01  # the half-window lag at 2 %/s of nominal
+    assert err[True] < 0.4 * err[False]
+    assert err[("track", True)] < 0.5 * err[False]
+    r = subprocess.run(base + ["--window-drift", "c2"], capture_output=True, text=True,
+                       timeout=300)
+    assert r.returncode == 2
+    assert r.stderr.strip().splitlines()[-1].startswith("error: drift: c2 not among the free")

@@ -15,6 +15,7 @@ from estimator.stream.monitor import NMWindowEstimator
 from estimator.stream.wear_streams import damper_wear
 from estimator.stream.tracker import ParameterTracker
 from estimator.stream.window import SlidingWindowIdentifier, fuse_road, noise_floor
+from suspid.errors import UsageError
 
 
 def test_defaults_follow_the_modes(quarter2) -> None:
@@ -162,3 +163,56 @@ def test_fused_road_keeps_a_consistent_road_and_averages_displacement_noise() ->
     gap = r.copy()
     gap[10] = np.nan
     assert np.array_equal(fuse_road(t, gap, rd, 2.0), gap, equal_nan=True)
+
+
+def test_drift_model_refers_a_ramping_damper_to_the_window_end(quarter2) -> None:
+    """c1 falls 6.25 %/s of nominal: a constant window lags the end by half a window,
+    the window with a linear drift of c1 estimates the end value."""
+    s = damper_wear(quarter2, duration=8.0, wear_start=0.0, wear_end=8.0, seed=3)
+    fix = {k: s.nominal[k] for k in ("m1", "m2", "c2", "k2")}
+    params = Parameters.for_model(quarter2, fix=fix)
+    t_end = 7.0
+    out = {}
+    for drift in ((), ("c1",)):
+        cfg = default_config(quarter2, s.nominal, 500.0, 4)
+        cfg.drift = drift
+        ident = SlidingWindowIdentifier(quarter2, params, cfg, ["x1", "x2"])
+        sel = (s.t >= t_end - cfg.window_s - 1e-9) & (s.t <= t_end + 1e-9)
+        out[drift] = ident.process(s.t[sel], {k: v[sel] for k, v in s.data.items()})
+        width = cfg.window_s
+    c_end = float(np.interp(t_end, s.t, s.truth["c1"]))
+    c_mid = float(np.interp(t_end - width / 2, s.t, s.truth["c1"]))
+    const, drift = out[()], out[("c1",)]
+    lag = (c_mid - c_end) / c_end  # the half-window lag, ~ +0.1 at 6.25 %/s over 3 s
+    assert lag > 0.05
+    # the constant window describes the middle: off by about the lag at the end
+    assert (const.params["c1"] - c_end) / c_end > 0.6 * lag
+    # the drift window describes the end
+    assert abs(drift.params["c1"] - c_end) / c_end < 0.25 * lag
+    assert abs(drift.params["c1"] - c_end) < 3 * drift.stderr["c1"]
+    # the other parameters are those of the constant fit
+    assert drift.params["k1"] == const.params["k1"]
+    assert 0 < drift.stderr_fit["c1"] < 0.05 * c_end
+
+
+def test_drift_needs_free_parameters_and_falls_back_to_the_recent_rate(quarter2) -> None:
+    s = damper_wear(quarter2, duration=8.0, wear_start=0.0, wear_end=8.0, seed=3)
+    fix = {k: s.nominal[k] for k in ("m1", "m2", "c2", "k2")}
+    cfg = default_config(quarter2, s.nominal, 500.0, 4)
+    cfg.drift = ("c2",)
+    with pytest.raises(UsageError, match="c2 not among the free parameters"):
+        SlidingWindowIdentifier(quarter2, Parameters.for_model(quarter2, fix=fix), cfg,
+                                ["x1", "x2"])
+    # acceleration channels fitted: no drift window; the estimate is moved to the end
+    cfg.drift = ("c1",)
+    cfg.cost = "frobenius"
+    ident = SlidingWindowIdentifier(quarter2, Parameters.for_model(quarter2, fix=fix), cfg,
+                                    ["x1", "x2", "x1_ddot"])
+    res = []
+    run_arrays(s.t, s.data, cfg.window_s, cfg.step_s, lambda t, d: res.append(ident.process(t, d)))
+    assert len(res) >= 3
+    for r in res:
+        assert any("moved to the window end at the recent rate" in w for w in r.warnings)
+    # the first windows have no recent rate (unchanged); later ones are moved down
+    assert res[-1].params["c1"] < float(np.interp(res[-1].t - cfg.window_s / 2, s.t,
+                                                  s.truth["c1"]))

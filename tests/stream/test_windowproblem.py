@@ -162,3 +162,33 @@ def test_inspection_search_finds_the_dense_grid_extrema(quarter2) -> None:
             quarter2, p, np.concatenate([[1e-3], fb])))))
         ph = (ph - 360 * np.round((ph[0] - 180) / 360))[1:]
         assert res.phi_min_deg == pytest.approx(ph.min(), abs=1e-6)
+
+
+def test_drift_residual_equals_the_lean_path_without_drift_and_fits_a_ramp(quarter2, window) -> None:
+    """With zero rates the drifting window is the constant one (any chunk length); on a
+    window whose c1 ramps, the true end value with the true rate fits far better than any
+    constant c1 of a scan."""
+    s, meas, params = window
+    ssm = StateSpaceMap(quarter2, params.valuesdict(), params.free)
+    lean = WindowProblem(quarter2, meas, ssmap=ssm)
+    assert lean.drift_ok
+    t_end = float(meas.t[-1])
+    for q in _points(s.nominal, n=4):
+        a = lean.normalized_ss(q)
+        for chunk in (0.02, 0.1, 0.35):
+            assert lean.drift_ss(q, {"c1": 0.0}, t_end, chunk) == pytest.approx(a, rel=1e-8)
+    # a ramp: c1 falls 6.25 %/s over the whole stream
+    w = damper_wear(quarter2, duration=8.0, fs=500.0, wear_start=0.0, wear_end=8.0, seed=4,
+                    quantize=False, noise={c: 0.0 for c in ("x1", "x2", "x1_ddot")})
+    sl = slice(2000, 3501, 2)
+    m2 = Measurement(w.t[sl].copy(), {k: w.data[k][sl] for k in ("r", "r_dot")},
+                     {c: w.data[c][sl] for c in ("x1", "x2")}, source="window")
+    prob = WindowProblem(quarter2, m2, ssmap=ssm)
+    te = float(m2.t[-1])
+    c_end = float(np.interp(te, w.t, w.truth["c1"]))
+    p = dict(w.nominal, c1=c_end)
+    g = -0.0625 * w.nominal["c1"] / c_end  # relative to the end value, 1/s
+    ramp = prob.drift_ss(p, {"c1": g}, te, 0.05)
+    best_const = min(prob.normalized_ss(dict(w.nominal, c1=c_end * f))
+                     for f in np.linspace(1.0, 1.25, 26))
+    assert ramp < 0.05 * best_const
