@@ -588,10 +588,14 @@ def noise_floor_ratio(problem: OutputErrorProblem, p: Mapping[str, float]) -> fl
     return num / den
 
 
-def _at_floor(problem: OutputErrorProblem, res: IdentResult) -> bool:
-    """``res`` explains the record exactly or down to white measurement noise."""
-    return bool(problem.normalized_ss(res.params) < EXACT_FIT
-                or noise_floor_ratio(problem, res.params) <= NOISE_FLOOR)
+def _exact(problem: OutputErrorProblem, res: IdentResult) -> bool:
+    """``res`` explains the record exactly (a noise-free record)."""
+    return bool(problem.normalized_ss(res.params) < EXACT_FIT)
+
+
+def _at_noise_floor(problem: OutputErrorProblem, res: IdentResult) -> bool:
+    """``res`` leaves only white measurement noise on a noisy record (not an exact fit)."""
+    return not _exact(problem, res) and noise_floor_ratio(problem, res.params) <= NOISE_FLOOR
 
 
 def _finite(x: float) -> float | None:
@@ -636,14 +640,15 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         Compute the data-driven start (:func:`estimate_start`) and run from it.
     keep_init : bool
         Also consider ``params`` as a start (always done when no data-driven start exists).
-        It is run when the fit from the data-driven start is not a clean success (not
-        converged, not identifiable, or implausible), when the estimate itself fits poorly
-        (normalised cost above ``POOR_ESTIMATE``), when that fit explains the record neither
-        exactly (normalised cost above ``EXACT_FIT``) nor down to white measurement noise
-        (:func:`noise_floor_ratio` above ``NOISE_FLOOR``: on a noisy record the estimate is
-        biased and may lead to a local minimum, whose residual is not white), or when
-        ``params`` begins at a lower cost than the data-driven start; otherwise it is listed
-        as skipped, so the time per identification does not grow.
+        It is skipped (listed as skipped, so the time per identification does not grow)
+        when the fit from the data-driven start is a clean success (converged, identifiable,
+        plausible) and either leaves only white measurement noise (a noisy record:
+        :func:`noise_floor_ratio` at most ``NOISE_FLOOR``; no start can then lower the cost
+        by more than the noise's own scatter) or explains the record exactly (normalised
+        cost below ``EXACT_FIT``) from an estimate that fits well (normalised cost below
+        ``POOR_ESTIMATE``) while ``params`` begins at no lower cost. Otherwise it runs: on a
+        noisy record the estimate is biased and may lead to a local minimum, whose residual
+        is not white.
     intervals : bool
         Attach honest 3-sigma bands (:func:`estimator.identify.profile.apply_bands`) to a
         result with standard errors: the curvature band where the cost is quadratic out to
@@ -682,9 +687,12 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         done = [r for _, _, r in results if r is not None]
         # a further start only runs when the fits so far are not clean, or when it begins
         # lower than the start they came from (it may then be in a better basin)
-        if done and all(r.success for r in done) and at_start[i] >= min(at_start[:i]) \
-                and est is not None and est.cost < POOR_ESTIMATE \
-                and all(_at_floor(problem, r) for r in done) \
+        # (or when the fits so far explain the record down to its noise: no start can
+        # then lower the cost by more than the noise's own scatter)
+        if done and all(r.success for r in done) \
+                and (at_start[i] >= min(at_start[:i]) and est is not None
+                     and est.cost < POOR_ESTIMATE and all(_exact(problem, r) for r in done)
+                     or all(_at_noise_floor(problem, r) for r in done)) \
                 and not _plausibility(done[0], free, usable(runs[0][0], runs[0][1]), data_vals):
             results.append((label, start, None))
             continue
@@ -705,8 +713,9 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         if r is None:
             entry.update({"cost": None, "skipped": "the fit from the data-driven start is "
                                                    "clean and explains the record down to "
-                                                   "its noise, "
-                                                   "and this start begins at a higher cost"})
+                                                   "white noise, or exactly from a good "
+                                                   "estimate while this start begins at "
+                                                   "no lower cost"})
         else:
             entry.update({"cost": _finite(r.cost), "params": {k: float(r.params[k]) for k in free},
                           "success": bool(r.success), "chosen": r is res})
