@@ -19,9 +19,10 @@ Usage::
     python tools/bench_start.py --data-only [--models ...] [--scales ...] [--noise ...]
         [--costs ...] [--no-bump] [--base DIR]
 
-``--data-only --base DIR`` times the same cases, one after the other in one run, with this
-checkout and with the code at ``DIR`` (e.g. ``git worktree add /tmp/base 84d56c2``; run in
-a subprocess with ``PYTHONPATH=DIR``), and prints before / after / ratio side by side.
+``--data-only --base DIR`` times the same cases in one run with this checkout and with the
+code at ``DIR`` (e.g. ``git worktree add /tmp/base 84d56c2``; each case in a subprocess
+with ``PYTHONPATH`` at the version, the two alternately), and prints before / after /
+ratio side by side.
 """
 from __future__ import annotations
 
@@ -104,17 +105,23 @@ def identify_bump(scale: float, data: bool) -> dict[str, Any]:
 
 
 def _side_by_side(a: argparse.Namespace) -> int:
-    """``--data-only --base DIR``: every case with the code at ``DIR``, then with this one."""
+    """``--data-only --base DIR``: every case with the code at ``DIR`` and with this one."""
     here = Path(__file__).resolve().parent.parent
-    args = [sys.executable, str(Path(__file__).resolve()), "--data-only", "--json",
-            "--models", a.models, "--costs", a.costs, "--no-bump"]
-    args += ["--scales", a.scales or "0.5", "--noise", a.noise or "0"]
+    args = [sys.executable, str(Path(__file__).resolve()), "--data-only", "--json", "--no-bump"]
     args += ["--ids", a.ids] if a.ids else []
-    runs = {}
-    for label, root in (("before", Path(a.base).resolve()), ("after", here)):
-        env = dict(os.environ, PYTHONPATH=str(root))
-        out = subprocess.run(args, env=env, cwd="/tmp", capture_output=True, text=True, check=True)
-        runs[label] = json.loads(out.stdout.strip().splitlines()[-1])
+    roots = {"before": Path(a.base).resolve(), "after": here}
+    runs: dict[str, list[dict[str, Any]]] = {"before": [], "after": []}
+    cases = [(m, c, s, n) for m in a.models.split(",") for c in a.costs.split(",")
+             for s in _floats(a.scales or "0.5") for n in _floats(a.noise or "0")]
+    for j, (m, c, s, n) in enumerate(cases):
+        # one case at a time, the two versions alternately and in alternating order, so
+        # that a change of the machine's load hits both alike
+        for label in (("before", "after") if j % 2 == 0 else ("after", "before")):
+            env = dict(os.environ, PYTHONPATH=str(roots[label]))
+            out = subprocess.run(args + ["--models", m, "--costs", c, "--scales", f"{s:g}",
+                                         "--noise", f"{n:g}"], env=env, cwd="/tmp",
+                                 capture_output=True, text=True, check=True)
+            runs[label] += json.loads(out.stdout.strip().splitlines()[-1])
     w = sys.stdout.write
     w(f"{'case':40} {'before s/id':>11} {'after s/id':>10} {'ratio':>6} {'nfev before':>11} "
       f"{'after':>6} {'ok before':>9} {'after':>6}\n")
