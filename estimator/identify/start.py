@@ -539,14 +539,15 @@ def data_driven_start(model: SuspensionModel, data: Measurement, fixed: Mapping[
 
 
 #: normalised output-error cost of a data-driven estimate above which the given start is
-#: always run as well (the estimate explains less than half of the record)
+#: run as well (the estimate explains less than half of the record) unless the fit from it
+#: leaves only white noise
 POOR_ESTIMATE = 0.5
 
 #: normalised output-error cost below which a fit explains the record exactly (noise-free):
 #: no other start can do better, so a further start is skipped. Any noisy record stays
 #: above it, and there the estimate is biased (its regressors are the noisy channels
 #: themselves: errors in variables) and may lead to a local minimum, so the given start runs
-#: as well and the lower cost wins.
+#: as well and the lower cost wins, unless the fit leaves only white noise (``NOISE_FLOOR``).
 EXACT_FIT = 1e-10
 
 #: :func:`noise_floor_ratio` up to which a fit to a noisy record counts as at the noise floor:
