@@ -17,6 +17,12 @@ Usage::
     python tools/bench_start.py --grid [--models ...] [--costs sse,frobenius]
         [--scales 0.1,0.2,0.5,2,5,10] [--noise 0.1,0.2,0.3,0.4,0.5] [--compare] [--json]
     python tools/bench_start.py --data-only [--models ...] [--scales ...] [--noise ...]
+        [--costs ...] [--no-bump] [--base DIR]
+
+``--data-only --base DIR`` times the same cases in one run with this checkout and with the
+code at ``DIR`` (e.g. ``git worktree add /tmp/base 84d56c2``; each case in a subprocess
+with ``PYTHONPATH`` at the version, the two alternately), and prints before / after /
+ratio side by side.
 """
 from __future__ import annotations
 
@@ -26,8 +32,10 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # small matrices: threads on
 
 import argparse
 import json
+import subprocess
 import sys
 import time
+from pathlib import Path
 from typing import Any
 
 from estimator.doe.runner import Settings, run_design
@@ -96,6 +104,36 @@ def identify_bump(scale: float, data: bool) -> dict[str, Any]:
             "seconds": dt, "max_rel_error": err, "success": res.success, "nfev": res.nfev}
 
 
+def _side_by_side(a: argparse.Namespace) -> int:
+    """``--data-only --base DIR``: every case with the code at ``DIR`` and with this one."""
+    here = Path(__file__).resolve().parent.parent
+    args = [sys.executable, str(Path(__file__).resolve()), "--data-only", "--json", "--no-bump"]
+    args += ["--ids", a.ids] if a.ids else []
+    roots = {"before": Path(a.base).resolve(), "after": here}
+    runs: dict[str, list[dict[str, Any]]] = {"before": [], "after": []}
+    cases = [(m, c, s, n) for m in a.models.split(",") for c in a.costs.split(",")
+             for s in _floats(a.scales or "0.5") for n in _floats(a.noise or "0")]
+    for j, (m, c, s, n) in enumerate(cases):
+        # one case at a time, the two versions alternately and in alternating order, so
+        # that a change of the machine's load hits both alike
+        for label in (("before", "after") if j % 2 == 0 else ("after", "before")):
+            env = dict(os.environ, PYTHONPATH=str(roots[label]))
+            out = subprocess.run(args + ["--models", m, "--costs", c, "--scales", f"{s:g}",
+                                         "--noise", f"{n:g}"], env=env, cwd="/tmp",
+                                 capture_output=True, text=True, check=True)
+            runs[label] += json.loads(out.stdout.strip().splitlines()[-1])
+    w = sys.stdout.write
+    w(f"{'case':40} {'before s/id':>11} {'after s/id':>10} {'ratio':>6} {'nfev before':>11} "
+      f"{'after':>6} {'ok before':>9} {'after':>6}\n")
+    for b, n in zip(runs["before"], runs["after"]):
+        case = f"doe {n['model']} {n['cost']} x{n['init_scale']:g} noise {n['noise']:g}"
+        w(f"{case:40} {b['s_per_row']:11.3f} {n['s_per_row']:10.3f} "
+          f"{n['s_per_row'] / b['s_per_row']:6.2f} {b['nfev_per_row']:11.0f} "
+          f"{n['nfev_per_row']:6.0f} {b['successes']:>5}/{b['total']:<3} "
+          f"{n['successes']:>3}/{n['total']:<3}\n")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--grid", action="store_true", help="success grid instead of timing")
@@ -111,6 +149,11 @@ def main(argv: list[str] | None = None) -> int:
                     help="timing: the data-driven path only (to compare two versions of the "
                          "code: run once per version, e.g. with PYTHONPATH at an unpacked "
                          "`git archive` of the other)")
+    ap.add_argument("--base", default=None,
+                    help="--data-only: also time the code at this directory (before) and "
+                         "print it side by side with this checkout (after)")
+    ap.add_argument("--no-bump", action="store_true",
+                    help="--data-only: leave out the `identify bump` cases")
     ap.add_argument("--json", action="store_true")
     a = ap.parse_args(argv)
     models = [s for s in a.models.split(",") if s]
@@ -134,6 +177,8 @@ def main(argv: list[str] | None = None) -> int:
                       + (f" | curvature band alone {r['curvature_band_successes']}/{r['total']}, "
                          f"profile bands in {len(r['profiled'])} rows" if n > 0 else "") + "\n")
                     sys.stdout.flush()
+    elif a.data_only and a.base:
+        return _side_by_side(a)
     elif a.data_only:
         scales = _floats(a.scales or "0.1,10")
         noises = _floats(a.noise) or [0.0]
@@ -147,7 +192,7 @@ def main(argv: list[str] | None = None) -> int:
                             w(f"{f'doe {m} {c} x{s:g} noise {n:g}':40} {r['s_per_row']:8.3f} s/id "
                               f"{r['successes']:>3}/{r['total']:<3} {r['nfev_per_row']:8.0f} nfev/id\n")
                             sys.stdout.flush()
-        for s in (1.0, 5.0, 0.2):
+        for s in ([] if a.no_bump else [1.0, 5.0, 0.2]):
             r = identify_bump(s, True)
             rows.append(r)
             if not a.json:

@@ -51,6 +51,9 @@ NOISE_FREE = 1e-6
 FAR = 1000.0
 #: |r - SIGMAS| at which a band end counts as found
 R_TOL = 0.03
+#: accuracy of a profile refit's cost in units of ``s_k^2`` (moves ``r`` near 3 by at most
+#: ``TOL_S / 6``, far below ``R_TOL``)
+TOL_S = 1e-3
 
 
 @dataclass
@@ -109,9 +112,30 @@ class _Cost:
         return math.inf if r is None else float(r @ r)
 
 
+def _fd_jacobian(cost: _Cost, u: FloatArray, r: FloatArray, others: list[int],
+                 h: float = 1e-6) -> FloatArray | None:
+    """Forward-difference Jacobian of the residual in the coordinates ``others``."""
+    J = np.empty((r.size, len(others)))
+    for j, i in enumerate(others):
+        up = u.copy()
+        up[i] += h
+        rp = cost.resid(up)
+        if rp is None:
+            return None
+        J[:, j] = (rp - r) / h
+    return J
+
+
 def _conditional_min(cost: _Cost, k: int, t: float, u0: FloatArray, s0: float,
-                     max_iter: int = 12) -> tuple[float, FloatArray]:
-    """``min S`` over every coordinate but ``k`` (held at ``t``), Levenberg–Marquardt from ``u0``."""
+                     tol: float = 0.0, max_iter: int = 12,
+                     jac: dict[int, FloatArray] | None = None) -> tuple[float, FloatArray]:
+    """``min S`` over every coordinate but ``k`` (held at ``t``), Levenberg–Marquardt from ``u0``.
+
+    Stops when a step lowers ``S`` by no more than ``max(tol, 1e-10 s0)`` (``tol``: the
+    accuracy the caller needs of ``S``). ``jac`` (``k -> Jacobian``) carries the Jacobian
+    from one profile point to the next: it is updated by Broyden's rank-one formula after
+    each step and recomputed by finite differences only when a step from it fails.
+    """
     n = u0.size
     others = [i for i in range(n) if i != k]
     u = u0.copy()
@@ -123,19 +147,18 @@ def _conditional_min(cost: _Cost, k: int, t: float, u0: FloatArray, s0: float,
     if not others:
         return f, u
     lam = 1e-3
-    h = 1e-6
+    stop = max(tol, 1e-10 * max(s0, 1e-300))
+    J = None if jac is None else jac.get(k)
+    fresh = False
+    if J is None or J.shape[0] != r.size:
+        J = _fd_jacobian(cost, u, r, others)
+        fresh = True
+        if J is None:
+            return f, u
     for _ in range(max_iter):
-        J = np.empty((r.size, len(others)))
-        for j, i in enumerate(others):
-            up = u.copy()
-            up[i] += h
-            rp = cost.resid(up)
-            if rp is None:
-                return f, u
-            J[:, j] = (rp - r) / h
         A = J.T @ J
         g = J.T @ r
-        improved = False
+        improved = done = small = False
         for _ in range(8):
             step = np.linalg.solve(A + lam * np.diag(np.diag(A) + 1e-12 * np.trace(A) / len(others)), -g)
             un = u.copy()
@@ -144,13 +167,30 @@ def _conditional_min(cost: _Cost, k: int, t: float, u0: FloatArray, s0: float,
             fn = math.inf if rn is None else float(rn @ rn)
             if rn is not None and fn < f:
                 improved = True
-                done = (f - fn) <= 1e-10 * max(s0, 1e-300) or np.max(np.abs(step)) < 1e-9
+                # converged only as judged with a Jacobian from finite differences
+                done = fresh and ((f - fn) <= stop or np.max(np.abs(step)) < 1e-9)
+                small = (f - fn) <= stop
+                # Broyden update of the Jacobian along the step taken
+                J = J + np.outer(rn - r - J @ step, step) / float(step @ step)
+                fresh = False
                 u, r, f = un, rn, fn
                 lam = max(lam / 4.0, 1e-9)
                 break
             lam *= 8.0
-        if not improved or done:
+            if not fresh:
+                break  # a stale Jacobian: recompute it before raising the damping further
+        if done:
             break
+        if not improved or small:
+            if fresh:
+                break
+            J = _fd_jacobian(cost, u, r, others)
+            fresh = True
+            lam = 1e-3
+            if J is None:
+                return f, u
+    if jac is not None and J is not None:
+        jac[k] = J
     return f, u
 
 
@@ -162,9 +202,11 @@ def _profile_side(cost: _Cost, k: int, side: float, t0: float, s0: float, sk2: f
     limit = math.log(FAR)
     lower = False
 
+    jac: dict[int, FloatArray] = {}
+
     def r_at(t: float, start: FloatArray) -> tuple[float, FloatArray]:
         nonlocal lower
-        f, u = _conditional_min(cost, k, t, start, s0)
+        f, u = _conditional_min(cost, k, t, start, s0, tol=TOL_S * sk2, jac=jac)
         if f < s0 * (1 - 1e-9):
             lower = True
         return math.sqrt(max(f - s0, 0.0) / sk2), u

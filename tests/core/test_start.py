@@ -9,6 +9,8 @@ from estimator.doe.design import experiments
 from estimator.doe.runner import Settings, measurement, run_design, start_parameters
 from estimator.identify import (OutputErrorProblem, Parameters, data_driven_start,
                                 estimate_start, fit, fit_from_starts)
+from estimator.identify import start as start_mod
+from estimator.identify.start import NOISE_FLOOR, noise_floor_ratio
 from estimator.stream.config import default_config
 from estimator.stream.drivers import run_arrays
 from estimator.stream.wear_streams import damper_wear
@@ -162,3 +164,35 @@ def test_a_noisy_record_runs_the_given_start_too() -> None:
     assert set(ran) == {"data", "init"}
     assert ran["init"]["chosen"] and ran["init"]["cost"] < ran["data"]["cost"]
     assert e["success"] and e["max_rel_error"] < 0.1
+
+
+def test_noise_floor_ratio_is_one_for_white_noise_and_large_for_a_misfit() -> None:
+    """The residual at the truth of a 0.5-sigma record is white noise (ratio ~1); a fit
+    with the dampers 2x off leaves a smooth misfit the differences do not see (ratio >> 1)."""
+    m = get_model("quarter2")
+    e = experiments(m)[0]
+    meas, _ = measurement(m, e, 0.5, e.id)
+    problem = OutputErrorProblem(m, meas, x0=e.x0)
+    assert noise_floor_ratio(problem, e.truth) == pytest.approx(1.0, abs=0.1)
+    off = dict(e.truth, c1=2 * e.truth["c1"], c2=2 * e.truth["c2"])
+    assert noise_floor_ratio(problem, off) > 1.5 * NOISE_FLOOR
+
+
+def test_a_noisy_fit_at_the_noise_floor_skips_the_given_start_with_the_same_answer(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """quarter2 row 1 at 0.5 sigma: the fit from the record's estimate leaves white noise, so
+    the given start is skipped; running it anyway (no floor rule) reaches the same optimum,
+    the same bands and the same verdict."""
+    fast = run_design("quarter2", Settings(noise=0.5), ids=[1])["experiments"][0]
+    assert [s["start"] for s in fast["starts"] if s.get("cost") is not None] == ["data"]
+    monkeypatch.setattr(start_mod, "NOISE_FLOOR", 0.0)
+    both = run_design("quarter2", Settings(noise=0.5), ids=[1])["experiments"][0]
+    assert [s["start"] for s in both["starts"] if s.get("cost") is not None] == ["data", "init"]
+    assert both["nfev"] > fast["nfev"]
+    assert fast["success"] == both["success"] and fast["identifiable"] == both["identifiable"]
+    for k, v in both["identified"].items():
+        assert fast["identified"][k] == pytest.approx(v, rel=1e-6), k
+    assert set(fast["band_3sigma"]) == set(both["band_3sigma"]) == set(FREE2)
+    for k in FREE2:
+        for a, b in zip(fast["band_3sigma"][k], both["band_3sigma"][k]):
+            assert a == pytest.approx(b, rel=0.01), k
