@@ -41,8 +41,11 @@ DBC's messages are held until one comes; foreign frames do not count), the times
 :meth:`DecodeListener.frame_stats` reports it as ``time_base``.
 With the timestamps and ``arrival_slots=True``, a whole log fed through
 :func:`~estimator.decode.replay.feed_log` has its data frames placed in their sample slots
-from their arrival times first (:mod:`estimator.decode.rules.arrival`); the frame
-statistics then list per message what was placed (``arrival_slots``).
+from their arrival times first (:mod:`estimator.decode.rules.arrival`); frames handed over
+one by one (:meth:`DecodeListener.on_message_received`, a live bus) go through the causal
+version of that rule (:mod:`estimator.decode.rules.arrival_live`), which holds the last few
+frames of each message until :meth:`DecodeListener.finish`. The frame statistics then list
+per message what was placed (``arrival_slots``).
 
 Feed it like any python-can listener: ``can.Notifier(bus, [listener])`` on a live bus, or
 :func:`estimator.decode.replay.feed_log` for a log (no reader thread and queue hand-off, so
@@ -155,7 +158,9 @@ class DecodeListener(can.Listener):
         A whole log fed with the timestamp time base
         (:func:`~estimator.decode.replay.feed_log`) has its data frames placed in their
         sample slots from their arrival times first (:meth:`place_arrivals`), so arrival
-        jitter, bursts and delivery delay lose no frame and move no sample.
+        jitter, bursts and delivery delay lose no frame and move no sample; frames fed one
+        by one (:meth:`on_message_received`) are placed as they arrive
+        (:mod:`estimator.decode.rules.arrival_live`; :meth:`finish` releases the last).
 
     Attributes
     ----------

@@ -163,19 +163,32 @@ class LiveSlots:
         recent = self.recent
         nr = len(recent)
         near_b = min(recent[i][0] - recent[i][1] * p for i in range(max(0, nr - DETECT), nr))
-        near_a = u0
-        far = math.inf
-        j = 1
-        for th, _ in self.hold:
-            if j < DETECT:
-                near_a = min(near_a, th - (k + j) * p)
-            else:
-                far = min(far, th - (k + j) * p)
-            j += 1
-        if near_a - near_b > 0.5 * p:
-            # the envelope rises: a gap of g frames, measured from the frames beyond the
-            # next DETECT (as offline: after the stretch where it rises) to the last HOLD
-            # released, after the frames that arrived too early to be after it
+        lim = near_b + 0.5 * p
+        rises = u0 > lim
+        if rises:
+            # the envelope rises over the next DETECT frames when all of them lie above
+            # (most frames end the check at once: one of the next lies below)
+            j = 1
+            for th, _ in self.hold:
+                if j >= DETECT:
+                    break
+                if th - (k + j) * p <= lim:
+                    rises = False
+                    break
+                j += 1
+        if rises:
+            # a gap of g frames, measured from the frames beyond the next DETECT (as
+            # offline: after the stretch where it rises) to the last HOLD released, after
+            # the frames that arrived too early to be after it
+            near_a = u0
+            far = math.inf
+            j = 1
+            for th, _ in self.hold:
+                if j < DETECT:
+                    near_a = min(near_a, th - (k + j) * p)
+                else:
+                    far = min(far, th - (k + j) * p)
+                j += 1
             ahead = min(near_a, far) if j <= DETECT else far
             before = min(tr - kr * p for tr, kr in recent)
             # what the period's uncertainty can lift u over the two sides is not a gap
