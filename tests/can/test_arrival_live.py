@@ -13,6 +13,7 @@ import pytest
 
 import estimator.stream.pipeline as pipeline
 from estimator.decode import DecodeListener, ReplayBus, feed_log
+from estimator.decode.rules.arrival import MIN_FRAMES
 from estimator.decode.rules.arrival_live import HOLD, LiveSlots
 from tests.can.test_arrival_time import KINDS, P, _arrivals, _rel, logs  # noqa: F401
 from tests.can.test_time_base import FIX, _estimates
@@ -140,3 +141,37 @@ def test_live_monitor_gives_the_clean_estimates(logs: dict[str, Path], kind: str
         else:
             assert abs(y["t"] - 100.0 - x["t"]) < 5 * P       # type: ignore[operator]
             assert _rel(x["params"], y["params"]) <= 1e-6     # type: ignore[arg-type]
+
+
+def test_a_clock_reset_starts_the_rule_over(logs: dict[str, Path]) -> None:  # noqa: F811
+    """A logger clock that jumps back: the held frames are passed on, the rule starts over
+    on the new clock, and the decoder's time check re-anchors as without the slots."""
+    msgs = _messages(logs["jitter"])
+    half = len(msgs) // 2
+    for m in msgs[half:]:
+        m.timestamp -= 1000.0
+    got = {}
+    for slots in (False, True):
+        lis = DecodeListener("quarter2", capacity=1 << 14, growable=True,
+                             time_source="timestamp", arrival_slots=slots)
+        for m in msgs:
+            lis.on_message_received(m)
+        lis.finish()
+        got[slots] = lis.frame_stats()
+    assert got[True]["accepted"] >= got[False]["accepted"]            # type: ignore[operator]
+    assert got[True]["accepted"] >= len(msgs) - 32                    # type: ignore[operator]
+    assert all(v["retimed"] for v in got[True]["arrival_slots"].values())  # type: ignore[attr-defined]
+
+
+def test_a_slow_message_ends_its_warm_up_in_time() -> None:
+    """A message at 2 Hz is placed after WARMUP_S of arrival time (and 2 x MIN_FRAMES
+    frames), not after WARMUP frames."""
+    t, k = _arrivals("jitter", 40, 0.5, None, 3)
+    ls = LiveSlots("slow")
+    out: list[tuple[float, int, Any]] = []
+    for i, x in enumerate(t):
+        ls.push(float(x), i, out)
+        if i == 2 * MIN_FRAMES - 1:
+            assert ls.state == "placing" and out
+    ls.flush(out)
+    np.testing.assert_array_equal([o[1] for o in out], k)

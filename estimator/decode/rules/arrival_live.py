@@ -3,7 +3,8 @@
 A live bus hands the frames over one by one; there is no whole log to look ahead in. Per
 data message (:class:`LiveSlots`):
 
-1. warm-up: the first ``WARMUP`` frames are held, then placed by the offline rule
+1. warm-up: the first ``WARMUP`` frames (fewer when they span more than ``WARMUP_S``) are
+   held, then placed by the offline rule
    (:func:`~estimator.decode.rules.arrival.arrival_slots`) -- all but the last ``HOLD``,
    which stay held. A message whose warm-up lies on a uniform grid (or was stamped by a clock
    that ticks with its samples), or cannot be placed, keeps its timestamps from then on;
@@ -25,7 +26,9 @@ data message (:class:`LiveSlots`):
 Messages whose periods agree within ``SAME_RATE`` share the period and phase of the first one
 placed (:class:`LivePlacer`), as :func:`~estimator.decode.rules.arrival.place_messages` does.
 The released frames of all messages and every other frame (arrival time kept) are merged in
-time order: a frame leaves once no message can still release an earlier one.
+time order: a frame leaves once no message can still release an earlier one. An arrival time
+more than ``RESET_S`` before the newest is a clock reset: everything held is passed on and
+the rule starts over.
 """
 from __future__ import annotations
 
@@ -37,10 +40,15 @@ from typing import Any, Callable
 
 import numpy as np
 
-from estimator.decode.rules.arrival import DETECT, SAME_RATE, SIDE, SNAP_SE, arrival_slots
+from estimator.decode.rules.arrival import (DETECT, MIN_FRAMES, SAME_RATE, SIDE, SNAP_SE,
+                                            arrival_slots)
 
 #: frames of a message placed by the offline rule before the online rule takes over
 WARMUP = 1024
+#: a slow message's warm-up ends after this span of arrival time (s) instead
+WARMUP_S = 2.0
+#: an arrival time this far (s) before the newest is a clock reset: the rule starts over
+RESET_S = 1.0
 #: frames of a message held before they are released (the look-ahead: a rise of the lower
 #: envelope is found over ``DETECT`` frames and measured over these, as ``SIDE``)
 HOLD = SIDE
@@ -98,7 +106,8 @@ class LiveSlots:
             return False
         if self.state == "warmup":
             self.warm.append((t, frame))
-            if len(self.warm) < WARMUP:
+            if len(self.warm) < WARMUP and not (
+                    t - self.warm[0][0] > WARMUP_S and len(self.warm) >= 2 * MIN_FRAMES):
                 return False
             self._start(out)
             return True
@@ -121,7 +130,7 @@ class LiveSlots:
         self.state = "placing"
         self.period = sl.period
         self._t0 = float(ts[0])
-        n_out = len(warm) - HOLD
+        n_out = len(warm) - min(HOLD, len(warm) // 2)
         for i in range(n_out):
             self._take(float(ts[i]), int(sl.k[i]))
         self._refit()
@@ -339,6 +348,14 @@ class LivePlacer:
             # not a time the rule can place (the time check rejects it)
             self._add(t, frame, False)
             return self._drain(False)
+        if t < self._newest - RESET_S:
+            # a clock reset: pass on everything held, start over with the new clock (the
+            # decoder's time check re-anchors its time base)
+            done = self.finish()
+            self.msgs = {k: LiveSlots(ls.name) for k, ls in self.msgs.items()}
+            self._groups = []
+            self._last_out = self._newest = self._first = -math.inf
+            return done + self.push(frame)
         self._newest = max(self._newest, t)
         if self._first == -math.inf:
             self._first = t
