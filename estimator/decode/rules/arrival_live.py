@@ -99,7 +99,9 @@ class LiveSlots:
     # ---- the rule ----------------------------------------------------------------------
     def push(self, t: float, frame: Any, out: list[tuple[float, int, Any]]) -> bool:
         """Take one frame arrived at ``t`` (s); released frames go to ``out`` as
-        ``(data time, frame)``. Returns True when the warm-up just ended."""
+        ``(data time, slot, frame)`` (time NaN: the warm-up's, timed by the caller with
+        :meth:`place`; slot -1: the arrival time kept). Returns True when the warm-up just
+        ended."""
         self.last_arrival = t
         if self.state == "kept":
             out.append((t, -1, frame))
