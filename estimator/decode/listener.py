@@ -221,6 +221,7 @@ class DecodeListener(can.Listener):
         self.arrival_stats: dict[str, dict[str, object]] = {}
         self._slot_period = 0.0
         self._live: LivePlacer | None = None
+        self._live_off = False
         routes = Routes(db, smap, self._buffer)
         if time_source == "tick" and not any(r.kind == SYNC for r in routes.ordered):
             raise UsageError(f"time_source 'tick' needs message {SYNC_MESSAGE} in the DBC "
@@ -270,7 +271,11 @@ class DecodeListener(can.Listener):
         few frames of each data message (its look-ahead) and passes frames on in time order
         with their slot times (:meth:`finish` releases the held ones).
         """
-        if self.arrival_slots and not self._auto and not self.engine.tick_time:
+        if self._auto:
+            # frames queued before the time base is decided keep their arrival times; later
+            # ones placed in slots could fall before them: the stream stays unplaced
+            self._live_off = True
+        elif self.arrival_slots and not self._live_off and not self.engine.tick_time:
             live = self._live
             if live is None:
                 live = self._live = self._placer()
