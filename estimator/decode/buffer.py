@@ -378,6 +378,17 @@ class RollingBuffer:
                         best = t
         return best
 
+    def earliest_time(self) -> float:
+        """Time (s) of the oldest row held of any source (NaN if empty)."""
+        best = float("nan")
+        with self._lock:
+            for s in self._sources.values():
+                if s.n:
+                    t = s.t[(s.w - s.n) % s.cap] if not s.growable else s.t[s.w - s.n]
+                    if not best <= t:
+                        best = t
+        return best
+
     def series(self, channel: str) -> tuple[np.ndarray, np.ndarray]:
         """``(t, v)`` of one channel in arrival order."""
         src, k = self._where[channel]

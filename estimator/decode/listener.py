@@ -41,8 +41,11 @@ DBC's messages are held until one comes; foreign frames do not count), the times
 :meth:`DecodeListener.frame_stats` reports it as ``time_base``.
 With the timestamps and ``arrival_slots=True``, a whole log fed through
 :func:`~estimator.decode.replay.feed_log` has its data frames placed in their sample slots
-from their arrival times first (:mod:`estimator.decode.rules.arrival`); the frame
-statistics then list per message what was placed (``arrival_slots``).
+from their arrival times first (:mod:`estimator.decode.rules.arrival`); frames handed over
+one by one (:meth:`DecodeListener.on_message_received`, a live bus) go through the causal
+version of that rule (:mod:`estimator.decode.rules.arrival_live`), which holds the last few
+frames of each message until :meth:`DecodeListener.finish`. The frame statistics then list
+per message what was placed (``arrival_slots``).
 
 Feed it like any python-can listener: ``can.Notifier(bus, [listener])`` on a live bus, or
 :func:`estimator.decode.replay.feed_log` for a log (no reader thread and queue hand-off, so
@@ -85,6 +88,7 @@ from estimator.decode.engine import MIN_RUN, SMALL_BATCH, DecodeEngine
 from estimator.decode.frames import sort_frames
 from estimator.decode.routes import DATA, EXT, SYNC, Routes, compile_row, model_channels
 from estimator.decode.rules.arrival import arrival_slots, place_messages
+from estimator.decode.rules.arrival_live import LivePlacer, retimed
 from estimator.decode.rules.counters import period_after
 from estimator.decode.rules.timebase import AUTO_FRAMES, TIME_RESYNC, choose_time_base, first_sync
 from estimator.decode.stats import REJECT_REASONS, FrameCounts
@@ -103,6 +107,21 @@ _compile_row = compile_row
 
 __all__ = ["AUTO_FRAMES", "BATCH_SIZE", "DecodeListener", "FrameCounts", "MIN_RUN",
            "REJECT_REASONS", "SMALL_BATCH", "TIME_RESYNC", "model_channels"]
+
+
+def _key_of(msg: can.Message) -> int | None:
+    """Route key of a frame (None: error and remote frames, which carry no data)."""
+    if msg.is_error_frame or msg.is_remote_frame:
+        return None
+    return msg.arbitration_id | EXT if msg.is_extended_id else msg.arbitration_id
+
+
+def _time_of(msg: can.Message) -> float:
+    """Arrival time (s) of a frame (NaN when it has none the rule can use)."""
+    try:
+        return float(msg.timestamp)
+    except (TypeError, ValueError):
+        return float("nan")
 
 
 class DecodeListener(can.Listener):
@@ -139,7 +158,9 @@ class DecodeListener(can.Listener):
         A whole log fed with the timestamp time base
         (:func:`~estimator.decode.replay.feed_log`) has its data frames placed in their
         sample slots from their arrival times first (:meth:`place_arrivals`), so arrival
-        jitter, bursts and delivery delay lose no frame and move no sample.
+        jitter, bursts and delivery delay lose no frame and move no sample; frames fed one
+        by one (:meth:`on_message_received`) are placed as they arrive
+        (:mod:`estimator.decode.rules.arrival_live`; :meth:`finish` releases the last).
 
     Attributes
     ----------
@@ -199,6 +220,8 @@ class DecodeListener(can.Listener):
         #: what :meth:`place_arrivals` did, per message (empty: not used)
         self.arrival_stats: dict[str, dict[str, object]] = {}
         self._slot_period = 0.0
+        self._live: LivePlacer | None = None
+        self._live_off = False
         routes = Routes(db, smap, self._buffer)
         if time_source == "tick" and not any(r.kind == SYNC for r in routes.ordered):
             raise UsageError(f"time_source 'tick' needs message {SYNC_MESSAGE} in the DBC "
@@ -243,7 +266,31 @@ class DecodeListener(can.Listener):
         The frame's fields are read when the batch is processed (at the latest when anything
         reads the results), as python-can's ``BufferedReader`` keeps messages: do not modify
         a message after handing it over. With ``batch_size=0`` the frame is validated now.
+        With ``arrival_slots`` and the timestamp time base the frame goes through the live
+        slot rule first (:mod:`estimator.decode.rules.arrival_live`), which holds the last
+        few frames of each data message (its look-ahead) and passes frames on in time order
+        with their slot times (:meth:`finish` releases the held ones).
         """
+        if self._auto:
+            # frames queued before the time base is decided keep their arrival times; later
+            # ones placed in slots could fall before them: the stream stays unplaced
+            self._live_off = True
+        elif self.arrival_slots and not self._live_off and not self.engine.tick_time:
+            live = self._live
+            if live is None:
+                live = self._live = self._placer()
+            for m in live.push(msg):
+                self._receive(m)
+            return
+        self._receive(msg)
+
+    def _placer(self) -> LivePlacer:
+        """The live slot rule over this listener's data messages."""
+        names = {r.key: r.name for r in self.routes.ordered if r.kind == DATA}
+        return LivePlacer(names, _key_of, _time_of, retimed)
+
+    def _receive(self, msg: can.Message) -> None:
+        """Queue (or, ``batch_size=0``, validate) one frame."""
         if self.batch_size:
             pend = self._pending
             pend.append(msg)
@@ -307,7 +354,12 @@ class DecodeListener(can.Listener):
                           self.routes.sync_ids)
 
     def finish(self) -> None:
-        """The input has ended: process every held frame (see ``time_source="auto"``)."""
+        """The input has ended: process every held frame (see ``time_source="auto"``; the
+        live slot rule's look-ahead)."""
+        live = self._live
+        if live is not None:
+            for m in live.finish():
+                self._receive(m)
         with self._lock:
             if self._auto:
                 self.choose_time_base([m.arbitration_id for m in self._pending], final=True)
@@ -461,6 +513,16 @@ class DecodeListener(can.Listener):
         placed.timestamp = out
         return sort_frames(placed)
 
+    def _live_stats(self) -> None:
+        """Take what the live slot rule did into :attr:`arrival_stats`."""
+        if self._live is None:
+            return
+        self.arrival_stats.update(self._live.stats())
+        periods = [float(v["period"]) for v in self.arrival_stats.values()  # type: ignore[arg-type]
+                   if v["retimed"]]
+        if periods:
+            self._slot_period = min(periods)
+
     def _deliver(self) -> None:
         """Hand accepted alerts to ``on_alert`` (outside the processing lock)."""
         with self._lock:
@@ -535,6 +597,7 @@ class DecodeListener(can.Listener):
         out: dict[str, object] = {"accepted": c.accepted, "rejected": dict(c.rejected),
                                   "ignored": c.ignored, "lost": c.lost,
                                   "time_base": "tick" if self.engine.tick_time else "timestamp"}
+        self._live_stats()
         if self.arrival_stats:
             out["arrival_slots"] = {k: dict(v) for k, v in self.arrival_stats.items()}
         if self.receive_stats:
@@ -591,6 +654,7 @@ class DecodeListener(can.Listener):
             Channels whose map subtracts the mean have the mean of the window removed.
         """
         self.flush()
+        self._live_stats()
         if dt is None and self.time_source == "tick":
             dt = self.engine.period
         t_start = None

@@ -153,8 +153,15 @@ class CanWindowDriver:
                 live = [c for name, src in self.listener.buffer.sources.items() if src.n > 0
                         for c in src.channels]
                 self.channels = live or None
-            self.t_first = latest
-            self.next_end = latest + self.window_s
+            # the first window starts at the oldest sample (frames a decoder held back, e.g.
+            # a live slot rule's warm-up, arrive together)
+            first = getattr(self.listener.buffer, "earliest_time", None)
+            t0 = first() if first is not None else latest
+            self.t_first = t0 if math.isfinite(t0) else latest
+            self.next_end = self.t_first + self.window_s
+            while latest > self.next_end + 1e-9:
+                self._cut(self.next_end)
+                self.next_end += self.step_s
             return
         while latest > self.next_end + 1e-9:
             self._cut(self.next_end)
