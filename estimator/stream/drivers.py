@@ -155,8 +155,7 @@ class CanWindowDriver:
                 self.channels = live or None
             # the first window starts at the oldest sample (frames a decoder held back, e.g.
             # a live slot rule's warm-up, arrive together)
-            first = getattr(self.listener.buffer, "earliest_time", None)
-            t0 = first() if first is not None else latest
+            t0 = self.listener.buffer.earliest_time()
             self.t_first = t0 if math.isfinite(t0) else latest
             self.next_end = self.t_first + self.window_s
             while latest > self.next_end + 1e-9:
