@@ -158,10 +158,6 @@ class CanWindowDriver:
             t0 = self.listener.buffer.earliest_time()
             self.t_first = t0 if math.isfinite(t0) else latest
             self.next_end = self.t_first + self.window_s
-            while latest > self.next_end + 1e-9:
-                self._cut(self.next_end)
-                self.next_end += self.step_s
-            return
         while latest > self.next_end + 1e-9:
             self._cut(self.next_end)
             self.next_end += self.step_s
