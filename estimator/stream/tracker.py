@@ -31,6 +31,15 @@ exponentially weighted mean of ``d_i^2 / (s_i^2 + 4 s_{i-1}^2 + s_{i-2}^2)`` (me
 rest on the scatter the estimates actually show. Not for an estimator whose outputs are
 themselves filtered (the EKF): their differences understate the error.
 
+A wear that starts (or stops) shows first as the changing model taking over, and its new
+rate is then two estimates old (the newest estimate describes its window's middle: a rate
+that changed in the last step does not show in it yet). When the changing model's
+probability first reaches ``restart_mu`` the tracker goes back one estimate, widens the
+rate (``restart_rate`` of nominal per s) and folds the two estimates in again; the restart
+is kept only if a likelihood-ratio test over those estimates prefers it (``restart_glr``),
+and no new forecast is announced from the restarted rate for ``restart_hold`` estimates.
+Only for estimates that describe an earlier time (``lag > 0``: the window's middle).
+
 The alerts (:class:`estimator.alerts.AlertEngine`) are decided on the tracked value and its
 standard error, the forecasts (:class:`estimator.alerts.ForecastEngine`) on the trend
 (:meth:`TrendTracker.trends`): right after a kink the trend's rate variance gets the
@@ -52,6 +61,9 @@ import numpy as np
 from estimator.alerts.forecast import Trend
 
 
+_Snap = tuple[float, list[np.ndarray], list[np.ndarray], np.ndarray]   # t, xs, Ps, mu
+
+
 @dataclass
 class _Track:
     x: np.ndarray       # [value, rate] (SI, SI/s): the mixture
@@ -64,6 +76,10 @@ class _Track:
     mu: np.ndarray = field(default_factory=lambda: np.ones(1))
     recent: list[tuple[float, float]] = field(default_factory=list)  # (value, stderr), last 3
     calib: tuple[float, float] = (0.0, 0.0)   # weighted sum of d^2/var, weighted count
+    # the last estimates: the filter before each, its time, value, variance, log-likelihood
+    hist: list[tuple[_Snap, float, float, float, float]] = field(default_factory=list)
+    held: int = 0     # consecutive estimates with the changing model at restart_mu or above
+    hold: int = 0     # estimates to go before a restarted rate may be forecast from
 
 
 @dataclass
@@ -97,6 +113,20 @@ class TrendTracker:
         and the clip range of ``lambda``.
     forecast_settle_s, forecast_settle_power : float
         Extra rate variance of the trends right after a kink (see the module docstring).
+    restart_mu : float
+        Probability of the changing model at which the rate is restarted (``_restart``).
+    restart_rate : float
+        Width of the restarted rate's prior, relative to nominal per s; 0: no restart.
+    restart_glr : float
+        Log-likelihood-ratio threshold (``2 Delta log L``) a restart must pass.
+    restart_back : int
+        Estimates before the one that shows the take-over from which the rate restarts.
+    restart_confirm : int
+        Further estimates the changing model must hold before the restart is tried (it
+        then goes back ``restart_back + restart_confirm`` estimates).
+    restart_hold : int
+        Estimates, counting the restarting one, during which the trend reports no data
+        span (the forecast engine announces nothing new from it).
     nominal : dict, optional
         ``parameter -> nominal`` (SI) scaling the noise; a parameter without one is scaled by
         its first estimate.
@@ -117,6 +147,12 @@ class TrendTracker:
     calib_max: float = 20.0
     forecast_settle_s: float = 20.0
     forecast_settle_power: float = 8.0
+    restart_mu: float = 0.5
+    restart_rate: float = 0.005
+    restart_glr: float = 3.84
+    restart_back: int = 1
+    restart_confirm: int = 0
+    restart_hold: int = 2
     nominal: dict[str, float] = field(default_factory=dict)
     tracks: dict[str, _Track] = field(default_factory=dict)
 
@@ -221,22 +257,74 @@ class TrendTracker:
                 continue
             self._calibrate(tr, float(v), float(se))
             r = se * se * self.overlap * self.scale(k)
-            self._predict(tr, t)
-            H = np.array([1.0, -lag])
-            like = np.empty(len(tr.xs))
-            for j, (x, P) in enumerate(zip(tr.xs, tr.Ps)):
-                S = float(H @ P @ H) + r
-                K = (P @ H) / S
-                nu = float(v) - float(H @ x)
-                tr.xs[j] = x + K * nu
-                Pn = P - np.outer(K, H @ P)
-                tr.Ps[j] = 0.5 * (Pn + Pn.T)
-                like[j] = math.exp(-0.5 * nu * nu / S) / math.sqrt(S)
-            mu = tr.mu * like
-            total = float(mu.sum())
-            tr.mu = mu / total if total > 0 and math.isfinite(total) else tr.mu
-            self._combine(tr)
+            before = self._snapshot(tr)
+            ll = self._step(tr, t, float(v), r, lag)
+            tr.hist.append((before, t, float(v), r, ll))
+            tr.held = tr.held + 1 if float(tr.mu[-1]) >= self.restart_mu else 0
+            tr.hold = max(tr.hold - 1, 0)
+            back = self.restart_back + self.restart_confirm
+            if (tr.mu.size > 1 and self.restart_rate > 0.0 and lag > 0.0
+                    and len(tr.hist) > back and tr.held == 1 + self.restart_confirm):
+                self._restart(tr, lag, back)
+            del tr.hist[:-(back + 1)]
         return self.state(t)
+
+    def _step(self, tr: _Track, t: float, v: float, r: float, lag: float) -> float:
+        """Predict to ``t`` and fold in one estimate ``v`` of variance ``r`` (both models)."""
+        self._predict(tr, t)
+        H = np.array([1.0, -lag])
+        like = np.empty(len(tr.xs))
+        for j, (x, P) in enumerate(zip(tr.xs, tr.Ps)):
+            S = float(H @ P @ H) + r
+            K = (P @ H) / S
+            nu = v - float(H @ x)
+            tr.xs[j] = x + K * nu
+            Pn = P - np.outer(K, H @ P)
+            tr.Ps[j] = 0.5 * (Pn + Pn.T)
+            like[j] = math.exp(-0.5 * nu * nu / S) / math.sqrt(S)
+        mu = tr.mu * like
+        total = float(mu.sum())
+        tr.mu = mu / total if total > 0 and math.isfinite(total) else tr.mu
+        self._combine(tr)
+        return math.log(total) if total > 0 and math.isfinite(total) else -math.inf
+
+    @staticmethod
+    def _snapshot(tr: _Track) -> _Snap:
+        return tr.t, [x.copy() for x in tr.xs], [P.copy() for P in tr.Ps], tr.mu.copy()
+
+    def _restore(self, tr: _Track, snap: _Snap) -> None:
+        t0, xs, Ps, mu = snap
+        tr.t, tr.xs, tr.Ps, tr.mu = t0, [x.copy() for x in xs], [P.copy() for P in Ps], mu.copy()
+        self._combine(tr)
+
+    def _restart(self, tr: _Track, lag: float, back: int) -> None:
+        """The changing model has just taken over: restart the rate ``back`` estimates back.
+
+        A window estimate describes the window's middle (``y = v - lag r``), so a rate that
+        changed during the last step does not show in the newest estimate: when the changing
+        model's probability first reaches ``restart_mu`` the change happened before the
+        previous estimate. The filter goes back to its state before that estimate, each
+        model's rate variance gets ``(restart_rate N)^2`` (the rate is learnt afresh from the
+        estimates since), and the estimates since are folded in again. The restart is kept
+        only if it explains them better, by a generalized likelihood ratio
+        ``2 (log L_restart - log L) >= restart_glr`` (3.84: chi-square, 1 dof, 95 %), and
+        the trend then reports no data span for ``restart_hold`` estimates (no forecast
+        announced from a rate two estimates old: two outlying windows look like a kink).
+        """
+        old = tr.hist[-(back + 1):]
+        keep = self._snapshot(tr)
+        self._restore(tr, old[0][0])
+        extra = (self.restart_rate * tr.nominal) ** 2
+        tr.Ps = [P + np.array([[0.0, 0.0], [0.0, extra]]) for P in tr.Ps]
+        new = []
+        for _, t, v, r, _ in old:
+            snap = self._snapshot(tr)
+            new.append((snap, t, v, r, self._step(tr, t, v, r, lag)))
+        if 2.0 * sum(n[4] - o[4] for n, o in zip(new, old)) < self.restart_glr:
+            self._restore(tr, keep)
+            return
+        tr.hist[-len(new):] = new
+        tr.hold = self.restart_hold
 
     def state(self, t: float | None = None) -> dict[str, dict[str, float]]:
         """The tracked values at ``t`` (default: each track's last update), JSON-ready."""
@@ -264,7 +352,7 @@ class TrendTracker:
                      * n2 * self.forecast_settle_s if tr.mu.size > 1 else 0.0)
             out[k] = Trend(tr.t, float(tr.x[0]), float(tr.x[1]), float(tr.P[0, 0]),
                            float(tr.P[0, 1]), float(tr.P[1, 1]) + extra,
-                           self.q_level ** 2 * n2, 0.0, tr.t - tr.t0)
+                           self.q_level ** 2 * n2, 0.0, 0.0 if tr.hold else tr.t - tr.t0)
         return out
 
 
