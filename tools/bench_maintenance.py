@@ -177,7 +177,11 @@ def main(argv: list[str] | None = None) -> int:
                     help="comma-separated case keys (" + ", ".join(c.key for c in CASES) + ")")
     ap.add_argument("--road-fusion", type=float, default=None, metavar="HZ",
                     help="sliding window: fuse each road displacement with its velocity's "
-                         "integral above HZ (WindowConfig.road_fusion_hz)")
+                         "integral above HZ (WindowConfig.road_fusion_hz; default 1.5 x "
+                         "the highest natural frequency, 0: off)")
+    ap.add_argument("--road-lowpass", type=float, default=None, metavar="HZ",
+                    help="sliding window: zero-phase low-pass of each road displacement at HZ "
+                         "(WindowConfig.road_lowpass_hz; default 0: off)")
     ap.add_argument("--drift", nargs="?", const="free", default=None, choices=("free", "prior"),
                     help="sliding window: refit the wearing part with a linear drift over "
                          "each window (WindowConfig.drift), its estimate at the window end; "
@@ -200,6 +204,8 @@ def main(argv: list[str] | None = None) -> int:
     opts: dict[str, Any] = {}
     if args.road_fusion is not None:
         opts["road_fusion_hz"] = args.road_fusion
+    if args.road_lowpass is not None:
+        opts["road_lowpass_hz"] = args.road_lowpass
     rows = []
     for c in cases:
         o = dict(opts)

@@ -35,7 +35,10 @@ Noise (see :class:`EKFTuning`)
     (:func:`estimator.stream.window.noise_floor`) and the DBC quantization ``q / sqrt(12)``.
     ``Q``: random walk of every ``theta`` with intensity ``q_param`` (1/sqrt(s)), i.e.
     variance ``q_param^2 dt`` per step; the motion states get ``q_state`` (m/s^2/sqrt(Hz))
-    acceleration noise for unmodelled road/quantization effects.
+    acceleration noise for unmodelled road/quantization effects; with
+    ``EKFTuning.input_noise`` the measured road's own white noise is added as process noise
+    through the step's sensitivity to its road samples (:meth:`AugmentedEKF.set_input_noise`:
+    the road is an input measured with error, not an exact one).
 """
 from __future__ import annotations
 
@@ -70,6 +73,11 @@ class EKFTuning:
         Initial standard deviation of positions (m) and velocities (m/s).
     substeps : int
         RK4 sub-intervals per sample.
+    input_noise : bool
+        Treat the measured road's white noise as process noise (errors in the input):
+        ``Q += G0 R_u G0^T + G1 R_u G1^T`` with ``G0``, ``G1`` the step's sensitivity to
+        the road samples at its start and end (:meth:`AugmentedEKF.set_input_noise`) and
+        ``R_u`` the road channels' noise floor; ``False`` takes the road as exact.
     """
 
     q_param: float = 0.005
@@ -78,6 +86,7 @@ class EKFTuning:
     p0_pos: float = 0.01
     p0_vel: float = 0.1
     substeps: int = 1
+    input_noise: bool = True
 
 
 class AugmentedEKF(ExtendedKalmanFilter):
@@ -148,6 +157,8 @@ class AugmentedEKF(ExtendedKalmanFilter):
         #: running sum of the normalised innovations squared and their degrees of freedom
         self.nis_sum = 0.0
         self.nis_dof = 0
+        #: process noise from the road's own noise (:meth:`set_input_noise`)
+        self._q_input = np.zeros((nz, nz))
         self.set_q(self.dt)
 
     # ---- parameters ----------------------------------------------------------------------
@@ -176,7 +187,43 @@ class AugmentedEKF(ExtendedKalmanFilter):
             Q[self.nq + i, self.nq + i] = qa
         for j in range(len(self.aug)):
             Q[self.nx + j, self.nx + j] = tu.q_param ** 2 * dt
-        self.Q = Q
+        self.Q = Q + self._q_input
+
+    def set_input_noise(self, sig_u: FloatArray) -> None:
+        """Add the road's white noise to ``Q`` (errors in the input).
+
+        The prediction interpolates the road ``u = [r, r']`` linearly between its samples
+        at the start and the end of a step, so white errors ``e0``, ``e1`` on those samples
+        move the predicted state by ``G0 e0 + G1 e1``, ``G0``, ``G1`` the sensitivities of
+        the step (:meth:`rk4`) to its two road samples at the current state; the step
+        gains ``G0 R_u G0^T + G1 R_u G1^T`` of process noise, ``R_u = diag(sig_u^2)``.
+        The step is affine in ``u`` for a model without effect terms, so the one-sigma
+        differences that give ``G0 R_u^(1/2)`` and ``G1 R_u^(1/2)`` are exact there. (The
+        error of a sample is shared by two consecutive steps; that correlation is left
+        out, as a filter with white process noise must.)
+
+        Parameters
+        ----------
+        sig_u : ndarray
+            Standard deviation of the white noise on each road input ``[r..., r'...]``
+            (m, m/s), length ``2 x number of roads``.
+        """
+        sig = np.asarray(sig_u, dtype=float)
+        z = self.x[:, 0].copy()
+        zero = np.zeros(sig.size)
+        base = self.rk4(z, zero, zero, self.dt, with_jacobian=False)[0]
+        Q = np.zeros((self.dim_x, self.dim_x))
+        for j in range(sig.size):
+            if not sig[j] > 0:
+                continue
+            e = zero.copy()
+            e[j] = sig[j]
+            for g in (self.rk4(z, e, zero, self.dt, with_jacobian=False)[0] - base,
+                      self.rk4(z, zero, e, self.dt, with_jacobian=False)[0] - base):
+                g[self.nx:] = 0.0
+                Q += np.outer(g, g)
+        self._q_input = Q
+        self.set_q(self.dt)
 
     # ---- dynamics -------------------------------------------------------------------------
     def f(self, z: FloatArray, u: FloatArray, t: float = 0.0) -> FloatArray:

@@ -18,7 +18,11 @@ starting values
     neither side starts from a default the other does not use.
 measurement noise
     ``R`` from the data's own noise floor on the first window (fourth differences,
-    :func:`estimator.stream.window.noise_floor`), never below the DBC quantization.
+    :func:`estimator.stream.window.noise_floor`), never below the DBC quantization; the
+    road channels' noise floor, found the same way, enters ``Q`` through the prediction's
+    sensitivity to the road (``EKFTuning.input_noise``): the road is an input measured with
+    error on both sides (the sliding window fuses its displacement with the integral of its
+    velocity above ``WindowConfig.road_fusion_hz``).
 consistency
     the normalised innovation squared (NIS) of every update is summed per window; its mean
     per degree of freedom is ``1`` for a filter whose model and noise fit the data. Each
@@ -160,6 +164,19 @@ class EKFWindowEstimator:
             s = max(nf if math.isfinite(nf) else 0.0, q, 1e-9)
             sig.append(s)
         self.ekf.R = np.diag(np.square(sig))
+        if self.tuning.input_noise:
+            roads = list(self.model.roads) + [f"{r}_dot" for r in self.model.roads]
+            sig_u = np.zeros(len(roads))
+            for i, c in enumerate(roads):
+                if c in data:
+                    nf = noise_floor(np.asarray(data[c], dtype=float))
+                    q = DBC_RESOLUTION.get(c, 0.0) / math.sqrt(12.0)
+                    sig_u[i] = max(nf if math.isfinite(nf) else 0.0, q)
+            nr = len(self.model.roads)
+            for i, r in enumerate(self.model.roads):
+                if f"{r}_dot" not in data:  # the road's central difference (see _road)
+                    sig_u[nr + i] = sig_u[i] / (math.sqrt(2.0) * h)
+            self.ekf.set_input_noise(sig_u)
         nq = len(self.model.coords)
         z = self.ekf.x[:, 0].copy()
         for i, c in enumerate(self.model.coords):

@@ -33,15 +33,29 @@ Excitation
     counts. Without any, the first measured motion channel is used. The noise floor is
     estimated from the data as ``std(diff4(y)) / sqrt(70)`` at the full rate (the fourth
     difference removes the smooth suspension motion, 70 = C(8,4) is its white-noise gain).
+Road input (errors in the variables)
+    The fit drives the model with the measured road displacement ``r`` interpolated
+    linearly between samples, so the tyre damping sees its slope: white noise on ``r``
+    becomes force noise rising with frequency, fed to the simulator as if it were road,
+    which biases the dampers (+1.9 % on c1 at 5 % noise on a stiff car). Before decimation
+    each window's road is rebuilt from ``r`` below a crossover and the integral of the
+    measured ``r'`` above it (:func:`fuse_road`, ``WindowConfig.road_fusion_hz``; by default
+    1.5 x the highest natural frequency, :mod:`estimator.stream.config`) when ``r'`` is in
+    the stream; optionally ``r`` is also low-passed with a zero-phase Butterworth
+    (:func:`lowpass_road`, ``WindowConfig.road_lowpass_hz``, off by default). The measured
+    outputs are not filtered, so the residual's noise stays white and the stderr need no
+    correction.
 """
 from __future__ import annotations
 
 import math
 import time
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Any, Mapping
 
 import numpy as np
+from scipy.signal import butter, sosfiltfilt
 
 from estimator.identify import Parameters, minimize_log
 from estimator.identify.start import cold_start
@@ -187,6 +201,47 @@ def fuse_road(t: FloatArray, r: FloatArray, r_dot: FloatArray, crossover_hz: flo
     return np.asarray(R + dlt, dtype=float)
 
 
+@lru_cache(maxsize=32)
+def _butter_sos(order: int, wn: float) -> FloatArray:
+    """Second-order sections of a Butterworth low-pass (``wn``: cutoff / Nyquist)."""
+    return np.asarray(butter(order, wn, output="sos"), dtype=float)
+
+
+def lowpass_road(v: FloatArray, h: float, cutoff_hz: float, order: int = 2) -> FloatArray:
+    """Zero-phase Butterworth low-pass of one road channel over a window.
+
+    ``sosfiltfilt`` (forward and backward: no phase lag, squared magnitude, so the cutoff
+    ``cutoff_hz`` is where the gain is 1/2) with odd extension of ``3 / cutoff_hz`` seconds
+    at both ends (value and slope continue through the edge, so a smooth road passes the
+    window's edges unchanged). A channel with a non-finite sample, a cutoff at or above
+    0.9 x the Nyquist frequency, or fewer samples than the padding is returned unchanged.
+
+    Parameters
+    ----------
+    v : ndarray
+        Road displacement (m) or velocity (m/s) on a uniform grid.
+    h : float
+        Sample interval (s).
+    cutoff_hz : float
+        Cutoff (Hz), -6 dB of the zero-phase pair.
+    order : int
+        Butterworth order of one pass.
+
+    Returns
+    -------
+    ndarray
+        The filtered channel (same units).
+    """
+    v = np.asarray(v, dtype=float)
+    wn = 2.0 * cutoff_hz * h
+    pad = int(math.ceil(3.0 / (cutoff_hz * h))) if cutoff_hz > 0 else 0
+    if not 0 < wn < 0.9 or v.size <= pad + 1 or not math.isfinite(float(np.add.reduce(v))):
+        return v
+    # the -6 dB point of the forward-backward pair at cutoff_hz: one pass at -3 dB there
+    return np.asarray(sosfiltfilt(_butter_sos(order, wn), v, padtype="odd", padlen=pad),
+                      dtype=float)
+
+
 class SlidingWindowIdentifier:
     """Fit the free parameters on successive windows of a stream.
 
@@ -279,6 +334,12 @@ class SlidingWindowIdentifier:
             for r in self.model.roads:
                 if r in data and f"{r}_dot" in data:
                     full[r] = fuse_road(t, data[r], data[f"{r}_dot"], fc)
+        lp = self.config.road_lowpass_hz
+        if lp > 0 and t.size > 1:
+            h = float(t[1] - t[0])
+            for r in self.model.roads:
+                if r in full:
+                    full[r] = lowpass_road(full[r], h, lp)
         road = {k: np.asarray(full[k][::d], dtype=float) for k in
                 [r for r in self.model.roads] + [f"{r}_dot" for r in self.model.roads] if k in full}
         meas = Measurement(t[::d].copy(), road,

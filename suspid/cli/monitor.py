@@ -80,6 +80,13 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     w.add_argument("--min-deflection", type=float, default=None, metavar="M",
                    help="skip windows whose RMS suspension deflection is below this (m, "
                         "default 0.0005)")
+    w.add_argument("--road-fusion", type=float, default=None, metavar="HZ",
+                   help="road displacement fed to each window's fit: measured r below HZ, "
+                        "integral of the measured r_dot above (default 1.5 x the highest "
+                        "natural frequency; 0: r as measured)")
+    w.add_argument("--road-lowpass", type=float, default=None, metavar="HZ",
+                   help="zero-phase low-pass of the road displacement fed to each window's "
+                        "fit (Hz, -6 dB; default 0: off)")
     w.add_argument("--window-drift", default=None, metavar="NAMES",
                    help="comma-separated free parameters fitted with a linear drift over each "
                         "window, so their estimate refers to the window's end (default none; "
@@ -221,6 +228,7 @@ def run(args: argparse.Namespace) -> int:
         hysteresis=args.hysteresis, window=args.window, step=args.step,
         window_overrides={"maxfev": args.budget, "first_maxfev": args.first_budget,
                           "sigma_floor": args.sigma_floor, "min_deflection": args.min_deflection,
+                          "road_fusion_hz": args.road_fusion, "road_lowpass_hz": args.road_lowpass,
                           "drift": (None if args.window_drift is None else tuple(
                               x.strip() for x in args.window_drift.split(",") if x.strip()))},
         decimate=args.decimate, inspection=not args.no_inspection,
