@@ -55,7 +55,9 @@ from functools import lru_cache
 from typing import Any, Mapping
 
 import numpy as np
-from scipy.signal import butter, sosfiltfilt
+# scipy.signal (which loads scipy.optimize, ~0.3 s) is reached through scipy's lazy
+# submodule attribute, so only a monitor with the road low-pass on pays for it
+import scipy
 
 from estimator.identify import Parameters, minimize_log
 from estimator.identify.start import cold_start
@@ -204,7 +206,7 @@ def fuse_road(t: FloatArray, r: FloatArray, r_dot: FloatArray, crossover_hz: flo
 @lru_cache(maxsize=32)
 def _butter_sos(order: int, wn: float) -> FloatArray:
     """Second-order sections of a Butterworth low-pass (``wn``: cutoff / Nyquist)."""
-    return np.asarray(butter(order, wn, output="sos"), dtype=float)
+    return np.asarray(scipy.signal.butter(order, wn, output="sos"), dtype=float)
 
 
 def lowpass_road(v: FloatArray, h: float, cutoff_hz: float, order: int = 2) -> FloatArray:
@@ -238,7 +240,7 @@ def lowpass_road(v: FloatArray, h: float, cutoff_hz: float, order: int = 2) -> F
     if not 0 < wn < 0.9 or v.size <= pad + 1 or not math.isfinite(float(np.add.reduce(v))):
         return v
     # the -6 dB point of the forward-backward pair at cutoff_hz: one pass at -3 dB there
-    return np.asarray(sosfiltfilt(_butter_sos(order, wn), v, padtype="odd", padlen=pad),
+    return np.asarray(scipy.signal.sosfiltfilt(_butter_sos(order, wn), v, padtype="odd", padlen=pad),
                       dtype=float)
 
 
