@@ -17,12 +17,14 @@ Usage::
     python tools/bench_start.py --grid [--models ...] [--costs sse,frobenius]
         [--scales 0.1,0.2,0.5,2,5,10] [--noise 0.1,0.2,0.3,0.4,0.5] [--compare] [--json]
     python tools/bench_start.py --data-only [--models ...] [--scales ...] [--noise ...]
-        [--costs ...] [--no-bump] [--base DIR]
+        [--costs ...] [--no-bump] [--base DIR [--repeat K]]
 
 ``--data-only --base DIR`` times the same cases in one run with this checkout and with the
 code at ``DIR`` (e.g. ``git worktree add /tmp/base 84d56c2``; each case in a subprocess
 with ``PYTHONPATH`` at the version, the two alternately), and prints before / after /
-ratio side by side.
+ratio side by side, in wall seconds and in CPU seconds (the process's own; on a shared
+machine the steadier of the two). ``--repeat K`` runs every case K times per version
+(alternately) and reports each version's fastest run.
 """
 from __future__ import annotations
 
@@ -32,6 +34,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # small matrices: threads on
 
 import argparse
 import json
+import math
 import subprocess
 import sys
 import time
@@ -55,10 +58,10 @@ def _floats(text: str) -> list[float]:
 def doe_row(model: str, cost: str, scale: float, noise: float, data: bool,
             ids: list[int] | None) -> dict[str, Any]:
     """One design (or its rows ``ids``): successes, total and seconds per row."""
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     out = run_design(model, Settings(cost=cost, init_scale=scale, noise=noise,
                                      data_start=data), ids=ids)
-    dt = time.perf_counter() - t0
+    dt, cpu = time.perf_counter() - t0, time.process_time() - c0
     worst = max((e["max_rel_error"] or float("inf")) for e in out["experiments"])
     # rows reported a success (by the identifier, or by the study's rule) with a parameter
     # more than 10x from the truth
@@ -78,7 +81,8 @@ def doe_row(model: str, cost: str, scale: float, noise: float, data: bool,
             "failed_unflagged": unflagged, "failed_flagged": flagged, "profiled": profiled,
             "curvature_band_successes": curvature_ok,
             "path": "data" if data else "init", "successes": out["successes"],
-            "total": out["total"], "s_per_row": dt / out["total"], "worst_rel": worst,
+            "total": out["total"], "s_per_row": dt / out["total"],
+            "cpu_s_per_row": cpu / out["total"], "worst_rel": worst,
             "nfev_per_row": sum(e["nfev"] for e in out["experiments"]) / out["total"],
             "failed": [e["id"] for e in out["experiments"] if not e["success"]],
             "success_true_beyond_10x": false_ok}
@@ -113,24 +117,40 @@ def _side_by_side(a: argparse.Namespace) -> int:
     runs: dict[str, list[dict[str, Any]]] = {"before": [], "after": []}
     cases = [(m, c, s, n) for m in a.models.split(",") for c in a.costs.split(",")
              for s in _floats(a.scales or "0.5") for n in _floats(a.noise or "0")]
-    for j, (m, c, s, n) in enumerate(cases):
-        # one case at a time, the two versions alternately and in alternating order, so
-        # that a change of the machine's load hits both alike
-        for label in (("before", "after") if j % 2 == 0 else ("after", "before")):
-            env = dict(os.environ, PYTHONPATH=str(roots[label]))
-            out = subprocess.run(args + ["--models", m, "--costs", c, "--scales", f"{s:g}",
-                                         "--noise", f"{n:g}"], env=env, cwd="/tmp",
-                                 capture_output=True, text=True, check=True)
-            runs[label] += json.loads(out.stdout.strip().splitlines()[-1])
+    order = 0
+    for m, c, s, n in cases:
+        best: dict[str, list[dict[str, Any]]] = {}
+        for _ in range(max(a.repeat, 1)):
+            # one case at a time, the two versions alternately and in alternating order,
+            # so that a change of the machine's load hits both alike
+            for label in (("before", "after") if order % 2 == 0 else ("after", "before")):
+                env = dict(os.environ, PYTHONPATH=str(roots[label]))
+                out = subprocess.run(args + ["--models", m, "--costs", c, "--scales", f"{s:g}",
+                                             "--noise", f"{n:g}"], env=env, cwd="/tmp",
+                                     capture_output=True, text=True, check=True)
+                got = json.loads(out.stdout.strip().splitlines()[-1])
+                if label in best:  # the fastest run of each row, wall and CPU alike
+                    for r, g in zip(best[label], got):
+                        for key in ("s_per_row", "cpu_s_per_row"):
+                            if key in g:
+                                r[key] = min(r.get(key, math.inf), g[key])
+                else:
+                    best[label] = got
+            order += 1
+        for label in runs:
+            runs[label] += best[label]
     w = sys.stdout.write
-    w(f"{'case':40} {'before s/id':>11} {'after s/id':>10} {'ratio':>6} {'nfev before':>11} "
-      f"{'after':>6} {'ok before':>9} {'after':>6}\n")
+    w(f"{'case':40} {'before s/id':>11} {'after s/id':>10} {'ratio':>6} {'CPU before':>10} "
+      f"{'after':>6} {'ratio':>6} {'nfev before':>11} {'after':>6} {'ok before':>9} "
+      f"{'after':>6}\n")
     for b, n in zip(runs["before"], runs["after"]):
         case = f"doe {n['model']} {n['cost']} x{n['init_scale']:g} noise {n['noise']:g}"
+        # CPU seconds: a version without them (before they were recorded) shows nan
+        cb, cn = b.get("cpu_s_per_row", math.nan), n.get("cpu_s_per_row", math.nan)
         w(f"{case:40} {b['s_per_row']:11.3f} {n['s_per_row']:10.3f} "
-          f"{n['s_per_row'] / b['s_per_row']:6.2f} {b['nfev_per_row']:11.0f} "
-          f"{n['nfev_per_row']:6.0f} {b['successes']:>5}/{b['total']:<3} "
-          f"{n['successes']:>3}/{n['total']:<3}\n")
+          f"{n['s_per_row'] / b['s_per_row']:6.2f} {cb:10.3f} {cn:6.3f} {cn / cb:6.2f} "
+          f"{b['nfev_per_row']:11.0f} {n['nfev_per_row']:6.0f} "
+          f"{b['successes']:>5}/{b['total']:<3} {n['successes']:>3}/{n['total']:<3}\n")
     return 0
 
 
@@ -152,6 +172,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--base", default=None,
                     help="--data-only: also time the code at this directory (before) and "
                          "print it side by side with this checkout (after)")
+    ap.add_argument("--repeat", type=int, default=1,
+                    help="--base: runs of every case per version (the fastest is reported)")
     ap.add_argument("--no-bump", action="store_true",
                     help="--data-only: leave out the `identify bump` cases")
     ap.add_argument("--json", action="store_true")

@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy.linalg import expm
 
 from estimator.identify.params import Parameters
@@ -101,24 +102,28 @@ def _filter_bank(w: float, h: float) -> tuple[FloatArray, FloatArray, FloatArray
     return E[:4, :4], E[:4, 4], E[:4, 5], d
 
 
-def _filter(U: FloatArray, w: float, h: float) -> tuple[FloatArray, FloatArray]:
-    """Filter the columns of ``U`` (N, m): outputs ``s^k / D`` for k = 0..4 and the modes.
+#: ``(Pb, T, Fh, d)`` of :func:`_impulse_responses` (``Fh`` complex)
+_Responses = tuple[FloatArray, FloatArray, NDArray[np.complex128], FloatArray]
+#: impulse responses of the filter already computed, ``(w, h, N) -> _impulse_responses``
+_RESPONSES: dict[tuple[float, float, int], "_Responses"] = {}
+#: how many of them are kept (the bandwidths of a few records' sample rates and lengths)
+_RESPONSES_KEPT = 16
 
-    The recursion ``z[n+1] = Phi z[n] + a u[n] + b u[n+1]`` (zero state before the record,
-    ``a = G1 - G2/h``, ``b = G2/h``) is a convolution with the impulse response
-    ``Phi^(i-1) a + Phi^i b``, less ``Phi^n b u[0]`` (the record has no sample before
-    ``u[0]``); the responses come from one loop over 4 x 4 products and the convolution
-    from an FFT of every column at once.
 
-    Returns
-    -------
-    Y : ndarray, shape (5, N, m)
-        ``Y[k]`` is ``s^k / D(s)`` applied to each column (zero initial filter state).
-    T : ndarray, shape (N, 4)
-        The filter's free-response functions (the transient's span).
+def _impulse_responses(w: float, h: float, N: int) -> _Responses:
+    """``(Pb, T, Fh, d)`` of the filter at ``w`` (rad/s), step ``h`` (s), ``N`` samples.
+
+    ``Pb[n] = Phi^n b``, ``T[n]`` the first row of ``Phi^n``, ``Fh`` the FFT of the impulse
+    response ``H`` (see :func:`_filter`) and ``d`` the filter's denominator. They depend on
+    neither the record's values nor the model, so every record of one sample rate and length
+    (the bandwidths tried, the instrumental-variable iterations at the chosen one, every row
+    of a design) shares them: computed once by the same recursion and kept (read-only).
     """
+    key = (float(w), float(h), int(N))
+    hit = _RESPONSES.get(key)
+    if hit is not None:
+        return hit
     Phi, G1, G2, d = _filter_bank(w, h)
-    N, m = U.shape
     a, b = G1 - G2 / h, G2 / h
     Pa = np.empty((N, 4))  # Phi^i a
     Pb = np.empty((N, 4))  # Phi^i b
@@ -130,8 +135,36 @@ def _filter(U: FloatArray, w: float, h: float) -> tuple[FloatArray, FloatArray]:
     H = Pb.copy()
     H[1:] += Pa[:-1]
     L = 1 << int(np.ceil(np.log2(2 * N)))
-    Fu = np.fft.rfft(U, L, axis=0)
     Fh = np.fft.rfft(H, L, axis=0)
+    for arr in (Pb, T, Fh, d):
+        arr.flags.writeable = False
+    if len(_RESPONSES) >= _RESPONSES_KEPT:
+        _RESPONSES.pop(next(iter(_RESPONSES)))
+    _RESPONSES[key] = (Pb, T, Fh, d)
+    return Pb, T, Fh, d
+
+
+def _filter(U: FloatArray, w: float, h: float) -> tuple[FloatArray, FloatArray]:
+    """Filter the columns of ``U`` (N, m): outputs ``s^k / D`` for k = 0..4 and the modes.
+
+    The recursion ``z[n+1] = Phi z[n] + a u[n] + b u[n+1]`` (zero state before the record,
+    ``a = G1 - G2/h``, ``b = G2/h``) is a convolution with the impulse response
+    ``Phi^(i-1) a + Phi^i b``, less ``Phi^n b u[0]`` (the record has no sample before
+    ``u[0]``); the responses come from one loop over 4 x 4 products
+    (:func:`_impulse_responses`, computed once per bandwidth, step and length) and the
+    convolution from an FFT of every column at once.
+
+    Returns
+    -------
+    Y : ndarray, shape (5, N, m)
+        ``Y[k]`` is ``s^k / D(s)`` applied to each column (zero initial filter state).
+    T : ndarray, shape (N, 4)
+        The filter's free-response functions (the transient's span).
+    """
+    N, m = U.shape
+    Pb, T, Fh, d = _impulse_responses(w, h, N)
+    L = 1 << int(np.ceil(np.log2(2 * N)))
+    Fu = np.fft.rfft(U, L, axis=0)
     Y = np.empty((5, N, m))
     for i in range(4):
         Y[i] = np.fft.irfft(Fh[:, i:i + 1] * Fu, L, axis=0)[:N] - np.outer(Pb[:, i], U[0])

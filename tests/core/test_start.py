@@ -196,3 +196,24 @@ def test_a_noisy_fit_at_the_noise_floor_skips_the_given_start_with_the_same_answ
     for k in FREE2:
         for a, b in zip(fast["band_3sigma"][k], both["band_3sigma"][k]):
             assert a == pytest.approx(b, rel=0.01), k
+
+
+def test_filter_impulse_responses_are_shared_and_give_the_same_filtered_signals() -> None:
+    """The filter's impulse responses depend only on bandwidth, step and length: computed
+    once and reused (read-only) for every record of that shape, with filtered signals equal
+    to a fresh computation to the last bit, and a record of another length gets its own."""
+    rng = np.random.default_rng(3)
+    w, h = 2 * np.pi * 1.7, 0.01
+    U1, U2 = rng.standard_normal((600, 3)), rng.standard_normal((600, 2))
+    start_mod._RESPONSES.clear()
+    start_mod._filter(U1, w, h)
+    assert len(start_mod._RESPONSES) == 1
+    Y_shared, T_shared = start_mod._filter(U2, w, h)  # from the kept responses
+    assert len(start_mod._RESPONSES) == 1
+    start_mod._RESPONSES.clear()
+    Y_fresh, T_fresh = start_mod._filter(U2, w, h)
+    assert np.array_equal(Y_shared, Y_fresh) and np.array_equal(T_shared, T_fresh)
+    Pb, T, Fh, d = start_mod._impulse_responses(w, h, 600)
+    assert not (Pb.flags.writeable or T.flags.writeable or Fh.flags.writeable)
+    start_mod._filter(U2[:400], w, h)
+    assert len(start_mod._RESPONSES) == 2

@@ -10,7 +10,7 @@ import pytest
 from estimator.doe.design import experiments
 from estimator.doe.runner import Outcome, Settings, free_names, measurement, run_design, success_beyond
 from estimator.identify import OutputErrorProblem, Parameters, fit, jacobian_log
-from estimator.identify.profile import SIGMAS, honest_bands
+from estimator.identify.profile import R_TOL, SIGMAS, honest_bands
 from suspid.models import get_model
 
 
@@ -129,3 +129,39 @@ def test_success_beyond_detects_a_far_success() -> None:
     near = Outcome(2, {"c": 1.0}, {"c": 0.2}, 0.8, True, {}, {}, 0, 0.0, 0.0, True,
                    {"rel_error": {"c": -0.8}, "reported_success": True})
     assert not success_beyond(near, 10.0)
+
+
+def test_every_profile_end_is_a_3_sigma_point_of_a_thorough_refit() -> None:
+    """The profile refits stop at the accuracy the band needs (Gauss-Newton model agreement,
+    also with a Broyden Jacobian; a cost within ``TOL_S s_k^2``) and the search's first step
+    comes from the optimum's slope of ``r``: every closed end of every profile band is still
+    a 3-sigma point within ``R_TOL`` when the others are refitted thoroughly (Nelder-Mead and
+    scipy's Levenberg-Marquardt, started from the optimum). quarter2 row 9 at 0.5 sigma has
+    long, flat profiles (k1 over a factor 20), where ``r`` is most sensitive to a refit
+    stopped short."""
+    m, e, problem, params, res = _noisy_fit("quarter2", 9, 0.5)
+    free = params.free
+    b = honest_bands(problem, res, free)
+    profiled = [k for k in free if b.method[k] == "profile"]
+    assert len(profiled) >= 2
+    V = np.asarray(res.cov_log)
+    J = jacobian_log(problem, res.params, free)
+    G = np.linalg.pinv(J.T @ J)
+    s0 = problem.normalized_ss(res.params) * problem.scale
+    checked = 0
+    for k in profiled:
+        i = free.index(k)
+        sk2 = V[i, i] / G[i, i]
+        for end in b.bands[k]:
+            if not 0 < end < math.inf:
+                continue
+            p = params.copy()
+            for j in free:
+                p[j].value = res.params[j]
+            p[k].value = end
+            p[k].vary = False
+            refit, _ = fit(problem, p, polish=True, with_stderr=False)
+            r = math.sqrt(max(problem.normalized_ss(refit.params) * problem.scale - s0, 0.0) / sk2)
+            assert abs(r - SIGMAS) <= R_TOL + 0.005, (k, end, r)
+            checked += 1
+    assert checked >= 4
