@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from estimator.stream.compare import compare
+from estimator.stream.config import strut_parameters
 from estimator.stream.wear_streams import Stream, damper_wear
 from suspid.excitation import iso8608_profile, time_grid
 from suspid.models import get_model
@@ -161,6 +162,14 @@ def run_case(case: Case, window_options: dict[str, Any] | None = None) -> dict[s
     return row
 
 
+def drift_names(case: Case) -> tuple[str, ...]:
+    """Every free damper and spring of the case's struts (the suspension, not the tyres)."""
+    m = get_model(case.model)
+    p0 = dict(m.defaults(), **(case.params or {}))
+    free = [k for k in m.param_names if k not in known(case, p0)]
+    return strut_parameters(m, p0, free)
+
+
 def _f(v: Any, fmt: str) -> str:
     if v is None:
         return "-"
@@ -187,6 +196,12 @@ def main(argv: list[str] | None = None) -> int:
                          "each window (WindowConfig.drift), its estimate at the window end; "
                          "the rate fitted per window (free, default) or that of the last "
                          "estimates (prior)")
+    ap.add_argument("--drift-params", default="part", choices=("part", "struts"),
+                    help="with --drift: the parameters that drift, the wearing part (default) "
+                         "or every free damper and spring of the struts "
+                         "(estimator.stream.config.strut_parameters)")
+    ap.add_argument("--drift-solver", default=None, choices=("linear", "gauss-newton"),
+                    help="with --drift: WindowConfig.drift_solver (default linear)")
     ap.add_argument("--drift-rate-sd", type=float, default=None, metavar="PER_S",
                     help="with --drift free: prior sd of each window's relative rate around "
                          "the recent estimates' (WindowConfig.drift_rate_sd; 0: none)")
@@ -210,7 +225,10 @@ def main(argv: list[str] | None = None) -> int:
     for c in cases:
         o = dict(opts)
         if args.drift:
-            o.update(drift=(c.part,), drift_rate=args.drift)
+            o.update(drift=drift_names(c) if args.drift_params == "struts" else (c.part,),
+                     drift_rate=args.drift)
+            if args.drift_solver is not None:
+                o["drift_solver"] = args.drift_solver
             if args.drift_rate_sd is not None:
                 o["drift_rate_sd"] = args.drift_rate_sd
             if args.drift_chunk is not None:
