@@ -16,8 +16,10 @@ Usage::
     python tools/bench_maintenance.py                  # every stream (~1-2 min on one core)
     python tools/bench_maintenance.py --only demo,fast # a subset, by key
     python tools/bench_maintenance.py --json           # one JSON object
+    python tools/bench_maintenance.py --window-drift none   # the constant window
     python tools/bench_maintenance.py --drift          # the window with a linear drift of
-                                                       # the wearing part (WindowConfig.drift)
+                                                       # the wearing part only (default: every
+                                                       # free strut damper and spring drifts)
 """
 from __future__ import annotations
 
@@ -30,7 +32,6 @@ from typing import Any
 import numpy as np
 
 from estimator.stream.compare import compare
-from estimator.stream.config import strut_parameters
 from estimator.stream.wear_streams import Stream, damper_wear
 from suspid.excitation import iso8608_profile, time_grid
 from suspid.models import get_model
@@ -162,14 +163,6 @@ def run_case(case: Case, window_options: dict[str, Any] | None = None) -> dict[s
     return row
 
 
-def drift_names(case: Case) -> tuple[str, ...]:
-    """Every free damper and spring of the case's struts (the suspension, not the tyres)."""
-    m = get_model(case.model)
-    p0 = dict(m.defaults(), **(case.params or {}))
-    free = [k for k in m.param_names if k not in known(case, p0)]
-    return strut_parameters(m, p0, free)
-
-
 def _f(v: Any, fmt: str) -> str:
     if v is None:
         return "-"
@@ -192,16 +185,17 @@ def main(argv: list[str] | None = None) -> int:
                     help="sliding window: zero-phase low-pass of each road displacement at HZ "
                          "(WindowConfig.road_lowpass_hz; default 0: off)")
     ap.add_argument("--drift", nargs="?", const="free", default=None, choices=("free", "prior"),
-                    help="sliding window: refit the wearing part with a linear drift over "
-                         "each window (WindowConfig.drift), its estimate at the window end; "
-                         "the rate fitted per window (free, default) or that of the last "
-                         "estimates (prior)")
-    ap.add_argument("--drift-params", default="part", choices=("part", "struts"),
-                    help="with --drift: the parameters that drift, the wearing part (default) "
-                         "or every free damper and spring of the struts "
-                         "(estimator.stream.config.strut_parameters)")
+                    help="sliding window: refit the wearing part (only) with a linear drift "
+                         "over each window (as --window-drift part), its estimate at the "
+                         "window end; the rate fitted per window (free, default) or that of "
+                         "the last estimates (prior)")
+    ap.add_argument("--window-drift", default=None, metavar="NAMES",
+                    help="sliding window: parameters fitted with a linear drift over each "
+                         "window (WindowConfig.drift): comma-separated names, 'part' (the "
+                         "wearing part) or 'none' (constant window); default the monitor's "
+                         "(every free damper and spring of the struts)")
     ap.add_argument("--drift-solver", default=None, choices=("linear", "gauss-newton"),
-                    help="with --drift: WindowConfig.drift_solver (default linear)")
+                    help="WindowConfig.drift_solver (default linear)")
     ap.add_argument("--drift-rate-sd", type=float, default=None, metavar="PER_S",
                     help="with --drift free: prior sd of each window's relative rate around "
                          "the recent estimates' (WindowConfig.drift_rate_sd; 0: none)")
@@ -224,15 +218,19 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     for c in cases:
         o = dict(opts)
+        wd = "part" if args.drift else args.window_drift
+        if wd is not None:
+            names = tuple(x.strip() for x in wd.split(",") if x.strip())
+            o["drift"] = ((c.part,) if names == ("part",) else
+                          () if names in ((), ("none",)) else names)
         if args.drift:
-            o.update(drift=drift_names(c) if args.drift_params == "struts" else (c.part,),
-                     drift_rate=args.drift)
-            if args.drift_solver is not None:
-                o["drift_solver"] = args.drift_solver
-            if args.drift_rate_sd is not None:
-                o["drift_rate_sd"] = args.drift_rate_sd
-            if args.drift_chunk is not None:
-                o["drift_chunk_s"] = args.drift_chunk
+            o["drift_rate"] = args.drift
+        if args.drift_solver is not None:
+            o["drift_solver"] = args.drift_solver
+        if args.drift_rate_sd is not None:
+            o["drift_rate_sd"] = args.drift_rate_sd
+        if args.drift_chunk is not None:
+            o["drift_chunk_s"] = args.drift_chunk
         rows.append(run_case(c, o or None))
     if args.json:
         json.dump({"cases": rows}, sys.stdout, indent=1)

@@ -13,6 +13,8 @@ from estimator.stream.config import default_config, default_decimation
 from suspid.models.modes import modes
 from estimator.stream.drivers import run_arrays
 from estimator.stream.monitor import NMWindowEstimator
+from estimator.stream.pipeline import monitor_spec
+from suspid.models import get_model
 from estimator.stream.wear_streams import damper_wear
 from estimator.stream.tracker import ParameterTracker
 from estimator.stream.window import SlidingWindowIdentifier, fuse_road, lowpass_road, noise_floor
@@ -346,3 +348,23 @@ def test_linear_drift_solver_matches_the_gauss_newton_one(quarter2) -> None:
                       for b, c in zip(gn, const)])
     assert math.sqrt(float((shift * shift).mean())) > 5 * math.sqrt(float((z * z).mean()))
     assert not any("moved to the window end" in w for r in lin for w in r.warnings)
+
+
+def test_monitor_default_drift_is_the_struts_dampers_and_springs() -> None:
+    """The monitor fits its struts' free dampers and springs with a linear drift by default
+    (not the tyres, not the fixed ones); ``drift=()`` turns it off; the tracker takes no lag
+    for them."""
+    q2 = get_model("quarter2")
+    spec = monitor_spec(q2, fix={"m1": 300.0, "m2": 40.0}, fs=500.0)
+    assert spec.config.drift == ("c1", "k1")  # c2, k2: the tyre
+    spec = monitor_spec(q2, fix={"m1": 300.0, "m2": 40.0, "k1": 20000.0}, fs=500.0)
+    assert spec.config.drift == ("c1",)
+    off = monitor_spec(q2, fix={"m1": 300.0, "m2": 40.0}, fs=500.0,
+                       window_overrides={"drift": ()})
+    assert off.config.drift == ()
+    h4 = get_model("half4")
+    spec = monitor_spec(h4, fix={k: h4.defaults()[k] for k in ("m", "I", "m1", "m2", "a1", "a2")},
+                        fs=250.0)
+    assert spec.config.drift == ("c1", "c2", "k1", "k2")
+    est = NMWindowEstimator(h4, spec.params, spec.config, ["x", "delta", "x1", "x2"])
+    assert est.lags == {k: 0.0 for k in ("c1", "c2", "k1", "k2")}
