@@ -24,8 +24,10 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import copy
 import json
 import sys
+import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -33,6 +35,7 @@ import numpy as np
 
 from estimator.stream.compare import compare
 from estimator.stream.wear_streams import Stream, damper_wear
+from estimator.stream.window import SlidingWindowIdentifier
 from suspid.excitation import iso8608_profile, time_grid
 from suspid.models import get_model
 from suspid.simulate import outputs, road_matrix, simulate_states
@@ -163,6 +166,50 @@ def run_case(case: Case, window_options: dict[str, Any] | None = None) -> dict[s
     return row
 
 
+def solver_check(case: Case, window_options: dict[str, Any] | None) -> dict[str, Any]:
+    """Both drift solvers on every window of one case (the same constant fit each time).
+
+    The Gauss-Newton solver's result goes on (the run itself is the monitor's with that
+    solver); per window the first-order one is computed too. Returns the RMS and largest
+    difference of the drifting parameters' end values over the Gauss-Newton stderr (the
+    stated one, floor included), the median and range of the ratio of their stderr_fit, and
+    the mean CPU per window of each solver (ms).
+    """
+    rows: list[tuple[float, float, float, float]] = []
+    orig = SlidingWindowIdentifier._drift_fit
+
+    def both(self: SlidingWindowIdentifier, prob: Any, t_end: float, width: float,
+             p_const: Any, drift: list[str], out: Any) -> None:
+        o1 = copy.deepcopy(out)
+        cfg = self.config
+        solver = cfg.drift_solver
+        c0 = time.process_time()
+        cfg.drift_solver = "linear"
+        orig(self, prob, t_end, width, p_const, drift, o1)
+        c1 = time.process_time()
+        cfg.drift_solver = "gauss-newton"
+        orig(self, prob, t_end, width, p_const, drift, out)
+        c2 = time.process_time()
+        cfg.drift_solver = solver
+        for k in drift:
+            rows.append(((o1.params[k] - out.params[k]) / out.stderr[k],
+                         o1.stderr_fit[k] / out.stderr_fit[k], c1 - c0, c2 - c1))
+
+    SlidingWindowIdentifier._drift_fit = both  # type: ignore[method-assign]
+    try:
+        run_case(case, window_options)
+    finally:
+        SlidingWindowIdentifier._drift_fit = orig  # type: ignore[method-assign]
+    a = np.array(rows)
+    return {"key": case.key, "windows": int(a.shape[0]),
+            "diff_over_stderr_rms": float(np.sqrt(np.mean(a[:, 0] ** 2))),
+            "diff_over_stderr_max": float(np.abs(a[:, 0]).max()),
+            "stderr_fit_ratio": [float(np.median(a[:, 1])), float(a[:, 1].min()),
+                                 float(a[:, 1].max())],
+            "cpu_ms_linear": 1e3 * float(a[:, 2].mean()),
+            "cpu_ms_gauss_newton": 1e3 * float(a[:, 3].mean())}
+
+
 def _f(v: Any, fmt: str) -> str:
     if v is None:
         return "-"
@@ -202,6 +249,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--drift-chunk", type=float, default=None, metavar="S",
                     help="with --drift: chunk over which the drift is held constant "
                          "(WindowConfig.drift_chunk_s)")
+    ap.add_argument("--solver-check", action="store_true",
+                    help="run both drift solvers on every window (first-order and "
+                         "Gauss-Newton, WindowConfig.drift_solver) and print how far apart "
+                         "their end values are, in stated stderr, and their CPU")
     args = ap.parse_args(argv)
     cases = CASES[:args.cases]
     if args.only:
@@ -231,7 +282,14 @@ def main(argv: list[str] | None = None) -> int:
             o["drift_rate_sd"] = args.drift_rate_sd
         if args.drift_chunk is not None:
             o["drift_chunk_s"] = args.drift_chunk
+        if args.solver_check:
+            chk = solver_check(c, o or None)
+            sys.stdout.write(json.dumps(chk) + "\n")
+            sys.stdout.flush()
+            continue
         rows.append(run_case(c, o or None))
+    if args.solver_check:
+        return 0
     if args.json:
         json.dump({"cases": rows}, sys.stdout, indent=1)
         sys.stdout.write("\n")
