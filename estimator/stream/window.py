@@ -452,8 +452,9 @@ class SlidingWindowIdentifier:
         r0 = R0.ravel()
         Jb = Jg / half
         # weighted least squares in x = (a, b) (b fixed at the prior's with drift_rate
-        # "prior"); rhs_of(Rv, x) is the right-hand side of the step from x given the
-        # residual Rv there (the linear model's residual or the drifting window's own)
+        # "prior"), factored once; step(rv, a, b) is the step from (a, b) given the
+        # residual rv there (the linear model's, or the drifting window's own for a chord
+        # step), the prior's rows included
         M = (np.hstack([Ja, Jb]) if free_rate else Ja) * w
         if sd_u > 0:
             P = np.zeros((nd, 2 * nd))
