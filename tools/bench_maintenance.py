@@ -16,14 +16,18 @@ Usage::
     python tools/bench_maintenance.py                  # every stream (~1-2 min on one core)
     python tools/bench_maintenance.py --only demo,fast # a subset, by key
     python tools/bench_maintenance.py --json           # one JSON object
+    python tools/bench_maintenance.py --window-drift none   # the constant window
     python tools/bench_maintenance.py --drift          # the window with a linear drift of
-                                                       # the wearing part (WindowConfig.drift)
+                                                       # the wearing part only (default: every
+                                                       # free strut damper and spring drifts)
 """
 from __future__ import annotations
 
 import argparse
+import copy
 import json
 import sys
+import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -31,6 +35,7 @@ import numpy as np
 
 from estimator.stream.compare import compare
 from estimator.stream.wear_streams import Stream, damper_wear
+from estimator.stream.window import SlidingWindowIdentifier
 from suspid.excitation import iso8608_profile, time_grid
 from suspid.models import get_model
 from suspid.simulate import outputs, road_matrix, simulate_states
@@ -161,6 +166,50 @@ def run_case(case: Case, window_options: dict[str, Any] | None = None) -> dict[s
     return row
 
 
+def solver_check(case: Case, window_options: dict[str, Any] | None) -> dict[str, Any]:
+    """Both drift solvers on every window of one case (the same constant fit each time).
+
+    The Gauss-Newton solver's result goes on (the run itself is the monitor's with that
+    solver); per window the first-order one is computed too. Returns the RMS and largest
+    difference of the drifting parameters' end values over the Gauss-Newton stderr (the
+    stated one, floor included), the median and range of the ratio of their stderr_fit, and
+    the mean CPU per window of each solver (ms).
+    """
+    rows: list[tuple[float, float, float, float]] = []
+    orig = SlidingWindowIdentifier._drift_fit
+
+    def both(self: SlidingWindowIdentifier, prob: Any, t_end: float, width: float,
+             p_const: Any, drift: list[str], out: Any) -> None:
+        o1 = copy.deepcopy(out)
+        cfg = self.config
+        solver = cfg.drift_solver
+        c0 = time.process_time()
+        cfg.drift_solver = "linear"
+        orig(self, prob, t_end, width, p_const, drift, o1)
+        c1 = time.process_time()
+        cfg.drift_solver = "gauss-newton"
+        orig(self, prob, t_end, width, p_const, drift, out)
+        c2 = time.process_time()
+        cfg.drift_solver = solver
+        for k in drift:
+            rows.append(((o1.params[k] - out.params[k]) / out.stderr[k],
+                         o1.stderr_fit[k] / out.stderr_fit[k], c1 - c0, c2 - c1))
+
+    SlidingWindowIdentifier._drift_fit = both  # type: ignore[method-assign]
+    try:
+        run_case(case, window_options)
+    finally:
+        SlidingWindowIdentifier._drift_fit = orig  # type: ignore[method-assign]
+    a = np.array(rows)
+    return {"key": case.key, "windows": int(a.shape[0]),
+            "diff_over_stderr_rms": float(np.sqrt(np.mean(a[:, 0] ** 2))),
+            "diff_over_stderr_max": float(np.abs(a[:, 0]).max()),
+            "stderr_fit_ratio": [float(np.median(a[:, 1])), float(a[:, 1].min()),
+                                 float(a[:, 1].max())],
+            "cpu_ms_linear": 1e3 * float(a[:, 2].mean()),
+            "cpu_ms_gauss_newton": 1e3 * float(a[:, 3].mean())}
+
+
 def _f(v: Any, fmt: str) -> str:
     if v is None:
         return "-"
@@ -183,16 +232,27 @@ def main(argv: list[str] | None = None) -> int:
                     help="sliding window: zero-phase low-pass of each road displacement at HZ "
                          "(WindowConfig.road_lowpass_hz; default 0: off)")
     ap.add_argument("--drift", nargs="?", const="free", default=None, choices=("free", "prior"),
-                    help="sliding window: refit the wearing part with a linear drift over "
-                         "each window (WindowConfig.drift), its estimate at the window end; "
-                         "the rate fitted per window (free, default) or that of the last "
-                         "estimates (prior)")
+                    help="sliding window: refit the wearing part (only) with a linear drift "
+                         "over each window (as --window-drift part), its estimate at the "
+                         "window end; the rate fitted per window (free, default) or that of "
+                         "the last estimates (prior)")
+    ap.add_argument("--window-drift", default=None, metavar="NAMES",
+                    help="sliding window: parameters fitted with a linear drift over each "
+                         "window (WindowConfig.drift): comma-separated names, 'part' (the "
+                         "wearing part) or 'none' (constant window); default the monitor's "
+                         "(every free damper and spring of the struts)")
+    ap.add_argument("--drift-solver", default=None, choices=("linear", "gauss-newton"),
+                    help="WindowConfig.drift_solver (default linear)")
     ap.add_argument("--drift-rate-sd", type=float, default=None, metavar="PER_S",
                     help="with --drift free: prior sd of each window's relative rate around "
                          "the recent estimates' (WindowConfig.drift_rate_sd; 0: none)")
     ap.add_argument("--drift-chunk", type=float, default=None, metavar="S",
                     help="with --drift: chunk over which the drift is held constant "
                          "(WindowConfig.drift_chunk_s)")
+    ap.add_argument("--solver-check", action="store_true",
+                    help="run both drift solvers on every window (first-order and "
+                         "Gauss-Newton, WindowConfig.drift_solver) and print how far apart "
+                         "their end values are, in stated stderr, and their CPU")
     args = ap.parse_args(argv)
     cases = CASES[:args.cases]
     if args.only:
@@ -209,13 +269,27 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     for c in cases:
         o = dict(opts)
+        wd = "part" if args.drift else args.window_drift
+        if wd is not None:
+            names = tuple(x.strip() for x in wd.split(",") if x.strip())
+            o["drift"] = ((c.part,) if names == ("part",) else
+                          () if names in ((), ("none",)) else names)
         if args.drift:
-            o.update(drift=(c.part,), drift_rate=args.drift)
-            if args.drift_rate_sd is not None:
-                o["drift_rate_sd"] = args.drift_rate_sd
-            if args.drift_chunk is not None:
-                o["drift_chunk_s"] = args.drift_chunk
+            o["drift_rate"] = args.drift
+        if args.drift_solver is not None:
+            o["drift_solver"] = args.drift_solver
+        if args.drift_rate_sd is not None:
+            o["drift_rate_sd"] = args.drift_rate_sd
+        if args.drift_chunk is not None:
+            o["drift_chunk_s"] = args.drift_chunk
+        if args.solver_check:
+            chk = solver_check(c, o or None)
+            sys.stdout.write(json.dumps(chk) + "\n")
+            sys.stdout.flush()
+            continue
         rows.append(run_case(c, o or None))
+    if args.solver_check:
+        return 0
     if args.json:
         json.dump({"cases": rows}, sys.stdout, indent=1)
         sys.stdout.write("\n")

@@ -111,13 +111,15 @@ class WindowConfig:
         Free parameters refitted on each window with a linear drift,
         ``theta(t) = theta_end (1 + g (t - t_end))`` (``g`` one extra free parameter each),
         so that their estimate refers to the window's end (the tracker then takes no lag
-        for them); empty (default): every parameter constant over the window.
+        for them); empty: every parameter constant over the window. The dataclass default
+        is empty; the monitor's (:func:`estimator.stream.pipeline.monitor_spec`) is every
+        free damper and spring of the struts (:func:`strut_parameters`).
     drift_chunk_s : float
         Chunk length (s) over which the drifting parameters are held constant in the
         drift fit (one matrix exponential per chunk; 0.2 s measured as accurate as 0.1 s
         at less CPU: ratio to the EKF's 0.41 against 0.52 on the README demo's stream).
     drift_iterations : int
-        Largest number of Gauss-Newton steps of the drift fit.
+        Largest number of Gauss-Newton steps of the drift fit (``drift_solver="gauss-newton"``).
     drift_rate : str
         ``"free"``: each window fits its drift rate; ``"prior"``: the rate is that of the
         last (up to 3) estimates, only the end value is fitted.
@@ -127,6 +129,18 @@ class WindowConfig:
         prior. 0.005 (0.5 %/s): without it the rate fitted on one window at 5 % sensor
         noise scatters so much that the end value is worse than the middle one
         (``tools/bench_maintenance.py --drift``, docs/monitoring.md).
+    drift_solver : str
+        ``"linear"`` (default): the drift fit to first order around the constant fit, from
+        the sensitivities of the constant window (one linear least-squares solve, no
+        evaluation of the drifting window); ``"gauss-newton"``: Gauss-Newton steps on the
+        chunked drifting window with forward differences (the reference; also the fallback
+        when the linear one does not apply). Measured on every window of the bench streams
+        (``tools/bench_maintenance.py --solver-check``): end values within 0.03-0.07 of
+        their stated stderr RMS (0.18 on the quantization-only demo60), ~15-20 x less CPU.
+    drift_refine : int
+        With ``drift_solver="linear"``: chord steps on the chunked drifting window after
+        the first-order solve (one evaluation each); 0 (default): none (one step moved the
+        demo60 end values 15 % closer to the Gauss-Newton ones, at 2.5 x the drift fit's CPU).
     """
 
     window_s: float
@@ -149,6 +163,8 @@ class WindowConfig:
     drift_iterations: int = 3
     drift_rate: str = "free"
     drift_rate_sd: float = 0.005
+    drift_solver: str = "linear"
+    drift_refine: int = 0
 
     def validate(self) -> None:
         """Raise :class:`UsageError` naming the first inconsistent setting."""
@@ -160,6 +176,9 @@ class WindowConfig:
             raise UsageError(f"--decimate: expected an integer >= 1, got {self.decimate}")
         if self.maxfev < 10 or self.first_maxfev < 10:
             raise UsageError(f"--budget: expected at least 10 evaluations, got {self.maxfev}")
+        if self.drift_solver not in ("linear", "gauss-newton"):
+            raise UsageError(f"drift_solver: expected linear or gauss-newton, "
+                             f"got {self.drift_solver!r}")
         if self.drift_rate not in ("free", "prior"):
             raise UsageError(f"drift_rate: expected free or prior, got {self.drift_rate!r}")
         if self.drift and not (self.drift_chunk_s > 0 and self.drift_iterations >= 1):
@@ -171,6 +190,29 @@ class WindowConfig:
                 raise UsageError(f"{opt}: expected a frequency >= 0 Hz (0: off), got {hz}")
         if not 0 <= self.max_missing < 1:
             raise UsageError(f"max_missing must be in [0, 1), got {self.max_missing}")
+
+
+def strut_parameters(model: SuspensionModel, params: Mapping[str, float],
+                     free: list[str]) -> tuple[str, ...]:
+    """The free dampers and springs of the model's struts (the suspension, not the tyres).
+
+    Parameters
+    ----------
+    model : SuspensionModel
+    params : mapping
+        Parameter values (SI) for the model's site geometry.
+    free : list of str
+        Free parameter names.
+
+    Returns
+    -------
+    tuple of str
+        In the order of ``free``.
+    """
+    names: set[str] = set()
+    for site in model.strut_sites(params):
+        names.update(k for k in (site.c_name, site.k_name) if k)
+    return tuple(k for k in free if k in names)
 
 
 def default_decimation(model: SuspensionModel, params: Mapping[str, float], fs: float) -> int:

@@ -36,7 +36,8 @@ from estimator.alerts import (DEFAULT_HORIZON_S, AlertConfig, AlertEngine, Alert
                               BusAlertSink, CallbackSink, ForecastEngine)
 from estimator.decode import DecodeListener
 from estimator.identify import Parameters
-from estimator.stream.config import WindowConfig, default_config, default_decimation
+from estimator.stream.config import (WindowConfig, default_config, default_decimation,
+                                     strut_parameters)
 from estimator.stream.drivers import CanWindowDriver, LiveStop, replay_log, run_arrays, run_bus
 from estimator.stream.events import Summary
 from estimator.stream.monitor import StreamMonitor
@@ -136,7 +137,9 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
     window, step : float, optional
         Window length and step (s); defaults from the model's modes.
     window_overrides : mapping, optional
-        Further :class:`WindowConfig` fields (``maxfev``, ``sigma_floor``, ...).
+        Further :class:`WindowConfig` fields (``maxfev``, ``sigma_floor``, ...); ``drift``
+        defaults to every free damper and spring of the struts
+        (:func:`~estimator.stream.config.strut_parameters`), ``()`` turns it off.
     decimate : int, optional
     fs : float
         Sample rate (Hz) when known (else the decimation is derived on the first window).
@@ -206,6 +209,9 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
             cfg.step_s = max(0.05, round(window / 2.0, 2))
     if step is not None:
         cfg.step_s = step
+    # the window's linear drift: by default every free damper and spring of the struts
+    # (the parts that wear; docs/monitoring.md, "Window with a linear drift")
+    cfg.drift = strut_parameters(model, values, params.free)
     for attr, v in (window_overrides or {}).items():
         if v is not None:
             setattr(cfg, attr, v)

@@ -38,7 +38,10 @@ probability first reaches ``restart_mu`` the tracker goes back one estimate, wid
 rate (``restart_rate`` of nominal per s) and folds the two estimates in again; the restart
 is kept only if a likelihood-ratio test over those estimates prefers it (``restart_glr``),
 and no new forecast is announced from the restarted rate for ``restart_hold`` estimates.
-Only for estimates that describe an earlier time (``lag > 0``: the window's middle).
+Only for window estimates: those that describe an earlier time (``lag > 0``: the window's
+middle) and those referred to the window's end by its linear drift (the parameters in
+``lags``): the drift window's rate prior is centred on the recent estimates' rate, so its
+end value too shows a new wear rate late. Not for the EKF (no ``lags``, lag 0).
 
 The alerts (:class:`estimator.alerts.AlertEngine`) are decided on the tracked value and its
 standard error, the forecasts (:class:`estimator.alerts.ForecastEngine`) on the trend
@@ -103,7 +106,8 @@ class TrendTracker:
         Data time (s) between a window's end and the time its estimate describes.
     lags : dict
         ``parameter -> lag`` (s) for parameters whose estimates describe another time
-        (0 for those the window fits with a linear drift, :attr:`WindowConfig.drift`).
+        (0 for those the window fits with a linear drift, :attr:`WindowConfig.drift`);
+        the rate restart applies to these as to the lagged ones.
     overlap : float
         Measurement-variance inflation for overlapping windows (``window / step``).
     calibrate : bool
@@ -263,7 +267,7 @@ class TrendTracker:
             tr.held = tr.held + 1 if float(tr.mu[-1]) >= self.restart_mu else 0
             tr.hold = max(tr.hold - 1, 0)
             back = self.restart_back + self.restart_confirm
-            if (tr.mu.size > 1 and self.restart_rate > 0.0 and lag > 0.0
+            if (tr.mu.size > 1 and self.restart_rate > 0.0 and (lag > 0.0 or k in self.lags)
                     and len(tr.hist) > back and tr.held == 1 + self.restart_confirm):
                 self._restart(tr, lag, back)
             del tr.hist[:-(back + 1)]

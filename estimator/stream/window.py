@@ -417,6 +417,125 @@ class SlidingWindowIdentifier:
         out.warnings.append(f"{why}; the constant-window estimate of "
                             f"{', '.join(drift)} moved to the window end at the recent rate")
 
+    def _drift_linear(self, prob: WindowProblem, t_end: float, half: float,
+                      p_const: Mapping[str, float], drift: list[str], b_prior: FloatArray,
+                      has_prior: bool, out: WindowResult) -> bool:
+        """The drift fit to first order around the constant fit; ``False``: not applicable.
+
+        The residual of the drifting window is taken linear in ``a = log(theta_end /
+        theta_const)`` and ``b = g width / 2`` around the constant fit (``a = b = 0``),
+        ``R(a, b) = R0 - Ja a - Jb b``, with ``Ja``, ``Jb`` the sensitivities of
+        :meth:`~estimator.stream.windowproblem.WindowProblem.drift_sensitivity` (one linear
+        simulation of the sensitivity system per column, on the constant fit's state
+        trajectory and modal form) and ``R0`` the constant fit's residual; the rate prior
+        (``drift_rate_sd``, around ``b_prior``) adds its rows, and one linear least-squares
+        solve gives ``a`` and ``b``. The neglected terms are second order in the drift over
+        half a window (a few % at most). The stderr are Gauss-Newton ones on the same
+        Jacobian: the constant fit's own (:attr:`WindowProblem.jacobian`) for the other
+        free parameters, ``Ja`` and the rate columns ``Jb / (width / 2)`` for the drifting
+        ones. No evaluation of the drifting window at all.
+        """
+        cfg = self.config
+        jac = prob.jacobian
+        R0 = prob.lean_residual(p_const)
+        if jac is None or R0 is None or jac[0] != self.free or jac[1] != dict(p_const):
+            return False
+        sens = prob.drift_sensitivity(p_const, drift, t_end)
+        if sens is None:
+            return False
+        Ja, Jg = sens
+        nd = len(drift)
+        free_rate = cfg.drift_rate == "free"
+        pch, N = R0.shape
+        sd_u = cfg.drift_rate_sd * half if (free_rate and has_prior) else 0.0
+        sig = (np.maximum(np.sqrt((R0 * R0).mean(axis=1)), 1e-300) if sd_u > 0
+               else np.ones(pch))
+        w = np.repeat(1.0 / sig, N)[:, None]
+        r0 = R0.ravel()
+        Jb = Jg / half
+        # weighted least squares in x = (a, b) (b fixed at the prior's with drift_rate
+        # "prior"), factored once; step(rv, a, b) is the step from (a, b) given the
+        # residual rv there (the linear model's, or the drifting window's own for a chord
+        # step), the prior's rows included
+        M = (np.hstack([Ja, Jb]) if free_rate else Ja) * w
+        if sd_u > 0:
+            P = np.zeros((nd, 2 * nd))
+            P[:, nd:] = np.eye(nd) / sd_u
+            M = np.vstack([M, P])
+        Q, Rq = np.linalg.qr(M)
+
+        def step(rv: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
+            rhs = rv * w[:, 0]
+            if sd_u > 0:
+                rhs = np.concatenate([rhs, (b_prior - b) / sd_u])
+            return np.asarray(np.linalg.solve(Rq, Q.T @ rhs), dtype=float)
+
+        def ok(a: FloatArray, b: FloatArray) -> bool:
+            v = np.concatenate([a, b])
+            return bool(np.all(np.isfinite(v)) and np.all(np.abs(v) < 0.5))
+
+        a = np.zeros(nd)
+        b = np.zeros(nd) if free_rate else b_prior.copy()
+        x = step(r0 - Jb @ b, a, b)
+        a = a + x[:nd]
+        if free_rate:
+            b = b + x[nd:]
+        if not ok(a, b):
+            return False
+        R = (r0 - Ja @ a - Jb @ b).reshape(pch, N)
+        for _ in range(cfg.drift_refine):
+            # a chord step on the drifting window itself (the same Jacobian)
+            pq = dict(p_const)
+            for j, k in enumerate(drift):
+                pq[k] = p_const[k] * math.exp(float(a[j]))
+            try:
+                Rx = prob.drift_residual(pq, {k: float(b[j]) / half
+                                              for j, k in enumerate(drift)},
+                                         t_end, cfg.drift_chunk_s)
+            except (np.linalg.LinAlgError, ValueError, FloatingPointError, OverflowError):
+                Rx = None
+            if Rx is None:
+                break
+            x = step(Rx.ravel(), a, b)
+            a2 = a + x[:nd]
+            b2 = b + x[nd:] if free_rate else b
+            if not ok(a2, b2):
+                break
+            a, b = a2, b2
+            R = (Rx.ravel() - (Ja @ x[:nd]) - (Jb @ x[nd:] if free_rate else 0.0)
+                 ).reshape(pch, N)
+        # stderr: every free parameter's column (the drifting ones' Ja) and the rates'
+        cols = jac[2].copy()
+        for j, k in enumerate(drift):
+            cols[:, self.free.index(k)] = Ja[:, j]
+        if free_rate:
+            cols = np.hstack([cols, Jg])
+        nc = cols.shape[1]
+        s2 = (R * R).sum(axis=1) / max(N - nc, 1)
+        s2 = np.where(s2 > 0, s2, 1.0)
+        Jn = cols / np.repeat(np.sqrt(s2), N)[:, None]
+        H = Jn.T @ Jn
+        if free_rate and sd_u > 0:
+            nf = len(self.free)
+            H[nf:, nf:] += np.eye(nd) / cfg.drift_rate_sd ** 2
+        try:
+            cov = np.linalg.inv(H)
+        except np.linalg.LinAlgError:
+            return False
+        got = []
+        for j, k in enumerate(drift):
+            pk = p_const[k] * math.exp(float(a[j]))
+            i = self.free.index(k)
+            se = pk * math.sqrt(max(float(cov[i, i]), 0.0))
+            if not (math.isfinite(se) and se > 0):
+                return False
+            got.append((k, pk, se))
+        for k, pk, se in got:
+            out.params[k] = pk
+            out.stderr_fit[k] = se
+            out.stderr[k] = float(math.hypot(se, cfg.sigma_floor * pk))
+        return True
+
     def _drift_fit(self, prob: WindowProblem, t_end: float, width: float,
                    p_const: Mapping[str, float], drift: list[str], out: WindowResult) -> None:
         """Refit ``drift`` with a linear drift over the window; their values at its end.
@@ -460,6 +579,9 @@ class SlidingWindowIdentifier:
                 return None
 
         free_rate = cfg.drift_rate == "free"
+        if cfg.drift_solver == "linear" and self._drift_linear(
+                prob, t_end, half, p_const, drift, u[nd:].copy(), len(h) >= 2, out):
+            return
         step = 1e-4
         R = resid(u)
         ok = R is not None

@@ -307,6 +307,11 @@ class WindowProblem(OutputErrorProblem):
     ssmap: StateSpaceMap | None = None
     lean: bool = field(init=False, default=False)
     n_fallback: int = field(init=False, default=0)
+    #: ``(free, p_hat, J)`` of the last lean :meth:`finish`: ``J`` (p N x n_free) the
+    #: derivative of the predicted fitted channels (channel-major rows) with respect to
+    #: the log-parameters at ``p_hat``
+    jacobian: tuple[list[str], dict[str, float], FloatArray] | None = field(
+        init=False, default=None)
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -685,6 +690,7 @@ class WindowProblem(OutputErrorProblem):
             J = np.column_stack(cols)
         # residual = y - yhat, so -d(residual) = d(yhat); rows channel-major (j*N + k)
         J = -J
+        self.jacobian = (list(free), dict(p_hat), J)
         n_obs = pch * N
         ss = float(r0 @ r0)
         dof = max(n_obs - nf, 1) / n_obs
@@ -851,6 +857,114 @@ class WindowProblem(OutputErrorProblem):
         sol, *_ = np.linalg.lstsq(G, R, rcond=None)
         R = R - G @ sol
         return R.reshape(len(rows), N)
+
+    def lean_residual(self, p: Mapping[str, float]) -> FloatArray | None:
+        """Residual (p, N) of the lean evaluation at ``p`` (cached), or ``None``."""
+        ev = self._evaluate(p) if self.lean else None
+        return None if ev is None else ev.R
+
+    def drift_sensitivity(self, p: Mapping[str, float], names: list[str], t_ref: float
+                          ) -> tuple[FloatArray, FloatArray] | None:
+        """Sensitivities of the fitted channels to a constant change and to a linear drift.
+
+        For each ``k`` in ``names``, with ``theta_k(t) = p_k exp(a) (1 + g (t - t_ref))``, the
+        derivatives at ``a = g = 0`` of the predicted fitted channels with respect to ``a``
+        (log units) and to ``g`` (1/s), the initial state refitted (the columns projected
+        off the free-response regressors, as the least-squares initial state does). They
+        are the responses of the linear sensitivity system ``s' = A s + f(t)`` from rest to
+        ``f = p_k (dA/dtheta_k z(t) + dBz/dtheta_k r(t))`` and to ``(t - t_ref) f``, ``z``
+        the lean evaluation's state trajectory at ``p`` (the simulator's ``z = x - B_v r``
+        coordinates), simulated in the evaluation's modal form with the first-order hold
+        of the exact discretisation. ``B_v`` must not depend on ``names`` (as for
+        :meth:`drift_residual`).
+
+        Parameters
+        ----------
+        p : mapping
+            Parameters (SI), typically the constant fit's estimate.
+        names : list of str
+            Parameters whose sensitivities are wanted.
+        t_ref : float
+            Reference time of the drift (s; the window end).
+
+        Returns
+        -------
+        (Ja, Jg) : tuple of ndarray, or None
+            Each ``(p N, len(names))``, rows channel-major as :meth:`drift_residual`'s
+            residual raveled; ``None`` when :attr:`drift_ok` is false, ``p`` is not on the
+            lean path or ``B_v`` depends on one of ``names``.
+        """
+        if not self.drift_ok or not names:
+            return None
+        ev = self._evaluate(p)
+        if ev is None:
+            return None
+        nr = self._nr
+        N = self._N
+        h = self._hf
+        vals = [float(p[k]) for k in self._names]
+        A, B, Bz, _ = self._ssmap.from_values(vals)
+        dA, dBz = [], []
+        for k in names:
+            i = self._names.index(k)
+            eps = 1e-6
+            v = list(vals)
+            v[i] = vals[i] * (1.0 + eps)
+            A1, B1, Bz1, _ = self._ssmap.from_values(v)
+            if float(np.abs(B1[:, nr:] - B[:, nr:]).max()) > 1e-9 * (
+                    float(np.abs(B[:, nr:]).max()) + 1e-300):
+                return None  # a road-rate input that moves with the parameter
+            # per unit log-parameter: theta dA/dtheta (affine maps: exact to rounding)
+            dA.append((A1 - A) / eps)
+            dBz.append((Bz1 - Bz) / eps)
+        pat = ev.pat
+        mm = ev.P.shape[0]
+        V = ev.vr @ pat.sel_v  # (n, m) kept modes
+        Vfull = np.concatenate([V, V[:, pat.pairs].conj()], axis=1)
+        try:
+            Vinv = np.linalg.inv(Vfull)[:mm]  # (m, n)
+        except np.linalg.LinAlgError:
+            return None
+        lam = np.einsum("in,nk,ki->i", Vinv, A, V)  # eigenvalues of the kept modes
+        z = (V * pat.fac) @ ev.modal(self._r)  # (n, N) complex, real part the state
+        zr = z.real
+        tt = self.t - t_ref
+        # forcing columns: constant (per unit a) then ramp (per unit g), each (n, N)
+        fc = [dAk @ zr + dBk @ self._r for dAk, dBk in zip(dA, dBz)]
+        F = np.stack(fc + [f * tt for f in fc])  # (2 q, n, N)
+        Bm = np.einsum("mn,cnk->cmk", Vinv, F)  # modal forcing (2 q, m, N)
+        # first-order-hold weights per mode (as the lean evaluation's)
+        g0 = np.empty(mm, dtype=complex)
+        g1 = np.empty(mm, dtype=complex)
+        for i, lm in enumerate(lam.tolist()):
+            zz = lm * h
+            e = cmath.exp(zz)
+            if abs(zz) < 1e-3:
+                i0 = h * (1 + zz / 2 + zz * zz / 6 + zz ** 3 / 24)
+                i1 = h * (0.5 + zz / 6 + zz * zz / 24 + zz ** 3 / 120)
+            else:
+                i0 = (e - 1) / zz * h
+                i1 = (e - 1 - zz) / (zz * zz) * h
+            g0[i], g1[i] = i0 - i1, i1
+        # w[k] = E^k sum_{l<k} (g0 b[l] + g1 b[l+1]) E^-(l+1), w[0] = 0
+        P = ev.P
+        D = g0[None, :, None] * Bm[:, :, :-1] + g1[None, :, None] * Bm[:, :, 1:]
+        W = np.zeros_like(Bm)
+        W[:, :, 1:] = P[None, :, 1:] * np.cumsum(D / P[None, :, 1:], axis=-1)
+        CV = (ev.vr[self._rows] @ pat.sel_cv)  # (p, m)
+        S = np.einsum("pm,cmk->cpk", CV, W).real  # (2 q, p, N)
+        pch = CV.shape[0]
+        Sf = S.reshape(S.shape[0], pch * N)
+        # the initial state refitted: project off the free-response regressors
+        T = CV.T[:, :, None] * P[:, None, :]
+        pairs = pat.pairs
+        G = np.concatenate([T.real, -T.imag[pairs]]).reshape(mm + pairs.size, pch * N)
+        coef, *_ = np.linalg.lstsq(G.T, Sf.T, rcond=None)
+        Sf = Sf - (G.T @ coef).T
+        q = len(names)
+        if not np.isfinite(Sf).all():
+            return None
+        return np.ascontiguousarray(Sf[:q].T), np.ascontiguousarray(Sf[q:].T)
 
     def drift_ss(self, p: Mapping[str, float], rates: Mapping[str, float], t_ref: float,
                  chunk_s: float) -> float:

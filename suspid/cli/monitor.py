@@ -89,9 +89,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                         "fit (Hz, -6 dB; default 0: off)")
     w.add_argument("--window-drift", default=None, metavar="NAMES",
                    help="comma-separated free parameters fitted with a linear drift over each "
-                        "window, so their estimate refers to the window's end (default none; "
-                        "docs/monitoring.md: it helps on quantization-only streams, not at "
-                        "2-5 %% sensor noise)")
+                        "window, so their estimate refers to the window's end (default: every "
+                        "free damper and spring of the struts; 'none': every parameter "
+                        "constant over the window; docs/monitoring.md)")
     a = p.add_argument_group("alerts")
     a.add_argument("--alert-file", metavar="PATH", default=None,
                    help="durable append-only alert log (JSON lines, fsynced); a restarted "
@@ -166,6 +166,14 @@ def _text(d: dict[str, Any]) -> str:
     return " ".join(f"{k}={v}" for k, v in d.items())
 
 
+def _drift_names(arg: str | None) -> tuple[str, ...] | None:
+    """``--window-drift``: ``None`` (the default set), ``()`` for ``none``, else the names."""
+    if arg is None:
+        return None
+    names = tuple(x.strip() for x in arg.split(",") if x.strip())
+    return () if names in ((), ("none",)) else names
+
+
 def _emitter(jsonl: bool) -> Callable[[Any], None]:
     """The sink: JSON lines, or one readable line per event."""
     def emit(ev: Any) -> None:
@@ -229,8 +237,7 @@ def run(args: argparse.Namespace) -> int:
         window_overrides={"maxfev": args.budget, "first_maxfev": args.first_budget,
                           "sigma_floor": args.sigma_floor, "min_deflection": args.min_deflection,
                           "road_fusion_hz": args.road_fusion, "road_lowpass_hz": args.road_lowpass,
-                          "drift": (None if args.window_drift is None else tuple(
-                              x.strip() for x in args.window_drift.split(",") if x.strip()))},
+                          "drift": _drift_names(args.window_drift)},
         decimate=args.decimate, inspection=not args.no_inspection,
         forecast_horizon=args.forecast_horizon, ekf_params=ekf_params, ekf_q=args.ekf_q,
         ekf_decimate=args.ekf_decimate, accel_channel=args.accel_channel,

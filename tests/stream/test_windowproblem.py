@@ -192,3 +192,38 @@ def test_drift_residual_equals_the_lean_path_without_drift_and_fits_a_ramp(quart
     best_const = min(prob.normalized_ss(dict(w.nominal, c1=c_end * f))
                      for f in np.linspace(1.0, 1.25, 26))
     assert ramp < 0.05 * best_const
+
+
+def test_drift_sensitivity_equals_finite_differences_of_the_drifting_window(quarter2, window) -> None:
+    """The sensitivity columns (one linear simulation each) are the derivatives of the
+    drifting window's prediction: with respect to the log of a parameter, the lean
+    path's own (constant window), and with respect to the rate, that of
+    :meth:`drift_residual` with short chunks; both at zero rate, at parameters that fit."""
+    s, meas, params = window
+    m = Measurement(meas.t, meas.road, {c: meas.measured[c] for c in ("x1", "x2")},
+                    source="window")
+    ssm = StateSpaceMap(quarter2, params.valuesdict(), params.free)
+    prob = WindowProblem(quarter2, m, ssmap=ssm)
+    te = float(m.t[-1])
+    # at the window's true parameters: the residual is noise (the Gauss-Newton, Kaufman
+    # form of the variable projection drops a term proportional to it)
+    p = dict(s.nominal, c1=float(np.interp(0.5 * (m.t[0] + te), s.t, s.truth["c1"])))
+    got = prob.drift_sensitivity(p, ["c1", "k1"], te)
+    assert got is not None
+    Ja, Jg = got
+    R0 = prob.lean_residual(p)
+    Rd = prob.drift_residual(p, {}, te, 0.01)
+    assert R0 is not None and Rd is not None
+    e = 1e-6
+    for j, k in enumerate(["c1", "k1"]):
+        Ra = prob.lean_residual(dict(p, **{k: p[k] * math.exp(e)}))
+        assert Ra is not None
+        fa = -(Ra - R0).ravel() / e
+        Rg = prob.drift_residual(p, {k: e}, te, 0.01)
+        assert Rg is not None
+        fg = -(Rg - Rd).ravel() / e
+        # FOH of the sensitivity forcing at 250 Hz: ~0.1-0.5 % of the column
+        assert np.linalg.norm(fa - Ja[:, j]) < 0.01 * np.linalg.norm(fa)
+        assert np.linalg.norm(fg - Jg[:, j]) < 0.01 * np.linalg.norm(fg)
+    # a parameter in the road-rate input (tyre damping c2 with B_v = c2 / m2): not available
+    assert prob.drift_sensitivity(p, ["c2"], te) is None
