@@ -38,7 +38,7 @@ from scipy.linalg import expm
 
 from estimator.identify.params import Parameters
 from estimator.identify.problem import OutputErrorProblem
-from estimator.identify.profile import apply_bands
+from estimator.identify.profile import SIGMAS, apply_bands
 from estimator.identify.result import IdentResult
 from estimator.identify.simplex import nelder_mead
 from suspid.errors import UsageError
@@ -593,6 +593,16 @@ NOISE_FLOOR = 1.15
 #: a free parameter this far (factor) from its start and from the data-driven estimate ran away
 RUNAWAY = 100.0
 
+#: factor within which the fit from the data-driven start must agree with the given start in
+#: every free parameter for the noise-floor rule to skip the given start. The whiteness test
+#: (:func:`noise_floor_ratio`) only sees a misfit larger than ``NOISE_FLOOR - 1`` of the
+#: residual; at 0.3-0.5 sigma noise the noise dominates the residual, and a local minimum
+#: whose misfit is a few per cent of it passes as white (half4 sse row 25: k4 at 2.3e6 N/m
+#: from an estimate of 2.1e6 against a truth of 500, ratio below 1.15, cost 21.65 against
+#: 20.63 from the given start). A fit an order of magnitude away from the given start in
+#: some parameter is such a case or a poor given start; only running the given start tells.
+AGREE = 10.0
+
 
 def noise_floor_ratio(problem: OutputErrorProblem, p: Mapping[str, float]) -> float:
     """Weighted sum of squares of the residual over what white noise alone would give.
@@ -630,6 +640,40 @@ def _exact(problem: OutputErrorProblem, res: IdentResult) -> bool:
 def _at_noise_floor(problem: OutputErrorProblem, res: IdentResult) -> bool:
     """``res`` leaves only white measurement noise on a noisy record (not an exact fit)."""
     return not _exact(problem, res) and noise_floor_ratio(problem, res.params) <= NOISE_FLOOR
+
+
+def _far(a: Mapping[str, float], b: Mapping[str, float], free: list[str],
+         factor: float = AGREE) -> list[str]:
+    """Free parameters in which ``a`` and ``b`` differ by more than ``factor`` (or are not
+    both finite and positive)."""
+    out = []
+    for k in free:
+        x, y = float(a[k]), float(b[k])
+        if not (math.isfinite(x) and math.isfinite(y) and x > 0 and y > 0) \
+                or abs(math.log(x / y)) > math.log(factor):
+            out.append(k)
+    return out
+
+
+def _within_noise(problem: OutputErrorProblem, best: IdentResult, other: IdentResult,
+                  nfree: int) -> bool:
+    """``other``'s cost exceeds ``best``'s by less than 3 sigma of the noise (noisy records).
+
+    The noise-scaled expectation is the band's own level: a cost rise of ``SIGMAS**2`` times
+    the residual variance per sample, ``ss / (N - p)`` (normalised units), is what a 3-sigma
+    step of one parameter costs; two fits closer than that are not told apart by the record.
+    """
+    if _exact(problem, best):
+        return False
+    ss_best = problem.normalized_ss(best.params)
+    ss_other = problem.normalized_ss(other.params)
+    try:
+        n = int(problem.residual_vector(best.params).size)
+    except (np.linalg.LinAlgError, ValueError, FloatingPointError):
+        return False
+    if not (math.isfinite(ss_best) and math.isfinite(ss_other)) or n <= nfree:
+        return False
+    return ss_other - ss_best <= SIGMAS ** 2 * ss_best / (n - nfree)
 
 
 def _finite(x: float) -> float | None:
@@ -678,7 +722,10 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         when the fit from the data-driven start is a clean success (converged, identifiable,
         plausible) and either leaves only white measurement noise (a noisy record:
         :func:`noise_floor_ratio` at most ``NOISE_FLOOR``; no start can then lower the cost
-        by more than the noise's own scatter) or explains the record exactly (normalised
+        by more than the noise's own scatter) while agreeing with ``params`` within a factor
+        ``AGREE`` in every free parameter (the whiteness test cannot see a misfit that is a
+        few per cent of a noise-dominated residual, so a fit an order of magnitude from the
+        given start is checked against it) or explains the record exactly (normalised
         cost below ``EXACT_FIT``) from an estimate that fits well (normalised cost below
         ``POOR_ESTIMATE``) while ``params`` begins at no lower cost. Otherwise it runs: on a
         noisy record the estimate is biased and may lead to a local minimum, whose residual
@@ -696,7 +743,10 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         ``data_start`` and ``nfev`` summed over the runs. A result whose parameters ran
         orders of magnitude away from its start and from the data-driven estimate is
         reported neither as a success nor as identifiable; its warnings say which parameter
-        and why, and the costs reached from each start.
+        and why, and the costs reached from each start. So is a noisy result when another
+        start reached a fit more than ``AGREE`` x away in some parameter at a cost within
+        3 sigma of the noise of it (the record does not decide between the two): the
+        warning names the parameters, the starts and their costs.
     """
     free = params.free
     est = estimate_start(problem, params) if data_start and free else None
@@ -726,7 +776,8 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         if done and all(r.success for r in done) \
                 and (at_start[i] >= min(at_start[:i]) and est is not None
                      and est.cost < POOR_ESTIMATE and all(_exact(problem, r) for r in done)
-                     or all(_at_noise_floor(problem, r) for r in done)) \
+                     or all(_at_noise_floor(problem, r) for r in done)
+                     and not any(_far(r.params, start.valuesdict(), free) for r in done)) \
                 and not _plausibility(done[0], free, usable(runs[0][0], runs[0][1]), data_vals):
             results.append((label, start, None))
             continue
@@ -745,11 +796,11 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         entry: dict[str, Any] = {"start": label, "from": {k: float(s[k].value) for k in free},
                                  "cost_at_start": _finite(problem.seed_cost(c0 * problem.scale))}
         if r is None:
-            entry.update({"cost": None, "skipped": "the fit from the data-driven start is "
-                                                   "clean and explains the record down to "
-                                                   "white noise, or exactly from a good "
-                                                   "estimate while this start begins at "
-                                                   "no lower cost"})
+            entry.update({"cost": None,
+                          "skipped": "the fit from the data-driven start is clean and "
+                                     "explains the record down to white noise within "
+                                     f"{AGREE:g}x of this start, or exactly from a good "
+                                     "estimate while this start begins at no lower cost"})
         else:
             entry.update({"cost": _finite(r.cost), "params": {k: float(r.params[k]) for k in free},
                           "success": bool(r.success), "chosen": r is res})
@@ -761,6 +812,16 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         if not est.values:
             res.warnings.append(f"no data-driven start: {est.reason}")
     bad = _plausibility(res, free, usable(best[0], best[1]), data_vals)
+    ambiguous: list[str] = []
+    for label, _, r in ran:
+        far = _far(res.params, r.params, free) if r is not res else []
+        if far and _within_noise(problem, res, r, len(free)):
+            ks = ", ".join(f"{k} {res.params[k]:.4g} ({best[0]} start) against "
+                           f"{r.params[k]:.4g} ({label} start)" for k in far)
+            ambiguous.append(
+                f"implausible result: the {best[0]} and {label} starts reached fits more than "
+                f"{AGREE:g}x apart ({ks}) at costs {res.cost:.4g} and {r.cost:.4g}, within "
+                f"{SIGMAS:g} sigma of the noise; the record does not decide between them")
     if bad:
         # a parameter that ran orders of magnitude away along a flat direction of the cost
         # is not identified by this record, whatever the curvature at the end point says
@@ -772,6 +833,15 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         alts = ", ".join(f"{label} start: cost {r.cost:.4g}" for label, _, r in ran)
         res.warnings += [f"implausible result: {b}" for b in bad]
         res.warnings.append(f"costs reached from each start: {alts}")
+    elif ambiguous:
+        # two starts reached places an order of magnitude apart at costs the noise does not
+        # tell apart: the record does not decide between them, whatever each curvature says
+        res.success = False
+        res.identifiable = False
+        for entry in res.starts:
+            if entry.get("chosen"):
+                entry["success"] = False
+        res.warnings += ambiguous
     elif intervals:
         apply_bands(problem, res, free)
     return res
