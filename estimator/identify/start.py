@@ -701,6 +701,16 @@ def _plausibility(res: IdentResult, free: list[str], start: Mapping[str, float],
     return out
 
 
+def _reject(res: IdentResult, warnings: list[str]) -> None:
+    """Report ``res`` as neither a success nor identifiable, with the reasons."""
+    res.success = False
+    res.identifiable = False
+    for entry in res.starts or []:
+        if entry.get("chosen"):
+            entry["success"] = False
+    res.warnings += warnings
+
+
 def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
                     run: Callable[[Parameters], IdentResult], *, data_start: bool = True,
                     keep_init: bool = True, intervals: bool = True) -> IdentResult:
@@ -825,23 +835,13 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
     if bad:
         # a parameter that ran orders of magnitude away along a flat direction of the cost
         # is not identified by this record, whatever the curvature at the end point says
-        res.success = False
-        res.identifiable = False
-        for entry in res.starts:
-            if entry.get("chosen"):
-                entry["success"] = False
         alts = ", ".join(f"{label} start: cost {r.cost:.4g}" for label, _, r in ran)
-        res.warnings += [f"implausible result: {b}" for b in bad]
-        res.warnings.append(f"costs reached from each start: {alts}")
+        _reject(res, [f"implausible result: {b}" for b in bad]
+                + [f"costs reached from each start: {alts}"])
     elif ambiguous:
         # two starts reached places an order of magnitude apart at costs the noise does not
         # tell apart: the record does not decide between them, whatever each curvature says
-        res.success = False
-        res.identifiable = False
-        for entry in res.starts:
-            if entry.get("chosen"):
-                entry["success"] = False
-        res.warnings += ambiguous
+        _reject(res, ambiguous)
     elif intervals:
         apply_bands(problem, res, free)
     return res

@@ -77,6 +77,36 @@ _UPPER: dict[int, FloatArray] = {}
 _PATTERNS: dict[tuple[int, ...], "_Pattern"] = {}
 
 
+def foh_weights(lm: complex, h: float) -> tuple[complex, complex, complex]:
+    """Exact first-order-hold weights of one mode over one sample interval.
+
+    For ``w' = lm w + b(t)`` with ``b`` linear between samples ``b0``, ``b1``:
+    ``w1 = e w0 + g0 b0 + g1 b1``.
+
+    Parameters
+    ----------
+    lm : complex
+        Eigenvalue (1/s).
+    h : float
+        Sample interval (s).
+
+    Returns
+    -------
+    e, g0, g1 : complex
+        ``exp(lm h)`` and the weights (s) of the interval's first and last input sample
+        (a series for ``|lm h| < 1e-3``, where the closed form cancels).
+    """
+    z = lm * h
+    e = cmath.exp(z)
+    if abs(z) < 1e-3:
+        i0 = h * (1 + z / 2 + z * z / 6 + z ** 3 / 24)
+        i1 = h * (0.5 + z / 6 + z * z / 24 + z ** 3 / 120)
+    else:
+        i0 = (e - 1) / z * h
+        i1 = (e - 1 - z) / (z * z) * h
+    return e, i0 - i1, i1
+
+
 def small_inverse(M: FloatArray) -> tuple[FloatArray | None, float]:
     """Inverse of a small square matrix and its 1-norm condition number.
 
@@ -479,15 +509,7 @@ class WindowProblem(OutputErrorProblem):
         cc: list[complex] = []  # w0 - a1 r[0]
         r0l = self._r0l
         for i, lm in enumerate(lam):
-            z = lm * h
-            e = cmath.exp(z)
-            if abs(z) < 1e-3:
-                i0 = h * (1 + z / 2 + z * z / 6 + z ** 3 / 24)
-                i1 = h * (0.5 + z / 6 + z * z / 24 + z ** 3 / 120)
-            else:
-                i0 = (e - 1) / z * h
-                i1 = (e - 1 - z) / (z * z) * h
-            g0, g1 = i0 - i1, i1
+            e, g0, g1 = foh_weights(lm, h)
             El.append(e)
             if road:
                 j, jj = pat.k1[i], pat.k2[i]
@@ -937,15 +959,7 @@ class WindowProblem(OutputErrorProblem):
         g0 = np.empty(mm, dtype=complex)
         g1 = np.empty(mm, dtype=complex)
         for i, lm in enumerate(lam.tolist()):
-            zz = lm * h
-            e = cmath.exp(zz)
-            if abs(zz) < 1e-3:
-                i0 = h * (1 + zz / 2 + zz * zz / 6 + zz ** 3 / 24)
-                i1 = h * (0.5 + zz / 6 + zz * zz / 24 + zz ** 3 / 120)
-            else:
-                i0 = (e - 1) / zz * h
-                i1 = (e - 1 - zz) / (zz * zz) * h
-            g0[i], g1[i] = i0 - i1, i1
+            _, g0[i], g1[i] = foh_weights(lm, h)
         # w[k] = E^k sum_{l<k} (g0 b[l] + g1 b[l+1]) E^-(l+1), w[0] = 0
         P = ev.P
         D = g0[None, :, None] * Bm[:, :, :-1] + g1[None, :, None] * Bm[:, :, 1:]
