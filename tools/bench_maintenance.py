@@ -3,7 +3,8 @@
 Held-out streams (ISO 8608 class C road at 50 km/h, white noise on every channel as a
 fraction of its RMS, DBC quantization) with different suspensions, noise levels, wear rates
 and wearing parts: quarter cars losing damping (c1) or spring stiffness (k1), the demo's
-quantization-only damper wear, and a half car losing front damping; both estimators run
+quantization-only damper wear, a half car losing front damping and a full car losing
+front-left damping (250 Hz, positions and roads measured); both estimators run
 through ``suspid compare``'s library call (:func:`estimator.stream.compare.compare`) with the
 same free parameters (dampers and springs; masses known), starts (nominal) and alert rule.
 Printed per stream: tracking RMSE of the wearing part (the value the alerts are decided on),
@@ -76,7 +77,12 @@ CASES = [
          100.0, 0.6, 13, part="k1"),
     Case("half4", "half car, 1 % noise, front damper c1 -50 % over 50 s (250 Hz)", None, 0.01,
          80.0, 20.0, 70.0, 0.5, 4, model="half4"),
+    Case("full7", "full car, 1 % noise, front-left damper c1 -50 % over 50 s (250 Hz)", None,
+         0.01, 80.0, 20.0, 70.0, 0.5, 6, model="full7"),
 ]
+
+#: the full car's known parameters: masses, inertias and geometry
+FULL7_KNOWN = ("m", "Ix", "Iy", "m1", "m2", "m3", "m4", "a1", "a2", "w1", "w2")
 
 
 def half4_stream(case: Case) -> Stream:
@@ -113,10 +119,30 @@ def half4_stream(case: Case) -> Stream:
     return Stream(t, data, truth, dict(p0))
 
 
+def full7_stream(case: Case) -> Stream:
+    """Full car on an ISO 8608 class C road at 50 km/h (independent left and right tracks,
+    each rear wheel on its front's track delayed by the wheelbase), 250 Hz, front-left damper
+    c1 losing damping linearly; white noise of ``case.noise`` x each channel's noise-free RMS
+    on the seven positions and the four roads (as :func:`half4_stream`: no accelerations or
+    road velocities measured), no quantization."""
+    m = get_model("full7")
+    kw: dict[str, Any] = dict(duration=case.duration, fs=250.0, c_end_fraction=case.wear_to,
+                              wear_start=case.wear_start, wear_end=case.wear_end,
+                              seed=case.seed, damper=case.part, channels=tuple(m.coords),
+                              quantize=False)
+    clean = damper_wear(m, noise={c: 0.0 for c in tuple(m.coords) + m.input_names}, **kw)
+    noise = {c: float(case.noise or 0.0) * float(np.std(v)) for c, v in clean.data.items()}
+    s = damper_wear(m, noise=noise, **kw)
+    s.data = {c: v for c, v in s.data.items() if not c.endswith("_dot")}
+    return s
+
+
 def make_stream(case: Case) -> Stream:
     """The case's stream: noise set relative to each channel's noise-free RMS."""
     if case.model == "half4":
         return half4_stream(case)
+    if case.model == "full7":
+        return full7_stream(case)
     m = get_model("quarter2")
     kw: dict[str, Any] = dict(duration=case.duration, fs=500.0, params=case.params,
                               c_end_fraction=case.wear_to, wear_start=case.wear_start,
@@ -130,10 +156,12 @@ def make_stream(case: Case) -> Stream:
 
 
 def known(case: Case, nominal: dict[str, float]) -> dict[str, float]:
-    """The parameters held fixed: masses (and the half car's inertia and geometry); the demo
-    also holds the tyre, as ``suspid compare`` does by default."""
+    """The parameters held fixed: masses (and the half and full cars' inertias and geometry);
+    the demo also holds the tyre, as ``suspid compare`` does by default."""
     if case.model == "half4":
         return {k: nominal[k] for k in ("m", "I", "m1", "m2", "a1", "a2")}
+    if case.model == "full7":
+        return {k: nominal[k] for k in FULL7_KNOWN}
     if case.key in ("demo", "demo60"):
         return {k: nominal[k] for k in ("m1", "m2", "c2", "k2")}
     return {k: nominal[k] for k in ("m1", "m2")}
