@@ -59,6 +59,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 FIX = ["--fix", "m1=300", "--fix", "m2=40", "--fix", "c2=300", "--fix", "k2=200000"]
+#: further options of the end-to-end monitor runs (``--window-drift``)
+EXTRA: list[str] = []
 
 
 def _rss_mb() -> float:
@@ -82,7 +84,7 @@ def _monitor_run(log: Path, repeat: int) -> tuple[float, float, list[dict[str, A
     Returns wall seconds, CPU seconds of that process, its JSON lines and the command.
     """
     cmd = [sys.executable, "-m", "suspid", "monitor", "--model", "quarter2", "--input", str(log),
-           *FIX, "--jsonl"]
+           *FIX, *EXTRA, "--jsonl"]
     best: tuple[float, float, list[dict[str, Any]], list[str]] | None = None
     for _ in range(max(1, repeat)):
         ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -210,38 +212,42 @@ def bench_saturated(seconds: float = 60.0) -> dict[str, Any]:
 
 def bench_windows(repeat: int = 3) -> dict[str, Any]:
     """CPU of the window fits alone (tracking, inspection, JSON lines), min of ``repeat``."""
-    from estimator.alerts import AlertConfig
     from estimator.identify import Parameters
     from estimator.stream.compare import metrics, run_one
-    from estimator.stream.config import default_config, default_decimation
-    from estimator.stream.monitor import NMWindowEstimator
+    from estimator.stream.pipeline import monitor_spec
     from suspid.models import get_model
 
     m = get_model("quarter2")
     out: dict[str, Any] = {}
     for name, fs, dur, seed in (("replay_500hz", 500.0, 150.0, 0), ("saturated_2khz", 2000.0, 60.0, 4)):
         s = _stream(dur, fs, seed=seed)
-        params = Parameters.for_model(m, fix={k: s.nominal[k] for k in ("m1", "m2", "c2", "k2")})
+        fix = {k: s.nominal[k] for k in ("m1", "m2", "c2", "k2")}
+        params = Parameters.for_model(m, fix=fix)
         nominal = {k: s.nominal[k] for k in params.free}
+        overrides = ({"drift": () if EXTRA[1] == "none" else tuple(EXTRA[1].split(","))}
+                     if EXTRA else None)
+        spec = monitor_spec(m, fix=fix, nominal=nominal, fs=fs, window_overrides=overrides)
+        data = {k: s.data[k] for k in ("x1", "x2", "x1_ddot", "r", "r_dot")}
         best = None
         for _ in range(max(1, repeat)):
-            cfg = default_config(m, s.nominal, fs, len(params.free))
-            cfg.decimate = default_decimation(m, s.nominal, fs)
-            est = NMWindowEstimator(m, params, cfg, ["x1", "x2", "x1_ddot"])
-            rec = run_one(est, s.t, s.data, cfg.window_s, cfg.step_s,
-                          AlertConfig(nominal, persistence_s=cfg.step_s), "quarter2")
-            if best is None or rec.cpu_s < best[0].cpu_s:
-                best = (rec, est)
-        rec, est = best
+            rec = run_one(spec, s.t, data)
+            if best is None or rec.cpu_s < best.cpu_s:
+                best = rec
+        if best is None:   # unreachable: the loop runs at least once
+            raise RuntimeError("no window run")
+        rec = best
+        est_lines = [ln for ln in rec.lines if ln["type"] == "estimate"]
+        fits_cpu = sum(float(ln.get("cpu_ms", 0.0)) for ln in est_lines) / 1e3
         met = metrics(rec, s.t, s.truth, nominal, 0.3, s.t.size)
-        nfev = [l["nfev"] for l in rec.lines if l["type"] == "estimate"]
+        nfev = [ln["nfev"] for ln in est_lines]
         c1 = met["params"]["c1"]
-        out[name] = {"data_s": dur, "sample_rate_hz": fs, "decimate": cfg.decimate,
-                     "windows": len(rec.lines), "cpu_s_with_inspection": rec.cpu_s,
-                     "cpu_ms_per_window": 1e3 * rec.cpu_s / max(len(rec.lines), 1),
-                     "fits_cpu_s": est.ident.total_cpu,
+        out[name] = {"data_s": dur, "sample_rate_hz": fs, "decimate": spec.config.decimate,
+                     "drift": list(spec.config.drift),
+                     "windows": len(est_lines), "cpu_s_with_inspection": rec.cpu_s,
+                     "cpu_ms_per_window": 1e3 * rec.cpu_s / max(len(est_lines), 1),
+                     "fits_cpu_s": fits_cpu,
                      "cpu_share_pct": 100 * rec.cpu_s / dur,
-                     "fits_cpu_share_pct": 100 * est.ident.total_cpu / dur,
+                     "fits_cpu_share_pct": 100 * fits_cpu / dur,
                      "nfev_first": nfev[0] if nfev else None,
                      "nfev_warm_mean": float(sum(nfev[1:]) / max(len(nfev) - 1, 1)),
                      "nfev_warm_max": max(nfev[1:]) if len(nfev) > 1 else None,
@@ -318,7 +324,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeat", type=int, default=3,
                     help="replay, windows: runs (fastest kept)")
     ap.add_argument("--json", action="store_true", help="print one JSON object")
+    ap.add_argument("--window-drift", default=None, metavar="NAMES",
+                    help="replay, windows: pass --window-drift NAMES to the monitor runs ('none': "
+                         "constant windows; default: the monitor's default)")
     a = ap.parse_args(argv)
+    EXTRA[:] = ["--window-drift", a.window_drift] if a.window_drift else []
     out: dict[str, Any] = {}
     with tempfile.TemporaryDirectory() as d:
         if a.what in ("replay", "all"):
