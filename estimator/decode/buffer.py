@@ -92,6 +92,11 @@ class Aligned:
     snapped: float = 0.0
 
 
+class NoSamplesError(InputError):
+    """No accepted frame carries the asked channels in the asked span (a stream's gap
+    longer than a window, or the end of a stream)."""
+
+
 class Source:
     """Ring of rows ``(t, v_0, ..., v_{k-1})`` of one message; created by :meth:`RollingBuffer.source`."""
 
@@ -445,7 +450,7 @@ class RollingBuffer:
             snaps[name] = (t, v)
         nonempty = [s for s in snaps.values() if s[0].size]
         if not nonempty:
-            raise InputError("no decoded samples to align (no accepted frame carries the channels "
+            raise NoSamplesError("no decoded samples to align (no accepted frame carries the channels "
                              f"{', '.join(names)})")
         if dt is None:
             steps = []

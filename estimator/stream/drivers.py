@@ -20,6 +20,7 @@ from typing import Any, Callable, Iterable, Mapping
 import can
 import numpy as np
 
+from estimator.decode.buffer import NoSamplesError
 from estimator.decode.replay import feed_log
 from estimator.stream.accumulator import WindowAccumulator
 from suspid.can.bus import LOSS_CLASSES, SocketcanReader
@@ -92,6 +93,8 @@ class CanWindowDriver:
     check_every: int = 32
     frames: int = 0
     windows: int = 0
+    #: windows that held no decoded sample of the channels (skipped)
+    empty_windows: int = 0
     dt: float | None = None
     t_first: float = math.nan
     next_end: float = math.nan
@@ -163,8 +166,15 @@ class CanWindowDriver:
             self.next_end += self.step_s
 
     def _cut(self, t_end: float) -> None:
-        al = self.listener.aligned(window=self.window_s, t_end=t_end, dt=self.dt,
-                                   channels=self.channels)
+        try:
+            al = self.listener.aligned(window=self.window_s, t_end=t_end, dt=self.dt,
+                                       channels=self.channels)
+        except NoSamplesError:
+            # a gap in the stream longer than a window (a dead link, a node that paused, the
+            # last frames of other messages after the measurements ended): nothing to fit,
+            # as a window with fewer than 3 samples
+            self.empty_windows += 1
+            return
         if self.dt is None:
             self.dt = float(al.dt)
             if self.on_first_dt is not None:

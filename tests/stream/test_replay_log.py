@@ -87,3 +87,19 @@ def test_batch_replay_cuts_the_same_windows(logs: dict[str, Path], name: str, ch
         assert sum(np.isnan(d["x1"]).any() for _, d in got) >= 1
     if name != "clean":
         assert sum(stats["rejected"].values()) > 0
+
+
+def test_a_gap_longer_than_a_window_is_skipped_not_fatal(logs, tmp_path) -> None:
+    """A dead link of 5 s (longer than the 3 s window) leaves windows without a decoded
+    sample: they are skipped and counted, the windows on both sides are cut as before, and
+    the replay does not stop with an error."""
+    holed = tmp_path / "long_hole.log"
+    _with_hole(logs["clean"], holed, 6.0, 11.0)
+    got: list[tuple[np.ndarray, dict[str, np.ndarray]]] = []
+    lst = DecodeListener("quarter2", capacity=1 << 12)
+    drv = CanWindowDriver(lst, 3.0, 1.5, lambda t, d: got.append((t.copy(), d)))
+    replay_log(drv, holed)
+    ends = [float(t[-1]) for t, _ in got]
+    assert drv.empty_windows >= 1
+    assert any(e < 6.0 for e in ends) and any(e > 14.0 for e in ends)
+    assert not any(9.0 + 0.01 < e < 11.0 for e in ends)   # no window lies inside the hole
