@@ -7,6 +7,7 @@ Usage (from the repository root)::
     python tools/bench_monitor.py saturated   # frame rate of a saturated 1 Mbit/s bus: CPU share
     python tools/bench_monitor.py rss         # 1 hour of simulated stream: RSS over time
     python tools/bench_monitor.py windows     # the window fits alone, in-process (min of 3)
+    python tools/bench_monitor.py evaluations # one window's cost evaluation, every model
     python tools/bench_monitor.py all --json
 
 ``replay``
@@ -37,6 +38,13 @@ Usage (from the repository root)::
     damper test) and the saturated bench's 60 s, 2 kHz stream (39 windows). Reports CPU
     per window, Nelder-Mead evaluations (cold start, warm mean) and the c1 accuracy
     (RMS error against the truth at the window end, alert delay after the 70 % crossing).
+``evaluations``
+    One 3 s window at 250 Hz (751 samples) of each model's damper-wear stream: every
+    position and road (and the quarter car's body acceleration), the masses, inertias and
+    geometry fixed. Microseconds per cost evaluation at 400 points spread 5 % around the
+    truth, on the window's lean path (:class:`estimator.stream.windowproblem.WindowProblem`)
+    and on the core's :class:`estimator.identify.OutputErrorProblem`, side by side (fastest
+    of ``--repeat`` passes).
 ``rss``
     Feeds one hour of data time (a 60 s encoded stream looped with continuous timestamps and
     E2E counters) through the live path (decoder, rolling buffer, windows, fits) and samples
@@ -258,6 +266,57 @@ def bench_windows(repeat: int = 3) -> dict[str, Any]:
     return out
 
 
+def bench_evaluations(repeat: int = 3) -> dict[str, Any]:
+    """Microseconds per window cost evaluation, lean path and core, for every model."""
+    import math
+
+    import numpy as np
+
+    from estimator.identify import OutputErrorProblem, Parameters
+    from estimator.stream.wear_streams import damper_wear
+    from estimator.stream.windowproblem import StateSpaceMap, WindowProblem
+    from suspid.io.csvio import Measurement
+    from suspid.models import get_model
+
+    out: dict[str, Any] = {}
+    for name in ("quarter2", "half4", "full7"):
+        m = get_model(name)
+        accel = (m.coords[0] + "_ddot",) if name == "quarter2" else ()
+        chans = tuple(m.coords) + accel
+        s = damper_wear(m, duration=4.0, fs=250.0, seed=4, wear_start=0.0, channels=chans)
+        sl = slice(250, 1001)
+        road = {k: s.data[k][sl] for k in s.data if k in m.input_names}
+        meas = Measurement(s.t[sl].copy(), road, {c: s.data[c][sl] for c in chans}, source="w")
+        fixed = {q.name: s.nominal[q.name] for q in m.params
+                 if q.kind in ("mass", "inertia", "length")}
+        params = Parameters.for_model(m, fix=fixed)
+        lean = WindowProblem(m, meas, ssmap=StateSpaceMap(m, params.valuesdict(), params.free))
+        core = OutputErrorProblem(m, meas)
+        rng = np.random.default_rng(1)
+        pts = []
+        for _ in range(400):
+            q = dict(s.nominal)
+            for k in params.free:
+                q[k] *= math.exp(rng.normal(0.0, 0.05))
+            pts.append(q)
+        row: dict[str, Any] = {"free": len(params.free), "samples": int(meas.t.size)}
+        for label, prob in (("lean", lean), ("core", core)):
+            best = math.inf
+            for _ in range(max(1, repeat)):
+                if prob is lean:
+                    lean._cache.clear()
+                t0 = time.process_time()
+                for q in pts:
+                    prob.normalized_ss(q)
+                best = min(best, (time.process_time() - t0) / len(pts))
+            row[f"{label}_us"] = round(1e6 * best, 1)
+        row["core_over_lean"] = round(row["core_us"] / row["lean_us"], 2)
+        row["lean_fallbacks"] = lean.n_fallback
+        out[name] = row
+    out["repeat"] = repeat
+    return out
+
+
 def bench_rss(hours: float = 1.0, chunk_s: float = 60.0) -> dict[str, Any]:
     """RSS while one hour of data time streams through the live path."""
     import can
@@ -316,13 +375,13 @@ def bench_rss(hours: float = 1.0, chunk_s: float = 60.0) -> dict[str, Any]:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("what", choices=["replay", "saturated", "rss", "windows", "all"])
+    ap.add_argument("what", choices=["replay", "saturated", "rss", "windows", "evaluations", "all"])
     ap.add_argument("--hours", type=float, default=1.0, help="rss: data hours (default 1)")
     ap.add_argument("--duration", type=float, default=150.0, help="replay: log length (s)")
     ap.add_argument("--long", type=float, default=1200.0,
                     help="replay: length of the long log for the sustained rate (s; 0 skips)")
     ap.add_argument("--repeat", type=int, default=3,
-                    help="replay, windows: runs (fastest kept)")
+                    help="replay, windows, evaluations: runs (fastest kept)")
     ap.add_argument("--json", action="store_true", help="print one JSON object")
     ap.add_argument("--window-drift", default=None, metavar="NAMES",
                     help="replay, windows: pass --window-drift NAMES to the monitor runs ('none': "
@@ -339,6 +398,8 @@ def main(argv: list[str] | None = None) -> int:
             out["rss"] = bench_rss(a.hours)
         if a.what in ("windows", "all"):
             out["windows"] = bench_windows(a.repeat)
+        if a.what in ("evaluations", "all"):
+            out["evaluations"] = bench_evaluations(a.repeat)
     print(json.dumps(out, indent=None if a.json else 2))
     return 0
 

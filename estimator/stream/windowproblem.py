@@ -17,13 +17,17 @@ evaluations on ~750 samples, so the fixed cost of an evaluation (dozens of numpy
    (condition number of ``V`` below 1e8);
 3. the forced modal trajectory of the first-order-hold road,
    ``w[k+1] = E w[k] + g0 s[k] + g1 s[k+1]``, in closed form:
-   ``w[k] = E^k (w[0] + sum_{l<k} d[l] E^-(l+1))`` -- one ``cumsum`` of ``r[l] E^-l``
+   ``w[k] = E^k (w[0] + sum_{l<k} d[l] E^-(l+1))`` -- one ``cumsum`` per mode of
+   ``(sum_j a_j r_j[l]) E^-l`` (the roads summed first: the trajectory is linear in them)
    instead of a recursion. Exact in exact arithmetic; the partial sums are dominated by
    their newest terms, so the rounding error stays ~``eps`` relative to ``|w|``. It is used
    only while ``|E|^-N`` stays far from overflow (``max(-Re(lam)) h N < 600``);
-4. the least-squares initial state from the explicit free-response regressors (``n``
-   real columns, ``p N`` rows: cheaper than the parent's closed-form geometric sums at
-   this size), then the residual.
+4. the least-squares initial state without forming the free-response regressors
+   ``Re(CV_i E_i^k)``, ``-Im(...)``: their Gram matrix from the channel products
+   ``CV^T CV``, ``CV^T conj(CV)`` and the geometric sums ``sum_k (E_i E_j)^k``, their
+   product with the residual as ``sum_c CV_ci (R P^T)_ci``; then the residual.
+   ``python tools/bench_monitor.py evaluations`` times an evaluation of each model's
+   751-sample window on this path and on the core's.
 
 Evaluations are cached per window, so the estimate's residual and Nelder-Mead's final
 simplex are reused by :meth:`WindowProblem.finish` (stderr from the secant through the
@@ -268,13 +272,17 @@ class _Pattern:
     pairs: np.ndarray  # indices of the complex modes
     sel_v: np.ndarray  # (n, m) complex: V = vr @ sel_v
     sel_cv: np.ndarray  # (n, m) complex: (C V) fac = (C vr) @ sel_cv
+    k1a: np.ndarray  # k1 as an index array
+    k2a: np.ndarray  # k2 as an index array
+    pair_mask: FloatArray  # (m,) 1.0 for a complex pair, 0.0 for a real mode
+    ix_pairs: tuple[np.ndarray, ...]  # np.ix_(pairs, pairs)
 
 
 @dataclass
 class _Traj:
     """Road-driven modal trajectory ``sum_j (Ca_j E^k Q_j[k] - Cb_j r_j[k]) + cc E^k``."""
 
-    PQ: list[np.ndarray]  # per road: (m, N) E^k Q[k]
+    Wf: np.ndarray  # (m, N) sum over roads j of Ca_j E^k Q_j[k]
     Ca: np.ndarray  # (m, nr) a0 + a1
     Cb: np.ndarray  # (m, nr) a0
     cc: np.ndarray  # (m,) w0 - a1 r[0]
@@ -317,9 +325,8 @@ class _Eval:
         """Complete modal trajectory (m, N): road-driven part plus the fitted free response."""
         W = self.coef[:, None] * self.P
         if self.traj is not None:
-            for jr, PQ in enumerate(self.traj.PQ):
-                W += self.traj.Ca[:, jr:jr + 1] * PQ
-                W -= np.outer(self.traj.Cb[:, jr], r[jr])
+            W += self.traj.Wf
+            W -= self.traj.Cb @ r
         return W
 
 
@@ -361,7 +368,6 @@ class WindowProblem(OutputErrorProblem):
         self._names = [q.name for q in m.params]
         self._r = np.ascontiguousarray(self.U[:, :nr].T)  # (nr, N)
         self._r0 = self._r[:, 0].copy()
-        self._r0l = self._r0.tolist()
         self._rc = self._r.astype(complex)
         self._hf = float(self.h)
         self._UT = np.ascontiguousarray(self.U.T)  # (2 nr, N)
@@ -421,7 +427,9 @@ class WindowProblem(OutputErrorProblem):
             sel_v[x, i] = 1.0
             if is_pair[i]:
                 sel_v[y, i] = 1j
-        got = _Pattern(k1, k2, is_pair, fac, np.flatnonzero(is_pair), sel_v, sel_v * fac)
+        got = _Pattern(k1, k2, is_pair, fac, np.flatnonzero(is_pair), sel_v, sel_v * fac,
+                       np.array(k1), np.array(k2), np.array(is_pair, dtype=float),
+                       np.ix_(np.flatnonzero(is_pair), np.flatnonzero(is_pair)))
         _PATTERNS[sig] = got
         return got
 
@@ -501,83 +509,76 @@ class WindowProblem(OutputErrorProblem):
         # The last term is a free response: the least-squares initial state absorbs it, so
         # it is left out of the residual and subtracted from the free coefficients after.
         road = self._road
+        lam_a = np.array(lam)
+        El_a, g0a, g1a = np.array([foh_weights(lm, h) for lm in lam]).T  # (m,) each
         if road:
-            VZ = (vl.T @ BB).tolist()  # rows a^T [Br | Bv | Bz], b^T [...] of left eigenvectors
-        El: list[complex] = []
-        ca: list[list[complex]] = []  # a0 + a1 per mode and road
-        cb: list[list[complex]] = []  # a0
-        cc: list[complex] = []  # w0 - a1 r[0]
-        r0l = self._r0l
-        for i, lm in enumerate(lam):
-            e, g0, g1 = foh_weights(lm, h)
-            El.append(e)
-            if road:
-                j, jj = pat.k1[i], pat.k2[i]
-                # row i of V^-1 [Br | Bv | Bz]
-                if pat.is_pair[i]:
-                    X = [complex(x, -y) / uv[i] for x, y in zip(VZ[j], VZ[jj])]
-                else:
-                    X = [x / uv[i] for x in VZ[j]]
-                c0 = 0j
-                ra, rb = [], []
-                for jr in range(nr):
-                    xb = X[2 * nr + jr]  # b = V^-1 Bz
-                    a0 = xb * g0 / e
-                    a1 = xb * g1
-                    ra.append(a0 + a1)
-                    rb.append(a0)
-                    c0 -= (X[nr + jr] + a1) * r0l[jr]  # w0 = -V^-1 Bv r[0]
-                ca.append(ra)
-                cb.append(rb)
-                cc.append(c0)
+            # rows of V^-1 [Br | Bv | Bz] from the left eigenvectors' real and imaginary
+            # parts: (a - ib)^T B / (u_i^H v_i)
+            VZ = vl.T @ BB
+            X = (VZ[pat.k1a] - 1j * (VZ[pat.k2a] * pat.pair_mask[:, None])) / np.array(uv)[:, None]
+            Xb = X[:, 2 * nr:]  # b = V^-1 Bz
+            Cb = Xb * (g0a / El_a)[:, None]  # a0
+            a1 = Xb * g1a[:, None]
+            Ca = Cb + a1  # a0 + a1
+            cc = -((X[:, nr:2 * nr] + a1) @ self._r0)  # w0 - a1 r[0], w0 = -V^-1 Bv r[0]
         P = np.empty((mm, N), dtype=complex)
-        P[:] = np.array(El)[:, None]
+        P[:] = El_a[:, None]
         P[:, 0] = 1.0
         np.cumprod(P, axis=1, out=P)
         if road:
-            Ca = np.array(ca)  # (m, nr)
-            Cb = np.array(cb)
-            PQ = []
-            R = self._YT.copy()
-            for jr in range(nr):
-                # rows 0..m-1: E^k Q[k]; row m: the road itself (complex copy made once)
-                buf = np.empty((mm + 1, N), dtype=complex)
-                np.cumsum(np.divide(self._r[jr], P), axis=1, out=buf[:mm])
-                buf[:mm] *= P
-                buf[mm] = self._rc[jr]
-                PQ.append(buf[:mm])
-                # R -= Re(CV diag(a) PQ - (CV a0) r), one product
-                M = np.empty((CV.shape[0], mm + 1), dtype=complex)
-                np.multiply(CV, Ca[:, jr], out=M[:, :mm])
-                M[:, mm] = -(CV @ Cb[:, jr])
-                R -= (M @ buf).real
+            # the roads summed first (the trajectory is linear in them):
+            #   Wf[k] = sum_j Ca_j E^k Q_j[k] = E^k cumsum_l((sum_j Ca_j r_j[l]) E^-l)
+            Wf = Ca @ self._rc
+            np.divide(Wf, P, out=Wf)
+            np.cumsum(Wf, axis=1, out=Wf)
+            Wf *= P
+            # R = Y - Re(CV Wf - (CV Cb) r)
+            R = self._YT - (CV @ Wf).real
+            R += (CV @ Cb).real @ self._r
             if not self._pos_only:
                 CB = B[self._rows, nr:] if Cm is None else Cm @ B[:, nr:]
                 R -= CB @ self._r
                 if Dm is not None and self._rdot:
                     R -= Dm @ self._UT
-            R = R.ravel()
-            traj = _Traj(PQ, Ca, Cb, np.array(cc))
+            traj = _Traj(Wf, Ca, Cb, cc)
         else:
-            R = self._Yflat.copy()
+            R = self._YT.copy()
             traj = None
-        # least-squares free modal coefficients from the explicit regressors:
-        # column a = Re(CV[:, i] E_i^k) for every mode, then -Im(...) for the complex ones
-        T = CV.T[:, :, None] * P[:, None, :]  # (m, p, N)
+        # least-squares free modal coefficients. The regressors are Re(CV[:, i] E_i^k) for
+        # every mode, then -Im(...) for the complex ones; with x = CV_ci E_i^k and
+        # y = CV_cj E_j^k their Gram matrix follows from the sums over channels and samples
+        #   S1 = sum x y = (CV^T CV)_ij g(E_i E_j),  S2 = sum x conj(y) = (CV^H CV)*_ij ...,
+        # g(z) = sum_{k<N} z^k = (1 - z^N) / (1 - z), as Re x Re y = Re(S1 + S2) / 2,
+        # Im x Im y = Re(S2 - S1) / 2, Re x Im y = Im(S1 - S2) / 2 -- no regressor matrix
+        sA = (lam_a[:, None] + lam_a[None, :]) * h
+        sB = (lam_a[:, None] + lam_a.conj()[None, :]) * h
+        S1 = (CV.T @ CV) * (np.expm1(N * sA) / np.expm1(sA))
+        S2 = (CV.T @ CV.conj()) * (np.expm1(N * sB) / np.expm1(sB))
         pairs = pat.pairs
         npair = pairs.size
-        pch = CV.shape[0]
-        G = np.empty((mm + npair, pch, N))
-        G[:mm] = T.real
+        nG = mm + npair
+        Gram = np.empty((nG, nG))
+        Gram[:mm, :mm] = 0.5 * (S1 + S2).real
         if npair:
-            np.negative(T.imag[pairs], out=G[mm:])
-        Gf = G.reshape(mm + npair, pch * N)
-        ev, vec, info = _dsyev(Gf @ Gf.T)
+            D = 0.5 * (S2 - S1)
+            Gram[mm:, mm:] = D.real[pat.ix_pairs]
+            Gram[:mm, mm:] = D.imag[:, pairs]  # Re x_i (-Im y_j) = Im(S2 - S1)_ij / 2
+            Gram[mm:, :mm] = Gram[:mm, mm:].T
+        ev, vec, info = _dsyev(Gram)
         evl = ev.tolist()
         if info != 0 or not (evl[0] > 0 and evl[-1] <= MAX_GRAM_COND * evl[0]):
             return None
-        sol = vec @ ((Gf @ R) @ vec / ev)  # not finite only if R is: the cost is then inf
-        R -= sol @ Gf
+        # regressors times the residual: Re(y_i), -Im(y_i) with
+        # y_i = sum_k E_i^k (CV^T R)_ik = sum_c CV_ci (R P^T)_ci
+        y = (CV * (R @ P.T)).sum(axis=0)
+        rhs = np.concatenate([y.real, -y.imag[pairs]])
+        sol = vec @ ((rhs @ vec) / ev)  # not finite only if R is: the cost is then inf
+        coef = sol[:mm].astype(complex)
+        if npair:
+            coef[pairs] += 1j * sol[mm:]
+        Wc = coef[:, None] * P
+        R -= (CV @ Wc).real
+        pch = CV.shape[0]
         out = _Eval(key, vr, pat, A, B, P, traj, sol, R.reshape(pch, N))
         cache = self._cache
         if len(cache) >= CACHE_SIZE:
