@@ -20,16 +20,27 @@ export MPLBACKEND=Agg
 export OPENBLAS_NUM_THREADS=${OPENBLAS_NUM_THREADS:-1} OMP_NUM_THREADS=${OMP_NUM_THREADS:-1}
 # the linter, the import contract and the type checker (pyproject.toml) must pass too
 bash tools/lint.sh
-# The main suite runs here; the SocketCAN tests (marker socketcan: vcan0 and can-utils) run
-# in one more pytest through tools/vcan_bench.sh: natively where the kernel has SocketCAN,
-# otherwise in one User-Mode Linux guest. pytest's status 5 (no test selected, e.g. when
-# the arguments name other tests) counts as success there.
+# The main suite runs in two pytest invocations: the tests that only compute run in parallel
+# (pytest-xdist: one worker per core, at most 4; TEST_WORKERS=N sets the number), then the
+# tests marked realtime (paced in wall-clock time: live buses, ptys, nodes with --speed) one
+# after another on an otherwise idle suite, so that the parallel load cannot make them late.
+# The SocketCAN tests (marker socketcan: vcan0 and can-utils) run in one more pytest through
+# tools/vcan_bench.sh: natively where the kernel has SocketCAN, otherwise in one User-Mode
+# Linux guest. pytest's status 5 (no test selected, e.g. when the arguments name tests of
+# one step only) counts as success as long as some step ran tests.
+cores=$(nproc)
+workers=${TEST_WORKERS:-$(( cores < 4 ? cores : 4 ))}
 set +e
-.venv/bin/python -m pytest -m "not socketcan" "$@"
-main=$?
+.venv/bin/python -m pytest -m "not socketcan and not realtime" -n "$workers" "$@"
+parallel=$?
+.venv/bin/python -m pytest -m "realtime and not socketcan" "$@"
+paced=$?
 bash tools/vcan_bench.sh .venv/bin/python -m pytest -m socketcan "$@"
 bench=$?
 set -e
-if [[ $bench -eq 5 ]]; then bench=0; fi
-if [[ $main -ne 0 ]]; then exit "$main"; fi
-exit "$bench"
+status=5
+for s in "$parallel" "$paced" "$bench"; do
+  if [[ $s -ne 0 && $s -ne 5 ]]; then exit "$s"; fi
+  if [[ $s -eq 0 ]]; then status=0; fi
+done
+exit "$status"

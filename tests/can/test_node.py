@@ -118,6 +118,7 @@ def test_bad_fault_specs(spec, fragment):
         FaultConfig.parse([spec])
 
 
+@pytest.mark.realtime
 def test_run_on_virtual_bus_paced():
     node = SensorNode(NodeConfig(scenario="bump", duration=1.0, rate=500))
     lst = DecodeListener("quarter2", node.db, time_source="tick")

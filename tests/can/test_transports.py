@@ -22,6 +22,9 @@ from tests.conftest import start_slcan_node, suspid_env
 
 REPO = Path(__file__).resolve().parents[2]
 
+#: pty adapters read by threads with short timeouts, nodes paced with --speed
+pytestmark = pytest.mark.realtime
+
 
 def _ask(port: serial.Serial, cmd: bytes) -> bytes:
     port.write(cmd + b"\r")

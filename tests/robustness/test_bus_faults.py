@@ -220,6 +220,7 @@ def test_loss_ledger_watch_ends_after_each_message_delivered() -> None:
                                                "buffer_overflow": 0, "none": 1}
 
 
+@pytest.mark.realtime
 def test_live_receiver_counts_error_frames_apart_and_overrun_unknown_off_socketcan() -> None:
     """A virtual bus: error frames are counted (not decoded), counter gaps are ``none``'s,
     and the socket overrun is unknown (``None``), not 0."""
@@ -276,6 +277,7 @@ def test_receive_buffer_is_sized_in_seconds_of_the_dbc_frame_rate() -> None:
     assert receive_capacity(2.5, None) == math.ceil(2.5 * RECEIVE_RATE)
 
 
+@pytest.mark.realtime
 def test_live_receiver_buffer_overflow_gaps_are_not_counted_again() -> None:
     """A receiver buffer of a hundred frames and a first fit that stalls for 0.3 s while
     the frames keep coming: frames are dropped at the full buffer (``buffer_overflow``),

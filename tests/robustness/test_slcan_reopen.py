@@ -43,6 +43,7 @@ def _attach(kind: str, path: str) -> can.BusABC:
     return bus
 
 
+@pytest.mark.realtime
 @pytest.mark.parametrize("how", ["channel", "port"])
 @pytest.mark.parametrize("kind", ["python-can", "buffered"])
 def test_slcan_link_closed_and_reopened(kind: str, how: str) -> None:

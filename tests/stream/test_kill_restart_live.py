@@ -18,7 +18,12 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
 from tests.conftest import REPO, start_slcan_node, suspid_env
+
+#: the node paced at x2; the restarted monitor must attach before the alert's data go by
+pytestmark = pytest.mark.realtime
 
 FIX = ["--fix", "m1=300", "--fix", "m2=40", "--fix", "c2=300", "--fix", "k2=200000",
        "--nominal", "c1=1500", "--nominal", "k1=20000"]
