@@ -28,7 +28,8 @@ bash tools/lint.sh
 # tools/vcan_bench.sh: natively where the kernel has SocketCAN, otherwise in one User-Mode
 # Linux guest. pytest's status 5 (no test selected, e.g. when the arguments name tests of
 # one step only) counts as success as long as some step ran tests.
-cores=$(nproc)
+# (GNU nproc honours OMP_NUM_THREADS, set to 1 above: count the cores without it)
+cores=$(env -u OMP_NUM_THREADS -u OMP_THREAD_LIMIT nproc)
 workers=${TEST_WORKERS:-$(( cores < 4 ? cores : 4 ))}
 set +e
 .venv/bin/python -m pytest -m "not socketcan and not realtime" -n "$workers" "$@"
