@@ -282,8 +282,7 @@ class _Pattern:
 class _Traj:
     """Road-driven modal trajectory ``sum_j (Ca_j E^k Q_j[k] - Cb_j r_j[k]) + cc E^k``."""
 
-    Wf: np.ndarray  # (m, N) sum over roads j of Ca_j E^k Q_j[k]
-    Ca: np.ndarray  # (m, nr) a0 + a1
+    Wf: np.ndarray  # (m, N) sum over roads j of Ca_j E^k Q_j[k], Ca = a0 + a1
     Cb: np.ndarray  # (m, nr) a0
     cc: np.ndarray  # (m,) w0 - a1 r[0]
 
@@ -299,17 +298,8 @@ class _Eval:
     B: FloatArray
     P: np.ndarray  # (m, N) powers E^k
     traj: _Traj | None  # the road-driven part of the modal trajectory (None: no road)
-    sol: FloatArray  # least-squares coefficients (real parts, then imaginary parts)
+    coef: np.ndarray  # (m,) complex modal coefficients of the fitted free response
     R: FloatArray  # (p, N) final residual, measured - predicted
-
-    @property
-    def coef(self) -> np.ndarray:
-        """Complex modal coefficients of the fitted free response (m,)."""
-        mm = self.P.shape[0]
-        c = self.sol[:mm].astype(complex)
-        if self.pat.pairs.size:
-            c[self.pat.pairs] += 1j * self.sol[mm:]
-        return c
 
     @property
     def c(self) -> np.ndarray:
@@ -540,7 +530,7 @@ class WindowProblem(OutputErrorProblem):
                 R -= CB @ self._r
                 if Dm is not None and self._rdot:
                     R -= Dm @ self._UT
-            traj = _Traj(Wf, Ca, Cb, cc)
+            traj = _Traj(Wf, Cb, cc)
         else:
             R = self._YT.copy()
             traj = None
@@ -576,10 +566,8 @@ class WindowProblem(OutputErrorProblem):
         coef = sol[:mm].astype(complex)
         if npair:
             coef[pairs] += 1j * sol[mm:]
-        Wc = coef[:, None] * P
-        R -= (CV @ Wc).real
-        pch = CV.shape[0]
-        out = _Eval(key, vr, pat, A, B, P, traj, sol, R.reshape(pch, N))
+        R -= (CV @ (coef[:, None] * P)).real
+        out = _Eval(key, vr, pat, A, B, P, traj, coef, R)
         cache = self._cache
         if len(cache) >= CACHE_SIZE:
             del cache[next(iter(cache))]  # oldest first
