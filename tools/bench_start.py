@@ -8,14 +8,16 @@ Two parts, both printed side by side for the two paths in one run:
   (``data``) and without it (``init``: the ``--init-scale`` start alone, the earlier
   behaviour), with the success count of each.
 * ``--grid``: success counts of every design row for the models, costs, ``--init-scale``
-  values and noise levels given (the study behind docs/performance.md's table); with
-  ``--compare`` also for the ``init`` path.
+  values and noise levels given (the study behind docs/performance.md's table; the noisy
+  rows start at the ``--noise-scales`` init scales, 0.5 by default); with ``--compare``
+  also for the ``init`` path.
 
 Usage::
 
     python tools/bench_start.py [--models half4,quarter2] [--scales 0.1,10] [--ids 1,2,3]
     python tools/bench_start.py --grid [--models ...] [--costs sse,frobenius]
-        [--scales 0.1,0.2,0.5,2,5,10] [--noise 0.1,0.2,0.3,0.4,0.5] [--compare] [--json]
+        [--scales 0.1,0.2,0.5,2,5,10] [--noise 0.1,0.2,0.3,0.4,0.5] [--noise-scales 0.5]
+        [--compare] [--json]
     python tools/bench_start.py --data-only [--models ...] [--scales ...] [--noise ...]
         [--costs ...] [--no-bump] [--base DIR [--repeat K]]
 
@@ -163,6 +165,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="init scales (default 0.1,10 for timing, 0.1,0.2,0.5,2,5,10 for the "
                          "grid; an empty string for none)")
     ap.add_argument("--noise", default="", help="noise levels (grid; at init scale 0.5)")
+    ap.add_argument("--noise-scales", default="0.5",
+                    help="grid: init scales of the noisy rows (default 0.5)")
     ap.add_argument("--ids", default=None, help="design rows (timing; default all)")
     ap.add_argument("--compare", action="store_true", help="grid: also the init-only path")
     ap.add_argument("--data-only", action="store_true",
@@ -186,7 +190,8 @@ def main(argv: list[str] | None = None) -> int:
     if a.grid:
         scales = _floats("0.1,0.2,0.5,2,5,10" if a.scales is None else a.scales)
         cases = [(m, c, s, 0.0) for m in models for c in costs for s in scales]
-        cases += [(m, c, 0.5, n) for m in models for c in costs for n in _floats(a.noise)]
+        cases += [(m, c, s, n) for m in models for c in costs for s in _floats(a.noise_scales)
+                  for n in _floats(a.noise)]
         for m, c, s, n in cases:
             for data in ([True, False] if a.compare else [True]):
                 r = doe_row(m, c, s, n, data, ids)

@@ -281,3 +281,18 @@ def test_two_fits_far_apart_within_the_noise_are_not_a_success(
     w = [x for x in res.warnings if "does not decide" in x]
     assert len(w) == 1 and "c2" in w[0] and "data start" in w[0] and "init start" in w[0]
     assert f"{res.cost:.4g}" in w[0]
+
+
+@pytest.mark.parametrize(("scale", "both"), [(0.1, False), (10.0, False), (0.02, True),
+                                             (50.0, True)])
+def test_the_noise_floor_skip_holds_for_starts_up_to_the_agreement_factor(
+        scale: float, both: bool) -> None:
+    """quarter2 row 1 at 0.5 sigma: the fit from the record's estimate leaves white noise near
+    the truth. A given start 10x off (the studies' farthest) lies within ``SKIP_AGREE`` of it
+    and is skipped, so a far start costs no extra time; one 50x off lies beyond it and runs
+    too. Either way the answer is the same fit near the truth."""
+    assert 10.0 < start_mod.SKIP_AGREE < 50.0
+    e = run_design("quarter2", Settings(noise=0.5, init_scale=scale), ids=[1])["experiments"][0]
+    ran = [s["start"] for s in e["starts"] if s.get("cost") is not None]
+    assert ran == (["data", "init"] if both else ["data"])
+    assert e["success"] and e["max_rel_error"] < 0.5
