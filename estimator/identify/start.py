@@ -841,6 +841,21 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
                 f"implausible result: the {best[0]} and {label} starts reached fits more than "
                 f"{AGREE:g}x apart ({ks}) at costs {res.cost:.4g} and {r.cost:.4g}, within "
                 f"{SIGMAS:g} sigma of the noise; the record does not decide between them")
+    # a noisy fit from the record's estimate that the given start was run to check (the fit
+    # was not white, or lay far from it) and that lies more than SKIP_AGREE x from the given
+    # start, while the given start's own fit failed: no second start confirms it
+    unconfirmed: list[str] = []
+    if best[0] == "data" and not _exact(problem, res):
+        for label, s, r in ran:
+            far = _far(res.params, s.valuesdict(), free, SKIP_AGREE) if r is not res else []
+            if far and not r.success:
+                ks = ", ".join(f"{k} {res.params[k]:.4g} against {s[k].value:.4g}" for k in far)
+                unconfirmed.append(
+                    f"unconfirmed result: the fit from the data-driven start lies more than "
+                    f"{SKIP_AGREE:g}x from the {label} start ({ks}) on a noisy record, and the fit "
+                    f"from the {label} start failed (cost {r.cost:.4g} against {res.cost:.4g}); "
+                    "no second start reached it, so the record's estimate may have led to a "
+                    "local minimum")
     if bad:
         # a parameter that ran orders of magnitude away along a flat direction of the cost
         # is not identified by this record, whatever the curvature at the end point says
@@ -851,6 +866,8 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         # two starts reached places an order of magnitude apart at costs the noise does not
         # tell apart: the record does not decide between them, whatever each curvature says
         _reject(res, ambiguous)
+    elif unconfirmed:
+        _reject(res, unconfirmed)
     elif intervals:
         apply_bands(problem, res, free)
     return res

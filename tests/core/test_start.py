@@ -296,3 +296,38 @@ def test_the_noise_floor_skip_holds_for_starts_up_to_the_agreement_factor(
     ran = [s["start"] for s in e["starts"] if s.get("cost") is not None]
     assert ran == (["data", "init"] if both else ["data"])
     assert e["success"] and e["max_rel_error"] < 0.5
+
+
+@pytest.mark.parametrize(("scale", "rejected"), [(50.0, True), (10.0, False)])
+def test_a_noisy_fit_the_failed_given_start_cannot_confirm_is_not_a_success(
+        monkeypatch: pytest.MonkeyPatch, scale: float, rejected: bool) -> None:
+    """quarter2 row 1 at 0.3 sigma, the given start run as well and made to fail: a fit from
+    the record's estimate more than ``SKIP_AGREE`` x from that start is confirmed by no
+    second start, so it is neither a success nor identifiable, and the warning names the
+    parameters and both costs; within the factor the fit stands (a correct fit from a start
+    10x off is ~10x from it)."""
+    m = get_model("quarter2")
+    e = experiments(m)[0]
+    meas, _ = measurement(m, e, 0.3, e.id)
+    problem = OutputErrorProblem(m, meas, x0=e.x0)
+    params = start_parameters(m, e, Settings(init_scale=scale))
+    monkeypatch.setattr(start_mod, "NOISE_FLOOR", 0.0)  # the given start runs too
+
+    def run(start: Parameters) -> IdentResult:
+        res, _ = fit(problem, start)
+        if start is params:  # the given start's fit runs away: not a success
+            res.success = False
+            res.cost *= 3.0
+        return res
+
+    res = fit_from_starts(problem, params, run)
+    assert res.starts is not None and [s["start"] for s in res.starts] == ["data", "init"]
+    assert max(abs(res.params[k] / e.truth[k] - 1) for k in FREE2) < 0.5
+    if rejected:
+        assert res.success is False and res.identifiable is False
+        msg = [w for w in res.warnings if w.startswith("unconfirmed result")]
+        assert len(msg) == 1 and "init start" in msg[0] and "c1" in msg[0]
+        assert f"{res.cost:.4g}" in msg[0]
+    else:
+        assert res.success is True
+        assert not any(w.startswith("unconfirmed") for w in res.warnings)
