@@ -1002,35 +1002,41 @@ class WindowProblem(OutputErrorProblem):
             Vinv = np.linalg.inv(Vfull)[:mm]  # (m, n)
         except np.linalg.LinAlgError:
             return None
-        lam = np.einsum("in,nk,ki->i", Vinv, A, V)  # eigenvalues of the kept modes
+        lam = ((Vinv @ A) * V.T).sum(axis=1)  # eigenvalues of the kept modes
         z = (V * pat.fac) @ ev.modal(self._r)  # (n, N) complex, real part the state
         zr = z.real
         tt = self.t - t_ref
-        # forcing columns: constant (per unit a) then ramp (per unit g), each (n, N)
-        fc = [dAk @ zr + dBk @ self._r for dAk, dBk in zip(dA, dBz)]
-        F = np.stack(fc + [f * tt for f in fc])  # (2 q, n, N)
-        Bm = np.einsum("mn,cnk->cmk", Vinv, F)  # modal forcing (2 q, m, N)
+        q = len(names)
+        n = A.shape[0]
+        # modal forcing (2 q, m, N): constant columns (per unit a) V^-1 (dA_k z + dBz_k r),
+        # then the ramp's (per unit g), the constant ones times (t - t_ref); the small
+        # products V^-1 dA_k, V^-1 dBz_k first, their real and imaginary parts in one real
+        # product with [z; r]
+        K = np.concatenate([np.stack([Vinv @ a for a in dA]).reshape(q * mm, n),
+                            np.stack([Vinv @ b for b in dBz]).reshape(q * mm, nr)], axis=1)
+        KX = np.concatenate([K.real, K.imag]) @ np.concatenate([zr, self._r])
+        Bm = np.empty((2 * q, mm, N), dtype=complex)
+        Bm.real[:q] = KX[:q * mm].reshape(q, mm, N)
+        Bm.imag[:q] = KX[q * mm:].reshape(q, mm, N)
+        np.multiply(Bm[:q], tt, out=Bm[q:])
         # first-order-hold weights per mode (as the lean evaluation's)
-        g0 = np.empty(mm, dtype=complex)
-        g1 = np.empty(mm, dtype=complex)
-        for i, lm in enumerate(lam.tolist()):
-            _, g0[i], g1[i] = foh_weights(lm, h)
+        _, g0, g1 = foh_weights_modes(lam, h)
         # w[k] = E^k sum_{l<k} (g0 b[l] + g1 b[l+1]) E^-(l+1), w[0] = 0
         P = ev.P
         D = g0[None, :, None] * Bm[:, :, :-1] + g1[None, :, None] * Bm[:, :, 1:]
         W = np.zeros_like(Bm)
         W[:, :, 1:] = P[None, :, 1:] * np.cumsum(D / P[None, :, 1:], axis=-1)
         CV = (ev.vr[self._rows] @ pat.sel_cv)  # (p, m)
-        S = np.einsum("pm,cmk->cpk", CV, W).real  # (2 q, p, N)
+        S = np.matmul(CV, W).real  # (2 q, p, N)
         pch = CV.shape[0]
         Sf = S.reshape(S.shape[0], pch * N)
-        # the initial state refitted: project off the free-response regressors
+        # the initial state refitted: project off the free-response regressors (full
+        # column rank: the lean evaluation checked their Gram matrix's condition number)
         T = CV.T[:, :, None] * P[:, None, :]
         pairs = pat.pairs
         G = np.concatenate([T.real, -T.imag[pairs]]).reshape(mm + pairs.size, pch * N)
-        coef, *_ = np.linalg.lstsq(G.T, Sf.T, rcond=None)
-        Sf = Sf - (G.T @ coef).T
-        q = len(names)
+        Qg = np.linalg.qr(G.T)[0]
+        Sf = Sf - (Sf @ Qg) @ Qg.T
         if not np.isfinite(Sf).all():
             return None
         return np.ascontiguousarray(Sf[:q].T), np.ascontiguousarray(Sf[q:].T)
