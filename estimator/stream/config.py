@@ -31,16 +31,21 @@ decay time ``tau_i = 1 / (zeta_i w_i)``):
     ms, no drift) and leaves the suspension's band to ``r``. Measured on the held-out streams
     (``tools/bench_maintenance.py``, docs/monitoring.md): c1 RMSE 4.09 -> 2.84 % at 5 %
     noise on every channel, 1.75 -> 1.52 % at 2 %; at 3 f_fast 2.92 and 1.84 %.
-``xatol``
-    Nelder-Mead's simplex-size tolerance (log units): 2e-3, or 4e-3 with ten or more free
-    parameters (:data:`XATOL_MANY_FREE`; the full car's twelve dampers, springs and tyres).
-    Both stay below the default ``sigma_floor`` (0.5 %), so below every reported stderr. In
-    twelve dimensions each halving of the simplex costs Nelder-Mead many more evaluations
-    than in two to six; measured on the full car's maintenance stream
-    (``tools/bench_maintenance.py --only full7``): 131 evaluations per warm window instead
-    of 220, the window estimates 0.18 % RMS (0.32 stated stderr) from the exact window
-    optimum instead of 0.07 % (0.11 stderr), and the tracked c1 as accurate (RMSE 0.54 %
-    either way, alert and first forecast unchanged; docs/monitoring.md).
+``xatol``, ``warm_adaptive``, ``gauss_newton_step``
+    Nelder-Mead's simplex-size tolerance (log units) is 2e-3; with ten or more free
+    parameters (:data:`MANY_FREE`; the full car's twelve dampers, springs and tyres) it is
+    4e-3 (:data:`XATOL_MANY_FREE`, still below the default ``sigma_floor``, so below every
+    reported stderr), warm windows use Nelder-Mead's standard coefficients instead of the
+    dimension-adapted ones, and one Gauss-Newton step follows it. In twelve dimensions each
+    halving of the simplex costs Nelder-Mead many evaluations; measured on the full car's
+    maintenance stream (``tools/bench_maintenance.py --only full7``, docs/monitoring.md):
+    120 evaluations per warm window instead of 220 (4e-3 alone: 131, its window estimates
+    0.18 % RMS from each window's exact optimum instead of 0.07 %; the standard
+    coefficients alone: 168), c1 RMSE 0.55 % against 0.54 %, alert and first forecast
+    unchanged. The step is what keeps the faster wear of
+    ``tests/stream/test_maintenance.py::test_full7_wearing_stream_through_compare``'s first
+    forecast interval holding the crossing (without it, 4e-3 or the standard coefficients
+    miss it by up to 0.3 s).
 ``maxfev`` / ``first_maxfev``
     Nelder-Mead evaluation budget of a warm-started window (default ``40 n_free``) and of
     the first, cold-started one (``250 n_free``). Every window reports the evaluations used.
