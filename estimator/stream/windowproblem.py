@@ -86,7 +86,7 @@ SS_GUARD = 1e-4
 CACHE_SIZE = 32
 #: largest final-simplex edge (log units) and edge-matrix condition number (1-norm) for
 #: which the Jacobian is taken from the simplex's residuals (secant) instead of forward
-#: differences
+#: differences; the edge is also the longest Gauss-Newton step taken (per parameter)
 SECANT_MAX_EDGE = 0.02
 SECANT_MAX_COND = 1e3
 
