@@ -51,7 +51,7 @@ def minimize_log(fun: Callable[[FloatArray], float], u0: FloatArray, step: float
                  restarts: int = 6, maxfev: int | None = None, xatol: float = 1e-7,
                  fatol: float = 1e-14, initial_simplex: FloatArray | None = None,
                  bounds: list[tuple[float, float]] | None = None,
-                 rel_improve: float = 1e-9) -> NMOutcome:
+                 rel_improve: float = 1e-9, adaptive: bool | None = None) -> NMOutcome:
     """Minimise ``fun(u)`` with Nelder–Mead, restarting from the best vertex.
 
     Parameters
@@ -68,6 +68,9 @@ def minimize_log(fun: Callable[[FloatArray], float], u0: FloatArray, step: float
         Evaluation budget over all runs (default ``1000 * len(u0)``).
     initial_simplex : ndarray, optional
         Warm start (e.g. a previous window's ``final_simplex``).
+    adaptive : bool, optional
+        Nelder–Mead's dimension-adapted coefficients (Gao and Han; scipy's ``adaptive``);
+        default: with more than four parameters.
     """
     n = u0.size
     budget = maxfev if maxfev is not None else 1000 * max(n, 1)
@@ -86,7 +89,8 @@ def minimize_log(fun: Callable[[FloatArray], float], u0: FloatArray, step: float
         if simplex is None:
             simplex = np.vstack([best_u] + [best_u + cur_step * e for e in np.eye(n)])
         res = nelder_mead(fun, simplex[0], bounds=bounds, initial_simplex=simplex,
-                          xatol=xatol, fatol=fatol, maxfev=budget - nfev, adaptive=n > 4)
+                          xatol=xatol, fatol=fatol, maxfev=budget - nfev,
+                          adaptive=n > 4 if adaptive is None else adaptive)
         nfev += int(res.nfev)
         last_status = int(res.status)
         final = res.final_simplex[0]

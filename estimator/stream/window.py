@@ -13,11 +13,14 @@ Warm start
     along the straight line through the last (up to 3) estimates of consecutive windows
     (``warm_predict``; a drifting damper moves ~1 % per step), with a fresh axis-aligned
     simplex of edge ``max(warm_step, 3 x previous relative stderr_fit)`` per parameter
-    (log units) centred on that start. Windows whose fit is not identifiable do not update
-    the warm state.
+    (log units) centred on that start (with ten or more free parameters: Nelder-Mead's
+    standard coefficients, not the dimension-adapted ones, and one Gauss-Newton step after
+    it, ``WindowConfig.warm_adaptive``, ``gauss_newton_step``). Windows whose fit is not
+    identifiable do not update the warm state.
 Termination and budget
     Nelder-Mead stops when every vertex is within ``xatol`` (log units, 0.2 %: 0.4 x the
-    ``sigma_floor`` below every reported stderr) of the best one, or at ``maxfev``
+    ``sigma_floor`` below every reported stderr; 0.4 % with ten or more free parameters,
+    :mod:`estimator.stream.config`) of the best one, or at ``maxfev``
     evaluations; every estimate reports ``nfev``, ``budget``, ``converged`` and the CPU time
     of the window. The stderr costs no further evaluation on the lean path: its Jacobian is
     the secant through the final simplex (see
@@ -696,17 +699,24 @@ class SlidingWindowIdentifier:
         # says nothing about the precision that matters here (sigma_floor)
         nm = minimize_log(cost, np.zeros(len(free)), step=0.3, restarts=0 if warm else 4,
                           maxfev=budget, xatol=cfg.xatol, fatol=math.inf,
-                          initial_simplex=simplex)
+                          initial_simplex=simplex,
+                          adaptive=None if cfg.warm_adaptive or not warm else False)
         converged = nm.nfev < budget
         p_hat = to_params(nm.u)
-        res = prob.finish(params, p_hat, nm.nfev, True,
-                          simplex=(None if nm.final_simplex is None
-                                   else [to_params(v) for v in nm.final_simplex]))
+        final: list[Mapping[str, float]] | None = (
+            None if nm.final_simplex is None else [to_params(v) for v in nm.final_simplex])
+        nfev = nm.nfev
+        if warm and cfg.gauss_newton_step:
+            q = prob.gauss_newton_step(free, p_hat)
+            nfev += len(free) + 1
+            if q is not None:
+                p_hat = q
+        res = prob.finish(params, p_hat, nfev, True, simplex=final)
         out.params = res.params
         out.stderr_fit = dict(res.stderr)
         out.stderr = {k: float(math.hypot(v, cfg.sigma_floor * res.params[k]))
                       for k, v in res.stderr.items()}
-        out.nfev, out.budget, out.converged = nm.nfev, budget, bool(converged)
+        out.nfev, out.budget, out.converged = nfev, budget, bool(converged)
         out.identifiable = bool(res.identifiable)
         out.cost = res.cost
         out.rms_residual = res.rms_residual
@@ -722,7 +732,7 @@ class SlidingWindowIdentifier:
             self._warm = (dict(res.params), rel)
             self._hist = (self._hist + [(out.t, [math.log(res.params[k]) for k in free])])[-3:]
         self.n_windows += 1
-        self.total_nfev += nm.nfev
+        self.total_nfev += nfev
         out.cpu_s = time.process_time() - c0
         self.total_cpu += out.cpu_s
         return out

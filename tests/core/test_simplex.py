@@ -248,6 +248,29 @@ def test_minimize_log_unchanged() -> None:
             assert np.array_equal(got.final_simplex, ref.final_simplex)
 
 
+def test_minimize_log_adaptive_choice() -> None:
+    """``adaptive`` picks the coefficients (default: adapted above four parameters): the
+    same run as scipy's with that option, and the two choices differ in six dimensions."""
+    from estimator.identify import solver as nm_mod
+
+    def cost(u: np.ndarray) -> float:
+        return rosen(u + 1.0) + 1e-3
+
+    n = 6
+    sim = np.vstack([np.zeros(n)] + [0.05 * e for e in np.eye(n)])
+    runs = {}
+    for adaptive in (None, True, False):
+        got = nm_mod.minimize_log(cost, np.zeros(n), maxfev=600, restarts=0, xatol=1e-4,
+                                  fatol=np.inf, initial_simplex=sim, adaptive=adaptive)
+        ref = minimize(cost, sim[0], method="Nelder-Mead",
+                       options={"initial_simplex": sim, "xatol": 1e-4, "fatol": np.inf,
+                                "maxfev": 600, "adaptive": adaptive is not False})
+        assert np.array_equal(got.u, ref.x) and got.nfev == ref.nfev
+        runs[adaptive] = got
+    assert np.array_equal(runs[None].u, runs[True].u)
+    assert runs[False].nfev != runs[True].nfev
+
+
 def test_monitor_imports_no_scipy_optimize() -> None:
     code = ("import sys, estimator.identify, estimator.stream.window; "
             "print('scipy.optimize' in sys.modules)")

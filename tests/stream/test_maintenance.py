@@ -234,7 +234,7 @@ def test_full7_wearing_stream_through_compare() -> None:
     same twelve dampers, springs and tyres (the EKF holds none), neither alerts falsely nor on
     a part that does not wear; the window alerts on c1 within 10 s of the crossing, forecasts
     it >= 10 s ahead with the crossing inside the 90 % interval and tracks it no less
-    accurately than the EKF (measured: c1 RMSE 0.78 / 2.50 %, alert 3.5 / 5.0 s, first
+    accurately than the EKF (measured: c1 RMSE 0.79 / 2.50 %, alert 3.5 / 5.0 s, first
     forecast 16.0 s ahead, the other parts' RMSE < 0.9 % on both sides)."""
     case = Case("full7", "full car", None, 0.01, 55.0, 10.0, 50.0, 0.5, 6, model="full7")
     s = full7_stream(case)
