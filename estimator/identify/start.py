@@ -738,16 +738,16 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         Also consider ``params`` as a start (always done when no data-driven start exists).
         It is skipped (listed as skipped, so the time per identification does not grow)
         when the fit from the data-driven start is a clean success (converged, identifiable,
-        plausible) and either leaves only white measurement noise (a noisy record:
-        :func:`noise_floor_ratio` at most ``NOISE_FLOOR``; no start can then lower the cost
-        by more than the noise's own scatter) while agreeing with ``params`` within a factor
-        ``SKIP_AGREE`` in every free parameter (the whiteness test cannot see a misfit that is a
-        few per cent of a noise-dominated residual, so a fit an order of magnitude from the
-        given start is checked against it) or explains the record exactly (normalised
-        cost below ``EXACT_FIT``) from an estimate that fits well (normalised cost below
-        ``POOR_ESTIMATE``) while ``params`` begins at no lower cost. Otherwise it runs: on a
-        noisy record the estimate is biased and may lead to a local minimum, whose residual
-        is not white.
+        plausible), ``params`` begins at no lower cost than the estimate (else it may lie in
+        a better basin), and the fit either leaves only white measurement noise (a noisy
+        record: :func:`noise_floor_ratio` at most ``NOISE_FLOOR``; no start can then lower
+        the cost by more than the noise's own scatter) while agreeing with ``params`` within
+        a factor ``SKIP_AGREE`` in every free parameter (the whiteness test cannot see a
+        misfit that is a few per cent of a noise-dominated residual, so a fit far from the
+        given start is checked against it) or explains the record exactly (normalised cost
+        below ``EXACT_FIT``) from an estimate that fits well (normalised cost below
+        ``POOR_ESTIMATE``). Otherwise it runs: on a noisy record the estimate is biased and
+        may lead to a local minimum, whose residual is not white.
     intervals : bool
         Attach honest 3-sigma bands (:func:`estimator.identify.profile.apply_bands`) to a
         result with standard errors: the curvature band where the cost is quadratic out to
@@ -764,7 +764,11 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         and why, and the costs reached from each start. So is a noisy result when another
         start reached a fit more than ``AGREE`` x away in some parameter at a cost within
         3 sigma of the noise of it (the record does not decide between the two): the
-        warning names the parameters, the starts and their costs.
+        warning names the parameters, the starts and their costs. So is a noisy result from
+        the data-driven start when the given start ran and its fit failed while the result
+        lies more than ``SKIP_AGREE`` x from the given start, or the estimate began at a
+        higher cost than the given start (no second start confirms it; the warning begins
+        ``unconfirmed result``).
     """
     free = params.free
     est = estimate_start(problem, params) if data_start and free else None
@@ -791,8 +795,8 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         # lower than the start they came from (it may then be in a better basin)
         # (or when the fits so far explain the record down to its noise: no start can
         # then lower the cost by more than the noise's own scatter)
-        if done and all(r.success for r in done) \
-                and (at_start[i] >= min(at_start[:i]) and est is not None
+        if done and all(r.success for r in done) and at_start[i] >= min(at_start[:i]) \
+                and (est is not None
                      and est.cost < POOR_ESTIMATE and all(_exact(problem, r) for r in done)
                      or all(_at_noise_floor(problem, r) for r in done)
                      and not any(_far(r.params, start.valuesdict(), free, SKIP_AGREE)
@@ -845,17 +849,27 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
     # was not white, or lay far from it) and that lies more than SKIP_AGREE x from the given
     # start, while the given start's own fit failed: no second start confirms it
     unconfirmed: list[str] = []
+    # (or, whatever the distance, when the estimate itself began at a higher cost than the
+    # given start: an estimate no better than the guess does not vouch for its basin)
     if best[0] == "data" and not _exact(problem, res):
-        for label, s, r in ran:
-            far = _far(res.params, s.valuesdict(), free, SKIP_AGREE) if r is not res else []
-            if far and not r.success:
-                ks = ", ".join(f"{k} {res.params[k]:.4g} against {s[k].value:.4g}" for k in far)
+        c_data = at_start[0]
+        for (label, s, r), c0 in zip(results, at_start):
+            if r is None or r is res or r.success:
+                continue
+            far = _far(res.params, s.valuesdict(), free, SKIP_AGREE)
+            worse = c_data > c0
+            if far or worse:
+                why = (f"lies more than {SKIP_AGREE:g}x from the {label} start ("
+                       + ", ".join(f"{k} {res.params[k]:.4g} against {s[k].value:.4g}"
+                                   for k in far) + ")") if far else (
+                    f"comes from an estimate that began at a higher cost than the {label} "
+                    f"start ({problem.seed_cost(c_data * problem.scale):.4g} against "
+                    f"{problem.seed_cost(c0 * problem.scale):.4g})")
                 unconfirmed.append(
-                    f"unconfirmed result: the fit from the data-driven start lies more than "
-                    f"{SKIP_AGREE:g}x from the {label} start ({ks}) on a noisy record, and the fit "
-                    f"from the {label} start failed (cost {r.cost:.4g} against {res.cost:.4g}); "
-                    "no second start reached it, so the record's estimate may have led to a "
-                    "local minimum")
+                    f"unconfirmed result: the fit from the data-driven start {why} on a noisy "
+                    f"record, and the fit from the {label} start failed (cost {r.cost:.4g} "
+                    f"against {res.cost:.4g}); no second start reached it, so the record's "
+                    "estimate may have led to a local minimum")
     if bad:
         # a parameter that ran orders of magnitude away along a flat direction of the cost
         # is not identified by this record, whatever the curvature at the end point says

@@ -331,3 +331,19 @@ def test_a_noisy_fit_the_failed_given_start_cannot_confirm_is_not_a_success(
     else:
         assert res.success is True
         assert not any(w.startswith("unconfirmed") for w in res.warnings)
+
+
+def test_a_fit_from_an_estimate_worse_than_the_given_start_needs_that_start() -> None:
+    """half4 sse row 25 from 10x at 0.5 sigma: the record's estimate begins at a higher cost
+    than the given start, so the given start runs although the fit from the estimate is
+    white and within ``SKIP_AGREE`` of it; it runs away, and the fit (k4 45x the truth, a
+    local minimum) is confirmed by no second start: not a success, with the reason."""
+    e = run_design("half4", Settings(cost="sse", init_scale=10.0, noise=0.5),
+                   ids=[25])["experiments"][0]
+    ran = {s["start"]: s for s in e["starts"] if s.get("cost") is not None}
+    assert set(ran) == {"data", "init"}
+    assert ran["data"]["cost_at_start"] > ran["init"]["cost_at_start"]
+    assert e["reported_success"] is False and e["identifiable"] is False
+    assert not e["success"]
+    assert any(w.startswith("unconfirmed result") and "began at a higher cost" in w
+               for w in e["warnings"])
