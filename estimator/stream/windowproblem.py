@@ -756,15 +756,9 @@ class WindowProblem(OutputErrorProblem):
         nf = len(free)
         J = self._secant(free, p_hat, r0, simplex)
         if J is None:
-            cols = []
-            for k in free:
-                q = dict(p_hat)
-                q[k] = p_hat[k] * math.exp(rel_step)
-                ek = self._evaluate(q)
-                if ek is None:
-                    return finish(self, params, p_hat, nfev, converged, with_stderr=True)
-                cols.append((ek.R.ravel() - r0) / rel_step)
-            J = np.column_stack(cols)
+            J = self._forward_jacobian(free, p_hat, r0, rel_step)
+            if J is None:
+                return finish(self, params, p_hat, nfev, converged, with_stderr=True)
         # residual = y - yhat, so -d(residual) = d(yhat); rows channel-major (j*N + k)
         J = -J
         self.jacobian = (list(free), dict(p_hat), J)
@@ -847,6 +841,25 @@ class WindowProblem(OutputErrorProblem):
         if ev is None or not free:
             return None
         r0 = ev.R.ravel()
+        J = self._forward_jacobian(free, p_hat, r0, rel_step)
+        if J is None:
+            return None
+        du = np.linalg.lstsq(J, -r0, rcond=None)[0]
+        if not (np.all(np.isfinite(du)) and float(np.abs(du).max()) <= SECANT_MAX_EDGE):
+            return None
+        q = dict(p_hat)
+        for k, d in zip(free, du.tolist()):
+            q[k] = p_hat[k] * math.exp(d)
+        return q if self.normalized_ss(q) < ev.ss / self.scale else None
+
+    def _forward_jacobian(self, free: list[str], p_hat: Mapping[str, float], r0: FloatArray,
+                          rel_step: float) -> FloatArray | None:
+        """Residual Jacobian (log-parameters) by forward differences on the lean path.
+
+        ``r0`` is the residual at ``p_hat`` (channel-major); one evaluation per free
+        parameter, step ``rel_step`` (log units). ``None`` when an evaluation leaves the
+        lean path.
+        """
         cols = []
         for k in free:
             q = dict(p_hat)
@@ -855,13 +868,7 @@ class WindowProblem(OutputErrorProblem):
             if ek is None:
                 return None
             cols.append((ek.R.ravel() - r0) / rel_step)
-        du = np.linalg.lstsq(np.column_stack(cols), -r0, rcond=None)[0]
-        if not (np.all(np.isfinite(du)) and float(np.abs(du).max()) <= SECANT_MAX_EDGE):
-            return None
-        q = dict(p_hat)
-        for k, d in zip(free, du.tolist()):
-            q[k] = p_hat[k] * math.exp(d)
-        return q if self.normalized_ss(q) < ev.ss / self.scale else None
+        return np.column_stack(cols)
 
     def _secant(self, free: list[str], p_hat: Mapping[str, float], r0: FloatArray,
                 simplex: list[Mapping[str, float]] | None) -> FloatArray | None:
