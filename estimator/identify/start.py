@@ -845,31 +845,31 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
                 f"implausible result: the {best[0]} and {label} starts reached fits more than "
                 f"{AGREE:g}x apart ({ks}) at costs {res.cost:.4g} and {r.cost:.4g}, within "
                 f"{SIGMAS:g} sigma of the noise; the record does not decide between them")
-    # a noisy fit from the record's estimate that the given start was run to check (the fit
-    # was not white, or lay far from it) and that lies more than SKIP_AGREE x from the given
-    # start, while the given start's own fit failed: no second start confirms it
+    # a noisy fit from the record's estimate that the given start was run to check, while
+    # the given start's own fit failed: no second start confirms it when it lies more than
+    # SKIP_AGREE x from the given start, or (whatever the distance) when the estimate itself
+    # began at a higher cost than the given start (it then does not vouch for its basin)
     unconfirmed: list[str] = []
-    # (or, whatever the distance, when the estimate itself began at a higher cost than the
-    # given start: an estimate no better than the guess does not vouch for its basin)
     if best[0] == "data" and not _exact(problem, res):
         c_data = at_start[0]
         for (label, s, r), c0 in zip(results, at_start):
             if r is None or r is res or r.success:
                 continue
             far = _far(res.params, s.valuesdict(), free, SKIP_AGREE)
-            worse = c_data > c0
-            if far or worse:
-                why = (f"lies more than {SKIP_AGREE:g}x from the {label} start ("
-                       + ", ".join(f"{k} {res.params[k]:.4g} against {s[k].value:.4g}"
-                                   for k in far) + ")") if far else (
-                    f"comes from an estimate that began at a higher cost than the {label} "
-                    f"start ({problem.seed_cost(c_data * problem.scale):.4g} against "
-                    f"{problem.seed_cost(c0 * problem.scale):.4g})")
-                unconfirmed.append(
-                    f"unconfirmed result: the fit from the data-driven start {why} on a noisy "
-                    f"record, and the fit from the {label} start failed (cost {r.cost:.4g} "
-                    f"against {res.cost:.4g}); no second start reached it, so the record's "
-                    "estimate may have led to a local minimum")
+            if far:
+                ks = ", ".join(f"{k} {res.params[k]:.4g} against {s[k].value:.4g}" for k in far)
+                why = f"lies more than {SKIP_AGREE:g}x from the {label} start ({ks})"
+            elif c_data > c0:
+                why = (f"comes from an estimate that began at a higher cost than the {label} "
+                       f"start ({problem.seed_cost(c_data * problem.scale):.4g} against "
+                       f"{problem.seed_cost(c0 * problem.scale):.4g})")
+            else:
+                continue
+            unconfirmed.append(
+                f"unconfirmed result: the fit from the data-driven start {why} on a noisy "
+                f"record, and the fit from the {label} start failed (cost {r.cost:.4g} "
+                f"against {res.cost:.4g}); no second start reached it, so the record's "
+                "estimate may have led to a local minimum")
     if bad:
         # a parameter that ran orders of magnitude away along a flat direction of the cost
         # is not identified by this record, whatever the curvature at the end point says
