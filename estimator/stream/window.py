@@ -706,12 +706,14 @@ class SlidingWindowIdentifier:
         final: list[Mapping[str, float]] | None = (
             None if nm.final_simplex is None else [to_params(v) for v in nm.final_simplex])
         nfev = nm.nfev
+        jac = None
         if warm and cfg.gauss_newton_step:
-            q = prob.gauss_newton_step(free, p_hat)
-            nfev += len(free) + 1
-            if q is not None:
-                p_hat = q
-        res = prob.finish(params, p_hat, nfev, True, simplex=final)
+            gn = prob.gauss_newton(free, p_hat)
+            nfev += gn.nfev
+            jac = gn.jacobian
+            if gn.params is not None:
+                p_hat = gn.params
+        res = prob.finish(params, p_hat, nfev, True, simplex=final, jacobian=jac)
         out.params = res.params
         out.stderr_fit = dict(res.stderr)
         out.stderr = {k: float(math.hypot(v, cfg.sigma_floor * res.params[k]))

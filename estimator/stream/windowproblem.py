@@ -375,6 +375,15 @@ class _Eval:
 
 
 @dataclass
+class GaussNewton:
+    """Outcome of :meth:`WindowProblem.gauss_newton`."""
+
+    params: dict[str, float] | None  # the parameters reached (SI); None: no step taken
+    jacobian: FloatArray | None  # residual Jacobian (log-parameters) at the start
+    nfev: int  # evaluations used
+
+
+@dataclass
 class WindowProblem(OutputErrorProblem):
     """:class:`~estimator.identify.OutputErrorProblem` with a lean evaluation path.
 
@@ -704,7 +713,7 @@ class WindowProblem(OutputErrorProblem):
     # ---- result at the optimum ----------------------------------------------------------------
     def finish(self, params: Parameters, p_hat: Mapping[str, float], nfev: int,
                converged: bool, simplex: list[Mapping[str, float]] | None = None,
-               rel_step: float = 1e-6) -> IdentResult:
+               rel_step: float = 1e-6, jacobian: FloatArray | None = None) -> IdentResult:
         """:func:`estimator.identify.finish` for a window: result, stderr, identifiability.
 
         Same quantities and formulas (RMS of every measured channel, per-channel residual
@@ -720,8 +729,9 @@ class WindowProblem(OutputErrorProblem):
           (itself a small part of ``stderr`` next to the ``sigma_floor``). When an edge
           is longer than :data:`SECANT_MAX_EDGE`, the edge matrix is ill-conditioned
           (condition number > :data:`SECANT_MAX_COND`) or a vertex was not evaluated on
-          the lean path, a forward difference (``rel_step``, ``n_free`` evaluations)
-          is used instead.
+          the lean path, ``jacobian`` when given (the Gauss-Newton steps' forward
+          difference, within :data:`SECANT_MAX_EDGE` of ``p_hat``), else a forward
+          difference (``rel_step``, ``n_free`` evaluations) is used instead.
 
         Not lean: :func:`estimator.identify.finish` (central differences).
 
@@ -738,6 +748,9 @@ class WindowProblem(OutputErrorProblem):
             Nelder-Mead's final simplex as parameter sets (SI), best vertex first.
         rel_step : float
             Forward-difference step in log-parameter units.
+        jacobian : ndarray, optional
+            Residual Jacobian (log-parameters, channel-major rows, as
+            :meth:`gauss_newton` returns it) near ``p_hat``, used when the secant is not.
 
         Returns
         -------
@@ -755,6 +768,8 @@ class WindowProblem(OutputErrorProblem):
         rms = dict(zip(self._all, np.sqrt(((self._Mall - Yall) ** 2).mean(axis=1)).tolist()))
         nf = len(free)
         J = self._secant(free, p_hat, r0, simplex)
+        if J is None and jacobian is not None and jacobian.shape == (r0.size, nf):
+            J = jacobian
         if J is None:
             J = self._forward_jacobian(free, p_hat, r0, rel_step)
             if J is None:
@@ -814,22 +829,7 @@ class WindowProblem(OutputErrorProblem):
 
     def gauss_newton_step(self, free: list[str], p_hat: Mapping[str, float],
                           rel_step: float = 1e-6) -> dict[str, float] | None:
-        """One Gauss-Newton step from Nelder-Mead's best vertex.
-
-        Nelder-Mead stops with every vertex within ``xatol`` of the best one, not at the
-        optimum; from there one Gauss-Newton step on the residuals' Jacobian (forward
-        differences of ``rel_step`` in log units: ``n_free`` evaluations) lands much closer
-        to it. The step ``du = -J^+ R(p_hat)`` is taken when it is shorter than
-        :data:`SECANT_MAX_EDGE` in every parameter and lowers the cost (one evaluation).
-
-        Parameters
-        ----------
-        free : list of str
-            Free parameter names.
-        p_hat : mapping
-            Nelder-Mead's best vertex, every parameter (SI).
-        rel_step : float
-            Forward-difference step (log units).
+        """One Gauss-Newton step from Nelder-Mead's best vertex (:meth:`gauss_newton`).
 
         Returns
         -------
@@ -837,20 +837,71 @@ class WindowProblem(OutputErrorProblem):
             The new parameters (SI), or ``None``: not on the lean path, too long a step or
             no lower cost.
         """
+        return self.gauss_newton(free, p_hat, 1, rel_step).params
+
+    def gauss_newton(self, free: list[str], p_hat: Mapping[str, float], steps: int = 1,
+                     rel_step: float = 1e-6) -> GaussNewton:
+        """Gauss-Newton steps from Nelder-Mead's best vertex on one Jacobian.
+
+        Nelder-Mead stops with every vertex within ``xatol`` of the best one, not at the
+        optimum; from there a Gauss-Newton step on the residuals' Jacobian (forward
+        differences of ``rel_step`` in log units at ``p_hat``: ``n_free`` evaluations)
+        lands much closer to it. Each step ``du = -J^+ R(p)`` (one evaluation) is taken
+        while it lowers the cost and keeps every parameter within
+        :data:`SECANT_MAX_EDGE` of ``p_hat``; up to ``steps`` of them, all on the
+        Jacobian at ``p_hat`` (the chord method: near the optimum the Jacobian barely
+        changes, and a new one would cost ``n_free`` evaluations per step).
+
+        Parameters
+        ----------
+        free : list of str
+            Free parameter names.
+        p_hat : mapping
+            Nelder-Mead's best vertex, every parameter (SI).
+        steps : int
+            Most steps taken.
+        rel_step : float
+            Forward-difference step (log units).
+
+        Returns
+        -------
+        GaussNewton
+            The parameters reached (``None``: not on the lean path or no step lowered the
+            cost), the Jacobian at ``p_hat`` (``None`` off the lean path) and the
+            evaluations used.
+        """
         ev = self._evaluate(p_hat) if self.lean else None
         if ev is None or not free:
-            return None
-        r0 = ev.R.ravel()
-        J = self._forward_jacobian(free, p_hat, r0, rel_step)
+            return GaussNewton(None, None, 0)
+        r = ev.R.ravel()
+        J = self._forward_jacobian(free, p_hat, r, rel_step)
+        nfev = len(free)
         if J is None:
-            return None
-        du = np.linalg.lstsq(J, -r0, rcond=None)[0]
-        if not (np.all(np.isfinite(du)) and float(np.abs(du).max()) <= SECANT_MAX_EDGE):
-            return None
-        q = dict(p_hat)
-        for k, d in zip(free, du.tolist()):
-            q[k] = p_hat[k] * math.exp(d)
-        return q if self.normalized_ss(q) < ev.ss / self.scale else None
+            return GaussNewton(None, None, nfev)
+        Q, Rq = np.linalg.qr(J)
+        u = np.zeros(len(free))
+        ss = ev.ss
+        best: dict[str, float] | None = None
+        for _ in range(steps):
+            try:
+                un = u + np.linalg.solve(Rq, -(Q.T @ r))
+            except np.linalg.LinAlgError:
+                break
+            if not (np.all(np.isfinite(un)) and float(np.abs(un).max()) <= SECANT_MAX_EDGE):
+                break
+            q = dict(p_hat)
+            for k, d in zip(free, un.tolist()):
+                q[k] = p_hat[k] * math.exp(d)
+            nfev += 1
+            try:
+                eq = self._evaluate(q)
+            except (np.linalg.LinAlgError, ValueError, FloatingPointError, OverflowError,
+                    ZeroDivisionError):
+                eq = None
+            if eq is None or not eq.ss < ss:
+                break
+            u, ss, best, r = un, eq.ss, q, eq.R.ravel()
+        return GaussNewton(best, J, nfev)
 
     def _forward_jacobian(self, free: list[str], p_hat: Mapping[str, float], r0: FloatArray,
                           rel_step: float) -> FloatArray | None:
