@@ -67,8 +67,10 @@ ROAD_FUSION_MODES = 1.5
 #: default Nelder-Mead xatol (log units), and the one for models with at least
 #: ``MANY_FREE`` free parameters (module docstring)
 XATOL = 2e-3
-XATOL_MANY_FREE = 4e-3
+XATOL_MANY_FREE = 7e-3
 MANY_FREE = 10
+#: Gauss-Newton steps after Nelder-Mead with at least ``MANY_FREE`` free parameters
+GAUSS_NEWTON_STEPS_MANY_FREE = 3
 
 
 @dataclass
@@ -106,10 +108,15 @@ class WindowConfig:
         default (:func:`default_config`) is ``False`` with ten or more free parameters
         (module docstring).
     gauss_newton_step : bool
-        After Nelder-Mead on a warm window, one Gauss-Newton step (forward-difference
-        Jacobian), kept when it lowers the cost (``n_free + 1`` evaluations;
-        :meth:`~estimator.stream.windowproblem.WindowProblem.gauss_newton_step`); the
-        monitor's default is on with ten or more free parameters (module docstring).
+        After Nelder-Mead on a warm window, Gauss-Newton steps on one forward-difference
+        Jacobian at its best vertex, each kept while it lowers the cost (``n_free``
+        evaluations for the Jacobian, one per step;
+        :meth:`~estimator.stream.windowproblem.WindowProblem.gauss_newton`); that Jacobian
+        also gives the window's stderr. The monitor's default is on with ten or more free
+        parameters (module docstring).
+    gauss_newton_steps : int
+        Most Gauss-Newton steps on that Jacobian (default 1; the monitor's default with
+        ten or more free parameters: 3).
     warm_predict : bool
         Start each warm window from the previous estimates extrapolated along their
         straight-line trend (3 windows) instead of the last estimate: a wearing damper
@@ -188,6 +195,7 @@ class WindowConfig:
     warm_step: float = 0.003
     warm_adaptive: bool = True
     gauss_newton_step: bool = False
+    gauss_newton_steps: int = 1
     warm_predict: bool = True
     max_missing: float = 0.2
     min_deflection: float = 5e-4
@@ -294,4 +302,5 @@ def default_config(model: SuspensionModel, params: Mapping[str, float], fs: floa
                         first_maxfev=250 * n,
                         xatol=XATOL_MANY_FREE if n >= MANY_FREE else XATOL,
                         warm_adaptive=n < MANY_FREE, gauss_newton_step=n >= MANY_FREE,
+                        gauss_newton_steps=GAUSS_NEWTON_STEPS_MANY_FREE if n >= MANY_FREE else 1,
                         road_fusion_hz=ROAD_FUSION_MODES * ms[-1].f_n)

@@ -708,7 +708,7 @@ class SlidingWindowIdentifier:
         nfev = nm.nfev
         jac = None
         if warm and cfg.gauss_newton_step:
-            gn = prob.gauss_newton(free, p_hat)
+            gn = prob.gauss_newton(free, p_hat, cfg.gauss_newton_steps)
             nfev += gn.nfev
             jac = gn.jacobian
             if gn.params is not None:
