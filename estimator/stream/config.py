@@ -85,6 +85,10 @@ class WindowConfig:
         Keep every ``decimate``-th sample for the fit.
     maxfev, first_maxfev : int
         Evaluation budgets (warm windows, first window).
+    first_restarts : int
+        Nelder-Mead restarts from the best vertex on the first window (default 4; the
+        monitor's default with ten or more free parameters: 0, the Gauss-Newton steps
+        finishing instead, module docstring).
     xatol : float
         Nelder-Mead simplex size tolerance in log-parameter units (2e-3 = 0.2 %, 2.5 times
         below the default ``sigma_floor``, so below every reported stderr); the only
@@ -191,6 +195,7 @@ class WindowConfig:
     decimate: int = 1
     maxfev: int = 160
     first_maxfev: int = 1000
+    first_restarts: int = 4
     xatol: float = XATOL
     warm_step: float = 0.003
     warm_adaptive: bool = True
@@ -303,4 +308,5 @@ def default_config(model: SuspensionModel, params: Mapping[str, float], fs: floa
                         xatol=XATOL_MANY_FREE if n >= MANY_FREE else XATOL,
                         warm_adaptive=n < MANY_FREE, gauss_newton_step=n >= MANY_FREE,
                         gauss_newton_steps=GAUSS_NEWTON_STEPS_MANY_FREE if n >= MANY_FREE else 1,
+                        first_restarts=0 if n >= MANY_FREE else 4,
                         road_fusion_hz=ROAD_FUSION_MODES * ms[-1].f_n)

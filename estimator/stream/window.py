@@ -8,22 +8,26 @@ Each window of the stream becomes a small output-error problem
 same sandwich standard errors as ``suspid identify``.
 
 Warm start
-    The first window starts cold from the nominal values with restarts and budget
-    ``first_maxfev``. Every later window starts from the previous estimate extrapolated
-    along the straight line through the last (up to 3) estimates of consecutive windows
-    (``warm_predict``; a drifting damper moves ~1 % per step), with a fresh axis-aligned
-    simplex of edge ``max(warm_step, 3 x previous relative stderr_fit)`` per parameter
-    (log units) centred on that start (with ten or more free parameters: Nelder-Mead's
-    standard coefficients, not the dimension-adapted ones, and one Gauss-Newton step after
-    it, ``WindowConfig.warm_adaptive``, ``gauss_newton_step``). Windows whose fit is not
-    identifiable do not update the warm state.
+    The first window starts cold from the nominal values (or the data-driven start when it
+    fits better) with ``first_restarts`` restarts and budget ``first_maxfev``. Every later
+    window starts from the previous estimate extrapolated along the straight line through
+    the last (up to 3) estimates of consecutive windows (``warm_predict``; a drifting
+    damper moves ~1 % per step), with a fresh axis-aligned simplex of edge
+    ``max(warm_step, 3 x previous relative stderr_fit)`` per parameter (log units) centred
+    on that start. With ten or more free parameters warm windows use Nelder-Mead's
+    standard coefficients, not the dimension-adapted ones, the first window no restart,
+    and every window ends with up to three Gauss-Newton steps on one Jacobian
+    (``WindowConfig.warm_adaptive``, ``first_restarts``, ``gauss_newton_step``,
+    ``gauss_newton_steps``). Windows whose fit is not identifiable do not update the warm
+    state.
 Termination and budget
     Nelder-Mead stops when every vertex is within ``xatol`` (log units, 0.2 %: 0.4 x the
-    ``sigma_floor`` below every reported stderr; 0.4 % with ten or more free parameters,
-    :mod:`estimator.stream.config`) of the best one, or at ``maxfev``
-    evaluations; every estimate reports ``nfev``, ``budget``, ``converged`` and the CPU time
-    of the window. The stderr costs no further evaluation on the lean path: its Jacobian is
-    the secant through the final simplex (see
+    ``sigma_floor`` below every reported stderr; 0.7 % with ten or more free parameters,
+    where the Gauss-Newton steps finish, :mod:`estimator.stream.config`) of the best one,
+    or at ``maxfev`` evaluations; every estimate reports ``nfev`` (the Gauss-Newton
+    steps' included), ``budget``, ``converged`` and the CPU time of the window. The stderr
+    costs no further evaluation on the lean path: its Jacobian is the secant through the
+    final simplex, or the Gauss-Newton steps' (see
     :meth:`~estimator.stream.windowproblem.WindowProblem.finish`).
 Excitation
     A window is skipped, with the reason, when a needed channel misses more than
@@ -697,7 +701,8 @@ class SlidingWindowIdentifier:
         budget = cfg.maxfev if warm else cfg.first_maxfev
         # termination on the simplex size alone (xatol, log units): the cost's own scale
         # says nothing about the precision that matters here (sigma_floor)
-        nm = minimize_log(cost, np.zeros(len(free)), step=0.3, restarts=0 if warm else 4,
+        nm = minimize_log(cost, np.zeros(len(free)), step=0.3,
+                          restarts=0 if warm else cfg.first_restarts,
                           maxfev=budget, xatol=cfg.xatol, fatol=math.inf,
                           initial_simplex=simplex,
                           adaptive=None if cfg.warm_adaptive or not warm else False)
@@ -707,7 +712,7 @@ class SlidingWindowIdentifier:
             None if nm.final_simplex is None else [to_params(v) for v in nm.final_simplex])
         nfev = nm.nfev
         jac = None
-        if warm and cfg.gauss_newton_step:
+        if cfg.gauss_newton_step:
             gn = prob.gauss_newton(free, p_hat, cfg.gauss_newton_steps)
             nfev += gn.nfev
             jac = gn.jacobian

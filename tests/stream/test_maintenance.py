@@ -10,12 +10,16 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
+from estimator.identify import Parameters
 from estimator.stream.compare import compare
+from estimator.stream.config import default_config
 from estimator.stream.wear_streams import damper_wear
+from estimator.stream.window import SlidingWindowIdentifier
 from suspid.io.csvio import write_measurement
 from suspid.models import get_model
 from tools.bench_maintenance import FULL7_KNOWN, Case, full7_stream
@@ -257,3 +261,30 @@ def test_full7_wearing_stream_through_compare() -> None:
     assert c1n["alert_delay_s"] is not None and 0.0 <= c1n["alert_delay_s"] <= 10.0
     assert c1n["forecast_lead_s"] >= 10.0 and c1n["forecast_first_contains"]
     assert c1n["rmse_pct"] < 2.0 and c1n["rmse_pct"] <= c1e["rmse_pct"]
+
+
+def test_full7_first_window_one_nelder_mead_run_then_gauss_newton() -> None:
+    """Twelve free parameters: the cold first window runs Nelder-Mead once (no restart) and
+    the Gauss-Newton steps finish it, in under 70 % of the evaluations of four restarts
+    without them (measured 395 against 642 here, 400 against 878 on the benchmark stream)
+    and at a cost no higher; the steps themselves lower the cost of Nelder-Mead's best vertex."""
+    case = Case("full7", "full car", None, 0.01, 8.0, 10.0, 50.0, 0.5, 6, model="full7")
+    s = full7_stream(case)
+    m = get_model("full7")
+    fix = {k: s.nominal[k] for k in FULL7_KNOWN}
+    free = [k for k in s.nominal if k not in fix]
+    params = Parameters.for_model(m, fix=fix, init={k: s.nominal[k] for k in free})
+    cfg = default_config(m, s.nominal, 250.0, len(free))
+    assert cfg.first_restarts == 0 and cfg.gauss_newton_step
+    n = int(round(cfg.window_s * 250.0)) + 1
+    window = {c: v[:n] for c, v in s.data.items()}
+    out = {}
+    for label, opts in (("new", {}), ("nm", {"gauss_newton_step": False}),
+                        ("old", {"gauss_newton_step": False, "first_restarts": 4})):
+        ident = SlidingWindowIdentifier(m, params, replace(cfg, **opts), list(m.coords))
+        out[label] = ident.process(s.t[:n], window)
+        assert not out[label].skipped and out[label].converged
+    assert out["new"].nfev <= out["nm"].nfev + len(free) + cfg.gauss_newton_steps
+    assert out["new"].nfev < 0.7 * out["old"].nfev
+    assert out["new"].cost < out["nm"].cost
+    assert out["new"].cost <= out["old"].cost * (1 + 1e-6)
