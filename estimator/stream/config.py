@@ -31,21 +31,25 @@ decay time ``tau_i = 1 / (zeta_i w_i)``):
     ms, no drift) and leaves the suspension's band to ``r``. Measured on the held-out streams
     (``tools/bench_maintenance.py``, docs/monitoring.md): c1 RMSE 4.09 -> 2.84 % at 5 %
     noise on every channel, 1.75 -> 1.52 % at 2 %; at 3 f_fast 2.92 and 1.84 %.
-``xatol``, ``warm_adaptive``, ``gauss_newton_step``
+``xatol``, ``warm_adaptive``, ``gauss_newton_step``, ``gauss_newton_steps``, ``first_restarts``
     Nelder-Mead's simplex-size tolerance (log units) is 2e-3; with ten or more free
     parameters (:data:`MANY_FREE`; the full car's twelve dampers, springs and tyres) it is
-    4e-3 (:data:`XATOL_MANY_FREE`, still below the default ``sigma_floor``, so below every
-    reported stderr), warm windows use Nelder-Mead's standard coefficients instead of the
-    dimension-adapted ones, and one Gauss-Newton step follows it. In twelve dimensions each
-    halving of the simplex costs Nelder-Mead many evaluations; measured on the full car's
-    maintenance stream (``tools/bench_maintenance.py --only full7``, docs/monitoring.md):
-    120 evaluations per warm window instead of 220 (4e-3 alone: 131, its window estimates
-    0.18 % RMS from each window's exact optimum instead of 0.07 %; the standard
-    coefficients alone: 168), c1 RMSE 0.55 % against 0.54 %, alert and first forecast
-    unchanged. The step is what keeps the faster wear of
+    7e-3 (:data:`XATOL_MANY_FREE`), warm windows use Nelder-Mead's standard coefficients
+    instead of the dimension-adapted ones, the first window runs Nelder-Mead once (no
+    restart), and on every window up to three Gauss-Newton steps
+    (:data:`GAUSS_NEWTON_STEPS_MANY_FREE`) on one forward-difference Jacobian at
+    Nelder-Mead's best vertex finish the fit; that Jacobian also gives the window's stderr.
+    In twelve dimensions each halving of the simplex costs Nelder-Mead many evaluations,
+    and its simplex is small long before it is at the optimum (at 7e-3 a median 1.3 %,
+    at most 5.5 %, from where the steps end). Measured on the full car's maintenance
+    stream (``tools/bench_maintenance.py --only full7``, docs/monitoring.md): 45
+    evaluations per warm window instead of 120 (4e-3 and one step) or 220 (2e-3), 400
+    instead of 949 on the first window, the estimates 0.003 % RMS from each window's exact
+    optimum (0.008 % with 4e-3 and one step), c1 RMSE, alert and first forecast unchanged.
+    Reaching the window optimum is what keeps the faster wear of
     ``tests/stream/test_maintenance.py::test_full7_wearing_stream_through_compare``'s first
-    forecast interval holding the crossing (without it, 4e-3 or the standard coefficients
-    miss it by up to 0.3 s).
+    forecast interval holding the crossing (4e-3 without a step, or 7e-3 with steps
+    refused beyond 2 %, miss it).
 ``maxfev`` / ``first_maxfev``
     Nelder-Mead evaluation budget of a warm-started window (default ``40 n_free``) and of
     the first, cold-started one (``250 n_free``). Every window reports the evaluations used.
@@ -95,7 +99,7 @@ class WindowConfig:
         termination test besides the budget. Measured on the damper-wear streams against
         fits to 1e-6: the estimates are within 0.06 % RMS (0.12 stderr) of the exact window
         optimum; 2.5e-3 saves ~1.5 evaluations per window but doubles that error. The
-        monitor's default (:func:`default_config`) is 4e-3 with ten or more free
+        monitor's default (:func:`default_config`) is 7e-3 with ten or more free
         parameters (module docstring: measured on the full car).
     warm_step : float
         Edge (log units) of the warm-start simplex per parameter, at least; the simplex is
