@@ -881,13 +881,16 @@ class WindowProblem(OutputErrorProblem):
         nfev = len(free)
         if J is None:
             return GaussNewton(None, None, nfev)
-        Q, Rq = np.linalg.qr(J)
+        # the normal equations (n_free x n_free, formed once): a QR factorisation of the
+        # tall J with its explicit Q costs as much as three evaluations; each step is
+        # checked on the cost anyway
+        H = J.T @ J
         u = np.zeros(len(free))
         ss = ev.ss
         best: dict[str, float] | None = None
         for _ in range(steps):
             try:
-                un = u + np.linalg.solve(Rq, -(Q.T @ r))
+                un = u + np.linalg.solve(H, -(J.T @ r))
             except np.linalg.LinAlgError:
                 break
             if not np.all(np.isfinite(un)):
