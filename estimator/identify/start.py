@@ -836,6 +836,16 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         lies more than ``SKIP_AGREE`` x from the given start, or the estimate began at a
         higher cost than the given start (no second start confirms it; the warning begins
         ``unconfirmed result``).
+
+        When no start gives a clean answer (the result would be rejected, is no success,
+        or leaves a residual that is not white: :func:`noise_floor_ratio` above
+        ``NOISE_FLOOR`` and no exact fit) and the given start was considered, the given start rescaled by one
+        common factor per kind of parameter (:func:`kind_scaled_start`) is a third start
+        (``"scaled"`` in ``starts``) if it begins at a lower cost than every start so far
+        and some factor lies outside ``[1/KIND_MIN_FACTOR, KIND_MIN_FACTOR]``; the rules
+        above are then applied to all three (a fit from it is checked against the given
+        start as a fit from the estimate is). A clean answer from the first two starts
+        costs nothing more.
     """
     free = params.free
     est = estimate_start(problem, params) if data_start and free else None
@@ -873,9 +883,11 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
             continue
         results.append((label, start, run(start)))
     issues = _issues(problem, results, at_start, free, data_vals, usable)
-    if issues.rejected or not issues.res.success:
-        # no clean answer: the given start rescaled kind by kind is a further start when it
-        # begins lower than every start run and is not the given start again
+    if issues.rejected or not issues.res.success or not _exact(problem, issues.res) \
+            and noise_floor_ratio(problem, issues.res.params) > NOISE_FLOOR:
+        # no clean answer (or a residual that is not white noise: a local minimum): the
+        # given start rescaled kind by kind is a further start when it begins lower than
+        # every start run and is not the given start again
         scaled = (kind_scaled_start(problem, params)
                   if any(label == "init" for label, _ in runs) else None)
         if scaled is not None and scaled[2] < min(at_start) and any(
