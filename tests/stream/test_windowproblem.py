@@ -297,10 +297,9 @@ def test_cost_skips_the_residual_pass_unless_the_terms_cancel(quarter2, window) 
     assert OutputErrorProblem(quarter2, clean).normalized_ss(p) < 1e-20
 
 
-def test_gauss_newton_step_lands_near_the_window_optimum(quarter2, window) -> None:
-    """One Gauss-Newton step from 0.3-0.4 % off the window's optimum (where a loose
-    Nelder-Mead stops) lands within a tenth of that distance and lowers the cost; from
-    30 % off it goes no farther than the trust region (and still lowers the cost)."""
+@pytest.fixture(scope="module")
+def window_optimum(quarter2, window):
+    """The window's lean problem and its optimum (Nelder-Mead to 1e-9, every parameter)."""
     s, meas, params = window
     free = params.free
     lean = WindowProblem(quarter2, meas, ssmap=StateSpaceMap(quarter2, params.valuesdict(), free))
@@ -311,7 +310,16 @@ def test_gauss_newton_step_lands_near_the_window_optimum(quarter2, window) -> No
 
     best = minimize_log(cost, np.zeros(len(free)), step=0.05, restarts=3, xatol=1e-9,
                         fatol=math.inf, maxfev=4000)
-    opt = {**base, **{k: base[k] * math.exp(x) for k, x in zip(free, best.u)}}
+    return lean, {**base, **{k: base[k] * math.exp(x) for k, x in zip(free, best.u)}}
+
+
+def test_gauss_newton_step_lands_near_the_window_optimum(window, window_optimum) -> None:
+    """One Gauss-Newton step from 0.3-0.4 % off the window's optimum (where a loose
+    Nelder-Mead stops) lands within a tenth of that distance and lowers the cost; from
+    30 % off it goes no farther than the trust region (and still lowers the cost)."""
+    params = window[2]
+    free = params.free
+    lean, opt = window_optimum
     off = dict(opt, c1=opt["c1"] * math.exp(0.004), k1=opt["k1"] * math.exp(-0.003))
     q = lean.gauss_newton_step(free, off)
     assert q is not None
@@ -325,22 +333,14 @@ def test_gauss_newton_step_lands_near_the_window_optimum(quarter2, window) -> No
     assert max(abs(math.log(q[k] / far[k])) for k in free) <= wp.GAUSS_NEWTON_MAX_STEP + 1e-12
 
 
-def test_gauss_newton_steps_on_one_jacobian_and_its_reuse_for_the_stderr(quarter2, window,
+def test_gauss_newton_steps_on_one_jacobian_and_its_reuse_for_the_stderr(window, window_optimum,
                                                                          monkeypatch) -> None:
     """Further steps on the first Jacobian land nearer the optimum than one step and cost
     one evaluation each; ``finish`` takes that Jacobian for the stderr instead of a second
     forward difference (its stderr within 5 % from 1.2 % off, no evaluation)."""
-    s, meas, params = window
+    params = window[2]
     free = params.free
-    lean = WindowProblem(quarter2, meas, ssmap=StateSpaceMap(quarter2, params.valuesdict(), free))
-    base = dict(s.nominal)
-
-    def cost(u: np.ndarray) -> float:
-        return lean.normalized_ss({**base, **{k: base[k] * math.exp(x) for k, x in zip(free, u)}})
-
-    best = minimize_log(cost, np.zeros(len(free)), step=0.05, restarts=3, xatol=1e-9,
-                        fatol=math.inf, maxfev=4000)
-    opt = {**base, **{k: base[k] * math.exp(x) for k, x in zip(free, best.u)}}
+    lean, opt = window_optimum
     off = dict(opt, c1=opt["c1"] * math.exp(0.012), k1=opt["k1"] * math.exp(-0.009))
     one = lean.gauss_newton(free, off, 1)
     three = lean.gauss_newton(free, off, 3)
