@@ -31,6 +31,18 @@ exponentially weighted mean of ``d_i^2 / (s_i^2 + 4 s_{i-1}^2 + s_{i-2}^2)`` (me
 rest on the scatter the estimates actually show. Not for an estimator whose outputs are
 themselves filtered (the EKF): their differences understate the error.
 
+The scatter does not show the track's own lag where a wear starts or stops: for a few
+windows the changing model has not yet taken the new rate up, and the tracked error is 3-8
+times the tracked stderr there (between the kinks about 1). The one-step innovations do show
+it: each estimate's ``nu = y - H x`` against the prediction before it, with
+``S = H P H' + lambda s^2 overlap``. Their short exponentially weighted mean ``kappa^2`` of
+``nu^2 / S`` (memory ``innov_memory`` estimates, ``innov_prior`` pseudo-observations of 1,
+clipped to ``[1, innov_max]``) widens the reported variances (``innov_scale``): the value's
+by ``kappa^2``, the rate's by ``kappa^(2 innov_rate)`` (the rate is learnt over many windows;
+widened fully it delays the first forecasts). The filter itself (its state, gains and model
+probabilities) is unchanged, so are the tracked values; only the stderr the alerts and
+forecasts use grows where the innovations exceed their stated spread. Not for the EKF.
+
 A wear that starts (or stops) shows first as the changing model taking over, and its new
 rate is then two estimates old (the newest estimate describes its window's middle: a rate
 that changed in the last step does not show in it yet). When the changing model's
@@ -81,6 +93,7 @@ class _Track:
     calib: tuple[float, float] = (0.0, 0.0)   # weighted sum of d^2/var, weighted count
     # the last estimates: the filter before each, its time, value, variance, log-likelihood
     hist: list[tuple[_Snap, float, float, float, float]] = field(default_factory=list)
+    innov: tuple[float, float] = (0.0, 0.0)   # weighted sum of nu^2 / S, weighted count
     held: int = 0     # consecutive estimates with the changing model at restart_mu or above
     hold: int = 0     # estimates to go before a restarted rate may be forecast from
 
@@ -115,6 +128,13 @@ class TrendTracker:
     calib_prior, calib_memory, calib_min, calib_max : float
         Pseudo-observations of ``lambda = 1``, memory (estimates) of the weighted mean,
         and the clip range of ``lambda``.
+    innov_scale : bool
+        Widen the reported variances by the innovations' ``kappa^2`` (calibrated tracks only).
+    innov_prior, innov_memory, innov_max : float
+        Pseudo-observations of ``kappa^2 = 1``, memory (estimates) of the weighted mean of
+        ``nu^2 / S`` and the upper clip of ``kappa^2`` (the lower is 1).
+    innov_rate : float
+        Exponent of ``kappa^2`` on the rate's variance (the covariance gets the geometric mean).
     forecast_settle_s, forecast_settle_power : float
         Extra rate variance of the trends right after a kink (see the module docstring).
     restart_mu : float
@@ -157,6 +177,11 @@ class TrendTracker:
     restart_back: int = 1
     restart_confirm: int = 0
     restart_hold: int = 2
+    innov_scale: bool = True
+    innov_prior: float = 0.5
+    innov_memory: float = 2.0
+    innov_max: float = 25.0
+    innov_rate: float = 0.25
     nominal: dict[str, float] = field(default_factory=dict)
     tracks: dict[str, _Track] = field(default_factory=dict)
 
@@ -215,6 +240,34 @@ class TrendTracker:
         tr = self.tracks.get(name)
         if tr is None or not self.calibrate:
             return 1.0
+        return self.scale_of(tr)
+
+    def honesty(self, name: str) -> float:
+        """The factor ``kappa^2`` on a parameter's tracked variances (1 without it)."""
+        tr = self.tracks.get(name)
+        if tr is None or not (self.calibrate and self.innov_scale):
+            return 1.0
+        num, den = tr.innov
+        k2 = (self.innov_prior + num) / (self.innov_prior + den)
+        return min(self.innov_max, max(1.0, k2))
+
+    def _innovate(self, tr: _Track, t: float, v: float, se: float, lag: float) -> None:
+        """Fold the normalized innovation ``nu^2 / S`` of the estimate ``v`` (SI) at ``t``
+        (s), against the one-step prediction before the estimate is used."""
+        if not (self.calibrate and self.innov_scale):
+            return
+        self._predict(tr, t)
+        H = np.array([1.0, -lag])
+        S = float(H @ tr.P @ H) + se * se * self.overlap * self.scale_of(tr)
+        nu = v - float(H @ tr.x)
+        f = 1.0 - 1.0 / self.innov_memory
+        num, den = tr.innov
+        tr.innov = (f * num + nu * nu / S, f * den + 1.0)
+
+    def scale_of(self, tr: _Track) -> float:
+        """``lambda`` of a track (see :meth:`scale`)."""
+        if not self.calibrate:
+            return 1.0
         num, den = tr.calib
         lam = (self.calib_prior + num) / (self.calib_prior + den)
         return min(self.calib_max, max(self.calib_min, lam))
@@ -259,9 +312,10 @@ class TrendTracker:
                                              [P.copy() for _ in range(m)], mu)
                 self._calibrate(tr, float(v), float(se))
                 continue
-            self._calibrate(tr, float(v), float(se))
-            r = se * se * self.overlap * self.scale(k)
             before = self._snapshot(tr)
+            self._innovate(tr, t, float(v), float(se), lag)
+            self._calibrate(tr, float(v), float(se))
+            r = se * se * self.overlap * self.scale_of(tr)
             ll = self._step(tr, t, float(v), r, lag)
             tr.hist.append((before, t, float(v), r, ll))
             tr.held = tr.held + 1 if float(tr.mu[-1]) >= self.restart_mu else 0
@@ -354,8 +408,10 @@ class TrendTracker:
             # model's probability
             extra = (float(tr.mu[1]) ** self.forecast_settle_power * self.q_rate_change ** 2
                      * n2 * self.forecast_settle_s if tr.mu.size > 1 else 0.0)
-            out[k] = Trend(tr.t, float(tr.x[0]), float(tr.x[1]), float(tr.P[0, 0]),
-                           float(tr.P[0, 1]), float(tr.P[1, 1]) + extra,
+            h = self.honesty(k)
+            hr = h ** self.innov_rate
+            out[k] = Trend(tr.t, float(tr.x[0]), float(tr.x[1]), h * float(tr.P[0, 0]),
+                           math.sqrt(h * hr) * float(tr.P[0, 1]), hr * float(tr.P[1, 1]) + extra,
                            self.q_level ** 2 * n2, 0.0, 0.0 if tr.hold else tr.t - tr.t0)
         return out
 

@@ -245,7 +245,7 @@ def test_stable_part_with_the_restart_gets_no_forecast_and_no_alert(stated: floa
         assert eng.emitted == [] and alerts.emitted == []
 
 
-def _forecasts_with_outlying_pairs(**kw: float) -> int:
+def _forecasts_with_outlying_pairs(**kw: float | bool) -> int:
     """Forecasts on a stable damper (0.5 % window noise) whose estimates dip by 2 % and
     3 % in two consecutive windows every 37.5 s (a transient, not a wear), ten draws."""
     n = 0
@@ -265,7 +265,53 @@ def test_two_outlying_windows_restart_the_rate_but_announce_no_forecast() -> Non
     """Two outlying windows look like the start of a wear to the restart; the restarted
     trend reports no data span for two estimates, by when the next windows have taken the
     rate back: no forecast. Announcing at once (``restart_hold=0``) forecasts a crossing
-    that never comes; the former tracker (no restart) announces none either."""
+    that never comes (without the innovations' widening of the variance, which alone keeps
+    some of those away); the former tracker (no restart) announces none either."""
     assert _forecasts_with_outlying_pairs() == 0
-    assert _forecasts_with_outlying_pairs(restart_hold=0) >= 3
+    at_once = _forecasts_with_outlying_pairs(restart_hold=0, innov_scale=False)
+    assert at_once >= 3
+    assert 0 < _forecasts_with_outlying_pairs(restart_hold=0) <= at_once
     assert _forecasts_with_outlying_pairs(restart_rate=0.0) == 0
+
+
+def _kinked_track(seed: int, **kw: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Tracked value, its stderr and the truth at each window end: a damper losing 1 %/s of
+    1500 N s/m between 30 and 55 s, honest window estimates of its end value (7.5 N s/m)."""
+    def truth(x: float) -> float:
+        return 1500.0 - 15.0 * min(max(0.0, x - 30.0), 25.0)
+
+    rng = np.random.default_rng(seed)
+    tr = TrendTracker(nominal={"c1": 1500.0}, **kw)
+    v, s, tv = [], [], []
+    for ti in np.arange(1.5, 90.0, 1.5):
+        out = tr.update(float(ti), {"c1": truth(float(ti)) + rng.normal(0.0, 7.5)},
+                        {"c1": 7.5})["c1"]
+        v.append(out["value"])
+        s.append(out["stderr"])
+        tv.append(truth(float(ti)))
+    return np.array(v), np.array(s), np.array(tv)
+
+
+def test_innovations_widen_the_stderr_at_a_kink_without_moving_the_value() -> None:
+    """Where a wear starts or stops the track lags for a few windows and its error outgrows
+    its stderr; the one-step innovations see it and widen the tracked variance for those
+    windows: error/stderr nearer 1, the largest excursion smaller, the value itself the same."""
+    z_on, z_off, worst_on, worst_off = [], [], [], []
+    for seed in range(5):
+        v1, s1, tv = _kinked_track(seed)
+        v0, s0, _ = _kinked_track(seed, innov_scale=False)
+        np.testing.assert_allclose(v1, v0, rtol=0, atol=1e-9)
+        assert np.all(s1 >= s0 - 1e-12)
+        z_on.append((v1 - tv) / s1)
+        z_off.append((v0 - tv) / s0)
+        worst_on.append(np.abs(z_on[-1]).max())
+        worst_off.append(np.abs(z_off[-1]).max())
+    rms_on = float(np.sqrt(np.mean(np.concatenate(z_on) ** 2)))
+    rms_off = float(np.sqrt(np.mean(np.concatenate(z_off) ** 2)))
+    assert rms_off > 1.05 and 0.7 < rms_on < rms_off - 0.1
+    assert max(worst_on) < max(worst_off) - 0.5
+    # a filter's own outputs (not calibrated) keep their variances
+    tr = TrendTracker(nominal={"c1": 1500.0}, calibrate=False)
+    for ti in (1.5, 3.0, 4.5):
+        tr.update(ti, {"c1": 1500.0 + 100.0 * ti}, {"c1": 7.5})
+    assert tr.honesty("c1") == 1.0
