@@ -22,9 +22,11 @@ Metrics (``truth`` known for synthetic streams):
     earlier than their confidence level warrants), below 1 when it is conservative.
 ``cpu_us_per_sample``
     process CPU time of the estimator divided by the samples of the stream.
-``forecast_lead_s``, ``forecast_first_error_s``, ``forecast_first_contains``
+``forecast_lead_s``, ``forecast_first_error_s``, ``forecast_first_contains``, ``forecast_first_margin_s``
     the first forecast before the true crossing: how long before it came, the error of its
-    predicted crossing time and whether its 90 % interval holds the true crossing.
+    predicted crossing time, whether its 90 % interval holds the true crossing, and by how
+    much (s): the distance from the true crossing to the interval's nearer end, negative
+    when the crossing lies outside.
 
 The values compared with the truth are those the alerts are decided on: the tracker's value
 at the window end for the sliding window, the filter's own state for the EKF.
@@ -155,6 +157,8 @@ def metrics(rec: RunRecord, t: FloatArray, truth: Mapping[str, FloatArray] | Non
                 m["forecast_first_error_s"] = f0["crossing_t"] - crossing
                 m["forecast_first_contains"] = bool(f0["crossing_t_low"] <= crossing
                                                     <= f0["crossing_t_high"])
+                m["forecast_first_margin_s"] = float(min(crossing - f0["crossing_t_low"],
+                                                         f0["crossing_t_high"] - crossing))
                 m["forecast_contains_fraction"] = float(np.mean(
                     [f["crossing_t_low"] <= crossing <= f["crossing_t_high"] for f in early]))
             m["false_forecasts"] = (len(fk) if not math.isfinite(crossing) else 0)
