@@ -666,19 +666,20 @@ def kind_scaled_start(problem: OutputErrorProblem, params: Parameters
         return problem.normalized_ss(scaled(u)) if np.all(np.abs(u) < 6.0) else math.inf
 
     logs = np.log(KIND_GRID)
-    u0 = min((np.array(g) for g in itertools.product(logs, repeat=len(kinds))), key=cost)
-    if not math.isfinite(cost(u0)):
+    c0, u0 = min(((cost(g), g) for g in map(np.array, itertools.product(logs, repeat=len(kinds)))),
+                 key=lambda cu: cu[0])
+    if not math.isfinite(c0):
         return None
     step = 0.5 * float(logs[1] - logs[0])
     res = nelder_mead(cost, u0, initial_simplex=np.vstack([u0] + [u0 + step * e
                                                                   for e in np.eye(len(kinds))]),
                       xatol=1e-2, fatol=1e-6, maxfev=60 * len(kinds))
-    u = np.asarray(res.x, dtype=float) if res.fun <= cost(u0) else u0
+    u, c = (np.asarray(res.x, dtype=float), float(res.fun)) if res.fun <= c0 else (u0, c0)
     out = params.copy()
     for k, v in scaled(u).items():
         if k in free:
             out[k].value = float(v)
-    return out, {kd: math.exp(float(u[i])) for i, kd in enumerate(kinds)}, float(cost(u))
+    return out, {kd: math.exp(float(u[i])) for i, kd in enumerate(kinds)}, c
 
 
 def noise_floor_ratio(problem: OutputErrorProblem, p: Mapping[str, float]) -> float:
@@ -988,9 +989,10 @@ def _issues(problem: OutputErrorProblem,
     unconfirmed: list[str] = []
     if best[0] in ("data", "scaled") and not _exact(problem, res):
         c_best = at_start[[label for label, _, _ in results].index(best[0])]
-        what = "the data-driven start" if best[0] == "data" else "the rescaled init start"
-        origin = "an estimate" if best[0] == "data" else "a rescaled start"
-        led = "the record's estimate" if best[0] == "data" else "the rescaling"
+        what, origin, led = {
+            "data": ("the data-driven start", "an estimate", "the record's estimate"),
+            "scaled": ("the rescaled init start", "a rescaled start", "the rescaling"),
+        }[best[0]]
         for (label, s, got), c0 in zip(results, at_start):
             if label != "init" or got is None or got.success:
                 continue

@@ -831,17 +831,6 @@ class WindowProblem(OutputErrorProblem):
             aic=aic, bic=bic, n_obs=n_obs, singular_values=verdict.singular_values,
             cov_log=cov_log)
 
-    def gauss_newton_step(self, free: list[str], p_hat: Mapping[str, float],
-                          rel_step: float = 1e-6) -> dict[str, float] | None:
-        """One Gauss-Newton step from Nelder-Mead's best vertex (:meth:`gauss_newton`).
-
-        Returns
-        -------
-        dict or None
-            The new parameters (SI), or ``None``: not on the lean path or no lower cost.
-        """
-        return self.gauss_newton(free, p_hat, 1, rel_step).params
-
     def gauss_newton(self, free: list[str], p_hat: Mapping[str, float], steps: int = 1,
                      rel_step: float = 1e-6) -> GaussNewton:
         """Gauss-Newton steps from Nelder-Mead's best vertex on one Jacobian.

@@ -321,14 +321,14 @@ def test_gauss_newton_step_lands_near_the_window_optimum(window, window_optimum)
     free = params.free
     lean, opt = window_optimum
     off = dict(opt, c1=opt["c1"] * math.exp(0.004), k1=opt["k1"] * math.exp(-0.003))
-    q = lean.gauss_newton_step(free, off)
+    q = lean.gauss_newton(free, off, 1).params
     assert q is not None
     d0 = max(abs(math.log(off[k] / opt[k])) for k in free)
     d1 = max(abs(math.log(q[k] / opt[k])) for k in free)
     assert d1 < 0.1 * d0
     assert lean.normalized_ss(q) < lean.normalized_ss(off)
     far = dict(opt, c1=opt["c1"] * 1.3)
-    q = lean.gauss_newton_step(free, far)
+    q = lean.gauss_newton(free, far, 1).params
     assert q is not None and lean.normalized_ss(q) < lean.normalized_ss(far)
     assert max(abs(math.log(q[k] / far[k])) for k in free) <= wp.GAUSS_NEWTON_MAX_STEP + 1e-12
 
