@@ -16,10 +16,8 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import TYPE_CHECKING
 
-if TYPE_CHECKING:  # the parsers are built without importing cantools (fast --help)
-    from suspid.can.signal_map import SignalMap
+from suspid.can.signal_map import SignalMap, merge_maps
 
 
 #: default length of the live receiver's buffer (s of data at the DBC's frame rate, at least
@@ -68,11 +66,8 @@ def add_can_arguments(parser: argparse.ArgumentParser, dbc: bool = False) -> Non
                         help="signal map file (.toml or .json: a [map] table, optional dbc = ...)")
 
 
-def can_inputs(args: argparse.Namespace) -> "tuple[Path | None, SignalMap | None]":
+def can_inputs(args: argparse.Namespace) -> tuple[Path | None, SignalMap | None]:
     """``(dbc_path, signal_map)`` from parsed options (the map file's ``dbc`` if no ``--dbc``)."""
-    # lazy: suspid.can.signal_map imports cantools (slow), and the parsers must build without it
-    from suspid.can.signal_map import SignalMap, merge_maps  # noqa: PLC0415
-
     maps = []
     if getattr(args, "signal_map_file", None):
         maps.append(SignalMap.from_file(args.signal_map_file))

@@ -29,12 +29,13 @@ import re
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable, Sequence, Union
+from typing import TYPE_CHECKING, Iterable, Sequence, Union
 
-from cantools.database.can import Database
-
-from suspid.can.dbc import channel_signals, find_message
+from suspid.can.conventions import channel_signals, find_message
 from suspid.errors import InputError, UsageError
+
+if TYPE_CHECKING:
+    from cantools.database.can import Database
 
 _NUM = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 _RE = re.compile(

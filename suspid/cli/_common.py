@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from estimator.identify import Parameters
+from estimator.identify.inputs import read_input
 from suspid.can.options import add_can_arguments, can_inputs
 from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
@@ -98,9 +99,6 @@ def parse_state(text: str, n: int, option: str) -> FloatArray:
 def load_measurement(args: argparse.Namespace,
                      model: SuspensionModel) -> tuple[Measurement, dict[str, object] | None]:
     """Read ``--input`` as a CSV or a CAN log; returns ``(Measurement, frame statistics or None)``."""
-    # lazy: the reader loads python-can, which monitor and compare (importers of this
-    # module) may load only after their MF4-backend skip has run
-    from estimator.identify.inputs import read_input  # noqa: PLC0415
     dbc_path, signal_map = can_inputs(args)
     return read_input(args.input, model, dbc_path, signal_map)
 

@@ -128,6 +128,30 @@ def test_help_does_not_import_heavy_packages() -> None:
     assert r.stdout.strip() == ""
 
 
+def test_identify_on_a_csv_does_not_import_the_can_stack(tmp_path: Path) -> None:
+    """A CSV is identified without python-can, cantools or asammdf (their import is ~0.4 s);
+    the same process then still reads a CAN log, which does load them."""
+    csv = tmp_path / "bump.csv"
+    assert run("simulate", "--model", "quarter2", "--scenario", "bump", "--duration", "1",
+               "--fs", "200", "--out", str(csv)).returncode == 0
+    code = ("import sys, io, contextlib; from suspid.cli import main; buf = io.StringIO()\n"
+            "with contextlib.redirect_stdout(buf):\n"
+            f"    rc = main(['identify', '--model', 'quarter2', '--input', {str(csv)!r}, "
+            "'--fix', 'm1=275', '--fix', 'm2=27', '--json'])\n"
+            "heavy = [m for m in ('can', 'cantools', 'asammdf') if m in sys.modules]\n"
+            "print(rc, ','.join(heavy) or '-')\n"
+            "from estimator.identify.inputs import read_input; from suspid.models import get_model\n"
+            "try:\n"
+            f"    read_input({str(tmp_path / 'x.blf')!r}, get_model('quarter2'))\n"
+            "except Exception as exc:\n"
+            "    print(type(exc).__name__, 'cantools' in sys.modules and 'can' in sys.modules)\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    first, second = r.stdout.strip().splitlines()
+    assert first == "0 -"
+    assert second == "InputError True"   # the missing .blf is read as a CAN log
+
+
 def test_no_road_and_no_decay_is_called_out(tmp_path: Path) -> None:
     """Driving vibration without a road column cannot be a free response: say so."""
     sim = tmp_path / "road.csv"
