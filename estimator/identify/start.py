@@ -30,7 +30,7 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -591,7 +591,16 @@ EXACT_FIT = 1e-10
 NOISE_FLOOR = 1.15
 
 #: a free parameter this far (factor) from its start and from the data-driven estimate ran away
+#: (unless a second start, begun far from the first in it, reached the same fit: :func:`_confirmed`)
 RUNAWAY = 100.0
+#: relative distance, or distance in standard errors, within which two fits are the same
+#: point (:func:`_same`)
+CONFIRM_TOL = 0.01
+CONFIRM_SIGMA = 0.3
+#: factor by which a confirmed parameter, moved alone up or down, must raise the cost by more
+#: than 3 sigma of the noise (:func:`_confirmed`): the record bounds it within a decade on
+#: at least one side
+CONFIRM_SPAN = 10.0
 
 #: factor beyond which two fits to a noisy record reached from different starts at costs the
 #: noise does not tell apart (:func:`_within_noise`) are reported as undecided: neither a
@@ -759,13 +768,14 @@ def _finite(x: float) -> float | None:
 
 
 def _plausibility(res: IdentResult, free: list[str], start: Mapping[str, float],
-                  data: Mapping[str, float]) -> list[str]:
-    """Reasons why ``res`` sits at an absurd place (empty when it does not)."""
+                  data: Mapping[str, float]) -> list[tuple[str, str]]:
+    """Free parameters at which ``res`` sits at an absurd place, each with the reason (empty
+    when there is none)."""
     out = []
     for k in free:
         v = res.params[k]
         if not (math.isfinite(v) and v > 0):
-            out.append(f"{k} reached {v!r}, not a finite positive value")
+            out.append((k, f"{k} reached {v!r}, not a finite positive value"))
             continue
         far_start = k not in start or abs(math.log(v / start[k])) > math.log(RUNAWAY)
         far_data = k not in data or abs(math.log(v / data[k])) > math.log(RUNAWAY)
@@ -774,9 +784,68 @@ def _plausibility(res: IdentResult, free: list[str], start: Mapping[str, float],
             if k not in start and k not in data:
                 continue  # neither a given start nor a usable estimate to compare with
             st = f"its start {start[k]:.4g}" if k in start else "its start"
-            out.append(f"{k} ran to {v:.4g}, more than {RUNAWAY:g}x from {st}{ref}; "
-                       "the record does not support it")
+            out.append((k, f"{k} ran to {v:.4g}, more than {RUNAWAY:g}x from {st}{ref}; "
+                           "the record does not support it"))
     return out
+
+
+def _same(a: IdentResult, b: IdentResult, k: str) -> bool:
+    """``b``'s value of ``k`` is ``a``'s: within ``CONFIRM_TOL`` (relative) or within
+    ``CONFIRM_SIGMA`` standard errors of ``a`` (a weakly determined parameter ends where
+    each search stops on a nearly flat cost)."""
+    x, y = float(a.params[k]), float(b.params[k])
+    if not (math.isfinite(x) and math.isfinite(y) and x > 0 and y > 0):
+        return False
+    se = a.stderr.get(k)
+    tol = max(CONFIRM_TOL, CONFIRM_SIGMA * se / x if se is not None and math.isfinite(se) else 0.0)
+    return abs(y / x - 1.0) <= tol
+
+
+def _confirmed(problem: OutputErrorProblem, res: IdentResult, start: Mapping[str, float],
+               k: str, free: list[str],
+               others: Sequence[tuple[str, Mapping[str, float], IdentResult]]) -> str | None:
+    """Label of another start that confirms ``res``'s value of ``k`` (``None`` if none does).
+
+    A parameter that ran far from its start along a flat direction of the cost, or into a
+    local minimum, is not confirmed. Two conditions together say the record itself puts it
+    there: a second start, begun more than ``KIND_MIN_FACTOR`` x away from this one in
+    ``k``, reached the same fit (every free parameter the same: :func:`_same`), and
+    the record bounds ``k`` on at least one side (moving ``k`` alone a factor
+    ``CONFIRM_SPAN`` up and down lowers the cost neither way by more than 3 sigma of the
+    noise and raises it one way by more than that; a drift along a flat direction to zero or
+    infinity leaves it unchanged both ways). The profile bands then say
+    how well the record bounds it, and name a side it leaves open.
+    """
+    v = res.params[k]
+    if not (math.isfinite(v) and v > 0):
+        return None
+    label = None
+    for lab, s, r in others:
+        if r is res or k not in s or k not in start \
+                or abs(math.log(s[k] / start[k])) <= math.log(KIND_MIN_FACTOR):
+            continue
+        if all(_same(res, r, j) for j in free):
+            label = lab
+            break
+    if label is None:
+        return None
+    ss = problem.normalized_ss(res.params)
+    try:
+        n = int(problem.residual_vector(res.params).size)
+    except (np.linalg.LinAlgError, ValueError, FloatingPointError):
+        return None
+    if not math.isfinite(ss) or n <= len(free):
+        return None
+    rise = max(SIGMAS ** 2 * ss / (n - len(free)), EXACT_FIT)
+    bounded = False
+    for f in (CONFIRM_SPAN, 1.0 / CONFIRM_SPAN):
+        moved = dict(res.params)
+        moved[k] = v * f
+        c = problem.normalized_ss(moved)
+        if math.isfinite(c) and c < ss - rise:
+            return None  # not even a minimum along k
+        bounded = bounded or (math.isfinite(c) and c - ss > rise)
+    return label if bounded else None
 
 
 def _reject(res: IdentResult, warnings: list[str]) -> None:
@@ -791,7 +860,8 @@ def _reject(res: IdentResult, warnings: list[str]) -> None:
 
 def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
                     run: Callable[[Parameters], IdentResult], *, data_start: bool = True,
-                    keep_init: bool = True, intervals: bool = True) -> IdentResult:
+                    keep_init: bool = True, init_fallback: bool = True,
+                    intervals: bool = True) -> IdentResult:
     """Run the fit ``run`` from the data-driven start and from ``params``; keep the best.
 
     Parameters
@@ -818,6 +888,11 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         below ``EXACT_FIT``) from an estimate that fits well (normalised cost below
         ``POOR_ESTIMATE``). Otherwise it runs: on a noisy record the estimate is biased and
         may lead to a local minimum, whose residual is not white.
+    init_fallback : bool
+        With ``keep_init`` false (no start given: ``params`` holds the documented defaults),
+        still run ``params`` when the fit from the data-driven start gives no clean answer
+        (below). A noisy record can mislead the estimate badly (e.g. positions alone at 0.3
+        sigma), and the defaults, a typical car, are then the better guess.
     intervals : bool
         Attach honest 3-sigma bands (:func:`estimator.identify.profile.apply_bands`) to a
         result with standard errors: the curvature band where the cost is quadratic out to
@@ -886,8 +961,19 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
             continue
         results.append((label, start, run(start)))
     issues = _issues(problem, results, at_start, free, data_vals, usable)
-    if issues.rejected or not issues.res.success or not _exact(problem, issues.res) \
-            and noise_floor_ratio(problem, issues.res.params) > NOISE_FLOOR:
+
+    def unclean(issues: _Issues) -> bool:
+        """No clean answer: rejected, no success, or a residual that is not white noise."""
+        return issues.rejected or not issues.res.success or not _exact(problem, issues.res) \
+            and noise_floor_ratio(problem, issues.res.params) > NOISE_FLOOR
+
+    if init_fallback and not any(label == "init" for label, _ in runs) and unclean(issues):
+        # no start was given and the record's estimate gave no clean answer: the defaults
+        runs.append(("init", params))
+        at_start.append(problem.normalized_ss(params.valuesdict()))
+        results.append(("init", params, run(params)))
+        issues = _issues(problem, results, at_start, free, data_vals, usable)
+    if unclean(issues):
         # no clean answer (or a residual that is not white noise: a local minimum): the
         # given start rescaled kind by kind is a further start when it begins lower than
         # every start run and is not the given start again
@@ -899,6 +985,23 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
             at_start.append(scaled[2])
             results.append(("scaled", scaled[0], run(scaled[0])))
             issues = _issues(problem, results, at_start, free, data_vals, usable)
+    if issues.runaway and not issues.ambiguous and not issues.unconfirmed and all(
+            math.isfinite(issues.res.params[k]) and issues.res.params[k] > 0
+            for k in issues.runaway):
+        # parameters that ran far from their start and no other start reached: a further
+        # start next to the fit, those parameters moved CONFIRM_SPAN x back towards where
+        # they came from, returns to it if the cost has a minimum there (a drift along a
+        # flat direction stays where it is put)
+        ref = usable(*issues.best[:2])
+        c = params.copy()
+        for k in free:
+            v = float(issues.res.params[k])
+            c[k].value = v if k not in issues.runaway else \
+                v * (CONFIRM_SPAN if ref.get(k, v) > v else 1.0 / CONFIRM_SPAN)
+        runs.append(("confirm", c))
+        at_start.append(problem.normalized_ss(c.valuesdict()))
+        results.append(("confirm", c, run(c)))
+        issues = _issues(problem, results, at_start, free, data_vals, usable)
     res = issues.res
     ran = [(label, s, r) for label, s, r in results if r is not None]
     res.nfev = int(sum(r.nfev for _, _, r in ran))
@@ -947,6 +1050,8 @@ class _Issues:
     bad: list[str]
     ambiguous: list[str]
     unconfirmed: list[str]
+    #: the free parameters behind ``bad`` (ran away, not confirmed by another start)
+    runaway: list[str]
 
     @property
     def res(self) -> IdentResult:
@@ -968,9 +1073,14 @@ def _issues(problem: OutputErrorProblem,
         c = item[2].cost
         return c if math.isfinite(c) else math.inf
 
-    best = min(ran, key=key)
+    # a confirmation run only vouches for (or against) the fit it started next to
+    best = min((item for item in ran if item[0] != "confirm"), key=key)
     res = best[2]
-    bad = _plausibility(res, free, usable(best[0], best[1]), data_vals)
+    start = usable(best[0], best[1])
+    others = [(label, usable(label, s), r) for label, s, r in ran]
+    flagged = [(k, why) for k, why in _plausibility(res, free, start, data_vals)
+               if _confirmed(problem, res, start, k, free, others) is None]
+    bad = [why for _, why in flagged]
     ambiguous: list[str] = []
     for label, _, r in ran:
         far = _far(res.params, r.params, free, AGREE) if r is not res else []
@@ -1011,7 +1121,7 @@ def _issues(problem: OutputErrorProblem,
                 f"record, and the fit from the {label} start failed (cost {got.cost:.4g} "
                 f"against {res.cost:.4g}); no second start reached it, so {led} may have "
                 "led to a local minimum")
-    return _Issues(best, bad, ambiguous, unconfirmed)
+    return _Issues(best, bad, ambiguous, unconfirmed, [k for k, _ in flagged])
 
 
 def cold_start(model: SuspensionModel, meas: Measurement, params: Parameters,
