@@ -622,7 +622,8 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
         return StartEstimate(reason="no free parameter enters the equations of motion linearly")
     nyq = 0.5 / h
     # the coefficients as a polynomial of the free values, for the noise-compensated fit
-    poly = _coef_poly(model, base, lin, nonlin)
+    # (computed when first needed: a noise-free record does not need it)
+    poly: list[tuple[FloatArray, FloatArray] | None] = []
     if bandwidths_hz is None:
         top = nyq / 5.0
         bandwidths_hz = [float(f) for f in np.geomspace(0.2, max(top, 0.3), 4)]
@@ -698,7 +699,9 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
                 vals[k] = floor
                 floored.append(k)
         cost = problem.normalized_ss({**base, **vals})
-        if cost >= EXACT_COST and poly is not None:
+        if cost >= EXACT_COST and not poly:
+            poly.append(_coef_poly(model, base, lin, nonlin))
+        if cost >= EXACT_COST and poly[0] is not None:
             # not exact: noise in the record (or too little of the model in it); the
             # noise-compensated fit from this estimate and from the given start as well
             given = {k: base[k] for k in free}
@@ -707,7 +710,7 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
                 starts += [{**vals, **{k: base[k] for k in nonlin}},
                            {**given, **{k: vals[k] for k in nonlin}}]
             comp = _ratio_fit(_Regression(model, meas, t, h, problem.U, 2 * math.pi * fc,
-                                          noise=True), poly[0], lin, nonlin, starts)
+                                          noise=True), poly[0][0], lin, nonlin, starts)
             if comp is not None:
                 comp_cost = problem.normalized_ss({**base, **comp})
                 if comp_cost < cost:
