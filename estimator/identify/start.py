@@ -21,9 +21,12 @@ The estimate needs neither a starting guess nor derivatives; it cannot apply whe
 coordinate has no measured channel at all (then the equations hold an unmeasured signal),
 when the time grid is not uniform, or when the record holds too little motion to separate
 the parameters (rank-deficient regression); the reason is reported and the caller falls
-back to its other starts. With measurement noise the estimate is biased (noise in the
-regressors), which is why it is only a start: Nelder-Mead and the polish refine it on
-the output-error cost.
+back to its other starts. With measurement noise least squares is biased (the noisy
+channels are the regressors: errors in variables); where it does not explain the record
+exactly, each equation's residual over the share white noise gives it (known from the
+filters and each channel's noise variance) is minimised as well (:func:`_ratio_fit`), and
+the lower output-error cost wins. Either way it is only a start: Nelder-Mead and the
+polish refine it on the output-error cost.
 """
 from __future__ import annotations
 
