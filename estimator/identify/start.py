@@ -21,9 +21,12 @@ The estimate needs neither a starting guess nor derivatives; it cannot apply whe
 coordinate has no measured channel at all (then the equations hold an unmeasured signal),
 when the time grid is not uniform, or when the record holds too little motion to separate
 the parameters (rank-deficient regression); the reason is reported and the caller falls
-back to its other starts. With measurement noise the estimate is biased (noise in the
-regressors), which is why it is only a start: Nelder-Mead and the polish refine it on
-the output-error cost.
+back to its other starts. With measurement noise least squares is biased (the noisy
+channels are the regressors: errors in variables); where it does not explain the record
+exactly, each equation's residual over the share white noise gives it (known from the
+filters and each channel's noise variance) is minimised as well (:func:`_ratio_fit`), and
+the lower output-error cost wins. Either way it is only a start: Nelder-Mead and the
+polish refine it on the output-error cost.
 """
 from __future__ import annotations
 
@@ -56,6 +59,11 @@ EXACT_COST = 1e-7
 FLOOR = 0.02
 #: smallest relative singular value of the regression accepted as "determined"
 RANK_TOL = 1e-9
+#: the noise-compensated fit (:func:`_ratio_fit`) stays within ``exp(RATIO_SPAN)`` of its
+#: first start
+RATIO_SPAN = 8.0
+#: iterations of each of its BFGS runs
+RATIO_ITER = 200
 
 
 @dataclass
@@ -144,6 +152,47 @@ def _impulse_responses(w: float, h: float, N: int) -> _Responses:
     return Pb, T, Fh, d
 
 
+#: filter products already computed, ``(w, h, N) -> _noise_products``
+_PRODUCTS: dict[tuple[float, float, int], FloatArray] = {}
+
+
+def _noise_products(w: float, h: float, N: int) -> FloatArray:
+    """``P[a, b]``: the expected sum over the kept samples of ``(F_a e)(F_b e)``, a, b = 0..4.
+
+    ``F_a`` is ``s^a / D(s)`` as :func:`_filter` applies it to a record of ``N`` samples and
+    ``e`` unit white noise: ``sum_m c_m h_a[m] h_b[m]`` with ``h_a`` the impulse response and
+    ``c_m`` the number of kept samples (from the third) at least ``m`` after the record's
+    start. Computed once per bandwidth ``w`` (rad/s), step ``h`` (s) and length and kept.
+    """
+    key = (float(w), float(h), int(N))
+    hit = _PRODUCTS.get(key)
+    if hit is not None:
+        return hit
+    _, _, Fh, d = _impulse_responses(w, h, N)
+    L = 1 << int(np.ceil(np.log2(2 * N)))
+    H = np.empty((N, 5))
+    H[:, :4] = np.fft.irfft(Fh, L, axis=0)[:N]
+    H[:, 4] = -H[:, :4] @ d  # s^4/D = 1 - (d0 + d1 s + d2 s^2 + d3 s^3)/D
+    H[0, 4] += 1.0
+    c = np.maximum(N - np.maximum(np.arange(N), 2), 0).astype(float)
+    P = (H * c[:, None]).T @ H
+    P.flags.writeable = False
+    if len(_PRODUCTS) >= _RESPONSES_KEPT:
+        _PRODUCTS.pop(next(iter(_PRODUCTS)))
+    _PRODUCTS[key] = P
+    return P
+
+
+def _noise_variance(y: FloatArray) -> float:
+    """Variance of white noise in ``y`` from its fourth differences (``mean(d4^2) / 70``).
+
+    A response of the model sampled well above its modes hardly enters them (a mode at a
+    tenth of the sampling rate passes ``(2 sin(pi/10))^8`` = 2 % of its variance).
+    """
+    d4 = np.diff(y, 4)
+    return float(d4 @ d4) / (70.0 * d4.size) if d4.size else 0.0
+
+
 def _filter(U: FloatArray, w: float, h: float) -> tuple[FloatArray, FloatArray]:
     """Filter the columns of ``U`` (N, m): outputs ``s^k / D`` for k = 0..4 and the modes.
 
@@ -186,7 +235,7 @@ class _Regression:
     """Filtered signals of one record, ready for the equation-error least squares."""
 
     def __init__(self, model: SuspensionModel, meas: Measurement, t: FloatArray, h: float,
-                 U: FloatArray, w: float) -> None:
+                 U: FloatArray, w: float, noise: bool = False) -> None:
         nq = len(model.coords)
         nr = len(model.roads)
         cols: list[FloatArray] = []
@@ -199,20 +248,33 @@ class _Regression:
                     if y is not None:
                         srcs.append((len(cols), order))
                         cols.append(y)
-            plan.append(srcs[:2])  # at most two sources, averaged
+            plan.append(srcs[:2])  # at most two sources, combined
         self.missing = [c for c, s in zip(model.coords, plan) if not s]
+        N = t.size
+        P = _noise_products(w, h, N) if noise else np.zeros((5, 5))
+        sig2 = [_noise_variance(y) if noise else 0.0 for y in cols]
+        # weight of each source of coordinate i in F_k q: equal (averaged), or with
+        # ``noise`` inversely as the noise each carries into F_k q (both are the same
+        # signal, so any weights summing to one keep the equation)
+        wt = np.zeros((nq, 3, 2))
+        for i, srcs in enumerate(plan):
+            for k in range(3):
+                v = np.array([sig2[col] * P[k + 2 - o, k + 2 - o] for col, o in srcs])
+                if noise and len(srcs) > 1 and np.all(v > 0):
+                    wt[i, k, :len(srcs)] = (1.0 / v) / np.sum(1.0 / v)
+                else:
+                    wt[i, k, :len(srcs)] = 1.0 / max(len(srcs), 1)
         road_cols = []
         for j in range(nr):
             road_cols.append(len(cols))
             cols.append(U[:, j])
         Y, T = _filter(np.column_stack(cols), w, h)
-        N = t.size
         # Q[k] (nq, N): F_k q = s^(k+2)/D q from a position, s^(k+1)/D from a velocity, ...
         self.Q = np.zeros((3, nq, N))
         for i, srcs in enumerate(plan):
-            for col, order in srcs:
+            for si, (col, order) in enumerate(srcs):
                 for k in range(3):
-                    self.Q[k, i] += Y[k + 2 - order, :, col] / len(srcs)
+                    self.Q[k, i] += Y[k + 2 - order, :, col] * wt[i, k, si]
         self.R = np.zeros((2, nr, N))
         for j, col in enumerate(road_cols):
             for k in range(2):
@@ -227,6 +289,19 @@ class _Regression:
         self.R = proj(self.R)
         self.S = np.concatenate([self.Q[2], self.Q[1], self.Q[0], self.R[0], self.R[1]], axis=0)
         self.G = self.S @ self.S.T  # Gram matrix of the filtered signals: all the LS needs
+        #: with ``noise``: the expected share of white measurement noise in ``G`` (rows
+        #: F_2 q, F_1 q, F_0 q of each coordinate; the road is known exactly)
+        self.B: FloatArray | None = None
+        if noise:
+            ns = self.S.shape[0]
+            B = np.zeros((ns, ns))
+            for i, srcs in enumerate(plan):
+                for si, (col, o) in enumerate(srcs):
+                    for k in range(3):
+                        for kk in range(3):
+                            B[(2 - k) * nq + i, (2 - kk) * nq + i] += (
+                                sig2[col] * wt[i, k, si] * wt[i, kk, si] * P[k + 2 - o, kk + 2 - o])
+            self.B = B
         self.iv = False  # True: G pairs instruments with the signals (not symmetric)
 
     def with_instruments(self, inst: "_Regression") -> "_Regression":
@@ -235,6 +310,7 @@ class _Regression:
         out.__dict__.update(self.__dict__)
         out.G = inst.S @ self.S.T
         out.iv = True
+        out.B = None
         return out
 
     @staticmethod
@@ -255,6 +331,50 @@ def _monomials(eta: FloatArray) -> FloatArray:
     return np.concatenate([[1.0], eta, quad])
 
 
+def _monomial_slopes(eta: FloatArray) -> FloatArray:
+    """``d monomial / d eta`` (rows as :func:`_monomials`, one column per length)."""
+    n = eta.size
+    rows = [np.zeros(n)] + [np.eye(n)[i] for i in range(n)]
+    for i in range(n):
+        for j in range(i, n):
+            g = np.zeros(n)
+            g[i] += eta[j]
+            g[j] += eta[i]
+            rows.append(g)
+    return np.array(rows).reshape(-1, n)
+
+
+def _coef_poly(model: SuspensionModel, base: Mapping[str, float], lin: list[str],
+               nonlin: list[str]) -> tuple[FloatArray, FloatArray] | None:
+    """The equation coefficients as a polynomial: ``K[j, m]`` with ``j`` = 0 the part no
+    linear parameter multiplies, ``j`` = 1.. each of ``lin``, ``m`` the monomials of the
+    lengths (:func:`_monomials`), so that ``coef = sum_j theta_j sum_m phi_m(eta) K[j, m]``
+    (``theta_0 = 1``); and the largest coefficient met per ``j``. ``None`` when the
+    dependence on the lengths is not a polynomial of degree <= 2.
+    """
+    rng = np.random.default_rng(7)
+    x0 = np.array([base[k] for k in nonlin])
+    pts = [x0 * np.exp(rng.normal(0.0, 0.5, x0.size)) for _ in range(3 * (x0.size + 1) ** 2)]
+
+    def coef_of(j: str | None, eta: FloatArray) -> FloatArray:
+        p = {**base, **dict(zip(nonlin, eta)), **{k: 0.0 for k in lin}}
+        c0 = _Regression.coef(model.matrices(p))
+        return c0 if j is None else _Regression.coef(model.matrices({**p, j: 1.0})) - c0
+
+    Phi = np.array([_monomials(e) for e in pts])
+    shape = coef_of(None, x0).shape
+    K = np.empty((len(lin) + 1, Phi.shape[1]) + shape)
+    vmax = np.empty(len(lin) + 1)
+    for ji, j in enumerate([None, *lin]):
+        vals = np.array([coef_of(j, e).ravel() for e in pts])
+        P, *_ = np.linalg.lstsq(Phi[:-1], vals[:-1], rcond=None)
+        if not np.allclose(Phi[-1] @ P, vals[-1], rtol=1e-8, atol=1e-10 * (1 + np.abs(vals).max())):
+            return None
+        K[ji] = P.reshape((-1,) + shape)
+        vmax[ji] = np.abs(vals).max()
+    return K, vmax
+
+
 def _lifted_seed(reg: "_Regression", model: SuspensionModel, base: Mapping[str, float],
                  lin: list[str], nonlin: list[str], wts: FloatArray) -> FloatArray | None:
     """Log-factors of the nonlinear parameters from the *lifted* linear problem.
@@ -265,28 +385,18 @@ def _lifted_seed(reg: "_Regression", model: SuspensionModel, base: Mapping[str, 
     ``(theta a) / theta``. ``None`` when the dependence is not a polynomial of degree <= 2
     or no ratio is determined.
     """
-    rng = np.random.default_rng(7)
     x0 = np.array([base[k] for k in nonlin])
-    pts = [x0 * np.exp(rng.normal(0.0, 0.5, x0.size)) for _ in range(3 * (x0.size + 1) ** 2)]
-    names = [None] + lin  # None: the part no linear parameter multiplies
-
-    def coef_of(j: str | None, eta: FloatArray) -> FloatArray:
-        p = {**base, **dict(zip(nonlin, eta)), **{k: 0.0 for k in lin}}
-        c0 = reg.coef(model.matrices(p))
-        return c0 if j is None else reg.coef(model.matrices({**p, j: 1.0})) - c0
-
-    Phi = np.array([_monomials(e) for e in pts])
+    poly = _coef_poly(model, base, lin, nonlin)
+    if poly is None:
+        return None
+    K, vmax = poly
     cols: list[FloatArray] = []
     tags: list[tuple[str | None, int]] = []
-    b = np.zeros_like(coef_of(None, x0))
-    for j in names:
-        vals = np.array([coef_of(j, e).ravel() for e in pts])
-        P, *_ = np.linalg.lstsq(Phi[:-1], vals[:-1], rcond=None)
-        if not np.allclose(Phi[-1] @ P, vals[-1], rtol=1e-8, atol=1e-10 * (1 + np.abs(vals).max())):
-            return None
-        for mi in range(P.shape[0]):
-            cm = P[mi].reshape(b.shape)
-            if np.max(np.abs(cm)) <= 1e-12 * (1 + np.abs(vals).max()):
+    b = np.zeros(K.shape[2:])
+    for ji, j in enumerate([None, *lin]):
+        for mi in range(K.shape[1]):
+            cm = K[ji, mi]
+            if np.max(np.abs(cm)) <= 1e-12 * (1 + vmax[ji]):
                 continue
             if j is None and mi == 0:
                 b = cm
@@ -378,6 +488,108 @@ def _solve_linear(reg: _Regression, model: SuspensionModel, p: Mapping[str, floa
     return theta, math.sqrt(max(res2, 0.0) / btb) if btb > 0 else 0.0, rel_sv
 
 
+def _bfgs(F: Callable[[FloatArray], tuple[float, FloatArray]], u0: FloatArray,
+          iterations: int, gtol: float = 1e-6) -> tuple[float, FloatArray]:
+    """Minimise ``F`` (value and gradient) by BFGS with a backtracking (Armijo) line search.
+
+    Returns ``(value, point)`` of the lowest point met; stops when the gradient's largest
+    component is below ``gtol``, no step lowers ``F`` or after ``iterations`` steps.
+    """
+    u = np.asarray(u0, dtype=float).copy()
+    f, g = F(u)
+    Hinv = np.eye(u.size)
+    for it in range(iterations):
+        if not np.max(np.abs(g)) > gtol:
+            break
+        d = -Hinv @ g
+        slope = float(g @ d)
+        if not slope < 0:  # not a descent direction: restart from the gradient
+            Hinv = np.eye(u.size)
+            d, slope = -g, -float(g @ g)
+        step = 1.0
+        while step > 1e-10:
+            un = u + step * d
+            fn, gn = F(un)
+            if fn <= f + 1e-4 * step * slope:
+                break
+            step *= 0.5
+        else:
+            break
+        sv, yv = un - u, gn - g
+        sy = float(sv @ yv)
+        if sy > 1e-12 * float(np.linalg.norm(sv) * np.linalg.norm(yv)):
+            if it == 0:  # the first step sets the scale (Nocedal & Wright 6.20)
+                Hinv = np.eye(u.size) * sy / float(yv @ yv)
+            rho = 1.0 / sy
+            V = np.eye(u.size) - rho * np.outer(sv, yv)
+            Hinv = V @ Hinv @ V.T + rho * np.outer(sv, sv)
+        u, f, g = un, fn, gn
+    return f, u
+
+
+def _ratio_fit(reg: _Regression, K: FloatArray, lin: list[str], nonlin: list[str],
+               starts: Sequence[Mapping[str, float]]) -> dict[str, float] | None:
+    """Free parameters minimising each equation's residual over its noise share, averaged.
+
+    With white measurement noise in the channels the filtered equation's residual at
+    coefficients ``c_i`` (equation ``i``) has the expected sum of squares
+    ``c_i' G0 c_i + c_i' B c_i`` (``G0`` the noise-free signals' Gram matrix, ``B`` the
+    noise's share, :class:`_Regression` with ``noise``), so the ratio
+    ``c_i' G c_i / c_i' B c_i`` is about 1 at the truth and larger elsewhere, as the record
+    grows: unlike least squares (which minimises ``c' G c`` and so also the noise's share,
+    pulling the estimate towards coefficients that pass little noise) its minimum is
+    consistent (errors in variables; the maximum-likelihood criterion of one equation).
+    The mean over the equations is minimised by BFGS on the logarithms of the values (all
+    positive) from each of ``starts`` (analytic gradient through the polynomial ``K`` of
+    :func:`_coef_poly`); ``None`` when no start gives a finite ratio.
+    """
+    if reg.B is None:
+        return None
+    G, B = reg.G, reg.B
+    nl = len(lin)
+    free = lin + nonlin
+    x0 = np.array([starts[0][k] for k in free])
+    big = 1e300
+
+    def F(u: FloatArray) -> tuple[float, FloatArray]:
+        if not np.all(np.abs(u) < RATIO_SPAN):
+            return big, np.zeros_like(u)
+        x = x0 * np.exp(u)
+        theta = np.concatenate([[1.0], x[:nl]])
+        eta = x[nl:]
+        phi = _monomials(eta)
+        Kp = np.einsum("m,jmis->jis", phi, K)  # per j, at these lengths
+        c = np.einsum("j,jis->is", theta, Kp)
+        Gc, Bc = c @ G, c @ B
+        num = np.einsum("is,is->i", Gc, c)
+        den = np.einsum("is,is->i", Bc, c)
+        if not np.all(den > 0):
+            return big, np.zeros_like(u)
+        q = num / den
+        dc = (2.0 / q.size) * (Gc - q[:, None] * Bc) / den[:, None]  # dF/dc
+        g = np.empty(u.size)
+        g[:nl] = np.einsum("is,jis->j", dc, Kp[1:])
+        if eta.size:
+            dK = np.einsum("ml,jmis->ljis", _monomial_slopes(eta), K)
+            g[nl:] = np.einsum("is,j,ljis->l", dc, theta, dK)
+        return float(np.mean(q)), g * x
+
+    best: tuple[float, FloatArray] | None = None
+    for st in starts:
+        v = np.array([st[k] for k in free])
+        if not np.all(v > 0):
+            continue
+        u0 = np.log(v / x0)
+        if not F(u0)[0] < big:
+            continue
+        f, u = _bfgs(F, u0, RATIO_ITER)
+        if math.isfinite(f) and f < big and (best is None or f < best[0]):
+            best = (f, u)
+    if best is None:
+        return None
+    return {k: float(v) for k, v in zip(free, x0 * np.exp(best[1]))}
+
+
 def estimate_start(problem: OutputErrorProblem, params: Parameters,
                    bandwidths_hz: list[float] | None = None) -> StartEstimate:
     """Data-driven start of the free parameters of ``params`` for ``problem``'s record.
@@ -412,6 +624,9 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
     if not lin:
         return StartEstimate(reason="no free parameter enters the equations of motion linearly")
     nyq = 0.5 / h
+    # the coefficients as a polynomial of the free values, for the noise-compensated fit
+    # (computed when first needed: a noise-free record does not need it)
+    poly: list[tuple[FloatArray, FloatArray] | None] = []
     if bandwidths_hz is None:
         top = nyq / 5.0
         bandwidths_hz = [float(f) for f in np.geomspace(0.2, max(top, 0.3), 4)]
@@ -487,6 +702,23 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
                 vals[k] = floor
                 floored.append(k)
         cost = problem.normalized_ss({**base, **vals})
+        if cost >= EXACT_COST and not poly:
+            poly.append(_coef_poly(model, base, lin, nonlin))
+        if cost >= EXACT_COST and poly[0] is not None:
+            # not exact: noise in the record (or too little of the model in it); the
+            # noise-compensated fit from this estimate and from the given start as well
+            given = {k: base[k] for k in free}
+            starts = [vals, given]
+            if nonlin:
+                starts += [{**vals, **{k: base[k] for k in nonlin}},
+                           {**given, **{k: vals[k] for k in nonlin}}]
+            comp = _ratio_fit(_Regression(model, meas, t, h, problem.U, 2 * math.pi * fc,
+                                          noise=True), poly[0][0], lin, nonlin, starts)
+            if comp is not None:
+                comp_cost = problem.normalized_ss({**base, **comp})
+                if comp_cost < cost:
+                    vals, cost, floored = comp, comp_cost, []
+                    notes = ["compensated for the measurement noise (errors in variables)"]
         if cost < best.cost:
             best = StartEstimate(values=vals, bandwidth_hz=fc, cost=float(cost), notes=notes,
                                  undetermined=floored)
