@@ -24,6 +24,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from suspid import smalllinalg
 from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
 from suspid.models.base import AffinePieces, FloatArray, SuspensionModel
@@ -132,9 +133,22 @@ class OutputErrorProblem:
         self.scale = data_ss if data_ss > 0 else 1.0
         self._kind = channel_kinds(m.coords, self.channels)
         self._nq = len(m.coords)
+        # what depends on the data alone, not on the parameters (the hot path's constants)
+        self._estimate = isinstance(self.x0, str) and self.x0 == "estimate"
+        self._x0_base = (np.zeros(m.n_states) if isinstance(self.x0, str)
+                         else np.asarray(self.x0, dtype=float))
+        self._x0_nonzero = bool(np.any(self._x0_base))
+        # with no acceleration channel the output maps do not depend on the parameters
+        self._maps_fixed: tuple[FloatArray, FloatArray] | None = None
+        if all(order < 2 for _, order in self._kind):
+            self._maps_fixed = output_maps(self._kind, np.zeros((m.n_states, m.n_states)),
+                                     np.zeros((m.n_states, 2 * len(m.roads))), self._nq)
+        self._w2 = w ** 2
 
     # ---- linear maps from states to channels --------------------------------------
     def _output_maps(self, A: FloatArray, B: FloatArray) -> tuple[FloatArray, FloatArray]:
+        if self._maps_fixed is not None:
+            return self._maps_fixed
         return output_maps(self._kind, A, B, self._nq)
 
     def pieces(self, p: Mapping[str, float]) -> AffinePieces | None:
@@ -172,26 +186,25 @@ class OutputErrorProblem:
         ``(N, p, n)`` regressor array is built.
         """
         m = self.model
-        nr = len(m.roads)
         N = self.t.size
         h = float(h)
         Cm, Dm = self._output_maps(modal.A, modal.B)
         CV = (Cm @ modal.V) * modal.fac  # (p, mm)
-        estimate = isinstance(self.x0, str) and self.x0 == "estimate"
-        base_x0 = self._base_x0()
+        estimate = self._estimate
+        base_x0 = self._x0_base
         E = np.exp(modal.lam * h)
         P: np.ndarray | None = None  # powers of E, built once and only where needed
+        Y: FloatArray | None = None  # None: the zero response (no road, x0 at rest)
         if self._has_road:
+            nr = len(m.roads)
             r = self.U[:, :nr]
             W = modal_trajectory(modal, h, r, base_x0)
             Y = _re_matmul(W, CV.T) + r @ (Cm @ modal.Bv).T + self.U @ Dm.T
-        elif np.any(base_x0):
+        elif self._x0_nonzero:
             P = powers(E, N)
             Y = _re_matmul(P, (CV * (modal.Vinv @ base_x0)).T)
-        else:
-            Y = np.zeros((N, len(self.channels)))
         if not estimate:
-            return Y, base_x0
+            return (Y if Y is not None else np.zeros((N, len(self.channels)))), base_x0
         if P is None:
             P = powers(E, N)
         if self._full:
@@ -201,26 +214,30 @@ class OutputErrorProblem:
                 pairs = modal.fac == 2.0
                 c = sol[:mm].astype(complex)
                 c[pairs] += 1j * sol[mm:]
-                Y = Y + _re_matmul(P, (CV * c).T)
-                return Y, free_coeffs_to_state(modal, sol)
+                Yx = _re_matmul(P, (CV * c).T)
+                # adding the zero response changes no value (0.0 + y == y)
+                return (Yx if Y is None else Y + Yx), free_coeffs_to_state(modal, sol)
+        if Y is None:
+            Y = np.zeros((N, len(self.channels)))
         G = free_response_basis(modal, h, N, Cm, P)
         sol = self._solve_x0(G, Y)
         Y = Y + G.reshape(-1, G.shape[2]).dot(sol).reshape(Y.shape)
         return Y, free_coeffs_to_state(modal, sol)
 
     def _x0_closed_form(self, modal: Modal, CV: np.ndarray, E: np.ndarray, P: np.ndarray,
-                        Y: FloatArray) -> FloatArray | None:
+                        Y: FloatArray | None) -> FloatArray | None:
         """Least-squares modal initial coefficients from closed-form normal equations.
 
-        Returns ``None`` when the Gram matrix is ill-conditioned (the caller then solves
-        the explicit least-squares problem).
+        ``Y`` is the response without the free part (``None``: zero). Returns ``None`` when
+        the Gram matrix is singular or ill-conditioned (the caller then solves the explicit
+        least-squares problem).
         """
         mm = modal.lam.size
         pairs = np.flatnonzero(modal.fac == 2.0)
         modes = np.concatenate([np.arange(mm), pairs])
         alpha = np.concatenate([np.ones(mm), np.full(pairs.size, 1j)])
         Q = CV[:, modes] * alpha  # (p, n): column a's regressor is Re(Q[:, a] * E_mode^k)
-        w2 = self.w ** 2
+        w2 = self._w2
         Eg = E[modes]
         EN = P[-1, modes] * Eg  # E^N
         N = P.shape[0]
@@ -229,7 +246,7 @@ class OutputErrorProblem:
                             EN[:, None] * np.conj(EN)[None, :], N)
         Qw = Q.T * w2
         GtG = 0.5 * np.real((Qw @ Q) * S1 + (Qw @ np.conj(Q)) * S2)
-        R = self.Ymeas - Y
+        R = self.Ymeas if Y is None else self.Ymeas - Y  # Ymeas - 0.0 == Ymeas
         CVw = CV * w2[:, None]
         RCr = R @ CVw.real  # (N, mm) real and imaginary parts of R @ CVw
         RCi = R @ CVw.imag
@@ -237,11 +254,8 @@ class OutputErrorProblem:
         v = (np.einsum("ki,ki->i", Pr, RCr) - np.einsum("ki,ki->i", Pi, RCi)
              + 1j * (np.einsum("ki,ki->i", Pr, RCi) + np.einsum("ki,ki->i", Pi, RCr)))
         GtR = np.real(alpha * v[modes])
-        try:
-            sol = np.linalg.solve(GtG, GtR)
-        except np.linalg.LinAlgError:
-            return None
-        if not np.all(np.isfinite(sol)) or np.linalg.cond(GtG) > 1e12:
+        sol = smalllinalg.solve(GtG, GtR)  # NaN when GtG is singular
+        if not np.isfinite(sol).all() or smalllinalg.cond2(GtG) > 1e12:
             return None
         return sol
 
@@ -337,8 +351,8 @@ def _re_matmul(P: np.ndarray, X: np.ndarray) -> FloatArray:
     the complex product of the same shape crosses its threading threshold; on a loaded
     machine the spinning helper threads cost 5-10x (measured, docs/performance.md).
     """
-    if not np.iscomplexobj(X):
+    if X.dtype.kind != "c":
         return np.real(P) @ X
-    if not np.iscomplexobj(P):
+    if P.dtype.kind != "c":
         return P @ X.real
     return P.real @ X.real - P.imag @ X.imag
