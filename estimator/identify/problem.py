@@ -199,10 +199,10 @@ class OutputErrorProblem:
             nr = len(m.roads)
             r = self.U[:, :nr]
             W = modal_trajectory(modal, h, r, base_x0)
-            Y = _re_matmul(W, CV.T) + r @ (Cm @ modal.Bv).T + self.U @ Dm.T
+            Y = _re_dot(W, CV.T) + r @ (Cm @ modal.Bv).T + self.U @ Dm.T
         elif self._x0_nonzero:
             P = powers(E, N)
-            Y = _re_matmul(P, (CV * (modal.Vinv @ base_x0)).T)
+            Y = _re_dot(P, (CV * (modal.Vinv @ base_x0)).T)
         if not estimate:
             return (Y if Y is not None else np.zeros((N, len(self.channels)))), base_x0
         if P is None:
@@ -214,7 +214,7 @@ class OutputErrorProblem:
                 pairs = modal.fac == 2.0
                 c = sol[:mm].astype(complex)
                 c[pairs] += 1j * sol[mm:]
-                Yx = _re_matmul(P, (CV * c).T)
+                Yx = _re_dot(P, (CV * c).T)
                 # adding the zero response changes no value (0.0 + y == y)
                 return (Yx if Y is None else Y + Yx), free_coeffs_to_state(modal, sol)
         if Y is None:
@@ -247,12 +247,9 @@ class OutputErrorProblem:
         Qw = Q.T * w2
         GtG = 0.5 * np.real((Qw @ Q) * S1 + (Qw @ np.conj(Q)) * S2)
         R = self.Ymeas if Y is None else self.Ymeas - Y  # Ymeas - 0.0 == Ymeas
-        CVw = CV * w2[:, None]
-        RCr = R @ CVw.real  # (N, mm) real and imaginary parts of R @ CVw
-        RCi = R @ CVw.imag
-        Pr, Pi = P.real, P.imag
-        v = (np.einsum("ki,ki->i", Pr, RCr) - np.einsum("ki,ki->i", Pi, RCi)
-             + 1j * (np.einsum("ki,ki->i", Pr, RCi) + np.einsum("ki,ki->i", Pi, RCr)))
+        # v_i = sum_k E_i^k (R @ CVw)[k, i] = sum_j (P^T R)[i, j] CVw[j, i]: one real
+        # product over the samples, (2 mm, p), then small arrays only
+        v = (_t_dot(P, R) * (CV * w2[:, None]).T).sum(axis=1)
         GtR = np.real(alpha * v[modes])
         sol = smalllinalg.solve(GtG, GtR)  # NaN when GtG is singular
         if not np.isfinite(sol).all() or smalllinalg.cond2(GtG) > 1e12:
@@ -306,6 +303,141 @@ class OutputErrorProblem:
         r = self.predict(p).residual * self.w
         return r[self.mask]
 
+    def residual_vectors(self, points: Sequence[Mapping[str, float]]) -> FloatArray:
+        """Residual vectors of several parameter sets at once, shape (k, n_obs).
+
+        Row ``i`` equals :meth:`residual_vector` of ``points[i]`` (to rounding, <= 1e-12
+        relative; tested). On the fast path (uniform grid, no road input, every point's
+        ``A`` diagonalisable with the same pattern of real modes and conjugate pairs, and
+        with ``x0="estimate"`` no missing sample and a well-conditioned projection) the
+        ``k`` evaluations share stacked numpy operations: one ``eig`` and one ``inv`` on
+        the ``(k, n, n)`` stack, one running product for all ``k * m`` modes, batched
+        products. Otherwise the points are evaluated one by one (the same errors raise).
+        For finite-difference Jacobians, whose ``k`` points differ in one parameter each.
+
+        Parameters
+        ----------
+        points : sequence of mapping
+            Parameter sets (SI), each with every parameter of the model.
+
+        Returns
+        -------
+        ndarray, shape (k, n_obs)
+            Weighted residuals of the observed samples (units of the channels times their
+            weights), each row flattened as :meth:`residual_vector`'s.
+        """
+        k = len(points)
+        # a subclass with its own residuals (the monitor's window problem) is evaluated
+        # point by point, through its own path
+        own = (type(self).residual_vector is OutputErrorProblem.residual_vector
+               and type(self).predict is OutputErrorProblem.predict)
+        out = self._stacked_residuals(points) if k > 1 and own else None
+        if out is None:
+            return np.array([self.residual_vector(q) for q in points]).reshape(k, self.n_obs)
+        return out
+
+    def _stacked_residuals(self, points: Sequence[Mapping[str, float]]) -> FloatArray | None:
+        """The fast path of :meth:`residual_vectors`; ``None`` where it does not apply."""
+        m = self.model
+        if self.h is None or self._has_road or (self._estimate and not self._full):
+            return None
+        if not all(np.isfinite(v) for q in points for v in q.values()):
+            return None
+        k = len(points)
+        aff = self.pieces(points[0])
+        mats = [state_matrices(m, q, aff) for q in points]
+        A = np.stack([a for a, _ in mats])
+        ev = smalllinalg.eig(A)
+        if ev is None:
+            return None
+        lam, V = ev
+        Vinv = smalllinalg.inv(V)
+        # modal_form's tests, point by point; one pattern of modes for the whole stack
+        pattern = None
+        for i in range(k):
+            if not np.abs(V[i]).sum(axis=0).max() * np.abs(Vinv[i]).sum(axis=0).max() <= 1e8:
+                return None
+            lim = np.abs(lam[i]).max()
+            tol = 1e-12 * (lim if lim > 1.0 else 1.0)
+            im = lam[i].imag
+            keep = np.flatnonzero(im >= -tol)
+            is_real = np.abs(im[keep]) <= tol
+            n_real = int(is_real.sum())
+            if n_real + 2 * (keep.size - n_real) != lam.shape[1]:
+                return None
+            if lam.dtype.kind == "c" and n_real == lam.shape[1]:
+                return None  # modal_form would have worked in real arithmetic here
+            if pattern is None:
+                pattern = (keep, is_real)
+            elif not (np.array_equal(keep, pattern[0]) and np.array_equal(is_real, pattern[1])):
+                return None
+        if pattern is None:
+            return None
+        keep, is_real = pattern
+        lam = lam[:, keep]
+        Vk = V[:, :, keep]
+        if is_real.any():
+            Vk[:, :, is_real] = Vk[:, :, is_real].real
+        Vinv = Vinv[:, keep]
+        fac = np.where(is_real, 1.0, 2.0)
+        mm = keep.size
+        if self._maps_fixed is not None:
+            Cm = self._maps_fixed[0]
+        else:
+            Cm = np.stack([self._output_maps(a, b)[0] for a, b in mats])
+        CV = (Cm @ Vk) * fac  # (k, p, mm)
+        N = self.t.size
+        E = np.exp(lam * float(self.h))  # (k, mm)
+        P = _stack_powers(E, N)  # (k, N, mm)
+        Y: np.ndarray | None = None
+        if self._x0_nonzero:
+            X = (CV * (Vinv @ self._x0_base)[:, None, :]).transpose(0, 2, 1)
+            Y = _re_dot_stack(P, X)
+        if self._estimate:
+            sol = self._x0_closed_form_stack(fac, CV, E, P, Y)
+            if sol is None:
+                return None
+            pairs = fac == 2.0
+            c = sol[:, :mm].astype(complex)
+            c[:, pairs] += 1j * sol[:, mm:]
+            Yx = _re_dot_stack(P, (CV * c[:, None, :]).transpose(0, 2, 1))
+            Y = Yx if Y is None else Y + Yx
+        if Y is None:
+            Y = np.zeros((k, N, len(self.channels)))
+        r = (self.Ymeas - Y) * self.w
+        if self._full:
+            return r.reshape(k, -1)
+        return r[:, self.mask]
+
+    def _x0_closed_form_stack(self, fac: FloatArray, CV: np.ndarray, E: np.ndarray,
+                              P: np.ndarray, Y: FloatArray | None) -> FloatArray | None:
+        """:meth:`_x0_closed_form` for ``k`` points at once (``CV`` (k, p, mm), ``E`` (k, mm),
+        ``P`` (k, N, mm), ``Y`` (k, N, p) or ``None``); ``None`` if any point needs the
+        explicit least squares."""
+        mm = fac.size
+        pairs = np.flatnonzero(fac == 2.0)
+        modes = np.concatenate([np.arange(mm), pairs])
+        alpha = np.concatenate([np.ones(mm), np.full(pairs.size, 1j)])
+        Q = CV[:, :, modes] * alpha  # (k, p, n)
+        w2 = self._w2
+        Eg = E[:, modes]
+        EN = P[:, -1][:, modes] * Eg
+        N = P.shape[1]
+        S1 = _geometric_sum(Eg[:, :, None] * Eg[:, None, :], EN[:, :, None] * EN[:, None, :], N)
+        S2 = _geometric_sum(Eg[:, :, None] * np.conj(Eg)[:, None, :],
+                            EN[:, :, None] * np.conj(EN)[:, None, :], N)
+        Qw = Q.transpose(0, 2, 1) * w2
+        GtG = 0.5 * np.real((Qw @ Q) * S1 + (Qw @ np.conj(Q)) * S2)
+        R = self.Ymeas if Y is None else self.Ymeas - Y
+        v = (_t_dot_stack(P, R) * (CV * w2[:, None]).transpose(0, 2, 1)).sum(axis=2)
+        GtR = np.real(alpha * v[:, modes])
+        sol = smalllinalg.solve(GtG, GtR)
+        if not np.isfinite(sol).all():
+            return None
+        if any(smalllinalg.cond2(G) > 1e12 for G in GtG):
+            return None
+        return np.asarray(sol, dtype=float)
+
     def normalized_ss(self, p: Mapping[str, float]) -> float:
         """Weighted sum of squares divided by the data's (dimensionless, 1 = no fit)."""
         try:
@@ -344,15 +476,67 @@ def _geometric_sum(q: np.ndarray, qN: np.ndarray, N: int) -> np.ndarray:
     return out
 
 
-def _re_matmul(P: np.ndarray, X: np.ndarray) -> FloatArray:
-    """``Re(P @ X)`` with two real products.
+def _re_dot(P: np.ndarray, X: np.ndarray) -> FloatArray:
+    """``Re(P @ X)`` for a C-contiguous ``P`` (N, m) as one real product.
 
-    Real ``dgemm`` on these tall, thin operands stays single-threaded in OpenBLAS, while
-    the complex product of the same shape crosses its threading threshold; on a loaded
-    machine the spinning helper threads cost 5-10x (measured, docs/performance.md).
+    A complex ``P`` is read as the real (N, 2 m) matrix of its interleaved real and
+    imaginary parts, so ``Re(P @ X) = P_real_view @ [Re X; -Im X]`` (rows interleaved):
+    one BLAS ``dgemm`` on contiguous memory, no copies of the real and imaginary parts.
+    The one-point case of :func:`_re_dot_stack` (the same products, so batched and single
+    evaluations agree bit for bit).
     """
-    if X.dtype.kind != "c":
-        return np.real(P) @ X
+    return _re_dot_stack(P[None], X[None])[0]
+
+
+def _t_dot(P: np.ndarray, R: FloatArray) -> np.ndarray:
+    """``P.T @ R`` for a C-contiguous ``P`` (N, m), real or complex, and real ``R`` (N, p).
+
+    One real product over the samples on ``P``'s interleaved real view (see
+    :func:`_re_dot`); returns (m, p), complex when ``P`` is. The one-point case of
+    :func:`_t_dot_stack`.
+    """
+    return _t_dot_stack(P[None], R)[0]
+
+
+def _stack_powers(E: np.ndarray, N: int) -> np.ndarray:
+    """``E[i]**j`` for ``j = 0..N-1``: (k, N, m) from ``E`` (k, m), as :func:`powers` per row.
+
+    Each point's block is C-contiguous like :func:`powers`' array, so the products on it
+    run exactly as on a single point's (same running product, same BLAS calls).
+    """
+    k, m = E.shape
+    P = np.empty((k, N, m), dtype=np.result_type(E, 1.0))
+    if N == 0:
+        return P
+    P[:, 0] = 1.0
+    if N > 1:
+        P[:, 1:] = E[:, None, :]
+        P[:, 1:].cumprod(axis=1, out=P[:, 1:])
+    return P
+
+
+def _re_dot_stack(P: np.ndarray, X: np.ndarray) -> FloatArray:
+    """``Re(P[i] @ X[i])`` for every ``i``: ``P`` (k, N, m) C-contiguous, ``X`` (k, m, p).
+
+    The stacked form of :func:`_re_dot` (one ``dgemm`` per point on the interleaved real
+    view of its block); returns (k, N, p).
+    """
+    k, N, m = P.shape
     if P.dtype.kind != "c":
-        return P @ X.real
-    return P.real @ X.real - P.imag @ X.imag
+        return np.matmul(P, X.real)
+    p = X.shape[2]
+    Xs = np.empty((k, 2 * m, p))
+    Xs[:, 0::2] = X.real
+    Xs[:, 1::2] = -X.imag if X.dtype.kind == "c" else 0.0
+    return np.matmul(P.view(np.float64), Xs)
+
+
+def _t_dot_stack(P: np.ndarray, R: FloatArray) -> np.ndarray:
+    """``P[i].T @ R[i]`` for every ``i`` (``R`` (N, p) shared or (k, N, p)): (k, m, p).
+
+    The stacked form of :func:`_t_dot`.
+    """
+    if P.dtype.kind != "c":
+        return np.matmul(P.transpose(0, 2, 1), R)
+    M = np.matmul(P.view(np.float64).transpose(0, 2, 1), R)  # (k, 2 m, p)
+    return M[:, 0::2] + 1j * M[:, 1::2]

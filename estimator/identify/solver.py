@@ -245,15 +245,29 @@ def _lm_polish(problem: OutputErrorProblem, to_params: Callable[[FloatArray], di
 
 def jacobian_log(problem: OutputErrorProblem, p: Mapping[str, float], free: list[str],
                  rel_step: float = 1e-5) -> FloatArray:
-    """Central-difference Jacobian of the residual vector w.r.t. log-parameters."""
-    cols = []
+    """Central-difference Jacobian of the residual vector w.r.t. log-parameters.
+
+    The ``2 n_free`` points are evaluated together
+    (:meth:`~estimator.identify.problem.OutputErrorProblem.residual_vectors`); the result
+    equals the column-by-column differences.
+
+    Returns
+    -------
+    ndarray, shape (n_obs, n_free)
+        ``-d(residual)/d(log theta)`` = ``d(prediction)/d(log theta)`` (channel units),
+        C-contiguous.
+    """
+    if not free:
+        return np.zeros((problem.n_obs, 0))
+    points = []
     for k in free:
         pp, pm = dict(p), dict(p)
         pp[k] = p[k] * math.exp(rel_step)
         pm[k] = p[k] * math.exp(-rel_step)
-        cols.append((problem.residual_vector(pm) - problem.residual_vector(pp)) / (2 * rel_step))
+        points += [pm, pp]
+    R = problem.residual_vectors(points)
     # residual = y - yhat, so -d(residual) = d(yhat)
-    return np.column_stack(cols) if cols else np.zeros((problem.n_obs, 0))
+    return np.ascontiguousarray(((R[0::2] - R[1::2]) / (2 * rel_step)).T)
 
 
 def finish(problem: OutputErrorProblem, params: Parameters, p_hat: Mapping[str, float],
