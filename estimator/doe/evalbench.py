@@ -20,6 +20,7 @@ another version's package (``PYTHONPATH=DIR python estimator/doe/evalbench.py``)
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import statistics
@@ -96,7 +97,7 @@ def main(argv: list[str] | None = None) -> int:
     res = {}
     cases = _cases()
     timed: list[tuple[str, Callable[[], object], int]] = [
-        (label, (lambda prob=prob, p=p: prob.normalized_ss(p)), args.repeat)  # type: ignore[misc]
+        (label, functools.partial(prob.normalized_ss, p), args.repeat)
         for label, prob, p in cases]
     if not args.no_jacobian:
         rep = max(args.repeat // 10, 1)
@@ -105,9 +106,9 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             short = label.split(",")[0] + "," + label.split(",")[1]
             timed.append((f"{short}: Jacobian ({2 * len(p)} ev.), one by one",
-                          (lambda prob=prob, p=p: _jacobian_one_by_one(prob, p)), rep))
+                          functools.partial(_jacobian_one_by_one, prob, p), rep))
             timed.append((f"{short}: Jacobian ({2 * len(p)} ev.), jacobian_log",
-                          (lambda prob=prob, p=p: jacobian_log(prob, p, list(p))), rep))
+                          functools.partial(jacobian_log, prob, p, list(p)), rep))
     for label, fn, repeat in timed:
         res[label] = _time(fn, repeat, args.rounds)
         if not args.json:
