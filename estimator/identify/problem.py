@@ -34,6 +34,12 @@ from suspid.simulate import (Modal, free_coeffs_to_state, free_response_basis, m
 
 COSTS = ("sse", "frobenius")
 
+#: most modal powers (points x samples x modes) one stacked evaluation holds (~0.8 MB)
+_STACK_ENTRIES = 50000
+#: most points one stacked evaluation holds: beyond 4 the per-point time rose again on a
+#: shared two-core machine (docs/performance.md)
+_STACK_POINTS = 4
+
 
 @dataclass
 class Prediction:
@@ -335,10 +341,28 @@ class OutputErrorProblem:
         # point by point, through its own path
         own = (type(self).residual_vector is OutputErrorProblem.residual_vector
                and type(self).predict is OutputErrorProblem.predict)
-        out = self._stacked_residuals(points) if k > 1 and own else None
-        if out is None:
-            return np.array([self.residual_vector(q) for q in points]).reshape(k, self.n_obs)
-        return out
+        size = self.batch_size()
+        R = np.empty((k, self.n_obs))
+        for i in range(0, k, size):
+            chunk = points[i:i + size]
+            out = self._stacked_residuals(chunk) if len(chunk) > 1 and own else None
+            if out is not None:
+                R[i:i + len(chunk)] = out
+            else:
+                for j, q in enumerate(chunk):
+                    R[i + j] = self.residual_vector(q)
+        return R
+
+    def batch_size(self) -> int:
+        """Most points :meth:`residual_vectors` stacks at once.
+
+        At most :data:`_STACK_POINTS`, and fewer when their powers (points x samples x
+        modes) would exceed :data:`_STACK_ENTRIES`: a larger stack leaves the cache and is
+        slower per point than one evaluation after another (measured,
+        ``python -m estimator.doe.evalbench``).
+        """
+        per_point = self.t.size * max(self.model.n_states // 2, 1)
+        return max(1, min(_STACK_POINTS, _STACK_ENTRIES // max(per_point, 1)))
 
     def _stacked_residuals(self, points: Sequence[Mapping[str, float]]) -> FloatArray | None:
         """The fast path of :meth:`residual_vectors`; ``None`` where it does not apply."""

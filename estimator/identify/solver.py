@@ -265,9 +265,15 @@ def jacobian_log(problem: OutputErrorProblem, p: Mapping[str, float], free: list
         pp[k] = p[k] * math.exp(rel_step)
         pm[k] = p[k] * math.exp(-rel_step)
         points += [pm, pp]
-    R = problem.residual_vectors(points)
-    # residual = y - yhat, so -d(residual) = d(yhat)
-    return np.ascontiguousarray(((R[0::2] - R[1::2]) / (2 * rel_step)).T)
+    # residual = y - yhat, so -d(residual) = d(yhat); a few columns at a time (a stack of
+    # every point's residuals would be megabytes of fresh memory)
+    J = np.empty((problem.n_obs, len(free)))
+    step = max(2, problem.batch_size() // 2 * 2)  # whole pairs
+    for start in range(0, len(points), step):
+        R = problem.residual_vectors(points[start:start + step])
+        for i in range(0, R.shape[0], 2):
+            J[:, (start + i) // 2] = (R[i] - R[i + 1]) / (2 * rel_step)
+    return J
 
 
 def finish(problem: OutputErrorProblem, params: Parameters, p_hat: Mapping[str, float],
