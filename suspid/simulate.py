@@ -246,9 +246,8 @@ def powers(E: np.ndarray, N: int) -> np.ndarray:
     if N == 0:
         return P
     P[0] = 1.0
-    if N > 1:
-        P[1:] = E
-        P[1:].cumprod(axis=0, out=P[1:])
+    if N > 1:  # running product read straight from a broadcast E (no filled copy)
+        np.multiply.accumulate(np.broadcast_to(E, (N - 1, E.size)), axis=0, out=P[1:])
     return P
 
 
