@@ -26,6 +26,7 @@ from typing import Mapping
 
 import numpy as np
 
+from suspid import smalllinalg
 from suspid.errors import UsageError
 from suspid.models.base import AffinePieces, FloatArray, SuspensionModel
 
@@ -123,14 +124,13 @@ def modal_form(model: SuspensionModel, p: Mapping[str, float],
     nr = len(model.roads)
     Br, Bv = B[:, :nr], B[:, nr:]
     Bz = A @ Bv + Br
-    try:
-        lam, V = np.linalg.eig(A)
-        Vinv = np.linalg.inv(V)
-    except np.linalg.LinAlgError:
+    ev = smalllinalg.eig(A)  # None: non-finite A or no convergence
+    if ev is None:
         return None
+    lam, V = ev
+    Vinv = smalllinalg.inv(V)  # NaN when V is singular: fails the test below
     # 1-norm condition number of V (max column sums), without np.linalg.norm's overhead
-    if (not np.isfinite(lam).all()
-            or np.abs(V).sum(axis=0).max() * np.abs(Vinv).sum(axis=0).max() > 1e8):
+    if not np.abs(V).sum(axis=0).max() * np.abs(Vinv).sum(axis=0).max() <= 1e8:
         return None
     lim = np.abs(lam).max()
     tol = 1e-12 * (lim if lim > 1.0 else 1.0)
@@ -246,9 +246,8 @@ def powers(E: np.ndarray, N: int) -> np.ndarray:
     if N == 0:
         return P
     P[0] = 1.0
-    if N > 1:
-        P[1:] = E
-        np.cumprod(P[1:], axis=0, out=P[1:])
+    if N > 1:  # running product read straight from a broadcast E (no filled copy)
+        np.multiply.accumulate(np.broadcast_to(E, (N - 1, E.size)), axis=0, out=P[1:])
     return P
 
 

@@ -2,7 +2,7 @@
 
 Usage::
 
-    python -m estimator.doe.evalbench [--repeat 300]
+    python -m estimator.doe.evalbench [--repeat 300] [--no-jacobian]
 
 Cases: ``half4`` and ``quarter2`` free responses (DoE row 14, 20 s at 100 Hz = 2001
 samples, positions + velocities) with the initial state known or estimated (variable
@@ -10,19 +10,27 @@ projection), and the seed's Table 1 quarter car over the speed bump (3 s at 1 kH
 samples, initial state estimated: what ``suspid identify`` runs). Prints the median wall
 and CPU time per evaluation in microseconds; the process's own CPU time is what the
 machine's load does not distort.
+
+Then, per free-response case, the central-difference Jacobian of the residual vector in
+every parameter (``2 n`` evaluations) two ways: one evaluation after another
+(``residual_vector`` per point) and :func:`~estimator.identify.jacobian_log` (batched where
+the version has it), in microseconds per Jacobian. The file also runs as a script against
+another version's package (``PYTHONPATH=DIR python estimator/doe/evalbench.py``).
 """
 from __future__ import annotations
 
 import argparse
+import functools
 import json
+import math
 import statistics
 import time
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
 from estimator.doe.design import experiments
-from estimator.identify import OutputErrorProblem
+from estimator.identify import OutputErrorProblem, jacobian_log
 from suspid.excitation import make_scenario
 from suspid.io.csvio import Measurement
 from suspid.models import get_model
@@ -54,25 +62,57 @@ def _cases() -> list[tuple[str, Any, dict[str, float]]]:
     return out
 
 
+def _jacobian_one_by_one(problem: OutputErrorProblem, p: dict[str, float],
+                         rel_step: float = 1e-5) -> Any:
+    """Central differences in every log-parameter, one ``residual_vector`` at a time."""
+    cols = []
+    for k in p:
+        pp, pm = dict(p), dict(p)
+        pp[k] = p[k] * math.exp(rel_step)
+        pm[k] = p[k] * math.exp(-rel_step)
+        cols.append((problem.residual_vector(pm) - problem.residual_vector(pp)) / (2 * rel_step))
+    return np.column_stack(cols)
+
+
+def _time(fn: Callable[[], object], repeat: int, rounds: int) -> dict[str, float]:
+    """Median wall and CPU time (us) per call of ``fn`` over ``rounds`` x ``repeat`` calls."""
+    walls, cpus = [], []
+    fn()
+    for _ in range(rounds):
+        w, c = time.perf_counter(), time.process_time()
+        for _ in range(repeat):
+            fn()
+        walls.append((time.perf_counter() - w) / repeat * 1e6)
+        cpus.append((time.process_time() - c) / repeat * 1e6)
+    return {"wall_us": statistics.median(walls), "cpu_us": statistics.median(cpus)}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeat", type=int, default=300)
     ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--no-jacobian", action="store_true", help="only the single evaluations")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     res = {}
-    for label, prob, p in _cases():
-        walls, cpus = [], []
-        prob.normalized_ss(p)
-        for _ in range(args.rounds):
-            w, c = time.perf_counter(), time.process_time()
-            for _ in range(args.repeat):
-                prob.normalized_ss(p)
-            walls.append((time.perf_counter() - w) / args.repeat * 1e6)
-            cpus.append((time.process_time() - c) / args.repeat * 1e6)
-        res[label] = {"wall_us": statistics.median(walls), "cpu_us": statistics.median(cpus)}
+    cases = _cases()
+    timed: list[tuple[str, Callable[[], object], int]] = [
+        (label, functools.partial(prob.normalized_ss, p), args.repeat)
+        for label, prob, p in cases]
+    if not args.no_jacobian:
+        rep = max(args.repeat // 10, 1)
+        for label, prob, p in cases:
+            if "free response" not in label:
+                continue
+            short = label.split(",")[0] + "," + label.split(",")[1]
+            timed.append((f"{short}: Jacobian ({2 * len(p)} ev.), one by one",
+                          functools.partial(_jacobian_one_by_one, prob, p), rep))
+            timed.append((f"{short}: Jacobian ({2 * len(p)} ev.), jacobian_log",
+                          functools.partial(jacobian_log, prob, p, list(p)), rep))
+    for label, fn, repeat in timed:
+        res[label] = _time(fn, repeat, args.rounds)
         if not args.json:
-            print(f"{label:>62}: {res[label]['wall_us']:8.0f} us wall {res[label]['cpu_us']:8.0f} us CPU",
+            print(f"{label:>72}: {res[label]['wall_us']:8.0f} us wall {res[label]['cpu_us']:8.0f} us CPU",
                   flush=True)
     if args.json:
         print(json.dumps(res, indent=1))

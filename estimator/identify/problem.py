@@ -24,6 +24,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from suspid import smalllinalg
 from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
 from suspid.models.base import AffinePieces, FloatArray, SuspensionModel
@@ -32,6 +33,12 @@ from suspid.simulate import (Modal, free_coeffs_to_state, free_response_basis, m
                              state_matrices, uniform_step)
 
 COSTS = ("sse", "frobenius")
+
+#: most modal powers (points x samples x modes) one stacked evaluation holds (~0.8 MB)
+_STACK_ENTRIES = 50000
+#: most points one stacked evaluation holds: beyond 4 the per-point time rose again on a
+#: shared two-core machine (docs/performance.md)
+_STACK_POINTS = 4
 
 
 @dataclass
@@ -132,9 +139,26 @@ class OutputErrorProblem:
         self.scale = data_ss if data_ss > 0 else 1.0
         self._kind = channel_kinds(m.coords, self.channels)
         self._nq = len(m.coords)
+        # what depends on the data alone, not on the parameters (the hot path's constants)
+        self._estimate = isinstance(self.x0, str) and self.x0 == "estimate"
+        self._x0_base = (np.zeros(m.n_states) if isinstance(self.x0, str)
+                         else np.asarray(self.x0, dtype=float))
+        self._x0_nonzero = bool(np.any(self._x0_base))
+        # with no acceleration channel the output maps do not depend on the parameters
+        self._maps_fixed: tuple[FloatArray, FloatArray] | None = None
+        if all(order < 2 for _, order in self._kind):
+            self._maps_fixed = output_maps(self._kind, np.zeros((m.n_states, m.n_states)),
+                                     np.zeros((m.n_states, 2 * len(m.roads))), self._nq)
+        self._w2 = w ** 2
+        # weights and mask as flat (N p,) rows: an elementwise product with a broadcast
+        # (p,) row runs one short inner loop per sample, 3-4x slower
+        self._w_flat = np.tile(w, self.t.size)
+        self._mask_flat = self.mask.reshape(-1)
 
     # ---- linear maps from states to channels --------------------------------------
     def _output_maps(self, A: FloatArray, B: FloatArray) -> tuple[FloatArray, FloatArray]:
+        if self._maps_fixed is not None:
+            return self._maps_fixed
         return output_maps(self._kind, A, B, self._nq)
 
     def pieces(self, p: Mapping[str, float]) -> AffinePieces | None:
@@ -172,26 +196,25 @@ class OutputErrorProblem:
         ``(N, p, n)`` regressor array is built.
         """
         m = self.model
-        nr = len(m.roads)
         N = self.t.size
         h = float(h)
         Cm, Dm = self._output_maps(modal.A, modal.B)
         CV = (Cm @ modal.V) * modal.fac  # (p, mm)
-        estimate = isinstance(self.x0, str) and self.x0 == "estimate"
-        base_x0 = self._base_x0()
+        estimate = self._estimate
+        base_x0 = self._x0_base
         E = np.exp(modal.lam * h)
         P: np.ndarray | None = None  # powers of E, built once and only where needed
+        Y: FloatArray | None = None  # None: the zero response (no road, x0 at rest)
         if self._has_road:
+            nr = len(m.roads)
             r = self.U[:, :nr]
             W = modal_trajectory(modal, h, r, base_x0)
-            Y = _re_matmul(W, CV.T) + r @ (Cm @ modal.Bv).T + self.U @ Dm.T
-        elif np.any(base_x0):
+            Y = _re_dot(W, CV.T) + r @ (Cm @ modal.Bv).T + self.U @ Dm.T
+        elif self._x0_nonzero:
             P = powers(E, N)
-            Y = _re_matmul(P, (CV * (modal.Vinv @ base_x0)).T)
-        else:
-            Y = np.zeros((N, len(self.channels)))
+            Y = _re_dot(P, (CV * (modal.Vinv @ base_x0)).T)
         if not estimate:
-            return Y, base_x0
+            return (Y if Y is not None else np.zeros((N, len(self.channels)))), base_x0
         if P is None:
             P = powers(E, N)
         if self._full:
@@ -201,26 +224,30 @@ class OutputErrorProblem:
                 pairs = modal.fac == 2.0
                 c = sol[:mm].astype(complex)
                 c[pairs] += 1j * sol[mm:]
-                Y = Y + _re_matmul(P, (CV * c).T)
-                return Y, free_coeffs_to_state(modal, sol)
+                Yx = _re_dot(P, (CV * c).T)
+                # adding the zero response changes no value (0.0 + y == y)
+                return (Yx if Y is None else Y + Yx), free_coeffs_to_state(modal, sol)
+        if Y is None:
+            Y = np.zeros((N, len(self.channels)))
         G = free_response_basis(modal, h, N, Cm, P)
         sol = self._solve_x0(G, Y)
         Y = Y + G.reshape(-1, G.shape[2]).dot(sol).reshape(Y.shape)
         return Y, free_coeffs_to_state(modal, sol)
 
     def _x0_closed_form(self, modal: Modal, CV: np.ndarray, E: np.ndarray, P: np.ndarray,
-                        Y: FloatArray) -> FloatArray | None:
+                        Y: FloatArray | None) -> FloatArray | None:
         """Least-squares modal initial coefficients from closed-form normal equations.
 
-        Returns ``None`` when the Gram matrix is ill-conditioned (the caller then solves
-        the explicit least-squares problem).
+        ``Y`` is the response without the free part (``None``: zero). Returns ``None`` when
+        the Gram matrix is singular or ill-conditioned (the caller then solves the explicit
+        least-squares problem).
         """
         mm = modal.lam.size
         pairs = np.flatnonzero(modal.fac == 2.0)
         modes = np.concatenate([np.arange(mm), pairs])
         alpha = np.concatenate([np.ones(mm), np.full(pairs.size, 1j)])
         Q = CV[:, modes] * alpha  # (p, n): column a's regressor is Re(Q[:, a] * E_mode^k)
-        w2 = self.w ** 2
+        w2 = self._w2
         Eg = E[modes]
         EN = P[-1, modes] * Eg  # E^N
         N = P.shape[0]
@@ -229,19 +256,13 @@ class OutputErrorProblem:
                             EN[:, None] * np.conj(EN)[None, :], N)
         Qw = Q.T * w2
         GtG = 0.5 * np.real((Qw @ Q) * S1 + (Qw @ np.conj(Q)) * S2)
-        R = self.Ymeas - Y
-        CVw = CV * w2[:, None]
-        RCr = R @ CVw.real  # (N, mm) real and imaginary parts of R @ CVw
-        RCi = R @ CVw.imag
-        Pr, Pi = P.real, P.imag
-        v = (np.einsum("ki,ki->i", Pr, RCr) - np.einsum("ki,ki->i", Pi, RCi)
-             + 1j * (np.einsum("ki,ki->i", Pr, RCi) + np.einsum("ki,ki->i", Pi, RCr)))
+        R = self.Ymeas if Y is None else self.Ymeas - Y  # Ymeas - 0.0 == Ymeas
+        # v_i = sum_k E_i^k (R @ CVw)[k, i] = sum_j (P^T R)[i, j] CVw[j, i]: one real
+        # product over the samples, (2 mm, p), then small arrays only
+        v = (_t_dot(P, R) * (CV * w2[:, None]).T).sum(axis=1)
         GtR = np.real(alpha * v[modes])
-        try:
-            sol = np.linalg.solve(GtG, GtR)
-        except np.linalg.LinAlgError:
-            return None
-        if not np.all(np.isfinite(sol)) or np.linalg.cond(GtG) > 1e12:
+        sol = smalllinalg.solve(GtG, GtR)  # NaN when GtG is singular
+        if not np.isfinite(sol).all() or smalllinalg.cond2(GtG) > 1e12:
             return None
         return sol
 
@@ -289,8 +310,163 @@ class OutputErrorProblem:
 
     def residual_vector(self, p: Mapping[str, float]) -> FloatArray:
         """Weighted residuals of the observed samples, flattened (for Jacobians)."""
-        r = self.predict(p).residual * self.w
-        return r[self.mask]
+        r = self.predict(p).residual.reshape(-1) * self._w_flat
+        return r if self._full else r[self._mask_flat]
+
+    def residual_vectors(self, points: Sequence[Mapping[str, float]]) -> FloatArray:
+        """Residual vectors of several parameter sets at once, shape (k, n_obs).
+
+        Row ``i`` equals :meth:`residual_vector` of ``points[i]`` (to rounding, <= 1e-12
+        relative; tested). On the fast path (uniform grid, no road input, every point's
+        ``A`` diagonalisable with the same pattern of real modes and conjugate pairs, and
+        with ``x0="estimate"`` no missing sample and a well-conditioned projection) the
+        ``k`` evaluations share stacked numpy operations: one ``eig`` and one ``inv`` on
+        the ``(k, n, n)`` stack, one running product for all ``k * m`` modes, batched
+        products. Otherwise the points are evaluated one by one (the same errors raise).
+        For finite-difference Jacobians, whose ``k`` points differ in one parameter each.
+
+        Parameters
+        ----------
+        points : sequence of mapping
+            Parameter sets (SI), each with every parameter of the model.
+
+        Returns
+        -------
+        ndarray, shape (k, n_obs)
+            Weighted residuals of the observed samples (units of the channels times their
+            weights), each row flattened as :meth:`residual_vector`'s.
+        """
+        k = len(points)
+        # a subclass with its own residuals (the monitor's window problem) is evaluated
+        # point by point, through its own path
+        own = (type(self).residual_vector is OutputErrorProblem.residual_vector
+               and type(self).predict is OutputErrorProblem.predict)
+        size = self.batch_size()
+        R = np.empty((k, self.n_obs))
+        for i in range(0, k, size):
+            chunk = points[i:i + size]
+            out = self._stacked_residuals(chunk) if len(chunk) > 1 and own else None
+            if out is not None:
+                R[i:i + len(chunk)] = out
+            else:
+                for j, q in enumerate(chunk):
+                    R[i + j] = self.residual_vector(q)
+        return R
+
+    def batch_size(self) -> int:
+        """Most points :meth:`residual_vectors` stacks at once.
+
+        At most :data:`_STACK_POINTS`, and fewer when their powers (points x samples x
+        modes) would exceed :data:`_STACK_ENTRIES`: a larger stack leaves the cache and is
+        slower per point than one evaluation after another. With the initial state known
+        (given or at rest) 1: stacking saved little there (no projection to share) and
+        made the half car's Jacobian ~15 % slower (measured,
+        ``python -m estimator.doe.evalbench``).
+        """
+        if not self._estimate:
+            return 1
+        per_point = self.t.size * max(self.model.n_states // 2, 1)
+        return max(1, min(_STACK_POINTS, _STACK_ENTRIES // max(per_point, 1)))
+
+    def _stacked_residuals(self, points: Sequence[Mapping[str, float]]) -> FloatArray | None:
+        """The fast path of :meth:`residual_vectors`; ``None`` where it does not apply."""
+        m = self.model
+        if self.h is None or self._has_road or (self._estimate and not self._full):
+            return None
+        if not all(np.isfinite(v) for q in points for v in q.values()):
+            return None
+        k = len(points)
+        aff = self.pieces(points[0])
+        mats = [state_matrices(m, q, aff) for q in points]
+        A = np.stack([a for a, _ in mats])
+        ev = smalllinalg.eig(A)
+        if ev is None:
+            return None
+        lam, V = ev
+        Vinv = smalllinalg.inv(V)
+        # modal_form's tests, point by point; one pattern of modes for the whole stack
+        pattern = None
+        for i in range(k):
+            if not np.abs(V[i]).sum(axis=0).max() * np.abs(Vinv[i]).sum(axis=0).max() <= 1e8:
+                return None
+            lim = np.abs(lam[i]).max()
+            tol = 1e-12 * (lim if lim > 1.0 else 1.0)
+            im = lam[i].imag
+            keep = np.flatnonzero(im >= -tol)
+            is_real = np.abs(im[keep]) <= tol
+            n_real = int(is_real.sum())
+            if n_real + 2 * (keep.size - n_real) != lam.shape[1]:
+                return None
+            if lam.dtype.kind == "c" and n_real == lam.shape[1]:
+                return None  # modal_form would have worked in real arithmetic here
+            if pattern is None:
+                pattern = (keep, is_real)
+            elif not (np.array_equal(keep, pattern[0]) and np.array_equal(is_real, pattern[1])):
+                return None
+        if pattern is None:
+            return None
+        keep, is_real = pattern
+        lam = lam[:, keep]
+        Vk = V[:, :, keep]
+        if is_real.any():
+            Vk[:, :, is_real] = Vk[:, :, is_real].real
+        Vinv = Vinv[:, keep]
+        fac = np.where(is_real, 1.0, 2.0)
+        mm = keep.size
+        if self._maps_fixed is not None:
+            Cm = self._maps_fixed[0]
+        else:
+            Cm = np.stack([self._output_maps(a, b)[0] for a, b in mats])
+        CV = (Cm @ Vk) * fac  # (k, p, mm)
+        N = self.t.size
+        E = np.exp(lam * float(self.h))  # (k, mm)
+        P = _stack_powers(E, N)  # (k, N, mm)
+        Y: np.ndarray | None = None
+        if self._x0_nonzero:
+            X = (CV * (Vinv @ self._x0_base)[:, None, :]).transpose(0, 2, 1)
+            Y = _re_dot_stack(P, X)
+        if self._estimate:
+            sol = self._x0_closed_form_stack(fac, CV, E, P, Y)
+            if sol is None:
+                return None
+            pairs = fac == 2.0
+            c = sol[:, :mm].astype(complex)
+            c[:, pairs] += 1j * sol[:, mm:]
+            Yx = _re_dot_stack(P, (CV * c[:, None, :]).transpose(0, 2, 1))
+            Y = Yx if Y is None else Y + Yx
+        if Y is None:
+            Y = np.zeros((k, N, len(self.channels)))
+        r = (self.Ymeas.reshape(1, -1) - Y.reshape(k, -1)) * self._w_flat
+        return r if self._full else r[:, self._mask_flat]
+
+    def _x0_closed_form_stack(self, fac: FloatArray, CV: np.ndarray, E: np.ndarray,
+                              P: np.ndarray, Y: FloatArray | None) -> FloatArray | None:
+        """:meth:`_x0_closed_form` for ``k`` points at once (``CV`` (k, p, mm), ``E`` (k, mm),
+        ``P`` (k, N, mm), ``Y`` (k, N, p) or ``None``); ``None`` if any point needs the
+        explicit least squares."""
+        mm = fac.size
+        pairs = np.flatnonzero(fac == 2.0)
+        modes = np.concatenate([np.arange(mm), pairs])
+        alpha = np.concatenate([np.ones(mm), np.full(pairs.size, 1j)])
+        Q = CV[:, :, modes] * alpha  # (k, p, n)
+        w2 = self._w2
+        Eg = E[:, modes]
+        EN = P[:, -1][:, modes] * Eg
+        N = P.shape[1]
+        S1 = _geometric_sum(Eg[:, :, None] * Eg[:, None, :], EN[:, :, None] * EN[:, None, :], N)
+        S2 = _geometric_sum(Eg[:, :, None] * np.conj(Eg)[:, None, :],
+                            EN[:, :, None] * np.conj(EN)[:, None, :], N)
+        Qw = Q.transpose(0, 2, 1) * w2
+        GtG = 0.5 * np.real((Qw @ Q) * S1 + (Qw @ np.conj(Q)) * S2)
+        R = self.Ymeas if Y is None else self.Ymeas - Y
+        v = (_t_dot_stack(P, R) * (CV * w2[:, None]).transpose(0, 2, 1)).sum(axis=2)
+        GtR = np.real(alpha * v[:, modes])
+        sol = smalllinalg.solve(GtG, GtR)
+        if not np.isfinite(sol).all():
+            return None
+        if any(smalllinalg.cond2(G) > 1e12 for G in GtG):
+            return None
+        return np.asarray(sol, dtype=float)
 
     def normalized_ss(self, p: Mapping[str, float]) -> float:
         """Weighted sum of squares divided by the data's (dimensionless, 1 = no fit)."""
@@ -330,15 +506,67 @@ def _geometric_sum(q: np.ndarray, qN: np.ndarray, N: int) -> np.ndarray:
     return out
 
 
-def _re_matmul(P: np.ndarray, X: np.ndarray) -> FloatArray:
-    """``Re(P @ X)`` with two real products.
+def _re_dot(P: np.ndarray, X: np.ndarray) -> FloatArray:
+    """``Re(P @ X)`` for a C-contiguous ``P`` (N, m) as one real product.
 
-    Real ``dgemm`` on these tall, thin operands stays single-threaded in OpenBLAS, while
-    the complex product of the same shape crosses its threading threshold; on a loaded
-    machine the spinning helper threads cost 5-10x (measured, docs/performance.md).
+    A complex ``P`` is read as the real (N, 2 m) matrix of its interleaved real and
+    imaginary parts, so ``Re(P @ X) = P_real_view @ [Re X; -Im X]`` (rows interleaved):
+    one BLAS ``dgemm`` on contiguous memory, no copies of the real and imaginary parts.
+    The one-point case of :func:`_re_dot_stack` (the same products, so batched and single
+    evaluations agree bit for bit).
     """
-    if not np.iscomplexobj(X):
-        return np.real(P) @ X
-    if not np.iscomplexobj(P):
-        return P @ X.real
-    return P.real @ X.real - P.imag @ X.imag
+    return _re_dot_stack(P[None], X[None])[0]
+
+
+def _t_dot(P: np.ndarray, R: FloatArray) -> np.ndarray:
+    """``P.T @ R`` for a C-contiguous ``P`` (N, m), real or complex, and real ``R`` (N, p).
+
+    One real product over the samples on ``P``'s interleaved real view (see
+    :func:`_re_dot`); returns (m, p), complex when ``P`` is. The one-point case of
+    :func:`_t_dot_stack`.
+    """
+    return _t_dot_stack(P[None], R)[0]
+
+
+def _stack_powers(E: np.ndarray, N: int) -> np.ndarray:
+    """``E[i]**j`` for ``j = 0..N-1``: (k, N, m) from ``E`` (k, m), as :func:`powers` per row.
+
+    Each point's block is C-contiguous like :func:`powers`' array, so the products on it
+    run exactly as on a single point's (same running product, same BLAS calls).
+    """
+    k, m = E.shape
+    P = np.empty((k, N, m), dtype=np.result_type(E, 1.0))
+    if N == 0:
+        return P
+    P[:, 0] = 1.0
+    if N > 1:
+        np.multiply.accumulate(np.broadcast_to(E[:, None, :], (k, N - 1, m)), axis=1,
+                               out=P[:, 1:])
+    return P
+
+
+def _re_dot_stack(P: np.ndarray, X: np.ndarray) -> FloatArray:
+    """``Re(P[i] @ X[i])`` for every ``i``: ``P`` (k, N, m) C-contiguous, ``X`` (k, m, p).
+
+    The stacked form of :func:`_re_dot` (one ``dgemm`` per point on the interleaved real
+    view of its block); returns (k, N, p).
+    """
+    k, N, m = P.shape
+    if P.dtype.kind != "c":
+        return np.matmul(P, X.real)
+    p = X.shape[2]
+    Xs = np.empty((k, 2 * m, p))
+    Xs[:, 0::2] = X.real
+    Xs[:, 1::2] = -X.imag if X.dtype.kind == "c" else 0.0
+    return np.matmul(P.view(np.float64), Xs)
+
+
+def _t_dot_stack(P: np.ndarray, R: FloatArray) -> np.ndarray:
+    """``P[i].T @ R[i]`` for every ``i`` (``R`` (N, p) shared or (k, N, p)): (k, m, p).
+
+    The stacked form of :func:`_t_dot`.
+    """
+    if P.dtype.kind != "c":
+        return np.matmul(P.transpose(0, 2, 1), R)
+    M = np.matmul(P.view(np.float64).transpose(0, 2, 1), R)  # (k, 2 m, p)
+    return M[:, 0::2] + 1j * M[:, 1::2]

@@ -108,6 +108,34 @@ class _Cost:
             return None
         return r if np.all(np.isfinite(r)) else None
 
+    def resids(self, us: list[FloatArray]) -> list[FloatArray] | None:
+        """Residuals at every ``u`` of ``us`` (evaluated together), or ``None`` as soon as
+        one is unavailable: what calling :meth:`resid` on each in turn gives, ``nfev``
+        included."""
+        n = next((i for i, u in enumerate(us) if not np.all(np.abs(u) < 30)), len(us))
+        qs = []
+        for u in us[:n]:
+            q = dict(self.p)
+            q.update(zip(self.free, self.theta * np.exp(u)))
+            qs.append(q)
+        try:
+            R = self.problem.residual_vectors(qs) if qs else np.empty((0, 0))
+        except (np.linalg.LinAlgError, ValueError, FloatingPointError):
+            rows: list[FloatArray] = []  # one by one: the same errors, the same count
+            for u in us:
+                r = self.resid(u)
+                if r is None:
+                    return None
+                rows.append(r)
+            return rows
+        rows = []
+        for r in R:
+            self.nfev += 1
+            if not np.all(np.isfinite(r)):
+                return None
+            rows.append(r)
+        return rows if n == len(us) else None
+
     def ss(self, u: FloatArray) -> float:
         r = self.resid(u)
         return math.inf if r is None else float(r @ r)
@@ -115,14 +143,20 @@ class _Cost:
 
 def _fd_jacobian(cost: _Cost, u: FloatArray, r: FloatArray, others: list[int],
                  h: float = 1e-6) -> FloatArray | None:
-    """Forward-difference Jacobian of the residual in the coordinates ``others``."""
-    J = np.empty((r.size, len(others)))
-    for j, i in enumerate(others):
+    """Forward-difference Jacobian of the residual in the coordinates ``others``.
+
+    The shifted points are evaluated together (:meth:`_Cost.resids`).
+    """
+    ups = []
+    for i in others:
         up = u.copy()
         up[i] += h
-        rp = cost.resid(up)
-        if rp is None:
-            return None
+        ups.append(up)
+    rows = cost.resids(ups)
+    if rows is None:
+        return None
+    J = np.empty((r.size, len(others)))
+    for j, rp in enumerate(rows):
         J[:, j] = (rp - r) / h
     return J
 

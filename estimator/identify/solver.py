@@ -245,15 +245,35 @@ def _lm_polish(problem: OutputErrorProblem, to_params: Callable[[FloatArray], di
 
 def jacobian_log(problem: OutputErrorProblem, p: Mapping[str, float], free: list[str],
                  rel_step: float = 1e-5) -> FloatArray:
-    """Central-difference Jacobian of the residual vector w.r.t. log-parameters."""
-    cols = []
+    """Central-difference Jacobian of the residual vector w.r.t. log-parameters.
+
+    The ``2 n_free`` points are evaluated together
+    (:meth:`~estimator.identify.problem.OutputErrorProblem.residual_vectors`); the result
+    equals the column-by-column differences.
+
+    Returns
+    -------
+    ndarray, shape (n_obs, n_free)
+        ``-d(residual)/d(log theta)`` = ``d(prediction)/d(log theta)`` (channel units),
+        C-contiguous.
+    """
+    if not free:
+        return np.zeros((problem.n_obs, 0))
+    points = []
     for k in free:
         pp, pm = dict(p), dict(p)
         pp[k] = p[k] * math.exp(rel_step)
         pm[k] = p[k] * math.exp(-rel_step)
-        cols.append((problem.residual_vector(pm) - problem.residual_vector(pp)) / (2 * rel_step))
-    # residual = y - yhat, so -d(residual) = d(yhat)
-    return np.column_stack(cols) if cols else np.zeros((problem.n_obs, 0))
+        points += [pm, pp]
+    # residual = y - yhat, so -d(residual) = d(yhat); a few columns at a time (a stack of
+    # every point's residuals would be megabytes of fresh memory)
+    J = np.empty((problem.n_obs, len(free)))
+    step = max(2, problem.batch_size() // 2 * 2)  # whole pairs
+    for start in range(0, len(points), step):
+        R = problem.residual_vectors(points[start:start + step])
+        for i in range(0, R.shape[0], 2):
+            J[:, (start + i) // 2] = (R[i] - R[i + 1]) / (2 * rel_step)
+    return J
 
 
 def finish(problem: OutputErrorProblem, params: Parameters, p_hat: Mapping[str, float],

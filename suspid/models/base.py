@@ -192,11 +192,17 @@ class AffinePieces:
     exact: bool
     Minv: FloatArray | None = None
     _flat: FloatArray = field(init=False, repr=False, compare=False)
+    _A0: FloatArray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         # the slopes as one (n_free, nq * (2 nq + 2 nr)) matrix: accel_rows is one product
         object.__setattr__(self, "_flat", np.ascontiguousarray(
             self.dAB.reshape(self.dAB.shape[0], -1)))
+        # the state matrix's kinematic rows [0 | I], copied and filled per parameter set
+        nq = self.AB0.shape[0]
+        A0 = np.zeros((2 * nq, 2 * nq))
+        A0[:nq, nq:] = np.eye(nq)
+        object.__setattr__(self, "_A0", A0)
 
     @property
     def nq(self) -> int:
@@ -223,11 +229,10 @@ class AffinePieces:
 
     def state_space(self, theta: FloatArray) -> tuple[FloatArray, FloatArray]:
         """``(A, B)`` at free parameters ``theta``, as :meth:`SuspensionModel.state_space`."""
-        AB = self.accel_rows(theta)
+        AB = self.AB0 + (np.asarray(theta, dtype=float) @ self._flat).reshape(self.AB0.shape)
         nq = AB.shape[0]
         n = 2 * nq
-        A = np.zeros((n, n))
-        A[:nq, nq:] = np.eye(nq)
+        A = self._A0.copy()
         A[nq:] = AB[:, :n]
         B = np.zeros((n, AB.shape[1] - n))
         B[nq:] = AB[:, n:]
