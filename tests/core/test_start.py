@@ -3,6 +3,7 @@ the monitor's cold window; results at an absurd place are never reported as a su
 from __future__ import annotations
 
 import copy
+from typing import Any
 
 import numpy as np
 import pytest
@@ -458,24 +459,32 @@ def test_a_fit_that_leaves_more_than_noise_tries_the_rescaled_start(
     was reported a success. The rescaled start runs as well and its fit, in the truth's
     basin, wins with the truth inside every band."""
     _least_squares_estimate(monkeypatch)
-    m = get_model("half4")
-    e = experiments(m)[3]
-    settings = Settings(cost="sse", init_scale=10.0, noise=0.5)
-    meas, _ = measurement(m, e, 0.5, settings.seed + e.id)
-    params = start_parameters(m, e, settings)
-    rng = np.random.default_rng(2)
-    for k in params.free:
-        params[k].value *= float(np.exp(rng.normal(0.0, 0.3)))
-    problem = OutputErrorProblem(m, meas, x0=e.x0)
-    direct = Settings(cost="sse", init_scale=10.0, noise=0.5, stages=(1.0,))
-    res = fit_from_starts(problem, params, lambda s: identify_staged(
-        m, meas, e.x0, s, settings if s is params else direct))
+    e, params, res = _scattered_half4_row4(sd=0.3, seed=2)
     assert res.starts is not None
     chosen = [s["start"] for s in res.starts if s.get("chosen")]
     assert chosen == ["scaled"]
     assert res.success is True and res.bands is not None
     for k in params.free:
         assert res.bands[k][0] <= e.truth[k] <= res.bands[k][1], k
+
+
+def _scattered_half4_row4(sd: float, seed: int) -> tuple[Any, Parameters, IdentResult]:
+    """half4 sse row 4 at 0.5 sigma from 10x, every start value further scattered by a
+    log-normal factor (``sd``, ``numpy`` seed ``seed``): the experiment, the start and the
+    fit from it."""
+    m = get_model("half4")
+    e = experiments(m)[3]
+    settings = Settings(cost="sse", init_scale=10.0, noise=0.5)
+    meas, _ = measurement(m, e, 0.5, settings.seed + e.id)
+    params = start_parameters(m, e, settings)
+    rng = np.random.default_rng(seed)
+    for k in params.free:
+        params[k].value *= float(np.exp(rng.normal(0.0, sd)))
+    problem = OutputErrorProblem(m, meas, x0=e.x0)
+    direct = Settings(cost="sse", init_scale=10.0, noise=0.5, stages=(1.0,))
+    res = fit_from_starts(problem, params, lambda s: identify_staged(
+        m, meas, e.x0, s, settings if s is params else direct))
+    return e, params, res
 
 
 def _noisy_default_bump(seed: int = 1) -> tuple[OutputErrorProblem, dict[str, float]]:
@@ -607,18 +616,7 @@ def test_a_scattered_far_start_found_from_the_record_alone() -> None:
     local minima and the rescaled start (one factor per kind) does not undo the scatter: the
     fit was flagged with k1 3.8e8x the truth. The noise-compensated estimate starts in the
     truth's basin; its fit is the answer, a success with the truth in every band."""
-    m = get_model("half4")
-    e = experiments(m)[3]
-    settings = Settings(cost="sse", init_scale=10.0, noise=0.5)
-    meas, _ = measurement(m, e, 0.5, settings.seed + e.id)
-    params = start_parameters(m, e, settings)
-    rng = np.random.default_rng(1)
-    for k in params.free:
-        params[k].value *= float(np.exp(rng.normal(0.0, 0.7)))
-    problem = OutputErrorProblem(m, meas, x0=e.x0)
-    direct = Settings(cost="sse", init_scale=10.0, noise=0.5, stages=(1.0,))
-    res = fit_from_starts(problem, params, lambda s: identify_staged(
-        m, meas, e.x0, s, settings if s is params else direct))
+    e, params, res = _scattered_half4_row4(sd=0.7, seed=1)
     assert res.starts is not None
     assert [s["start"] for s in res.starts if s.get("chosen")] == ["data"]
     assert res.success is True and res.bands is not None

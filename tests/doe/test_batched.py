@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from estimator.doe.design import experiments
+from estimator.doe.evalbench import jacobian_one_by_one
 from estimator.doe.runner import measurement
 from estimator.identify import OutputErrorProblem, jacobian_log
 from estimator.identify.profile import _Cost, _fd_jacobian
@@ -14,17 +15,6 @@ from suspid.excitation import make_scenario
 from suspid.io.csvio import Measurement
 from suspid.models import get_model, model_names
 from suspid.simulate import simulate
-
-
-def _jacobian_one_by_one(problem: OutputErrorProblem, p: dict[str, float], free: list[str],
-                         rel_step: float = 1e-5) -> np.ndarray:
-    cols = []
-    for k in free:
-        pp, pm = dict(p), dict(p)
-        pp[k] = p[k] * math.exp(rel_step)
-        pm[k] = p[k] * math.exp(-rel_step)
-        cols.append((problem.residual_vector(pm) - problem.residual_vector(pp)) / (2 * rel_step))
-    return np.column_stack(cols)
 
 
 def _free_response(name: str, missing: bool = False) -> tuple[Measurement, dict[str, float],
@@ -82,7 +72,7 @@ def test_batched_jacobian_equals_one_by_one(name: str, case: str, x0: str) -> No
         scale = np.max(np.abs(one))
         assert np.max(np.abs(batch - one)) <= 1e-12 * scale
         J = jacobian_log(prob, p, free)
-        ref = _jacobian_one_by_one(prob, p, free)
+        ref = jacobian_one_by_one(prob, p, free)
         assert J.flags.c_contiguous
         assert np.max(np.abs(J - ref)) <= 1e-12 * np.max(np.abs(ref))
 
