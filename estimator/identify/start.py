@@ -64,6 +64,9 @@ RANK_TOL = 1e-9
 RATIO_SPAN = 8.0
 #: iterations of each of its BFGS runs
 RATIO_ITER = 200
+#: its stopping tolerance: the largest gradient component (of the mean ratio, ~1 at the
+#: truth, in the logarithms of the values)
+RATIO_GTOL = 1e-6
 
 
 @dataclass
@@ -257,9 +260,36 @@ class _Regression:
                         cols.append(y)
             plan.append(srcs[:2])  # at most two sources, combined
         self.missing = [c for c, s in zip(model.coords, plan) if not s]
-        N = t.size
-        P = _noise_products(w, h, N) if noise else np.zeros((5, 5))
-        sig2 = [_noise_variance(y) if noise else 0.0 for y in cols]
+        self._plan = plan
+        self._nq, self._nr, self._nmeas = nq, nr, len(cols)
+        self._w, self._h = w, h
+        self._sig2: list[float] | None = None
+        for j in range(nr):
+            cols.append(U[:, j])
+        self._cols = cols
+        # the filtering is the same with or without the noise weights: done once, kept
+        self._Y, self._T = _filter(np.column_stack(cols), w, h)
+        self._build(noise)
+
+    def with_noise(self) -> "_Regression":
+        """A copy set up for the noise-compensated fit (``B`` and the noise weights)."""
+        out = object.__new__(_Regression)
+        out.__dict__.update(self.__dict__)
+        out._build(True, signals=any(len(s) > 1 for s in self._plan))
+        return out
+
+    def _build(self, noise: bool, signals: bool = True) -> None:
+        """``Q``, ``R``, ``S``, ``G`` (and with ``noise`` the noise share ``B``).
+
+        ``signals`` False keeps the present ``Q`` ... ``G`` (one source per coordinate:
+        the noise weights are the plain ones) and adds ``B`` only.
+        """
+        nq, nr, plan, Y, T = self._nq, self._nr, self._plan, self._Y, self._T
+        N = T.shape[0]
+        P = _noise_products(self._w, self._h, N) if noise else np.zeros((5, 5))
+        if noise and self._sig2 is None:
+            self._sig2 = [_noise_variance(y) for y in self._cols[:self._nmeas]]
+        sig2 = self._sig2 if noise and self._sig2 is not None else [0.0] * self._nmeas
         # weight of each source of coordinate i in F_k q: equal (averaged), or with
         # ``noise`` inversely as the noise each carries into F_k q (both are the same
         # signal, so any weights summing to one keep the equation)
@@ -271,31 +301,27 @@ class _Regression:
                     wt[i, k, :len(srcs)] = (1.0 / v) / np.sum(1.0 / v)
                 else:
                     wt[i, k, :len(srcs)] = 1.0 / max(len(srcs), 1)
-        road_cols = []
-        for j in range(nr):
-            road_cols.append(len(cols))
-            cols.append(U[:, j])
-        Y, T = _filter(np.column_stack(cols), w, h)
-        # Q[k] (nq, N): F_k q = s^(k+2)/D q from a position, s^(k+1)/D from a velocity, ...
-        self.Q = np.zeros((3, nq, N))
-        for i, srcs in enumerate(plan):
-            for si, (col, order) in enumerate(srcs):
-                for k in range(3):
-                    self.Q[k, i] += Y[k + 2 - order, :, col] * wt[i, k, si]
-        self.R = np.zeros((2, nr, N))
-        for j, col in enumerate(road_cols):
-            for k in range(2):
-                self.R[k, j] = Y[k + 2, :, col]
-        # project out the transient (the filter's modes) and the first samples
-        keep = slice(2, N)
-        Tq, _ = np.linalg.qr(T[keep])
-        def proj(X: FloatArray) -> FloatArray:
-            Xk = X[..., keep]
-            return Xk - (Xk @ Tq) @ Tq.T
-        self.Q = proj(self.Q)
-        self.R = proj(self.R)
-        self.S = np.concatenate([self.Q[2], self.Q[1], self.Q[0], self.R[0], self.R[1]], axis=0)
-        self.G = self.S @ self.S.T  # Gram matrix of the filtered signals: all the LS needs
+        if signals:
+            # Q[k] (nq, N): F_k q = s^(k+2)/D q from a position, s^(k+1)/D from a velocity, ...
+            self.Q = np.zeros((3, nq, N))
+            for i, srcs in enumerate(plan):
+                for si, (col, order) in enumerate(srcs):
+                    for k in range(3):
+                        self.Q[k, i] += Y[k + 2 - order, :, col] * wt[i, k, si]
+            self.R = np.zeros((2, nr, N))
+            for j in range(nr):
+                for k in range(2):
+                    self.R[k, j] = Y[k + 2, :, self._nmeas + j]
+            # project out the transient (the filter's modes) and the first samples
+            keep = slice(2, N)
+            Tq, _ = np.linalg.qr(T[keep])
+            def proj(X: FloatArray) -> FloatArray:
+                Xk = X[..., keep]
+                return Xk - (Xk @ Tq) @ Tq.T
+            self.Q = proj(self.Q)
+            self.R = proj(self.R)
+            self.S = np.concatenate([self.Q[2], self.Q[1], self.Q[0], self.R[0], self.R[1]], axis=0)
+            self.G = self.S @ self.S.T  # Gram matrix of the filtered signals: all the LS needs
         #: with ``noise``: the expected share of white measurement noise in ``G`` (rows
         #: F_2 q, F_1 q, F_0 q of each coordinate; the road is known exactly)
         self.B: FloatArray | None = None
@@ -495,25 +521,52 @@ def _solve_linear(reg: _Regression, model: SuspensionModel, p: Mapping[str, floa
     return theta, math.sqrt(max(res2, 0.0) / btb) if btb > 0 else 0.0, rel_sv
 
 
+#: :func:`_bfgs` near the edge of its box: steps and relative decrease of a stalled run
+EDGE_STALL = 10
+EDGE_FTOL = 1e-6
+
+
 def _bfgs(F: Callable[[FloatArray], tuple[float, FloatArray]], u0: FloatArray,
-          iterations: int, gtol: float = 1e-6) -> tuple[float, FloatArray]:
+          iterations: int, gtol: float = 1e-6, span: float = math.inf
+          ) -> tuple[float, FloatArray]:
     """Minimise ``F`` (value and gradient) by BFGS with a backtracking (Armijo) line search.
 
+    Each line search starts at the full quasi-Newton step or, where that leaves the box
+    ``|u| < span``, at the box's edge along it (a run may touch the edge and come back).
+    A run that has kept some ``|u_i|`` within 1 of the edge for ``EDGE_STALL`` steps while
+    ``F`` fell by less than ``EDGE_FTOL`` of its value stops there: it crawls towards a
+    minimum beyond the region searched (a run-away, not an estimate).
+
     Returns ``(value, point)`` of the lowest point met; stops when the gradient's largest
-    component is below ``gtol``, no step lowers ``F`` or after ``iterations`` steps.
+    component is below ``gtol``, stalled at the edge, when no step lowers ``F`` or after
+    ``iterations`` steps.
     """
     u = np.asarray(u0, dtype=float).copy()
     f, g = F(u)
     Hinv = np.eye(u.size)
+    edge = span * (1.0 - 1e-9)
+    near: list[float] = []  # values of the last steps ending within 1 of the edge
     for it in range(iterations):
-        if not np.max(np.abs(g)) > gtol:
+        if not float(np.abs(g).max()) > gtol:
             break
         d = -Hinv @ g
         slope = float(g @ d)
         if not slope < 0:  # not a descent direction: restart from the gradient
             Hinv = np.eye(u.size)
             d, slope = -g, -float(g @ g)
-        step = 1.0
+        # the largest step inside the box; a component on the edge and pointing out is
+        # held (the run slides along the edge)
+        reach = math.inf
+        for i, (ui, di) in enumerate(zip(u.tolist(), d.tolist())):
+            room = (edge - ui) if di > 0 else (-edge - ui)
+            if di != 0 and room / di <= 1e-10:
+                d[i] = 0.0
+            elif di != 0:
+                reach = min(reach, room / di)
+        slope = float(g @ d)
+        if not slope < 0:  # on the edge, every way down points out of the box
+            break
+        step = min(1.0, reach)
         while step > 1e-10:
             un = u + step * d
             fn, gn = F(un)
@@ -524,13 +577,19 @@ def _bfgs(F: Callable[[FloatArray], tuple[float, FloatArray]], u0: FloatArray,
             break
         sv, yv = un - u, gn - g
         sy = float(sv @ yv)
-        if sy > 1e-12 * float(np.linalg.norm(sv) * np.linalg.norm(yv)):
+        if sy > 1e-12 * math.sqrt(float(sv @ sv) * float(yv @ yv)):
             if it == 0:  # the first step sets the scale (Nocedal & Wright 6.20)
                 Hinv = np.eye(u.size) * sy / float(yv @ yv)
-            rho = 1.0 / sy
-            V = np.eye(u.size) - rho * np.outer(sv, yv)
-            Hinv = V @ Hinv @ V.T + rho * np.outer(sv, sv)
+            # (I - rho s y') H (I - rho y s') + rho s s', rho = 1 / s'y, expanded
+            Hy = Hinv @ yv
+            Hinv = Hinv + ((sy + float(yv @ Hy)) / sy ** 2) * np.outer(sv, sv) \
+                - (np.outer(Hy, sv) + np.outer(sv, Hy)) / sy
         u, f, g = un, fn, gn
+        near = near + [f] if float(np.max(np.abs(u))) > span - 1.0 else []
+        if len(near) > EDGE_STALL:
+            near = near[-EDGE_STALL - 1:]
+            if near[0] - f <= EDGE_FTOL * max(abs(f), 1.0):
+                break
     return f, u
 
 
@@ -552,34 +611,39 @@ def _ratio_fit(reg: _Regression, K: FloatArray, lin: list[str], nonlin: list[str
     """
     if reg.B is None:
         return None
-    G, B = reg.G, reg.B
     nl = len(lin)
     free = lin + nonlin
     x0 = np.array([starts[0][k] for k in free])
     big = 1e300
+    # the coefficients are linear in z = theta (x) phi(eta), so each equation's two
+    # quadratic forms are z' A_i z and z' D_i z: contracted with G and B once, here
+    nj, nm, ni = K.shape[0], K.shape[1], K.shape[2]
+    Kz = K.reshape(nj * nm, ni, K.shape[3])
+    A = np.einsum("ais,st,bit->iab", Kz, reg.G, Kz)
+    D = np.einsum("ais,st,bit->iab", Kz, reg.B, Kz)
+    theta = np.ones(nl + 1)
+    one = np.ones(1)
 
     def F(u: FloatArray) -> tuple[float, FloatArray]:
-        if not np.all(np.abs(u) < RATIO_SPAN):
+        if not (np.abs(u) < RATIO_SPAN).all():
             return big, np.zeros_like(u)
         x = x0 * np.exp(u)
-        theta = np.concatenate([[1.0], x[:nl]])
+        theta[1:] = x[:nl]
         eta = x[nl:]
-        phi = _monomials(eta)
-        Kp = np.einsum("m,jmis->jis", phi, K)  # per j, at these lengths
-        c = np.einsum("j,jis->is", theta, Kp)
-        Gc, Bc = c @ G, c @ B
-        num = np.einsum("is,is->i", Gc, c)
-        den = np.einsum("is,is->i", Bc, c)
-        if not np.all(den > 0):
+        phi = _monomials(eta) if eta.size else one
+        z = (theta[:, None] * phi).ravel()
+        Az, Dz = A @ z, D @ z
+        num, den = Az @ z, Dz @ z
+        if not (den > 0).all():
             return big, np.zeros_like(u)
         q = num / den
-        dc = (2.0 / q.size) * (Gc - q[:, None] * Bc) / den[:, None]  # dF/dc
+        # dF/dz: the mean of dq_i/dz = 2 (A_i z - q_i D_i z) / den_i
+        Gz = ((Az - q[:, None] * Dz) / den[:, None]).sum(axis=0).reshape(nj, nm)
         g = np.empty(u.size)
-        g[:nl] = np.einsum("is,jis->j", dc, Kp[1:])
+        g[:nl] = Gz[1:] @ phi
         if eta.size:
-            dK = np.einsum("ml,jmis->ljis", _monomial_slopes(eta), K)
-            g[nl:] = np.einsum("is,j,ljis->l", dc, theta, dK)
-        return float(np.mean(q)), g * x
+            g[nl:] = (theta @ Gz) @ _monomial_slopes(eta)
+        return float(q.sum()) / ni, g * x * (2.0 / ni)
 
     best: tuple[float, FloatArray] | None = None
     for st in starts:
@@ -589,7 +653,7 @@ def _ratio_fit(reg: _Regression, K: FloatArray, lin: list[str], nonlin: list[str
         u0 = np.log(v / x0)
         if not F(u0)[0] < big:
             continue
-        f, u = _bfgs(F, u0, RATIO_ITER)
+        f, u = _bfgs(F, u0, RATIO_ITER, gtol=RATIO_GTOL, span=RATIO_SPAN)
         if math.isfinite(f) and f < big and (best is None or f < best[0]):
             best = (f, u)
     if best is None:
@@ -724,8 +788,7 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
             if nonlin:
                 starts += [{**vals, **{k: base[k] for k in nonlin}},
                            {**given, **{k: vals[k] for k in nonlin}}]
-            comp = _ratio_fit(_Regression(model, meas, t, h, problem.U, 2 * math.pi * fc,
-                                          noise=True), poly[0][0], lin, nonlin, starts)
+            comp = _ratio_fit(reg.with_noise(), poly[0][0], lin, nonlin, starts)
             if comp is not None:
                 comp_cost = problem.normalized_ss({**base, **comp})
                 if comp_cost < cost:
