@@ -661,6 +661,31 @@ def _ratio_fit(reg: _Regression, K: FloatArray, lin: list[str], nonlin: list[str
     return {k: float(v) for k, v in zip(free, x0 * np.exp(best[1]))}
 
 
+def _floored(model: SuspensionModel, base: Mapping[str, float], lin: list[str],
+             vals: dict[str, float], what: str) -> tuple[dict[str, float], list[str], list[str]]:
+    """``vals`` with each of ``lin`` below ``FLOOR`` x the geometric mean of the others of
+    its kind (or not finite) raised to that floor: ``(values, floored names, notes)``.
+
+    An equation-error value that small is not determined by the record (a spring or damper
+    whose force the noise hides); as a start it would send the fit off along a flat
+    direction, so it starts at the floor and is judged as undetermined.
+    """
+    out = dict(vals)
+    floored: list[str] = []
+    notes: list[str] = []
+    ok = [k for k in lin if vals[k] > 0 and math.isfinite(vals[k])]
+    for k in lin:
+        kind = model.spec(k).kind
+        same = [vals[j] for j in ok if model.spec(j).kind == kind and j != k]
+        floor = FLOOR * (math.exp(float(np.mean(np.log(same)))) if same else base[k])
+        if not (vals[k] >= floor and math.isfinite(vals[k])):
+            notes.append(f"{k}: the {what} estimate {vals[k]:.3g} is not a usable "
+                         f"positive value; started at {floor:.3g}")
+            out[k] = floor
+            floored.append(k)
+    return out, floored, notes
+
+
 def estimate_start(problem: OutputErrorProblem, params: Parameters,
                    bandwidths_hz: list[float] | None = None) -> StartEstimate:
     """Data-driven start of the free parameters of ``params`` for ``problem``'s record.
@@ -764,19 +789,8 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
             reasons.append(f"{fc:.3g} Hz: too little excitation to separate "
                            f"{', '.join(lin)} (relative singular value {sv:.1e})")
             continue
-        notes = []
-        vals = {k: float(p[k]) for k in free}
-        floored: list[str] = []
-        ok = [k for k in lin if vals[k] > 0 and math.isfinite(vals[k])]
-        for k in lin:
-            kind = model.spec(k).kind
-            same = [vals[j] for j in ok if model.spec(j).kind == kind and j != k]
-            floor = FLOOR * (math.exp(float(np.mean(np.log(same)))) if same else base[k])
-            if not (vals[k] >= floor and math.isfinite(vals[k])):
-                notes.append(f"{k}: the equation-error estimate {vals[k]:.3g} is not a usable "
-                             f"positive value; started at {floor:.3g}")
-                vals[k] = floor
-                floored.append(k)
+        vals, floored, notes = _floored(model, base, lin, {k: float(p[k]) for k in free},
+                                        "equation-error")
         cost = problem.normalized_ss({**base, **vals})
         if cost >= EXACT_COST and noisy and not poly:
             poly.append(_coef_poly(model, base, lin, nonlin))
@@ -790,14 +804,19 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
                            {**given, **{k: vals[k] for k in nonlin}}]
             comp = _ratio_fit(reg.with_noise(), poly[0][0], lin, nonlin, starts)
             if comp is not None:
+                comp, comp_floored, comp_notes = _floored(model, base, lin, comp,
+                                                          "noise-compensated")
                 comp_cost = problem.normalized_ss({**base, **comp})
                 if comp_cost < cost:
-                    vals, cost, floored = comp, comp_cost, []
-                    notes = ["compensated for the measurement noise (errors in variables)"]
+                    vals, cost, floored = comp, comp_cost, comp_floored
+                    notes = ["compensated for the measurement noise (errors in variables)",
+                             *comp_notes]
         if cost < best.cost:
             best = StartEstimate(values=vals, bandwidth_hz=fc, cost=float(cost), notes=notes,
                                  undetermined=floored)
             best_reg = (reg, wts)
+            if noisy and not floored and noise_floor_ratio(problem, {**base, **vals}) <= NOISE_FLOOR:
+                break  # leaves only white noise: no other bandwidth can do better
     if not best.values and reasons:
         best.reason = "; ".join(reasons)
     if best.values and best.cost >= EXACT_COST and best_reg is not None:
