@@ -113,6 +113,36 @@ def mass_inverse(model: SuspensionModel, p: Mapping[str, float],
     return model.mass_inverse(p)
 
 
+#: largest 1-norm condition number of the eigenvector matrix taken as diagonalisable
+MODE_COND_MAX = 1e8
+
+
+def mode_pattern(lam: np.ndarray, V: np.ndarray, Vinv: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray] | None:
+    """The modes one eigen-decomposition ``(lam, V, Vinv)`` keeps: ``(keep, is_real)``.
+
+    ``keep`` indexes the real eigenvalues and the member of each conjugate pair with the
+    positive imaginary part (the other one is its conjugate), ``is_real`` marks the real
+    ones among them. ``None`` when ``A`` is (nearly) defective (``V``'s 1-norm condition
+    number above ``MODE_COND_MAX``, or ``V`` singular: ``Vinv`` not finite) or the
+    eigenvalues do not pair up. One test for :func:`modal_form` and for every point of a
+    stacked evaluation.
+    """
+    # 1-norm condition number of V (max column sums), without np.linalg.norm's overhead
+    if not np.abs(V).sum(axis=0).max() * np.abs(Vinv).sum(axis=0).max() <= MODE_COND_MAX:
+        return None
+    lim = np.abs(lam).max()
+    tol = 1e-12 * (lim if lim > 1.0 else 1.0)
+    im = lam.imag
+    keep = np.flatnonzero(im >= -tol)
+    is_real = np.abs(im[keep]) <= tol
+    n_real = int(is_real.sum())
+    # a real eigenvalue must have a real eigenvector; pairs must really pair up
+    if n_real + 2 * (keep.size - n_real) != lam.size:
+        return None
+    return keep, is_real
+
+
 def modal_form(model: SuspensionModel, p: Mapping[str, float],
                affine: AffinePieces | None = None) -> Modal | None:
     """Eigen-decomposition of ``A`` for ``p``; ``None`` if ``A`` is (nearly) defective.
@@ -128,19 +158,12 @@ def modal_form(model: SuspensionModel, p: Mapping[str, float],
     if ev is None:
         return None
     lam, V = ev
-    Vinv = smalllinalg.inv(V)  # NaN when V is singular: fails the test below
-    # 1-norm condition number of V (max column sums), without np.linalg.norm's overhead
-    if not np.abs(V).sum(axis=0).max() * np.abs(Vinv).sum(axis=0).max() <= 1e8:
+    Vinv = smalllinalg.inv(V)  # NaN when V is singular: fails the test in mode_pattern
+    pattern = mode_pattern(lam, V, Vinv)
+    if pattern is None:
         return None
-    lim = np.abs(lam).max()
-    tol = 1e-12 * (lim if lim > 1.0 else 1.0)
-    im = lam.imag
-    keep = np.flatnonzero(im >= -tol)
-    is_real = np.abs(im[keep]) <= tol
+    keep, is_real = pattern
     n_real = int(is_real.sum())
-    # a real eigenvalue must have a real eigenvector; pairs must really pair up
-    if n_real + 2 * (keep.size - n_real) != lam.size:
-        return None
     Vk = V[:, keep]
     if n_real:
         Vk[:, is_real] = Vk[:, is_real].real

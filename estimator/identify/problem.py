@@ -29,8 +29,8 @@ from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
 from suspid.models.base import AffinePieces, FloatArray, SuspensionModel
 from suspid.simulate import (Modal, free_coeffs_to_state, free_response_basis, modal_form,
-                             modal_trajectory, powers, road_matrix, simulate_states,
-                             state_matrices, uniform_step)
+                             modal_trajectory, mode_pattern, powers, road_matrix,
+                             simulate_states, state_matrices, uniform_step)
 
 COSTS = ("sse", "frobenius")
 
@@ -384,24 +384,17 @@ class OutputErrorProblem:
             return None
         lam, V = ev
         Vinv = smalllinalg.inv(V)
-        # modal_form's tests, point by point; one pattern of modes for the whole stack
+        # modal_form's test, point by point; one pattern of modes for the whole stack
         pattern = None
         for i in range(k):
-            if not np.abs(V[i]).sum(axis=0).max() * np.abs(Vinv[i]).sum(axis=0).max() <= 1e8:
+            got = mode_pattern(lam[i], V[i], Vinv[i])
+            if got is None:
                 return None
-            lim = np.abs(lam[i]).max()
-            tol = 1e-12 * (lim if lim > 1.0 else 1.0)
-            im = lam[i].imag
-            keep = np.flatnonzero(im >= -tol)
-            is_real = np.abs(im[keep]) <= tol
-            n_real = int(is_real.sum())
-            if n_real + 2 * (keep.size - n_real) != lam.shape[1]:
-                return None
-            if lam.dtype.kind == "c" and n_real == lam.shape[1]:
+            if lam.dtype.kind == "c" and int(got[1].sum()) == lam.shape[1]:
                 return None  # modal_form would have worked in real arithmetic here
             if pattern is None:
-                pattern = (keep, is_real)
-            elif not (np.array_equal(keep, pattern[0]) and np.array_equal(is_real, pattern[1])):
+                pattern = got
+            elif not (np.array_equal(got[0], pattern[0]) and np.array_equal(got[1], pattern[1])):
                 return None
         if pattern is None:
             return None
