@@ -531,6 +531,9 @@ def _bfgs(F: Callable[[FloatArray], tuple[float, FloatArray]], u0: FloatArray,
           ) -> tuple[float, FloatArray]:
     """Minimise ``F`` (value and gradient) by BFGS with a backtracking (Armijo) line search.
 
+    A full step after which the slope is still more than 0.9 of the first (Wolfe's curvature
+    condition fails) is doubled while that lowers ``F``: without it a long curved valley
+    is crawled along in steps the first curvature estimate set.
     Each line search starts at the full quasi-Newton step or, where that leaves the box
     ``|u| < span``, at the box's edge along it (a run may touch the edge and come back).
     A run that has kept some ``|u_i|`` within 1 of the edge for ``EDGE_STALL`` steps while
@@ -575,6 +578,16 @@ def _bfgs(F: Callable[[FloatArray], tuple[float, FloatArray]], u0: FloatArray,
             step *= 0.5
         else:
             break
+        # the full step taken and the slope along it hardly less steep (the curvature
+        # condition of Wolfe fails): the valley goes on, so the step doubles while it
+        # keeps lowering F that much (a long, gently curved valley in a few steps)
+        while step < reach and float(gn @ d) < 0.9 * slope:
+            nxt = min(2.0 * step, reach)
+            ut = u + nxt * d
+            ft, gt = F(ut)
+            if not ft <= f + 1e-4 * nxt * slope or not ft < fn:
+                break
+            step, un, fn, gn = nxt, ut, ft, gt
         sv, yv = un - u, gn - g
         sy = float(sv @ yv)
         if sy > 1e-12 * math.sqrt(float(sv @ sv) * float(yv @ yv)):

@@ -10,7 +10,7 @@ import pytest
 
 from estimator.doe.design import experiments
 from estimator.doe.runner import (Settings, identify_staged, measurement, run_design,
-                                  start_parameters)
+                                  run_experiment, start_parameters)
 from estimator.identify import (OutputErrorProblem, Parameters, data_driven_start,
                                 estimate_start, fit, fit_from_starts)
 from estimator.identify import start as start_mod
@@ -648,3 +648,156 @@ def test_no_noise_compensation_on_a_noise_free_record(monkeypatch: pytest.Monkey
         noisy.measured[c] = y + 1e-3 * np.std(y) * rng.standard_normal(y.size)
     estimate_start(OutputErrorProblem(m, noisy), params)
     assert calls
+
+
+def _quadratic_in_box(centre: np.ndarray, scale: np.ndarray) -> Any:
+    """``F(u) = sum(scale (u - centre)^2)`` with its gradient, counting the calls."""
+    calls: list[int] = []
+
+    def F(u: np.ndarray) -> tuple[float, np.ndarray]:
+        calls.append(1)
+        d = u - centre
+        return float(np.sum(scale * d * d)), 2.0 * scale * d
+
+    F.calls = calls  # type: ignore[attr-defined]
+    return F
+
+
+def test_bfgs_finds_a_minimum_its_first_steps_overshoot() -> None:
+    """A badly scaled bowl inside the box: the first step (the gradient, 1e4 in one
+    component) would leave the box; it is cut at the edge and the run comes back to the
+    minimum, to the gradient tolerance."""
+    F = _quadratic_in_box(np.array([1.0, -2.0]), np.array([1.0, 5e3]))
+    f, u = start_mod._bfgs(F, np.array([0.0, 0.0]), 200, gtol=1e-8, span=8.0)
+    assert u == pytest.approx([1.0, -2.0], abs=1e-6) and f < 1e-12
+    assert len(F.calls) < 60
+
+
+def test_bfgs_slides_along_the_edge_and_stops_when_stalled_there() -> None:
+    """The minimum lies outside the box in u[0] (at 20, span 8) and inside in u[1]: the run
+    holds u[0] on the edge, finds u[1], and stops there instead of crawling (the old line
+    search took hundreds of calls on such runs)."""
+    F = _quadratic_in_box(np.array([20.0, 0.5]), np.array([1e-4, 1.0]))
+    f, u = start_mod._bfgs(F, np.array([0.0, 0.0]), 200, span=8.0)
+    assert u[0] == pytest.approx(8.0, abs=1e-6) and u[1] == pytest.approx(0.5, abs=1e-4)
+    assert np.all(np.abs(u) < 8.0)
+    assert len(F.calls) < 40
+    # a valley towards the edge with no end inside: stops once the values stall near it
+    G = _quadratic_in_box(np.array([1e3, 0.0]), np.array([1e-12, 1.0]))
+    start_mod._bfgs(G, np.array([0.0, 3.0]), 200, span=8.0)
+    assert len(G.calls) < 60
+
+
+def test_the_noise_regression_is_the_plain_one_plus_the_noise_share() -> None:
+    """``with_noise`` reuses the plain regression's filtering: the same Gram matrix and noise
+    share as a regression built with ``noise`` from scratch, for one source per coordinate
+    (the signals unchanged) and two (positions and velocities, weighted by their noise)."""
+    m = get_model("quarter2")
+    rng = np.random.default_rng(3)
+    for chans in (["x1", "x2"], ["x1", "x2", "x1_dot", "x2_dot"]):
+        meas = _bump(TABLE1, chans, duration=1.0, fs=500.0)
+        for c, y in meas.measured.items():
+            meas.measured[c] = y + 0.1 * np.std(y) * rng.standard_normal(y.size)
+        t = meas.t
+        U = OutputErrorProblem(m, meas).U
+        fresh = start_mod._Regression(m, meas, t, 0.002, U, 2 * np.pi * 3.0, noise=True)
+        plain = start_mod._Regression(m, meas, t, 0.002, U, 2 * np.pi * 3.0)
+        derived = plain.with_noise()
+        assert plain.B is None and derived.B is not None and fresh.B is not None
+        assert np.array_equal(derived.G, fresh.G) and np.array_equal(derived.B, fresh.B)
+        assert (len(chans) == 2) == np.array_equal(plain.G, derived.G)
+
+
+def test_a_compensated_value_below_its_kind_floor_starts_at_the_floor(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """quarter2 `frobenius` row 25 at 0.5 sigma (k2 = 50 N/m, 0.16 of k1): a
+    noise-compensated fit that puts k2 at 0.03 N/m (as one did before its line search
+    extrapolated along valleys) sent the fit from it along a flat direction to c2 5e10, k2 0
+    (4000 evaluations, its whole budget). Such a value starts at the floor (2 % of k1),
+    marked undetermined, as a least-squares one does, and the fit from it is the truth's."""
+    m = get_model("quarter2")
+    e = experiments(m)[24]
+    settings = Settings(cost="frobenius", init_scale=0.5, noise=0.5)
+    collapsed = {"c1": 1.197 * e.truth["c1"], "k1": 1.044 * e.truth["k1"],
+                 "c2": 1.23 * e.truth["c2"], "k2": 0.0284}
+    monkeypatch.setattr(start_mod, "_ratio_fit", lambda *a, **k: dict(collapsed))
+    meas, _ = measurement(m, e, 0.5, settings.seed + e.id)
+    problem = OutputErrorProblem(m, meas, cost="frobenius", x0=e.x0)
+    params = start_parameters(m, e, settings)
+    est = estimate_start(problem, params)
+    assert est.undetermined == ["k2"] and any("noise-compensated estimate" in n for n in est.notes)
+    assert est.values["k2"] == pytest.approx(start_mod.FLOOR * est.values["k1"], rel=1e-9)
+    assert est.values["c2"] == collapsed["c2"]
+    _, res = run_experiment(m, e, settings)
+    data = [s for s in (res.starts or []) if s["start"] == "data"][0]
+    assert data["success"] and data["cost"] == pytest.approx(res.cost, rel=1e-6)
+    assert res.nfev < 2000 and res.success
+    assert all(_in_band(res, e.truth, k) for k in params.free)
+    # the floor itself: per kind, from the geometric mean of the others
+    vals, floored, notes = start_mod._floored(
+        m, params.valuesdict(), ["c1", "k1", "c2", "k2"],
+        {"c1": 100.0, "k1": 1e4, "c2": 1.0, "k2": float("nan")}, "test")
+    assert floored == ["c2", "k2"] and vals["c2"] == pytest.approx(2.0)
+    assert vals["k2"] == pytest.approx(200.0)
+    assert vals["c1"] == 100.0 and len(notes) == 2
+
+
+def test_the_bandwidth_sweep_ends_at_an_estimate_that_leaves_white_noise(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """On a noisy record an estimate whose residual is white (``noise_floor_ratio`` at most
+    ``NOISE_FLOOR``) ends the sweep: no other bandwidth can do better than the noise."""
+    m = get_model("quarter1")
+    e = experiments(m)[0]
+    settings = Settings(cost="sse", init_scale=0.5, noise=0.1)
+    meas, _ = measurement(m, e, 0.1, settings.seed + e.id)
+    problem = OutputErrorProblem(m, meas, x0=e.x0)
+    params = start_parameters(m, e, settings)
+    built: list[float] = []
+    real = start_mod._Regression.__init__
+
+    def counting(self, *a, **k):  # type: ignore[no-untyped-def]
+        built.append(a[5])
+        real(self, *a, **k)
+
+    monkeypatch.setattr(start_mod._Regression, "__init__", counting)
+    monkeypatch.setattr(start_mod, "noise_floor_ratio", lambda *a, **k: 1.0)
+    est = estimate_start(problem, params)
+    # one bandwidth: the sweep's first regression, the instrument ones at the same
+    assert est.values and est.bandwidth_hz == pytest.approx(built[0] / (2 * np.pi))
+    n_white = len({round(b, 9) for b in built})
+    assert n_white == 1
+    built.clear()
+    monkeypatch.setattr(start_mod, "noise_floor_ratio", lambda *a, **k: 2.0)
+    estimate_start(problem, params)
+    assert len({round(b, 9) for b in built}) > n_white
+
+
+@pytest.mark.parametrize("row", [8, 10, 15])
+def test_no_noise_compensated_run_crawls_to_its_iteration_limit(
+        monkeypatch: pytest.MonkeyPatch, row: int) -> None:
+    """quarter1 at 0.1 sigma: from the given start some runs follow a long curved valley
+    towards a run-away (row 8 in the interior, rows 10 and 15 along the box's edge); they
+    used to crawl in tiny steps to the 200-iteration limit (200-430 calls each). The step
+    doubling along a valley and the stall rule at the edge end each run in under 100."""
+    m = get_model("quarter1")
+    e = experiments(m)[row - 1]
+    settings = Settings(cost="sse", init_scale=0.5, noise=0.1)
+    meas, _ = measurement(m, e, 0.1, settings.seed + e.id)
+    counts: list[int] = []
+    real = start_mod._bfgs
+
+    def counting(F, *a, **k):  # type: ignore[no-untyped-def]
+        n = [0]
+
+        def F2(u: np.ndarray) -> tuple[float, np.ndarray]:
+            n[0] += 1
+            return F(u)
+
+        out = real(F2, *a, **k)
+        counts.append(n[0])
+        return out
+
+    monkeypatch.setattr(start_mod, "_bfgs", counting)
+    est = estimate_start(OutputErrorProblem(m, meas, x0=e.x0), start_parameters(m, e, settings))
+    assert est.values and len(counts) >= 4
+    assert max(counts) < 100, counts
