@@ -531,18 +531,21 @@ def _bfgs(F: Callable[[FloatArray], tuple[float, FloatArray]], u0: FloatArray,
           ) -> tuple[float, FloatArray]:
     """Minimise ``F`` (value and gradient) by BFGS with a backtracking (Armijo) line search.
 
-    A full step after which the slope is still more than 0.9 of the first (Wolfe's curvature
-    condition fails) is doubled while that lowers ``F``: without it a long curved valley
-    is crawled along in steps the first curvature estimate set.
     Each line search starts at the full quasi-Newton step or, where that leaves the box
-    ``|u| < span``, at the box's edge along it (a run may touch the edge and come back).
-    A run that has kept some ``|u_i|`` within 1 of the edge for ``EDGE_STALL`` steps while
-    ``F`` fell by less than ``EDGE_FTOL`` of its value stops there: it crawls towards a
-    minimum beyond the region searched (a run-away, not an estimate).
+    ``|u| < span``, at the box's edge along it (a run may touch the edge and come back); a
+    component on the edge whose way down points out of the box is held there. A full step
+    after which the slope is still more than 0.9 of the first (Wolfe's curvature condition
+    fails) is doubled while that lowers ``F``: without it a long curved valley is crawled
+    along in the steps the first curvature estimate set (not after a backtracking, which
+    found the step too long already). A run that has kept some
+    ``|u_i|`` within 1 of the edge for ``EDGE_STALL`` steps while ``F`` fell by less than
+    ``EDGE_FTOL`` of its value stops there: it crawls towards a minimum beyond the region
+    searched (a run-away, not an estimate).
 
     Returns ``(value, point)`` of the lowest point met; stops when the gradient's largest
-    component is below ``gtol``, stalled at the edge, when no step lowers ``F`` or after
-    ``iterations`` steps.
+    component is below ``gtol``, stalled at the edge, when no step lowers ``F`` beyond its
+    rounding (the gradient there may still read a little above ``gtol``: it is rounding
+    too) or after ``iterations`` steps.
     """
     u = np.asarray(u0, dtype=float).copy()
     f, g = F(u)
@@ -569,7 +572,7 @@ def _bfgs(F: Callable[[FloatArray], tuple[float, FloatArray]], u0: FloatArray,
         slope = float(g @ d)
         if not slope < 0:  # on the edge, every way down points out of the box
             break
-        step = min(1.0, reach)
+        full = step = min(1.0, reach)
         while step > 1e-10:
             un = u + step * d
             fn, gn = F(un)
@@ -581,13 +584,13 @@ def _bfgs(F: Callable[[FloatArray], tuple[float, FloatArray]], u0: FloatArray,
         # the full step taken and the slope along it hardly less steep (the curvature
         # condition of Wolfe fails): the valley goes on, so the step doubles while it
         # keeps lowering F that much (a long, gently curved valley in a few steps)
-        while step < reach and float(gn @ d) < 0.9 * slope:
-            nxt = min(2.0 * step, reach)
-            ut = u + nxt * d
+        while step == full and step < reach and float(gn @ d) < 0.9 * slope:
+            full = min(2.0 * step, reach)
+            ut = u + full * d
             ft, gt = F(ut)
-            if not ft <= f + 1e-4 * nxt * slope or not ft < fn:
+            if not ft <= f + 1e-4 * full * slope or not ft < fn:
                 break
-            step, un, fn, gn = nxt, ut, ft, gt
+            step, un, fn, gn = full, ut, ft, gt
         sv, yv = un - u, gn - g
         sy = float(sv @ yv)
         if sy > 1e-12 * math.sqrt(float(sv @ sv) * float(yv @ yv)):
@@ -597,7 +600,10 @@ def _bfgs(F: Callable[[FloatArray], tuple[float, FloatArray]], u0: FloatArray,
             Hy = Hinv @ yv
             Hinv = Hinv + ((sy + float(yv @ Hy)) / sy ** 2) * np.outer(sv, sv) \
                 - (np.outer(Hy, sv) + np.outer(sv, Hy)) / sy
+        lowered = f - fn > 8.0 * np.finfo(float).eps * abs(f)
         u, f, g = un, fn, gn
+        if not lowered:  # the value changes only in its rounding: converged as far as it goes
+            break
         near = near + [f] if float(np.max(np.abs(u))) > span - 1.0 else []
         if len(near) > EDGE_STALL:
             near = near[-EDGE_STALL - 1:]
@@ -679,9 +685,10 @@ def _floored(model: SuspensionModel, base: Mapping[str, float], lin: list[str],
     """``vals`` with each of ``lin`` below ``FLOOR`` x the geometric mean of the others of
     its kind (or not finite) raised to that floor: ``(values, floored names, notes)``.
 
-    An equation-error value that small is not determined by the record (a spring or damper
-    whose force the noise hides); as a start it would send the fit off along a flat
-    direction, so it starts at the floor and is judged as undetermined.
+    An estimate that small (least-squares or noise-compensated, named by ``what``) is not
+    determined by the record (a spring or damper whose force the noise hides); as a start
+    it would send the fit off along a flat direction, so it starts at the floor and is
+    judged as undetermined.
     """
     out = dict(vals)
     floored: list[str] = []
@@ -712,7 +719,11 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
         Fixed values (known masses, inertia, geometry) and, for parameters that do not
         enter the equations linearly, the centre of their search grid.
     bandwidths_hz : list of float, optional
-        Filter bandwidths (Hz) tried; default five from 0.5 Hz to a fifth of Nyquist.
+        Filter bandwidths (Hz) tried in turn; default four, geometrically spaced from
+        0.2 Hz to a fifth of Nyquist. The sweep ends early at an estimate that explains
+        the record exactly (noise-free) or, on a noisy record, leaves only white noise
+        (:func:`noise_floor_ratio` at most ``NOISE_FLOOR``); otherwise the estimate with
+        the lowest output-error cost wins.
 
     Returns
     -------
