@@ -242,29 +242,9 @@ class OutputErrorProblem:
         the Gram matrix is singular or ill-conditioned (the caller then solves the explicit
         least-squares problem).
         """
-        mm = modal.lam.size
-        pairs = np.flatnonzero(modal.fac == 2.0)
-        modes = np.concatenate([np.arange(mm), pairs])
-        alpha = np.concatenate([np.ones(mm), np.full(pairs.size, 1j)])
-        Q = CV[:, modes] * alpha  # (p, n): column a's regressor is Re(Q[:, a] * E_mode^k)
-        w2 = self._w2
-        Eg = E[modes]
-        EN = P[-1, modes] * Eg  # E^N
-        N = P.shape[0]
-        S1 = _geometric_sum(Eg[:, None] * Eg[None, :], EN[:, None] * EN[None, :], N)
-        S2 = _geometric_sum(Eg[:, None] * np.conj(Eg)[None, :],
-                            EN[:, None] * np.conj(EN)[None, :], N)
-        Qw = Q.T * w2
-        GtG = 0.5 * np.real((Qw @ Q) * S1 + (Qw @ np.conj(Q)) * S2)
-        R = self.Ymeas if Y is None else self.Ymeas - Y  # Ymeas - 0.0 == Ymeas
-        # v_i = sum_k E_i^k (R @ CVw)[k, i] = sum_j (P^T R)[i, j] CVw[j, i]: one real
-        # product over the samples, (2 mm, p), then small arrays only
-        v = (_t_dot(P, R) * (CV * w2[:, None]).T).sum(axis=1)
-        GtR = np.real(alpha * v[modes])
-        sol = smalllinalg.solve(GtG, GtR)  # NaN when GtG is singular
-        if not np.isfinite(sol).all() or smalllinalg.cond2(GtG) > 1e12:
-            return None
-        return sol
+        sol = self._x0_closed_form_stack(modal.fac, CV[None], E[None], P[None],
+                                         None if Y is None else Y[None])
+        return None if sol is None else sol[0]
 
     def _solve_x0(self, G: FloatArray, Y: FloatArray) -> FloatArray:
         """Explicit weighted least squares for the free-response coefficients."""

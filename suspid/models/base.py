@@ -229,7 +229,7 @@ class AffinePieces:
 
     def state_space(self, theta: FloatArray) -> tuple[FloatArray, FloatArray]:
         """``(A, B)`` at free parameters ``theta``, as :meth:`SuspensionModel.state_space`."""
-        AB = self.AB0 + (np.asarray(theta, dtype=float) @ self._flat).reshape(self.AB0.shape)
+        AB = self.accel_rows(theta)
         nq = AB.shape[0]
         n = 2 * nq
         A = self._A0.copy()
