@@ -40,13 +40,13 @@ from numpy.typing import NDArray
 from scipy.linalg import expm
 
 from estimator.identify.params import Parameters
-from estimator.identify.problem import OutputErrorProblem
+from estimator.identify.problem import OutputErrorProblem, channel_kinds
 from estimator.identify.profile import SIGMAS, apply_bands
 from estimator.identify.result import IdentResult
 from estimator.identify.simplex import nelder_mead
 from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
-from suspid.models.base import FloatArray, SuspensionModel
+from suspid.models.base import FloatArray, SuspensionModel, Twin
 from suspid.simulate import simulate_states, uniform_step
 
 #: damping ratio of the filter's double pole pair
@@ -982,6 +982,11 @@ KIND_MAX = 3
 #: be run as a further start (within it, it is the given start again)
 KIND_MIN_FACTOR = 3.0
 
+#: factor by which one of two twin fits (:func:`_resolve_twin`) must fit the measured
+#: channels outside the cost better (in squared residual per channel variance) for those
+#: channels to choose between them
+TWIN_DECIDE = 4.0
+
 
 def kind_scaled_start(problem: OutputErrorProblem, params: Parameters
                       ) -> tuple[Parameters, dict[str, float], float] | None:
@@ -1353,6 +1358,18 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         results.append(("confirm", c, run(c)))
         issues = _issues(problem, results, at_start, free, data_vals, usable)
     res = issues.res
+    twin_warning = None
+    if not (issues.bad or issues.ambiguous or issues.unconfirmed):
+        tw = twin_of(problem, params, res.params)
+        if tw is not None:
+            start = params.copy()
+            for k in free:
+                start[k].value = float(tw.params[k])
+            other = run(start)
+            runs.append(("twin", start))
+            at_start.append(problem.normalized_ss(start.valuesdict()))
+            results.append(("twin", start, other))
+            res, twin_warning = _resolve_twin(problem, res, other, tw)
     ran = [(label, s, r) for label, s, r in results if r is not None]
     res.nfev = int(sum(r.nfev for _, _, r in ran))
     res.starts = []
@@ -1389,7 +1406,71 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         _reject(res, issues.unconfirmed)
     elif intervals:
         apply_bands(problem, res, free)
+    if twin_warning is not None:
+        res.warnings.append(twin_warning)
     return res
+
+
+def twin_of(problem: OutputErrorProblem, params: Parameters, p: Mapping[str, float]
+            ) -> Twin | None:
+    """The model's twin of ``p`` on the coordinates in ``problem``'s cost, or ``None``.
+
+    :meth:`SuspensionModel.twin`, for the coordinates with a channel in the cost. ``None``
+    as well when some free value of ``p`` is not finite and positive, or the twin would
+    change a parameter ``params`` holds fixed (the record is then not ambiguous: the twin
+    lies outside what is identified).
+    """
+    model = problem.model
+    measured = {model.coords[i] for i, _ in channel_kinds(model.coords, problem.channels)}
+    if not all(math.isfinite(p[k]) and p[k] > 0 for k in params.free):
+        return None
+    tw = model.twin(p, measured)
+    if tw is None or any(not math.isclose(tw.params[k], p[k], rel_tol=1e-12)
+                         for k in params.fixed):
+        return None
+    return tw
+
+
+def _resolve_twin(problem: OutputErrorProblem, res: IdentResult, other: IdentResult,
+                  tw: Twin) -> tuple[IdentResult, str | None]:
+    """Choose between ``res`` and ``other``, the fit from the model's twin of ``res``.
+
+    A twin is a second parameter set with the same response on the channels in the cost
+    (the quarter car's suspension and tyre seen from the body alone), so both fits reach
+    the same cost and no optimiser can tell which is right. When they do (both exact, or
+    within the noise: :func:`_within_noise`), measured channels outside the cost decide if
+    one fits them ``TWIN_DECIDE`` times better (squared residual over the channel's
+    variance, summed); otherwise the twin's physical rule decides (:attr:`Twin.rule`). A
+    fit from the twin that ends at a clearly lower cost simply wins (``res`` was a local
+    minimum). Returns the chosen result and a warning naming the other (``None`` when the
+    costs decided).
+    """
+    same = (_exact(problem, res) and _exact(problem, other)
+            or _within_noise(problem, res, other, len(res.stderr)))
+    if not same:
+        return (other if other.cost < res.cost else res), None
+    outside = [c for c in res.rms_residual
+               if c not in problem.channels and c in other.rms_residual]
+
+    def misfit(r: IdentResult) -> float:
+        total = 0.0
+        for c in outside:
+            var = float(np.nanvar(problem.meas.measured[c]))
+            total += r.rms_residual[c] ** 2 / var if var > 0 else 0.0
+        return total
+
+    a, b = misfit(res), misfit(other)
+    if outside and max(a, b) > TWIN_DECIDE * min(a, b) and max(a, b) > EXACT_FIT:
+        take_other = b < a
+        why = f"as the channels outside the cost ({', '.join(outside)}) fit it better"
+    else:
+        take_other = tw.prefer
+        why = f"by the rule: {tw.rule}"
+    best, alt = (other, res) if take_other else (res, other)
+    vals = ", ".join(f"{k} = {alt.params[k]:.6g}" for k in alt.stderr)
+    return best, (f"two fits explain the record equally well (costs {res.cost:.6g} and "
+                  f"{other.cost:.6g}): the cost cannot tell {tw.swapped}; the other fit is "
+                  f"{vals}; this one is chosen {why}")
 
 
 @dataclass

@@ -67,7 +67,8 @@ import numpy as np
 import scipy
 
 from estimator.identify import Parameters, minimize_log
-from estimator.identify.start import cold_start
+from estimator.identify.profile import SIGMAS
+from estimator.identify.start import EXACT_FIT, cold_start, twin_of
 from estimator.stream.config import WindowConfig
 from estimator.stream.windowproblem import StateSpaceMap, WindowProblem
 from suspid.errors import UsageError
@@ -654,6 +655,25 @@ class SlidingWindowIdentifier:
             out.stderr_fit[k] = se[k]
             out.stderr[k] = float(math.hypot(se[k], cfg.sigma_floor * p[k]))
 
+    def _twin_choice(self, prob: WindowProblem, params: Parameters, p_hat: dict[str, float]
+                     ) -> tuple[dict[str, float], str | None]:
+        """The first window's fit, or its twin when the twin fits as well and the model's
+        rule prefers it (:meth:`SuspensionModel.twin`: the quarter car seen from the body
+        alone); later windows start next to the choice. Returns the parameters and a
+        warning when the twin was taken."""
+        tw = twin_of(prob, params, p_hat)
+        if tw is None or not tw.prefer:
+            return p_hat, None
+        # as well = within 3 sigma of the noise (a cost rise of SIGMAS^2 residual variances)
+        c_fit, c_twin = prob.normalized_ss(p_hat), prob.normalized_ss(tw.params)
+        dof = max(prob.n_obs - len(self.free), 1)
+        if not c_twin <= c_fit * (1.0 + SIGMAS ** 2 / dof) + EXACT_FIT:
+            return p_hat, None
+        vals = ", ".join(f"{k} = {p_hat[k]:.6g}" for k in self.free)
+        return tw.params, (f"the first window's fit ({vals}) has a twin that fits as well: the "
+                           f"cost cannot tell {tw.swapped}; the twin is taken by the rule: "
+                           f"{tw.rule}")
+
     def process(self, t: FloatArray, data: Mapping[str, FloatArray]) -> WindowResult:
         """Fit one window (or skip it).
 
@@ -718,6 +738,11 @@ class SlidingWindowIdentifier:
             jac = gn.jacobian
             if gn.params is not None:
                 p_hat = gn.params
+        twin_note = None
+        if not warm:
+            p_hat, twin_note = self._twin_choice(prob, params, p_hat)
+            if twin_note is not None:  # the simplex and Jacobian belong to the other fit
+                final, jac = None, None
         res = prob.finish(params, p_hat, nfev, True, simplex=final, jacobian=jac)
         out.params = res.params
         out.stderr_fit = dict(res.stderr)
@@ -728,6 +753,8 @@ class SlidingWindowIdentifier:
         out.cost = res.cost
         out.rms_residual = res.rms_residual
         out.warnings = [w for w in res.warnings if "evaluation budget" not in w]
+        if twin_note is not None:
+            out.warnings.append(twin_note)
         if not converged:
             out.warnings.append(f"Nelder-Mead used its budget of {budget} evaluations "
                                 f"before meeting xatol={cfg.xatol:g}")

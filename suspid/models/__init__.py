@@ -19,7 +19,8 @@ from importlib.metadata import entry_points
 from typing import Callable, Iterable, Iterator
 
 from suspid.errors import UsageError
-from suspid.models.base import GRAVITY, AffinePieces, DoeDesign, ParamSpec, Site, SuspensionModel
+from suspid.models.base import (GRAVITY, AffinePieces, DoeDesign, ParamSpec, Site, SuspensionModel,
+                                Twin)
 from suspid.models.full7 import Full7
 from suspid.models.half4 import Half4
 from suspid.models.quarter1 import Quarter1
@@ -134,5 +135,5 @@ def infer_model(columns: Iterable[str]) -> str:
 
 
 __all__ = ["AffinePieces", "BUILTIN", "DoeDesign", "ENTRY_POINT_GROUP", "GRAVITY", "MODELS", "ParamSpec", "Site",
-           "SuspensionModel", "get_model", "infer_model", "model_names", "Quarter1", "Quarter2",
+           "SuspensionModel", "Twin", "get_model", "infer_model", "model_names", "Quarter1", "Quarter2",
            "Half4", "Full7"]

@@ -17,13 +17,15 @@ name: its structure (coordinates, roads, parameters), where its struts and tyres
 each other (:meth:`SuspensionModel.road_lags`, :meth:`SuspensionModel.road_tracks`), its
 suspension deflections (:meth:`SuspensionModel.deflections`), which CSV columns are its
 (:meth:`SuspensionModel.column_bases`), its CAN identities (:attr:`sensor_set`,
-:attr:`alert_id`, matching the DBC) and its design of experiments (:attr:`doe_design`). See ``docs/architecture.md`` ("Adding a model").
+:attr:`alert_id`, matching the DBC), its design of experiments (:attr:`doe_design`) and the
+other parameter set a record of some coordinates cannot tell from the true one
+(:meth:`SuspensionModel.twin`). See ``docs/architecture.md`` ("Adding a model").
 """
 from __future__ import annotations
 
 import functools
 from dataclasses import dataclass, field
-from typing import Callable, ClassVar, Mapping
+from typing import Callable, ClassVar, Collection, Mapping
 
 import numpy as np
 from numpy.typing import NDArray
@@ -154,6 +156,32 @@ class DoeDesign:
     choices: Mapping[str, str] = field(default_factory=dict)
     rows: tuple[tuple[int, ...], ...] | None = None
     levels: Mapping[str, tuple[str, str, tuple[float, ...]]] | None = None
+
+
+@dataclass(frozen=True)
+class Twin:
+    """A second parameter set with exactly the same response on some coordinates.
+
+    A structural, discrete non-identifiability: the cost has two isolated minima of the
+    same value for every record of those coordinates (any road, noise-free or not), so no
+    optimiser can tell them apart and the local curvature at either looks fine.
+
+    Attributes
+    ----------
+    params : dict
+        Every parameter of the twin (SI), the given ones where the twin keeps them.
+    swapped : str
+        What the record cannot tell apart, in words.
+    rule : str
+        The physical rule that chooses between the two, in words.
+    prefer : bool
+        ``True`` when the rule chooses the twin over the given parameter set.
+    """
+
+    params: dict[str, float]
+    swapped: str
+    rule: str
+    prefer: bool
 
 
 @dataclass(frozen=True)
@@ -357,6 +385,19 @@ class SuspensionModel:
         track delayed by ``L / v``. Default: no lag.
         """
         return (0.0,) * len(self.roads)
+
+    def twin(self, p: Mapping[str, float], measured: Collection[str]) -> Twin | None:
+        """The other parameter set whose response on the ``measured`` coordinates equals
+        that of ``p`` for every road and initial state, or ``None`` (the default: none).
+
+        Parameters
+        ----------
+        p : mapping
+            Every parameter (SI).
+        measured : collection of str
+            The coordinates (names in :attr:`coords`) with some channel in the cost.
+        """
+        return None
 
     def strut_sites(self, p: Mapping[str, float]) -> list[Site]:
         """The suspension struts (coordinate = extension; the force resists extension)."""

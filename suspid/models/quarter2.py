@@ -5,12 +5,12 @@
 """
 from __future__ import annotations
 
-from typing import Mapping
+from typing import Collection, Mapping
 
 import numpy as np
 
 from suspid.models.base import (GRAVITY, DoeDesign, FloatArray, Matrices, ParamSpec, Site,
-                                SuspensionModel)
+                                SuspensionModel, Twin)
 
 
 class Quarter2(SuspensionModel):
@@ -62,3 +62,31 @@ class Quarter2(SuspensionModel):
         g = np.array([0.0, -1.0])
         return [Site("tyre", "tyre", g, np.array([1.0]), -g, "c2", "k2",
                      (p["m1"] + p["m2"]) * GRAVITY)]
+
+    def twin(self, p: Mapping[str, float], measured: Collection[str]) -> Twin | None:
+        """The suspension and the tyre swapped, when only the body ``x1`` is measured.
+
+        With ``A = c1 s + k1`` and ``B = c2 s + k2`` the body's response to the road is
+        ``x1 / r = A B / (m1 m2 s^4 + s^2 ((m1 + m2) A + m1 B) + A B)``. ``A' = m1 B / M``,
+        ``B' = M A / m1`` (``M = m1 + m2``) leave ``A B`` and ``M A + m1 B`` and so the
+        whole transfer function unchanged: ``c1' = m1 c2 / M``, ``k1' = m1 k2 / M``,
+        ``c2' = M c1 / m1``, ``k2' = M k1 / m1``. The free responses share the poles, so
+        an estimated initial state fits both alike. A channel of the wheel ``x2`` tells
+        them apart (its numerator ``(m1 s^2 + A) B`` is not symmetric); so does a fixed
+        ``c1``, ``k1``, ``c2`` or ``k2``, which the caller checks.
+
+        The rule: the tyre spring is the stiffer one relative to the suspension spring
+        (``k2 / k1`` the larger of the two; one of them is always above ``M / m1`` and
+        the other below, and road vehicles have ``k2 / k1`` of about 5-15).
+        """
+        if "x2" in measured or "x1" not in measured:
+            return None
+        m1, m2 = p["m1"], p["m2"]
+        f = (m1 + m2) / m1
+        q = dict(p)
+        q.update(c1=p["c2"] / f, k1=p["k2"] / f, c2=p["c1"] * f, k2=p["k1"] * f)
+        return Twin(q, "the suspension (c1, k1) and the tyre (c2, k2), scaled by "
+                       "(m1 + m2)/m1, from the body alone",
+                    "the tyre spring the stiffer one relative to the suspension spring "
+                    "(k2/k1 the larger)",
+                    q["k2"] * p["k1"] > p["k2"] * q["k1"])

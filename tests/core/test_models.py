@@ -1,9 +1,13 @@
 """The models implement the seed's equations 1-7 term by term."""
 from __future__ import annotations
 
-import numpy as np
+import itertools
 
-from suspid.models import MODELS, get_model
+import numpy as np
+import pytest
+
+from suspid.models import MODELS, SuspensionModel, get_model
+from suspid.simulate import simulate_states
 
 
 def test_quarter1_eq1() -> None:
@@ -48,3 +52,51 @@ def test_models_are_stable_at_defaults() -> None:
         m = get_model(name)
         A, _ = m.state_space(m.defaults())
         assert np.all(np.linalg.eigvals(A).real < 0)
+
+
+def _smooth_roads(m: SuspensionModel, t: np.ndarray) -> np.ndarray:
+    """``[r, r_dot]`` of every road: a sum of sines in a sin^2 window (starts at rest,
+    ``r_dot`` the exact derivative of ``r``)."""
+    T = t[-1]
+    w, wd = np.sin(np.pi * t / T) ** 2, np.pi / T * np.sin(2 * np.pi * t / T)
+    rs, rds = [], []
+    for j in range(len(m.roads)):
+        f = np.array([0.7, 1.3, 3.1, 7.7, 13.0]) * (1 + 0.1 * j)
+        a = np.array([1.0, 0.5, 0.3, 0.1, 0.05]) * 1e-2
+        ph = np.arange(5.0) + j
+        s = (a[:, None] * np.sin(2 * np.pi * f[:, None] * t + ph[:, None])).sum(0)
+        sd = (a[:, None] * 2 * np.pi * f[:, None] * np.cos(2 * np.pi * f[:, None] * t
+                                                           + ph[:, None])).sum(0)
+        rs.append(s * w)
+        rds.append(sd * w + s * wd)
+    return np.column_stack(rs + rds)
+
+
+@pytest.mark.parametrize("name", MODELS)
+def test_a_twin_has_the_same_response_on_its_coordinates_only(name: str) -> None:
+    """Every model's :meth:`twin`, for every set of measured coordinates: the twin's
+    response equals the parameters' on those coordinates (1e-9) and not on the others,
+    the twin of the twin is the original, and the rule picks exactly one of the two.
+    The quarter car seen from the body is the one case with a twin."""
+    m = get_model(name)
+    p = m.defaults()
+    t = np.arange(0.0, 5.0, 0.001)
+    U = _smooth_roads(m, t)
+    X = simulate_states(m, p, t, U)
+    found = []
+    for n in range(1, len(m.coords) + 1):
+        for sub in itertools.combinations(m.coords, n):
+            tw = m.twin(p, set(sub))
+            if tw is None:
+                continue
+            found.append(sub)
+            Xt = simulate_states(m, tw.params, t, U)
+            for i, c in enumerate(m.coords):
+                for j in (i, i + len(m.coords)):  # position and velocity
+                    err = np.abs(X[:, j] - Xt[:, j]).max() / np.abs(X[:, j]).max()
+                    assert bool(err < 1e-9) is (c in sub), (c, err)
+            back = m.twin(tw.params, set(sub))
+            assert back is not None and back.prefer is not tw.prefer
+            for k, v in p.items():
+                assert back.params[k] == pytest.approx(v, rel=1e-12), k
+    assert found == ([("x1",)] if name == "quarter2" else [])

@@ -818,3 +818,83 @@ def test_no_noise_compensated_run_crawls_to_its_iteration_limit(
     est = estimate_start(OutputErrorProblem(m, meas, x0=e.x0), start_parameters(m, e, settings))
     assert est.values and len(counts) >= 4
     assert max(counts) < 100, counts
+
+
+def _body_only(truth: dict[str, float], chans: list[str], start: dict[str, float]
+               ) -> IdentResult:
+    m = get_model("quarter2")
+    problem = OutputErrorProblem(m, _bump(truth, chans, duration=2.0, fs=500.0), cost="sse")
+    params = Parameters.for_model(m, fix={"m1": truth["m1"], "m2": truth["m2"]},
+                                  init={k: start[k] for k in FREE2})
+    return fit_from_starts(problem, params, lambda s: fit(problem, s, polish=True)[0])
+
+
+@pytest.mark.parametrize("from_twin", [False, True])
+def test_body_only_twin_is_found_and_the_tyre_rule_keeps_the_truth(from_twin: bool) -> None:
+    """The body alone cannot tell the suspension from the tyre (two exact fits): whichever
+    the optimiser reaches first, the twin is fitted too and the rule (the tyre spring the
+    stiffer one relative to the suspension spring) reports the truth, naming the other."""
+    m = get_model("quarter2")
+    twin = m.twin(TABLE1, {"x1"})
+    assert twin is not None and not twin.prefer
+    res = _body_only(TABLE1, ["x1", "x1_ddot"], twin.params if from_twin else TABLE1)
+    for k in FREE2:
+        assert res.params[k] == pytest.approx(TABLE1[k], rel=1e-6), (k, res.params)
+    assert res.success
+    assert res.starts is not None and [s["start"] for s in res.starts][-1] == "twin"
+    note = [w for w in res.warnings if w.startswith("two fits explain the record")]
+    assert len(note) == 1 and "by the rule" in note[0]
+    assert f"k2 = {twin.params['k2']:.6g}" in note[0]
+
+
+@pytest.mark.parametrize("outside", [True, False])
+def test_a_channel_outside_the_cost_decides_between_the_twins(outside: bool) -> None:
+    """A tyre softer than the suspension relative to the masses (k2/k1 below (m1+m2)/m1):
+    the rule would pick the twin; a wheel channel outside the ``sse`` cost (which uses
+    the positions, here the body's alone) tells them apart and keeps the truth."""
+    truth = dict(TABLE1, k2=1.05 * TABLE1["k1"])
+    m = get_model("quarter2")
+    twin = m.twin(truth, {"x1"})
+    assert twin is not None and twin.prefer
+    chans = ["x1", "x2_ddot"] if outside else ["x1"]
+    res = _body_only(truth, chans, truth)
+    note = [w for w in res.warnings if w.startswith("two fits explain the record")]
+    assert len(note) == 1
+    expect = truth if outside else twin.params
+    for k in FREE2:
+        assert res.params[k] == pytest.approx(expect[k], rel=1e-6), (k, res.params)
+    assert ("channels outside the cost (x2_ddot)" in note[0]) is outside
+
+
+def test_no_twin_when_the_wheel_is_measured_or_a_swapped_value_is_fixed() -> None:
+    """A wheel channel in the cost, or a fixed tyre damping, leaves one answer: no twin run."""
+    m = get_model("quarter2")
+    for chans, fix in ((["x1", "x2"], {}), (["x1"], {"c2": TABLE1["c2"]})):
+        problem = OutputErrorProblem(m, _bump(TABLE1, chans, duration=2.0, fs=500.0))
+        params = Parameters.for_model(m, fix={"m1": 275.0, "m2": 27.0, **fix},
+                                      init={k: TABLE1[k] for k in FREE2 if k not in fix})
+        res = fit_from_starts(problem, params, lambda s: fit(problem, s, polish=True)[0])
+        assert res.starts is not None and "twin" not in [s["start"] for s in res.starts]
+        assert not any(w.startswith("two fits explain") for w in res.warnings)
+
+
+def test_monitor_cold_window_takes_the_twin_the_rule_prefers() -> None:
+    """Body channels only, nominal values at the truth's twin: the first window's fit is
+    the twin (it fits as well); the rule puts it back on the truth, and says so."""
+    m = get_model("quarter2")
+    s = damper_wear(m, duration=6.0, wear_start=1e6, wear_end=2e6, seed=5)
+    twin = m.twin(s.nominal, {"x1"})
+    assert twin is not None and not twin.prefer
+    params = Parameters.for_model(m, fix={"m1": s.nominal["m1"], "m2": s.nominal["m2"]},
+                                  init={k: twin.params[k] for k in FREE2})
+    cfg = default_config(m, s.nominal, 500.0, 4)
+    ident = SlidingWindowIdentifier(m, params, cfg, ["x1"])
+    res = []
+    run_arrays(s.t, s.data, cfg.window_s, cfg.step_s, lambda t, d: res.append(ident.process(t, d)))
+    done = [r for r in res if not r.skipped]
+    assert len(done) >= 2
+    first = done[0]
+    assert any("has a twin that fits as well" in w for w in first.warnings), first.warnings
+    for r in done:
+        for k in ("k1", "k2"):
+            assert r.params[k] == pytest.approx(s.nominal[k], rel=0.05), (k, r.t, r.params)
