@@ -47,7 +47,7 @@ from estimator.diagnose.refit import (ModelFit, PhysicalRefit, SensorRefit, base
 from estimator.diagnose.residuals import (ChannelStats, Motion, Screen, channel_stats, effective_n,
                                           motion_from, noise_variance, screen_physical,
                                           screen_sensor, xcorr_peak)
-from estimator.identify import IdentResult, OutputErrorProblem, Parameters, fit
+from estimator.identify import IdentResult, OutputErrorProblem, Parameters, fit, resolve_twin
 from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
 from suspid.models.base import FloatArray, SuspensionModel
@@ -208,8 +208,17 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
     """
     th = thresholds or Thresholds()
     problem = OutputErrorProblem(model, meas, cost=cost, x0=x0)
-    ident, _ = fit(problem, params, restarts=restarts, maxfev=maxfev, polish=polish,
-                   multistart=multistart)
+    def run(start: Parameters) -> IdentResult:
+        return fit(problem, start, restarts=restarts, maxfev=maxfev, polish=polish,
+                   multistart=multistart)[0]
+
+    # the body alone of a quarter car has two exact answers: the twin is fitted too
+    given = run(params)
+    ident, twin_run, twin_note = resolve_twin(problem, params, given, run)
+    if twin_run is not None:
+        ident.nfev = given.nfev + twin_run[1].nfev
+    if twin_note is not None:
+        ident.warnings.append(twin_note)
     free = params.free
     p0 = dict(ident.params)
     base = baseline_fit(problem, p0, np.asarray(ident.x0), ident.nfev, len(free))

@@ -1360,16 +1360,11 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
     res = issues.res
     twin_warning = None
     if not (issues.bad or issues.ambiguous or issues.unconfirmed):
-        tw = twin_of(problem, params, res.params)
-        if tw is not None:
-            start = params.copy()
-            for k in free:
-                start[k].value = float(tw.params[k])
-            other = run(start)
-            runs.append(("twin", start))
-            at_start.append(problem.normalized_ss(start.valuesdict()))
-            results.append(("twin", start, other))
-            res, twin_warning = _resolve_twin(problem, res, other, tw)
+        res, twin_run, twin_warning = resolve_twin(problem, params, res, run)
+        if twin_run is not None:
+            runs.append(("twin", twin_run[0]))
+            at_start.append(problem.normalized_ss(twin_run[0].valuesdict()))
+            results.append(("twin", *twin_run))
     ran = [(label, s, r) for label, s, r in results if r is not None]
     res.nfev = int(sum(r.nfev for _, _, r in ran))
     res.starts = []
@@ -1431,8 +1426,28 @@ def twin_of(problem: OutputErrorProblem, params: Parameters, p: Mapping[str, flo
     return tw
 
 
-def _resolve_twin(problem: OutputErrorProblem, res: IdentResult, other: IdentResult,
-                  tw: Twin) -> tuple[IdentResult, str | None]:
+def resolve_twin(problem: OutputErrorProblem, params: Parameters, res: IdentResult,
+                 run: Callable[[Parameters], IdentResult]
+                 ) -> tuple[IdentResult, tuple[Parameters, IdentResult] | None, str | None]:
+    """``res`` or the fit ``run`` reaches from its twin (:func:`twin_of`), whichever is right.
+
+    Returns the chosen result, ``(start, result)`` of the fit from the twin (``None`` when
+    there is no twin: then ``res`` itself and no warning), and the warning that names the
+    other fit when the two are equally good (:func:`_choose_twin`).
+    """
+    tw = twin_of(problem, params, res.params)
+    if tw is None:
+        return res, None, None
+    start = params.copy()
+    for k in params.free:
+        start[k].value = float(tw.params[k])
+    other = run(start)
+    best, warning = _choose_twin(problem, res, other, tw)
+    return best, (start, other), warning
+
+
+def _choose_twin(problem: OutputErrorProblem, res: IdentResult, other: IdentResult,
+                 tw: Twin) -> tuple[IdentResult, str | None]:
     """Choose between ``res`` and ``other``, the fit from the model's twin of ``res``.
 
     A twin is a second parameter set with the same response on the channels in the cost

@@ -8,6 +8,7 @@ import pytest
 
 from estimator.diagnose import diagnose
 from estimator.identify import Parameters
+from suspid.io.csvio import Measurement
 from suspid.models import get_model
 
 from ..conftest import TABLE1
@@ -93,3 +94,22 @@ def test_structured_but_unexplained_residual_is_said_plainly() -> None:
     assert ev["structured_channels"], ev["channels"]
     assert ev.get("unexplained") is True
     assert "no candidate effect explains it" in ev["verdict"]
+
+
+def test_body_only_baseline_is_not_the_twin() -> None:
+    """Body channels alone, the fit started at the truth's twin (the suspension and tyre
+    swapped: the same response, the same cost): the baseline fits the twin's twin too and
+    reports the truth by the rule, naming the other fit."""
+    m = get_model("quarter2")
+    full = make_measurement([], "bump", noise=0.0, seed=3)
+    meas = Measurement(t=full.t, road=full.road, source=full.source,
+                       measured={c: full.measured[c] for c in ("x1", "x1_dot")})
+    twin = m.twin(TABLE1, {"x1"})
+    assert twin is not None
+    params = Parameters.for_model(m, fix={"m1": TABLE1["m1"], "m2": TABLE1["m2"]},
+                                  init={k: twin.params[k] for k in ("c1", "k1", "c2", "k2")})
+    out = diagnose(m, meas, params, maxfev=BASELINE_FEV).to_json()
+    for k in ("c1", "k1", "c2", "k2"):
+        assert math.isclose(out["baseline"]["params"][k], TABLE1[k], rel_tol=1e-5), k
+    assert any(w.startswith("two fits explain the record") for w in out["warnings"])
+    assert out["effect"] is None
