@@ -29,8 +29,8 @@ from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
 from suspid.models.base import AffinePieces, FloatArray, SuspensionModel
 from suspid.simulate import (Modal, free_coeffs_to_state, free_response_basis, modal_form,
-                             modal_trajectory, mode_pattern, powers, road_matrix,
-                             simulate_states, state_matrices, uniform_step)
+                             modal_step_powers, modal_trajectory, mode_pattern, powers,
+                             road_matrix, simulate_states, state_matrices, uniform_step)
 
 COSTS = ("sse", "frobenius")
 
@@ -261,7 +261,12 @@ class OutputErrorProblem:
 
     def _predict_general(self, p: Mapping[str, float], modal: Modal | None,
                          aff: AffinePieces | None = None) -> tuple[FloatArray, FloatArray]:
-        """General path (non-uniform grid or defective ``A``): stepwise simulation."""
+        """General path (non-uniform grid or defective ``A``): stepwise simulation.
+
+        On a non-uniform grid with a diagonalisable ``A`` the modes are stepped interval by
+        interval and the free response is the running product of the per-step
+        ``exp(lam dt)`` (no simulation per initial-state direction).
+        """
         m = self.model
         A, B = (modal.A, modal.B) if modal is not None else state_matrices(m, p, aff)
         Cm, Dm = self._output_maps(A, B)
@@ -269,10 +274,14 @@ class OutputErrorProblem:
         X = simulate_states(m, p, self.t, self.U, base_x0, modal=modal, affine=aff)
         Y = X @ Cm.T + self.U @ Dm.T
         if isinstance(self.x0, str) and self.x0 == "estimate":
-            G = self._free_basis_slow(Cm, p, aff)
+            if modal is not None:
+                G = free_response_basis(modal, 0.0, self.t.size, Cm,
+                                        modal_step_powers(modal, self.t))
+            else:
+                G = self._free_basis_slow(Cm, p, aff)
             sol = self._solve_x0(G, Y)
             Y = Y + G.reshape(-1, G.shape[2]).dot(sol).reshape(Y.shape)
-            return Y, sol
+            return Y, (free_coeffs_to_state(modal, sol) if modal is not None else sol)
         return Y, base_x0
 
     def _free_basis_slow(self, Cm: FloatArray, p: Mapping[str, float],

@@ -8,7 +8,7 @@ from estimator.identify import OutputErrorProblem, Parameters, fit
 from suspid.excitation import make_scenario
 from suspid.io.csvio import Measurement
 from suspid.models import get_model
-from suspid.simulate import simulate
+from suspid.simulate import simulate, simulate_states
 
 from ..conftest import TABLE1
 
@@ -134,3 +134,34 @@ def test_structural_scale_ambiguity_is_decided_exactly() -> None:
     assert weak and all("does not change the response" not in w and w.endswith("by this data")
                         for w in weak)
     assert min(v3.singular_values) < WEAK_TOL
+
+
+@pytest.mark.parametrize("name", ["quarter2", "full7"])
+def test_jittered_grid_estimated_x0_matches_the_stepwise_basis(name: str) -> None:
+    """On a jittered grid the initial state's regressors come from the modes' running
+    products; the prediction equals the one from simulating each unit initial state."""
+    m = get_model(name)
+    p = m.defaults()
+    t, road, x0 = make_scenario(m, "bump", duration=0.4, fs=500.0, params=p, t0=0.05)
+    t = t + np.random.default_rng(5).uniform(-2e-4, 2e-4, t.size) * (np.arange(t.size) > 0)
+    x0 = np.linspace(0.01, 0.03, m.n_states)
+    out = simulate(m, p, t, road, x0)
+    meas = Measurement(t=t, road=road, measured={c: out[c] for c in m.coords}, source="jitter")
+    pr = OutputErrorProblem(m, meas, cost="sse")
+    assert pr.h is None
+    q = {k: v * 1.1 for k, v in p.items()}
+    pred = pr.predict(q)
+    # reference: the forced response plus each unit initial state's response, simulated
+    # one by one, and the least-squares initial state on them
+    assert pr._maps_fixed is not None  # positions only
+    Cm = pr._maps_fixed[0]
+    Yf = simulate_states(m, q, t, pr.U, np.zeros(m.n_states)) @ Cm.T
+    G = pr._free_basis_slow(Cm, q)
+    sol = pr._solve_x0(G, Yf)
+    np.testing.assert_allclose(pred.x0, sol, rtol=1e-6, atol=1e-12)
+    Yref = Yf + G.reshape(-1, G.shape[2]).dot(sol).reshape(Yf.shape)
+    np.testing.assert_allclose(pred.Y, Yref, rtol=0, atol=1e-9 * np.abs(Yref).max())
+    # and the exact data are matched at the true parameters with the true initial state
+    exact = pr.predict(p)
+    np.testing.assert_allclose(exact.x0, x0, rtol=1e-6, atol=1e-9)
+    assert float(np.max(np.abs(exact.residual))) < 1e-9
