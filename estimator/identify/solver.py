@@ -276,6 +276,12 @@ def jacobian_log(problem: OutputErrorProblem, p: Mapping[str, float], free: list
     return J
 
 
+def _rms(d: FloatArray) -> float:
+    """RMS of the non-NaN entries of ``d`` (NaN when there are none; no warning)."""
+    v = d[~np.isnan(d)]
+    return float(np.sqrt(np.mean(v * v))) if v.size else math.nan
+
+
 def finish(problem: OutputErrorProblem, params: Parameters, p_hat: Mapping[str, float],
            nfev: int, converged: bool, with_stderr: bool = True) -> IdentResult:
     """Build the :class:`IdentResult` at ``p_hat``: residuals, stderr, identifiability."""
@@ -283,17 +289,22 @@ def finish(problem: OutputErrorProblem, params: Parameters, p_hat: Mapping[str, 
     free = params.free
     pred = problem.predict(p_hat)
     res = pred.residual
-    ss = float(np.nansum((res * problem.w) ** 2))
+    # a response that overflows at p_hat (parameters far from any physical value) has no
+    # finite cost: not the 0 that a NaN-skipping sum would give
+    finite = bool(np.isfinite(res[problem.mask]).all())
+    ss = float(np.nansum((res * problem.w) ** 2)) if finite else math.inf
     warnings = list(problem.meas.warnings) + list(problem.warnings)
+    if not finite:
+        warnings.append("the model's response overflows at these parameters (no finite cost)")
     # RMS over every measured channel, not only those in the cost
     U = road_matrix(model, problem.t, problem.meas.road)
     X = simulate_states(model, p_hat, problem.t, U, pred.x0)
     allout = outputs(model, p_hat, X, U)
-    rms = {c: float(np.sqrt(np.nanmean((problem.meas.measured[c] - allout[c]) ** 2)))
+    rms = {c: _rms(problem.meas.measured[c] - allout[c])
            for c in model.channels if c in problem.meas.measured}
     stderr: dict[str, float] = {k: float("nan") for k in free}
-    identifiable, sv, cov_log = True, [], None
-    if with_stderr and free:
+    identifiable, sv, cov_log = finite, [], None
+    if with_stderr and free and finite:
         J = jacobian_log(problem, p_hat, free)
         # per-channel residual variance (sandwich estimate for the unweighted channels)
         rw = res * problem.w

@@ -165,3 +165,32 @@ def test_jittered_grid_estimated_x0_matches_the_stepwise_basis(name: str) -> Non
     exact = pr.predict(p)
     np.testing.assert_allclose(exact.x0, x0, rtol=1e-6, atol=1e-9)
     assert float(np.max(np.abs(exact.residual))) < 1e-9
+
+
+def test_constant_record_overflowing_parameters_cost_infinity_quietly() -> None:
+    """A record with no excitation (every channel constant, road and its rate inconsistent)
+    lets the search wander to parameters whose response overflows: that cost is infinite and
+    the fit ends with an answer, not a LinAlgError from the initial state's least squares,
+    and no RuntimeWarning reaches stderr."""
+    import warnings
+
+    from estimator.identify.start import fit_from_starts
+
+    m = get_model("quarter2")
+    t = np.arange(201) * 0.005
+    c = np.full(t.size, 0.01)
+    meas = Measurement(t=t, road={"r": c, "r_dot": c},
+                       measured={k: c for k in ("x1", "x2", "x1_dot", "x2_dot")}, source="const")
+    pr = OutputErrorProblem(m, meas, cost="sse")
+    params = Parameters.for_model(m)
+    # a parameter set whose response overflows (the record's equation-error start)
+    wild = {"m1": 0.0674, "c1": 1.534e20, "k1": 400.0, "m2": 2.497, "c2": 3.069e18, "k2": 8.88e-18}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        with np.errstate(over="ignore", invalid="ignore"):
+            r = pr.residual_vectors([wild, {**wild, "k1": 401.0}])
+            assert r.shape == (2, pr.n_obs)
+        res = fit_from_starts(pr, params, lambda s: fit(pr, s, maxfev=60, restarts=0,
+                                                        polish=True)[0])
+    assert set(res.params) == set(m.param_names)
+    assert not res.success
