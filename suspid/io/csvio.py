@@ -51,6 +51,9 @@ def _parse_float(text: str, path: str, line: int, col: str) -> float:
     if s == "" or s.lower() in ("nan", "na"):
         return math.nan
     try:
+        # Python's float() also reads "1_000" and other scripts' digits: no CSV number
+        if not s.isascii() or "_" in s:
+            raise ValueError(s)
         v = float(s)
     except ValueError:
         raise InputError(f"{path}:{line}: column {col!r}: expected a number, got {s[:40]!r}") from None

@@ -112,3 +112,12 @@ def test_trailing_separator_is_an_empty_last_column(tmp_path: Path) -> None:
                         ("t,x,\n0\n0.1,2\n", ":2: expected 2 cells, got 1")):
         with pytest.raises(InputError, match=where):
             read_measurement(_write(tmp_path, text), m1)
+
+
+@pytest.mark.parametrize("cell", ["1_000", "0.00_5", "\u0661\u0662", "\uff11"])
+def test_python_only_number_spellings_are_rejected(tmp_path: Path, cell: str) -> None:
+    """float() reads digit-group underscores and other scripts' digits; a CSV number is
+    plain ASCII, so such a cell is named as not a number instead of read as one."""
+    text = f"t,x\n0,1\n0.1,{cell}\n0.2,3\n"
+    with pytest.raises(InputError, match=r":3: column 'x': expected a number"):
+        read_measurement(_write(tmp_path, text), get_model("quarter1"))
