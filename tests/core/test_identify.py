@@ -194,3 +194,33 @@ def test_constant_record_overflowing_parameters_cost_infinity_quietly() -> None:
                                                         polish=True)[0])
     assert set(res.params) == set(m.param_names)
     assert not res.success
+
+
+@pytest.mark.parametrize("maxfev", [40, 150])
+def test_polish_keeps_to_the_evaluation_budget(maxfev: int) -> None:
+    """``--maxfev`` bounds every evaluation, the Levenberg–Marquardt polish and its
+    finite-difference Jacobians included (the polish once added up to 60 per free
+    parameter on top: minutes for a full7 log with ``--maxfev 60``); a fit cut short by
+    the budget is not reported as converged."""
+    m = get_model("quarter2")
+    p = m.defaults()
+    t, road, x0 = make_scenario(m, "bump", duration=0.6, fs=400.0, params=p, t0=0.05)
+    out = simulate(m, p, t, road, x0)
+    noise = np.random.default_rng(7).normal(0.0, 1e-4, (2, t.size))
+    meas = Measurement(t=t, road=road, measured={"x1": out["x1"] + noise[0],
+                                                 "x2": out["x2"] + noise[1]}, source="budget")
+    pr = OutputErrorProblem(m, meas, cost="sse")
+    params = Parameters.for_model(m, fix={"m1": p["m1"]},
+                                  init={k: 0.6 * v for k, v in p.items() if k != "m1"})
+    calls = {"n": 0}
+    inner = pr.residual_vector
+
+    def counted(q: dict[str, float]) -> np.ndarray:
+        calls["n"] += 1
+        return inner(q)
+
+    pr.residual_vector = counted  # type: ignore[method-assign]
+    res, nm = fit(pr, params, maxfev=maxfev, restarts=0, polish=True, with_stderr=False)
+    assert nm.nfev <= maxfev
+    assert calls["n"] <= maxfev
+    assert not res.success
