@@ -36,13 +36,14 @@ from estimator.alerts import (DEFAULT_HORIZON_S, AlertConfig, AlertEngine, Alert
                               BusAlertSink, CallbackSink, ForecastEngine)
 from estimator.decode import DecodeListener
 from estimator.identify import Parameters
+from estimator.identify.inputs import CSV_SUFFIXES
 from estimator.stream.config import (WindowConfig, default_config, default_decimation,
                                      strut_parameters)
 from estimator.stream.drivers import CanWindowDriver, LiveStop, replay_log, run_arrays, run_bus
 from estimator.stream.events import Summary
 from estimator.stream.monitor import StreamMonitor
 from suspid.can.bus import open_bus
-from suspid.can.logs import ReadStats, is_can_log
+from suspid.can.logs import LOG_FORMATS, ReadStats, is_can_log
 from suspid.can.options import RECEIVE_BUFFER_S
 from suspid.errors import InputError, UsageError, require_file
 from suspid.io.csvio import read_measurement
@@ -441,6 +442,9 @@ def run_source(source: Source, spec: MonitorSpec, mon: StreamMonitor,
             path = require_file(source.input)
             if is_can_log(path):
                 return _run_log(source, spec, mon, sinks, buses)
+            if path.suffix.lower() not in CSV_SUFFIXES:  # as identify: no guess at the format
+                raise InputError(f"{path}: unknown input format {path.suffix!r}; expected .csv "
+                                 f"or a CAN log ({', '.join(LOG_FORMATS)})")
             return _run_csv(source, spec, mon)
         return _run_live(source, spec, mon, sinks, buses)
     finally:
