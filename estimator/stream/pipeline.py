@@ -28,7 +28,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from statistics import NormalDist
-from typing import Any, Callable, Literal, Mapping
+from typing import Any, Callable, Literal, Mapping, cast
 
 import numpy as np
 
@@ -501,6 +501,11 @@ def _run_log(source: Source, spec: MonitorSpec, mon: StreamMonitor, sinks: list[
     replay_log(drv, source.input, stats)
     listener.count_malformed(stats.malformed)
     if drv.windows == 0:
+        fs = listener.frame_stats()
+        if not fs["accepted"]:  # no data at all: a shorter window would not help
+            rej = {k: v for k, v in cast("dict[str, int]", fs["rejected"]).items() if v}
+            raise InputError(f"{source.input}: no accepted frame ({drv.frames} frames read, "
+                             f"rejected {rej or 'none'})")
         raise InputError(f"{source.input}: {drv.frames} frames but less data than one window "
                          f"({cfg.window_s:g} s); give a shorter --window")
     out: dict[str, Any] = {"frames": listener.frame_stats(), "windows_cut": drv.windows}

@@ -119,6 +119,8 @@ CASES: list[tuple[list[str], str]] = [
      "cannot open CAN interface 'nope'"),
     (["monitor", "--model", "quarter2", "--input", "missing.log", "--jsonl"], "missing.log"),
     (["monitor", "--model", "quarter2", "--input", "junk.blf", "--jsonl"], "junk.blf"),
+    (["monitor", "--model", "quarter2", "--input", "empty.log", "--jsonl"],
+     "empty.log: no accepted frame (0 frames read, rejected none)"),
     (["monitor", "--model", "quarter2", "--input", "q2.xyz", "--jsonl"],
      "q2.xyz: unknown input format '.xyz'; expected .csv or a CAN log"),
     (["monitor", "--model", "quarter2", "--input", "q2.log", "--dbc", "empty.dbc", "--jsonl"], "empty.dbc"),
