@@ -46,7 +46,8 @@ def work(tmp_path_factory: pytest.TempPathFactory) -> Path:
     (d / "junk.mf4").write_bytes(b"x" * 10)
     (d / "bad.json").write_text("{bad json")
     (d / "q2.xyz").write_text("t,x1\n0,0\n")
-    (d / "huge.csv").write_text("t,x1,x2\n0,1e300,0\n0.01,-2e300,0\n0.02,0,1\n")
+    (d / "huge.csv").write_text("t,x1,x2\n0,1e300,0\n0.01,-2e300,0\n"
+                                + "".join(f"0.0{k},0,1\n" for k in range(2, 9)))
     (d / "hugeroad.csv").write_text("t,r,x1\n0,1e300,0\n0.01,-2e300,0\n0.02,0,1\n")
     return d
 
