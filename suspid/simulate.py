@@ -170,8 +170,10 @@ def modal_form(model: SuspensionModel, p: Mapping[str, float],
     return Modal(lam[keep], Vk, Vinv[keep], np.where(is_real, 1.0, 2.0), Bz, Bv, A, B)
 
 
-def _foh_weights(lam: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``E = exp(lam h)`` and FOH weights ``g0, g1`` of ``int_0^h e^{lam(h-s)} u(s) ds``."""
+def _foh_weights(lam: np.ndarray, h: float | np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``E = exp(lam h)`` and FOH weights ``g0, g1`` of ``int_0^h e^{lam(h-s)} u(s) ds``
+    (elementwise: ``lam`` and ``h`` broadcast, e.g. (1, m) modes by (N-1, 1) steps)."""
     z = lam * h
     E = np.exp(z)
     small = np.abs(z) < 1e-3
@@ -253,6 +255,50 @@ def modal_trajectory(modal: Modal, h: float, r: FloatArray, x0: FloatArray) -> n
     return W
 
 
+def modal_trajectory_steps(modal: Modal, dt: FloatArray, r: FloatArray,
+                           x0: FloatArray) -> np.ndarray:
+    """:func:`modal_trajectory` on a non-uniform grid: steps ``dt`` (N-1,) in s.
+
+    Each interval has its own ``exp(lam dt[k])`` and FOH weights (elementwise, no matrix
+    exponential), so a jittered logger time base costs one short recursion over the
+    samples instead of a matrix exponential per sample.
+    """
+    N = r.shape[0]
+    m = modal.lam.size
+    z0 = x0 - modal.Bv @ r[0]
+    w0 = modal.Vinv @ z0
+    W = np.empty((N, m), dtype=complex)
+    W[0] = w0
+    if N > 1:
+        E, g0, g1 = _foh_weights(modal.lam[None, :], np.asarray(dt, dtype=float)[:, None])
+        if np.any(r):
+            S = r @ (modal.Vinv @ modal.Bz).T
+            drive = g0 * S[:-1] + g1 * S[1:]
+            w = w0
+            for k in range(N - 1):
+                w = E[k] * w + drive[k]
+                W[k + 1] = w
+        else:
+            W[1:] = step_powers(E)[1:] * w0[None, :]
+    return W
+
+
+def step_powers(E: np.ndarray) -> np.ndarray:
+    """Running products ``prod_{j<k} E[j]`` for ``k = 0..N-1`` of per-step multipliers
+    ``E`` (N-1, m): the free response of each mode on a non-uniform grid, shape (N, m)."""
+    P = np.empty((E.shape[0] + 1, E.shape[1]), dtype=np.result_type(E, 1.0))
+    P[0] = 1.0
+    np.cumprod(E, axis=0, out=P[1:])
+    return P
+
+
+def modal_step_powers(modal: Modal, t: FloatArray) -> np.ndarray:
+    """``exp(lam (t[k] - t[0]))`` for every sample of a (non-uniform) grid ``t``, shape (N, m),
+    as running products of the per-step ``exp(lam dt)`` (the uniform grid's
+    :func:`modal_powers`)."""
+    return step_powers(np.exp(np.diff(np.asarray(t, dtype=float))[:, None] * modal.lam[None, :]))
+
+
 def modal_powers(modal: Modal, h: float, N: int) -> np.ndarray:
     """``E**k = exp(lam h k)`` for ``k = 0..N-1``, shape (N, m).
 
@@ -310,8 +356,9 @@ def simulate_states(model: SuspensionModel, p: Mapping[str, float], t: FloatArra
     p : mapping
         Parameters (SI).
     t : ndarray, shape (N,)
-        Sample times (s), uniform for the fast path; a non-uniform grid uses exact
-        per-interval matrix exponentials (slower).
+        Sample times (s). Uniform for the fastest path (blocked scans); a non-uniform grid
+        steps the modes interval by interval (exact, one short recursion), and only a
+        defective ``A`` falls back to per-interval matrix exponentials.
     U : ndarray, shape (N, 2 n_roads)
         Inputs ``[r, r_dot]`` from :func:`road_matrix`.
     x0 : ndarray, shape (n,), optional
@@ -328,8 +375,9 @@ def simulate_states(model: SuspensionModel, p: Mapping[str, float], t: FloatArra
     h = uniform_step(t)
     if modal is None:
         modal = modal_form(model, p, affine)
-    if h is not None and modal is not None:
-        W = modal_trajectory(modal, h, r, x0)
+    if modal is not None:
+        W = (modal_trajectory(modal, h, r, x0) if h is not None
+             else modal_trajectory_steps(modal, np.diff(t), r, x0))
         return modal.real_part(W, np.eye(n)) + r @ modal.Bv.T
     return _simulate_states_loop(model, p, t, U, x0, affine)
 
@@ -337,9 +385,9 @@ def simulate_states(model: SuspensionModel, p: Mapping[str, float], t: FloatArra
 def _simulate_states_loop(model: SuspensionModel, p: Mapping[str, float], t: FloatArray,
                           U: FloatArray, x0: FloatArray,
                           affine: AffinePieces | None = None) -> FloatArray:
-    """Exact FOH stepping with block matrix exponentials (non-uniform grids, defective A)."""
-    # scipy.linalg costs ~0.4 s to import and only non-uniform grids and defective A land
-    # here; `suspid simulate` on a uniform grid loads no scipy at all
+    """Exact FOH stepping with block matrix exponentials (defective A)."""
+    # scipy.linalg costs ~0.4 s to import and only a defective A lands
+    # here; `suspid simulate` of a diagonalisable model loads no scipy at all
     from scipy.linalg import expm  # noqa: PLC0415
 
     A, B = state_matrices(model, p, affine)

@@ -48,9 +48,10 @@ from estimator.diagnose.residuals import (ChannelStats, Motion, Screen, channel_
                                           motion_from, noise_variance, screen_physical,
                                           screen_sensor, xcorr_peak)
 from estimator.identify import IdentResult, OutputErrorProblem, Parameters, fit, resolve_twin
-from suspid.errors import UsageError
+from suspid.errors import InputError, UsageError
 from suspid.io.csvio import Measurement
 from suspid.models.base import FloatArray, SuspensionModel
+from suspid.simulate import uniform_step
 from suspid.effects import PhysicalEffect, SensorEffect, effect_classes, make_effect, strut_sites
 
 
@@ -176,6 +177,10 @@ def compare(base: ModelFit, aug: ModelFit, noise_var: Mapping[str, float],
     return dbic, p, explained, f, aug.rms()
 
 
+#: fewest samples the residual analysis works on (its Savitzky–Golay window, cubic)
+MIN_SAMPLES = 7
+
+
 def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost: str = "sse",
              x0: str | FloatArray = "estimate", restarts: int = 3, maxfev: int | None = None,
              thresholds: Thresholds | None = None, polish: bool = True,
@@ -205,8 +210,24 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
     Returns
     -------
     DiagnoseResult
+
+    Raises
+    ------
+    InputError
+        A record the residual analysis cannot use: fewer than ``MIN_SAMPLES`` samples (the
+        smoothing filter's window), or a non-uniform time grid (the nonlinear refits step
+        on a uniform one); the message names the record and what it holds.
     """
     th = thresholds or Thresholds()
+    t = np.asarray(meas.t, dtype=float)
+    if t.size < MIN_SAMPLES:
+        raise InputError(f"{meas.source}: diagnose needs at least {MIN_SAMPLES} samples, "
+                         f"got {t.size}")
+    if uniform_step(t) is None:
+        d = np.diff(t)
+        raise InputError(f"{meas.source}: diagnose needs uniformly spaced samples; the time "
+                         f"steps range from {float(d.min()):.6g} to {float(d.max()):.6g} s "
+                         "(resample the record, or use identify)")
     problem = OutputErrorProblem(model, meas, cost=cost, x0=x0)
     def run(start: Parameters) -> IdentResult:
         return fit(problem, start, restarts=restarts, maxfev=maxfev, polish=polish,

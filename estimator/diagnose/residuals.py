@@ -60,6 +60,8 @@ def ljung_box(e: FloatArray, lags: int = 20) -> tuple[float, float]:
     """
     x = np.asarray(e, dtype=float)
     n = int(np.sum(~np.isnan(x)))
+    if n < 3:  # no lag to test (autocorr's own limit): no evidence against whiteness
+        return 0.0, 1.0
     lags = max(1, min(lags, n // 4))
     rho = autocorr(x, lags)[1:]
     k = np.arange(1, rho.size + 1)
@@ -78,15 +80,19 @@ def noise_variance(e: FloatArray) -> float:
 def xcorr_peak(a: FloatArray, b: FloatArray, maxlag: int) -> tuple[float, int]:
     """Largest normalised cross-correlation of ``a`` and ``b`` over ``|lag| <= maxlag``.
 
-    Returns ``(rho, lag)``; lag > 0 means ``a`` follows ``b``.
+    Returns ``(rho, lag)``; lag > 0 means ``a`` follows ``b``. Lags beyond the record's
+    length (a short record) are not tried.
     """
     ok = ~(np.isnan(a) | np.isnan(b))
+    if not ok.any():
+        return 0.0, 0
     x = a[ok] - np.mean(a[ok])
     y = b[ok] - np.mean(b[ok])
     den = math.sqrt(float(x @ x) * float(y @ y))
     if den <= 0:
         return 0.0, 0
     n = x.size
+    maxlag = min(maxlag, n - 1)
     best, lag = 0.0, 0
     for k in range(-maxlag, maxlag + 1):
         v = float(x[k:] @ y[: n - k]) if k >= 0 else float(x[: n + k] @ y[-k:])

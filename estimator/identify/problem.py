@@ -25,12 +25,12 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from suspid import smalllinalg
-from suspid.errors import UsageError
+from suspid.errors import InputError, UsageError
 from suspid.io.csvio import Measurement
 from suspid.models.base import AffinePieces, FloatArray, SuspensionModel
 from suspid.simulate import (Modal, free_coeffs_to_state, free_response_basis, modal_form,
-                             modal_trajectory, mode_pattern, powers, road_matrix,
-                             simulate_states, state_matrices, uniform_step)
+                             modal_step_powers, modal_trajectory, mode_pattern, powers,
+                             road_matrix, simulate_states, state_matrices, uniform_step)
 
 COSTS = ("sse", "frobenius")
 
@@ -130,6 +130,7 @@ class OutputErrorProblem:
         self.Ymeas0 = np.where(self.mask, self.Ymeas, 0.0)
         w = np.array([float((self.weights or {}).get(c, 1.0)) for c in self.channels])
         self.w = w
+        self._check_magnitudes()
         self.h = uniform_step(self.t)
         self.n_obs = int(self.mask.sum())
         self._full = bool(self.mask.all())
@@ -154,6 +155,20 @@ class OutputErrorProblem:
         # (p,) row runs one short inner loop per sample, 3-4x slower
         self._w_flat = np.tile(w, self.t.size)
         self._mask_flat = self.mask.reshape(-1)
+
+    def _check_magnitudes(self) -> None:
+        """Raise :class:`~suspid.errors.InputError` naming a measured or road column whose
+        sum of squares overflows (values near 1e200 and up): no cost can be formed on it."""
+        nr = len(self.model.roads)
+        names = list(self.channels) + list(self.model.roads) + [f"{r}_dot" for r in self.model.roads]
+        cols = np.column_stack([self.Ymeas0, self.U[:, :nr], self.U[:, nr:]])
+        with np.errstate(over="ignore"):
+            ok = np.isfinite(np.einsum("ij,ij->j", cols, cols))
+        if not ok.all():
+            j = int(np.flatnonzero(~ok)[0])
+            big = float(np.max(np.abs(cols[:, j])))
+            raise InputError(f"{self.meas.source}: column {names[j]!r}: values up to {big:.3g} "
+                             "overflow the sum of squares; expected SI units (m, m/s, m/s^2, rad)")
 
     # ---- linear maps from states to channels --------------------------------------
     def _output_maps(self, A: FloatArray, B: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -247,9 +262,15 @@ class OutputErrorProblem:
         return None if sol is None else sol[0]
 
     def _solve_x0(self, G: FloatArray, Y: FloatArray) -> FloatArray:
-        """Explicit weighted least squares for the free-response coefficients."""
+        """Explicit weighted least squares for the free-response coefficients.
+
+        NaN coefficients (so a non-finite residual and cost) when the response overflows:
+        parameters far from any physical value on a long record.
+        """
         R = ((self.Ymeas0 - Y) * self.w * self.mask).reshape(-1)
         Gm = (G * (self.w[None, :, None] * self.mask[:, :, None])).reshape(-1, G.shape[2])
+        if not (np.isfinite(R).all() and np.isfinite(Gm).all()):
+            return np.full(G.shape[2], np.nan)
         GtG = Gm.T @ Gm
         try:
             sol = np.linalg.solve(GtG, Gm.T @ R)
@@ -261,7 +282,12 @@ class OutputErrorProblem:
 
     def _predict_general(self, p: Mapping[str, float], modal: Modal | None,
                          aff: AffinePieces | None = None) -> tuple[FloatArray, FloatArray]:
-        """General path (non-uniform grid or defective ``A``): stepwise simulation."""
+        """General path (non-uniform grid or defective ``A``): stepwise simulation.
+
+        On a non-uniform grid with a diagonalisable ``A`` the modes are stepped interval by
+        interval and the free response is the running product of the per-step
+        ``exp(lam dt)`` (no simulation per initial-state direction).
+        """
         m = self.model
         A, B = (modal.A, modal.B) if modal is not None else state_matrices(m, p, aff)
         Cm, Dm = self._output_maps(A, B)
@@ -269,10 +295,14 @@ class OutputErrorProblem:
         X = simulate_states(m, p, self.t, self.U, base_x0, modal=modal, affine=aff)
         Y = X @ Cm.T + self.U @ Dm.T
         if isinstance(self.x0, str) and self.x0 == "estimate":
-            G = self._free_basis_slow(Cm, p, aff)
+            if modal is not None:
+                G = free_response_basis(modal, 0.0, self.t.size, Cm,
+                                        modal_step_powers(modal, self.t))
+            else:
+                G = self._free_basis_slow(Cm, p, aff)
             sol = self._solve_x0(G, Y)
             Y = Y + G.reshape(-1, G.shape[2]).dot(sol).reshape(Y.shape)
-            return Y, sol
+            return Y, (free_coeffs_to_state(modal, sol) if modal is not None else sol)
         return Y, base_x0
 
     def _free_basis_slow(self, Cm: FloatArray, p: Mapping[str, float],

@@ -175,12 +175,18 @@ def fit(problem: OutputErrorProblem, params: Parameters, restarts: int = 6,
                            xatol=max(xatol, 1e-2) if use_polish else xatol,
                            fatol=max(fatol, 1e-6) if use_polish else fatol)
         converged = out.converged
-        if use_polish:
-            u_lm, nfev_lm, ok = _lm_polish(problem, to_params, out.u, out.fun)
+        # the polish counts against the budget too (its Jacobians included): with fewer
+        # evaluations left than one Jacobian it cannot take a step
+        left = None if budget is None else budget - out.nfev
+        if use_polish and left is not None and left <= len(free) + 1:
+            converged = False  # only the loose Nelder-Mead tolerance was reached
+        elif use_polish:
+            u_lm, nfev_lm, ok = _lm_polish(problem, to_params, out.u, out.fun, left)
             out.nfev += nfev_lm
             if ok:
                 out.u, out.fun = u_lm, cost(u_lm)
-                converged = True
+                # a polish stopped by the budget improved the fit but did not converge
+                converged = left is None or nfev_lm < left
             else:  # the polish did not help: finish with Nelder-Mead at full tolerance
                 left = None if budget is None else max(budget - out.nfev, 1)
                 more = minimize_log(cost, out.u, step=0.05, restarts=restarts, maxfev=left,
@@ -217,8 +223,13 @@ def fit(problem: OutputErrorProblem, params: Parameters, restarts: int = 6,
 
 
 def _lm_polish(problem: OutputErrorProblem, to_params: Callable[[FloatArray], dict[str, float]],
-               u0: FloatArray, f0: float) -> tuple[FloatArray, int, bool]:
-    """Levenberg–Marquardt from ``u0`` on the normalised residuals; ``(u, nfev, improved)``."""
+               u0: FloatArray, f0: float, maxfev: int | None = None
+               ) -> tuple[FloatArray, int, bool]:
+    """Levenberg–Marquardt from ``u0`` on the normalised residuals; ``(u, nfev, improved)``.
+
+    At most ``60 n`` residual evaluations (``n`` free parameters, the finite-difference
+    Jacobians included), fewer when ``maxfev`` is smaller.
+    """
     # lazy: scipy.optimize costs the monitor's start time and only the polish needs it
     from scipy.optimize import least_squares  # noqa: PLC0415
 
@@ -236,7 +247,8 @@ def _lm_polish(problem: OutputErrorProblem, to_params: Callable[[FloatArray], di
 
     try:
         sol = least_squares(resid, u0, method="lm", x_scale=1.0, xtol=1e-12, ftol=1e-12,
-                            gtol=1e-12, max_nfev=60 * max(len(u0), 1))
+                            gtol=1e-12, max_nfev=min(60 * max(len(u0), 1),
+                                                     maxfev if maxfev is not None else 1 << 62))
     except (ValueError, np.linalg.LinAlgError):
         return u0, 0, False
     f = float(2.0 * sol.cost)
@@ -276,6 +288,12 @@ def jacobian_log(problem: OutputErrorProblem, p: Mapping[str, float], free: list
     return J
 
 
+def _rms(d: FloatArray) -> float:
+    """RMS of the non-NaN entries of ``d`` (NaN when there are none; no warning)."""
+    v = d[~np.isnan(d)]
+    return float(np.sqrt(np.mean(v * v))) if v.size else math.nan
+
+
 def finish(problem: OutputErrorProblem, params: Parameters, p_hat: Mapping[str, float],
            nfev: int, converged: bool, with_stderr: bool = True) -> IdentResult:
     """Build the :class:`IdentResult` at ``p_hat``: residuals, stderr, identifiability."""
@@ -283,17 +301,22 @@ def finish(problem: OutputErrorProblem, params: Parameters, p_hat: Mapping[str, 
     free = params.free
     pred = problem.predict(p_hat)
     res = pred.residual
-    ss = float(np.nansum((res * problem.w) ** 2))
+    # a response that overflows at p_hat (parameters far from any physical value) has no
+    # finite cost: not the 0 that a NaN-skipping sum would give
+    finite = bool(np.isfinite(res[problem.mask]).all())
+    ss = float(np.nansum((res * problem.w) ** 2)) if finite else math.inf
     warnings = list(problem.meas.warnings) + list(problem.warnings)
+    if not finite:
+        warnings.append("the model's response overflows at these parameters (no finite cost)")
     # RMS over every measured channel, not only those in the cost
     U = road_matrix(model, problem.t, problem.meas.road)
     X = simulate_states(model, p_hat, problem.t, U, pred.x0)
     allout = outputs(model, p_hat, X, U)
-    rms = {c: float(np.sqrt(np.nanmean((problem.meas.measured[c] - allout[c]) ** 2)))
+    rms = {c: _rms(problem.meas.measured[c] - allout[c])
            for c in model.channels if c in problem.meas.measured}
     stderr: dict[str, float] = {k: float("nan") for k in free}
-    identifiable, sv, cov_log = True, [], None
-    if with_stderr and free:
+    identifiable, sv, cov_log = finite, [], None
+    if with_stderr and free and finite:
         J = jacobian_log(problem, p_hat, free)
         # per-channel residual variance (sandwich estimate for the unweighted channels)
         rw = res * problem.w

@@ -1213,6 +1213,9 @@ def _reject(res: IdentResult, warnings: list[str]) -> None:
     res.warnings += warnings
 
 
+# a parameter set far from any physical value overflows the response: such a cost is
+# infinite (the search moves on), not a RuntimeWarning with its source line on stderr
+@np.errstate(over="ignore", invalid="ignore", divide="ignore")
 def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
                     run: Callable[[Parameters], IdentResult], *, data_start: bool = True,
                     keep_init: bool = True, init_fallback: bool = True,

@@ -28,7 +28,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from statistics import NormalDist
-from typing import Any, Callable, Literal, Mapping
+from typing import Any, Callable, Literal, Mapping, cast
 
 import numpy as np
 
@@ -36,13 +36,14 @@ from estimator.alerts import (DEFAULT_HORIZON_S, AlertConfig, AlertEngine, Alert
                               BusAlertSink, CallbackSink, ForecastEngine)
 from estimator.decode import DecodeListener
 from estimator.identify import Parameters
+from estimator.identify.inputs import CSV_SUFFIXES
 from estimator.stream.config import (WindowConfig, default_config, default_decimation,
                                      strut_parameters)
 from estimator.stream.drivers import CanWindowDriver, LiveStop, replay_log, run_arrays, run_bus
 from estimator.stream.events import Summary
 from estimator.stream.monitor import StreamMonitor
 from suspid.can.bus import open_bus
-from suspid.can.logs import ReadStats, is_can_log
+from suspid.can.logs import LOG_FORMATS, ReadStats, is_can_log
 from suspid.can.options import RECEIVE_BUFFER_S
 from suspid.errors import InputError, UsageError, require_file
 from suspid.io.csvio import read_measurement
@@ -441,6 +442,9 @@ def run_source(source: Source, spec: MonitorSpec, mon: StreamMonitor,
             path = require_file(source.input)
             if is_can_log(path):
                 return _run_log(source, spec, mon, sinks, buses)
+            if path.suffix.lower() not in CSV_SUFFIXES:  # as identify: no guess at the format
+                raise InputError(f"{path}: unknown input format {path.suffix!r}; expected .csv "
+                                 f"or a CAN log ({', '.join(LOG_FORMATS)})")
             return _run_csv(source, spec, mon)
         return _run_live(source, spec, mon, sinks, buses)
     finally:
@@ -497,6 +501,11 @@ def _run_log(source: Source, spec: MonitorSpec, mon: StreamMonitor, sinks: list[
     replay_log(drv, source.input, stats)
     listener.count_malformed(stats.malformed)
     if drv.windows == 0:
+        fs = listener.frame_stats()
+        if not fs["accepted"]:  # no data at all: a shorter window would not help
+            rej = {k: v for k, v in cast("dict[str, int]", fs["rejected"]).items() if v}
+            raise InputError(f"{source.input}: no accepted frame ({drv.frames} frames read, "
+                             f"rejected {rej or 'none'})")
         raise InputError(f"{source.input}: {drv.frames} frames but less data than one window "
                          f"({cfg.window_s:g} s); give a shorter --window")
     out: dict[str, Any] = {"frames": listener.frame_stats(), "windows_cut": drv.windows}

@@ -178,7 +178,8 @@ def fuse_road(t: FloatArray, r: FloatArray, r_dot: FloatArray, crossover_hz: flo
     ``r - R`` is a constant and ``r_hat = r``; white noise on ``r`` (which the simulator
     would feed into the tyre force at every frequency, biasing the damper estimate as an
     error in the input) is averaged out above the crossover, where the integrated velocity
-    takes over. A window with a missing or non-finite sample is returned unchanged.
+    takes over. A window with a missing or non-finite sample is returned unchanged; in a
+    window shorter than the average, the average spans the window.
 
     Parameters
     ----------
@@ -199,7 +200,9 @@ def fuse_road(t: FloatArray, r: FloatArray, r_dot: FloatArray, crossover_hz: flo
     if r.size < 3 or not (np.isfinite(r).all() and np.isfinite(v).all()):
         return r
     h = float(t[1] - t[0])
-    w = 2 * int(round(0.5 / (crossover_hz * h))) + 1
+    # at most the window itself (a longer average is the window's mean, and np.convolve's
+    # "same" output would take the kernel's length)
+    w = min(2 * int(round(0.5 / (crossover_hz * h))) + 1, r.size - 1 + r.size % 2)
     if w < 3:
         return r
     R = np.concatenate(([0.0], np.cumsum(0.5 * h * (v[1:] + v[:-1]))))

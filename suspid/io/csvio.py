@@ -3,7 +3,8 @@
 ``t`` (s) is required and must be strictly increasing; road columns are the model's
 ``roads`` (with optional ``_dot``); measured columns are any subset of the model's
 ``channels``. Empty cells are missing samples (NaN). Unknown columns are ignored with a
-warning. Every error names the file, the line and the column.
+warning. A trailing separator (an empty last column, on the header or the rows) is
+allowed. Every error names the file, the line and the column.
 """
 from __future__ import annotations
 
@@ -50,6 +51,9 @@ def _parse_float(text: str, path: str, line: int, col: str) -> float:
     if s == "" or s.lower() in ("nan", "na"):
         return math.nan
     try:
+        # Python's float() also reads "1_000" and other scripts' digits: no CSV number
+        if not s.isascii() or "_" in s:
+            raise ValueError(s)
         v = float(s)
     except ValueError:
         raise InputError(f"{path}:{line}: column {col!r}: expected a number, got {s[:40]!r}") from None
@@ -93,19 +97,25 @@ def read_measurement(path: str | Path, model: SuspensionModel, *,
         header = [h.strip() for h in header]
         if "t" not in header:
             raise InputError(f"{name}:1: no 't' column in the header (got {', '.join(header[:8])})")
-        dup = {h for h in header if header.count(h) > 1}
+        dup = {h for h in header if h and header.count(h) > 1}
         if dup:
             raise InputError(f"{name}:1: duplicate column(s) {', '.join(sorted(dup))}")
         road_cols = set(model.roads) | {f"{r}_dot" for r in model.roads}
         known = {"t"} | road_cols | set(model.channels)
+        # a trailing separator (on the header, the rows or both) is an empty last column:
+        # a row holds the named columns, then at most the header's cells or empty ones
+        ncol = len(header)
+        while ncol and not header[ncol - 1]:
+            ncol -= 1
+        unnamed_data = False
         warnings: list[str] = []
-        unknown = [h for h in header if h not in known]
+        unknown = [h or f"column {i + 1} (no name)" for i, h in enumerate(header[:ncol])
+                   if h not in known]
         if unknown:
             warnings.append(f"{name}: ignoring column(s) not used by model {model.name}: "
                             f"{', '.join(unknown)}")
         used = [(i, h) for i, h in enumerate(header) if h in known]
         cols: dict[str, array] = {h: array("d") for _, h in used}  # 8 bytes/value
-        ncol = len(header)
         line = 1
         try:
             for row in reader:
@@ -113,11 +123,17 @@ def read_measurement(path: str | Path, model: SuspensionModel, *,
                 if not row or all(not c.strip() for c in row):
                     continue
                 if len(row) != ncol:
-                    raise InputError(f"{name}:{line}: expected {ncol} cells, got {len(row)}")
+                    if len(row) < ncol or any(c.strip() for c in row[len(header):]):
+                        raise InputError(f"{name}:{line}: expected {ncol} cells, got {len(row)}")
+                    unnamed_data = unnamed_data or any(c.strip() for c in row[ncol:])
                 for i, h in used:
                     cols[h].append(_parse_float(row[i], name, line, h))
         except (csv.Error, UnicodeDecodeError) as exc:
             raise InputError(f"{name}:{line}: unreadable CSV ({exc})") from None
+    if unnamed_data:
+        where = (f"column {ncol + 1}" if len(header) == ncol + 1
+                 else f"columns {ncol + 1}-{len(header)}")
+        warnings.append(f"{name}: ignoring the values in {where} (no name in the header)")
     t = np.frombuffer(cols.pop("t"), dtype=float).copy()
     if t.size < 2:
         raise InputError(f"{name}: expected at least 2 data rows, got {t.size}")

@@ -1,14 +1,16 @@
 """Identification recovers known truth; identifiability is reported honestly."""
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
-from estimator.identify import OutputErrorProblem, Parameters, fit
+from estimator.identify import OutputErrorProblem, Parameters, fit, fit_from_starts
 from suspid.excitation import make_scenario
 from suspid.io.csvio import Measurement
 from suspid.models import get_model
-from suspid.simulate import simulate
+from suspid.simulate import simulate, simulate_states
 
 from ..conftest import TABLE1
 
@@ -134,3 +136,89 @@ def test_structural_scale_ambiguity_is_decided_exactly() -> None:
     assert weak and all("does not change the response" not in w and w.endswith("by this data")
                         for w in weak)
     assert min(v3.singular_values) < WEAK_TOL
+
+
+@pytest.mark.parametrize("name", ["quarter2", "full7"])
+def test_jittered_grid_estimated_x0_matches_the_stepwise_basis(name: str) -> None:
+    """On a jittered grid the initial state's regressors come from the modes' running
+    products; the prediction equals the one from simulating each unit initial state."""
+    m = get_model(name)
+    p = m.defaults()
+    t, road, x0 = make_scenario(m, "bump", duration=0.4, fs=500.0, params=p, t0=0.05)
+    t = t + np.random.default_rng(5).uniform(-2e-4, 2e-4, t.size) * (np.arange(t.size) > 0)
+    x0 = np.linspace(0.01, 0.03, m.n_states)
+    out = simulate(m, p, t, road, x0)
+    meas = Measurement(t=t, road=road, measured={c: out[c] for c in m.coords}, source="jitter")
+    pr = OutputErrorProblem(m, meas, cost="sse")
+    assert pr.h is None
+    q = {k: v * 1.1 for k, v in p.items()}
+    pred = pr.predict(q)
+    # reference: the forced response plus each unit initial state's response, simulated
+    # one by one, and the least-squares initial state on them
+    assert pr._maps_fixed is not None  # positions only
+    Cm = pr._maps_fixed[0]
+    Yf = simulate_states(m, q, t, pr.U, np.zeros(m.n_states)) @ Cm.T
+    G = pr._free_basis_slow(Cm, q)
+    sol = pr._solve_x0(G, Yf)
+    np.testing.assert_allclose(pred.x0, sol, rtol=1e-6, atol=1e-12)
+    Yref = Yf + G.reshape(-1, G.shape[2]).dot(sol).reshape(Yf.shape)
+    np.testing.assert_allclose(pred.Y, Yref, rtol=0, atol=1e-9 * np.abs(Yref).max())
+    # and the exact data are matched at the true parameters with the true initial state
+    exact = pr.predict(p)
+    np.testing.assert_allclose(exact.x0, x0, rtol=1e-6, atol=1e-9)
+    assert float(np.max(np.abs(exact.residual))) < 1e-9
+
+
+def test_constant_record_overflowing_parameters_cost_infinity_quietly() -> None:
+    """A record with no excitation (every channel constant, road and its rate inconsistent)
+    lets the search wander to parameters whose response overflows: that cost is infinite and
+    the fit ends with an answer, not a LinAlgError from the initial state's least squares,
+    and no RuntimeWarning reaches stderr."""
+    m = get_model("quarter2")
+    t = np.arange(201) * 0.005
+    c = np.full(t.size, 0.01)
+    meas = Measurement(t=t, road={"r": c, "r_dot": c},
+                       measured={k: c for k in ("x1", "x2", "x1_dot", "x2_dot")}, source="const")
+    pr = OutputErrorProblem(m, meas, cost="sse")
+    params = Parameters.for_model(m)
+    # a parameter set whose response overflows (the record's equation-error start)
+    wild = {"m1": 0.0674, "c1": 1.534e20, "k1": 400.0, "m2": 2.497, "c2": 3.069e18, "k2": 8.88e-18}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        with np.errstate(over="ignore", invalid="ignore"):
+            r = pr.residual_vectors([wild, {**wild, "k1": 401.0}])
+            assert r.shape == (2, pr.n_obs)
+        res = fit_from_starts(pr, params, lambda s: fit(pr, s, maxfev=60, restarts=0,
+                                                        polish=True)[0])
+    assert set(res.params) == set(m.param_names)
+    assert not res.success
+
+
+@pytest.mark.parametrize("maxfev", [40, 150])
+def test_polish_keeps_to_the_evaluation_budget(maxfev: int) -> None:
+    """``--maxfev`` bounds every evaluation, the Levenberg–Marquardt polish and its
+    finite-difference Jacobians included (the polish once added up to 60 per free
+    parameter on top: minutes for a full7 log with ``--maxfev 60``); a fit cut short by
+    the budget is not reported as converged."""
+    m = get_model("quarter2")
+    p = m.defaults()
+    t, road, x0 = make_scenario(m, "bump", duration=0.6, fs=400.0, params=p, t0=0.05)
+    out = simulate(m, p, t, road, x0)
+    noise = np.random.default_rng(7).normal(0.0, 1e-4, (2, t.size))
+    meas = Measurement(t=t, road=road, measured={"x1": out["x1"] + noise[0],
+                                                 "x2": out["x2"] + noise[1]}, source="budget")
+    pr = OutputErrorProblem(m, meas, cost="sse")
+    params = Parameters.for_model(m, fix={"m1": p["m1"]},
+                                  init={k: 0.6 * v for k, v in p.items() if k != "m1"})
+    calls = {"n": 0}
+    inner = pr.residual_vector
+
+    def counted(q: dict[str, float]) -> np.ndarray:
+        calls["n"] += 1
+        return inner(q)
+
+    pr.residual_vector = counted  # type: ignore[method-assign]
+    res, nm = fit(pr, params, maxfev=maxfev, restarts=0, polish=True, with_stderr=False)
+    assert nm.nfev <= maxfev
+    assert calls["n"] <= maxfev
+    assert not res.success

@@ -2,12 +2,15 @@
 from __future__ import annotations
 
 import math
+import warnings
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from estimator.diagnose import diagnose
 from estimator.identify import Parameters
+from suspid.errors import InputError
 from suspid.io.csvio import Measurement
 from suspid.models import get_model
 
@@ -113,3 +116,37 @@ def test_body_only_baseline_is_not_the_twin() -> None:
         assert math.isclose(out["baseline"]["params"][k], TABLE1[k], rel_tol=1e-5), k
     assert any(w.startswith("two fits explain the record") for w in out["warnings"])
     assert out["effect"] is None
+
+
+def test_short_or_non_uniform_record_is_an_input_error_naming_it() -> None:
+    """The residual analysis smooths with a 7-sample window and the refits step on a
+    uniform grid: a shorter record, or a jittered time base, is an input error naming the
+    record (a 2-row CSV once ended in scipy's savgol ValueError, a jittered one in a
+    message naming neither file nor grid)."""
+    meas = make_measurement([], fs=200.0, duration=0.4, noise=0.0)
+    m = get_model("quarter2")
+    params = Parameters.for_model(m, fix={"m1": TABLE1["m1"]})
+    short = replace(meas, t=meas.t[:6], measured={k: v[:6] for k, v in meas.measured.items()},
+                    road={k: v[:6] for k, v in meas.road.items()}, source="short.csv")
+    with pytest.raises(InputError, match=r"^short\.csv: diagnose needs at least 7 samples, got 6$"):
+        diagnose(m, short, params, maxfev=50)
+    t = meas.t + np.random.default_rng(3).uniform(-2e-4, 2e-4, meas.t.size) * (np.arange(meas.t.size) > 0)
+    with pytest.raises(InputError, match=r"^jitter\.csv: diagnose needs uniformly spaced samples"):
+        diagnose(m, replace(meas, t=t, source="jitter.csv"), params, maxfev=50)
+
+
+@pytest.mark.parametrize("n", [7, 12])
+def test_record_shorter_than_the_analysis_lags_is_diagnosed(n: int) -> None:
+    """Cross-correlation and whiteness lags are cut to the record (a 12-sample record once
+    broke the cross-correlation's slicing)."""
+    meas = make_measurement([], fs=200.0, duration=0.8, noise=0.0)
+    k = slice(100, 100 + n)
+    rec = replace(meas, t=meas.t[k], measured={c: v[k] for c, v in meas.measured.items()},
+                  road={c: v[k] for c, v in meas.road.items()})
+    m = get_model("quarter2")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        res = diagnose(m, rec, Parameters.for_model(m, fix={"m1": TABLE1["m1"]}), maxfev=60)
+    assert res.baseline is not None
+    assert all(abs(v["rho"]) <= 1.0 + 1e-12 for ch in res.evidence["cross_correlation"].values()
+               for v in ch.values())

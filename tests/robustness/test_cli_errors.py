@@ -46,6 +46,9 @@ def work(tmp_path_factory: pytest.TempPathFactory) -> Path:
     (d / "junk.mf4").write_bytes(b"x" * 10)
     (d / "bad.json").write_text("{bad json")
     (d / "q2.xyz").write_text("t,x1\n0,0\n")
+    (d / "huge.csv").write_text("t,x1,x2\n0,1e300,0\n0.01,-2e300,0\n"
+                                + "".join(f"0.0{k},0,1\n" for k in range(2, 9)))
+    (d / "hugeroad.csv").write_text("t,r,x1\n0,1e300,0\n0.01,-2e300,0\n0.02,0,1\n")
     return d
 
 
@@ -64,6 +67,9 @@ CASES: list[tuple[list[str], str]] = [
     (IDENT + ["--input", "inf.csv"], "inf.csv:3: column 'x1': expected a finite number"),
     (IDENT + ["--input", "bin.csv"], "bin.csv:1: not a CSV text file"),
     (IDENT + ["--input", "q2.xyz"], "q2.xyz: unknown input format '.xyz'"),
+    (IDENT + ["--input", "huge.csv"], "huge.csv: column 'x1': values up to 2e+300 overflow"),
+    (IDENT + ["--input", "hugeroad.csv"], "hugeroad.csv: column 'r': values up to 2e+300 overflow"),
+    (["diagnose", "--model", "quarter2", "--input", "huge.csv"], "huge.csv: column 'x1'"),
     (IDENT + ["--input", "missing.log"], "missing.log: no such CAN log file"),
     (IDENT + ["--input", "adir.log"], "adir.log: no such CAN log file"),
     (IDENT + ["--input", "empty.log"], "empty.log: no accepted frame"),
@@ -114,6 +120,10 @@ CASES: list[tuple[list[str], str]] = [
      "cannot open CAN interface 'nope'"),
     (["monitor", "--model", "quarter2", "--input", "missing.log", "--jsonl"], "missing.log"),
     (["monitor", "--model", "quarter2", "--input", "junk.blf", "--jsonl"], "junk.blf"),
+    (["monitor", "--model", "quarter2", "--input", "empty.log", "--jsonl"],
+     "empty.log: no accepted frame (0 frames read, rejected none)"),
+    (["monitor", "--model", "quarter2", "--input", "q2.xyz", "--jsonl"],
+     "q2.xyz: unknown input format '.xyz'; expected .csv or a CAN log"),
     (["monitor", "--model", "quarter2", "--input", "q2.log", "--dbc", "empty.dbc", "--jsonl"], "empty.dbc"),
     (["monitor", "--model", "quarter2", "--input", "q2.log", "--window", "nan", "--jsonl"], "--window"),
     (["monitor", "--model", "quarter2", "--input", "q2.log", "--alert-file", "adir", "--jsonl"], "adir"),

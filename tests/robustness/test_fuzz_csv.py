@@ -6,6 +6,7 @@ import tracemalloc
 from pathlib import Path
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -86,3 +87,37 @@ def test_large_file_is_read_in_compact_columns(tmp_path: Path) -> None:
     # csv reader's one row: no per-row Python objects (which would be ~100 B per cell)
     values = 3 * n * 8
     assert peak < 2.5 * values, (peak, values)
+
+
+def test_trailing_separator_is_an_empty_last_column(tmp_path: Path) -> None:
+    """Spreadsheet exports end lines with a separator: on the rows, on the header or on
+    both. Such a file reads as without it; an unnamed column that holds values is ignored
+    with a warning naming its position, and a row still needs every named cell."""
+    m1 = get_model("quarter1")
+    want = np.array([1.0, 2.0, 3.0])
+    for text in ("t,x\n0,1,\n0.1,2,\n0.2,3,\n",      # rows only
+                 "t,x,\n0,1\n0.1,2\n0.2,3\n",         # header only
+                 "t,x,\n0,1,\n0.1,2,\n0.2,3,\n",      # both
+                 "t,x\r\n0,1,,\r\n0.1,2,\r\n0.2,3\r\n"):  # CRLF, ragged
+        meas = read_measurement(_write(tmp_path, text), m1)
+        np.testing.assert_array_equal(meas.measured["x"], want)
+        assert meas.warnings == []
+    meas = read_measurement(_write(tmp_path, "t,x,,\n0,1,5\n0.1,2,,\n0.2,3\n"), m1)
+    np.testing.assert_array_equal(meas.measured["x"], want)
+    assert meas.warnings == [f"{tmp_path / 'fuzz.csv'}: ignoring the values in columns 3-4 "
+                             "(no name in the header)"]
+    meas = read_measurement(_write(tmp_path, "t,,x\n0,9,1\n0.1,,2\n0.2,1,3\n"), m1)
+    assert "column 2 (no name)" in meas.warnings[0]
+    for text, where in (("t,x\n0,1,7\n0.1,2\n", ":2: expected 2 cells, got 3"),
+                        ("t,x,\n0\n0.1,2\n", ":2: expected 2 cells, got 1")):
+        with pytest.raises(InputError, match=where):
+            read_measurement(_write(tmp_path, text), m1)
+
+
+@pytest.mark.parametrize("cell", ["1_000", "0.00_5", "\u0661\u0662", "\uff11"])
+def test_python_only_number_spellings_are_rejected(tmp_path: Path, cell: str) -> None:
+    """float() reads digit-group underscores and other scripts' digits; a CSV number is
+    plain ASCII, so such a cell is named as not a number instead of read as one."""
+    text = f"t,x\n0,1\n0.1,{cell}\n0.2,3\n"
+    with pytest.raises(InputError, match=r":3: column 'x': expected a number"):
+        read_measurement(_write(tmp_path, text), get_model("quarter1"))

@@ -176,6 +176,20 @@ def test_fused_road_keeps_a_consistent_road_and_averages_displacement_noise() ->
     assert np.array_equal(fuse_road(t, gap, rd, 2.0), gap, equal_nan=True)
 
 
+@pytest.mark.parametrize("n", [4, 5, 101, 102])
+def test_fuse_road_in_a_window_shorter_than_its_average(n: int) -> None:
+    """A window shorter than the crossover's moving average (``--window 0.5`` at 200 Hz with
+    the 1 Hz default: 101 samples, a 201-sample average) fuses over the whole window and
+    keeps its length (np.convolve's "same" once returned the kernel's length: a broadcast
+    error ended ``suspid monitor``); noise-free data come back unchanged."""
+    t = np.arange(n) * 0.005
+    r = 0.01 * np.sin(2 * np.pi * 1.5 * t) + 0.002
+    rd = 0.01 * 2 * np.pi * 1.5 * np.cos(2 * np.pi * 1.5 * t)
+    fused = fuse_road(t, r, rd, 1.0)
+    assert fused.shape == r.shape
+    assert np.max(np.abs(fused - r)) < 1e-3 * np.max(np.abs(r))
+
+
 def test_lowpass_road_passes_a_smooth_road_to_its_edges_and_cuts_white_noise() -> None:
     """Zero phase: a road well below the cutoff comes back unchanged, edges included (odd
     extension); white noise keeps about the fraction 2 f_c / f_s of its variance; a
