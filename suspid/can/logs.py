@@ -757,7 +757,23 @@ def _read_trc(path: Path, stats: ReadStats) -> Iterator[can.Message]:
     return _read_text_resumable(path, reader, counter, stats)
 
 
+#: a Vector BLF file begins with this signature and a header of ``BLF_HEADER`` bytes
+BLF_SIGNATURE = b"LOGG"
+BLF_HEADER = 144
+
+
 def _read_blf(path: Path, stats: ReadStats) -> Iterator[can.Message]:
+    with open(path, "rb") as fh:
+        head = fh.read(BLF_HEADER)
+    if len(head) < BLF_HEADER or not head.startswith(BLF_SIGNATURE):
+        if not head:
+            what = "an empty file"
+        elif len(head) < BLF_HEADER:
+            what = f"{len(head)} bytes beginning {head[:4]!r}"
+        else:
+            what = f"a file beginning {head[:4]!r}"
+        raise InputError(f"{path}: not a Vector BLF file: expected the signature "
+                         f"{BLF_SIGNATURE!r} and a {BLF_HEADER}-byte header, got {what}")
     return _read_binary(path, can.BLFReader(str(path)), stats)
 
 

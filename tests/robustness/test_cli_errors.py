@@ -73,7 +73,7 @@ CASES: list[tuple[list[str], str]] = [
     (IDENT + ["--input", "missing.log"], "missing.log: no such CAN log file"),
     (IDENT + ["--input", "adir.log"], "adir.log: no such CAN log file"),
     (IDENT + ["--input", "empty.log"], "empty.log: no accepted frame"),
-    (IDENT + ["--input", "junk.blf"], "junk.blf: not a readable Vector BLF file"),
+    (IDENT + ["--input", "junk.blf"], "junk.blf: not a Vector BLF file: expected the signature b'LOGG' and a 144-byte header, got 10 bytes"),
     (IDENT + ["--input", "junk.mf4"], "junk.mf4: not a readable ASAM MDF4 file"),
     # DBC and signal maps
     (IDENT + ["--input", "q2.log", "--dbc", "missing.dbc"], "missing.dbc: no such DBC file"),

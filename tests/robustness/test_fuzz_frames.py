@@ -230,3 +230,20 @@ def test_empty_log_of_every_format(tmp_path: Path, suffix: str) -> None:
     with pytest.raises(InputError) as ei:
         load_log_as_measurement(p, "quarter2")
     assert "\n" not in str(ei.value) and str(p) in str(ei.value)
+
+
+@pytest.mark.parametrize("content,got", [
+    (b"", "got an empty file"),
+    (b"LOGG", "got 4 bytes beginning b'LOGG'"),
+    (b"PK\x03\x04" + bytes(200), "got a file beginning b'PK\\x03\\x04'"),
+])
+def test_a_file_that_is_no_blf_says_what_it_got(tmp_path: Path, content: bytes, got: str) -> None:
+    """A ``.blf`` without the BLF signature and header: expected vs got, not the struct
+    module's 'unpack requires a buffer of 72 bytes'."""
+    p = tmp_path / "drive.blf"
+    p.write_bytes(content)
+    with pytest.raises(InputError) as ei:
+        list(read_log(p))
+    msg = str(ei.value)
+    assert msg.startswith(f"{p}: not a Vector BLF file: expected the signature b'LOGG' and a "
+                          "144-byte header, ") and msg.endswith(got), msg
