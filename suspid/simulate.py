@@ -233,10 +233,14 @@ def first_order_scan(E: np.ndarray, d: np.ndarray, w0: np.ndarray,
     return W.reshape(m, nb * L)[:, :n].T
 
 
-def modal_trajectory(modal: Modal, h: float, r: FloatArray, x0: FloatArray) -> np.ndarray:
+def modal_trajectory(modal: Modal, h: float | FloatArray, r: FloatArray,
+                     x0: FloatArray) -> np.ndarray:
     """Kept modal coordinates ``W`` (N, m) for road ``r`` (N, nr) and initial state ``x0``.
 
-    The states follow as ``x = Re(V W fac) + B_v r``.
+    ``h`` is the step (s) of a uniform grid, or the ``N - 1`` steps of a non-uniform one
+    (a logger's jittered time base): each interval then has its own ``exp(lam dt)`` and
+    FOH weights (elementwise, no matrix exponential) and the recursion runs sample by
+    sample instead of the blocked scan. The states follow as ``x = Re(V W fac) + B_v r``.
     """
     N = r.shape[0]
     m = modal.lam.size
@@ -245,41 +249,23 @@ def modal_trajectory(modal: Modal, h: float, r: FloatArray, x0: FloatArray) -> n
     W = np.empty((N, m), dtype=complex)
     W[0] = w0
     if N > 1:
-        E, g0, g1 = _foh_weights(modal.lam, h)
-        if np.any(r):
-            S = r @ (modal.Vinv @ modal.Bz).T
-            drive = g0[None, :] * S[:-1] + g1[None, :] * S[1:]
-            W[1:] = first_order_scan(E, drive, w0)
+        steps = np.ndim(h) > 0
+        if steps:
+            E, g0, g1 = _foh_weights(modal.lam[None, :], np.asarray(h, dtype=float)[:, None])
         else:
-            W[1:] = powers(np.exp(modal.lam * h), N)[1:] * w0[None, :]
-    return W
-
-
-def modal_trajectory_steps(modal: Modal, dt: FloatArray, r: FloatArray,
-                           x0: FloatArray) -> np.ndarray:
-    """:func:`modal_trajectory` on a non-uniform grid: steps ``dt`` (N-1,) in s.
-
-    Each interval has its own ``exp(lam dt[k])`` and FOH weights (elementwise, no matrix
-    exponential), so a jittered logger time base costs one short recursion over the
-    samples instead of a matrix exponential per sample.
-    """
-    N = r.shape[0]
-    m = modal.lam.size
-    z0 = x0 - modal.Bv @ r[0]
-    w0 = modal.Vinv @ z0
-    W = np.empty((N, m), dtype=complex)
-    W[0] = w0
-    if N > 1:
-        E, g0, g1 = _foh_weights(modal.lam[None, :], np.asarray(dt, dtype=float)[:, None])
+            E, g0, g1 = _foh_weights(modal.lam, float(h))
         if np.any(r):
             S = r @ (modal.Vinv @ modal.Bz).T
             drive = g0 * S[:-1] + g1 * S[1:]
-            w = w0
-            for k in range(N - 1):
-                w = E[k] * w + drive[k]
-                W[k + 1] = w
+            if steps:
+                w = w0
+                for k in range(N - 1):
+                    w = E[k] * w + drive[k]
+                    W[k + 1] = w
+            else:
+                W[1:] = first_order_scan(E, drive, w0)
         else:
-            W[1:] = step_powers(E)[1:] * w0[None, :]
+            W[1:] = (step_powers(E) if steps else powers(E, N))[1:] * w0[None, :]
     return W
 
 
@@ -376,8 +362,7 @@ def simulate_states(model: SuspensionModel, p: Mapping[str, float], t: FloatArra
     if modal is None:
         modal = modal_form(model, p, affine)
     if modal is not None:
-        W = (modal_trajectory(modal, h, r, x0) if h is not None
-             else modal_trajectory_steps(modal, np.diff(t), r, x0))
+        W = modal_trajectory(modal, h if h is not None else np.diff(t), r, x0)
         return modal.real_part(W, np.eye(n)) + r @ modal.Bv.T
     return _simulate_states_loop(model, p, t, U, x0, affine)
 
