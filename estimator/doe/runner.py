@@ -16,6 +16,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
 import numpy as np
+from scipy.stats import chi2
 
 from estimator.doe.design import DESIGNS, FS, HORIZON, Experiment, experiments, time_grid
 from estimator.identify import OutputErrorProblem, Parameters, fit
@@ -30,6 +31,9 @@ from suspid.simulate import simulate
 TOL = 0.01
 #: noisy success band (standard errors)
 SIGMAS = 3.0
+#: the probability a Gaussian value lies beyond ``SIGMAS`` standard errors (0.27 %): the
+#: joint region of a row (:func:`joint_region`) misses the truth as often as one band does
+JOINT_ALPHA = math.erfc(SIGMAS / math.sqrt(2.0))
 
 
 @dataclass
@@ -219,6 +223,29 @@ def band_of(res: IdentResult, free: list[str]) -> dict[str, tuple[float, float]]
     return out
 
 
+def joint_region(res: IdentResult, truth: dict[str, float], free: list[str]
+                 ) -> dict[str, Any] | None:
+    """Whether the truth lies in the row's joint 3-sigma confidence region.
+
+    The per-parameter band of :func:`band_of` misses a correct truth with probability
+    0.27 % per value, so a row of ``p`` values misses one about ``p`` times as often; the
+    region ``d' C^-1 d <= chi2_p(1 - 0.27 %)`` (``d`` the log-parameter error, ``C`` the
+    identifier's covariance of the log-parameters) misses it 0.27 % of the time per row.
+    ``None`` without a covariance (no standard errors). Returns ``d2`` (the squared
+    Mahalanobis distance), ``limit`` (the chi-square quantile), ``dof`` and ``inside``.
+    """
+    if res.cov_log is None or not free:
+        return None
+    d = np.array([math.log(truth[k] / res.params[k]) if res.params[k] > 0 else math.inf
+                  for k in free])
+    C = np.asarray(res.cov_log, dtype=float)
+    if not (np.isfinite(d).all() and np.isfinite(C).all()):
+        return None
+    d2 = float(d @ np.linalg.pinv(C, rcond=1e-12, hermitian=True) @ d)
+    limit = float(chi2.isf(JOINT_ALPHA, len(free)))
+    return {"d2": d2, "limit": limit, "dof": len(free), "inside": bool(d2 <= limit)}
+
+
 def _num(x: float) -> float | None:
     return float(x) if math.isfinite(x) else None
 
@@ -264,6 +291,8 @@ def run_experiment(model: SuspensionModel, exp: Experiment, settings: Settings) 
                    "reported_success": bool(res.success),
                    "band_3sigma": {k: [_num(lo), _num(hi)] for k, (lo, hi) in bands.items()},
                    "band_method": {k: (res.band_method or {}).get(k, "curvature") for k in free},
+                   **({"joint_3sigma": joint_region(res, exp.truth, free)}
+                      if settings.noise > 0 else {}),
                    **({"starts": res.starts} if res.starts is not None else {})})
     return out, res
 
@@ -276,6 +305,8 @@ def run_design(model: SuspensionModel | str, settings: Settings,
     Returns the contract's object ``{"design", "experiments", "successes", "total"}`` and
     ``success_beyond_10x``: the rows reported a success (by the study's rule or by the
     identifier) with a free parameter more than 10x from the truth, which must stay empty.
+    Noisy designs add ``in_joint_region``: the rows whose truth lies in their joint 3-sigma
+    confidence region (:func:`joint_region`; each row's is under ``joint_3sigma``).
     """
     if isinstance(model, str):
         model = get_model(model)
@@ -286,11 +317,15 @@ def run_design(model: SuspensionModel | str, settings: Settings,
         rows.append(o)
         if progress is not None:
             progress(i + 1, len(exps), o)
-    return {"design": DESIGNS[model.name],
-            "experiments": [o.to_json() for o in rows],
-            "successes": int(sum(o.success for o in rows)),
-            "total": len(rows),
-            "success_beyond_10x": [o.id for o in rows if success_beyond(o, FAR_OFF)]}
+    out = {"design": DESIGNS[model.name],
+           "experiments": [o.to_json() for o in rows],
+           "successes": int(sum(o.success for o in rows)),
+           "total": len(rows),
+           "success_beyond_10x": [o.id for o in rows if success_beyond(o, FAR_OFF)]}
+    if settings.noise > 0:
+        out["in_joint_region"] = int(sum(bool((o.extra.get("joint_3sigma") or {}).get("inside"))
+                                         for o in rows))
+    return out
 
 
 #: a parameter this far (factor) from the truth must never be part of a success

@@ -8,9 +8,11 @@ import numpy as np
 import pytest
 
 from estimator.doe.design import experiments
-from estimator.doe.runner import Outcome, Settings, free_names, measurement, run_design, success_beyond
+from estimator.doe.runner import (JOINT_ALPHA, Outcome, Settings, free_names, joint_region, measurement,
+                                  run_design, success_beyond)
 from estimator.identify import OutputErrorProblem, Parameters, fit, jacobian_log
 from estimator.identify.profile import R_TOL, SIGMAS, honest_bands
+from estimator.identify.result import IdentResult
 from suspid.models import get_model
 
 
@@ -165,3 +167,45 @@ def test_every_profile_end_is_a_3_sigma_point_of_a_thorough_refit() -> None:
             assert abs(r - SIGMAS) <= R_TOL + 0.005, (k, end, r)
             checked += 1
     assert checked >= 4
+
+
+def _result(params: dict[str, float], cov: np.ndarray) -> IdentResult:
+    return IdentResult(model="quarter2", params=params, fixed=[], stderr={k: 0.0 for k in params},
+                       cost=0.0, nfev=0, success=True, rms_residual={}, identifiable=True,
+                       cov_log=cov)
+
+
+def test_the_joint_region_of_one_value_is_its_3_sigma_band() -> None:
+    """One free value: the region is the curvature band itself (chi2_1 quantile 9)."""
+    res = _result({"c1": 1000.0}, np.array([[0.01 ** 2]]))  # 1 % standard error in log
+    inside = joint_region(res, {"c1": 1000.0 * math.exp(2.99 * 0.01)}, ["c1"])
+    outside = joint_region(res, {"c1": 1000.0 * math.exp(-3.01 * 0.01)}, ["c1"])
+    assert inside is not None and outside is not None
+    assert inside["limit"] == pytest.approx(9.0, rel=1e-9) and inside["dof"] == 1
+    assert inside["inside"] and not outside["inside"]
+    assert outside["d2"] == pytest.approx(3.01 ** 2, rel=1e-9)
+
+
+def test_the_joint_region_uses_the_correlations() -> None:
+    """Two values each 2.5 sigma off (inside both bands) along the direction the covariance
+    makes unlikely lie outside the joint region; along the likely one they lie inside."""
+    sd, rho = 0.01, 0.95
+    cov = sd ** 2 * np.array([[1.0, rho], [rho, 1.0]])
+    res = _result({"k1": 1e4, "k2": 1e5}, cov)
+    against = {"k1": 1e4 * math.exp(2.5 * sd), "k2": 1e5 * math.exp(-2.5 * sd)}
+    along = {"k1": 1e4 * math.exp(2.5 * sd), "k2": 1e5 * math.exp(2.5 * sd)}
+    a = joint_region(res, against, ["k1", "k2"])
+    b = joint_region(res, along, ["k1", "k2"])
+    assert a is not None and b is not None
+    assert not a["inside"] and b["inside"]
+    assert a["limit"] == pytest.approx(-2.0 * math.log(JOINT_ALPHA), rel=1e-9)  # chi2_2
+
+
+def test_noisy_design_reports_the_joint_region_per_row_and_in_total() -> None:
+    out = run_design("quarter2", Settings(noise=0.5), ids=[1, 24])
+    rows = {e["id"]: e for e in out["experiments"]}
+    assert out["in_joint_region"] == sum(e["joint_3sigma"]["inside"] for e in rows.values())
+    # row 24 misses its per-parameter bands by a value ~3 sigma off; jointly it is a
+    # 4 % event (d2 about 10 for 4 values), inside the region
+    assert rows[24]["success"] is False and rows[24]["joint_3sigma"]["inside"] is True
+    assert "in_joint_region" not in run_design("quarter2", Settings(), ids=[1])
