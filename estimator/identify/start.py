@@ -982,7 +982,7 @@ KIND_MAX = 3
 #: be run as a further start (within it, it is the given start again)
 KIND_MIN_FACTOR = 3.0
 
-#: factor by which one of two twin fits (:func:`_resolve_twin`) must fit the measured
+#: factor by which one of two twin fits (:func:`_choose_twin`) must fit the measured
 #: channels outside the cost better (in squared residual per channel variance) for those
 #: channels to choose between them
 TWIN_DECIDE = 4.0
