@@ -42,6 +42,7 @@ from numpy.typing import NDArray
 from scipy.stats import chi2
 
 from estimator.diagnose.corners import SiteRestricted, effect_sites, model_limits, strut_limit_key
+from estimator.diagnose.regrid import JITTER_FRACTION, grid_jitter, to_uniform_grid
 from estimator.diagnose.refit import (ModelFit, PhysicalRefit, SensorRefit, baseline_fit,
                                       reweighted_linear_fit)
 from estimator.diagnose.residuals import (ChannelStats, Motion, Screen, channel_stats, effective_n,
@@ -119,6 +120,8 @@ class DiagnoseResult:
     motion: Motion | None = None
     fits: dict[str, ModelFit] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
+    #: the record as analysed (resampled onto its uniform grid when its times jittered)
+    record: Measurement | None = None
 
     def to_json(self) -> dict[str, Any]:
         """``baseline``, ``augmented``, ``effect``, ``evidence`` (plus ``model``, ``warnings``)."""
@@ -215,19 +218,28 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
     ------
     InputError
         A record the residual analysis cannot use: fewer than ``MIN_SAMPLES`` samples (the
-        smoothing filter's window), or a non-uniform time grid (the nonlinear refits step
-        on a uniform one); the message names the record and what it holds.
+        smoothing filter's window), or a time grid that is not uniform even up to timing
+        jitter (the nonlinear refits step on a uniform one; a record whose samples lie
+        within a quarter step of the uniform grid of the same span and count is resampled
+        onto it by a cubic spline, with a warning, :mod:`estimator.diagnose.regrid`); the
+        message names the record and what it holds.
     """
     th = thresholds or Thresholds()
     t = np.asarray(meas.t, dtype=float)
     if t.size < MIN_SAMPLES:
         raise InputError(f"{meas.source}: diagnose needs at least {MIN_SAMPLES} samples, "
                          f"got {t.size}")
+    jitter_note = None
     if uniform_step(t) is None:
-        d = np.diff(t)
-        raise InputError(f"{meas.source}: diagnose needs uniformly spaced samples; the time "
-                         f"steps range from {float(d.min()):.6g} to {float(d.max()):.6g} s "
-                         "(resample the record, or use identify)")
+        meas, jitter_note = to_uniform_grid(meas)
+        if jitter_note is None:
+            d = np.diff(t)
+            h, jit = grid_jitter(t)
+            raise InputError(f"{meas.source}: diagnose needs uniformly spaced samples; the time "
+                             f"steps range from {float(d.min()):.6g} to {float(d.max()):.6g} s, "
+                             f"a sample lies {jit:.3g} s from the uniform grid of the same span "
+                             f"and count, more than the {JITTER_FRACTION:g} step ({JITTER_FRACTION * h:.3g} s) "
+                             "of timing jitter resampled (a gap? resample the record, or use identify)")
     problem = OutputErrorProblem(model, meas, cost=cost, x0=x0)
     def run(start: Parameters) -> IdentResult:
         return fit(problem, start, restarts=restarts, maxfev=maxfev, polish=polish,
@@ -249,7 +261,7 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
     stats = {c: channel_stats(c, base.residual[c], np.asarray(meas.measured[c], dtype=float), skip=skip)
              for c in channels}
     noise_var = {c: noise_variance(base.residual[c]) for c in channels}
-    warnings = list(ident.warnings)
+    warnings = ([jitter_note] if jitter_note else []) + list(ident.warnings)
     evidence: dict[str, Any] = {"thresholds": asdict(th),
                                 "channels": {c: s.to_json() for c, s in stats.items()}}
     limits = model_limits(model)
@@ -298,7 +310,7 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
         structured = [c for c in structured if lin_stats[c].white_p < th.whiteness_p]
     evidence["structured_channels"] = structured
     result = DiagnoseResult(model.name, base, base, None, evidence, ident, stats, motion=mo,
-                            warnings=warnings)
+                            warnings=warnings, record=meas)
     if not structured:
         how = (", once the linear model is refitted on every channel"
                if "linear_refit_all_channels" in evidence else "")

@@ -57,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
     if frames is not None:
         out["frames"] = frames
     if args.plot:
-        plot_evidence(res, meas, args.plot)
+        plot_evidence(res, res.record or meas, args.plot)
     if args.json:
         print_json(out)
     else:

@@ -120,9 +120,10 @@ def test_body_only_baseline_is_not_the_twin() -> None:
 
 def test_short_or_non_uniform_record_is_an_input_error_naming_it() -> None:
     """The residual analysis smooths with a 7-sample window and the refits step on a
-    uniform grid: a shorter record, or a jittered time base, is an input error naming the
-    record (a 2-row CSV once ended in scipy's savgol ValueError, a jittered one in a
-    message naming neither file nor grid)."""
+    uniform grid: a shorter record, or a time base with a gap, is an input error naming the
+    record (a 2-row CSV once ended in scipy's savgol ValueError, a non-uniform one in a
+    message naming neither file nor grid). Jitter within a quarter step is resampled
+    (``tests/diagnose/test_jitter.py``)."""
     meas = make_measurement([], fs=200.0, duration=0.4, noise=0.0)
     m = get_model("quarter2")
     params = Parameters.for_model(m, fix={"m1": TABLE1["m1"]})
@@ -130,9 +131,11 @@ def test_short_or_non_uniform_record_is_an_input_error_naming_it() -> None:
                     road={k: v[:6] for k, v in meas.road.items()}, source="short.csv")
     with pytest.raises(InputError, match=r"^short\.csv: diagnose needs at least 7 samples, got 6$"):
         diagnose(m, short, params, maxfev=50)
-    t = meas.t + np.random.default_rng(3).uniform(-2e-4, 2e-4, meas.t.size) * (np.arange(meas.t.size) > 0)
-    with pytest.raises(InputError, match=r"^jitter\.csv: diagnose needs uniformly spaced samples"):
-        diagnose(m, replace(meas, t=t, source="jitter.csv"), params, maxfev=50)
+    keep = np.arange(meas.t.size) != 40
+    gap = replace(meas, t=meas.t[keep], measured={k: v[keep] for k, v in meas.measured.items()},
+                  road={k: v[keep] for k, v in meas.road.items()}, source="gap.csv")
+    with pytest.raises(InputError, match=r"^gap\.csv: diagnose needs uniformly spaced samples"):
+        diagnose(m, gap, params, maxfev=50)
 
 
 @pytest.mark.parametrize("n", [7, 12])
