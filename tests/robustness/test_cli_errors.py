@@ -93,6 +93,26 @@ CASES: list[tuple[list[str], str]] = [
     (IDENT + ["--input", "q2.csv", "--fix", "zz=1"], "no parameter 'zz'"),
     (IDENT + ["--input", "q2.csv", "--fix", "m1=nan"], "--fix 'm1=nan': expected a finite number"),
     (IDENT + ["--input", "q2.csv", "--init", "m1=0"], "parameter m1: expected a finite value > 0"),
+    # subnormal or absurdly small SI values (were accepted: exit 0 with cost null, or
+    # "success" with every parameter near 1e-300); one parser for every subcommand
+    (IDENT + ["--input", "q2.csv", "--fix", "m1=1e-320"],
+     "--fix m1: expected a value of magnitude at least 1e-09 in SI units (kg, kg m^2, N/m, N s/m, m), "
+     "got 1e-320 (a subnormal number)"),
+    (IDENT + ["--input", "q2.csv", "--init", "c1=1e-300"], "--init c1: expected a value of magnitude "
+     "at least 1e-09"),
+    (["diagnose", "--model", "quarter2", "--input", "q2.csv", "--fix", "k2=-4e-324"],
+     "--fix k2: expected a value of magnitude at least 1e-09 in SI units (kg, kg m^2, N/m, N s/m, m), "
+     "got -4e-324 (a subnormal number)"),
+    (["monitor", "--model", "quarter2", "--input", "q2.log", "--nominal", "c1=1e-12", "--jsonl"],
+     "--nominal c1: expected a value of magnitude at least 1e-09 in SI units (kg, kg m^2, N/m, N s/m, m), "
+     "got 1e-12 (absurdly small)"),
+    (["fleet", "--model", "quarter2", "--input", "q2.csv", "--nominal", "c1=5e-310", "--json"],
+     "--nominal c1: expected a value of magnitude at least 1e-09"),
+    (["compare", "--model", "quarter2", "--input", "q2.log", "--nominal", "c1=1e-15"],
+     "--nominal c1: expected a value of magnitude at least 1e-09"),
+    (["simulate", "--model", "quarter2", "--out", "x.csv", "--param", "m1=1e-320"],
+     "--param m1: expected a value of magnitude at least 1e-09"),
+    (NODE + ["--param", "c1=1e-320"], "--param c1: expected a value of magnitude at least 1e-09"),
     (["diagnose", "--model", "quarter2", "--input", "tonly.csv"], "tonly.csv:1: no measured channel"),
     (["diagnose", "--model", "quarter2", "--input", "q2.csv", "--maxfev", "0"], "--maxfev"),
     (["encode", "--input", "missing.csv", "--out", "o.log"], "missing.csv: no such file"),
