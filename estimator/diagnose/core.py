@@ -202,8 +202,14 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
         The seed cost of every fit.
     x0 : "estimate", "rest" or ndarray
         Initial-state handling (as for ``identify``).
-    restarts, maxfev
-        Nelder–Mead settings of the baseline fit.
+    restarts : int
+        Nelder–Mead restarts of the baseline fit.
+    maxfev : int, optional
+        Evaluation budget of every fit: the baseline (and the quarter car's twin, each a
+        fit of its own), the linear refit on every channel, each candidate's refit and the
+        reference fit a sensor effect is judged against (Nelder–Mead and
+        Levenberg–Marquardt evaluations together, Jacobians included). Default: each
+        fit's own budget.
     thresholds : Thresholds, optional
         Decision thresholds.
     polish, multistart
@@ -301,7 +307,7 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
         # channels outside the cost carry the echo of the baseline's parameter and
         # initial-state errors; structure the linear model itself removes once it is fitted
         # on every channel (noise-weighted) is not a missing effect
-        p_lin, r_lin = reweighted_linear_fit(problem, p0, free, noise_var)
+        p_lin, r_lin = reweighted_linear_fit(problem, p0, free, noise_var, maxfev)
         lin_stats = {c: channel_stats(c, r_lin[c], np.asarray(meas.measured[c], dtype=float), skip=skip)
                      for c in channels}
         evidence["linear_refit_all_channels"] = {
@@ -336,7 +342,8 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
         tried: list[dict[str, Any]] = []
         for option in [sc] + list(sc.alternatives):
             try:
-                fm, ref = _refit(problem, p0, free, base, option, th, mo, noise_var, references)
+                fm, ref = _refit(problem, p0, free, base, option, th, mo, noise_var, references,
+                                 maxfev)
             except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:
                 warnings.append(f"refit with {option.name} {option.params} failed: {exc}")
                 continue
@@ -539,11 +546,13 @@ def _beats(base: ModelFit, problem: OutputErrorProblem,
 def _refit(problem: OutputErrorProblem, p0: Mapping[str, float], free: list[str], base: ModelFit,
            sc: Screen, th: Thresholds, motion: Motion,
            noise_var: Mapping[str, float] | None = None,
-           references: dict[tuple[str, ...], ModelFit] | None = None) -> tuple[ModelFit, ModelFit]:
+           references: dict[tuple[str, ...], ModelFit] | None = None,
+           maxfev: int | None = None) -> tuple[ModelFit, ModelFit]:
     """Refit the model augmented with the screened candidate ``sc``.
 
     ``noise_var`` (channel -> white-noise variance of the baseline residual) weights the
-    channels a sensor effect changes outside the cost (see :class:`SensorRefit`).
+    channels a sensor effect changes outside the cost (see :class:`SensorRefit`);
+    ``maxfev`` bounds the evaluations of the refit and of its reference fit.
 
     Returns the augmented fit and the fit it is judged against: the baseline, or for a
     sensor effect that adds channels to the refit the linear model fitted on those same
@@ -560,13 +569,13 @@ def _refit(problem: OutputErrorProblem, p0: Mapping[str, float], free: list[str]
         rf = PhysicalRefit(problem, start_base, free, eff, _x0_start(problem, base, motion))
         start = dict(start_base)
         start.update({k: float(values[k]) for k in eff.numeric_names})
-        return rf.fit(start, worth=_beats(base, problem, noise_var)), base
+        return rf.fit(start, maxfev=maxfev, worth=_beats(base, problem, noise_var)), base
     eff = make_effect(sc.name, **sc.params)
     if not isinstance(eff, SensorEffect):
         raise ValueError(f"{sc.name} is not a sensor effect")
     rf2 = SensorRefit(problem, p0, free, eff, th.max_delay_s, noise_var)
     start_base = {k: (sc.base[k] if sc.base.get(k, 0) > 0 else p0[k]) for k in p0}
-    fm = rf2.fit(start_base, sc.params)
+    fm = rf2.fit(start_base, sc.params, maxfev=maxfev)
     if not rf2.needs_reference:
         return fm, base
     # the reference depends on the channels added and on those whose tail is left out
@@ -574,7 +583,7 @@ def _refit(problem: OutputErrorProblem, p0: Mapping[str, float], free: list[str]
     if references is None:
         references = {}
     if key not in references:
-        references[key] = rf2.fit_null(p0)
+        references[key] = rf2.fit_null(p0, maxfev)
     return fm, references[key]
 
 

@@ -24,9 +24,9 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from estimator.identify import OutputErrorProblem, minimize_log
+from estimator.identify.lm import lm_within
 from estimator.diagnose.residuals import shift_allpass
 from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
@@ -285,7 +285,9 @@ class PhysicalRefit:
         restarts : int
             Nelder–Mead restarts of the first pass.
         maxfev : int, optional
-            Evaluation budget per pass (default 150 per fitted parameter).
+            Evaluation budget of the whole refit, every pass's Nelder–Mead and
+            Levenberg–Marquardt evaluations together (``suspid diagnose --maxfev``); default
+            150 per fitted parameter for each pass's Nelder–Mead.
         step : float
             First simplex edge in log coordinates.
         passes : int
@@ -328,15 +330,18 @@ class PhysicalRefit:
             v = r[pr.mask] * inv
             return v if np.all(np.isfinite(v)) else big
 
-        budget = maxfev if maxfev is not None else 150 * len(names)
         nfev = 0
         u = np.zeros(len(names))
         coarse = True
         for sweep in range(passes):
+            left = None if maxfev is None else maxfev - nfev
+            if left is not None and left <= 0:
+                break
             # the initial state is projected linearly around self.x0; re-centre and repeat
             u, f, n_used = nm_then_lm(vec, u, step=step if sweep == 0 else step / 4,
-                                      restarts=restarts if sweep == 0 else 1, maxfev=budget,
-                                      coarse=coarse)
+                                      restarts=restarts if sweep == 0 else 1,
+                                      maxfev=150 * len(names) if left is None else left,
+                                      coarse=coarse, cap=left)
             nfev += n_used
             _, x0_new, _ = self.residual(to_theta(u))
             self.x0 = x0_new
@@ -364,7 +369,7 @@ class PhysicalRefit:
 
 def nm_then_lm(vec: Callable[[FloatArray], FloatArray], u0: FloatArray, step: float = 0.15,
                restarts: int = 3, maxfev: int | None = None,
-               coarse: bool = True) -> tuple[FloatArray, float, int]:
+               coarse: bool = True, cap: int | None = None) -> tuple[FloatArray, float, int]:
     """Minimise ``|vec(u)|^2``: a short Nelder–Mead, then Levenberg–Marquardt.
 
     Nelder–Mead (log coordinates, :func:`~estimator.identify.minimize_log`) gets from the
@@ -391,6 +396,9 @@ def nm_then_lm(vec: Callable[[FloatArray], FloatArray], u0: FloatArray, step: fl
     coarse : bool
         Run the coarse Nelder–Mead first (``False``: start Levenberg–Marquardt at ``u0``,
         already in the basin).
+    cap : int, optional
+        Most evaluations in all (coarse run, polish with its Jacobians, fallback); the
+        polish is skipped when fewer are left than one Jacobian takes.
 
     Returns
     -------
@@ -403,6 +411,9 @@ def nm_then_lm(vec: Callable[[FloatArray], FloatArray], u0: FloatArray, step: fl
     """
     n = u0.size
     budget = maxfev if maxfev is not None else 150 * max(n, 1)
+    total = cap if cap is not None else 1 << 62
+    if cap is not None:
+        budget = min(budget, cap)
 
     def cost(u: FloatArray) -> float:
         v = vec(u)
@@ -411,23 +422,27 @@ def nm_then_lm(vec: Callable[[FloatArray], FloatArray], u0: FloatArray, step: fl
     if n == 0:
         return u0, cost(u0), 1
     f0 = cost(u0)
-    if coarse:
+    if coarse and total > 2:
         out = minimize_log(cost, u0, step=step, restarts=min(restarts, 1),
-                           maxfev=min(budget, 10 * (n + 1)), xatol=1e-2, fatol=1e-4 * f0,
-                           rel_improve=1e-4)
+                           maxfev=min(budget, 10 * (n + 1), total - 1), xatol=1e-2,
+                           fatol=1e-4 * f0, rel_improve=1e-4)
         u1, f1, nfev = out.u, out.fun, out.nfev + 1
     else:
         u1, f1, nfev = np.asarray(u0, dtype=float), f0, 1
-    try:
-        sol = least_squares(vec, u1, method="lm", diff_step=1e-6, xtol=1e-10, ftol=1e-10,
-                            gtol=1e-10, max_nfev=12 * (n + 1))
-        nfev += int(sol.nfev)
-        f_lm = float(2.0 * sol.cost)
-        if np.isfinite(f_lm) and f_lm <= f1:
-            return np.asarray(sol.x, dtype=float), f_lm, nfev
-    except (ValueError, np.linalg.LinAlgError):
-        pass
-    more = minimize_log(cost, u1, step=0.05, restarts=restarts, maxfev=budget,
+    if total - nfev > n + 1:
+        try:
+            sol = lm_within(vec, u1, None if cap is None else total - nfev,
+                            max_nfev=min(12 * (n + 1), total - nfev), diff_step=1e-6,
+                            xtol=1e-10, ftol=1e-10, gtol=1e-10)
+            nfev += sol.nfev
+            if np.isfinite(sol.fun) and sol.fun <= f1:
+                return sol.x, sol.fun, nfev
+        except (ValueError, np.linalg.LinAlgError):
+            pass
+    left = min(budget, total - nfev)
+    if left <= 0:
+        return u1, f1, nfev
+    more = minimize_log(cost, u1, step=0.05, restarts=restarts, maxfev=left,
                         xatol=1e-5, fatol=1e-7 * f1, rel_improve=1e-6)
     if more.fun <= f1:
         return more.u, more.fun, nfev + more.nfev
@@ -545,8 +560,12 @@ class SensorRefit:
             Starting base parameters (SI).
         start_effect : mapping
             Starting effect parameters (``delay_s`` in s, ``offset`` in the channel's unit).
-        restarts, maxfev, step
+        restarts, step
             Search settings (see :func:`nm_then_lm`).
+        maxfev : int, optional
+            Evaluation budget of the whole refit (Nelder–Mead and Levenberg–Marquardt
+            together, ``suspid diagnose --maxfev``); default 200 per fitted parameter for
+            the Nelder–Mead fallback.
 
         Returns
         -------
@@ -584,7 +603,7 @@ class SensorRefit:
 
         budget = maxfev if maxfev is not None else 200 * len(names)
         u, _, nfev = nm_then_lm(vec, np.zeros(len(names)), step=step, restarts=restarts,
-                                maxfev=budget)
+                                maxfev=budget, cap=maxfev)
         p, eff = split(to_theta(u))
         return self._model_fit(p, eff, nfev, len(names))
 
@@ -593,14 +612,15 @@ class SensorRefit:
         """True when the refit sees channels the baseline's cost does not (:meth:`fit_null`)."""
         return bool(self.extra)
 
-    def fit_null(self, start_base: Mapping[str, float]) -> ModelFit:
+    def fit_null(self, start_base: Mapping[str, float], maxfev: int | None = None) -> ModelFit:
         """The declared linear model fitted exactly as :meth:`fit` fits the augmented one —
         same channels, weights and left-out tail — but without the effect.
 
         When the effect adds channels outside the baseline's cost, the baseline is the
         wrong reference: refitting the base parameters on those channels lowers their
         residual whether or not the effect exists (a "delay" of 1e-11 s would be credited
-        with it). The effect is judged against this fit instead.
+        with it). The effect is judged against this fit instead. ``maxfev`` bounds its
+        Levenberg–Marquardt evaluations, Jacobians included.
         """
         sp = self.sub_problem(None)
         th0 = np.array([float(start_base[k]) for k in self.free])
@@ -625,12 +645,12 @@ class SensorRefit:
         u, nfev = u0, 1
         if self.free:
             try:
-                sol = least_squares(vec, u0, method="lm", diff_step=1e-6, xtol=1e-10, ftol=1e-10,
-                                    gtol=1e-10, max_nfev=30 * (len(self.free) + 1))
-                nfev = int(sol.nfev)
+                sol = lm_within(vec, u0, maxfev, max_nfev=30 * (len(self.free) + 1),
+                                diff_step=1e-6, xtol=1e-10, ftol=1e-10, gtol=1e-10)
+                nfev = sol.nfev
                 r0 = vec(u0)
-                if float(2 * sol.cost) <= float(r0 @ r0):
-                    u = np.asarray(sol.x, dtype=float)
+                if sol.fun <= float(r0 @ r0):
+                    u = sol.x
             except (ValueError, np.linalg.LinAlgError):
                 pass
         out = self._model_fit(params_of(u), None, nfev, len(self.free))
@@ -652,7 +672,8 @@ class SensorRefit:
 
 
 def reweighted_linear_fit(problem: OutputErrorProblem, p: Mapping[str, float], free: list[str],
-                          noise_var: Mapping[str, float]) -> tuple[dict[str, float], dict[str, FloatArray]]:
+                          noise_var: Mapping[str, float],
+                          maxfev: int | None = None) -> tuple[dict[str, float], dict[str, FloatArray]]:
     """The declared linear model refitted on *every* measured channel, each weighted by its
     white-noise level (Levenberg–Marquardt from ``p``, initial state re-estimated).
 
@@ -672,6 +693,8 @@ def reweighted_linear_fit(problem: OutputErrorProblem, p: Mapping[str, float], f
         Parameters to refit.
     noise_var : mapping
         White-noise variance per channel (channel units squared).
+    maxfev : int, optional
+        Most residual evaluations, the Jacobians included (``suspid diagnose --maxfev``).
 
     Returns
     -------
@@ -712,10 +735,10 @@ def reweighted_linear_fit(problem: OutputErrorProblem, p: Mapping[str, float], f
     q = dict(p)
     if free:
         try:
-            sol = least_squares(vec, np.zeros(len(free)), method="lm", diff_step=1e-6,
-                                xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=30 * (len(free) + 1))
-            if float(2 * sol.cost) <= float(vec(np.zeros(len(free))) @ vec(np.zeros(len(free)))):
-                q = params_of(np.asarray(sol.x, dtype=float))
+            sol = lm_within(vec, np.zeros(len(free)), maxfev, max_nfev=30 * (len(free) + 1),
+                            diff_step=1e-6, xtol=1e-10, ftol=1e-10, gtol=1e-10)
+            if sol.fun <= float(vec(np.zeros(len(free))) @ vec(np.zeros(len(free)))):
+                q = params_of(sol.x)
         except (ValueError, np.linalg.LinAlgError):
             pass
     pred = pr.predict(q)

@@ -19,6 +19,7 @@ from typing import Callable, Mapping
 import numpy as np
 
 from estimator.identify.identifiability import assess
+from estimator.identify.lm import lm_within
 from estimator.identify.params import Parameters
 from estimator.identify.problem import OutputErrorProblem
 from estimator.identify.result import IdentResult
@@ -203,10 +204,11 @@ def fit(problem: OutputErrorProblem, params: Parameters, restarts: int = 6,
     tries = 0
     rng = np.random.default_rng(12345)
     while (multistart > tries and len(free) > 0
-           and (np.max(np.abs(out.u)) > math.log(50.0) or not converged)):
+           and (np.max(np.abs(out.u)) > math.log(50.0) or not converged)
+           and (maxfev is None or out.nfev < maxfev)):   # a spent budget starts nothing more
         tries += 1
         u_start = rng.normal(0.0, 0.7, len(free))
-        budget = None if maxfev is None else max(maxfev - out.nfev, 1)
+        budget = None if maxfev is None else maxfev - out.nfev
         alt, alt_conv = run_from(u_start, None, budget)
         alt.nfev += out.nfev
         alt.restarts += out.restarts + 1
@@ -214,8 +216,6 @@ def fit(problem: OutputErrorProblem, params: Parameters, restarts: int = 6,
             out, converged = alt, alt_conv
         else:
             out.nfev, out.restarts = alt.nfev, alt.restarts
-        if maxfev is not None and out.nfev >= maxfev:
-            break
     p_hat = to_params(out.u)
     res = finish(problem, params, p_hat, out.nfev, converged, with_stderr=with_stderr)
     res.restarts = out.restarts
@@ -227,12 +227,10 @@ def _lm_polish(problem: OutputErrorProblem, to_params: Callable[[FloatArray], di
                ) -> tuple[FloatArray, int, bool]:
     """Levenberg–Marquardt from ``u0`` on the normalised residuals; ``(u, nfev, improved)``.
 
-    At most ``60 n`` residual evaluations (``n`` free parameters, the finite-difference
-    Jacobians included), fewer when ``maxfev`` is smaller.
+    At most ``60 n`` iterates (``n`` free parameters) and at most ``maxfev`` residual
+    evaluations in all, the finite-difference Jacobians included (:func:`lm_within`); the
+    count returned includes the Jacobians.
     """
-    # lazy: scipy.optimize costs the monitor's start time and only the polish needs it
-    from scipy.optimize import least_squares  # noqa: PLC0415
-
     inv = 1.0 / math.sqrt(problem.scale)
     n = problem.n_obs
 
@@ -246,13 +244,12 @@ def _lm_polish(problem: OutputErrorProblem, to_params: Callable[[FloatArray], di
         return r if np.all(np.isfinite(r)) else np.full(n, 1e6)
 
     try:
-        sol = least_squares(resid, u0, method="lm", x_scale=1.0, xtol=1e-12, ftol=1e-12,
-                            gtol=1e-12, max_nfev=min(60 * max(len(u0), 1),
-                                                     maxfev if maxfev is not None else 1 << 62))
+        sol = lm_within(resid, u0, maxfev, max_nfev=min(60 * max(len(u0), 1),
+                                                        maxfev if maxfev is not None else 1 << 62),
+                        x_scale=1.0, xtol=1e-12, ftol=1e-12, gtol=1e-12)
     except (ValueError, np.linalg.LinAlgError):
         return u0, 0, False
-    f = float(2.0 * sol.cost)
-    return np.asarray(sol.x, dtype=float), int(sol.nfev), bool(f <= f0 and np.isfinite(f))
+    return sol.x, sol.nfev, bool(sol.fun <= f0 and np.isfinite(sol.fun))
 
 
 def jacobian_log(problem: OutputErrorProblem, p: Mapping[str, float], free: list[str],

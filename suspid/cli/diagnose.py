@@ -17,7 +17,11 @@ FIT_HELP = FitHelp(
     x0="initial state: estimate it (default), start at rest, or give it",
     restarts="Nelder-Mead restarts of the baseline fit (default 3; the augmented refit starts "
              "from the residual regression)",
-    maxfev="evaluation budget of the baseline fit",
+    maxfev="evaluation budget of every fit diagnose makes: the baseline fit (and, for a "
+           "quarter car seen from the body, the fit from its twin), the linear refit on every "
+           "channel, each candidate effect's refit and its reference fit; Nelder-Mead and "
+           "Levenberg-Marquardt evaluations together, Jacobians included (default: each fit's "
+           "own budget)",
     multistart="baseline fit: further starts (up to N) when it lands on a suspicious "
                "local minimum, as for identify (default 4)",
     polish="baseline fit: pure Nelder-Mead to full tolerance (default: Nelder-Mead "
