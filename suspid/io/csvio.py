@@ -5,11 +5,18 @@
 ``channels``. Empty cells are missing samples (NaN). Unknown columns are ignored with a
 warning. A trailing separator (an empty last column, on the header or the rows) is
 allowed. Every error names the file, the line and the column.
+
+A logger's export often annotates each name with its unit, ``t [s]`` or ``x1_dot (m/s)``:
+such a column is read as the named one when the unit is the SI unit the contract
+prescribes (:func:`si_units`); with any other unit (``x1 [mm]``, ``t [ms]``) it is not
+converted but ignored with a warning that names the unit found and the one expected
+(``t`` in another unit is an error, as a missing ``t`` is).
 """
 from __future__ import annotations
 
 import csv
 import math
+import re
 from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -44,6 +51,55 @@ class Measurement:
     measured: dict[str, FloatArray] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     source: str = ""
+
+
+#: ``name [unit]`` or ``name (unit)`` in a header cell
+_ANNOTATED = re.compile(r"^(?P<name>[^\[\]()]*?)\s*[\[(]\s*(?P<unit>[^\[\]()]*?)\s*[\])]$")
+#: spellings of one SI unit, normalised
+_SPELLINGS = {"m/s2": "m/s^2", "m/s²": "m/s^2", "m/s/s": "m/s^2", "m s^-2": "m/s^2",
+              "rad/s2": "rad/s^2", "rad/s²": "rad/s^2", "rad/s/s": "rad/s^2", "sec": "s"}
+#: coordinates of the bundled models that are angles (rad); the others are lengths (m)
+ANGLES = ("delta", "phi")
+LENGTHS = ("x", "x1", "x2", "x3", "x4")
+
+
+def si_units(column: str, model: SuspensionModel) -> tuple[str, ...]:
+    """The SI unit(s) a column of ``model``'s CSV is written in (empty: not a column of it).
+
+    ``t`` in s, roads in m (their ``_dot`` in m/s), a coordinate in m or rad, its ``_dot``
+    per s and ``_ddot`` per s^2. A coordinate of a plug-in model that the bundled models
+    do not name may be either a length or an angle.
+    """
+    if column == "t":
+        return ("s",)
+    roads = set(model.roads)
+    base, per = column, ""
+    for suffix, rate in (("_ddot", "/s^2"), ("_dot", "/s")):
+        if column.endswith(suffix):
+            base, per = column[: -len(suffix)], rate
+            break
+    if base in roads and per != "/s^2":
+        return ("m" + per,)
+    if column not in model.channels:
+        return ()
+    if base in ANGLES:
+        return ("rad" + per,)
+    if base in LENGTHS:
+        return ("m" + per,)
+    return ("m" + per, "rad" + per)
+
+
+def _annotated(cell: str, model: SuspensionModel) -> tuple[str, str | None]:
+    """``(column name, None)`` for a header cell naming a column in its SI unit (or
+    without a unit), ``(name, unit)`` for a known column annotated with another unit."""
+    m = _ANNOTATED.match(cell)
+    if m is None:
+        return cell, None
+    name, unit = m.group("name").strip(), " ".join(m.group("unit").split())
+    units = si_units(name, model)
+    if not units:
+        return cell, None
+    return (name, None) if _SPELLINGS.get(unit, unit) in units else (name, unit)
 
 
 def _parse_float(text: str, path: str, line: int, col: str) -> float:
@@ -95,6 +151,17 @@ def read_measurement(path: str | Path, model: SuspensionModel, *,
         except (csv.Error, UnicodeDecodeError) as exc:
             raise InputError(f"{name}:1: not a CSV text file ({exc})") from None
         header = [h.strip() for h in header]
+        off_unit: dict[int, tuple[str, str]] = {}
+        for i, cell in enumerate(header):
+            col, unit = _annotated(cell, model)
+            if unit is None:
+                header[i] = col
+            else:
+                off_unit[i] = (col, unit)
+        for i, (col, unit) in off_unit.items():
+            if col == "t":
+                raise InputError(f"{name}:1: column {header[i]!r}: time in {unit!r}, expected s "
+                                 "(convert the column to seconds)")
         if "t" not in header:
             raise InputError(f"{name}:1: no 't' column in the header (got {', '.join(header[:8])})")
         dup = {h for h in header if h and header.count(h) > 1}
@@ -110,7 +177,10 @@ def read_measurement(path: str | Path, model: SuspensionModel, *,
         unnamed_data = False
         warnings: list[str] = []
         unknown = [h or f"column {i + 1} (no name)" for i, h in enumerate(header[:ncol])
-                   if h not in known]
+                   if h not in known and i not in off_unit]
+        for i, (col, unit) in off_unit.items():
+            warnings.append(f"{name}: ignoring column {header[i]!r}: {col} in {unit!r}, expected "
+                            f"{' or '.join(si_units(col, model))} (SI; convert the column)")
         if unknown:
             warnings.append(f"{name}: ignoring column(s) not used by model {model.name}: "
                             f"{', '.join(unknown)}")
@@ -167,8 +237,10 @@ def read_measurement(path: str | Path, model: SuspensionModel, *,
         if f"{r}_dot" in road and r not in road:
             raise InputError(f"{name}:1: road velocity column '{r}_dot' given without '{r}'")
     if not measured and require_measured:
+        units = "".join(f"; column {header[i]!r} is {col} in {unit!r}, expected "
+                        f"{' or '.join(si_units(col, model))}" for i, (col, unit) in off_unit.items())
         raise InputError(f"{name}:1: no measured channel for model {model.name}; expected any of "
-                         f"{', '.join(model.channels)}")
+                         f"{', '.join(model.channels)}{units}")
     return Measurement(t=t, road=road, measured=measured, warnings=warnings, source=name)
 
 

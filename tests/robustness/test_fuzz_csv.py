@@ -121,3 +121,36 @@ def test_python_only_number_spellings_are_rejected(tmp_path: Path, cell: str) ->
     text = f"t,x\n0,1\n0.1,{cell}\n0.2,3\n"
     with pytest.raises(InputError, match=r":3: column 'x': expected a number"):
         read_measurement(_write(tmp_path, text), get_model("quarter1"))
+
+
+def test_header_names_with_their_si_unit_are_read(tmp_path: Path) -> None:
+    """A logger's export annotates names with units: ``t [s]``, ``x1_dot (m/s)`` are the
+    contract's columns (were: "no 't' column" for the first, the second silently ignored)."""
+    body = "0,0,0.01,0.1,1\n0.005,0.001,0.011,0.12,1.5\n0.01,0.002,0.012,0.13,2\n"
+    p = _write(tmp_path, "t [s],r (m),x1 [m],x1_dot (m/s),x2_ddot [m/s^2]\n" + body)
+    m = read_measurement(p, Q2)
+    assert set(m.measured) == {"x1", "x1_dot", "x2_ddot"} and set(m.road) == {"r"}
+    assert m.warnings == []
+    assert np.allclose(m.measured["x1_dot"], [0.1, 0.12, 0.13])
+    assert np.allclose(m.t, [0, 0.005, 0.01])
+    # spellings of m/s^2 and angles in rad (half4's pitch)
+    h4 = read_measurement(_write(tmp_path, "t [s],x (m),delta [rad],x_ddot [m/s²]\n0,1,2,3\n1,1,2,3\n"),
+                          get_model("half4"))
+    assert set(h4.measured) == {"x", "delta", "x_ddot"} and h4.warnings == []
+
+
+def test_header_names_with_other_units_are_named_not_converted(tmp_path: Path) -> None:
+    body = "0,1,2\n0.005,1,2\n0.01,1,2\n"
+    m = read_measurement(_write(tmp_path, "t [s],x1 [mm],x2 (m)\n" + body), Q2)
+    assert set(m.measured) == {"x2"}
+    assert m.warnings == [f"{tmp_path / 'fuzz.csv'}: ignoring column 'x1 [mm]': x1 in 'mm', "
+                          "expected m (SI; convert the column)"]
+    with pytest.raises(InputError, match=r"fuzz\.csv:1: column 't \[ms\]': time in 'ms', expected s"):
+        read_measurement(_write(tmp_path, "t [ms],x1 [m]\n" + "0,1\n5,1\n"), Q2)
+    with pytest.raises(InputError, match=r"no measured channel .*; column 'x1 \[mm\]' is x1 in 'mm', "
+                                         r"expected m$"):
+        read_measurement(_write(tmp_path, "t,x1 [mm]\n0,1\n1,1\n"), Q2)
+    # a name that is no column of the model keeps the unknown-column warning
+    other = read_measurement(_write(tmp_path, "t,x1,speed [km/h]\n0,1,2\n1,1,2\n"), Q2)
+    assert other.warnings == [f"{tmp_path / 'fuzz.csv'}: ignoring column(s) not used by model "
+                              "quarter2: speed [km/h]"]
