@@ -29,6 +29,24 @@ from suspid.io.csvio import Measurement
 from suspid.models import SuspensionModel, get_model
 
 
+def unparsed_hint(path: str | Path, stats: ReadStats) -> str:
+    """``"; nothing parsed, the first skipped: line N: reason (...)"`` when a log reader
+    parsed no frame at all but skipped lines, else ``""``.
+
+    Nothing parsed means the file is not in the format its suffix names: plain
+    ``candump can0`` output saved as ``.log`` is the usual case (suspid reads a ``.log`` as
+    ``candump -L``).
+    """
+    if stats.frames or not stats.examples:
+        return ""
+    first = stats.examples[0]
+    first = first[len(str(path)) + 1:] if first.startswith(f"{path}:") else first
+    out = f"; nothing parsed, the first skipped: line {first}"
+    if str(path).lower().endswith(".log"):
+        out += " (a .log is read as candump -L: '(SECONDS) IFACE ID#DATA' per line)"
+    return out
+
+
 def summarize_gaps(aligned: Aligned) -> list[str]:
     """One warning line per channel with missing samples."""
     out = []
@@ -153,10 +171,11 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
     if not any(s.n for s in listener.buffer.sources.values()):
         rejected = cast("dict[str, int]", frame_stats["rejected"])   # reason -> count
         rej = {k: v for k, v in rejected.items() if v}
+        unread = unparsed_hint(path, stats)
         raise InputError(f"{path}: no accepted frame carries a channel of model {m.name} "
                          f"({stats.frames} frames read, {frame_stats['accepted']} accepted, "
                          f"rejected {rej or 'none'}; map: "
-                         f"{', '.join(str(x) for x in listener.signal_map.mappings)})")
+                         f"{', '.join(str(x) for x in listener.signal_map.mappings)}){unread}")
     aligned = listener.aligned(dt=dt)
     if aligned.snapped > 1e-3 * aligned.dt:
         warnings.append(f"{path}: frame times snapped to a uniform grid of {aligned.dt:.6g} s "

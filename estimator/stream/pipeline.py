@@ -35,6 +35,7 @@ import numpy as np
 from estimator.alerts import (DEFAULT_HORIZON_S, AlertConfig, AlertEngine, AlertStore,
                               BusAlertSink, CallbackSink, ForecastEngine)
 from estimator.decode import DecodeListener
+from estimator.decode.log_input import unparsed_hint
 from estimator.identify import Parameters
 from estimator.identify.inputs import CSV_SUFFIXES
 from estimator.stream.config import (WindowConfig, default_config, default_decimation,
@@ -505,7 +506,7 @@ def _run_log(source: Source, spec: MonitorSpec, mon: StreamMonitor, sinks: list[
         if not fs["accepted"]:  # no data at all: a shorter window would not help
             rej = {k: v for k, v in cast("dict[str, int]", fs["rejected"]).items() if v}
             raise InputError(f"{source.input}: no accepted frame ({drv.frames} frames read, "
-                             f"rejected {rej or 'none'})")
+                             f"rejected {rej or 'none'}){unparsed_hint(str(source.input), stats)}")
         raise InputError(f"{source.input}: {drv.frames} frames but less data than one window "
                          f"({cfg.window_s:g} s); give a shorter --window")
     out: dict[str, Any] = {"frames": listener.frame_stats(), "windows_cut": drv.windows}

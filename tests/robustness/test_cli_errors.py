@@ -48,6 +48,12 @@ def work(tmp_path_factory: pytest.TempPathFactory) -> Path:
     (d / "q2.xyz").write_text("t,x1\n0,0\n")
     (d / "huge.csv").write_text("t,x1,x2\n0,1e300,0\n0.01,-2e300,0\n"
                                 + "".join(f"0.0{k},0,1\n" for k in range(2, 9)))
+    # plain `candump can0` output (not -L) saved as .log
+    plain = [ln.split() for ln in (d / "q2.log").read_text().splitlines()[:50]]
+    (d / "plain.log").write_text("".join(
+        f"  {f[1]}  {f[2].split('#')[0]}   [{len(f[2].split('#')[1]) // 2}]  "
+        + " ".join(f[2].split("#")[1][i:i + 2] for i in range(0, len(f[2].split("#")[1]), 2)) + "\n"
+        for f in plain))
     (d / "hugeroad.csv").write_text("t,r,x1\n0,1e300,0\n0.01,-2e300,0\n0.02,0,1\n")
     return d
 
@@ -142,6 +148,14 @@ CASES: list[tuple[list[str], str]] = [
     (["monitor", "--model", "quarter2", "--input", "junk.blf", "--jsonl"], "junk.blf"),
     (["monitor", "--model", "quarter2", "--input", "empty.log", "--jsonl"],
      "empty.log: no accepted frame (0 frames read, rejected none)"),
+    # every line skipped: the first one's reason and the format a .log must have (were: only
+    # "0 frames read, rejected {'malformed': 50}")
+    (IDENT + ["--input", "plain.log"], "rejected {'malformed': 50}; map: x1=QC_Body.Disp"),
+    (IDENT + ["--input", "plain.log"], "); nothing parsed, the first skipped: line 1: expected "
+     "'(seconds)' first, got 'can0' (a .log is read as candump -L: '(SECONDS) IFACE ID#DATA' per line)"),
+    (["monitor", "--model", "quarter2", "--input", "plain.log", "--jsonl"],
+     "plain.log: no accepted frame (0 frames read, rejected {'malformed': 50}); nothing parsed, "
+     "the first skipped: line 1: expected '(seconds)' first, got 'can0' (a .log is read as candump -L"),
     (["monitor", "--model", "quarter2", "--input", "q2.xyz", "--jsonl"],
      "q2.xyz: unknown input format '.xyz'; expected .csv or a CAN log"),
     (["monitor", "--model", "quarter2", "--input", "q2.log", "--dbc", "empty.dbc", "--jsonl"], "empty.dbc"),
