@@ -153,7 +153,8 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
     feed_log(listener, path, stats)
     listener.count_malformed(stats.malformed)
     frame_stats = listener.frame_stats()
-    warnings = [f"{path}: skipped {e}" for e in stats.examples]
+    warnings = listener.signal_map.unit_warnings(listener.db, m)
+    warnings += [f"{path}: skipped {e}" for e in stats.examples]
     if stats.malformed > len(stats.examples):
         warnings.append(f"{path}: {stats.malformed} unparseable lines/records skipped in all")
     if stats.truncated:

@@ -462,8 +462,12 @@ def _listener(source: Source, spec: MonitorSpec,
     cfg = spec.config
     # rows per message: window + step at up to 2 kHz, power of two
     rows = 1 << max(12, math.ceil(math.log2(max(2.0, (cfg.window_s + 2 * cfg.step_s) * 2000.0))))
-    return DecodeListener(spec.model, source.dbc, source.signal_map, capacity=rows,
-                          growable=False, time_source=time_source, arrival_slots=True)
+    listener = DecodeListener(spec.model, source.dbc, source.signal_map, capacity=rows,
+                              growable=False, time_source=time_source, arrival_slots=True)
+    # a mapped signal the DBC gives in mm, g or deg without a scale: said before streaming
+    for w in listener.signal_map.unit_warnings(listener.db, listener.model):
+        sys.stderr.write(f"warning: {w}\n")
+    return listener
 
 
 def _alert_bus(source: Source, sinks: list[Any], listener: DecodeListener, buses: list[Any],

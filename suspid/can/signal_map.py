@@ -25,6 +25,7 @@ config file (``.toml`` or ``.json``)::
 from __future__ import annotations
 
 import json
+import math
 import re
 import tomllib
 from dataclasses import dataclass
@@ -33,6 +34,8 @@ from typing import TYPE_CHECKING, Iterable, Sequence, Union
 
 from suspid.can.conventions import channel_signals, find_message
 from suspid.errors import InputError, UsageError
+from suspid.io.csvio import normalize_unit, si_units
+from suspid.models.base import SuspensionModel
 
 if TYPE_CHECKING:
     from cantools.database.can import Database
@@ -220,6 +223,33 @@ class SignalMap:
         """Mapped channels in order."""
         return [m.channel for m in self.mappings]
 
+    def unit_warnings(self, db: Database, model: SuspensionModel) -> list[str]:
+        """Mappings that read a signal the DBC declares in another unit than the channel's
+        SI unit, without a scale: the likely forgotten conversion (``x2 = MSG.Height`` with
+        ``Height`` in mm). A mapping with a scale, or a signal without a unit (``""``,
+        ``"-"``), is taken as the user's.
+        """
+        out = []
+        for m in self.mappings:
+            if m.scale != 1.0:
+                continue
+            expected = si_units(m.channel, model)
+            try:
+                msg = find_message(db, m.message, self.source)
+            except (InputError, UsageError):
+                continue
+            sig = next((x for x in msg.signals if x.name == m.signal), None)
+            unit = " ".join(str(getattr(sig, "unit", "") or "").split())
+            if not expected or unit in ("", "-") or normalize_unit(unit) in expected:
+                continue
+            factor = TO_SI.get(unit.lower())
+            hint = (f" (e.g. {m.channel}={m.message}.{m.signal}*{factor:.6g})"
+                    if factor is not None else "")
+            out.append(f"{self.source}: {m}: signal {msg.name}.{m.signal} is in {unit!r} by the "
+                       f"DBC but {m.channel} is read in {' or '.join(expected)}, with no scale; "
+                       f"give the factor to SI{hint}")
+        return out
+
     def validate(self, db: Database, allowed_channels: Sequence[str]) -> None:
         """Check every mapping against the DBC and the model's channels.
 
@@ -246,6 +276,11 @@ class SignalMap:
             if m.scale == 0:
                 raise UsageError(f"{where}: scale must not be 0")
 
+
+#: factors to SI of the units a DBC commonly gives motion signals in (lower case)
+TO_SI = {"mm": 1e-3, "cm": 1e-2, "mm/s": 1e-3, "cm/s": 1e-2, "mm/s^2": 1e-3, "g": 9.80665,
+         "mg": 9.80665e-3, "deg": math.pi / 180, "°": math.pi / 180, "deg/s": math.pi / 180,
+         "°/s": math.pi / 180, "km/h": 1 / 3.6}
 
 SignalMapLike = Union[SignalMap, str, Path, Sequence[str], None]
 

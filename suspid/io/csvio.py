@@ -63,6 +63,12 @@ ANGLES = ("delta", "phi")
 LENGTHS = ("x", "x1", "x2", "x3", "x4")
 
 
+def normalize_unit(unit: str) -> str:
+    """A unit's spelling reduced to the one :func:`si_units` uses (``m/s2`` -> ``m/s^2``)."""
+    u = " ".join(unit.split())
+    return _SPELLINGS.get(u, u)
+
+
 def si_units(column: str, model: SuspensionModel) -> tuple[str, ...]:
     """The SI unit(s) a column of ``model``'s CSV is written in (empty: not a column of it).
 
@@ -99,7 +105,7 @@ def _annotated(cell: str, model: SuspensionModel) -> tuple[str, str | None]:
     units = si_units(name, model)
     if not units:
         return cell, None
-    return (name, None) if _SPELLINGS.get(unit, unit) in units else (name, unit)
+    return (name, None) if normalize_unit(unit) in units else (name, unit)
 
 
 def _parse_float(text: str, path: str, line: int, col: str) -> float:

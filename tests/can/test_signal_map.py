@@ -2,11 +2,14 @@
 from __future__ import annotations
 
 import json
+import struct
 
 import pytest
 
 from estimator.decode.listener import model_channels
+from suspid.can.dbc import load_dbc
 from suspid.can.signal_map import SignalMap, SignalMapping, parse_mapping
+from suspid.cli import main
 from suspid.errors import InputError, UsageError
 from suspid.models import get_model
 
@@ -76,3 +79,51 @@ def test_validate_against_dbc_and_model(realdata):
         with pytest.raises((InputError, UsageError)) as exc:
             SignalMap.from_strings([text]).validate(db, allowed)
         assert fragment in str(exc.value)
+
+
+MM_DBC = '''VERSION ""
+BS_:
+BU_: Logger
+BO_ 291 Height: 8 Logger
+ SG_ Body : 0|16@1- (0.01,0) [-300|300] "mm" Logger
+ SG_ Wheel : 16|16@1- (0.00001,0) [-0.3|0.3] "m" Logger
+ SG_ BodyAcc : 32|16@1- (0.001,0) [-30|30] "g" Logger
+ SG_ Pitch : 48|16@1- (0.01,0) [-300|300] "deg" Logger
+'''
+
+
+def test_a_signal_in_another_unit_without_a_scale_is_warned(tmp_path):
+    """A logger's DBC gives heights in mm or accelerations in g; mapped without a factor the
+    fit silently mixes units (a quarter car with the body in mm and the wheel in m:
+    c2 ran to 1.9e12). Warned with the factor to give; a mapping with a scale is the user's."""
+    dbc = tmp_path / "mm.dbc"
+    dbc.write_text(MM_DBC)
+    db = load_dbc(dbc)
+    q2 = get_model("quarter2")
+    sm = SignalMap.from_strings(["x1=Height.Body", "x2=Height.Wheel", "x1_ddot=Height.BodyAcc",
+                                 "x2_ddot=Height.BodyAcc*9.81"])
+    w = sm.unit_warnings(db, q2)
+    assert w == ["--map: x1=Height.Body: signal Height.Body is in 'mm' by the DBC but x1 is read in m, "
+                 "with no scale; give the factor to SI (e.g. x1=Height.Body*0.001)",
+                 "--map: x1_ddot=Height.BodyAcc: signal Height.BodyAcc is in 'g' by the DBC but x1_ddot "
+                 "is read in m/s^2, with no scale; give the factor to SI (e.g. x1_ddot=Height.BodyAcc*9.80665)"]
+    h4 = SignalMap.from_strings(["delta=Height.Pitch"])
+    assert h4.unit_warnings(db, get_model("half4")) == [
+        "--map: delta=Height.Pitch: signal Height.Pitch is in 'deg' by the DBC but delta is read in rad, "
+        "with no scale; give the factor to SI (e.g. delta=Height.Pitch*0.0174533)"]
+    assert SignalMap.from_strings(["x1=Height.Body*0.001"]).unit_warnings(db, q2) == []
+
+
+def test_the_unit_warning_reaches_identify(tmp_path, capsys):
+    dbc = tmp_path / "mm.dbc"
+    dbc.write_text(MM_DBC)
+    log = tmp_path / "mm.log"
+    log.write_text("".join(f"({1.7e9 + k / 200:.6f}) can0 123#"
+                           f"{struct.pack('<hhhh', 100 * (k % 7), 10 * (k % 5), 0, 0).hex().upper()}\n"
+                           for k in range(200)))
+    rc = main(["identify", "--model", "quarter2", "--input", str(log), "--dbc", str(dbc), "--map",
+               "x1=Height.Body", "--map", "x2=Height.Wheel", "--fix", "m1=300", "--fix", "m2=40",
+               "--maxfev", "20", "--no-data-start", "--json"])
+    assert rc == 0
+    out = json.loads(capsys.readouterr().out)
+    assert any("Height.Body is in 'mm'" in w for w in out["warnings"])
