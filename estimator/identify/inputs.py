@@ -100,6 +100,15 @@ def decays(measured: dict[str, Any]) -> bool:
         first, last = first[np.isfinite(first)], last[np.isfinite(last)]
         if first.size < 2 or last.size < 2:
             continue
-        if not np.sqrt(np.mean(last * last)) < 0.5 * np.sqrt(np.mean(first * first)):
+        if not _rms(last) < 0.5 * _rms(first):
             return False
     return True
+
+
+def _rms(v: Any) -> float:
+    """RMS of finite values without overflowing on huge ones (1e300: a unit slip the
+    caller reports; squaring it here printed a RuntimeWarning above that one-line error)."""
+    top = float(np.max(np.abs(v))) if v.size else 0.0
+    if top == 0.0:
+        return 0.0
+    return top * float(np.sqrt(np.mean((v / top) ** 2)))

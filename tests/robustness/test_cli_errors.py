@@ -9,6 +9,7 @@ import os
 import shutil
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import pytest
@@ -322,3 +323,18 @@ def test_subprocess_bad_inputs(work: Path) -> None:
 def test_subprocess_debug_traceback(work: Path) -> None:
     r = _suspid("identify", "--model", "quarter2", "--input", "missing.csv", "--debug", cwd=work)
     assert r.returncode != 0 and "Traceback" in r.stderr and "InputError" in r.stderr
+
+
+@pytest.mark.parametrize("command", ["identify", "diagnose"])
+def test_overflowing_values_raise_no_runtime_warning(work: Path, capsys: pytest.CaptureFixture[str],
+                                                     monkeypatch: pytest.MonkeyPatch,
+                                                     command: str) -> None:
+    """The one error line is all of stderr: the record's decay check squared 2e300 and
+    printed numpy's 'RuntimeWarning: overflow encountered in multiply' with its source line
+    above the error."""
+    monkeypatch.chdir(work)
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        rc, err = _run([command, "--model", "quarter2", "--input", "huge.csv", "--json"], capsys)
+    assert _one_error(rc, err).startswith("error: huge.csv: column 'x1': values up to 2e+300 overflow")
+    assert [str(w.message) for w in seen if issubclass(w.category, RuntimeWarning)] == []
