@@ -20,10 +20,16 @@ from suspid.models.base import FloatArray
 #: suffixes read as CAN logs through python-can (the rest must be a measurement CSV)
 
 
+#: what ``--model`` help says of the bundled models (a plug-in model is listed by name)
+MODEL_HELP = {"quarter1": "1 DOF, eq. 1", "quarter2": "2 DOF, eqs. 2-3",
+              "half4": "4 DOF half car, eqs. 4-7", "full7": "7 DOF full car"}
+
+
 def add_model_option(p: argparse.ArgumentParser, required: bool = True) -> None:
+    """``--model``, its help naming every registered model (the choices)."""
     p.add_argument("--model", required=required, choices=list(MODELS),
-                   help="suspension model: quarter1 (1 DOF, eq. 1), quarter2 (2 DOF, eqs. 2-3), "
-                        "half4 (4 DOF half car, eqs. 4-7)")
+                   help="suspension model: " + ", ".join(
+                       f"{n} ({MODEL_HELP[n]})" if n in MODEL_HELP else n for n in MODELS))
 
 
 def add_param_options(p: argparse.ArgumentParser) -> None:

@@ -8,6 +8,9 @@ from pathlib import Path
 
 import pytest
 
+from suspid.cli import main
+from suspid.models import MODELS
+
 from ..conftest import TABLE1
 
 
@@ -204,3 +207,15 @@ def test_listing_matches_each_subcommand_module() -> None:
         importlib.import_module(f"suspid.cli.{name}").add_parser(sub)
         helps = {a.dest: a.help for a in sub._choices_actions}
         assert helps == {name: summary}, name
+
+
+@pytest.mark.parametrize("command", ["identify", "diagnose", "monitor", "fleet", "compare", "simulate"])
+def test_model_help_names_every_model(command: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--model`` accepted full7 but its help listed quarter1, quarter2 and half4 only."""
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    line = text[text.index("suspension model:"):]
+    for name in MODELS:
+        assert f"{name} (" in line or f"{name}," in line or line.startswith(f"suspension model: {name}"), name
+    assert "full7 (7 DOF full car)" in line
