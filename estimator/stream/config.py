@@ -75,6 +75,10 @@ XATOL_MANY_FREE = 7e-3
 MANY_FREE = 10
 #: Gauss-Newton steps after Nelder-Mead with at least ``MANY_FREE`` free parameters
 GAUSS_NEWTON_STEPS_MANY_FREE = 3
+#: longest window plus two steps (s): a monitor's decoder buffers that span at up to 2 kHz
+#: (2^21 rows per message); ``--window 1e5`` once asked for 2^28 rows and was killed for
+#: 24 GB, ``--window 1e9`` ended in a MemoryError traceback
+MAX_SPAN_S = 1000.0
 
 
 @dataclass
@@ -227,6 +231,11 @@ class WindowConfig:
             raise UsageError(f"--window: expected a window length > 0 s, got {self.window_s}")
         if not (0 < self.step_s <= 10 * self.window_s):
             raise UsageError(f"--step: expected 0 < step <= 10 x window, got {self.step_s} s")
+        span = self.window_s + 2 * self.step_s
+        if span > MAX_SPAN_S:
+            raise UsageError(f"--window/--step: a window and two steps span {span:g} s, more than "
+                             f"the {MAX_SPAN_S:g} s a monitor's decoder buffers (at up to 2 kHz); "
+                             "give a shorter --window or --step, or use identify for a whole record")
         if self.decimate < 1:
             raise UsageError(f"--decimate: expected an integer >= 1, got {self.decimate}")
         if self.maxfev < 10 or self.first_maxfev < 10:

@@ -65,8 +65,10 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="print JSON lines (one object per line); without it, one readable line "
                         "per window")
     w = p.add_argument_group("windows (defaults from the model's modes; docs/monitoring.md)")
-    w.add_argument("--window", type=float, default=None, metavar="S", help="window length (s)")
-    w.add_argument("--step", type=float, default=None, metavar="S", help="window step (s)")
+    w.add_argument("--window", type=float, default=None, metavar="S",
+                   help="window length (s); a window and two steps span at most 1000 s")
+    w.add_argument("--step", type=float, default=None, metavar="S",
+                   help="window step (s), at most 10 windows")
     w.add_argument("--decimate", type=int, default=None, metavar="N",
                    help="fit every N-th sample (default: 20 samples per wheel-hop period)")
     w.add_argument("--budget", type=int, default=None, metavar="N",

@@ -166,6 +166,16 @@ CASES: list[tuple[list[str], str]] = [
      "--road-lowpass: expected a frequency >= 0 Hz"),
     (["monitor", "--model", "quarter2", "--input", "q2.log", "--road-fusion", "nan", "--jsonl"],
      "--road-fusion: expected a frequency >= 0 Hz"),
+    # windows whose buffer would not fit in memory (were: a MemoryError traceback for 1e9,
+    # killed by the OOM killer at 24 GB for 1e5)
+    (["monitor", "--model", "quarter2", "--input", "q2.log", "--window", "1e9", "--jsonl"],
+     "--window/--step: a window and two steps span 2e+09 s, more than the 1000 s a monitor's "
+     "decoder buffers (at up to 2 kHz)"),
+    (["monitor", "--model", "quarter2", "--input", "q2.log", "--window", "1e5", "--jsonl"],
+     "span 200000 s, more than the 1000 s"),
+    (["monitor", "--model", "quarter2", "--input", "q2.log", "--window", "100", "--step", "500",
+      "--jsonl"], "span 1100 s, more than the 1000 s"),
+    (["compare", "--model", "quarter2", "--input", "q2.log", "--window", "1e9"], "span 2e+09 s"),
     (["compare", "--model", "quarter2", "--input", "missing.log", "--json"], "missing.log"),
     (["doe", "--model", "quarter1", "--init-scale", "nan", "--json"], "--init-scale"),
     (["doe", "--model", "quarter1", "--ids", "999", "--json"], "--ids '999'"),
