@@ -42,7 +42,7 @@ from numpy.typing import NDArray
 from scipy.stats import chi2
 
 from estimator.diagnose.corners import SiteRestricted, effect_sites, model_limits, strut_limit_key
-from estimator.diagnose.regrid import JITTER_FRACTION, grid_jitter, to_uniform_grid
+from estimator.identify.regrid import JITTER_FRACTION, grid_jitter, to_uniform_grid
 from estimator.diagnose.refit import (ModelFit, PhysicalRefit, SensorRefit, baseline_fit,
                                       reweighted_linear_fit)
 from estimator.diagnose.residuals import (ChannelStats, Motion, Screen, channel_stats, effective_n,
@@ -227,7 +227,7 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
         smoothing filter's window), or a time grid that is not uniform even up to timing
         jitter (the nonlinear refits step on a uniform one; a record whose samples lie
         within a quarter step of the uniform grid of the same span and count is resampled
-        onto it by a cubic spline, with a warning, :mod:`estimator.diagnose.regrid`); the
+        onto it by a cubic spline, with a warning, :mod:`estimator.identify.regrid`); the
         message names the record and what it holds.
     """
     th = thresholds or Thresholds()

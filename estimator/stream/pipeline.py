@@ -38,6 +38,7 @@ from estimator.decode import DecodeListener
 from estimator.decode.log_input import unparsed_hint
 from estimator.identify import Parameters
 from estimator.identify.inputs import CSV_SUFFIXES
+from estimator.identify.regrid import to_uniform_grid
 from estimator.stream.config import (WindowConfig, default_config, default_decimation,
                                      strut_parameters)
 from estimator.stream.drivers import CanWindowDriver, LiveStop, replay_log, run_arrays, run_bus
@@ -523,6 +524,10 @@ def _run_csv(source: Source, spec: MonitorSpec, mon: StreamMonitor) -> dict[str,
     """Stream a measurement CSV through the same windows."""
     cfg = spec.config
     meas = read_measurement(str(source.input), spec.model)
+    # a logger's timing jitter: resampled onto the uniform grid (a gap still skips windows)
+    meas, jitter = to_uniform_grid(meas)
+    if jitter is not None:
+        meas.warnings.append(jitter)
     data = dict(meas.measured)
     data.update(meas.road)
     if meas.t.size < 3 or meas.t[-1] - meas.t[0] < cfg.window_s:

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from estimator.diagnose import diagnose
-from estimator.diagnose.regrid import grid_jitter, to_uniform_grid
+from estimator.identify.regrid import grid_jitter, to_uniform_grid
 from estimator.diagnose.synthetic import synthetic_record
 from estimator.identify import Parameters
 from suspid.io.csvio import Measurement

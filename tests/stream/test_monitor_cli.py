@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.interpolate import CubicSpline
 
 from estimator.stream.wear_streams import damper_wear, write_log
 from suspid.io.csvio import write_measurement
@@ -163,3 +164,29 @@ def test_baseline_ekf_on_the_same_log(fast_wear) -> None:
     crossing = s.crossing_time("c1", 1050.0)
     assert [a["parameter"] for a in alerts] == ["c1"] and crossing < alerts[0]["t"] < crossing + 8
     assert out[-1]["cpu_us_per_sample"] > 0
+
+
+def test_a_jittered_csv_is_resampled_not_skipped(fast_wear, tmp_path: Path) -> None:
+    """A logger's CSV with timing jitter (every sample within a fifth of a step of its grid
+    point) was skipped window by window ("time base not uniform"); it is resampled onto the
+    uniform grid (estimator.identify.regrid) and tracks as the uniform CSV does."""
+    s, _, csv, _ = fast_wear
+    rng = np.random.default_rng(5)
+    h = float(s.t[1] - s.t[0])
+    tj = s.t + rng.uniform(-0.2, 0.2, s.t.size) * h
+    tj[0], tj[-1] = s.t[0], s.t[-1]
+    # the record sampled at the jittered times (a spline of the 500 Hz data, far finer than
+    # the 5 % the test allows)
+    jit = tmp_path / "jittered.csv"
+    write_measurement(jit, tj, {k: CubicSpline(s.t, v)(tj) for k, v in s.data.items()})
+    ra = run("monitor", "--model", "quarter2", "--input", str(csv), *FIX, "--jsonl", "--no-inspection")
+    rb = run("monitor", "--model", "quarter2", "--input", str(jit), *FIX, "--jsonl", "--no-inspection")
+    assert ra.returncode == 0 and rb.returncode == 0, ra.stderr + rb.stderr
+    ea = [d for d in lines(ra.stdout) if d["type"] == "estimate"]
+    eb = [d for d in lines(rb.stdout) if d["type"] == "estimate"]
+    assert not [d for d in lines(rb.stdout) if d["type"] == "skip"]
+    assert len(ea) == len(eb) == 25
+    for x, y in zip(ea, eb):
+        assert x["params"]["c1"] == pytest.approx(y["params"]["c1"], rel=0.02)
+    summary = lines(rb.stdout)[-1]
+    assert any("jittered.csv: sample times jitter by up to" in w for w in summary["warnings"])

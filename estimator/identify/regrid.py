@@ -1,7 +1,7 @@
 """A record whose sample times jitter about a uniform grid, put on that grid.
 
-The nonlinear refits of :func:`estimator.diagnose.diagnose` step on a uniform time grid.
-A logger's CSV often stamps its samples with a little timing jitter; such a record is
+The nonlinear refits of :func:`estimator.diagnose.diagnose` and the monitor's windows
+(``suspid monitor --input CSV``) step on a uniform time grid. A logger's CSV often stamps its samples with a little timing jitter; such a record is
 accepted when it *is* uniform up to jitter:
 
 * the reference grid has the record's first and last time and its sample count (step
