@@ -169,7 +169,11 @@ def read_measurement(path: str | Path, model: SuspensionModel, *,
                 raise InputError(f"{name}:1: column {header[i]!r}: time in {unit!r}, expected s "
                                  "(convert the column to seconds)")
         if "t" not in header:
-            raise InputError(f"{name}:1: no 't' column in the header (got {', '.join(header[:8])})")
+            seps = [sep for sep in (";", "\t", "|") if len(header) == 1 and sep in header[0]]
+            hint = (f"; the header is separated by {seps[0]!r}, expected commas (a spreadsheet's "
+                    "export: save as comma-separated with '.' decimals)" if seps else "")
+            raise InputError(f"{name}:1: no 't' column in the header (got {', '.join(header[:8])})"
+                             + hint)
         dup = {h for h in header if h and header.count(h) > 1}
         if dup:
             raise InputError(f"{name}:1: duplicate column(s) {', '.join(sorted(dup))}")

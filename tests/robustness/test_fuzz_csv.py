@@ -154,3 +154,13 @@ def test_header_names_with_other_units_are_named_not_converted(tmp_path: Path) -
     other = read_measurement(_write(tmp_path, "t,x1,speed [km/h]\n0,1,2\n1,1,2\n"), Q2)
     assert other.warnings == [f"{tmp_path / 'fuzz.csv'}: ignoring column(s) not used by model "
                               "quarter2: speed [km/h]"]
+
+
+def test_a_semicolon_separated_export_is_named(tmp_path: Path) -> None:
+    """A spreadsheet's export with ';' (and decimal commas): the error says what the
+    separator is (was: only "no 't' column ... (got t;x1)")."""
+    with pytest.raises(InputError, match=r"fuzz\.csv:1: no 't' column in the header \(got t;x1\); "
+                                         r"the header is separated by ';', expected commas"):
+        read_measurement(_write(tmp_path, "t;x1\n0;0,001\n0,005;0,002\n"), Q2)
+    with pytest.raises(InputError, match=r"^[^;]*\(got time, x1\)$"):
+        read_measurement(_write(tmp_path, "time,x1\n0,1\n1,2\n"), Q2)
