@@ -11,7 +11,7 @@ from suspid.errors import UsageError
 from suspid.excitation import SCENARIOS, make_scenario, measured_road
 from suspid.io.csvio import read_measurement, write_measurement
 from suspid.plots import plot_channels
-from suspid.simulate import simulate
+from suspid.simulate import simulate, uniform_step
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -78,6 +78,12 @@ def run(args: argparse.Namespace) -> int:
                                     params=params, h=args.height, l=args.length, v_kmh=args.speed,
                                     t0=args.t0, road_class=args.road_class, seed=args.seed, x0=x0)
         scenario = args.scenario
+    if args.effect and args.road and uniform_step(t) is None:
+        d = np.diff(t)
+        raise UsageError(f"--effect with --road {args.road}: the nonlinear simulation steps on a "
+                         f"uniform time grid; the road's time steps range from {float(d.min()):.6g} "
+                         f"to {float(d.max()):.6g} s (resample the road, or simulate without "
+                         "--effect)")
     if args.effect:
         # suspid.effects brings scipy.interpolate/optimize (~0.6 s to import); only runs with
         # --effect need it
