@@ -23,7 +23,8 @@ FIT_HELP = FitHelp(
     cost="sse (seed cost 1, default) or frobenius (seed cost 2)",
     x0="initial state: estimate (default), rest, or [q..., q_dot...]",
     restarts="Nelder–Mead restarts (default 6)",
-    maxfev="evaluation budget over all restarts (default 1000 per free parameter)",
+    maxfev="evaluation budget of each fit over all its restarts, further starts and polish "
+           "(default 1000 per free parameter), as for identify",
     multistart="further starts on a suspicious local minimum (default 4)",
     polish="pure Nelder–Mead to full tolerance (no Levenberg–Marquardt polish)")
 

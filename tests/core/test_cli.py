@@ -219,3 +219,21 @@ def test_model_help_names_every_model(command: str, capsys: pytest.CaptureFixtur
     for name in MODELS:
         assert f"{name} (" in line or f"{name}," in line or line.startswith(f"suspension model: {name}"), name
     assert "full7 (7 DOF full car)" in line
+
+
+def test_maxfev_help_matches_the_reported_nfev(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``identify --maxfev 100`` reports nfev 200 (two starts, each its own budget); its
+    help said "budget over all restarts" only."""
+    csv = tmp_path / "b.csv"
+    assert main(["simulate", "--model", "quarter2", "--scenario", "bump", "--duration", "1",
+                 "--fs", "200", "--noise", "0.01", "--out", str(csv)]) == 0
+    capsys.readouterr()
+    assert main(["identify", "--model", "quarter2", "--input", str(csv), "--maxfev", "100",
+                 "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    runs = [s for s in out["starts"] if not s.get("skipped")]
+    assert len(runs) >= 2 and 100 < out["nfev"] <= 100 * len(runs) * 2   # (twin fits included)
+    with pytest.raises(SystemExit):
+        main(["identify", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "each have their own, and nfev reports their sum" in text
