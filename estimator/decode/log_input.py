@@ -154,7 +154,7 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
     listener.count_malformed(stats.malformed)
     frame_stats = listener.frame_stats()
     warnings = listener.signal_map.unit_warnings(listener.db, m)
-    warnings += [f"{path}: skipped {e}" for e in stats.examples]
+    warnings += [f"{e} (skipped)" for e in stats.examples]   # e names file and line
     if stats.malformed > len(stats.examples):
         warnings.append(f"{path}: {stats.malformed} unparseable lines/records skipped in all")
     if stats.truncated:

@@ -205,3 +205,14 @@ def test_log_without_model_frames_is_input_error(tmp_path):
     p.write_text("(0.0) can0 7DF#0102030405060708\n(0.1) can0 7DF#0102030405060708\n")
     with pytest.raises(InputError, match="no accepted frame"):
         load_log_as_measurement(p, "quarter2")
+
+
+def test_a_skipped_line_is_named_once(q2_log, tmp_path):
+    """A comment line atop a candump log is skipped with a warning naming file and line
+    once (was: "F: skipped F:1: ...")."""
+    log = tmp_path / "commented.log"
+    log.write_text("# recorded with candump -L\n" + q2_log.read_text())
+    meas, stats = load_log_as_measurement(log, "quarter2")
+    assert stats["rejected"]["malformed"] == 1
+    assert f"{log}:1: expected '(seconds)' first, got '#' (skipped)" in meas.warnings
+    assert not any(w.count(str(log)) > 1 for w in meas.warnings)
