@@ -38,8 +38,10 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                                    "tire_liftoff, sensor_delay, sensor_offset, and any effect "
                                    "an installed package registers under the entry-point "
                                    "group suspid.effects), refit by "
-                                   "Nelder-Mead and report before/after. See "
-                                   "docs/closing-the-loop.md.")
+                                   "Nelder-Mead and report before/after. A record whose sample "
+                                   "times jitter within a quarter step of a uniform grid is "
+                                   "resampled onto it (cubic spline, with a warning); a gap is an "
+                                   "error. See docs/closing-the-loop.md.")
     add_model_option(p)
     add_input_options(p)
     add_param_options(p)
