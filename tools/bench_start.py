@@ -20,6 +20,8 @@ Usage::
         [--compare] [--json]
     python tools/bench_start.py --data-only [--models ...] [--scales ...] [--noise ...]
         [--costs ...] [--no-bump] [--base DIR [--repeat K]]
+    python tools/bench_start.py --estimate-only [--models ...] [--costs ...] [--scales ...]
+        [--noise ...] [--ids ...] [--base DIR]
 
 ``--data-only --base DIR`` times the same cases in one run with this checkout and with the
 code at ``DIR`` (e.g. ``git worktree add /tmp/base 84d56c2``; each case in a subprocess
@@ -27,6 +29,12 @@ with ``PYTHONPATH`` at the version, the two alternately), and prints before / af
 ratio side by side, in wall seconds and in CPU seconds (the process's own; on a shared
 machine the steadier of the two). ``--repeat K`` runs every case K times per version
 (alternately) and reports each version's fastest run.
+
+``--estimate-only`` runs the record's estimate (``estimate_start``) alone on every design
+row and prints, per row, the worst factor between an estimated value and the truth (and
+which value), the estimate's output-error cost against the truth's, the bandwidth chosen
+and the CPU seconds; with ``--base DIR`` the code at ``DIR`` (before) beside this one
+(after), each version in a subprocess.
 """
 from __future__ import annotations
 
@@ -43,8 +51,10 @@ import time
 from pathlib import Path
 from typing import Any
 
-from estimator.doe.runner import Settings, run_design
-from estimator.identify import OutputErrorProblem, Parameters, fit, fit_from_starts
+from estimator.doe.design import experiments
+from estimator.doe.runner import Settings, measurement, run_design, start_parameters
+from estimator.identify import (OutputErrorProblem, Parameters, estimate_start, fit,
+                                fit_from_starts)
 from suspid.excitation import make_scenario
 from suspid.io.csvio import Measurement
 from suspid.models import get_model
@@ -88,6 +98,64 @@ def doe_row(model: str, cost: str, scale: float, noise: float, data: bool,
             "nfev_per_row": sum(e["nfev"] for e in out["experiments"]) / out["total"],
             "failed": [e["id"] for e in out["experiments"] if not e["success"]],
             "success_true_beyond_10x": false_ok}
+
+
+def estimate_rows(model: str, cost: str, scale: float, noise: float,
+                  ids: list[int] | None) -> list[dict[str, Any]]:
+    """``estimate_start`` alone on each design row: worst factor, costs, CPU seconds."""
+    m = get_model(model)
+    out = []
+    for e in experiments(m):
+        if ids and e.id not in ids:
+            continue
+        st = Settings(cost=cost, init_scale=scale, noise=noise)
+        meas, _ = measurement(m, e, noise, st.seed + e.id)
+        problem = OutputErrorProblem(m, meas, x0=e.x0, cost=cost)
+        params = start_parameters(m, e, st)
+        c0 = time.process_time()
+        est = estimate_start(problem, params)
+        cpu = time.process_time() - c0
+        fac = {k: max(v / e.truth[k], e.truth[k] / v) if v > 0 else math.inf
+               for k, v in est.values.items()}
+        worst = max(fac, key=lambda k: fac[k]) if fac else None
+        out.append({"model": model, "cost": cost, "init_scale": scale, "noise": noise,
+                    "row": e.id, "worst": fac[worst] if worst else math.inf,
+                    "worst_param": worst, "est_cost": est.cost,
+                    "truth_cost": problem.normalized_ss(dict(e.truth)),
+                    "bandwidth_hz": est.bandwidth_hz, "undetermined": est.undetermined,
+                    "cpu_s": cpu})
+    return out
+
+
+def _estimate_side_by_side(a: argparse.Namespace) -> int:
+    """``--estimate-only --base DIR``: every row's estimate with the code at ``DIR`` and this."""
+    here = Path(__file__).resolve().parent.parent
+    args = [sys.executable, str(Path(__file__).resolve()), "--estimate-only", "--json",
+            "--models", a.models, "--costs", a.costs, "--scales", a.scales or "0.5,10",
+            "--noise", a.noise or "0.5"] + (["--ids", a.ids] if a.ids else [])
+    got = {}
+    for label, root in (("before", Path(a.base).resolve()), ("after", here)):
+        env = dict(os.environ, PYTHONPATH=str(root))
+        out = subprocess.run(args, env=env, cwd="/tmp", capture_output=True, text=True,
+                             check=True)
+        got[label] = json.loads(out.stdout.strip().splitlines()[-1])
+    w = sys.stdout.write
+    w(f"{'case':34} {'row':>3} {'worst before':>18} {'after':>18} {'cost before':>11} "
+      f"{'after':>7} {'truth':>7}\n")
+    totals: dict[str, list[float]] = {}
+    for b, n in zip(got["before"], got["after"]):
+        case = f"{n['model']} {n['cost']} x{n['init_scale']:g} noise {n['noise']:g}"
+        t = totals.setdefault(case, [0.0, 0.0, 0.0])
+        t[0] += b["cpu_s"]
+        t[1] += n["cpu_s"]
+        t[2] += 1
+        wb = f"{b['worst']:.3g} {b['worst_param']}"
+        wn = f"{n['worst']:.3g} {n['worst_param']}"
+        w(f"{case:34} {n['row']:3d} {wb:>18} {wn:>18} {b['est_cost']:11.4g} "
+          f"{n['est_cost']:7.4g} {n['truth_cost']:7.4g}\n")
+    for case, (cb, cn, k) in totals.items():
+        w(f"{case:34} CPU s per estimate {cb / k:.3f} -> {cn / k:.3f}\n")
+    return 0
 
 
 def identify_bump(scale: float, data: bool) -> dict[str, Any]:
@@ -180,6 +248,10 @@ def main(argv: list[str] | None = None) -> int:
                     help="--base: runs of every case per version (the fastest is reported)")
     ap.add_argument("--no-bump", action="store_true",
                     help="--data-only: leave out the `identify bump` cases")
+    ap.add_argument("--estimate-only", action="store_true",
+                    help="the record's estimate alone on every design row (default scales "
+                         "0.5,10, noise 0.5): worst factor from the truth, output-error "
+                         "cost, CPU seconds; with --base side by side")
     ap.add_argument("--json", action="store_true")
     a = ap.parse_args(argv)
     models = [s for s in a.models.split(",") if s]
@@ -204,6 +276,22 @@ def main(argv: list[str] | None = None) -> int:
                       + (f" | curvature band alone {r['curvature_band_successes']}/{r['total']}, "
                          f"profile bands in {len(r['profiled'])} rows" if n > 0 else "") + "\n")
                     sys.stdout.flush()
+    elif a.estimate_only and a.base:
+        return _estimate_side_by_side(a)
+    elif a.estimate_only:
+        for m in models:
+            for c in costs:
+                for s in _floats(a.scales or "0.5,10"):
+                    for n in _floats(a.noise or "0.5"):
+                        got = estimate_rows(m, c, s, n, ids)
+                        rows += got
+                        if not a.json:
+                            for r in got:
+                                w(f"{f'{m} {c} x{s:g} noise {n:g}':34} {r['row']:3d} "
+                                  f"worst {r['worst']:8.3g} {str(r['worst_param']):3} cost "
+                                  f"{r['est_cost']:.4g} (truth {r['truth_cost']:.4g}) "
+                                  f"{r['bandwidth_hz']:.3g} Hz {r['cpu_s']:.3f} s\n")
+                            sys.stdout.flush()
     elif a.data_only and a.base:
         return _side_by_side(a)
     elif a.data_only:

@@ -60,7 +60,7 @@ FLOOR = 0.02
 #: smallest relative singular value of the regression accepted as "determined"
 RANK_TOL = 1e-9
 #: the noise-compensated fit (:func:`_ratio_fit`) stays within ``exp(RATIO_SPAN)`` of its
-#: first start
+#: first start (a start outside that box: of that start)
 RATIO_SPAN = 8.0
 #: iterations of each of its BFGS runs
 RATIO_ITER = 200
@@ -613,7 +613,7 @@ def _bfgs(F: Callable[[FloatArray], tuple[float, FloatArray]], u0: FloatArray,
 
 
 def _ratio_fit(reg: _Regression, K: FloatArray, lin: list[str], nonlin: list[str],
-               starts: Sequence[Mapping[str, float]]) -> dict[str, float] | None:
+               starts: Sequence[Mapping[str, float]]) -> list[dict[str, float]] | None:
     """Free parameters minimising each equation's residual over its noise share, averaged.
 
     With white measurement noise in the channels the filtered equation's residual at
@@ -625,14 +625,27 @@ def _ratio_fit(reg: _Regression, K: FloatArray, lin: list[str], nonlin: list[str
     pulling the estimate towards coefficients that pass little noise) its minimum is
     consistent (errors in variables; the maximum-likelihood criterion of one equation).
     The mean over the equations is minimised by BFGS on the logarithms of the values (all
-    positive) from each of ``starts`` (analytic gradient through the polynomial ``K`` of
-    :func:`_coef_poly`); ``None`` when no start gives a finite ratio.
+    positive) from each of ``starts``, each run within ``exp(RATIO_SPAN)`` of the first
+    start, or of its own start where that lies outside this box (analytic gradient through
+    the polynomial ``K`` of :func:`_coef_poly`).
+
+    Returns
+    -------
+    list of dict or None
+        The end point of every run (free parameter -> value, SI), lowest mean ratio first,
+        those within 1e-6 (relative) of an earlier one left out; ``None`` when no start
+        gives a finite ratio. The caller chooses among them by the output-error cost: the
+        ratio is about 1 at every minimum where the equations pass the noise alone,
+        including spurious ones where some term's signal vanishes (a spring or damper
+        near zero), so its value does not tell them apart.
     """
     if reg.B is None:
         return None
     nl = len(lin)
     free = lin + nonlin
-    x0 = np.array([starts[0][k] for k in free])
+    # the centre of the present run's box: the logarithms are taken from it
+    x0 = np.ones(len(free))
+    first = np.array([starts[0][k] for k in free]) if starts else x0.copy()
     big = 1e300
     # the coefficients are linear in z = theta (x) phi(eta), so each equation's two
     # quadratic forms are z' A_i z and z' D_i z: contracted with G and B once, here
@@ -664,20 +677,29 @@ def _ratio_fit(reg: _Regression, K: FloatArray, lin: list[str], nonlin: list[str
             g[nl:] = (theta @ Gz) @ _monomial_slopes(eta)
         return float(q.sum()) / ni, g * x * (2.0 / ni)
 
-    best: tuple[float, FloatArray] | None = None
+    ends: list[tuple[float, FloatArray]] = []
     for st in starts:
         v = np.array([st[k] for k in free])
-        if not np.all(v > 0):
+        if not (np.all(v > 0) and np.all(np.isfinite(v))):
             continue
-        u0 = np.log(v / x0)
+        # the box around the first start, or around this start when it lies outside that
+        # box (a least-squares value floored far below the given start): such a start was
+        # left out, although its run may be the one that reaches the truth's basin
+        centre = first if np.all(first > 0) and np.all(
+            np.abs(np.log(v / first)) < RATIO_SPAN) else v
+        x0[:] = centre
+        u0 = np.log(v / centre)
         if not F(u0)[0] < big:
             continue
         f, u = _bfgs(F, u0, RATIO_ITER, gtol=RATIO_GTOL, span=RATIO_SPAN)
-        if math.isfinite(f) and f < big and (best is None or f < best[0]):
-            best = (f, u)
-    if best is None:
+        x = centre * np.exp(u)
+        if math.isfinite(f) and f < big and not any(
+                np.allclose(x, y, rtol=1e-6, atol=0.0) for _, y in ends):
+            ends.append((f, x))
+    if not ends:
         return None
-    return {k: float(v) for k, v in zip(free, x0 * np.exp(best[1]))}
+    ends.sort(key=lambda fx: fx[0])
+    return [{k: float(v) for k, v in zip(free, x)} for _, x in ends]
 
 
 def _floored(model: SuspensionModel, base: Mapping[str, float], lin: list[str],
@@ -826,8 +848,9 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
             if nonlin:
                 starts += [{**vals, **{k: base[k] for k in nonlin}},
                            {**given, **{k: vals[k] for k in nonlin}}]
-            comp = _ratio_fit(reg.with_noise(), poly[0][0], lin, nonlin, starts)
-            if comp is not None:
+            # every run's end point is a candidate; the output-error cost chooses, as it
+            # does among the bandwidths
+            for comp in _ratio_fit(reg.with_noise(), poly[0][0], lin, nonlin, starts) or []:
                 comp, comp_floored, comp_notes = _floored(model, base, lin, comp,
                                                           "noise-compensated")
                 comp_cost = problem.normalized_ss({**base, **comp})
