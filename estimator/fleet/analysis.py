@@ -11,6 +11,7 @@ in alert after its latest drive.
 from __future__ import annotations
 
 import math
+from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any, Iterable
 
@@ -61,6 +62,42 @@ class AlertRule:
                 "horizon_days": self.horizon_days}
 
 
+#: 2000-01-01 00:00 UTC (epoch s): a drive that starts before it carries the time since the
+#: start of its record (a CSV whose ``t`` starts at 0, a logger without a clock), not the
+#: epoch time the trend is fitted over
+EPOCH_FLOOR = 946684800.0
+
+
+def time_warnings(vehicle: str, times: list[float]) -> list[str]:
+    """What makes a vehicle's drive times unfit for a trend, one line each.
+
+    Parameters
+    ----------
+    vehicle : str
+        The vehicle's name (folder).
+    times : list of float
+        Its identified drives' times (epoch s), one per drive.
+
+    Returns
+    -------
+    list of str
+        Empty when every drive starts after :data:`EPOCH_FLOOR` at a time of its own.
+    """
+    out: list[str] = []
+    early = [t for t in times if t < EPOCH_FLOOR]
+    if early:
+        out.append(f"vehicle {vehicle}: {len(early)} of {len(times)} drives start before "
+                   f"2000-01-01 (first sample t = {min(early):.6g} s): their logs carry the "
+                   "time since the record's start, not the epoch time; the trend and "
+                   "forecast need each drive's date (log with a real-time clock, or a CSV "
+                   "whose t is epoch seconds)")
+    shared = sum(c for c in Counter(times).values() if c > 1)
+    if shared:
+        out.append(f"vehicle {vehicle}: {shared} of {len(times)} drives share their drive "
+                   "time with another drive; the trend tells drives apart by time only")
+    return out
+
+
 @dataclass
 class VehicleSummary:
     """One vehicle's drives and what they say."""
@@ -77,6 +114,7 @@ class VehicleSummary:
     alerts: list[dict[str, Any]]
     risk: str = "ok"
     rank: int = 0
+    warnings: list[str] = field(default_factory=list)
 
     @property
     def latest(self) -> dict[str, Any] | None:
@@ -120,6 +158,7 @@ class VehicleSummary:
             "nominal": dict(self.nominal),
             "alert_details": self.alerts,
             "margin": self.margin() if math.isfinite(self.margin()) else None,
+            "warnings": list(self.warnings),
         }
 
 
@@ -171,7 +210,8 @@ def summarize_vehicle(vehicle: str, records: list[dict[str, Any]], rule: AlertRu
             forecasts[k] = fc
     risk = "alert" if alerts else ("forecast" if forecasts else "ok")
     return VehicleSummary(vehicle, model, ok, failed, monitored, nominal, limits, trends,
-                          forecasts, alerts, risk)
+                          forecasts, alerts, risk,
+                          warnings=time_warnings(vehicle, [float(r["t"]) for r in ok]))
 
 
 def _nan(x: Any) -> float:

@@ -150,6 +150,8 @@ def render(vehicles: Sequence[VehicleSummary], drives: Sequence[dict[str, Any]],
     for s in vehicles:
         parts.append(f'<h2 id="v-{html.escape(s.vehicle)}">{s.rank}. {html.escape(s.vehicle)} '
                      f"({html.escape(s.model)}, {len(s.drives)} drives, {s.risk})</h2>")
+        for msg in s.warnings:
+            parts.append(f'<p class="warn-msg"><b>WARNING</b> {html.escape(msg)}</p>')
         for a in s.alerts:
             parts.append(f'<p class="alert-msg"><b>ALERT</b> {html.escape(a["message"])} '
                          f'(first below in the drive of {_date(a["since_t"], True)} UTC)</p>')

@@ -117,6 +117,9 @@ def run(args: argparse.Namespace) -> int:
     out = result.to_json()
     if args.json:
         print_json(out)
+        for v in out["vehicles"]:
+            for msg in v.get("warnings", []):
+                sys.stderr.write(f"warning: {msg}\n")
         return 0
     _print_table(out)
     return 0
@@ -141,6 +144,9 @@ def _print_table(out: dict[str, Any]) -> None:
                   for k, f in v["forecast"].items()]
         w(f"{v['rank']:>4}  {v['vehicle']:<16} {v['risk']:<9} {v['drives']:>6}  "
           f"{'; '.join(notes)}\n")
+    for v in out["vehicles"]:
+        for msg in v.get("warnings", []):
+            w(f"warning: {msg}\n")
     for d in out["drives"]:
         if d["status"] != "ok":
             w(f"failed: {d['error']}\n")

@@ -38,6 +38,7 @@ def test_contract_fields_and_failed_logs(fleet: Fleet, inprocess: dict[str, Any]
     for v in out["vehicles"]:
         assert set(v) >= {"vehicle", "drives", "latest", "trend", "alerts", "forecast"}
         assert set(v["trend"]) == {"c1", "k1", "c2", "k2"}          # the free parameters
+        assert v["warnings"] == []                  # every drive dated, each at its own time
         for tr in v["trend"].values():
             assert set(tr) >= {"rate_per_day", "stderr"}
     assert vehicles["VAN-OK"]["drives"] == 8
