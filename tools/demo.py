@@ -49,6 +49,10 @@ def live_monitor(out: Path) -> tuple[list[dict], dict, float]:
     crossing = WEAR_START + 0.3 / (1 - WEAR_TO) * (DURATION - WEAR_START)
     node_bus = open_bus("virtual", channel)
     summary: dict = {}
+    # the node keeps its receive task running after its last frame until the monitor has
+    # finished: the monitor's alert and forecast frames go out when its windows are fitted,
+    # which may be seconds after the node at 8x real time has sent everything
+    monitor_done = threading.Event()
 
     def run_node() -> None:
         # start sending once the monitor has attached to the virtual channel (python-can's
@@ -59,7 +63,7 @@ def live_monitor(out: Path) -> tuple[list[dict], dict, float]:
         while len(virtual.channels.get(channel, ())) < 2 and time.monotonic() < deadline:
             time.sleep(0.05)
         time.sleep(0.5)
-        summary["node"] = node.run(node_bus, speed=8.0)
+        summary["node"] = node.run(node_bus, speed=8.0, linger=120.0, linger_until=monitor_done)
 
     th = threading.Thread(target=run_node, daemon=True)
     th.start()
@@ -69,6 +73,7 @@ def live_monitor(out: Path) -> tuple[list[dict], dict, float]:
         text = run_cli(["monitor", "--model", "quarter2", "--interface", "virtual", "--channel",
                         channel, *FIX, "--jsonl", "--idle-timeout", "3", "--alert-file",
                         str(alert_file)])
+        monitor_done.set()
         th.join(30)
     finally:
         node_bus.shutdown()
