@@ -2,9 +2,11 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
 import numpy as np
 
+from estimator.identify.regrid import to_uniform_grid
 from suspid.cli._common import (add_model_option, model_from_args, parse_assignments, parse_state,
                                 print_json)
 from suspid.errors import UsageError
@@ -69,6 +71,12 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--noise: expected a finite fraction >= 0, got {args.noise}")
     if args.road:
         given_road = read_measurement(args.road, model, require_measured=False)
+        if args.effect:
+            # the nonlinear simulation steps on a uniform grid: a road logged with timing
+            # jitter is resampled onto it (a gap stays the error below)
+            given_road, note = to_uniform_grid(given_road)
+            if note is not None:
+                sys.stderr.write(f"warning: {note}; the simulation and --out are on that grid\n")
         t = given_road.t
         road = measured_road(model, t, given_road.road, params, args.speed, source=args.road)
         x0 = np.zeros(model.n_states) if x0 is None else x0
@@ -82,8 +90,8 @@ def run(args: argparse.Namespace) -> int:
         d = np.diff(t)
         raise UsageError(f"--effect with --road {args.road}: the nonlinear simulation steps on a "
                          f"uniform time grid; the road's time steps range from {float(d.min()):.6g} "
-                         f"to {float(d.max()):.6g} s (resample the road, or simulate without "
-                         "--effect)")
+                         f"to {float(d.max()):.6g} s, more than a quarter step of jitter (resample "
+                         "the road, or simulate without --effect)")
     if args.effect:
         # suspid.effects brings scipy.interpolate/optimize (~0.6 s to import); only runs with
         # --effect need it

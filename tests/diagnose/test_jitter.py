@@ -140,3 +140,30 @@ def test_a_gap_is_still_rejected(tmp_path: Path) -> None:
     t = np.loadtxt(gap, delimiter=",", skiprows=1, usecols=0)
     h, jit = grid_jitter(t)
     assert jit > 0.45 * h
+
+
+def test_simulate_with_an_effect_resamples_a_jittered_road(tmp_path: Path) -> None:
+    # the nonlinear simulation steps on a uniform grid: a jittered road is put on the grid
+    # (warning), and the result equals the same run on the road sampled there exactly
+    t = jittered_times(0.2)
+    n = t.size
+    grid = t[0] + (t[-1] - t[0]) / (n - 1) * np.arange(n)
+    files = {}
+    for name, tt in (("jit", t), ("uni", grid)):
+        r, rd = bump_road(tt)
+        files[name] = tmp_path / f"{name}_road.csv"
+        np.savetxt(files[name], np.column_stack([tt, r, rd]), delimiter=",",
+                   header="t,r,r_dot", comments="", fmt="%.12g")
+    out = {}
+    for name, road in files.items():
+        csv = tmp_path / f"{name}.csv"
+        p = run("simulate", "--model", "quarter2", "--road", str(road), "--effect",
+                "coulomb_friction:F=100", "--out", str(csv))
+        assert p.returncode == 0, p.stderr
+        out[name] = (np.genfromtxt(csv, delimiter=",", names=True), p.stderr)
+    data, err = out["jit"]
+    assert f"{files['jit']}: sample times jitter by up to" in err and "on that grid" in err
+    assert "jitter" not in out["uni"][1]
+    np.testing.assert_allclose(data["t"], out["uni"][0]["t"], rtol=0, atol=1e-9)
+    peak = float(np.max(np.abs(out["uni"][0]["x1"])))
+    assert float(np.max(np.abs(data["x1"] - out["uni"][0]["x1"]))) < 1e-3 * peak

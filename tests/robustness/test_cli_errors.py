@@ -55,7 +55,8 @@ def work(tmp_path_factory: pytest.TempPathFactory) -> Path:
         f"  {f[1]}  {f[2].split('#')[0]}   [{len(f[2].split('#')[1]) // 2}]  "
         + " ".join(f[2].split("#")[1][i:i + 2] for i in range(0, len(f[2].split("#")[1]), 2)) + "\n"
         for f in plain))
-    (d / "jitroad.csv").write_text("t,r\n0,0\n0.004,0\n0.011,0.001\n0.015,0.002\n0.02,0.002\n")
+    # a missing sample (0.015 s), not jitter: more than a quarter step off any uniform grid
+    (d / "jitroad.csv").write_text("t,r\n0,0\n0.005,0\n0.01,0.001\n0.02,0.002\n0.025,0.002\n")
     (d / "hugeroad.csv").write_text("t,r,x1\n0,1e300,0\n0.01,-2e300,0\n0.02,0,1\n")
     return d
 
@@ -124,7 +125,7 @@ CASES: list[tuple[list[str], str]] = [
     # uniformly spaced samples", naming neither the option nor the file)
     (["simulate", "--model", "quarter2", "--road", "jitroad.csv", "--effect", "coulomb_friction:F=100",
       "--out", "x.csv"], "--effect with --road jitroad.csv: the nonlinear simulation steps on a uniform "
-     "time grid; the road's time steps range from 0.004 to 0.007 s"),
+     "time grid; the road's time steps range from 0.005 to 0.01 s, more than a quarter step of jitter"),
     (NODE + ["--param", "c1=1e-320"], "--param c1: expected a value of magnitude at least 1e-09"),
     (["diagnose", "--model", "quarter2", "--input", "tonly.csv"], "tonly.csv:1: no measured channel"),
     (["diagnose", "--model", "quarter2", "--input", "q2.csv", "--maxfev", "0"], "--maxfev"),
