@@ -58,9 +58,6 @@ _ANNOTATED = re.compile(r"^(?P<name>[^\[\]()]*?)\s*[\[(]\s*(?P<unit>[^\[\]()]*?)
 #: spellings of one SI unit, normalised
 _SPELLINGS = {"m/s2": "m/s^2", "m/s²": "m/s^2", "m/s/s": "m/s^2", "m s^-2": "m/s^2",
               "rad/s2": "rad/s^2", "rad/s²": "rad/s^2", "rad/s/s": "rad/s^2", "sec": "s"}
-#: coordinates of the bundled models that are angles (rad); the others are lengths (m)
-ANGLES = ("delta", "phi")
-LENGTHS = ("x", "x1", "x2", "x3", "x4")
 
 
 def normalize_unit(unit: str) -> str:
@@ -72,9 +69,9 @@ def normalize_unit(unit: str) -> str:
 def si_units(column: str, model: SuspensionModel) -> tuple[str, ...]:
     """The SI unit(s) a column of ``model``'s CSV is written in (empty: not a column of it).
 
-    ``t`` in s, roads in m (their ``_dot`` in m/s), a coordinate in m or rad, its ``_dot``
-    per s and ``_ddot`` per s^2. A coordinate of a plug-in model that the bundled models
-    do not name may be either a length or an angle.
+    ``t`` in s, roads in m (their ``_dot`` in m/s), a coordinate in m or rad as the model
+    declares (``SuspensionModel.angles``), its ``_dot`` per s and ``_ddot`` per s^2. A
+    model that does not declare its angles may have either.
     """
     if column == "t":
         return ("s",)
@@ -88,11 +85,9 @@ def si_units(column: str, model: SuspensionModel) -> tuple[str, ...]:
         return ("m" + per,)
     if column not in model.channels:
         return ()
-    if base in ANGLES:
-        return ("rad" + per,)
-    if base in LENGTHS:
-        return ("m" + per,)
-    return ("m" + per, "rad" + per)
+    if model.angles is None:   # not declared: either
+        return ("m" + per, "rad" + per)
+    return ("rad" + per,) if base in model.angles else ("m" + per,)
 
 
 def _annotated(cell: str, model: SuspensionModel) -> tuple[str, str | None]:

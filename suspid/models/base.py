@@ -314,12 +314,17 @@ class SuspensionModel:
     doe_design : DoeDesign or None
         (class attribute) The model's design of experiments for ``suspid doe`` (``None``:
         the model has none).
+    angles : tuple of str or None
+        (class attribute) The coordinates that are angles (rad; their rates rad/s, rad/s^2);
+        the others are lengths (m). ``None``: not declared (a plug-in model's coordinate
+        may then be either, e.g. for the units a CSV header names).
     """
 
     sensor_set: ClassVar[int] = 0
     alert_id: ClassVar[int] = -1
     known: ClassVar[tuple[str, ...]] = ()
     doe_design: ClassVar[DoeDesign | None] = None
+    angles: ClassVar[tuple[str, ...] | None] = None
 
     name: str
     coords: tuple[str, ...]

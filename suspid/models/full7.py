@@ -79,6 +79,7 @@ class Full7(SuspensionModel):
     """Full car: heave, pitch and roll of the body over four wheels."""
 
     sensor_set = 3
+    angles = ("delta", "phi")
     alert_id = 3
     known = ("m", "Ix", "Iy", "m1", "m2", "m3", "m4", "a1", "a2", "w1", "w2")
     #: Table 5's L27-3 on the left corners (see ``FULL7_COLUMNS``); every free parameter of

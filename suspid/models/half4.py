@@ -46,6 +46,7 @@ class Half4(SuspensionModel):
     """
 
     sensor_set = 2
+    angles = ("delta",)
     alert_id = 2
     known = ("m", "I", "m1", "m2", "a1", "a2")
     #: the seed's section 6.1 half car: Table 5's columns map onto the half car by name

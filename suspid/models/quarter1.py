@@ -17,6 +17,7 @@ class Quarter1(SuspensionModel):
     """
 
     sensor_set = 1
+    angles = ()
     known = ("m",)
     alert_id = 0
     #: the seed's L16-4 design (Tables 3-4): initial position and velocity, m, c, k

@@ -17,6 +17,7 @@ class Quarter2(SuspensionModel):
     """Body ``m1`` on the suspension (``k1``, ``c1``) over wheel ``m2`` on the tyre (``k2``, ``c2``)."""
 
     sensor_set = 1
+    angles = ()
     known = ("m1", "m2")
     alert_id = 1
     #: the seed's L27-3 design (Tables 5-6): body and wheel initial states, then
