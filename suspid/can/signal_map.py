@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING, Iterable, Sequence, Union
 
 from suspid.can.conventions import channel_signals, find_message
 from suspid.errors import InputError, UsageError
-from suspid.io.csvio import normalize_unit, si_units
+from suspid.io.csvio import normalize_unit
 from suspid.models.base import SuspensionModel
 
 if TYPE_CHECKING:
@@ -233,7 +233,7 @@ class SignalMap:
         for m in self.mappings:
             if m.scale != 1.0:
                 continue
-            expected = si_units(m.channel, model)
+            expected = model.column_units(m.channel)
             try:
                 msg = find_message(db, m.message, self.source)
             except (InputError, UsageError):

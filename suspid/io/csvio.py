@@ -8,8 +8,8 @@ allowed. Every error names the file, the line and the column.
 
 A logger's export often annotates each name with its unit, ``t [s]`` or ``x1_dot (m/s)``:
 such a column is read as the named one when the unit is the SI unit the contract
-prescribes (:func:`si_units`); with any other unit (``x1 [mm]``, ``t [ms]``) it is not
-converted but ignored with a warning that names the unit found and the one expected
+prescribes (:meth:`SuspensionModel.column_units`); with any other unit (``x1 [mm]``,
+``t [ms]``) it is not converted but ignored with a warning that names the unit found and the one expected
 (``t`` in another unit is an error, as a missing ``t`` is).
 """
 from __future__ import annotations
@@ -61,33 +61,10 @@ _SPELLINGS = {"m/s2": "m/s^2", "m/s²": "m/s^2", "m/s/s": "m/s^2", "m s^-2": "m/
 
 
 def normalize_unit(unit: str) -> str:
-    """A unit's spelling reduced to the one :func:`si_units` uses (``m/s2`` -> ``m/s^2``)."""
+    """A unit's spelling reduced to the one :meth:`SuspensionModel.column_units` uses
+    (``m/s2`` -> ``m/s^2``)."""
     u = " ".join(unit.split())
     return _SPELLINGS.get(u, u)
-
-
-def si_units(column: str, model: SuspensionModel) -> tuple[str, ...]:
-    """The SI unit(s) a column of ``model``'s CSV is written in (empty: not a column of it).
-
-    ``t`` in s, roads in m (their ``_dot`` in m/s), a coordinate in m or rad as the model
-    declares (``SuspensionModel.angles``), its ``_dot`` per s and ``_ddot`` per s^2. A
-    model that does not declare its angles may have either.
-    """
-    if column == "t":
-        return ("s",)
-    roads = set(model.roads)
-    base, per = column, ""
-    for suffix, rate in (("_ddot", "/s^2"), ("_dot", "/s")):
-        if column.endswith(suffix):
-            base, per = column[: -len(suffix)], rate
-            break
-    if base in roads and per != "/s^2":
-        return ("m" + per,)
-    if column not in model.channels:
-        return ()
-    if model.angles is None:   # not declared: either
-        return ("m" + per, "rad" + per)
-    return ("rad" + per,) if base in model.angles else ("m" + per,)
 
 
 def _annotated(cell: str, model: SuspensionModel) -> tuple[str, str | None]:
@@ -97,7 +74,7 @@ def _annotated(cell: str, model: SuspensionModel) -> tuple[str, str | None]:
     if m is None:
         return cell, None
     name, unit = m.group("name").strip(), " ".join(m.group("unit").split())
-    units = si_units(name, model)
+    units = model.column_units(name)
     if not units:
         return cell, None
     return (name, None) if normalize_unit(unit) in units else (name, unit)
@@ -185,7 +162,7 @@ def read_measurement(path: str | Path, model: SuspensionModel, *,
                    if h not in known and i not in off_unit]
         for i, (col, unit) in off_unit.items():
             warnings.append(f"{name}: ignoring column {header[i]!r}: {col} in {unit!r}, expected "
-                            f"{' or '.join(si_units(col, model))} (SI; convert the column)")
+                            f"{' or '.join(model.column_units(col))} (SI; convert the column)")
         if unknown:
             warnings.append(f"{name}: ignoring column(s) not used by model {model.name}: "
                             f"{', '.join(unknown)}")
@@ -243,7 +220,7 @@ def read_measurement(path: str | Path, model: SuspensionModel, *,
             raise InputError(f"{name}:1: road velocity column '{r}_dot' given without '{r}'")
     if not measured and require_measured:
         units = "".join(f"; column {header[i]!r} is {col} in {unit!r}, expected "
-                        f"{' or '.join(si_units(col, model))}" for i, (col, unit) in off_unit.items())
+                        f"{' or '.join(model.column_units(col))}" for i, (col, unit) in off_unit.items())
         raise InputError(f"{name}:1: no measured channel for model {model.name}; expected any of "
                          f"{', '.join(model.channels)}{units}")
     return Measurement(t=t, road=road, measured=measured, warnings=warnings, source=name)

@@ -444,6 +444,28 @@ class SuspensionModel:
         """Base names of the CSV columns of this model (coordinates and roads)."""
         return set(self.coords) | set(self.roads)
 
+    def column_units(self, column: str) -> tuple[str, ...]:
+        """The SI unit(s) a CSV column or channel of this model is in (empty: not one of it).
+
+        ``t`` in s, roads in m (their ``_dot`` in m/s), a coordinate in m or rad as
+        :attr:`angles` declares, its ``_dot`` per s and ``_ddot`` per s^2. A model that does
+        not declare its angles may have either.
+        """
+        if column == "t":
+            return ("s",)
+        base, per = column, ""
+        for suffix, rate in (("_ddot", "/s^2"), ("_dot", "/s")):
+            if column.endswith(suffix):
+                base, per = column[: -len(suffix)], rate
+                break
+        if base in self.roads and per != "/s^2":
+            return ("m" + per,)
+        if column not in self.channels:
+            return ()
+        if self.angles is None:   # not declared: either
+            return ("m" + per, "rad" + per)
+        return ("rad" + per,) if base in self.angles else ("m" + per,)
+
     # ---- physics (overridden by concrete models) ---------------------------------
     def matrices(self, p: Mapping[str, float]) -> Matrices:
         """Return ``(M, C, K, Fk, Fc)`` for parameters ``p`` (SI units)."""

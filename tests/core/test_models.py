@@ -6,7 +6,6 @@ import itertools
 import numpy as np
 import pytest
 
-from suspid.io.csvio import si_units
 from suspid.models import MODELS, SuspensionModel, get_model
 from suspid.simulate import simulate_states
 
@@ -105,13 +104,13 @@ def test_a_twin_has_the_same_response_on_its_coordinates_only(name: str) -> None
 
 @pytest.mark.parametrize("name", MODELS)
 def test_a_model_declares_which_coordinates_are_angles(name: str) -> None:
-    # the units a CSV header may name come from here (suspid.io.csvio.si_units)
+    # the units a CSV header may name come from here (SuspensionModel.column_units)
     model = get_model(name)
     assert model.angles is not None and set(model.angles) <= set(model.coords)
     for c in model.coords:
         unit = "rad" if c in model.angles else "m"
-        assert si_units(c, model) == (unit,)
-        assert si_units(f"{c}_dot", model) == (f"{unit}/s",)
-        assert si_units(f"{c}_ddot", model) == (f"{unit}/s^2",)
+        assert model.column_units(c) == (unit,)
+        assert model.column_units(f"{c}_dot") == (f"{unit}/s",)
+        assert model.column_units(f"{c}_ddot") == (f"{unit}/s^2",)
     # the body's rotations are the angles: pitch (delta) of the half and full car, roll (phi)
     assert set(model.angles) == {"delta", "phi"} & set(model.coords)
