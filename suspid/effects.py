@@ -236,6 +236,14 @@ class Effect:
         if why is not None:
             raise UsageError(f"effect {self.name} is not available for model {model.name}: {why}")
 
+    def record_problem(self, t: FloatArray) -> str | None:
+        """Why the effect cannot act on a record sampled at ``t`` (s); ``None``: it can.
+
+        The base class finds nothing; :class:`SensorDelay` objects to a delay no shorter
+        than the record (the delayed channels would hold their first value throughout).
+        """
+        return None
+
     def __repr__(self) -> str:
         args = ", ".join(f"{k}={v!r}" for k, v in self.values.items())
         return f"{type(self).__name__}({args})"
@@ -863,6 +871,15 @@ class SensorDelay(SensorEffect):
                 out[c] = _shift(tt, np.asarray(out[c], dtype=float), self.values["delay_s"])
         return out
 
+    def record_problem(self, t: FloatArray) -> str | None:
+        tt = np.asarray(t, dtype=float)
+        span = float(tt[-1] - tt[0]) if tt.size > 1 else 0.0
+        d = float(self.values["delay_s"])
+        if d >= span:
+            return (f"delay_s {d:g} s is not shorter than the record ({span:g} s): the delayed "
+                    "channels would hold their first value throughout (a delay in ms? give it in s)")
+        return None
+
     @classmethod
     def screen_groups(cls, model: SuspensionModel, measured: Sequence[str]) -> list[list[str]]:
         groups: list[list[str]] = []
@@ -1052,6 +1069,56 @@ class Injection:
     def describe(self) -> list[dict[str, Any]]:
         """The injected effects as contract-style ``{"name", "params"}`` objects."""
         return [e.to_json() for e in self.effects]
+
+    def check_record(self, t: FloatArray) -> None:
+        """Raise :class:`UsageError` if an effect cannot act on a record sampled at ``t`` (s)."""
+        for e in self.effects:
+            why = e.record_problem(t)
+            if why is not None:
+                raise UsageError(f"effect {e.name}: {why}")
+
+    def influence(self, params: Mapping[str, float], t: FloatArray,
+                  road: Mapping[str, FloatArray] | None = None, x0: FloatArray | None = None,
+                  combined: Mapping[str, FloatArray] | None = None) -> list[float]:
+        """How much each effect alone changes what the sensors report (1, relative).
+
+        Parameters
+        ----------
+        params, t, road, x0
+            As for :meth:`simulate`.
+        combined : dict, optional
+            :meth:`simulate`'s output with every effect, reused when there is one effect.
+
+        Returns
+        -------
+        list of float
+            Per effect, in order: the largest over the model's channels of the RMS change
+            the effect makes divided by the channel's RMS without it (0: the record never
+            engages it, e.g. a bump stop beyond the largest deflection).
+        """
+        t = np.asarray(t, dtype=float)
+        base = simulate(self.base, dict(params), t, road, x0)
+        out: list[float] = []
+        for e in self.effects:
+            alone = (combined if combined is not None and len(self.effects) == 1
+                     else inject(self.base, [e]).simulate(params, t, road, x0))
+            worst = 0.0
+            for c in self.base.channels:
+                if c not in base or c not in alone:
+                    continue
+                ref = np.asarray(base[c], dtype=float)
+                diff = np.asarray(alone[c], dtype=float) - ref
+                ok = np.isfinite(diff)
+                if not ok.any():
+                    continue
+                scale = float(np.sqrt(np.mean(ref[ok] ** 2)))
+                change = float(np.sqrt(np.mean(diff[ok] ** 2)))
+                if scale > 0.0:
+                    worst = max(worst, change / scale)
+                elif change > 0.0:
+                    worst = math.inf
+            out.append(worst)
+        return out
 
 
 def inject(model: SuspensionModel,

@@ -15,6 +15,11 @@ from suspid.io.csvio import read_measurement, write_measurement
 from suspid.plots import plot_channels
 from suspid.simulate import simulate, uniform_step
 
+#: an injected effect that changes no channel by more than this fraction of its RMS is
+#: reported as never engaged by the record (a bump stop beyond the largest deflection, a
+#: value in the wrong unit)
+INACTIVE_EFFECT = 1e-6
+
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser("simulate", help="simulate a model and write a measurement CSV",
@@ -67,6 +72,7 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError(f"--param {k}={v}: expected a value > 0")
     params.update(given)
     x0 = parse_state(args.x0, model.n_states, "--x0") if args.x0 else None
+    warnings: list[str] = []
     if not 0 <= args.noise < float("inf"):
         raise UsageError(f"--noise: expected a finite fraction >= 0, got {args.noise}")
     if args.road:
@@ -76,7 +82,8 @@ def run(args: argparse.Namespace) -> int:
             # jitter is resampled onto it (a gap stays the error below)
             given_road, note = to_uniform_grid(given_road)
             if note is not None:
-                sys.stderr.write(f"warning: {note}; the simulation and --out are on that grid\n")
+                warnings.append(f"{note}; the simulation and --out are on that grid")
+                sys.stderr.write(f"warning: {warnings[-1]}\n")
         t = given_road.t
         road = measured_road(model, t, given_road.road, params, args.speed, source=args.road)
         x0 = np.zeros(model.n_states) if x0 is None else x0
@@ -96,7 +103,18 @@ def run(args: argparse.Namespace) -> int:
         # suspid.effects brings scipy.interpolate/optimize (~0.6 s to import); only runs with
         # --effect need it
         from suspid.effects import inject  # noqa: PLC0415
-        out = inject(model, args.effect).simulate(params, t, road, x0)
+        injection = inject(model, args.effect)
+        injection.check_record(t)
+        out = injection.simulate(params, t, road, x0)
+        changes = injection.influence(params, t, road, x0, combined=out)
+        for i, (spec, change) in enumerate(zip(args.effect, changes)):
+            if change < INACTIVE_EFFECT:
+                note = (f"--effect {spec} changes no channel on this record by more than "
+                        f"{INACTIVE_EFFECT:g} of its RMS (largest change {change:.2g}): the record "
+                        "never engages it" + ("; check the values and their units (SI)"
+                                              if injection.effects[i].numeric_names else ""))
+                warnings.append(note)
+                sys.stderr.write(f"warning: {note}\n")
     else:
         out = simulate(model, params, t, road, x0)
     if args.channels:
@@ -124,5 +142,5 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print_json({"model": model.name, "scenario": scenario, "params": params,
                     "x0": [float(v) for v in x0], "samples": int(t.size), "out": args.out,
-                    "channels": list(cols), "effects": list(args.effect)})
+                    "channels": list(cols), "effects": list(args.effect), "warnings": warnings})
     return 0

@@ -158,3 +158,30 @@ def test_the_fitting_commands_share_the_identifier_s_options(tmp_path: Path, cap
         assert main(argv) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert err == [f"error: {opt}: expected >= 0, got {argv[-1]}"], err
+
+
+def test_effect_the_record_never_engages_is_warned(tmp_path: Path, capsys) -> None:
+    """A bump stop 30 m away (a value in mm given as m) changes nothing: the output says so."""
+    csv = tmp_path / "far.csv"
+    rc = main(["simulate", "--model", "quarter2", "--scenario", "bump", "--duration", "1", "--fs", "200",
+               "--effect", "bump_stop:gap=30,k_stop=1e5", "--out", str(csv), "--json"])
+    assert rc == 0
+    cap = capsys.readouterr()
+    out = json.loads(cap.out)
+    assert len(out["warnings"]) == 1 and "bump_stop:gap=30,k_stop=1e5" in out["warnings"][0]
+    assert "never engages" in cap.err and "unit" in cap.err
+    # the same stop within the record's deflection is not warned about
+    rc = main(["simulate", "--model", "quarter2", "--scenario", "bump", "--duration", "1", "--fs", "200",
+               "--effect", "bump_stop:gap=0.02,k_stop=1e5", "--out", str(csv), "--json"])
+    assert rc == 0
+    cap = capsys.readouterr()
+    assert json.loads(cap.out)["warnings"] == [] and "warning" not in cap.err
+
+
+def test_sensor_delay_longer_than_the_record_is_an_error(tmp_path: Path, capsys) -> None:
+    rc = main(["simulate", "--model", "quarter2", "--scenario", "bump", "--duration", "2", "--fs", "200",
+               "--effect", "sensor_delay:channels=x1,delay_s=8", "--out", str(tmp_path / "d.csv")])
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: effect sensor_delay: delay_s 8 s") and "(2 s)" in err
+    assert err.count("\n") == 1 and not (tmp_path / "d.csv").exists()

@@ -5,7 +5,9 @@ import numpy as np
 import pytest
 
 from suspid.errors import UsageError
+from suspid.excitation import make_scenario
 from suspid.models import get_model
+from suspid.simulate import simulate
 from suspid.effects import (EFFECT_NAMES, REGISTRY, PhysicalEffect, effects_for, inject,
                                    make_effect, parse_effect, strut_sites, tyre_sites)
 
@@ -131,3 +133,17 @@ def test_other_models(model: str) -> None:
         u = np.zeros(2 * len(m.roads))
         dx = inj.model.rhs(0.0, x, u, p)
         assert np.all(np.isfinite(dx))
+
+
+def test_influence_is_zero_only_for_an_effect_the_record_never_engages() -> None:
+    """``Injection.influence``: per effect, the largest relative RMS change of a channel."""
+    model = get_model("quarter2")
+    p = model.defaults()
+    t, road, x0 = make_scenario(model, "bump", duration=1.0, fs=200.0, params=p)
+    inj = inject(model, ["bump_stop:gap=30,k_stop=1e5", "coulomb_friction:F=100",
+                         "sensor_offset:channel=x1,offset=0.003"])
+    far, friction, offset = inj.influence(p, t, road, x0)
+    assert far < 1e-9
+    assert friction > 1e-3
+    base = simulate(model, p, t, road, x0)
+    assert offset == pytest.approx(0.003 / float(np.sqrt(np.mean(base["x1"] ** 2))), rel=1e-9)
