@@ -71,6 +71,7 @@ class Plant:
         self._prev: tuple[FloatArray, dict[str, FloatArray]] | None = None
         if effects:
             inj = inject(model, effects)  # validates names, parameters and channels
+            inj.check_record(np.asarray(t, dtype=float))  # e.g. a delay longer than the run
             if inj.physical:
                 self._physical = inject(model, inj.physical)
             if inj.sensor:

@@ -57,3 +57,11 @@ def test_node_rejects_unknown_effect(capsys: pytest.CaptureFixture) -> None:
     assert rc == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error:") and "warp_drive" in err[0]
+
+
+def test_node_rejects_a_sensor_delay_longer_than_the_run(capsys: pytest.CaptureFixture) -> None:
+    rc = main(["node", "--scenario", "bump", "--interface", "virtual", "--channel", "x",
+               "--speed", "0", "--duration", "1", "--effect", "sensor_delay:channels=x1,delay_s=10"])
+    assert rc == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: effect sensor_delay: delay_s 10 s"), err
