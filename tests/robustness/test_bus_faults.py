@@ -114,7 +114,7 @@ def test_node_restart_mid_drive_continues_the_data_time() -> None:
     a, node = _node_frames(duration=1.5)
     b, _ = _node_frames(duration=1.0, seed=1, t_shift=1.8)
     for lst in _fed_both_ways(a + b, node.db):
-        assert lst.engine.clock.restarts == 1
+        assert lst.engine.clock.restarts == 1 and lst.frame_stats()["node_restarts"] == 1
         t, _ = lst.buffer.series("x1")
         assert np.all(np.diff(t) > 0)
         assert t[-1] == pytest.approx(2.8, abs=0.01)   # 1.5 s + pause 0.3 s + 1.0 s
@@ -129,7 +129,7 @@ def test_sensor_tick_wrap_keeps_the_data_time_exact() -> None:
     a, node = _node_frames(duration=2.0)
     frames = _tick_offset(a, (1 << 32) - 500)
     for lst in _fed_both_ways(frames, node.db):
-        assert lst.engine.clock.wraps == 1
+        assert lst.engine.clock.wraps == 1 and lst.frame_stats()["tick_wraps"] == 1
         t, _ = lst.buffer.series("x1")
         t = t - ((1 << 32) - 500) * 0.002
         assert np.all(np.diff(t) > 0)
