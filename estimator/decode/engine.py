@@ -47,11 +47,13 @@ from estimator.decode.buffer import RollingBuffer
 from estimator.decode.routes import DATA, EXT, STATUS, SYNC, Route, Routes
 from estimator.decode.rules.counters import CounterRules, period_after, steady_frames
 from estimator.decode.rules.e2e import Payload, alive_counter, alive_counters, crc_ok_rows
-from estimator.decode.rules.timebase import (SyncTrack, TimeOrder, fresh_ticks, stale_tick,
+from estimator.decode.rules.timebase import (SyncTrack, TickClock, TimeOrder, fresh_ticks,
+                                             stale_tick,
                                              sync_time, sync_times, tick_of_counter, tick_time,
                                              tick_times, ticks_of_counters, time_breaks)
 from estimator.decode.stats import FrameCounts
 from suspid.can.codec import decode_alert
+from suspid.can.crc import COUNTER_MODULUS
 from suspid.can.logs import FrameArrays
 
 _INF = math.inf
@@ -119,6 +121,8 @@ class DecodeEngine:
         self.order = TimeOrder()
         self.tick_time = tick_time
         self.sync_tick: int | None = None
+        self.sync_shift = 0
+        self.clock = TickClock()
         self.sync_n = 0
         self.period: float | None = None
         self.node_status: dict[str, object] = {}
@@ -162,6 +166,7 @@ class DecodeEngine:
             rejected["dlc"] += 1
             return
         c = -1
+        ext = ext_shift = 0
         if route.check is not None:
             if not route.check(data):
                 rejected["crc"] += 1
@@ -174,13 +179,16 @@ class DecodeEngine:
                 # period estimate tiny and counted thousands of frames 'lost'
                 if route.kind == SYNC:
                     tick, period_us = route.decode(data)
+                    ext = self.clock.extend(int(tick), period_us, arrival)
+                    ext_shift = (ext - int(tick)) % COUNTER_MODULUS
                     if period_us > 0:
-                        ts = sync_time(tick, period_us)
+                        ts = sync_time(ext, period_us)
                 elif route.kind == DATA and self.sync_tick is not None and self.period:
                     if stale_tick(route, self.sync_n, self.period, arrival):
                         rejected["no_sync"] += 1
                         return
-                    ts = tick_time(tick_of_counter(self.sync_tick, c), self.period)
+                    ts = tick_time(tick_of_counter(
+                        self.sync_tick, (c + self.sync_shift) % COUNTER_MODULUS), self.period)
                 elif route.kind != DATA and self.sync_tick is not None and self.period:
                     # SN_Status (SUSPID_Alert): its own counter and rate, sent in the tick
                     # of the last SN_Sync -- timed by it, a host's late delivery of a
@@ -201,6 +209,9 @@ class DecodeEngine:
             route.source.push(ts, route.row(data))
         elif not self._special(route, data, ts):
             return
+        elif route.kind == SYNC and self.tick_time and route.check is not None:
+            self.sync_tick = ext   # the unbroken tick (TickClock)
+            self.sync_shift = ext_shift
         route.accepted += 1
         self.counts.accepted += 1
 
@@ -390,8 +401,8 @@ class DecodeEngine:
         cnt_r = np.bincount(r_h, minlength=nroutes)
         ends = np.cumsum(cnt_r).tolist()
         runs = [(k, ends[k] - c, ends[k]) for k, c in enumerate(cnt_r.tolist()) if c]
-        syncs = SyncTrack(self.sync_tick, self.sync_n, self.period) if self.tick_time \
-            else None
+        syncs = SyncTrack(self.sync_tick, self.sync_n, self.period, self.sync_shift) \
+            if self.tick_time else None
         tsd = arr
         if syncs is not None and route_list[runs[0][0]].kind == SYNC:
             # tick mode: SN_Sync first (its data time is its own Tick x PeriodUs)
@@ -402,6 +413,12 @@ class DecodeEngine:
             tk, pus = vals
             t_s = arr[a:b]
             if route.check is not None:
+                # the unbroken tick across wraps and node restarts (TickClock)
+                raw = np.asarray(tk, dtype=np.int64)
+                tk = self.clock.extend_many(raw, pus, t_s)
+                pus = np.asarray(pus)
+                vals = (tk, pus)
+                syncs.pending_shifts = (tk - raw) % COUNTER_MODULUS
                 if isinstance(tk, np.ndarray):
                     t_s = sync_times(tk, pus, t_s)
                 else:
@@ -420,7 +437,7 @@ class DecodeEngine:
             # residue mod 15, times the period; of the E2E SN_Status and SUSPID_Alert frames:
             # the last SN_Sync's tick times the period
             a0 = runs[0][1]
-            sn, st, known, per = syncs.at(h[a0:])
+            sn, st, known, per, shift = syncs.at(h[a0:])
             syncs.sn, syncs.known, syncs.per, syncs.lo = sn, known, per, a0
             has = known & ~np.isnan(per)
             conv = has & self.routes.data_e2e[r_h[a0:]]
@@ -428,7 +445,8 @@ class DecodeEngine:
             tsd = arr
             if conv.any() or at_sync.any():
                 # SN_Status and SUSPID_Alert: the last SN_Sync's tick
-                tk = np.where(conv, ticks_of_counters(st, alive_counters(rows[a0:])), st)
+                tk = np.where(conv, ticks_of_counters(
+                    st, (alive_counters(rows[a0:]) + shift) % COUNTER_MODULUS), st)
                 tsd = arr.copy()
                 tsd[a0:] = np.where(conv | at_sync, tick_times(tk, per), arr[a0:])
         e2e_runs = [x for x in runs if route_list[x[0]].check is not None]
@@ -616,8 +634,11 @@ class DecodeEngine:
                 else:
                     tk_acc = np.array([int(tk[i]) for i in at.tolist()], dtype=np.int64)
                     pus_acc = np.array([pus[i] for i in at.tolist()], dtype=np.float64)
-                syncs.add(q[at], tk_acc, pus_acc)
+                shifts = None if syncs.pending_shifts is None else syncs.pending_shifts[at]
+                syncs.pending_shifts = None
+                syncs.add(q[at], tk_acc, pus_acc, shifts)
                 self.sync_tick = int(tk_acc[-1])
+                self.sync_shift = 0 if shifts is None else int(shifts[-1])
                 pos = np.flatnonzero(pus_acc > 0)
                 if pos.size:
                     self.period = pus_acc[pos[-1]].item() * 1e-6

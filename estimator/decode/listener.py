@@ -592,11 +592,17 @@ class DecodeListener(can.Listener):
         """``{"accepted": N, "rejected": {reason: n}, "ignored": n, "lost": n,
         "time_base": "tick" | "timestamp"}`` (JSON-ready); ``arrival_slots`` (message ->
         ``period``, ``missing``, ``retimed``) when a log was placed in sample slots,
-        ``receive`` when live."""
+        ``receive`` when live; ``node_restarts`` and ``tick_wraps`` when the sensor clock
+        restarted or wrapped (:class:`~estimator.decode.rules.timebase.TickClock`)."""
         c = self.counts
         out: dict[str, object] = {"accepted": c.accepted, "rejected": dict(c.rejected),
                                   "ignored": c.ignored, "lost": c.lost,
                                   "time_base": "tick" if self.engine.tick_time else "timestamp"}
+        clock = self.engine.clock
+        if clock.restarts:
+            out["node_restarts"] = clock.restarts
+        if clock.wraps:
+            out["tick_wraps"] = clock.wraps
         self._live_stats()
         if self.arrival_stats:
             out["arrival_slots"] = {k: dict(v) for k, v in self.arrival_stats.items()}

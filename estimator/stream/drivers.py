@@ -83,6 +83,13 @@ class CanWindowDriver:
         validates large batches; a window is aligned from the samples inside it and the
         listener's buffer holds a window plus two steps, so a window cut a little after its
         end is the same window.
+    max_missing : float
+        A window whose samples start or end inside a gap in the stream (the aligned grid runs
+        from the first to the last sample it holds) and so cover less than ``1 - max_missing``
+        of ``window_s`` is padded with missing samples (NaN) to its whole span: the
+        estimator skips it as a gap in the data, at the window's own end time. (Unpadded,
+        both windows that straddle the start of a long gap were fitted on their part before
+        it and reported at the same time, the last sample's.)
     """
 
     listener: Any
@@ -101,6 +108,7 @@ class CanWindowDriver:
     _left: int = 1
     on_first_dt: Callable[[float], None] | None = None
     start_wait_s: float | None = None
+    max_missing: float = 0.2
     _t_seen: float = math.nan
 
     def _sources_started(self, latest: float) -> bool:
@@ -187,7 +195,9 @@ class CanWindowDriver:
                 al.values = {c: al.values[c] for c in live}
         if al.t.size < 3:
             return
-        self.on_window(al.t, al.values)
+        t, values = _pad_to_window(al.t, al.values, float(al.dt), t_end - self.window_s, t_end,
+                                   self.max_missing)
+        self.on_window(t, values)
         self.windows += 1
 
     def flush(self) -> None:
@@ -201,6 +211,23 @@ class CanWindowDriver:
             while latest >= self.next_end - 1e-9:
                 self._cut(self.next_end)
                 self.next_end += self.step_s
+
+
+def _pad_to_window(t: np.ndarray, values: dict[str, np.ndarray], dt: float, t_start: float,
+                   t_end: float, max_missing: float) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """A window's grid ``t`` (s, step ``dt``) and ``values``, extended with NaN samples on
+    the grid to ``[t_start, t_end]`` when they cover less than ``1 - max_missing`` of it
+    (the window reaches into a gap at its start or end); unchanged otherwise."""
+    span = t_end - t_start
+    if not (dt > 0 and span > 0) or t[-1] - t[0] + dt >= (1.0 - max_missing) * span:
+        return t, values
+    before = max(0, int(math.floor((t[0] - t_start) / dt + 1e-6)))
+    after = max(0, int(math.floor((t_end - t[-1]) / dt + 1e-6)))
+    t_new = np.concatenate([t[0] - dt * np.arange(before, 0, -1), t,
+                            t[-1] + dt * np.arange(1, after + 1)])
+    pad = {c: np.concatenate([np.full(before, np.nan), v, np.full(after, np.nan)])
+           for c, v in values.items()}
+    return t_new, pad
 
 
 def replay(driver: CanWindowDriver, messages: Iterable[Any]) -> int:

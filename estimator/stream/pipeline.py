@@ -275,12 +275,18 @@ def make_estimator(spec: MonitorSpec, channels: list[str], fs: float) -> Any:
     if spec.baseline == "nm" and not spec.decimate_given:
         spec.config.decimate = default_decimation(spec.model, spec.params.valuesdict(), fs)
     if spec.baseline != "output_only":
-        roads = [r for r in spec.model.roads if r in channels]
-        if len(roads) < len(spec.model.roads):
-            raise InputError(f"the stream carries no road input {', '.join(spec.model.roads)} "
+        absent = [r for r in spec.model.roads if r not in channels]
+        if len(absent) == len(spec.model.roads):
+            raise InputError(f"the stream carries no road input {', '.join(absent)} "
                              f"(channels: {', '.join(channels) or 'none'}); input-output "
                              "identification needs it -- use --output-only for a body "
                              "accelerometer alone")
+        if absent:
+            # one wheel's road message never came (a sensor or its message missing)
+            raise InputError(f"the stream carries no road input {', '.join(absent)} of model "
+                             f"{spec.model.name}'s {', '.join(spec.model.roads)} (channels: "
+                             f"{', '.join(channels)}); input-output identification needs "
+                             "every wheel's road")
     mod, _, fn = ESTIMATORS[spec.baseline].partition(":")
     factory: Callable[[MonitorSpec, list[str], float], Any] = getattr(
         importlib.import_module(mod), fn)
@@ -502,7 +508,8 @@ def _run_log(source: Source, spec: MonitorSpec, mon: StreamMonitor, sinks: list[
     listener = _listener(source, spec, source.time_source or "auto")
     _alert_bus(source, sinks, listener, buses)
     _attach(mon, sinks)
-    drv = CanWindowDriver(listener, cfg.window_s, cfg.step_s, mon.window)
+    drv = CanWindowDriver(listener, cfg.window_s, cfg.step_s, mon.window,
+                          max_missing=cfg.max_missing)
     stats = ReadStats()
     replay_log(drv, source.input, stats)
     listener.count_malformed(stats.malformed)
@@ -549,7 +556,8 @@ def _run_live(source: Source, spec: MonitorSpec, mon: StreamMonitor, sinks: list
     listener = _listener(source, spec, source.time_source or "auto")
     _alert_bus(source, sinks, listener, buses, live_bus=bus)
     _attach(mon, sinks)
-    drv = CanWindowDriver(listener, cfg.window_s, cfg.step_s, mon.window)
+    drv = CanWindowDriver(listener, cfg.window_s, cfg.step_s, mon.window,
+                          max_missing=cfg.max_missing)
     stop = LiveStop(duration=source.duration,
                     idle_timeout=None if not source.idle_timeout else source.idle_timeout)
     stop.install()

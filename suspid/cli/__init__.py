@@ -106,6 +106,16 @@ def _subcommand(argv: Sequence[str]) -> str | None:
     return None
 
 
+def _drop_stdout() -> None:
+    """Point file descriptor 1 at ``/dev/null`` (after its reader closed the pipe)."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError):   # no real stdout (captured, closed): nothing to flush
+        pass
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``suspid`` console script."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -122,18 +132,21 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise
         sys.stderr.write(f"error: {_one_line(str(exc))}\n")
         return 2
+    except BrokenPipeError:
+        # the reader of stdout went away (``suspid monitor --jsonl | head -1``): stop quietly;
+        # stdout goes to /dev/null so the interpreter's final flush cannot fail again
+        _drop_stdout()
+        return 0
     except OSError as exc:
         # last resort for a file a subcommand opened without its own check (an output
         # path in a missing directory, a directory given as a file, no permission, ...)
-        if debug or isinstance(exc, BrokenPipeError):
+        if debug:
             raise
         where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
         sys.stderr.write(f"error: {where}{_one_line(exc.strerror or str(exc))}\n")
         return 2
     except KeyboardInterrupt:
         return 130
-    except BrokenPipeError:
-        return 0
 
 
 if __name__ == "__main__":  # pragma: no cover

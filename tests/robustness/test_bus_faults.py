@@ -22,8 +22,9 @@ from estimator.stream.drivers import (RECEIVE_RATE, CanWindowDriver, LiveStop, L
 from firmware_sim.faults import FaultConfig
 from firmware_sim.node import NodeConfig, SensorNode
 from suspid.can.bus import error_frame_classes, open_bus
+from suspid.can.crc import e2e_protect
 from suspid.can.dbc import load_dbc
-from suspid.can.logs import ReadStats, read_log
+from suspid.can.logs import FrameArrays, ReadStats, read_log
 from tools.fault_table import run_condition
 
 CH = ["x1", "x2", "r"]
@@ -78,6 +79,63 @@ def test_node_restart_counter_reset_resynchronises() -> None:
     al = lst.aligned()
     gap = [g for g in al.gaps if g.channel == "x1"]
     assert gap and max(g.t_end - g.t_start for g in gap) >= 0.4  # the reboot pause is a gap
+
+
+def _tick_offset(frames: list[can.Message], offset: int) -> list[can.Message]:
+    """The node's frames as a node whose Tick started at ``offset`` would send them (mod 2^32):
+    SN_Sync's Tick and every E2E counter (Tick mod 15) rewritten, CRC recomputed."""
+    out, tick = [], None
+    for m in frames:
+        d = bytearray(m.data)
+        if m.arbitration_id == 0x100:
+            tick = (int.from_bytes(d[2:6], "little") + offset) % (1 << 32)
+            d[2:6] = tick.to_bytes(4, "little")
+        if m.arbitration_id in (0x100, 0x110, 0x111, 0x112) and tick is not None:
+            e2e_protect(d, m.arbitration_id, tick % 15)
+        out.append(can.Message(timestamp=m.timestamp, arbitration_id=m.arbitration_id,
+                               is_extended_id=False, data=d))
+    return out
+
+
+def _fed_both_ways(frames: list[can.Message], db: object) -> list[DecodeListener]:
+    """The frames through one listener frame by frame and another as one array batch."""
+    one = DecodeListener("quarter2", db, time_source="tick")
+    feed(one, frames)
+    batch = DecodeListener("quarter2", db, time_source="tick")
+    batch.feed_arrays(FrameArrays.from_messages(frames))
+    batch.finish()
+    return [one, batch]
+
+
+def test_node_restart_mid_drive_continues_the_data_time() -> None:
+    """A node restart after 1.5 s of driving (Tick back to 0 after a 0.3 s pause): the samples
+    after it follow the ones before after a gap of the pause (were: placed at 0..1 s again,
+    in the past of the stream, so no window after the restart was ever cut)."""
+    a, node = _node_frames(duration=1.5)
+    b, _ = _node_frames(duration=1.0, seed=1, t_shift=1.8)
+    for lst in _fed_both_ways(a + b, node.db):
+        assert lst.engine.clock.restarts == 1 and lst.frame_stats()["node_restarts"] == 1
+        t, _ = lst.buffer.series("x1")
+        assert np.all(np.diff(t) > 0)
+        assert t[-1] == pytest.approx(2.8, abs=0.01)   # 1.5 s + pause 0.3 s + 1.0 s
+        gap = max(g.t_end - g.t_start for g in lst.aligned().gaps if g.channel == "x1")
+        assert gap == pytest.approx(0.3, abs=0.01)
+
+
+def test_sensor_tick_wrap_keeps_the_data_time_exact() -> None:
+    """SN_Sync's 32-bit Tick wraps 1 s into the log (99 days at 500 Hz): data time goes on
+    at the period (was: back by 8.6e6 s, every later sample in the past of the stream);
+    the sample at the wrap repeats the counter and is lost."""
+    a, node = _node_frames(duration=2.0)
+    frames = _tick_offset(a, (1 << 32) - 500)
+    for lst in _fed_both_ways(frames, node.db):
+        assert lst.engine.clock.wraps == 1 and lst.frame_stats()["tick_wraps"] == 1
+        t, _ = lst.buffer.series("x1")
+        t = t - ((1 << 32) - 500) * 0.002
+        assert np.all(np.diff(t) > 0)
+        assert t[0] == pytest.approx(0.0, abs=1e-6) and t[-1] == pytest.approx(2.0, abs=1e-6)
+        assert t.size >= 1000   # one sample at most lost at the wrap
+        assert sum(lst.frame_stats()["rejected"].values()) <= 4
 
 
 def test_clock_jump_back_reanchors_and_forward_jump_is_a_gap() -> None:

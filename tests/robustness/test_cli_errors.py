@@ -355,3 +355,28 @@ def test_overflowing_values_raise_no_runtime_warning(work: Path, capsys: pytest.
         rc, err = _run([command, "--model", "quarter2", "--input", "huge.csv", "--json"], capsys)
     assert _one_error(rc, err).startswith("error: huge.csv: column 'x1': values up to 2e+300 overflow")
     assert [str(w.message) for w in seen if issubclass(w.category, RuntimeWarning)] == []
+
+
+@pytest.mark.parametrize("fmt", [["--jsonl"], []])
+def test_monitor_into_a_closed_pipe_stops_quietly(tmp_path: Path, fmt: list[str]) -> None:
+    """``suspid monitor --jsonl | head -1``: the reader closes the pipe, the next line fails
+    with EPIPE; the monitor stops with exit 0 and nothing on stderr (was: a BrokenPipeError
+    traceback and exit 1 -- main's OSError clause re-raised it past its own
+    BrokenPipeError clause)."""
+    m = get_model("quarter2")
+    t, road, x0 = make_scenario(m, "iso8608", duration=8.0, fs=250.0)
+    out = simulate(m, m.defaults(), t, road, x0)
+    write_measurement(tmp_path / "q2.csv", t,
+                      {k: out[k] for k in ("r", "r_dot", "x1", "x2")})
+    exe = shutil.which("suspid")
+    cmd = [exe] if exe else [sys.executable, "-c", "import sys; from suspid.cli import main; "
+                                                   "sys.exit(main())"]
+    p = subprocess.Popen([*cmd, "monitor", "--model", "quarter2", "--input", "q2.csv",
+                          "--fix", "m1=300", "--no-inspection", *fmt], cwd=tmp_path,
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert p.stdout is not None and p.stderr is not None
+    first = p.stdout.readline()   # head -1
+    p.stdout.close()
+    err = p.stderr.read()
+    assert p.wait(timeout=120) == 0, err
+    assert first.strip() and err == ""

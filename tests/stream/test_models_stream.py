@@ -13,8 +13,10 @@ import pytest
 from estimator.identify import Parameters
 from estimator.stream.config import default_config
 from estimator.stream.drivers import run_arrays
+from estimator.stream.pipeline import make_estimator, monitor_spec
 from estimator.stream.wear_streams import damper_wear, write_log
 from estimator.stream.window import SlidingWindowIdentifier
+from suspid.errors import InputError
 from suspid.models import get_model
 
 #: free parameters of the monitor per model (masses, inertias, geometry and tyres known)
@@ -101,3 +103,14 @@ def test_monitor_cli_on_a_full7_log(tmp_path: Path) -> None:
         assert set(d["stderr"]) == set(FREE["full7"])
         for k in FREE["full7"]:
             assert d["params"][k] == pytest.approx(s.nominal[k], rel=0.03), k
+
+
+@pytest.mark.parametrize("baseline", ["nm", "ekf"])
+def test_one_missing_road_is_named(baseline: str) -> None:
+    """A full car whose rear-left road message never came: the error names that road, r3
+    (was: "the stream carries no road input r1, r2, r3, r4" while r1, r2 and r4 were in it)."""
+    m = get_model("full7")
+    spec = monitor_spec(m, fix={"m": 1400.0}, baseline=baseline)
+    chans = ["x", "delta", "phi", "x1", "x2", "x3", "x4", "r1", "r2", "r4"]
+    with pytest.raises(InputError, match=r"no road input r3 of model full7's r1, r2, r3, r4"):
+        make_estimator(spec, chans, 500.0)

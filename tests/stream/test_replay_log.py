@@ -103,3 +103,30 @@ def test_a_gap_longer_than_a_window_is_skipped_not_fatal(logs, tmp_path) -> None
     assert drv.empty_windows >= 1
     assert any(e < 6.0 for e in ends) and any(e > 14.0 for e in ends)
     assert not any(9.0 + 0.01 < e < 11.0 for e in ends)   # no window lies inside the hole
+
+
+def test_windows_reaching_into_a_gap_keep_their_own_span(logs, tmp_path) -> None:
+    """A 5 s dead link: the windows that straddle its start or end hold data on one side only.
+    One whose data cover less than 80 % of it (``max_missing`` 0.2) is handed over on its
+    whole 3 s span, the part in the gap missing (NaN), so the estimator skips it as a gap, at
+    its own end time: window ends strictly increase (were: both windows that straddle the
+    start of the gap were cut down to their data and reported at the same time, the last
+    sample's, the second fitted on half a window with 0 % missing)."""
+    holed = tmp_path / "long_hole.log"
+    _with_hole(logs["clean"], holed, 6.0, 11.0)
+    got: list[tuple[np.ndarray, dict[str, np.ndarray]]] = []
+    lst = DecodeListener("quarter2", capacity=1 << 12)
+    drv = CanWindowDriver(lst, 3.0, 1.5, lambda t, d: got.append((t.copy(), d)))
+    replay_log(drv, holed)
+    ends = np.array([float(t[-1]) for t, _ in got])
+    assert np.all(np.diff(ends) > 1.0)
+    straddling = {round(float(t[-1]), 1): (t, d) for t, d in got
+                  if t[0] < 6.0 < t[-1] or t[0] - 0.01 < 11.0 < t[-1]}
+    assert sorted(straddling) == [7.5, 12.0, 13.5]
+    for end, miss in [(7.5, 0.5), (12.0, 2 / 3)]:   # padded to the whole window
+        t, d = straddling[end]
+        assert t[-1] - t[0] == pytest.approx(3.0, abs=0.01)
+        assert np.allclose(np.diff(t), np.diff(t).mean(), rtol=1e-6)   # one uniform grid
+        assert float(np.isnan(d["x1"]).mean()) == pytest.approx(miss, abs=0.01)
+    t, d = straddling[13.5]   # 2.5 s of data (17 % missing): fitted on them, as before
+    assert t[-1] - t[0] == pytest.approx(2.5, abs=0.01) and not np.isnan(d["x1"]).any()

@@ -172,15 +172,22 @@ class SyncTrack:
         SN_Sync frames accepted before the segment.
     period0 : float or None
         Period (s) before the segment.
+    shift0 : int
+        Counter shift (:attr:`TickClock.shift`) of that SN_Sync.
     """
 
-    def __init__(self, tick0: int | None, n0: int, period0: float | None) -> None:
+    def __init__(self, tick0: int | None, n0: int, period0: float | None,
+                 shift0: int = 0) -> None:
         self.tick0 = tick0
         self.n0 = n0
         self.period0 = period0
+        self.shift0 = shift0
         self.pos = np.empty(0, dtype=np.int64)
         self.ticks = np.empty(0, dtype=np.int64)
         self.periods = np.empty(0)
+        self.shifts = np.empty(0, dtype=np.int64)
+        #: counter shifts (:attr:`TickClock.shift`) of the SN_Sync run being accepted
+        self.pending_shifts: np.ndarray | None = None
         # filled by the segment for the frames of the other messages (from index lo of the
         # sorted segment arrays on): SN_Sync count, tick known, period (NaN unknown)
         self.lo = 0
@@ -188,8 +195,12 @@ class SyncTrack:
         self.known = np.empty(0, dtype=bool)
         self.per = np.empty(0)
 
-    def add(self, pos: np.ndarray, ticks: np.ndarray, period_us: np.ndarray) -> None:
-        """The accepted SN_Sync frames of the segment: positions, ticks, periods (µs)."""
+    def add(self, pos: np.ndarray, ticks: np.ndarray, period_us: np.ndarray,
+            shifts: np.ndarray | None = None) -> None:
+        """The accepted SN_Sync frames of the segment: positions, (unbroken) ticks, periods
+        (µs) and counter shifts (default none)."""
+        self.shifts = np.zeros(len(pos), dtype=np.int64) if shifts is None else \
+            np.asarray(shifts, dtype=np.int64)
         given = period_us > 0
         last = np.maximum.accumulate(np.where(given, np.arange(given.size), -1))
         per = (period_us * 1e-6) if period_us.dtype.kind == "f" else \
@@ -199,8 +210,10 @@ class SyncTrack:
         self.periods = np.where(last >= 0, per[np.maximum(last, 0)],
                                 math.nan if self.period0 is None else self.period0)
 
-    def at(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """At segment positions ``q``: SN_Sync count, tick, tick known, period (NaN unknown)."""
+    def at(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                         np.ndarray]:
+        """At segment positions ``q``: SN_Sync count, tick, tick known, period (NaN unknown),
+        counter shift."""
         k = np.searchsorted(self.pos, q)
         sn = self.n0 + k
         has = k > 0
@@ -209,11 +222,104 @@ class SyncTrack:
             st = np.where(has, self.ticks[km1], 0 if self.tick0 is None else self.tick0)
             per = np.where(has, self.periods[km1],
                            math.nan if self.period0 is None else self.period0)
+            sh = np.where(has, self.shifts[km1], self.shift0)
         else:
             st = np.full(q.size, 0 if self.tick0 is None else self.tick0, dtype=np.int64)
             per = np.full(q.size, math.nan if self.period0 is None else self.period0)
+            sh = np.full(q.size, self.shift0, dtype=np.int64)
         known = has | (self.tick0 is not None)
-        return sn, st.astype(np.int64), known, per
+        return sn, st.astype(np.int64), known, per, sh.astype(np.int64)
+
+
+# ---- the sensor clock across wraps and node restarts ------------------------------------
+#: SN_Sync's Tick is a 32-bit counter: it wraps to 0 after 2^32 ticks
+TICK_MODULUS = 1 << 32
+#: a node restart is recognised when SN_Sync's Tick falls back by more than this much time
+#: and the new Tick is within this much time (plus the silence before it) of the node's start
+RESTART_S = 1.0
+
+
+class TickClock:
+    """The node's tick as one unbroken count: SN_Sync's raw ``Tick`` plus a ``base``.
+
+    The 32-bit ``Tick`` wraps after 2^32 samples (99 days at 500 Hz) and starts again at 0
+    when the node restarts (power cycle, watchdog reset) mid-drive. Raw, either would send
+    data time back and every later sample would land in the past of the stream (the
+    windows after it were never cut). A raw Tick below the last one is
+
+    * a **wrap** when counting on from the last Tick through 2^32 reaches it within the
+      silence between the two SN_Sync frames (arrival times) plus ``RESTART_S``: ``base``
+      grows by 2^32, data time goes on exactly;
+    * a **restart** when it falls back by more than ``RESTART_S`` of ticks and is itself
+      within that silence plus ``RESTART_S`` of 0: data time continues after the silence
+      (the arrival times' measure of it, at least one period), the pause a gap;
+    * else a late or replayed SN_Sync: placed with the current ``base``, the state kept.
+
+    A data frame's alive counter is its raw tick mod 15, so its tick is matched with the
+    counter shifted by ``base`` mod 15 (:attr:`shift`).
+
+    Attributes
+    ----------
+    base : int
+        Ticks added to the raw Tick.
+    last_raw : int or None
+        Raw Tick of the last SN_Sync that moved the clock.
+    last_arrival : float
+        Its arrival time (s).
+    wraps, restarts : int
+        Wraps and node restarts recognised.
+    """
+
+    __slots__ = ("base", "last_raw", "last_arrival", "wraps", "restarts")
+
+    def __init__(self) -> None:
+        self.base = 0
+        self.last_raw: int | None = None
+        self.last_arrival = 0.0
+        self.wraps = 0
+        self.restarts = 0
+
+    def extend(self, raw: int, period_us: float, arrival: float) -> int:
+        """The unbroken tick of an SN_Sync with raw ``Tick`` ``raw`` and ``PeriodUs``
+        ``period_us`` arriving at ``arrival`` (s)."""
+        last = self.last_raw
+        if last is not None and raw < last:
+            period = period_us * 1e-6
+            if not period > 0:
+                return raw + self.base
+            silence = max(arrival - self.last_arrival, 0.0) if math.isfinite(arrival) else 0.0
+            if ((raw - last) % TICK_MODULUS) * period <= silence + RESTART_S:
+                self.base += TICK_MODULUS
+                self.wraps += 1
+            elif (last - raw) * period > RESTART_S and raw * period <= silence + RESTART_S:
+                self.base = last + self.base + max(1, round(silence / period)) - raw
+                self.restarts += 1
+            else:
+                return raw + self.base
+        self.last_raw = raw
+        self.last_arrival = arrival
+        return raw + self.base
+
+    def extend_many(self, raw: Any, period_us: Any, arrival: np.ndarray) -> np.ndarray:
+        """:meth:`extend` of SN_Sync frames in order (int64 array; one pass of numpy when no
+        Tick falls back)."""
+        tk = np.asarray(raw, dtype=np.int64)
+        if not tk.size:
+            return tk
+        last = tk[0] if self.last_raw is None else self.last_raw
+        if tk[0] >= last and (tk.size < 2 or bool((tk[1:] >= tk[:-1]).all())):
+            self.last_raw = int(tk[-1])
+            self.last_arrival = float(arrival[-1])
+            return tk + self.base
+        pus = np.broadcast_to(np.asarray(period_us, dtype=np.float64), tk.shape)
+        return np.array([self.extend(int(t), float(u), float(a))
+                         for t, u, a in zip(tk.tolist(), pus.tolist(), arrival.tolist())],
+                        dtype=np.int64)
+
+    @property
+    def shift(self) -> int:
+        """``base`` mod 15: what the raw counters lag the unbroken tick's residue by."""
+        return self.base % COUNTER_MODULUS
 
 
 # ---- which clock ------------------------------------------------------------------------
