@@ -39,9 +39,11 @@ from __future__ import annotations
 import locale
 import logging
 import math
+import re
 from bisect import bisect_left
 from dataclasses import dataclass, field
 from datetime import datetime
+from decimal import Decimal
 from pathlib import Path
 from typing import Callable, Iterable, Iterator, Optional, Sequence, TextIO, cast
 
@@ -694,13 +696,55 @@ class _LineCounter:
         return getattr(self.fh, name)
 
 
-def _open_text(path: Path) -> _LineCounter:
-    """A text log opened as python-can would open it, its lines counted."""
+#: ASC header line declaring relative timestamps
+_ASC_RELATIVE = re.compile(r"\s*base\s+(?:hex|dec)\s+timestamps\s+relative\b", re.IGNORECASE)
+#: ASC trigger block start (the time origin of the events after it)
+_ASC_TRIGGER = re.compile(r"\s*begin\s+triggerblock\b", re.IGNORECASE)
+#: an ASC event line: its leading time (s), as python-can's reader recognises it
+_ASC_EVENT = re.compile(r"(\s*)(\d+\.\d+)(?=\s)")
+
+
+class _AscLines(_LineCounter):
+    """ASC lines counted, with relative event times made absolute (from the trigger block).
+
+    An ASC file whose header says ``base hex  timestamps relative`` (a CANalyzer/CANoe
+    logging option) stamps every event with the time since the previous event; python-can's
+    reader reads every time as absolute (it records the header's mode and ignores it), so
+    such a log came out as frames about one interval after the trigger block, nearly all
+    rejected as going back in time. Here every timestamped line -- frames and the events
+    python-can skips (``Start of measurement``, status, comments with a time) alike -- adds
+    its time to a running sum kept as an exact decimal, restarted at each ``Begin
+    Triggerblock``, and the line is handed on with the sum, so the reader sees the log as if
+    it had been written with ``timestamps absolute``.
+    """
+
+    def __init__(self, fh: TextIO) -> None:
+        super().__init__(fh)
+        self.relative = False
+        self.elapsed = Decimal(0)
+
+    def __next__(self) -> str:
+        line = next(self.fh)
+        self.lineno += 1
+        if self.relative:
+            m = _ASC_EVENT.match(line)
+            if m is not None:
+                self.elapsed += Decimal(m.group(2))
+                return f"{m.group(1)}{self.elapsed:f}{line[m.end():]}"
+            if _ASC_TRIGGER.match(line):
+                self.elapsed = Decimal(0)
+        elif "elative" in line and _ASC_RELATIVE.match(line):
+            self.relative = True
+        return line
+
+
+def _open_text(path: Path, lines: type[_LineCounter] = _LineCounter) -> _LineCounter:
+    """A text log opened as python-can would open it, its lines counted (by ``lines``)."""
     try:
         fh = path.open("r", encoding=locale.getpreferredencoding(False))
     except OSError as exc:
         raise InputError(f"{path}: cannot open CAN log: {exc.strerror}") from None
-    return _LineCounter(fh)
+    return lines(fh)
 
 
 def _skip_header(*_args: object, **_kwargs: object) -> None:
@@ -736,7 +780,7 @@ def _read_text_resumable(path: Path, reader: can.ASCReader | can.TRCReader,
 
 
 def _read_asc(path: Path, stats: ReadStats) -> Iterator[can.Message]:
-    counter = _open_text(path)
+    counter = _open_text(path, _AscLines)
     try:
         reader = can.ASCReader(cast(TextIO, counter), relative_timestamp=False)   # duck-typed
     except BaseException:
