@@ -144,3 +144,53 @@ def test_a_multiplexed_signal_in_a_map_is_named_not_read_from_every_page(q2_csv,
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and err[0].startswith("error: --map: x1=Chassis.Height")
     assert "Chassis has Road" in err[0]
+
+
+SAME_NAME_DBC = """VERSION ""
+
+NS_ :
+
+BS_:
+
+BU_: ECU
+
+BO_ 256 Body: 8 ECU
+ SG_ Height : 0|16@1- (1e-05,0) [-0.32768|0.32767] "m" ECU
+
+BO_ 2147483904 Body: 8 ECU
+ SG_ Height : 0|16@1- (1e-05,0) [-0.32768|0.32767] "m" ECU
+"""
+
+
+def test_standard_and_extended_messages_of_one_name_are_told_apart(tmp_path, capsys):
+    dbc = tmp_path / "same.dbc"
+    dbc.write_text(SAME_NAME_DBC)
+    db = cantools.database.load_file(str(dbc))
+    log = tmp_path / "same.log"
+    with can.Logger(str(log)) as w:
+        for i in range(400):
+            for ext, h in ((False, 0.01), (True, 0.02)):
+                w.on_message_received(can.Message(
+                    timestamp=0.002 * i, arbitration_id=0x100, is_extended_id=ext,
+                    data=db.messages[int(ext)].encode({"Height": h})))
+    # by frame ID: 0x100 is the standard frame, bit 31 (the DBC's notation) the extended
+    # one (was: both decoded the extended frames, 0.02, through a lookup by name)
+    for ref, want in (("0x100", 0.01), ("256", 0.01), ("0x80000100", 0.02),
+                      ("2147483904", 0.02)):
+        meas, stats = load_log_as_measurement(log, "quarter1", dbc, [f"x={ref}.Height"])
+        assert stats["accepted"] == 400 and stats["ignored"] == 400, ref
+        np.testing.assert_allclose(meas.measured["x"], want, atol=1e-12, err_msg=ref)
+    # both at once: two sources, each its own frames
+    meas, stats = load_log_as_measurement(
+        log, "quarter2", dbc, ["x1=0x100.Height", "x2=0x80000100.Height"])
+    assert stats["accepted"] == 800
+    np.testing.assert_allclose(meas.measured["x1"], 0.01, atol=1e-12)
+    np.testing.assert_allclose(meas.measured["x2"], 0.02, atol=1e-12)
+    # by the shared name: one error line naming both IDs (was: the extended one, silently)
+    capsys.readouterr()
+    rc = main(["identify", "--model", "quarter1", "--input", str(log), "--dbc", str(dbc),
+               "--map", "x=Body.Height", "--json"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1, err
+    assert "message name 'Body' is ambiguous" in err[0]
+    assert "0x100 (standard) and 0x80000100 (extended)" in err[0]
