@@ -928,6 +928,33 @@ class _ASCWriter(can.ASCWriter):
         return dt.strftime(f"%a %b %d %H:%M:%S.{dt.microsecond // 1000:03d} %Y")
 
 
+#: python-can's BLF writer stores a start time below this (1990-01-01, epoch s) as no date
+#: (``timestamp_to_systemtime``), which its reader then takes as 0
+BLF_DATED_FROM = 631152000.0
+
+
+class _BLFWriter(can.BLFWriter):
+    """BLFWriter whose times read back as written when they are not epoch times.
+
+    BLF stores each frame's time as unsigned nanoseconds after the file's start date.
+    python-can takes the first frame's time as the start and writes it as a date only from
+    1990 on; below that (a CSV's ``t`` from 0.5 s, say) it writes no date, which its reader
+    takes as 0, so every time read back was short by the first one (0.5 s). Such times are
+    stored here after a start of 0, so they read back as themselves; a negative time cannot
+    be stored at all (python-can wrote it as the start) and is an error.
+    """
+
+    def _add_object(self, obj_type: int, data: bytes, timestamp: Optional[float] = None) -> None:
+        if self.start_timestamp is None and timestamp is not None \
+                and timestamp < BLF_DATED_FROM:
+            self.start_timestamp = 0.0
+        if timestamp is not None and timestamp < 0.0:
+            raise InputError(f"{getattr(self.file, 'name', 'BLF log')}: a BLF log stores times "
+                             f"from 0 s on, got a frame at {timestamp!r} s (shift the times, "
+                             "e.g. with --t0)")
+        super()._add_object(obj_type, data, timestamp)
+
+
 def open_log_writer(path: str | Path) -> can.io.generic.MessageWriter:
     """A python-can writer for the log format of ``path`` (use as a context manager).
 
@@ -987,7 +1014,7 @@ class LogFormat:
 LOG_FORMATS: dict[str, LogFormat] = {
     ".log": LogFormat("candump -L", _read_candump, _candump_writer, _candump_batches),
     ".asc": LogFormat("Vector ASC", _read_asc, _ASCWriter),
-    ".blf": LogFormat("Vector BLF", _read_blf, can.BLFWriter),
+    ".blf": LogFormat("Vector BLF", _read_blf, _BLFWriter),
     ".trc": LogFormat("PEAK TRC", _read_trc, can.TRCWriter),
     ".mf4": LogFormat("ASAM MDF4", _read_mf4, can.MF4Writer),
 }

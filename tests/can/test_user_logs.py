@@ -194,3 +194,30 @@ def test_standard_and_extended_messages_of_one_name_are_told_apart(tmp_path, cap
     assert rc == 2 and len(err) == 1, err
     assert "message name 'Body' is ambiguous" in err[0]
     assert "0x100 (standard) and 0x80000100 (extended)" in err[0]
+
+
+@pytest.mark.parametrize("suffix", [".log", ".asc", ".blf", ".trc", ".mf4"])
+def test_encoded_times_not_from_zero_read_back_as_the_csv(tmp_path, suffix):
+    """A CSV whose t starts at 0.5 s (not an epoch time): every format gives its times back
+    (was: BLF 0.5 s short, python-can writing no start date below 1990 and its reader
+    taking that as 0)."""
+    csv = tmp_path / "late.csv"
+    t = 0.5 + 0.002 * np.arange(50)
+    csv.write_text("t,x1,x2\n" + "".join(f"{float(ti)!r},0.001,0.002\n" for ti in t))
+    out = tmp_path / f"late{suffix}"
+    assert main(["encode", "--input", str(csv), "--out", str(out)]) == 0
+    got = np.array([m.timestamp for m in read_log(out) if m.arbitration_id == 0x100])
+    np.testing.assert_allclose(got, t, rtol=0, atol=2e-7 if suffix == ".mf4" else 1e-9)
+
+
+def test_blf_refuses_negative_times_in_one_line(tmp_path, capsys):
+    csv = tmp_path / "neg.csv"
+    csv.write_text("t,x1,x2\n-0.004,0.001,0.002\n-0.002,0.001,0.002\n0,0.001,0.002\n")
+    out = tmp_path / "neg.blf"
+    assert main(["encode", "--input", str(csv), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"error: {out}: a BLF log stores times from 0 s on, got a frame at -0.004 s "
+                   "(shift the times, e.g. with --t0)"]
+    assert main(["encode", "--input", str(csv), "--out", str(out), "--t0", "0.004"]) == 0
+    got = sorted({round(m.timestamp, 9) for m in read_log(out)})
+    assert got == [0.0, 0.002, 0.004]
