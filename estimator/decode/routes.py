@@ -161,14 +161,21 @@ class Routes:
         self.by_key: dict[int, Route] = {}
         self.known: set[int] = {route_key(msg.frame_id, msg.is_extended_frame)
                                 for msg in db.messages}
-        per_msg: dict[str, list[SignalMapping]] = {}
+        # by the message itself, not its name: a standard and an extended frame may share
+        # a name (mapped by frame ID), and a name lookup would give the other one
+        per_msg: dict[int, tuple[Message, list[SignalMapping]]] = {}
         for m in signal_map.mappings:
             msg = find_message(db, m.message, signal_map.source)
-            per_msg.setdefault(msg.name, []).append(m)
-        for name, maps in per_msg.items():
-            msg = db.get_message_by_name(name)
+            per_msg.setdefault(route_key(msg.frame_id, msg.is_extended_frame),
+                               (msg, []))[1].append(m)
+        names = [msg.name for msg, _ in per_msg.values()]
+        for msg, maps in per_msg.values():
+            name = msg.name
+            if names.count(name) > 1:
+                name = f"{name}@{msg.frame_id:#x}{'x' if msg.is_extended_frame else ''}"
             src = buffer.source(name, [m.channel for m in maps])
             route = self._add(msg, DATA, _decoded_elsewhere, src, compile_row(msg, maps))
+            route.name = name
             route.vrow = compile_vector_row(msg, maps)
         for special, kind in ((SYNC_MESSAGE, SYNC), (STATUS_MESSAGE, STATUS),
                               (ALERT_MESSAGE, ALERT)):

@@ -65,31 +65,58 @@ def is_e2e(message: Message) -> bool:
     return message_attribute(message, ATTR_E2E, "") == "P01"
 
 
+#: bit 31 of a DBC frame ID: the message is an extended (29-bit) frame
+DBC_EXTENDED = 0x80000000
+#: largest standard (11-bit) CAN ID
+MAX_STANDARD_ID = 0x7FF
+
+
+def _id_text(message: Message) -> str:
+    """``0x100`` (standard) or ``0x80000100`` (extended, the DBC's bit 31) of a message."""
+    if message.is_extended_frame:
+        return f"{message.frame_id | DBC_EXTENDED:#x} (extended)"
+    return f"{message.frame_id:#x} (standard)"
+
+
 def find_message(db: Database, ref: str, where: str = "") -> Message:
     """Message by name, or by frame ID (decimal or ``0x`` hex).
+
+    A frame ID is standard unless it has bit 31 set (the DBC's ``BO_`` notation, e.g.
+    ``0x80000100``) or exceeds 11 bits; an ID that only an extended message has also finds
+    it. A name two messages share (a standard and an extended frame of one name: an invalid
+    DBC that cantools loads, keeping one of them under the name) is an error naming both IDs.
 
     Raises
     ------
     InputError
         Naming ``where`` (e.g. the map entry) and a few of the known messages.
     """
-    try:
-        return db.get_message_by_name(ref)
-    except KeyError:
-        pass
+    lead = f"{where}{': ' if where else ''}"
+    src = getattr(db, "suspid_path", "DBC")
+    named = [m for m in db.messages if m.name == ref]
+    if len(named) > 1:
+        raise InputError(f"{lead}message name {ref!r} is ambiguous in {src}: "
+                         f"{' and '.join(_id_text(m) for m in named)} share it; "
+                         "give the frame ID instead of the name, e.g. "
+                         f"{_id_text(named[0]).split()[0]}")
+    if named:
+        return named[0]
     try:
         fid = int(ref, 0)
     except ValueError:
         fid = None
-    if fid is not None:
-        try:
-            return db.get_message_by_frame_id(fid)
-        except KeyError:
-            pass
+    if fid is not None and fid >= 0:
+        ext = bool(fid & DBC_EXTENDED) or fid > MAX_STANDARD_ID
+        can_id = fid & ~DBC_EXTENDED
+        same = [m for m in db.messages if m.frame_id == can_id]
+        exact = [m for m in same if m.is_extended_frame == ext]
+        if exact:
+            return exact[0]
+        if same and not fid & DBC_EXTENDED:   # 0x100 of an extended-only message
+            return same[0]
     names = ", ".join(m.name for m in db.messages[:12])
     more = ", ..." if len(db.messages) > 12 else ""
-    src = getattr(db, "suspid_path", "DBC")
-    raise InputError(f"{where}{': ' if where else ''}message {ref!r} is not in {src}; "
+    raise InputError(f"{lead}message {ref!r} is not in {src}; "
                      f"expected one of {names}{more}")
 
 

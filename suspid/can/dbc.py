@@ -27,6 +27,13 @@ def _one_line(text: str) -> str:
     return " ".join(str(text).split())
 
 
+def _not_a_name_overwrite(record: logging.LogRecord) -> bool:
+    """Drop cantools' "Overwriting message 'X' with 'X' in the name to message dictionary"
+    (two messages of one name): :func:`~suspid.can.conventions.find_message` names both IDs
+    when a map uses that name, as the one error line."""
+    return not str(record.msg).startswith("Overwriting message '%s' with '%s' in the name")
+
+
 def load_dbc(path: str | Path | None = None, strict: bool = True) -> Database:
     """Load a DBC file with cantools.
 
@@ -55,6 +62,8 @@ def load_dbc(path: str | Path | None = None, strict: bool = True) -> Database:
     except OSError as exc:
         raise InputError(f"{p}: cannot read DBC: {exc.strerror}") from None
     db = Database(strict=strict)
+    cantools_log = logging.getLogger(Database.__module__)
+    cantools_log.addFilter(_not_a_name_overwrite)
     try:
         db.add_dbc_string(text)
     except Exception as exc:  # cantools raises several types (ParseError, Error, ...)
@@ -69,6 +78,8 @@ def load_dbc(path: str | Path | None = None, strict: bool = True) -> Database:
             log.warning("%s: loaded without cantools strict checks (%s)", p, msg)
         else:
             raise InputError(f"{p}: cannot load DBC: {msg}") from None
+    finally:
+        cantools_log.removeFilter(_not_a_name_overwrite)
     if not db.messages:
         raise InputError(f"{p}: DBC defines no message (BO_), expected at least one")
     # cantools' Database has no field for its source: an extra attribute, read with getattr

@@ -39,9 +39,11 @@ from __future__ import annotations
 import locale
 import logging
 import math
+import re
 from bisect import bisect_left
 from dataclasses import dataclass, field
 from datetime import datetime
+from decimal import Decimal
 from pathlib import Path
 from typing import Callable, Iterable, Iterator, Optional, Sequence, TextIO, cast
 
@@ -694,13 +696,55 @@ class _LineCounter:
         return getattr(self.fh, name)
 
 
-def _open_text(path: Path) -> _LineCounter:
-    """A text log opened as python-can would open it, its lines counted."""
+#: ASC header line declaring relative timestamps
+_ASC_RELATIVE = re.compile(r"\s*base\s+(?:hex|dec)\s+timestamps\s+relative\b", re.IGNORECASE)
+#: ASC trigger block start (the time origin of the events after it)
+_ASC_TRIGGER = re.compile(r"\s*begin\s+triggerblock\b", re.IGNORECASE)
+#: an ASC event line: its leading time (s), as python-can's reader recognises it
+_ASC_EVENT = re.compile(r"(\s*)(\d+\.\d+)(?=\s)")
+
+
+class _AscLines(_LineCounter):
+    """ASC lines counted, with relative event times made absolute (from the trigger block).
+
+    An ASC file whose header says ``base hex  timestamps relative`` (a CANalyzer/CANoe
+    logging option) stamps every event with the time since the previous event; python-can's
+    reader reads every time as absolute (it records the header's mode and ignores it), so
+    such a log came out as frames about one interval after the trigger block, nearly all
+    rejected as going back in time. Here every timestamped line -- frames and the events
+    python-can skips (``Start of measurement``, status, comments with a time) alike -- adds
+    its time to a running sum kept as an exact decimal, restarted at each ``Begin
+    Triggerblock``, and the line is handed on with the sum, so the reader sees the log as if
+    it had been written with ``timestamps absolute``.
+    """
+
+    def __init__(self, fh: TextIO) -> None:
+        super().__init__(fh)
+        self.relative = False
+        self.elapsed = Decimal(0)
+
+    def __next__(self) -> str:
+        line = next(self.fh)
+        self.lineno += 1
+        if self.relative:
+            m = _ASC_EVENT.match(line)
+            if m is not None:
+                self.elapsed += Decimal(m.group(2))
+                return f"{m.group(1)}{self.elapsed:f}{line[m.end():]}"
+            if _ASC_TRIGGER.match(line):
+                self.elapsed = Decimal(0)
+        elif "elative" in line and _ASC_RELATIVE.match(line):
+            self.relative = True
+        return line
+
+
+def _open_text(path: Path, lines: type[_LineCounter] = _LineCounter) -> _LineCounter:
+    """A text log opened as python-can would open it, its lines counted (by ``lines``)."""
     try:
         fh = path.open("r", encoding=locale.getpreferredencoding(False))
     except OSError as exc:
         raise InputError(f"{path}: cannot open CAN log: {exc.strerror}") from None
-    return _LineCounter(fh)
+    return lines(fh)
 
 
 def _skip_header(*_args: object, **_kwargs: object) -> None:
@@ -736,7 +780,7 @@ def _read_text_resumable(path: Path, reader: can.ASCReader | can.TRCReader,
 
 
 def _read_asc(path: Path, stats: ReadStats) -> Iterator[can.Message]:
-    counter = _open_text(path)
+    counter = _open_text(path, _AscLines)
     try:
         reader = can.ASCReader(cast(TextIO, counter), relative_timestamp=False)   # duck-typed
     except BaseException:
@@ -884,6 +928,33 @@ class _ASCWriter(can.ASCWriter):
         return dt.strftime(f"%a %b %d %H:%M:%S.{dt.microsecond // 1000:03d} %Y")
 
 
+#: python-can's BLF writer stores a start time below this (1990-01-01, epoch s) as no date
+#: (``timestamp_to_systemtime``), which its reader then takes as 0
+BLF_DATED_FROM = 631152000.0
+
+
+class _BLFWriter(can.BLFWriter):
+    """BLFWriter whose times read back as written when they are not epoch times.
+
+    BLF stores each frame's time as unsigned nanoseconds after the file's start date.
+    python-can takes the first frame's time as the start and writes it as a date only from
+    1990 on; below that (a CSV's ``t`` from 0.5 s, say) it writes no date, which its reader
+    takes as 0, so every time read back was short by the first one (0.5 s). Such times are
+    stored here after a start of 0, so they read back as themselves; a negative time cannot
+    be stored at all (python-can wrote it as the start) and is an error.
+    """
+
+    def _add_object(self, obj_type: int, data: bytes, timestamp: Optional[float] = None) -> None:
+        if self.start_timestamp is None and timestamp is not None \
+                and timestamp < BLF_DATED_FROM:
+            self.start_timestamp = 0.0
+        if timestamp is not None and timestamp < 0.0:
+            raise InputError(f"{getattr(self.file, 'name', 'BLF log')}: a BLF log stores times "
+                             f"from 0 s on, got a frame at {timestamp!r} s (shift the times, "
+                             "e.g. with --t0)")
+        super()._add_object(obj_type, data, timestamp)
+
+
 def open_log_writer(path: str | Path) -> can.io.generic.MessageWriter:
     """A python-can writer for the log format of ``path`` (use as a context manager).
 
@@ -943,7 +1014,7 @@ class LogFormat:
 LOG_FORMATS: dict[str, LogFormat] = {
     ".log": LogFormat("candump -L", _read_candump, _candump_writer, _candump_batches),
     ".asc": LogFormat("Vector ASC", _read_asc, _ASCWriter),
-    ".blf": LogFormat("Vector BLF", _read_blf, can.BLFWriter),
+    ".blf": LogFormat("Vector BLF", _read_blf, _BLFWriter),
     ".trc": LogFormat("PEAK TRC", _read_trc, can.TRCWriter),
     ".mf4": LogFormat("ASAM MDF4", _read_mf4, can.MF4Writer),
 }

@@ -269,10 +269,21 @@ class SignalMap:
                 raise UsageError(f"{where}: channel {m.channel!r} is mapped twice")
             seen.add(m.channel)
             msg = find_message(db, m.message, where)
-            if not any(s.name == m.signal for s in msg.signals):
+            sig = next((s for s in msg.signals if s.name == m.signal), None)
+            if sig is None:
                 names = ", ".join(s.name for s in msg.signals)
                 raise InputError(f"{where}: message {msg.name} has no signal {m.signal!r}; "
                                  f"expected one of {names}")
+            if sig.multiplexer_ids:
+                # the decoder reads a mapped signal from every frame of its message: the
+                # frames of the other pages would be read as this signal
+                pages = ", ".join(str(i) for i in sig.multiplexer_ids)
+                plain = [s.name for s in msg.signals if not s.multiplexer_ids
+                         and not s.is_multiplexer]
+                raise InputError(f"{where}: signal {msg.name}.{m.signal} is multiplexed (sent "
+                                 f"only when {sig.multiplexer_signal} = {pages}); suspid decodes "
+                                 "non-multiplexed signals only"
+                                 + (f" ({msg.name} has {', '.join(plain)})" if plain else ""))
             if m.scale == 0:
                 raise UsageError(f"{where}: scale must not be 0")
 

@@ -53,6 +53,8 @@ class Measurement:
     source: str = ""
 
 
+#: header of python-can's CSV log format (``can.CSVWriter``): CAN frames, not a measurement
+PYTHON_CAN_CSV_LOG = ("timestamp", "arbitration_id", "extended", "remote", "error", "dlc", "data")
 #: ``name [unit]`` or ``name (unit)`` in a header cell
 _ANNOTATED = re.compile(r"^(?P<name>[^\[\]()]*?)\s*[\[(]\s*(?P<unit>[^\[\]()]*?)\s*[\])]$")
 #: spellings of one SI unit, normalised
@@ -144,6 +146,10 @@ def read_measurement(path: str | Path, model: SuspensionModel, *,
             seps = [sep for sep in (";", "\t", "|") if len(header) == 1 and sep in header[0]]
             hint = (f"; the header is separated by {seps[0]!r}, expected commas (a spreadsheet's "
                     "export: save as comma-separated with '.' decimals)" if seps else "")
+            if header[:3] == list(PYTHON_CAN_CSV_LOG[:3]):
+                hint = ("; this is a CAN log in python-can's CSV format, not a measurement CSV: "
+                        f"convert it to a CAN log, e.g. python -m can.logconvert {name} "
+                        f"{Path(name).with_suffix('.blf')}")
             raise InputError(f"{name}:1: no 't' column in the header (got {', '.join(header[:8])})"
                              + hint)
         dup = {h for h in header if h and header.count(h) > 1}

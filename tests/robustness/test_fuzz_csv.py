@@ -5,6 +5,7 @@ import math
 import tracemalloc
 from pathlib import Path
 
+import can
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -164,3 +165,19 @@ def test_a_semicolon_separated_export_is_named(tmp_path: Path) -> None:
         read_measurement(_write(tmp_path, "t;x1\n0;0,001\n0,005;0,002\n"), Q2)
     with pytest.raises(InputError, match=r"^[^;]*\(got time, x1\)$"):
         read_measurement(_write(tmp_path, "time,x1\n0,1\n1,2\n"), Q2)
+
+
+def test_a_python_can_csv_log_is_named_with_its_conversion(tmp_path: Path) -> None:
+    """python-can's own CSV log format (``can.Logger("x.csv")``): CAN frames, not
+    measurements; the error says so and how to convert it (was: only "no 't' column")."""
+    p = tmp_path / "frames.csv"
+    with can.Logger(str(p)) as w:
+        w.on_message_received(can.Message(timestamp=0.5, arbitration_id=0x110,
+                                          is_extended_id=False, data=bytes(8)))
+    with pytest.raises(InputError) as err:
+        read_measurement(p, Q2)
+    msg = str(err.value)
+    assert msg.startswith(f"{p}:1: no 't' column in the header (got timestamp, arbitration_id")
+    assert msg.endswith(f"this is a CAN log in python-can's CSV format, not a measurement CSV: "
+                        f"convert it to a CAN log, e.g. python -m can.logconvert {p} "
+                        f"{tmp_path / 'frames.blf'}")
