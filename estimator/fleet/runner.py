@@ -29,7 +29,7 @@ from estimator.fleet.discover import DriveFile, find_drives
 from estimator.fleet.drive import (CAN_SUFFIXES, IdentifySettings, cached_database, file_digest,
                                    identify_drive)
 from estimator.fleet.history import History, drive_id
-from estimator.fleet.report import write_report
+from estimator.fleet.report import prepare_report_folder, write_report
 from suspid.errors import InputError, UsageError
 
 Progress = Callable[[int, int, int], None]
@@ -238,6 +238,8 @@ def run_fleet(config: FleetConfig) -> FleetResult:
     if not config.inputs and config.db is not None and not Path(config.db).is_file():
         raise InputError(f"--db {config.db}: no such history database (a run with --input "
                          "creates it)")
+    if config.report is not None:
+        prepare_report_folder(config.report)
     history = (History(config.db, readonly=not config.inputs) if config.db is not None
                else None)
     try:
