@@ -8,7 +8,8 @@ vehicle is the name of the folder that holds it (``fleet/VAN-07/2026-11-02.blf``
 Folders are searched through symbolic links (a vehicle folder linked from another disk is
 searched like any other), each real folder once, so a link back up the tree (a loop) ends
 the descent instead of repeating it; glob patterns are matched over the same walk, so a
-``**`` over a tree with a loop finishes too.
+``**`` over a tree with a loop finishes too. A link to a log that no longer exists is
+kept: its drive fails with the reason (``No such file or directory``).
 """
 from __future__ import annotations
 
@@ -143,7 +144,9 @@ def find_drives(inputs: Iterable[str]) -> list[DriveFile]:
 
     def walk(d: Path) -> None:
         for q, _, is_dir in _entries(d):
-            if not is_dir and _is_drive(q) and q.is_file():
+            # a link to a log that is gone (an unmounted share) is a drive that fails with
+            # its reason, not a log silently left out
+            if not is_dir and _is_drive(q) and (q.is_file() or q.is_symlink()):
                 add(q)
 
     for item in inputs:
@@ -157,7 +160,7 @@ def find_drives(inputs: Iterable[str]) -> list[DriveFile]:
             if not hit:
                 raise InputError(f"--input {item}: the pattern matches no file")
             for q in files:
-                if q.is_file() and _is_drive(q):
+                if (q.is_file() or q.is_symlink()) and _is_drive(q):
                     add(q)
         else:
             raise InputError(f"--input {item}: no such file or directory")

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from estimator.fleet.discover import find_drives, vehicle_of
-from estimator.fleet.drive import cached_database
+from estimator.fleet.drive import IdentifySettings, cached_database, identify_drive
 from suspid.can.dbc import default_dbc_path
 from suspid.errors import InputError
 
@@ -66,3 +66,17 @@ def test_symlinked_folders_followed_and_loops_end(tmp_path: Path) -> None:
         assert [(str(Path(d.path).relative_to(fleet)), d.vehicle) for d in found] == expected
     assert [Path(d.path).name for d in find_drives([str(fleet / "*" / "*.csv")])] == ["a.csv"]
     assert [Path(d.path).name for d in find_drives([str(fleet / "**" / "c.log")])] == ["c.log"]
+
+
+def test_link_to_a_missing_log_is_a_failed_drive(tmp_path: Path) -> None:
+    """A log linked from a share that is not mounted is a failed drive naming the path, not
+    a log silently left out."""
+    (tmp_path / "VAN-M").mkdir()
+    link = tmp_path / "VAN-M" / "d.blf"
+    link.symlink_to(tmp_path / "unmounted" / "d.blf")
+    (tmp_path / "VAN-M" / "self.log").symlink_to(tmp_path / "VAN-M" / "self.log")
+    for inputs in ([str(tmp_path)], [str(tmp_path / "*" / "*.*")]):
+        assert [Path(d.path).name for d in find_drives(inputs)] == ["d.blf", "self.log"]
+    rec = identify_drive(str(link), "VAN-M", IdentifySettings(model="quarter2"))
+    assert rec["status"] == "failed" and rec["error"].startswith(str(link))
+    assert "No such file or directory" in rec["error"] and "\n" not in rec["error"]
