@@ -3,7 +3,8 @@
 Schema (``PRAGMA user_version = 1``; query it with the ``sqlite3`` shell)::
 
     CREATE TABLE drives (
-        id        TEXT PRIMARY KEY,  -- SHA-256 of the log's bytes ('path:' + path if unreadable)
+        id        TEXT PRIMARY KEY,  -- SHA-256 of the log's bytes; of a failed log
+                                     -- SHA-256 + ':' + path ('path:' + path if unreadable)
         path      TEXT NOT NULL,     -- where it was read last
         vehicle   TEXT NOT NULL,     -- the folder holding the log
         t         REAL,              -- first sample, epoch s (NULL if unreadable)
@@ -32,7 +33,11 @@ Schema (``PRAGMA user_version = 1``; query it with the ``sqlite3`` shell)::
 
 A log is one drive whatever its path: processing the same bytes again replaces its row
 (``INSERT OR REPLACE`` on ``id``) instead of adding one; a log already stored with the same
-``settings`` is not identified again.
+``settings`` is not identified again. A failed log is one row per path (empty or garbage
+files of several vehicles are as many failed logs, not one). A log whose bytes changed at
+the same path (a logger still writing it, an upload completed) replaces the row stored for
+that path when that row failed or starts at the same time; a different drive written to the
+same path later (another first timestamp) is added.
 """
 from __future__ import annotations
 
@@ -63,8 +68,12 @@ CREATE TABLE IF NOT EXISTS runs (
 
 
 def drive_id(record: dict[str, Any]) -> str:
-    """A drive's key: its content hash, or its path when the file could not be read."""
-    return record.get("sha256") or f"path:{record['path']}"
+    """A drive's key: its content hash; for a failed log the hash and its path (each failed
+    file is listed), or its path alone when the file could not be read."""
+    sha = record.get("sha256")
+    if not sha:
+        return f"path:{record['path']}"
+    return sha if record.get("status") == "ok" else f"{sha}:{record['path']}"
 
 
 class History:
@@ -73,31 +82,53 @@ class History:
     Parameters
     ----------
     path : str or Path
-        The SQLite file (created with its folder if missing).
+        The SQLite file (created with its folder if missing, unless ``readonly``).
+    readonly : bool
+        Open an existing history for reading only (a report from the history: works on a
+        read-only file, folder or mount).
 
     Raises
     ------
     InputError
-        Not an SQLite database, or one of a newer schema.
+        Not an SQLite database, one of a newer schema, not a fleet history (``readonly``),
+        or one that cannot be written (not ``readonly``).
     """
 
-    def __init__(self, path: str | Path) -> None:
+    #: seconds to wait for another run's write to end before failing
+    BUSY_TIMEOUT_S = 60.0
+
+    def __init__(self, path: str | Path, readonly: bool = False) -> None:
         self.path = Path(path)
         if self.path.is_dir():
             raise InputError(f"--db {path}: is a directory, expected a database file")
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+        if not readonly:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        existed = self.path.exists()
         try:
-            self.conn = sqlite3.connect(str(self.path))
+            if readonly:
+                self.conn = sqlite3.connect(self.path.resolve().as_uri() + "?mode=ro", uri=True,
+                                            timeout=self.BUSY_TIMEOUT_S)
+            else:
+                self.conn = sqlite3.connect(str(self.path), timeout=self.BUSY_TIMEOUT_S)
             self.conn.execute("PRAGMA foreign_keys = ON")
             version = self.conn.execute("PRAGMA user_version").fetchone()[0]
             if version > SCHEMA_VERSION:
                 raise InputError(f"--db {path}: schema version {version}, this suspid reads "
                                  f"up to {SCHEMA_VERSION}")
+            if readonly:
+                if self.conn.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND "
+                                     "name = 'drives'").fetchone() is None:
+                    raise InputError(f"--db {path}: not a fleet history (no table drives)")
+                return
+        except sqlite3.DatabaseError as exc:
+            what = "not a usable SQLite database" if existed else "cannot create the history"
+            raise InputError(f"--db {path}: {what} ({exc})") from None
+        try:
             self.conn.executescript(_SCHEMA)
             self.conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
             self.conn.commit()
         except sqlite3.DatabaseError as exc:
-            raise InputError(f"--db {path}: not a usable SQLite database ({exc})") from None
+            raise InputError(f"--db {path}: cannot write the history ({exc})") from None
 
     def close(self) -> None:
         self.conn.close()
@@ -115,13 +146,31 @@ class History:
         return {r[0]: _record(r) for r in rows}
 
     def add(self, records: Iterable[dict[str, Any]], model: str, settings_key: str) -> int:
-        """Insert or replace drives (one transaction); returns how many."""
+        """Insert or replace drives (one transaction); returns how many.
+
+        A row stored for the same path with other bytes is replaced when it failed or starts
+        at the same time (the same log, grown or repaired since).
+
+        Raises
+        ------
+        InputError
+            The database cannot be written (read-only, locked longer than
+            :attr:`BUSY_TIMEOUT_S`, disk full).
+        """
+        try:
+            return self._add(records, model, settings_key)
+        except sqlite3.DatabaseError as exc:
+            raise InputError(f"--db {self.path}: cannot store the drives ({exc})") from None
+
+    def _add(self, records: Iterable[dict[str, Any]], model: str, settings_key: str) -> int:
         now = time.time()
         n = 0
         with self.conn:
             for rec in records:
                 did = drive_id(rec)
                 res = rec.get("result")
+                self.conn.execute("DELETE FROM drives WHERE path = ? AND id != ? AND "
+                                  "(status != 'ok' OR t = ?)", (rec["path"], did, rec.get("t")))
                 self.conn.execute("DELETE FROM estimates WHERE drive_id = ?", (did,))
                 self.conn.execute(
                     "INSERT OR REPLACE INTO drives (id, path, vehicle, t, model, status, error, "
@@ -157,6 +206,20 @@ class History:
 
     def add_run(self, started: float, model: str, options: dict[str, Any], new: int,
                 reused: int, failed: int) -> None:
+        """Record a run (its options, counts).
+
+        Raises
+        ------
+        InputError
+            The database cannot be written.
+        """
+        try:
+            self._add_run(started, model, options, new, reused, failed)
+        except sqlite3.DatabaseError as exc:
+            raise InputError(f"--db {self.path}: cannot store the run ({exc})") from None
+
+    def _add_run(self, started: float, model: str, options: dict[str, Any], new: int,
+                 reused: int, failed: int) -> None:
         with self.conn:
             self.conn.execute("INSERT INTO runs (started, finished, model, options, new, reused, "
                               "failed) VALUES (?,?,?,?,?,?,?)",
@@ -168,4 +231,4 @@ def _record(r: tuple[Any, ...]) -> dict[str, Any]:
     did = r[0]
     return {"path": r[1], "vehicle": r[2], "t": r[3], "status": r[4], "error": r[5],
             "size": r[6], "result": json.loads(r[7]) if r[7] else None,
-            "sha256": None if did.startswith("path:") else did}
+            "sha256": None if did.startswith("path:") else did.split(":", 1)[0]}

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import html
 import math
+import os
 import time
 from datetime import datetime, timezone
 from pathlib import Path
@@ -17,6 +18,7 @@ from typing import Any, Sequence
 
 from estimator.fleet.analysis import AlertRule, VehicleSummary
 from estimator.fleet.trend import DAY_S
+from suspid.errors import InputError
 
 _CSS = """
 body{font-family:system-ui,sans-serif;margin:1.5em;color:#222}
@@ -181,6 +183,32 @@ def render(vehicles: Sequence[VehicleSummary], drives: Sequence[dict[str, Any]],
 
 def _conf(z: float) -> float:
     return 0.5 * (1.0 + math.erf(z / math.sqrt(2.0)))
+
+
+def prepare_report_folder(folder: str | Path) -> Path:
+    """Create the report's folder before any drive is identified; returns the page's path.
+
+    Raises
+    ------
+    InputError
+        ``folder`` is a file, cannot be created or written, or its ``index.html`` is a
+        folder (found at the start of a run, not after hours of identification).
+    """
+    d = Path(folder)
+    if d.exists() and not d.is_dir():
+        raise InputError(f"--report {folder}: is a file, expected a folder (the report is "
+                         f"written to {d / 'index.html'})")
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"--report {folder}: cannot create the folder "
+                         f"({exc.strerror or exc})") from None
+    page = d / "index.html"
+    if page.is_dir():
+        raise InputError(f"--report {folder}: {page} is a folder, expected the report page")
+    if not os.access(d, os.W_OK) or (page.exists() and not os.access(page, os.W_OK)):
+        raise InputError(f"--report {folder}: cannot write {page} (permission denied)")
+    return page
 
 
 def write_report(folder: str | Path, vehicles: Sequence[VehicleSummary],

@@ -29,7 +29,7 @@ from estimator.fleet.discover import DriveFile, find_drives
 from estimator.fleet.drive import (CAN_SUFFIXES, IdentifySettings, cached_database, file_digest,
                                    identify_drive)
 from estimator.fleet.history import History, drive_id
-from estimator.fleet.report import write_report
+from estimator.fleet.report import prepare_report_folder, write_report
 from suspid.errors import InputError, UsageError
 
 Progress = Callable[[int, int, int], None]
@@ -177,7 +177,8 @@ def execute(jobs: list[tuple[str, str, str | None]], settings: IdentifySettings,
                 raise UsageError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler "
                                  f"({' '.join(str(exc).split())})") from None
         else:
-            n = workers if workers is not None else (os.cpu_count() or 1)
+            # no more worker processes than drives: each costs a process start and its memory
+            n = min(workers if workers is not None else (os.cpu_count() or 1), total)
             cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                    dashboard_address=None, silence_logs=logging.ERROR)
             client = Client(cluster)
@@ -237,7 +238,10 @@ def run_fleet(config: FleetConfig) -> FleetResult:
     if not config.inputs and config.db is not None and not Path(config.db).is_file():
         raise InputError(f"--db {config.db}: no such history database (a run with --input "
                          "creates it)")
-    history = History(config.db) if config.db is not None else None
+    if config.report is not None:
+        prepare_report_folder(config.report)
+    history = (History(config.db, readonly=not config.inputs) if config.db is not None
+               else None)
     try:
         rule = config.rule
         if history is not None and not config.inputs and not rule.nominal:

@@ -9,6 +9,9 @@ from pathlib import Path
 
 import pytest
 
+from estimator.fleet import runner
+from estimator.fleet.drive import IdentifySettings
+from suspid.errors import InputError
 from tests.fleet.conftest import Fleet, HistoryRuns, fleet_json
 
 
@@ -93,3 +96,24 @@ def test_report_in_headless_chromium(fleet: Fleet, history: HistoryRuns,
     proc = _browser([f"--screenshot={shot}", "--window-size=1200,1600", page.resolve().as_uri()],
                     tmp_path / "profile2")
     assert proc.returncode == 0 and shot.stat().st_size > 20000, proc.stderr[-2000:]
+
+
+def test_unusable_report_folder_fails_before_any_drive(tmp_path: Path,
+                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--report`` naming a file, or a folder whose index.html is a folder, is one error at
+    the start of the run, not after every drive has been identified."""
+    log = tmp_path / "V" / "d.csv"
+    log.parent.mkdir()
+    log.write_text("t,x\n0,0\n")
+    (tmp_path / "a-file").write_text("x")
+    (tmp_path / "r" / "index.html").mkdir(parents=True)
+
+    def identified(*args: object) -> None:
+        raise AssertionError("a drive was identified before the report folder was checked")
+
+    monkeypatch.setattr(runner, "identify_drive", identified)
+    settings = IdentifySettings(model="quarter2")
+    for folder, words in (("a-file", "is a file"), ("r", "is a folder")):
+        with pytest.raises(InputError, match=words):
+            runner.run_fleet(runner.FleetConfig(inputs=[str(log)], settings=settings, workers=0,
+                                                report=str(tmp_path / folder)))
