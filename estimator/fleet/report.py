@@ -115,13 +115,21 @@ def trend_svg(s: VehicleSummary, name: str, width: int = 440, height: int = 210)
     return "".join(out)
 
 
+def vehicle_anchor(name: str) -> str:
+    """The HTML id of a vehicle's section: ``v-`` and the name, every character other than
+    an ASCII letter, digit or ``-`` written as ``_HEX_`` (ids hold no whitespace; distinct
+    names give distinct ids; the same name the same id from run to run)."""
+    return "v-" + "".join(c if (c.isascii() and c.isalnum()) or c == "-" else f"_{ord(c):x}_"
+                          for c in name)
+
+
 def _vehicle_row(s: VehicleSummary) -> str:
     last = s.latest
     fc = min(s.forecasts.items(), key=lambda kv: kv[1].crossing_t, default=None)
     fc_txt = (f"{fc[0]}: {_date(fc[1].crossing_t)} ({_date(fc[1].crossing_t_low)} to "
               f"{_date(fc[1].crossing_t_high)})" if fc else "")
     margin = s.margin()
-    cells = [str(s.rank), f'<a href="#v-{html.escape(s.vehicle)}">{html.escape(s.vehicle)}</a>',
+    cells = [str(s.rank), f'<a href="#{vehicle_anchor(s.vehicle)}">{html.escape(s.vehicle)}</a>',
              s.risk, str(len(s.drives)), str(s.failed),
              ", ".join(a["parameter"] for a in s.alerts), fc_txt,
              _date(last["t"], True) if last else "",
@@ -150,7 +158,7 @@ def render(vehicles: Sequence[VehicleSummary], drives: Sequence[dict[str, Any]],
     parts += [_vehicle_row(s) for s in vehicles]
     parts.append("</tbody></table>")
     for s in vehicles:
-        parts.append(f'<h2 id="v-{html.escape(s.vehicle)}">{s.rank}. {html.escape(s.vehicle)} '
+        parts.append(f'<h2 id="{vehicle_anchor(s.vehicle)}">{s.rank}. {html.escape(s.vehicle)} '
                      f"({html.escape(s.model)}, {len(s.drives)} drives, {s.risk})</h2>")
         for msg in s.warnings:
             parts.append(f'<p class="warn-msg"><b>WARNING</b> {html.escape(msg)}</p>')

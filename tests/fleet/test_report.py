@@ -11,6 +11,7 @@ import pytest
 
 from estimator.fleet import runner
 from estimator.fleet.drive import IdentifySettings
+from estimator.fleet.report import vehicle_anchor
 from suspid.errors import InputError
 from tests.fleet.conftest import Fleet, HistoryRuns, fleet_json
 
@@ -22,12 +23,18 @@ class _Tables(HTMLParser):
         super().__init__()
         self.tables: dict[str, list[list[str]]] = {}
         self.svgs: list[tuple[str, str]] = []
+        self.ids: list[str] = []
+        self.links: list[str] = []
         self._table: str | None = None
         self._row: list[str] | None = None
         self._cell: list[str] | None = None
 
     def handle_starttag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
         a = dict(attrs)
+        if a.get("id"):
+            self.ids.append(str(a["id"]))
+        if tag == "a" and (a.get("href") or "").startswith("#"):
+            self.links.append(str(a["href"])[1:])
         if tag == "table" and a.get("id"):
             self._table = str(a["id"])
             self.tables[self._table] = []
@@ -92,6 +99,9 @@ def test_report_in_headless_chromium(fleet: Fleet, history: HistoryRuns,
     assert all(r[1] == "VAN-OK" and r[2] for r in failed)
     assert sorted(dom.svgs) == sorted((v, k) for v in ("VAN-WORN", "VAN-WEAR", "VAN-OK")
                                       for k in ("c1", "k1", "c2", "k2"))
+    # every vehicle link leads to its section: ids unique, without whitespace
+    assert len(dom.links) == 3 and set(dom.links) <= set(dom.ids)
+    assert len(set(dom.ids)) == len(dom.ids) and not any(c.isspace() for i in dom.ids for c in i)
     shot = tmp_path / "report.png"
     proc = _browser([f"--screenshot={shot}", "--window-size=1200,1600", page.resolve().as_uri()],
                     tmp_path / "profile2")
@@ -117,3 +127,14 @@ def test_unusable_report_folder_fails_before_any_drive(tmp_path: Path,
         with pytest.raises(InputError, match=words):
             runner.run_fleet(runner.FleetConfig(inputs=[str(log)], settings=settings, workers=0,
                                                 report=str(tmp_path / folder)))
+
+
+def test_vehicle_anchors_are_valid_distinct_ids() -> None:
+    """Vehicle names with spaces, markup or non-ASCII letters give HTML ids without
+    whitespace or markup, one per name."""
+    names = ["VAN 1", "VAN_1", "VAN-1", "VAN_20_1", "Lkw Ölwechsel", "<b>&\"'", "ö", "_f6_", ""]
+    ids = [vehicle_anchor(n) for n in names]
+    assert len(set(ids)) == len(ids)
+    assert all(i.startswith("v-") and all((c.isascii() and c.isalnum()) or c in "-_" for c in i)
+               for i in ids)
+    assert vehicle_anchor("VAN-OK") == "v-VAN-OK"
