@@ -14,7 +14,7 @@ bridged by linear interpolation -- reported in ``warnings`` with their count, ne
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Literal, cast
+from typing import Iterable, Literal, cast
 
 import numpy as np
 from cantools.database import Database
@@ -22,7 +22,7 @@ from cantools.database import Database
 from estimator.decode.buffer import Aligned
 from estimator.decode.listener import DecodeListener
 from estimator.decode.replay import feed_log
-from suspid.can.logs import ReadStats
+from suspid.can.logs import ReadStats, describe_channels
 from suspid.can.signal_map import SignalMapLike
 from suspid.errors import InputError
 from suspid.io.csvio import Measurement
@@ -45,6 +45,46 @@ def unparsed_hint(path: str | Path, stats: ReadStats) -> str:
     if str(path).lower().endswith(".log"):
         out += " (a .log is read as candump -L: '(SECONDS) IFACE ID#DATA' per line)"
     return out
+
+
+def channel_notes(path: str | Path, stats: ReadStats, keys: Iterable[int],
+                  channel: str | None) -> tuple[dict[str, object], list[str]]:
+    """Frame statistics and warnings about the bus channels of a log that has been read.
+
+    Parameters
+    ----------
+    path : str or Path
+        The log (for the warning).
+    stats : ReadStats
+        Of the reader (``stats.channels``: frames per channel and frame key).
+    keys : iterable of int
+        Frame keys (CAN ID, bit 31 for an extended one) of the sensor's data messages.
+    channel : str or None
+        The channel asked for (``--can-channel``), ``None`` for every channel.
+
+    Returns
+    -------
+    frames : dict
+        To add to the frame statistics: ``channels`` (channel -> frames read) for a log of
+        more than one channel, ``channel`` and ``other_channel`` (frames of the other
+        channels, not decoded) when one was asked for; empty for a one-channel log read whole.
+    warnings : list of str
+        When no channel was asked for and the sensor's messages arrive on more than one:
+        the channels with their counts (the frames of every channel were decoded together).
+    """
+    extra: dict[str, object] = {}
+    if len(stats.channels) > 1 or channel is not None:
+        extra["channels"] = stats.channel_frames()
+    if channel is not None:
+        extra["channel"] = channel
+        extra["other_channel"] = stats.other_channel
+        return extra, []
+    carrying = {ch: n for ch, n in stats.channel_frames(keys).items() if n}
+    if len(carrying) < 2:
+        return extra, []
+    return extra, [f"{path}: the sensor's messages are on {len(carrying)} bus channels, "
+                   f"{describe_channels(carrying)}, and were decoded together; choose one "
+                   "with --can-channel CH"]
 
 
 def summarize_gaps(aligned: Aligned) -> list[str]:
@@ -104,7 +144,8 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
                             time_source: Literal["timestamp", "tick", "auto"] = "auto",
                             dt: float | None = None,
                             max_counter_delta: int = 4,
-                            arrival_slots: bool = True) -> tuple[Measurement, dict[str, object]]:
+                            arrival_slots: bool = True,
+                            channel: str | None = None) -> tuple[Measurement, dict[str, object]]:
     """Decode a CAN log into a measurement on a uniform time grid.
 
     Parameters
@@ -129,6 +170,11 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
         sample slot from its arrival time and its order within its message
         (:mod:`estimator.decode.rules.arrival`) instead of the nearest grid cell of its
         timestamp: arrival jitter, bursts and delivery delay then lose no frame.
+    channel : str, optional
+        Decode only this bus channel of a multi-bus log, as the file names it (``"1"`` for
+        channel 1 of an ASC, BLF, TRC or MDF4 log, ``"can1"`` for a candump interface; see
+        :func:`suspid.can.logs.channel_wanted`). Default: every channel, with a warning when
+        the sensor's messages are on more than one.
 
     Returns
     -------
@@ -136,24 +182,28 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
         ``t`` (s), ``road``, ``measured`` (NaN for missing samples), ``warnings``.
     frame_stats : dict
         ``{"accepted": N, "rejected": {reason: n, ...}, "ignored": n, "lost": n,
-        "time_base": "tick" | "timestamp"}``.
+        "time_base": "tick" | "timestamp"}``, with ``channels``, ``channel`` and
+        ``other_channel`` as :func:`channel_notes` gives them.
 
     Raises
     ------
     InputError
         Missing/unreadable log or DBC, or no accepted frame carrying a mapped channel.
     UsageError
-        Unknown log suffix, or a signal map that does not fit the DBC or model.
+        Unknown log suffix, a signal map that does not fit the DBC or model, or a
+        ``channel`` the log does not have.
     """
     m = get_model(model) if isinstance(model, str) else model
     listener = DecodeListener(m, dbc_path, signal_map, capacity=1 << 14, growable=True,
                               time_source=time_source, max_counter_delta=max_counter_delta,
                               arrival_slots=arrival_slots)
     stats = ReadStats()
-    feed_log(listener, path, stats)
+    feed_log(listener, path, stats, channel=channel)
     listener.count_malformed(stats.malformed)
     frame_stats = listener.frame_stats()
-    warnings = listener.signal_map.unit_warnings(listener.db, m)
+    bus_stats, warnings = channel_notes(path, stats, listener.data_keys(), channel)
+    frame_stats.update(bus_stats)
+    warnings += listener.signal_map.unit_warnings(listener.db, m)
     warnings += [f"{e} (skipped)" for e in stats.examples]   # e names file and line
     if stats.malformed > len(stats.examples):
         warnings.append(f"{path}: {stats.malformed} unparseable lines/records skipped in all")

@@ -48,7 +48,7 @@ def feed(listener: can.Listener, messages: Iterable[can.Message]) -> int:
 
 
 def feed_log(listener: can.Listener, path: str | Path, stats: Optional[ReadStats] = None, *,
-             poll: Optional[Callable[[], int]] = None) -> int:
+             poll: Optional[Callable[[], int]] = None, channel: Optional[str] = None) -> int:
     """Feed every frame of a CAN log to a listener, as fast as possible.
 
     A :class:`~estimator.decode.listener.DecodeListener` gets the frames as arrays
@@ -68,6 +68,10 @@ def feed_log(listener: can.Listener, path: str | Path, stats: Optional[ReadStats
         Called after the first frame, then again after as many frames as it returns (at
         least 1) -- e.g. a window driver checking the buffer's newest time, exactly where a
         frame-by-frame loop with that countdown would have checked it.
+    channel : str, optional
+        Feed only this bus channel of a multi-bus log, named as the file names it
+        (:func:`suspid.can.logs.channel_wanted`); the other frames are counted in
+        ``stats.other_channel``. Default: every frame.
 
     Returns
     -------
@@ -79,14 +83,14 @@ def feed_log(listener: can.Listener, path: str | Path, stats: Optional[ReadStats
     InputError
         Missing or unreadable file.
     UsageError
-        Unknown suffix.
+        Unknown suffix, or a ``channel`` the log does not have.
     """
     left = 1
     n = 0
     feed_arrays = getattr(listener, "feed_arrays", None)
     if feed_arrays is None:
         on = listener.on_message_received
-        for msg in read_log(path, stats):
+        for msg in read_log(path, stats, channel=channel):
             on(msg)
             n += 1
             if poll is not None:
@@ -98,7 +102,7 @@ def feed_log(listener: can.Listener, path: str | Path, stats: Optional[ReadStats
             finish()
         return n
     chooser = listener if isinstance(listener, _TimeBaseChooser) else None
-    for fa in _placed(listener, path, stats):
+    for fa in _placed(listener, path, stats, channel):
         size = len(fa)
         if chooser is not None:
             # "auto": decided on the first chunk
@@ -126,14 +130,14 @@ def feed_log(listener: can.Listener, path: str | Path, stats: Optional[ReadStats
     return n
 
 
-def _placed(listener: can.Listener, path: str | Path,
-            stats: Optional[ReadStats]) -> Iterator[FrameArrays]:
+def _placed(listener: can.Listener, path: str | Path, stats: Optional[ReadStats],
+            channel: Optional[str] = None) -> Iterator[FrameArrays]:
     """The chunks of a log; for a listener that places arrival times in sample slots
     (``DecodeListener(arrival_slots=True)`` with the timestamp time base, decided on the
     first chunk) the log is read twice: first its times and IDs alone (the slots), then its
     frames -- as they are when no frame moves, else as one chunk with the slot times,
     sorted by them."""
-    chunks = read_log_arrays(path, stats)
+    chunks = read_log_arrays(path, stats, channel=channel)
     first = next(chunks, None)
     if first is None:
         return
@@ -165,7 +169,7 @@ def _placed(listener: can.Listener, path: str | Path,
         {k: np.concatenate(v) for k, v in per.items()}) if ordered else {}
     del per
     # pass 2: the frames (read and counted once already)
-    again = read_log_arrays(path, ReadStats())
+    again = read_log_arrays(path, ReadStats(), channel=channel)
     if not moved:
         yield from again
         return

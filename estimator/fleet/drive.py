@@ -69,6 +69,8 @@ class IdentifySettings:
         DBC path for CAN logs (``None``: suspid's bundled DBC).
     signal_map : SignalMap or None
         ``--map``/``--map-file`` mapping, as ``identify`` resolves it.
+    can_channel : str or None
+        ``--can-channel``: the bus channel of multi-bus logs to decode (``None``: all).
     """
 
     model: str
@@ -83,6 +85,7 @@ class IdentifySettings:
     data_start: bool = True
     dbc: str | None = None
     signal_map: SignalMap | None = None
+    can_channel: str | None = None
 
     def parameters(self) -> Parameters:
         """The identifier's parameters (raises :class:`UsageError` for unknown names)."""
@@ -99,6 +102,8 @@ class IdentifySettings:
         except OSError:
             d["dbc_sha256"] = None
         d["suspid"] = __version__
+        if d["can_channel"] is None:   # the key of every log read whole stays as it was
+            del d["can_channel"]
         d["x0"] = self.x0 if isinstance(self.x0, str) else [float(v) for v in self.x0]
         d["signal_map"] = (None if self.signal_map is None else
                            [str(m) for m in self.signal_map.mappings])
@@ -156,7 +161,8 @@ def load_drive(path: str | Path, model: SuspensionModel, settings: IdentifySetti
     InputError, UsageError
         Unreadable or unusable log (one-line message naming the file).
     """
-    return read_input(path, model, cached_database(settings.dbc), settings.signal_map)
+    return read_input(path, model, cached_database(settings.dbc), settings.signal_map,
+                      channel=settings.can_channel)
 
 
 def one_line(text: object) -> str:

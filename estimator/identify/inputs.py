@@ -35,7 +35,8 @@ CAN_FORMATS, CAN_READER = "suspid.can.logs", "estimator.decode.log_input"
 
 def read_input(path: str | Path, model: SuspensionModel,
                dbc: str | Path | Database | None = None,
-               signal_map: SignalMapLike = None) -> tuple[Measurement, dict[str, Any] | None]:
+               signal_map: SignalMapLike = None,
+               channel: str | None = None) -> tuple[Measurement, dict[str, Any] | None]:
     """Read a measurement CSV or a CAN log (format by suffix) for ``model``.
 
     Parameters
@@ -49,6 +50,9 @@ def read_input(path: str | Path, model: SuspensionModel,
         it is.
     signal_map : optional
         The user's signal map for a foreign DBC.
+    channel : str, optional
+        The bus channel of a multi-bus CAN log to decode (``--can-channel``; see
+        :func:`estimator.decode.log_input.load_log_as_measurement`); ignored for a CSV.
 
     Returns
     -------
@@ -73,7 +77,8 @@ def read_input(path: str | Path, model: SuspensionModel,
             raise InputError(f"{p}: unknown input format {p.suffix!r}; expected .csv or a CAN "
                              f"log ({', '.join(formats.LOG_FORMATS)})")
         reader = importlib.import_module(CAN_READER)
-        meas, frames = reader.load_log_as_measurement(p, model, dbc, signal_map)
+        meas, frames = reader.load_log_as_measurement(p, model, dbc, signal_map,
+                                                      channel=channel)
     if model.roads and not meas.road and not decays(meas.measured):
         meas.warnings.append(
             f"{p}: no road input ({', '.join(model.roads)}) and the motion does not decay: "

@@ -252,7 +252,8 @@ def replay(driver: CanWindowDriver, messages: Iterable[Any]) -> int:
     return n
 
 
-def replay_log(driver: CanWindowDriver, path: Any, stats: Any = None) -> int:
+def replay_log(driver: CanWindowDriver, path: Any, stats: Any = None,
+               channel: str | None = None) -> int:
     """Replay a CAN log file as fast as possible; returns the number of frames.
 
     The log is read and decoded in NumPy batches (:func:`estimator.decode.feed_log`: a
@@ -267,6 +268,8 @@ def replay_log(driver: CanWindowDriver, path: Any, stats: Any = None) -> int:
         ``.log``, ``.asc``, ``.blf``, ``.trc`` or ``.mf4``.
     stats : ReadStats, optional
         Filled with frames read and lines skipped.
+    channel : str, optional
+        Only this bus channel of a multi-bus log (see :func:`estimator.decode.feed_log`).
     """
     fed = driver.frames + 1   # frames fed when poll() is called (first after one frame)
 
@@ -277,7 +280,7 @@ def replay_log(driver: CanWindowDriver, path: Any, stats: Any = None) -> int:
         fed += k
         return k
 
-    n = feed_log(driver.listener, path, stats, poll=poll)
+    n = feed_log(driver.listener, path, stats, poll=poll, channel=channel)
     driver.frames += n
     driver.flush()
     return n

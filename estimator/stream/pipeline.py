@@ -35,7 +35,7 @@ import numpy as np
 from estimator.alerts import (DEFAULT_HORIZON_S, AlertConfig, AlertEngine, AlertStore,
                               BusAlertSink, CallbackSink, ForecastEngine)
 from estimator.decode import DecodeListener
-from estimator.decode.log_input import unparsed_hint
+from estimator.decode.log_input import channel_notes, unparsed_hint
 from estimator.identify import Parameters
 from estimator.identify.inputs import CSV_SUFFIXES
 from estimator.identify.regrid import to_uniform_grid
@@ -365,6 +365,8 @@ class Source:
     dbc : Path or None
         DBC of the CAN data (default suspid's).
     signal_map : SignalMap or None
+    can_channel : str or None
+        ``--can-channel``: the bus channel of a multi-bus log to replay (``None``: all).
     time_source : {"timestamp", "tick"} or None
         None (logs and live): the sensor's tick when the stream carries SN_Sync frames,
         the frame timestamps otherwise.
@@ -385,6 +387,7 @@ class Source:
     bitrate: int | None = None
     dbc: Path | None = None
     signal_map: Any = None
+    can_channel: str | None = None
     time_source: Literal["timestamp", "tick"] | None = None
     duration: float | None = None
     idle_timeout: float | None = 5.0
@@ -511,8 +514,12 @@ def _run_log(source: Source, spec: MonitorSpec, mon: StreamMonitor, sinks: list[
     drv = CanWindowDriver(listener, cfg.window_s, cfg.step_s, mon.window,
                           max_missing=cfg.max_missing)
     stats = ReadStats()
-    replay_log(drv, source.input, stats)
+    replay_log(drv, source.input, stats, channel=source.can_channel)
     listener.count_malformed(stats.malformed)
+    bus_stats, bus_warnings = channel_notes(str(source.input), stats, listener.data_keys(),
+                                            source.can_channel)
+    for w in bus_warnings:
+        sys.stderr.write(f"warning: {w}\n")
     if drv.windows == 0:
         fs = listener.frame_stats()
         if not fs["accepted"]:  # no data at all: a shorter window would not help
@@ -521,9 +528,14 @@ def _run_log(source: Source, spec: MonitorSpec, mon: StreamMonitor, sinks: list[
                              f"rejected {rej or 'none'}){unparsed_hint(str(source.input), stats)}")
         raise InputError(f"{source.input}: {drv.frames} frames but less data than one window "
                          f"({cfg.window_s:g} s); give a shorter --window")
-    out: dict[str, Any] = {"frames": listener.frame_stats(), "windows_cut": drv.windows}
+    frames = listener.frame_stats()
+    frames.update(bus_stats)
+    out: dict[str, Any] = {"frames": frames, "windows_cut": drv.windows}
+    warnings = list(bus_warnings)
     if stats.truncated:
-        out["warnings"] = [f"{source.input}: the file ends inside a record (truncated)"]
+        warnings.append(f"{source.input}: the file ends inside a record (truncated)")
+    if warnings:
+        out["warnings"] = warnings
     return out
 
 

@@ -88,6 +88,70 @@ def is_can_log(path: str | Path) -> bool:
     return Path(path).suffix.lower() in LOG_FORMATS
 
 
+#: what python-can's reader of a format gives as ``Message.channel`` for the file's channel 1:
+#: ASC and BLF count from 1 in the file and python-can gives ``0``; TRC's bus column and
+#: MDF4's ``BusChannel`` are given as written (``1``); candump names the interface
+#: (``can0``), a string
+_CHANNEL_BASE = {".asc": 1, ".blf": 1, ".trc": 0, ".mf4": 0}
+#: an option value naming a numbered channel: ``1``, ``CAN1`` (CANedge), ``ch1``, ``channel 1``
+_CHANNEL_NUMBER = re.compile(r"(?:can|ch|channel)?\s*(\d+)", re.IGNORECASE)
+#: the label of a frame without a channel (an MDF4 file without ``BusChannel``)
+NO_CHANNEL = "none"
+
+
+def channel_label(suffix: str, channel: object) -> str:
+    """A frame's bus channel as the log file names it (what a user reads in the file).
+
+    Parameters
+    ----------
+    suffix : str
+        The log's format (lower case, ``".asc"``).
+    channel : int, str or None
+        :attr:`can.Message.channel` as python-can's reader of that format gives it.
+
+    Returns
+    -------
+    str
+        ``"1"``, ``"2"``, ... for the numbered formats (ASC/BLF channel 1, TRC bus 1,
+        MDF4 ``BusChannel`` 1 = CANedge CAN1), the interface name for candump
+        (``"can0"``), :data:`NO_CHANNEL` when the frame carries none.
+    """
+    if channel is None:
+        return NO_CHANNEL
+    if isinstance(channel, (int, np.integer)) and not isinstance(channel, bool):
+        return str(int(channel) + _CHANNEL_BASE.get(suffix, 0))
+    return str(channel)
+
+
+def channel_wanted(suffix: str, text: str) -> str:
+    """The channel label (:func:`channel_label`) that an option value names in a log.
+
+    For the numbered formats ``1``, ``CAN1``, ``ch1`` and ``channel 1`` all name channel 1;
+    for candump the value is the interface name as written (``can1``).
+    """
+    text = text.strip()
+    if suffix == ".log":
+        return text
+    m = _CHANNEL_NUMBER.fullmatch(text)
+    return str(int(m.group(1))) if m else text
+
+
+def _channel_order(label: str) -> tuple[int, int, str]:
+    """Sort key of channel labels: numbers in numeric order, then names."""
+    return (0, int(label), "") if label.isdigit() else (1, 0, label)
+
+
+def describe_channels(counts: dict[str, int]) -> str:
+    """``"1 (1200 frames), 2 (1200 frames)"``, or ``"no frames"`` for a log without any."""
+    return ", ".join(f"{ch} ({n} frames)" for ch, n in counts.items()) or "no frames"
+
+
+#: frame keys (CAN ID | extended flag << 31) below ``_KEY_SPAN`` are counted per channel as
+#: one int64 ``code << _KEY_BITS | key``
+_KEY_BITS = 40
+_KEY_SPAN = 1 << _KEY_BITS
+
+
 @dataclass
 class ReadStats:
     """What a tolerant reader skipped.
@@ -102,12 +166,45 @@ class ReadStats:
         A binary file ended in the middle of a record.
     examples : list of str
         The first few problems, ``file:line: reason``.
+    channels : dict
+        Per bus channel of the log, as the file names it (:func:`channel_label`: ``"1"``,
+        ``"can0"``): frame key (CAN ID, bit 31 set for an extended one) -> frames read.
+        Filled by :func:`read_log` and :func:`read_log_arrays`.
+    other_channel : int
+        Frames of other channels than the one asked for, skipped (not yielded).
     """
 
     frames: int = 0
     malformed: int = 0
     truncated: bool = False
     examples: list[str] = field(default_factory=list)
+    channels: dict[str, dict[int, int]] = field(default_factory=dict)
+    other_channel: int = 0
+
+    def count_channels(self, codes: np.ndarray, names: Sequence[str], keys: np.ndarray) -> None:
+        """Count frames per channel and key (``codes`` index ``names``, one per frame)."""
+        if not codes.size:
+            return
+        keys = np.asarray(keys, dtype=np.int64)
+        pairs: Iterable[tuple[int, int]]
+        if int(keys.min()) >= 0 and int(keys.max()) < _KEY_SPAN:   # one sort of int64
+            uniq, counts = np.unique((codes.astype(np.int64) << _KEY_BITS) | keys,
+                                     return_counts=True)
+            pairs = ((u >> _KEY_BITS, u & (_KEY_SPAN - 1)) for u in uniq.tolist())
+        else:   # an identifier beyond 29 bits from an odd line: pairs sorted as rows
+            rows, counts = np.unique(np.stack([codes.astype(np.int64), keys], axis=1), axis=0,
+                                     return_counts=True)
+            pairs = ((int(c), int(k)) for c, k in rows.tolist())
+        for (code, k), c in zip(pairs, counts.tolist()):
+            per = self.channels.setdefault(names[code], {})
+            per[k] = per.get(k, 0) + c
+
+    def channel_frames(self, keys: Optional[Iterable[int]] = None) -> dict[str, int]:
+        """Frames per channel (``keys`` given: of those frame keys only), in channel order."""
+        want = None if keys is None else set(keys)
+        out = {ch: sum(n for k, n in per.items() if want is None or k in want)
+               for ch, per in self.channels.items()}
+        return dict(sorted(out.items(), key=lambda kv: _channel_order(kv[0])))
 
     def bad(self, where: str, reason: str) -> None:
         """Count one skipped line/record and keep the first five reasons."""
@@ -309,6 +406,15 @@ class FrameArrays:
                     long_data[i] = bytes(payloads[i])
         return cls(ts, ids, ext, ft, lens, data, long_data)
 
+    def select(self, rows: np.ndarray) -> "FrameArrays":
+        """The frames where the boolean mask ``rows`` is true, in order."""
+        out = FrameArrays(self.timestamp[rows], self.arbitration_id[rows], self.is_extended[rows],
+                          self.frame_type[rows], self.length[rows], self.data[rows])
+        if self.long_data:
+            new = np.cumsum(rows) - 1
+            out.long_data = {int(new[i]): v for i, v in self.long_data.items() if rows[i]}
+        return out
+
     def payload(self, i: int) -> bytes:
         """Payload of frame ``i``."""
         got = self.long_data.get(i)
@@ -453,8 +559,36 @@ def _parse_layout(rows: np.ndarray, layout: tuple[int, int, int, int, int, int]
     return good, ts, ids, data
 
 
+#: interfaces told apart by comparisons in one layout of a chunk, before a sort does it
+_FEW_NAMES = 4
+
+
+def _name_codes(iface: np.ndarray, code_of: Callable[[str], int]) -> np.ndarray | int:
+    """The code (``code_of(name)``) of each fixed-width interface name of ``iface`` (an
+    ``S<n>`` array): one code when all are equal, else a comparison per name while there are
+    few (a log of two or three buses), a sort beyond."""
+    first = iface[0]
+    same = iface == first
+    if bool(same.all()):
+        return code_of(bytes(first).decode("ascii", errors="replace"))
+    out = np.empty(iface.size, dtype=np.int64)
+    out[same] = code_of(bytes(first).decode("ascii", errors="replace"))
+    left = np.flatnonzero(~same)
+    for _ in range(_FEW_NAMES):
+        name = iface[left[0]]
+        same = iface[left] == name
+        out[left[same]] = code_of(bytes(name).decode("ascii", errors="replace"))
+        left = left[~same]
+        if not left.size:
+            return out
+    uniq, inv = np.unique(iface[left], return_inverse=True)
+    out[left] = np.array([code_of(bytes(u).decode("ascii", errors="replace"))
+                          for u in uniq.tolist()], dtype=np.int64)[inv.reshape(-1)]
+    return out
+
+
 def _candump_chunk(buf: bytes, path: Path, line0: int, stats: ReadStats
-                   ) -> tuple[FrameArrays, int]:
+                   ) -> tuple[FrameArrays, int, np.ndarray, list[str]]:
     """Parse whole candump -L lines (``buf`` ends at a line end or at the file end).
 
     Lines are grouped by length; a group's first line gives the byte positions of the
@@ -462,8 +596,9 @@ def _candump_chunk(buf: bytes, path: Path, line0: int, stats: ReadStats
     column operations (:func:`_parse_layout`). Lines that fit no layout -- malformed, FD,
     remote, odd spacing, control characters -- go through :func:`_candump_messages`, in file
     order, so bad lines are counted with the same reasons and line numbers as the message
-    reader. Returns the frames in file order and the number of lines (for numbering the
-    next chunk; a lone ``\\r`` is a line break of its own, as for a text reader).
+    reader. Returns the frames in file order, the number of lines (for numbering the
+    next chunk; a lone ``\\r`` is a line break of its own, as for a text reader), and each
+    frame's interface as a code (int64 per frame) into a list of interface names.
     """
     b = np.frombuffer(buf, dtype=np.uint8)
     nl = np.flatnonzero(b == 10)
@@ -494,6 +629,17 @@ def _candump_chunk(buf: bytes, path: Path, line0: int, stats: ReadStats
     ldata = np.zeros((nlines, 8), dtype=np.uint8)
     ldata64 = ldata.view(np.uint64).reshape(nlines)    # one 8-byte store per row
     fast = np.zeros(nlines, dtype=bool)
+    lcode = np.zeros(nlines, dtype=np.int64)
+    names: list[str] = []
+    name_code: dict[str, int] = {}
+
+    def code_of(name: str) -> int:
+        c = name_code.get(name)
+        if c is None:
+            c = name_code[name] = len(names)
+            names.append(name)
+        return c
+
     cand = (length >= 10) & (length <= _MAX_FAST_LINE) & ~slow
     cidx = np.flatnonzero(cand)
     if cidx.size:
@@ -523,6 +669,12 @@ def _candump_chunk(buf: bytes, path: Path, line0: int, stats: ReadStats
                 lidlen[at] = layout[4] - layout[3] - 1
                 lnb[at] = (layout[5] - layout[4] - 1) // 2
                 ldata64[at] = data.view(np.uint64).reshape(-1)
+                sp1, sp2 = layout[2], layout[3]
+                part = rows if whole else rows[left]
+                iface = np.ascontiguousarray(part[:, sp1 + 1:sp2]).view(f"S{sp2 - sp1 - 1}")
+                iface = iface.reshape(-1) if all_good else iface.reshape(-1)[good]
+                if iface.size:
+                    lcode[at] = _name_codes(iface, code_of)
                 left = left[~good]
     # every other non-empty line: the message parser, in file order, in one pass
     slow_msgs: list[can.Message] = []
@@ -563,16 +715,18 @@ def _candump_chunk(buf: bytes, path: Path, line0: int, stats: ReadStats
         ldata[ft] = 0
     if not slow_msgs:   # every frame from a regular line: in file order already
         if n_fast == nlines:
-            return FrameArrays(lt, lid, ext, ft, lnb, ldata), total_lines
-        return FrameArrays(lt[fast], lid[fast], ext[fast], ft[fast], lnb[fast],
-                           ldata[fast]), total_lines
+            return FrameArrays(lt, lid, ext, ft, lnb, ldata), total_lines, lcode, names
+        return (FrameArrays(lt[fast], lid[fast], ext[fast], ft[fast], lnb[fast], ldata[fast]),
+                total_lines, lcode[fast], names)
     where = np.array(slow_line, dtype=np.int64)
     np.add.at(per_line, where, 1)
     n = int(per_line.sum())
     offs = np.cumsum(per_line) - per_line
     out = FrameArrays(np.zeros(n), np.zeros(n, np.int64), np.zeros(n, bool), np.zeros(n, bool),
                       np.zeros(n, np.int64), np.zeros((n, 8), np.uint8))
+    codes = np.zeros(n, np.int64)
     at = offs[fast]
+    codes[at] = lcode[fast]
     out.timestamp[at] = lt[fast]
     out.arbitration_id[at] = lid[fast]
     out.is_extended[at] = ext[fast]
@@ -585,6 +739,7 @@ def _candump_chunk(buf: bytes, path: Path, line0: int, stats: ReadStats
     first = np.flatnonzero(np.r_[True, where[1:] != where[:-1]])   # a line's first frame
     nth = np.arange(where.size) - np.repeat(first, np.diff(np.r_[first, where.size]))
     at = offs[where] + nth
+    codes[at] = [code_of(str(m.channel)) for m in slow_msgs]
     out.timestamp[at] = extra.timestamp
     out.arbitration_id[at] = extra.arbitration_id
     out.is_extended[at] = extra.is_extended
@@ -593,7 +748,7 @@ def _candump_chunk(buf: bytes, path: Path, line0: int, stats: ReadStats
     out.data[at] = extra.data
     for j, payload in extra.long_data.items():
         out.long_data[int(at[j])] = payload
-    return out, total_lines
+    return out, total_lines, codes, names
 
 
 def read_candump_arrays(path: str | Path, stats: Optional[ReadStats] = None, *,
@@ -609,7 +764,7 @@ def read_candump_arrays(path: str | Path, stats: Optional[ReadStats] = None, *,
     path : str or Path
         A candump -L log.
     stats : ReadStats, optional
-        Filled with frames read and lines skipped.
+        Filled with frames read and lines skipped, and the frames per interface.
     chunk_bytes : int
         Bytes read per step (a chunk ends at a line end; 512 KiB is ~12 k frames). The
         parse's temporaries are about 7x the chunk, so this bounds the reader's memory
@@ -622,6 +777,18 @@ def read_candump_arrays(path: str | Path, stats: Optional[ReadStats] = None, *,
         The file cannot be opened.
     """
     p = Path(path)
+    st = stats if stats is not None else ReadStats()
+    return _select_arrays(p, ".log", _candump_labelled(p, st, chunk_bytes), st, None)
+
+
+#: a batch of frames with each frame's channel: ``(frames, codes, names)``, ``names[codes[i]]``
+#: the channel label (:func:`channel_label`) of frame ``i``
+LabelledFrames = tuple[FrameArrays, np.ndarray, list[str]]
+
+
+def _candump_labelled(p: Path, stats: Optional[ReadStats],
+                      chunk_bytes: int = 1 << 19) -> Iterator[LabelledFrames]:
+    """:func:`read_candump_arrays` with each frame's interface (see :data:`LabelledFrames`)."""
     st = stats if stats is not None else ReadStats()
     try:
         fh = p.open("rb")
@@ -643,27 +810,79 @@ def read_candump_arrays(path: str | Path, stats: Optional[ReadStats] = None, *,
                 buf, rest = rest, b""
                 if not buf:
                     return
-            fa, nlines = _candump_chunk(buf, p, line0, st)
+            fa, nlines, codes, names = _candump_chunk(buf, p, line0, st)
             line0 += nlines
             if len(fa):
-                yield fa
+                yield fa, codes, names
             if not blk:
                 return
 
 
 def read_log_arrays(path: str | Path, stats: Optional[ReadStats] = None, *,
-                    chunk: int = 65536) -> Iterator[FrameArrays]:
+                    chunk: int = 65536, channel: Optional[str] = None) -> Iterator[FrameArrays]:
     """The frames of a CAN log (format by suffix) as :class:`FrameArrays` batches.
 
     candump -L (``.log``) goes through :func:`read_candump_arrays`; the python-can formats
     are read as messages (:func:`read_log`) and converted ``chunk`` frames at a time.
-    Same checks, errors and :class:`ReadStats` as :func:`read_log`.
+    Same checks, errors, ``channel`` selection and :class:`ReadStats` as :func:`read_log`.
     """
     p, suf, st = _open_log(path, stats)
     batches = LOG_FORMATS[suf].read_arrays
     if batches is not None:
-        return batches(p, st)
-    return _message_batches(read_log(p, st), chunk)
+        return _select_arrays(p, suf, batches(p, st), st, channel)
+    return _message_batches(read_log(p, st, channel=channel), chunk)
+
+
+def _missing_channel(path: Path, channel: str, stats: ReadStats) -> UsageError:
+    """The one-line error of a channel option naming no channel of the log."""
+    return UsageError(f"{path}: --can-channel {channel}: no such channel in the log; "
+                      f"channels present: {describe_channels(stats.channel_frames())}")
+
+
+def _select_arrays(path: Path, suf: str, chunks: Iterator[LabelledFrames], st: ReadStats,
+                   channel: Optional[str]) -> Iterator[FrameArrays]:
+    """The frames of ``channel`` (all when ``None``) of labelled batches, every frame
+    counted per channel in ``st``; a channel absent from the log raises at the end."""
+    want = None if channel is None else channel_wanted(suf, channel)
+    for fa, codes, names in chunks:
+        keys = fa.arbitration_id | (fa.is_extended.astype(np.int64) << 31)
+        st.count_channels(codes, names, keys)
+        if want is not None:
+            keep = np.array([n == want for n in names], dtype=bool)[codes]
+            n_keep = int(np.count_nonzero(keep))
+            st.other_channel += len(fa) - n_keep
+            if n_keep < len(fa):
+                fa = fa.select(keep)
+        if len(fa):
+            yield fa
+    if want is not None and want not in st.channels:
+        raise _missing_channel(path, str(channel), st)
+
+
+def _select_messages(path: Path, suf: str, messages: Iterator[can.Message], st: ReadStats,
+                     channel: Optional[str]) -> Iterator[can.Message]:
+    """:func:`_select_arrays` for messages."""
+    want = None if channel is None else channel_wanted(suf, channel)
+    counts: dict[tuple[str, int], int] = {}
+    last: object = object()
+    label = ""
+    try:
+        for msg in messages:
+            ch = msg.channel
+            if ch is not last:
+                last, label = ch, channel_label(suf, ch)
+            key = (label, msg.arbitration_id | (bool(msg.is_extended_id) << 31))
+            counts[key] = counts.get(key, 0) + 1
+            if want is None or label == want:
+                yield msg
+            else:
+                st.other_channel += 1
+    finally:
+        for (lab, k), n in counts.items():
+            per = st.channels.setdefault(lab, {})
+            per[k] = per.get(k, 0) + n
+    if want is not None and want not in st.channels:
+        raise _missing_channel(path, str(channel), st)
 
 
 def _message_batches(messages: Iterable[can.Message], chunk: int) -> Iterator[FrameArrays]:
@@ -862,7 +1081,8 @@ def first_timestamp(path: str | Path) -> float | None:
     return None
 
 
-def read_log(path: str | Path, stats: Optional[ReadStats] = None) -> Iterator[can.Message]:
+def read_log(path: str | Path, stats: Optional[ReadStats] = None, *,
+             channel: Optional[str] = None) -> Iterator[can.Message]:
     """Iterate over the frames of a CAN log (format by suffix), skipping bad lines.
 
     Parameters
@@ -870,7 +1090,13 @@ def read_log(path: str | Path, stats: Optional[ReadStats] = None) -> Iterator[ca
     path : str or Path
         ``.log``, ``.asc``, ``.blf``, ``.trc`` or ``.mf4`` (any case).
     stats : ReadStats, optional
-        Filled with the number of frames read and lines skipped.
+        Filled with the number of frames read and lines skipped, and the frames per bus
+        channel (``stats.channels``).
+    channel : str, optional
+        Only the frames of this bus channel, named as the file names it (:func:`channel_wanted`:
+        ``"1"`` or ``"CAN1"`` for channel 1 of an ASC, BLF, TRC or MDF4 log, the interface
+        name such as ``"can1"`` for candump); the others are counted in
+        ``stats.other_channel``. Default: every frame.
 
     Yields
     ------
@@ -882,12 +1108,13 @@ def read_log(path: str | Path, stats: Optional[ReadStats] = None) -> Iterator[ca
     InputError
         Missing or unreadable file, or a file whose header cannot be read.
     UsageError
-        Unknown suffix.
+        Unknown suffix; at the end of the log, a ``channel`` that no frame has (naming the
+        channels present).
     """
     p, suf, st = _open_log(path, stats)
     fmt = LOG_FORMATS[suf]
     try:
-        return fmt.read(p, st)
+        return _select_messages(p, suf, fmt.read(p, st), st, channel)
     except InputError:
         raise
     except ImportError as exc:  # asammdf missing
@@ -980,8 +1207,8 @@ def _candump_writer(path: str) -> can.io.generic.MessageWriter:
     return can.CanutilsLogWriter(path, channel="can0")
 
 
-def _candump_batches(path: Path, stats: ReadStats) -> Iterator[FrameArrays]:
-    return read_candump_arrays(path, stats)
+def _candump_batches(path: Path, stats: ReadStats) -> Iterator[LabelledFrames]:
+    return _candump_labelled(path, stats)
 
 
 @dataclass(frozen=True)
@@ -998,14 +1225,15 @@ class LogFormat:
     write : callable
         ``write(path) -> python-can writer``.
     read_arrays : callable or None
-        ``read_arrays(path, stats) -> iterator of FrameArrays`` where the format has a batch
-        parser; ``None``: :func:`read_log_arrays` converts the messages of ``read``.
+        ``read_arrays(path, stats) -> iterator of LabelledFrames`` (frames with their bus
+        channels) where the format has a batch parser; ``None``: :func:`read_log_arrays`
+        converts the messages of ``read``.
     """
 
     name: str
     read: Callable[[Path, ReadStats], Iterator[can.Message]]
     write: Callable[[str], can.io.generic.MessageWriter]
-    read_arrays: Optional[Callable[[Path, ReadStats], Iterator[FrameArrays]]] = None
+    read_arrays: Optional[Callable[[Path, ReadStats], Iterator[LabelledFrames]]] = None
 
 
 #: suffix (lower case) -> format: the one table choosing readers and writers, as python-can's

@@ -3,9 +3,10 @@
 ``identify``, ``diagnose``, ``monitor`` and ``compare`` can call :func:`add_can_arguments`
 on their parser and :func:`can_inputs` on the parsed arguments::
 
-    add_can_arguments(parser)            # --map CHANNEL=MSG.SIGNAL..., --map-file PATH
+    add_can_arguments(parser)            # --map CHANNEL=MSG.SIGNAL..., --map-file PATH, --can-channel
     dbc_path, signal_map = can_inputs(args)
-    meas, frames = load_log_as_measurement(args.input, model, dbc_path, signal_map)
+    meas, frames = load_log_as_measurement(args.input, model, dbc_path, signal_map,
+                                           channel=args.can_channel)
 
 (``--dbc`` is part of the contract and stays defined by each command unless ``dbc=True``.)
 
@@ -52,7 +53,8 @@ def add_receive_arguments(parser: "argparse.ArgumentParser | argparse._ArgumentG
 
 
 def add_can_arguments(parser: argparse.ArgumentParser, dbc: bool = False) -> None:
-    """Add ``--map`` and ``--map-file`` (and ``--dbc`` if ``dbc``) to a parser."""
+    """Add ``--map``, ``--map-file`` and ``--can-channel`` (and ``--dbc`` if ``dbc``) to a
+    parser."""
     if dbc:
         parser.add_argument("--dbc", metavar="PATH",
                             help="DBC of the CAN data (default: suspid's dbc/suspension.dbc)")
@@ -64,6 +66,14 @@ def add_can_arguments(parser: argparse.ArgumentParser, dbc: bool = False) -> Non
                              "SuspidChannel attributes of suspid's DBC")
     parser.add_argument("--map-file", metavar="PATH", dest="signal_map_file",
                         help="signal map file (.toml or .json: a [map] table, optional dbc = ...)")
+    parser.add_argument("--can-channel", metavar="CH", default=None,
+                        help="decode only this bus channel of a CAN log that records several, "
+                             "as the file names it: 1, 2, ... for ASC/BLF channels, TRC buses "
+                             "and MDF4 BusChannel (CAN1 and ch1 also read as 1), the interface "
+                             "name (can0, can1) for candump; frames of the other channels are "
+                             "counted (frames.other_channel), not decoded. Default: every "
+                             "channel, with a warning when the sensor's messages are on more "
+                             "than one")
 
 
 def can_inputs(args: argparse.Namespace) -> tuple[Path | None, SignalMap | None]:

@@ -126,7 +126,8 @@ def load_measurement(args: argparse.Namespace,
                      model: SuspensionModel) -> tuple[Measurement, dict[str, object] | None]:
     """Read ``--input`` as a CSV or a CAN log; returns ``(Measurement, frame statistics or None)``."""
     dbc_path, signal_map = can_inputs(args)
-    return read_input(args.input, model, dbc_path, signal_map)
+    return read_input(args.input, model, dbc_path, signal_map,
+                      channel=getattr(args, "can_channel", None))
 
 
 def print_json(obj: Any) -> None:
