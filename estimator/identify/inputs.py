@@ -52,7 +52,8 @@ def read_input(path: str | Path, model: SuspensionModel,
         The user's signal map for a foreign DBC.
     channel : str, optional
         The bus channel of a multi-bus CAN log to decode (``--can-channel``; see
-        :func:`estimator.decode.log_input.load_log_as_measurement`); ignored for a CSV.
+        :func:`estimator.decode.log_input.load_log_as_measurement`); a CSV has none (a
+        warning says it was not used).
 
     Returns
     -------
@@ -71,6 +72,9 @@ def read_input(path: str | Path, model: SuspensionModel,
     frames: dict[str, Any] | None
     if p.suffix.lower() in CSV_SUFFIXES:
         meas, frames = read_measurement(p, model), None
+        if channel is not None:
+            meas.warnings.append(f"{p}: --can-channel {channel} not used: a measurement CSV "
+                                 "has no bus channels (the option selects one bus of a CAN log)")
     else:
         formats = importlib.import_module(CAN_FORMATS)
         if not formats.is_can_log(p):

@@ -194,3 +194,13 @@ def test_monitor_cli(two_bus, height_dbc, capsys):
     assert "the sensor's messages are on 2 bus channels" in cap.err
     summary = [json.loads(ln) for ln in cap.out.splitlines()][-1]
     assert summary["frames"]["accepted"] == 2 * n
+
+
+def test_a_csv_has_no_bus_channel_the_option_is_warned(q2_csv, capsys):
+    args = ["identify", "--model", "quarter2", "--input", str(q2_csv), "--fix", "m1=300",
+            "--fix", "m2=40", "--maxfev", "10", "--no-data-start", "--json"]
+    assert main(args + ["--can-channel", "2"]) == 0
+    warns = json.loads(capsys.readouterr().out)["warnings"]
+    assert any("--can-channel 2 not used" in w and str(q2_csv) in w for w in warns), warns
+    assert main(args) == 0
+    assert not any("--can-channel" in w for w in json.loads(capsys.readouterr().out)["warnings"])
