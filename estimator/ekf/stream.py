@@ -23,6 +23,19 @@ measurement noise
     sensitivity to the road (``EKFTuning.input_noise``): the road is an input measured with
     error on both sides (the sliding window fuses its displacement with the integral of its
     velocity above ``WindowConfig.road_fusion_hz``).
+gaps in the data
+    the sliding window fits every window from a fresh initial state (least squares) and
+    skips a window whose time base jumps or whose channels miss more than ``max_missing``,
+    so after a gap it starts over with the parameters carried on. The filter does the same
+    (:meth:`EKFWindowEstimator._restart`): where the time between two samples with the road
+    exceeds ``GAP_STEPS`` sample steps (a jump in the time base, windows without data, or a
+    hole in the road longer than ``BRIDGE_SAMPLES`` samples: the motion cannot be predicted
+    without its input), it does not bridge the gap with one step of the nominal length nor
+    with an interpolated road; the motion states restart from the measurements
+    after the gap (as at the first sample, with the initial motion covariance), and the
+    parameters are predicted over the real elapsed time (their random walk, ``q_param^2``
+    times the gap's length, added to their variance). Each such restart is reported in the
+    window's ``gaps`` and ``warnings`` and counted in the summary (``restarts``).
 consistency
     the normalised innovation squared (NIS) of every update is summed per window; its mean
     per degree of freedom is ``1`` for a filter whose model and noise fit the data. Each
@@ -49,6 +62,15 @@ from estimator.stream.wear_streams import DBC_RESOLUTION
 from estimator.stream.window import SlidingWindowIdentifier, noise_floor
 from suspid.models.base import FloatArray, SuspensionModel
 from suspid.simulate import uniform_step
+
+
+#: a step between two consecutive samples with the road longer than this many sample steps
+#: is a gap in the data: the filter restarts its motion states after it
+GAP_STEPS = 1.5
+#: holes in the road of up to this many samples between two samples with it are bridged by
+#: linear interpolation (4 ms at 500 Hz, under a twentieth of a wheel-hop period: the rule
+#: the decimation keeps for the road's first-order hold); longer ones are gaps
+BRIDGE_SAMPLES = 2
 
 
 class EKFWindowEstimator:
@@ -112,6 +134,14 @@ class EKFWindowEstimator:
         self._u_prev: FloatArray | None = None
         self._phase = 0
         self.held_note = ""
+        #: nominal sample step of the stream (s), set on the first window
+        self.h = math.nan
+        #: data time of the last sample with the road (s) and of the last filtered one
+        self._t_seen = -math.inf
+        self._t_step = -math.inf
+        #: motion restarts after gaps, and the data time they bridged (s)
+        self.restarts = 0
+        self.gap_s = 0.0
 
     def _road(self, data: Mapping[str, FloatArray], t: FloatArray) -> FloatArray:
         n = t.size
@@ -177,18 +207,77 @@ class EKFWindowEstimator:
                 if f"{r}_dot" not in data:  # the road's central difference (see _road)
                     sig_u[nr + i] = sig_u[i] / (math.sqrt(2.0) * h)
             self.ekf.set_input_noise(sig_u)
+        self.h = h
+        self.ekf.x[:self.ekf.nx, 0] = self._motion_state(data, 0)
+
+    def _motion_state(self, data: Mapping[str, FloatArray], k: int) -> FloatArray:
+        """Motion states ``[q, q']`` from the measurements at sample ``k`` of ``data``.
+
+        A measured coordinate gives its position, its ``_dot`` channel (or the central
+        difference of the next samples) its velocity; the others start at rest (m, m/s).
+        """
         nq = len(self.model.coords)
-        z = self.ekf.x[:, 0].copy()
+        z = np.zeros(2 * nq)
+        h = self.h
         for i, c in enumerate(self.model.coords):
             if c in data:
-                y = np.asarray(data[c], dtype=float)
-                if np.isfinite(y[0]):
+                y = np.asarray(data[c], dtype=float)[k:k + 3]
+                if y.size and np.isfinite(y[0]):
                     z[i] = y[0]
-                if y.size > 2 and np.all(np.isfinite(y[:3])):
+                if y.size > 2 and np.all(np.isfinite(y)):
                     z[nq + i] = (y[2] - y[0]) / (2 * h)
-            if f"{c}_dot" in data and np.isfinite(data[f"{c}_dot"][0]):
-                z[nq + i] = data[f"{c}_dot"][0]
-        self.ekf.x = z[:, None]
+            v = data.get(f"{c}_dot")
+            if v is not None and k < len(v) and np.isfinite(v[k]):
+                z[nq + i] = float(v[k])
+        return z
+
+    def _usable(self, data: Mapping[str, FloatArray], n: int) -> np.ndarray:
+        """Which of ``n`` samples the filter steps to: those with every road channel, and
+        holes of at most ``BRIDGE_SAMPLES`` samples between two of them (their road
+        interpolated linearly, :meth:`_road`). A longer hole, or one at either end of the
+        samples, is left out: the next sample after it restarts the motion (:meth:`_restart`).
+        """
+        ok = np.ones(n, dtype=bool)
+        for r in self.model.roads:
+            if r in data:
+                ok &= np.isfinite(data[r])
+        if ok.all():
+            return ok
+        out = ok.copy()
+        miss = np.flatnonzero(~ok)
+        starts = miss[np.r_[True, np.diff(miss) > 1]]
+        ends = miss[np.r_[np.diff(miss) > 1, True]] + 1
+        for a, b in zip(starts.tolist(), ends.tolist()):
+            if a > 0 and b < n and b - a <= BRIDGE_SAMPLES:
+                out[a:b] = True
+        return out
+
+    def _restart(self, data: Mapping[str, FloatArray], k: int, t_k: float) -> str:
+        """Start the motion over at sample ``k`` (time ``t_k``, s) after a gap in the data.
+
+        The motion states come from the measurements at ``k`` (:meth:`_motion_state`) with
+        the initial motion covariance and no correlation with the parameters; the parameters
+        keep their estimate and covariance, their random walk predicted over the real time
+        elapsed since the last filtered sample. Returns the warning that reports it.
+        """
+        ekf = self._filter()
+        nx = ekf.nx
+        tu = self.tuning
+        elapsed = t_k - self._t_step
+        ekf.x[:nx, 0] = self._motion_state(data, k)
+        P = ekf.P.copy()
+        P[:nx, :] = 0.0
+        P[:, :nx] = 0.0
+        nq = ekf.nq
+        P[:nx, :nx] = np.diag([tu.p0_pos ** 2] * nq + [tu.p0_vel ** 2] * nq)
+        P[nx:, nx:] += np.eye(P.shape[0] - nx) * tu.q_param ** 2 * max(elapsed, 0.0)
+        ekf.P = P
+        gap = t_k - self._t_seen
+        self.restarts += 1
+        self.gap_s += gap
+        return (f"gap in the data: no sample with the road from t={self._t_seen:.4f} s to "
+                f"t={t_k:.4f} s ({gap:.4g} s); the EKF's motion state restarted from the "
+                f"measurements after it, its parameters predicted over the {elapsed:.4g} s elapsed")
 
     def _filter(self) -> AugmentedEKF:
         if self.ekf is None:
@@ -202,21 +291,35 @@ class EKFWindowEstimator:
         if self.ekf is None:
             self._start(t, data)
         tn = t[new]
+        gaps: list[str] = []
         if tn.size:
             U = self._road(data, t)[new]
             Y = np.column_stack([np.asarray(data[c], dtype=float)[new] if c in data
                                  else np.full(tn.size, np.nan) for c in self.channels])
+            dnew = {c: np.asarray(v, dtype=float)[new] for c, v in data.items()}
+            usable = self._usable(dnew, tn.size)
             ekf = self._filter()
             step = ekf.step
+            limit = GAP_STEPS * self.h
             for k in range(tn.size):
-                self._phase = (self._phase + 1) % self.decimate
-                if self._phase != 0 and self._u_prev is not None:
+                if not usable[k]:      # no input: nothing to predict the motion with
                     continue
-                if self._u_prev is None:
+                tk = float(tn[k])
+                gap = self._u_prev is not None and tk - self._t_seen > limit
+                if gap:
+                    gaps.append(self._restart(dnew, k, tk))
+                self._t_seen = tk
+                if self._u_prev is None or gap:   # the anchor of the following steps
                     self._u_prev = U[k]
+                    self._t_step = tk
+                    self._phase = 0
+                    continue
+                self._phase = (self._phase + 1) % self.decimate
+                if self._phase != 0:
                     continue
                 step(Y[k], self._u_prev, U[k])
                 self._u_prev = U[k]
+                self._t_step = tk
                 self.samples += 1
             self.t_last = float(tn[-1])
         cpu = time.process_time() - c0
@@ -244,9 +347,12 @@ class EKFWindowEstimator:
                              "longer fits the data and its stderr is not to be trusted")
         if self.held_note and self.samples == 0:
             warns.append(self.held_note)
+        warns.extend(gaps)
         info: dict[str, Any] = {"samples": self.samples, "cpu_ms": 1e3 * cpu,
                                 "augmented": list(self.augmented),
                                 "nis": nis, "nis_band": [lo, hi], "warnings": warns}
+        if gaps:
+            info["gaps"] = len(gaps)
         if self.held:
             info["held"] = dict(self.held)
         if self.start_from:
@@ -261,7 +367,8 @@ class EKFWindowEstimator:
                 "cpu_us_per_sample": 1e6 * self.cpu / self.samples if self.samples else None,
                 "augmented": list(self.augmented), "held": dict(self.held),
                 "nis": (ekf.nis_sum / ekf.nis_dof) if ekf is not None and ekf.nis_dof else None,
-                "nis_windows_inconsistent": self.nis_windows_out}
+                "nis_windows_inconsistent": self.nis_windows_out,
+                "restarts": self.restarts, "gap_s": self.gap_s}
 
 
 #: parameter kinds the augmented EKF can carry in its state (affine in the model's matrices)

@@ -1079,22 +1079,58 @@ def noise_floor_ratio(problem: OutputErrorProblem, p: Mapping[str, float]) -> fl
     1 (within a few ``sqrt(2 / N)``) for a fit at the noise floor, and above it by the
     misfit's share of the residual otherwise. ``inf`` where it cannot be evaluated.
     """
+    parts = noise_floor_parts(problem, p)
+    if parts is None:
+        return math.inf
+    num = sum(a for a, _ in parts.values())
+    den = sum(b for _, b in parts.values())
+    if not (den > 0 and math.isfinite(num)):
+        return math.inf
+    return num / den
+
+
+def noise_floor_ratios(problem: OutputErrorProblem, p: Mapping[str, float]) -> dict[str, float]:
+    """:func:`noise_floor_ratio` of every fitted channel on its own (channel -> ratio).
+
+    ``inf`` for a channel where it cannot be evaluated; empty when the prediction fails.
+    """
+    parts = noise_floor_parts(problem, p)
+    return {} if parts is None else ratios_of_parts(parts)
+
+
+def ratios_of_parts(parts: Mapping[str, tuple[float, float]]) -> dict[str, float]:
+    """Channel -> ratio from :func:`noise_floor_parts` (``inf`` where it cannot be formed)."""
+    return {c: (a / b if b > 0 and math.isfinite(a) else math.inf) for c, (a, b) in parts.items()}
+
+
+def noise_floor_parts(problem: OutputErrorProblem, p: Mapping[str, float]
+                      ) -> dict[str, tuple[float, float]] | None:
+    """Per fitted channel: the residual's sum of squares and what white noise would give.
+
+    The second is ``sum(diff(r)^2) / 2`` scaled to the residual's length (same units
+    squared as the channel); channels with fewer than 3 finite residuals are left out.
+    ``None`` when the prediction fails.
+    """
     try:
         r = problem.predict(p).residual
     except (np.linalg.LinAlgError, ValueError, FloatingPointError):
-        return math.inf
-    num = den = 0.0
-    for j in range(r.shape[1]):
+        return None
+    return residual_noise_floor_parts(r, problem.channels)
+
+
+def residual_noise_floor_parts(r: FloatArray, channels: Sequence[str]
+                               ) -> dict[str, tuple[float, float]]:
+    """:func:`noise_floor_parts` of a given residual ``r`` (samples x channels, NaN where
+    missing; ``channels`` names its columns)."""
+    out: dict[str, tuple[float, float]] = {}
+    for j, c in enumerate(channels):
         rj = r[:, j]
         rj = rj[np.isfinite(rj)]
         if rj.size < 3:
             continue
-        num += float(rj @ rj)
         d = np.diff(rj)
-        den += float(d @ d) / 2.0 * rj.size / d.size
-    if not (den > 0 and math.isfinite(num)):
-        return math.inf
-    return num / den
+        out[c] = (float(rj @ rj), float(d @ d) / 2.0 * rj.size / d.size)
+    return out
 
 
 def _exact(problem: OutputErrorProblem, res: IdentResult) -> bool:

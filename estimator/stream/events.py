@@ -76,6 +76,35 @@ class Skip:
 
 
 @dataclass
+class Notice:
+    """A warning about the run as a whole, said once (e.g. the fits persistently miss).
+
+    Attributes
+    ----------
+    t : float
+        Data time (s) of the window that decided it.
+    kind : str
+        What it is about (``"misfit"``).
+    message : str
+        One plain sentence or two: what was seen, the likely causes, what to do.
+    fields : dict
+        The numbers behind it, as JSON-ready values.
+    """
+
+    t: float
+    kind: str
+    message: str
+    fields: dict[str, Any] = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        """The ``warning`` JSON line."""
+        out: dict[str, Any] = {"type": "warning", "t": self.t, "kind": self.kind}
+        out.update(self.fields)
+        out["message"] = self.message
+        return out
+
+
+@dataclass
 class Summary:
     """The closing line: counts, CPU and wall time, frames, alerts."""
 
@@ -86,4 +115,4 @@ class Summary:
         return dict({"type": "summary"}, **self.fields)
 
 
-Event = Union[Estimate, Skip, AlertEvent, ForecastEvent, Summary]
+Event = Union[Estimate, Skip, Notice, AlertEvent, ForecastEvent, Summary]

@@ -22,7 +22,8 @@ from estimator.alerts import AlertEngine, ForecastEngine
 from estimator.identify import Parameters
 from estimator.inspection import inspect, quarter_car_problem
 from estimator.stream.config import WindowConfig
-from estimator.stream.events import Estimate, Skip, Summary
+from estimator.stream.events import Estimate, Notice, Skip, Summary
+from estimator.stream.misfit import MisfitWatch
 from estimator.stream.tracker import TrendTracker
 from estimator.stream.window import SlidingWindowIdentifier
 from suspid.models.base import FloatArray, SuspensionModel
@@ -38,11 +39,14 @@ class StepResult:
         The window's typed event.
     values, stderr : dict or None
         Parameter values and standard errors for the tracker (``None`` when skipped).
+    notices : list of Notice
+        Warnings about the run that this window decided (emitted after the event).
     """
 
     event: Estimate | Skip
     values: dict[str, float] | None = None
     stderr: dict[str, float] | None = None
+    notices: list[Notice] = field(default_factory=list)
 
     @property
     def line(self) -> dict[str, Any]:
@@ -127,6 +131,9 @@ class NMWindowEstimator:
         self.lags = {k: 0.0 for k in config.drift}
         self.overlap = max(1.0, config.window_s / config.step_s)
         self.inspection = inspection and quarter_car_problem(model) is None
+        #: misfit windows (their fit far above the noise floor) and the one warning
+        self.misfit = MisfitWatch({k: float(params[k].value) for k in params
+                                   if k not in params.free})
 
     def process(self, t: FloatArray, data: Mapping[str, FloatArray]) -> StepResult:
         data, warns, reason = fill_road_gaps(self.model, data, t, self.config.max_missing)
@@ -147,15 +154,18 @@ class NMWindowEstimator:
             except (np.linalg.LinAlgError, ValueError) as exc:
                 info["inspection"] = None
                 info["warnings"].append(f"virtual damper test failed: {exc}")
+        is_misfit, notice = self.misfit.update(res.t, res.noise_floor_ratio)
+        info["misfit"] = is_misfit
         finite = {k: v for k, v in res.stderr.items() if math.isfinite(v)}
         return StepResult(Estimate(res.t, res.t_start, self.name, dict(res.params),
                                    dict(res.stderr), info=info),
-                          dict(res.params), finite if res.identifiable else {})
+                          dict(res.params), finite if res.identifiable else {},
+                          [notice] if notice is not None else [])
 
     def summary(self) -> dict[str, Any]:
         i = self.ident
         return {"windows": i.n_windows, "skipped": i.n_skipped, "nfev": i.total_nfev,
-                "cpu_s": i.total_cpu}
+                "cpu_s": i.total_cpu, "misfit_windows": self.misfit.count}
 
 
 @dataclass
@@ -217,6 +227,9 @@ class StreamMonitor:
                 ev.track = tracked
         self.emit(ev)
         self.lines += 1
+        for n in res.notices:
+            self.emit(n)
+            self.lines += 1
         if isinstance(ev, Estimate) and res.values is not None and res.stderr:
             if self.alerts is not None:
                 if getattr(self.estimator, "own_track", False):

@@ -68,7 +68,8 @@ import scipy
 
 from estimator.identify import Parameters, minimize_log
 from estimator.identify.profile import SIGMAS
-from estimator.identify.start import EXACT_FIT, cold_start, twin_of
+from estimator.identify.start import (EXACT_FIT, cold_start, noise_floor_ratios, ratios_of_parts,
+                                      residual_noise_floor_parts, twin_of)
 from estimator.stream.config import WindowConfig
 from estimator.stream.windowproblem import StateSpaceMap, WindowProblem
 from suspid.errors import UsageError
@@ -105,6 +106,10 @@ class WindowResult:
         Process CPU time spent on the window (s).
     excitation : dict
         ``deflection_rms`` (m), ``noise`` (m), ``snr``, ``missing`` (fraction).
+    noise_floor_ratio : dict
+        Per fitted channel, the window fit's residual over what white noise alone would
+        leave (:func:`~estimator.identify.start.noise_floor_ratios`, dimensionless; about 1
+        at the noise floor, far above it when the model or a fixed value is wrong).
     warnings : list of str
     reason : str
     """
@@ -123,6 +128,7 @@ class WindowResult:
     rms_residual: dict[str, float] = field(default_factory=dict)
     cpu_s: float = 0.0
     excitation: dict[str, float] = field(default_factory=dict)
+    noise_floor_ratio: dict[str, float] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     reason: str = ""
 
@@ -136,7 +142,8 @@ class WindowResult:
                 "nfev": self.nfev, "budget": self.budget, "converged": self.converged,
                 "identifiable": self.identifiable, "cost": self.cost,
                 "rms_residual": self.rms_residual, "cpu_ms": 1e3 * self.cpu_s,
-                "excitation": self.excitation, "warnings": self.warnings}
+                "excitation": self.excitation, "noise_floor_ratio": self.noise_floor_ratio,
+                "warnings": self.warnings}
 
 
 def _finite(y: FloatArray) -> FloatArray:
@@ -545,7 +552,15 @@ class SlidingWindowIdentifier:
             out.params[k] = pk
             out.stderr_fit[k] = se
             out.stderr[k] = float(math.hypot(se, cfg.sigma_floor * pk))
+        self._drift_ratios(prob, R, out)
         return True
+
+    @staticmethod
+    def _drift_ratios(prob: WindowProblem, R: FloatArray, out: WindowResult) -> None:
+        """The noise-floor ratios of the drifting fit's residual ``R`` (channels x samples):
+        the fit the window reports; a constant fit to a drifting damper leaves the drift."""
+        out.noise_floor_ratio = ratios_of_parts(
+            residual_noise_floor_parts(np.asarray(R, dtype=float).T, prob.channels))
 
     def _drift_fit(self, prob: WindowProblem, t_end: float, width: float,
                    p_const: Mapping[str, float], drift: list[str], out: WindowResult) -> None:
@@ -657,6 +672,7 @@ class SlidingWindowIdentifier:
             out.params[k] = p[k]
             out.stderr_fit[k] = se[k]
             out.stderr[k] = float(math.hypot(se[k], cfg.sigma_floor * p[k]))
+        self._drift_ratios(prob, R, out)
 
     def _twin_choice(self, prob: WindowProblem, params: Parameters, p_hat: dict[str, float]
                      ) -> tuple[dict[str, float], str | None]:
@@ -755,6 +771,9 @@ class SlidingWindowIdentifier:
         out.identifiable = bool(res.identifiable)
         out.cost = res.cost
         out.rms_residual = res.rms_residual
+        # the constant fit's residual against white noise (one cached evaluation; a drift
+        # fit below replaces it with its own)
+        out.noise_floor_ratio = noise_floor_ratios(prob, res.params)
         out.warnings = [w for w in res.warnings if "evaluation budget" not in w]
         if twin_note is not None:
             out.warnings.append(twin_note)

@@ -165,6 +165,8 @@ def _text(d: dict[str, Any]) -> str:
         return f"t={d['t']:.2f}s FORECAST: {d['message']}"
     if typ == "forecast_withdrawn":
         return f"t={d['t']:.2f}s FORECAST WITHDRAWN: {d['message']}"
+    if typ == "warning":
+        return f"t={d['t']:.2f}s WARNING: {d['message']}"
     return " ".join(f"{k}={v}" for k, v in d.items())
 
 
@@ -177,9 +179,12 @@ def _drift_names(arg: str | None) -> tuple[str, ...] | None:
 
 
 def _emitter(jsonl: bool) -> Callable[[Any], None]:
-    """The sink: JSON lines, or one readable line per event."""
+    """The sink: JSON lines, or one readable line per event; a ``warning`` also on stderr."""
     def emit(ev: Any) -> None:
         d = ev.to_json()
+        if d.get("type") == "warning":
+            sys.stderr.write(f"warning: t={d['t']:.2f} s: {d['message']}\n")
+            sys.stderr.flush()
         if jsonl:
             print_json(d)
         else:
