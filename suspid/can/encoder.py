@@ -1,6 +1,8 @@
 """Measurement CSV -> the CAN log the sensor node would have sent (``suspid encode``).
 
-Per CSV row ``i`` (sample tick ``i``), stamped with the row's ``t`` (+ ``t0``): one
+Per CSV row ``i`` (at sample tick ``round((t_i - t_0) / period)``, the period the median
+step: the node's clock counts through a gap of missing rows, as a real node's does while
+its frames are lost), stamped with the row's ``t`` (+ ``t0``): one
 ``SN_Sync`` frame, then the sensor frames of the model's message set that carry any of
 the CSV's columns (channels absent from the CSV or empty cells are sent with their
 ``Valid`` bit cleared), and every ``round(fs / 10)`` rows an ``SN_Status`` frame -- the
@@ -80,12 +82,21 @@ def measurement_frames(meas: Measurement, model_name: str, db: Database, t0: flo
     status_counter = 0
     sensor_set = get_model(model_name).sensor_set
     rate = 1.0 / period if period > 0 else 0.0
+    # the sensor clock's tick of every row: through a gap of missing rows it counts on
+    # (never twice the same tick, should a row's jitter exceed half a step)
+    ticks = np.zeros(n, dtype=np.int64)
+    if n > 1 and period > 0:
+        ticks = np.rint((t - t[0]) / period).astype(np.int64)
+        for i in range(1, n):
+            if ticks[i] <= ticks[i - 1]:
+                ticks[i] = ticks[i - 1] + 1
     for i in range(n):
         ts = float(t[i]) + t0
-        fid, data = enc.sync_frame(i, period)
+        tick = int(ticks[i])
+        fid, data = enc.sync_frame(tick, period)
         yield make_message(fid, data, ts)
         values = {c: float(a[i]) for c, a in zip(names, arrays)}
-        for fid, data in enc.sample_frames(i, values):
+        for fid, data in enc.sample_frames(tick, values):
             yield make_message(fid, data, ts)
         res.frames += 1 + len(enc.plans)
         if status_every and i % status_every == 0:

@@ -55,6 +55,22 @@ def test_t0_shifts_times_and_model_inference(q2_csv, tmp_path):
     np.testing.assert_array_equal(tick.t, ref.t)
 
 
+def test_a_gap_in_the_csv_is_a_gap_on_the_sensor_clock(q2_csv, tmp_path):
+    """Rows missing from the CSV: the node's tick counts through them (frames lost), so the
+    log read back on the sensor clock has the gap where the CSV has it, not closed up."""
+    lines = q2_csv.read_text().splitlines()
+    gap = tmp_path / "gap.csv"
+    gap.write_text("\n".join(lines[:101] + lines[201:]) + "\n")    # samples 100..199 gone
+    out = tmp_path / "gap.log"
+    assert main(["encode", "--input", str(gap), "--out", str(out)]) == 0
+    ref = read_measurement(gap, get_model("quarter2"))
+    meas, stats = load_log_as_measurement(out, "quarter2")
+    assert stats["time_base"] == "tick"
+    ok = np.isfinite(meas.measured["x1"])
+    np.testing.assert_allclose(meas.t[ok], ref.t, rtol=0, atol=1e-12)
+    assert int(np.sum(~ok)) == 100        # the gap's cells, empty
+
+
 def test_missing_channels_stay_missing(tmp_path):
     csv = tmp_path / "q1.csv"
     csv.write_text("t,x,y\n0,0.01,0\n0.002,0.02,0.001\n0.004,,0.002\n0.006,0.04,0.003\n")
