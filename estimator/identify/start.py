@@ -57,6 +57,12 @@ NONLIN_GRID = np.exp(np.linspace(math.log(0.05), math.log(20.0), 21))
 EXACT_COST = 1e-7
 #: floor of an estimate relative to the geometric mean of the others of its kind
 FLOOR = 0.02
+#: relative residual of the equation-error fit above which, when the equation weights at the
+#: documented defaults of the free masses differ from those at the start values by more than
+#: ``REWEIGHT_FACTOR`` in some equation, the fit is solved with those weights as well (start
+#: values decades off, e.g. a free mass given at 1e-6x its value)
+REWEIGHT_REL = 0.5
+REWEIGHT_FACTOR = 30.0
 #: smallest relative singular value of the regression accepted as "determined"
 RANK_TOL = 1e-9
 #: the noise-compensated fit (:func:`_ratio_fit`) stays within ``exp(RATIO_SPAN)`` of its
@@ -483,6 +489,17 @@ def _split_linear(model: SuspensionModel, base: Mapping[str, float], free: list[
     return lin, [k for k in free if k not in lin]
 
 
+def _equation_weights(reg: "_Regression", model: SuspensionModel, p: Mapping[str, float]
+                      ) -> FloatArray:
+    """Weight of each equation of motion in :func:`_solve_linear`: one over the norm of its
+    mass term (of its whole filtered coefficient row where it has none) at the values ``p``."""
+    mats = model.matrices(p)
+    mk = reg.norms(reg.coef(mats))
+    mass_term = reg.norms(reg.coef((mats[0],) + tuple(np.zeros_like(a) for a in mats[1:])))
+    scale = np.where(mass_term > 0, mass_term, mk)
+    return 1.0 / np.where(scale > 0, scale, 1.0)
+
+
 def _solve_linear(reg: _Regression, model: SuspensionModel, p: Mapping[str, float],
                   lin: list[str], wts: FloatArray) -> tuple[FloatArray, float, float]:
     """Linear least squares for ``lin`` at the other values of ``p`` (normal equations).
@@ -793,11 +810,7 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
         if not np.any(reg.Q):
             return StartEstimate(reason="the record holds no motion")
         # equation weights: the known (mass) term of each equation at the start values
-        mats = model.matrices(base)
-        mk = reg.norms(reg.coef(mats))
-        mass_term = reg.norms(reg.coef((mats[0],) + tuple(np.zeros_like(a) for a in mats[1:])))
-        scale = np.where(mass_term > 0, mass_term, mk)
-        wts = 1.0 / np.where(scale > 0, scale, 1.0)
+        wts = _equation_weights(reg, model, base)
 
         def solve_at(eta: FloatArray, fc: float = fc, reg: _Regression = reg,
                      wts: FloatArray = wts) -> tuple[dict[str, float], float, float]:
@@ -831,6 +844,20 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
             p, rel, sv = solve_at(np.exp(best_u))
         else:
             p, rel, sv = solve_at(np.zeros(0))
+        if rel > REWEIGHT_REL:
+            # start values decades off the record's (an absurd --init of a free mass) weigh
+            # one equation so far above the others that the one holding the known scale is
+            # ignored, and the estimate shrinks with them: weigh at the documented defaults
+            # as well and keep the estimate that explains the record better
+            alt = _equation_weights(reg, model, {**base, **{
+                k: model.spec(k).default for k in free if model.spec(k).kind in ("mass", "inertia")}})
+            if np.all(np.isfinite(alt)) and np.any(
+                    np.abs(np.log(alt / wts)) > math.log(REWEIGHT_FACTOR)):
+                eta = np.exp(last_u) if nonlin and last_u is not None else np.zeros(len(nonlin))
+                p_alt, rel_alt, sv_alt = solve_at(eta, wts=alt)
+                if (problem.normalized_ss({**base, **{k: float(p_alt[k]) for k in free}})
+                        < problem.normalized_ss({**base, **{k: float(p[k]) for k in free}})):
+                    p, rel, sv, wts = p_alt, rel_alt, sv_alt, alt
         if sv < RANK_TOL:
             reasons.append(f"{fc:.3g} Hz: too little excitation to separate "
                            f"{', '.join(lin)} (relative singular value {sv:.1e})")

@@ -98,6 +98,31 @@ def _parse_float(text: str, path: str, line: int, col: str) -> float:
     return v
 
 
+def _integrated(t: FloatArray, r: FloatArray, r_dot: FloatArray) -> FloatArray:
+    """``r`` (m) with each run of missing samples filled by integrating ``r_dot`` (m/s) by the
+    trapezoid rule from the sample before it, the drift to the sample after it (integration
+    and sensor error) spread linearly over the run; a run at an end is integrated from the
+    other side."""
+    out = r.copy()
+    gap = np.isnan(r)
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], gap.view(np.int8), [0]))))
+    for a, b in zip(edges[::2], edges[1::2]):  # missing samples a..b-1
+        lo, hi = a - 1, b  # valid neighbours (may be outside the record)
+        if lo >= 0:
+            seg = np.arange(lo, min(hi, r.size - 1) + 1)
+            steps = 0.5 * (r_dot[seg[1:]] + r_dot[seg[:-1]]) * np.diff(t[seg])
+            path = r[lo] + np.concatenate(([0.0], np.cumsum(steps)))
+            if hi < r.size:  # spread the mismatch at the far end, keep r[hi]
+                path += (r[hi] - path[-1]) * (t[seg] - t[lo]) / (t[hi] - t[lo])
+                path = path[:-1]
+            out[lo + 1:lo + path.size] = path[1:]
+        else:  # a run at the start: integrate backwards from the sample after it
+            seg = np.arange(0, hi + 1)
+            steps = 0.5 * (r_dot[seg[1:]] + r_dot[seg[:-1]]) * np.diff(t[seg])
+            out[:hi] = r[hi] - np.cumsum(steps[::-1])[::-1]
+    return out
+
+
 def read_measurement(path: str | Path, model: SuspensionModel, *,
                      require_measured: bool = True) -> Measurement:
     """Read a measurement CSV for ``model``.
@@ -208,13 +233,8 @@ def read_measurement(path: str | Path, model: SuspensionModel, *,
     for h, vals in cols.items():
         arr = np.frombuffer(vals, dtype=float).copy()
         if h in road_cols:
-            if np.isnan(arr).any():
-                ok = ~np.isnan(arr)
-                if ok.sum() < 2:
-                    raise InputError(f"{name}: road column {h!r} has fewer than 2 values")
-                arr = np.interp(t, t[ok], arr[ok])
-                warnings.append(f"{name}: road column {h!r}: {int((~ok).sum())} missing samples "
-                                "filled by linear interpolation")
+            if np.isnan(arr).any() and (~np.isnan(arr)).sum() < 2:
+                raise InputError(f"{name}: road column {h!r} has fewer than 2 values")
             road[h] = arr
         else:
             if np.isnan(arr).all():
@@ -224,6 +244,23 @@ def read_measurement(path: str | Path, model: SuspensionModel, *,
     for r in model.roads:
         if f"{r}_dot" in road and r not in road:
             raise InputError(f"{name}:1: road velocity column '{r}_dot' given without '{r}'")
+    raw = {k: v.copy() for k, v in road.items()}
+    for h, arr in raw.items():
+        gap = np.isnan(arr)
+        if not gap.any():
+            continue
+        other = raw.get(f"{h}_dot") if not h.endswith("_dot") else raw.get(h[:-4])
+        if other is not None and not np.isnan(other[gap]).any():
+            road[h] = (_integrated(t, arr, other) if not h.endswith("_dot")
+                       else np.where(gap, np.gradient(other, t), arr))
+            how = (f"integrated from {h}_dot" if not h.endswith("_dot")
+                   else f"differentiated from {h[:-4]}")
+        else:
+            ok = ~gap
+            road[h] = np.interp(t, t[ok], arr[ok])
+            how = "filled by linear interpolation (the road's shape there is not known: "
+            how += "the fit follows the guess; cut the record at the gap if it held excitation)"
+        warnings.append(f"{name}: road column {h!r}: {int(gap.sum())} missing samples {how}")
     if not measured and require_measured:
         units = "".join(f"; column {header[i]!r} is {col} in {unit!r}, expected "
                         f"{' or '.join(model.column_units(col))}" for i, (col, unit) in off_unit.items())
