@@ -5,7 +5,7 @@ import argparse
 import json
 import math
 import sys
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 
@@ -143,6 +143,53 @@ def print_json(obj: Any) -> None:
 
     sys.stdout.write(json.dumps(clean(obj)) + "\n")
     sys.stdout.flush()
+
+
+#: the lengths (m) a vehicle's or a test rig's geometry (axle distances from the centre of
+#: mass, track widths) can have; a value outside is a unit slip (1200 for 1.2 m, in mm).
+#: Masses, stiffnesses and damping rates get no such range: the seed's own designs go from
+#: a 10 kg body on a 50 N/m tyre to a passenger car's 200 kN/m
+LENGTH_RANGE_M = (0.01, 20.0)
+
+
+def implausible_values(model: SuspensionModel, values: Mapping[str, float],
+                       option: str) -> list[str]:
+    """Warnings for lengths outside ``LENGTH_RANGE_M``.
+
+    Parameters
+    ----------
+    model : SuspensionModel
+    values : mapping
+        Parameter name -> value (SI), as parsed from ``option``.
+    option : str
+        The option the values came from (``--fix``, ``--init``, ``--nominal``), named in
+        each warning.
+
+    Returns
+    -------
+    list of str
+        One sentence per implausible value: the value, the range and the model's default.
+    """
+    lo, hi = LENGTH_RANGE_M
+    out: list[str] = []
+    for name, v in values.items():
+        spec = model.spec(name)
+        if spec.kind == "length" and v > 0 and not lo <= v <= hi:
+            out.append(f"{option} {name}={v:g} {spec.unit} ({spec.description}) is outside "
+                       f"{lo:g}..{hi:g} m, the lengths of vehicles and test rigs (default "
+                       f"{spec.default:g} m): a value in mm or cm? suspid takes SI units")
+    return out
+
+
+def assignment_warnings(args: argparse.Namespace, model: SuspensionModel) -> list[str]:
+    """:func:`implausible_values` of every parameter option ``args`` has (``--fix``,
+    ``--init``, ``--nominal``)."""
+    out: list[str] = []
+    for option in ("--fix", "--init", "--nominal"):
+        items = getattr(args, option[2:], None)
+        if items:
+            out += implausible_values(model, parse_assignments(items, option), option)
+    return out
 
 
 def params_from_args(args: argparse.Namespace, model: SuspensionModel) -> Parameters:

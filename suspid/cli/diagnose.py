@@ -7,7 +7,8 @@ import sys
 from estimator.diagnose import diagnose
 from estimator.diagnose.plots import plot_evidence
 from suspid.cli._args import FitHelp, add_fit_options, fit_inputs
-from suspid.cli._common import add_input_options, add_model_option, add_param_options, print_json
+from suspid.cli._common import (add_input_options, add_model_option, add_param_options,
+                                assignment_warnings, print_json)
 from suspid.cli.identify import parse_x0
 
 #: help of the identifier's options as diagnose words them (the baseline fit's settings)
@@ -60,6 +61,7 @@ def run(args: argparse.Namespace) -> int:
                    restarts=args.restarts, maxfev=args.maxfev, polish=args.polish,
                    multistart=args.multistart)
     out = res.to_json()
+    out["warnings"] = assignment_warnings(args, model) + list(out["warnings"])
     if frames is not None:
         out["frames"] = frames
     if args.plot:

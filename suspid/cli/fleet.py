@@ -11,7 +11,8 @@ from typing import Any
 from estimator.fleet import AlertRule, FleetConfig, IdentifySettings, ProgressBar, run_fleet
 from suspid.can.options import add_can_arguments, can_inputs
 from suspid.cli._args import FitHelp, add_fit_options, check_counts
-from suspid.cli._common import (add_model_option, add_param_options, parse_assignments,
+from suspid.cli._common import (add_model_option, add_param_options, assignment_warnings,
+                                parse_assignments,
                                 positive_int, print_json)
 from suspid.cli.identify import parse_x0
 from suspid.errors import UsageError
@@ -108,6 +109,8 @@ def run(args: argparse.Namespace) -> int:
     if args.model is not None:
         for k in nominal:
             get_model(args.model).spec(k)
+        for msg in assignment_warnings(args, get_model(args.model)):
+            sys.stderr.write(f"warning: {msg}\n")
     rule = AlertRule(nominal=nominal, drop=args.alert_drop,
                      z=float(NormalDist().inv_cdf(args.confidence)), min_count=args.alert_drives,
                      horizon_days=args.horizon)

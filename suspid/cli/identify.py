@@ -5,7 +5,8 @@ import argparse
 import sys
 from estimator.identify import OutputErrorProblem, fit, fit_from_starts
 from suspid.cli._common import (parse_state, positive_int, add_input_options, add_model_option, add_param_options,
-                                load_measurement, model_from_args, params_from_args, print_json)
+                                load_measurement, model_from_args, params_from_args, print_json,
+                                assignment_warnings)
 from suspid.errors import UsageError
 from suspid.models.base import FloatArray
 from suspid.plots import plot_comparison
@@ -69,6 +70,7 @@ def run(args: argparse.Namespace) -> int:
         data_start=args.data_start, keep_init=bool(args.init) or not args.data_start)
     if frames is not None:
         result.frames = frames
+    result.warnings[:0] = assignment_warnings(args, model)
     if args.plot:
         plot_comparison(model, meas, result, args.plot)
     if args.json:

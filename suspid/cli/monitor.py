@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
 
 from suspid.can.options import add_can_arguments, add_receive_arguments, can_inputs
-from suspid.cli._common import add_model_option, parse_assignments, print_json
+from suspid.cli._common import add_model_option, assignment_warnings, parse_assignments, print_json
 from suspid.errors import UsageError
 from suspid.models import get_model
 
@@ -251,6 +251,8 @@ def run(args: argparse.Namespace) -> int:
         ekf_decimate=args.ekf_decimate, accel_channel=args.accel_channel,
         oo_method=getattr(args, "oo_method", None) or "carma")
     warn(spec)
+    for msg in assignment_warnings(args, model):
+        sys.stderr.write(f"warning: {msg}\n")
     emit = _emitter(args.jsonl)
     summary = run_monitor(spec, source_from_args(args), emit, alert_file=args.alert_file)
     if not args.no_summary:

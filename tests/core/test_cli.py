@@ -8,8 +8,10 @@ from pathlib import Path
 
 import pytest
 
+from estimator.doe.design import experiments
 from suspid.cli import main
-from suspid.models import MODELS
+from suspid.cli._common import implausible_values
+from suspid.models import MODELS, get_model
 
 from ..conftest import TABLE1
 
@@ -237,3 +239,34 @@ def test_maxfev_help_matches_the_reported_nfev(tmp_path: Path, capsys: pytest.Ca
         main(["identify", "--help"])
     text = " ".join(capsys.readouterr().out.split())
     assert "each have their own, and nfev reports their sum" in text
+
+
+def test_a_length_in_another_unit_is_named(tmp_path: Path,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """``--fix a1=1200`` (mm for m) on the half car: the output names the value, the range
+    and the unit slip; the model's own geometry raises no such warning."""
+    csv = tmp_path / "h4.csv"
+    assert main(["simulate", "--model", "half4", "--scenario", "bump", "--duration", "1",
+                 "--fs", "200", "--out", str(csv)]) == 0
+    capsys.readouterr()
+    base = ["identify", "--model", "half4", "--input", str(csv), "--fix", "m=1200",
+            "--fix", "I=1500", "--fix", "m1=40", "--fix", "m2=40", "--fix", "a2=1.4",
+            "--maxfev", "20", "--no-data-start", "--json"]
+    assert main(base + ["--fix", "a1=1200"]) == 0
+    cap = capsys.readouterr()
+    warns = json.loads(cap.out)["warnings"]
+    assert warns[0].startswith("--fix a1=1200 m (") and "outside 0.01..20 m" in warns[0]
+    assert "mm" in warns[0] and "warning: --fix a1=1200 m" in cap.err
+    assert main(base + ["--fix", "a1=1.2"]) == 0
+    assert not any("outside" in w for w in json.loads(capsys.readouterr().out)["warnings"])
+
+
+def test_every_model_default_and_design_truth_is_plausible() -> None:
+    """No documented default nor any value of the seed's designs (L16/L27 levels) is called
+    implausible: the check names unit slips, not the vehicles the project studies."""
+    for name in MODELS:
+        model = get_model(name)
+        assert implausible_values(model, model.defaults(), "--fix") == [], name
+        if name in ("quarter1", "quarter2", "half4"):
+            for exp in experiments(model):
+                assert implausible_values(model, exp.truth, "--fix") == [], (name, exp)
