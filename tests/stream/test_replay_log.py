@@ -89,16 +89,23 @@ def test_batch_replay_cuts_the_same_windows(logs: dict[str, Path], name: str, ch
         assert sum(stats["rejected"].values()) > 0
 
 
-def test_a_gap_longer_than_a_window_is_skipped_not_fatal(logs, tmp_path) -> None:
-    """A dead link of 5 s (longer than the 3 s window) leaves windows without a decoded
-    sample: they are skipped and counted, the windows on both sides are cut as before, and
-    the replay does not stop with an error."""
+def _windows_over_a_dead_link(logs, tmp_path) -> tuple[CanWindowDriver,
+                                                     list[tuple[np.ndarray, dict[str, np.ndarray]]]]:
+    """The clean log with 6..11 s cut out, replayed through 3 s windows every 1.5 s."""
     holed = tmp_path / "long_hole.log"
     _with_hole(logs["clean"], holed, 6.0, 11.0)
     got: list[tuple[np.ndarray, dict[str, np.ndarray]]] = []
     lst = DecodeListener("quarter2", capacity=1 << 12)
     drv = CanWindowDriver(lst, 3.0, 1.5, lambda t, d: got.append((t.copy(), d)))
     replay_log(drv, holed)
+    return drv, got
+
+
+def test_a_gap_longer_than_a_window_is_skipped_not_fatal(logs, tmp_path) -> None:
+    """A dead link of 5 s (longer than the 3 s window) leaves windows without a decoded
+    sample: they are skipped and counted, the windows on both sides are cut as before, and
+    the replay does not stop with an error."""
+    drv, got = _windows_over_a_dead_link(logs, tmp_path)
     ends = [float(t[-1]) for t, _ in got]
     assert drv.empty_windows >= 1
     assert any(e < 6.0 for e in ends) and any(e > 14.0 for e in ends)
@@ -112,12 +119,7 @@ def test_windows_reaching_into_a_gap_keep_their_own_span(logs, tmp_path) -> None
     its own end time: window ends strictly increase (were: both windows that straddle the
     start of the gap were cut down to their data and reported at the same time, the last
     sample's, the second fitted on half a window with 0 % missing)."""
-    holed = tmp_path / "long_hole.log"
-    _with_hole(logs["clean"], holed, 6.0, 11.0)
-    got: list[tuple[np.ndarray, dict[str, np.ndarray]]] = []
-    lst = DecodeListener("quarter2", capacity=1 << 12)
-    drv = CanWindowDriver(lst, 3.0, 1.5, lambda t, d: got.append((t.copy(), d)))
-    replay_log(drv, holed)
+    _, got = _windows_over_a_dead_link(logs, tmp_path)
     ends = np.array([float(t[-1]) for t, _ in got])
     assert np.all(np.diff(ends) > 1.0)
     straddling = {round(float(t[-1]), 1): (t, d) for t, d in got
