@@ -185,6 +185,13 @@ class ReadStats:
         """Count frames per channel and key (``codes`` index ``names``, one per frame)."""
         if not codes.size:
             return
+        if len(names) == 1 or not np.any(codes != codes[0]):
+            # one channel (the usual log): the keys alone, in their own width
+            uniq, counts = np.unique(keys, return_counts=True)
+            per = self.channels.setdefault(names[int(codes[0])], {})
+            for k, c in zip(uniq.tolist(), counts.tolist()):
+                per[int(k)] = per.get(int(k), 0) + c
+            return
         keys = np.asarray(keys, dtype=np.int64)
         pairs: Iterable[tuple[int, int]]
         if int(keys.min()) >= 0 and int(keys.max()) < _KEY_SPAN:   # one sort of int64
@@ -571,7 +578,7 @@ def _name_codes(iface: np.ndarray, code_of: Callable[[str], int]) -> np.ndarray 
     same = iface == first
     if bool(same.all()):
         return code_of(bytes(first).decode("ascii", errors="replace"))
-    out = np.empty(iface.size, dtype=np.int64)
+    out = np.empty(iface.size, dtype=np.int32)
     out[same] = code_of(bytes(first).decode("ascii", errors="replace"))
     left = np.flatnonzero(~same)
     for _ in range(_FEW_NAMES):
@@ -583,7 +590,7 @@ def _name_codes(iface: np.ndarray, code_of: Callable[[str], int]) -> np.ndarray 
             return out
     uniq, inv = np.unique(iface[left], return_inverse=True)
     out[left] = np.array([code_of(bytes(u).decode("ascii", errors="replace"))
-                          for u in uniq.tolist()], dtype=np.int64)[inv.reshape(-1)]
+                          for u in uniq.tolist()], dtype=np.int32)[inv.reshape(-1)]
     return out
 
 
@@ -629,7 +636,7 @@ def _candump_chunk(buf: bytes, path: Path, line0: int, stats: ReadStats
     ldata = np.zeros((nlines, 8), dtype=np.uint8)
     ldata64 = ldata.view(np.uint64).reshape(nlines)    # one 8-byte store per row
     fast = np.zeros(nlines, dtype=bool)
-    lcode = np.zeros(nlines, dtype=np.int64)
+    lcode = np.zeros(nlines, dtype=np.int32)
     names: list[str] = []
     name_code: dict[str, int] = {}
 
@@ -724,7 +731,7 @@ def _candump_chunk(buf: bytes, path: Path, line0: int, stats: ReadStats
     offs = np.cumsum(per_line) - per_line
     out = FrameArrays(np.zeros(n), np.zeros(n, np.int64), np.zeros(n, bool), np.zeros(n, bool),
                       np.zeros(n, np.int64), np.zeros((n, 8), np.uint8))
-    codes = np.zeros(n, np.int64)
+    codes = np.zeros(n, np.int32)
     at = offs[fast]
     codes[at] = lcode[fast]
     out.timestamp[at] = lt[fast]
@@ -845,7 +852,8 @@ def _select_arrays(path: Path, suf: str, chunks: Iterator[LabelledFrames], st: R
     counted per channel in ``st``; a channel absent from the log raises at the end."""
     want = None if channel is None else channel_wanted(suf, channel)
     for fa, codes, names in chunks:
-        keys = fa.arbitration_id | (fa.is_extended.astype(np.int64) << 31)
+        keys = np.array(fa.arbitration_id, dtype=np.int64)    # CAN ID | extended << 31
+        keys[fa.is_extended] |= 1 << 31
         st.count_channels(codes, names, keys)
         if want is not None:
             keep = np.array([n == want for n in names], dtype=bool)[codes]
