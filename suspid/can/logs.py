@@ -185,21 +185,19 @@ class ReadStats:
         """Count frames per channel and key (``codes`` index ``names``, one per frame)."""
         if not codes.size:
             return
+        pairs: Iterable[tuple[int, int]]
         if len(names) == 1 or not np.any(codes != codes[0]):
             # one channel (the usual log): the keys alone, in their own width
             uniq, counts = np.unique(keys, return_counts=True)
-            per = self.channels.setdefault(names[int(codes[0])], {})
-            for k, c in zip(uniq.tolist(), counts.tolist()):
-                per[int(k)] = per.get(int(k), 0) + c
-            return
-        keys = np.asarray(keys, dtype=np.int64)
-        pairs: Iterable[tuple[int, int]]
-        if int(keys.min()) >= 0 and int(keys.max()) < _KEY_SPAN:   # one sort of int64
+            code0 = int(codes[0])
+            pairs = ((code0, int(k)) for k in uniq.tolist())
+        elif int(keys.min()) >= 0 and int(keys.max()) < _KEY_SPAN:   # one sort of int64
             uniq, counts = np.unique((codes.astype(np.int64) << _KEY_BITS) | keys,
                                      return_counts=True)
             pairs = ((u >> _KEY_BITS, u & (_KEY_SPAN - 1)) for u in uniq.tolist())
         else:   # an identifier beyond 29 bits from an odd line: pairs sorted as rows
-            rows, counts = np.unique(np.stack([codes.astype(np.int64), keys], axis=1), axis=0,
+            rows, counts = np.unique(np.stack([codes.astype(np.int64),
+                                               np.asarray(keys, dtype=np.int64)], axis=1), axis=0,
                                      return_counts=True)
             pairs = ((int(c), int(k)) for c, k in rows.tolist())
         for (code, k), c in zip(pairs, counts.tolist()):
