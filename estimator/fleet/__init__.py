@@ -7,10 +7,11 @@ from estimator.fleet.analysis import AlertRule, VehicleSummary, summarize_fleet
 from estimator.fleet.discover import DriveFile, find_drives
 from estimator.fleet.drive import IdentifySettings, identify_drive
 from estimator.fleet.history import History
-from estimator.fleet.runner import FleetConfig, FleetResult, ProgressBar, execute, run_fleet
+from estimator.fleet.runner import (FleetConfig, FleetResult, ProgressBar, available_cpus,
+                                    execute, local_workers, run_fleet)
 from estimator.fleet.trend import Forecast, Trend, forecast_crossing, robust_trend
 
 __all__ = ["AlertRule", "VehicleSummary", "summarize_fleet", "DriveFile", "find_drives",
            "IdentifySettings", "identify_drive", "History", "FleetConfig", "FleetResult",
-           "ProgressBar", "execute", "run_fleet", "Forecast", "Trend", "forecast_crossing",
+           "ProgressBar", "available_cpus", "local_workers", "execute", "run_fleet", "Forecast", "Trend", "forecast_crossing",
            "robust_trend"]

@@ -3,7 +3,7 @@
 Execution
     Each drive is one Dask task (:func:`estimator.fleet.drive.identify_drive`). By default a
     :class:`distributed.LocalCluster` of worker *processes* (one thread each; ``workers``
-    of them, default this machine's cores) is started for the run and closed after it; with
+    of them, default and at most the CPUs available to the process) is started for the run and closed after it; with
     ``scheduler="tcp://HOST:PORT"`` the tasks go to that existing cluster. The workers open
     the logs by the path the client found them at, so on a cluster of several machines the
     logs must be at the same path on every machine (a shared file system); see
@@ -33,6 +33,24 @@ from estimator.fleet.report import prepare_report_folder, write_report
 from suspid.errors import InputError, UsageError
 
 Progress = Callable[[int, int, int], None]
+
+
+def available_cpus() -> int:
+    """The CPUs this process may run on (its affinity mask where the system has one, as in a
+    container or under ``taskset``; else the machine's count)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return max(1, os.cpu_count() or 1)
+
+
+def local_workers(workers: int | None, drives: int) -> int:
+    """Local worker processes for ``drives`` drives: ``workers`` (default the available
+    CPUs), but no more than the available CPUs (each drive's identification is
+    single-threaded CPU work: more processes only share the cores and add memory) and no more
+    than the drives (each costs a process start and its memory)."""
+    cpus = available_cpus()
+    return max(1, min(cpus if workers is None else workers, cpus, drives))
 
 
 class ProgressBar:
@@ -177,8 +195,7 @@ def execute(jobs: list[tuple[str, str, str | None]], settings: IdentifySettings,
                 raise UsageError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler "
                                  f"({' '.join(str(exc).split())})") from None
         else:
-            # no more worker processes than drives: each costs a process start and its memory
-            n = min(workers if workers is not None else (os.cpu_count() or 1), total)
+            n = local_workers(workers, total)
             cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                    dashboard_address=None, silence_logs=logging.ERROR)
             client = Client(cluster)

@@ -8,7 +8,8 @@ from datetime import datetime, timezone
 from statistics import NormalDist
 from typing import Any
 
-from estimator.fleet import AlertRule, FleetConfig, IdentifySettings, ProgressBar, run_fleet
+from estimator.fleet import (AlertRule, FleetConfig, IdentifySettings, ProgressBar, available_cpus,
+                             run_fleet)
 from suspid.can.options import add_can_arguments, can_inputs
 from suspid.cli._args import FitHelp, add_fit_options, check_counts
 from suspid.cli._common import (add_model_option, add_param_options, assignment_warnings,
@@ -67,8 +68,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="run on this existing Dask cluster (the workers must read the logs at "
                         "the same paths); default: a local cluster")
     r.add_argument("--workers", type=int, default=None, metavar="N",
-                   help="local Dask worker processes (default: the CPU count; 0: no cluster, "
-                        "in this process)")
+                   help="local Dask worker processes (default and at most: the CPUs available; 0: "
+                        "no cluster, in this process)")
     r.add_argument("--db", metavar="PATH", default=None,
                    help="SQLite history of the drives, appended across runs (a log seen "
                         "again is one drive); without --input, report from it alone")
@@ -111,6 +112,10 @@ def run(args: argparse.Namespace) -> int:
             get_model(args.model).spec(k)
         for msg in assignment_warnings(args, get_model(args.model)):
             sys.stderr.write(f"warning: {msg}\n")
+    if args.workers is not None and args.scheduler is None and args.workers > available_cpus():
+        sys.stderr.write(f"warning: --workers {args.workers}: {available_cpus()} CPU(s) available; "
+                         f"using {available_cpus()} worker processes (each drive is "
+                         "single-threaded: more would only share the cores)\n")
     rule = AlertRule(nominal=nominal, drop=args.alert_drop,
                      z=float(NormalDist().inv_cdf(args.confidence)), min_count=args.alert_drives,
                      horizon_days=args.horizon)

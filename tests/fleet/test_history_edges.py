@@ -3,7 +3,6 @@ failed files with the same bytes, a history read while another run writes, and t
 of local workers."""
 from __future__ import annotations
 
-import os
 import sqlite3
 from pathlib import Path
 from typing import Any
@@ -17,6 +16,7 @@ from estimator.fleet.drive import IdentifySettings
 from estimator.fleet.synthetic import EPOCH0, FleetSpec, VehicleWear, write_drive
 from suspid.can.dbc import load_dbc
 from suspid.errors import InputError
+from tests.fleet.conftest import run_fleet_cli
 
 FAST = IdentifySettings(model="quarter2", fix={"m1": 300.0, "m2": 40.0}, restarts=1,
                         multistart=0)
@@ -98,8 +98,9 @@ def test_history_report_reads_while_another_run_writes(tmp_path: Path,
         run_fleet(FleetConfig(db=str(other)))
 
 
-def test_no_more_local_workers_than_drives(monkeypatch: pytest.MonkeyPatch) -> None:
-    """``--workers 500`` for 2 drives starts 2 worker processes, not 500."""
+def test_no_more_local_workers_than_drives_or_cpus(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--workers 500`` for 2 drives starts 2 worker processes, not 500; for 40 drives on
+    3 available CPUs, 3."""
     started: list[int] = []
 
     class Stop(Exception):
@@ -113,4 +114,18 @@ def test_no_more_local_workers_than_drives(monkeypatch: pytest.MonkeyPatch) -> N
     for workers in (500, None):
         with pytest.raises(Stop):
             execute([("a.log", "V", None), ("b.log", "V", None)], FAST, workers=workers)
-    assert started == [2, min(os.cpu_count() or 1, 2)]
+    assert started == [2, min(runner.available_cpus(), 2)]
+    monkeypatch.setattr(runner, "available_cpus", lambda: 3)
+    started.clear()
+    for workers in (500, None, 2):
+        with pytest.raises(Stop):
+            execute([(f"{i}.log", "V", None) for i in range(40)], FAST, workers=workers)
+    assert started == [3, 3, 2]
+
+
+def test_more_workers_than_cpus_is_warned_about(tmp_path: Path) -> None:
+    """``suspid fleet --workers N`` above the available CPUs says how many it uses."""
+    n = runner.available_cpus() + 5
+    proc = run_fleet_cli("--model", "quarter2", "--input", str(tmp_path / "none"),
+                         "--workers", str(n), check=False)
+    assert f"warning: --workers {n}: {runner.available_cpus()} CPU(s) available" in proc.stderr
