@@ -51,6 +51,9 @@ import time
 from pathlib import Path
 from typing import Any
 
+from scipy.stats import binom
+
+from estimator.doe import runner
 from estimator.doe.design import experiments
 from estimator.doe.runner import Settings, measurement, run_design, start_parameters
 from estimator.identify import (OutputErrorProblem, Parameters, estimate_start, fit,
@@ -97,7 +100,8 @@ def doe_row(model: str, cost: str, scale: float, noise: float, data: bool,
             "cpu_s_per_row": cpu / out["total"], "worst_rel": worst,
             "nfev_per_row": sum(e["nfev"] for e in out["experiments"]) / out["total"],
             "failed": [e["id"] for e in out["experiments"] if not e["success"]],
-            "success_true_beyond_10x": false_ok}
+            "success_true_beyond_10x": false_ok,
+            **({"band_coverage": out["band_coverage"]} if "band_coverage" in out else {})}
 
 
 def estimate_rows(model: str, cost: str, scale: float, noise: float,
@@ -274,8 +278,19 @@ def main(argv: list[str] | None = None) -> int:
                       f"failed {r['failed']} (not flagged: {r['failed_unflagged']}) "
                       f"success-true>10x {r['success_true_beyond_10x']}"
                       + (f" | curvature band alone {r['curvature_band_successes']}/{r['total']}, "
-                         f"profile bands in {len(r['profiled'])} rows" if n > 0 else "") + "\n")
+                         f"profile bands in {len(r['profiled'])} rows, bands missed "
+                         f"{r['band_coverage']['missed']}/{r['band_coverage']['bands']} "
+                         f"(expected {r['band_coverage']['expected']:.2f})" if n > 0 else "")
+                      + "\n")
                     sys.stdout.flush()
+        cover = [r["band_coverage"] for r in rows if "band_coverage" in r]
+        if cover and not a.json:
+            # every noisy cell's bands together: do they miss as often as correct bands?
+            n_b, k_b = sum(b["bands"] for b in cover), sum(b["missed"] for b in cover)
+            w(f"all noisy cells: {k_b} of {n_b} closed 3-sigma bands miss the truth; correct "
+              f"bands miss {n_b * runner.JOINT_ALPHA:.2f} on average, P(>= {k_b}) = "
+              f"{binom.sf(k_b - 1, n_b, runner.JOINT_ALPHA) if n_b else 1.0:.3f}, "
+              f"P(none) = {binom.pmf(0, n_b, runner.JOINT_ALPHA):.3f}\n")
     elif a.estimate_only and a.base:
         return _estimate_side_by_side(a)
     elif a.estimate_only:

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
 import numpy as np
-from scipy.stats import chi2
+from scipy.stats import binom, chi2
 
 from estimator.doe.design import DESIGNS, FS, HORIZON, Experiment, experiments, time_grid
 from estimator.identify import OutputErrorProblem, Parameters, fit
@@ -306,7 +306,9 @@ def run_design(model: SuspensionModel | str, settings: Settings,
     ``success_beyond_10x``: the rows reported a success (by the study's rule or by the
     identifier) with a free parameter more than 10x from the truth, which must stay empty.
     Noisy designs add ``in_joint_region``: the rows whose truth lies in their joint 3-sigma
-    confidence region (:func:`joint_region`; each row's is under ``joint_3sigma``).
+    confidence region (:func:`joint_region`; each row's is under ``joint_3sigma``), and
+    ``band_coverage`` (:func:`band_coverage`): how many of the design's closed bands miss
+    their truth against how many correct bands would.
     """
     if isinstance(model, str):
         model = get_model(model)
@@ -325,7 +327,52 @@ def run_design(model: SuspensionModel | str, settings: Settings,
     if settings.noise > 0:
         out["in_joint_region"] = int(sum(bool((o.extra.get("joint_3sigma") or {}).get("inside"))
                                          for o in rows))
+        out["band_coverage"] = band_coverage([o.to_json() for o in rows])
     return out
+
+
+def band_coverage(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """Do a noisy design's bands miss their truths as often as correct 3-sigma bands would?
+
+    Every closed band of every row (``band_3sigma`` of a row's JSON; a band open on a side
+    belongs to a row reported not identifiable and is not counted) is one trial that a
+    correct band loses with probability ``JOINT_ALPHA`` (0.27 %). A design of ``n`` bands
+    therefore misses ``n x 0.27 %`` of them on average, and a row of ``p`` values misses
+    one about ``p`` times as often as one band does: zero misses over a whole design is
+    itself an unlikely outcome for correct bands when ``n`` is in the hundreds.
+
+    Parameters
+    ----------
+    rows : list of dict
+        The design's rows (``Outcome.to_json()``: ``true`` and ``band_3sigma``).
+
+    Returns
+    -------
+    dict
+        ``bands`` (closed bands counted), ``missed`` (those whose truth lies outside),
+        ``expected`` (``bands x 0.27 %``), ``p_value`` (the binomial probability of at least
+        ``missed`` misses if every band is correct: small values mean bands too narrow),
+        ``p_none`` (the probability of no miss at all) and ``rows_missed`` (row ids).
+    """
+    n = missed = 0
+    rows_missed: list[int] = []
+    for r in rows:
+        truth = r.get("true", {})
+        row_miss = False
+        for k, band in (r.get("band_3sigma") or {}).items():
+            lo, hi = band
+            if lo is None or hi is None or not (0 < lo < math.inf and hi < math.inf):
+                continue
+            n += 1
+            if not lo <= truth[k] <= hi:
+                missed += 1
+                row_miss = True
+        if row_miss:
+            rows_missed.append(int(r["id"]))
+    return {"bands": n, "missed": missed, "expected": round(n * JOINT_ALPHA, 4),
+            "p_value": float(binom.sf(missed - 1, n, JOINT_ALPHA)) if n else 1.0,
+            "p_none": float(binom.pmf(0, n, JOINT_ALPHA)),
+            "rows_missed": rows_missed}
 
 
 #: a parameter this far (factor) from the truth must never be part of a success

@@ -147,6 +147,7 @@ def run(args: argparse.Namespace) -> int:
         "successes": out["successes"], "total": out["total"],
         "success_beyond_10x": out["success_beyond_10x"],
         **({"in_joint_region": out["in_joint_region"]} if "in_joint_region" in out else {}),
+        **({"band_coverage": out["band_coverage"]} if "band_coverage" in out else {}),
         "model": model.name, "cost": args.cost, "init_scale": args.init_scale,
         "free_masses": bool(args.free_masses), "mass_init_scale": args.mass_init_scale,
         "noise": args.noise,
@@ -171,6 +172,10 @@ def run(args: argparse.Namespace) -> int:
         if "in_joint_region" in out:
             w(f"truth inside the row's joint 3-sigma region: {out['in_joint_region']}/"
               f"{out['total']}\n")
+        if "band_coverage" in out:
+            b = out["band_coverage"]
+            w(f"bands missing the truth: {b['missed']} of {b['bands']} (correct 3-sigma bands "
+              f"miss {b['expected']:.2f} on average; P(>= {b['missed']}) = {b['p_value']:.2f})\n")
         if out["success_beyond_10x"]:
             w(f"reported a success with a parameter more than 10x from the truth: rows "
               f"{out['success_beyond_10x']}\n")
