@@ -63,6 +63,12 @@ FLOOR = 0.02
 #: values decades off, e.g. a free mass given at 1e-6x its value)
 REWEIGHT_REL = 0.5
 REWEIGHT_FACTOR = 30.0
+#: longest run of missing samples of a channel the data-driven start bridges by linear
+#: interpolation (a lost frame or three); a longer gap is cut out of its regression
+#: (:func:`_segments`)
+FILL_MAX = 3
+#: shortest stretch of valid samples between cut gaps the regression keeps
+SEGMENT_MIN = 16
 #: smallest relative singular value of the regression accepted as "determined"
 RANK_TOL = 1e-9
 #: the noise-compensated fit (:func:`_ratio_fit`) stays within ``exp(RATIO_SPAN)`` of its
@@ -202,10 +208,13 @@ NOISE_NEGLIGIBLE = 1e-8
 def _noise_variance(y: FloatArray) -> float:
     """Variance of white noise in ``y`` from its fourth differences (``mean(d4^2) / 70``).
 
+    Differences that touch a missing (NaN) sample are left out.
+
     A response of the model sampled well above its modes hardly enters them (a mode at a
     tenth of the sampling rate passes ``(2 sin(pi/10))^8`` = 2 % of its variance).
     """
     d4 = np.diff(y, 4)
+    d4 = d4[np.isfinite(d4)]  # a fourth difference that touches a missing sample: none
     return float(d4 @ d4) / (70.0 * d4.size) if d4.size else 0.0
 
 
@@ -237,6 +246,45 @@ def _filter(U: FloatArray, w: float, h: float) -> tuple[FloatArray, FloatArray]:
     return Y, T
 
 
+def _segments(missing: NDArray[np.bool_]) -> list[tuple[int, int, int]]:
+    """Stretches of the record the regression keeps, around the long gaps in ``missing``.
+
+    A run of more than ``FILL_MAX`` missing samples is a gap: the linear interpolation
+    that bridges it is no measurement, and the filters would carry its error on into the
+    samples after it. Each stretch between gaps is taken as a record of its own: its rows
+    (less the first two, as at the record's start) are kept and the filter's free response
+    from its start is projected out (every free response begun before, the error the
+    bridged gap left in the filter's state included, is one from there on). A stretch
+    shorter than ``SEGMENT_MIN`` samples is dropped.
+
+    Parameters
+    ----------
+    missing : ndarray of bool, shape (N,)
+        Samples where some channel the regression uses is missing.
+
+    Returns
+    -------
+    list of (origin, lo, hi)
+        Rows ``lo:hi`` are kept, the transient there spanned by ``T[lo - origin:hi - origin]``
+        (:func:`_impulse_responses`). The whole record is ``[(0, 2, N)]``; so is a record
+        with no stretch left (then the gaps stay interpolated).
+    """
+    N = missing.size
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], missing.astype(np.int8), [0]])))
+    gaps = [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2]) if b - a > FILL_MAX]
+    if not gaps:
+        return [(0, 2, N)]
+    out: list[tuple[int, int, int]] = []
+    origin, lo = 0, 2
+    for a, b in gaps:
+        if a - lo >= SEGMENT_MIN:
+            out.append((origin, lo, a))
+        origin, lo = b, b + 2
+    if N - lo >= SEGMENT_MIN:
+        out.append((origin, lo, N))
+    return out if out else [(0, 2, N)]
+
+
 def _fill(y: FloatArray, t: FloatArray) -> FloatArray | None:
     """Linear interpolation over missing samples (None if fewer than half are present)."""
     ok = np.isfinite(y)
@@ -251,20 +299,36 @@ class _Regression:
     """Filtered signals of one record, ready for the equation-error least squares."""
 
     def __init__(self, model: SuspensionModel, meas: Measurement, t: FloatArray, h: float,
-                 U: FloatArray, w: float, noise: bool = False) -> None:
+                 U: FloatArray, w: float, noise: bool = False,
+                 segments: list[tuple[int, int, int]] | None = None) -> None:
+        """Filter the record's channels at ``w`` (rad/s), step ``h`` (s).
+
+        ``segments`` (see :func:`_segments`) fixes the rows kept, e.g. those of the
+        measured record for instruments simulated on its grid; default: from the gaps of
+        the channels used.
+        """
         nq = len(model.coords)
         nr = len(model.roads)
         cols: list[FloatArray] = []
+        raw: list[FloatArray] = []
         plan: list[list[tuple[int, int]]] = []  # per coordinate: (column, derivative order)
         for c in model.coords:
             srcs = []
             for order, name in enumerate((c, f"{c}_dot", f"{c}_ddot")):
                 if name in meas.measured:
-                    y = _fill(np.asarray(meas.measured[name], dtype=float), t)
+                    y0 = np.asarray(meas.measured[name], dtype=float)
+                    y = _fill(y0, t)
                     if y is not None:
                         srcs.append((len(cols), order))
                         cols.append(y)
+                        raw.append(y0)
             plan.append(srcs[:2])  # at most two sources, combined
+        used = [raw[col] for srcs in plan for col, _ in srcs]
+        missing = np.zeros(t.size, dtype=bool)
+        for y0 in used:
+            missing |= np.isnan(y0)
+        self.segments = segments if segments is not None else _segments(missing)
+        self._raw = raw
         self.missing = [c for c, s in zip(model.coords, plan) if not s]
         self._plan = plan
         self._nq, self._nr, self._nmeas = nq, nr, len(cols)
@@ -293,8 +357,12 @@ class _Regression:
         nq, nr, plan, Y, T = self._nq, self._nr, self._plan, self._Y, self._T
         N = T.shape[0]
         P = _noise_products(self._w, self._h, N) if noise else np.zeros((5, 5))
+        kept = sum(hi - lo for _, lo, hi in self.segments)
+        if noise and kept != N - 2:
+            # fewer rows kept (gaps cut out): the noise share shrinks with their number
+            P = P * (kept / (N - 2))
         if noise and self._sig2 is None:
-            self._sig2 = [_noise_variance(y) for y in self._cols[:self._nmeas]]
+            self._sig2 = [_noise_variance(y) for y in self._raw]
         sig2 = self._sig2 if noise and self._sig2 is not None else [0.0] * self._nmeas
         # weight of each source of coordinate i in F_k q: equal (averaged), or with
         # ``noise`` inversely as the noise each carries into F_k q (both are the same
@@ -318,12 +386,17 @@ class _Regression:
             for j in range(nr):
                 for k in range(2):
                     self.R[k, j] = Y[k + 2, :, self._nmeas + j]
-            # project out the transient (the filter's modes) and the first samples
-            keep = slice(2, N)
-            Tq, _ = np.linalg.qr(T[keep])
+            # project out the transient (the filter's modes) and the first samples, in
+            # each stretch between gaps its own
+            bases = [(slice(lo, hi), np.linalg.qr(T[lo - origin:hi - origin])[0])
+                     for origin, lo, hi in self.segments]
+
             def proj(X: FloatArray) -> FloatArray:
-                Xk = X[..., keep]
-                return Xk - (Xk @ Tq) @ Tq.T
+                parts = []
+                for keep, Tq in bases:
+                    Xk = X[..., keep]
+                    parts.append(Xk - (Xk @ Tq) @ Tq.T)
+                return parts[0] if len(parts) == 1 else np.concatenate(parts, axis=-1)
             self.Q = proj(self.Q)
             self.R = proj(self.R)
             self.S = np.concatenate([self.Q[2], self.Q[1], self.Q[0], self.R[0], self.R[1]], axis=0)
@@ -796,9 +869,9 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
     best_reg: tuple[_Regression, FloatArray] | None = None
     # the noise compensation only where some channel carries measurable white noise: on a
     # noise-free record an inexact estimate is model or filter error, which it cannot fix
-    noisy = any(_noise_variance(y) > NOISE_NEGLIGIBLE * float(np.var(y))
+    noisy = any(_noise_variance(y) > NOISE_NEGLIGIBLE * float(np.nanvar(y))
                 for y in (np.asarray(v, dtype=float) for v in meas.measured.values())
-                if y.size > 4 and np.all(np.isfinite(y)))
+                if np.count_nonzero(~np.isnan(y)) > 4 and not np.any(np.isinf(y)))
     for fc in bandwidths_hz:
         if best.cost < EXACT_COST:
             break
@@ -922,7 +995,8 @@ def _refine_iv(problem: OutputErrorProblem, est: StartEstimate, reg: "_Regressio
                           measured={**{c: X[:, i] for i, c in enumerate(model.coords)},
                                     **{f"{c}_dot": X[:, nq + i] for i, c in enumerate(model.coords)}})
         iv = reg.with_instruments(_Regression(model, sim, problem.t, h, problem.U,
-                                              2 * math.pi * est.bandwidth_hz))
+                                              2 * math.pi * est.bandwidth_hz,
+                                              segments=reg.segments))
         q = dict(p)
         if nonlin:
             u = _lifted_seed(iv, model, p, lin, nonlin, wts)
