@@ -11,6 +11,9 @@ is then a standard normal value for every realisation; its size for one realisat
 how extreme that realisation is, independently of the fit and of the identifier's standard
 errors.
 
+``--row all`` prints one line per row instead: on the design's own realisations, the largest
+linearised ``|z|`` of each row, the values beyond 3 and ``delta' C^-1 delta``.
+
 For one row of a ``suspid doe`` design and one noise realisation (default: the design's own,
 ``numpy`` seed = the settings' seed + the row number) prints, per free parameter, the
 linearised z-score ``delta_k / sqrt(C_kk)``; with ``--fit`` also the identifier's (as
@@ -19,7 +22,9 @@ error over the exact one, and the fit's distance from the linearised prediction 
 standard errors (small: the fit is at the minimum the linear model predicts); the parameter
 with the largest linearised ``|z|`` (or ``--param``) split by channel (each channel's part of
 the z-score and of its variance) with the effective number of samples and the largest single
-sample's part; and the squared Mahalanobis distance ``delta' C^-1 delta`` with its chi-square tail. With
+sample's part; the squared Mahalanobis distance ``delta' C^-1 delta`` with its chi-square tail; and the
+realisation's noise per channel against the noise model (its std over the intended one,
+lag-1 autocorrelation, Kolmogorov-Smirnov p-value against the normal). With
 ``--draws N`` also the mean and std of each linearised z-score over ``N`` further
 realisations (seeds ``--seed0``, ...; no fits, a few ms each).
 
@@ -38,12 +43,12 @@ import argparse
 import math
 
 import numpy as np
-from scipy.stats import chi2, norm
+from scipy.stats import chi2, kstest, norm
 
 from estimator.doe import runner
 from estimator.doe.design import Experiment, experiments
 from estimator.doe.noise import linearised_error
-from estimator.doe.runner import Settings, measurement, run_experiment
+from estimator.doe.runner import Settings, free_names, measurement, run_experiment
 from estimator.identify.result import IdentResult
 from suspid.models import SuspensionModel, get_model
 
@@ -61,12 +66,33 @@ def fit_row(model: SuspensionModel, exp: Experiment, settings: Settings, seed: i
     return res
 
 
+def summarise(model: SuspensionModel, designs: list[Experiment], settings: Settings) -> None:
+    """Print, for every row on the design's own realisation, the largest linearised
+    ``|z|``, the values beyond 3 and ``delta' C^-1 delta`` with its chi-square tail."""
+    print(f"{model.name} {settings.cost} noise {settings.noise:g}, every row on its own "
+          "realisation (seed = settings' seed + row)")
+    total = 0.0
+    for exp in designs:
+        lin = linearised_error(model, exp, settings)
+        delta = lin.delta(measurement(model, exp, settings.noise, settings.seed + exp.id)[0])
+        z = delta / lin.stderr
+        d2 = float(delta @ np.linalg.solve(lin.cov, delta))
+        total += d2
+        far = ", ".join(f"{k} {v:+.2f}" for k, v in zip(lin.free, z) if abs(v) > 3.0)
+        print(f"  row {exp.id:2d}: max |z| {float(np.max(np.abs(z))):.2f}, d' C^-1 d {d2:5.1f} "
+              f"(tail {chi2.sf(d2, len(lin.free)):.2g})" + (f"; beyond 3: {far}" if far else ""))
+    dof = len(designs) * len(free_names(model, settings.free_masses))
+    print(f"  sum of d' C^-1 d {total:.1f} (chi-square with {dof} degrees of freedom: "
+          f"{dof} +- {math.sqrt(2 * dof):.0f})")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Print the linearised error of one row's realisation (see the module docstring)."""
     ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     ap.add_argument("--model", required=True)
     ap.add_argument("--cost", default="sse")
-    ap.add_argument("--row", type=int, required=True, help="design row (1-based)")
+    ap.add_argument("--row", required=True,
+                    help="design row (1-based), or 'all': one summary line per row")
     ap.add_argument("--noise", type=float, required=True)
     ap.add_argument("--seed", type=int, default=None,
                     help="noise seed (default: the design's, settings' seed + row)")
@@ -80,17 +106,21 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"--noise: expected a fraction > 0, got {a.noise}")
     model = get_model(a.model)
     designs = experiments(model)
-    if not 1 <= a.row <= len(designs):
-        ap.error(f"--row: expected 1..{len(designs)}, got {a.row}")
-    exp = designs[a.row - 1]
     settings = Settings(cost=a.cost, noise=a.noise)
+    if a.row == "all":
+        summarise(model, designs, settings)
+        return 0
+    row = int(a.row) if a.row.isdigit() else 0
+    if not 1 <= row <= len(designs):
+        ap.error(f"--row: expected 1..{len(designs)} or all, got {a.row}")
+    exp = designs[row - 1]
     seed = settings.seed + exp.id if a.seed is None else a.seed
     lin = linearised_error(model, exp, settings)
     se = lin.stderr
     e = lin.noise_of(measurement(model, exp, a.noise, seed)[0])
     delta = lin.gain @ e
     z = delta / se
-    print(f"{a.model} {a.cost} row {a.row} noise {a.noise:g}, seed {seed}")
+    print(f"{a.model} {a.cost} row {row} noise {a.noise:g}, seed {seed}")
     res = fit_row(model, exp, settings, seed) if a.fit else None
     head = f"  {'name':5s} {'z linear':>9s}"
     if res is not None:
@@ -123,6 +153,13 @@ def main(argv: list[str] | None = None) -> int:
     w = share.reshape(-1) / share.sum()
     print(f"    effective samples {1.0 / float(np.sum(w ** 2)):.0f}, the largest single "
           f"sample's part of z {float(np.max(np.abs(part))):.3f}")
+    print("  the realisation's noise per channel: std over the intended one, lag-1 "
+          "autocorrelation,\n    Kolmogorov-Smirnov p against the normal")
+    un = e.reshape(-1, nch) / lin.sigma
+    for c, name in enumerate(lin.channels):
+        x = un[:, c]
+        print(f"    {name:9s} {float(np.std(x)):.3f}  {float(np.corrcoef(x[1:], x[:-1])[0, 1]):+.3f}"
+              f"  {float(kstest(x, 'norm').pvalue):.2f}")
     if a.draws > 0:
         Z = np.array([lin.delta(measurement(model, exp, a.noise, s)[0]) / se
                       for s in range(a.seed0, a.seed0 + a.draws)])
