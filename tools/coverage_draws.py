@@ -9,6 +9,13 @@ z-score ``(estimate - truth) / stderr`` (about 0 and 1 when the standard errors 
 and how many draws put some parameter more than 3 standard errors off (a correct band
 misses ``1 - 0.9973^p`` of draws for ``p`` parameters) or outside its reported band.
 
+Next to each it prints the same statistics of the linearised z-score of the same draws
+(:func:`estimator.doe.noise.linearised_error`: the error the draw's noise puts into the
+estimate to first order, over its exact standard error; standard normal by construction), so
+a spread away from 1 that the linearised z-scores share is the draws' sampling spread, not
+a wrong standard error; and the identifier's standard error of each log-parameter over the
+exact one (mean, min-max over the draws; 1 = right).
+
 Usage::
 
     python tools/coverage_draws.py --model full7 --cost sse --row 17 --noise 0.1
@@ -27,8 +34,10 @@ import numpy as np
 
 from estimator.doe import runner
 from estimator.doe.design import experiments
+from estimator.doe.noise import linearised_error
 from estimator.doe.runner import Settings, run_experiment
 from suspid.models import get_model
+from suspid.models.base import FloatArray
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -48,7 +57,10 @@ def main(argv: list[str] | None = None) -> int:
     exp = designs[a.row - 1]
     settings = Settings(cost=a.cost, init_scale=a.init_scale, noise=a.noise)
     real = runner.measurement
+    lin = linearised_error(model, exp, settings)
     z: list[dict[str, float]] = []
+    z_lin: list[FloatArray] = []
+    se_ratio: list[FloatArray] = []
     outside = 0
     for seed in range(a.seed0, a.seed0 + a.draws):
         # the row's record with this draw's noise instead of the design's own seed
@@ -58,6 +70,10 @@ def main(argv: list[str] | None = None) -> int:
             _, res = run_experiment(model, exp, settings)
         finally:
             runner.measurement = real
+        z_lin.append(lin.delta(real(model, exp, a.noise, seed)[0]) / lin.stderr)
+        cov = np.asarray(res.cov_log if res.cov_log is not None else
+                         np.full((len(lin.free),) * 2, np.nan), dtype=float)
+        se_ratio.append(np.sqrt(np.diag(cov)) / lin.stderr)
         z.append({k: (res.params[k] - exp.truth[k]) / se for k, se in (res.stderr or {}).items()
                   if se and math.isfinite(se)})
         if res.bands and any(not ((lo is None or lo <= exp.truth[k])
@@ -68,11 +84,20 @@ def main(argv: list[str] | None = None) -> int:
     Z = np.array([[d.get(k, np.nan) for k in keys] for d in z])
     print(f"{a.model} {a.cost} row {a.row} noise {a.noise:g}, {len(z)} draws (seeds "
           f"{a.seed0}-{a.seed0 + a.draws - 1})")
+    ZL = np.array(z_lin)
+    R = np.array(se_ratio)
+    print("  (z: the fit's; linearised: the same draws' first-order error over its exact "
+          "standard error;\n   stderr / exact: the identifier's log-parameter standard error "
+          "over the exact one)")
     for i, k in enumerate(keys):
-        print(f"  {k:5s} z mean {np.nanmean(Z[:, i]):+.2f}  sd {np.nanstd(Z[:, i]):.2f}")
+        j = lin.free.index(k)
+        print(f"  {k:5s} z mean {np.nanmean(Z[:, i]):+.2f}  sd {np.nanstd(Z[:, i]):.2f}   "
+              f"linearised mean {ZL[:, j].mean():+.2f}  sd {ZL[:, j].std():.2f}   stderr / exact "
+              f"{np.nanmean(R[:, j]):.3f} ({np.nanmin(R[:, j]):.3f}-{np.nanmax(R[:, j]):.3f})")
     beyond = int(np.sum(np.nanmax(np.abs(Z), axis=1) > 3.0))
     expected = 1.0 - 0.9973 ** len(keys)
-    print(f"  draws with some |z| > 3: {beyond}/{len(z)} (correct standard errors: "
+    print(f"  draws with some |z| > 3: {beyond}/{len(z)} (linearised: "
+          f"{int(np.sum(np.abs(ZL).max(axis=1) > 3.0))}; correct standard errors: "
           f"{100 * expected:.1f} %); outside a reported band: {outside}/{len(z)}")
     return 0
 

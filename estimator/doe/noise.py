@@ -14,11 +14,17 @@ std and reports the identified parameters' maximum relative error (8.83 % with c
   error divided by that bound is the *efficiency ratio* (1 = as good as possible);
 * coverage of the run's own 3-sigma band (the contract's noisy success rule): the honest
   band of :mod:`estimator.identify.profile` (``coverage_3sigma``) and the curvature band
-  ``value +- 3 stderr`` alone (``coverage_curvature_3sigma``).
+  ``value +- 3 stderr`` alone (``coverage_curvature_3sigma``);
+* the *linearised estimation error* of one realisation (:func:`linearised_error`): near the
+  truth the output-error estimate is linear in the noise, so the error a realisation puts
+  into the fit follows from the noise alone, with its exact covariance. A fit that agrees
+  with it is at the minimum the noise puts there; a z-score it reproduces is the
+  realisation's, not the identifier's.
 """
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any, Callable
 
 import numpy as np
@@ -78,6 +84,83 @@ def crlb_relative(F: FloatArray) -> FloatArray:
 def estimator_channels(model: SuspensionModel, cost: str) -> list[str]:
     """Channels the DoE's cost uses: positions (``sse``) or positions and velocities."""
     return list(model.coords) if cost == "sse" else list(model.state_names)
+
+
+@dataclass
+class LinearisedError:
+    """The linear map from a design row's noise to its log-parameter error, at the truth.
+
+    For noise ``e`` on the cost's channels the least-squares estimate's log-parameter error
+    is ``delta = (J^T J)^-1 J^T e`` to first order (``J`` the sensitivity of the weighted
+    channels to the log-parameters at the truth, :func:`jacobian_log`), with the exact
+    covariance ``C = (J^T J)^-1 J^T S J (J^T J)^-1`` (``S`` the per-channel variance of the
+    weighted noise the record is made with), so ``delta_k / sqrt(C_kk)`` is a standard
+    normal value for every realisation.
+
+    Attributes
+    ----------
+    free : list of str
+        Free parameters (the order of the rows below).
+    channels : list of str
+        The cost's channels.
+    gain : ndarray, shape (n_free, n_samples * n_channels)
+        ``(J^T J)^-1 J^T``: log-parameter error (dimensionless) per unit of weighted noise
+        (channel units); the noise flattened sample by sample, channels within.
+    cov : ndarray, shape (n_free, n_free)
+        ``C``, the exact covariance of the log-parameter error (dimensionless).
+    sigma : ndarray, shape (n_channels,)
+        Each channel's weighted noise std (channel units).
+    clean : ndarray, shape (n_samples, n_channels)
+        The noise-free channels (channel units).
+    weights : ndarray, shape (n_channels,)
+        The cost's per-channel weights (dimensionless; 1 in ``suspid doe``).
+    """
+
+    free: list[str]
+    channels: list[str]
+    gain: FloatArray
+    cov: FloatArray
+    sigma: FloatArray
+    clean: FloatArray
+    weights: FloatArray
+
+    @property
+    def stderr(self) -> FloatArray:
+        """The exact standard errors of the log-parameters (dimensionless)."""
+        return np.sqrt(np.diag(self.cov))
+
+    def noise_of(self, meas: Measurement) -> FloatArray:
+        """The weighted noise of the record ``meas`` (made from this row's clean channels),
+        flattened as :attr:`gain`'s columns (channel units)."""
+        got = np.column_stack([meas.measured[c] for c in self.channels])
+        return np.asarray(((got - self.clean) * self.weights).reshape(-1), dtype=float)
+
+    def delta(self, meas: Measurement) -> FloatArray:
+        """The linearised log-parameter error ``(J^T J)^-1 J^T e`` of the record ``meas``
+        (dimensionless, ``log(estimate / truth)``)."""
+        return np.asarray(self.gain @ self.noise_of(meas), dtype=float)
+
+
+def linearised_error(model: SuspensionModel, exp: Experiment, settings: Settings
+                     ) -> LinearisedError:
+    """:class:`LinearisedError` of design row ``exp`` under ``settings`` (its cost, noise
+    level, record length and sample rate; the masses fixed unless ``free_masses``).
+
+    The Jacobian is the identifier's own (:func:`jacobian_log`) at the truth, on the
+    noise-free record; the noise std of a channel is ``settings.noise`` x its clean std, as
+    :func:`measurement` draws it.
+    """
+    meas, clean = measurement(model, exp, 0.0, 0, settings.horizon, settings.fs)
+    problem = OutputErrorProblem(model, meas, cost=settings.cost, x0=exp.x0)
+    free = free_names(model, settings.free_masses)
+    J = jacobian_log(problem, exp.truth, free)
+    gain = np.asarray(np.linalg.solve(J.T @ J, J.T), dtype=float)
+    sig = noise_sigmas({c: clean[c] for c in problem.channels}, settings.noise)
+    sigma = np.array([sig[c] for c in problem.channels]) * problem.w
+    cov = (gain * np.tile(sigma ** 2, problem.t.size)) @ gain.T
+    Y = np.column_stack([clean[c] for c in problem.channels])
+    return LinearisedError(free, list(problem.channels), gain, cov, sigma, Y,
+                           np.asarray(problem.w, dtype=float))
 
 
 def monte_carlo(model: SuspensionModel | str, exp_id: int, settings: Settings, seeds: int,
