@@ -100,12 +100,15 @@ class NoSamplesError(InputError):
 class Source:
     """Ring of rows ``(t, v_0, ..., v_{k-1})`` of one message; created by :meth:`RollingBuffer.source`."""
 
-    __slots__ = ("name", "channels", "t", "cols", "w", "n", "cap", "growable", "overwritten",
-                 "_lock", "push", "_views", "_cleared", "_checked", "_drop")
+    __slots__ = ("name", "group", "channels", "t", "cols", "w", "n", "cap", "growable",
+                 "overwritten", "_lock", "push", "_views", "_cleared", "_checked", "_drop")
 
     def __init__(self, name: str, channels: Sequence[str], capacity: int, growable: bool,
-                 lock: threading.Lock) -> None:
+                 lock: threading.Lock, group: str | None = None) -> None:
         self.name = name
+        #: the message whose frames fill this ring: its own name, or for a page of a
+        #: multiplexed message the message's (the pages of one message share a rate)
+        self.group = name if group is None else group
         self.channels = tuple(channels)
         self.cap = capacity
         zeros = bytes(8 * capacity)
@@ -349,14 +352,18 @@ class RollingBuffer:
         """``message name -> Source`` (every row received so far stored)."""
         return self._sources
 
-    def source(self, name: str, channels: Sequence[str]) -> Source:
-        """Create (or return) the ring of message ``name`` carrying ``channels``."""
+    def source(self, name: str, channels: Sequence[str], group: str | None = None) -> Source:
+        """Create (or return) the ring of message ``name`` carrying ``channels``.
+
+        ``group`` names the message when the ring holds one page of a multiplexed message
+        (the rings of its pages share the message's frame interval, see :meth:`align`).
+        """
         if name in self._sources:
             return self._sources[name]
         for ch in channels:
             if ch in self._where:
                 raise ValueError(f"channel {ch!r} already comes from {self._where[ch][0].name}")
-        src = Source(name, channels, self.capacity, self.growable, self._lock)
+        src = Source(name, channels, self.capacity, self.growable, self._lock, group)
         self._sources[name] = src
         for k, ch in enumerate(channels):
             self._where[ch] = (src, k)
@@ -414,7 +421,10 @@ class RollingBuffer:
         channels : iterable of str, optional
             Channels to align (default all).
         dt : float, optional
-            Grid step (s); default the smallest median frame interval of the sources.
+            Grid step (s); default the smallest median frame interval of the messages:
+            the rings of the pages of one multiplexed message count as that message, the
+            median interval of their times taken together (page 0 at ``t``, page 1 at
+            ``t + P``: the grid step is ``P``, each page fills every other cell).
         t_start, t_end : float, optional
             Window (s, inclusive); default everything held.
 
@@ -454,7 +464,12 @@ class RollingBuffer:
                              f"{', '.join(names)})")
         if dt is None:
             steps = []
-            for t, _ in nonempty:
+            by_group: dict[str, list[np.ndarray]] = {}
+            for name, (t, _) in snaps.items():
+                if t.size:
+                    by_group.setdefault(want[name][0].group, []).append(t)
+            for ts in by_group.values():
+                t = ts[0] if len(ts) == 1 else np.sort(np.concatenate(ts))
                 if t.size >= 2:
                     d = np.diff(t)
                     d = d[d > 0]

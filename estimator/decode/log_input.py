@@ -87,8 +87,23 @@ def channel_notes(path: str | Path, stats: ReadStats, keys: Iterable[int],
                    "with --can-channel CH"]
 
 
+def cadence(v: np.ndarray) -> int:
+    """Grid cells from one sample of a channel to the next: the median distance between
+    its samples (1 when it fills every cell, ``N`` for one page of ``N`` of a multiplexed
+    message, or a message at ``1/N`` of the grid's rate)."""
+    at = np.flatnonzero(~np.isnan(v))
+    if at.size < 2:
+        return 1
+    return max(1, int(np.median(np.diff(at))))
+
+
 def summarize_gaps(aligned: Aligned) -> list[str]:
-    """One warning line per channel with missing samples."""
+    """One warning line per channel with missing samples.
+
+    A channel with a sample every ``N`` cells (:func:`cadence`) misses nothing in the
+    ``N - 1`` cells between two of its samples (the other pages of its message): only runs
+    of ``N`` or more empty cells are gaps.
+    """
     out = []
     by_ch: dict[str, list] = {}
     for g in aligned.gaps:
@@ -97,9 +112,16 @@ def summarize_gaps(aligned: Aligned) -> list[str]:
         n = sum(g.samples for g in gaps)
         if n >= aligned.t.size:
             continue  # never sent (absent column): not a gap
+        every = cadence(aligned.values[ch])
+        if every > 1:
+            gaps = [g for g in gaps if g.samples >= every]
+            if not gaps:
+                continue
+            n = sum(g.samples for g in gaps)
         longest = max(gaps, key=lambda g: g.samples)
         out.append(f"channel {ch}: {n} of {aligned.t.size} samples missing in {len(gaps)} gap(s); "
-                   f"longest {longest.samples} samples from t={longest.t_start:.6g} s")
+                   f"longest {longest.samples} samples from t={longest.t_start:.6g} s"
+                   + (f" (a sample every {every} grid cells)" if every > 1 else ""))
     return out
 
 
@@ -209,6 +231,9 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
         warnings.append(f"{path}: {stats.malformed} unparseable lines/records skipped in all")
     if stats.truncated:
         warnings.append(f"{path}: the file ends inside a record (truncated); frames before it used")
+    for name, n in listener.unknown_pages().items():
+        warnings.append(f"{path}: {n} frames of {name} carry a multiplexer value that is no "
+                        "page of the DBC (not decoded)")
     if listener.time_resyncs:
         warnings.append(f"{path}: timestamps jumped back {listener.time_resyncs} time(s); "
                         "the time base was re-anchored")
