@@ -77,7 +77,9 @@ class Aligned:
     values : dict
         ``channel -> ndarray (N,)``, NaN where no valid sample fell.
     gaps : list of Gap
-        Runs of NaN per channel (leading and trailing runs included).
+        Runs of NaN per channel (leading and trailing runs included); for a channel with
+        one sample every ``N`` cells (a page of a multiplexed message), only the runs of
+        ``N`` cells or more (:func:`cadence`).
     collisions : int
         Samples that fell on an already filled cell (the later one is kept).
     snapped : float
@@ -533,12 +535,36 @@ class RollingBuffer:
         return Aligned(t_out, dt_fit, values, gaps, collisions, snapped)
 
 
+def cadence(v: np.ndarray) -> int:
+    """Grid cells from one sample of a channel to the next: the median distance between its
+    samples (non-NaN values of ``v``).
+
+    1 for a channel that fills every cell but where samples are missing, ``N`` for one page
+    of ``N`` pages of a multiplexed message sent in turn (or a message at ``1/N`` of the
+    grid's rate). With more than ``2/3`` of the cells filled the median distance is 1 (half
+    the distances at least 2 would span ``1.5`` cells per sample): no median is taken.
+    """
+    n = v.size
+    ok = ~np.isnan(v)
+    p = int(np.count_nonzero(ok))
+    if p < 2 or 3 * (p - 1) > 2 * (n - 1):
+        return 1
+    return max(1, int(np.median(np.diff(np.flatnonzero(ok)))))
+
+
 def _gaps(channel: str, v: np.ndarray, t: np.ndarray) -> list[Gap]:
-    """Runs of NaN in ``v`` as Gap records."""
+    """Runs of missing samples of ``v`` as Gap records: runs of NaN, but for a channel
+    with one sample every ``N`` cells (:func:`cadence`) only runs of ``N`` cells or more --
+    the ``N - 1`` cells between two of its samples (the other pages of its message) are
+    not missing samples."""
     miss = np.isnan(v)
     if not miss.any():
         return []
     d = np.diff(np.r_[0, miss.astype(np.int8), 0])
     starts = np.flatnonzero(d == 1)
     ends = np.flatnonzero(d == -1) - 1
+    every = cadence(v)
+    if every > 1:
+        long = ends - starts + 1 >= every
+        starts, ends = starts[long], ends[long]
     return [Gap(channel, float(t[a]), float(t[b]), int(b - a + 1)) for a, b in zip(starts, ends)]

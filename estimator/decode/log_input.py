@@ -19,7 +19,7 @@ from typing import Iterable, Literal, cast
 import numpy as np
 from cantools.database import Database
 
-from estimator.decode.buffer import Aligned
+from estimator.decode.buffer import Aligned, cadence
 from estimator.decode.listener import DecodeListener
 from estimator.decode.replay import feed_log
 from suspid.can.logs import ReadStats, describe_channels
@@ -87,22 +87,12 @@ def channel_notes(path: str | Path, stats: ReadStats, keys: Iterable[int],
                    "with --can-channel CH"]
 
 
-def cadence(v: np.ndarray) -> int:
-    """Grid cells from one sample of a channel to the next: the median distance between
-    its samples (1 when it fills every cell, ``N`` for one page of ``N`` of a multiplexed
-    message, or a message at ``1/N`` of the grid's rate)."""
-    at = np.flatnonzero(~np.isnan(v))
-    if at.size < 2:
-        return 1
-    return max(1, int(np.median(np.diff(at))))
-
-
 def summarize_gaps(aligned: Aligned) -> list[str]:
     """One warning line per channel with missing samples.
 
-    A channel with a sample every ``N`` cells (:func:`cadence`) misses nothing in the
-    ``N - 1`` cells between two of its samples (the other pages of its message): only runs
-    of ``N`` or more empty cells are gaps.
+    A channel with a sample every ``N`` cells (:func:`~estimator.decode.buffer.cadence`:
+    a page of a multiplexed message) has gaps only where ``N`` or more cells are empty
+    (:attr:`Aligned.gaps <estimator.decode.buffer.Aligned.gaps>`); its line says so.
     """
     out = []
     by_ch: dict[str, list] = {}
@@ -113,11 +103,6 @@ def summarize_gaps(aligned: Aligned) -> list[str]:
         if n >= aligned.t.size:
             continue  # never sent (absent column): not a gap
         every = cadence(aligned.values[ch])
-        if every > 1:
-            gaps = [g for g in gaps if g.samples >= every]
-            if not gaps:
-                continue
-            n = sum(g.samples for g in gaps)
         longest = max(gaps, key=lambda g: g.samples)
         out.append(f"channel {ch}: {n} of {aligned.t.size} samples missing in {len(gaps)} gap(s); "
                    f"longest {longest.samples} samples from t={longest.t_start:.6g} s"
@@ -205,7 +190,8 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
     frame_stats : dict
         ``{"accepted": N, "rejected": {reason: n, ...}, "ignored": n, "lost": n,
         "time_base": "tick" | "timestamp"}``, with ``channels``, ``channel`` and
-        ``other_channel`` as :func:`channel_notes` gives them.
+        ``other_channel`` as :func:`channel_notes` gives them, and ``unknown_page``
+        (message -> frames) as :meth:`DecodeListener.frame_stats` gives it.
 
     Raises
     ------

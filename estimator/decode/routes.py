@@ -169,7 +169,7 @@ class Routes:
     signal_map : SignalMap
         Validated against the DBC.
     buffer : RollingBuffer
-        Gets one ring per data message.
+        Gets one ring per data message (per set of pages of a multiplexed one).
 
     Attributes
     ----------

@@ -11,7 +11,9 @@ Grammar: ``CHANNEL = [SCALE *] [-] MESSAGE.SIGNAL [* SCALE] [(+|-) OFFSET]`` whe
 ``MESSAGE`` is a message name or frame ID (decimal or ``0x`` hex), ``SCALE`` and
 ``OFFSET`` are numbers and ``OFFSET`` may be ``mean`` (subtract the mean of the mapped
 signal over the data handed to the identifier: the whole log, or the current window).
-The result is ``channel = scale * signal + offset`` in the channel's SI unit.
+The result is ``channel = scale * signal + offset`` in the channel's SI unit. A multiplexed
+signal (``SG_ Height m0``, sent only when the multiplexer is 0) is read only from the frames
+of its pages.
 
 On the command line: ``--map 'x1_ddot=gnss_imu.AccelerationX-9.81'`` (repeatable). In a
 config file (``.toml`` or ``.json``)::
