@@ -265,3 +265,22 @@ def test_monitor_windows_of_pages_are_fitted_as_plain_ones(tmp_path: Path) -> No
     for a, b in zip(got, want):
         assert a["t"] == pytest.approx(b["t"])
         assert _rel(a["params"], b["params"]) < 0.05
+
+
+def test_a_real_gap_in_a_page_is_still_reported(ref: Measurement, tmp_path: Path) -> None:
+    dbc, db = _dbc(tmp_path, MUX_DBC, "mux.dbc")
+    frames = mux_frames(db, ref, [0, 1])
+    log = _write(tmp_path / "gap.log", frames[:400] + frames[440:])   # 20 samples per page lost
+    meas, _ = load_log_as_measurement(log, "quarter2", dbc, MUX_MAP)
+    assert meas.t.size == ref.t.size
+    for ch, first in (("x1", 400), ("x2", 401)):
+        miss = np.flatnonzero(np.isnan(meas.measured[ch]))
+        # the other page's cells plus the 20 samples lost
+        assert miss.size == ref.t.size - (ref.t.size - 40 + (ch == "x1")) // 2
+        assert np.isnan(meas.measured[ch][first:first + 40:2]).all()
+    gaps = [w for w in meas.warnings if "samples missing" in w]
+    assert len(gaps) == 3, meas.warnings   # x1, x2 and the road (every frame)
+    for ch, n in (("x1", 41), ("x2", 41)):
+        assert any(f"channel {ch}: {n} of {ref.t.size} samples missing in 1 gap(s)" in w
+                   and w.endswith("(a sample every 2 grid cells)") for w in gaps), gaps
+    assert any("channel r: 40 of" in w and "grid cells" not in w for w in gaps), gaps
