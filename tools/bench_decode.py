@@ -270,10 +270,10 @@ def main() -> int:
             rows.append(("SLCAN pty + python-can slcan", rate, n))
             rate, n = best(lambda: bench_slcan(ssub, db, True), 1)
             rows.append(("SLCAN pty + BufferedSlcanBus", rate, n))
-    print(f"\n{'path':40s} {'frames/s':>12s} {'x CAN max':>10s} {'frames':>9s}")
+    print(f"\n{'path':46s} {'frames/s':>12s} {'x CAN max':>10s} {'frames':>9s}")
     for name, rate, n in rows:
-        print(f"{name:40s} {rate:12,.0f} {rate / CAN_MAX_NO_STUFF:10.1f} {n:9d}")
-    print(f"{'classic CAN, 1 Mbit/s, 8-byte frames':40s} {CAN_MAX_WORST:6,.0f}-"
+        print(f"{name:46s} {rate:12,.0f} {rate / CAN_MAX_NO_STUFF:10.1f} {n:9d}")
+    print(f"{'classic CAN, 1 Mbit/s, 8-byte frames':46s} {CAN_MAX_WORST:6,.0f}-"
           f"{CAN_MAX_NO_STUFF:,.0f}   (worst-case stuffing - no stuffing)")
     rate_of = dict((r[0], r[1]) for r in rows)
     print()
