@@ -17,6 +17,11 @@ disturbed one):
 * ``load_log_as_measurement``  log -> uniform-grid measurement (feed_log + alignment), on
                           the epoch-time log and on the real candump-drive log (82,558
                           frames, ../shared/realdata; skipped when absent)
+* ``... user DBC``         the same on a user's DBC and map, one frame per 1 kHz sample:
+                          ``plain`` the three signals in every frame, ``multiplexed`` the
+                          body and wheel position on pages 0 and 1 of one message in turn
+                          (plus two pages not mapped), the road in every frame
+                          (:func:`make_user_logs`; frames encoded by cantools)
 * ``decode only``         DecodeListener on messages already in memory
 * ``cantools decode``     ``Database.decode_message`` per frame, for comparison
 * ``virtual bus``         a sender thread on python-can's virtual bus, received by a
@@ -45,6 +50,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import can  # noqa: E402
+import cantools  # noqa: E402
+import numpy as np  # noqa: E402
 
 from estimator.decode import (DecodeListener, feed, feed_log,  # noqa: E402
                               load_log_as_measurement)
@@ -70,6 +77,58 @@ def make_log(path: Path, seconds: float) -> int:
             w.on_message_received(msg)
             n += 1
     return n
+
+
+#: a user's DBC: a multiplexed message (pages 0-3) and the same signals in a plain one
+USER_DBC = """VERSION ""
+
+NS_ :
+
+BS_:
+
+BU_: ECU
+
+BO_ 512 Chassis: 8 ECU
+ SG_ Page M : 0|8@1+ (1,0) [0|255] "" ECU
+ SG_ Height m0 : 8|16@1- (1e-05,0) [-0.32768|0.32767] "m" ECU
+ SG_ Wheel m1 : 8|16@1- (1e-05,0) [-0.32768|0.32767] "m" ECU
+ SG_ Temp m2 : 8|16@1- (0.1,-40) [-40|200] "degC" ECU
+ SG_ Volt m3 : 8|16@1- (0.001,0) [0|65] "V" ECU
+ SG_ Road : 39|16@0- (1e-05,0) [-0.32768|0.32767] "m" ECU
+
+BO_ 513 Plain: 8 ECU
+ SG_ Height : 8|16@1- (1e-05,0) [-0.32768|0.32767] "m" ECU
+ SG_ Wheel : 24|16@1- (1e-05,0) [-0.32768|0.32767] "m" ECU
+ SG_ Road : 55|16@0- (1e-05,0) [-0.32768|0.32767] "m" ECU
+"""
+USER_MAPS = {"plain": ["x1=Plain.Height", "x2=Plain.Wheel", "r=Plain.Road"],
+             "multiplexed": ["x1=Chassis.Height", "x2=Chassis.Wheel", "r=Chassis.Road"]}
+
+
+def make_user_logs(tmp: Path, seconds: float) -> tuple[Path, dict[str, Path]]:
+    """The DBC :data:`USER_DBC` and two candump logs of one frame per 1 kHz sample (epoch
+    times): ``plain`` and ``multiplexed`` (pages 0, 1, 2, 3 in turn)."""
+    dbc = tmp / "user.dbc"
+    dbc.write_text(USER_DBC)
+    db = cantools.database.load_file(str(dbc))
+    mux, plain = db.get_message_by_name("Chassis"), db.get_message_by_name("Plain")
+    n = int(round(seconds * 1000))
+    t = EPOCH_T0 + np.arange(n) * 1e-3
+    x = np.round(0.01 * np.sin(2 * np.pi * 1.3 * (t - EPOCH_T0)), 5)
+    logs = {"plain": tmp / "user_plain.log", "multiplexed": tmp / "user_mux.log"}
+    with open_log_writer(logs["plain"]) as w:
+        for i in range(n):
+            w.on_message_received(can.Message(
+                timestamp=t[i], arbitration_id=plain.frame_id, is_extended_id=False,
+                data=plain.encode({"Height": x[i], "Wheel": x[i] / 2, "Road": x[i] / 4})))
+    with open_log_writer(logs["multiplexed"]) as w:
+        for i in range(n):
+            page = i % 4
+            sig = [{"Height": x[i]}, {"Wheel": x[i] / 2}, {"Temp": 25.0}, {"Volt": 12.0}][page]
+            w.on_message_received(can.Message(
+                timestamp=t[i], arbitration_id=mux.frame_id, is_extended_id=False,
+                data=mux.encode({"Page": page, "Road": x[i] / 4, **sig})))
+    return dbc, logs
 
 
 def shifted_copy(msgs: list[can.Message], path: Path, t0: float) -> None:
@@ -181,6 +240,12 @@ def main() -> int:
             rows.append(("load_log_as_measurement, candump-drive", rate, n))
         else:
             print(f"(real log {args.real} not found: its row is skipped)")
+        user_dbc, user_logs = make_user_logs(Path(tmp), args.seconds)
+        for kind, path in user_logs.items():
+            n_user = log_frames(path)
+            rate, n = best(lambda p=path, k=kind, m=n_user: (load_log_as_measurement(
+                p, "quarter2", user_dbc, USER_MAPS[k]), m)[1], args.repeat)
+            rows.append((f"load_log_as_measurement, {kind} user DBC", rate, n))
         rate, n = best(lambda: feed(DecodeListener("quarter2", db, growable=True), msgs),
                        args.repeat)
         rows.append(("decode only (in memory)", rate, n))
@@ -205,10 +270,10 @@ def main() -> int:
             rows.append(("SLCAN pty + python-can slcan", rate, n))
             rate, n = best(lambda: bench_slcan(ssub, db, True), 1)
             rows.append(("SLCAN pty + BufferedSlcanBus", rate, n))
-    print(f"\n{'path':40s} {'frames/s':>12s} {'x CAN max':>10s} {'frames':>9s}")
+    print(f"\n{'path':46s} {'frames/s':>12s} {'x CAN max':>10s} {'frames':>9s}")
     for name, rate, n in rows:
-        print(f"{name:40s} {rate:12,.0f} {rate / CAN_MAX_NO_STUFF:10.1f} {n:9d}")
-    print(f"{'classic CAN, 1 Mbit/s, 8-byte frames':40s} {CAN_MAX_WORST:6,.0f}-"
+        print(f"{name:46s} {rate:12,.0f} {rate / CAN_MAX_NO_STUFF:10.1f} {n:9d}")
+    print(f"{'classic CAN, 1 Mbit/s, 8-byte frames':46s} {CAN_MAX_WORST:6,.0f}-"
           f"{CAN_MAX_NO_STUFF:,.0f}   (worst-case stuffing - no stuffing)")
     rate_of = dict((r[0], r[1]) for r in rows)
     print()

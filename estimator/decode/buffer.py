@@ -77,7 +77,9 @@ class Aligned:
     values : dict
         ``channel -> ndarray (N,)``, NaN where no valid sample fell.
     gaps : list of Gap
-        Runs of NaN per channel (leading and trailing runs included).
+        Runs of NaN per channel (leading and trailing runs included); for a channel with
+        one sample every ``N`` cells (a page of a multiplexed message), only the runs of
+        ``N`` cells or more (:func:`cadence`).
     collisions : int
         Samples that fell on an already filled cell (the later one is kept).
     snapped : float
@@ -100,12 +102,15 @@ class NoSamplesError(InputError):
 class Source:
     """Ring of rows ``(t, v_0, ..., v_{k-1})`` of one message; created by :meth:`RollingBuffer.source`."""
 
-    __slots__ = ("name", "channels", "t", "cols", "w", "n", "cap", "growable", "overwritten",
-                 "_lock", "push", "_views", "_cleared", "_checked", "_drop")
+    __slots__ = ("name", "group", "channels", "t", "cols", "w", "n", "cap", "growable",
+                 "overwritten", "_lock", "push", "_views", "_cleared", "_checked", "_drop")
 
     def __init__(self, name: str, channels: Sequence[str], capacity: int, growable: bool,
-                 lock: threading.Lock) -> None:
+                 lock: threading.Lock, group: str | None = None) -> None:
         self.name = name
+        #: the message whose frames fill this ring: its own name, or for a page of a
+        #: multiplexed message the message's (the pages of one message share a rate)
+        self.group = name if group is None else group
         self.channels = tuple(channels)
         self.cap = capacity
         zeros = bytes(8 * capacity)
@@ -349,14 +354,18 @@ class RollingBuffer:
         """``message name -> Source`` (every row received so far stored)."""
         return self._sources
 
-    def source(self, name: str, channels: Sequence[str]) -> Source:
-        """Create (or return) the ring of message ``name`` carrying ``channels``."""
+    def source(self, name: str, channels: Sequence[str], group: str | None = None) -> Source:
+        """Create (or return) the ring of message ``name`` carrying ``channels``.
+
+        ``group`` names the message when the ring holds one page of a multiplexed message
+        (the rings of its pages share the message's frame interval, see :meth:`align`).
+        """
         if name in self._sources:
             return self._sources[name]
         for ch in channels:
             if ch in self._where:
                 raise ValueError(f"channel {ch!r} already comes from {self._where[ch][0].name}")
-        src = Source(name, channels, self.capacity, self.growable, self._lock)
+        src = Source(name, channels, self.capacity, self.growable, self._lock, group)
         self._sources[name] = src
         for k, ch in enumerate(channels):
             self._where[ch] = (src, k)
@@ -414,7 +423,10 @@ class RollingBuffer:
         channels : iterable of str, optional
             Channels to align (default all).
         dt : float, optional
-            Grid step (s); default the smallest median frame interval of the sources.
+            Grid step (s); default the smallest median frame interval of the messages:
+            the rings of the pages of one multiplexed message count as that message, the
+            median interval of their times taken together (page 0 at ``t``, page 1 at
+            ``t + P``: the grid step is ``P``, each page fills every other cell).
         t_start, t_end : float, optional
             Window (s, inclusive); default everything held.
 
@@ -454,7 +466,12 @@ class RollingBuffer:
                              f"{', '.join(names)})")
         if dt is None:
             steps = []
-            for t, _ in nonempty:
+            by_group: dict[str, list[np.ndarray]] = {}
+            for name, (t, _) in snaps.items():
+                if t.size:
+                    by_group.setdefault(want[name][0].group, []).append(t)
+            for ts in by_group.values():
+                t = ts[0] if len(ts) == 1 else np.sort(np.concatenate(ts))
                 if t.size >= 2:
                     d = np.diff(t)
                     d = d[d > 0]
@@ -518,12 +535,36 @@ class RollingBuffer:
         return Aligned(t_out, dt_fit, values, gaps, collisions, snapped)
 
 
+def cadence(v: np.ndarray) -> int:
+    """Grid cells from one sample of a channel to the next: the median distance between its
+    samples (non-NaN values of ``v``).
+
+    1 for a channel that fills every cell but where samples are missing, ``N`` for one page
+    of ``N`` pages of a multiplexed message sent in turn (or a message at ``1/N`` of the
+    grid's rate). With more than ``2/3`` of the cells filled the median distance is 1 (half
+    the distances at least 2 would span ``1.5`` cells per sample): no median is taken.
+    """
+    n = v.size
+    ok = ~np.isnan(v)
+    p = int(np.count_nonzero(ok))
+    if p < 2 or 3 * (p - 1) > 2 * (n - 1):
+        return 1
+    return max(1, int(np.median(np.diff(np.flatnonzero(ok)))))
+
+
 def _gaps(channel: str, v: np.ndarray, t: np.ndarray) -> list[Gap]:
-    """Runs of NaN in ``v`` as Gap records."""
+    """Runs of missing samples of ``v`` as Gap records: runs of NaN, but for a channel
+    with one sample every ``N`` cells (:func:`cadence`) only runs of ``N`` cells or more --
+    the ``N - 1`` cells between two of its samples (the other pages of its message) are
+    not missing samples."""
     miss = np.isnan(v)
     if not miss.any():
         return []
     d = np.diff(np.r_[0, miss.astype(np.int8), 0])
     starts = np.flatnonzero(d == 1)
     ends = np.flatnonzero(d == -1) - 1
+    every = cadence(v)
+    if every > 1:
+        long = ends - starts + 1 >= every
+        starts, ends = starts[long], ends[long]
     return [Gap(channel, float(t[a]), float(t[b]), int(b - a + 1)) for a, b in zip(starts, ends)]

@@ -204,9 +204,12 @@ class DecodeEngine:
                     rejected["no_sync"] += 1
                     return
                 # ts is the data time matched through the counter above
-            if route.source is None or route.row is None:   # every DATA route has both
+            if route.source is not None and route.row is not None:
+                route.source.push(ts, route.row(data))
+            elif route.pages is not None:   # a multiplexed message: page by page
+                route.pages.push(ts, data)
+            else:   # every DATA route has a source and a decoder, or pages
                 raise RuntimeError(f"data route {route.name} without a source or decoder")
-            route.source.push(ts, route.row(data))
         elif not self._special(route, data, ts):
             return
         elif route.kind == SYNC and self.tick_time and route.check is not None:
@@ -603,18 +606,21 @@ class DecodeEngine:
             return
         kind = route.kind
         if kind == DATA:
-            if route.source is None or route.row is None:   # every DATA route has both
-                raise RuntimeError(f"data route {route.name} without a source or decoder")
             if n_acc < acc.size:
                 rows = rows.view(np.uint64).reshape(-1)[acc].view(np.uint8).reshape(n_acc, 8)
                 tsd = tsd[acc]
-            if route.vrow is not None:
-                vals = route.vrow(rows)
+            if route.source is None or route.row is None:
+                if route.pages is None:   # every DATA route has a source and a decoder, or pages
+                    raise RuntimeError(f"data route {route.name} without a source or decoder")
+                route.pages.push_many(tsd, rows)   # a multiplexed message: page by page
             else:
-                L = route.dlc
-                vals = np.array([route.row(r.tobytes()) for r in rows[:, :L]],
-                                dtype=np.float64).reshape(n_acc, -1)
-            route.source.push_many(tsd, vals)
+                if route.vrow is not None:
+                    vals = route.vrow(rows)
+                else:
+                    L = route.dlc
+                    vals = np.array([route.row(r.tobytes()) for r in rows[:, :L]],
+                                    dtype=np.float64).reshape(n_acc, -1)
+                route.source.push_many(tsd, vals)
         elif kind == SYNC:
             at = np.flatnonzero(acc)
             if sync_vals is None:   # timestamp mode: only the last frames matter

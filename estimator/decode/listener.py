@@ -593,7 +593,9 @@ class DecodeListener(can.Listener):
         "time_base": "tick" | "timestamp"}`` (JSON-ready); ``arrival_slots`` (message ->
         ``period``, ``missing``, ``retimed``) when a log was placed in sample slots,
         ``receive`` when live; ``node_restarts`` and ``tick_wraps`` when the sensor clock
-        restarted or wrapped (:class:`~estimator.decode.rules.timebase.TickClock`)."""
+        restarted or wrapped (:class:`~estimator.decode.rules.timebase.TickClock`);
+        ``unknown_page`` (message -> frames) when frames of a multiplexed message carried a
+        multiplexer value that is no page of the DBC (:meth:`unknown_pages`)."""
         c = self.counts
         out: dict[str, object] = {"accepted": c.accepted, "rejected": dict(c.rejected),
                                   "ignored": c.ignored, "lost": c.lost,
@@ -608,7 +610,18 @@ class DecodeListener(can.Listener):
             out["arrival_slots"] = {k: dict(v) for k, v in self.arrival_stats.items()}
         if self.receive_stats:
             out["receive"] = dict(self.receive_stats)
+        unknown = self.unknown_pages()
+        if unknown:
+            out["unknown_page"] = unknown
         return out
+
+    def unknown_pages(self) -> dict[str, int]:
+        """Per multiplexed data message, the accepted frames whose multiplexer value is no
+        page of the DBC (:attr:`estimator.decode.pages.PageSplit.unknown`; stored in no
+        page's ring); messages without such frames are left out."""
+        self.flush()
+        return {r.name: r.pages.unknown for r in self.routes.ordered
+                if r.pages is not None and r.pages.unknown}
 
     def per_message(self) -> dict[str, int]:
         """Accepted frames per DBC message name."""

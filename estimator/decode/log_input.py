@@ -19,7 +19,7 @@ from typing import Iterable, Literal, cast
 import numpy as np
 from cantools.database import Database
 
-from estimator.decode.buffer import Aligned
+from estimator.decode.buffer import Aligned, cadence
 from estimator.decode.listener import DecodeListener
 from estimator.decode.replay import feed_log
 from suspid.can.logs import ReadStats, describe_channels
@@ -88,7 +88,12 @@ def channel_notes(path: str | Path, stats: ReadStats, keys: Iterable[int],
 
 
 def summarize_gaps(aligned: Aligned) -> list[str]:
-    """One warning line per channel with missing samples."""
+    """One warning line per channel with missing samples.
+
+    A channel with a sample every ``N`` cells (:func:`~estimator.decode.buffer.cadence`:
+    a page of a multiplexed message) has gaps only where ``N`` or more cells are empty
+    (:attr:`Aligned.gaps <estimator.decode.buffer.Aligned.gaps>`); its line says so.
+    """
     out = []
     by_ch: dict[str, list] = {}
     for g in aligned.gaps:
@@ -97,9 +102,11 @@ def summarize_gaps(aligned: Aligned) -> list[str]:
         n = sum(g.samples for g in gaps)
         if n >= aligned.t.size:
             continue  # never sent (absent column): not a gap
+        every = cadence(aligned.values[ch])
         longest = max(gaps, key=lambda g: g.samples)
         out.append(f"channel {ch}: {n} of {aligned.t.size} samples missing in {len(gaps)} gap(s); "
-                   f"longest {longest.samples} samples from t={longest.t_start:.6g} s")
+                   f"longest {longest.samples} samples from t={longest.t_start:.6g} s"
+                   + (f" (a sample every {every} grid cells)" if every > 1 else ""))
     return out
 
 
@@ -183,7 +190,8 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
     frame_stats : dict
         ``{"accepted": N, "rejected": {reason: n, ...}, "ignored": n, "lost": n,
         "time_base": "tick" | "timestamp"}``, with ``channels``, ``channel`` and
-        ``other_channel`` as :func:`channel_notes` gives them.
+        ``other_channel`` as :func:`channel_notes` gives them, and ``unknown_page``
+        (message -> frames) as :meth:`DecodeListener.frame_stats` gives it.
 
     Raises
     ------
@@ -209,6 +217,9 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
         warnings.append(f"{path}: {stats.malformed} unparseable lines/records skipped in all")
     if stats.truncated:
         warnings.append(f"{path}: the file ends inside a record (truncated); frames before it used")
+    for name, n in listener.unknown_pages().items():
+        warnings.append(f"{path}: {n} frames of {name} carry a multiplexer value that is no "
+                        "page of the DBC (not decoded)")
     if listener.time_resyncs:
         warnings.append(f"{path}: timestamps jumped back {listener.time_resyncs} time(s); "
                         "the time base was re-anchored")

@@ -3,7 +3,8 @@ buffer ring, per-message state), and the tables the batch path looks frames up i
 
 Kinds: data messages (mapped channels, stored in the buffer), ``SN_Sync`` (the sensor's
 tick and period), ``SN_Status`` and ``SUSPID_Alert``. A DBC message that carries no mapped
-channel has no route: its frames are counted as ``ignored``.
+channel has no route: its frames are counted as ``ignored``. A data message with mapped
+multiplexed signals stores its frames page by page (:mod:`estimator.decode.pages`).
 """
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ import numpy as np
 from cantools.database.can import Database, Message
 
 from estimator.decode.buffer import RollingBuffer, Source
+from estimator.decode.pages import PageSink, PageSplit
 from estimator.decode.rules.e2e import Payload, crc_checker, crc_start
 from estimator.decode.vector import RowsFn, compile_raw, compile_vector_row
 from suspid.can.codec import MessageCodec, signal_spec
@@ -72,6 +74,7 @@ class Route:
     start_reg: int = 0          # E2E CRC register after the data-ID bytes
     vrow: RowsFn | None = None  # data messages: array decoder (None: decode frame by frame)
     vsync: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None  # Tick, PeriodUs
+    pages: PageSplit | None = None  # multiplexed data message: stored page by page
 
 
 def compile_row(msg: Message, maps: Sequence[SignalMapping]) -> Unpack:
@@ -122,6 +125,36 @@ def compile_sync(codec: MessageCodec) -> Callable[[np.ndarray], tuple[np.ndarray
     return values
 
 
+def _multiplexer_of(msg: Message, signal: str) -> str | None:
+    """The multiplexer of a multiplexed signal of ``msg`` (``None``: in every frame)."""
+    sig = msg.get_signal_by_name(signal)
+    return sig.multiplexer_signal if sig.multiplexer_ids else None
+
+
+def _page_split(msg: Message, name: str, maps: Sequence[SignalMapping],
+                buffer: RollingBuffer) -> PageSplit:
+    """The rings of a multiplexed message's mapped signals, one per set of pages.
+
+    The mappings of signals sent in every frame (the multiplexer included) share the ring
+    ``name``; those of the signals of one set of pages the ring ``name[Mux=ids]``; every
+    ring's group is ``name``.
+    """
+    groups: dict[tuple[str, tuple[int, ...]] | None, list[SignalMapping]] = {}
+    for m in maps:
+        mux = _multiplexer_of(msg, m.signal)
+        ids = tuple(sorted(msg.get_signal_by_name(m.signal).multiplexer_ids or ()))
+        groups.setdefault((mux, ids) if mux is not None else None, []).append(m)
+    muxes = list(dict.fromkeys(g[0] for g in groups if g is not None))
+    sinks = []
+    for g, gm in groups.items():
+        ring = name if g is None else f"{name}[{g[0]}={','.join(str(i) for i in g[1])}]"
+        src = buffer.source(ring, [m.channel for m in gm], group=name)
+        sinks.append(PageSink(src, compile_row(msg, gm), compile_vector_row(msg, gm),
+                              -1 if g is None else muxes.index(g[0]),
+                              frozenset(g[1]) if g is not None else frozenset()))
+    return PageSplit(msg, muxes, sinks)
+
+
 def model_channels(model: SuspensionModel) -> list[str]:
     """Every channel a map may target: measured channels, roads and road velocities."""
     return list(model.channels) + list(model.roads) + [f"{r}_dot" for r in model.roads]
@@ -136,7 +169,7 @@ class Routes:
     signal_map : SignalMap
         Validated against the DBC.
     buffer : RollingBuffer
-        Gets one ring per data message.
+        Gets one ring per data message (per set of pages of a multiplexed one).
 
     Attributes
     ----------
@@ -173,10 +206,14 @@ class Routes:
             name = msg.name
             if names.count(name) > 1:
                 name = f"{name}@{msg.frame_id:#x}{'x' if msg.is_extended_frame else ''}"
-            src = buffer.source(name, [m.channel for m in maps])
-            route = self._add(msg, DATA, _decoded_elsewhere, src, compile_row(msg, maps))
+            if any(_multiplexer_of(msg, m.signal) for m in maps):
+                route = self._add(msg, DATA, _decoded_elsewhere)
+                route.pages = _page_split(msg, name, maps, buffer)
+            else:
+                src = buffer.source(name, [m.channel for m in maps])
+                route = self._add(msg, DATA, _decoded_elsewhere, src, compile_row(msg, maps))
+                route.vrow = compile_vector_row(msg, maps)
             route.name = name
-            route.vrow = compile_vector_row(msg, maps)
         for special, kind in ((SYNC_MESSAGE, SYNC), (STATUS_MESSAGE, STATUS),
                               (ALERT_MESSAGE, ALERT)):
             try:

@@ -170,10 +170,22 @@ def noise_floor(y: FloatArray) -> float:
 
 
 def _missing(v: FloatArray) -> float:
-    """Fraction of NaN/inf samples of ``v`` (one reduction when there is none)."""
+    """Fraction of the samples of ``v`` that are missing (NaN/inf), at its own cadence.
+
+    A channel that fills only every ``N``-th grid cell (a page of a multiplexed message,
+    a message at ``1/N`` of the grid's rate: the median distance between its samples is
+    ``N`` cells) misses nothing when it has one sample every ``N`` cells; it misses the
+    fraction of those ``ceil(size / N)`` samples that are not there. One reduction when
+    nothing is NaN.
+    """
     if math.isfinite(float(np.add.reduce(v))):
         return 0.0
-    return float(np.count_nonzero(~np.isfinite(v))) / v.size
+    at = np.flatnonzero(np.isfinite(v))
+    if at.size < 2:
+        return 1.0 - at.size / v.size
+    step = int(np.median(np.diff(at)))
+    expected = -(-v.size // step)
+    return max(0.0, 1.0 - at.size / expected)
 
 
 def fuse_road(t: FloatArray, r: FloatArray, r_dot: FloatArray, crossover_hz: float) -> FloatArray:

@@ -11,7 +11,9 @@ Grammar: ``CHANNEL = [SCALE *] [-] MESSAGE.SIGNAL [* SCALE] [(+|-) OFFSET]`` whe
 ``MESSAGE`` is a message name or frame ID (decimal or ``0x`` hex), ``SCALE`` and
 ``OFFSET`` are numbers and ``OFFSET`` may be ``mean`` (subtract the mean of the mapped
 signal over the data handed to the identifier: the whole log, or the current window).
-The result is ``channel = scale * signal + offset`` in the channel's SI unit.
+The result is ``channel = scale * signal + offset`` in the channel's SI unit. A multiplexed
+signal (``SG_ Height m0``, sent only when the multiplexer is 0) is read only from the frames
+of its pages.
 
 On the command line: ``--map 'x1_ddot=gnss_imu.AccelerationX-9.81'`` (repeatable). In a
 config file (``.toml`` or ``.json``)::
@@ -256,8 +258,15 @@ class SignalMap:
         Raises
         ------
         InputError
-            Unknown message or signal (naming the map entry and the DBC), a channel that
-            the model does not have, or a channel mapped twice.
+            Unknown message or signal (naming the map entry and the DBC), or a signal of
+            nested multiplexing (its multiplexer is itself multiplexed).
+        UsageError
+            A channel that the model does not have, a channel mapped twice, or a scale 0.
+
+        Notes
+        -----
+        A multiplexed signal (``SG_ Height m0``) is valid: the decoder reads it only from
+        the frames whose multiplexer value is one of its pages (``multiplexer_ids``).
         """
         seen: set[str] = set()
         for m in self.mappings:
@@ -274,16 +283,17 @@ class SignalMap:
                 names = ", ".join(s.name for s in msg.signals)
                 raise InputError(f"{where}: message {msg.name} has no signal {m.signal!r}; "
                                  f"expected one of {names}")
-            if sig.multiplexer_ids:
-                # the decoder reads a mapped signal from every frame of its message: the
-                # frames of the other pages would be read as this signal
-                pages = ", ".join(str(i) for i in sig.multiplexer_ids)
-                plain = [s.name for s in msg.signals if not s.multiplexer_ids
-                         and not s.is_multiplexer]
-                raise InputError(f"{where}: signal {msg.name}.{m.signal} is multiplexed (sent "
-                                 f"only when {sig.multiplexer_signal} = {pages}); suspid decodes "
-                                 "non-multiplexed signals only"
-                                 + (f" ({msg.name} has {', '.join(plain)})" if plain else ""))
+            ids = sig.multiplexer_ids or []
+            mux = next((s for s in msg.signals if s.name == sig.multiplexer_signal), None) \
+                if ids else None
+            if mux is not None and mux.multiplexer_ids:
+                # a page of a page: the decoder reads one level of multiplexing
+                pages = ", ".join(str(i) for i in ids)
+                outer = ", ".join(str(i) for i in mux.multiplexer_ids)
+                raise InputError(f"{where}: signal {msg.name}.{m.signal} is sent only when "
+                                 f"{mux.name} = {pages}, and {mux.name} only when "
+                                 f"{mux.multiplexer_signal} = {outer}: nested multiplexing, "
+                                 "which suspid does not decode (one multiplexer per signal)")
             if m.scale == 0:
                 raise UsageError(f"{where}: scale must not be 0")
 

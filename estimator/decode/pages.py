@@ -1,0 +1,155 @@
+"""The pages of a multiplexed message: each page's frames stored as a message of its own.
+
+A DBC multiplexes a message when one of its signals, the multiplexer (``SG_ Page M``),
+says which of several layouts a frame carries: ``SG_ Height m0`` is sent only in the
+frames with ``Page = 0``, ``SG_ Wheel m1`` only in those with ``Page = 1``; the signals
+without ``m<n>`` are in every frame. A logger sends the pages in turn, so each page is a
+stream of its own, at its own times (page 0 at ``t``, page 1 at ``t + P``, ...) and at
+``1/N`` of the message's rate for ``N`` pages in turn.
+
+:class:`PageSplit` is the store of such a message's accepted frames. The frames are
+validated as one message (its length, its E2E check and alive counter when it has them:
+the counter counts the frames of the message, whatever their page); then each mapped
+signal takes its samples only from the frames whose multiplexer value is one of the
+signal's pages (cantools ``Signal.multiplexer_ids``). The mapped signals of one set of
+pages share a ring of the buffer named ``Message[Multiplexer=ids]`` (``Chassis[Page=0]``);
+the non-multiplexed ones, the multiplexer itself included when it is mapped, keep the
+message's ring, filled from every frame. The rings of one message share its name as their
+group: the alignment takes the grid step from the message's frame interval
+(:meth:`~estimator.decode.buffer.RollingBuffer.align`), as it takes every other message's.
+
+Frames of the other pages are not read as a page's signals, and are no error: they are
+other pages. A frame whose multiplexer value is not a page of the DBC at all is counted
+(:attr:`PageSplit.unknown`) and stores nothing in the page rings.
+
+Nested multiplexing (a multiplexer that is itself multiplexed) is refused by
+:meth:`suspid.can.signal_map.SignalMap.validate`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, cast
+
+import numpy as np
+from cantools.database.can import Message
+
+from estimator.decode.buffer import Source
+from estimator.decode.rules.e2e import Payload
+from estimator.decode.vector import RawFn, RowsFn, compile_raw
+from suspid.can.codec import MessageCodec
+
+#: payload -> decoded values of one ring's channels
+Row = Callable[[Payload], tuple]
+
+
+@dataclass(eq=False)
+class PageSink:
+    """The ring of the signals of one set of pages (or of every frame).
+
+    Attributes
+    ----------
+    source : Source
+        The ring.
+    row : callable
+        ``row(payload) -> (value per channel, ...)`` (scalar path).
+    vrow : callable or None
+        ``vrow(rows (m, 8) uint8) -> values (m, k)`` (batch path); ``None``: frame by frame.
+    mux : int
+        Index of the multiplexer in :attr:`PageSplit.muxes`; ``-1`` for the ring of the
+        non-multiplexed signals (every frame).
+    pages : frozenset of int
+        Raw multiplexer values whose frames carry the ring's signals.
+    """
+
+    source: Source
+    row: Row
+    vrow: RowsFn | None
+    mux: int
+    pages: frozenset[int]
+
+    def __post_init__(self) -> None:
+        self._pages_a = np.array(sorted(self.pages), dtype=np.int64)
+
+    def select(self, page: np.ndarray) -> np.ndarray:
+        """Mask of the frames (raw multiplexer values ``page``) of this ring's pages."""
+        if self._pages_a.size == 1:
+            return page == self._pages_a[0]
+        return np.isin(page, self._pages_a)
+
+
+class PageSplit:
+    """Store the accepted frames of one multiplexed message, page by page.
+
+    Parameters
+    ----------
+    msg : cantools Message
+    muxes : sequence of str
+        The multiplexers (signal names) that the mapped signals depend on: one for a
+        plain multiplexed message, more for a message with several independent ones.
+    sinks : sequence of PageSink
+        One per ring (:attr:`PageSink.mux` indexes ``muxes``).
+
+    Attributes
+    ----------
+    unknown : int
+        Frames whose multiplexer value is not a page of the DBC (for any of ``muxes``).
+    """
+
+    def __init__(self, msg: Message, muxes: list[str], sinks: list[PageSink]) -> None:
+        self.name = msg.name
+        self.dlc = msg.length
+        self.muxes = tuple(muxes)
+        self.sinks = tuple(sinks)
+        self.unknown = 0
+        codecs = [MessageCodec(msg, [m]) for m in muxes]
+        # the codec types its unpackers for bytes; they take any buffer (struct, int.from_bytes)
+        self._raw = [cast(Row, c.unpack_raw) for c in codecs]
+        self._vraw: list[RawFn | None] = [compile_raw(c.specs[0], msg.length) for c in codecs]
+        defined: list[set[int]] = [set() for _ in muxes]
+        for sig in msg.signals:
+            if sig.multiplexer_signal in self.muxes and sig.multiplexer_ids:
+                defined[self.muxes.index(sig.multiplexer_signal)].update(sig.multiplexer_ids)
+        self.defined = tuple(frozenset(d) for d in defined)
+        self._defined_a = [np.array(sorted(d), dtype=np.int64) for d in self.defined]
+
+    def _page_rows(self, k: int, rows: np.ndarray) -> np.ndarray:
+        """Raw values of multiplexer ``k`` of payloads ``rows`` (m, 8)."""
+        f = self._vraw[k]
+        if f is not None:
+            return f(rows)
+        dec = self._raw[k]
+        return np.array([dec(r.tobytes())[0] for r in rows[:, :self.dlc]], dtype=np.int64)
+
+    def push(self, t: float, data: Payload) -> None:
+        """Store one accepted frame (time ``t`` in s, payload ``data``) in its rings."""
+        page = [int(f(data)[0]) for f in self._raw]
+        for k, p in enumerate(page):
+            if p not in self.defined[k]:
+                self.unknown += 1
+                break
+        for s in self.sinks:
+            if s.mux < 0 or page[s.mux] in s.pages:
+                s.source.push(t, s.row(data))
+
+    def push_many(self, t: np.ndarray, rows: np.ndarray) -> None:
+        """Store accepted frames (times ``t`` (m,) in s, payloads ``rows`` (m, 8) uint8,
+        zero-padded and C-contiguous) in their rings, each ring's frames in order."""
+        page = [self._page_rows(k, rows) for k in range(len(self.muxes))]
+        bad = np.zeros(t.shape[0], dtype=bool)
+        for k, p in enumerate(page):
+            bad |= ~np.isin(p, self._defined_a[k])
+        self.unknown += int(np.count_nonzero(bad))
+        for s in self.sinks:
+            if s.mux < 0:
+                sub, ts = rows, t
+            else:
+                sel = s.select(page[s.mux])
+                if not sel.any():
+                    continue
+                sub, ts = rows[sel], t[sel]
+            if s.vrow is not None:
+                vals = s.vrow(sub)
+            else:
+                vals = np.array([s.row(r.tobytes()) for r in sub[:, :self.dlc]],
+                                dtype=np.float64).reshape(sub.shape[0], -1)
+            s.source.push_many(ts, vals)
