@@ -332,30 +332,37 @@ def run_design(model: SuspensionModel | str, settings: Settings,
 
 
 def band_coverage(rows: list[dict[str, Any]]) -> dict[str, Any]:
-    """Do a noisy design's bands miss their truths as often as correct 3-sigma bands would?
+    """Do a noisy design's bands and joint regions miss their truths as often as correct ones?
 
     Every closed band of every row (``band_3sigma`` of a row's JSON; a band open on a side
-    belongs to a row reported not identifiable and is not counted) is one trial that a
-    correct band loses with probability ``JOINT_ALPHA`` (0.27 %). A design of ``n`` bands
-    therefore misses ``n x 0.27 %`` of them on average, and a row of ``p`` values misses
-    one about ``p`` times as often as one band does: zero misses over a whole design is
-    itself an unlikely outcome for correct bands when ``n`` is in the hundreds.
+    belongs to a row reported not identifiable and is not counted) misses a correct truth
+    with probability ``JOINT_ALPHA`` (0.27 %), so a design of ``n`` bands misses
+    ``n x 0.27 %`` of them on average (an exact expectation, whatever the correlations). The
+    misses of one row are correlated (one noise realisation moves correlated values
+    together), so their count is not binomial; the rows are independent, and the truth
+    leaves a correct row's joint 3-sigma region (``joint_3sigma``) with probability
+    ``JOINT_ALPHA``: the number of rows outside theirs is binomial, which ``p_value`` tests.
 
     Parameters
     ----------
     rows : list of dict
-        The design's rows (``Outcome.to_json()``: ``true`` and ``band_3sigma``).
+        The design's rows (``Outcome.to_json()``: ``id``, ``true``, ``band_3sigma`` and,
+        where there is a covariance, ``joint_3sigma``).
 
     Returns
     -------
     dict
         ``bands`` (closed bands counted), ``missed`` (those whose truth lies outside),
-        ``expected`` (``bands x 0.27 %``), ``p_value`` (the binomial probability of at least
-        ``missed`` misses if every band is correct: small values mean bands too narrow),
-        ``p_none`` (the probability of no miss at all) and ``rows_missed`` (row ids).
+        ``expected`` (``bands x 0.27 %``), ``rows_missed`` (ids of rows with a missed band),
+        ``joint_rows`` (rows with a joint region), ``joint_outside`` (ids of rows whose truth
+        lies outside it), ``joint_expected`` (``joint_rows x 0.27 %``) and ``p_value``
+        (the binomial probability of at least that many rows outside if every region is
+        correct: a small value means regions, and so bands, too narrow).
     """
     n = missed = 0
     rows_missed: list[int] = []
+    joint_rows = 0
+    joint_outside: list[int] = []
     for r in rows:
         truth = r.get("true", {})
         row_miss = False
@@ -369,10 +376,16 @@ def band_coverage(rows: list[dict[str, Any]]) -> dict[str, Any]:
                 row_miss = True
         if row_miss:
             rows_missed.append(int(r["id"]))
+        joint = r.get("joint_3sigma")
+        if joint is not None:
+            joint_rows += 1
+            if not joint["inside"]:
+                joint_outside.append(int(r["id"]))
+    k = len(joint_outside)
     return {"bands": n, "missed": missed, "expected": round(n * JOINT_ALPHA, 4),
-            "p_value": float(binom.sf(missed - 1, n, JOINT_ALPHA)) if n else 1.0,
-            "p_none": float(binom.pmf(0, n, JOINT_ALPHA)),
-            "rows_missed": rows_missed}
+            "rows_missed": rows_missed, "joint_rows": joint_rows, "joint_outside": joint_outside,
+            "joint_expected": round(joint_rows * JOINT_ALPHA, 4),
+            "p_value": float(binom.sf(k - 1, joint_rows, JOINT_ALPHA)) if k else 1.0}
 
 
 #: a parameter this far (factor) from the truth must never be part of a success

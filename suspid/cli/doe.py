@@ -175,7 +175,9 @@ def run(args: argparse.Namespace) -> int:
         if "band_coverage" in out:
             b = out["band_coverage"]
             w(f"bands missing the truth: {b['missed']} of {b['bands']} (correct 3-sigma bands "
-              f"miss {b['expected']:.2f} on average; P(>= {b['missed']}) = {b['p_value']:.2f})\n")
+              f"miss {b['expected']:.2f} on average); rows outside their joint region: "
+              f"{len(b['joint_outside'])} of {b['joint_rows']} (expected {b['joint_expected']:.2f}, "
+              f"P(>= {len(b['joint_outside'])}) = {b['p_value']:.2f})\n")
         if out["success_beyond_10x"]:
             w(f"reported a success with a parameter more than 10x from the truth: rows "
               f"{out['success_beyond_10x']}\n")

@@ -212,25 +212,30 @@ def test_noisy_design_reports_the_joint_region_per_row_and_in_total() -> None:
 
 
 def test_band_coverage_counts_closed_bands_and_their_misses() -> None:
-    """One miss in 3 closed bands (an open band of a flagged row not counted): the expected
-    count and the binomial tail follow the 0.27 % a correct band misses."""
+    """One miss in 3 closed bands (an open band of a flagged row not counted), one row of two
+    outside its joint region: the expected counts and the binomial tail of the rows."""
     rows = [{"id": 1, "true": {"c1": 1.0, "k1": 2.0},
-             "band_3sigma": {"c1": [0.9, 1.1], "k1": [2.1, 2.3]}},      # k1 missed
+             "band_3sigma": {"c1": [0.9, 1.1], "k1": [2.1, 2.3]},       # k1 missed
+             "joint_3sigma": {"inside": False}},
             {"id": 2, "true": {"c1": 1.0, "k1": 2.0},
-             "band_3sigma": {"c1": [0.5, 1.5], "k1": [1.0, None]}}]     # k1 open: not counted
+             "band_3sigma": {"c1": [0.5, 1.5], "k1": [1.0, None]},      # k1 open: not counted
+             "joint_3sigma": {"inside": True}}]
     b = band_coverage(rows)
     assert b["bands"] == 3 and b["missed"] == 1 and b["rows_missed"] == [1]
     assert b["expected"] == pytest.approx(3 * JOINT_ALPHA, abs=1e-4)
-    assert b["p_value"] == pytest.approx(1 - (1 - JOINT_ALPHA) ** 3, rel=1e-9)
-    assert b["p_none"] == pytest.approx((1 - JOINT_ALPHA) ** 3, rel=1e-9)
-    assert band_coverage(rows[1:])["missed"] == 0 and band_coverage(rows[1:])["p_value"] == 1.0
+    assert b["joint_rows"] == 2 and b["joint_outside"] == [1]
+    assert b["p_value"] == pytest.approx(1 - (1 - JOINT_ALPHA) ** 2, rel=1e-9)
+    clean = band_coverage(rows[1:])
+    assert clean["missed"] == 0 and clean["joint_outside"] == [] and clean["p_value"] == 1.0
 
 
 def test_noisy_design_reports_its_band_coverage() -> None:
-    """quarter2 rows 1 and 24 at 0.5 sigma: row 24's miss is counted among 8 closed bands."""
+    """quarter2 rows 1 and 24 at 0.5 sigma: row 24's miss is counted among 8 closed bands,
+    and it lies inside its joint region."""
     out = run_design("quarter2", Settings(noise=0.5), ids=[1, 24])
     b = out["band_coverage"]
     rows = {e["id"]: e for e in out["experiments"]}
     assert b["rows_missed"] == [24] and rows[24]["success"] is False
     assert b["bands"] == 8 and b["missed"] >= 1
+    assert b["joint_rows"] == 2 and b["joint_outside"] == []
     assert "band_coverage" not in run_design("quarter2", Settings(), ids=[1])
