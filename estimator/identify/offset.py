@@ -22,12 +22,13 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Mapping
+from typing import Any, Mapping
 
 import numpy as np
 
 from estimator.identify.problem import OutputErrorProblem
 from estimator.identify.start import NOISE_FLOOR, noise_floor_ratio
+from suspid.effects import SensorOffset
 from suspid.io.csvio import Measurement
 from suspid.models.base import FloatArray, SuspensionModel
 
@@ -35,6 +36,9 @@ from suspid.models.base import FloatArray, SuspensionModel
 #: removing it must explain at least three quarters of the misfit (on the bump records of
 #: docs/robustness.md it leaves 0.06 % of it; a clean record's best offset removes < 0.1 %)
 OFFSET_SHARE = 0.25
+
+#: standard errors an offset must exceed to be named (a road column without one is left out)
+SIGMAS = 3.0
 
 #: shift (channel units) used to form the residual's exact affine dependence on an offset
 _PROBE = 1e-2
@@ -69,15 +73,31 @@ class Offset:
         """Share of the weighted sum of squares the offsets leave (0 = all of it explained)."""
         return self.cost_after / self.cost_before if self.cost_before > 0 else 1.0
 
+    def effects(self) -> list[SensorOffset]:
+        """The offsets as the ``sensor_offset`` effects of :mod:`suspid.effects` (one per
+        column; what ``suspid simulate --effect`` injects and ``suspid diagnose`` screens)."""
+        return [SensorOffset(channel=c, offset=d) for c, d in self.values.items()]
+
     def remove(self, meas: Measurement) -> Measurement:
         """``meas`` with the offsets subtracted from their columns (a new measurement)."""
         road = dict(meas.road)
         measured = dict(meas.measured)
-        target = road if self.kind == "road" else measured
-        for c, d in self.values.items():
-            target[c] = np.asarray(target[c], dtype=float) - d
+        for e in self.effects():
+            if self.kind == "road":
+                road = e.compensate(meas.t, road)
+            else:
+                measured = e.compensate(meas.t, measured)
         return dataclasses.replace(meas, road=road, measured=measured,
                                    warnings=list(meas.warnings))
+
+    def to_json(self, removed: bool) -> dict[str, Any]:
+        """The JSON's ``offset``: ``kind``, ``values`` (SI), ``removed``, ``share`` and
+        ``effects`` (the ``--effect`` spelling of each, e.g.
+        ``sensor_offset:channel=r,offset=0.01``)."""
+        return {"kind": self.kind, "values": dict(self.values), "removed": removed,
+                "share": self.share,
+                "effects": [f"sensor_offset:channel={c},offset={d:.6g}"
+                            for c, d in self.values.items()]}
 
     def describe(self, model: SuspensionModel) -> str:
         """The columns and their offsets, e.g. ``road column r reads +0.01 m`` (SI units)."""
@@ -111,6 +131,20 @@ def _residual(problem: OutputErrorProblem, meas: Measurement,
     other = OutputErrorProblem(problem.model, meas, cost=problem.cost, x0=problem.x0,
                                weights=problem.weights, affine=problem.affine)
     return other.residual_vector(p)
+
+
+def _offsets(J: FloatArray, r0: FloatArray) -> tuple[FloatArray, float, list[int]]:
+    """Offsets ``d`` minimising ``|r0 - J d|^2`` (``r(d) = r0 - J d``), that minimum, and the
+    columns whose offset exceeds ``SIGMAS`` standard errors (residual variance per sample)."""
+    d, *_ = np.linalg.lstsq(J, r0, rcond=None)
+    rd = r0 - J @ d
+    ss = float(rd @ rd)
+    s2 = ss / max(r0.size - J.shape[1], 1)
+    try:
+        se = np.sqrt(np.clip(np.diag(np.linalg.pinv(J.T @ J)) * s2, 0.0, None))
+    except np.linalg.LinAlgError:
+        return d, ss, []
+    return d, ss, [i for i in range(J.shape[1]) if abs(d[i]) > SIGMAS * se[i]]
 
 
 def find_offset(problem: OutputErrorProblem, p: Mapping[str, float]) -> Offset | None:
@@ -156,10 +190,12 @@ def find_offset(problem: OutputErrorProblem, p: Mapping[str, float]) -> Offset |
             continue
         if not np.all(np.isfinite(J)):
             continue
-        # r(d) = r0 - J d: the offsets d minimising |r0 - J d|^2
-        d, *_ = np.linalg.lstsq(J, r0, rcond=None)
-        rd = r0 - J @ d
-        ss = float(rd @ rd)
+        d, ss, keep = _offsets(J, r0)
+        if len(keep) < len(cols):  # columns whose offset the record does not resolve
+            cols = [cols[i] for i in keep]
+            if not cols:
+                continue
+            d, ss, _ = _offsets(J[:, keep], r0)
         if best is None or ss / problem.scale < best.cost_after:
             best = Offset(kind, {c: float(v) for c, v in zip(cols, d)},
                           ss0 / problem.scale, ss / problem.scale, ratio)

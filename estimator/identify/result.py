@@ -52,8 +52,8 @@ class IdentResult:
     offset : dict, optional
         A constant offset found in the record (:mod:`estimator.identify.offset`): ``kind``
         (``"road"`` or ``"channel"``), ``values`` (column -> offset, the column's SI unit),
-        ``removed`` (subtracted before the fit) and ``share`` (share of the misfit at the
-        start it leaves).
+        ``removed`` (subtracted before the fit), ``share`` (share of the misfit at the
+        start it leaves) and ``effects`` (each as ``suspid simulate --effect`` spells it).
     """
 
     model: str

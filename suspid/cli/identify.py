@@ -89,8 +89,7 @@ def run(args: argparse.Namespace) -> int:
     if offset is not None:
         removed = args.offset == "remove"
         result.warnings.insert(0, offset.warning(model, removed))
-        result.offset = {"kind": offset.kind, "values": dict(offset.values),
-                         "removed": removed, "share": offset.share}
+        result.offset = offset.to_json(removed)
     if frames is not None:
         result.frames = frames
     result.warnings[:0] = assignment_warnings(args, model)
