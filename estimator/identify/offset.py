@@ -136,7 +136,7 @@ def _residual(problem: OutputErrorProblem, meas: Measurement,
 def _offsets(J: FloatArray, r0: FloatArray) -> tuple[FloatArray, float, list[int]]:
     """Offsets ``d`` minimising ``|r0 - J d|^2`` (``r(d) = r0 - J d``), that minimum, and the
     columns whose offset exceeds ``SIGMAS`` standard errors (residual variance per sample)."""
-    d, *_ = np.linalg.lstsq(J, r0, rcond=None)
+    d = np.asarray(np.linalg.lstsq(J, r0, rcond=None)[0], dtype=np.float64)
     rd = r0 - J @ d
     ss = float(rd @ rd)
     s2 = ss / max(r0.size - J.shape[1], 1)
