@@ -94,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
         result.frames = frames
     result.warnings[:0] = assignment_warnings(args, model)
     if args.plot:
-        plot_comparison(model, meas, result, args.plot)
+        plot_comparison(model, fitted.meas, result, args.plot)  # the record as fitted
     if args.json:
         print_json(result.to_json())
     else:
