@@ -125,12 +125,16 @@ def _with_shift(meas: Measurement, kind: str, column: str, d: float) -> Measurem
     return dataclasses.replace(meas, road=road, measured=measured)
 
 
+def on_record(problem: OutputErrorProblem, meas: Measurement) -> OutputErrorProblem:
+    """``problem`` (model, cost, initial-state handling, weights) on the record ``meas``."""
+    return OutputErrorProblem(problem.model, meas, cost=problem.cost, x0=problem.x0,
+                              weights=problem.weights, affine=problem.affine)
+
+
 def _residual(problem: OutputErrorProblem, meas: Measurement,
               p: Mapping[str, float]) -> FloatArray:
     """``problem``'s weighted residual vector on ``meas`` instead of its own record."""
-    other = OutputErrorProblem(problem.model, meas, cost=problem.cost, x0=problem.x0,
-                               weights=problem.weights, affine=problem.affine)
-    return other.residual_vector(p)
+    return on_record(problem, meas).residual_vector(p)
 
 
 def _offsets(J: FloatArray, r0: FloatArray) -> tuple[FloatArray, float, list[int]]:

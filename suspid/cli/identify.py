@@ -3,8 +3,9 @@ from __future__ import annotations
 
 import argparse
 import sys
-from estimator.identify import OutputErrorProblem, estimate_start, fit, fit_from_starts
-from estimator.identify.offset import find_offset
+from estimator.identify import OutputErrorProblem
+from estimator.identify.record import identify_record
+from suspid.cli._args import add_offset_option
 from suspid.cli._common import (parse_state, positive_int, add_input_options, add_model_option, add_param_options,
                                 load_measurement, model_from_args, params_from_args, print_json,
                                 assignment_warnings)
@@ -44,13 +45,12 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="start only from --init and the defaults (default: estimate a start "
                         "from the record by a filtered equation-error least-squares fit, used "
                         "as the start when no --init is given and as a further start with it)")
-    p.add_argument("--offset", choices=["remove", "keep"], default="remove",
-                   help="a constant offset in the road column(s) or in one position channel "
-                        "(a sensor zero not at the rest position; estimated at the data-driven "
-                        "start as extra linear unknowns, found when it is most of the misfit): "
-                        "remove: subtract it and fit the corrected record (default); keep: fit "
-                        "the record as it is (slow: every further start chases the offset's "
-                        "misfit); either way a warning names it")
+    add_offset_option(p, "a constant offset in the road column(s) or in one position channel "
+                         "(a sensor zero not at the rest position; estimated at the data-driven "
+                         "start as extra linear unknowns, found when it is most of the misfit): "
+                         "remove: subtract it and fit the corrected record (default); keep: fit "
+                         "the record as it is (slow: every further start chases the offset's "
+                         "misfit); either way a warning names it")
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
     p.add_argument("--plot", metavar="PNG", default=None,
                    help="write the seed-style comparison (measured vs identified) to this PNG")
@@ -72,24 +72,10 @@ def run(args: argparse.Namespace) -> int:
     meas, frames = load_measurement(args, model)
     x0 = parse_x0(args.x0, model.n_states)
     problem = OutputErrorProblem(model, meas, cost=args.cost, x0=x0)
-    est = estimate_start(problem, params) if args.data_start and params.free else None
-    # a sensor zero not at rest, judged at the data-driven start (its filtered equations do
-    # not see a constant level) or at the given one
-    offset = find_offset(problem, {**params.valuesdict(), **(est.values if est else {})})
-    if offset is not None and args.offset == "remove":
-        problem = OutputErrorProblem(model, offset.remove(meas), cost=args.cost, x0=x0)
-        est = None
-    fitted = problem
-    result = fit_from_starts(
-        fitted, params,
-        lambda start: fit(fitted, start, restarts=args.restarts, maxfev=args.maxfev,
-                          polish=args.polish, multistart=args.multistart)[0],
-        data_start=args.data_start, keep_init=bool(args.init) or not args.data_start,
-        estimate=est)
-    if offset is not None:
-        removed = args.offset == "remove"
-        result.warnings.insert(0, offset.warning(model, removed))
-        result.offset = offset.to_json(removed)
+    result, fitted = identify_record(
+        problem, params, restarts=args.restarts, maxfev=args.maxfev, polish=args.polish,
+        multistart=args.multistart, data_start=args.data_start,
+        keep_init=bool(args.init) or not args.data_start, offset=args.offset)
     if frames is not None:
         result.frames = frames
     result.warnings[:0] = assignment_warnings(args, model)
