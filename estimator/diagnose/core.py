@@ -338,47 +338,28 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
     check = check_offset(problem, params)
     offset_verdict: Verdict | None = None
     if check.offset is not None:
-        sc, offset_verdict, fm, notes = _offset_refit(
+        offset_screen, offset_verdict, offset_fit, offset_notes = _offset_refit(
             problem, params, check, base, noise_var, evidenced, th,
             dict(restarts=restarts, maxfev=maxfev, polish=polish, multistart=multistart))
         evidence["offset"] = check.offset.to_json(removed=True)
-        if offset_verdict.accepted:
-            result.effect = fm.effect
-            result.augmented = fm
-            result.screens, result.verdicts, result.fits = [sc], [offset_verdict], {sc.name: fm}
-            evidence["candidates"] = {sc.name: {"screen": sc.to_json(),
-                                                "refit": offset_verdict.to_json()}}
-            evidence["verdict"] = (f"residual structured ({lb}); a constant offset, "
-                                   f"{check.offset.describe(model)} at the rest position "
-                                   f"(sensor_offset), explains {offset_verdict.explained:.0%} of "
-                                   f"the structured residual, dBIC {offset_verdict.dbic:.4g}, "
-                                   f"LR p {offset_verdict.lr_p:.2g}")
-            # the baseline fit's own warnings are of the record as it is
-            warnings[:] = [w if w == jitter_note else f"baseline (the record as it is): {w}"
-                           for w in warnings] + notes
-            aug_stats = {c: channel_stats(c, fm.residual[c],
-                                          np.asarray(meas.measured[c], dtype=float), skip=skip)
-                         for c in channels}
-            evidence["augmented_channels"] = {c: s.to_json() for c, s in aug_stats.items()}
-            left = [c for c in evidenced if aug_stats[c].white_p < th.whiteness_p
-                    and aug_stats[c].rms > th.min_relative_rms * max(aug_stats[c].signal_rms, 1e-300)]
-            if left:
-                warnings.append(
-                    f"the residual is still structured with the offset removed (on "
-                    f"{', '.join(left)}): diagnose the record with the offset subtracted "
-                    "(evidence.offset.values) for a further effect")
-            return result
     # screening
     screens, force_summary = screen_physical(model, p0, free, mo, noise_var, h)
     evidence["force_residual"] = force_summary
     screens += screen_sensor(model, meas, p0, free, base.predicted, problem.U, th.max_delay_s)
-    result.screens = screens
+    if offset_verdict is not None:
+        # the check's offset replaces the one-channel screen's: one offset, named once
+        screens = [s for s in screens if s.name != offset_verdict.name]
     blocked = _not_identifiable(model, screens, limits, th)
     if blocked:
         evidence["not_identifiable"] = blocked
     first, fallback = select_for_refit(screens, blocked, th)
     verdicts: list[Verdict] = []
     fits: dict[str, ModelFit] = {}
+    if offset_verdict is not None:   # refitted already: identify's fit of the corrected record
+        screens.append(offset_screen)
+        verdicts.append(offset_verdict)
+        fits[offset_verdict.name] = offset_fit
+    result.screens = screens
     references: dict[tuple[str, ...], ModelFit] = {}
 
     def refit_candidate(sc: Screen) -> None:
@@ -423,8 +404,6 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
     evidence["candidates"] = {s.name: {"screen": s.to_json()} for s in screens}
     for v in verdicts:
         evidence["candidates"][v.name]["refit"] = v.to_json()
-    if offset_verdict is not None:   # found by the offset check, not accepted
-        evidence["offset"]["refit"] = offset_verdict.to_json()
     accepted = sorted([v for v in verdicts if v.accepted], key=lambda v: v.dbic)
     if accepted:
         best = accepted[0]
@@ -448,6 +427,15 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
         evidence["verdict"] = (f"residual structured ({lb}); {best.name}{where} explains "
                                f"{best.explained:.0%} of the structured residual, dBIC "
                                f"{best.dbic:.4g}, LR p {best.lr_p:.2g}")
+        if best is offset_verdict and check.offset is not None:
+            evidence["verdict"] = (f"residual structured ({lb}); a constant offset, "
+                                   f"{check.offset.describe(model)} at the rest position "
+                                   f"(sensor_offset), explains {best.explained:.0%} of the "
+                                   f"structured residual, dBIC {best.dbic:.4g}, LR p "
+                                   f"{best.lr_p:.2g}")
+            # the baseline fit's own warnings are of the record as it is
+            warnings[:] = [w if w == jitter_note else f"baseline (the record as it is): {w}"
+                           for w in warnings] + offset_notes
         for name, why in blocked.items():
             warnings.append(f"{name}: {why}")
         for key, why in limits.items():
@@ -473,6 +461,13 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
     aug_stats = {c: channel_stats(c, result.augmented.residual[c],
                                   np.asarray(meas.measured[c], dtype=float), skip=skip) for c in channels}
     evidence["augmented_channels"] = {c: s.to_json() for c, s in aug_stats.items()}
+    if offset_verdict is not None and result.augmented is offset_fit:
+        left = [c for c in evidenced if aug_stats[c].white_p < th.whiteness_p
+                and aug_stats[c].rms > th.min_relative_rms * max(aug_stats[c].signal_rms, 1e-300)]
+        if left:
+            warnings.append(f"the residual is still structured with the offset removed (on "
+                            f"{', '.join(left)}): diagnose the record with the offset "
+                            "subtracted (evidence.offset.values) for a further effect")
     return result
 
 

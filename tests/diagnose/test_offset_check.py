@@ -36,7 +36,9 @@ def test_road_offset_is_the_effect_named_once() -> None:
     assert effect["params"]["offset"] == pytest.approx(ROAD_OFFSET, abs=2e-4)
     # named once: the effect, not a second candidate on a position channel nor identify's
     # offset warning line on top of it
-    assert list(out["evidence"]["candidates"]) == ["sensor_offset"]
+    cands = out["evidence"]["candidates"]
+    assert [k for k in cands if "offset" in k] == ["sensor_offset"]
+    assert cands["sensor_offset"]["refit"]["params"] == effect["params"]
     assert not any(w.startswith("offset:") or "road column" in w for w in out["warnings"])
     assert "road column r reads +0.00998 m" in out["evidence"]["verdict"]
     assert out["evidence"]["offset"]["values"] == {"r": effect["params"]["offset"]}
