@@ -33,6 +33,7 @@
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import asdict, dataclass, field
 from typing import Any, Callable, Mapping
@@ -49,6 +50,7 @@ from estimator.diagnose.residuals import (ChannelStats, Motion, Screen, channel_
                                           motion_from, noise_variance, screen_physical,
                                           screen_sensor, xcorr_peak)
 from estimator.identify import IdentResult, OutputErrorProblem, Parameters, fit, resolve_twin
+from estimator.identify.record import OffsetCheck, check_offset, identify_record
 from suspid.errors import InputError, UsageError
 from suspid.io.csvio import Measurement
 from suspid.models.base import FloatArray, SuspensionModel
@@ -324,17 +326,40 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
                                f"{th.whiteness_p:g} on every channel{how}) or at numerical "
                                "precision: no missing effect")
         return result
+    worst = min(structured, key=lambda c: (stats[c].white_p, -stats[c].ljung_box_q))
+    if stats[worst].mean_p < stats[worst].ljung_box_p:
+        lb = f"mean {stats[worst].mean:.3g} is not zero, p = {stats[worst].mean_p:.2g}, on {worst}"
+    else:
+        lb = f"Ljung-Box p = {stats[worst].ljung_box_p:.2g} on {worst}"
+    # a constant road or position offset (a sensor zero not at rest), checked as identify
+    # checks it (the road columns together, which the one-channel screen below cannot
+    # express); found, it is the effect, and its refit is identify's fit of the record with
+    # the offset removed, against this baseline of the record as it is
+    check = check_offset(problem, params)
+    offset_verdict: Verdict | None = None
+    if check.offset is not None:
+        offset_screen, offset_verdict, offset_fit, offset_notes = _offset_refit(
+            problem, params, check, base, noise_var, evidenced, th,
+            dict(restarts=restarts, maxfev=maxfev, polish=polish, multistart=multistart))
+        evidence["offset"] = check.offset.to_json(removed=True)
     # screening
     screens, force_summary = screen_physical(model, p0, free, mo, noise_var, h)
     evidence["force_residual"] = force_summary
     screens += screen_sensor(model, meas, p0, free, base.predicted, problem.U, th.max_delay_s)
-    result.screens = screens
+    if offset_verdict is not None:
+        # the check's offset replaces the one-channel screen's: one offset, named once
+        screens = [s for s in screens if s.name != offset_verdict.name]
     blocked = _not_identifiable(model, screens, limits, th)
     if blocked:
         evidence["not_identifiable"] = blocked
     first, fallback = select_for_refit(screens, blocked, th)
     verdicts: list[Verdict] = []
     fits: dict[str, ModelFit] = {}
+    if offset_verdict is not None:   # refitted already: identify's fit of the corrected record
+        screens.append(offset_screen)
+        verdicts.append(offset_verdict)
+        fits[offset_verdict.name] = offset_fit
+    result.screens = screens
     references: dict[tuple[str, ...], ModelFit] = {}
 
     def refit_candidate(sc: Screen) -> None:
@@ -380,11 +405,6 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
     for v in verdicts:
         evidence["candidates"][v.name]["refit"] = v.to_json()
     accepted = sorted([v for v in verdicts if v.accepted], key=lambda v: v.dbic)
-    worst = min(structured, key=lambda c: (stats[c].white_p, -stats[c].ljung_box_q))
-    if stats[worst].mean_p < stats[worst].ljung_box_p:
-        lb = f"mean {stats[worst].mean:.3g} is not zero, p = {stats[worst].mean_p:.2g}, on {worst}"
-    else:
-        lb = f"Ljung-Box p = {stats[worst].ljung_box_p:.2g} on {worst}"
     if accepted:
         best = accepted[0]
         result.effect = fits[best.name].effect
@@ -407,6 +427,15 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
         evidence["verdict"] = (f"residual structured ({lb}); {best.name}{where} explains "
                                f"{best.explained:.0%} of the structured residual, dBIC "
                                f"{best.dbic:.4g}, LR p {best.lr_p:.2g}")
+        if best is offset_verdict and check.offset is not None:
+            evidence["verdict"] = (f"residual structured ({lb}); a constant offset, "
+                                   f"{check.offset.describe(model)} at the rest position "
+                                   f"(sensor_offset), explains {best.explained:.0%} of the "
+                                   f"structured residual, dBIC {best.dbic:.4g}, LR p "
+                                   f"{best.lr_p:.2g}")
+            # the baseline fit's own warnings are of the record as it is
+            warnings[:] = [w if w == jitter_note else f"baseline (the record as it is): {w}"
+                           for w in warnings] + offset_notes
         for name, why in blocked.items():
             warnings.append(f"{name}: {why}")
         for key, why in limits.items():
@@ -432,7 +461,84 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
     aug_stats = {c: channel_stats(c, result.augmented.residual[c],
                                   np.asarray(meas.measured[c], dtype=float), skip=skip) for c in channels}
     evidence["augmented_channels"] = {c: s.to_json() for c, s in aug_stats.items()}
+    if offset_verdict is not None and result.augmented is offset_fit:
+        left = [c for c in evidenced if aug_stats[c].white_p < th.whiteness_p
+                and aug_stats[c].rms > th.min_relative_rms * max(aug_stats[c].signal_rms, 1e-300)]
+        if left:
+            warnings.append(f"the residual is still structured with the offset removed (on "
+                            f"{', '.join(left)}): diagnose the record with the offset "
+                            "subtracted (evidence.offset.values) for a further effect")
     return result
+
+
+def _offset_refit(problem: OutputErrorProblem, params: Parameters, check: OffsetCheck,
+                  base: ModelFit, noise_var: Mapping[str, float], channels: list[str],
+                  th: Thresholds, settings: Mapping[str, Any]
+                  ) -> tuple[Screen, Verdict, ModelFit, list[str]]:
+    """The offset :func:`~estimator.identify.record.check_offset` found, as a candidate.
+
+    Parameters
+    ----------
+    problem : OutputErrorProblem
+        The record as it is (the baseline's).
+    params : Parameters
+        Fixed values (SI) and the given start.
+    check : OffsetCheck
+        The check of ``problem``'s record, with an offset found.
+    base : ModelFit
+        The baseline: the declared model fitted to the record as it is.
+    noise_var : mapping
+        Channel -> white-noise variance of the baseline residual (channel unit squared).
+    channels : list of str
+        The channels the evidence is measured on.
+    th : Thresholds
+    settings : mapping
+        ``restarts``, ``maxfev``, ``polish``, ``multistart`` of the fit.
+
+    Returns
+    -------
+    screen : Screen
+        The check as a ``sensor_offset`` screen: the share of the misfit at the
+        data-driven start the offsets explain.
+    verdict : Verdict
+        The refit's evidence against the baseline.
+    fit : ModelFit
+        ``identify``'s fit of the record with the offsets removed (:func:`identify_record`):
+        its ``effect`` is the ``sensor_offset`` of the largest offset, its ``k`` counts
+        every offset, its ``predicted`` channels read the channel offset.
+    notes : list of str
+        The fit's warnings other than the offset's own line (which the effect states).
+    """
+    offset = check.offset
+    if offset is None:
+        raise ValueError("no offset found to refit")
+    ident, fitted = identify_record(problem, params, offset="remove", check=check, **settings)
+    effects = offset.effects()
+    effect = max(effects, key=lambda e: abs(float(e.values["offset"])))
+    fm = baseline_fit(fitted, ident.params, np.asarray(ident.x0, dtype=float), ident.nfev,
+                      len(params.free) + len(effects))
+    predicted = fm.predicted
+    if offset.kind == "channel":
+        for e in effects:
+            predicted = e.apply(problem.meas.t, predicted)
+    fm = dataclasses.replace(fm, effect=effect, predicted=dict(predicted),
+                             notes=[f"identify's fit with the offset removed ({offset.describe(problem.model)})"])
+    dbic, p, expl, f, rms = compare(base, fm, noise_var, channels)
+    ok = dbic < th.dbic and p < th.lr_p and expl >= th.explained
+    reason = "accepted" if ok else "; ".join(
+        r for r, bad in ((f"dBIC {dbic:.3g} not below {th.dbic:g}", dbic >= th.dbic),
+                         (f"LR p {p:.3g} not below {th.lr_p:g}", p >= th.lr_p),
+                         (f"explains {expl:.0%} of the structured residual, needs "
+                          f"{th.explained:.0%}", expl < th.explained)) if bad)
+    screen = Screen(effect.name, "output", 1.0 - offset.share, math.nan, True,
+                    effect.to_json()["params"], dict(check.estimate.values if check.estimate else {}),
+                    note=f"offset check at the data-driven start: {offset.describe(problem.model)}")
+    verdict = Verdict(effect.name, dbic, p, expl, f, rms, effect.to_json()["params"], ok, reason)
+    notes = [f"with the offset removed: {w}" for w in ident.warnings if not w.startswith("offset:")]
+    if len(effects) > 1:
+        notes.append(f"offsets on {len(effects)} columns ({offset.describe(problem.model)}); "
+                     "'effect' holds the largest, evidence.offset all of them")
+    return screen, verdict, fm, notes
 
 
 def _fmt(v: Mapping[str, Any]) -> str:

@@ -7,8 +7,11 @@ modification time and size) instead of once per drive.
 
 The identification is the same library call as ``suspid identify`` makes --
 :class:`~estimator.identify.OutputErrorProblem`, then
-:func:`~estimator.identify.fit_from_starts` over :func:`~estimator.identify.fit` with the
-same options (:func:`identify`) -- on the same measurement (:func:`load_drive`, which reads a CAN log through
+:func:`~estimator.identify.record.identify_record` with the same options (:func:`identify`):
+the data-driven start, the check for a constant road or position offset (a sensor zero not
+at rest, named in the drive's first warning and its ``offset`` field, removed before the
+fit unless ``offset="keep"``), :func:`~estimator.identify.fit_from_starts` over
+:func:`~estimator.identify.fit` -- on the same measurement (:func:`load_drive`, which reads a CAN log through
 :func:`~estimator.decode.log_input.load_log_as_measurement` and a CSV through
 :func:`~suspid.io.csvio.read_measurement`, and adds identify's "motion does not decay"
 warning), so a drive's parameters equal ``suspid identify --json`` on the same file to the
@@ -29,7 +32,8 @@ import numpy as np
 from cantools.database import Database
 
 from estimator.identify.inputs import read_input
-from estimator.identify import IdentResult, OutputErrorProblem, Parameters, fit, fit_from_starts
+from estimator.identify import IdentResult, OutputErrorProblem, Parameters
+from estimator.identify.record import identify_record
 from suspid import __version__
 from suspid.can.dbc import default_dbc_path, load_dbc
 from suspid.can.logs import FORMATS, first_timestamp
@@ -71,6 +75,9 @@ class IdentifySettings:
         ``--map``/``--map-file`` mapping, as ``identify`` resolves it.
     can_channel : str or None
         ``--can-channel``: the bus channel of multi-bus logs to decode (``None``: all).
+    offset : {"remove", "keep"}
+        ``--offset``: a constant road or position offset found in a drive is subtracted
+        before the fit (default) or the drive is fitted as it is; either way it is named.
     """
 
     model: str
@@ -86,6 +93,7 @@ class IdentifySettings:
     dbc: str | None = None
     signal_map: SignalMap | None = None
     can_channel: str | None = None
+    offset: str = "remove"
 
     def parameters(self) -> Parameters:
         """The identifier's parameters (raises :class:`UsageError` for unknown names)."""
@@ -171,13 +179,14 @@ def one_line(text: object) -> str:
 
 
 def identify(problem: OutputErrorProblem, settings: IdentifySettings) -> IdentResult:
-    """The fit ``suspid identify`` runs on a measurement, with the same arguments."""
-    def run(start: Parameters) -> IdentResult:
-        return fit(problem, start, restarts=settings.restarts, maxfev=settings.maxfev,
-                   polish=settings.polish, multistart=settings.multistart)[0]
-
-    return fit_from_starts(problem, settings.parameters(), run, data_start=settings.data_start,
-                           keep_init=bool(settings.init) or not settings.data_start)
+    """The identification ``suspid identify`` runs on a measurement, with the same arguments
+    (the offset check included: a found offset is in the result's first warning and its
+    ``offset``)."""
+    return identify_record(problem, settings.parameters(), restarts=settings.restarts,
+                           maxfev=settings.maxfev, polish=settings.polish,
+                           multistart=settings.multistart, data_start=settings.data_start,
+                           keep_init=bool(settings.init) or not settings.data_start,
+                           offset=settings.offset)[0]
 
 
 def identify_drive(path: str, vehicle: str, settings: IdentifySettings,

@@ -148,7 +148,7 @@ def drive_json(rec: dict[str, Any]) -> dict[str, Any]:
                            "status": rec["status"], "error": rec.get("error"),
                            "sha256": rec.get("sha256")}
     for k in ("model", "fixed", "cost", "nfev", "success", "rms_residual", "identifiable",
-              "warnings", "frames"):
+              "warnings", "offset", "frames"):
         if k in res:
             out[k] = res[k]
     return out

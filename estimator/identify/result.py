@@ -49,6 +49,11 @@ class IdentResult:
         does not bound.
     band_method : dict, optional
         ``name -> "curvature"`` or ``"profile"``.
+    offset : dict, optional
+        A constant offset found in the record (:mod:`estimator.identify.offset`): ``kind``
+        (``"road"`` or ``"channel"``), ``values`` (column -> offset, the column's SI unit),
+        ``removed`` (subtracted before the fit), ``share`` (share of the misfit at the
+        start it leaves) and ``effects`` (each as ``suspid simulate --effect`` spells it).
     """
 
     model: str
@@ -73,6 +78,7 @@ class IdentResult:
     data_start: dict[str, Any] | None = None
     bands: dict[str, tuple[float, float]] | None = None
     band_method: dict[str, str] | None = None
+    offset: dict[str, Any] | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The contract's JSON object."""
@@ -105,4 +111,6 @@ class IdentResult:
         if self.bands is not None:
             out["band_3sigma"] = {k: [f(lo), f(hi)] for k, (lo, hi) in self.bands.items()}
             out["band_method"] = dict(self.band_method or {})
+        if self.offset is not None:
+            out["offset"] = self.offset
         return out

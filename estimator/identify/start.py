@@ -1379,7 +1379,7 @@ def _reject(res: IdentResult, warnings: list[str]) -> None:
 def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
                     run: Callable[[Parameters], IdentResult], *, data_start: bool = True,
                     keep_init: bool = True, init_fallback: bool = True,
-                    intervals: bool = True) -> IdentResult:
+                    intervals: bool = True, estimate: StartEstimate | None = None) -> IdentResult:
     """Run the fit ``run`` from the data-driven start and from ``params``; keep the best.
 
     Parameters
@@ -1416,6 +1416,9 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         result with standard errors: the curvature band where the cost is quadratic out to
         its ends, the profile likelihood where it is not; a parameter the profile does not
         bound makes the result not identifiable.
+    estimate : StartEstimate, optional
+        The data-driven start of ``problem`` when already computed
+        (:func:`estimate_start`); default: computed here when ``data_start``.
 
     Returns
     -------
@@ -1444,7 +1447,8 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         costs nothing more.
     """
     free = params.free
-    est = estimate_start(problem, params) if data_start and free else None
+    est = (estimate if estimate is not None
+           else estimate_start(problem, params) if data_start and free else None)
     runs: list[tuple[str, Parameters]] = []
     if est is not None and est.values:
         p = params.copy()

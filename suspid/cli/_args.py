@@ -1,4 +1,5 @@
-"""Option groups and checks the fitting commands share (``diagnose``, ``fleet``; ``identify``'s set).
+"""Option groups and checks the fitting commands share (``diagnose``, ``fleet``; ``identify``'s set;
+``--offset`` of ``identify`` and ``fleet``).
 
 Each command words its own help; the option names, types, defaults and metavars and the
 checks of their values live here once.
@@ -10,6 +11,7 @@ from dataclasses import dataclass
 
 from estimator.identify import Parameters
 from estimator.identify.problem import COSTS
+from estimator.identify.record import OFFSET_MODES
 from suspid.cli._common import load_measurement, model_from_args, params_from_args, positive_int
 from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
@@ -53,6 +55,19 @@ def add_fit_options(p: argparse._ActionsContainer, helps: FitHelp, restarts: int
     p.add_argument("--maxfev", type=positive_int, default=None, help=helps.maxfev)
     p.add_argument("--multistart", type=int, default=4, metavar="N", help=helps.multistart)
     p.add_argument("--no-polish", dest="polish", action="store_false", help=helps.polish)
+
+
+def add_offset_option(p: argparse._ActionsContainer, help_text: str) -> None:
+    """Add ``--offset remove|keep`` (default ``remove``): what the identification does with a
+    constant road or position offset it finds (:func:`estimator.identify.record.identify_record`).
+
+    Parameters
+    ----------
+    p : argparse parser or argument group
+    help_text : str
+        The command's help of the option.
+    """
+    p.add_argument("--offset", choices=list(OFFSET_MODES), default="remove", help=help_text)
 
 
 def check_counts(args: argparse.Namespace, *options: str) -> None:

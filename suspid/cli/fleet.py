@@ -11,7 +11,7 @@ from typing import Any
 from estimator.fleet import (AlertRule, FleetConfig, IdentifySettings, ProgressBar, available_cpus,
                              run_fleet)
 from suspid.can.options import add_can_arguments, can_inputs
-from suspid.cli._args import FitHelp, add_fit_options, check_counts
+from suspid.cli._args import FitHelp, add_fit_options, add_offset_option, check_counts
 from suspid.cli._common import (add_model_option, add_param_options, assignment_warnings,
                                 parse_assignments,
                                 positive_int, print_json)
@@ -50,6 +50,10 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     add_fit_options(i, FIT_HELP, restarts=6)
     i.add_argument("--no-data-start", dest="data_start", action="store_false",
                    help="start only from --init and the defaults (as identify's option)")
+    add_offset_option(i, "a constant offset in a drive's road column(s) or one position channel "
+                         "(a sensor zero not at rest), as identify finds it: remove: subtract "
+                         "it before the drive's fit (default); keep: fit the drive as it is; "
+                         "either way the drive's first warning and its offset field name it")
     a = p.add_argument_group("alerts and forecasts")
     a.add_argument("--nominal", action="append", default=[], metavar="NAME=VALUE",
                    help="nominal value of a monitored (free) parameter (SI; default the "
@@ -96,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
             x0=x0 if isinstance(x0, str) else tuple(float(v) for v in x0),
             restarts=args.restarts, maxfev=args.maxfev, multistart=args.multistart,
             polish=args.polish, data_start=args.data_start, dbc=str(dbc) if dbc is not None else None, signal_map=smap,
-            can_channel=args.can_channel)
+            can_channel=args.can_channel, offset=args.offset)
     elif args.db is None:
         raise UsageError("give --input DIR_OR_GLOB... with --model, or --db PATH to report from "
                          "the history")
@@ -126,12 +130,19 @@ def run(args: argparse.Namespace) -> int:
     out = result.to_json()
     if args.json:
         print_json(out)
-        for v in out["vehicles"]:
-            for msg in v.get("warnings", []):
-                sys.stderr.write(f"warning: {msg}\n")
+        for msg in _warnings(out):
+            sys.stderr.write(f"warning: {msg}\n")
         return 0
     _print_table(out)
     return 0
+
+
+def _warnings(out: dict[str, Any]) -> list[str]:
+    """The vehicles' warnings, then each drive's offset warning prefixed by its path."""
+    msgs = [msg for v in out["vehicles"] for msg in v.get("warnings", [])]
+    msgs += [f"{d['path']}: {msg}" for d in out["drives"] if d.get("offset")
+             for msg in d.get("warnings", []) if msg.startswith("offset:")]
+    return msgs
 
 
 def _date(t: Any) -> str:
@@ -153,9 +164,8 @@ def _print_table(out: dict[str, Any]) -> None:
                   for k, f in v["forecast"].items()]
         w(f"{v['rank']:>4}  {v['vehicle']:<16} {v['risk']:<9} {v['drives']:>6}  "
           f"{'; '.join(notes)}\n")
-    for v in out["vehicles"]:
-        for msg in v.get("warnings", []):
-            w(f"warning: {msg}\n")
+    for msg in _warnings(out):
+        w(f"warning: {msg}\n")
     for d in out["drives"]:
         if d["status"] != "ok":
             w(f"failed: {d['error']}\n")

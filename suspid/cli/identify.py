@@ -3,7 +3,9 @@ from __future__ import annotations
 
 import argparse
 import sys
-from estimator.identify import OutputErrorProblem, fit, fit_from_starts
+from estimator.identify import OutputErrorProblem
+from estimator.identify.record import identify_record
+from suspid.cli._args import add_offset_option
 from suspid.cli._common import (parse_state, positive_int, add_input_options, add_model_option, add_param_options,
                                 load_measurement, model_from_args, params_from_args, print_json,
                                 assignment_warnings)
@@ -43,6 +45,12 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="start only from --init and the defaults (default: estimate a start "
                         "from the record by a filtered equation-error least-squares fit, used "
                         "as the start when no --init is given and as a further start with it)")
+    add_offset_option(p, "a constant offset in the road column(s) or in one position channel "
+                         "(a sensor zero not at the rest position; estimated at the data-driven "
+                         "start as extra linear unknowns, found when it is most of the misfit): "
+                         "remove: subtract it and fit the corrected record (default); keep: fit "
+                         "the record as it is (slow: every further start chases the offset's "
+                         "misfit); either way a warning names it")
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
     p.add_argument("--plot", metavar="PNG", default=None,
                    help="write the seed-style comparison (measured vs identified) to this PNG")
@@ -62,17 +70,17 @@ def run(args: argparse.Namespace) -> int:
     if args.multistart < 0:
         raise UsageError(f"--multistart: expected >= 0, got {args.multistart}")
     meas, frames = load_measurement(args, model)
-    problem = OutputErrorProblem(model, meas, cost=args.cost, x0=parse_x0(args.x0, model.n_states))
-    result = fit_from_starts(
-        problem, params,
-        lambda start: fit(problem, start, restarts=args.restarts, maxfev=args.maxfev,
-                          polish=args.polish, multistart=args.multistart)[0],
-        data_start=args.data_start, keep_init=bool(args.init) or not args.data_start)
+    x0 = parse_x0(args.x0, model.n_states)
+    problem = OutputErrorProblem(model, meas, cost=args.cost, x0=x0)
+    result, fitted = identify_record(
+        problem, params, restarts=args.restarts, maxfev=args.maxfev, polish=args.polish,
+        multistart=args.multistart, data_start=args.data_start,
+        keep_init=bool(args.init) or not args.data_start, offset=args.offset)
     if frames is not None:
         result.frames = frames
     result.warnings[:0] = assignment_warnings(args, model)
     if args.plot:
-        plot_comparison(model, meas, result, args.plot)
+        plot_comparison(model, fitted.meas, result, args.plot)  # the record as fitted
     if args.json:
         print_json(result.to_json())
     else:

@@ -1,0 +1,208 @@
+"""A constant offset in a road or position column: a sensor zero not at the rest position.
+
+The linear models measure every position from static equilibrium on a road at zero. A road
+sensor whose zero is not where the car rests (``r = road + d``), or a position sensor whose
+zero is not the rest position (``x1 = q1 + d``), puts a static level into the record that no
+parameter set can produce: an output-error fit then ends far above the noise floor, and the
+search machinery (further starts, runaway checks, profile bands) chases a misfit that no
+parameter can remove.
+
+For fixed parameters the residual is affine in such offsets: the response is linear in the
+road, and the variable projection of the initial state is a linear projection of the
+measured channels. So the offsets that minimise the cost at given parameters follow from
+one small linear least-squares problem (:func:`find_offset`), the offsets as extra linear
+unknowns of the output-error residual; its columns are exact differences of two residual
+vectors. The candidates are the road columns together (one offset each) and every measured
+position channel alone; a road offset ``d`` on every road and an offset ``-d`` on every
+position channel are the same to the model (with the initial state estimated), so the road
+columns are named first.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+import numpy as np
+
+from estimator.identify.problem import OutputErrorProblem
+from estimator.identify.start import NOISE_FLOOR, noise_floor_ratio
+from suspid.effects import SensorOffset
+from suspid.io.csvio import Measurement
+from suspid.models.base import FloatArray, SuspensionModel
+
+#: share of the weighted sum of squares an offset must leave at most to count as found:
+#: removing it must explain at least three quarters of the misfit (on the bump records of
+#: docs/robustness.md it leaves 0.06 % of it; a clean record's best offset removes < 0.1 %)
+OFFSET_SHARE = 0.25
+
+#: standard errors an offset must exceed to be named (a road column without one is left out)
+SIGMAS = 3.0
+
+#: shift (channel units) used to form the residual's exact affine dependence on an offset
+_PROBE = 1e-2
+
+
+@dataclass
+class Offset:
+    """Constant offsets found in columns of a record.
+
+    Attributes
+    ----------
+    kind : {"road", "channel"}
+        Road columns (``r``, ``r1`` ...) or one measured position channel.
+    values : dict
+        Column -> offset (the column's SI unit: m, or rad for an angle): the column reads
+        that much above the level the model expects (the rest position).
+    cost_before, cost_after : float
+        Normalised output-error cost (1 = no fit) with the offsets in and removed, at the
+        parameters they were estimated for.
+    noise_ratio : float
+        :func:`~estimator.identify.start.noise_floor_ratio` with the offsets in.
+    """
+
+    kind: str
+    values: dict[str, float]
+    cost_before: float
+    cost_after: float
+    noise_ratio: float
+
+    @property
+    def share(self) -> float:
+        """Share of the weighted sum of squares the offsets leave (0 = all of it explained)."""
+        return self.cost_after / self.cost_before if self.cost_before > 0 else 1.0
+
+    def effects(self) -> list[SensorOffset]:
+        """The offsets as the ``sensor_offset`` effects of :mod:`suspid.effects` (one per
+        column; what ``suspid simulate --effect`` injects and ``suspid diagnose`` screens)."""
+        return [SensorOffset(channel=c, offset=d) for c, d in self.values.items()]
+
+    def remove(self, meas: Measurement) -> Measurement:
+        """``meas`` with the offsets subtracted from their columns (a new measurement)."""
+        road = dict(meas.road)
+        measured = dict(meas.measured)
+        for e in self.effects():
+            if self.kind == "road":
+                road = e.compensate(meas.t, road)
+            else:
+                measured = e.compensate(meas.t, measured)
+        return dataclasses.replace(meas, road=road, measured=measured,
+                                   warnings=list(meas.warnings))
+
+    def to_json(self, removed: bool) -> dict[str, Any]:
+        """The JSON's ``offset``: ``kind``, ``values`` (SI), ``removed``, ``share`` and
+        ``effects`` (the ``--effect`` spelling of each, e.g.
+        ``sensor_offset:channel=r,offset=0.01``)."""
+        return {"kind": self.kind, "values": dict(self.values), "removed": removed,
+                "share": self.share,
+                "effects": [f"sensor_offset:channel={c},offset={d:.6g}"
+                            for c, d in self.values.items()]}
+
+    def describe(self, model: SuspensionModel) -> str:
+        """The columns and their offsets, e.g. ``road column r reads +0.01 m`` (SI units)."""
+        parts = [f"{c} reads {d:+.3g} {(model.column_units(c) or ('SI',))[0]}"
+                 for c, d in self.values.items()]
+        what = "road column" if self.kind == "road" else "position channel"
+        return f"{what}{'s' if len(parts) > 1 else ''} " + ", ".join(parts)
+
+    def warning(self, model: SuspensionModel, removed: bool) -> str:
+        """One line naming the columns, the offsets with units and the remedy."""
+        head = (f"offset: {self.describe(model)} at the rest position, where the model "
+                "expects 0 (a sensor zero not at rest: a static level no parameter can "
+                f"produce, {100 * (1 - self.share):.1f} % of the misfit at the start)")
+        if removed:
+            return head + "; removed before the fit (--offset keep fits the record as it is)"
+        return head + ("; kept (--offset keep), so the fit is not meaningful: subtract it from "
+                       "the column, or let identify remove it (--offset remove, the default)")
+
+
+def _with_shift(meas: Measurement, kind: str, column: str, d: float) -> Measurement:
+    """``meas`` with ``d`` subtracted from one road (``kind="road"``) or measured column."""
+    road, measured = dict(meas.road), dict(meas.measured)
+    target = road if kind == "road" else measured
+    target[column] = np.asarray(target[column], dtype=float) - d
+    return dataclasses.replace(meas, road=road, measured=measured)
+
+
+def on_record(problem: OutputErrorProblem, meas: Measurement) -> OutputErrorProblem:
+    """``problem`` (model, cost, initial-state handling, weights) on the record ``meas``."""
+    return OutputErrorProblem(problem.model, meas, cost=problem.cost, x0=problem.x0,
+                              weights=problem.weights, affine=problem.affine)
+
+
+def _residual(problem: OutputErrorProblem, meas: Measurement,
+              p: Mapping[str, float]) -> FloatArray:
+    """``problem``'s weighted residual vector on ``meas`` instead of its own record."""
+    return on_record(problem, meas).residual_vector(p)
+
+
+def _offsets(J: FloatArray, r0: FloatArray) -> tuple[FloatArray, float, list[int]]:
+    """Offsets ``d`` minimising ``|r0 - J d|^2`` (``r(d) = r0 - J d``), that minimum, and the
+    columns whose offset exceeds ``SIGMAS`` standard errors (residual variance per sample)."""
+    d = np.asarray(np.linalg.lstsq(J, r0, rcond=None)[0], dtype=np.float64)
+    rd = r0 - J @ d
+    ss = float(rd @ rd)
+    s2 = ss / max(r0.size - J.shape[1], 1)
+    try:
+        se = np.sqrt(np.clip(np.diag(np.linalg.pinv(J.T @ J)) * s2, 0.0, None))
+    except np.linalg.LinAlgError:
+        return d, ss, []
+    return d, ss, [i for i in range(J.shape[1]) if abs(d[i]) > SIGMAS * se[i]]
+
+
+def find_offset(problem: OutputErrorProblem, p: Mapping[str, float]) -> Offset | None:
+    """The constant road or position offsets that best explain ``problem``'s misfit at ``p``.
+
+    Parameters
+    ----------
+    problem : OutputErrorProblem
+        The record and its cost.
+    p : mapping
+        Parameters (SI), every parameter of the model: the data-driven estimate, whose
+        filtered equations do not see a constant level, or the given start.
+
+    Returns
+    -------
+    Offset or None
+        The candidate (all road columns together, or one measured position channel) that
+        lowers the cost most, when the fit at ``p`` does not leave white noise
+        (:func:`~estimator.identify.start.noise_floor_ratio` above ``NOISE_FLOOR``) and
+        the offsets leave at most ``OFFSET_SHARE`` of its weighted sum of squares;
+        ``None`` otherwise (or when the residual cannot be evaluated).
+    """
+    model, meas = problem.model, problem.meas
+    try:
+        r0 = problem.residual_vector(p)
+    except (np.linalg.LinAlgError, ValueError, FloatingPointError):
+        return None
+    ss0 = float(r0 @ r0)
+    if not (math.isfinite(ss0) and ss0 > 0):
+        return None
+    ratio = noise_floor_ratio(problem, p)
+    if not ratio > NOISE_FLOOR:
+        return None
+    roads = [c for c in model.roads if c in meas.road and np.any(meas.road[c])]
+    groups: list[tuple[str, list[str]]] = [("road", roads)] if roads else []
+    groups += [("channel", [c]) for c in problem.channels if c in model.coords]
+    best: Offset | None = None
+    for kind, cols in groups:
+        try:
+            J = np.column_stack([(r0 - _residual(problem, _with_shift(meas, kind, c, _PROBE), p))
+                                 / _PROBE for c in cols])
+        except (np.linalg.LinAlgError, ValueError, FloatingPointError):
+            continue
+        if not np.all(np.isfinite(J)):
+            continue
+        d, ss, keep = _offsets(J, r0)
+        if len(keep) < len(cols):  # columns whose offset the record does not resolve
+            cols = [cols[i] for i in keep]
+            if not cols:
+                continue
+            d, ss, _ = _offsets(J[:, keep], r0)
+        if best is None or ss / problem.scale < best.cost_after:
+            best = Offset(kind, {c: float(v) for c, v in zip(cols, d)},
+                          ss0 / problem.scale, ss / problem.scale, ratio)
+    if best is None or best.share > OFFSET_SHARE:
+        return None
+    return best

@@ -1,0 +1,135 @@
+"""One record identified as ``suspid identify`` does it, the offset check included.
+
+``suspid identify``, each drive of ``suspid fleet`` and the offset-corrected fit of
+``suspid diagnose`` make the same call, :func:`identify_record`: the data-driven start
+(:func:`~estimator.identify.start.estimate_start`), the check for a constant offset in a
+road column or a position channel at it (:func:`check_offset`, a sensor zero not at rest,
+:mod:`estimator.identify.offset`), the offset removed before the fit (``offset="remove"``,
+the default) or kept, then :func:`~estimator.identify.start.fit_from_starts` over
+:func:`~estimator.identify.solver.fit`; a found offset is named in the result's first
+warning and in its ``offset`` field.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from estimator.identify.offset import Offset, find_offset, on_record
+from estimator.identify.params import Parameters
+from estimator.identify.problem import OutputErrorProblem
+from estimator.identify.result import IdentResult
+from estimator.identify.solver import fit
+from estimator.identify.start import StartEstimate, estimate_start, fit_from_starts
+from suspid.errors import UsageError
+
+#: what to do with a found offset: subtract it before the fit, or fit the record as it is
+OFFSET_MODES: tuple[str, ...] = ("remove", "keep")
+
+
+@dataclass
+class OffsetCheck:
+    """The offset check of a record at its data-driven start.
+
+    Attributes
+    ----------
+    offset : Offset or None
+        The constant road or position offsets found (``None``: none).
+    estimate : StartEstimate or None
+        The record's data-driven start (``None`` when not computed: ``data_start`` off or
+        nothing free); its filtered equations do not see a constant level, so it is the
+        same with the offset in or removed.
+    """
+
+    offset: Offset | None
+    estimate: StartEstimate | None
+
+
+def check_offset(problem: OutputErrorProblem, params: Parameters, *,
+                 data_start: bool = True) -> OffsetCheck:
+    """Look for a constant road or position offset in ``problem``'s record.
+
+    Parameters
+    ----------
+    problem : OutputErrorProblem
+        The record as read, and its cost.
+    params : Parameters
+        Fixed values (SI) and the given start of the free parameters.
+    data_start : bool
+        Judge the offset at the data-driven start (``identify``'s default); otherwise, or
+        when no parameter is free, at ``params``' values.
+
+    Returns
+    -------
+    OffsetCheck
+        The offset found (:func:`~estimator.identify.offset.find_offset`) and the
+        data-driven start it was judged at.
+    """
+    est = estimate_start(problem, params) if data_start and params.free else None
+    offset = find_offset(problem, {**params.valuesdict(), **(est.values if est else {})})
+    return OffsetCheck(offset, est)
+
+
+def identify_record(problem: OutputErrorProblem, params: Parameters, *, restarts: int = 6,
+                    maxfev: int | None = None, polish: bool = True, multistart: int = 4,
+                    data_start: bool = True, keep_init: bool = True, offset: str = "remove",
+                    check: OffsetCheck | None = None
+                    ) -> tuple[IdentResult, OutputErrorProblem]:
+    """Identify ``params`` from ``problem``'s record as ``suspid identify`` does.
+
+    Parameters
+    ----------
+    problem : OutputErrorProblem
+        The record as read, and its cost.
+    params : Parameters
+        Fixed values (SI) and the given start of the free parameters.
+    restarts, maxfev, polish, multistart
+        Settings of every :func:`~estimator.identify.solver.fit` (``identify``'s options of
+        the same names; ``maxfev`` in model evaluations).
+    data_start : bool
+        Start from the data-driven estimate too (``--no-data-start`` turns it off).
+    keep_init : bool
+        Also fit from ``params`` (``identify``: an ``--init`` given, or no data-driven
+        start); see :func:`~estimator.identify.start.fit_from_starts`.
+    offset : {"remove", "keep"}
+        A found offset is subtracted from its columns before the fit (``"remove"``), or the
+        record is fitted as it is (``"keep"``); either way the first warning names it.
+    check : OffsetCheck, optional
+        The record's :func:`check_offset` when already made (default: made here).
+
+    Returns
+    -------
+    result : IdentResult
+        The identification; with an offset found, its first warning names it and
+        ``result.offset`` holds it (:meth:`~estimator.identify.offset.Offset.to_json`).
+    fitted : OutputErrorProblem
+        The problem the fit ran on: ``problem`` itself, or the record with the offset
+        removed.
+
+    Raises
+    ------
+    UsageError
+        ``offset`` is not one of ``OFFSET_MODES``.
+    """
+    if offset not in OFFSET_MODES:
+        raise UsageError(f"offset: expected one of {', '.join(OFFSET_MODES)}, got {offset!r}")
+    found = check if check is not None else check_offset(problem, params, data_start=data_start)
+    fitted = problem
+    if found.offset is not None and offset == "remove":
+        fitted = on_record(problem, found.offset.remove(problem.meas))
+    removed = fitted is not problem
+    # the estimate's values hold either way; its cost and the checks on it are the record's
+    # as read, so the corrected record gets its own
+    est = None if removed else found.estimate
+
+    def run(start: Parameters) -> IdentResult:
+        return fit(fitted, start, restarts=restarts, maxfev=maxfev, polish=polish,
+                   multistart=multistart)[0]
+
+    result = fit_from_starts(fitted, params, run, data_start=data_start, keep_init=keep_init,
+                             estimate=est)
+    if found.offset is not None:
+        result.warnings.insert(0, found.offset.warning(problem.model, removed))
+        result.offset = found.offset.to_json(removed)
+    return result, fitted
+
+
+__all__ = ["OFFSET_MODES", "OffsetCheck", "check_offset", "identify_record"]
