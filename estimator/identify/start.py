@@ -995,17 +995,18 @@ NOISE_FLOOR = 1.15
 #: non-white part of its residual at least equals the noise. Correct fits to ``suspid
 #: simulate`` records (5 s at 200 Hz; every model, bump and ISO 8608 roads, noise 0.1 and
 #: 0.5 of each channel's std) measure 0.99-1.06; every spring and damper held at twice the
-#: truth 2.3-51 at 0.1-0.5 sigma (except three at 0.5 sigma: 1.1-1.9, which the noise hides)
-#: and 780-1300 noise-free; the half car's body mass at twice the truth (the rest free)
+#: truth 2.2-52 at 0.1-0.5 sigma (except four at 0.5 sigma: 1.1-1.9, which the noise hides)
+#: and 777-1340 noise-free; the half car's body mass at twice the truth (the rest free)
 #: 2.8-3.4 at 0.1 sigma (``python tools/identify_misfit.py --can``).
 MISFIT_FLOOR = 2.0
 #: share of the record's signal (the fitted channels' sums of squares about their means,
 #: weighted as in the cost) that a channel residual's excess over its noise floor must
 #: exceed as well: a noise-free record has no noise floor (its ratio compares rounding
-#: errors, up to 1.3; up to 1.5 quantized as a CAN log), and there a correct fit leaves at
+#: errors: 1.0-1.5, quantized as a CAN log too, but 553 on the full car's bump), and there
+#: a correct fit leaves at
 #: most 1e-20 (1.1e-8 quantized), while a quarter car's body mass held at twice the truth
 #: with its springs and dampers free leaves 1.3e-5 (bump) and 6.7e-4 (ISO road), every
-#: spring and damper at twice the truth 0.02-0.26 (same command).
+#: spring and damper at twice the truth 0.01-0.26 (same command).
 MISFIT_SHARE = 1e-5
 
 #: a free parameter this far (factor) from its start and from the data-driven estimate ran away
