@@ -993,11 +993,12 @@ NOISE_FLOOR = 1.15
 #: :func:`noise_floor_ratio` of a fitted channel above which the fit of
 #: :func:`fit_from_starts` is a misfit, not a success (:func:`misfit_channels`): the smooth,
 #: non-white part of its residual at least equals the noise. Correct fits to ``suspid
-#: simulate`` records (5 s at 200 Hz; every model, bump and ISO 8608 roads, noise 0.1 and
-#: 0.5 of each channel's std) measure 0.99-1.06; every spring and damper held at twice the
-#: truth 2.2-52 at 0.1-0.5 sigma (except four at 0.5 sigma: 1.1-1.9, which the noise hides)
-#: and 777-1340 noise-free; the half car's body mass at twice the truth (the rest free)
-#: 2.8-3.4 at 0.1 sigma (``python tools/identify_misfit.py --can``).
+#: simulate`` records (5 s at 200 Hz; quarter1, quarter2, half4, bump and ISO 8608 roads,
+#: noise 0.1 and 0.5 of each channel's std) measure 0.99-1.06; every spring and damper (with
+#: full7 the noise-free bump only) held at twice the truth 2.2-52 at 0.1-0.5 sigma (except
+#: four at 0.5 sigma: 1.1-1.9, which the noise hides) and 777-1340 noise-free; the half
+#: car's body mass at twice the truth (the rest free) 2.8-3.4 at 0.1 sigma (``python
+#: tools/identify_misfit.py --can``).
 MISFIT_FLOOR = 2.0
 #: share of the record's signal (the fitted channels' sums of squares about their means,
 #: weighted as in the cost) that a channel residual's excess over its noise floor must
