@@ -30,6 +30,12 @@ from suspid.simulate import outputs, road_matrix, simulate_states
 
 #: relative standard error above which a free parameter counts as not determined
 UNDETERMINED = 1.0
+#: evaluations per free parameter of each start of a fit without ``maxfev`` (its runs,
+#: polish and finishing Nelder-Mead together)
+DEFAULT_MAXFEV = 1000
+#: relative difference of two costs (normalised) within which a further start of
+#: :func:`fit` reached the same minimum as the best so far
+SAME_COST = 1e-3
 
 
 @dataclass
@@ -128,7 +134,11 @@ def fit(problem: OutputErrorProblem, params: Parameters, restarts: int = 6,
 
     ``multistart > 0`` allows up to that many further starts (log-normal scatter of 0.7
     around the start, fixed seed) when the answer looks like a spurious local minimum: a
-    parameter more than 50x away from its start, or no convergence. The lowest cost wins. Near the optimum the
+    parameter more than 50x away from its start, or no convergence. The lowest cost wins;
+    a further start that returns to the best cost (within ``SAME_COST``) ends the search.
+    ``maxfev`` bounds the evaluations of every run, further start and polish together;
+    without it each start has ``DEFAULT_MAXFEV`` per free parameter for its runs, its polish
+    and the Nelder-Mead that finishes a polish that did not help. Near the optimum the
     output-error problem is almost linear, so the polish converges in a handful of
     Jacobians instead of the hundreds of simplex steps Nelder–Mead spends resolving the
     last digits (unbounded problems only).
@@ -197,10 +207,16 @@ def fit(problem: OutputErrorProblem, params: Parameters, restarts: int = 6,
                 out, converged = more, more.converged
         return out, converged
 
-    out, converged = run_from(np.zeros(len(free)), initial_simplex, maxfev)
+    # ``maxfev`` covers every run, further start and polish of this fit; without it each
+    # start has DEFAULT_MAXFEV per free parameter for its runs, polish and continuation
+    own = DEFAULT_MAXFEV * max(len(free), 1)
+    out, converged = run_from(np.zeros(len(free)), initial_simplex,
+                              maxfev if maxfev is not None else own)
     # Multi-start only when the answer looks like a spurious local minimum: a parameter run
     # off by more than 50x from its start (e.g. a damper collapsing to zero while another
     # compensates), a fit that did not converge, or a cost far above the best possible.
+    # A further start that returns to the best cost (``SAME_COST``) confirms it: the
+    # scatter finds no other basin, and the rest of the starts would repeat it.
     tries = 0
     rng = np.random.default_rng(12345)
     while (multistart > tries and len(free) > 0
@@ -208,14 +224,16 @@ def fit(problem: OutputErrorProblem, params: Parameters, restarts: int = 6,
            and (maxfev is None or out.nfev < maxfev)):   # a spent budget starts nothing more
         tries += 1
         u_start = rng.normal(0.0, 0.7, len(free))
-        budget = None if maxfev is None else maxfev - out.nfev
-        alt, alt_conv = run_from(u_start, None, budget)
+        alt, alt_conv = run_from(u_start, None, own if maxfev is None else maxfev - out.nfev)
         alt.nfev += out.nfev
         alt.restarts += out.restarts + 1
+        same = abs(alt.fun - out.fun) <= SAME_COST * max(out.fun, alt.fun)
         if alt.fun < out.fun:
             out, converged = alt, alt_conv
         else:
             out.nfev, out.restarts = alt.nfev, alt.restarts
+        if same:
+            break
     p_hat = to_params(out.u)
     res = finish(problem, params, p_hat, out.nfev, converged, with_stderr=with_stderr)
     res.restarts = out.restarts

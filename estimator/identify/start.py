@@ -1064,6 +1064,26 @@ EXACT_FIT = 1e-10
 #: to measure 1.8-19.
 NOISE_FLOOR = 1.15
 
+#: :func:`noise_floor_ratio` of a fitted channel above which the fit of
+#: :func:`fit_from_starts` is a misfit, not a success (:func:`misfit_channels`): the smooth,
+#: non-white part of its residual at least equals the noise. Correct fits to ``suspid
+#: simulate`` records (5 s at 200 Hz; quarter1, quarter2, half4, bump and ISO 8608 roads,
+#: noise 0.1 and 0.5 of each channel's std) measure 0.99-1.06; every spring and damper (with
+#: full7 the noise-free bump only) held at twice the truth 2.2-52 at 0.1-0.5 sigma (except
+#: four at 0.5 sigma: 1.1-1.9, which the noise hides) and 777-1340 noise-free; the half
+#: car's body mass at twice the truth (the rest free) 2.8-3.4 at 0.1 sigma (``python
+#: tools/identify_misfit.py --can``).
+MISFIT_FLOOR = 2.0
+#: share of the record's signal (the fitted channels' sums of squares about their means,
+#: weighted as in the cost) that a channel residual's excess over its noise floor must
+#: exceed as well: a noise-free record has no noise floor (its ratio compares rounding
+#: errors: 1.0-1.5, quantized as a CAN log too, but 553 on the full car's bump), and there
+#: a correct fit leaves at
+#: most 1e-20 (1.1e-8 quantized), while a quarter car's body mass held at twice the truth
+#: with its springs and dampers free leaves 1.3e-5 (bump) and 6.7e-4 (ISO road), every
+#: spring and damper at twice the truth 0.01-0.26 (same command).
+MISFIT_SHARE = 1e-5
+
 #: a free parameter this far (factor) from its start and from the data-driven estimate ran away
 #: (unless a second start, begun far from the first in it, reached the same fit: :func:`_confirmed`)
 RUNAWAY = 100.0
@@ -1232,6 +1252,77 @@ def residual_noise_floor_parts(r: FloatArray, channels: Sequence[str]
         d = np.diff(rj)
         out[c] = (float(rj @ rj), float(d @ d) / 2.0 * rj.size / d.size)
     return out
+
+
+def misfit_measures(problem: OutputErrorProblem, p: Mapping[str, float]
+                    ) -> dict[str, tuple[float, float]]:
+    """Per fitted channel: its noise-floor ratio and the excess's share of the signal.
+
+    The ratio is :func:`noise_floor_ratios`' (``inf`` with no noise floor at all); the
+    share is the channel residual's sum of squares less its noise floor over the fitted
+    channels' summed sums of squares about their means (weighted as in the cost;
+    dimensionless; below 0 when the residual is all noise). A channel the record hardly
+    moves (the roll of a symmetric bump) thus weighs what it weighs in the cost. Channels
+    with fewer than 3 finite samples are left out; empty when the prediction fails or the
+    record does not move.
+    """
+    parts = noise_floor_parts(problem, p)
+    if parts is None:
+        return {}
+    var = 0.0
+    for j in range(len(problem.channels)):
+        y = problem.Ymeas[:, j]
+        y = y[np.isfinite(y)]
+        if y.size:
+            var += float(np.sum((y - y.mean()) ** 2)) * float(problem.w[j]) ** 2
+    if not var > 0:
+        return {}
+    out: dict[str, tuple[float, float]] = {}
+    for j, c in enumerate(problem.channels):
+        if c in parts and math.isfinite(parts[c][0]):
+            a, b = parts[c]
+            out[c] = (a / b if b > 0 else math.inf, (a - b) * float(problem.w[j]) ** 2 / var)
+    return out
+
+
+def misfit_channels(problem: OutputErrorProblem, p: Mapping[str, float]
+                    ) -> dict[str, tuple[float, float]]:
+    """Fitted channels whose residual at ``p`` is clearly more than measurement noise.
+
+    A channel is a misfit when its noise-floor ratio exceeds ``MISFIT_FLOOR`` and the
+    residual's excess over the noise floor exceeds ``MISFIT_SHARE`` of the record's signal
+    (:func:`misfit_measures`). A fit at the noise floor (ratio about 1) or one that
+    leaves a negligible part of the signal (a noise-free or quantized record fitted well) is
+    none.
+
+    Parameters
+    ----------
+    problem : OutputErrorProblem
+        The record and cost.
+    p : mapping
+        Every parameter's value (SI).
+
+    Returns
+    -------
+    dict
+        Channel -> ``(ratio, share)`` of the misfit channels (both dimensionless); empty
+        when there is no misfit or the prediction fails.
+    """
+    return {c: (r, sh) for c, (r, sh) in misfit_measures(problem, p).items()
+            if r > MISFIT_FLOOR and sh > MISFIT_SHARE}
+
+
+def misfit_warning(misfit: Mapping[str, tuple[float, float]], fixed: Mapping[str, float]
+                   ) -> str:
+    """The one-line warning of a misfit (:func:`misfit_channels`), naming the held values."""
+    chans = ", ".join(f"{c} (noise-floor ratio {r:.3g}, {100.0 * sh:.3g} % of the signal)"
+                      for c, (r, sh) in misfit.items())
+    held = ", ".join(f"{k}={v:.6g}" for k, v in fixed.items())
+    cause = (f"the values held fixed ({held}: --fix) are the likely cause" if held
+             else "a local minimum, an effect the model lacks or a faulty channel is the "
+                  "likely cause")
+    return (f"misfit: the fit leaves far more than measurement noise on {chans}; the model "
+            f"does not explain the record and {cause}")
 
 
 def _exact(problem: OutputErrorProblem, res: IdentResult) -> bool:
@@ -1570,6 +1661,14 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         apply_bands(problem, res, free)
     if twin_warning is not None:
         res.warnings.append(twin_warning)
+    misfit = misfit_channels(problem, res.params)
+    if misfit:
+        # the model does not explain the record, however well the optimiser converged
+        res.success = False
+        for entry in res.starts:
+            if entry.get("chosen"):
+                entry["success"] = False
+        res.warnings.append(misfit_warning(misfit, {k: res.params[k] for k in params.fixed}))
     return res
 
 
