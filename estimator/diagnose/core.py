@@ -78,6 +78,16 @@ class Thresholds:
     #: start of the record (s) left out of the whiteness test (initial-state transient)
     settle_s: float = 0.05
 
+    def judge(self, dbic: float, p: float, explained: float) -> tuple[bool, str]:
+        """Whether a refit with these statistics is accepted, and why (or why not)."""
+        ok = dbic < self.dbic and p < self.lr_p and explained >= self.explained
+        reason = "accepted" if ok else "; ".join(
+            r for r, bad in ((f"dBIC {dbic:.3g} not below {self.dbic:g}", dbic >= self.dbic),
+                             (f"LR p {p:.3g} not below {self.lr_p:g}", p >= self.lr_p),
+                             (f"explains {explained:.0%} of the structured residual, needs "
+                              f"{self.explained:.0%}", explained < self.explained)) if bad)
+        return ok, reason
+
 
 @dataclass
 class Verdict:
@@ -381,12 +391,7 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
         if best_try is None:
             return
         dbic, p, expl, f, rms, fm, ref = best_try
-        ok = dbic < th.dbic and p < th.lr_p and expl >= th.explained
-        reason = "accepted" if ok else "; ".join(
-            r for r, bad in ((f"dBIC {dbic:.3g} not below {th.dbic:g}", dbic >= th.dbic),
-                             (f"LR p {p:.3g} not below {th.lr_p:g}", p >= th.lr_p),
-                             (f"explains {expl:.0%} of the structured residual, needs "
-                              f"{th.explained:.0%}", expl < th.explained)) if bad)
+        ok, reason = th.judge(dbic, p, expl)
         verdicts.append(Verdict(sc.name, dbic, p, expl, f, rms, fm.effect.to_json()["params"] if fm.effect else {},
                                 ok, reason, tried,
                                 "baseline" if ref is base else (ref.notes[0] if ref.notes else "reference fit")))
@@ -524,12 +529,7 @@ def _offset_refit(problem: OutputErrorProblem, params: Parameters, check: Offset
     fm = dataclasses.replace(fm, effect=effect, predicted=dict(predicted),
                              notes=[f"identify's fit with the offset removed ({offset.describe(problem.model)})"])
     dbic, p, expl, f, rms = compare(base, fm, noise_var, channels)
-    ok = dbic < th.dbic and p < th.lr_p and expl >= th.explained
-    reason = "accepted" if ok else "; ".join(
-        r for r, bad in ((f"dBIC {dbic:.3g} not below {th.dbic:g}", dbic >= th.dbic),
-                         (f"LR p {p:.3g} not below {th.lr_p:g}", p >= th.lr_p),
-                         (f"explains {expl:.0%} of the structured residual, needs "
-                          f"{th.explained:.0%}", expl < th.explained)) if bad)
+    ok, reason = th.judge(dbic, p, expl)
     screen = Screen(effect.name, "output", 1.0 - offset.share, math.nan, True,
                     effect.to_json()["params"], dict(check.estimate.values if check.estimate else {}),
                     note=f"offset check at the data-driven start: {offset.describe(problem.model)}")
