@@ -1318,11 +1318,12 @@ def misfit_warning(misfit: Mapping[str, tuple[float, float]], fixed: Mapping[str
     chans = ", ".join(f"{c} (noise-floor ratio {r:.3g}, {100.0 * sh:.3g} % of the signal)"
                       for c, (r, sh) in misfit.items())
     held = ", ".join(f"{k}={v:.6g}" for k, v in fixed.items())
-    cause = (f"the values held fixed ({held}: --fix) are the likely cause" if held
-             else "a local minimum, an effect the model lacks or a faulty channel is the "
-                  "likely cause")
+    cause = (f"likely causes: a value held fixed ({held}: --fix), an effect the model lacks "
+             "(suspid diagnose) or a faulty channel" if held
+             else "likely causes: a local minimum, an effect the model lacks (suspid diagnose) "
+                  "or a faulty channel")
     return (f"misfit: the fit leaves far more than measurement noise on {chans}; the model "
-            f"does not explain the record and {cause}")
+            f"does not explain the record; {cause}")
 
 
 def _exact(problem: OutputErrorProblem, res: IdentResult) -> bool:
