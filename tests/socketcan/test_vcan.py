@@ -85,17 +85,6 @@ def _jsonl(path: Path) -> list[dict[str, Any]]:
     return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
 
 
-def _wait_for_estimates(path: Path, n: int, timeout: float = 180.0) -> None:
-    """Wait until the live monitor's JSONL at ``path`` holds ``n`` estimates (a slow guest
-    fits behind the bus: the frames are all queued, the windows not yet all fitted)."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        text = path.read_text() if path.exists() else ""
-        if sum('"estimate"' in line for line in text.splitlines()) >= n:
-            return
-        time.sleep(0.5)
-
-
 def _candump_ids(path: Path) -> Counter[int]:
     ids: Counter[int] = Counter()
     for line in path.read_text().splitlines():
@@ -177,7 +166,6 @@ def test_canplayer_replay_equals_monitor_input(node_run: dict[str, Any]) -> None
     play = subprocess.run(["canplayer", "-I", str(log), "vcan0=can0"], capture_output=True,
                           text=True, timeout=300)
     assert play.returncode == 0, play.stderr
-    _wait_for_estimates(tmp / "replay.jsonl", len(ref_est))
     time.sleep(2.0)
     err = _stop(mon)
     assert mon.returncode == 0, err
