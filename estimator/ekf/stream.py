@@ -142,6 +142,10 @@ class EKFWindowEstimator:
         #: motion restarts after gaps, and the data time they bridged (s)
         self.restarts = 0
         self.gap_s = 0.0
+        #: restarts after the filter diverged (:meth:`_recover`)
+        self.divergences = 0
+        self._nis_ok: tuple[float, int] = (0.0, 0)
+        self._sig_u: FloatArray | None = None
 
     def _road(self, data: Mapping[str, FloatArray], t: FloatArray) -> FloatArray:
         n = t.size
@@ -185,8 +189,7 @@ class EKFWindowEstimator:
         self._first_window_start(t, data)
         h = uniform_step(t) or float(np.median(np.diff(t)))
         dt = h * self.decimate
-        self.ekf = AugmentedEKF(self.model, self.params, self.augmented, self.channels, dt,
-                                self.tuning)
+        self.ekf = self._new_filter(dt)
         sig = []
         for c in self.channels:
             nf = noise_floor(np.asarray(data[c], dtype=float))
@@ -207,8 +210,37 @@ class EKFWindowEstimator:
                 if f"{r}_dot" not in data:  # the road's central difference (see _road)
                     sig_u[nr + i] = sig_u[i] / (math.sqrt(2.0) * h)
             self.ekf.set_input_noise(sig_u)
+            self._sig_u = sig_u
         self.h = h
         self.ekf.x[:self.ekf.nx, 0] = self._motion_state(data, 0)
+
+    def _new_filter(self, dt: float) -> AugmentedEKF:
+        """A filter at the start values (motion at rest, the initial covariance), with the
+        measurement and road noise of the first window when they are known."""
+        ekf = AugmentedEKF(self.model, self.params, self.augmented, self.channels, dt,
+                           self.tuning)
+        if self.ekf is not None:
+            ekf.R = self.ekf.R.copy()
+            if self._sig_u is not None:
+                ekf.set_input_noise(self._sig_u)
+        return ekf
+
+    def _recover(self, data: Mapping[str, FloatArray], k: int, t_k: float) -> None:
+        """Start the filter over at sample ``k`` (time ``t_k``, s) after it diverged.
+
+        A state or covariance that is no longer finite (a model far from the data: a sensor
+        offset kept, a wrong fixed value) makes every later update fail; the filter starts
+        over from the start values and the measurements at ``k``, its consistency sums kept.
+        Counted per window (:meth:`process`) and in the summary (``divergences``).
+        """
+        old = self._filter()
+        sums = (old.nis_sum if math.isfinite(old.nis_sum) else self._nis_ok[0],
+                old.nis_dof if math.isfinite(old.nis_sum) else self._nis_ok[1])
+        ekf = self._new_filter(old.dt)
+        ekf.x[:ekf.nx, 0] = self._motion_state(data, k)
+        ekf.nis_sum, ekf.nis_dof = sums
+        self.ekf = ekf
+        self.divergences += 1
 
     def _motion_state(self, data: Mapping[str, FloatArray], k: int) -> FloatArray:
         """Motion states ``[q, q']`` from the measurements at sample ``k`` of ``data``.
@@ -284,6 +316,52 @@ class EKFWindowEstimator:
             raise RuntimeError("the EKF starts with the first window")
         return self.ekf
 
+    def _run(self, tn: FloatArray, U: FloatArray, Y: FloatArray,
+             dnew: Mapping[str, FloatArray], usable: np.ndarray, gaps: list[str]
+             ) -> tuple[int, float]:
+        """Step the filter through the new samples (times ``tn``, road ``U``, measurements
+        ``Y``); gaps are appended to ``gaps``. Returns the divergences (:meth:`_recover`) and
+        the time of the first (s; NaN without one)."""
+        ekf = self._filter()
+        step = ekf.step
+        limit = GAP_STEPS * self.h
+        diverged = 0
+        first_div = math.nan
+        for k in range(tn.size):
+            if not usable[k]:      # no input: nothing to predict the motion with
+                continue
+            tk = float(tn[k])
+            gap = self._u_prev is not None and tk - self._t_seen > limit
+            if gap:
+                gaps.append(self._restart(dnew, k, tk))
+            self._t_seen = tk
+            if self._u_prev is None or gap:   # the anchor of the following steps
+                self._u_prev = U[k]
+                self._t_step = tk
+                self._phase = 0
+                continue
+            self._phase = (self._phase + 1) % self.decimate
+            if self._phase != 0:
+                continue
+            try:
+                step(Y[k], self._u_prev, U[k])
+                failed = not math.isfinite(ekf.nis_sum)
+            except (np.linalg.LinAlgError, FloatingPointError, ValueError):
+                failed = True
+            if failed:
+                if not diverged:
+                    first_div = tk
+                diverged += 1
+                self._recover(dnew, k, tk)
+                ekf = self._filter()
+                step = ekf.step
+            else:
+                self._nis_ok = (ekf.nis_sum, ekf.nis_dof)
+            self._u_prev = U[k]
+            self._t_step = tk
+            self.samples += 1
+        return diverged, first_div
+
     def process(self, t: FloatArray, data: Mapping[str, FloatArray]) -> StepResult:
         """Filter the window's new samples; report the parameters at the window end."""
         c0 = time.process_time()
@@ -291,6 +369,8 @@ class EKFWindowEstimator:
         if self.ekf is None:
             self._start(t, data)
         tn = t[new]
+        diverged = 0
+        first_div = math.nan
         gaps: list[str] = []
         if tn.size:
             U = self._road(data, t)[new]
@@ -298,29 +378,11 @@ class EKFWindowEstimator:
                                  else np.full(tn.size, np.nan) for c in self.channels])
             dnew = {c: np.asarray(v, dtype=float)[new] for c, v in data.items()}
             usable = self._usable(dnew, tn.size)
-            ekf = self._filter()
-            step = ekf.step
-            limit = GAP_STEPS * self.h
-            for k in range(tn.size):
-                if not usable[k]:      # no input: nothing to predict the motion with
-                    continue
-                tk = float(tn[k])
-                gap = self._u_prev is not None and tk - self._t_seen > limit
-                if gap:
-                    gaps.append(self._restart(dnew, k, tk))
-                self._t_seen = tk
-                if self._u_prev is None or gap:   # the anchor of the following steps
-                    self._u_prev = U[k]
-                    self._t_step = tk
-                    self._phase = 0
-                    continue
-                self._phase = (self._phase + 1) % self.decimate
-                if self._phase != 0:
-                    continue
-                step(Y[k], self._u_prev, U[k])
-                self._u_prev = U[k]
-                self._t_step = tk
-                self.samples += 1
+            err = np.seterr(over="ignore", invalid="ignore")   # a divergence is said below
+            try:
+                diverged, first_div = self._run(tn, U, Y, dnew, usable, gaps)
+            finally:
+                np.seterr(**err)
             self.t_last = float(tn[-1])
         cpu = time.process_time() - c0
         self.cpu += cpu
@@ -348,17 +410,27 @@ class EKFWindowEstimator:
         if self.held_note and self.samples == 0:
             warns.append(self.held_note)
         warns.extend(gaps)
+        if diverged:
+            warns.insert(0, f"EKF diverged {diverged} time{'s' if diverged > 1 else ''} in this "
+                            f"window (first at t={first_div:.4f} s): its state or covariance "
+                            "was no longer finite; restarted from the start values and the "
+                            "measurements each time; this estimate goes to neither the "
+                            "tracker nor the alerts (the model does not describe the data: a "
+                            "sensor offset kept, a wrong fixed value)")
         info: dict[str, Any] = {"samples": self.samples, "cpu_ms": 1e3 * cpu,
                                 "augmented": list(self.augmented),
                                 "nis": nis, "nis_band": [lo, hi], "warnings": warns}
         if gaps:
             info["gaps"] = len(gaps)
+        if diverged:
+            info["divergences"] = diverged
         if self.held:
             info["held"] = dict(self.held)
         if self.start_from:
             info["start_from_first_window"] = dict(self.start_from)
         ev = Estimate(float(t[-1]), float(t[0]), self.name, vals, se, info=info)
-        return StepResult(ev, vals if ok else None, se if ok else None)
+        track = ok and not diverged        # a restarted filter's values are no estimate
+        return StepResult(ev, vals if track else None, se if track else None)
 
     def summary(self) -> dict[str, Any]:
         """Samples filtered and CPU time."""
@@ -368,7 +440,7 @@ class EKFWindowEstimator:
                 "augmented": list(self.augmented), "held": dict(self.held),
                 "nis": (ekf.nis_sum / ekf.nis_dof) if ekf is not None and ekf.nis_dof else None,
                 "nis_windows_inconsistent": self.nis_windows_out,
-                "restarts": self.restarts, "gap_s": self.gap_s}
+                "restarts": self.restarts, "gap_s": self.gap_s, "divergences": self.divergences}
 
 
 #: parameter kinds the augmented EKF can carry in its state (affine in the model's matrices)

@@ -114,7 +114,7 @@ class Offset:
         if removed:
             return head + "; removed before the fit (--offset keep fits the record as it is)"
         return head + ("; kept (--offset keep), so the fit is not meaningful: subtract it from "
-                       "the column, or let identify remove it (--offset remove, the default)")
+                       "the column, or let suspid remove it (--offset remove, the default)")
 
 
 def _with_shift(meas: Measurement, kind: str, column: str, d: float) -> Measurement:

@@ -61,6 +61,7 @@ from dataclasses import dataclass
 from typing import Mapping
 
 
+from estimator.identify.record import OFFSET_MODES
 from suspid.errors import UsageError
 from suspid.models.base import SuspensionModel
 from suspid.models.modes import modes
@@ -196,6 +197,12 @@ class WindowConfig:
         With ``drift_solver="linear"``: chord steps on the chunked drifting window after
         the first-order solve (one evaluation each); 0 (default): none (one step moved the
         demo60 end values 15 % closer to the Gauss-Newton ones, at 2.5 x the drift fit's CPU).
+    offset : str
+        A constant offset in a road column or a measured position channel (a sensor zero not
+        at the rest position, :mod:`estimator.identify.offset`) is looked for on each cold
+        window (the first fitted one, and any later one while no estimate has been
+        accepted) until one is found: ``"remove"`` (default) subtracts it from that window
+        and every later one, ``"keep"`` only names it (``suspid identify``'s ``--offset``).
     """
 
     window_s: float
@@ -224,6 +231,7 @@ class WindowConfig:
     drift_rate_sd: float = 0.005
     drift_solver: str = "linear"
     drift_refine: int = 0
+    offset: str = "remove"
 
     def validate(self) -> None:
         """Raise :class:`UsageError` naming the first inconsistent setting."""
@@ -238,6 +246,9 @@ class WindowConfig:
                              "give a shorter --window or --step, or use identify for a whole record")
         if self.decimate < 1:
             raise UsageError(f"--decimate: expected an integer >= 1, got {self.decimate}")
+        if self.offset not in OFFSET_MODES:
+            raise UsageError(f"--offset: expected one of {', '.join(OFFSET_MODES)}, "
+                             f"got {self.offset!r}")
         if self.maxfev < 10 or self.first_maxfev < 10:
             raise UsageError(f"--budget: expected at least 10 evaluations, got {self.maxfev}")
         if self.drift_solver not in ("linear", "gauss-newton"):

@@ -24,6 +24,7 @@ from estimator.inspection import inspect, quarter_car_problem
 from estimator.stream.config import WindowConfig
 from estimator.stream.events import Estimate, Notice, Skip, Summary
 from estimator.stream.misfit import MisfitWatch
+from estimator.stream.offsets import OffsetStage
 from estimator.stream.tracker import TrendTracker
 from estimator.stream.window import SlidingWindowIdentifier
 from suspid.models.base import FloatArray, SuspensionModel
@@ -188,6 +189,9 @@ class StreamMonitor:
     tracker : TrendTracker, optional
         Built from the estimator's ``lag`` and ``overlap`` when not given.
     forecasts : ForecastEngine, optional
+    offsets : OffsetStage, optional
+        Finds a constant road or position offset on the first excited window and removes it
+        from every window before the estimator sees it (:mod:`estimator.stream.offsets`).
     """
 
     estimator: Any
@@ -195,6 +199,7 @@ class StreamMonitor:
     alerts: AlertEngine | None = None
     tracker: TrendTracker | None = None
     forecasts: ForecastEngine | None = None
+    offsets: OffsetStage | None = None
     lines: int = 0
     started: float = field(default_factory=time.perf_counter)
     cpu_started: float = field(default_factory=time.process_time)
@@ -218,7 +223,12 @@ class StreamMonitor:
         if not math.isfinite(self.t_first):
             self.t_first = float(t[0])
         self.t_last = float(t[-1])
+        told = None
+        if self.offsets is not None:
+            data, told = self.offsets.process(t, data)
         res = self.estimator.process(t, data)
+        if told is not None:
+            res.notices.insert(0, told)
         ev = res.event
         tracked: dict[str, dict[str, float]] = {}
         if isinstance(ev, Estimate) and res.values is not None and res.stderr:
@@ -250,6 +260,8 @@ class StreamMonitor:
                                "data_s": span, "wall_s": wall, "cpu_s": cpu,
                                "realtime_factor": span / wall if wall > 0 else None}
         out.update(self.estimator.summary())
+        if self.offsets is not None:
+            out["offset"] = self.offsets.summary()
         if self.alerts is not None:
             out["alerts"] = sum(1 for e in self.alerts.emitted if e.kind == "alert")
             out["forecasts"] = sum(1 for e in self.alerts.emitted if e.kind == "forecast")

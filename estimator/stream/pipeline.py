@@ -43,6 +43,7 @@ from estimator.stream.config import (WindowConfig, default_config, default_decim
                                      strut_parameters)
 from estimator.stream.drivers import CanWindowDriver, LiveStop, replay_log, run_arrays, run_bus
 from estimator.stream.events import Summary
+from estimator.stream.offsets import OffsetStage
 from estimator.stream.monitor import StreamMonitor
 from suspid.can.bus import open_bus
 from suspid.can.logs import LOG_FORMATS, ReadStats, is_can_log
@@ -349,7 +350,9 @@ def build_monitor(spec: MonitorSpec, emit: Callable[[Any], None], store: AlertSt
             for k, ev in store.last_forecast.items():
                 if ev.kind == "forecast" and k in forecasts.limits:
                     forecasts.active[k] = ev
-    return StreamMonitor(est, emit, engine, forecasts=forecasts)
+    offsets = (OffsetStage(spec.model, spec.params, spec.config)
+               if spec.baseline != "output_only" else None)
+    return StreamMonitor(est, emit, engine, forecasts=forecasts, offsets=offsets)
 
 
 @dataclass

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
 
 from suspid.can.options import add_can_arguments, add_receive_arguments, can_inputs
+from suspid.cli._args import add_offset_option
 from suspid.cli._common import add_model_option, assignment_warnings, parse_assignments, print_json
 from suspid.errors import UsageError
 from suspid.models import get_model
@@ -94,6 +95,11 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                         "window, so their estimate refers to the window's end (default: every "
                         "free damper and spring of the struts; 'none': every parameter "
                         "constant over the window; docs/monitoring.md)")
+    add_offset_option(w, "a constant offset in the road column(s) or one position channel (a "
+                         "sensor zero not at the rest position), looked for on the first fitted "
+                         "window: 'remove' (default) subtracts it from every window, 'keep' "
+                         "fits the data as they are; either way a warning and the summary's "
+                         "offset field name it")
     a = p.add_argument_group("alerts")
     a.add_argument("--alert-file", metavar="PATH", default=None,
                    help="durable append-only alert log (JSON lines, fsynced); a restarted "
@@ -245,7 +251,7 @@ def run(args: argparse.Namespace) -> int:
         window_overrides={"maxfev": args.budget, "first_maxfev": args.first_budget,
                           "sigma_floor": args.sigma_floor, "min_deflection": args.min_deflection,
                           "road_fusion_hz": args.road_fusion, "road_lowpass_hz": args.road_lowpass,
-                          "drift": _drift_names(args.window_drift)},
+                          "drift": _drift_names(args.window_drift), "offset": args.offset},
         decimate=args.decimate, inspection=not args.no_inspection,
         forecast_horizon=args.forecast_horizon, ekf_params=ekf_params, ekf_q=args.ekf_q,
         ekf_decimate=args.ekf_decimate, accel_channel=args.accel_channel,

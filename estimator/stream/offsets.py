@@ -1,0 +1,135 @@
+"""A sensor zero not at rest, found on the stream's first excited window and removed from all.
+
+A road sensor whose zero is not where the car rests, or a position sensor whose zero is not
+the rest position, puts a constant level into every window that no parameter set produces:
+every window fit then ends far above its noise floor and drifts away from the truth (on a
+quarter car with x1 reading +4 mm, the window fits put k1 between 0.80 and 1.32 of the truth
+and the EKF at 0.50-0.79; docs/monitoring.md, "Sensor offset"). ``suspid identify``
+finds such an offset from the data-driven start (:mod:`estimator.identify.offset`); the
+monitor does the same once, on the first window that is excited enough to fit and has no
+missing sample (:class:`OffsetStage`), and -- with ``--offset remove``, the default -- hands
+every window to its estimator (the sliding-window fits or the EKF alike) with the offset
+subtracted. The finding is said once, as a ``warning`` event of kind ``offset``
+(``offset_kind`` ``road`` or ``channel``, ``values`` per column in SI units, ``removed``,
+``share`` of the misfit left, ``effects``), and in the summary's ``offset``.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping
+
+import numpy as np
+
+from estimator.identify.offset import Offset
+from estimator.identify.params import Parameters
+from estimator.identify.problem import OutputErrorProblem
+from estimator.identify.record import check_offset
+from estimator.stream.config import WindowConfig
+from estimator.stream.events import Notice
+from estimator.stream.window import SlidingWindowIdentifier
+from suspid.errors import UsageError
+from suspid.io.csvio import Measurement
+from suspid.models.base import FloatArray, SuspensionModel
+
+
+class OffsetStage:
+    """Look for a constant road or position offset once, then remove it from every window.
+
+    Parameters
+    ----------
+    model : SuspensionModel
+    params : Parameters
+        The monitor's fixed values and starting values of the free parameters (the offset is
+        judged at the data-driven start of the window, as ``identify`` does).
+    config : WindowConfig
+        ``offset`` (``"remove"`` or ``"keep"``), ``cost`` and the excitation thresholds.
+
+    Attributes
+    ----------
+    offset : Offset or None
+        The offset found (``None``: none, or not checked yet).
+    t : float
+        End time (s) of the window it was judged on (NaN until then).
+    checked : bool
+        Whether an excited window has been checked (no later window is).
+    """
+
+    def __init__(self, model: SuspensionModel, params: Parameters, config: WindowConfig) -> None:
+        self.model = model
+        self.params = params
+        self.config = config
+        self.remove = config.offset == "remove"
+        self.offset: Offset | None = None
+        self.t = math.nan
+        self.checked = False
+        self._excited: SlidingWindowIdentifier | None = None
+
+    def _needed(self, data: Mapping[str, FloatArray]) -> tuple[list[str], list[str]]:
+        """The model's measured channels in ``data`` and its road columns in ``data``."""
+        chans = [c for c in self.model.channels if c in data
+                 and np.mean(np.isfinite(np.asarray(data[c], dtype=float))) > 0.5]
+        roads = [k for r in self.model.roads for k in (r, f"{r}_dot") if k in data]
+        return chans, roads
+
+    def _check(self, t: FloatArray, data: Mapping[str, FloatArray]) -> Notice | None:
+        chans, roads = self._needed(data)
+        if not chans or not all(r in roads for r in self.model.roads):
+            return None
+        if self._excited is None:
+            try:
+                self._excited = SlidingWindowIdentifier(self.model, self.params, self.config,
+                                                        chans)
+            except UsageError:
+                return None
+        _, reason = self._excited.excitation(t, data)
+        cols = chans + roads
+        if reason or not all(np.isfinite(np.asarray(data[c], dtype=float)).all() for c in cols):
+            return None                                  # wait for a fully sampled, excited one
+        meas = Measurement(np.asarray(t, dtype=float).copy(),
+                           {k: np.asarray(data[k], dtype=float) for k in roads},
+                           {c: np.asarray(data[c], dtype=float) for c in chans}, source="window")
+        try:
+            found = check_offset(OutputErrorProblem(self.model, meas, cost=self.config.cost),
+                                 self.params).offset
+        except (UsageError, ValueError, np.linalg.LinAlgError):
+            return None
+        self.checked = True
+        if found is None:
+            return None
+        self.offset = found
+        self.t = float(t[-1])
+        fields = found.to_json(self.remove)
+        fields["offset_kind"] = fields.pop("kind")          # the event's kind is "offset"
+        return Notice(self.t, "offset", found.warning(self.model, self.remove), fields)
+
+    def apply(self, data: Mapping[str, FloatArray]) -> Mapping[str, FloatArray]:
+        """``data`` with the offset subtracted from its columns (as given when none is found,
+        or with ``--offset keep``)."""
+        if self.offset is None or not self.remove:
+            return data
+        out = dict(data)
+        for c, d in self.offset.values.items():
+            if c in out:
+                out[c] = np.asarray(out[c], dtype=float) - d
+        return out
+
+    def process(self, t: FloatArray, data: Mapping[str, FloatArray]
+                ) -> tuple[Mapping[str, FloatArray], Notice | None]:
+        """One window: checked while no excited window has been, then corrected.
+
+        Returns
+        -------
+        data : mapping
+            The window for the estimator.
+        notice : Notice or None
+            The ``offset`` warning, on the window that found it.
+        """
+        notice = None if self.checked else self._check(t, data)
+        return self.apply(data), notice
+
+    def summary(self) -> dict[str, Any] | None:
+        """The summary's ``offset``: ``None``, or the window end ``t`` (s) it was found at
+        and :meth:`~estimator.identify.offset.Offset.to_json`."""
+        if self.offset is None:
+            return None
+        return {"t": self.t, **self.offset.to_json(self.remove)}
