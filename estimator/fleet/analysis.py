@@ -115,6 +115,8 @@ class VehicleSummary:
     risk: str = "ok"
     rank: int = 0
     warnings: list[str] = field(default_factory=list)
+    #: constant road or position offsets found in the drives, by column (:func:`sensor_offsets`)
+    offsets: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     @property
     def latest(self) -> dict[str, Any] | None:
@@ -159,7 +161,45 @@ class VehicleSummary:
             "alert_details": self.alerts,
             "margin": self.margin() if math.isfinite(self.margin()) else None,
             "warnings": list(self.warnings),
+            "sensor_offsets": {k: dict(v) for k, v in self.offsets.items()},
         }
+
+
+def sensor_offsets(records: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """The constant offsets ``identify`` found in a vehicle's drives, by column.
+
+    A sensor zero not at the rest position (:mod:`estimator.identify.offset`) found in one
+    drive is that drive's matter (removed before its fit unless ``--offset keep``); found in
+    drive after drive it is the sensor's calibration, for the workshop.
+
+    Parameters
+    ----------
+    records : list of dict
+        The vehicle's identified drives, oldest first (each ``result`` an identify JSON).
+
+    Returns
+    -------
+    dict
+        Column -> ``kind`` (``road`` or ``channel``), ``drives`` (how many of ``of`` drives
+        had it), ``median``, ``min``, ``max`` (SI, over those drives), ``latest_t`` (epoch s
+        of the latest such drive), ``removed`` (in that drive). Empty when none was found.
+    """
+    found: dict[str, list[tuple[float, float, str, bool]]] = {}
+    for r in records:
+        off = (r.get("result") or {}).get("offset")
+        if not off:
+            continue
+        for col, d in off.get("values", {}).items():
+            found.setdefault(col, []).append((float(r["t"]), float(d), str(off.get("kind")),
+                                              bool(off.get("removed"))))
+    out: dict[str, dict[str, Any]] = {}
+    for col, items in sorted(found.items()):
+        vals = [d for _, d, _, _ in items]
+        last = max(items)
+        out[col] = {"kind": last[2], "drives": len(items), "of": len(records),
+                    "median": float(np.median(vals)), "min": min(vals), "max": max(vals),
+                    "latest_t": last[0], "removed": last[3]}
+    return out
 
 
 def _model_of(rec: dict[str, Any]) -> str:
@@ -211,7 +251,8 @@ def summarize_vehicle(vehicle: str, records: list[dict[str, Any]], rule: AlertRu
     risk = "alert" if alerts else ("forecast" if forecasts else "ok")
     return VehicleSummary(vehicle, model, ok, failed, monitored, nominal, limits, trends,
                           forecasts, alerts, risk,
-                          warnings=time_warnings(vehicle, [float(r["t"]) for r in ok]))
+                          warnings=time_warnings(vehicle, [float(r["t"]) for r in ok]),
+                          offsets=sensor_offsets(ok))
 
 
 def _nan(x: Any) -> float:

@@ -18,7 +18,8 @@ from typing import Any, Sequence
 
 from estimator.fleet.analysis import AlertRule, VehicleSummary
 from estimator.fleet.trend import DAY_S
-from suspid.errors import InputError
+from suspid.errors import InputError, UsageError
+from suspid.models import get_model
 
 _CSS = """
 body{font-family:system-ui,sans-serif;margin:1.5em;color:#222}
@@ -162,6 +163,15 @@ def render(vehicles: Sequence[VehicleSummary], drives: Sequence[dict[str, Any]],
                      f"({html.escape(s.model)}, {len(s.drives)} drives, {s.risk})</h2>")
         for msg in s.warnings:
             parts.append(f'<p class="warn-msg"><b>WARNING</b> {html.escape(msg)}</p>')
+        for col, o in s.offsets.items():
+            parts.append(f'<p class="warn-msg offset"><b>SENSOR OFFSET</b> {html.escape(col)} '
+                         f"reads {_offset(col, o['median'], s.model)} at the rest position "
+                         f"(median of {o['drives']} of {o['of']} drives, from "
+                         f"{_offset(col, o['min'], s.model)} to {_offset(col, o['max'], s.model)};"
+                         f" latest {_date(o['latest_t'], True)} UTC): a "
+                         f"{'road' if o['kind'] == 'road' else 'position'} sensor zero not at "
+                         f"rest, {'removed before each fit' if o['removed'] else 'kept in the fit'}"
+                         "; recalibrate the sensor</p>")
         for a in s.alerts:
             parts.append(f'<p class="alert-msg"><b>ALERT</b> {html.escape(a["message"])} '
                          f'(first below in the drive of {_date(a["since_t"], True)} UTC)</p>')
@@ -187,6 +197,15 @@ def render(vehicles: Sequence[VehicleSummary], drives: Sequence[dict[str, Any]],
                      f"<td>{html.escape(d.get('error') or '')}</td></tr>")
     parts.append("</tbody></table></body></html>\n")
     return "\n".join(parts)
+
+
+def _offset(column: str, value: float, model: str) -> str:
+    """An offset in mm (or mrad for an angle) with its sign."""
+    try:
+        unit = (get_model(model).column_units(column) or ("m",))[0]
+    except (KeyError, ValueError, UsageError):
+        unit = "m"
+    return f"{1e3 * value:+.3g} {'mrad' if unit == 'rad' else 'mm'}"
 
 
 def _conf(z: float) -> float:

@@ -44,8 +44,11 @@ def drives(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 
 @pytest.fixture(scope="module")
 def run(drives: dict[str, Path]) -> dict[str, Any]:
-    return fleet_json("--model", "quarter2", "--input", str(drives["root"]), *FIX,
-                      "--workers", "0", "--no-progress")
+    report = drives["root"].parent / "report"
+    out = fleet_json("--model", "quarter2", "--input", str(drives["root"]), *FIX,
+                     "--workers", "0", "--no-progress", "--report", str(report))
+    out["_report"] = report
+    return out
 
 
 def test_drive_with_a_road_offset(drives: dict[str, Path], run: dict[str, Any],
@@ -63,7 +66,17 @@ def test_drive_with_a_road_offset(drives: dict[str, Path], run: dict[str, Any],
     assert main(["identify", "--model", "quarter2", "--input", str(drives["offset"]), *FIX,
                  "--json"]) == 0
     ident = json.loads(capsys.readouterr().out)
-    assert ident["offset"] == d["offset"] and ident["params"] == d["params"]
+    # the same identification: equal far inside its standard errors (the two runs have been
+    # seen to end 3e-6 apart in c2 in one process and bit-identical in another: Nelder-Mead
+    # stops within its simplex tolerance, not at one exact point)
+    a, b = dict(ident["offset"]), dict(d["offset"])
+    assert a.pop("values") == pytest.approx(b.pop("values"), rel=1e-6)
+    assert a.pop("share") == pytest.approx(b.pop("share"), rel=1e-3)
+    assert a == b
+    assert ident["params"] == pytest.approx(d["params"], rel=1e-4)
+    for k, se in d["stderr"].items():
+        if se is not None:
+            assert abs(ident["params"][k] - d["params"][k]) < 1e-2 * se, k
     clean = by_path[str(drives["clean"])]
     assert clean["status"] == "ok" and "offset" not in clean
     assert not any(w.startswith("offset:") for w in clean.get("warnings", []))
@@ -75,3 +88,19 @@ def test_offset_mode_is_part_of_the_settings_key() -> None:
     assert remove.offset == "remove"
     assert json.loads(remove.key())["offset"] == "remove"
     assert remove.key() != keep.key()
+
+
+def test_vehicle_summary_and_report_name_the_offset(drives: dict[str, Path],
+                                                    run: dict[str, Any]) -> None:
+    """Found in a drive, the offset is the vehicle's too: ``sensor_offsets`` in its JSON and
+    a SENSOR OFFSET line in its section of the report (was: only in the drive's warnings)."""
+    (veh,) = run["vehicles"]
+    off = veh["sensor_offsets"]
+    assert list(off) == ["r"]
+    assert off["r"]["drives"] == 1 and off["r"]["of"] == 2 and off["r"]["kind"] == "road"
+    assert off["r"]["median"] == pytest.approx(ROAD_OFFSET, abs=1e-4)
+    assert off["r"]["removed"] is True
+    page = (run["_report"] / "index.html").read_text()
+    line = next(x for x in page.splitlines() if "SENSOR OFFSET" in x)
+    assert "r reads +10 mm at the rest position" in line
+    assert "median of 1 of 2 drives" in line and "removed before each fit" in line
