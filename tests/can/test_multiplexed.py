@@ -284,3 +284,32 @@ def test_a_real_gap_in_a_page_is_still_reported(ref: Measurement, tmp_path: Path
         assert any(f"channel {ch}: {n} of {ref.t.size} samples missing in 1 gap(s)" in w
                    and w.endswith("(a sample every 2 grid cells)") for w in gaps), gaps
     assert any("channel r: 40 of" in w and "grid cells" not in w for w in gaps), gaps
+
+
+def test_ekf_monitor_on_pages_filters_each_channel_when_its_page_comes(tmp_path: Path) -> None:
+    """The EKF takes each page's channels at the samples they come on (the other page's
+    cells are missing entries of the update, not gaps): no restart, estimates as on the
+    plain log's within the filter's own spread."""
+    m = get_model("quarter2")
+    t, road, x0 = make_scenario(m, "iso8608", duration=12.0, fs=500.0)
+    sim = simulate(m, m.defaults(), t, road, x0)
+    rec = Measurement(t=t, road={"r": sim["r"]}, measured={"x1": sim["x1"], "x2": sim["x2"]})
+    mdbc, mdb = _dbc(tmp_path, MUX_DBC, "mux.dbc")
+    pdbc, pdb = _dbc(tmp_path, PLAIN_DBC, "plain.dbc")
+    mux = _estimates(["--input", str(_write(tmp_path / "mux.log", mux_frames(mdb, rec, [0, 1]))),
+                      "--dbc", str(mdbc), *[x for e in MUX_MAP for x in ("--map", e)],
+                      "--baseline", "ekf"])
+    plain = _estimates(["--input", str(_write(tmp_path / "plain.log", plain_frames(pdb, rec))),
+                        "--dbc", str(pdbc), *[x for e in PLAIN_MAP for x in ("--map", e)],
+                        "--baseline", "ekf"])
+    got = [e for e in mux if e["type"] == "estimate"]
+    want = [e for e in plain if e["type"] == "estimate"]
+    assert len(got) == len(want) >= 8
+    assert mux[-1]["restarts"] == 0 and mux[-1]["divergences"] == 0
+    assert not any(e.get("gaps") for e in got)
+    for a, b in zip(got[-3:], want[-3:]):
+        assert a["t"] == pytest.approx(b["t"])
+        for k in ("c1", "k1", "k2"):
+            assert a["params"][k] == pytest.approx(b["params"][k], rel=0.05), k
+    for k in ("c1", "k1", "k2"):
+        assert got[-1]["params"][k] == pytest.approx(m.defaults()[k], rel=0.05), k
