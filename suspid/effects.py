@@ -97,7 +97,9 @@ from importlib.metadata import entry_points
 from typing import Any, ClassVar, Iterable, Mapping, Sequence, TypeVar
 
 import numpy as np
-from scipy.interpolate import CubicSpline
+# scipy.interpolate (which loads scipy.optimize, ~0.2 s) is reached through scipy's lazy
+# submodule attribute, so a monitor that never resamples a channel does not pay for it
+import scipy
 
 from suspid.errors import UsageError
 from suspid.models.base import GRAVITY, FloatArray, ForceFn, Site, SuspensionModel
@@ -827,7 +829,7 @@ def _shift(t: FloatArray, y: FloatArray, dt: float) -> FloatArray:
     if ok.sum() < 4:
         return np.interp(t + dt, t[ok], y[ok], right=np.nan)
     tq = t + dt
-    out = CubicSpline(t[ok], y[ok], extrapolate=False)(tq)
+    out = scipy.interpolate.CubicSpline(t[ok], y[ok], extrapolate=False)(tq)
     out = np.where(tq < t[ok][0], y[ok][0], out)
     return np.where(tq > t[ok][-1], np.nan, out)
 
