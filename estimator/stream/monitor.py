@@ -237,7 +237,15 @@ class StreamMonitor:
                 ev.track = tracked
         self.emit(ev)
         self.lines += 1
+        stage = self.offsets
+        kept = stage.offset if stage is not None and not stage.remove else None
         for n in res.notices:
+            if n.kind == "misfit" and stage is not None and kept is not None:
+                # the likeliest cause is the one already found
+                n.message += (f". A sensor offset was found and kept: "
+                              f"{kept.describe(stage.model)} (--offset keep); --offset remove "
+                              "subtracts it")
+                n.fields["offset_kept"] = dict(kept.values)
             self.emit(n)
             self.lines += 1
         if isinstance(ev, Estimate) and res.values is not None and res.stderr:

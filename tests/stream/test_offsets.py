@@ -107,6 +107,9 @@ def test_keep_names_it_and_fits_the_data_as_they_are(records: dict[str, Path],
     lines = _monitor(capsys, records["quarter2:x1"], "quarter2", "--offset", "keep")
     kinds = [d["kind"] for d in lines if d["type"] == "warning"]
     assert kinds[0] == "offset" and "misfit" in kinds
+    misfit = next(d for d in lines if d["type"] == "warning" and d["kind"] == "misfit")
+    assert "found and kept: position channel x1 reads +0.004 m" in misfit["message"]
+    assert misfit["offset_kept"] == pytest.approx({"x1": 0.004}, rel=0.03)
     assert lines[-1]["offset"]["removed"] is False
     assert lines[-1]["misfit_windows"] > 0
 
