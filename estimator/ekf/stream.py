@@ -234,11 +234,10 @@ class EKFWindowEstimator:
         Counted per window (:meth:`process`) and in the summary (``divergences``).
         """
         old = self._filter()
-        sums = (old.nis_sum if math.isfinite(old.nis_sum) else self._nis_ok[0],
-                old.nis_dof if math.isfinite(old.nis_sum) else self._nis_ok[1])
         ekf = self._new_filter(old.dt)
         ekf.x[:ekf.nx, 0] = self._motion_state(data, k)
-        ekf.nis_sum, ekf.nis_dof = sums
+        ekf.nis_sum, ekf.nis_dof = ((old.nis_sum, old.nis_dof) if math.isfinite(old.nis_sum)
+                                    else self._nis_ok)
         self.ekf = ekf
         self.divergences += 1
 

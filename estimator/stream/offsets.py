@@ -102,15 +102,15 @@ class OffsetStage:
         fields["offset_kind"] = fields.pop("kind")          # the event's kind is "offset"
         return Notice(self.t, "offset", found.warning(self.model, self.remove), fields)
 
-    def apply(self, data: Mapping[str, FloatArray]) -> Mapping[str, FloatArray]:
-        """``data`` with the offset subtracted from its columns (as given when none is found,
-        or with ``--offset keep``)."""
+    def apply(self, t: FloatArray, data: Mapping[str, FloatArray]) -> Mapping[str, FloatArray]:
+        """``data`` (on times ``t``, s) with the offset subtracted from its columns (the
+        ``sensor_offset`` effects' compensation, as :meth:`Offset.remove`); as given when none
+        is found, or with ``--offset keep``."""
         if self.offset is None or not self.remove:
             return data
         out = dict(data)
-        for c, d in self.offset.values.items():
-            if c in out:
-                out[c] = np.asarray(out[c], dtype=float) - d
+        for e in self.offset.effects():
+            out = e.compensate(t, out)
         return out
 
     def process(self, t: FloatArray, data: Mapping[str, FloatArray]
@@ -125,7 +125,7 @@ class OffsetStage:
             The ``offset`` warning, on the window that found it.
         """
         notice = None if self.checked else self._check(t, data)
-        return self.apply(data), notice
+        return self.apply(t, data), notice
 
     def summary(self) -> dict[str, Any] | None:
         """The summary's ``offset``: ``None``, or the window end ``t`` (s) it was found at

@@ -22,21 +22,10 @@ from estimator.stream.wear_streams import damper_wear
 from suspid.cli import main
 from suspid.io.csvio import read_measurement, write_measurement
 from suspid.models import get_model
+from tests.robustness.test_offset import _shifted
 
 FIX = {"quarter2": ["--fix", "m1=300", "--fix", "m2=40"],
        "half4": ["--fix", "m=1200", "--fix", "I=1500", "--fix", "m1=40", "--fix", "m2=40"]}
-
-
-def _shifted(src: Path, dst: Path, column: str, d: float) -> Path:
-    with src.open(newline="") as f:
-        rows = list(csv.DictReader(f))
-    with dst.open("w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        for row in rows:
-            row[column] = repr(float(row[column]) + d)
-            w.writerow(row)
-    return dst
 
 
 @pytest.fixture(scope="module")
