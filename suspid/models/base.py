@@ -412,6 +412,59 @@ class SuspensionModel:
         """The tyre contacts (coordinate = compression ``r - x_wheel``, static load in N)."""
         raise UsageError(f"model {self.name} defines no tyres")
 
+    @property
+    def ride_heights(self) -> tuple[str, ...]:
+        """Ride-height channel names, one per strut of :meth:`strut_sites` in its order.
+
+        ``"d"`` for a model with one strut, else ``"d1"``, ``"d2"``, ...: the strut's
+        extension (m, the body corner minus the wheel; positive in rebound), which
+        production cars measure with ride-height sensors. Each may come with ``_dot`` (m/s).
+        """
+        n = len(self.strut_sites(self.defaults()))
+        return ("d",) if n == 1 else tuple(f"d{i}" for i in range(1, n + 1))
+
+    @property
+    def ride_height_channels(self) -> tuple[str, ...]:
+        """:attr:`ride_heights` and their rates (``_dot``)."""
+        return self.ride_heights + tuple(f"{d}_dot" for d in self.ride_heights)
+
+    def body_rows(self, p: Mapping[str, float] | None = None) -> tuple[int, ...]:
+        """Coordinates whose equation holds only strut forces: the body's.
+
+        Row ``j`` of ``M q'' + C q' + K q = Fk r + Fc r'`` is a body row when its ``C``,
+        ``K``, ``Fk``, ``Fc`` entries are exactly those of the struts alone
+        (``M[j] q'' = -sum_i g_i[j] (c_i d_i' + k_i d_i)``, ``d_i`` the strut extensions),
+        so no tyre and no road acts on it except through a strut. These equations hold
+        whatever the road does: the road-unknown identification fits them. Derived from
+        the model's matrices, never from its name.
+
+        Parameters
+        ----------
+        p : mapping, optional
+            Parameters (SI); default the model's defaults.
+        """
+        pp = dict(self.defaults(), **dict(p or {}))
+        M, C, K, Fk, Fc = self.matrices(pp)
+        Cs = np.zeros_like(C)
+        Ks = np.zeros_like(K)
+        Fks = np.zeros_like(Fk)
+        Fcs = np.zeros_like(Fc)
+        for s in self.strut_sites(pp):
+            c = pp[s.c_name] if s.c_name else 0.0
+            k = pp[s.k_name] if s.k_name else 0.0
+            Cs += c * np.outer(s.g, s.g)
+            Ks += k * np.outer(s.g, s.g)
+            Fks -= k * np.outer(s.g, s.gr)
+            Fcs -= c * np.outer(s.g, s.gr)
+        rows = []
+        for j in range(len(self.coords)):
+            scale = max(np.abs(C[j]).max(), np.abs(K[j]).max(), 1e-300)
+            same = all(np.allclose(a[j], b[j], rtol=1e-12, atol=1e-12 * scale)
+                       for a, b in ((C, Cs), (K, Ks), (Fk, Fks), (Fc, Fcs)))
+            if same and np.abs(K[j]).max() > 0.0:
+                rows.append(j)
+        return tuple(rows)
+
     def deflections(self, data: Mapping[str, FloatArray],
                     p: Mapping[str, float] | None = None) -> dict[str, FloatArray]:
         """Suspension deflections (strut extensions, m) computable from ``data``.
