@@ -79,6 +79,9 @@ class IdentResult:
     bands: dict[str, tuple[float, float]] | None = None
     band_method: dict[str, str] | None = None
     offset: dict[str, Any] | None = None
+    road: str = "measured"
+    undetermined: list[str] | None = None
+    band_hz: list[float] | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The contract's JSON object."""
@@ -101,7 +104,12 @@ class IdentResult:
             "bic": f(self.bic),
             "n_obs": int(self.n_obs),
             "restarts": int(self.restarts),
+            "road": self.road,
         }
+        if self.undetermined is not None:
+            out["undetermined"] = list(self.undetermined)
+        if self.band_hz is not None:
+            out["band_hz"] = list(self.band_hz)
         if self.frames is not None:
             out["frames"] = self.frames
         if self.starts is not None:

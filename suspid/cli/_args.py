@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from estimator.identify import Parameters
 from estimator.identify.problem import COSTS
 from estimator.identify.record import OFFSET_MODES
+from estimator.identify.roadfree import ROAD_MODES
 from suspid.cli._common import load_measurement, model_from_args, params_from_args, positive_int
 from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
@@ -113,3 +114,15 @@ def fit_inputs(args: argparse.Namespace
     check_counts(args, "multistart")
     meas, frames = load_measurement(args, model)
     return model, params, meas, frames
+
+
+def add_road_option(p: argparse._ActionsContainer) -> None:
+    """``--road measured|zero|unknown`` (default: chosen from the record and named in a warning)."""
+    p.add_argument("--road", choices=list(ROAD_MODES), default=None,
+                   help="measured: the record's road columns/messages are the input; zero: no "
+                        "road input (a free response); unknown: the road is never measured "
+                        "(every road vehicle): fit the body equations on body accelerations "
+                        "and ride heights (or wheel motion), identifying every strut's damper "
+                        "and spring and reporting what the record cannot determine as such. "
+                        "Default: measured with road columns, else zero for a free response "
+                        "and unknown for driving data, named in a warning")

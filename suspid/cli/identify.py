@@ -5,7 +5,8 @@ import argparse
 import sys
 from estimator.identify import OutputErrorProblem
 from estimator.identify.record import identify_record
-from suspid.cli._args import add_offset_option
+from estimator.identify.roadfree import fit_road_unknown, resolve_road
+from suspid.cli._args import add_offset_option, add_road_option
 from suspid.cli._common import (parse_state, positive_int, add_input_options, add_model_option, add_param_options,
                                 load_measurement, model_from_args, params_from_args, print_json,
                                 assignment_warnings)
@@ -52,6 +53,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                          "remove: subtract it and fit the corrected record (default); keep: fit "
                          "the record as it is (slow: every further start chases the offset's "
                          "misfit); either way a warning names it")
+    add_road_option(p)
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
     p.add_argument("--plot", metavar="PNG", default=None,
                    help="write the seed-style comparison (measured vs identified) to this PNG")
@@ -72,15 +74,20 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--multistart: expected >= 0, got {args.multistart}")
     meas, frames = load_measurement(args, model)
     x0 = parse_x0(args.x0, model.n_states)
-    problem = OutputErrorProblem(model, meas, cost=args.cost, x0=x0)
-    result, fitted = identify_record(
-        problem, params, restarts=args.restarts, maxfev=args.maxfev, polish=args.polish,
-        multistart=args.multistart, data_start=args.data_start,
-        keep_init=bool(args.init) or not args.data_start, offset=args.offset)
+    road, meas, road_warnings = resolve_road(model, meas, args.road)
+    if road == "unknown":
+        result = fit_road_unknown(model, meas, params)
+    else:
+        problem = OutputErrorProblem(model, meas, cost=args.cost, x0=x0)
+        result, fitted = identify_record(
+            problem, params, restarts=args.restarts, maxfev=args.maxfev, polish=args.polish,
+            multistart=args.multistart, data_start=args.data_start,
+            keep_init=bool(args.init) or not args.data_start, offset=args.offset)
+        result.road = road
     if frames is not None:
         result.frames = frames
-    result.warnings[:0] = assignment_warnings(args, model)
-    if args.plot:
+    result.warnings[:0] = assignment_warnings(args, model) + road_warnings
+    if args.plot and road != "unknown":
         plot_comparison(model, fitted.meas, result, args.plot)  # the record as fitted
     if args.json:
         print_json(result.to_json())

@@ -1,0 +1,665 @@
+"""Identification with the road unknown: the body equations, fitted by modulating functions.
+
+No road vehicle measures the road under its tyres, but the body sees the road only
+through its struts. Every *body row* of the model (:meth:`SuspensionModel.body_rows`: the
+equations that hold strut forces alone) reads
+
+    sum_k M[j, k] q_k'' + sum_i g_i[j] (c_i d_i' + k_i d_i) = 0
+
+with ``d_i`` the extension of strut ``i`` (its ride height). It holds whatever the road
+does, and it is *linear* in the masses and inertias of ``M`` and in every strut's damper
+``c_i`` and spring ``k_i``. So body accelerations and ride heights (or wheel motions, or
+wheel accelerometers) determine every strut's ``c_i``, ``k_i`` by linear least squares,
+the body mass and inertias too when a spring or damper is held; a record cannot scale all
+of them at once (the equations are homogeneous), and nothing about the tyres or the wheel
+masses (the unknown road hides them).
+
+How the equations are formed (the modulating-function method of continuous-time system
+identification): each contiguous stretch of samples of length ``T`` is multiplied by the
+test functions ``phi_k(t) = w(t) exp(-j w_k t)``, ``w(t) = sin^4(pi t / T)``, ``w_k = 2 pi k
+/ T``, and integrated. ``phi_k`` and its first three derivatives vanish at both ends, so an
+integral of a derivative moves onto the test function exactly
+(``int phi x^(n) = (-1)^n int phi^(n) x``): no derivative of a noisy channel is ever taken,
+and a channel measured as position, velocity or acceleration enters the same equation.
+As ``w`` is the finite Fourier series ``3/8 - cos(2 pi t/T)/2 + cos(4 pi t/T)/8``, every such
+integral is five bins of the channel's plain FFT: ``J_k[x^(n)] = sum_m a_m (j w_{k-m})^n
+X_{k-m}``. Bins ``k >= 3`` see no constant, so a ride-height or accelerometer zero offset
+drops out exactly. When a quantity is only available as a higher derivative (a deflection
+from accelerometers alone) the whole equation is multiplied by ``(j w)^s`` (integrated
+against ``phi^(s)``), which keeps every power of ``j w`` non-negative: no integration
+drift, no high-pass to tune.
+
+The band: bins from ``k = 3`` up to where every regressor channel's spectrum stands out of
+its own noise floor (the median power of its top 16 % of bins) by :data:`SNR_MIN`: a
+regressor whose noise is as large as its signal would bias its parameter toward zero (errors
+in variables). The weights: a first ordinary least-squares pass gives the equation error's
+spectrum, smoothed over 17 bins; the second pass weights each bin by its inverse. The
+standard errors are the sandwich estimate with the bins' correlation over the window's
+reach (Bartlett weights over 4 bins), so they hold on a coloured equation error.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from estimator.identify.params import Parameters
+from estimator.identify.result import IdentResult
+from suspid.errors import UsageError
+from suspid.io.csvio import Measurement
+from suspid.models.base import FloatArray, Site, SuspensionModel
+from suspid.models.modes import modes
+
+#: window ``sin^4(pi t / T)`` as a Fourier series: coefficients of ``exp(j 2 pi m t / T)``,
+#: ``m = -2..2``
+WINDOW = {-2: 1.0 / 16.0, -1: -0.25, 0: 0.375, 1: -0.25, 2: 1.0 / 16.0}
+#: highest power of ``j w`` the window carries exactly (its derivatives 0..3 vanish at the ends)
+MAX_POWER = 4
+#: first bin used: bins 0..2 see the window's own mean (a constant offset)
+FIRST_BIN = 3
+#: a regressor channel's smoothed power must exceed its noise floor by this factor
+SNR_MIN = 30.0
+#: bins over which spectra and the equation error are smoothed
+SMOOTH_BINS = 17
+#: correlation reach of neighbouring bins (the window's spectrum spans 5 bins)
+HAC_LAGS = 4
+#: shortest stretch of samples that forms equations
+MIN_SEGMENT = 32
+#: the band reaches at least this far (Hz)
+MIN_BAND_HZ = 10.0
+#: relative standard error above which a parameter counts as not determined
+MAX_REL_STDERR = 0.5
+#: the road modes of identify, diagnose, monitor, compare and fleet
+ROAD_MODES: tuple[str, ...] = ("measured", "zero", "unknown")
+#: sources of a quantity by preference: a measured derivative of the same order first
+_ORDER_SUFFIX = {0: "", 1: "_dot", 2: "_ddot"}
+
+
+@dataclass(frozen=True)
+class Term:
+    """One measured channel in an equation term: ``coef * J[channel^(power)]``."""
+
+    channel: str
+    order: int       # derivative order the channel is measured at (0 position, 1 rate, 2 acc.)
+    coef: float
+
+
+@dataclass
+class BodyEquations:
+    """Which measured channels form the body equations of a model, and what they determine.
+
+    Attributes
+    ----------
+    rows : tuple of int
+        The body rows (coordinate indices) fitted.
+    regressors : dict
+        ``parameter -> per row: list of (target derivative order, terms)``, the channel
+        combinations that multiply the parameter in each body row.
+    names : tuple of str
+        Parameters that enter the body equations (masses, inertias, dampers, springs).
+    missing : list of str
+        Why a part of the equations could not be formed (a strut without its ride height
+        or wheel motion, a body coordinate without a channel); empty when complete.
+    shift : int
+        Power of ``j w`` every equation is multiplied by (0 unless a quantity is measured
+        only as a higher derivative).
+    """
+
+    rows: tuple[int, ...]
+    regressors: dict[str, list[list[tuple[int, list[Term]]]]]
+    names: tuple[str, ...]
+    missing: list[str] = field(default_factory=list)
+    shift: int = 0
+
+    @property
+    def channels(self) -> list[str]:
+        """Every measured channel the equations use."""
+        out: list[str] = []
+        for per_row in self.regressors.values():
+            for parts in per_row:
+                for _, terms in parts:
+                    out.extend(t.channel for t in terms if t.channel not in out)
+        return out
+
+
+def _source(name: str, order: int, measured: Mapping[str, FloatArray]) -> tuple[str, int] | None:
+    """The channel of quantity ``name`` (a coordinate or ride height) that best gives its
+    ``order``-th derivative: the same order, else the nearest lower one, else the nearest higher."""
+    have = {o: name + suf for o, suf in _ORDER_SUFFIX.items() if name + suf in measured}
+    for o in [order] + list(range(order - 1, -1, -1)) + list(range(order + 1, 3)):
+        if o in have:
+            return have[o], o
+    return None
+
+
+def _quantity(weights: Mapping[str, float], order: int,
+              measured: Mapping[str, FloatArray]) -> list[Term] | None:
+    """Terms of ``sum_q weights[q] q^(order)`` from the measured channels (None: one missing)."""
+    terms = []
+    for q, wq in weights.items():
+        src = _source(q, order, measured)
+        if src is None:
+            return None
+        terms.append(Term(src[0], src[1], float(wq)))
+    return terms
+
+
+def body_equations(model: SuspensionModel, measured: Mapping[str, FloatArray],
+                   p: Mapping[str, float]) -> BodyEquations:
+    """The body equations of ``model`` that the ``measured`` channels can form.
+
+    Parameters
+    ----------
+    model : SuspensionModel
+    measured : mapping
+        Channel name -> samples (only the names matter here).
+    p : mapping
+        Parameter values (SI): the geometry the strut directions depend on.
+
+    Returns
+    -------
+    BodyEquations
+        Rows whose every term has a channel; ``missing`` names what the others lack.
+    """
+    pp = dict(model.defaults(), **dict(p))
+    rows = model.body_rows(pp)
+    sites = model.strut_sites(pp)
+    nq = len(model.coords)
+    M0 = model.matrices(pp)[0]
+    # M is linear in the masses and inertias: its slope in each (exact for a linear M)
+    mass_names = [s.name for s in model.params if s.kind in ("mass", "inertia")]
+    dM = {}
+    for n in mass_names:
+        bumped = dict(pp)
+        bumped[n] = pp[n] + 1.0
+        slope = model.matrices(bumped)[0] - M0
+        if np.any(slope[list(rows)] != 0.0):
+            dM[n] = slope
+    heights = model.ride_heights
+    missing: list[str] = []
+    regressors: dict[str, list[list[tuple[int, list[Term]]]]] = {}
+    used_rows: list[int] = []
+    # per row, the parameter -> [(order, terms)] contributions
+    per_row: list[dict[str, list[tuple[int, list[Term]]]]] = []
+    for j in rows:
+        contrib: dict[str, list[tuple[int, list[Term]]]] = {}
+        ok = True
+        for n, slope in dM.items():
+            w = {model.coords[k]: float(slope[j, k]) for k in range(nq) if slope[j, k] != 0.0}
+            if not w:
+                continue
+            terms = _quantity(w, 2, measured)
+            if terms is None:
+                missing.append(f"body row {model.coords[j]}: no channel of "
+                               f"{', '.join(w)} (position, rate or acceleration)")
+                ok = False
+                break
+            contrib[n] = [(2, terms)]
+        for i, site in enumerate(sites):
+            gj = float(site.g[j])
+            if gj == 0.0:
+                continue
+            for name, order in ((site.c_name, 1), (site.k_name, 0)):
+                if name is None:
+                    continue
+                terms = _deflection(heights[i], site, order, gj, model, measured)
+                if terms is None:
+                    wheel = [model.coords[k] for k in range(nq) if site.g[k] != 0.0]
+                    road = " and its road" if np.any(site.gr != 0.0) else ""
+                    missing.append(f"{site.name}: neither its ride height {heights[i]} "
+                                   f"nor the motion of {', '.join(wheel)}{road}")
+                    ok = False
+                    break
+                contrib.setdefault(name, []).append((order, terms))
+            if not ok:
+                break
+        if ok:
+            used_rows.append(j)
+            per_row.append(contrib)
+    names = tuple(dict.fromkeys(n for c in per_row for n in c))
+    for n in names:
+        regressors[n] = [c.get(n, []) for c in per_row]
+    shift = 0
+    for per in regressors.values():
+        for parts in per:
+            for order, terms in parts:
+                shift = max(shift, max(t.order - order for t in terms))
+    return BodyEquations(tuple(used_rows), regressors, names, sorted(set(missing)), shift)
+
+
+def _deflection(height: str, site: Site, order: int, gj: float, model: SuspensionModel,
+                measured: Mapping[str, FloatArray]) -> list[Term] | None:
+    """Terms of ``g_i[j] d_i^(order)``: the ride height channel, else the coordinates' motion
+    (only where the strut does not stand on the road)."""
+    src = _source(height, order, measured)
+    if src is not None:
+        return [Term(src[0], src[1], gj)]
+    if np.any(site.gr != 0.0):
+        return None
+    w = {model.coords[k]: gj * float(site.g[k]) for k in range(len(model.coords))
+         if site.g[k] != 0.0}
+    return _quantity(w, order, measured)
+
+
+@dataclass
+class _Segment:
+    """A stretch of uniformly spaced samples where every used channel is finite."""
+
+    dt: float
+    data: dict[str, FloatArray]
+
+    @property
+    def n(self) -> int:
+        return next(iter(self.data.values())).size
+
+
+def _segments(meas: Measurement, channels: Sequence[str]) -> list[_Segment]:
+    """The record's stretches without a missing sample in ``channels`` or a time step
+    off the median by more than 1 %, each at least :data:`MIN_SEGMENT` samples long."""
+    t = np.asarray(meas.t, dtype=float)
+    if t.size < MIN_SEGMENT:
+        return []
+    good = np.ones(t.size, dtype=bool)
+    for c in channels:
+        good &= np.isfinite(meas.measured[c])
+    dt = float(np.median(np.diff(t)))
+    step_ok = np.abs(np.diff(t) - dt) <= 0.01 * dt
+    # a break before sample i when sample i-1 -> i is not a regular step
+    brk = np.ones(t.size, dtype=bool)
+    brk[1:] = ~step_ok
+    out: list[_Segment] = []
+    i = 0
+    while i < t.size:
+        if not good[i]:
+            i += 1
+            continue
+        j = i + 1
+        while j < t.size and good[j] and not brk[j]:
+            j += 1
+        if j - i >= MIN_SEGMENT:
+            out.append(_Segment(dt, {c: np.asarray(meas.measured[c][i:j], dtype=float)
+                                     for c in channels}))
+        i = j
+    return out
+
+
+def _smooth(x: FloatArray, n: int = SMOOTH_BINS) -> FloatArray:
+    """Running mean over ``n`` bins (shorter at the ends)."""
+    k = np.ones(n)
+    num = np.convolve(x, k, mode="same")
+    den = np.convolve(np.ones_like(x), k, mode="same")
+    return np.asarray(num / den, dtype=float)
+
+
+@dataclass
+class _SegmentEquations:
+    """One segment's equations over its band.
+
+    ``X`` (rows, bins, parameters) complex regressors; ``noise`` the same shape, the
+    expected power each regressor's channel noise contributes (from the channels' noise
+    floors); ``omega`` the bins' angular frequencies (rad/s); ``T`` the length (s).
+    """
+
+    X: np.ndarray
+    noise: np.ndarray
+    omega: FloatArray
+    T: float
+
+
+def _noise_floor(Y: np.ndarray) -> float:
+    """Per-bin noise power of a spectrum: the median power of its top 16 % of bins
+    (white noise there: the median of an exponential distribution is ln 2 times its mean)."""
+    nb = Y.size
+    top = max(4, int(0.16 * nb))
+    return float(np.median(np.abs(Y[nb - top:]) ** 2) / math.log(2.0))
+
+
+def band_limit(model: SuspensionModel, p: Mapping[str, float]) -> float:
+    """Upper end of the fit band (Hz): twice the model's highest natural frequency at ``p``
+    (the wheel hop), at least :data:`MIN_BAND_HZ`. Above it a record holds what the model
+    does not (the road's roughness seen through the tyre's damping, the engine, the
+    structure) and little of the struts."""
+    f = max((md.f_n for md in modes(model, dict(model.defaults(), **dict(p)))), default=0.0)
+    return max(MIN_BAND_HZ, 2.0 * f)
+
+
+def _segment_equations(seg: _Segment, eqs: BodyEquations, free: Sequence[str], f_hi: float
+                       ) -> _SegmentEquations | None:
+    """The windowed equations of one segment in the band up to ``f_hi`` (Hz) where every
+    free parameter's regressor stands :data:`SNR_MIN` above its own noise."""
+    n = seg.n
+    T = n * seg.dt
+    spectra = {c: np.fft.rfft(v) * seg.dt for c, v in seg.data.items()}
+    floors = {c: _noise_floor(Y) for c, Y in spectra.items()}
+    nb = n // 2 + 1
+    omega_all = 2.0 * np.pi * np.arange(nb) / T
+    # up to a quarter of the sample rate: the rectangle rule's integrals stay clear of aliasing
+    kmax = min(nb - 3, int(0.25 * n), int(f_hi * T))
+    if kmax < FIRST_BIN:
+        return None
+    bins = np.arange(FIRST_BIN, kmax + 1)
+    a2 = {m: a * a for m, a in WINDOW.items()}
+    cache: dict[tuple[str, int], tuple[np.ndarray, np.ndarray]] = {}
+
+    def J(channel: str, power: int) -> tuple[np.ndarray, np.ndarray]:
+        key = (channel, power)
+        if key not in cache:
+            Y = spectra[channel]
+            acc = np.zeros(bins.size, dtype=complex)
+            nz = np.zeros(bins.size)
+            for m, a in WINDOW.items():
+                w = (1j * omega_all[bins - m]) ** power
+                acc += a * w * Y[bins - m]
+                nz += a2[m] * np.abs(w) ** 2 * floors[channel]
+            cache[key] = (acc, nz)
+        return cache[key]
+
+    n_rows = len(eqs.rows)
+    X = np.zeros((n_rows, bins.size, len(eqs.names)), dtype=complex)
+    N = np.zeros((n_rows, bins.size, len(eqs.names)))
+    for pi, name in enumerate(eqs.names):
+        for r, parts in enumerate(eqs.regressors[name]):
+            for order, terms in parts:
+                for tm in terms:
+                    acc, nz = J(tm.channel, order + eqs.shift - tm.order)
+                    X[r, :, pi] += tm.coef * acc
+                    N[r, :, pi] += tm.coef ** 2 * nz
+    ok = np.ones(bins.size, dtype=bool)
+    for name in free:
+        i = eqs.names.index(name)
+        sig = _smooth(np.sum(np.abs(X[:, :, i]) ** 2, axis=0))
+        ok &= sig > SNR_MIN * np.sum(N[:, :, i], axis=0)
+    if not ok.any():
+        return None
+    return _SegmentEquations(X[:, ok], N[:, ok], np.asarray(omega_all[bins[ok]], dtype=float), T)
+
+
+def _hac(U: list[np.ndarray]) -> np.ndarray:
+    """Sum of score outer products with neighbouring bins' (Bartlett weights over
+    :data:`HAC_LAGS`); ``U`` holds one (bins, p) score array per segment."""
+    p = U[0].shape[1]
+    S = np.zeros((p, p))
+    for u in U:
+        S += u.T @ u
+        for lag in range(1, HAC_LAGS + 1):
+            if lag >= u.shape[0]:
+                break
+            g = u[lag:].T @ u[:-lag]
+            S += (1.0 - lag / (HAC_LAGS + 1)) * (g + g.T)
+    return S
+
+
+def fit_road_unknown(model: SuspensionModel, meas: Measurement, params: Parameters
+                     ) -> IdentResult:
+    """Identify what the body equations determine, the road under the tyres unknown.
+
+    Parameters
+    ----------
+    model : SuspensionModel
+    meas : Measurement
+        Body accelerations (or body motion) and every strut's ride height (or its wheel's
+        motion); road columns, if any, are not used.
+    params : Parameters
+        Held values (``vary=False``) and the given values of the free parameters (SI).
+
+    Returns
+    -------
+    IdentResult
+        ``params`` every parameter (a parameter the record cannot determine keeps its given
+        value and has no standard error), ``stderr`` the determined free parameters'
+        (sandwich estimate), ``identifiable`` whether every free parameter is determined,
+        ``warnings`` naming the ones that are not and why, ``road`` ``"unknown"``,
+        ``undetermined`` the free parameters without a value from the record.
+    """
+    values = params.valuesdict()
+    eqs = body_equations(model, meas.measured, values)
+    warnings: list[str] = ["road unknown: fitted the body equations "
+                           f"({', '.join(model.coords[j] for j in eqs.rows) or 'none'}) on "
+                           "body accelerations and ride heights; the road under the tyres "
+                           "is never used"]
+    warnings.extend(f"road unknown: cannot form the equation of {m}" for m in eqs.missing)
+    free = [n for n in eqs.names if params[n].vary]
+    held = [n for n in eqs.names if not params[n].vary]
+    homogeneous = not held and bool(free)
+    scale_name = ""
+    if homogeneous:
+        masses = [n for n in free if model.spec(n).kind in ("mass", "inertia")]
+        scale_name = masses[0] if masses else free[0]
+        free.remove(scale_name)
+        held = [scale_name]
+    result = IdentResult(model=model.name, params=dict(values), fixed=params.fixed, stderr={},
+                         cost=float("nan"), nfev=0, success=False, rms_residual={},
+                         identifiable=False, warnings=warnings, road="unknown")
+    f_hi = band_limit(model, values)
+    segs = [s for s in (_segment_equations(seg, eqs, free, f_hi)
+                        for seg in _segments(meas, eqs.channels)) if s is not None] \
+        if eqs.rows else []
+    undetermined = [n for n in params.free if n not in free]
+    if not free or not segs:
+        why = ("no free parameter enters the body equations" if not free and eqs.rows
+               else "no stretch of the record forms the body equations"
+               if eqs.rows else "no body equation can be formed from the measured channels")
+        warnings.append(f"road unknown: {why}")
+        result.undetermined = sorted(set(undetermined) | set(free))
+        _explain_undetermined(model, result, eqs, scale_name)
+        return result
+    ip = [eqs.names.index(n) for n in free]
+    ih = [eqs.names.index(n) for n in held]
+    theta_h = np.array([values[n] for n in held])
+    # per segment: A (rows*bins, p) complex, y (rows*bins,) complex, with scale and weights
+    blocks = []
+    for s in segs:
+        A = s.X[:, :, ip]
+        y = -(s.X[:, :, ih] @ theta_h)
+        blocks.append((A, y, s))
+    col = np.sqrt(sum(np.sum(np.abs(A) ** 2, axis=(0, 1)) for A, _, _ in blocks))
+    col[col == 0.0] = 1.0
+
+    def solve(weights: list[np.ndarray]) -> tuple[FloatArray, np.ndarray, np.ndarray, np.ndarray]:
+        """Bias-compensated weighted least squares: the regressors' expected noise power
+        is taken off the normal equations' diagonal (errors in variables)."""
+        AA = np.vstack([_real((A / col) * w[:, :, None]) for (A, _, _), w in zip(blocks, weights)])
+        yy = np.concatenate([_real(y * w) for (_, y, _), w in zip(blocks, weights)])
+        noise = sum(np.sum(s.noise[:, :, ip] * (w ** 2)[:, :, None], axis=(0, 1))
+                    for (_, _, s), w in zip(blocks, weights)) / col ** 2
+        G = AA.T @ AA
+        G = G - np.diag(np.minimum(noise, 0.5 * np.diag(G)))
+        try:
+            beta = np.linalg.solve(G, AA.T @ yy)
+        except np.linalg.LinAlgError:
+            beta = np.full(len(ip), np.nan)
+        return beta, AA, yy, G
+
+    ones = [np.ones(A.shape[:2]) for A, _, _ in blocks]
+    beta, _, _, _ = solve(ones)
+    weights = []
+    for A, y, _ in blocks:
+        e = y - (A / col) @ beta
+        pw = np.vstack([_smooth(np.abs(er) ** 2) for er in e])
+        pw = np.maximum(pw, 1e-300 + 1e-12 * pw.max())
+        weights.append(1.0 / np.sqrt(pw))
+    beta, AA, yy, H = solve(weights)
+    theta = beta / col
+    # sandwich covariance with the bins' correlation
+    resid = yy - AA @ beta
+    scores = []
+    start = 0
+    for (A, _, _), _w in zip(blocks, weights):
+        nr, nbins = A.shape[:2]
+        m = nr * nbins
+        a_re, a_im = AA[start:start + m], AA[start + m:start + 2 * m]
+        e_re, e_im = resid[start:start + m], resid[start + m:start + 2 * m]
+        u = (a_re * e_re[:, None] + a_im * e_im[:, None]).reshape(nr, nbins, -1).sum(axis=0)
+        scores.append(u)
+        start += 2 * m
+    try:
+        Hinv = np.linalg.inv(H)
+    except np.linalg.LinAlgError:
+        Hinv = np.full_like(H, np.inf)
+    cov = Hinv @ _hac(scores) @ Hinv
+    se = np.sqrt(np.clip(np.diag(cov), 0.0, None)) / col
+    result.nfev = 2
+    result.n_obs = int(yy.size)
+    result.cost = float(resid @ resid)
+    result.success = bool(np.all(np.isfinite(theta)))
+    determined = []
+    for n, v, e in zip(free, theta, se):
+        result.params[n] = float(v)
+        ok = bool(np.isfinite(e) and v > 0.0 and e < MAX_REL_STDERR * v)
+        if ok and not homogeneous:
+            result.stderr[n] = float(e)
+            determined.append(n)
+        else:
+            undetermined.append(n)
+            if not (v > 0.0):
+                warnings.append(f"road unknown: {n} came out {v:.4g} {model.spec(n).unit} "
+                                "(not physical): the record does not determine it")
+    if homogeneous:
+        undetermined.append(scale_name)
+    result.undetermined = sorted(set(undetermined))
+    result.identifiable = result.success and not result.undetermined
+    result.rms_residual = _rms_residual(model, eqs, blocks, theta, col, values)
+    result.band_hz = _band(segs)
+    _explain_undetermined(model, result, eqs, scale_name)
+    return result
+
+
+def _real(z: np.ndarray) -> np.ndarray:
+    """Complex equations (..., p) or (...,) flattened and stacked as real then imaginary parts."""
+    flat: np.ndarray = z.reshape(-1, z.shape[2]) if z.ndim == 3 else z.reshape(-1)
+    return np.concatenate([flat.real, flat.imag])
+
+
+def _band(segs: list[_SegmentEquations]) -> list[float]:
+    lo = min(float(s.omega.min()) for s in segs) / (2 * np.pi)
+    hi = max(float(s.omega.max()) for s in segs) / (2 * np.pi)
+    return [round(lo, 4), round(hi, 4)]
+
+
+def _rms_residual(model: SuspensionModel, eqs: BodyEquations, blocks: list, theta: FloatArray,
+                  col: FloatArray, values: Mapping[str, float]) -> dict[str, float]:
+    """In-band RMS equation error of each body row, in its acceleration channel's unit
+    (Parseval over the windowed bins, divided by the row's mass or inertia)."""
+    M = model.matrices(dict(model.defaults(), **dict(values)))[0]
+    num = np.zeros(len(eqs.rows))
+    den = 0.0
+    for A, y, s in blocks:
+        e = y - A @ theta
+        if eqs.shift:
+            e = e / (1j * s.omega[None, :]) ** eqs.shift
+        num += 2.0 * np.sum(np.abs(e) ** 2, axis=1) / s.T
+        den += s.T * 35.0 / 128.0
+    out = {}
+    for r, j in enumerate(eqs.rows):
+        out[f"{model.coords[j]}_ddot"] = float(math.sqrt(num[r] / den) / abs(M[j, j]))
+    return out
+
+
+def _explain_undetermined(model: SuspensionModel, result: IdentResult, eqs: BodyEquations,
+                          scale_name: str) -> None:
+    """Warnings naming each free parameter the record leaves undetermined, and why."""
+    und = result.undetermined or []
+    if not und:
+        return
+    in_eq = [n for n in und if n in eqs.names]
+    outside = [n for n in und if n not in eqs.names]
+    if scale_name:
+        ratio = ", ".join(f"{n}/{scale_name}" for n in eqs.names if n != scale_name)
+        result.warnings.append(
+            f"not identifiable: the body equations are homogeneous, so they determine only "
+            f"the ratios {ratio}; hold one of {', '.join(eqs.names)} (--fix, e.g. a weighed "
+            f"body mass or a spring's rate) to scale them (values shown at {scale_name} = "
+            f"{result.params[scale_name]:.6g} {model.spec(scale_name).unit}, its given value)")
+        in_eq = [n for n in in_eq if n != scale_name and n not in eqs.names]
+    if in_eq:
+        result.warnings.append(f"not identifiable: {', '.join(in_eq)}: the record does not "
+                               "determine them (too little excitation in the band or a "
+                               "channel missing); values shown are not estimates")
+    if outside:
+        result.warnings.append(
+            f"not identifiable with the road unknown: {', '.join(outside)} (they act only "
+            "through the wheels' equations, which hold the unmeasured road); values shown "
+            "are the given ones, not estimates; hold them (--fix) or measure the road")
+
+
+def is_free_response(meas: Measurement) -> bool:
+    """Whether the record is a free response: its motion is largest at the very start
+    (the first 5 % of the record) and has decayed by the last fifth to under a fifth of
+    that. Driving data (a road under the tyres) keeps moving; a bump record starts at rest."""
+    n = meas.t.size
+    if n < 40 or not meas.measured:
+        return False
+    blocks = 20
+    verdicts = []
+    for v in meas.measured.values():
+        x = np.asarray(v, dtype=float)
+        if np.count_nonzero(np.isfinite(x)) < n // 2:
+            continue
+        x = x - np.nanmedian(x[-max(1, n // 5):])
+        parts = np.array_split(x, blocks)
+        rms = np.array([math.sqrt(float(np.nanmean(p * p))) if np.any(np.isfinite(p)) else 0.0
+                        for p in parts])
+        peak = float(rms.max())
+        if peak == 0.0:
+            continue
+        tail = float(np.sqrt(np.nanmean(x[-max(1, n // 5):] ** 2)))
+        verdicts.append(rms[0] >= 0.5 * peak and tail < 0.2 * peak)
+    return bool(verdicts) and all(verdicts)
+
+
+def resolve_road(model: SuspensionModel, meas: Measurement, requested: str | None
+                 ) -> tuple[str, Measurement, list[str]]:
+    """The road mode a record is fitted in, the record as fitted, and what was chosen.
+
+    Parameters
+    ----------
+    model : SuspensionModel
+    meas : Measurement
+    requested : {"measured", "zero", "unknown"} or None
+        ``--road``; ``None`` chooses: ``measured`` when the record has road columns, else
+        ``zero`` for a free response (:func:`is_free_response`) and ``unknown`` for
+        driving data, named in a warning.
+
+    Returns
+    -------
+    mode : str
+    meas : Measurement
+        ``meas`` itself, or a copy without its road columns (``zero``, ``unknown``).
+    warnings : list of str
+
+    Raises
+    ------
+    UsageError
+        ``measured`` on a record without road columns, or an unknown mode.
+    """
+    has_road = any(r in meas.road for r in model.roads)
+    warnings: list[str] = []
+    if requested is not None and requested not in ROAD_MODES:
+        raise UsageError(f"--road: expected one of {', '.join(ROAD_MODES)}, got {requested!r}")
+    if requested is None:
+        if has_road:
+            return "measured", meas, warnings
+        mode = "zero" if is_free_response(meas) else "unknown"
+        if mode == "zero":
+            warnings.append("no road column and the motion decays from the start: fitted as a "
+                            "free response with no road input (--road zero); give --road "
+                            "unknown if a road moved the car")
+        else:
+            warnings.append("no road column and the motion does not decay (driving data): the "
+                            "road under the tyres is unknown (--road unknown): identifying what "
+                            "body accelerations and ride heights determine; give --road zero "
+                            "for a free response")
+    else:
+        mode = requested
+    if mode == "measured":
+        if not has_road:
+            raise UsageError(f"--road measured: {meas.source or 'the record'} has no road "
+                             f"column; expected {', '.join(model.roads)} (or give --road "
+                             "unknown for driving data, --road zero for a free response)")
+        return mode, meas, warnings
+    if has_road:
+        warnings.append(f"--road {mode}: the record's road column(s) "
+                        f"{', '.join(r for r in model.roads if r in meas.road)} not used")
+    return mode, replace(meas, road={}), warnings
