@@ -63,8 +63,10 @@ FIRST_BIN = 3
 SNR_MIN = 30.0
 #: bins over which spectra and the equation error are smoothed
 SMOOTH_BINS = 17
-#: correlation reach of neighbouring bins (the window's spectrum spans 5 bins)
-HAC_LAGS = 4
+#: groups of the jackknife standard errors
+JACKKNIFE_GROUPS = 20
+#: bins per cluster of the standard errors' sandwich (the window's spectrum spans 5 bins)
+CLUSTER_BINS = 8
 #: shortest stretch of samples that forms equations
 MIN_SEGMENT = 32
 #: the band reaches at least this far (Hz)
@@ -376,19 +378,129 @@ def _segment_equations(seg: _Segment, eqs: BodyEquations, free: Sequence[str], f
     return _SegmentEquations(X[:, ok], N[:, ok], np.asarray(omega_all[bins[ok]], dtype=float), T)
 
 
-def _hac(U: list[np.ndarray]) -> np.ndarray:
-    """Sum of score outer products with neighbouring bins' (Bartlett weights over
-    :data:`HAC_LAGS`); ``U`` holds one (bins, p) score array per segment."""
+def _cluster_scores(U: list[np.ndarray]) -> np.ndarray:
+    """Sum of the outer products of the scores summed over runs of :data:`CLUSTER_BINS`
+    neighbouring bins (a cluster-robust sandwich: the windowed bins are correlated with
+    their neighbours, runs of bins far less with each other); ``U`` holds one (bins, p)
+    score array per segment."""
     p = U[0].shape[1]
     S = np.zeros((p, p))
     for u in U:
-        S += u.T @ u
-        for lag in range(1, HAC_LAGS + 1):
-            if lag >= u.shape[0]:
-                break
-            g = u[lag:].T @ u[:-lag]
-            S += (1.0 - lag / (HAC_LAGS + 1)) * (g + g.T)
+        n = u.shape[0]
+        for i in range(0, n, CLUSTER_BINS):
+            g = u[i:i + CLUSTER_BINS].sum(axis=0)
+            S += np.outer(g, g)
     return S
+
+
+@dataclass
+class _Solution:
+    """The bias-compensated weighted least-squares solution over a set of segments."""
+
+    theta: FloatArray          # free parameters (SI)
+    se: FloatArray             # their standard errors (SI)
+    cost: float                # weighted residual sum of squares
+    n_obs: int                 # real equations
+    blocks: list[tuple[np.ndarray, np.ndarray, _SegmentEquations]]
+    col: FloatArray
+
+
+def _solve(segs: list[_SegmentEquations], ip: list[int], ih: list[int],
+           theta_h: FloatArray, stderr: bool = True) -> _Solution:
+    """Two passes of weighted least squares over the segments' equations: the first
+    (unweighted) gives the equation error's spectrum, the second weights each bin by its
+    inverse; the regressors' expected noise power is taken off the normal equations'
+    diagonal (errors in variables); standard errors by the sandwich with the bins' correlation."""
+    # per segment: A (rows, bins, p) complex, y (rows, bins) complex
+    blocks = []
+    for s in segs:
+        A = s.X[:, :, ip]
+        y = -(s.X[:, :, ih] @ theta_h)
+        blocks.append((A, y, s))
+    col = np.sqrt(sum(np.sum(np.abs(A) ** 2, axis=(0, 1)) for A, _, _ in blocks))
+    col[col == 0.0] = 1.0
+
+    def solve(weights: list[np.ndarray]) -> tuple[FloatArray, np.ndarray, np.ndarray, np.ndarray]:
+        AA = np.vstack([_real((A / col) * w[:, :, None]) for (A, _, _), w in zip(blocks, weights)])
+        yy = np.concatenate([_real(y * w) for (_, y, _), w in zip(blocks, weights)])
+        noise = sum(np.sum(s.noise[:, :, ip] * (w ** 2)[:, :, None], axis=(0, 1))
+                    for (_, _, s), w in zip(blocks, weights)) / col ** 2
+        G = AA.T @ AA
+        G = G - np.diag(np.minimum(noise, 0.5 * np.diag(G)))
+        try:
+            beta = np.linalg.solve(G, AA.T @ yy)
+        except np.linalg.LinAlgError:
+            beta = np.full(len(ip), np.nan)
+        return beta, AA, yy, G
+
+    beta, _, _, _ = solve([np.ones(A.shape[:2]) for A, _, _ in blocks])
+    weights = []
+    for A, y, _ in blocks:
+        e = y - (A / col) @ beta
+        pw = np.vstack([_smooth(np.abs(er) ** 2) for er in e])
+        pw = np.maximum(pw, 1e-300 + 1e-12 * pw.max())
+        weights.append(1.0 / np.sqrt(pw))
+    beta, AA, yy, H = solve(weights)
+    resid = yy - AA @ beta
+    if not stderr:
+        return _Solution(beta / col, np.zeros(len(ip)), float(resid @ resid), int(yy.size),
+                         blocks, col)
+    scores = []
+    start = 0
+    for A, _, _ in blocks:
+        nr, nbins = A.shape[:2]
+        m = nr * nbins
+        a_re, a_im = AA[start:start + m], AA[start + m:start + 2 * m]
+        e_re, e_im = resid[start:start + m], resid[start + m:start + 2 * m]
+        u = (a_re * e_re[:, None] + a_im * e_im[:, None]).reshape(nr, nbins, -1).sum(axis=0)
+        scores.append(u)
+        start += 2 * m
+    try:
+        Hinv = np.linalg.inv(H)
+    except np.linalg.LinAlgError:
+        Hinv = np.full_like(H, np.inf)
+    cov = Hinv @ _cluster_scores(scores) @ Hinv
+    se = np.sqrt(np.clip(np.diag(cov), 0.0, None)) / col
+    return _Solution(beta / col, se, float(resid @ resid), int(yy.size), blocks, col)
+
+
+def _jackknife(segs: list[_SegmentEquations], ip: list[int], ih: list[int],
+               theta_h: FloatArray) -> FloatArray:
+    """Delete-a-group jackknife standard errors of the whole fit (weights and noise
+    compensation included): the band's bins, over every segment, in :data:`JACKKNIFE_GROUPS`
+    runs of neighbouring bins, each left out in turn."""
+    sizes = [s.omega.size for s in segs]
+    total = sum(sizes)
+    groups = min(JACKKNIFE_GROUPS, total // CLUSTER_BINS)
+    if groups < 3:
+        return np.zeros(len(ip))
+    # runs of neighbouring bins that carry equal shares of the information (the springs'
+    # is in the few lowest bins), none shorter than CLUSTER_BINS
+    info = np.concatenate([np.sum(np.abs(s.X[:, :, ip]) ** 2 / np.maximum(s.noise[:, :, ip], 1e-300),
+                                  axis=(0, 2)) for s in segs])
+    share = np.cumsum(info) / max(float(info.sum()), 1e-300)
+    label = np.zeros(total, dtype=int)
+    g, start = 0, 0
+    for i in range(total):
+        if i - start >= CLUSTER_BINS and share[i] > (g + 1) / groups and total - i >= CLUSTER_BINS:
+            g, start = g + 1, i
+        label[i] = g
+    groups = g + 1
+    offs = np.cumsum([0] + sizes)
+    thetas = []
+    for g in range(groups):
+        kept = []
+        for s, a, b in zip(segs, offs[:-1], offs[1:]):
+            keep = label[a:b] != g
+            if keep.sum() >= CLUSTER_BINS:
+                kept.append(_SegmentEquations(s.X[:, keep], s.noise[:, keep], s.omega[keep], s.T))
+        if kept:
+            thetas.append(_solve(kept, ip, ih, theta_h, stderr=False).theta)
+    th = np.array(thetas)
+    G = th.shape[0]
+    if G < 3:
+        return np.zeros(len(ip))
+    return np.asarray(np.sqrt((G - 1) / G * np.sum((th - th.mean(axis=0)) ** 2, axis=0)), dtype=float)
 
 
 def fit_road_unknown(model: SuspensionModel, meas: Measurement, params: Parameters
@@ -432,10 +544,10 @@ def fit_road_unknown(model: SuspensionModel, meas: Measurement, params: Paramete
     result = IdentResult(model=model.name, params=dict(values), fixed=params.fixed, stderr={},
                          cost=float("nan"), nfev=0, success=False, rms_residual={},
                          identifiable=False, warnings=warnings, road="unknown")
+    pieces = _segments(meas, eqs.channels) if eqs.rows else []
     f_hi = band_limit(model, values)
-    segs = [s for s in (_segment_equations(seg, eqs, free, f_hi)
-                        for seg in _segments(meas, eqs.channels)) if s is not None] \
-        if eqs.rows else []
+    segs = [s for s in (_segment_equations(seg, eqs, free, f_hi) for seg in pieces)
+            if s is not None]
     undetermined = [n for n in params.free if n not in free]
     if not free or not segs:
         why = ("no free parameter enters the body equations" if not free and eqs.rows
@@ -448,61 +560,20 @@ def fit_road_unknown(model: SuspensionModel, meas: Measurement, params: Paramete
     ip = [eqs.names.index(n) for n in free]
     ih = [eqs.names.index(n) for n in held]
     theta_h = np.array([values[n] for n in held])
-    # per segment: A (rows*bins, p) complex, y (rows*bins,) complex, with scale and weights
-    blocks = []
-    for s in segs:
-        A = s.X[:, :, ip]
-        y = -(s.X[:, :, ih] @ theta_h)
-        blocks.append((A, y, s))
-    col = np.sqrt(sum(np.sum(np.abs(A) ** 2, axis=(0, 1)) for A, _, _ in blocks))
-    col[col == 0.0] = 1.0
-
-    def solve(weights: list[np.ndarray]) -> tuple[FloatArray, np.ndarray, np.ndarray, np.ndarray]:
-        """Bias-compensated weighted least squares: the regressors' expected noise power
-        is taken off the normal equations' diagonal (errors in variables)."""
-        AA = np.vstack([_real((A / col) * w[:, :, None]) for (A, _, _), w in zip(blocks, weights)])
-        yy = np.concatenate([_real(y * w) for (_, y, _), w in zip(blocks, weights)])
-        noise = sum(np.sum(s.noise[:, :, ip] * (w ** 2)[:, :, None], axis=(0, 1))
-                    for (_, _, s), w in zip(blocks, weights)) / col ** 2
-        G = AA.T @ AA
-        G = G - np.diag(np.minimum(noise, 0.5 * np.diag(G)))
-        try:
-            beta = np.linalg.solve(G, AA.T @ yy)
-        except np.linalg.LinAlgError:
-            beta = np.full(len(ip), np.nan)
-        return beta, AA, yy, G
-
-    ones = [np.ones(A.shape[:2]) for A, _, _ in blocks]
-    beta, _, _, _ = solve(ones)
-    weights = []
-    for A, y, _ in blocks:
-        e = y - (A / col) @ beta
-        pw = np.vstack([_smooth(np.abs(er) ** 2) for er in e])
-        pw = np.maximum(pw, 1e-300 + 1e-12 * pw.max())
-        weights.append(1.0 / np.sqrt(pw))
-    beta, AA, yy, H = solve(weights)
-    theta = beta / col
-    # sandwich covariance with the bins' correlation
-    resid = yy - AA @ beta
-    scores = []
-    start = 0
-    for (A, _, _), _w in zip(blocks, weights):
-        nr, nbins = A.shape[:2]
-        m = nr * nbins
-        a_re, a_im = AA[start:start + m], AA[start + m:start + 2 * m]
-        e_re, e_im = resid[start:start + m], resid[start + m:start + 2 * m]
-        u = (a_re * e_re[:, None] + a_im * e_im[:, None]).reshape(nr, nbins, -1).sum(axis=0)
-        scores.append(u)
-        start += 2 * m
-    try:
-        Hinv = np.linalg.inv(H)
-    except np.linalg.LinAlgError:
-        Hinv = np.full_like(H, np.inf)
-    cov = Hinv @ _hac(scores) @ Hinv
-    se = np.sqrt(np.clip(np.diag(cov), 0.0, None)) / col
+    sol = _solve(segs, ip, ih, theta_h)
+    # the band reaches twice the highest natural frequency: judged again at the estimate
+    # when the given values were far off
+    if np.all(sol.theta > 0.0):
+        f_est = band_limit(model, {**values, **dict(zip(free, sol.theta.tolist()))})
+        if abs(f_est / f_hi - 1.0) > 0.2:
+            again = [s for s in (_segment_equations(seg, eqs, free, f_est) for seg in pieces)
+                     if s is not None]
+            if again:
+                segs, sol = again, _solve(again, ip, ih, theta_h)
+    theta, se = sol.theta, np.maximum(sol.se, _jackknife(segs, ip, ih, theta_h))
     result.nfev = 2
-    result.n_obs = int(yy.size)
-    result.cost = float(resid @ resid)
+    result.n_obs = sol.n_obs
+    result.cost = sol.cost
     result.success = bool(np.all(np.isfinite(theta)))
     determined = []
     for n, v, e in zip(free, theta, se):
@@ -520,7 +591,7 @@ def fit_road_unknown(model: SuspensionModel, meas: Measurement, params: Paramete
         undetermined.append(scale_name)
     result.undetermined = sorted(set(undetermined))
     result.identifiable = result.success and not result.undetermined
-    result.rms_residual = _rms_residual(model, eqs, blocks, theta, col, values)
+    result.rms_residual = _rms_residual(model, eqs, sol.blocks, theta, values)
     result.band_hz = _band(segs)
     _explain_undetermined(model, result, eqs, scale_name)
     return result
@@ -538,8 +609,9 @@ def _band(segs: list[_SegmentEquations]) -> list[float]:
     return [round(lo, 4), round(hi, 4)]
 
 
-def _rms_residual(model: SuspensionModel, eqs: BodyEquations, blocks: list, theta: FloatArray,
-                  col: FloatArray, values: Mapping[str, float]) -> dict[str, float]:
+def _rms_residual(model: SuspensionModel, eqs: BodyEquations,
+                  blocks: list[tuple[np.ndarray, np.ndarray, _SegmentEquations]],
+                  theta: FloatArray, values: Mapping[str, float]) -> dict[str, float]:
     """In-band RMS equation error of each body row, in its acceleration channel's unit
     (Parseval over the windowed bins, divided by the row's mass or inertia)."""
     M = model.matrices(dict(model.defaults(), **dict(values)))[0]
