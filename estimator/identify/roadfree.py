@@ -464,6 +464,26 @@ def _solve(segs: list[_SegmentEquations], ip: list[int], ih: list[int],
     return _Solution(beta / col, se, float(resid @ resid), int(yy.size), blocks, col)
 
 
+def _with_columns(meas: Measurement, eqs: BodyEquations,
+                  extra: Mapping[str, Sequence[FloatArray]]) -> tuple[Measurement, BodyEquations]:
+    """The record and equations with further force columns (see :func:`fit_road_unknown`)."""
+    measured = dict(meas.measured)
+    regressors = dict(eqs.regressors)
+    for name, series in extra.items():
+        if len(series) != len(eqs.rows):
+            raise UsageError(f"extra column {name!r}: {len(series)} series, expected one per "
+                             f"body row ({len(eqs.rows)})")
+        per_row = []
+        for r, z in enumerate(series):
+            ch = f"{name}@{r}"
+            measured[ch] = np.asarray(z, dtype=float)
+            per_row.append([(0, [Term(ch, 0, 1.0)])])
+        regressors[name] = per_row
+    eqs2 = BodyEquations(eqs.rows, regressors, eqs.names + tuple(extra), list(eqs.missing),
+                         eqs.shift)
+    return replace(meas, measured=measured), eqs2
+
+
 def _jackknife(segs: list[_SegmentEquations], ip: list[int], ih: list[int],
                theta_h: FloatArray) -> FloatArray:
     """Delete-a-group jackknife standard errors of the whole fit (weights and noise
@@ -503,8 +523,8 @@ def _jackknife(segs: list[_SegmentEquations], ip: list[int], ih: list[int],
     return np.asarray(np.sqrt((G - 1) / G * np.sum((th - th.mean(axis=0)) ** 2, axis=0)), dtype=float)
 
 
-def fit_road_unknown(model: SuspensionModel, meas: Measurement, params: Parameters
-                     ) -> IdentResult:
+def fit_road_unknown(model: SuspensionModel, meas: Measurement, params: Parameters,
+                     extra: Mapping[str, Sequence[FloatArray]] | None = None) -> IdentResult:
     """Identify what the body equations determine, the road under the tyres unknown.
 
     Parameters
@@ -515,6 +535,12 @@ def fit_road_unknown(model: SuspensionModel, meas: Measurement, params: Paramete
         motion); road columns, if any, are not used.
     params : Parameters
         Held values (``vary=False``) and the given values of the free parameters (SI).
+    extra : mapping, optional
+        Further generalised-force columns with free coefficients: name -> one series per
+        body row (:attr:`BodyEquations.rows` order; N, N m per unit coefficient, on the
+        record's samples), e.g. an effect's force at the struts (the diagnosis). Their
+        coefficients come back in ``params`` and ``stderr`` under their names. The band is
+        judged on the model's parameters alone.
 
     Returns
     -------
@@ -527,17 +553,20 @@ def fit_road_unknown(model: SuspensionModel, meas: Measurement, params: Paramete
     """
     values = params.valuesdict()
     eqs = body_equations(model, meas.measured, values)
+    extra = dict(extra or {})
+    if extra:
+        meas, eqs = _with_columns(meas, eqs, extra)
     warnings: list[str] = ["road unknown: fitted the body equations "
                            f"({', '.join(model.coords[j] for j in eqs.rows) or 'none'}) on "
                            "body accelerations and ride heights; the road under the tyres "
                            "is never used"]
     warnings.extend(f"road unknown: cannot form the equation of {m}" for m in eqs.missing)
-    free = [n for n in eqs.names if params[n].vary]
-    held = [n for n in eqs.names if not params[n].vary]
+    free = [n for n in eqs.names if n in extra or params[n].vary]
+    held = [n for n in eqs.names if n not in extra and not params[n].vary]
     homogeneous = not held and bool(free)
     scale_name = ""
     if homogeneous:
-        masses = [n for n in free if model.spec(n).kind in ("mass", "inertia")]
+        masses = [n for n in free if n not in extra and model.spec(n).kind in ("mass", "inertia")]
         scale_name = masses[0] if masses else free[0]
         free.remove(scale_name)
         held = [scale_name]
@@ -546,7 +575,8 @@ def fit_road_unknown(model: SuspensionModel, meas: Measurement, params: Paramete
                          identifiable=False, warnings=warnings, road="unknown")
     pieces = _segments(meas, eqs.channels) if eqs.rows else []
     f_hi = band_limit(model, values)
-    segs = [s for s in (_segment_equations(seg, eqs, free, f_hi) for seg in pieces)
+    model_free = [n for n in free if n not in extra]
+    segs = [s for s in (_segment_equations(seg, eqs, model_free, f_hi) for seg in pieces)
             if s is not None]
     undetermined = [n for n in params.free if n not in free]
     if not free or not segs:
@@ -563,10 +593,12 @@ def fit_road_unknown(model: SuspensionModel, meas: Measurement, params: Paramete
     sol = _solve(segs, ip, ih, theta_h)
     # the band reaches twice the highest natural frequency: judged again at the estimate
     # when the given values were far off
-    if np.all(sol.theta > 0.0):
-        f_est = band_limit(model, {**values, **dict(zip(free, sol.theta.tolist()))})
+    mine = np.array([n not in extra for n in free], dtype=bool)
+    if np.all(sol.theta[mine] > 0.0):
+        f_est = band_limit(model, {**values, **{n: v for n, v in zip(free, sol.theta.tolist())
+                                                if n not in extra}})
         if abs(f_est / f_hi - 1.0) > 0.2:
-            again = [s for s in (_segment_equations(seg, eqs, free, f_est) for seg in pieces)
+            again = [s for s in (_segment_equations(seg, eqs, model_free, f_est) for seg in pieces)
                      if s is not None]
             if again:
                 segs, sol = again, _solve(again, ip, ih, theta_h)
@@ -578,6 +610,9 @@ def fit_road_unknown(model: SuspensionModel, meas: Measurement, params: Paramete
     determined = []
     for n, v, e in zip(free, theta, se):
         result.params[n] = float(v)
+        if n in extra:   # a force column's coefficient may have either sign
+            result.stderr[n] = float(e)
+            continue
         ok = bool(np.isfinite(e) and v > 0.0 and e < MAX_REL_STDERR * v)
         if ok and not homogeneous:
             result.stderr[n] = float(e)
@@ -592,6 +627,8 @@ def fit_road_unknown(model: SuspensionModel, meas: Measurement, params: Paramete
     result.undetermined = sorted(set(undetermined))
     result.identifiable = result.success and not result.undetermined
     result.rms_residual = _rms_residual(model, eqs, sol.blocks, theta, values)
+    # the cost: the body rows' in-band mean-square equation error, (m/s^2)^2 (rad/s^2)^2
+    result.cost = float(sum(v * v for v in result.rms_residual.values()))
     result.band_hz = _band(segs)
     _explain_undetermined(model, result, eqs, scale_name)
     return result
