@@ -524,7 +524,8 @@ def _jackknife(segs: list[_SegmentEquations], ip: list[int], ih: list[int],
 
 
 def fit_road_unknown(model: SuspensionModel, meas: Measurement, params: Parameters,
-                     extra: Mapping[str, Sequence[FloatArray]] | None = None) -> IdentResult:
+                     extra: Mapping[str, Sequence[FloatArray]] | None = None,
+                     jackknife: bool = True) -> IdentResult:
     """Identify what the body equations determine, the road under the tyres unknown.
 
     Parameters
@@ -541,6 +542,9 @@ def fit_road_unknown(model: SuspensionModel, meas: Measurement, params: Paramete
         record's samples), e.g. an effect's force at the struts (the diagnosis). Their
         coefficients come back in ``params`` and ``stderr`` under their names. The band is
         judged on the model's parameters alone.
+    jackknife : bool
+        Standard errors as the larger of the sandwich and the delete-a-group jackknife
+        (default); ``False`` the sandwich alone (screening many candidate columns).
 
     Returns
     -------
@@ -602,7 +606,8 @@ def fit_road_unknown(model: SuspensionModel, meas: Measurement, params: Paramete
                      if s is not None]
             if again:
                 segs, sol = again, _solve(again, ip, ih, theta_h)
-    theta, se = sol.theta, np.maximum(sol.se, _jackknife(segs, ip, ih, theta_h))
+    theta, se = sol.theta, (np.maximum(sol.se, _jackknife(segs, ip, ih, theta_h)) if jackknife
+                            else sol.se)
     result.nfev = 2
     result.n_obs = sol.n_obs
     result.cost = sol.cost

@@ -6,7 +6,9 @@ import sys
 
 from estimator.diagnose import diagnose
 from estimator.diagnose.plots import plot_evidence
-from suspid.cli._args import FitHelp, add_fit_options, fit_inputs
+from estimator.diagnose.roadfree import diagnose_road_unknown
+from estimator.identify.roadfree import resolve_road
+from suspid.cli._args import FitHelp, add_fit_options, add_road_option, fit_inputs
 from suspid.cli._common import (add_input_options, add_model_option, add_param_options,
                                 assignment_warnings, print_json)
 from suspid.cli.identify import parse_x0
@@ -47,6 +49,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     add_input_options(p)
     add_param_options(p)
     add_fit_options(p, FIT_HELP, restarts=3)
+    add_road_option(p)
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
     p.add_argument("--plot", metavar="PNG", default=None,
                    help="write the evidence figure (residuals before/after, autocorrelation, "
@@ -57,15 +60,23 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> int:
     """Run ``suspid diagnose`` (JSON or text on stdout, warnings on stderr); exit status 0."""
     model, params, meas, frames = fit_inputs(args)
-    res = diagnose(model, meas, params, cost=args.cost, x0=parse_x0(args.x0, model.n_states),
-                   restarts=args.restarts, maxfev=args.maxfev, polish=args.polish,
-                   multistart=args.multistart)
-    out = res.to_json()
-    out["warnings"] = assignment_warnings(args, model) + list(out["warnings"])
+    road, meas, road_warnings = resolve_road(model, meas, args.road)
+    if road == "unknown":
+        out = diagnose_road_unknown(model, meas, params).to_json()
+        if args.plot:
+            road_warnings.append("--plot: the evidence figure is drawn for a measured or zero "
+                                 "road only; not written")
+    else:
+        res = diagnose(model, meas, params, cost=args.cost, x0=parse_x0(args.x0, model.n_states),
+                       restarts=args.restarts, maxfev=args.maxfev, polish=args.polish,
+                       multistart=args.multistart)
+        out = res.to_json()
+        out["road"] = road
+        if args.plot:
+            plot_evidence(res, res.record or meas, args.plot)
+    out["warnings"] = assignment_warnings(args, model) + road_warnings + list(out["warnings"])
     if frames is not None:
         out["frames"] = frames
-    if args.plot:
-        plot_evidence(res, res.record or meas, args.plot)
     if args.json:
         print_json(out)
     else:
