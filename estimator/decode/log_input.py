@@ -37,6 +37,8 @@ def unparsed_hint(path: str | Path, stats: ReadStats) -> str:
     ``candump can0`` output saved as ``.log`` is the usual case (suspid reads a ``.log`` as
     ``candump -L``).
     """
+    if stats.damage and not stats.frames:
+        return f"; {stats.damage}"
     if stats.frames or not stats.examples:
         return ""
     first = stats.examples[0]
@@ -215,7 +217,9 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
     warnings += [f"{e} (skipped)" for e in stats.examples]   # e names file and line
     if stats.malformed > len(stats.examples):
         warnings.append(f"{path}: {stats.malformed} unparseable lines/records skipped in all")
-    if stats.truncated:
+    if stats.damage:
+        warnings.append(stats.damage)
+    elif stats.truncated:
         warnings.append(f"{path}: the file ends inside a record (truncated); frames before it used")
     for name, n in listener.unknown_pages().items():
         warnings.append(f"{path}: {n} frames of {name} carry a multiplexer value that is no "

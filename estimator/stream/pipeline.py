@@ -535,7 +535,9 @@ def _run_log(source: Source, spec: MonitorSpec, mon: StreamMonitor, sinks: list[
     frames.update(bus_stats)
     out: dict[str, Any] = {"frames": frames, "windows_cut": drv.windows}
     warnings = list(bus_warnings)
-    if stats.truncated:
+    if stats.damage:
+        warnings.append(stats.damage)
+    elif stats.truncated:
         warnings.append(f"{source.input}: the file ends inside a record (truncated)")
     if warnings:
         out["warnings"] = warnings
