@@ -86,6 +86,7 @@ from cantools.database.can import Database
 from estimator.decode.buffer import Aligned, RollingBuffer
 from estimator.decode.engine import MIN_RUN, SMALL_BATCH, DecodeEngine
 from estimator.decode.frames import sort_frames
+from estimator.decode.j1939 import J1939Match
 from estimator.decode.routes import DATA, EXT, SYNC, Routes, compile_row, model_channels
 from estimator.decode.rules.arrival import arrival_slots, place_messages
 from estimator.decode.rules.arrival_live import LivePlacer, retimed
@@ -161,6 +162,10 @@ class DecodeListener(can.Listener):
         jitter, bursts and delivery delay lose no frame and move no sample; frames fed one
         by one (:meth:`on_message_received`) are placed as they arrive
         (:mod:`estimator.decode.rules.arrival_live`; :meth:`finish` releases the last).
+    j1939_source : str or int, optional
+        A DBC with J1939 messages: extended frames are matched to them by PGN
+        (:class:`~estimator.decode.j1939.J1939Match`), from this source address only
+        (``"0x47"``); default the first sender of each PGN.
 
     Attributes
     ----------
@@ -183,7 +188,7 @@ class DecodeListener(can.Listener):
                  max_counter_delta: int = 4, stale_window: int = 5,
                  batch_size: int = BATCH_SIZE,
                  on_alert: Callable[[dict[str, object]], None] | None = None,
-                 arrival_slots: bool = False) -> None:
+                 arrival_slots: bool = False, j1939_source: str | int | None = None) -> None:
         self.model = get_model(model) if isinstance(model, str) else model
         smap = as_signal_map(signal_map)
         if isinstance(dbc, Database):
@@ -223,6 +228,8 @@ class DecodeListener(can.Listener):
         self._live: LivePlacer | None = None
         self._live_off = False
         routes = Routes(db, smap, self._buffer)
+        #: J1939 frames matched by PGN (:mod:`estimator.decode.j1939`); None: no J1939 DBC
+        self.j1939 = J1939Match.from_db(db, j1939_source)
         if time_source == "tick" and not any(r.kind == SYNC for r in routes.ordered):
             raise UsageError(f"time_source 'tick' needs message {SYNC_MESSAGE} in the DBC "
                              f"{getattr(self.db, 'suspid_path', '')}")
@@ -271,6 +278,11 @@ class DecodeListener(can.Listener):
         few frames of each data message (its look-ahead) and passes frames on in time order
         with their slot times (:meth:`finish` releases the held ones).
         """
+        if self.j1939 is not None:
+            got = self.j1939.message(msg)
+            if got is None:
+                return
+            msg = got
         if self._auto:
             # frames queued before the time base is decided keep their arrival times; later
             # ones placed in slots could fall before them: the stream stays unplaced
@@ -419,6 +431,14 @@ class DecodeListener(can.Listener):
         stop = len(frames) if stop is None else min(stop, len(frames))
         if stop <= start:
             return 0
+        taken = stop - start
+        if self.j1939 is not None:
+            rows = np.zeros(len(frames), dtype=bool)
+            rows[start:stop] = True
+            frames = self.j1939.arrays(frames.select(rows) if taken < len(frames) else frames)
+            start, stop = 0, len(frames)
+            if not stop:
+                return taken
         if self._auto:
             with self._lock:
                 self.choose_time_base(
@@ -430,7 +450,7 @@ class DecodeListener(can.Listener):
             self.engine.process(frames, start, stop)
         if self.engine.outbox:
             self._deliver()
-        return stop - start
+        return taken
 
     def feed_messages(self, messages: Sequence[can.Message]) -> int:
         """Validate, decode and buffer a sequence of messages as batches; returns how many."""
@@ -613,6 +633,8 @@ class DecodeListener(can.Listener):
         unknown = self.unknown_pages()
         if unknown:
             out["unknown_page"] = unknown
+        if self.j1939 is not None:
+            out["j1939"] = self.j1939.stats()
         return out
 
     def unknown_pages(self) -> dict[str, int]:

@@ -37,6 +37,8 @@ def unparsed_hint(path: str | Path, stats: ReadStats) -> str:
     ``candump can0`` output saved as ``.log`` is the usual case (suspid reads a ``.log`` as
     ``candump -L``).
     """
+    if stats.damage and not stats.frames:
+        return f"; {stats.damage}"
     if stats.frames or not stats.examples:
         return ""
     first = stats.examples[0]
@@ -152,7 +154,9 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
                             dt: float | None = None,
                             max_counter_delta: int = 4,
                             arrival_slots: bool = True,
-                            channel: str | None = None) -> tuple[Measurement, dict[str, object]]:
+                            channel: str | None = None,
+                            j1939_source: str | int | None = None,
+                            ) -> tuple[Measurement, dict[str, object]]:
     """Decode a CAN log into a measurement on a uniform time grid.
 
     Parameters
@@ -182,6 +186,10 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
         channel 1 of an ASC, BLF, TRC or MDF4 log, ``"can1"`` for a candump interface; see
         :func:`suspid.can.logs.channel_wanted`). Default: every channel, with a warning when
         the sensor's messages are on more than one.
+    j1939_source : str or int, optional
+        A J1939 DBC: decode the parameter groups from this source address only (``"0x47"``);
+        default the first sender of each (:mod:`estimator.decode.j1939`, with a warning
+        naming the senders when a mapped one has several).
 
     Returns
     -------
@@ -204,7 +212,7 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
     m = get_model(model) if isinstance(model, str) else model
     listener = DecodeListener(m, dbc_path, signal_map, capacity=1 << 14, growable=True,
                               time_source=time_source, max_counter_delta=max_counter_delta,
-                              arrival_slots=arrival_slots)
+                              arrival_slots=arrival_slots, j1939_source=j1939_source)
     stats = ReadStats()
     feed_log(listener, path, stats, channel=channel)
     listener.count_malformed(stats.malformed)
@@ -212,10 +220,15 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
     bus_stats, warnings = channel_notes(path, stats, listener.data_keys(), channel)
     frame_stats.update(bus_stats)
     warnings += listener.signal_map.unit_warnings(listener.db, m)
+    mapped = {r.name for r in listener.routes.ordered}
+    if listener.j1939 is not None:
+        warnings += listener.j1939.warnings(str(path), mapped)
     warnings += [f"{e} (skipped)" for e in stats.examples]   # e names file and line
     if stats.malformed > len(stats.examples):
         warnings.append(f"{path}: {stats.malformed} unparseable lines/records skipped in all")
-    if stats.truncated:
+    if stats.damage:
+        warnings.append(stats.damage)
+    elif stats.truncated:
         warnings.append(f"{path}: the file ends inside a record (truncated); frames before it used")
     for name, n in listener.unknown_pages().items():
         warnings.append(f"{path}: {n} frames of {name} carry a multiplexer value that is no "
@@ -234,6 +247,8 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
         rejected = cast("dict[str, int]", frame_stats["rejected"])   # reason -> count
         rej = {k: v for k, v in rejected.items() if v}
         unread = unparsed_hint(path, stats)
+        if listener.j1939 is not None:
+            unread += listener.j1939.hint(mapped)
         raise InputError(f"{path}: no accepted frame carries a channel of model {m.name} "
                          f"({stats.frames} frames read, {frame_stats['accepted']} accepted, "
                          f"rejected {rej or 'none'}; map: "

@@ -75,6 +75,8 @@ class IdentifySettings:
         ``--map``/``--map-file`` mapping, as ``identify`` resolves it.
     can_channel : str or None
         ``--can-channel``: the bus channel of multi-bus logs to decode (``None``: all).
+    j1939_source : str or None
+        ``--j1939-source``: the J1939 source address decoded (``None``: the first sender).
     offset : {"remove", "keep"}
         ``--offset``: a constant road or position offset found in a drive is subtracted
         before the fit (default) or the drive is fitted as it is; either way it is named.
@@ -94,6 +96,7 @@ class IdentifySettings:
     signal_map: SignalMap | None = None
     can_channel: str | None = None
     offset: str = "remove"
+    j1939_source: str | None = None
 
     def parameters(self) -> Parameters:
         """The identifier's parameters (raises :class:`UsageError` for unknown names)."""
@@ -112,6 +115,8 @@ class IdentifySettings:
         d["suspid"] = __version__
         if d["can_channel"] is None:   # the key of every log read whole stays as it was
             del d["can_channel"]
+        if d["j1939_source"] is None:
+            del d["j1939_source"]
         d["x0"] = self.x0 if isinstance(self.x0, str) else [float(v) for v in self.x0]
         d["signal_map"] = (None if self.signal_map is None else
                            [str(m) for m in self.signal_map.mappings])
@@ -170,7 +175,7 @@ def load_drive(path: str | Path, model: SuspensionModel, settings: IdentifySetti
         Unreadable or unusable log (one-line message naming the file).
     """
     return read_input(path, model, cached_database(settings.dbc), settings.signal_map,
-                      channel=settings.can_channel)
+                      channel=settings.can_channel, j1939_source=settings.j1939_source)
 
 
 def one_line(text: object) -> str:

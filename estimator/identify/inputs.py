@@ -36,7 +36,8 @@ CAN_FORMATS, CAN_READER = "suspid.can.logs", "estimator.decode.log_input"
 def read_input(path: str | Path, model: SuspensionModel,
                dbc: str | Path | Database | None = None,
                signal_map: SignalMapLike = None,
-               channel: str | None = None) -> tuple[Measurement, dict[str, Any] | None]:
+               channel: str | None = None,
+               j1939_source: str | None = None) -> tuple[Measurement, dict[str, Any] | None]:
     """Read a measurement CSV or a CAN log (format by suffix) for ``model``.
 
     Parameters
@@ -54,6 +55,8 @@ def read_input(path: str | Path, model: SuspensionModel,
         The bus channel of a multi-bus CAN log to decode (``--can-channel``; see
         :func:`estimator.decode.log_input.load_log_as_measurement`); a CSV has none (a
         warning says it was not used).
+    j1939_source : str, optional
+        ``--j1939-source``: the source address decoded from a J1939 DBC's parameter groups.
 
     Returns
     -------
@@ -82,7 +85,8 @@ def read_input(path: str | Path, model: SuspensionModel,
                              f"log ({', '.join(formats.LOG_FORMATS)})")
         reader = importlib.import_module(CAN_READER)
         meas, frames = reader.load_log_as_measurement(p, model, dbc, signal_map,
-                                                      channel=channel)
+                                                      channel=channel,
+                                                      j1939_source=j1939_source)
     if model.roads and not meas.road and not decays(meas.measured):
         meas.warnings.append(
             f"{p}: no road input ({', '.join(model.roads)}) and the motion does not decay: "

@@ -168,13 +168,14 @@ def metrics(rec: RunRecord, t: FloatArray, truth: Mapping[str, FloatArray] | Non
 
 def load_stream(model: SuspensionModel, path: str | Path, dbc: Path | None = None,
                 signal_map: Any = None, truth_csv: str | Path | None = None,
-                channel: str | None = None
+                channel: str | None = None, j1939_source: str | None = None
                 ) -> tuple[FloatArray, dict[str, FloatArray], dict[str, FloatArray] | None]:
     """``(t, data, truth or None)`` of a CAN log (its bus ``channel`` only, when given) or
-    measurement CSV and its truth file."""
+    measurement CSV and its truth file (``j1939_source``: ``--j1939-source``)."""
     p = require_file(str(path))
     if is_can_log(p):
-        meas, _ = load_log_as_measurement(p, model, dbc, signal_map, channel=channel)
+        meas, _ = load_log_as_measurement(p, model, dbc, signal_map, channel=channel,
+                                          j1939_source=j1939_source)
     else:
         meas = read_measurement(p, model)
     data = dict(meas.measured)

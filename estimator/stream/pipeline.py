@@ -370,6 +370,8 @@ class Source:
     signal_map : SignalMap or None
     can_channel : str or None
         ``--can-channel``: the bus channel of a multi-bus log to replay (``None``: all).
+    j1939_source : str or None
+        ``--j1939-source``: the J1939 source address decoded (``None``: the first sender).
     time_source : {"timestamp", "tick"} or None
         None (logs and live): the sensor's tick when the stream carries SN_Sync frames,
         the frame timestamps otherwise.
@@ -391,6 +393,7 @@ class Source:
     dbc: Path | None = None
     signal_map: Any = None
     can_channel: str | None = None
+    j1939_source: str | None = None
     time_source: Literal["timestamp", "tick"] | None = None
     duration: float | None = None
     idle_timeout: float | None = 5.0
@@ -476,7 +479,8 @@ def _listener(source: Source, spec: MonitorSpec,
     # rows per message: window + step at up to 2 kHz, power of two
     rows = 1 << max(12, math.ceil(math.log2(max(2.0, (cfg.window_s + 2 * cfg.step_s) * 2000.0))))
     listener = DecodeListener(spec.model, source.dbc, source.signal_map, capacity=rows,
-                              growable=False, time_source=time_source, arrival_slots=True)
+                              growable=False, time_source=time_source, arrival_slots=True,
+                              j1939_source=source.j1939_source)
     # a mapped signal the DBC gives in mm, g or deg without a scale: said before streaming
     for w in listener.signal_map.unit_warnings(listener.db, listener.model):
         sys.stderr.write(f"warning: {w}\n")
@@ -521,6 +525,9 @@ def _run_log(source: Source, spec: MonitorSpec, mon: StreamMonitor, sinks: list[
     listener.count_malformed(stats.malformed)
     bus_stats, bus_warnings = channel_notes(str(source.input), stats, listener.data_keys(),
                                             source.can_channel)
+    mapped = {r.name for r in listener.routes.ordered}
+    if listener.j1939 is not None:
+        bus_warnings = bus_warnings + listener.j1939.warnings(str(source.input), mapped)
     for w in bus_warnings:
         sys.stderr.write(f"warning: {w}\n")
     if drv.windows == 0:
@@ -528,14 +535,18 @@ def _run_log(source: Source, spec: MonitorSpec, mon: StreamMonitor, sinks: list[
         if not fs["accepted"]:  # no data at all: a shorter window would not help
             rej = {k: v for k, v in cast("dict[str, int]", fs["rejected"]).items() if v}
             raise InputError(f"{source.input}: no accepted frame ({drv.frames} frames read, "
-                             f"rejected {rej or 'none'}){unparsed_hint(str(source.input), stats)}")
+                             f"rejected {rej or 'none'}){unparsed_hint(str(source.input), stats)}"
+                             + (listener.j1939.hint(mapped) if listener.j1939 is not None
+                                else ""))
         raise InputError(f"{source.input}: {drv.frames} frames but less data than one window "
                          f"({cfg.window_s:g} s); give a shorter --window")
     frames = listener.frame_stats()
     frames.update(bus_stats)
     out: dict[str, Any] = {"frames": frames, "windows_cut": drv.windows}
     warnings = list(bus_warnings)
-    if stats.truncated:
+    if stats.damage:
+        warnings.append(stats.damage)
+    elif stats.truncated:
         warnings.append(f"{source.input}: the file ends inside a record (truncated)")
     if warnings:
         out["warnings"] = warnings

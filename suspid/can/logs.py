@@ -36,10 +36,13 @@ exactly (python-can's would drop the sub-millisecond part of the first timestamp
 """
 from __future__ import annotations
 
+import contextlib
+import io
 import locale
 import logging
 import math
 import re
+import struct
 from bisect import bisect_left
 from dataclasses import dataclass, field
 from datetime import datetime
@@ -51,6 +54,7 @@ import can
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
+from suspid.can.damage import blf_damage, mdf_damage
 from suspid.errors import InputError, UsageError
 
 _CAN_ERR_FLAG = 0x20000000
@@ -172,6 +176,9 @@ class ReadStats:
         Filled by :func:`read_log` and :func:`read_log_arrays`.
     other_channel : int
         Frames of other channels than the one asked for, skipped (not yielded).
+    damage : str
+        Where a binary file is damaged (:mod:`suspid.can.damage`), one line naming the file
+        and the byte; ``""`` for a whole file. Counted once in ``malformed``.
     """
 
     frames: int = 0
@@ -180,6 +187,7 @@ class ReadStats:
     examples: list[str] = field(default_factory=list)
     channels: dict[str, dict[int, int]] = field(default_factory=dict)
     other_channel: int = 0
+    damage: str = ""
 
     def count_channels(self, codes: np.ndarray, names: Sequence[str], keys: np.ndarray) -> None:
         """Count frames per channel and key (``codes`` index ``names``, one per frame)."""
@@ -210,6 +218,14 @@ class ReadStats:
         out = {ch: sum(n for k, n in per.items() if want is None or k in want)
                for ch, per in self.channels.items()}
         return dict(sorted(out.items(), key=lambda kv: _channel_order(kv[0])))
+
+    def damaged(self, path: Path, what: str) -> None:
+        """Record the damage of a binary file (the first one named): truncated, one record
+        counted ``malformed``."""
+        self.truncated = True
+        if not self.damage:
+            self.malformed += 1
+            self.damage = f"{path}: damaged {log_format(path, 'CAN log')[1:].upper()} file: {what}"
 
     def bad(self, where: str, reason: str) -> None:
         """Count one skipped line/record and keep the first five reasons."""
@@ -1043,27 +1059,83 @@ def _read_blf(path: Path, stats: ReadStats) -> Iterator[can.Message]:
             what = f"a file beginning {head[:4]!r}"
         raise InputError(f"{path}: not a Vector BLF file: expected the signature "
                          f"{BLF_SIGNATURE!r} and a {BLF_HEADER}-byte header, got {what}")
-    return _read_binary(path, can.BLFReader(str(path)), stats)
+    return _read_binary(path, can.BLFReader(str(path)), stats, lambda: blf_damage(path))
+
+
+def _quiet_mdf4_del(original: Callable[[object], None]) -> Callable[[object], None]:
+    """``MDF4.__del__`` that skips an object whose construction failed before it opened
+    the file (asammdf's own ``__del__`` then raises ``AttributeError: _file``, which Python
+    prints as 8 lines of "Exception ignored in" after our one-line error)."""
+    def __del__(self: object) -> None:
+        if hasattr(self, "_file"):
+            original(self)
+    __del__.suspid_guard = True  # type: ignore[attr-defined]
+    return __del__
+
+
+def _guard_mdf4_del() -> None:
+    """Install :func:`_quiet_mdf4_del` on asammdf's ``MDF4`` (once; python-can imports it
+    as ``can.io.mf4.MDF4``, ``None`` without asammdf)."""
+    mdf4 = getattr(can.io.mf4, "MDF4", None)
+    if mdf4 is not None and not getattr(mdf4.__del__, "suspid_guard", False):
+        mdf4.__del__ = _quiet_mdf4_del(mdf4.__del__)
+
+
+def _quiet_asammdf(record: logging.LogRecord) -> bool:
+    """Drop asammdf's own log records (a traceback of a damaged file: named by us)."""
+    return False
 
 
 def _read_mf4(path: Path, stats: ReadStats) -> Iterator[can.Message]:
-    return _read_binary(path, can.MF4Reader(str(path)), stats)
+    """python-can's MF4 reader; a file cut short inside its records is read up to the last
+    whole record (:func:`~suspid.can.damage.mdf_damage`), a damaged structure is an error
+    naming the byte."""
+    _guard_mdf4_del()
+    damage = mdf_damage(path)
+    source: str | io.BytesIO = str(path)
+    if damage is not None and damage.whole_to:
+        with open(path, "rb") as fh:   # asammdf fails on the record cut short: leave it out
+            source = io.BytesIO(fh.read(damage.whole_to))
+    asammdf_log = logging.getLogger("asammdf")
+    asammdf_log.addFilter(_quiet_asammdf)
+    try:
+        # asammdf print()s the traceback of what it could not finalise to stdout, where the
+        # JSON result goes; the damage is named by us
+        with contextlib.redirect_stdout(io.StringIO()):
+            reader = can.MF4Reader(source)
+    except (ValueError, OSError, struct.error, KeyError, IndexError) as exc:
+        if damage is None:
+            raise
+        raise InputError(f"{path}: damaged MF4 file: {damage.what}; no frame can be read "
+                         "(asammdf, which python-can's MF4 reader uses: "
+                         f"{type(exc).__name__}: {' '.join(str(exc).split())[:80]})") from None
+    finally:
+        asammdf_log.removeFilter(_quiet_asammdf)
+    return _read_binary(path, reader, stats, lambda: damage.what if damage else None)
 
 
-def _read_binary(path: Path, reader: can.io.generic.MessageReader,
-                 stats: ReadStats) -> Iterator[can.Message]:
+def _read_binary(path: Path, reader: can.io.generic.MessageReader, stats: ReadStats,
+                 damage: Callable[[], str | None]) -> Iterator[can.Message]:
+    """The frames of a python-can binary reader; a damaged file ends the read with the frames
+    read so far and the damage named (``damage()``, else the reader's exception)."""
+    failed = ""
     try:
         for msg in reader:
             stats.frames += 1
             yield msg
     except Exception as exc:  # a damaged binary log: keep what was read
-        stats.truncated = True
-        stats.bad(f"{path}: after frame {stats.frames}", f"{type(exc).__name__}: {exc}")
+        failed = f"the reader stopped after frame {stats.frames}: {type(exc).__name__}: " \
+                 f"{' '.join(str(exc).split())[:80]}"
     finally:
         try:
             reader.stop()
         except Exception:  # pragma: no cover - closing a broken reader
             pass
+    found = damage()
+    if found is not None:
+        stats.damaged(path, f"{found}; {stats.frames} frames read before it are used")
+    elif failed:
+        stats.damaged(path, failed)
 
 
 def first_timestamp(path: str | Path) -> float | None:

@@ -53,8 +53,8 @@ def add_receive_arguments(parser: "argparse.ArgumentParser | argparse._ArgumentG
 
 
 def add_can_arguments(parser: argparse.ArgumentParser, dbc: bool = False) -> None:
-    """Add ``--map``, ``--map-file`` and ``--can-channel`` (and ``--dbc`` if ``dbc``) to a
-    parser."""
+    """Add ``--map``, ``--map-file``, ``--can-channel`` and ``--j1939-source`` (and ``--dbc``
+    if ``dbc``) to a parser."""
     if dbc:
         parser.add_argument("--dbc", metavar="PATH",
                             help="DBC of the CAN data (default: suspid's dbc/suspension.dbc)")
@@ -74,6 +74,12 @@ def add_can_arguments(parser: argparse.ArgumentParser, dbc: bool = False) -> Non
                              "counted (frames.other_channel), not decoded. Default: every "
                              "channel, with a warning when the sensor's messages are on more "
                              "than one")
+    parser.add_argument("--j1939-source", metavar="ADDR", default=None,
+                        help="a J1939 DBC (ProtocolType J1939): decode its parameter groups "
+                             "from this source address only (0..253, e.g. 0x00 the engine); "
+                             "frames are matched to the DBC by PGN whatever their source "
+                             "address. Default: the first sender of each PGN, with a warning "
+                             "naming every sender when a mapped PGN has several")
 
 
 def can_inputs(args: argparse.Namespace) -> tuple[Path | None, SignalMap | None]:

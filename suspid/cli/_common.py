@@ -127,7 +127,8 @@ def load_measurement(args: argparse.Namespace,
     """Read ``--input`` as a CSV or a CAN log; returns ``(Measurement, frame statistics or None)``."""
     dbc_path, signal_map = can_inputs(args)
     return read_input(args.input, model, dbc_path, signal_map,
-                      channel=getattr(args, "can_channel", None))
+                      channel=getattr(args, "can_channel", None),
+                      j1939_source=getattr(args, "j1939_source", None))
 
 
 def print_json(obj: Any) -> None:

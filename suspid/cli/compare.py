@@ -93,7 +93,8 @@ def run(args: argparse.Namespace) -> int:
     else:
         dbc, smap = can_inputs(args)
         t, data, truth = load_stream(model, args.input, Path(args.dbc) if args.dbc else dbc,
-                                     smap, args.truth, channel=args.can_channel)
+                                     smap, args.truth, channel=args.can_channel,
+                                     j1939_source=args.j1939_source)
         source = args.input
     aug = comma_list(args.ekf_params)
     out, recs = compare(model, t, data, truth, fix=fix, nominal=nominal, init=init,

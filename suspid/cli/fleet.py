@@ -100,7 +100,8 @@ def run(args: argparse.Namespace) -> int:
             x0=x0 if isinstance(x0, str) else tuple(float(v) for v in x0),
             restarts=args.restarts, maxfev=args.maxfev, multistart=args.multistart,
             polish=args.polish, data_start=args.data_start, dbc=str(dbc) if dbc is not None else None, signal_map=smap,
-            can_channel=args.can_channel, offset=args.offset)
+            can_channel=args.can_channel, offset=args.offset,
+            j1939_source=args.j1939_source)
     elif args.db is None:
         raise UsageError("give --input DIR_OR_GLOB... with --model, or --db PATH to report from "
                          "the history")

@@ -223,7 +223,7 @@ def source_from_args(args: argparse.Namespace) -> "Source":
         dbc_path = Path(args.dbc)
     return Source(input=args.input, interface=args.interface, channel=args.channel,
                   bitrate=args.bitrate, dbc=dbc_path, signal_map=smap,
-                  can_channel=args.can_channel,
+                  can_channel=args.can_channel, j1939_source=args.j1939_source,
                   time_source=args.time_source, duration=args.duration,
                   idle_timeout=args.idle_timeout, rx_buffer_s=args.rx_buffer,
                   slcan_timestamps=args.slcan_timestamps, alert_frames=not args.no_alert_frames,
