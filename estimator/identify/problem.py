@@ -109,6 +109,27 @@ def ride_height_rows(model: SuspensionModel, channels: Sequence[str], p: Mapping
     return C, D
 
 
+def check_magnitudes(source: str, columns: Mapping[str, FloatArray]) -> None:
+    """Raise :class:`~suspid.errors.InputError` naming the first column whose sum of squares
+    overflows (values near 1e200 and up, a unit slip): no cost can be formed on it.
+
+    Parameters
+    ----------
+    source : str
+        Where the record came from (for the message).
+    columns : mapping
+        Column name -> values (NaN for missing samples are skipped).
+    """
+    for name, col in columns.items():
+        c = np.nan_to_num(np.asarray(col, dtype=float), nan=0.0)
+        with np.errstate(over="ignore"):
+            ok = np.isfinite(float(c @ c))
+        if not ok:
+            big = float(np.max(np.abs(c)))
+            raise InputError(f"{source}: column {name!r}: values up to {big:.3g} "
+                             "overflow the sum of squares; expected SI units (m, m/s, m/s^2, rad)")
+
+
 @dataclass
 class OutputErrorProblem:
     """Residuals of a linear suspension model against a measurement.
@@ -206,17 +227,11 @@ class OutputErrorProblem:
 
     def _check_magnitudes(self) -> None:
         """Raise :class:`~suspid.errors.InputError` naming a measured or road column whose
-        sum of squares overflows (values near 1e200 and up): no cost can be formed on it."""
+        sum of squares overflows (see :func:`check_magnitudes`)."""
         nr = len(self.model.roads)
         names = list(self.channels) + list(self.model.roads) + [f"{r}_dot" for r in self.model.roads]
         cols = np.column_stack([self.Ymeas0, self.U[:, :nr], self.U[:, nr:]])
-        with np.errstate(over="ignore"):
-            ok = np.isfinite(np.einsum("ij,ij->j", cols, cols))
-        if not ok.all():
-            j = int(np.flatnonzero(~ok)[0])
-            big = float(np.max(np.abs(cols[:, j])))
-            raise InputError(f"{self.meas.source}: column {names[j]!r}: values up to {big:.3g} "
-                             "overflow the sum of squares; expected SI units (m, m/s, m/s^2, rad)")
+        check_magnitudes(self.meas.source, dict(zip(names, cols.T)))
 
     # ---- linear maps from states to channels --------------------------------------
     def _output_maps(self, A: FloatArray, B: FloatArray) -> tuple[FloatArray, FloatArray]:

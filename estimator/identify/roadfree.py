@@ -46,6 +46,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from estimator.identify.params import Parameters
+from estimator.identify.problem import check_magnitudes
 from estimator.identify.result import IdentResult
 from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
@@ -556,11 +557,12 @@ def fit_road_unknown(model: SuspensionModel, meas: Measurement, params: Paramete
         ``undetermined`` the free parameters without a value from the record.
     """
     values = params.valuesdict()
+    check_magnitudes(meas.source, meas.measured)
     eqs = body_equations(model, meas.measured, values)
     extra = dict(extra or {})
     if extra:
         meas, eqs = _with_columns(meas, eqs, extra)
-    warnings: list[str] = ["road unknown: fitted the body equations "
+    warnings: list[str] = list(meas.warnings) + ["road unknown: fitted the body equations "
                            f"({', '.join(model.coords[j] for j in eqs.rows) or 'none'}) on "
                            "body accelerations and ride heights; the road under the tyres "
                            "is never used"]

@@ -170,13 +170,22 @@ def test_no_road_and_no_decay_is_called_out(tmp_path: Path) -> None:
     r = run("identify", "--model", "quarter2", "--input", str(noroad), "--fix", "m1=300",
             "--fix", "m2=40", "--json", "--maxfev", "50")
     assert r.returncode == 0, r.stderr
-    assert any("does not decay" in w and "--output-only" in w for w in json.loads(r.stdout)["warnings"])
+    out = json.loads(r.stdout)
+    assert out["road"] == "unknown"      # driving data: the road is unknown, and it is said
+    assert any("does not decay" in w and "--road unknown" in w for w in out["warnings"])
+    r = run("identify", "--model", "quarter2", "--input", str(noroad), "--fix", "m1=300",
+            "--fix", "m2=40", "--json", "--maxfev", "50", "--road", "zero")
+    out = json.loads(r.stdout)           # forced to a free response: the output-error fit says why
+    assert out["road"] == "zero"
+    assert any("does not decay" in w and "--output-only" in w for w in out["warnings"])
     free = tmp_path / "free.csv"                     # a release test decays: no such warning
     assert run("simulate", "--model", "quarter2", "--scenario", "initial", "--duration", "5",
                "--out", str(free)).returncode == 0
     r = run("identify", "--model", "quarter2", "--input", str(free), "--fix", "m1=300",
             "--fix", "m2=40", "--json")
-    assert not any("does not decay" in w for w in json.loads(r.stdout)["warnings"])
+    out = json.loads(r.stdout)
+    assert out["road"] in ("measured", "zero")
+    assert not any("does not decay" in w for w in out["warnings"])
 
 
 def test_subcommand_start_imports_only_its_own_module() -> None:
