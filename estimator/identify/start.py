@@ -38,12 +38,12 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 from numpy.typing import NDArray
 from scipy.linalg import expm
+from scipy.optimize import minimize
 
 from estimator.identify.params import Parameters
 from estimator.identify.problem import OutputErrorProblem
 from estimator.identify.profile import SIGMAS, apply_bands
 from estimator.identify.result import IdentResult
-from estimator.identify.simplex import nelder_mead
 from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
 from suspid.models.base import FloatArray, SuspensionModel, Twin
@@ -907,10 +907,12 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
                 seeds = [np.log(np.array(g, dtype=float)) for _, g in scored[:3]]
             best_u, best_r = np.zeros(len(nonlin)), math.inf
             for g0 in tries if tries else seeds:
-                res = nelder_mead(
+                res = minimize(
                     lambda u: solve_at(np.exp(u))[1] if np.all(np.abs(u) < 3.5) else np.inf, g0,
-                    initial_simplex=np.vstack([g0] + [g0 + 0.1 * e for e in np.eye(len(nonlin))]),
-                    xatol=1e-5, fatol=1e-14, maxfev=60 * len(nonlin))
+                    method="Nelder-Mead",
+                    options={"initial_simplex": np.vstack([g0] + [g0 + 0.1 * e
+                                                                  for e in np.eye(len(nonlin))]),
+                             "xatol": 1e-5, "fatol": 1e-14, "maxfev": 60 * len(nonlin)})
                 if res.fun < best_r:
                     best_u, best_r = np.asarray(res.x, dtype=float), float(res.fun)
             last_u = best_u
@@ -1179,9 +1181,10 @@ def kind_scaled_start(problem: OutputErrorProblem, params: Parameters
     if not math.isfinite(c0):
         return None
     step = 0.5 * float(logs[1] - logs[0])
-    res = nelder_mead(cost, u0, initial_simplex=np.vstack([u0] + [u0 + step * e
-                                                                  for e in np.eye(len(kinds))]),
-                      xatol=1e-2, fatol=1e-6, maxfev=60 * len(kinds))
+    res = minimize(cost, u0, method="Nelder-Mead",
+                   options={"initial_simplex": np.vstack([u0] + [u0 + step * e
+                                                                 for e in np.eye(len(kinds))]),
+                            "xatol": 1e-2, "fatol": 1e-6, "maxfev": 60 * len(kinds)})
     u, c = (np.asarray(res.x, dtype=float), float(res.fun)) if res.fun <= c0 else (u0, c0)
     out = params.copy()
     for k, v in scaled(u).items():
