@@ -29,6 +29,7 @@ from typing import ClassVar, Mapping, Sequence
 
 import numpy as np
 
+from estimator.choices import COSTS
 from suspid.errors import InputError, UsageError
 from suspid.io.csvio import Measurement
 from suspid.models.base import AffinePieces, FloatArray, SuspensionModel
@@ -36,8 +37,6 @@ from suspid.simulate import (Modal, free_coeffs_to_state, free_response_basis, m
                              modal_step_powers, modal_trajectory, mode_pattern, powers,
                              ride_height_maps, road_matrix, simulate_states, state_matrices,
                              uniform_step)
-
-COSTS = ("sse", "frobenius")
 
 #: most modal powers (points x samples x modes) one stacked evaluation holds (~0.8 MB)
 _STACK_ENTRIES = 50000

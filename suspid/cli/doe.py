@@ -16,15 +16,20 @@ import argparse
 import sys
 import time
 from dataclasses import asdict
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 from threadpoolctl import threadpool_limits
 
 from estimator.doe.design import DESIGNS, experiments, setup_record
-from estimator.doe.runner import Settings, run_design
 from suspid.cli._common import print_json
+from suspid.cli._lazy import lazy_names
 from suspid.errors import UsageError
 from suspid.models import get_model
+
+if TYPE_CHECKING:
+    from estimator.doe.runner import Settings, run_design
+else:
+    Settings, run_design = lazy_names("estimator.doe.runner", "Settings", "run_design")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
