@@ -26,7 +26,6 @@ from typing import Mapping
 
 import numpy as np
 
-from suspid import smalllinalg
 from suspid.errors import UsageError
 from suspid.models.base import AffinePieces, FloatArray, SuspensionModel
 
@@ -154,11 +153,11 @@ def modal_form(model: SuspensionModel, p: Mapping[str, float],
     nr = len(model.roads)
     Br, Bv = B[:, :nr], B[:, nr:]
     Bz = A @ Bv + Br
-    ev = smalllinalg.eig(A)  # None: non-finite A or no convergence
-    if ev is None:
+    try:
+        lam, V = np.linalg.eig(A)
+        Vinv = np.linalg.inv(V)
+    except np.linalg.LinAlgError:  # non-finite A, no convergence or a singular V
         return None
-    lam, V = ev
-    Vinv = smalllinalg.inv(V)  # NaN when V is singular: fails the test in mode_pattern
     pattern = mode_pattern(lam, V, Vinv)
     if pattern is None:
         return None

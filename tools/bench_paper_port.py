@@ -32,9 +32,9 @@ import time
 from pathlib import Path
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from estimator.doe.baseline import ode45, seed_identify
-from estimator.doe.blas import single_thread_blas
 from estimator.identify import OutputErrorProblem, Parameters, fit
 from suspid.excitation import bump_profile, make_scenario
 from suspid.io.csvio import read_measurement, write_measurement
@@ -59,7 +59,7 @@ def main() -> int:
     ap.add_argument("--json", action="store_true", help="print one JSON object")
     args = ap.parse_args()
     if "OPENBLAS_NUM_THREADS" not in os.environ:  # a user's setting wins
-        single_thread_blas()  # small matrices: threads only cost here (in this process only)
+        threadpool_limits(limits=1, user_api="blas")  # small matrices: threads only cost here (in this process only)
 
     model = get_model("quarter2")
     t, road, x0 = make_scenario(model, "bump", duration=args.duration, fs=1000.0, params=TABLE1)

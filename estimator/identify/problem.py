@@ -29,7 +29,7 @@ from typing import ClassVar, Mapping, Sequence
 
 import numpy as np
 
-from suspid import smalllinalg
+from estimator.choices import COSTS
 from suspid.errors import InputError, UsageError
 from suspid.io.csvio import Measurement
 from suspid.models.base import AffinePieces, FloatArray, SuspensionModel
@@ -37,8 +37,6 @@ from suspid.simulate import (Modal, free_coeffs_to_state, free_response_basis, m
                              modal_step_powers, modal_trajectory, mode_pattern, powers,
                              ride_height_maps, road_matrix, simulate_states, state_matrices,
                              uniform_step)
-
-COSTS = ("sse", "frobenius")
 
 #: most modal powers (points x samples x modes) one stacked evaluation holds (~0.8 MB)
 _STACK_ENTRIES = 50000
@@ -498,11 +496,11 @@ class OutputErrorProblem:
         aff = self.pieces(points[0])
         mats = [state_matrices(m, q, aff) for q in points]
         A = np.stack([a for a, _ in mats])
-        ev = smalllinalg.eig(A)
-        if ev is None:
+        try:
+            lam, V = np.linalg.eig(A)
+            Vinv = np.linalg.inv(V)
+        except np.linalg.LinAlgError:  # non-finite A, no convergence or a singular V
             return None
-        lam, V = ev
-        Vinv = smalllinalg.inv(V)
         # modal_form's test, point by point; one pattern of modes for the whole stack
         pattern = None
         for i in range(k):
@@ -573,10 +571,13 @@ class OutputErrorProblem:
         R = self.Ymeas if Y is None else self.Ymeas - Y
         v = (_t_dot_stack(P, R) * (CV * w2[:, None]).transpose(0, 2, 1)).sum(axis=2)
         GtR = np.real(alpha * v[:, modes])
-        sol = smalllinalg.solve(GtG, GtR)
+        try:
+            sol = np.linalg.solve(GtG, GtR[..., None])[..., 0]
+        except np.linalg.LinAlgError:  # a singular GtG
+            return None
         if not np.isfinite(sol).all():
             return None
-        if any(smalllinalg.cond2(G) > 1e12 for G in GtG):
+        if (np.linalg.cond(GtG) > 1e12).any():
             return None
         return np.asarray(sol, dtype=float)
 

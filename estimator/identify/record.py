@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from estimator.choices import OFFSET_MODES
 from estimator.identify.offset import Offset, find_offset, on_record
 from estimator.identify.params import Parameters
 from estimator.identify.problem import OutputErrorProblem
@@ -21,8 +22,6 @@ from estimator.identify.solver import fit
 from estimator.identify.start import StartEstimate, estimate_start, fit_from_starts
 from suspid.errors import UsageError
 
-#: what to do with a found offset: subtract it before the fit, or fit the record as it is
-OFFSET_MODES: tuple[str, ...] = ("remove", "keep")
 
 
 @dataclass

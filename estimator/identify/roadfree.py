@@ -45,6 +45,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from estimator.choices import ROAD_MODES
 from estimator.identify.params import Parameters
 from estimator.identify.problem import check_magnitudes
 from estimator.identify.result import IdentResult
@@ -74,8 +75,6 @@ MIN_SEGMENT = 32
 MIN_BAND_HZ = 10.0
 #: relative standard error above which a parameter counts as not determined
 MAX_REL_STDERR = 0.5
-#: the road modes of identify, diagnose, monitor, compare and fleet
-ROAD_MODES: tuple[str, ...] = ("measured", "zero", "unknown")
 #: sources of a quantity by preference: a measured derivative of the same order first
 _ORDER_SUFFIX = {0: "", 1: "_dot", 2: "_ddot"}
 

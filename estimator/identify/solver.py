@@ -1,8 +1,7 @@
 """The solver: Nelder–Mead identification in log coordinates with restarts and a polish.
 
-The simplex is :func:`estimator.identify.simplex.nelder_mead`, a bit-identical replica of
-scipy's Nelder–Mead that spares importing ``scipy.optimize``. Its default first simplex
-(scipy's) takes 5 % steps of each coordinate's value,
+The simplex is scipy's Nelder–Mead (``scipy.optimize.minimize(method="Nelder-Mead")``).
+Its default first simplex takes 5 % steps of each coordinate's value,
 which is meaningless when parameters span six orders of magnitude (an inertia in kg m^2
 next to a tyre stiffness in N/m). suspid optimises ``u = log(theta / theta_start)``, so a
 step of 0.1 is a 10 % change of any parameter, and every coordinate starts at 0. After the
@@ -17,13 +16,13 @@ from dataclasses import dataclass
 from typing import Callable, Mapping
 
 import numpy as np
+from scipy.optimize import minimize
 
 from estimator.identify.identifiability import assess
 from estimator.identify.lm import lm_within
 from estimator.identify.params import Parameters
 from estimator.identify.problem import OutputErrorProblem
 from estimator.identify.result import IdentResult
-from estimator.identify.simplex import nelder_mead
 from suspid.models.base import FloatArray
 from suspid.simulate import outputs, road_matrix, simulate_states
 
@@ -95,9 +94,10 @@ def minimize_log(fun: Callable[[FloatArray], float], u0: FloatArray, step: float
     while run <= restarts and nfev < budget:
         if simplex is None:
             simplex = np.vstack([best_u] + [best_u + cur_step * e for e in np.eye(n)])
-        res = nelder_mead(fun, simplex[0], bounds=bounds, initial_simplex=simplex,
-                          xatol=xatol, fatol=fatol, maxfev=budget - nfev,
-                          adaptive=n > 4 if adaptive is None else adaptive)
+        res = minimize(fun, simplex[0], method="Nelder-Mead", bounds=bounds,
+                       options={"initial_simplex": simplex, "xatol": xatol, "fatol": fatol,
+                                "maxfev": budget - nfev,
+                                "adaptive": n > 4 if adaptive is None else adaptive})
         nfev += int(res.nfev)
         last_status = int(res.status)
         final = res.final_simplex[0]

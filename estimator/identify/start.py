@@ -38,12 +38,12 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 from numpy.typing import NDArray
 from scipy.linalg import expm
+from scipy.optimize import minimize
 
 from estimator.identify.params import Parameters
 from estimator.identify.problem import OutputErrorProblem
 from estimator.identify.profile import SIGMAS, apply_bands
 from estimator.identify.result import IdentResult
-from estimator.identify.simplex import nelder_mead
 from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
 from suspid.models.base import FloatArray, SuspensionModel, Twin
@@ -74,7 +74,7 @@ RANK_TOL = 1e-9
 #: the noise-compensated fit (:func:`_ratio_fit`) stays within ``exp(RATIO_SPAN)`` of its
 #: first start (a start outside that box: of that start)
 RATIO_SPAN = 8.0
-#: iterations of each of its BFGS runs
+#: iterations of each of its BFGS runs (scipy's L-BFGS-B, :func:`_bfgs`)
 RATIO_ITER = 200
 #: its stopping tolerance: the largest gradient component (of the mean ratio, ~1 at the
 #: truth, in the logarithms of the values)
@@ -611,95 +611,28 @@ def _solve_linear(reg: _Regression, model: SuspensionModel, p: Mapping[str, floa
     return theta, math.sqrt(max(res2, 0.0) / btb) if btb > 0 else 0.0, rel_sv
 
 
-#: :func:`_bfgs` near the edge of its box: steps and relative decrease of a stalled run
-EDGE_STALL = 10
-EDGE_FTOL = 1e-6
-
-
 def _bfgs(F: Callable[[FloatArray], tuple[float, FloatArray]], u0: FloatArray,
           iterations: int, gtol: float = 1e-6, span: float = math.inf
           ) -> tuple[float, FloatArray]:
-    """Minimise ``F`` (value and gradient) by BFGS with a backtracking (Armijo) line search.
+    """Minimise ``F`` (value and gradient) by scipy's box-constrained BFGS (L-BFGS-B).
 
-    Each line search starts at the full quasi-Newton step or, where that leaves the box
-    ``|u| < span``, at the box's edge along it (a run may touch the edge and come back); a
-    component on the edge whose way down points out of the box is held there. A full step
-    after which the slope is still more than 0.9 of the first (Wolfe's curvature condition
-    fails) is doubled while that lowers ``F``: without it a long curved valley is crawled
-    along in the steps the first curvature estimate set (not after a backtracking, which
-    found the step too long already). A run that has kept some
-    ``|u_i|`` within 1 of the edge for ``EDGE_STALL`` steps while ``F`` fell by less than
-    ``EDGE_FTOL`` of its value stops there: it crawls towards a minimum beyond the region
-    searched (a run-away, not an estimate).
+    The box is ``|u| < span`` (``F`` is ``inf``-like outside it): a run may touch its edge
+    and come back; a component whose way down points out of the box stays on the edge
+    (the projected gradient), so a run towards a minimum beyond the region searched ends
+    there instead of crawling along it (a run-away, not an estimate; the caller's
+    output-error cost judges it). The run stops when the largest component of the
+    projected gradient is below ``gtol``, when a step lowers ``F`` by no more than its
+    rounding (``ftol`` of a few machine epsilons) or after ``iterations`` iterations.
 
-    Returns ``(value, point)`` of the lowest point met; stops when the gradient's largest
-    component is below ``gtol``, stalled at the edge, when no step lowers ``F`` beyond its
-    rounding (the gradient there may still read a little above ``gtol``: it is rounding
-    too) or after ``iterations`` steps.
+    Returns ``(value, point)`` of the end point (the lowest met: each step lowers ``F``).
     """
-    u = np.asarray(u0, dtype=float).copy()
-    f, g = F(u)
-    Hinv = np.eye(u.size)
+    u = np.asarray(u0, dtype=float)
     edge = span * (1.0 - 1e-9)
-    near: list[float] = []  # values of the last steps ending within 1 of the edge
-    for it in range(iterations):
-        if not float(np.abs(g).max()) > gtol:
-            break
-        d = -Hinv @ g
-        slope = float(g @ d)
-        if not slope < 0:  # not a descent direction: restart from the gradient
-            Hinv = np.eye(u.size)
-            d, slope = -g, -float(g @ g)
-        # the largest step inside the box; a component on the edge and pointing out is
-        # held (the run slides along the edge)
-        reach = math.inf
-        for i, (ui, di) in enumerate(zip(u.tolist(), d.tolist())):
-            room = (edge - ui) if di > 0 else (-edge - ui)
-            if di != 0 and room / di <= 1e-10:
-                d[i] = 0.0
-            elif di != 0:
-                reach = min(reach, room / di)
-        slope = float(g @ d)
-        if not slope < 0:  # on the edge, every way down points out of the box
-            break
-        full = step = min(1.0, reach)
-        while step > 1e-10:
-            un = u + step * d
-            fn, gn = F(un)
-            if fn <= f + 1e-4 * step * slope:
-                break
-            step *= 0.5
-        else:
-            break
-        # the full step taken and the slope along it hardly less steep (the curvature
-        # condition of Wolfe fails): the valley goes on, so the step doubles while it
-        # keeps lowering F that much (a long, gently curved valley in a few steps)
-        while step == full and step < reach and float(gn @ d) < 0.9 * slope:
-            full = min(2.0 * step, reach)
-            ut = u + full * d
-            ft, gt = F(ut)
-            if not ft <= f + 1e-4 * full * slope or not ft < fn:
-                break
-            step, un, fn, gn = full, ut, ft, gt
-        sv, yv = un - u, gn - g
-        sy = float(sv @ yv)
-        if sy > 1e-12 * math.sqrt(float(sv @ sv) * float(yv @ yv)):
-            if it == 0:  # the first step sets the scale (Nocedal & Wright 6.20)
-                Hinv = np.eye(u.size) * sy / float(yv @ yv)
-            # (I - rho s y') H (I - rho y s') + rho s s', rho = 1 / s'y, expanded
-            Hy = Hinv @ yv
-            Hinv = Hinv + ((sy + float(yv @ Hy)) / sy ** 2) * np.outer(sv, sv) \
-                - (np.outer(Hy, sv) + np.outer(sv, Hy)) / sy
-        lowered = f - fn > 8.0 * np.finfo(float).eps * abs(f)
-        u, f, g = un, fn, gn
-        if not lowered:  # the value changes only in its rounding: converged as far as it goes
-            break
-        near = near + [f] if float(np.max(np.abs(u))) > span - 1.0 else []
-        if len(near) > EDGE_STALL:
-            near = near[-EDGE_STALL - 1:]
-            if near[0] - f <= EDGE_FTOL * max(abs(f), 1.0):
-                break
-    return f, u
+    bounds = [(-edge, edge)] * u.size if math.isfinite(span) else None
+    res = minimize(F, u, jac=True, method="L-BFGS-B", bounds=bounds,
+                   options={"maxiter": iterations, "gtol": gtol,
+                            "ftol": 8.0 * float(np.finfo(float).eps)})
+    return float(res.fun), np.asarray(res.x, dtype=float)
 
 
 def _ratio_fit(reg: _Regression, K: FloatArray, lin: list[str], nonlin: list[str],
@@ -907,10 +840,12 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
                 seeds = [np.log(np.array(g, dtype=float)) for _, g in scored[:3]]
             best_u, best_r = np.zeros(len(nonlin)), math.inf
             for g0 in tries if tries else seeds:
-                res = nelder_mead(
+                res = minimize(
                     lambda u: solve_at(np.exp(u))[1] if np.all(np.abs(u) < 3.5) else np.inf, g0,
-                    initial_simplex=np.vstack([g0] + [g0 + 0.1 * e for e in np.eye(len(nonlin))]),
-                    xatol=1e-5, fatol=1e-14, maxfev=60 * len(nonlin))
+                    method="Nelder-Mead",
+                    options={"initial_simplex": np.vstack([g0] + [g0 + 0.1 * e
+                                                                  for e in np.eye(len(nonlin))]),
+                             "xatol": 1e-5, "fatol": 1e-14, "maxfev": 60 * len(nonlin)})
                 if res.fun < best_r:
                     best_u, best_r = np.asarray(res.x, dtype=float), float(res.fun)
             last_u = best_u
@@ -1179,9 +1114,10 @@ def kind_scaled_start(problem: OutputErrorProblem, params: Parameters
     if not math.isfinite(c0):
         return None
     step = 0.5 * float(logs[1] - logs[0])
-    res = nelder_mead(cost, u0, initial_simplex=np.vstack([u0] + [u0 + step * e
-                                                                  for e in np.eye(len(kinds))]),
-                      xatol=1e-2, fatol=1e-6, maxfev=60 * len(kinds))
+    res = minimize(cost, u0, method="Nelder-Mead",
+                   options={"initial_simplex": np.vstack([u0] + [u0 + step * e
+                                                                 for e in np.eye(len(kinds))]),
+                            "xatol": 1e-2, "fatol": 1e-6, "maxfev": 60 * len(kinds)})
     u, c = (np.asarray(res.x, dtype=float), float(res.fun)) if res.fun <= c0 else (u0, c0)
     out = params.copy()
     for k, v in scaled(u).items():

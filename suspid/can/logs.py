@@ -55,6 +55,7 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from suspid.can.damage import blf_damage, mdf_damage
+from suspid.can.formats import FORMATS
 from suspid.errors import InputError, UsageError
 
 _CAN_ERR_FLAG = 0x20000000
@@ -1317,13 +1318,11 @@ class LogFormat:
 #: suffix (lower case) -> format: the one table choosing readers and writers, as python-can's
 #: ``can.io`` does with its reader and writer tables. Use :func:`is_can_log` or
 #: :func:`log_format` rather than a list of suffixes of your own.
+#: The suffixes and names are :data:`suspid.can.formats.FORMATS`'s (re-exported here).
 LOG_FORMATS: dict[str, LogFormat] = {
-    ".log": LogFormat("candump -L", _read_candump, _candump_writer, _candump_batches),
-    ".asc": LogFormat("Vector ASC", _read_asc, _ASCWriter),
-    ".blf": LogFormat("Vector BLF", _read_blf, _BLFWriter),
-    ".trc": LogFormat("PEAK TRC", _read_trc, can.TRCWriter),
-    ".mf4": LogFormat("ASAM MDF4", _read_mf4, can.MF4Writer),
+    ".log": LogFormat(FORMATS[".log"], _read_candump, _candump_writer, _candump_batches),
+    ".asc": LogFormat(FORMATS[".asc"], _read_asc, _ASCWriter),
+    ".blf": LogFormat(FORMATS[".blf"], _read_blf, _BLFWriter),
+    ".trc": LogFormat(FORMATS[".trc"], _read_trc, can.TRCWriter),
+    ".mf4": LogFormat(FORMATS[".mf4"], _read_mf4, can.MF4Writer),
 }
-
-#: suffix -> human name (derived from :data:`LOG_FORMATS`)
-FORMATS: dict[str, str] = {suf: fmt.name for suf, fmt in LOG_FORMATS.items()}

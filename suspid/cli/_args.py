@@ -9,14 +9,16 @@ from __future__ import annotations
 import argparse
 from dataclasses import dataclass
 
-from estimator.identify import Parameters
-from estimator.identify.problem import COSTS
-from estimator.identify.record import OFFSET_MODES
-from estimator.identify.roadfree import ROAD_MODES
+from typing import TYPE_CHECKING
+
+from estimator.choices import COSTS, OFFSET_MODES, ROAD_MODES
 from suspid.cli._common import load_measurement, model_from_args, params_from_args, positive_int
 from suspid.errors import UsageError
-from suspid.io.csvio import Measurement
-from suspid.models.base import SuspensionModel
+
+if TYPE_CHECKING:
+    from estimator.identify import Parameters
+    from suspid.io.csvio import Measurement
+    from suspid.models.base import SuspensionModel
 
 
 @dataclass(frozen=True)

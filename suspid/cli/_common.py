@@ -5,17 +5,23 @@ import argparse
 import json
 import math
 import sys
-from typing import Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 
-from estimator.identify import Parameters
-from estimator.identify.inputs import read_input
 from suspid.can.options import add_can_arguments, can_inputs
+from suspid.cli._lazy import lazy_names
 from suspid.errors import UsageError
-from suspid.io.csvio import Measurement
 from suspid.models import MODELS, SuspensionModel, get_model
 from suspid.models.base import FloatArray
+
+if TYPE_CHECKING:
+    from estimator.identify import Parameters
+    from estimator.identify.inputs import read_input
+    from suspid.io.csvio import Measurement
+else:
+    Parameters, = lazy_names("estimator.identify", "Parameters")
+    read_input, = lazy_names("estimator.identify.inputs", "read_input")
 
 #: suffixes read as CAN logs through python-can (the rest must be a measurement CSV)
 

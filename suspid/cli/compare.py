@@ -12,15 +12,22 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from estimator.stream.compare import compare, load_stream, plot
-from estimator.stream.wear_streams import damper_wear
 from suspid.can.options import add_can_arguments, can_inputs
 from suspid.cli._args import comma_list
 from suspid.cli._common import add_model_option, parse_assignments, print_json
+from suspid.cli._lazy import lazy_names
 from suspid.errors import UsageError
 from suspid.models import get_model
+
+if TYPE_CHECKING:
+    from estimator.stream.compare import compare, load_stream, plot
+    from estimator.stream.wear_streams import damper_wear
+else:
+    compare, load_stream, plot = lazy_names("estimator.stream.compare", "compare", "load_stream",
+                                            "plot")
+    damper_wear, = lazy_names("estimator.stream.wear_streams", "damper_wear")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:

@@ -3,15 +3,24 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import TYPE_CHECKING
 
-from estimator.diagnose import diagnose
-from estimator.diagnose.plots import plot_evidence
-from estimator.diagnose.roadfree import diagnose_road_unknown
-from estimator.identify.roadfree import resolve_road
 from suspid.cli._args import FitHelp, add_fit_options, add_road_option, fit_inputs
 from suspid.cli._common import (add_input_options, add_model_option, add_param_options,
                                 assignment_warnings, print_json)
+from suspid.cli._lazy import lazy_names
 from suspid.cli.identify import parse_x0
+
+if TYPE_CHECKING:
+    from estimator.diagnose import diagnose
+    from estimator.diagnose.plots import plot_evidence
+    from estimator.diagnose.roadfree import diagnose_road_unknown
+    from estimator.identify.roadfree import resolve_road
+else:
+    diagnose, = lazy_names("estimator.diagnose", "diagnose")
+    plot_evidence, = lazy_names("estimator.diagnose.plots", "plot_evidence")
+    diagnose_road_unknown, = lazy_names("estimator.diagnose.roadfree", "diagnose_road_unknown")
+    resolve_road, = lazy_names("estimator.identify.roadfree", "resolve_road")
 
 #: help of the identifier's options as diagnose words them (the baseline fit's settings)
 FIT_HELP = FitHelp(

@@ -16,14 +16,20 @@ import argparse
 import sys
 import time
 from dataclasses import asdict
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
-from estimator.doe.blas import single_thread_blas
+from threadpoolctl import threadpool_limits
+
 from estimator.doe.design import DESIGNS, experiments, setup_record
-from estimator.doe.runner import Settings, run_design
 from suspid.cli._common import print_json
+from suspid.cli._lazy import lazy_names
 from suspid.errors import UsageError
 from suspid.models import get_model
+
+if TYPE_CHECKING:
+    from estimator.doe.runner import Settings, run_design
+else:
+    Settings, run_design = lazy_names("estimator.doe.runner", "Settings", "run_design")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -113,7 +119,8 @@ class ProgressBar:
 
 
 def run(args: argparse.Namespace) -> int:
-    single_thread_blas()  # small matrices: OpenBLAS threads only cost (docs/performance.md)
+    # small matrices: BLAS threads only cost (docs/performance.md)
+    threadpool_limits(limits=1, user_api="blas")
     model = get_model(args.model)
     if not (args.init_scale > 0 and args.init_scale < 1e6):
         raise UsageError(f"--init-scale: expected a number > 0, got {args.init_scale}")

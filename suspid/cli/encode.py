@@ -3,11 +3,18 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import TYPE_CHECKING
 
-from suspid.can.dbc import load_dbc
-from suspid.can.encoder import encode_csv
-from suspid.can.logs import FORMATS
+from suspid.can.formats import FORMATS
+from suspid.cli._lazy import lazy_names
 from suspid.models import MODELS
+
+if TYPE_CHECKING:
+    from suspid.can.dbc import load_dbc
+    from suspid.can.encoder import encode_csv
+else:
+    load_dbc, = lazy_names("suspid.can.dbc", "load_dbc")
+    encode_csv, = lazy_names("suspid.can.encoder", "encode_csv")
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:

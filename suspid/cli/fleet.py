@@ -6,18 +6,25 @@ import math
 import sys
 from datetime import datetime, timezone
 from statistics import NormalDist
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from estimator.fleet import (AlertRule, FleetConfig, IdentifySettings, ProgressBar, available_cpus,
-                             run_fleet)
 from suspid.can.options import add_can_arguments, can_inputs
 from suspid.cli._args import FitHelp, add_fit_options, add_offset_option, check_counts
 from suspid.cli._common import (add_model_option, add_param_options, assignment_warnings,
                                 parse_assignments,
                                 positive_int, print_json)
+from suspid.cli._lazy import lazy_names
 from suspid.cli.identify import parse_x0
 from suspid.errors import UsageError
 from suspid.models import get_model
+
+if TYPE_CHECKING:
+    from estimator.fleet import (AlertRule, FleetConfig, IdentifySettings, ProgressBar,
+                                 available_cpus, run_fleet)
+else:
+    (AlertRule, FleetConfig, IdentifySettings, ProgressBar, available_cpus,
+     run_fleet) = lazy_names("estimator.fleet", "AlertRule", "FleetConfig", "IdentifySettings",
+                             "ProgressBar", "available_cpus", "run_fleet")
 
 
 #: help of the identifier's options as fleet words them (each drive fitted as identify does)

@@ -3,16 +3,27 @@ from __future__ import annotations
 
 import argparse
 import sys
-from estimator.identify import OutputErrorProblem
-from estimator.identify.record import identify_record
-from estimator.identify.roadfree import fit_road_unknown, resolve_road
+from typing import TYPE_CHECKING
+
 from suspid.cli._args import add_offset_option, add_road_option
 from suspid.cli._common import (parse_state, positive_int, add_input_options, add_model_option, add_param_options,
                                 load_measurement, model_from_args, params_from_args, print_json,
                                 assignment_warnings)
 from suspid.errors import UsageError
+from suspid.cli._lazy import lazy_names
 from suspid.models.base import FloatArray
-from suspid.plots import plot_comparison
+
+if TYPE_CHECKING:
+    from estimator.identify import OutputErrorProblem
+    from estimator.identify.record import identify_record
+    from estimator.identify.roadfree import fit_road_unknown, resolve_road
+    from suspid.plots import plot_comparison
+else:
+    OutputErrorProblem, = lazy_names("estimator.identify", "OutputErrorProblem")
+    identify_record, = lazy_names("estimator.identify.record", "identify_record")
+    fit_road_unknown, resolve_road = lazy_names("estimator.identify.roadfree", "fit_road_unknown",
+                                                "resolve_road")
+    plot_comparison, = lazy_names("suspid.plots", "plot_comparison")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:

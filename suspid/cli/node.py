@@ -4,18 +4,27 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from typing import TYPE_CHECKING
 
-import can
-
-from firmware_sim.faults import FaultConfig
-from firmware_sim.node import NodeConfig, SensorNode
 from firmware_sim.scenarios import SCENARIOS
-from firmware_sim.transport import SlcanPtyBus, open_bus
-from suspid.can.logs import log_format, open_log_writer
 from suspid.cli._args import comma_list
 from suspid.cli._common import parse_assignments
+from suspid.cli._lazy import lazy_names
 from suspid.errors import UsageError
 from suspid.models import MODELS
+
+if TYPE_CHECKING:
+    import can
+
+    from firmware_sim.faults import FaultConfig
+    from firmware_sim.node import NodeConfig, SensorNode
+    from firmware_sim.transport import SlcanPtyBus, open_bus
+    from suspid.can.logs import log_format, open_log_writer
+else:
+    FaultConfig, = lazy_names("firmware_sim.faults", "FaultConfig")
+    NodeConfig, SensorNode = lazy_names("firmware_sim.node", "NodeConfig", "SensorNode")
+    SlcanPtyBus, open_bus = lazy_names("firmware_sim.transport", "SlcanPtyBus", "open_bus")
+    log_format, open_log_writer = lazy_names("suspid.can.logs", "log_format", "open_log_writer")
 
 
 def _speed(text: str) -> float:

@@ -3,18 +3,25 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from estimator.identify.regrid import to_uniform_grid
 from suspid.cli._common import (add_model_option, model_from_args, parse_assignments, parse_state,
                                 print_json)
+from suspid.cli._lazy import lazy_names
 from suspid.errors import UsageError
 from suspid.excitation import SCENARIOS, make_scenario, measured_road
 from suspid.io.csvio import read_measurement, write_measurement
 from suspid.models.base import CHANNEL_SETS, SuspensionModel
-from suspid.plots import plot_channels
 from suspid.simulate import simulate, uniform_step
+
+if TYPE_CHECKING:
+    from estimator.identify.regrid import to_uniform_grid
+    from suspid.plots import plot_channels
+else:
+    to_uniform_grid, = lazy_names("estimator.identify.regrid", "to_uniform_grid")
+    plot_channels, = lazy_names("suspid.plots", "plot_channels")
 
 #: an injected effect that changes no channel by more than this fraction of its RMS is
 #: reported as never engaged by the record (a bump stop beyond the largest deflection, a

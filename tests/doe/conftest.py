@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import pytest
 
-from estimator.doe.blas import single_thread_blas
+from threadpoolctl import threadpool_limits
 
 
 @pytest.fixture(scope="session", autouse=True)
 def _single_thread_blas() -> None:
-    single_thread_blas()
+    threadpool_limits(limits=1, user_api="blas")
