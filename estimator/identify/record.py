@@ -24,6 +24,10 @@ from suspid.errors import UsageError
 
 
 
+#: evaluations per free parameter shared by every start of one record when no ``maxfev``
+#: is given (a converging fit takes a few hundred)
+RECORD_MAXFEV = 1200
+
 @dataclass
 class OffsetCheck:
     """The offset check of a record at its data-driven start.
@@ -119,9 +123,17 @@ def identify_record(problem: OutputErrorProblem, params: Parameters, *, restarts
     # as read, so the corrected record gets its own
     est = None if removed else found.estimate
 
+    # without a budget, all starts of the record share RECORD_MAXFEV per free parameter: a
+    # record the model cannot fit (a length in mm) ends in a normal fit time as a misfit
+    # instead of every start and further start spending its own budget
+    left = [maxfev if maxfev is not None else RECORD_MAXFEV * max(1, len(params.free))]
+
     def run(start: Parameters) -> IdentResult:
-        return fit(fitted, start, restarts=restarts, maxfev=maxfev, polish=polish,
-                   multistart=multistart)[0]
+        res = fit(fitted, start, restarts=restarts, maxfev=max(1, left[0]), polish=polish,
+                  multistart=multistart)[0]
+        if maxfev is None:
+            left[0] -= res.nfev
+        return res
 
     result = fit_from_starts(fitted, params, run, data_start=data_start, keep_init=keep_init,
                              estimate=est)

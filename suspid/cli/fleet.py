@@ -33,7 +33,7 @@ FIT_HELP = FitHelp(
     x0="initial state: estimate (default), rest, or [q..., q_dot...]",
     restarts="Nelder–Mead restarts (default 6)",
     maxfev="evaluation budget of each fit over all its restarts, further starts and polish "
-           "(default: 1000 per free parameter for each start of a fit), as for identify",
+           "(default: 1200 per free parameter shared by every fit of a drive), as for identify",
     multistart="further starts on a suspicious local minimum (default 4)",
     polish="pure Nelder–Mead to full tolerance (no Levenberg–Marquardt polish)")
 

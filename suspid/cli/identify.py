@@ -44,10 +44,10 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--restarts", type=int, default=6, help="Nelder–Mead restarts (default 6)")
     p.add_argument("--maxfev", type=positive_int, default=None,
                    help="evaluation budget of each fit over all its restarts, further starts and "
-                        "polish (default: none for the fit, 1000 per free parameter for each of "
-                        "its starts, further starts ending once one returns to the best cost); "
-                        "the fits from the data-driven start, from --init/the defaults and from "
-                        "the quarter car's twin each have their own, and nfev reports their sum")
+                        "polish; the fits from the data-driven start, from --init/the defaults "
+                        "and from the quarter car's twin each have their own, and nfev reports "
+                        "their sum (default: 1200 per free parameter shared by every fit of the "
+                        "record, further starts ending once one returns to the best cost)")
     p.add_argument("--multistart", type=int, default=4, metavar="N",
                    help="further starts (up to N) when the fit lands on a suspicious local "
                         "minimum: a parameter > 50x from its start or no convergence (default 4)")
