@@ -39,7 +39,7 @@ from suspid.can.codec import (FAULT_BITS, STATE_BUSOFF_RECOVERED, STATE_DEGRADED
 from suspid.can.dbc import ALERT_MESSAGE, load_dbc
 from suspid.errors import UsageError
 from suspid.models import get_model
-from suspid.models.base import ForceFn, SuspensionModel
+from suspid.models.base import CHANNEL_SETS, ForceFn, SuspensionModel
 from suspid.effects import Effect
 
 #: default sensor noise standard deviation (SI) by derivative order: position, velocity, acceleration
@@ -52,6 +52,15 @@ class FrameBus(Protocol):
     def send(self, msg: can.Message, timeout: float | None = None) -> None: ...
 
     def recv(self, timeout: float | None = None) -> can.Message | None: ...
+
+
+def expand_channel_sets(model: SuspensionModel, names: Sequence[str]) -> list[str]:
+    """Channel names with each named set (:data:`~suspid.models.base.CHANNEL_SETS`)
+    replaced by its channels (:meth:`SuspensionModel.channel_set`), duplicates dropped."""
+    out: list[str] = []
+    for n in names:
+        out += model.channel_set(n) if n in CHANNEL_SETS else [n]
+    return list(dict.fromkeys(out))
 
 
 def _order(channel: str) -> int:
@@ -80,7 +89,11 @@ class NodeConfig:
     noise : float
         Multiplier of :data:`DEFAULT_NOISE` (0 = noise-free sensors).
     channels : list of str or None
-        Channels sent (default: every channel of the model and the roads).
+        Channels sent (default: every motion channel of the model and the roads). Ride
+        heights (``d``, ``d1_dot``, ...) may be named, and the sets of
+        :data:`~suspid.models.base.CHANNEL_SETS` (``production``: body accelerations and
+        ride heights; ``accelerometers``: every coordinate's acceleration), which send no
+        road and no wheel motion.
     params : dict
         Plant parameter overrides (SI).
     faults : FaultConfig
@@ -214,7 +227,8 @@ class SensorNode:
                            self.setup.x0, chunk_s=0.05 if self.setup.name == "damper-wear" else 1.0,
                            extra_forces=extra_forces, effects=effects)
         available = list(self.plant.channels)
-        chans = list(config.channels) if config.channels else available
+        chans = (expand_channel_sets(self.model, config.channels) if config.channels
+                 else [c for c in available if c not in self.model.ride_height_channels])
         bad = [c for c in chans if c not in available]
         if bad:
             raise UsageError(f"channel(s) {', '.join(bad)} not available for model {self.model.name} "

@@ -57,7 +57,7 @@ class Plant:
     Attributes
     ----------
     channels : tuple of str
-        Channels :meth:`sample` returns (model channels and road columns).
+        Channels :meth:`sample` returns (model channels, ride heights and road columns).
     """
 
     def __init__(self, model: SuspensionModel, params: Mapping[str, float] | ParamsFn,
@@ -93,6 +93,7 @@ class Plant:
         self.chunk = max(2, int(round(chunk_s * self.fs)))
         self.x = np.zeros(model.n_states) if x0 is None else np.asarray(x0, dtype=float).copy()
         self.channels: tuple[str, ...] = tuple(model.channels) + tuple(
+            model.ride_height_channels) + tuple(
             c for r in model.roads for c in (r, f"{r}_dot") if r in self.road)
         self._start = -1   # first sample index of the cached chunk
         self._cols: dict[str, FloatArray] = {}

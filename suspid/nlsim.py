@@ -226,7 +226,8 @@ def simulate_effects(model: SuspensionModel, params: Mapping[str, float],
     Returns
     -------
     dict
-        ``channel -> ndarray`` for every channel of ``model.channels`` and the roads.
+        ``channel -> ndarray`` for every channel of ``model.channels``, the ride heights and
+        the roads.
 
     Raises
     ------
@@ -280,7 +281,7 @@ def simulate_effects(model: SuspensionModel, params: Mapping[str, float],
     PH = np.asarray(PHl).reshape(Nf, max(S, 1))[::substeps, :S]
     X = Z + U[:, :nr] @ st.Bv.T
     acc = X @ st.A[nq:].T + U @ st.B[nq:].T + PH @ st.Bfs[nq:].T
-    return pack_channels(model, X, acc, U)
+    return pack_channels(model, X, acc, U, params)
 
 
 def effect_forces(model: SuspensionModel, params: Mapping[str, float],

@@ -402,16 +402,68 @@ def _simulate_states_loop(model: SuspensionModel, p: Mapping[str, float], t: Flo
     return X
 
 
+def ride_height_maps(model: SuspensionModel, p: Mapping[str, float]
+                     ) -> tuple[FloatArray, FloatArray]:
+    """Output maps of the ride heights: ``d = G q + Gr r`` (and ``d' = G q' + Gr r'``).
+
+    Row ``i`` is strut ``i`` of :meth:`~suspid.models.base.SuspensionModel.strut_sites`
+    (its extension, m): ``G`` (n_struts, nq) the sites' ``g``, ``Gr`` (n_struts, nr) their
+    ``gr``. Empty for a model without struts.
+
+    Parameters
+    ----------
+    model : SuspensionModel
+    p : mapping
+        Parameters (SI); the geometry (axle distances, track widths) sets the rows.
+    """
+    if not model.ride_heights:
+        return np.zeros((0, len(model.coords))), np.zeros((0, len(model.roads)))
+    sites = model.strut_sites(dict(model.defaults(), **dict(p)))
+    G = np.array([np.asarray(s.g, dtype=float) for s in sites]).reshape(len(sites), -1)
+    Gr = np.array([np.asarray(s.gr, dtype=float) for s in sites]).reshape(len(sites), -1)
+    return G, Gr
+
+
+def ride_height_outputs(model: SuspensionModel, p: Mapping[str, float], X: FloatArray,
+                        U: FloatArray | None = None) -> dict[str, FloatArray]:
+    """The ride heights ``d``/``dN`` (m, strut extensions, rebound positive) and their
+    ``_dot`` (m/s) from states ``X`` (N, n) and inputs ``U`` (N, 2 nr; ``None``: no road).
+
+    Strut ``i``'s extension is ``site.g . q + site.gr . r``, its rate
+    ``site.g . q' + site.gr . r'`` (``site = model.strut_sites(p)[i]``).
+    """
+    names = model.ride_heights
+    if not names:
+        return {}
+    G, Gr = ride_height_maps(model, p)
+    nq = len(model.coords)
+    nr = len(model.roads)
+    D = X[:, :nq] @ G.T
+    Dd = X[:, nq:2 * nq] @ G.T
+    if U is not None and nr:
+        D = D + U[:, :nr] @ Gr.T
+        Dd = Dd + U[:, nr:2 * nr] @ Gr.T
+    out: dict[str, FloatArray] = {}
+    for i, name in enumerate(names):
+        out[name] = D[:, i]
+        out[f"{name}_dot"] = Dd[:, i]
+    return out
+
+
 def pack_channels(model: SuspensionModel, X: FloatArray, acc: FloatArray,
-                  U: FloatArray | None = None) -> dict[str, FloatArray]:
+                  U: FloatArray | None = None,
+                  p: Mapping[str, float] | None = None) -> dict[str, FloatArray]:
     """Channel dict from states ``X`` (N, n), accelerations ``acc`` (N, nq) and, if given,
-    inputs ``U`` (N, 2 nr) for the road columns."""
+    inputs ``U`` (N, 2 nr) for the road columns; with the parameters ``p`` (SI) also the
+    ride heights (:func:`ride_height_outputs`, on the road ``U`` or none)."""
     nq = len(model.coords)
     out: dict[str, FloatArray] = {}
     for i, c in enumerate(model.coords):
         out[c] = X[:, i]
         out[f"{c}_dot"] = X[:, nq + i]
         out[f"{c}_ddot"] = acc[:, i]
+    if p is not None:
+        out.update(ride_height_outputs(model, p, X, U))
     if U is not None:
         nr = len(model.roads)
         for i, name in enumerate(model.roads):
@@ -430,8 +482,11 @@ def accelerations(model: SuspensionModel, p: Mapping[str, float], X: FloatArray,
 
 def outputs(model: SuspensionModel, p: Mapping[str, float], X: FloatArray,
             U: FloatArray, affine: AffinePieces | None = None) -> dict[str, FloatArray]:
-    """Every channel (positions, velocities, accelerations) from states and inputs."""
-    return pack_channels(model, X, accelerations(model, p, X, U, affine))
+    """Every channel from states and inputs: positions, velocities, accelerations and the
+    ride heights with their rates (:func:`ride_height_outputs`); no road columns."""
+    out = pack_channels(model, X, accelerations(model, p, X, U, affine))
+    out.update(ride_height_outputs(model, p, X, U))
+    return out
 
 
 def simulate(model: SuspensionModel, params: Mapping[str, float], t: FloatArray,
@@ -458,14 +513,15 @@ def simulate(model: SuspensionModel, params: Mapping[str, float], t: FloatArray,
     Returns
     -------
     dict
-        ``channel -> ndarray`` for every channel of ``model.channels`` plus the roads.
+        ``channel -> ndarray`` for every channel of ``model.channels``, the ride heights
+        (``model.ride_height_channels``) and the roads.
     """
     t = np.asarray(t, dtype=float)
     U = road_matrix(model, t, road)
     if model.extra_force:
         return simulate_ode(model, params, t, road, x0)
     X = simulate_states(model, params, t, U, x0, affine=affine)
-    return pack_channels(model, X, accelerations(model, params, X, U, affine), U)
+    return pack_channels(model, X, accelerations(model, params, X, U, affine), U, params)
 
 
 def simulate_ode(model: SuspensionModel, params: Mapping[str, float], t: FloatArray,
@@ -510,4 +566,4 @@ def simulate_ode(model: SuspensionModel, params: Mapping[str, float], t: FloatAr
         Uo = U
     nq = len(model.coords)
     acc = np.array([model.rhs(tt, xx, uu, params)[nq:] for tt, xx, uu in zip(t, X, Uo)])
-    return pack_channels(model, X, acc, Uo)
+    return pack_channels(model, X, acc, Uo, params)

@@ -198,7 +198,8 @@ class DecodeListener(can.Listener):
                 raise UsageError(f"{getattr(db, 'suspid_path', 'the DBC')} declares no channel of "
                                  f"model {self.model.name} (no SuspidChannel attributes); give a "
                                  "signal map, e.g. --map x1_ddot=MESSAGE.SIGNAL")
-        smap.validate(db, model_channels(self.model))
+        # the motions and roads, and the ride heights (strut extensions) measured like them
+        smap.validate(db, model_channels(self.model) + list(self.model.ride_height_channels))
         self.signal_map = smap
         if time_source not in ("timestamp", "tick", "auto"):
             raise UsageError(f"time_source must be 'timestamp', 'tick' or 'auto', "

@@ -250,5 +250,5 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
     if not meas.measured:
         raise InputError(f"{path}: no measured channel of model {m.name} in the log "
                          f"(decoded: {', '.join(aligned.values) or 'none'}); expected any of "
-                         f"{', '.join(m.channels)}")
+                         f"{', '.join(m.channels + m.ride_height_channels)}")
     return meas, frame_stats

@@ -9,18 +9,23 @@ problem (``x0="estimate"``); ``x0="rest"`` starts at equilibrium and an array fi
 Cost functions (the seed's two):
 
 ``sse``
-    sum of squared differences of the measured *position* channels (all measured channels
-    when no position is measured);
+    sum of squared differences of the measured *position* channels, ride heights included
+    (all measured channels when no position is measured);
 ``frobenius``
     Frobenius norm of the measured-minus-simulated matrix over every measured channel.
 
 Nelder–Mead only compares cost values, so the two differ by the channels they use (and by
 the termination test), not by the square root.
+
+Ride heights (``d``/``dN`` and their ``_dot``: strut extensions) are compared like the
+motions: strut ``i``'s extension is ``g . q + gr . r`` (its rate with ``q'``, ``r'``) on the
+problem's road input (the record's road, or none), rows of the output map after those of the
+motion channels (:func:`ride_height_rows`).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Mapping, Sequence
+from typing import ClassVar, Mapping, Sequence
 
 import numpy as np
 
@@ -30,7 +35,8 @@ from suspid.io.csvio import Measurement
 from suspid.models.base import AffinePieces, FloatArray, SuspensionModel
 from suspid.simulate import (Modal, free_coeffs_to_state, free_response_basis, modal_form,
                              modal_step_powers, modal_trajectory, mode_pattern, powers,
-                             road_matrix, simulate_states, state_matrices, uniform_step)
+                             ride_height_maps, road_matrix, simulate_states, state_matrices,
+                             uniform_step)
 
 COSTS = ("sse", "frobenius")
 
@@ -77,6 +83,32 @@ def output_maps(kinds: Sequence[tuple[int, int]], A: FloatArray, B: FloatArray, 
     return Cm, Dm
 
 
+def ride_height_rows(model: SuspensionModel, channels: Sequence[str], p: Mapping[str, float]
+                     ) -> tuple[FloatArray, FloatArray]:
+    """Output maps ``y = C x + D u`` of ride-height channels (``d``, ``d2_dot``, ...).
+
+    A strut's extension ``g . q + gr . r`` (m) reads the positions and the roads, its rate
+    ``g . q' + gr . r'`` (m/s) the velocities and the road rates (``g``, ``gr`` of
+    ``model.strut_sites(p)``, so the geometry in ``p`` counts).
+
+    Returns
+    -------
+    C : ndarray, shape (len(channels), n_states)
+    D : ndarray, shape (len(channels), 2 n_roads)
+    """
+    G, Gr = ride_height_maps(model, p)
+    nq, nr = G.shape[1], Gr.shape[1]
+    index = {d: i for i, d in enumerate(model.ride_heights)}
+    C = np.zeros((len(channels), 2 * nq))
+    D = np.zeros((len(channels), 2 * nr))
+    for j, c in enumerate(channels):
+        rate = c.endswith("_dot")
+        i = index[c[:-4] if rate else c]
+        C[j, nq * rate:nq * (rate + 1)] = G[i]
+        D[j, nr * rate:nr * (rate + 1)] = Gr[i]
+    return C, D
+
+
 @dataclass
 class OutputErrorProblem:
     """Residuals of a linear suspension model against a measurement.
@@ -105,16 +137,25 @@ class OutputErrorProblem:
     affine: AffinePieces | None = None
     channels: list[str] = field(init=False)
     warnings: list[str] = field(init=False, default_factory=list)
+    #: whether measured ride heights enter the cost (a subclass with its own output path
+    #: that does not map them sets ``False``: they are then left out with a warning)
+    compares_ride_heights: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
         if self.cost not in COSTS:
             raise UsageError(f"unknown cost {self.cost!r}; expected one of {', '.join(COSTS)}")
         m = self.model
-        measured = [c for c in m.channels if c in self.meas.measured]
+        motions = [c for c in m.channels if c in self.meas.measured]
+        heights = [c for c in m.ride_height_channels if c in self.meas.measured]
+        if heights and not self.compares_ride_heights:
+            self.warnings.append(f"ride-height channel(s) {', '.join(heights)} not compared "
+                                 f"({type(self).__name__} fits the motion channels only)")
+            heights = []
+        measured = motions + heights
         if not measured:
             raise UsageError(f"no measured channel of model {m.name} in {self.meas.source}")
         if self.cost == "sse":
-            pos = [c for c in measured if c in m.coords]
+            pos = [c for c in measured if c in m.coords or c in m.ride_heights]
             if pos:
                 self.channels = pos
             else:
@@ -138,8 +179,14 @@ class OutputErrorProblem:
         self._has_road = bool(np.any(self.U))
         data_ss = float(np.sum((self.Ymeas0 * w) ** 2))
         self.scale = data_ss if data_ss > 0 else 1.0
-        self._kind = channel_kinds(m.coords, self.channels)
+        self._heights = [c for c in self.channels if c in m.ride_height_channels]
+        self._kind = channel_kinds(m.coords, self.channels[:len(self.channels) - len(self._heights)])
         self._nq = len(m.coords)
+        # ride-height rows of the output maps, for the geometry they were built with
+        self._rh_geom: tuple[float, ...] | None = None
+        self._rh_maps = (np.zeros((0, m.n_states)), np.zeros((0, 2 * len(m.roads))))
+        if self._heights:
+            self._set_heights(m.defaults())
         # what depends on the data alone, not on the parameters (the hot path's constants)
         self._estimate = isinstance(self.x0, str) and self.x0 == "estimate"
         self._x0_base = (np.zeros(m.n_states) if isinstance(self.x0, str)
@@ -148,8 +195,9 @@ class OutputErrorProblem:
         # with no acceleration channel the output maps do not depend on the parameters
         self._maps_fixed: tuple[FloatArray, FloatArray] | None = None
         if all(order < 2 for _, order in self._kind):
-            self._maps_fixed = output_maps(self._kind, np.zeros((m.n_states, m.n_states)),
-                                     np.zeros((m.n_states, 2 * len(m.roads))), self._nq)
+            self._maps_fixed = self._stack_heights(output_maps(
+                self._kind, np.zeros((m.n_states, m.n_states)),
+                np.zeros((m.n_states, 2 * len(m.roads))), self._nq))
         self._w2 = w ** 2
         # weights and mask as flat (N p,) rows: an elementwise product with a broadcast
         # (p,) row runs one short inner loop per sample, 3-4x slower
@@ -174,7 +222,46 @@ class OutputErrorProblem:
     def _output_maps(self, A: FloatArray, B: FloatArray) -> tuple[FloatArray, FloatArray]:
         if self._maps_fixed is not None:
             return self._maps_fixed
-        return output_maps(self._kind, A, B, self._nq)
+        return self._stack_heights(output_maps(self._kind, A, B, self._nq))
+
+    def _stack_heights(self, maps: tuple[FloatArray, FloatArray]) -> tuple[FloatArray, FloatArray]:
+        """The motion channels' maps with the ride heights' rows below them."""
+        if not self._heights:
+            return maps
+        return np.vstack([maps[0], self._rh_maps[0]]), np.vstack([maps[1], self._rh_maps[1]])
+
+    def _geometry(self, p: Mapping[str, float]) -> tuple[float, ...]:
+        """What the ride heights' rows depend on: the struts' directions for ``p``."""
+        G, Gr = ride_height_maps(self.model, p)
+        return tuple(G.ravel().tolist() + Gr.ravel().tolist())
+
+    def _set_heights(self, p: Mapping[str, float]) -> None:
+        """Build the ride heights' output rows for the geometry of ``p`` (when it changed)."""
+        if not self._heights:
+            return
+        geom = self._geometry(p)
+        if geom == self._rh_geom:
+            return
+        self._rh_geom = geom
+        self._rh_maps = ride_height_rows(self.model, self._heights, p)
+        if getattr(self, "_maps_fixed", None) is not None:
+            m = self.model
+            self._maps_fixed = self._stack_heights(output_maps(
+                self._kind, np.zeros((m.n_states, m.n_states)),
+                np.zeros((m.n_states, 2 * len(m.roads))), self._nq))
+
+    def measured_coords(self) -> set[str]:
+        """The coordinates the cost's channels observe: those of its motion channels and
+        every coordinate a compared ride height reads (a strut's body and wheel)."""
+        m = self.model
+        seen = {m.coords[i] for i, _ in self._kind}
+        if self._heights:
+            G, _ = ride_height_maps(m, m.defaults())
+            index = {d: i for i, d in enumerate(m.ride_heights)}
+            for c in self._heights:
+                row = G[index[c[:-4] if c.endswith("_dot") else c]]
+                seen |= {m.coords[j] for j in np.flatnonzero(row)}
+        return seen
 
     def pieces(self, p: Mapping[str, float]) -> AffinePieces | None:
         """The forward model's affine pieces (built from the first finite ``p``)."""
@@ -185,6 +272,7 @@ class OutputErrorProblem:
     def predict(self, p: Mapping[str, float]) -> Prediction:
         """Predict the measured channels for parameters ``p`` (with the best ``x0``)."""
         m = self.model
+        self._set_heights(p)
         aff = self.pieces(p)
         modal = modal_form(m, p, aff)
         if modal is not None and self.h is not None:
@@ -386,6 +474,12 @@ class OutputErrorProblem:
         if not all(np.isfinite(v) for q in points for v in q.values()):
             return None
         k = len(points)
+        if self._heights:
+            # one set of ride-height rows for the stack: the points share the geometry
+            geom = self._geometry(points[0])
+            if any(self._geometry(q) != geom for q in points[1:]):
+                return None
+            self._set_heights(points[0])
         aff = self.pieces(points[0])
         mats = [state_matrices(m, q, aff) for q in points]
         A = np.stack([a for a, _ in mats])

@@ -328,7 +328,7 @@ def finish(problem: OutputErrorProblem, params: Parameters, p_hat: Mapping[str, 
     X = simulate_states(model, p_hat, problem.t, U, pred.x0)
     allout = outputs(model, p_hat, X, U)
     rms = {c: _rms(problem.meas.measured[c] - allout[c])
-           for c in model.channels if c in problem.meas.measured}
+           for c in model.channels + model.ride_height_channels if c in problem.meas.measured}
     stderr: dict[str, float] = {k: float("nan") for k in free}
     identifiable, sv, cov_log = finite, [], None
     if with_stderr and free and finite:

@@ -40,7 +40,7 @@ from numpy.typing import NDArray
 from scipy.linalg import expm
 
 from estimator.identify.params import Parameters
-from estimator.identify.problem import OutputErrorProblem, channel_kinds
+from estimator.identify.problem import OutputErrorProblem
 from estimator.identify.profile import SIGMAS, apply_bands
 from estimator.identify.result import IdentResult
 from estimator.identify.simplex import nelder_mead
@@ -1683,7 +1683,7 @@ def twin_of(problem: OutputErrorProblem, params: Parameters, p: Mapping[str, flo
     lies outside what is identified).
     """
     model = problem.model
-    measured = {model.coords[i] for i, _ in channel_kinds(model.coords, problem.channels)}
+    measured = problem.measured_coords()
     if not all(math.isfinite(p[k]) and p[k] > 0 for k in params.free):
         return None
     tw = model.twin(p, measured)

@@ -52,7 +52,7 @@ from __future__ import annotations
 import cmath
 import math
 from dataclasses import dataclass, field
-from typing import Mapping
+from typing import ClassVar, Mapping
 
 import numpy as np
 from scipy.linalg import expm as _expm
@@ -395,8 +395,11 @@ class WindowProblem(OutputErrorProblem):
     :class:`StateSpaceMap` built once for the monitor. The lean path is taken when the time
     grid is uniform, every fitted sample is finite, the weights are 1 and
     ``x0="estimate"`` (attribute ``lean``); ``n_fallback`` counts evaluations that needed
-    the parent's path.
+    the parent's path. Its lean path maps the motion channels only: measured ride heights
+    are left out of the window's cost (with a warning).
     """
+
+    compares_ride_heights: ClassVar[bool] = False
 
     ssmap: StateSpaceMap | None = None
     lean: bool = field(init=False, default=False)

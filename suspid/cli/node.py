@@ -63,7 +63,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     p.add_argument("--rate", type=float, default=500.0, metavar="HZ",
                    help="sensor task rate, 500-1000 Hz typical (default 500)")
     p.add_argument("--channels", metavar="LIST",
-                   help="comma-separated channels to send (default: all of the model and roads)")
+                   help="comma-separated channels to send (default: every motion channel of "
+                        "the model and the roads); ride heights (d, d_dot; d1..d4) may be named, "
+                        "and the sets 'production' (body accelerations and ride heights) and "
+                        "'accelerometers' (every coordinate's acceleration), which send no road "
+                        "and no wheel motion")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                    help="plant parameter (SI), e.g. --param c1=1200; repeatable")
     p.add_argument("--noise", type=float, default=1.0, metavar="SCALE",

@@ -12,6 +12,7 @@ from suspid.cli._common import (add_model_option, model_from_args, parse_assignm
 from suspid.errors import UsageError
 from suspid.excitation import SCENARIOS, make_scenario, measured_road
 from suspid.io.csvio import read_measurement, write_measurement
+from suspid.models.base import CHANNEL_SETS, SuspensionModel
 from suspid.plots import plot_channels
 from suspid.simulate import simulate, uniform_step
 
@@ -50,7 +51,11 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="Gaussian noise, std as a fraction of each channel's std (seed: 0.1-0.5)")
     p.add_argument("--seed", type=int, default=0, help="random seed for noise and random roads")
     p.add_argument("--channels", default=None,
-                   help="comma-separated channels to write (default: positions and velocities)")
+                   help="comma-separated channels to write (default: positions and velocities), "
+                        "ride heights (d, d_dot; d1..d4) included, or a named set: 'production' "
+                        "(body accelerations and ride heights), 'accelerometers' (every "
+                        "coordinate's _ddot); the road columns are written unless a named set "
+                        "is given (then only road columns listed among the channels)")
     p.add_argument("--effect", action="append", default=[], metavar="NAME[:key=val,...]",
                    help="inject an effect the declared model lacks (undeclared; see suspid "
                         "diagnose), e.g. coulomb_friction:F=120, bump_stop:gap=0.01,k_stop=3e5, "
@@ -60,6 +65,57 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--plot", default=None, metavar="PNG", help="also plot the channels")
     p.add_argument("--json", action="store_true", help="print a JSON summary")
     return p
+
+
+def select_channels(model: SuspensionModel, spec: str | None) -> tuple[list[str], list[str]]:
+    """The measured channels and the road columns ``--channels`` asks to write.
+
+    Parameters
+    ----------
+    model : SuspensionModel
+    spec : str or None
+        Comma-separated channels (motions, ride heights, road columns) and named sets
+        (:data:`~suspid.models.base.CHANNEL_SETS`); ``None``: positions and velocities.
+
+    Returns
+    -------
+    chans : list of str
+        Measured channels, in the order given (a set expanded in place).
+    roads : list of str
+        Road columns (``r``, ``r_dot``) to write: every one unless a named set is given,
+        else those listed.
+
+    Raises
+    ------
+    UsageError
+        A name that is neither a channel, a road column nor a set, naming the valid ones.
+    """
+    road_cols = [c for r in model.roads for c in (r, f"{r}_dot")]
+    if not spec:
+        return [c for c in model.channels if not c.endswith("_ddot")], road_cols
+    valid = list(model.channels) + list(model.ride_height_channels)
+    chans: list[str] = []
+    listed: list[str] = []
+    named = False
+    bad = []
+    for item in (c.strip() for c in spec.split(",")):
+        if not item:
+            continue
+        if item in CHANNEL_SETS:
+            named = True
+            chans += model.channel_set(item)
+        elif item in valid:
+            chans.append(item)
+        elif item in road_cols:
+            listed.append(item)
+        else:
+            bad.append(item)
+    if bad:
+        raise UsageError(f"--channels: unknown channel(s) {', '.join(bad)} for {model.name}; "
+                         f"expected any of {', '.join(valid + road_cols)} or a set "
+                         f"({', '.join(CHANNEL_SETS)})")
+    roads = [c for c in road_cols if c in listed] if named else road_cols
+    return list(dict.fromkeys(chans)), roads
 
 
 def run(args: argparse.Namespace) -> int:
@@ -117,20 +173,12 @@ def run(args: argparse.Namespace) -> int:
                 sys.stderr.write(f"warning: {note}\n")
     else:
         out = simulate(model, params, t, road, x0)
-    if args.channels:
-        chans = [c.strip() for c in args.channels.split(",") if c.strip()]
-        bad = [c for c in chans if c not in model.channels]
-        if bad:
-            raise UsageError(f"--channels: unknown channel(s) {', '.join(bad)} for {model.name}; "
-                             f"expected any of {', '.join(model.channels)}")
-    else:
-        chans = [c for c in model.channels if not c.endswith("_ddot")]
+    chans, roads = select_channels(model, args.channels)
     rng = np.random.default_rng(args.seed)
     cols: dict[str, np.ndarray] = {}
-    for r in model.roads:
+    for r in roads:
         if road:
             cols[r] = out[r]
-            cols[f"{r}_dot"] = out[f"{r}_dot"]
     for c in chans:
         y = out[c]
         if args.noise > 0:

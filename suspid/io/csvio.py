@@ -2,7 +2,8 @@
 
 ``t`` (s) is required and must be strictly increasing; road columns are the model's
 ``roads`` (with optional ``_dot``); measured columns are any subset of the model's
-``channels``. Empty cells are missing samples (NaN). Unknown columns are ignored with a
+``channels`` and ride heights (``ride_height_channels``: strut extensions ``d``/``dN`` in m
+and their ``_dot`` in m/s). Empty cells are missing samples (NaN). Unknown columns are ignored with a
 warning. A trailing separator (an empty last column, on the header or the rows) is
 allowed. Every error names the file, the line and the column.
 
@@ -39,7 +40,7 @@ class Measurement:
     road : dict
         Road inputs by name (m) and ``<name>_dot`` (m/s) when given.
     measured : dict
-        Measured channels (SI), NaN where a sample is missing.
+        Measured channels (SI), NaN where a sample is missing: motions and ride heights.
     warnings : list of str
         Non-fatal findings (ignored columns, filled gaps, ...).
     source : str
@@ -181,7 +182,8 @@ def read_measurement(path: str | Path, model: SuspensionModel, *,
         if dup:
             raise InputError(f"{name}:1: duplicate column(s) {', '.join(sorted(dup))}")
         road_cols = set(model.roads) | {f"{r}_dot" for r in model.roads}
-        known = {"t"} | road_cols | set(model.channels)
+        measurable = list(model.channels) + list(model.ride_height_channels)
+        known = {"t"} | road_cols | set(measurable)
         # a trailing separator (on the header, the rows or both) is an empty last column:
         # a row holds the named columns, then at most the header's cells or empty ones
         ncol = len(header)
@@ -265,7 +267,7 @@ def read_measurement(path: str | Path, model: SuspensionModel, *,
         units = "".join(f"; column {header[i]!r} is {col} in {unit!r}, expected "
                         f"{' or '.join(model.column_units(col))}" for i, (col, unit) in off_unit.items())
         raise InputError(f"{name}:1: no measured channel for model {model.name}; expected any of "
-                         f"{', '.join(model.channels)}{units}")
+                         f"{', '.join(measurable)}{units}")
     return Measurement(t=t, road=road, measured=measured, warnings=warnings, source=name)
 
 

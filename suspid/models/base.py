@@ -39,6 +39,12 @@ Matrices = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
 ForceFn = Callable[[float, FloatArray, FloatArray, Mapping[str, float]], FloatArray]
 #: standard gravity (m/s^2) for static wheel loads
 GRAVITY = 9.81
+#: named channel sets (``suspid simulate --channels``, ``suspid node --channels``), see
+#: :meth:`SuspensionModel.channel_set`
+CHANNEL_SETS: dict[str, str] = {
+    "production": "the sensors of a production car: body accelerations and ride heights",
+    "accelerometers": "an accelerometer on every coordinate (body and wheels)",
+}
 
 
 @functools.lru_cache(maxsize=32)
@@ -419,8 +425,12 @@ class SuspensionModel:
         ``"d"`` for a model with one strut, else ``"d1"``, ``"d2"``, ...: the strut's
         extension (m, the body corner minus the wheel; positive in rebound), which
         production cars measure with ride-height sensors. Each may come with ``_dot`` (m/s).
+        A model that defines no struts (a plug-in without :meth:`strut_sites`) has none.
         """
-        n = len(self.strut_sites(self.defaults()))
+        try:
+            n = len(self.strut_sites(self.defaults()))
+        except UsageError:
+            return ()
         return ("d",) if n == 1 else tuple(f"d{i}" for i in range(1, n + 1))
 
     @property
@@ -465,6 +475,25 @@ class SuspensionModel:
                 rows.append(j)
         return tuple(rows)
 
+    def channel_set(self, name: str) -> tuple[str, ...]:
+        """The channels of a named sensor set (:data:`CHANNEL_SETS`); none is a road.
+
+        ``production``: the accelerations (``_ddot``, m/s^2 or rad/s^2) of the body
+        coordinates (:meth:`body_rows`) and every ride height (:attr:`ride_heights`, m),
+        what a production car carries -- no road, no wheel motion. ``accelerometers``: the
+        acceleration of every coordinate (body and wheel accelerometers).
+
+        Raises
+        ------
+        UsageError
+            An unknown set name (naming the known ones).
+        """
+        if name == "production":
+            return tuple(f"{self.coords[j]}_ddot" for j in self.body_rows()) + self.ride_heights
+        if name == "accelerometers":
+            return tuple(f"{c}_ddot" for c in self.coords)
+        raise UsageError(f"unknown channel set {name!r}; expected one of {', '.join(CHANNEL_SETS)}")
+
     def deflections(self, data: Mapping[str, FloatArray],
                     p: Mapping[str, float] | None = None) -> dict[str, FloatArray]:
         """Suspension deflections (strut extensions, m) computable from ``data``.
@@ -494,15 +523,15 @@ class SuspensionModel:
         return out
 
     def column_bases(self) -> set[str]:
-        """Base names of the CSV columns of this model (coordinates and roads)."""
-        return set(self.coords) | set(self.roads)
+        """Base names of the CSV columns of this model (coordinates, ride heights, roads)."""
+        return set(self.coords) | set(self.ride_heights) | set(self.roads)
 
     def column_units(self, column: str) -> tuple[str, ...]:
         """The SI unit(s) a CSV column or channel of this model is in (empty: not one of it).
 
-        ``t`` in s, roads in m (their ``_dot`` in m/s), a coordinate in m or rad as
-        :attr:`angles` declares, its ``_dot`` per s and ``_ddot`` per s^2. A model that does
-        not declare its angles may have either.
+        ``t`` in s, roads and ride heights in m (their ``_dot`` in m/s), a coordinate in m
+        or rad as :attr:`angles` declares, its ``_dot`` per s and ``_ddot`` per s^2. A model
+        that does not declare its angles may have either.
         """
         if column == "t":
             return ("s",)
@@ -512,6 +541,8 @@ class SuspensionModel:
                 base, per = column[: -len(suffix)], rate
                 break
         if base in self.roads and per != "/s^2":
+            return ("m" + per,)
+        if column in self.ride_height_channels:
             return ("m" + per,)
         if column not in self.channels:
             return ()

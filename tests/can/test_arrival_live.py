@@ -25,13 +25,19 @@ def _messages(path: Path) -> list[can.Message]:
     return list(can.LogReader(str(path)))
 
 
+#: channels the DBC maps for quarter2 that the node does not send by default (ride heights)
+NOT_SENT = ("d", "d_dot")
+
+
 def _listener() -> DecodeListener:
     return DecodeListener("quarter2", capacity=1 << 14, growable=True,
                           time_source="timestamp", arrival_slots=True)
 
 
 def _samples(listener: DecodeListener) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    return {name: src.snapshot() for name, src in listener.buffer.sources.items()}
+    """The samples of every ring that received frames (a DBC message the log lacks, e.g. a
+    ride height the node did not send, has none)."""
+    return {name: src.snapshot() for name, src in listener.buffer.sources.items() if src.n}
 
 
 # ---- the rule on synthetic arrival times ---------------------------------------------------
@@ -91,7 +97,8 @@ def test_frame_by_frame_equals_the_log_path(logs: dict[str, Path], kind: str) ->
     assert a.t.size == b.t.size
     for ch, v in a.values.items():
         np.testing.assert_array_equal(b.values[ch], v)
-        assert not np.isnan(b.values[ch]).any()
+        if ch not in NOT_SENT:
+            assert not np.isnan(b.values[ch]).any()
 
 
 def test_a_real_gap_live(logs: dict[str, Path]) -> None:  # noqa: F811
@@ -110,6 +117,8 @@ def test_a_real_gap_live(logs: dict[str, Path]) -> None:  # noqa: F811
     assert off.frame_stats()["accepted"] - fs["accepted"] <= 3   # type: ignore[operator]
     al = live.aligned()
     for ch, v in al.values.items():
+        if ch in NOT_SENT:
+            continue
         miss = np.flatnonzero(np.isnan(v))
         assert 50 <= miss.size <= 51 and miss[-1] - miss[0] == miss.size - 1, ch
 

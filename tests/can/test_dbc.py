@@ -18,11 +18,21 @@ SENSOR_MESSAGES = {"QC_Body", "QC_Wheel", "QC_Road", "HC_Body", "HC_Pitch", "HC_
                    "HC_WheelRear", "HC_RoadFront", "HC_RoadRear", "FC_Body", "FC_Pitch", "FC_Roll",
                    "FC_WheelFL", "FC_WheelFR", "FC_WheelRL", "FC_WheelRR", "FC_RoadFL", "FC_RoadFR",
                    "FC_RoadRL", "FC_RoadRR"}
+RIDE_HEIGHT_MESSAGES = {"QC_RideHeight", "HC_RideHeightFront", "HC_RideHeightRear",
+                        "FC_RideHeightFL", "FC_RideHeightFR", "FC_RideHeightRL", "FC_RideHeightRR"}
+#: the CAN IDs of the sensor messages before the ride heights came: unchanged
+EXISTING_IDS = {"QC_Body": 272, "QC_Wheel": 273, "QC_Road": 274, "HC_Body": 288, "HC_Pitch": 289,
+                "HC_WheelFront": 290, "HC_WheelRear": 291, "HC_RoadFront": 292, "HC_RoadRear": 293,
+                "FC_Body": 304, "FC_Pitch": 305, "FC_Roll": 306, "FC_WheelFL": 307,
+                "FC_WheelFR": 308, "FC_WheelRL": 309, "FC_WheelRR": 310, "FC_RoadFL": 311,
+                "FC_RoadFR": 312, "FC_RoadRL": 313, "FC_RoadRR": 314, "SN_Sync": 256,
+                "SUSPID_Alert": 768, "SN_Status": 784}
 
 
 def test_loads_strict_with_expected_messages(db):
     names = {m.name for m in db.messages}
-    assert SENSOR_MESSAGES | {"SN_Sync", "SN_Status", "SUSPID_Alert"} <= names
+    assert SENSOR_MESSAGES | RIDE_HEIGHT_MESSAGES | {"SN_Sync", "SN_Status", "SUSPID_Alert"} <= names
+    assert {n: db.get_message_by_name(n).frame_id for n in EXISTING_IDS} == EXISTING_IDS
     assert db.get_message_by_name("SUSPID_Alert").is_multiplexed()
 
 
@@ -74,8 +84,36 @@ def test_every_frame_is_e2e_protected_with_crc_and_counter(db):
 def test_suspid_channel_attributes_cover_every_channel_once(db, model_name):
     m = get_model(model_name)
     mapped = [ch for ch, _, _ in channel_signals(db, model_name)]
-    expected = list(m.channels) + list(m.roads) + [f"{r}_dot" for r in m.roads]
+    expected = (list(m.channels) + list(m.ride_height_channels) + list(m.roads)
+                + [f"{r}_dot" for r in m.roads])
     assert sorted(mapped) == sorted(expected)
+
+
+@pytest.mark.parametrize("model_name", list(MODELS))
+def test_ride_heights_and_body_accelerations_have_signals(db, model_name):
+    """Every ride height (with its rate) sits in a ride-height message of its own set, with
+    E2E header and Valid bits, 10 um / +-0.25 m at least and +-5 m/s at least; every body
+    coordinate's acceleration has a signal (the production set is all on the bus)."""
+    m = get_model(model_name)
+    sig = {ch: (msg, s) for ch, msg, s in channel_signals(db, model_name)}
+    for d in m.ride_heights:
+        msg_name, s = sig[d]
+        assert msg_name in RIDE_HEIGHT_MESSAGES and sig[f"{d}_dot"][0] == msg_name
+        msg = db.get_message_by_name(msg_name)
+        assert is_e2e(msg) and {"DispValid", "VelValid", "Saturated"} <= {x.name for x in msg.signals}
+        pos = signal_spec(msg, s)
+        vel = signal_spec(msg, sig[f"{d}_dot"][1])
+        assert pos.scale == 1e-05 and min(-pos.raw_min, pos.raw_max) * pos.scale >= 0.25
+        assert vel.scale <= 5e-4 and min(-vel.raw_min, vel.raw_max) * vel.scale >= 5.0
+        assert msg.get_signal_by_name(s).unit == "m"
+        assert msg.get_signal_by_name(sig[f"{d}_dot"][1]).unit == "m/s"
+    for c in m.channel_set("production"):
+        assert c in sig, c
+    # one message per strut, none shared with another channel of the model
+    msgs = [sig[d][0] for d in m.ride_heights]
+    assert len(set(msgs)) == len(msgs)
+    others = {msg for ch, (msg, _) in sig.items() if ch not in m.ride_height_channels}
+    assert not others & set(msgs)
 
 
 @pytest.mark.parametrize("model_name", list(MODELS))

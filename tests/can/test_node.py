@@ -14,7 +14,7 @@ from firmware_sim.node import NodeConfig, SensorNode
 from firmware_sim.scenarios import SCENARIOS
 from suspid.cli import main
 from suspid.errors import UsageError
-from suspid.can.dbc import channel_signals
+from suspid.can.dbc import channel_signals, load_dbc
 from suspid.models import MODELS, get_model
 from suspid.simulate import simulate
 
@@ -35,9 +35,11 @@ def test_every_scenario_and_model_decodes_cleanly(scenario, model_name):
     st = lst.frame_stats()
     model = get_model(model_name)
     roads = set(model.input_names)
-    # SN_Sync and the model's sensor messages; without a road (initial) no road messages
+    # SN_Sync and the model's sensor messages (ride heights only when asked for); without a
+    # road (initial) no road messages
     n_msgs = 1 + len({msg for ch, msg, _ in channel_signals(node.db, model_name)
-                      if scenario != "initial" or ch not in roads})
+                      if (scenario != "initial" or ch not in roads)
+                      and ch not in model.ride_height_channels})
     assert n_msgs == {"quarter1": 3, "quarter2": 4, "half4": 7, "full7": 12}.get(model_name, n_msgs) \
         - len(model.roads) * (scenario == "initial")
     # 501 ticks of sensor frames; status at ticks 0, 50, ..., 500 and a final one
@@ -184,3 +186,76 @@ def test_full7_node_log_identifies_the_struts_and_tyres(tmp_path, capsys):
     for k in out["stderr"]:
         assert out["params"][k] == pytest.approx(p[k], rel=0.01), k
         assert abs(out["params"][k] - p[k]) < 5 * out["stderr"][k] + 1e-4 * p[k], k
+
+
+def _virtual_node_run(argv: list[str], channel: str) -> tuple[int, list[can.Message]]:
+    """Run ``suspid node`` on a python-can virtual bus and collect every frame it sends."""
+    got: list[can.Message] = []
+    with can.Bus(interface="virtual", channel=channel) as rx:
+        rc = main(["node", "--interface", "virtual", "--channel", channel, *argv])
+        while (msg := rx.recv(0.05)) is not None:
+            got.append(msg)
+    return rc, got
+
+
+@pytest.mark.parametrize("model_name", list(MODELS))
+@pytest.mark.parametrize("named", ["production", "accelerometers"])
+def test_node_named_channel_sets_send_only_those_messages(model_name, named, capsys):
+    """--channels production: body accelerations and ride heights; accelerometers: every
+    coordinate's acceleration; neither sends a road or (production) a wheel message, and the
+    decoded values are the plant's within quantization."""
+    m = get_model(model_name)
+    rc, frames = _virtual_node_run(["--scenario", "damper-wear", "--model", model_name,
+                                    "--channels", named, "--speed", "max", "--duration", "5",
+                                    "--noise", "0"], f"t-sets-{model_name}-{named}")
+    assert rc == 0
+    summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])["node"]
+    db = load_dbc()
+    sig = {ch: (msg, s) for ch, msg, s in channel_signals(db, model_name)}
+    want = set(m.channel_set(named))
+    expected_msgs = {sig[c][0] for c in want}
+    by_id = {db.get_message_by_name(n).frame_id: n for n in expected_msgs}
+    sent = {f.arbitration_id for f in frames}
+    road_msgs = {sig[c][0] for c in m.input_names}
+    wheel_msgs = {sig[c][0] for c in m.channels if c.split("_")[0] not in
+                  {m.coords[j] for j in m.body_rows()}}
+    assert {db.get_message_by_name(n).frame_id for n in expected_msgs} <= sent
+    sent_names = {db.get_message_by_frame_id(i).name for i in sent}
+    assert not sent_names & road_msgs
+    if named == "production":
+        assert not sent_names & wheel_msgs
+        assert {sig[d][0] for d in m.ride_heights} <= sent_names
+    assert sent_names == expected_msgs | {"SN_Sync", "SN_Status"}
+    assert len(frames) == summary["frames_sent"] == 2501 * (1 + len(by_id)) + 52
+    # decoded: exactly the set, equal to the plant's truth within half a step
+    lst = DecodeListener(m, db)
+    feed(lst, frames)
+    meas = lst.aligned()
+    node = SensorNode(NodeConfig(model=model_name, scenario="damper-wear", duration=5.0,
+                                 channels=[named], noise=0.0))
+    rows = [node.plant.sample(k) for k in range(node.n_ticks)]
+    truth = {c: np.array([r[c] for r in rows]) for c in want}
+    assert {c for c, v in meas.values.items() if np.isfinite(v).any()} == want
+    for c in want:
+        msg, s = sig[c]
+        step = db.get_message_by_name(msg).get_signal_by_name(s).scale
+        assert np.max(np.abs(meas.values[c] - truth[c])) <= step / 2 * (1 + 1e-6), c
+        assert np.ptp(truth[c]) > 20 * step, c   # the channel moves
+
+
+def test_node_production_quarter2_cli_on_virtual_bus(capsys):
+    """The documented run: ride-height and body-acceleration messages, no road message."""
+    rc, frames = _virtual_node_run(["--scenario", "damper-wear", "--model", "quarter2",
+                                    "--channels", "production", "--speed", "max",
+                                    "--duration", "5"], "t-prod-q2")
+    assert rc == 0
+    db = load_dbc()
+    names = {db.get_message_by_frame_id(f.arbitration_id).name for f in frames}
+    assert names == {"SN_Sync", "QC_Body", "QC_RideHeight", "SN_Status"}
+    body = [db.get_message_by_name("QC_Body").decode(bytes(f.data)) for f in frames
+            if f.arbitration_id == db.get_message_by_name("QC_Body").frame_id]
+    assert all(b["AccValid"] == 1 and b["DispValid"] == 0 and b["VelValid"] == 0 for b in body)
+    rh = [db.get_message_by_name("QC_RideHeight").decode(bytes(f.data)) for f in frames
+          if f.arbitration_id == db.get_message_by_name("QC_RideHeight").frame_id]
+    assert len(rh) == 2501 and all(r["DispValid"] == 1 and r["VelValid"] == 0 for r in rh)
+    assert np.ptp([r["Disp"] for r in rh]) > 1e-3
