@@ -70,7 +70,7 @@ def run_one(spec: MonitorSpec, t: FloatArray, data: Mapping[str, FloatArray]) ->
     """Stream ``(t, data)`` through the monitor of ``spec``; collect its events."""
     fs = 1.0 / float(np.median(np.diff(t)))
     channels = [c for c in data if c in spec.model.channels or c in spec.model.roads
-                or c[:-4] in spec.model.roads]
+                or c[:-4] in spec.model.roads or c in spec.model.ride_height_channels]
     c0, w0 = time.process_time(), time.perf_counter()
     est = make_estimator(spec, channels, fs)
     rec = RunRecord(spec.baseline, own_track=bool(getattr(est, "own_track", False)))
