@@ -100,6 +100,8 @@ class MonitorSpec:
     warnings : list of str
     road : {"measured", "zero", "unknown"} or None
         ``--road``; ``None``: chosen on the first window (:func:`choose_road`), then set.
+    drift_given : bool
+        ``--window-drift`` named parameters (a choice of the road unknown ignores it, warned).
     """
 
     model: SuspensionModel
@@ -120,6 +122,7 @@ class MonitorSpec:
     units: dict[str, str] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     road: str | None = None
+    drift_given: bool = False
 
 
 def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = None,
@@ -272,7 +275,7 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
                        forecast_horizon_s=forecast_horizon, ekf_params=aug, ekf_q=ekf_q,
                        ekf_decimate=ekf_decimate,
                        units={k: model.spec(k).unit for k in nominal_all}, warnings=warnings,
-                       road=road)
+                       road=road, drift_given=bool(given_drift))
 
 
 def _output_only_spec(model: SuspensionModel, nominal: Mapping[str, float], drop: float, z: float,
@@ -332,6 +335,9 @@ def choose_road(spec: MonitorSpec, t: FloatArray, data: Mapping[str, FloatArray]
     if mode == "unknown":
         spec.params, more = road_unknown_params(model, spec.params)
         notes += more
+        if spec.drift_given:
+            notes.append(f"--window-drift {','.join(spec.config.drift)} ignored: with the road "
+                         "unknown each window is one linear fit of constant parameters")
         spec.config.drift = ()
     spec.road = mode
     for w in notes:
@@ -385,7 +391,8 @@ def make_estimator(spec: MonitorSpec, channels: list[str], fs: float) -> Any:
         if len(absent) == len(spec.model.roads):
             raise InputError(f"the stream carries no road input {', '.join(absent)} "
                              f"(channels: {', '.join(channels) or 'none'}); input-output "
-                             "identification needs it -- use --output-only for a body "
+                             "identification needs it -- use --road unknown for body "
+                             "accelerations and ride heights, --output-only for a body "
                              "accelerometer alone")
         if absent:
             # one wheel's road message never came (a sensor or its message missing)

@@ -200,8 +200,8 @@ class RoadFreeWindowEstimator:
                                      f"(> {cfg.max_missing:.0%}); gap in the data", c0)
         rms = {h: float(np.nanstd(data[h])) for h in self.heights if h in data}
         if rms and max(rms.values()) < cfg.min_deflection:
-            h, v = max(rms.items(), key=lambda kv: kv[1])
-            return self._skip(t, f"too little excitation: ride height {h} RMS {v * 1e3:.3g} mm "
+            h, top = max(rms.items(), key=lambda kv: kv[1])
+            return self._skip(t, f"too little excitation: ride height {h} RMS {top * 1e3:.3g} mm "
                                  f"< {cfg.min_deflection * 1e3:.3g} mm", c0)
         meas = Measurement(np.asarray(t, dtype=float), {},
                            {c: np.asarray(data[c], dtype=float) for c in self.channels},
