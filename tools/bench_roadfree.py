@@ -20,13 +20,14 @@ Usage (from the repository root)::
     The first ``--record`` seconds of the same stream as a measurement CSV, identified
     by ``suspid identify --road measured`` and ``--road unknown`` (the same free c1, k1),
     in a subprocess, end to end (fastest of ``--repeat``; each uses the channels its path
-    takes from the record), and the fit alone in-process
-    (:func:`estimator.identify.record.identify_record` against
-    :func:`estimator.identify.roadfree.fit_road_unknown`).
+    takes from the record), and the same command in this process (``fit_s``: reading the
+    CSV and the identification, no interpreter start).
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import json
 import subprocess
 import sys
@@ -38,13 +39,11 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from estimator.identify import OutputErrorProblem, Parameters  # noqa: E402
-from estimator.identify.record import identify_record  # noqa: E402
-from estimator.identify.roadfree import fit_road_unknown, resolve_road  # noqa: E402
 from estimator.stream.compare import metrics, run_one  # noqa: E402
 from estimator.stream.pipeline import monitor_spec  # noqa: E402
 from estimator.stream.wear_streams import Stream, damper_wear  # noqa: E402
-from suspid.io.csvio import read_measurement, write_measurement  # noqa: E402
+from suspid.cli import main as cli_main  # noqa: E402
+from suspid.io.csvio import write_measurement  # noqa: E402
 from suspid.models import get_model  # noqa: E402
 
 FIX = {"m1": 300.0, "m2": 40.0, "c2": 300.0, "k2": 200000.0}
@@ -87,13 +86,11 @@ def bench_monitor(s: Stream, repeat: int) -> dict[str, Any]:
 
 def bench_identify(s: Stream, record_s: float, repeat: int, tmp: Path) -> dict[str, Any]:
     """identify's time, road measured vs unknown, on the same record (module docstring)."""
-    m = get_model("quarter2")
     n = int(record_s * 500.0) + 1
     csv = tmp / "record.csv"
     write_measurement(csv, s.t[:n], {c: s.data[c][:n] for c in set(MEASURED) | set(UNKNOWN)})
     fix = [a for k, v in FIX.items() for a in ("--fix", f"{k}={v:g}")]
     out: dict[str, Any] = {"record_s": record_s, "samples": n}
-    meas = read_measurement(str(csv), m)
     for road in ("measured", "unknown"):
         walls = []
         res: dict[str, Any] = {}
@@ -107,16 +104,12 @@ def bench_identify(s: Stream, record_s: float, repeat: int, tmp: Path) -> dict[s
                 raise SystemExit(r.stderr)
             res = json.loads(r.stdout)
         fits = []
-        for _ in range(repeat):
-            params = Parameters.for_model(m, fix=FIX)
-            _, rec, _ = resolve_road(m, meas, road)     # as suspid identify does
+        for _ in range(repeat):   # the same command in this process: no interpreter start
             w0 = time.perf_counter()
-            if road == "unknown":
-                fit_road_unknown(m, rec, params)
-            else:
-                identify_record(OutputErrorProblem(m, rec, cost="sse", x0="estimate"), params,
-                                restarts=6, maxfev=None, polish=True, multistart=4,
-                                data_start=True, keep_init=False, offset="remove")
+            with contextlib.redirect_stdout(io.StringIO()), \
+                    contextlib.redirect_stderr(io.StringIO()):
+                cli_main(["identify", "--model", "quarter2", "--input", str(csv), *fix,
+                          "--road", road, "--json"])
             fits.append(time.perf_counter() - w0)
         out[road] = {"wall_s_end_to_end": round(min(walls), 3), "fit_s": round(min(fits), 4),
                      "c1": res["params"]["c1"], "k1": res["params"]["k1"],
@@ -150,7 +143,7 @@ def main(argv: list[str] | None = None) -> int:
     idf = out["identify"]
     print(f"identify, {a.record:g} s record: end to end "
           f"{idf['measured']['wall_s_end_to_end']:.2f} s (road measured) vs "
-          f"{idf['unknown']['wall_s_end_to_end']:.2f} s (road unknown); the fit alone "
+          f"{idf['unknown']['wall_s_end_to_end']:.2f} s (road unknown); in-process "
           f"{idf['measured']['fit_s']:.3f} s vs {idf['unknown']['fit_s']:.4f} s "
           f"({idf['fit_measured_over_unknown']}x)")
     return 0
