@@ -197,3 +197,16 @@ def test_half_and_full_car_wear_streams_track(name: str) -> None:
         for k, met in res["params"].items():
             # the worn front damper and every other strut within a few %
             assert met["rmse_pct"] < 3.0, (key, k, met["rmse_pct"])
+
+
+def test_road_zero_fits_a_free_response(tmp_path: Path) -> None:
+    free = tmp_path / "free.csv"
+    assert run("simulate", "--model", "quarter2", "--scenario", "initial", "--duration", "6",
+               "--fs", "200", "--out", str(free)).returncode == 0
+    r = run("monitor", "--model", "quarter2", "--input", str(free), "--fix", "m1=300", "--fix",
+            "m2=40", "--road", "zero", "--min-deflection", "0", "--jsonl")
+    assert r.returncode == 0, r.stderr
+    out = lines(r.stdout)
+    assert out[-1]["road"] == "zero"
+    first = next(d for d in out if d["type"] == "estimate")
+    assert abs(first["params"]["c1"] / 1500.0 - 1.0) < 1e-3
