@@ -232,7 +232,8 @@ class SensorNode:
         bad = [c for c in chans if c not in available]
         if bad:
             raise UsageError(f"channel(s) {', '.join(bad)} not available for model {self.model.name} "
-                             f"and scenario {self.setup.name}; expected any of {', '.join(available)}")
+                             f"and scenario {self.setup.name}; expected any of {', '.join(available)} "
+                             f"or a set ({', '.join(CHANNEL_SETS)})")
         self.channels = chans
         for ch, _start, _len in config.faults.stuck:
             if ch not in chans:

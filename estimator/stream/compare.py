@@ -70,7 +70,7 @@ def run_one(spec: MonitorSpec, t: FloatArray, data: Mapping[str, FloatArray]) ->
     """Stream ``(t, data)`` through the monitor of ``spec``; collect its events."""
     fs = 1.0 / float(np.median(np.diff(t)))
     channels = [c for c in data if c in spec.model.channels or c in spec.model.roads
-                or c[:-4] in spec.model.roads]
+                or c[:-4] in spec.model.roads or c in spec.model.ride_height_channels]
     c0, w0 = time.process_time(), time.perf_counter()
     est = make_estimator(spec, channels, fs)
     rec = RunRecord(spec.baseline, own_track=bool(getattr(est, "own_track", False)))
@@ -204,25 +204,41 @@ def compare(model: SuspensionModel, t: FloatArray, data: Mapping[str, FloatArray
             alert_drop: float = 0.3, window: float | None = None, step: float | None = None,
             ekf_params: list[str] | None = None, ekf_q: float | None = None,
             ekf_decimate: int | None = None, forecast_horizon: float | None = None,
-            source: str = "", window_options: Mapping[str, Any] | None = None
-            ) -> tuple[dict[str, Any], list[RunRecord]]:
+            source: str = "", window_options: Mapping[str, Any] | None = None,
+            road: str | None = None) -> tuple[dict[str, Any], list[RunRecord]]:
     """The sliding window and the EKF on one stream, on the same footing.
 
     Both get the same free parameters, starting values (``init``, else ``nominal``, else
     the defaults -- the EKF then starts from the first window's estimate, as the sliding
     window does), windows, alert rule and forecast horizon. ``window_options`` overrides
     fields of the sliding window's :class:`~estimator.stream.config.WindowConfig` (e.g.
-    ``road_fusion_hz``). Returns the report (one JSON object) and the two run records.
+    ``road_fusion_hz``). ``road`` is ``--road`` (``None``: ``measured`` when the stream
+    carries every road, else ``unknown``, named in the report's ``warnings``); with
+    ``unknown`` both run on the body equations (:mod:`estimator.stream.roadfree`,
+    :mod:`estimator.ekf.roadfree`). Returns the report (one JSON object) and the two run
+    records.
     """
-    if not all(r in data for r in model.roads):
-        raise InputError("the stream has no road input; compare needs input-output data")
+    has_road = all(r in data for r in model.roads)
+    warnings: list[str] = []
+    if road is None:
+        road = "measured" if has_road else "unknown"
+        if not has_road:
+            warnings.append("no road in the stream (driving data): the road under the tyres is "
+                            "unknown (--road unknown): both estimators fit the body equations "
+                            "on body accelerations and ride heights")
+    if road == "measured" and not has_road:
+        raise InputError(f"--road measured: the stream has no road input "
+                         f"({', '.join(model.roads)}); give --road unknown for body "
+                         "accelerations and ride heights")
     fs = 1.0 / float(np.median(np.diff(t)))
     kw: dict[str, Any] = dict(fix=fix, nominal=nominal, init=init, alert_drop=alert_drop,
                               window=window, step=step, fs=fs, inspection=False,
-                              ekf_params=ekf_params, ekf_q=ekf_q, ekf_decimate=ekf_decimate)
+                              ekf_params=ekf_params, ekf_q=ekf_q, ekf_decimate=ekf_decimate,
+                              road=road)
     if forecast_horizon is not None:
         kw["forecast_horizon"] = forecast_horizon
     nm_spec = monitor_spec(model, baseline="nm", **kw)
+    warnings += nm_spec.warnings
     if window_options:
         nm_spec = replace(nm_spec, config=replace(nm_spec.config, **dict(window_options)))
     ekf_spec = monitor_spec(model, baseline="ekf", **kw)
@@ -230,9 +246,9 @@ def compare(model: SuspensionModel, t: FloatArray, data: Mapping[str, FloatArray
     rec_ekf = run_one(ekf_spec, t, data)
     n = int(t.size)
     cfg = nm_spec.config
-    channels = [c for c in model.channels if c in data]
+    channels = [c for c in list(model.channels) + list(model.ride_height_channels) if c in data]
     out: dict[str, Any] = {
-        "model": model.name,
+        "model": model.name, "road": road, "warnings": warnings,
         "stream": {"source": source, "duration_s": float(t[-1] - t[0]), "fs_hz": fs,
                    "samples": n, "channels": channels},
         "window": {"window_s": cfg.window_s, "step_s": cfg.step_s, "decimate": cfg.decimate,

@@ -39,24 +39,29 @@ from estimator.decode.log_input import channel_notes, unparsed_hint
 from estimator.identify import Parameters
 from estimator.identify.inputs import CSV_SUFFIXES
 from estimator.identify.regrid import to_uniform_grid
+from estimator.identify.roadfree import ROAD_MODES, resolve_road
 from estimator.stream.config import (WindowConfig, default_config, default_decimation,
                                      strut_parameters)
 from estimator.stream.drivers import CanWindowDriver, LiveStop, replay_log, run_arrays, run_bus
 from estimator.stream.events import Summary
 from estimator.stream.offsets import OffsetStage
 from estimator.stream.monitor import StreamMonitor
+from estimator.stream.roadfree import road_unknown_params, road_unknown_window
 from suspid.can.bus import open_bus
 from suspid.can.logs import LOG_FORMATS, ReadStats, is_can_log
 from suspid.can.options import RECEIVE_BUFFER_S
 from suspid.errors import InputError, UsageError, require_file
-from suspid.io.csvio import read_measurement
+from suspid.io.csvio import Measurement, read_measurement
 from suspid.models.base import FloatArray, SuspensionModel
 
 
 #: estimator name -> "module:factory"; a factory takes ``(spec, channels, fs)``
 ESTIMATORS = {"nm": "estimator.stream.monitor:make_nm_estimator",
               "ekf": "estimator.ekf.stream:make_ekf_estimator",
-              "output_only": "estimator.output_only:make_output_only_estimator"}
+              "output_only": "estimator.output_only:make_output_only_estimator",
+              # the road unknown (--road unknown): the body equations, no road input
+              "nm/unknown": "estimator.stream.roadfree:make_roadfree_estimator",
+              "ekf/unknown": "estimator.ekf.roadfree:make_roadfree_ekf_estimator"}
 
 #: output-only windows (s): a spectral estimate needs many body periods
 OUTPUT_ONLY_WINDOW_S = 60.0
@@ -93,6 +98,10 @@ class MonitorSpec:
     oo_method : str
     units : dict
     warnings : list of str
+    road : {"measured", "zero", "unknown"} or None
+        ``--road``; ``None``: chosen on the first window (:func:`choose_road`), then set.
+    drift_given : bool
+        ``--window-drift`` named parameters (a choice of the road unknown ignores it, warned).
     """
 
     model: SuspensionModel
@@ -112,6 +121,8 @@ class MonitorSpec:
     oo_method: str = "carma"
     units: dict[str, str] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
+    road: str | None = None
+    drift_given: bool = False
 
 
 def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = None,
@@ -125,7 +136,7 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
                  forecast_horizon: float | None = None,
                  ekf_params: list[str] | None = None, ekf_q: float | None = None,
                  ekf_decimate: int | None = None, accel_channel: str | None = None,
-                 oo_method: str = "carma") -> MonitorSpec:
+                 oo_method: str = "carma", road: str | None = None) -> MonitorSpec:
     """Check the monitor's options and derive its defaults.
 
     Parameters
@@ -156,6 +167,11 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
         and decimation.
     accel_channel, oo_method
         Output-only channel (default the body's ``_ddot``) and method.
+    road : {"measured", "zero", "unknown"}, optional
+        ``--road``; ``None`` chooses on the first window (:func:`choose_road`). With
+        ``unknown`` the free parameters outside the body equations are held
+        (:func:`~estimator.stream.roadfree.road_unknown_params`), the window is at least
+        :func:`~estimator.stream.roadfree.road_unknown_window` and the drift is off.
 
     Returns
     -------
@@ -178,6 +194,8 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
     if not (forecast_horizon > 0 and math.isfinite(forecast_horizon)):
         raise UsageError(f"--forecast-horizon: expected a time > 0 s, got {forecast_horizon}")
     z = float(NormalDist().inv_cdf(confidence))
+    if road is not None and road not in ROAD_MODES:
+        raise UsageError(f"--road: expected one of {', '.join(ROAD_MODES)}, got {road!r}")
     if baseline == "output_only":
         return _output_only_spec(model, nominal_in, alert_drop, z, persistence, hysteresis,
                                  window, step, forecast_horizon, accel_channel, oo_method)
@@ -192,7 +210,10 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
         raise UsageError(f"--init {sorted(bad)[0]}: the parameter is fixed (--fix)")
     params = Parameters.for_model(model, fix=fix, init=nominal_in)
     warnings: list[str] = []
-    if model.scale_invariant and set(model.scale_invariant) <= set(params.free):
+    if road == "unknown":
+        params, road_warnings = road_unknown_params(model, params)
+        warnings += road_warnings
+    elif model.scale_invariant and set(model.scale_invariant) <= set(params.free):
         m0 = next(p.name for p in model.params if p.kind in ("mass", "inertia"))
         params[m0].vary = False
         warnings.append(f"every mass, damper and spring is free, so only their ratios are "
@@ -204,9 +225,14 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
     nominal_all = {k: values[k] for k in params.free}
     for k, v in init.items():
         if k not in nominal_all:
-            raise UsageError(f"--init {k}: not a free parameter")
+            raise UsageError(f"--init {k}: not a free parameter"
+                             + (" the road-unknown monitor follows" if road == "unknown" else ""))
         params[k].value = v
     cfg = default_config(model, values, fs, len(params.free))
+    if road == "unknown" and window is None:
+        # the band starts at 3 / window: below the body mode (docs/monitoring.md)
+        cfg.window_s = max(cfg.window_s, road_unknown_window(model, values))
+        cfg.step_s = max(0.05, round(round(cfg.window_s / 2.0 / 0.05) * 0.05, 2))
     if window is not None:
         cfg.window_s = window
         if step is None:
@@ -215,7 +241,12 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
         cfg.step_s = step
     # the window's linear drift: by default every free damper and spring of the struts
     # (the parts that wear; docs/monitoring.md, "Window with a linear drift")
-    cfg.drift = strut_parameters(model, values, params.free)
+    cfg.drift = strut_parameters(model, values, params.free) if road != "unknown" else ()
+    given_drift = (window_overrides or {}).get("drift")
+    if road == "unknown" and given_drift:
+        raise UsageError(f"--window-drift {','.join(given_drift)}: does not apply with --road "
+                         "unknown (each window's body equations are one linear fit of constant "
+                         "parameters); give --window-drift none or leave it out")
     for attr, v in (window_overrides or {}).items():
         if v is not None:
             setattr(cfg, attr, v)
@@ -243,7 +274,8 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
                        decimate_given=decimate is not None, inspection=inspection,
                        forecast_horizon_s=forecast_horizon, ekf_params=aug, ekf_q=ekf_q,
                        ekf_decimate=ekf_decimate,
-                       units={k: model.spec(k).unit for k in nominal_all}, warnings=warnings)
+                       units={k: model.spec(k).unit for k in nominal_all}, warnings=warnings,
+                       road=road, drift_given=bool(given_drift))
 
 
 def _output_only_spec(model: SuspensionModel, nominal: Mapping[str, float], drop: float, z: float,
@@ -271,16 +303,96 @@ def _output_only_spec(model: SuspensionModel, nominal: Mapping[str, float], drop
                        units={"f_body": "Hz", "zeta_body": ""})
 
 
+def choose_road(spec: MonitorSpec, t: FloatArray, data: Mapping[str, FloatArray]) -> str:
+    """Set ``spec.road`` from the first window when ``--road`` was not given.
+
+    As :func:`estimator.identify.roadfree.resolve_road` decides for a record: ``measured``
+    when the stream carries the road, else ``zero`` for a free response and ``unknown`` for
+    driving data; the choice is written as one ``warning:`` line on stderr. With
+    ``unknown`` the free parameters outside the body equations are then held
+    (:func:`~estimator.stream.roadfree.road_unknown_params`, said the same way).
+
+    Parameters
+    ----------
+    spec : MonitorSpec
+    t : ndarray
+        The first window's times (s).
+    data : mapping
+        Its channels (SI).
+
+    Returns
+    -------
+    str
+        The road mode.
+    """
+    if spec.road is not None or spec.baseline == "output_only":
+        return spec.road or "measured"
+    model = spec.model
+    road = {r: np.asarray(v, dtype=float) for r, v in data.items() if r in model.input_names}
+    measured = {c: np.asarray(v, dtype=float) for c, v in data.items() if c not in road}
+    mode, _, notes = resolve_road(model, Measurement(np.asarray(t, dtype=float), road, measured,
+                                                     source="stream"), None)
+    if mode == "unknown":
+        spec.params, more = road_unknown_params(model, spec.params)
+        notes += more
+        if spec.drift_given:
+            notes.append(f"--window-drift {','.join(spec.config.drift)} ignored: with the road "
+                         "unknown each window is one linear fit of constant parameters")
+        spec.config.drift = ()
+    spec.road = mode
+    for w in notes:
+        sys.stderr.write(f"warning: {w}\n")
+    return mode
+
+
+class ZeroRoad:
+    """An estimator fed the model's roads as zero (``--road zero``: no road input, a free
+    response from the window's initial state); road channels in the stream are not used."""
+
+    road = "zero"
+
+    def __init__(self, inner: Any, model: SuspensionModel) -> None:
+        self.inner = inner
+        self.model = model
+        self.name = inner.name
+        for a in ("lag", "lags", "overlap", "own_track"):
+            if hasattr(inner, a):
+                setattr(self, a, getattr(inner, a))
+
+    def process(self, t: FloatArray, data: Mapping[str, FloatArray]) -> Any:
+        """Delegate with every road and its rate set to zero."""
+        d = dict(data)
+        for r in self.model.input_names:
+            d[r] = np.zeros(len(t))
+        return self.inner.process(t, d)
+
+    def summary(self) -> dict[str, Any]:
+        return dict(self.inner.summary(), road="zero")
+
+
 def make_estimator(spec: MonitorSpec, channels: list[str], fs: float) -> Any:
-    """The spec's estimator for a stream with ``channels`` sampled at ``fs`` (Hz)."""
+    """The spec's estimator for a stream with ``channels`` sampled at ``fs`` (Hz).
+
+    ``spec.road`` chooses the path: ``unknown`` the body equations (no road input,
+    :data:`ESTIMATORS` ``"nm/unknown"``, ``"ekf/unknown"``), ``zero`` the road-measured
+    estimator fed zero roads (:class:`ZeroRoad`), ``measured`` (or ``None``) the road from
+    the stream, which must carry every wheel's.
+    """
+    road = spec.road or "measured"
     if spec.baseline == "nm" and not spec.decimate_given:
         spec.config.decimate = default_decimation(spec.model, spec.params.valuesdict(), fs)
+    if spec.baseline != "output_only" and road == "unknown":
+        mod, _, fn = ESTIMATORS[f"{spec.baseline}/unknown"].partition(":")
+        return getattr(importlib.import_module(mod), fn)(spec, channels, fs)
+    if spec.baseline != "output_only" and road == "zero":
+        channels = list(channels) + [r for r in spec.model.input_names if r not in channels]
     if spec.baseline != "output_only":
         absent = [r for r in spec.model.roads if r not in channels]
         if len(absent) == len(spec.model.roads):
             raise InputError(f"the stream carries no road input {', '.join(absent)} "
                              f"(channels: {', '.join(channels) or 'none'}); input-output "
-                             "identification needs it -- use --output-only for a body "
+                             "identification needs it -- use --road unknown for body "
+                             "accelerations and ride heights, --output-only for a body "
                              "accelerometer alone")
         if absent:
             # one wheel's road message never came (a sensor or its message missing)
@@ -291,7 +403,8 @@ def make_estimator(spec: MonitorSpec, channels: list[str], fs: float) -> Any:
     mod, _, fn = ESTIMATORS[spec.baseline].partition(":")
     factory: Callable[[MonitorSpec, list[str], float], Any] = getattr(
         importlib.import_module(mod), fn)
-    return factory(spec, channels, fs)
+    est = factory(spec, channels, fs)
+    return ZeroRoad(est, spec.model) if road == "zero" and spec.baseline != "output_only" else est
 
 
 class LazyEstimator:
@@ -304,9 +417,10 @@ class LazyEstimator:
 
     def _build(self, t: FloatArray, data: Mapping[str, FloatArray]) -> Any:
         present = [c for c, v in data.items() if np.mean(np.isfinite(v)) > 0.5]
+        choose_road(self.spec, t, {c: data[c] for c in present})
         dt = float(np.median(np.diff(t)))
         self.inner = make_estimator(self.spec, present, 1.0 / dt if dt > 0 else 0.0)
-        for a in ("lag", "lags", "overlap", "own_track"):
+        for a in ("lag", "lags", "overlap", "own_track", "road"):
             if hasattr(self.inner, a):
                 setattr(self, a, getattr(self.inner, a))
         return self.inner
@@ -350,8 +464,9 @@ def build_monitor(spec: MonitorSpec, emit: Callable[[Any], None], store: AlertSt
             for k, ev in store.last_forecast.items():
                 if ev.kind == "forecast" and k in forecasts.limits:
                     forecasts.active[k] = ev
+    # the offset stage judges a window by the road-measured fit: not with the road unknown
     offsets = (OffsetStage(spec.model, spec.params, spec.config)
-               if spec.baseline != "output_only" else None)
+               if spec.baseline != "output_only" and spec.road in (None, "measured") else None)
     return StreamMonitor(est, emit, engine, forecasts=forecasts, offsets=offsets)
 
 
@@ -442,6 +557,8 @@ def run_monitor(spec: MonitorSpec, source: Source, emit: Callable[[Any], None],
     finally:
         if store is not None:
             store.close()
+    if spec.baseline != "output_only":
+        extra["road"] = spec.road
     if store is not None:
         extra["alert_file"] = str(store.path)
     return mon.summary(extra)

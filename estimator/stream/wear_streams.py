@@ -154,6 +154,30 @@ def damper_wear(model: SuspensionModel, duration: float = 150.0, fs: float = 500
     return Stream(t, data, truth, p0, {"wear_start": wear_start, "wear_end": wear_end})
 
 
+def production_wear(model: SuspensionModel, **kwargs: object) -> Stream:
+    """:func:`damper_wear` as a production car sends it: the body accelerations and the ride
+    heights (strut extensions ``d``/``dN``, the states' ``x1 - x2`` for ``quarter2``), with the
+    node's quantization and noise, and no road (no vehicle measures it).
+
+    Parameters
+    ----------
+    model : SuspensionModel
+    **kwargs
+        Further arguments of :func:`damper_wear` (``duration``, ``fs``, ``seed``, ...;
+        ``channels`` defaults to ``model.channel_set("production")``).
+
+    Returns
+    -------
+    Stream
+        ``data`` without the road columns.
+    """
+    kw = dict(kwargs)
+    kw.setdefault("channels", model.channel_set("production"))
+    s = damper_wear(model, **kw)  # type: ignore[arg-type]
+    s.data = {k: v for k, v in s.data.items() if k not in model.input_names}
+    return s
+
+
 def write_log(stream: Stream, path: str, model_name: str = "quarter2", t0: float = 0.0) -> int:
     """Write a stream as the CAN log the sensor node would send (format by suffix).
 

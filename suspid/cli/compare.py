@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from suspid.can.options import add_can_arguments, can_inputs
-from suspid.cli._args import comma_list
+from suspid.cli._args import add_road_option, comma_list
 from suspid.cli._common import add_model_option, parse_assignments, print_json
 from suspid.cli._lazy import lazy_names
 from suspid.errors import UsageError
@@ -23,11 +23,12 @@ from suspid.models import get_model
 
 if TYPE_CHECKING:
     from estimator.stream.compare import compare, load_stream, plot
-    from estimator.stream.wear_streams import damper_wear
+    from estimator.stream.wear_streams import damper_wear, production_wear
 else:
     compare, load_stream, plot = lazy_names("estimator.stream.compare", "compare", "load_stream",
                                             "plot")
-    damper_wear, = lazy_names("estimator.stream.wear_streams", "damper_wear")
+    damper_wear, production_wear = lazy_names("estimator.stream.wear_streams", "damper_wear",
+                                              "production_wear")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -70,10 +71,43 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="EKF on every N-th sample (default: 250 Hz or less)")
     p.add_argument("--window", type=float, default=None, metavar="S")
     p.add_argument("--step", type=float, default=None, metavar="S")
+    add_road_option(p)
     p.add_argument("--param", default="c1", help="parameter to plot (default c1)")
     p.add_argument("--plot", metavar="PNG", default=None, help="write the comparison plot here")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     return p
+
+
+#: rows of the text table: metric key and its label
+TABLE_ROWS = (("rmse_pct", "RMS error vs truth (%)"), ("error_over_stderr_rms", "error / stderr (RMS)"),
+              ("convergence_s", "convergence (s)"), ("alert_delay_s", "alert after crossing (s)"),
+              ("false_alarms", "false alarms"), ("forecast_lead_s", "first forecast lead (s)"),
+              ("forecast_first_contains", "its interval holds the crossing"))
+
+
+def comparison_table(out: dict[str, Any]) -> str:
+    """The report as a text table: per monitored parameter and metric, the sliding window
+    and the EKF side by side (``-`` where a metric does not apply)."""
+    nm, ekf = out["nm"], out["ekf_result"]
+
+    def cell(v: Any) -> str:
+        if v is None:
+            return "-"
+        return f"{v:.3g}" if isinstance(v, float) else str(v)
+
+    lines = [f"model {out['model']}, road {out['road']}: sliding window vs EKF",
+             f"{'':38} {'window':>12} {'EKF':>12}",
+             f"{'estimates':38} {nm['estimates']:>12} {ekf['estimates']:>12}",
+             f"{'CPU per sample (us)':38} {nm['cpu_us_per_sample']:>12.3g} "
+             f"{ekf['cpu_us_per_sample']:>12.3g}"]
+    for k in nm["params"]:
+        a, b = nm["params"][k], ekf["params"].get(k, {})
+        for key, label in TABLE_ROWS:
+            if key in a or key in b:
+                lines.append(f"{k + ': ' + label:38} {cell(a.get(key)):>12} {cell(b.get(key)):>12}")
+    if ekf.get("held"):
+        lines += [f"EKF holds {k}: {why}" for k, why in ekf["held"].items()]
+    return "\n".join(lines) + "\n"
 
 
 def run(args: argparse.Namespace) -> int:
@@ -87,8 +121,11 @@ def run(args: argparse.Namespace) -> int:
         if args.duration < 30 or args.fs < 50:
             raise UsageError(f"--duration >= 30 s and --fs >= 50 Hz needed, got {args.duration}, "
                              f"{args.fs}")
-        s = damper_wear(model, duration=args.duration, fs=args.fs, seed=args.seed,
-                        c_end_fraction=args.wear_to)
+        # with the road unknown the stream is what a production car sends: body
+        # accelerations and ride heights, no road
+        make = production_wear if args.road == "unknown" else damper_wear
+        s = make(model, duration=args.duration, fs=args.fs, seed=args.seed,
+                 c_end_fraction=args.wear_to)
         t, data = s.t, s.data
         truth: dict[str, Any] | None = dict(s.truth)
         base = dict(s.nominal)
@@ -107,23 +144,17 @@ def run(args: argparse.Namespace) -> int:
     out, recs = compare(model, t, data, truth, fix=fix, nominal=nominal, init=init,
                         alert_drop=args.alert_drop, window=args.window, step=args.step,
                         ekf_params=aug, ekf_q=args.ekf_q, ekf_decimate=args.ekf_decimate,
-                        forecast_horizon=args.forecast_horizon, source=source)
+                        forecast_horizon=args.forecast_horizon, source=source, road=args.road)
     if args.plot:
         if args.param not in out["nominal"]:
             raise UsageError(f"--param {args.param}: not a monitored parameter "
                              f"({', '.join(out['nominal'])})")
         plot(args.plot, t, truth, recs, args.param, out["nominal"][args.param], args.alert_drop)
         out["plot"] = args.plot
+    for w in out.get("warnings", []):
+        sys.stderr.write(f"warning: {w}\n")
     if args.json:
         print_json(out)
     else:
-        for name, key in (("Nelder-Mead windows", "nm"), ("EKF", "ekf_result")):
-            r = out[key]
-            sys.stdout.write(f"{name}: {r['estimates']} estimates, "
-                             f"{r['cpu_us_per_sample']:.1f} us CPU/sample\n")
-            if r.get("held"):
-                for k, why in r["held"].items():
-                    sys.stdout.write(f"  holds {k}: {why}\n")
-            for k, m in r["params"].items():
-                sys.stdout.write(f"  {k}: " + ", ".join(f"{a}={b}" for a, b in m.items()) + "\n")
+        sys.stdout.write(comparison_table(out))
     return 0

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
 
 from suspid.can.options import add_can_arguments, add_receive_arguments, can_inputs
-from suspid.cli._args import add_offset_option
+from suspid.cli._args import add_offset_option, add_road_option
 from suspid.cli._common import add_model_option, assignment_warnings, parse_assignments, print_json
 from suspid.errors import UsageError
 from suspid.models import get_model
@@ -65,6 +65,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--jsonl", action="store_true",
                    help="print JSON lines (one object per line); without it, one readable line "
                         "per window")
+    add_road_option(p)
     w = p.add_argument_group("windows (defaults from the model's modes; docs/monitoring.md)")
     w.add_argument("--window", type=float, default=None, metavar="S",
                    help="window length (s); a window and two steps span at most 1000 s")
@@ -255,7 +256,8 @@ def run(args: argparse.Namespace) -> int:
         decimate=args.decimate, inspection=not args.no_inspection,
         forecast_horizon=args.forecast_horizon, ekf_params=ekf_params, ekf_q=args.ekf_q,
         ekf_decimate=args.ekf_decimate, accel_channel=args.accel_channel,
-        oo_method=getattr(args, "oo_method", None) or "carma")
+        oo_method=getattr(args, "oo_method", None) or "carma",
+        road=None if args.output_only else args.road)
     warn(spec)
     for msg in assignment_warnings(args, model):
         sys.stderr.write(f"warning: {msg}\n")

@@ -29,6 +29,9 @@ def _channel_specs(db, model_name):
 @pytest.mark.parametrize("model_name", list(MODELS))
 def test_round_trip_within_half_a_step(db, model_name):
     specs = _channel_specs(db, model_name)
+    m = get_model(model_name)
+    # every contract channel: motions, ride heights (body accelerations among them), roads
+    assert set(specs) == set(m.channels) | set(m.ride_height_channels) | set(m.input_names)
     enc = SensorEncoder(db, model_name, list(specs))
 
     @settings(max_examples=150, deadline=None)

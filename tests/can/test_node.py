@@ -155,6 +155,7 @@ def test_node_cli_virtual_with_log(tmp_path, capsys):
     (["--scenario", "flood"], "invalid choice"),
     (["--scenario", "bump", "--interface", "udp_multicast"], "not supported"),
     (["--scenario", "bump", "--channels", "x1,x7"], "x7"),
+    (["--scenario", "bump", "--channels", "production,x9"], "or a set (production, accelerometers)"),
     (["--scenario", "bump", "--fault", "stuck=x9:1:1"], "x9"),
     (["--scenario", "bump", "--interface", "nosuchbus"], "cannot open CAN interface"),
 ])

@@ -40,3 +40,20 @@ def test_bench_monitor_evaluations_times_lean_and_core_on_every_model() -> None:
         assert row["lean_fallbacks"] == 0
         assert row["lean_us"] > 0 and row["core_us"] > 0
         assert row["core_over_lean"] == round(row["core_us"] / row["lean_us"], 2)
+
+
+def test_bench_roadfree_reports_both_roads_side_by_side() -> None:
+    r = subprocess.run([sys.executable, str(REPO / "tools" / "bench_roadfree.py"), "--duration",
+                        "30", "--record", "8", "--repeat", "1", "--json"],
+                       capture_output=True, text=True, timeout=600, cwd=REPO)
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    for key in ("nm/measured", "nm/unknown", "ekf/measured", "ekf/unknown"):
+        row = out["monitor"][key]
+        assert row["estimates"] == 19 and row["cpu_us_per_sample"] > 0
+        assert row["c1_rmse_pct"] < 5.0
+    idf = out["identify"]
+    for road in ("measured", "unknown"):
+        assert idf[road]["wall_s_end_to_end"] > 0 and abs(idf[road]["c1"] / 1500.0 - 1) < 0.05
+    assert idf["fit_measured_over_unknown"] == round(idf["measured"]["fit_s"]
+                                                     / idf["unknown"]["fit_s"], 1)

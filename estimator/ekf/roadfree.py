@@ -1,0 +1,441 @@
+"""The EKF baseline with the road unknown: the body equations, filtered sample by sample.
+
+The sliding window with the road unknown (:mod:`estimator.stream.roadfree`) fits each
+window's body equations ``M_b q_b'' = -sum_i g_i (c_i d_i' + k_i d_i)`` on the body
+accelerations and the ride heights ``d_i``. The fair EKF gets exactly that information and
+the same equations:
+
+state
+    every strut's extension ``d_i`` and its rate ``d_i'`` (the rate is a state: no
+    derivative of a noisy channel is taken), one zero offset ``b_j`` per body
+    acceleration channel (a slow random walk: a body accelerometer's zero and the static
+    load on the springs, which the window's band leaves out by starting at its bin 3), and
+    the free struts' dampers and springs as relative random-walk states ``theta_p = p /
+    p_start`` (``q_param``, as the road-measured EKF).
+prediction
+    linear: ``d <- d + h d'`` with a white deflection acceleration of the variance the first
+    window's ride heights show (their second difference, less its noise part), the
+    offsets and the parameters unchanged (their random walks in ``Q``).
+measurements
+    the ride heights (linear, their noise floor or DBC quantization as ``R``), their
+    rates when the stream carries them, and the body accelerations
+    ``-M_b^-1 G (c o d' + k o d) + b`` (nonlinear: products of a parameter and a state; the
+    analytic Jacobian), ``R`` from their noise floor.
+
+Why this and not the road as a random-walk state of the full model: the road enters the
+full model only through the tyres, so that filter would also need the wheel masses and the
+tyre springs and dampers, which the record cannot determine without the road (they would be
+held at guesses the window never uses), and a random-walk road prior besides. The
+deflection states need neither: the same channels and the same equations as the window.
+
+Start, consistency (NIS per window and its band), gaps (the deflection states restart from
+the ride heights after a jump in the time base) and the events are those of
+:class:`estimator.ekf.stream.EKFWindowEstimator`.
+"""
+from __future__ import annotations
+
+import math
+import time
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+from filterpy.kalman import ExtendedKalmanFilter
+from scipy.stats import chi2
+
+from estimator.ekf.filter import EKFTuning
+from estimator.identify import Parameters
+from estimator.identify.roadfree import fit_road_unknown
+from estimator.stream.events import Estimate
+from estimator.stream.monitor import StepResult
+from estimator.stream.wear_streams import channel_resolution
+from estimator.stream.window import noise_floor
+from suspid.errors import InputError
+from suspid.io.csvio import Measurement
+from suspid.models.base import FloatArray, SuspensionModel
+from suspid.simulate import uniform_step
+
+#: random walk of the body accelerations' zero offsets (m/s^2 per sqrt(s))
+Q_OFFSET = 1e-3
+#: initial standard deviation of the zero offsets (m/s^2)
+P0_OFFSET = 1.0
+#: a step longer than this many sample steps is a gap: the deflection states restart
+GAP_STEPS = 1.5
+
+
+class BodyEquationEKF(ExtendedKalmanFilter):
+    """filterpy EKF on the body equations: deflections and their rates, offsets, struts.
+
+    Parameters
+    ----------
+    model : SuspensionModel
+    params : mapping
+        Every parameter (SI): masses and inertias of the body rows, held struts, and the
+        start values of ``augmented``.
+    augmented : sequence of str
+        Strut dampers and springs the filter estimates (relative random-walk states).
+    channels : sequence of str
+        Measured channels: body accelerations (``x1_ddot``, ``delta_ddot``, ...), ride
+        heights (``d``, ``d1``, ...) and their rates (``d_dot``, ...).
+    dt : float
+        Filter step (s).
+    tuning : EKFTuning
+        ``q_param``, ``p0_param``, ``p0_pos``, ``p0_vel`` apply.
+    accel_var : ndarray
+        Per strut, the variance of its deflection acceleration ((m/s^2)^2): the process
+        noise of the rate states.
+
+    Raises
+    ------
+    InputError
+        When a strut's ride height or every body acceleration is missing.
+    """
+
+    def __init__(self, model: SuspensionModel, params: Mapping[str, float],
+                 augmented: Sequence[str], channels: Sequence[str], dt: float,
+                 tuning: EKFTuning, accel_var: FloatArray) -> None:
+        p = dict(model.defaults(), **dict(params))
+        self.model = model
+        self.params = p
+        self.tuning = tuning
+        self.dt = float(dt)
+        sites = model.strut_sites(p)
+        heights = model.ride_heights
+        missing = [h for h in heights if h not in channels]
+        if missing:
+            raise InputError(f"road unknown: the EKF needs every strut's ride height; the stream "
+                             f"lacks {', '.join(missing)} (channels: {', '.join(channels)})")
+        rows = [j for j in model.body_rows(p) if f"{model.coords[j]}_ddot" in channels]
+        if not rows:
+            raise InputError(f"road unknown: the EKF needs a body acceleration "
+                             f"({', '.join(model.coords[j] + '_ddot' for j in model.body_rows(p))}); "
+                             f"the stream has {', '.join(channels)}")
+        ns, nb = len(sites), len(rows)
+        M = model.matrices(p)[0]
+        #: body accelerations = -W (c o d' + k o d) + b, W = M_bb^-1 G_b
+        G = np.array([[float(s.g[j]) for s in sites] for j in rows])
+        self.W = np.linalg.solve(M[np.ix_(rows, rows)], G)
+        self.aug = list(augmented)
+        self.c_idx = {s.c_name: i for i, s in enumerate(sites) if s.c_name}
+        self.k_idx = {s.k_name: i for i, s in enumerate(sites) if s.k_name}
+        self.nominal = np.array([float(p[k]) for k in self.aug])
+        self.ns, self.nb = ns, nb
+        self.nx = 2 * ns + nb
+        nz = self.nx + len(self.aug)
+        self.channels = ([f"{model.coords[j]}_ddot" for j in rows] + list(heights)
+                         + [f"{h}_dot" for h in heights if f"{h}_dot" in channels])
+        super().__init__(dim_x=nz, dim_z=len(self.channels))
+        h = self.dt
+        F = np.eye(nz)
+        F[:ns, ns:2 * ns] = h * np.eye(ns)
+        self.F = F
+        Q = np.zeros((nz, nz))
+        a = np.asarray(accel_var, dtype=float)
+        Q[:ns, :ns] = np.diag(a * h ** 4 / 4.0)
+        Q[:ns, ns:2 * ns] = Q[ns:2 * ns, :ns] = np.diag(a * h ** 3 / 2.0)
+        Q[ns:2 * ns, ns:2 * ns] = np.diag(a * h ** 2)
+        Q[2 * ns:self.nx, 2 * ns:self.nx] = np.eye(nb) * Q_OFFSET ** 2 * h
+        Q[self.nx:, self.nx:] = np.eye(len(self.aug)) * tuning.q_param ** 2 * h
+        self.Q = Q
+        self.P = np.diag([tuning.p0_pos ** 2] * ns + [tuning.p0_vel ** 2] * ns
+                         + [P0_OFFSET ** 2] * nb + [tuning.p0_param ** 2] * len(self.aug))
+        self.x = np.concatenate([np.zeros(self.nx), np.ones(len(self.aug))])[:, None]
+        self._I = np.eye(nz)
+        self.nis_sum = 0.0
+        self.nis_dof = 0
+        # the linear rows of H: ride heights and their rates
+        H0 = np.zeros((len(self.channels), nz))
+        for r, c in enumerate(self.channels[nb:], start=nb):
+            base = c.removesuffix("_dot")
+            i = heights.index(base)
+            H0[r, i if c == base else ns + i] = 1.0
+        for r in range(nb):
+            H0[r, 2 * ns + r] = 1.0
+        self._H0 = H0
+
+    def struts(self, z: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Every strut's damper and spring (SI) at state ``z``."""
+        c = np.zeros(self.ns)
+        k = np.zeros(self.ns)
+        for name, i in self.c_idx.items():
+            c[i] = self.params[name]
+        for name, i in self.k_idx.items():
+            k[i] = self.params[name]
+        for j, name in enumerate(self.aug):
+            v = self.nominal[j] * z[self.nx + j]
+            if name in self.c_idx:
+                c[self.c_idx[name]] = v
+            else:
+                k[self.k_idx[name]] = v
+        return c, k
+
+    def hx_jac(self, z: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Predicted measurement at state ``z`` and its Jacobian."""
+        ns, nb = self.ns, self.nb
+        d, v = z[:ns], z[ns:2 * ns]
+        c, k = self.struts(z)
+        H = self._H0.copy()
+        y = H @ z
+        y[:nb] += -self.W @ (c * v + k * d)
+        H[:nb, :ns] = -self.W * k[None, :]
+        H[:nb, ns:2 * ns] = -self.W * c[None, :]
+        for j, name in enumerate(self.aug):
+            if name in self.c_idx:
+                i = self.c_idx[name]
+                H[:nb, self.nx + j] = -self.W[:, i] * self.nominal[j] * v[i]
+            else:
+                i = self.k_idx[name]
+                H[:nb, self.nx + j] = -self.W[:, i] * self.nominal[j] * d[i]
+        return y, H
+
+    def step(self, y: FloatArray) -> None:
+        """Predict one step and update with measurement ``y`` (NaN entries left out);
+        Joseph form, as :meth:`estimator.ekf.filter.AugmentedEKF.update`."""
+        self.x = self.F @ self.x
+        self.P = self.F @ self.P @ self.F.T + self.Q
+        zz = np.asarray(y, dtype=float)
+        ok = np.isfinite(zz)
+        if not ok.any():
+            return
+        hx, H = self.hx_jac(self.x[:, 0])
+        Rm = np.asarray(self.R, dtype=float)
+        if not ok.all():
+            H, hx, zz, Rm = H[ok], hx[ok], zz[ok], Rm[np.ix_(ok, ok)]
+        PHT = self.P @ H.T
+        S = H @ PHT + Rm
+        K = np.linalg.solve(S, PHT.T).T
+        e = zz - hx
+        self.x = self.x + (K @ e)[:, None]
+        I_KH = self._I - K @ H
+        self.P = I_KH @ self.P @ I_KH.T + K @ Rm @ K.T
+        self.nis_sum += float(e @ np.linalg.solve(S, e))
+        self.nis_dof += int(e.size)
+
+    def param_values(self) -> dict[str, float]:
+        """Every parameter (SI), the augmented ones from the state."""
+        out = dict(self.params)
+        for j, k in enumerate(self.aug):
+            out[k] = float(self.nominal[j] * self.x[self.nx + j, 0])
+        return out
+
+    def param_stderr(self) -> dict[str, float]:
+        """Standard deviation of each augmented parameter (SI)."""
+        d = np.sqrt(np.clip(np.diag(self.P)[self.nx:], 0.0, None))
+        return {k: float(self.nominal[j] * d[j]) for j, k in enumerate(self.aug)}
+
+
+class RoadFreeEKFEstimator:
+    """The body-equation EKF fed window by window (module docstring).
+
+    Parameters
+    ----------
+    model : SuspensionModel
+    params : Parameters
+        Held values and the start values of the free parameters (SI); the free ones are
+        the filter's augmented states.
+    channels : sequence of str
+        Channels in the stream.
+    tuning : EKFTuning
+    decimate : int
+        Filter every ``decimate``-th sample.
+    first_window : sequence of str
+        Free parameters started from the first window's road-unknown fit (their start not
+        given), as the road-measured EKF starts from the first window's sliding-window fit.
+    nis_level, nis_tolerance : float
+        The NIS band (as :class:`estimator.ekf.stream.EKFWindowEstimator`).
+    """
+
+    name = "ekf"
+    road = "unknown"
+    own_track = True
+    lag = 0.0
+    overlap = 1.0
+
+    def __init__(self, model: SuspensionModel, params: Parameters, channels: Sequence[str],
+                 tuning: EKFTuning, decimate: int = 1, first_window: Sequence[str] = (),
+                 nis_level: float = 0.999, nis_tolerance: float = 1.5) -> None:
+        self.model = model
+        self.params = params.copy()
+        self.channels = list(channels)
+        self.tuning = tuning
+        self.decimate = max(1, int(decimate))
+        self.first_window = list(first_window)
+        self.nis_level = nis_level
+        self.nis_tolerance = nis_tolerance
+        self.ekf: BodyEquationEKF | None = None
+        self.t_last = -math.inf
+        self._t_seen = -math.inf
+        self._phase = 0
+        self.h = math.nan
+        self.samples = 0
+        self.cpu = 0.0
+        self.restarts = 0
+        self.gap_s = 0.0
+        self.nis_windows_out = 0
+        self._nis0 = (0.0, 0)
+        self.start_from: dict[str, float] = {}
+        self.note = ""
+
+    def _start(self, t: FloatArray, data: Mapping[str, FloatArray]) -> BodyEquationEKF:
+        model = self.model
+        if self.first_window:
+            meas = Measurement(np.asarray(t, dtype=float), {},
+                               {c: np.asarray(v, dtype=float) for c, v in data.items()
+                                if c not in model.input_names}, source="window")
+            res = fit_road_unknown(model, meas, self.params)
+            for k in self.first_window:
+                if k in res.stderr:
+                    self.params[k].value = float(res.params[k])
+                    self.start_from[k] = float(res.params[k])
+                else:
+                    self.note = (f"first window did not determine {k}; the EKF starts it from "
+                                 f"{self.params[k].value:g} {model.spec(k).unit}")
+        h = uniform_step(t) or float(np.median(np.diff(t)))
+        self.h = h
+        dt = h * self.decimate
+        res_q = channel_resolution(model.name)
+        # deflection acceleration variance at the filter's step, less the noise part
+        acc_var = []
+        for name in model.ride_heights:
+            dv = np.asarray(data.get(name, np.zeros(0)), dtype=float)[::self.decimate]
+            dv = dv[np.isfinite(dv)]
+            if dv.size < 10:
+                acc_var.append(1.0)
+                continue
+            a = np.diff(dv, 2) / dt ** 2
+            nf = noise_floor(np.asarray(data[name], dtype=float))
+            s = max(nf if math.isfinite(nf) else 0.0, res_q.get(name, 0.0) / math.sqrt(12.0))
+            acc_var.append(max(float(np.var(a)) - 6.0 * s * s / dt ** 4, 0.1 * float(np.var(a)),
+                               1e-6))
+        aug = list(self.params.free)
+        ekf = BodyEquationEKF(model, self.params.valuesdict(), aug, self.channels, dt,
+                              self.tuning, np.array(acc_var))
+        sig = []
+        for c in ekf.channels:
+            nf = noise_floor(np.asarray(data[c], dtype=float))
+            q = res_q.get(c, 0.0) / math.sqrt(12.0)
+            sig.append(max(nf if math.isfinite(nf) else 0.0, q, 1e-9))
+        ekf.R = np.diag(np.square(sig))
+        self._init_motion(ekf, data, 0)
+        return ekf
+
+    def _init_motion(self, ekf: BodyEquationEKF, data: Mapping[str, FloatArray], k: int) -> None:
+        """Deflections and rates from the ride heights at sample ``k`` (central difference
+        for the rate without a ``_dot`` channel), the initial covariance of the motion."""
+        ns = ekf.ns
+        tu = self.tuning
+        for i, name in enumerate(self.model.ride_heights):
+            y = np.asarray(data[name], dtype=float)[k:k + 3]
+            if y.size and np.isfinite(y[0]):
+                ekf.x[i, 0] = y[0]
+            if y.size > 2 and np.all(np.isfinite(y)):
+                ekf.x[ns + i, 0] = (y[2] - y[0]) / (2 * self.h)
+            v = data.get(f"{name}_dot")
+            if v is not None and k < len(v) and np.isfinite(v[k]):
+                ekf.x[ns + i, 0] = float(v[k])
+        P = ekf.P.copy()
+        P[:2 * ns, :] = 0.0
+        P[:, :2 * ns] = 0.0
+        P[:2 * ns, :2 * ns] = np.diag([tu.p0_pos ** 2] * ns + [tu.p0_vel ** 2] * ns)
+        ekf.P = P
+
+    def process(self, t: FloatArray, data: Mapping[str, FloatArray]) -> StepResult:
+        """Filter the window's new samples; report the struts at the window end."""
+        c0 = time.process_time()
+        if self.ekf is None:
+            self.ekf = self._start(t, data)
+        ekf = self.ekf
+        new = t > self.t_last + 1e-12
+        tn = t[new]
+        gaps: list[str] = []
+        if tn.size:
+            Y = np.column_stack([np.asarray(data[c], dtype=float)[new] if c in data
+                                 else np.full(tn.size, np.nan) for c in ekf.channels])
+            dnew = {c: np.asarray(data[c], dtype=float)[new] for c in self.model.ride_height_channels
+                    if c in data}
+            limit = GAP_STEPS * self.h
+            first = self.samples == 0 and self._t_seen == -math.inf
+            for k in range(tn.size):
+                tk = float(tn[k])
+                if first:
+                    first = False
+                    self._t_seen = tk
+                    continue
+                if tk - self._t_seen > limit:
+                    gap = tk - self._t_seen
+                    self._init_motion(ekf, dnew, k)
+                    ekf.P[ekf.nx:, ekf.nx:] += (np.eye(len(ekf.aug)) * self.tuning.q_param ** 2
+                                                * gap)
+                    self.restarts += 1
+                    self.gap_s += gap
+                    gaps.append(f"gap in the data from t={self._t_seen:.4f} s to t={tk:.4f} s "
+                                f"({gap:.4g} s): the EKF's deflection states restarted from the "
+                                "ride heights after it")
+                    self._t_seen = tk
+                    self._phase = 0
+                    continue
+                self._t_seen = tk
+                self._phase = (self._phase + 1) % self.decimate
+                if self._phase:
+                    continue
+                ekf.step(Y[k])
+                self.samples += 1
+            self.t_last = float(tn[-1])
+        cpu = time.process_time() - c0
+        self.cpu += cpu
+        vals = ekf.param_values()
+        se = ekf.param_stderr()
+        ok = all(math.isfinite(vals[k]) and vals[k] > 0 for k in ekf.aug)
+        warns = [] if ok else ["EKF parameter state left the physical range"]
+        s0, n0 = self._nis0
+        dof = ekf.nis_dof - n0
+        nis = (ekf.nis_sum - s0) / dof if dof > 0 else float("nan")
+        self._nis0 = (ekf.nis_sum, ekf.nis_dof)
+        lo = hi = float("nan")
+        if dof > 0:
+            a = (1.0 - self.nis_level) / 2.0
+            lo = float(chi2.ppf(a, dof)) / dof / self.nis_tolerance
+            hi = float(chi2.ppf(1.0 - a, dof)) / dof * self.nis_tolerance
+            if not lo <= nis <= hi:
+                self.nis_windows_out += 1
+                warns.append(f"EKF inconsistent: mean normalised innovation squared {nis:.3g} "
+                             f"per degree of freedom outside [{lo:.3g}, {hi:.3g}]")
+        if self.note:
+            warns.append(self.note)
+            self.note = ""
+        warns.extend(gaps)
+        info: dict[str, Any] = {"road": "unknown", "samples": self.samples, "cpu_ms": 1e3 * cpu,
+                                "augmented": list(ekf.aug), "nis": nis, "nis_band": [lo, hi],
+                                "warnings": warns}
+        if gaps:
+            info["gaps"] = len(gaps)
+        if self.start_from:
+            info["start_from_first_window"] = dict(self.start_from)
+        ev = Estimate(float(t[-1]), float(t[0]), self.name, vals, se, info=info)
+        return StepResult(ev, vals if ok else None, se if ok else None)
+
+    def summary(self) -> dict[str, Any]:
+        """Samples filtered, CPU time, consistency, restarts."""
+        ekf = self.ekf
+        return {"road": "unknown", "samples": self.samples, "cpu_s": self.cpu,
+                "cpu_us_per_sample": 1e6 * self.cpu / self.samples if self.samples else None,
+                "augmented": list(ekf.aug) if ekf is not None else [], "held": {},
+                "nis": (ekf.nis_sum / ekf.nis_dof) if ekf is not None and ekf.nis_dof else None,
+                "nis_windows_inconsistent": self.nis_windows_out,
+                "restarts": self.restarts, "gap_s": self.gap_s}
+
+
+def make_roadfree_ekf_estimator(spec: Any, channels: list[str], fs: float) -> RoadFreeEKFEstimator:
+    """The road-unknown EKF of a :class:`~estimator.stream.pipeline.MonitorSpec`: every free
+    strut damper and spring in the state (``--ekf-params`` narrows it, the others held)."""
+    params = spec.params.copy()
+    if spec.ekf_params:
+        for k in params.free:
+            if k not in spec.ekf_params:
+                params[k].vary = False
+    tun = EKFTuning()
+    if spec.ekf_q is not None:
+        tun.q_param = spec.ekf_q
+    dec = spec.ekf_decimate or max(1, int(math.floor(fs / 250.0 + 1e-9)))
+    unknown = [k for k in params.free if k not in spec.start_given]
+    return RoadFreeEKFEstimator(spec.model, params, channels, tun, decimate=dec,
+                                first_window=unknown)
