@@ -44,8 +44,10 @@ def live_monitor(out: Path) -> tuple[list[dict], dict, float]:
     from firmware_sim.transport import open_bus
 
     channel = f"suspid-demo-{os.getpid()}"
+    # the sensors of a production car: body acceleration and ride height, never the road
     node = SensorNode(NodeConfig(model="quarter2", scenario="damper-wear", duration=DURATION,
-                                 wear_start=WEAR_START, wear_to=WEAR_TO, seed=1))
+                                 wear_start=WEAR_START, wear_to=WEAR_TO, seed=1,
+                                 channels=["production"]))
     crossing = WEAR_START + 0.3 / (1 - WEAR_TO) * (DURATION - WEAR_START)
     node_bus = open_bus("virtual", channel)
     summary: dict = {}
@@ -71,7 +73,8 @@ def live_monitor(out: Path) -> tuple[list[dict], dict, float]:
     alert_file.unlink(missing_ok=True)
     try:
         text = run_cli(["monitor", "--model", "quarter2", "--interface", "virtual", "--channel",
-                        channel, *FIX, "--jsonl", "--idle-timeout", "3", "--alert-file",
+                        channel, *FIX, "--road", "unknown", "--jsonl", "--idle-timeout", "3",
+                        "--alert-file",
                         str(alert_file)])
         monitor_done.set()
         th.join(30)
@@ -85,7 +88,8 @@ def live_monitor(out: Path) -> tuple[list[dict], dict, float]:
 def main(out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
     w = sys.stdout.write
-    w(f"1) sensor node -> virtual CAN bus -> suspid monitor ({DURATION:.0f} s of data at 8x real time)\n")
+    w(f"1) sensor node (body acceleration + ride height, no road) -> virtual CAN bus -> "
+      f"suspid monitor --road unknown ({DURATION:.0f} s of data at 8x real time)\n")
     events, node_summary, crossing = live_monitor(out)
     est = [e for e in events if e["type"] == "estimate"]
     alerts = [e for e in events if e["type"] == "alert"]
@@ -112,6 +116,7 @@ def main(out: Path) -> None:
     w("2) sliding-window Nelder–Mead vs filterpy EKF on the same stream (suspid compare)\n")
     cmp = json.loads(run_cli(["compare", "--model", "quarter2", "--scenario", "damper-wear",
                               "--duration", str(DURATION), "--wear-to", str(WEAR_TO), *FIX,
+                              "--road", "unknown",
                               "--plot", str(out / "compare-c1.png"), "--json"]))
     w(f"   {'':22}{'Nelder-Mead':>14}{'EKF':>12}\n")
     nm, ekf = cmp["nm"], cmp["ekf_result"]
