@@ -46,6 +46,7 @@ from dataclasses import dataclass
 from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
+from scipy.stats import chi2
 from filterpy.kalman import ExtendedKalmanFilter
 
 from suspid.errors import UsageError
@@ -436,3 +437,33 @@ class AugmentedEKF(ExtendedKalmanFilter):
         """
         self.predict_step(u0, u1)
         self.update(y, self.HJ, self.hx, args=(u1,), hx_args=(u1,))
+
+
+def window_nis(nis_sum: float, nis_dof: int, before: tuple[float, int], level: float,
+               tolerance: float) -> tuple[float, int, float, float, str | None]:
+    """The mean normalised innovation squared per degree of freedom since ``before`` (the
+    filter's running ``(nis_sum, nis_dof)`` at the previous window) and its consistency band.
+
+    Returns
+    -------
+    nis, dof, lo, hi : float, int, float, float
+        The window's mean NIS per dof, its dof, and the ``level`` chi-square band per dof
+        widened ``tolerance`` times (NaN without innovations).
+    warning : str or None
+        One sentence when ``nis`` lies outside the band: the filter no longer fits the data.
+    """
+    s0, n0 = before
+    dof = nis_dof - n0
+    nis = (nis_sum - s0) / dof if dof > 0 else float("nan")
+    lo = hi = float("nan")
+    warning = None
+    if dof > 0:
+        a = (1.0 - level) / 2.0
+        lo = float(chi2.ppf(a, dof)) / dof / tolerance
+        hi = float(chi2.ppf(1.0 - a, dof)) / dof * tolerance
+        if not lo <= nis <= hi:
+            warning = (f"EKF inconsistent: mean normalised innovation squared {nis:.3g} per "
+                       f"degree of freedom outside [{lo:.3g}, {hi:.3g}] ({100 * level:g} % band "
+                       f"of {dof} dof, widened {tolerance:g}x); the filter no longer fits the "
+                       "data and its stderr is not to be trusted")
+    return nis, dof, lo, hi, warning

@@ -51,9 +51,8 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from scipy.stats import chi2
 
-from estimator.ekf.filter import AugmentedEKF, EKFTuning
+from estimator.ekf.filter import AugmentedEKF, EKFTuning, window_nis
 from estimator.identify import Parameters
 from estimator.stream.config import WindowConfig, default_decimation
 from estimator.stream.events import Estimate
@@ -390,22 +389,12 @@ class EKFWindowEstimator:
         se = ekf.param_stderr()
         ok = all(math.isfinite(v) and v > 0 for v in vals.values())
         warns = [] if ok else ["EKF parameter state left the physical range"]
-        s0, n0 = self._nis0
-        dof = ekf.nis_dof - n0
-        nis = (ekf.nis_sum - s0) / dof if dof > 0 else float("nan")
+        nis, dof, lo, hi, nis_warning = window_nis(ekf.nis_sum, ekf.nis_dof, self._nis0,
+                                                   self.nis_level, self.nis_tolerance)
         self._nis0 = (ekf.nis_sum, ekf.nis_dof)
-        lo = hi = float("nan")
-        if dof > 0:
-            a = (1.0 - self.nis_level) / 2.0
-            lo = float(chi2.ppf(a, dof)) / dof / self.nis_tolerance
-            hi = float(chi2.ppf(1.0 - a, dof)) / dof * self.nis_tolerance
-            if not lo <= nis <= hi:
-                self.nis_windows_out += 1
-                warns.append(f"EKF inconsistent: mean normalised innovation squared {nis:.3g} "
-                             f"per degree of freedom outside [{lo:.3g}, {hi:.3g}] "
-                             f"({100 * self.nis_level:g} % band of {dof} dof, widened "
-                             f"{self.nis_tolerance:g}x); the filter no "
-                             "longer fits the data and its stderr is not to be trusted")
+        if nis_warning is not None:
+            self.nis_windows_out += 1
+            warns.append(nis_warning)
         if self.held_note and self.samples == 0:
             warns.append(self.held_note)
         warns.extend(gaps)
