@@ -88,17 +88,42 @@ class Trend:
 
 @dataclass
 class Forecast:
-    """When a falling trend crosses its limit (epoch s, 90 % interval)."""
+    """When a falling trend crosses its limit (epoch s, 90 % interval).
+
+    Attributes
+    ----------
+    crossing_t, crossing_t_low, crossing_t_high : float
+        The predicted crossing and its interval (epoch s), never before ``t_latest``.
+    limit : float
+        The limit (SI).
+    level : float
+        Two-sided level of the interval.
+    t_latest : float
+        Epoch s of the vehicle's latest drive, from which ``days`` count (NaN: unknown).
+    """
 
     crossing_t: float
     crossing_t_low: float
     crossing_t_high: float
     limit: float
     level: float = 0.90
+    t_latest: float = math.nan
 
-    def to_json(self) -> dict[str, float]:
-        return {"crossing_t": self.crossing_t, "crossing_t_low": self.crossing_t_low,
-                "crossing_t_high": self.crossing_t_high, "limit": self.limit}
+    def days(self) -> tuple[float, float, float]:
+        """The crossing and its interval in days after the latest drive."""
+        return ((self.crossing_t - self.t_latest) / DAY_S,
+                (self.crossing_t_low - self.t_latest) / DAY_S,
+                (self.crossing_t_high - self.t_latest) / DAY_S)
+
+    def to_json(self) -> dict[str, float | None]:
+        """``crossing_t``, ``crossing_t_low``, ``crossing_t_high`` (epoch s), ``limit``, and
+        ``days``, ``days_low``, ``days_high`` after the latest drive."""
+        out: dict[str, float | None] = {
+            "crossing_t": self.crossing_t, "crossing_t_low": self.crossing_t_low,
+            "crossing_t_high": self.crossing_t_high, "limit": self.limit}
+        for k, d in zip(("days", "days_low", "days_high"), self.days()):
+            out[k] = round(d, 3) if math.isfinite(d) else None
+        return out
 
 
 def _wls(x: np.ndarray, v: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -234,9 +259,21 @@ def _random_effects(x: np.ndarray, v: np.ndarray, s: np.ndarray, floor: float
     return beta, M, hi
 
 
-def forecast_crossing(trend: Trend | None, limit: float, level: float = 0.90
-                      ) -> Forecast | None:
+def forecast_crossing(trend: Trend | None, limit: float, level: float = 0.90,
+                      not_before: float | None = None) -> Forecast | None:
     """Date a falling trend crosses ``limit``, with Fieller's ``level`` interval.
+
+    Parameters
+    ----------
+    trend : Trend or None
+    limit : float
+        The limit (SI).
+    level : float
+        Two-sided level of the interval.
+    not_before : float, optional
+        Epoch s of the vehicle's latest drive (default the trend's): the crossing and both
+        ends of its interval are never before it (a line already at the limit crosses "at
+        the latest drive", never in the past).
 
     Returns
     -------
@@ -255,5 +292,6 @@ def forecast_crossing(trend: Trend | None, limit: float, level: float = 0.90
     if fc is None:
         return None
     tc, lo, hi = fc
-    return Forecast(trend.t_ref + tc * DAY_S, trend.t_ref + lo * DAY_S, trend.t_ref + hi * DAY_S,
-                    float(limit), level)
+    t0 = trend.t_ref if not_before is None else max(float(not_before), trend.t_ref)
+    return Forecast(max(trend.t_ref + tc * DAY_S, t0), max(trend.t_ref + lo * DAY_S, t0),
+                    max(trend.t_ref + hi * DAY_S, t0), float(limit), level, t0)
