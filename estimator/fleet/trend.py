@@ -127,11 +127,24 @@ class Forecast:
 
 
 def _wls(x: np.ndarray, v: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    X = np.column_stack([np.ones_like(x), x])
-    XtW = X.T * w
-    M = XtW @ X
-    beta = np.linalg.solve(M, XtW @ v)
-    return beta, M
+    """Weighted least-squares line ``v = b0 + b1 x``: ``(b0, b1)`` and the normal matrix
+    ``X'WX`` (the 2x2 system solved in closed form: a fleet fits one per parameter per
+    vehicle, thousands of times per report)."""
+    wx = w * x
+    s0, s1, s2 = float(np.sum(w)), float(np.sum(wx)), float(np.dot(wx, x))
+    sy, sxy = float(np.dot(w, v)), float(np.dot(wx, v))
+    det = s0 * s2 - s1 * s1
+    M = np.array([[s0, s1], [s1, s2]])
+    if not det > 0.0:
+        raise np.linalg.LinAlgError("singular weighted least-squares line")
+    return np.array([(s2 * sy - s1 * sxy) / det, (s0 * sxy - s1 * sy) / det]), M
+
+
+def _median(a: np.ndarray) -> float:
+    """The median of a small 1-D array (``np.median`` without its overhead)."""
+    b = np.sort(a)
+    n = b.size
+    return float(b[n // 2]) if n % 2 else 0.5 * float(b[n // 2 - 1] + b[n // 2])
 
 
 def theil_sen(x: np.ndarray, v: np.ndarray) -> tuple[float, float]:
@@ -188,8 +201,8 @@ def robust_trend(t: np.ndarray, v: np.ndarray, s: np.ndarray | None = None,
     for c, kind in ((HUBER_C, "huber"), (BISQUARE_C, "bisquare")):
         for _ in range(iterations):
             r = v - (beta[0] + beta[1] * x)
-            mad = MAD_TO_SIGMA * float(np.median(np.abs(r - np.median(r))))
-            tau2 = max(0.0, mad * mad - float(np.median(s * s)))
+            mad = MAD_TO_SIGMA * _median(np.abs(r - _median(r)))
+            tau2 = max(0.0, mad * mad - _median(s * s))
             var = np.maximum(s * s + tau2, floor)
             u = np.abs(r) / np.sqrt(var)
             if kind == "huber":
@@ -200,7 +213,8 @@ def robust_trend(t: np.ndarray, v: np.ndarray, s: np.ndarray | None = None,
             if np.count_nonzero(w) < 2 or np.ptp(x[w > 0]) == 0:
                 break
             new, M = _wls(x, v, w)
-            done = np.allclose(new, beta, rtol=1e-12, atol=0.0)
+            done = (abs(new[0] - beta[0]) <= 1e-12 * abs(beta[0])
+                    and abs(new[1] - beta[1]) <= 1e-12 * abs(beta[1]))
             beta = new
             if done:
                 break

@@ -156,6 +156,14 @@ def _date(t: Any) -> str:
     return datetime.fromtimestamp(t, tz=timezone.utc).strftime("%Y-%m-%d")
 
 
+def _days(fc: dict[str, Any]) -> str:
+    """``; in 41 d, 33 to 52 d`` after the latest drive ('' when unknown)."""
+    d = [fc.get(k) for k in ("days", "days_low", "days_high")]
+    if any(x is None for x in d):
+        return ""
+    return f"; in {d[0]:.0f} d, {d[1]:.0f} to {d[2]:.0f} d"
+
+
 def _print_table(out: dict[str, Any]) -> None:
     w = sys.stdout.write
     ok = sum(1 for d in out["drives"] if d["status"] == "ok")
@@ -166,9 +174,8 @@ def _print_table(out: dict[str, Any]) -> None:
     for v in out["vehicles"]:
         notes = [f"ALERT {k}" for k in v["alerts"]]
         notes += [f"{k} reaches {f['limit']:.4g} on {_date(f['crossing_t'])} "
-                  f"({_date(f['crossing_t_low'])} to {_date(f['crossing_t_high'])}; "
-                  f"in {f['days']:.0f} d, {f['days_low']:.0f} to {f['days_high']:.0f} d)"
-                  for k, f in v["forecast"].items()]
+                  f"({_date(f['crossing_t_low'])} to {_date(f['crossing_t_high'])}"
+                  f"{_days(f)})" for k, f in v["forecast"].items()]
         if v.get("unidentified"):
             notes.append(f"{len(v['unidentified'])} drive(s) not identified")
         w(f"{v['rank']:>4}  {v['vehicle']:<16} {v['risk']:<9} {v['drives']:>6}  "
