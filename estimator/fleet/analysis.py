@@ -1,12 +1,22 @@
 """Per-vehicle history, trends, alerts, forecasts and risk ranking from drive records.
 
+Only ``ok`` drives count (:func:`estimator.fleet.drive.classify`: the identification
+succeeded), and of each only the parameters it determined
+(:func:`estimator.fleet.drive.determined`: free, not ``undetermined`` -- the tyres with the
+road unknown -- and with a standard error): a drive read but not identified
+(``unidentified``) is listed with its reason and never enters a trend, an alert or a
+forecast. The **monitored** parameters are the free dampers and springs (wear); free masses
+and inertias are the drive's **load** (the body mass with a spring held and the road
+unknown: the payload), shown per drive, never trended or alerted.
+
 Alerts follow the monitor's rule (:class:`estimator.alerts.engine.AlertEngine`) with each
 drive as one estimate in time order: a parameter is in alert when the upper one-sided
 confidence bound ``v + z s`` (default 99 %, ``z = 2.326``) of its estimate is below
-``(1 - drop) x nominal`` in ``min_count`` consecutive drives (default 2, so one bad drive
-never raises an alert), and it leaves the alert only when the lower bound is back above
-``(1 - drop + 0.05) x nominal`` in as many drives. A vehicle's ``alerts`` are the parameters
-in alert after its latest drive.
+``(1 - drop) x nominal`` in ``min_count`` consecutive drives (default 1: one drive
+confidently below is enough, as ``monitor`` decides), and it leaves the alert only when the
+lower bound is back above ``(1 - drop + 0.05) x nominal`` in as many drives. A vehicle's
+``alerts`` are the parameters in alert after its latest drive. A parameter in alert has no
+forecast, and no forecast crossing is ever before the vehicle's latest drive.
 """
 from __future__ import annotations
 
@@ -18,6 +28,7 @@ from typing import Any, Iterable
 import numpy as np
 
 from estimator.alerts.engine import AlertConfig, AlertEngine
+from estimator.fleet.drive import determined
 from estimator.fleet.trend import DAY_S, Forecast, Trend, forecast_crossing, robust_trend
 from suspid.models import get_model
 
@@ -35,7 +46,8 @@ class AlertRule:
     z : float
         One-sided normal quantile of the alert bound (2.326: 99 %).
     min_count : int
-        Consecutive drives the condition must hold in.
+        Consecutive drives the condition must hold in (default 1: the latest drive alone
+        raises the alert when it is confidently below the limit).
     level : float
         Two-sided level of the forecast interval.
     horizon_days : float
@@ -47,7 +59,7 @@ class AlertRule:
     nominal: dict[str, float] = field(default_factory=dict)
     drop: float = 0.3
     z: float = 2.326
-    min_count: int = 2
+    min_count: int = 1
     level: float = 0.90
     horizon_days: float = 365.0
 
@@ -117,10 +129,27 @@ class VehicleSummary:
     warnings: list[str] = field(default_factory=list)
     #: constant road or position offsets found in the drives, by column (:func:`sensor_offsets`)
     offsets: dict[str, dict[str, Any]] = field(default_factory=dict)
+    #: drives read but not identified (status ``unidentified``), oldest first
+    unidentified: list[dict[str, Any]] = field(default_factory=list)
+    #: free masses and inertias the drives determine (the load: payload per drive)
+    loads: list[str] = field(default_factory=list)
 
     @property
     def latest(self) -> dict[str, Any] | None:
         return self.drives[-1] if self.drives else None
+
+    def series(self, name: str) -> list[dict[str, Any]]:
+        """The ``ok`` drives that determine ``name`` (oldest first): its trend's points."""
+        return [r for r in self.drives if name in determined(r["result"])]
+
+    def latest_value(self, name: str) -> float | None:
+        """``name``'s estimate in the latest drive that determines it (SI)."""
+        ser = self.series(name)
+        return float(ser[-1]["result"]["params"][name]) if ser else None
+
+    def roads(self) -> dict[str, int]:
+        """Road mode -> number of ``ok`` drives fitted in it."""
+        return dict(Counter(str(r["result"].get("road", "measured")) for r in self.drives))
 
     def sort_key(self) -> tuple[int, float, float, str]:
         """Most at risk first: alerts, then the earliest forecast crossing, then the
@@ -136,17 +165,23 @@ class VehicleSummary:
             return math.inf
         out = math.inf
         for k in self.monitored:
-            v = last["result"]["params"].get(k)
+            v = self.latest_value(k)
             if v is not None and self.nominal[k] > self.limits[k]:
                 out = min(out, (v - self.limits[k]) / (self.nominal[k] - self.limits[k]))
         return out
 
     def to_json(self) -> dict[str, Any]:
+        """The contract's vehicle object (``vehicle``, ``drives``, ``latest``, ``trend``,
+        ``alerts``, ``forecast``), then the rest. ``latest`` holds the parameters the latest
+        drive determined or held; those it left undetermined are in ``latest_undetermined``."""
         last = self.latest
+        res = last["result"] if last else {}
+        known = set(determined(res)) | set(res.get("fixed", [])) if last else set()
         return {
             "vehicle": self.vehicle,
             "drives": len(self.drives),
-            "latest": dict(last["result"]["params"]) if last else None,
+            "latest": ({k: v for k, v in res["params"].items() if k in known} if last
+                       else None),
             "trend": {k: tr.to_json() for k, tr in self.trends.items() if tr is not None},
             "alerts": [a["parameter"] for a in self.alerts],
             "forecast": {k: f.to_json() for k, f in self.forecasts.items()},
@@ -162,6 +197,14 @@ class VehicleSummary:
             "margin": self.margin() if math.isfinite(self.margin()) else None,
             "warnings": list(self.warnings),
             "sensor_offsets": {k: dict(v) for k, v in self.offsets.items()},
+            "latest_undetermined": ([k for k in res["params"] if k not in known] if last
+                                    else []),
+            "unidentified": [{"path": r["path"], "t": r.get("t"), "error": r.get("error")}
+                             for r in self.unidentified],
+            "roads": self.roads(),
+            "loads": {k: [{"t": float(r["t"]), "value": float(r["result"]["params"][k]),
+                           "stderr": r["result"]["stderr"].get(k)} for r in self.series(k)]
+                      for k in self.loads},
         }
 
 
@@ -206,28 +249,56 @@ def _model_of(rec: dict[str, Any]) -> str:
     return str(rec.get("model") or rec["result"]["model"])
 
 
+#: parameter kinds that wear (monitored), and those that are the drive's load
+WEAR_KINDS = ("damping", "stiffness")
+LOAD_KINDS = ("mass", "inertia")
+
+
 def summarize_vehicle(vehicle: str, records: list[dict[str, Any]], rule: AlertRule
                       ) -> VehicleSummary:
-    """History, trends, alerts and forecasts of one vehicle from its drive records."""
-    ok = sorted((r for r in records if r["status"] == "ok" and r.get("result")),
-                key=lambda r: (r["t"], r["path"]))
-    failed = sum(1 for r in records if r["status"] != "ok")
+    """History, trends, alerts and forecasts of one vehicle from its drive records.
+
+    Parameters
+    ----------
+    vehicle : str
+    records : list of dict
+        The vehicle's drive records (any status).
+    rule : AlertRule
+
+    Returns
+    -------
+    VehicleSummary
+        Built from the ``ok`` drives only (module docstring); ``risk`` ``"no data"`` when
+        there is none.
+    """
+    def when(r: dict[str, Any]) -> tuple[float, str]:
+        return (float(r["t"]) if r.get("t") is not None else math.inf, r["path"])
+
+    ok = sorted((r for r in records if r["status"] == "ok" and r.get("result")), key=when)
+    failed = sum(1 for r in records if r["status"] == "failed")
+    unidentified = sorted((r for r in records if r["status"] == "unidentified"), key=when)
     if not ok:
-        return VehicleSummary(vehicle, "", [], failed, [], {}, {}, {}, {}, [], "no data")
+        return VehicleSummary(vehicle, "", [], failed, [], {}, {}, {}, {}, [], "no data",
+                              unidentified=unidentified)
     model = _model_of(ok[-1])
     # a history may mix models or --fix sets over the years: follow the latest drive's
     ok = [r for r in ok if _model_of(r) == model]
+    spec = get_model(model).spec
     fixed = set(ok[-1]["result"].get("fixed", []))
-    monitored = [k for k in ok[-1]["result"]["params"] if k not in fixed]
+    seen = {k for r in ok for k in determined(r["result"])}
+    free = [k for k in ok[-1]["result"]["params"] if k not in fixed and k in seen]
+    monitored = [k for k in free if spec(k).kind in WEAR_KINDS]
+    loads = [k for k in free if spec(k).kind in LOAD_KINDS]
     nominal = {k: rule.nominal_of(model, k) for k in monitored}
     cfg = AlertConfig(nominal=nominal, drop=rule.drop, z=rule.z, persistence_s=0.0,
                       min_count=rule.min_count)
     limits = {k: cfg.limit(k) for k in monitored}
-    engine = AlertEngine(cfg, model, units={k: get_model(model).spec(k).unit for k in monitored})
+    engine = AlertEngine(cfg, model, units={k: spec(k).unit for k in monitored})
     for r in ok:
         res = r["result"]
-        se = {k: (math.nan if v is None else v) for k, v in res.get("stderr", {}).items()}
-        engine.update(float(r["t"]), res["params"], se)
+        det = [k for k in determined(res) if k in nominal]
+        engine.update(float(r["t"]), {k: float(res["params"][k]) for k in det},
+                      {k: float(res["stderr"][k]) for k in det})
     alerts = []
     for k in monitored:
         if engine.states[k].active:
@@ -236,27 +307,28 @@ def summarize_vehicle(vehicle: str, records: list[dict[str, Any]], rule: AlertRu
                            "bound": ev.bound, "limit": ev.limit, "nominal": ev.nominal,
                            "since_t": ev.onset, "t": ev.t, "severity": ev.severity,
                            "message": ev.message})
+    alerted = {a["parameter"] for a in alerts}
+    t_latest = float(ok[-1]["t"])
     trends: dict[str, Trend | None] = {}
     forecasts: dict[str, Forecast] = {}
+    summary = VehicleSummary(vehicle, model, ok, failed, monitored, nominal, limits, trends,
+                             forecasts, alerts, warnings=time_warnings(
+                                 vehicle, [float(r["t"]) for r in ok]),
+                             offsets=sensor_offsets(ok), unidentified=unidentified, loads=loads)
     for k in monitored:
-        free = [r for r in ok if k not in r["result"].get("fixed", [])]
-        t = np.array([float(r["t"]) for r in free])
-        v = np.array([float(r["result"]["params"][k]) for r in free])
-        s = np.array([_nan(r["result"].get("stderr", {}).get(k)) for r in free])
+        ser = summary.series(k)
+        t = np.array([float(r["t"]) for r in ser])
+        v = np.array([float(r["result"]["params"][k]) for r in ser])
+        s = np.array([float(r["result"]["stderr"][k]) for r in ser])
         tr = robust_trend(t, v, s)
         trends[k] = tr
-        fc = forecast_crossing(tr, limits[k], rule.level)
-        if fc is not None and tr is not None and fc.crossing_t <= tr.t_ref + rule.horizon_days * DAY_S:
+        if k in alerted:      # already below: an alert, not a forecast
+            continue
+        fc = forecast_crossing(tr, limits[k], rule.level, not_before=t_latest)
+        if fc is not None and fc.crossing_t <= t_latest + rule.horizon_days * DAY_S:
             forecasts[k] = fc
-    risk = "alert" if alerts else ("forecast" if forecasts else "ok")
-    return VehicleSummary(vehicle, model, ok, failed, monitored, nominal, limits, trends,
-                          forecasts, alerts, risk,
-                          warnings=time_warnings(vehicle, [float(r["t"]) for r in ok]),
-                          offsets=sensor_offsets(ok))
-
-
-def _nan(x: Any) -> float:
-    return math.nan if x is None else float(x)
+    summary.risk = "alert" if alerts else ("forecast" if forecasts else "ok")
+    return summary
 
 
 def summarize_fleet(records: Iterable[dict[str, Any]], rule: AlertRule) -> list[VehicleSummary]:

@@ -34,6 +34,7 @@ from cantools.database import Database
 from estimator.identify.inputs import read_input
 from estimator.identify import IdentResult, OutputErrorProblem, Parameters
 from estimator.identify.record import identify_record
+from estimator.identify.roadfree import fit_road_unknown, resolve_road
 from suspid import __version__
 from suspid.can.dbc import default_dbc_path, load_dbc
 from suspid.can.logs import FORMATS, first_timestamp
@@ -80,6 +81,11 @@ class IdentifySettings:
     offset : {"remove", "keep"}
         ``--offset``: a constant road or position offset found in a drive is subtracted
         before the fit (default) or the drive is fitted as it is; either way it is named.
+    road : {"measured", "zero", "unknown"} or None
+        ``--road``; ``None`` chooses per drive from its record as ``identify`` does
+        (:func:`~estimator.identify.roadfree.resolve_road`: ``measured`` with road columns,
+        else ``zero`` for a free response and ``unknown`` for driving data), named in the
+        drive's first warning. Part of :meth:`key`, and each result carries the mode used.
     """
 
     model: str
@@ -97,6 +103,7 @@ class IdentifySettings:
     can_channel: str | None = None
     offset: str = "remove"
     j1939_source: str | None = None
+    road: str | None = None
 
     def parameters(self) -> Parameters:
         """The identifier's parameters (raises :class:`UsageError` for unknown names)."""
@@ -117,6 +124,7 @@ class IdentifySettings:
             del d["can_channel"]
         if d["j1939_source"] is None:
             del d["j1939_source"]
+        d["road"] = self.road if self.road is not None else "auto"
         d["x0"] = self.x0 if isinstance(self.x0, str) else [float(v) for v in self.x0]
         d["signal_map"] = (None if self.signal_map is None else
                            [str(m) for m in self.signal_map.mappings])
@@ -184,14 +192,90 @@ def one_line(text: object) -> str:
 
 
 def identify(problem: OutputErrorProblem, settings: IdentifySettings) -> IdentResult:
-    """The identification ``suspid identify`` runs on a measurement, with the same arguments
-    (the offset check included: a found offset is in the result's first warning and its
-    ``offset``)."""
+    """The identification ``suspid identify`` runs on a measurement with the road measured or
+    zero, with the same arguments (the offset check included: a found offset is in the
+    result's first warning and its ``offset``)."""
     return identify_record(problem, settings.parameters(), restarts=settings.restarts,
                            maxfev=settings.maxfev, polish=settings.polish,
                            multistart=settings.multistart, data_start=settings.data_start,
                            keep_init=bool(settings.init) or not settings.data_start,
                            offset=settings.offset)[0]
+
+
+def identify_measurement(model: SuspensionModel, meas: Measurement,
+                         settings: IdentifySettings) -> IdentResult:
+    """Identify one record as ``suspid identify --road ...`` does: the road mode resolved
+    from the record (:func:`~estimator.identify.roadfree.resolve_road`), then the body
+    equations with the road unknown (:func:`~estimator.identify.roadfree.fit_road_unknown`)
+    or the output-error fit (:func:`identify`) with the road measured or zero.
+
+    Returns
+    -------
+    IdentResult
+        With ``road`` the mode used and the choice's warning first.
+
+    Raises
+    ------
+    UsageError
+        ``--road measured`` on a record without a road column.
+    """
+    road, meas, road_warnings = resolve_road(model, meas, settings.road)
+    if road == "unknown":
+        result = fit_road_unknown(model, meas, settings.parameters())
+    else:
+        problem = OutputErrorProblem(model, meas, cost=settings.cost,
+                                     x0=(settings.x0 if isinstance(settings.x0, str)
+                                         else np.asarray(settings.x0, dtype=float)))
+        result = identify(problem, settings)
+        result.road = road
+    result.warnings[:0] = road_warnings
+    return result
+
+
+def determined(result: dict[str, Any]) -> list[str]:
+    """The free parameters a drive's result gives a value for: not held, not left
+    ``undetermined`` by the record (the tyres with the road unknown), with a finite standard
+    error; empty when the fit did not succeed.
+
+    Parameters
+    ----------
+    result : dict
+        An identify JSON object.
+    """
+    if not result.get("success"):
+        return []
+    fixed = set(result.get("fixed", []))
+    und = set(result.get("undetermined") or [])
+    se = result.get("stderr") or {}
+    out = []
+    for k in result.get("params", {}):
+        s = se.get(k)
+        if k in fixed or k in und or s is None or not math.isfinite(float(s)):
+            continue
+        out.append(k)
+    return out
+
+
+def classify(result: dict[str, Any] | None) -> tuple[str, str | None]:
+    """A read drive's status from its identify result: ``("ok", None)`` when the
+    identification succeeded and determined at least one free parameter, else
+    ``("unidentified", reason)`` (the reason on one line, from the result's warnings).
+
+    Parameters
+    ----------
+    result : dict or None
+        An identify JSON object (``None``: nothing was identified).
+    """
+    if result is None:
+        return "unidentified", "no identification result"
+    if determined(result):
+        return "ok", None
+    notes = [w for w in result.get("warnings", [])
+             if "identifiab" in w or "cannot form" in w or w.startswith("road unknown: no ")]
+    why = ("success false" if not result.get("success")
+           else "no free parameter determined")
+    return "unidentified", one_line(f"not identified ({why})"
+                                    + (f": {'; '.join(notes)}" if notes else ""))
 
 
 def identify_drive(path: str, vehicle: str, settings: IdentifySettings,
@@ -212,9 +296,10 @@ def identify_drive(path: str, vehicle: str, settings: IdentifySettings,
     -------
     dict
         ``path``, ``vehicle``, ``sha256``, ``size`` (bytes), ``t`` (epoch s of the first
-        sample, ``None`` if unreadable), ``status`` (``"ok"``/``"failed"``), ``error``
-        (one-line reason or ``None``) and, when ok, ``result``: the ``suspid identify --json``
-        object of the drive.
+        sample, ``None`` if unreadable), ``status`` (``"ok"``; ``"unidentified"``: read but
+        not identified, :func:`classify`; ``"failed"``: not read), ``error`` (one-line
+        reason or ``None``) and, when read, ``result``: the ``suspid identify --json`` object
+        of the drive.
     """
     out: dict[str, Any] = {"path": path, "vehicle": vehicle, "sha256": digest, "size": None,
                            "t": None, "status": "failed", "error": None, "result": None}
@@ -231,14 +316,12 @@ def identify_drive(path: str, vehicle: str, settings: IdentifySettings,
         if not math.isfinite(t0):
             raise InputError(f"{path}: no sample time")
         out["t"] = t0
-        problem = OutputErrorProblem(model, meas, cost=settings.cost,
-                                     x0=(settings.x0 if isinstance(settings.x0, str)
-                                         else np.asarray(settings.x0, dtype=float)))
-        result = identify(problem, settings)
+        result = identify_measurement(model, meas, settings)
         if frames is not None:
             result.frames = frames
         out["result"] = result.to_json()
-        out["status"] = "ok"
+        out["status"], why = classify(out["result"])
+        out["error"] = None if why is None else f"{path}: {why}"
     except SuspidError as exc:
         out["error"] = one_line(exc)
     except OSError as exc:

@@ -9,8 +9,8 @@ Schema (``PRAGMA user_version = 1``; query it with the ``sqlite3`` shell)::
         vehicle   TEXT NOT NULL,     -- the folder holding the log
         t         REAL,              -- first sample, epoch s (NULL if unreadable)
         model     TEXT NOT NULL,
-        status    TEXT NOT NULL,     -- 'ok' or 'failed'
-        error     TEXT,              -- one-line reason when failed
+        status    TEXT NOT NULL,     -- 'ok', 'unidentified' (read, not identified) or 'failed'
+        error     TEXT,              -- one-line reason when unidentified or failed
         size      INTEGER,           -- bytes
         settings  TEXT NOT NULL,     -- identify options, DBC hash, suspid version (JSON)
         result    TEXT,              -- the drive's `suspid identify --json` object
@@ -47,9 +47,12 @@ import time
 from pathlib import Path
 from typing import Any, Iterable
 
+from estimator.fleet.drive import classify
 from suspid.errors import InputError
 
 SCHEMA_VERSION = 1
+#: statuses of a drive that was read (its result is the content's: one row per content)
+READ = ("ok", "unidentified")
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS drives (
@@ -73,7 +76,7 @@ def drive_id(record: dict[str, Any]) -> str:
     sha = record.get("sha256")
     if not sha:
         return f"path:{record['path']}"
-    return sha if record.get("status") == "ok" else f"{sha}:{record['path']}"
+    return sha if record.get("status") in READ else f"{sha}:{record['path']}"
 
 
 class History:
@@ -228,7 +231,15 @@ class History:
 
 
 def _record(r: tuple[Any, ...]) -> dict[str, Any]:
+    """A stored row as a drive record; a read drive's status is decided again from its
+    result (:func:`~estimator.fleet.drive.classify`), so a history written when every
+    read drive was ``ok`` lists a failed fit as ``unidentified``."""
     did = r[0]
-    return {"path": r[1], "vehicle": r[2], "t": r[3], "status": r[4], "error": r[5],
-            "size": r[6], "result": json.loads(r[7]) if r[7] else None,
+    result = json.loads(r[7]) if r[7] else None
+    status, error = r[4], r[5]
+    if status in READ:
+        status, why = classify(result)
+        error = None if why is None else f"{r[1]}: {why}"
+    return {"path": r[1], "vehicle": r[2], "t": r[3], "status": status, "error": error,
+            "size": r[6], "result": result,
             "sha256": None if did.startswith("path:") else did.split(":", 1)[0]}

@@ -4,7 +4,10 @@
 first, then those with a forecast limit crossing, soonest first, then by the smallest
 margin above the limit), one section per vehicle with each monitored parameter's drive
 estimates (±2 standard errors), robust trend, nominal value, limit and forecast crossing
-with its 90 % interval, and the failed logs with their reasons (table ``#failed``).
+with its 90 % interval, a table of its drives (``drives-NAME``: time, road mode, each free
+parameter, the load -- the body mass with a spring held and the road unknown: the payload --
+and what the drive left undetermined), and the drives read but not identified (table
+``#unidentified``) and the failed logs (table ``#failed``) with their reasons.
 """
 from __future__ import annotations
 
@@ -17,7 +20,8 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from estimator.fleet.analysis import AlertRule, VehicleSummary
-from estimator.fleet.trend import DAY_S
+from estimator.fleet.drive import determined
+from estimator.fleet.trend import DAY_S, Forecast
 from suspid.errors import InputError, UsageError
 from suspid.models import get_model
 
@@ -47,7 +51,7 @@ def _num(v: float) -> str:
 
 def trend_svg(s: VehicleSummary, name: str, width: int = 440, height: int = 210) -> str:
     """An inline SVG plot of one parameter's history, trend, limit and forecast."""
-    drives = s.drives
+    drives = s.series(name)
     t = [float(d["t"]) for d in drives]
     v = [float(d["result"]["params"][name]) for d in drives]
     se = [d["result"].get("stderr", {}).get(name) for d in drives]
@@ -128,10 +132,10 @@ def _vehicle_row(s: VehicleSummary) -> str:
     last = s.latest
     fc = min(s.forecasts.items(), key=lambda kv: kv[1].crossing_t, default=None)
     fc_txt = (f"{fc[0]}: {_date(fc[1].crossing_t)} ({_date(fc[1].crossing_t_low)} to "
-              f"{_date(fc[1].crossing_t_high)})" if fc else "")
+              f"{_date(fc[1].crossing_t_high)}; {_days(fc[1])})" if fc else "")
     margin = s.margin()
     cells = [str(s.rank), f'<a href="#{vehicle_anchor(s.vehicle)}">{html.escape(s.vehicle)}</a>',
-             s.risk, str(len(s.drives)), str(s.failed),
+             s.risk, str(len(s.drives)), str(s.failed), str(len(s.unidentified)),
              ", ".join(a["parameter"] for a in s.alerts), fc_txt,
              _date(last["t"], True) if last else "",
              f"{100 * margin:.0f} %" if math.isfinite(margin) else ""]
@@ -142,25 +146,36 @@ def _vehicle_row(s: VehicleSummary) -> str:
 def render(vehicles: Sequence[VehicleSummary], drives: Sequence[dict[str, Any]],
            rule: AlertRule) -> str:
     """The report page as HTML text."""
-    failed = [d for d in drives if d["status"] != "ok"]
+    failed = [d for d in drives if d["status"] == "failed"]
+    unidentified = [d for d in drives if d["status"] == "unidentified"]
+    n_ok = sum(1 for d in drives if d["status"] == "ok")
     parts = ["<!DOCTYPE html><html><head><meta charset='utf-8'>",
              "<title>suspid fleet report</title>", f"<style>{_CSS}</style></head><body>",
              "<h1>Suspension condition of the fleet</h1>",
-             f"<p>{len(vehicles)} vehicles, {len(drives) - len(failed)} drives identified, "
+             f"<p>{len(vehicles)} vehicles, {n_ok} drives identified, {len(unidentified)} "
+             f"read but not identified (never in a trend, alert or forecast), "
              f"{len(failed)} failed logs. Limit: {100 * (1 - rule.drop):.0f} % of nominal; "
              f"alert when the {100 * _conf(rule.z):.0f} % upper bound is below it in "
-             f"{rule.min_count} consecutive drives; forecasts with {100 * rule.level:.0f} % "
-             f"intervals. Generated {_date(time.time(), True)} UTC.</p>",
+             f"{_drives_text(rule.min_count)}; forecasts with {100 * rule.level:.0f} % "
+             f"intervals, in days after the vehicle's latest drive. Generated "
+             f"{_date(time.time(), True)} UTC.</p>",
              "<h2>Vehicles by risk</h2>", '<table id="vehicles"><thead><tr>',
              "".join(f"<th>{h}</th>" for h in ("Rank", "Vehicle", "Risk", "Drives", "Failed logs",
-                                               "Alerts", "First forecast crossing (90 %)",
+                                               "Not identified", "Alerts",
+                                               "First forecast crossing (90 %)",
                                                "Latest drive (UTC)", "Margin to limit")),
              "</tr></thead><tbody>"]
     parts += [_vehicle_row(s) for s in vehicles]
     parts.append("</tbody></table>")
     for s in vehicles:
+        roads = ", ".join(f"road {k}: {n}" for k, n in sorted(s.roads().items()))
         parts.append(f'<h2 id="{vehicle_anchor(s.vehicle)}">{s.rank}. {html.escape(s.vehicle)} '
-                     f"({html.escape(s.model)}, {len(s.drives)} drives, {s.risk})</h2>")
+                     f"({html.escape(s.model) or 'no identified drive'}, {len(s.drives)} drives"
+                     f"{'; ' + roads if roads else ''}; {s.risk})</h2>")
+        if s.unidentified:
+            parts.append(f'<p class="warn-msg unidentified"><b>NOT IDENTIFIED</b> '
+                         f"{len(s.unidentified)} drive(s) read but not identified, left out of "
+                         "the trends, alerts and forecasts (table below)</p>")
         for msg in s.warnings:
             parts.append(f'<p class="warn-msg"><b>WARNING</b> {html.escape(msg)}</p>')
         for col, o in s.offsets.items():
@@ -184,12 +199,24 @@ def render(vehicles: Sequence[VehicleSummary], drives: Sequence[dict[str, Any]],
                 fc = s.forecasts.get(k)
                 rate = ("" if tr is None else f"{_num(tr.rate_per_day)}" +
                         (f" ± {_num(tr.stderr)}" if math.isfinite(tr.stderr) else ""))
-                parts.append(f"<tr><td>{k}</td><td>{_num(s.drives[-1]['result']['params'][k])}</td>"
+                last = s.latest_value(k)
+                parts.append(f"<tr><td>{k}</td><td>{'' if last is None else _num(last)}</td>"
                              f"<td>{_num(s.nominal[k])}</td><td>{_num(s.limits[k])}</td>"
-                             f"<td>{rate}</td><td>{_date(fc.crossing_t) if fc else ''}</td></tr>")
+                             f"<td>{rate}</td><td>{_date(fc.crossing_t) if fc else ''}"
+                             f"{' (' + _days(fc) + ')' if fc else ''}</td></tr>")
             parts.append("</table><div class='plots'>")
             parts += [trend_svg(s, k) for k in s.monitored]
             parts.append("</div>")
+        if s.drives or s.unidentified:
+            parts.append(_drives_table(s))
+    parts.append('<h2>Drives read but not identified</h2><table id="unidentified"><thead><tr>'
+                 "<th>Log</th><th>Vehicle</th><th>Road</th><th>Reason</th></tr></thead><tbody>")
+    for d in unidentified:
+        road = str((d.get("result") or {}).get("road", ""))
+        parts.append(f"<tr><td>{html.escape(d['path'])}</td><td>{html.escape(d['vehicle'])}</td>"
+                     f"<td>{html.escape(road)}</td>"
+                     f"<td>{html.escape(d.get('error') or '')}</td></tr>")
+    parts.append("</tbody></table>")
     parts.append('<h2>Failed logs</h2><table id="failed"><thead><tr><th>Log</th><th>Vehicle</th>'
                  "<th>Reason</th></tr></thead><tbody>")
     for d in failed:
@@ -197,6 +224,50 @@ def render(vehicles: Sequence[VehicleSummary], drives: Sequence[dict[str, Any]],
                      f"<td>{html.escape(d.get('error') or '')}</td></tr>")
     parts.append("</tbody></table></body></html>\n")
     return "\n".join(parts)
+
+
+def _drives_text(n: int) -> str:
+    return "the latest drive" if n == 1 else f"{n} consecutive drives"
+
+
+def _days(fc: Forecast) -> str:
+    """``in 41 d (33 to 52 d)`` after the latest drive."""
+    d, lo, hi = fc.days()
+    if not math.isfinite(d):
+        return ""
+    return f"in {d:.0f} d ({lo:.0f} to {hi:.0f} d)"
+
+
+def _drives_table(s: VehicleSummary) -> str:
+    """A vehicle's drives: time, road mode, status, each free parameter (undetermined ones
+    marked), the load (payload) columns first."""
+    rows = sorted(s.drives + s.unidentified,
+                  key=lambda r: (float(r["t"]) if r.get("t") is not None else math.inf,
+                                 r["path"]))
+    names = s.loads + s.monitored
+    head = "".join(f"<th>{html.escape(k)}{' (load)' if k in s.loads else ''}</th>"
+                   for k in names)
+    out = [f'<table class="drives" id="drives-{vehicle_anchor(s.vehicle)[2:]}"><thead><tr>'
+           f"<th>Drive (UTC)</th><th>Road</th><th>Status</th>{head}<th>Undetermined</th>"
+           "</tr></thead><tbody>"]
+    for r in rows:
+        res = r.get("result") or {}
+        det = set(determined(res))
+        cells = []
+        for k in names:
+            v = res.get("params", {}).get(k)
+            se = (res.get("stderr") or {}).get(k)
+            cells.append("not determined" if k not in det or v is None else
+                         _num(float(v)) + (f" ± {_num(float(se))}" if se is not None else ""))
+        und = [k for k in res.get("params", {}) if k not in det and k not in res.get("fixed", [])]
+        status = r["status"] if r["status"] == "ok" else f"{r['status']}: {r.get('error') or ''}"
+        out.append(f'<tr class="{html.escape(r["status"])}"><td>{_date(r.get("t"), True)}</td>'
+                   f"<td>{html.escape(str(res.get('road', '')))}</td>"
+                   f"<td>{html.escape(status)}</td>"
+                   + "".join(f"<td>{c}</td>" for c in cells)
+                   + f"<td>{html.escape(', '.join(und))}</td></tr>")
+    out.append("</tbody></table>")
+    return "".join(out)
 
 
 def _offset(column: str, value: float, model: str) -> str:

@@ -28,7 +28,7 @@ from estimator.fleet.analysis import AlertRule, VehicleSummary, summarize_fleet
 from estimator.fleet.discover import DriveFile, find_drives
 from estimator.fleet.drive import (CAN_SUFFIXES, IdentifySettings, cached_database, file_digest,
                                    identify_drive)
-from estimator.fleet.history import History, drive_id
+from estimator.fleet.history import READ, History, drive_id
 from estimator.fleet.report import prepare_report_folder, write_report
 from suspid.errors import InputError, UsageError
 
@@ -135,7 +135,8 @@ class FleetResult:
         """The contract's object: ``drives``, ``vehicles``, ``failed`` (+ run facts)."""
         drives = [drive_json(r) for r in self.drives]
         return {"drives": drives, "vehicles": [v.to_json() for v in self.vehicles],
-                "failed": sum(1 for d in drives if d["status"] != "ok"),
+                "failed": sum(1 for d in drives if d["status"] == "failed"),
+                "unidentified": sum(1 for d in drives if d["status"] == "unidentified"),
                 "new": self.new, "reused": self.reused, "duplicates": self.duplicates,
                 "report": self.report, "seconds": self.seconds}
 
@@ -147,8 +148,8 @@ def drive_json(rec: dict[str, Any]) -> dict[str, Any]:
                            "params": res.get("params"), "stderr": res.get("stderr"),
                            "status": rec["status"], "error": rec.get("error"),
                            "sha256": rec.get("sha256")}
-    for k in ("model", "fixed", "cost", "nfev", "success", "rms_residual", "identifiable",
-              "warnings", "offset", "frames"):
+    for k in ("model", "road", "fixed", "cost", "nfev", "success", "rms_residual",
+              "identifiable", "undetermined", "warnings", "offset", "frames"):
         if k in res:
             out[k] = res[k]
     return out
@@ -180,7 +181,7 @@ def execute(jobs: list[tuple[str, str, str | None]], settings: IdentifySettings,
         inline: list[dict[str, Any]] = []
         for i, (p, v, d) in enumerate(jobs, 1):
             inline.append(identify_drive(p, v, settings, d))
-            failed += inline[-1]["status"] != "ok"
+            failed += inline[-1]["status"] == "failed"
             if progress:
                 progress(i, total, failed)
         return inline
@@ -217,7 +218,7 @@ def execute(jobs: list[tuple[str, str, str | None]], settings: IdentifySettings,
                                              f"{type(exc).__name__}: {exc}".split())}
                 out[i] = rec
                 done += 1
-                failed += rec["status"] != "ok"
+                failed += rec["status"] == "failed"
                 if progress:
                     progress(done, total, failed)
             return [r for r in out if r is not None]
@@ -277,8 +278,13 @@ def run_fleet(config: FleetConfig) -> FleetResult:
                 history.add_run(t_start, settings.model,
                                 {"settings": settings.key(), "rule": rule.to_json(),
                                  "inputs": list(config.inputs)},
-                                new, reused, sum(r["status"] != "ok" for r in records))
+                                new, reused, sum(r["status"] == "failed" for r in records))
             records = history.drives()
+            if not files:
+                # a report from the history alone: every read drive comes from it (the count
+                # a run with --input over the same logs gives; failed logs are tried again)
+                reused = sum(r["status"] in READ for r in records)
+
         records = sort_drives(records)
         vehicles = summarize_fleet(records, rule)
         result = FleetResult(records, vehicles, duplicates, new, reused)
@@ -312,7 +318,7 @@ def _identify(files: list[DriveFile], settings: IdentifySettings, history: Histo
                 digest = file_digest(f.path)
             except OSError:
                 digest = None       # the task reports the reason
-        if digest is not None and digest in known and known[digest]["status"] == "ok":
+        if digest is not None and digest in known and known[digest]["status"] in READ:
             reuse[i] = {**known[digest], "path": f.path, "vehicle": f.vehicle}
         else:
             jobs.append((f.path, f.vehicle, digest))

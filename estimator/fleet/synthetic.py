@@ -133,6 +133,57 @@ def write_drive(path: Path, spec: FleetSpec, vehicle: VehicleWear, t0: float, se
     return p
 
 
+def write_production_drive(path: str | Path, params: dict[str, float], t0: float,
+                           duration: float = 20.0, fs: float = 200.0, noise: float = 0.02,
+                           seed: int = 0, speed_kmh: float = 50.0, model: str = "quarter2"
+                           ) -> dict[str, float]:
+    """Simulate one drive over an ISO 8608 road and write what a production car logs.
+
+    The CSV holds ``t`` (epoch s, from ``t0``) and the model's production sensor set
+    (:meth:`~suspid.models.base.SuspensionModel.channel_set` ``"production"``: the body
+    accelerations, m/s^2, and the ride heights, m), each with Gaussian noise of ``noise``
+    times its standard deviation; no road column (the road is never measured).
+
+    Parameters
+    ----------
+    path : str or Path
+        The CSV to write (its folder must exist).
+    params : dict
+        The drive's true parameters (SI), e.g. with this drive's body mass (payload).
+    t0 : float
+        Epoch s of the first sample.
+    duration : float
+        Length (s).
+    fs : float
+        Sample rate (Hz).
+    noise : float
+        Noise standard deviation as a fraction of each channel's.
+    seed : int
+        Seed of the road and the noise.
+    speed_kmh : float
+        Speed over the class C road (km/h).
+    model : str
+        Model name.
+
+    Returns
+    -------
+    dict
+        The true parameters (``params`` completed with the model's defaults).
+    """
+    m = get_model(model)
+    p = {**m.defaults(), **params}
+    t, road, x0 = make_scenario(m, "iso8608", duration=duration, fs=fs, params=p,
+                                v_kmh=speed_kmh, seed=seed)
+    out = simulate(m, p, t, road, x0)
+    rng = np.random.default_rng(seed + 7919)
+    cols = {c: out[c] + rng.standard_normal(t.size) * noise * np.std(out[c])
+            for c in m.channel_set("production")}
+    data = np.column_stack([t + t0, *cols.values()])
+    np.savetxt(path, data, fmt=["%.6f"] + ["%.10g"] * len(cols), delimiter=",",
+               header=",".join(["t", *cols]), comments="")
+    return p
+
+
 def make_fleet(folder: str | Path, spec: FleetSpec) -> list[dict[str, object]]:
     """Write ``spec.drives`` logs under ``folder/<vehicle>/``; returns each drive's truth.
 

@@ -88,25 +88,63 @@ class Trend:
 
 @dataclass
 class Forecast:
-    """When a falling trend crosses its limit (epoch s, 90 % interval)."""
+    """When a falling trend crosses its limit (epoch s, 90 % interval).
+
+    Attributes
+    ----------
+    crossing_t, crossing_t_low, crossing_t_high : float
+        The predicted crossing and its interval (epoch s), never before ``t_latest``.
+    limit : float
+        The limit (SI).
+    level : float
+        Two-sided level of the interval.
+    t_latest : float
+        Epoch s of the vehicle's latest drive, from which ``days`` count (NaN: unknown).
+    """
 
     crossing_t: float
     crossing_t_low: float
     crossing_t_high: float
     limit: float
     level: float = 0.90
+    t_latest: float = math.nan
 
-    def to_json(self) -> dict[str, float]:
-        return {"crossing_t": self.crossing_t, "crossing_t_low": self.crossing_t_low,
-                "crossing_t_high": self.crossing_t_high, "limit": self.limit}
+    def days(self) -> tuple[float, float, float]:
+        """The crossing and its interval in days after the latest drive."""
+        return ((self.crossing_t - self.t_latest) / DAY_S,
+                (self.crossing_t_low - self.t_latest) / DAY_S,
+                (self.crossing_t_high - self.t_latest) / DAY_S)
+
+    def to_json(self) -> dict[str, float | None]:
+        """``crossing_t``, ``crossing_t_low``, ``crossing_t_high`` (epoch s), ``limit``, and
+        ``days``, ``days_low``, ``days_high`` after the latest drive."""
+        out: dict[str, float | None] = {
+            "crossing_t": self.crossing_t, "crossing_t_low": self.crossing_t_low,
+            "crossing_t_high": self.crossing_t_high, "limit": self.limit}
+        for k, d in zip(("days", "days_low", "days_high"), self.days()):
+            out[k] = round(d, 3) if math.isfinite(d) else None
+        return out
 
 
 def _wls(x: np.ndarray, v: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    X = np.column_stack([np.ones_like(x), x])
-    XtW = X.T * w
-    M = XtW @ X
-    beta = np.linalg.solve(M, XtW @ v)
-    return beta, M
+    """Weighted least-squares line ``v = b0 + b1 x``: ``(b0, b1)`` and the normal matrix
+    ``X'WX`` (the 2x2 system solved in closed form: a fleet fits one per parameter per
+    vehicle, thousands of times per report)."""
+    wx = w * x
+    s0, s1, s2 = float(np.sum(w)), float(np.sum(wx)), float(np.dot(wx, x))
+    sy, sxy = float(np.dot(w, v)), float(np.dot(wx, v))
+    det = s0 * s2 - s1 * s1
+    M = np.array([[s0, s1], [s1, s2]])
+    if not det > 0.0:
+        raise np.linalg.LinAlgError("singular weighted least-squares line")
+    return np.array([(s2 * sy - s1 * sxy) / det, (s0 * sxy - s1 * sy) / det]), M
+
+
+def _median(a: np.ndarray) -> float:
+    """The median of a small 1-D array (``np.median`` without its overhead)."""
+    b = np.sort(a)
+    n = b.size
+    return float(b[n // 2]) if n % 2 else 0.5 * float(b[n // 2 - 1] + b[n // 2])
 
 
 def theil_sen(x: np.ndarray, v: np.ndarray) -> tuple[float, float]:
@@ -163,8 +201,8 @@ def robust_trend(t: np.ndarray, v: np.ndarray, s: np.ndarray | None = None,
     for c, kind in ((HUBER_C, "huber"), (BISQUARE_C, "bisquare")):
         for _ in range(iterations):
             r = v - (beta[0] + beta[1] * x)
-            mad = MAD_TO_SIGMA * float(np.median(np.abs(r - np.median(r))))
-            tau2 = max(0.0, mad * mad - float(np.median(s * s)))
+            mad = MAD_TO_SIGMA * _median(np.abs(r - _median(r)))
+            tau2 = max(0.0, mad * mad - _median(s * s))
             var = np.maximum(s * s + tau2, floor)
             u = np.abs(r) / np.sqrt(var)
             if kind == "huber":
@@ -175,7 +213,8 @@ def robust_trend(t: np.ndarray, v: np.ndarray, s: np.ndarray | None = None,
             if np.count_nonzero(w) < 2 or np.ptp(x[w > 0]) == 0:
                 break
             new, M = _wls(x, v, w)
-            done = np.allclose(new, beta, rtol=1e-12, atol=0.0)
+            done = (abs(new[0] - beta[0]) <= 1e-12 * abs(beta[0])
+                    and abs(new[1] - beta[1]) <= 1e-12 * abs(beta[1]))
             beta = new
             if done:
                 break
@@ -234,9 +273,21 @@ def _random_effects(x: np.ndarray, v: np.ndarray, s: np.ndarray, floor: float
     return beta, M, hi
 
 
-def forecast_crossing(trend: Trend | None, limit: float, level: float = 0.90
-                      ) -> Forecast | None:
+def forecast_crossing(trend: Trend | None, limit: float, level: float = 0.90,
+                      not_before: float | None = None) -> Forecast | None:
     """Date a falling trend crosses ``limit``, with Fieller's ``level`` interval.
+
+    Parameters
+    ----------
+    trend : Trend or None
+    limit : float
+        The limit (SI).
+    level : float
+        Two-sided level of the interval.
+    not_before : float, optional
+        Epoch s of the vehicle's latest drive (default the trend's): the crossing and both
+        ends of its interval are never before it (a line already at the limit crosses "at
+        the latest drive", never in the past).
 
     Returns
     -------
@@ -255,5 +306,6 @@ def forecast_crossing(trend: Trend | None, limit: float, level: float = 0.90
     if fc is None:
         return None
     tc, lo, hi = fc
-    return Forecast(trend.t_ref + tc * DAY_S, trend.t_ref + lo * DAY_S, trend.t_ref + hi * DAY_S,
-                    float(limit), level)
+    t0 = trend.t_ref if not_before is None else max(float(not_before), trend.t_ref)
+    return Forecast(max(trend.t_ref + tc * DAY_S, t0), max(trend.t_ref + lo * DAY_S, t0),
+                    max(trend.t_ref + hi * DAY_S, t0), float(limit), level, t0)

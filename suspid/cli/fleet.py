@@ -9,7 +9,8 @@ from statistics import NormalDist
 from typing import TYPE_CHECKING, Any
 
 from suspid.can.options import add_can_arguments, can_inputs
-from suspid.cli._args import FitHelp, add_fit_options, add_offset_option, check_counts
+from suspid.cli._args import (FitHelp, add_fit_options, add_offset_option, add_road_option,
+                              check_counts)
 from suspid.cli._common import (add_model_option, add_param_options, assignment_warnings,
                                 parse_assignments,
                                 positive_int, print_json)
@@ -61,6 +62,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                          "(a sensor zero not at rest), as identify finds it: remove: subtract "
                          "it before the drive's fit (default); keep: fit the drive as it is; "
                          "either way the drive's first warning and its offset field name it")
+    add_road_option(i)
     a = p.add_argument_group("alerts and forecasts")
     a.add_argument("--nominal", action="append", default=[], metavar="NAME=VALUE",
                    help="nominal value of a monitored (free) parameter (SI; default the "
@@ -69,8 +71,10 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="limit (1 - FRACTION) x nominal (default 0.3)")
     a.add_argument("--confidence", type=float, default=0.99, metavar="P",
                    help="one-sided confidence of the alert bound (default 0.99, as monitor)")
-    a.add_argument("--alert-drives", type=positive_int, default=2, metavar="N",
-                   help="consecutive drives the drop must hold in before an alert (default 2)")
+    a.add_argument("--alert-drives", type=positive_int, default=1, metavar="N",
+                   help="consecutive drives the drop must hold in before an alert (default 1: "
+                        "the latest drive confidently below the limit alerts, as monitor "
+                        "decides)")
     a.add_argument("--horizon", type=float, default=365.0, metavar="DAYS",
                    help="report limit-crossing forecasts up to this many days after the latest "
                         "drive (default 365)")
@@ -108,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
             restarts=args.restarts, maxfev=args.maxfev, multistart=args.multistart,
             polish=args.polish, data_start=args.data_start, dbc=str(dbc) if dbc is not None else None, signal_map=smap,
             can_channel=args.can_channel, offset=args.offset,
-            j1939_source=args.j1939_source)
+            j1939_source=args.j1939_source, road=args.road)
     elif args.db is None:
         raise UsageError("give --input DIR_OR_GLOB... with --model, or --db PATH to report from "
                          "the history")
@@ -159,23 +163,34 @@ def _date(t: Any) -> str:
     return datetime.fromtimestamp(t, tz=timezone.utc).strftime("%Y-%m-%d")
 
 
+def _days(fc: dict[str, Any]) -> str:
+    """``; in 41 d, 33 to 52 d`` after the latest drive ('' when unknown)."""
+    d = [fc.get(k) for k in ("days", "days_low", "days_high")]
+    if any(x is None for x in d):
+        return ""
+    return f"; in {d[0]:.0f} d, {d[1]:.0f} to {d[2]:.0f} d"
+
+
 def _print_table(out: dict[str, Any]) -> None:
     w = sys.stdout.write
     ok = sum(1 for d in out["drives"] if d["status"] == "ok")
-    w(f"{len(out['vehicles'])} vehicles, {ok} drives identified, {out['failed']} failed "
-      f"({out['new']} new, {out['reused']} from the history) in {out['seconds']:.1f} s\n")
+    w(f"{len(out['vehicles'])} vehicles, {ok} drives identified, {out['unidentified']} not "
+      f"identified, {out['failed']} failed ({out['new']} new, {out['reused']} from the "
+      f"history) in {out['seconds']:.1f} s\n")
     w(f"{'rank':>4}  {'vehicle':<16} {'risk':<9} {'drives':>6}  alerts / forecasts\n")
     for v in out["vehicles"]:
         notes = [f"ALERT {k}" for k in v["alerts"]]
         notes += [f"{k} reaches {f['limit']:.4g} on {_date(f['crossing_t'])} "
-                  f"({_date(f['crossing_t_low'])} to {_date(f['crossing_t_high'])})"
-                  for k, f in v["forecast"].items()]
+                  f"({_date(f['crossing_t_low'])} to {_date(f['crossing_t_high'])}"
+                  f"{_days(f)})" for k, f in v["forecast"].items()]
+        if v.get("unidentified"):
+            notes.append(f"{len(v['unidentified'])} drive(s) not identified")
         w(f"{v['rank']:>4}  {v['vehicle']:<16} {v['risk']:<9} {v['drives']:>6}  "
           f"{'; '.join(notes)}\n")
     for msg in _warnings(out):
         w(f"warning: {msg}\n")
     for d in out["drives"]:
         if d["status"] != "ok":
-            w(f"failed: {d['error']}\n")
+            w(f"{d['status']}: {d['error']}\n")
     if out.get("report"):
         w(f"report: {out['report']}\n")

@@ -11,7 +11,7 @@ DAY = 86400.0
 def _record(vehicle: str, t: float, c1: float, path: str) -> dict[str, Any]:
     params = {"m1": 300.0, "m2": 40.0, "c1": c1, "k1": 20000.0, "c2": 10.0, "k2": 200000.0}
     return {"vehicle": vehicle, "path": path, "t": t, "status": "ok",
-            "result": {"model": "quarter2", "params": params, "fixed": ["m1", "m2"],
+            "result": {"model": "quarter2", "params": params, "fixed": ["m1", "m2"], "success": True,
                        "stderr": {k: 0.01 * v for k, v in params.items()}}}
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import sqlite3
 from typing import Any
 
-from tests.fleet.conftest import Fleet, HistoryRuns, fleet_json
+from tests.fleet.conftest import run_fleet_cli, Fleet, HistoryRuns, fleet_json
 
 
 def test_history_dedup_and_history_only_report(fleet: Fleet, inprocess: dict[str, Any],
@@ -37,7 +37,9 @@ def test_history_dedup_and_history_only_report(fleet: Fleet, inprocess: dict[str
     assert len(c1) == 6 and c1[0][1] > c1[-1][1]
     # history only: no --input, no --model
     hist = fleet_json("--db", str(history.db))
-    assert hist["new"] == 0 and hist["reused"] == 0
+    # every identified drive is taken from the history (as a run with --input counts them)
+    assert hist["new"] == 0 and hist["reused"] == n_ok
+    assert f"0 new, {n_ok} from the history" in run_fleet_cli("--db", str(history.db)).stdout
     assert len(hist["drives"]) == n and hist["failed"] == 2
     assert hist["vehicles"] == third["vehicles"]
     by = {v["vehicle"]: v for v in inprocess["vehicles"]}
