@@ -118,7 +118,10 @@ class CanWindowDriver:
         if not isinstance(srcs, dict) or not srcs:
             return True
         if not math.isfinite(self._t_seen):
-            self._t_seen = latest
+            # data time counts from the oldest sample: frames a decoder held back (a live slot
+            # rule's warm-up) arrive together, already spanning part of the wait
+            t0 = buf.earliest_time()
+            self._t_seen = t0 if math.isfinite(t0) else latest
         if all(src.n > 0 for src in srcs.values()):
             return True
         wait = self.window_s if self.start_wait_s is None else self.start_wait_s

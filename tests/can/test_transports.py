@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import socket
 import subprocess
@@ -300,15 +301,18 @@ def test_monitor_cli_slcan_timestamps_needs_slcan():
 
 
 def test_monitor_cli_rx_buffer_is_seconds_of_the_dbc_frame_rate():
-    """``--rx-buffer 0.5``: the receiver holds 0.5 s at suspid's DBC rate (10,510 frames/s);
-    a live bus other than SocketCAN reports its socket overrun as unknown (null)."""
+    """``--rx-buffer 0.5``: the receiver holds 0.5 s at suspid's DBC rate (every message at
+    its ``GenMsgCycleTime``: 14,010 frames/s); a live bus other than SocketCAN reports its
+    socket overrun as unknown (null)."""
+    rate = sum(1000.0 / m.cycle_time for m in load_dbc().messages if m.cycle_time)
+    assert rate == pytest.approx(14_010)
     out = subprocess.run([sys.executable, "-m", "suspid", "monitor", "--model", "quarter2",
                           "--interface", "virtual", "--channel", "rx-buffer-flag",
                           "--rx-buffer", "0.5", "--idle-timeout", "0.5", "--jsonl"],
                          capture_output=True, text=True, env=suspid_env(), cwd=REPO, timeout=120)
     assert out.returncode == 0, out.stderr
     rx = json.loads(out.stdout.splitlines()[-1])["frames"]["receive"]
-    assert rx["buffer_capacity"] == 5255 and rx["read"] == 0
+    assert rx["buffer_capacity"] == math.ceil(0.5 * rate) and rx["read"] == 0
     assert rx["socket_overrun"] is None and rx["lost_by_cause"]["socket_overrun"] is None
     bad = subprocess.run([sys.executable, "-m", "suspid", "monitor", "--model", "quarter2",
                           "--interface", "virtual", "--channel", "x", "--rx-buffer", "0"],

@@ -20,7 +20,8 @@ def test_demo_reports_parameters_alert_on_the_bus_and_the_ekf_comparison(tmp_pat
     assert proc.returncode == 0, proc.stderr[-3000:]
     out = proc.stdout
     n = re.search(r"frames accepted (\d+), windows identified (\d+)", out)
-    assert n is not None and int(n.group(1)) > 100_000 and int(n.group(2)) >= 30, out
+    # 60 s of the production set (about 1,510 frames/s), none of them lost
+    assert n is not None and int(n.group(1)) > 85_000 and int(n.group(2)) >= 30, out
     assert re.search(r"ALERT t = \d+\.\d s: c1 = ", out), out
     assert re.search(r"FORECAST t = \d+\.\d s: c1 = ", out), out
     # the monitor's alert and forecast frames reach the node even when the monitor fits
