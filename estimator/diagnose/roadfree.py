@@ -126,7 +126,7 @@ def diagnose_road_unknown(model: SuspensionModel, meas: Measurement, params: Par
                           ) -> RoadUnknownDiagnosis:
     """Fit the body equations, try every registered strut effect in them, keep the one the
     equation error supports (see the module docstring)."""
-    base = fit_road_unknown(model, meas, params)
+    base = fit_road_unknown(model, meas, params, misfit_fails=False)
     warnings = list(base.warnings)
     evidence: dict[str, Any] = {"road": "unknown", "candidates": [], "not_tried": {}}
     p = dict(base.params)
@@ -163,7 +163,8 @@ def diagnose_road_unknown(model: SuspensionModel, meas: Measurement, params: Par
             for trial in cls.screen_trials([sites[i] for i in idx], [s[i] for i in idx],
                                            [sd[i] for i in idx]):
                 cols = _columns(cls, trial, sites, idx, rows, s, sd, p, noise)
-                fit = fit_road_unknown(model, meas, params, extra=cols, jackknife=False)
+                fit = fit_road_unknown(model, meas, params, extra=cols, jackknife=False,
+                                       misfit_fails=False)
                 coef = np.array([fit.params.pop(k) for k in cols])
                 ses = np.array([fit.stderr.pop(k) for k in cols])
                 tstat = float(np.max(np.abs(coef) / np.maximum(ses, 1e-300)))
@@ -196,7 +197,7 @@ def diagnose_road_unknown(model: SuspensionModel, meas: Measurement, params: Par
         return RoadUnknownDiagnosis(model.name, base, base, None, [], evidence, warnings)
     _, (cls, eparams, cols, label, idx) = best
     effect = cls(**eparams)
-    augmented = fit_road_unknown(model, meas, params, extra=cols)
+    augmented = fit_road_unknown(model, meas, params, extra=cols, misfit_fails=False)
     evidence["effect_stderr"] = {k: augmented.stderr.pop(k) for k in cols}
     for k in cols:
         augmented.params.pop(k)

@@ -280,7 +280,7 @@ class RoadFreeEKFEstimator:
             meas = Measurement(np.asarray(t, dtype=float), {},
                                {c: np.asarray(v, dtype=float) for c, v in data.items()
                                 if c not in model.input_names}, source="window")
-            res = fit_road_unknown(model, meas, self.params)
+            res = fit_road_unknown(model, meas, self.params, misfit_fails=False)
             for k in self.first_window:
                 if k in res.stderr:
                     self.params[k].value = float(res.params[k])

@@ -82,6 +82,9 @@ class IdentResult:
     road: str = "measured"
     undetermined: list[str] | None = None
     band_hz: list[float] | None = None
+    #: road unknown: body rows whose equation error is clearly more than noise,
+    #: ``coordinate -> [noise-floor ratio, share of the signal]``
+    misfit: dict[str, list[float]] | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The contract's JSON object."""
@@ -110,6 +113,8 @@ class IdentResult:
             out["undetermined"] = list(self.undetermined)
         if self.band_hz is not None:
             out["band_hz"] = list(self.band_hz)
+        if self.misfit is not None:
+            out["misfit"] = {k: [float(x) for x in v] for k, v in self.misfit.items()}
         if self.frames is not None:
             out["frames"] = self.frames
         if self.starts is not None:

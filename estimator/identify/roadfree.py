@@ -49,6 +49,7 @@ from estimator.choices import ROAD_MODES
 from estimator.identify.params import Parameters
 from estimator.identify.problem import check_magnitudes
 from estimator.identify.result import IdentResult
+from estimator.identify.start import MISFIT_FLOOR, MISFIT_SHARE
 from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
 from suspid.models.base import FloatArray, Site, SuspensionModel
@@ -525,7 +526,7 @@ def _jackknife(segs: list[_SegmentEquations], ip: list[int], ih: list[int],
 
 def fit_road_unknown(model: SuspensionModel, meas: Measurement, params: Parameters,
                      extra: Mapping[str, Sequence[FloatArray]] | None = None,
-                     jackknife: bool = True) -> IdentResult:
+                     jackknife: bool = True, misfit_fails: bool = True) -> IdentResult:
     """Identify what the body equations determine, the road under the tyres unknown.
 
     Parameters
@@ -545,6 +546,11 @@ def fit_road_unknown(model: SuspensionModel, meas: Measurement, params: Paramete
     jackknife : bool
         Standard errors as the larger of the sandwich and the delete-a-group jackknife
         (default); ``False`` the sandwich alone (screening many candidate columns).
+    misfit_fails : bool
+        Whether a misfit (:func:`body_misfit`: the equations leave clearly more than the
+        measurement noise) makes the fit unsuccessful (default, as ``identify`` judges a
+        road-measured fit); ``False`` keeps ``success`` for a solved system and only warns
+        (a monitor's window, a diagnosis baseline, whose residual is the evidence).
 
     Returns
     -------
@@ -636,8 +642,71 @@ def fit_road_unknown(model: SuspensionModel, meas: Measurement, params: Paramete
     # the cost: the body rows' in-band mean-square equation error, (m/s^2)^2 (rad/s^2)^2
     result.cost = float(sum(v * v for v in result.rms_residual.values()))
     result.band_hz = _band(segs)
+    full = np.zeros(len(eqs.names))
+    full[ip], full[ih] = theta, theta_h
+    misfit = body_misfit(model, eqs, sol.blocks, full)
+    if misfit:
+        result.misfit = {k: [r, sh] for k, (r, sh) in misfit.items()}
+        if misfit_fails:
+            result.success = False
+        held_text = ", ".join(f"{k}={values[k]:.6g}" for k in params.fixed if k in eqs.names)
+        rows = ", ".join(f"the {k} equation (noise-floor ratio {r:.3g}, {100.0 * sh:.3g} % "
+                         "of the signal)" for k, (r, sh) in misfit.items())
+        warnings.append(
+            f"misfit: the body equations leave far more than measurement noise in {rows}; the "
+            "model does not explain the record; likely causes: an effect the model lacks "
+            "(suspid diagnose --road unknown), "
+            + (f"a value held fixed ({held_text}: --fix) " if held_text else "")
+            + "or a faulty channel")
     _explain_undetermined(model, result, eqs, scale_name)
     return result
+
+
+def body_misfit(model: SuspensionModel, eqs: BodyEquations,
+                blocks: list[tuple[np.ndarray, np.ndarray, _SegmentEquations]],
+                theta: FloatArray) -> dict[str, tuple[float, float]]:
+    """Body rows whose in-band equation error is clearly more than measurement noise.
+
+    The equation error of row ``r`` at the estimate, ``e = sum_i theta_i X_i``, has the
+    expected power ``sum_i theta_i^2 N_i`` from the channels' noise floors alone (the
+    columns' noise is independent, or in quadrature: a damper's ``j w D`` and a spring's
+    ``D`` of one ride height). A row misfits, as a road-measured fit's channel does
+    (:data:`~estimator.identify.start.MISFIT_FLOOR`, :data:`~estimator.identify.start.MISFIT_SHARE`),
+    when its error's power exceeds that noise power by that ratio and the excess is more
+    than that share of the row's held terms' power (the body's inertia force). Measured
+    on linear and unmodelled-effect drives in docs/road-unknown.md.
+
+    Parameters
+    ----------
+    model : SuspensionModel
+    eqs : BodyEquations
+    blocks : list
+        Each segment's ``(A, y, equations)`` (:func:`_solve`).
+    theta : ndarray
+        Every column's coefficient, in :attr:`BodyEquations.names` order (SI).
+
+    Returns
+    -------
+    dict
+        ``coordinate -> (ratio, share)`` of the misfit rows (dimensionless); empty when none.
+    """
+    n_rows = len(eqs.rows)
+    err = np.zeros(n_rows)
+    noise = np.zeros(n_rows)
+    signal = np.zeros(n_rows)
+    for _, y, s in blocks:
+        err += np.sum(np.abs(s.X @ theta) ** 2, axis=1)
+        noise += np.sum(s.noise @ (theta ** 2), axis=1)
+        signal += np.sum(np.abs(y) ** 2, axis=1)
+    out = {}
+    for r, j in enumerate(eqs.rows):
+        if not (noise[r] > 0.0 and signal[r] > 0.0):
+            continue
+        ratio = float(err[r] / noise[r])
+        share = float((err[r] - noise[r]) / signal[r])
+        if ratio > MISFIT_FLOOR and share > MISFIT_SHARE:
+            out[model.coords[j]] = (ratio, share)
+    return out
 
 
 def _real(z: np.ndarray) -> np.ndarray:

@@ -206,7 +206,7 @@ class RoadFreeWindowEstimator:
         meas = Measurement(np.asarray(t, dtype=float), {},
                            {c: np.asarray(data[c], dtype=float) for c in self.channels},
                            source="window")
-        res = fit_road_unknown(self.model, meas, self.params)
+        res = fit_road_unknown(self.model, meas, self.params, misfit_fails=False)
         if not res.success:
             why = next((w for w in reversed(res.warnings) if w.startswith("road unknown: no ")),
                        "the body equations could not be solved on this window")
@@ -217,7 +217,7 @@ class RoadFreeWindowEstimator:
             "road": "unknown", "stderr_fit": dict(res.stderr), "identifiable": res.identifiable,
             "undetermined": list(res.undetermined or []), "cost": res.cost,
             "rms_residual": dict(res.rms_residual), "band_hz": res.band_hz,
-            "excitation": {"ride_height_rms": rms},
+            "excitation": {"ride_height_rms": rms}, "misfit": res.misfit,
             "warnings": [w for w in res.warnings[1:]
                          if not w.startswith("not identifiable with the road unknown")]}
         if self.inspection and res.identifiable:
