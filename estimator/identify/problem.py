@@ -472,7 +472,7 @@ class OutputErrorProblem:
         slower per point than one evaluation after another. With the initial state known
         (given or at rest) 1: stacking saved little there (no projection to share) and
         made the half car's Jacobian ~15 % slower (measured,
-        ``python -m estimator.doe.evalbench``).
+        ``python tools/doe_evalbench.py``).
         """
         if not self._estimate:
             return 1

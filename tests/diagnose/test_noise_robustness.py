@@ -9,7 +9,7 @@ interpolated half-sample shift made a spurious delay screen above friction, whic
 fell below half the best screen and was never refitted.
 
 At 3 % noise the positions-only cost leaves c1 within about +-9 % over seeds even at the
-cost's own optimum (seeds 2, 5 and 6 of ``python -m estimator.diagnose.noise_sweep``, refitted
+cost's own optimum (seeds 2, 5 and 6 of ``python tools/noise_sweep.py``, refitted
 from the truth), so the c1/k1 check runs on seeds whose optimum is within 5 %; the
 detection rate over eight seeds is in the doc's noise table.
 """

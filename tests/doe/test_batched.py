@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from estimator.doe.design import experiments
-from estimator.doe.evalbench import jacobian_one_by_one
+from tools.doe_evalbench import jacobian_one_by_one
 from estimator.doe.runner import measurement
 from estimator.identify import OutputErrorProblem, jacobian_log
 from estimator.identify.profile import _Cost, _fd_jacobian

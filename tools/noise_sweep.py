@@ -7,9 +7,9 @@ makes them (:func:`estimator.diagnose.synthetic.synthetic_record` with ``noise_s
 
 Usage::
 
-    python -m estimator.diagnose.noise_sweep                          # friction 60 N and 150 N
-    python -m estimator.diagnose.noise_sweep --effect coulomb_friction:F=150 --noise 0.03 --seeds 1-8
-    python -m estimator.diagnose.noise_sweep --json                   # one JSON object per record
+    python tools/noise_sweep.py                          # friction 60 N and 150 N
+    python tools/noise_sweep.py --effect coulomb_friction:F=150 --noise 0.03 --seeds 1-8
+    python tools/noise_sweep.py --json                   # one JSON object per record
 
 The Markdown table has one row per effect and noise level: how many records named the
 injected effect, the wrong one or none, the range of the effect's parameters and of the

@@ -2,10 +2,10 @@
 
 Usage (from the repository root)::
 
-    python -m estimator.doe.study ablation        [--out docs]   # half4 L27, what each step buys
-    python -m estimator.doe.study noise           [--out docs]   # §6.2 noise, CRLB, denoising
-    python -m estimator.doe.study identifiability [--out docs]   # scale ambiguity, minimal prior
-    python -m estimator.doe.study figures         [--out docs]   # target vs identified PNGs
+    python tools/doe_study.py ablation        [--out docs]   # half4 L27, what each step buys
+    python tools/doe_study.py noise           [--out docs]   # §6.2 noise, CRLB, denoising
+    python tools/doe_study.py identifiability [--out docs]   # scale ambiguity, minimal prior
+    python tools/doe_study.py figures         [--out docs]   # target vs identified PNGs
 
 Each writes ``<out>/data/<study>.json`` (and PNGs under ``<out>/figures/``) and prints a
 summary. The designs themselves are ``suspid doe ...`` (see the doc).

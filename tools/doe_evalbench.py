@@ -2,7 +2,7 @@
 
 Usage::
 
-    python -m estimator.doe.evalbench [--repeat 300] [--no-jacobian]
+    python tools/doe_evalbench.py [--repeat 300] [--no-jacobian]
 
 Cases: ``half4`` and ``quarter2`` free responses (DoE row 14, 20 s at 100 Hz = 2001
 samples, positions + velocities) with the initial state known or estimated (variable
@@ -15,7 +15,7 @@ Then, per free-response case, the central-difference Jacobian of the residual ve
 every parameter (``2 n`` evaluations) two ways: one evaluation after another
 (``residual_vector`` per point) and :func:`~estimator.identify.jacobian_log` (batched where
 the version has it), in microseconds per Jacobian. The file also runs as a script against
-another version's package (``PYTHONPATH=DIR python estimator/doe/evalbench.py``).
+another version's package (``PYTHONPATH=DIR python tools/doe_evalbench.py``).
 """
 from __future__ import annotations
 
