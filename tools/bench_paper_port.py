@@ -8,7 +8,7 @@ identify c1, k1, c2, k2 with the masses fixed, starting at 0.5x the truth, cost 
 
 * reference: RK45 at ode45's default RelTol 1e-3 / AbsTol 1e-6 on the same ``model.rhs``
   with the analytic bump as road, plus Nelder–Mead with fminsearch's defaults in raw
-  coordinates (``estimator.doe.baseline``). The seed's known zero initial state.
+  coordinates (``tools.doe_baseline``). The seed's known zero initial state.
 * suspid in-process: ``OutputErrorProblem`` + ``fit`` exactly as ``suspid identify`` runs
   them (initial state estimated by variable projection).
 * suspid end to end: ``suspid identify ... --json`` as a subprocess, process start
@@ -34,7 +34,10 @@ from pathlib import Path
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from estimator.doe.baseline import ode45, seed_identify
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository: tools.*
+
+from tools.doe_baseline import ode45, seed_identify  # noqa: E402
 from estimator.identify import OutputErrorProblem, Parameters, fit
 from suspid.excitation import bump_profile, make_scenario
 from suspid.io.csvio import read_measurement, write_measurement

@@ -10,7 +10,7 @@ and how many draws put some parameter more than 3 standard errors off (a correct
 misses ``1 - 0.9973^p`` of draws for ``p`` parameters) or outside its reported band.
 
 Next to each it prints the same statistics of the linearised z-score of the same draws
-(:func:`estimator.doe.noise.linearised_error`: the error the draw's noise puts into the
+(:func:`tools.doe_noise.linearised_error`: the error the draw's noise puts into the
 estimate to first order, over its exact standard error; standard normal by construction), so
 a spread away from 1 that the linearised z-scores share is the draws' sampling spread, not
 a wrong standard error; and the identifier's standard error of each log-parameter over the
@@ -34,7 +34,12 @@ import numpy as np
 
 from estimator.doe import runner
 from estimator.doe.design import experiments
-from estimator.doe.noise import linearised_error
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository: tools.*
+
+from tools.doe_noise import linearised_error  # noqa: E402
 from estimator.doe.runner import Settings, run_experiment
 from suspid.models import get_model
 from suspid.models.base import FloatArray

@@ -26,10 +26,13 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from estimator.doe.baseline import seed_identify
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository: tools.*
+
+from tools.doe_baseline import seed_identify  # noqa: E402
 from estimator.doe.design import Experiment, experiments
-from estimator.doe.prior import prior_study, scale_ambiguity
-from estimator.doe.noise import monte_carlo
+from tools.doe_prior import prior_study, scale_ambiguity  # noqa: E402
+from tools.doe_noise import monte_carlo  # noqa: E402
 from estimator.doe.runner import (TOL, Settings, free_names, identify_staged, measurement,
                                   run_design, start_parameters)
 from estimator.identify import IdentResult

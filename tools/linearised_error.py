@@ -2,7 +2,7 @@
 """Benchmark: is a design row's miss its noise realisation? The linearised estimation error.
 
 Near the truth an output-error estimate is linear in the noise
-(:func:`estimator.doe.noise.linearised_error`): its log-parameter error is
+(:func:`tools.doe_noise.linearised_error`): its log-parameter error is
 ``delta = (J^T J)^-1 J^T e`` (``J`` the sensitivity of the cost's weighted channels to the
 log-parameters at the truth, ``e`` the weighted noise added to the record), with the exact
 covariance ``C = (J^T J)^-1 J^T S J (J^T J)^-1`` (``S`` the per-channel noise variance the
@@ -47,7 +47,12 @@ from scipy.stats import chi2, kstest, norm
 
 from estimator.doe import runner
 from estimator.doe.design import Experiment, experiments
-from estimator.doe.noise import linearised_error
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository: tools.*
+
+from tools.doe_noise import linearised_error  # noqa: E402
 from estimator.doe.runner import Settings, free_names, measurement, run_experiment
 from estimator.identify.result import IdentResult
 from suspid.models import SuspensionModel, get_model

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from estimator.doe.baseline import FMIN_TOLFUN, FMIN_TOLX, ODE45_ATOL, ODE45_RTOL, ode45, seed_cost
+from tools.doe_baseline import FMIN_TOLFUN, FMIN_TOLX, ODE45_ATOL, ODE45_RTOL, ode45, seed_cost
 from estimator.doe.design import experiments, time_grid
 from suspid.models import get_model
 from suspid.simulate import simulate

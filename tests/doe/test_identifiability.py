@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import pytest
 
-from estimator.doe.prior import prior_study, scale_ambiguity
+from tools.doe_prior import prior_study, scale_ambiguity
 
 
 @pytest.mark.parametrize("model", ["quarter1", "quarter2", "half4"])

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from estimator.doe.design import experiments, time_grid
-from estimator.doe.noise import (crlb_relative, fisher_information, linearised_error,
+from tools.doe_noise import (crlb_relative, fisher_information, linearised_error,
                                  monte_carlo, noise_sigmas)
 from estimator.doe.runner import Settings, measurement, run_experiment
 from suspid.models import get_model
