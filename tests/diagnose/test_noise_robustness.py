@@ -25,7 +25,7 @@ from estimator.diagnose.core import Thresholds, select_for_refit
 from estimator.diagnose.residuals import Screen, shift_allpass
 from estimator.identify import Parameters
 from suspid.models import get_model
-from suspid.effects import _shift
+from suspid.effects.sensor import _shift
 
 from ..conftest import TABLE1
 from .conftest import make_measurement

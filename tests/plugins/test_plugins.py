@@ -18,7 +18,8 @@ from typing import Any
 import pytest
 
 from suspid.errors import UsageError
-from suspid.effects import PhysicalEffect, _check_plugin
+from suspid.effects import PhysicalEffect
+from suspid.effects.base import _check_plugin
 
 from .conftest import env_with
 
