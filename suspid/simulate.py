@@ -124,8 +124,8 @@ def mode_pattern(lam: np.ndarray, V: np.ndarray, Vinv: np.ndarray
     positive imaginary part (the other one is its conjugate), ``is_real`` marks the real
     ones among them. ``None`` when ``A`` is (nearly) defective (``V``'s 1-norm condition
     number above ``MODE_COND_MAX``, or ``V`` singular: ``Vinv`` not finite) or the
-    eigenvalues do not pair up. One test for :func:`modal_form` and for every point of a
-    stacked evaluation.
+    eigenvalues do not pair up. The test of :func:`modal_form`; the output-error cost's fast
+    path applies the same bound to its LAPACK eigenvectors.
     """
     # 1-norm condition number of V (max column sums), without np.linalg.norm's overhead
     if not np.abs(V).sum(axis=0).max() * np.abs(Vinv).sum(axis=0).max() <= MODE_COND_MAX:

@@ -54,15 +54,10 @@ from suspid.io.csvio import Measurement
 from suspid.models.base import AffinePieces, FloatArray, SuspensionModel
 from suspid.simulate import (MODE_COND_MAX, Modal, first_order_scan, foh_weights,
                              free_coeffs_to_state, free_response_basis, modal_form,
-                             modal_step_powers, modal_trajectory, mode_pattern, powers,
+                             modal_step_powers, modal_trajectory, powers,
                              ride_height_maps, road_matrix, simulate_states, state_matrices,
                              uniform_step)
 
-#: most modal powers (points x samples x modes) one stacked evaluation holds (~0.8 MB)
-_STACK_ENTRIES = 50000
-#: most points one stacked evaluation holds: beyond 4 the per-point time rose again on a
-#: shared two-core machine (docs/performance.md)
-_STACK_POINTS = 4
 
 
 @dataclass
@@ -443,7 +438,6 @@ class OutputErrorProblem:
             self._maps_fixed = self._stack_heights(output_maps(
                 self._kind, np.zeros((m.n_states, m.n_states)),
                 np.zeros((m.n_states, 2 * len(m.roads))), self._nq))
-        self._w2 = w ** 2
         # weights and mask as flat (N p,) rows: an elementwise product with a broadcast
         # (p,) row runs one short inner loop per sample, 3-4x slower
         self._w_flat = np.tile(w, self.t.size)
@@ -907,16 +901,11 @@ class OutputErrorProblem:
         return r if self._full else r[self._mask_flat]
 
     def residual_vectors(self, points: Sequence[Mapping[str, float]]) -> FloatArray:
-        """Residual vectors of several parameter sets at once, shape (k, n_obs).
+        """Residual vectors of several parameter sets, shape (k, n_obs).
 
-        Row ``i`` equals :meth:`residual_vector` of ``points[i]`` (to rounding, <= 1e-12
-        relative; tested). On the fast path (uniform grid, no road input, every point's
-        ``A`` diagonalisable with the same pattern of real modes and conjugate pairs, and
-        with ``x0="estimate"`` no missing sample and a well-conditioned projection) the
-        ``k`` evaluations share stacked numpy operations: one ``eig`` and one ``inv`` on
-        the ``(k, n, n)`` stack, one running product for all ``k * m`` modes, batched
-        products. Otherwise the points are evaluated one by one (the same errors raise).
-        For finite-difference Jacobians, whose ``k`` points differ in one parameter each.
+        Row ``i`` is :meth:`residual_vector` of ``points[i]`` (the same path, so finite
+        differences between rows are differences of one computation; the same errors
+        raise).
 
         Parameters
         ----------
@@ -929,140 +918,10 @@ class OutputErrorProblem:
             Weighted residuals of the observed samples (units of the channels times their
             weights), each row flattened as :meth:`residual_vector`'s.
         """
-        k = len(points)
-        size = self.batch_size()
-        R = np.empty((k, self.n_obs))
-        for i in range(0, k, size):
-            chunk = points[i:i + size]
-            out = self._stacked_residuals(chunk) if len(chunk) > 1 else None
-            if out is not None:
-                R[i:i + len(chunk)] = out
-            else:
-                for j, q in enumerate(chunk):
-                    R[i + j] = self.residual_vector(q)
+        R = np.empty((len(points), self.n_obs))
+        for i, q in enumerate(points):
+            R[i] = self.residual_vector(q)
         return R
-
-    def batch_size(self) -> int:
-        """Most points :meth:`residual_vectors` stacks at once.
-
-        At most :data:`_STACK_POINTS`, and fewer when their powers (points x samples x
-        modes) would exceed :data:`_STACK_ENTRIES`: a larger stack leaves the cache and is
-        slower per point than one evaluation after another. With the initial state known
-        (given or at rest) 1: stacking saved little there (no projection to share) and
-        made the half car's Jacobian ~15 % slower (measured,
-        ``python -m estimator.doe.evalbench``).
-        """
-        if not self._estimate:
-            return 1
-        per_point = self.t.size * max(self.model.n_states // 2, 1)
-        return max(1, min(_STACK_POINTS, _STACK_ENTRIES // max(per_point, 1)))
-
-    def _stacked_residuals(self, points: Sequence[Mapping[str, float]]) -> FloatArray | None:
-        """The fast path of :meth:`residual_vectors`; ``None`` where it does not apply."""
-        m = self.model
-        if self.h is None or self._has_road or (self._estimate and not self._full):
-            return None
-        if not all(np.isfinite(v) for q in points for v in q.values()):
-            return None
-        k = len(points)
-        if self._heights:
-            # one set of ride-height rows for the stack: the points share the geometry
-            geom = self._geometry(points[0])
-            if any(self._geometry(q) != geom for q in points[1:]):
-                return None
-            self._set_heights(points[0])
-        aff = self.pieces(points[0])
-        mats = [state_matrices(m, q, aff) for q in points]
-        A = np.stack([a for a, _ in mats])
-        try:
-            lam, V = np.linalg.eig(A)
-            Vinv = np.linalg.inv(V)
-        except np.linalg.LinAlgError:  # non-finite A, no convergence or a singular V
-            return None
-        # modal_form's test, point by point; one pattern of modes for the whole stack
-        pattern = None
-        for i in range(k):
-            got = mode_pattern(lam[i], V[i], Vinv[i])
-            if got is None:
-                return None
-            if lam.dtype.kind == "c" and int(got[1].sum()) == lam.shape[1]:
-                return None  # modal_form would have worked in real arithmetic here
-            if pattern is None:
-                pattern = got
-            elif not (np.array_equal(got[0], pattern[0]) and np.array_equal(got[1], pattern[1])):
-                return None
-        if pattern is None:
-            return None
-        keep, is_real = pattern
-        lam = lam[:, keep]
-        Vk = V[:, :, keep]
-        if is_real.any():
-            Vk[:, :, is_real] = Vk[:, :, is_real].real
-        Vinv = Vinv[:, keep]
-        fac = np.where(is_real, 1.0, 2.0)
-        mm = keep.size
-        if self._maps_fixed is not None:
-            Cm = self._maps_fixed[0]
-        else:
-            Cm = np.stack([self._output_maps(a, b)[0] for a, b in mats])
-        CV = (Cm @ Vk) * fac  # (k, p, mm)
-        N = self.t.size
-        E = np.exp(lam * float(self.h))  # (k, mm)
-        P = _stack_powers(E, N)  # (k, N, mm)
-        Y: np.ndarray | None = None
-        if self._x0_nonzero:
-            X = (CV * (Vinv @ self._x0_base)[:, None, :]).transpose(0, 2, 1)
-            Y = _re_dot_stack(P, X)
-        if self._estimate:
-            sol = self._x0_closed_form_stack(fac, CV, E, P, Y)
-            if sol is None:
-                return None
-            pairs = fac == 2.0
-            c = sol[:, :mm].astype(complex)
-            c[:, pairs] += 1j * sol[:, mm:]
-            Yx = _re_dot_stack(P, (CV * c[:, None, :]).transpose(0, 2, 1))
-            Y = Yx if Y is None else Y + Yx
-        if Y is None:
-            Y = np.zeros((k, N, len(self.channels)))
-        r = (self.Ymeas.reshape(1, -1) - Y.reshape(k, -1)) * self._w_flat
-        return r if self._full else r[:, self._mask_flat]
-
-    def _x0_closed_form_stack(self, fac: FloatArray, CV: np.ndarray, E: np.ndarray,
-                              P: np.ndarray, Y: FloatArray | None) -> FloatArray | None:
-        """Least-squares modal initial coefficients of ``k`` points from closed-form
-        normal equations (``CV`` (k, p, mm), ``E`` (k, mm), ``P`` (k, N, mm), ``Y`` (k, N, p)
-        the response without the free part or ``None``: zero).
-
-        The Gram matrix of the free-response regressors is a sum of geometric series in the
-        products of the modes' ``exp(lam h)`` (as in :meth:`evaluate`); ``None`` if any
-        point's Gram matrix is singular or ill-conditioned (the caller then evaluates the
-        points one by one)."""
-        mm = fac.size
-        pairs = np.flatnonzero(fac == 2.0)
-        modes = np.concatenate([np.arange(mm), pairs])
-        alpha = np.concatenate([np.ones(mm), np.full(pairs.size, 1j)])
-        Q = CV[:, :, modes] * alpha  # (k, p, n)
-        w2 = self._w2
-        Eg = E[:, modes]
-        EN = P[:, -1][:, modes] * Eg
-        N = P.shape[1]
-        S1 = _geometric_sum(Eg[:, :, None] * Eg[:, None, :], EN[:, :, None] * EN[:, None, :], N)
-        S2 = _geometric_sum(Eg[:, :, None] * np.conj(Eg)[:, None, :],
-                            EN[:, :, None] * np.conj(EN)[:, None, :], N)
-        Qw = Q.transpose(0, 2, 1) * w2
-        GtG = 0.5 * np.real((Qw @ Q) * S1 + (Qw @ np.conj(Q)) * S2)
-        R = self.Ymeas if Y is None else self.Ymeas - Y
-        v = (_t_dot_stack(P, R) * (CV * w2[:, None]).transpose(0, 2, 1)).sum(axis=2)
-        GtR = np.real(alpha * v[:, modes])
-        try:
-            sol = np.linalg.solve(GtG, GtR[..., None])[..., 0]
-        except np.linalg.LinAlgError:  # a singular GtG
-            return None
-        if not np.isfinite(sol).all():
-            return None
-        if (np.linalg.cond(GtG) > 1e12).any():
-            return None
-        return np.asarray(sol, dtype=float)
 
     def normalized_ss(self, p: Mapping[str, float]) -> float:
         """Weighted sum of squares divided by the data's (dimensionless, 1 = no fit)."""
@@ -1090,70 +949,17 @@ class OutputErrorProblem:
         return float(np.sqrt(ss)) if self.cost == "frobenius" else float(ss)
 
 
-def _geometric_sum(q: np.ndarray, qN: np.ndarray, N: int) -> np.ndarray:
-    """``sum_{k<N} q**k`` elementwise, given ``qN = q**N`` (series near ``q = 1``)."""
-    d = q - 1.0
-    near = np.abs(d) < 1e-7
-    safe = np.where(near, 1.0, d)
-    out = (qN - 1.0) / safe
-    if np.any(near):
-        series = N + N * (N - 1) / 2.0 * d + N * (N - 1) * (N - 2) / 6.0 * d * d
-        out = np.where(near, series, out)
-    return out
-
-
 def _re_dot(P: np.ndarray, X: np.ndarray) -> FloatArray:
     """``Re(P @ X)`` for a C-contiguous ``P`` (N, m) as one real product.
 
     A complex ``P`` is read as the real (N, 2 m) matrix of its interleaved real and
     imaginary parts, so ``Re(P @ X) = P_real_view @ [Re X; -Im X]`` (rows interleaved):
     one BLAS ``dgemm`` on contiguous memory, no copies of the real and imaginary parts.
-    The one-point case of :func:`_re_dot_stack` (the same products, so batched and single
-    evaluations agree bit for bit).
-    """
-    return _re_dot_stack(P[None], X[None])[0]
-
-
-def _stack_powers(E: np.ndarray, N: int) -> np.ndarray:
-    """``E[i]**j`` for ``j = 0..N-1``: (k, N, m) from ``E`` (k, m), as :func:`powers` per row.
-
-    Each point's block is C-contiguous like :func:`powers`' array, so the products on it
-    run exactly as on a single point's (same running product, same BLAS calls).
-    """
-    k, m = E.shape
-    P = np.empty((k, N, m), dtype=np.result_type(E, 1.0))
-    if N == 0:
-        return P
-    P[:, 0] = 1.0
-    if N > 1:
-        np.multiply.accumulate(np.broadcast_to(E[:, None, :], (k, N - 1, m)), axis=1,
-                               out=P[:, 1:])
-    return P
-
-
-def _re_dot_stack(P: np.ndarray, X: np.ndarray) -> FloatArray:
-    """``Re(P[i] @ X[i])`` for every ``i``: ``P`` (k, N, m) C-contiguous, ``X`` (k, m, p).
-
-    The stacked form of :func:`_re_dot` (one ``dgemm`` per point on the interleaved real
-    view of its block); returns (k, N, p).
-    """
-    k, N, m = P.shape
-    if P.dtype.kind != "c":
-        return np.matmul(P, X.real)
-    p = X.shape[2]
-    Xs = np.empty((k, 2 * m, p))
-    Xs[:, 0::2] = X.real
-    Xs[:, 1::2] = -X.imag if X.dtype.kind == "c" else 0.0
-    return np.matmul(P.view(np.float64), Xs)
-
-
-def _t_dot_stack(P: np.ndarray, R: FloatArray) -> np.ndarray:
-    """``P[i].T @ R[i]`` for every ``i`` (``R`` (N, p) shared or (k, N, p)): (k, m, p).
-
-    Real products over the samples on ``P``'s interleaved real view (see :func:`_re_dot`);
-    complex when ``P`` is.
     """
     if P.dtype.kind != "c":
-        return np.matmul(P.transpose(0, 2, 1), R)
-    M = np.matmul(P.view(np.float64).transpose(0, 2, 1), R)  # (k, 2 m, p)
-    return M[:, 0::2] + 1j * M[:, 1::2]
+        return np.asarray(P @ X.real)
+    m, p = X.shape
+    Xs = np.empty((2 * m, p))
+    Xs[0::2] = X.real
+    Xs[1::2] = -X.imag if X.dtype.kind == "c" else 0.0
+    return np.asarray(P.view(np.float64) @ Xs)

@@ -152,7 +152,7 @@ class WindowFit:
         """Every measured model channel (rows) of an evaluation, from its estimated ``x0``."""
         Cm, Dm = output_maps(self._all_kind, ev.A, ev.B, self._nq)
         CV = (Cm @ ev.vr) @ ev.pat.sel_cv
-        Y = (CV @ ev.modal(self._r)).real + (Cm @ ev.B[:, self._nr:]) @ self._r + Dm @ self.problem._UT
+        Y = (CV @ ev.modal(self._r)).real + (Cm @ ev.B[:, self._nr:]) @ self._r + Dm @ self.problem.U.T
         return Y
 
     # ---- result at the optimum ----------------------------------------------------------------
