@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import functools
+import itertools
 import json
 import math
 import statistics
@@ -84,17 +85,9 @@ N_POINTS = 64
 
 def _cycle(fn: Callable[[dict[str, float]], object], p: dict[str, float]) -> Callable[[], object]:
     """``fn`` of the next of :data:`N_POINTS` sets ``p * (1 + 1e-6 i)`` on each call."""
-    points = [{k: v * (1.0 + 1e-6 * i) for k, v in p.items()} for i in range(N_POINTS)]
-    it = iter(range(0))
-
-    def call() -> object:
-        nonlocal it
-        q = next(it, None)
-        if q is None:
-            it = iter(points)
-            q = next(it)
-        return fn(q)
-    return call
+    points = itertools.cycle([{k: v * (1.0 + 1e-6 * i) for k, v in p.items()}
+                              for i in range(N_POINTS)])
+    return lambda: fn(next(points))
 
 
 def _time(fn: Callable[[], object], repeat: int, rounds: int) -> dict[str, float]:
@@ -108,6 +101,11 @@ def _time(fn: Callable[[], object], repeat: int, rounds: int) -> dict[str, float
         walls.append((time.perf_counter() - w) / repeat * 1e6)
         cpus.append((time.process_time() - c) / repeat * 1e6)
     return {"wall_us": statistics.median(walls), "cpu_us": statistics.median(cpus)}
+
+
+def _jacobian_log_all(problem: OutputErrorProblem, p: dict[str, float]) -> Any:
+    """:func:`~estimator.identify.jacobian_log` in every parameter of ``p``."""
+    return jacobian_log(problem, p, list(p))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -131,7 +129,7 @@ def main(argv: list[str] | None = None) -> int:
             timed.append((f"{short}: Jacobian ({2 * len(p)} ev.), one by one",
                           _cycle(functools.partial(jacobian_one_by_one, prob), p), rep))
             timed.append((f"{short}: Jacobian ({2 * len(p)} ev.), jacobian_log",
-                          _cycle(lambda q, prob=prob: jacobian_log(prob, q, list(q)), p), rep))
+                          _cycle(functools.partial(_jacobian_log_all, prob), p), rep))
     for label, fn, repeat in timed:
         res[label] = _time(fn, repeat, args.rounds)
         if not args.json:
