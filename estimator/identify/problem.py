@@ -258,22 +258,6 @@ class Evaluation:
             R = self._R = self.R0 - (self.CV @ (self.coef[:, None] * self.P)).real
         return R
 
-    def residual_rows(self) -> FloatArray:
-        """Final residual sample-major, (N, p) C-contiguous (as :attr:`R` transposed).
-
-        The free response ``Re(P^T (CV coef)^T)`` as one real product on ``P``'s
-        interleaved real view: ``Pv^T [Re X | Im X]`` gives the real and imaginary parts'
-        products in alternate rows (no complex temporary, no transposing copy).
-        """
-        if self._R is not None:
-            return np.ascontiguousarray(self._R.T)
-        X = (self.CV * self.coef).T  # (m, p)
-        p = X.shape[1]
-        Z = self.P.view(np.float64).T @ np.concatenate([X.real, X.imag], axis=1)  # (2N, 2p)
-        out = np.subtract(self.R0.T, Z[0::2, :p], out=np.empty((Z.shape[0] // 2, p)))
-        out += Z[1::2, p:]
-        return out
-
     @property
     def c(self) -> np.ndarray:
         """Complex free modal coefficients of the initial state (m,).
@@ -911,10 +895,8 @@ class OutputErrorProblem:
         """Weighted residuals of the observed samples, flattened (for Jacobians)."""
         ev = self._fast_or_none(p)
         if ev is not None:
-            rows = ev.residual_rows()
-            if not self._unit_w:
-                rows *= self.w
-            return rows.reshape(-1)
+            return (ev.R.T.ravel() if self._unit_w
+                    else (ev.R * self.w[:, None]).T.ravel())
         r = self.predict(p).residual.reshape(-1) * self._w_flat
         return r if self._full else r[self._mask_flat]
 
