@@ -35,8 +35,8 @@ per problem and per parameter set:
   parameter set the fast path declines: an ill-conditioned initial-state Gram matrix);
 * stepwise simulation on a non-uniform grid or for a defective ``A``.
 
-The paths agree to rounding; ``tests/identify`` (``tests/core/test_identify.py``) checks
-them against an accurate ``scipy.integrate.solve_ivp`` simulation.
+The paths agree to rounding; ``tests/core/test_cost_oracle.py`` checks each of them against
+an accurate ``scipy.integrate.solve_ivp`` simulation.
 """
 from __future__ import annotations
 
@@ -151,7 +151,7 @@ MAX_GRAM_COND = 1e12
 #: the fitted free response removes, no residual pass) unless that is below this fraction of
 #: ``||R0||^2``: then the two terms cancel and the residual is formed explicitly (noise-free
 #: data at its optimum). Above it the cancellation costs at most ~1e-16 / SS_GUARD of
-#: relative precision (docs/performance.md)
+#: relative precision
 SS_GUARD = 1e-4
 #: most fast evaluations cached per problem (a monitor window's Nelder-Mead final simplex
 #: is among the latest) ...
