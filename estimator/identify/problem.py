@@ -389,7 +389,7 @@ class OutputErrorProblem:
         heights = [c for c in m.ride_height_channels if c in self.meas.measured]
         if heights and not self.ride_heights:
             self.warnings.append(f"ride-height channel(s) {', '.join(heights)} not compared "
-                                 "(this fit compares the motion channels only)")
+                                 "(the monitor's window fits the motion channels only)")
             heights = []
         measured = motions + heights
         if not measured:
