@@ -459,7 +459,7 @@ class OutputErrorProblem:
         self._hf = float(self.h) if self.h is not None else 0.0
         self.road_t = np.ascontiguousarray(self.U[:, :nr].T)  #: roads (nr, N) (m)
         self._rc = self.road_t.astype(complex)
-        self._r0 = self.road_t[:, 0].copy()
+        self._r0 = self.road_t[:, 0].copy() if N else np.zeros(nr)
         self._UT = np.ascontiguousarray(self.U.T)  # (2 nr, N)
         self._road = bool(np.any(self.road_t))
         self._YT = np.ascontiguousarray(self.Ymeas0.T)  # (p, N)
