@@ -36,7 +36,7 @@ from scipy.linalg import expm
 
 from suspid.errors import UsageError
 from suspid.models.base import AffinePieces, FloatArray, SuspensionModel
-from suspid.simulate import (_foh_weights, mass_inverse, pack_channels, road_matrix,
+from suspid.simulate import (foh_weights, mass_inverse, pack_channels, road_matrix,
                              state_matrices, uniform_step)
 
 #: scalar force law at one site: ``phi(s, s_dot) -> force`` (N)
@@ -151,7 +151,7 @@ def _modal_weights(A: FloatArray, Bw: FloatArray, h: float
         return None
     if not np.all(np.isfinite(lam)) or np.linalg.cond(V) > 1e8:
         return None
-    E, g0, g1 = _foh_weights(lam, h)
+    E, g0, g1 = foh_weights(lam, h)
     VB = Vinv @ Bw
     Phi = np.real((V * E[None, :]) @ Vinv)
     W0 = np.real((V * g0[None, :]) @ VB)

@@ -124,8 +124,8 @@ def mode_pattern(lam: np.ndarray, V: np.ndarray, Vinv: np.ndarray
     positive imaginary part (the other one is its conjugate), ``is_real`` marks the real
     ones among them. ``None`` when ``A`` is (nearly) defective (``V``'s 1-norm condition
     number above ``MODE_COND_MAX``, or ``V`` singular: ``Vinv`` not finite) or the
-    eigenvalues do not pair up. One test for :func:`modal_form` and for every point of a
-    stacked evaluation.
+    eigenvalues do not pair up. The test of :func:`modal_form`; the output-error cost's fast
+    path applies the same bound to its LAPACK eigenvectors.
     """
     # 1-norm condition number of V (max column sums), without np.linalg.norm's overhead
     if not np.abs(V).sum(axis=0).max() * np.abs(Vinv).sum(axis=0).max() <= MODE_COND_MAX:
@@ -169,13 +169,37 @@ def modal_form(model: SuspensionModel, p: Mapping[str, float],
     return Modal(lam[keep], Vk, Vinv[keep], np.where(is_real, 1.0, 2.0), Bz, Bv, A, B)
 
 
-def _foh_weights(lam: np.ndarray, h: float | np.ndarray
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``E = exp(lam h)`` and FOH weights ``g0, g1`` of ``int_0^h e^{lam(h-s)} u(s) ds``
-    (elementwise: ``lam`` and ``h`` broadcast, e.g. (1, m) modes by (N-1, 1) steps)."""
+def foh_weights(lam: np.ndarray, h: float | np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Exact first-order-hold discretisation of the modes ``w' = lam w + b(t)``.
+
+    With the input ``b`` linear between two samples ``b0``, ``b1`` one interval later,
+    ``w1 = E w0 + g0 b0 + g1 b1``. One function for every simulator of the project (the
+    linear and the nonlinear one, the output-error cost and the drift sensitivities).
+
+    Parameters
+    ----------
+    lam : ndarray of complex
+        Eigenvalues (1/s); broadcast against ``h``.
+    h : float or ndarray
+        Sample interval(s) (s), e.g. (N-1, 1) steps of a non-uniform grid against (1, m)
+        modes.
+
+    Returns
+    -------
+    E, g0, g1 : ndarray
+        ``exp(lam h)`` and the weights (s) of the interval's first and last input sample:
+        ``g1 = int_0^h e^{lam (h - s)} s / h ds``, ``g0 = int_0^h e^{lam (h - s)} ds - g1``.
+        Where ``|lam h| < 1e-3`` the closed forms cancel, so a fourth-order series is used
+        there.
+    """
     z = lam * h
     E = np.exp(z)
     small = np.abs(z) < 1e-3
+    if not small.any():  # the common case: the closed forms alone
+        em1 = E - 1.0
+        i1 = (em1 - z) / (z * z) * h
+        return E, em1 / z * h - i1, i1
     zs = np.where(small, 1.0, z)
     i0 = np.where(small, h * (1 + z / 2 + z * z / 6 + z ** 3 / 24), (E - 1) / zs * h)
     i1 = np.where(small, h * (0.5 + z / 6 + z * z / 24 + z ** 3 / 120),
@@ -250,9 +274,9 @@ def modal_trajectory(modal: Modal, h: float | FloatArray, r: FloatArray,
     if N > 1:
         steps = np.ndim(h) > 0
         if steps:
-            E, g0, g1 = _foh_weights(modal.lam[None, :], np.asarray(h, dtype=float)[:, None])
+            E, g0, g1 = foh_weights(modal.lam[None, :], np.asarray(h, dtype=float)[:, None])
         else:
-            E, g0, g1 = _foh_weights(modal.lam, float(h))
+            E, g0, g1 = foh_weights(modal.lam, float(h))
         if np.any(r):
             S = r @ (modal.Vinv @ modal.Bz).T
             drive = g0 * S[:-1] + g1 * S[1:]

@@ -9,18 +9,21 @@ samples, positions + velocities) with the initial state known or estimated (vari
 projection), and the seed's Table 1 quarter car over the speed bump (3 s at 1 kHz = 3001
 samples, initial state estimated: what ``suspid identify`` runs). Prints the median wall
 and CPU time per evaluation in microseconds; the process's own CPU time is what the
-machine's load does not distort.
+machine's load does not distort. Each call takes the next of :data:`N_POINTS` parameter
+sets a few parts per million apart (a version that caches evaluations per problem is timed
+evaluating, not looking up).
 
 Then, per free-response case, the central-difference Jacobian of the residual vector in
 every parameter (``2 n`` evaluations) two ways: one evaluation after another
-(``residual_vector`` per point) and :func:`~estimator.identify.jacobian_log` (batched where
-the version has it), in microseconds per Jacobian. The file also runs as a script against
+(``residual_vector`` per point) and :func:`~estimator.identify.jacobian_log` (batched in
+versions that stacked points), in microseconds per Jacobian. The file also runs as a script against
 another version's package (``PYTHONPATH=DIR python tools/doe_evalbench.py``).
 """
 from __future__ import annotations
 
 import argparse
 import functools
+import itertools
 import json
 import math
 import statistics
@@ -76,6 +79,17 @@ def jacobian_one_by_one(problem: OutputErrorProblem, p: dict[str, float],
     return np.column_stack(cols)
 
 
+#: distinct parameter sets each timed function cycles through (more than any problem caches)
+N_POINTS = 64
+
+
+def _cycle(fn: Callable[[dict[str, float]], object], p: dict[str, float]) -> Callable[[], object]:
+    """``fn`` of the next of :data:`N_POINTS` sets ``p * (1 + 1e-6 i)`` on each call."""
+    points = itertools.cycle([{k: v * (1.0 + 1e-6 * i) for k, v in p.items()}
+                              for i in range(N_POINTS)])
+    return lambda: fn(next(points))
+
+
 def _time(fn: Callable[[], object], repeat: int, rounds: int) -> dict[str, float]:
     """Median wall and CPU time (us) per call of ``fn`` over ``rounds`` x ``repeat`` calls."""
     walls, cpus = [], []
@@ -89,6 +103,11 @@ def _time(fn: Callable[[], object], repeat: int, rounds: int) -> dict[str, float
     return {"wall_us": statistics.median(walls), "cpu_us": statistics.median(cpus)}
 
 
+def _jacobian_log_all(problem: OutputErrorProblem, p: dict[str, float]) -> Any:
+    """:func:`~estimator.identify.jacobian_log` in every parameter of ``p``."""
+    return jacobian_log(problem, p, list(p))
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeat", type=int, default=300)
@@ -99,7 +118,7 @@ def main(argv: list[str] | None = None) -> int:
     res = {}
     cases = _cases()
     timed: list[tuple[str, Callable[[], object], int]] = [
-        (label, functools.partial(prob.normalized_ss, p), args.repeat)
+        (label, _cycle(prob.normalized_ss, p), args.repeat)
         for label, prob, p in cases]
     if not args.no_jacobian:
         rep = max(args.repeat // 10, 1)
@@ -108,9 +127,9 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             short = label.split(",")[0] + "," + label.split(",")[1]
             timed.append((f"{short}: Jacobian ({2 * len(p)} ev.), one by one",
-                          functools.partial(jacobian_one_by_one, prob, p), rep))
+                          _cycle(functools.partial(jacobian_one_by_one, prob), p), rep))
             timed.append((f"{short}: Jacobian ({2 * len(p)} ev.), jacobian_log",
-                          functools.partial(jacobian_log, prob, p, list(p)), rep))
+                          _cycle(functools.partial(_jacobian_log_all, prob), p), rep))
     for label, fn, repeat in timed:
         res[label] = _time(fn, repeat, args.rounds)
         if not args.json:

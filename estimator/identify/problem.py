@@ -21,28 +21,43 @@ Ride heights (``d``/``dN`` and their ``_dot``: strut extensions) are compared li
 motions: strut ``i``'s extension is ``g . q + gr . r`` (its rate with ``q'``, ``r'``) on the
 problem's road input (the record's road, or none), rows of the output map after those of the
 motion channels (:func:`ride_height_rows`).
+
+One problem class serves identify, the monitor's windows and diagnose; the path is chosen
+per problem and per parameter set:
+
+* the fast path (:meth:`OutputErrorProblem.evaluate`): a uniform grid with every fitted
+  sample observed and ``x0="estimate"`` (weights allowed) -- the common case of a record and
+  of every monitor window. Affine ``A(theta)``, one LAPACK eigen-decomposition, the forced
+  trajectory in closed form, the initial state from closed-form normal equations; cached
+  per problem, so a window's final simplex and estimate are reused (stderr, Gauss-Newton:
+  :mod:`estimator.stream.windowfit`);
+* the modal recursion on a uniform grid otherwise (missing samples, a known ``x0``, or a
+  parameter set the fast path declines: an ill-conditioned initial-state Gram matrix);
+* stepwise simulation on a non-uniform grid or for a defective ``A``.
+
+The paths agree to rounding; ``tests/core/test_cost_oracle.py`` checks each of them against
+an accurate ``scipy.integrate.solve_ivp`` simulation.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
-from typing import ClassVar, Mapping, Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
+from scipy.linalg.lapack import dgeev as _dgeev
+from scipy.linalg.lapack import dsyev as _dsyev
 
 from estimator.choices import COSTS
 from suspid.errors import InputError, UsageError
 from suspid.io.csvio import Measurement
 from suspid.models.base import AffinePieces, FloatArray, SuspensionModel
-from suspid.simulate import (Modal, free_coeffs_to_state, free_response_basis, modal_form,
-                             modal_step_powers, modal_trajectory, mode_pattern, powers,
+from suspid.simulate import (MODE_COND_MAX, Modal, first_order_scan, foh_weights,
+                             free_coeffs_to_state, free_response_basis, modal_form,
+                             modal_step_powers, modal_trajectory, powers,
                              ride_height_maps, road_matrix, simulate_states, state_matrices,
                              uniform_step)
 
-#: most modal powers (points x samples x modes) one stacked evaluation holds (~0.8 MB)
-_STACK_ENTRIES = 50000
-#: most points one stacked evaluation holds: beyond 4 the per-point time rose again on a
-#: shared two-core machine (docs/performance.md)
-_STACK_POINTS = 4
 
 
 @dataclass
@@ -128,6 +143,209 @@ def check_magnitudes(source: str, columns: Mapping[str, FloatArray]) -> None:
                              "overflow the sum of squares; expected SI units (m, m/s, m/s^2, rad)")
 
 
+#: largest ``max(-Re(lam)) h N`` for which ``E**-N`` is formed (e^600 ~ 1e260 < 1.8e308)
+MAX_DECAY_EXPONENT = 600.0
+#: Gram-matrix condition number above which the initial state is solved explicitly
+MAX_GRAM_COND = 1e12
+#: the fast cost is taken as ``||R0||^2 - rhs . sol`` (the pre-fit residual's norm less what
+#: the fitted free response removes, no residual pass) unless that is below this fraction of
+#: ``||R0||^2``: then the two terms cancel and the residual is formed explicitly (noise-free
+#: data at its optimum). Above it the cancellation costs at most ~1e-16 / SS_GUARD of
+#: relative precision
+SS_GUARD = 1e-4
+#: most fast evaluations cached per problem (a monitor window's Nelder-Mead final simplex
+#: is among the latest) ...
+CACHE_SIZE = 32
+#: ... and at most this many bytes of them (a long identify record keeps fewer)
+CACHE_BYTES = 8 << 20
+
+_PATTERNS: dict[tuple[int, ...], "_Pattern"] = {}
+
+
+@dataclass
+class _Pattern:
+    """Bookkeeping of one eigenvalue pattern (which ``dgeev`` columns form which mode)."""
+
+    k1: list[int]  # column of the real part (or of the real eigenvector) of each kept mode
+    k2: list[int]  # column of the imaginary part (= k1 for a real mode)
+    is_pair: list[bool]
+    fac: FloatArray  # (m,) 2 for a complex pair, 1 for a real mode
+    pairs: np.ndarray  # indices of the complex modes
+    sel_v: np.ndarray  # (n, m) complex: V = vr @ sel_v
+    sel_cv: np.ndarray  # (n, m) complex: (C V) fac = (C vr) @ sel_cv
+    k1a: np.ndarray  # k1 as an index array
+    k2a: np.ndarray  # k2 as an index array
+    pair_mask: FloatArray  # (m,) 1.0 for a complex pair, 0.0 for a real mode
+    ix_pairs: tuple[np.ndarray, ...]  # np.ix_(pairs, pairs)
+
+
+def _pattern(wi: list[float]) -> _Pattern | None:
+    """Mode bookkeeping for the eigenvalue pattern of ``dgeev`` (cached per pattern).
+
+    ``None`` when the pattern is not a clean sequence of real eigenvalues and conjugate
+    pairs (positive imaginary part first), as LAPACK returns them.
+    """
+    sig = tuple(0 if v == 0.0 else (1 if v > 0 else -1) for v in wi)
+    got = _PATTERNS.get(sig)
+    if got is not None:
+        return got
+    k1: list[int] = []
+    k2: list[int] = []
+    j = 0
+    n = len(sig)
+    while j < n:
+        if sig[j] == 0:
+            k1.append(j)
+            k2.append(j)
+            j += 1
+        elif sig[j] > 0 and j + 1 < n and sig[j + 1] < 0:
+            k1.append(j)
+            k2.append(j + 1)
+            j += 2
+        else:
+            return None
+    mm = len(k1)
+    is_pair = [x != y for x, y in zip(k1, k2)]
+    fac = np.array([2.0 if q else 1.0 for q in is_pair])
+    sel_v = np.zeros((n, mm), dtype=complex)  # V = vr @ sel_v
+    for i, (x, y) in enumerate(zip(k1, k2)):
+        sel_v[x, i] = 1.0
+        if is_pair[i]:
+            sel_v[y, i] = 1j
+    pairs = np.flatnonzero(is_pair)
+    got = _Pattern(k1, k2, is_pair, fac, pairs, sel_v, sel_v * fac, np.array(k1),
+                   np.array(k2), np.array(is_pair, dtype=float), np.ix_(pairs, pairs))
+    _PATTERNS[sig] = got
+    return got
+
+
+@dataclass
+class _Traj:
+    """Road-driven modal trajectory ``sum_j (Ca_j E^k Q_j[k] - Cb_j r_j[k]) + cc E^k``."""
+
+    Wf: np.ndarray  # (m, N) sum over roads j of Ca_j E^k Q_j[k], Ca = a0 + a1
+    Cb: np.ndarray  # (m, nr) a0
+    cc: np.ndarray  # (m,) w0 - a1 r[0]
+
+
+@dataclass
+class Evaluation:
+    """One fast evaluation (:meth:`OutputErrorProblem.evaluate`), kept for reuse at the same
+    parameters.
+
+    The residual ``R`` is formed on first use (``R0`` less the fitted free response): the
+    cost ``ss`` does not need it unless the evaluation formed it for precision.
+    """
+
+    key: tuple[float, ...]
+    vr: FloatArray  # (n, n) LAPACK right eigenvectors (real and imaginary parts)
+    pat: _Pattern
+    A: FloatArray
+    B: FloatArray
+    P: np.ndarray  # (m, N) powers E^k
+    traj: _Traj | None  # the road-driven part of the modal trajectory (None: no road)
+    coef: np.ndarray  # (m,) complex modal coefficients of the fitted free response
+    R0: FloatArray  # (p, N) residual before the free response, measured - forced
+    CV: np.ndarray  # (p, m) complex fitted channels per mode
+    ss: float  # weighted sum of squared final residuals
+    _R: FloatArray | None = None
+
+    @property
+    def R(self) -> FloatArray:
+        """Final residual (p, N), measured - predicted (unweighted, formed on first use)."""
+        R = self._R
+        if R is None:
+            R = self._R = self.R0 - (self.CV @ (self.coef[:, None] * self.P)).real
+        return R
+
+    @property
+    def c(self) -> np.ndarray:
+        """Complex free modal coefficients of the initial state (m,).
+
+        The fit absorbed the forced response's own free term ``(w0 - a1 r[0]) E^k``;
+        it is taken out again here.
+        """
+        c = self.coef
+        return c if self.traj is None else c - self.traj.cc
+
+    def modal(self, r: FloatArray) -> np.ndarray:
+        """Complete modal trajectory (m, N): road-driven part plus the fitted free response
+        (``r`` the roads, (nr, N))."""
+        W = self.coef[:, None] * self.P
+        if self.traj is not None:
+            W += self.traj.Wf
+            W -= self.traj.Cb @ r
+        return W
+
+
+class _StateSpaceLayout:
+    """``vals -> (A, B, Bz, [B | Bz])`` as one product, from a model's exact affine pieces.
+
+    The pieces' acceleration rows (:class:`~suspid.models.base.AffinePieces`) laid out once
+    as the column-major blocks ``[A | B | Bz]`` (the order LAPACK wants ``A`` in):
+    ``c0 + theta @ D``. ``Bz = A B_v + B_r`` is affine too when ``B_v`` (tyre damping over
+    wheel mass) does not move with the free parameters; otherwise it is formed per call.
+
+    Parameters
+    ----------
+    pieces : AffinePieces
+        Exact pieces (``pieces.exact``).
+    names : list of str
+        Every parameter of the model, in the order of the values passed.
+    n_roads : int
+    """
+
+    def __init__(self, pieces: AffinePieces, names: list[str], n_roads: int) -> None:
+        self.pieces = pieces
+        free = list(pieces.names)
+        fset = set(free)
+        self._ifree = [names.index(k) for k in free]
+        self._ifix = [i for i, k in enumerate(names) if k not in fset]
+        self._vfix = [float(pieces.base[names[i]]) for i in self._ifix]
+        nq = pieces.nq
+        n = 2 * nq
+        nr = n_roads
+        self._n, self._nr = n, nr
+        A0, B0 = pieces.state_space(np.zeros(len(free)))
+        dA = np.zeros((len(free), n, n))
+        dB = np.zeros((len(free), n, 2 * nr))
+        dA[:, nq:, :] = pieces.dAB[:, :, :n]
+        dB[:, nq:, :] = pieces.dAB[:, :, n:]
+        Bv0 = B0[:, nr:]
+        scale = float(np.abs(Bv0).max()) + 1e-300
+        th0 = np.abs(pieces.theta(pieces.base))
+        self.affine_bz = bool(np.all(np.abs(dB[:, :, nr:]) * th0[:, None, None]
+                                     <= 1e-12 * scale))
+        blocks0 = [A0.ravel(order="F"), B0.ravel(order="F")]
+        blocksD = [np.stack([a.ravel(order="F") for a in dA]),
+                   np.stack([b.ravel(order="F") for b in dB])]
+        if self.affine_bz:
+            blocks0.append((A0 @ Bv0 + B0[:, :nr]).ravel(order="F"))
+            blocksD.append(np.stack([(a @ Bv0 + b[:, :nr]).ravel(order="F")
+                                     for a, b in zip(dA, dB)]))
+        self._c0 = np.concatenate(blocks0)
+        self._D = np.ascontiguousarray(np.concatenate(blocksD, axis=1))
+
+    def applies(self, vals: Sequence[float]) -> bool:
+        """Whether every fixed parameter of ``vals`` is at the pieces' base value."""
+        return [vals[i] for i in self._ifix] == self._vfix
+
+    def __call__(self, vals: Sequence[float]
+                 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """``(A, B, Bz, [B | Bz])``: Fortran-ordered views of one vector."""
+        f = self._c0 + np.array([vals[i] for i in self._ifree]) @ self._D
+        n, nr = self._n, self._nr
+        k1 = n * n
+        k2 = k1 + 2 * n * nr
+        A = f[:k1].reshape((n, n), order="F")
+        B = f[k1:k2].reshape((n, 2 * nr), order="F")
+        if self.affine_bz:
+            BB = f[k1:].reshape((n, 3 * nr), order="F")
+            return A, B, BB[:, 2 * nr:], BB
+        Bz = A @ B[:, nr:] + B[:, :nr]
+        return A, B, Bz, np.concatenate([B, Bz], axis=1)
+
+
 @dataclass
 class OutputErrorProblem:
     """Residuals of a linear suspension model against a measurement.
@@ -146,6 +364,11 @@ class OutputErrorProblem:
         (:meth:`~suspid.models.base.SuspensionModel.affine`); default: built from the first
         predicted parameter set with every damper and spring free. A parameter set they do
         not apply to (another mass, inertia or length) is predicted from the model itself.
+        A caller with many problems of one model (the monitor's windows) passes its pieces
+        once.
+    ride_heights : bool
+        Whether measured ride heights enter the cost (default); ``False`` leaves them out
+        with a warning (the monitor's window compares the motion channels only).
     """
 
     model: SuspensionModel
@@ -154,11 +377,9 @@ class OutputErrorProblem:
     x0: str | FloatArray = "estimate"
     weights: Mapping[str, float] | None = None
     affine: AffinePieces | None = None
+    ride_heights: bool = True
     channels: list[str] = field(init=False)
     warnings: list[str] = field(init=False, default_factory=list)
-    #: whether measured ride heights enter the cost (a subclass with its own output path
-    #: that does not map them sets ``False``: they are then left out with a warning)
-    compares_ride_heights: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
         if self.cost not in COSTS:
@@ -166,9 +387,9 @@ class OutputErrorProblem:
         m = self.model
         motions = [c for c in m.channels if c in self.meas.measured]
         heights = [c for c in m.ride_height_channels if c in self.meas.measured]
-        if heights and not self.compares_ride_heights:
+        if heights and not self.ride_heights:
             self.warnings.append(f"ride-height channel(s) {', '.join(heights)} not compared "
-                                 f"({type(self).__name__} fits the motion channels only)")
+                                 "(the monitor's window fits the motion channels only)")
             heights = []
         measured = motions + heights
         if not measured:
@@ -217,11 +438,40 @@ class OutputErrorProblem:
             self._maps_fixed = self._stack_heights(output_maps(
                 self._kind, np.zeros((m.n_states, m.n_states)),
                 np.zeros((m.n_states, 2 * len(m.roads))), self._nq))
-        self._w2 = w ** 2
         # weights and mask as flat (N p,) rows: an elementwise product with a broadcast
         # (p,) row runs one short inner loop per sample, 3-4x slower
         self._w_flat = np.tile(w, self.t.size)
         self._mask_flat = self.mask.reshape(-1)
+        # ---- the fast path's constants (uniform grid, every sample observed, x0 estimated)
+        nr = len(m.roads)
+        N = int(self.t.size)
+        self._nr = nr
+        self._N = N
+        #: evaluations by the fast path, cached per problem (see :meth:`evaluate`)
+        self._cache: dict[tuple[float, ...], Evaluation] = {}
+        #: the fast path applies to this problem (else every evaluation takes the general one)
+        self.fast = bool(self.h is not None and self._full and self._estimate and N >= 2)
+        #: evaluations the fast path declined (a defective ``A``, an ill-conditioned Gram
+        #: matrix) and the general path made
+        self.n_fallback = 0
+        self.param_names = [q.name for q in m.params]
+        self._layout: _StateSpaceLayout | None = None
+        self._hf = float(self.h) if self.h is not None else 0.0
+        self.road_t = np.ascontiguousarray(self.U[:, :nr].T)  #: roads (nr, N) (m)
+        self._rc = self.road_t.astype(complex)
+        self._r0 = self.road_t[:, 0].copy() if N else np.zeros(nr)
+        self._UT = np.ascontiguousarray(self.U.T)  # (2 nr, N)
+        self._road = bool(np.any(self.road_t))
+        self._YT = np.ascontiguousarray(self.Ymeas0.T)  # (p, N)
+        # fitted channels that are states (positions, velocities): C V = V[rows]
+        self.state_rows: list[int] | None = (
+            [i + (self._nq if order == 1 else 0) for i, order in self._kind]
+            if not self._heights and all(order < 2 for _, order in self._kind) else None)
+        rows = self.state_rows or []
+        self._rows_are_range = rows == list(range(len(rows)))
+        self._pos_only = self.state_rows is not None and all(o == 0 for _, o in self._kind)
+        self._cache_size = max(1, min(CACHE_SIZE, CACHE_BYTES // max(
+            N * (16 * m.n_states + 8 * len(self.channels)), 1)))
 
     def _check_magnitudes(self) -> None:
         """Raise :class:`~suspid.errors.InputError` naming a measured or road column whose
@@ -282,12 +532,268 @@ class OutputErrorProblem:
             self.affine = self.model.affine(p)
         return self.affine
 
+    def state_space(self, vals: Sequence[float]
+                    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """``(A, B, Bz, [B | Bz])`` for the values ``vals`` of every parameter (SI, in
+        :attr:`param_names` order).
+
+        ``Bz = A B_v + B_r`` is the road's input matrix in the simulator's ``z = x - B_v r``
+        coordinates (:mod:`suspid.simulate`). From the affine pieces (:meth:`pieces`, laid
+        out once as one product, see :class:`_StateSpaceLayout`) when they apply to
+        ``vals``, else from the model.
+        """
+        lay = self._layout
+        if lay is None or lay.pieces is not self.affine:  # (new pieces: a new layout)
+            lay = self._layout = None
+            aff = self.pieces(dict(zip(self.param_names, vals)))
+            if aff is not None and aff.exact and len(aff.names):
+                lay = self._layout = _StateSpaceLayout(aff, self.param_names, self._nr)
+        if lay is not None and lay.applies(vals):
+            return lay(vals)
+        A, B = self.model.state_space(dict(zip(self.param_names, vals)))
+        nr = self._nr
+        Bz = A @ B[:, nr:] + B[:, :nr]
+        return A, B, Bz, np.concatenate([B, Bz], axis=1)
+
+    # ---- the fast path -------------------------------------------------------------------
+    def cached(self, p: Mapping[str, float]) -> Evaluation | None:
+        """The cached fast evaluation at ``p`` (``None``: not evaluated, or evicted)."""
+        return self._cache.get(tuple([p[k] for k in self.param_names]))
+
+    def evaluate(self, p: Mapping[str, float]) -> Evaluation | None:
+        """One evaluation at ``p`` by the fast path, cached; ``None`` where it does not apply.
+
+        It applies to a problem on a uniform grid with every fitted sample observed and
+        ``x0="estimate"`` (:attr:`fast`), at a ``p`` whose ``A`` is diagonalisable (the
+        test of :func:`suspid.simulate.modal_form`) and whose initial-state Gram matrix has a
+        condition number below :data:`MAX_GRAM_COND`. Steps:
+
+        1. ``A, B, Bz`` from the affine pieces (:meth:`state_space`);
+        2. the modal form ``A = V diag(lam) V^-1`` from one LAPACK ``dgeev`` (right and
+           left eigenvectors; the rows of ``V^-1`` are the left eigenvectors scaled by
+           ``1 / (u^H v)``, no inverse);
+        3. the forced modal trajectory of the first-order-hold road,
+           ``w[k+1] = E w[k] + g0 s[k] + g1 s[k+1]``, in closed form,
+           ``w[k] = E^k (w[0] + sum_{l<k} d[l] E^-(l+1))``: one ``cumsum`` per mode of
+           ``(sum_j a_j r_j[l]) E^-l`` (the roads summed first). The partial sums are
+           dominated by their newest terms, so the rounding stays ~``eps`` relative to
+           ``|w|``; used while ``|E|^-N`` stays far from overflow
+           (``max(-Re(lam)) h N <`` :data:`MAX_DECAY_EXPONENT`), else the blocked scan
+           :func:`~suspid.simulate.first_order_scan` (a long record);
+        4. the least-squares initial state without the ``(N, p, n)`` free-response
+           regressors ``Re(CV_i E_i^k)``, ``-Im(...)``: their Gram matrix from the channel
+           products ``CV^T CV``, ``CV^T conj(CV)`` and the geometric sums
+           ``sum_k (E_i E_j)^k``, their product with the residual as
+           ``sum_c CV_ci (R P^T)_ci``; the cost as ``||R0||^2 - rhs . sol`` (``R0`` the
+           residual of the forced response, ``Gram sol = rhs``) without a residual pass,
+           unless the two terms cancel (below :data:`SS_GUARD` of ``||R0||^2``: noise-free
+           data near its optimum), when the residual is formed and summed.
+
+        Arrays are laid out modes x samples, so every elementwise operation runs over
+        contiguous rows of ``N`` samples.
+        """
+        if not self.fast:
+            return None
+        names = self.param_names
+        vals = [p[k] for k in names]
+        key = tuple(vals)
+        got = self._cache.get(key)
+        if got is not None:
+            return got
+        if self._heights:
+            self._set_heights(p)
+        A, B, Bz, BB = self.state_space(vals)
+        nr = self._nr
+        wr, wi, vl, vr, info = _dgeev(A, compute_vl=1, compute_vr=1)
+        if info != 0:
+            return None
+        wrl = wr.tolist()
+        wil = wi.tolist()
+        lim = 0.0
+        for x, y in zip(wrl, wil):
+            a = math.hypot(x, y)
+            if not a < math.inf:  # NaN or inf
+                return None
+            if a > lim:
+                lim = a
+        tol = 1e-12 * (lim if lim > 1.0 else 1.0)
+        for v in wil:
+            if v != 0.0 and abs(v) <= tol:
+                return None  # within rounding of the real axis: the general path decides
+        pat = _pattern(wil)
+        if pat is None:
+            return None
+        n = len(wrl)
+        # u_i^H v_i from the real parts: (a - ib)^T (c + id) = a.c + b.d + i (a.d - b.c)
+        Mv = (vl.T @ vr).tolist()
+        uv: list[complex] = []
+        bound = 0.0
+        for j, jj, pr in zip(pat.k1, pat.k2, pat.is_pair):
+            x = (complex(Mv[j][j] + Mv[jj][jj], Mv[j][jj] - Mv[jj][j]) if pr
+                 else complex(Mv[j][j], 0.0))
+            if x == 0.0:
+                return None
+            uv.append(x)
+            bound += (2.0 if pr else 1.0) / abs(x)
+        # cond_1(V) <= sqrt(n) sum_i fac_i / |u_i^H v_i| for unit eigenvectors; the exact
+        # test of modal_form only when that bound is not already below the limit
+        if math.sqrt(n) * bound > MODE_COND_MAX:
+            V = vr @ pat.sel_v
+            Vinv = (vl @ pat.sel_v).conj().T / np.array(uv)[:, None]
+            if (np.abs(V).sum(axis=0).max() * (np.abs(Vinv) * pat.fac[:, None]).sum(axis=0).max()
+                    > MODE_COND_MAX):
+                return None
+        mm = len(uv)
+        N = self._N
+        h = self._hf
+        lam = [complex(wrl[j], wil[j]) for j in pat.k1]
+        # fitted channels per mode: CV = (Cm V) fac
+        rows = self.state_rows
+        if rows is not None:
+            CV = (vr[:len(rows)] if self._rows_are_range else vr[rows]) @ pat.sel_cv
+            Cm = Dm = None
+        else:
+            Cm, Dm = self._output_maps(A, B)
+            CV = (Cm @ vr) @ pat.sel_cv
+        # per mode: E = exp(lam h), the first-order-hold weights and, with b = V^-1 Bz and
+        # w0 = -V^-1 Bv r[0] (forced response from rest),
+        #   w[k] = E^k (w0 + sum_{l<k} b (g0 r[l] + g1 r[l+1]) E^-(l+1))
+        #        = (a0 + a1) E^k Q[k] - a0 r[k] + (w0 - a1 r[0]) E^k,
+        # q[l] = r[l] E^-l, Q = cumsum(q), a0 = b g0 / E, a1 = b g1 (w[0] = w0 exactly).
+        # The last term is a free response: the least-squares initial state absorbs it, so
+        # it is left out of the residual and subtracted from the free coefficients after.
+        lam_a = np.array(lam)
+        El_a, g0a, g1a = foh_weights(lam_a, h)  # (m,) each
+        P = np.empty((mm, N), dtype=complex)
+        P[:] = El_a[:, None]
+        P[:, 0] = 1.0
+        np.cumprod(P, axis=1, out=P)
+        r = self.road_t
+        if self._road:
+            # rows of V^-1 [Br | Bv | Bz] from the left eigenvectors' real and imaginary
+            # parts: (a - ib)^T B / (u_i^H v_i)
+            VZ = vl.T @ BB
+            X = (VZ[pat.k1a] - 1j * (VZ[pat.k2a] * pat.pair_mask[:, None])) / np.array(uv)[:, None]
+            Xb = X[:, 2 * nr:]  # b = V^-1 Bz
+            if max(-x.real for x in lam) * h * (N - 1) <= MAX_DECAY_EXPONENT:
+                Cb = Xb * (g0a / El_a)[:, None]  # a0
+                a1 = Xb * g1a[:, None]
+                cc = -((X[:, nr:2 * nr] + a1) @ self._r0)  # w0 - a1 r[0], w0 = -V^-1 Bv r[0]
+                # the roads summed first (the trajectory is linear in them):
+                #   Wf[k] = sum_j Ca_j E^k Q_j[k] = E^k cumsum_l((sum_j Ca_j r_j[l]) E^-l)
+                Wf = (Cb + a1) @ self._rc
+                np.divide(Wf, P, out=Wf)
+                np.cumsum(Wf, axis=1, out=Wf)
+                Wf *= P
+                # R = Y - Re(CV Wf - (CV Cb) r)
+                R = self._YT - (CV @ Wf).real
+                R += (CV @ Cb).real @ r
+            else:
+                # E^-N would overflow: the forced trajectory from rest by the blocked scan
+                S = Xb @ r
+                w0 = -(X[:, nr:2 * nr] @ self._r0)
+                Wf = np.empty((mm, N), dtype=complex)
+                Wf[:, 0] = w0
+                Wf[:, 1:] = first_order_scan(
+                    El_a, (g0a[:, None] * S[:, :-1] + g1a[:, None] * S[:, 1:]).T, w0).T
+                Cb = np.zeros((mm, nr), dtype=complex)
+                cc = np.zeros(mm, dtype=complex)
+                R = self._YT - (CV @ Wf).real
+            if not self._pos_only:  # x = z + B_v r
+                CB = B[rows, nr:] if Cm is None else Cm @ B[:, nr:]
+                R -= CB @ r
+            traj: _Traj | None = _Traj(Wf, Cb, cc)
+        else:
+            R = self._YT.copy()
+            traj = None
+        if Dm is not None and self._has_road:
+            R -= Dm @ self._UT
+        # least-squares free modal coefficients. The regressors are Re(CV[:, i] E_i^k) for
+        # every mode, then -Im(...) for the complex ones; with x = CV_ci E_i^k and
+        # y = CV_cj E_j^k their Gram matrix follows from the sums over channels and samples
+        #   S1 = sum x y = (CV^T CV)_ij g(E_i E_j),  S2 = sum x conj(y) = (CV^H CV)*_ij ...,
+        # g(z) = sum_{k<N} z^k = (1 - z^N) / (1 - z), as Re x Re y = Re(S1 + S2) / 2,
+        # Im x Im y = Re(S2 - S1) / 2, Re x Im y = Im(S1 - S2) / 2 -- no regressor matrix.
+        # Weights scale the channels (rows) of both.
+        if self._unit_w:
+            CVw, Rw = CV, R
+        else:
+            CVw, Rw = CV * self.w[:, None], R * self.w[:, None]
+        sAB = np.empty((2, mm, mm), dtype=complex)  # (lam_i + lam_j) h, (lam_i + lam_j*) h
+        np.add(lam_a[:, None], lam_a[None, :], out=sAB[0])
+        np.add(lam_a[:, None], lam_a.conj()[None, :], out=sAB[1])
+        sAB *= h
+        gAB = np.expm1(N * sAB)
+        gAB /= np.expm1(sAB)
+        CC = CVw.T @ np.concatenate([CVw, CVw.conj()], axis=1)  # [CV^T CV | CV^T conj(CV)]
+        S1 = CC[:, :mm] * gAB[0]
+        S2 = CC[:, mm:] * gAB[1]
+        pairs = pat.pairs
+        npair = pairs.size
+        nG = mm + npair
+        Gram = np.empty((nG, nG))
+        Gram[:mm, :mm] = 0.5 * (S1 + S2).real
+        if npair:
+            D = 0.5 * (S2 - S1)
+            Gram[mm:, mm:] = D.real[pat.ix_pairs]
+            Gram[:mm, mm:] = D.imag[:, pairs]  # Re x_i (-Im y_j) = Im(S2 - S1)_ij / 2
+            Gram[mm:, :mm] = Gram[:mm, mm:].T
+        ev, vec, info = _dsyev(Gram)
+        evl = ev.tolist()
+        if info != 0 or not (evl[0] > 0 and evl[-1] <= MAX_GRAM_COND * evl[0]):
+            return None
+        # regressors times the residual: Re(y_i), -Im(y_i) with
+        # y_i = sum_k E_i^k (CV^T R)_ik = sum_c CV_ci (R P^T)_ci
+        y = (CVw * (Rw @ P.T)).sum(axis=0)
+        rhs = np.concatenate([y.real, -y.imag[pairs]])
+        proj = rhs @ vec
+        sol = vec @ (proj / ev)  # not finite only if R is: the cost is then inf
+        coef = sol[:mm].astype(complex)
+        if npair:
+            coef[pairs] += 1j * sol[mm:]
+        # the cost without the residual pass: ||R0 - G sol||^2 = ||R0||^2 - rhs . sol at the
+        # least-squares sol (Gram sol = rhs); explicit when the two terms nearly cancel
+        r0 = Rw.ravel()
+        r0sq = float(r0 @ r0)
+        ss = r0sq - float(proj @ (proj / ev))
+        out = Evaluation(key, vr, pat, A, B, P, traj, coef, R, CV, ss)
+        if not ss >= SS_GUARD * r0sq:
+            rf = out.R if self._unit_w else out.R * self.w[:, None]
+            out.ss = float(np.einsum("ij,ij->", rf, rf))
+        cache = self._cache
+        if len(cache) >= self._cache_size:
+            del cache[next(iter(cache))]  # oldest first
+        cache[key] = out
+        return out
+
+    def initial_state(self, ev: Evaluation) -> FloatArray:
+        """The estimated initial state of an evaluation (n,) (SI)."""
+        return np.real((ev.vr @ ev.pat.sel_v) @ (ev.c * ev.pat.fac))
+
+    def _fast_or_none(self, p: Mapping[str, float]) -> Evaluation | None:
+        """:meth:`evaluate` where the fast path applies, counting what it declines."""
+        if not self.fast:
+            return None
+        ev = self.evaluate(p)
+        if ev is None:
+            self.n_fallback += 1
+        return ev
+
+    # ---- predictions and costs -------------------------------------------------------------
     def predict(self, p: Mapping[str, float]) -> Prediction:
-        """Predict the measured channels for parameters ``p`` (with the best ``x0``)."""
-        m = self.model
+        """Predict the measured channels for parameters ``p`` (with the best ``x0``).
+
+        The fast path (:meth:`evaluate`) where it applies; otherwise the modal recursion
+        (uniform grid, diagonalisable ``A``: missing samples, a known ``x0``) or the
+        stepwise simulation (a non-uniform grid, a defective ``A``).
+        """
+        ev = self._fast_or_none(p)
+        if ev is not None:
+            res = ev.R.T.copy()
+            return Prediction(Y=self.Ymeas - res, x0=self.initial_state(ev), residual=res)
         self._set_heights(p)
         aff = self.pieces(p)
-        modal = modal_form(m, p, aff)
+        modal = modal_form(self.model, p, aff)
         if modal is not None and self.h is not None:
             Y, x0 = self._predict_modal(modal, self.h)
         else:
@@ -298,25 +804,15 @@ class OutputErrorProblem:
             res = np.where(self.mask, self.Ymeas - Y, np.nan)
         return Prediction(Y=Y, x0=x0, residual=res)
 
-    def _base_x0(self) -> FloatArray:
-        if isinstance(self.x0, str):
-            return np.zeros(self.model.n_states)
-        return np.asarray(self.x0, dtype=float)
-
     def _predict_modal(self, modal: Modal, h: float) -> tuple[FloatArray, FloatArray]:
-        """Fast path (uniform grid, diagonalisable ``A``): modal recursion.
-
-        With ``x0="estimate"`` and no missing sample the normal equations of the initial
-        state are formed in closed form: the Gram matrix of the free-response regressors
-        is a sum of geometric series in the products of the modes' ``exp(lam h)``, so no
-        ``(N, p, n)`` regressor array is built.
-        """
+        """Modal recursion on a uniform grid (diagonalisable ``A``) where the fast path
+        does not apply: a known ``x0`` (closed form), missing samples (the initial state by
+        explicit weighted least squares on the observed samples)."""
         m = self.model
         N = self.t.size
         h = float(h)
         Cm, Dm = self._output_maps(modal.A, modal.B)
         CV = (Cm @ modal.V) * modal.fac  # (p, mm)
-        estimate = self._estimate
         base_x0 = self._x0_base
         E = np.exp(modal.lam * h)
         P: np.ndarray | None = None  # powers of E, built once and only where needed
@@ -329,38 +825,14 @@ class OutputErrorProblem:
         elif self._x0_nonzero:
             P = powers(E, N)
             Y = _re_dot(P, (CV * (modal.Vinv @ base_x0)).T)
-        if not estimate:
-            return (Y if Y is not None else np.zeros((N, len(self.channels)))), base_x0
-        if P is None:
-            P = powers(E, N)
-        if self._full:
-            sol = self._x0_closed_form(modal, CV, E, P, Y)
-            if sol is not None:
-                mm = modal.lam.size
-                pairs = modal.fac == 2.0
-                c = sol[:mm].astype(complex)
-                c[pairs] += 1j * sol[mm:]
-                Yx = _re_dot(P, (CV * c).T)
-                # adding the zero response changes no value (0.0 + y == y)
-                return (Yx if Y is None else Y + Yx), free_coeffs_to_state(modal, sol)
         if Y is None:
             Y = np.zeros((N, len(self.channels)))
-        G = free_response_basis(modal, h, N, Cm, P)
+        if not self._estimate:
+            return Y, base_x0
+        G = free_response_basis(modal, h, N, Cm, P if P is not None else powers(E, N))
         sol = self._solve_x0(G, Y)
         Y = Y + G.reshape(-1, G.shape[2]).dot(sol).reshape(Y.shape)
         return Y, free_coeffs_to_state(modal, sol)
-
-    def _x0_closed_form(self, modal: Modal, CV: np.ndarray, E: np.ndarray, P: np.ndarray,
-                        Y: FloatArray | None) -> FloatArray | None:
-        """Least-squares modal initial coefficients from closed-form normal equations.
-
-        ``Y`` is the response without the free part (``None``: zero). Returns ``None`` when
-        the Gram matrix is singular or ill-conditioned (the caller then solves the explicit
-        least-squares problem).
-        """
-        sol = self._x0_closed_form_stack(modal.fac, CV[None], E[None], P[None],
-                                         None if Y is None else Y[None])
-        return None if sol is None else sol[0]
 
     def _solve_x0(self, G: FloatArray, Y: FloatArray) -> FloatArray:
         """Explicit weighted least squares for the free-response coefficients.
@@ -392,7 +864,7 @@ class OutputErrorProblem:
         m = self.model
         A, B = (modal.A, modal.B) if modal is not None else state_matrices(m, p, aff)
         Cm, Dm = self._output_maps(A, B)
-        base_x0 = self._base_x0()
+        base_x0 = self._x0_base
         X = simulate_states(m, p, self.t, self.U, base_x0, modal=modal, affine=aff)
         Y = X @ Cm.T + self.U @ Dm.T
         if isinstance(self.x0, str) and self.x0 == "estimate":
@@ -421,20 +893,19 @@ class OutputErrorProblem:
 
     def residual_vector(self, p: Mapping[str, float]) -> FloatArray:
         """Weighted residuals of the observed samples, flattened (for Jacobians)."""
+        ev = self._fast_or_none(p)
+        if ev is not None:
+            return (ev.R.T.ravel() if self._unit_w
+                    else (ev.R * self.w[:, None]).T.ravel())
         r = self.predict(p).residual.reshape(-1) * self._w_flat
         return r if self._full else r[self._mask_flat]
 
     def residual_vectors(self, points: Sequence[Mapping[str, float]]) -> FloatArray:
-        """Residual vectors of several parameter sets at once, shape (k, n_obs).
+        """Residual vectors of several parameter sets, shape (k, n_obs).
 
-        Row ``i`` equals :meth:`residual_vector` of ``points[i]`` (to rounding, <= 1e-12
-        relative; tested). On the fast path (uniform grid, no road input, every point's
-        ``A`` diagonalisable with the same pattern of real modes and conjugate pairs, and
-        with ``x0="estimate"`` no missing sample and a well-conditioned projection) the
-        ``k`` evaluations share stacked numpy operations: one ``eig`` and one ``inv`` on
-        the ``(k, n, n)`` stack, one running product for all ``k * m`` modes, batched
-        products. Otherwise the points are evaluated one by one (the same errors raise).
-        For finite-difference Jacobians, whose ``k`` points differ in one parameter each.
+        Row ``i`` is :meth:`residual_vector` of ``points[i]`` (the same path, so finite
+        differences between rows are differences of one computation; the same errors
+        raise).
 
         Parameters
         ----------
@@ -447,144 +918,18 @@ class OutputErrorProblem:
             Weighted residuals of the observed samples (units of the channels times their
             weights), each row flattened as :meth:`residual_vector`'s.
         """
-        k = len(points)
-        # a subclass with its own residuals (the monitor's window problem) is evaluated
-        # point by point, through its own path
-        own = (type(self).residual_vector is OutputErrorProblem.residual_vector
-               and type(self).predict is OutputErrorProblem.predict)
-        size = self.batch_size()
-        R = np.empty((k, self.n_obs))
-        for i in range(0, k, size):
-            chunk = points[i:i + size]
-            out = self._stacked_residuals(chunk) if len(chunk) > 1 and own else None
-            if out is not None:
-                R[i:i + len(chunk)] = out
-            else:
-                for j, q in enumerate(chunk):
-                    R[i + j] = self.residual_vector(q)
+        R = np.empty((len(points), self.n_obs))
+        for i, q in enumerate(points):
+            R[i] = self.residual_vector(q)
         return R
-
-    def batch_size(self) -> int:
-        """Most points :meth:`residual_vectors` stacks at once.
-
-        At most :data:`_STACK_POINTS`, and fewer when their powers (points x samples x
-        modes) would exceed :data:`_STACK_ENTRIES`: a larger stack leaves the cache and is
-        slower per point than one evaluation after another. With the initial state known
-        (given or at rest) 1: stacking saved little there (no projection to share) and
-        made the half car's Jacobian ~15 % slower (measured,
-        ``python tools/doe_evalbench.py``).
-        """
-        if not self._estimate:
-            return 1
-        per_point = self.t.size * max(self.model.n_states // 2, 1)
-        return max(1, min(_STACK_POINTS, _STACK_ENTRIES // max(per_point, 1)))
-
-    def _stacked_residuals(self, points: Sequence[Mapping[str, float]]) -> FloatArray | None:
-        """The fast path of :meth:`residual_vectors`; ``None`` where it does not apply."""
-        m = self.model
-        if self.h is None or self._has_road or (self._estimate and not self._full):
-            return None
-        if not all(np.isfinite(v) for q in points for v in q.values()):
-            return None
-        k = len(points)
-        if self._heights:
-            # one set of ride-height rows for the stack: the points share the geometry
-            geom = self._geometry(points[0])
-            if any(self._geometry(q) != geom for q in points[1:]):
-                return None
-            self._set_heights(points[0])
-        aff = self.pieces(points[0])
-        mats = [state_matrices(m, q, aff) for q in points]
-        A = np.stack([a for a, _ in mats])
-        try:
-            lam, V = np.linalg.eig(A)
-            Vinv = np.linalg.inv(V)
-        except np.linalg.LinAlgError:  # non-finite A, no convergence or a singular V
-            return None
-        # modal_form's test, point by point; one pattern of modes for the whole stack
-        pattern = None
-        for i in range(k):
-            got = mode_pattern(lam[i], V[i], Vinv[i])
-            if got is None:
-                return None
-            if lam.dtype.kind == "c" and int(got[1].sum()) == lam.shape[1]:
-                return None  # modal_form would have worked in real arithmetic here
-            if pattern is None:
-                pattern = got
-            elif not (np.array_equal(got[0], pattern[0]) and np.array_equal(got[1], pattern[1])):
-                return None
-        if pattern is None:
-            return None
-        keep, is_real = pattern
-        lam = lam[:, keep]
-        Vk = V[:, :, keep]
-        if is_real.any():
-            Vk[:, :, is_real] = Vk[:, :, is_real].real
-        Vinv = Vinv[:, keep]
-        fac = np.where(is_real, 1.0, 2.0)
-        mm = keep.size
-        if self._maps_fixed is not None:
-            Cm = self._maps_fixed[0]
-        else:
-            Cm = np.stack([self._output_maps(a, b)[0] for a, b in mats])
-        CV = (Cm @ Vk) * fac  # (k, p, mm)
-        N = self.t.size
-        E = np.exp(lam * float(self.h))  # (k, mm)
-        P = _stack_powers(E, N)  # (k, N, mm)
-        Y: np.ndarray | None = None
-        if self._x0_nonzero:
-            X = (CV * (Vinv @ self._x0_base)[:, None, :]).transpose(0, 2, 1)
-            Y = _re_dot_stack(P, X)
-        if self._estimate:
-            sol = self._x0_closed_form_stack(fac, CV, E, P, Y)
-            if sol is None:
-                return None
-            pairs = fac == 2.0
-            c = sol[:, :mm].astype(complex)
-            c[:, pairs] += 1j * sol[:, mm:]
-            Yx = _re_dot_stack(P, (CV * c[:, None, :]).transpose(0, 2, 1))
-            Y = Yx if Y is None else Y + Yx
-        if Y is None:
-            Y = np.zeros((k, N, len(self.channels)))
-        r = (self.Ymeas.reshape(1, -1) - Y.reshape(k, -1)) * self._w_flat
-        return r if self._full else r[:, self._mask_flat]
-
-    def _x0_closed_form_stack(self, fac: FloatArray, CV: np.ndarray, E: np.ndarray,
-                              P: np.ndarray, Y: FloatArray | None) -> FloatArray | None:
-        """:meth:`_x0_closed_form` for ``k`` points at once (``CV`` (k, p, mm), ``E`` (k, mm),
-        ``P`` (k, N, mm), ``Y`` (k, N, p) or ``None``); ``None`` if any point needs the
-        explicit least squares."""
-        mm = fac.size
-        pairs = np.flatnonzero(fac == 2.0)
-        modes = np.concatenate([np.arange(mm), pairs])
-        alpha = np.concatenate([np.ones(mm), np.full(pairs.size, 1j)])
-        Q = CV[:, :, modes] * alpha  # (k, p, n)
-        w2 = self._w2
-        Eg = E[:, modes]
-        EN = P[:, -1][:, modes] * Eg
-        N = P.shape[1]
-        S1 = _geometric_sum(Eg[:, :, None] * Eg[:, None, :], EN[:, :, None] * EN[:, None, :], N)
-        S2 = _geometric_sum(Eg[:, :, None] * np.conj(Eg)[:, None, :],
-                            EN[:, :, None] * np.conj(EN)[:, None, :], N)
-        Qw = Q.transpose(0, 2, 1) * w2
-        GtG = 0.5 * np.real((Qw @ Q) * S1 + (Qw @ np.conj(Q)) * S2)
-        R = self.Ymeas if Y is None else self.Ymeas - Y
-        v = (_t_dot_stack(P, R) * (CV * w2[:, None]).transpose(0, 2, 1)).sum(axis=2)
-        GtR = np.real(alpha * v[:, modes])
-        try:
-            sol = np.linalg.solve(GtG, GtR[..., None])[..., 0]
-        except np.linalg.LinAlgError:  # a singular GtG
-            return None
-        if not np.isfinite(sol).all():
-            return None
-        if (np.linalg.cond(GtG) > 1e12).any():
-            return None
-        return np.asarray(sol, dtype=float)
 
     def normalized_ss(self, p: Mapping[str, float]) -> float:
         """Weighted sum of squares divided by the data's (dimensionless, 1 = no fit)."""
         try:
-            if self._full:
+            ev = self._fast_or_none(p)
+            if ev is not None:
+                v = ev.ss / self.scale
+            elif self._full:
                 r = self.predict(p).residual
                 if self._unit_w:
                     v = float(np.einsum("ij,ij->", r, r)) / self.scale
@@ -594,29 +939,14 @@ class OutputErrorProblem:
             else:
                 rv = self.residual_vector(p)
                 v = float(rv @ rv) / self.scale
-        except (np.linalg.LinAlgError, ValueError, FloatingPointError):
+        except (np.linalg.LinAlgError, ValueError, FloatingPointError, OverflowError,
+                ZeroDivisionError):
             return np.inf
         return v if np.isfinite(v) else np.inf
 
     def seed_cost(self, ss: float) -> float:
         """Report the seed's cost from the raw weighted sum of squares ``ss``."""
         return float(np.sqrt(ss)) if self.cost == "frobenius" else float(ss)
-
-    def rms_by_channel(self, res: FloatArray) -> dict[str, float]:
-        """RMS residual per channel (SI)."""
-        return {c: float(np.sqrt(np.nanmean(res[:, j] ** 2))) for j, c in enumerate(self.channels)}
-
-
-def _geometric_sum(q: np.ndarray, qN: np.ndarray, N: int) -> np.ndarray:
-    """``sum_{k<N} q**k`` elementwise, given ``qN = q**N`` (series near ``q = 1``)."""
-    d = q - 1.0
-    near = np.abs(d) < 1e-7
-    safe = np.where(near, 1.0, d)
-    out = (qN - 1.0) / safe
-    if np.any(near):
-        series = N + N * (N - 1) / 2.0 * d + N * (N - 1) * (N - 2) / 6.0 * d * d
-        out = np.where(near, series, out)
-    return out
 
 
 def _re_dot(P: np.ndarray, X: np.ndarray) -> FloatArray:
@@ -625,61 +955,11 @@ def _re_dot(P: np.ndarray, X: np.ndarray) -> FloatArray:
     A complex ``P`` is read as the real (N, 2 m) matrix of its interleaved real and
     imaginary parts, so ``Re(P @ X) = P_real_view @ [Re X; -Im X]`` (rows interleaved):
     one BLAS ``dgemm`` on contiguous memory, no copies of the real and imaginary parts.
-    The one-point case of :func:`_re_dot_stack` (the same products, so batched and single
-    evaluations agree bit for bit).
-    """
-    return _re_dot_stack(P[None], X[None])[0]
-
-
-def _t_dot(P: np.ndarray, R: FloatArray) -> np.ndarray:
-    """``P.T @ R`` for a C-contiguous ``P`` (N, m), real or complex, and real ``R`` (N, p).
-
-    One real product over the samples on ``P``'s interleaved real view (see
-    :func:`_re_dot`); returns (m, p), complex when ``P`` is. The one-point case of
-    :func:`_t_dot_stack`.
-    """
-    return _t_dot_stack(P[None], R)[0]
-
-
-def _stack_powers(E: np.ndarray, N: int) -> np.ndarray:
-    """``E[i]**j`` for ``j = 0..N-1``: (k, N, m) from ``E`` (k, m), as :func:`powers` per row.
-
-    Each point's block is C-contiguous like :func:`powers`' array, so the products on it
-    run exactly as on a single point's (same running product, same BLAS calls).
-    """
-    k, m = E.shape
-    P = np.empty((k, N, m), dtype=np.result_type(E, 1.0))
-    if N == 0:
-        return P
-    P[:, 0] = 1.0
-    if N > 1:
-        np.multiply.accumulate(np.broadcast_to(E[:, None, :], (k, N - 1, m)), axis=1,
-                               out=P[:, 1:])
-    return P
-
-
-def _re_dot_stack(P: np.ndarray, X: np.ndarray) -> FloatArray:
-    """``Re(P[i] @ X[i])`` for every ``i``: ``P`` (k, N, m) C-contiguous, ``X`` (k, m, p).
-
-    The stacked form of :func:`_re_dot` (one ``dgemm`` per point on the interleaved real
-    view of its block); returns (k, N, p).
-    """
-    k, N, m = P.shape
-    if P.dtype.kind != "c":
-        return np.matmul(P, X.real)
-    p = X.shape[2]
-    Xs = np.empty((k, 2 * m, p))
-    Xs[:, 0::2] = X.real
-    Xs[:, 1::2] = -X.imag if X.dtype.kind == "c" else 0.0
-    return np.matmul(P.view(np.float64), Xs)
-
-
-def _t_dot_stack(P: np.ndarray, R: FloatArray) -> np.ndarray:
-    """``P[i].T @ R[i]`` for every ``i`` (``R`` (N, p) shared or (k, N, p)): (k, m, p).
-
-    The stacked form of :func:`_t_dot`.
     """
     if P.dtype.kind != "c":
-        return np.matmul(P.transpose(0, 2, 1), R)
-    M = np.matmul(P.view(np.float64).transpose(0, 2, 1), R)  # (k, 2 m, p)
-    return M[:, 0::2] + 1j * M[:, 1::2]
+        return np.asarray(P @ X.real)
+    m, p = X.shape
+    Xs = np.empty((2 * m, p))
+    Xs[0::2] = X.real
+    Xs[1::2] = -X.imag if X.dtype.kind == "c" else 0.0
+    return np.asarray(P.view(np.float64) @ Xs)

@@ -274,9 +274,9 @@ def jacobian_log(problem: OutputErrorProblem, p: Mapping[str, float], free: list
                  rel_step: float = 1e-5) -> FloatArray:
     """Central-difference Jacobian of the residual vector w.r.t. log-parameters.
 
-    The ``2 n_free`` points are evaluated together
-    (:meth:`~estimator.identify.problem.OutputErrorProblem.residual_vectors`); the result
-    equals the column-by-column differences.
+    The ``2 n_free`` points are evaluated by
+    :meth:`~estimator.identify.problem.OutputErrorProblem.residual_vectors`, a pair at a
+    time (a stack of every point's residuals would be megabytes of fresh memory).
 
     Returns
     -------
@@ -292,14 +292,11 @@ def jacobian_log(problem: OutputErrorProblem, p: Mapping[str, float], free: list
         pp[k] = p[k] * math.exp(rel_step)
         pm[k] = p[k] * math.exp(-rel_step)
         points += [pm, pp]
-    # residual = y - yhat, so -d(residual) = d(yhat); a few columns at a time (a stack of
-    # every point's residuals would be megabytes of fresh memory)
+    # residual = y - yhat, so -d(residual) = d(yhat)
     J = np.empty((problem.n_obs, len(free)))
-    step = max(2, problem.batch_size() // 2 * 2)  # whole pairs
-    for start in range(0, len(points), step):
-        R = problem.residual_vectors(points[start:start + step])
-        for i in range(0, R.shape[0], 2):
-            J[:, (start + i) // 2] = (R[i] - R[i + 1]) / (2 * rel_step)
+    for i in range(0, len(points), 2):
+        R = problem.residual_vectors(points[i:i + 2])
+        J[:, i // 2] = (R[0] - R[1]) / (2 * rel_step)
     return J
 
 

@@ -124,7 +124,7 @@ class WindowConfig:
         After Nelder-Mead on a warm window, Gauss-Newton steps on one forward-difference
         Jacobian at its best vertex, each kept while it lowers the cost (``n_free``
         evaluations for the Jacobian, one per step;
-        :meth:`~estimator.stream.windowproblem.WindowProblem.gauss_newton`); that Jacobian
+        :meth:`~estimator.stream.windowfit.WindowFit.gauss_newton`); that Jacobian
         also gives the window's stderr. The monitor's default is on with ten or more free
         parameters (module docstring).
     gauss_newton_steps : int

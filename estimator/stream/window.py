@@ -1,8 +1,8 @@
 """Sliding-window identification: one warm-started, budgeted Nelder-Mead fit per window.
 
 Each window of the stream becomes a small output-error problem
-(:class:`~estimator.stream.windowproblem.WindowProblem`, the core's
-:class:`~estimator.identify.OutputErrorProblem` with a lean evaluation path; decimated as
+(the core's :class:`~estimator.identify.OutputErrorProblem` on its fast path, the motion
+channels compared; decimated as
 :mod:`estimator.stream.config` documents) and is fitted with the core's
 :func:`~estimator.identify.minimize_log` (scipy-identical Nelder-Mead in log coordinates) and the
 same sandwich standard errors as ``suspid identify``.
@@ -26,9 +26,9 @@ Termination and budget
     where the Gauss-Newton steps finish, :mod:`estimator.stream.config`) of the best one,
     or at ``maxfev`` evaluations; every estimate reports ``nfev`` (the Gauss-Newton
     steps' included), ``budget``, ``converged`` and the CPU time of the window. The stderr
-    costs no further evaluation on the lean path: its Jacobian is the secant through the
+    costs no further evaluation on the fast path: its Jacobian is the secant through the
     final simplex, or the Gauss-Newton steps' (see
-    :meth:`~estimator.stream.windowproblem.WindowProblem.finish`).
+    :meth:`~estimator.stream.windowfit.WindowFit.finish`).
 Excitation
     A window is skipped, with the reason, when a needed channel misses more than
     ``max_missing`` of its samples, when its time base is not uniform, or when the RMS
@@ -66,15 +66,15 @@ import numpy as np
 # submodule attribute, so only a monitor with the road low-pass on pays for it
 import scipy
 
-from estimator.identify import Parameters, minimize_log
+from estimator.identify import OutputErrorProblem, Parameters, minimize_log
 from estimator.identify.profile import SIGMAS
 from estimator.identify.start import (EXACT_FIT, cold_start, noise_floor_ratios, ratios_of_parts,
                                       residual_noise_floor_parts, twin_of)
 from estimator.stream.config import WindowConfig
-from estimator.stream.windowproblem import StateSpaceMap, WindowProblem
+from estimator.stream.windowfit import WindowFit
 from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
-from suspid.models.base import FloatArray, SuspensionModel
+from suspid.models.base import AffinePieces, FloatArray, SuspensionModel
 from suspid.simulate import uniform_step
 
 
@@ -301,7 +301,12 @@ class SlidingWindowIdentifier:
         if not self.free:
             raise UsageError("every parameter is fixed (--fix); nothing to monitor")
         self.nominal = self.params.valuesdict()
-        self._ssmap = StateSpaceMap(model, self.nominal, self.free)
+        #: the forward model's affine pieces in the free parameters, once per monitor
+        self._affine: AffinePieces | None
+        try:
+            self._affine = model.affine(self.nominal, self.free)
+        except (np.linalg.LinAlgError, ValueError, ZeroDivisionError, FloatingPointError):
+            self._affine = None  # each window's problem builds its own from its parameters
         fixed_drift = [k for k in config.drift if k not in self.free]
         if fixed_drift:
             raise UsageError(f"drift: {', '.join(fixed_drift)} not among the free parameters "
@@ -358,7 +363,7 @@ class SlidingWindowIdentifier:
         return ex, ""
 
     # ---- fit ----------------------------------------------------------------------------
-    def _problem(self, t: FloatArray, data: Mapping[str, FloatArray]) -> WindowProblem:
+    def _problem(self, t: FloatArray, data: Mapping[str, FloatArray]) -> OutputErrorProblem:
         d = self.config.decimate
         fc = self.config.road_fusion_hz
         full = dict(data)
@@ -377,7 +382,8 @@ class SlidingWindowIdentifier:
         meas = Measurement(t[::d].copy(), road,
                            {c: np.asarray(data[c][::d], dtype=float) for c in self.channels},
                            source="window")
-        return WindowProblem(self.model, meas, cost=self.config.cost, ssmap=self._ssmap)
+        return OutputErrorProblem(self.model, meas, cost=self.config.cost, affine=self._affine,
+                                  ride_heights=False)
 
     def _predict(self, t_end: float) -> list[float] | None:
         """Log of the free parameters extrapolated to the window ending at ``t_end``.
@@ -447,7 +453,7 @@ class SlidingWindowIdentifier:
         out.warnings.append(f"{why}; the constant-window estimate of "
                             f"{', '.join(drift)} moved to the window end at the recent rate")
 
-    def _drift_linear(self, prob: WindowProblem, t_end: float, half: float,
+    def _drift_linear(self, fit: WindowFit, t_end: float, half: float,
                       p_const: Mapping[str, float], drift: list[str], b_prior: FloatArray,
                       has_prior: bool, out: WindowResult) -> bool:
         """The drift fit to first order around the constant fit; ``False``: not applicable.
@@ -455,22 +461,22 @@ class SlidingWindowIdentifier:
         The residual of the drifting window is taken linear in ``a = log(theta_end /
         theta_const)`` and ``b = g width / 2`` around the constant fit (``a = b = 0``),
         ``R(a, b) = R0 - Ja a - Jb b``, with ``Ja``, ``Jb`` the sensitivities of
-        :meth:`~estimator.stream.windowproblem.WindowProblem.drift_sensitivity` (one linear
+        :meth:`~estimator.stream.windowfit.WindowFit.drift_sensitivity` (one linear
         simulation of the sensitivity system per column, on the constant fit's state
         trajectory and modal form) and ``R0`` the constant fit's residual; the rate prior
         (``drift_rate_sd``, around ``b_prior``) adds its rows, and one linear least-squares
         solve gives ``a`` and ``b``. The neglected terms are second order in the drift over
         half a window (a few % at most). The stderr are Gauss-Newton ones on the same
-        Jacobian: the constant fit's own (:attr:`WindowProblem.jacobian`) for the other
+        Jacobian: the constant fit's own (:attr:`WindowFit.jacobian`) for the other
         free parameters, ``Ja`` and the rate columns ``Jb / (width / 2)`` for the drifting
         ones. No evaluation of the drifting window at all.
         """
         cfg = self.config
-        jac = prob.jacobian
-        R0 = prob.lean_residual(p_const)
+        jac = fit.jacobian
+        R0 = fit.residual(p_const)
         if jac is None or R0 is None or jac[0] != self.free or jac[1] != dict(p_const):
             return False
-        sens = prob.drift_sensitivity(p_const, drift, t_end)
+        sens = fit.drift_sensitivity(p_const, drift, t_end)
         if sens is None:
             return False
         Ja, Jg = sens
@@ -519,7 +525,7 @@ class SlidingWindowIdentifier:
             for j, k in enumerate(drift):
                 pq[k] = p_const[k] * math.exp(float(a[j]))
             try:
-                Rx = prob.drift_residual(pq, {k: float(b[j]) / half
+                Rx = fit.drift_residual(pq, {k: float(b[j]) / half
                                               for j, k in enumerate(drift)},
                                          t_end, cfg.drift_chunk_s)
             except (np.linalg.LinAlgError, ValueError, FloatingPointError, OverflowError):
@@ -564,17 +570,17 @@ class SlidingWindowIdentifier:
             out.params[k] = pk
             out.stderr_fit[k] = se
             out.stderr[k] = float(math.hypot(se, cfg.sigma_floor * pk))
-        self._drift_ratios(prob, R, out)
+        self._drift_ratios(fit, R, out)
         return True
 
     @staticmethod
-    def _drift_ratios(prob: WindowProblem, R: FloatArray, out: WindowResult) -> None:
+    def _drift_ratios(fit: WindowFit, R: FloatArray, out: WindowResult) -> None:
         """The noise-floor ratios of the drifting fit's residual ``R`` (channels x samples):
         the fit the window reports; a constant fit to a drifting damper leaves the drift."""
         out.noise_floor_ratio = ratios_of_parts(
-            residual_noise_floor_parts(np.asarray(R, dtype=float).T, prob.channels))
+            residual_noise_floor_parts(np.asarray(R, dtype=float).T, fit.problem.channels))
 
-    def _drift_fit(self, prob: WindowProblem, t_end: float, width: float,
+    def _drift_fit(self, fit: WindowFit, t_end: float, width: float,
                    p_const: Mapping[str, float], drift: list[str], out: WindowResult) -> None:
         """Refit ``drift`` with a linear drift over the window; their values at its end.
 
@@ -612,13 +618,13 @@ class SlidingWindowIdentifier:
         def resid(v: FloatArray) -> FloatArray | None:
             p, rates = unpack(v)
             try:
-                return prob.drift_residual(p, rates, t_end, chunk)
+                return fit.drift_residual(p, rates, t_end, chunk)
             except (np.linalg.LinAlgError, ValueError, FloatingPointError, OverflowError):
                 return None
 
         free_rate = cfg.drift_rate == "free"
         if cfg.drift_solver == "linear" and self._drift_linear(
-                prob, t_end, half, p_const, drift, u[nd:].copy(), len(h) >= 2, out):
+                fit, t_end, half, p_const, drift, u[nd:].copy(), len(h) >= 2, out):
             return
         step = 1e-4
         R = resid(u)
@@ -674,7 +680,7 @@ class SlidingWindowIdentifier:
             self._to_end(drift, g_hist, half, out, "drift fit not possible on this window")
             return
         p, rates = unpack(u)
-        se = prob.drift_stderr(p, self.free, rates if free_rate else {}, t_end, chunk,
+        se = fit.drift_stderr(p, self.free, rates if free_rate else {}, t_end, chunk,
                                fixed_rates=None if free_rate else rates,
                                rate_prior_sd=(cfg.drift_rate_sd if sd_u > 0 else None), R0=R)
         if se is None:
@@ -684,9 +690,9 @@ class SlidingWindowIdentifier:
             out.params[k] = p[k]
             out.stderr_fit[k] = se[k]
             out.stderr[k] = float(math.hypot(se[k], cfg.sigma_floor * p[k]))
-        self._drift_ratios(prob, R, out)
+        self._drift_ratios(fit, R, out)
 
-    def _twin_choice(self, prob: WindowProblem, params: Parameters, p_hat: dict[str, float]
+    def _twin_choice(self, prob: OutputErrorProblem, params: Parameters, p_hat: dict[str, float]
                      ) -> tuple[dict[str, float], str | None]:
         """The first window's fit, or its twin when the twin fits as well and the model's
         rule prefers it (:meth:`SuspensionModel.twin`: the quarter car seen from the body
@@ -731,6 +737,7 @@ class SlidingWindowIdentifier:
             return out
         cfg = self.config
         prob = self._problem(t, data)
+        fit = WindowFit(prob)
         params, simplex, warm = self._start(float(t[-1]))
         if not warm:  # cold: the record's own estimate when the nominal start fits worse
             params = cold_start(self.model, prob.meas, params, self.config.cost)
@@ -764,7 +771,7 @@ class SlidingWindowIdentifier:
         nfev = nm.nfev
         jac = None
         if cfg.gauss_newton_step:
-            gn = prob.gauss_newton(free, p_hat, cfg.gauss_newton_steps)
+            gn = fit.gauss_newton(free, p_hat, cfg.gauss_newton_steps)
             nfev += gn.nfev
             jac = gn.jacobian
             if gn.params is not None:
@@ -774,7 +781,7 @@ class SlidingWindowIdentifier:
             p_hat, twin_note = self._twin_choice(prob, params, p_hat)
             if twin_note is not None:  # the simplex and Jacobian belong to the other fit
                 final, jac = None, None
-        res = prob.finish(params, p_hat, nfev, True, simplex=final, jacobian=jac)
+        res = fit.finish(params, p_hat, nfev, True, simplex=final, jacobian=jac)
         out.params = res.params
         out.stderr_fit = dict(res.stderr)
         out.stderr = {k: float(math.hypot(v, cfg.sigma_floor * res.params[k]))
@@ -795,7 +802,7 @@ class SlidingWindowIdentifier:
         rel = {k: (v / res.params[k]) for k, v in res.stderr.items()}
         drift = [k for k in cfg.drift if k in free]
         if drift and res.identifiable:
-            self._drift_fit(prob, float(t[-1]), float(t[-1] - t[0]), res.params, drift, out)
+            self._drift_fit(fit, float(t[-1]), float(t[-1] - t[0]), res.params, drift, out)
         if res.identifiable and all(np.isfinite(v) and v < 0.5 for v in rel.values()):
             self._warm = (dict(res.params), rel)
             self._hist = (self._hist + [(out.t, [math.log(res.params[k]) for k in free])])[-3:]

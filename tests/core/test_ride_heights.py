@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 
 from estimator.identify.problem import OutputErrorProblem
-from estimator.stream.windowproblem import WindowProblem
 from suspid.cli import main
 from suspid.errors import InputError, UsageError
 from suspid.excitation import make_scenario
@@ -224,13 +223,14 @@ def test_identify_from_body_acceleration_ride_heights_and_road(tmp_path: Path, n
         assert res["params"][k] == pytest.approx(p[k], rel=0.01), k
 
 
-def test_window_problem_leaves_ride_heights_out_with_a_warning() -> None:
+def test_problem_without_ride_heights_leaves_them_out_with_a_warning() -> None:
+    """The monitor window's problem (``ride_heights=False``) fits the motion channels."""
     m = get_model("quarter2")
     p = m.defaults()
     t, road, x0 = make_scenario(m, "bump", duration=1.0, fs=200.0, t0=0.2)
     out = simulate(m, p, t, road, x0)
     meas = Measurement(t, dict(road), {c: out[c] for c in ("x1_ddot", "d", "d_dot")})
-    wp = WindowProblem(m, meas, cost="frobenius")
+    wp = OutputErrorProblem(m, meas, cost="frobenius", ride_heights=False)
     assert wp.channels == ["x1_ddot"]
     assert any("d, d_dot not compared" in w for w in wp.warnings)
     assert np.abs(wp.predict(p).residual).max() < 1e-8

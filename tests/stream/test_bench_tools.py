@@ -27,7 +27,7 @@ def test_bench_monitor_replay_reports_start_long_and_sustained_rates() -> None:
     assert out["realtime_factor_end_to_end"] == out["data_s"] / out["wall_s"]
 
 
-def test_bench_monitor_evaluations_times_lean_and_core_on_every_model() -> None:
+def test_bench_monitor_evaluations_times_the_fast_and_general_paths_on_every_model() -> None:
     r = subprocess.run([sys.executable, str(REPO / "tools" / "bench_monitor.py"), "evaluations",
                         "--repeat", "1", "--json"],
                        capture_output=True, text=True, timeout=600, cwd=REPO)
@@ -36,10 +36,10 @@ def test_bench_monitor_evaluations_times_lean_and_core_on_every_model() -> None:
     for name, free in (("quarter2", 4), ("half4", 6), ("full7", 12)):
         row = out[name]
         assert row["free"] == free and row["samples"] == 751
-        # every point on the lean path (the timing itself is not asserted)
-        assert row["lean_fallbacks"] == 0
-        assert row["lean_us"] > 0 and row["core_us"] > 0
-        assert row["core_over_lean"] == round(row["core_us"] / row["lean_us"], 2)
+        # every point on the fast path (the timing itself is not asserted)
+        assert row["fast_fallbacks"] == 0
+        assert row["fast_us"] > 0 and row["general_us"] > 0
+        assert row["general_over_fast"] == round(row["general_us"] / row["fast_us"], 2)
 
 
 def test_bench_roadfree_reports_both_roads_side_by_side() -> None:

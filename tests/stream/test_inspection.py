@@ -141,3 +141,22 @@ def test_the_tyre_the_test_needs_is_checked(sites, missing) -> None:
     model = _NoTyre(sites)
     with pytest.raises(UsageError, match=missing):
         inspect(model.defaults(), model)
+
+
+def test_inspection_search_finds_the_dense_grid_extrema(quarter2) -> None:
+    """Two nested grids + a parabolic vertex give the minimum of a 200 001-point sweep."""
+    base = quarter2.defaults()
+    for c1 in (1500.0, 900.0, 450.0):
+        p = dict(base, c1=c1)
+        res = inspect(p, quarter2)
+        f = np.geomspace(2.0, 25.0, 200_001)
+        H = contact_force_response(quarter2, p, f)
+        fs = (p["m1"] + p["m2"]) * 9.80665
+        rh = 100 * (fs - 0.003 * np.abs(H)) / fs
+        assert res.eusama_pct == pytest.approx(max(0.0, rh.min()), abs=1e-6)
+        assert res.eusama_f_hz == pytest.approx(f[np.argmin(rh)], rel=1e-4)
+        fb = np.geomspace(max(2.0, res.f_body_hz), min(25.0, res.f_wheel_hz), 200_001)
+        ph = np.degrees(np.unwrap(np.angle(contact_force_response(
+            quarter2, p, np.concatenate([[1e-3], fb])))))
+        ph = (ph - 360 * np.round((ph[0] - 180) / 360))[1:]
+        assert res.phi_min_deg == pytest.approx(ph.min(), abs=1e-6)

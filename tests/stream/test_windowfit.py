@@ -1,10 +1,5 @@
-"""The window problem's lean evaluation path equals the core's OutputErrorProblem.
-
-The lean path (:mod:`estimator.stream.windowproblem`) only changes how a window's cost is
-computed (affine state-space map, one LAPACK eigen-decomposition, closed-form FOH scan,
-explicit least squares for the initial state) and how the stderr Jacobian is obtained
-(secant through the final simplex); these tests pin it to the core's results.
-"""
+"""A monitor window's fit on the one output-error problem: the stderr from the final
+simplex's secant, Gauss-Newton steps, the drifting window, the fast cost's guard."""
 from __future__ import annotations
 
 import math
@@ -14,12 +9,11 @@ import pytest
 
 from estimator.identify import OutputErrorProblem, Parameters, finish
 from estimator.identify.solver import minimize_log
-from estimator.inspection import contact_force_response, inspect
 from estimator.stream.wear_streams import damper_wear
-import estimator.stream.windowproblem as wp
-from estimator.stream.windowproblem import StateSpaceMap, WindowProblem, small_inverse
+import estimator.identify.problem as pm
+import estimator.stream.windowfit as wf
+from estimator.stream.windowfit import WindowFit, small_inverse
 from suspid.io.csvio import Measurement
-from suspid.models import get_model
 from suspid.simulate import outputs, simulate_states
 
 FIX = ("m1", "m2", "c2", "k2")
@@ -37,6 +31,12 @@ def window(quarter2):
     return s, meas, params
 
 
+def _window(model, meas, params):
+    """The window's problem as the monitor builds it."""
+    return OutputErrorProblem(model, meas, affine=model.affine(params.valuesdict(), params.free),
+                              ride_heights=False)
+
+
 def _points(p0, n=12, spread=0.3, seed=0):
     rng = np.random.default_rng(seed)
     out = []
@@ -48,33 +48,11 @@ def _points(p0, n=12, spread=0.3, seed=0):
     return out
 
 
-@pytest.mark.parametrize("cost", ["sse", "frobenius"])
-def test_lean_cost_residual_and_x0_equal_the_core(quarter2, window, cost) -> None:
-    s, meas, params = window
-    ref = OutputErrorProblem(quarter2, meas, cost=cost)
-    ssm = StateSpaceMap(quarter2, params.valuesdict(), params.free)
-    assert ssm.affine_ab and ssm.affine_bz
-    lean = WindowProblem(quarter2, meas, cost=cost, ssmap=ssm)
-    assert lean.lean
-    for q in _points(s.nominal):
-        a, b = ref.normalized_ss(q), lean.normalized_ss(q)
-        assert b == pytest.approx(a, rel=1e-10)
-        ra, rb = ref.residual_vector(q), lean.residual_vector(q)
-        assert np.max(np.abs(ra - rb)) <= 1e-10 * np.max(np.abs(ra))
-        pa, pb = ref.predict(q), lean.predict(q)
-        # the estimated initial state, and the trajectory it starts (every channel)
-        assert np.allclose(pb.x0, pa.x0, rtol=1e-7, atol=1e-12 * np.max(np.abs(pa.x0)))
-        oa = outputs(quarter2, q, simulate_states(quarter2, q, ref.t, ref.U, pa.x0), ref.U)
-        ob = lean.all_outputs(q, pb.x0)
-        for c in ("x1", "x2", "x1_ddot"):
-            assert np.max(np.abs(oa[c] - ob[c])) <= 1e-9 * np.max(np.abs(oa[c]))
-    assert lean.n_fallback == 0
-
-
 def test_window_finish_equals_the_core_finish(quarter2, window) -> None:
     s, meas, params = window
     ref = OutputErrorProblem(quarter2, meas)
-    lean = WindowProblem(quarter2, meas, ssmap=StateSpaceMap(quarter2, params.valuesdict(), params.free))
+    prob = _window(quarter2, meas, params)
+    lean = WindowFit(prob)
     p = dict(s.nominal)
     p["c1"] *= 1.004  # near, not at, the optimum
     a = finish(ref, params, p, 12, True)
@@ -84,7 +62,7 @@ def test_window_finish_equals_the_core_finish(quarter2, window) -> None:
     simplex = [p, dict(p, c1=p["c1"] * math.exp(2e-3)),
                dict(p, k1=p["k1"] * math.exp(1.5e-3), c1=p["c1"] * math.exp(-1e-3))]
     for q in simplex:
-        lean.normalized_ss(q)
+        prob.normalized_ss(q)
     c = lean.finish(params, p, 12, True, simplex=simplex)
     for res, tol in ((b, 1e-4), (c, 2e-2)):
         assert res.identifiable == a.identifiable
@@ -98,7 +76,8 @@ def test_window_finish_equals_the_core_finish(quarter2, window) -> None:
         assert np.allclose(res.singular_values, a.singular_values, rtol=tol)
 
 
-def test_missing_samples_and_irregular_grids_use_the_core(quarter2, window) -> None:
+def test_missing_samples_and_irregular_grids_take_the_general_path(quarter2, window) -> None:
+    """A gap or a jittered grid: no fast path (the window's finish is the core's)."""
     s, meas, params = window
     x1 = meas.measured["x1"].copy()
     x1[100:110] = np.nan
@@ -108,34 +87,11 @@ def test_missing_samples_and_irregular_grids_use_the_core(quarter2, window) -> N
     irregular = Measurement(t2, meas.road, meas.measured, source="window")
     q = dict(s.nominal)
     for m in (gappy, irregular):
-        lean = WindowProblem(quarter2, m)
-        assert not lean.lean
-        assert lean.normalized_ss(q) == OutputErrorProblem(quarter2, m).normalized_ss(q)
-
-
-def test_state_space_map_is_exact_and_knows_when_it_is_not_affine(quarter2) -> None:
-    base = quarter2.defaults()
-    rng = np.random.default_rng(3)
-    for free, affine in ((["c1", "k1"], True), (["c1", "k1", "c2", "k2"], True),
-                         (["m1", "c1", "k1"], False)):
-        ssm = StateSpaceMap(quarter2, base, free)
-        assert ssm.affine_ab is affine
-        for _ in range(5):
-            q = dict(base)
-            for k in free:
-                q[k] = base[k] * math.exp(rng.normal(0.0, 0.5))
-            A, B, Bz = ssm(q)
-            A0, B0 = quarter2.state_space(q)
-            assert np.allclose(A, A0, rtol=1e-12, atol=1e-12 * np.abs(A0).max())
-            assert np.allclose(B, B0, rtol=1e-12, atol=1e-12 * np.abs(B0).max())
-            assert np.allclose(Bz, A0 @ B0[:, 1:] + B0[:, :1], rtol=1e-10,
-                               atol=1e-12 * np.abs(A0 @ B0[:, 1:]).max())
-    # c2 free: B_v varies, so Bz = A B_v + B_r is not affine (computed, still exact)
-    assert not StateSpaceMap(quarter2, base, ["c1", "k1", "c2", "k2"]).affine_bz
-    # a fixed parameter away from its base value: the model's own matrices
-    ssm = StateSpaceMap(quarter2, base, ["c1", "k1"])
-    q = dict(base, m1=2 * base["m1"])
-    assert np.allclose(ssm(q)[0], quarter2.state_space(q)[0])
+        prob = _window(quarter2, m, params)
+        assert not prob.fast and prob.evaluate(q) is None and not WindowFit(prob).drift_ok
+        a = WindowFit(prob).finish(params, q, 3, True)
+        b = finish(OutputErrorProblem(quarter2, m), params, q, 3, True, with_stderr=True)
+        assert a.cost == b.cost and a.stderr == b.stderr
 
 
 def test_small_inverse() -> None:
@@ -148,36 +104,17 @@ def test_small_inverse() -> None:
     assert small_inverse(np.array([[1.0, 2.0], [2.0, 4.0]])) == (None, math.inf)
 
 
-def test_inspection_search_finds_the_dense_grid_extrema(quarter2) -> None:
-    """Two nested grids + a parabolic vertex give the minimum of a 200 001-point sweep."""
-    base = quarter2.defaults()
-    for c1 in (1500.0, 900.0, 450.0):
-        p = dict(base, c1=c1)
-        res = inspect(p, quarter2)
-        f = np.geomspace(2.0, 25.0, 200_001)
-        H = contact_force_response(quarter2, p, f)
-        fs = (p["m1"] + p["m2"]) * 9.80665
-        rh = 100 * (fs - 0.003 * np.abs(H)) / fs
-        assert res.eusama_pct == pytest.approx(max(0.0, rh.min()), abs=1e-6)
-        assert res.eusama_f_hz == pytest.approx(f[np.argmin(rh)], rel=1e-4)
-        fb = np.geomspace(max(2.0, res.f_body_hz), min(25.0, res.f_wheel_hz), 200_001)
-        ph = np.degrees(np.unwrap(np.angle(contact_force_response(
-            quarter2, p, np.concatenate([[1e-3], fb])))))
-        ph = (ph - 360 * np.round((ph[0] - 180) / 360))[1:]
-        assert res.phi_min_deg == pytest.approx(ph.min(), abs=1e-6)
-
-
 def test_drift_residual_equals_the_lean_path_without_drift_and_fits_a_ramp(quarter2, window) -> None:
     """With zero rates the drifting window is the constant one (any chunk length); on a
     window whose c1 ramps, the true end value with the true rate fits far better than any
     constant c1 of a scan."""
     s, meas, params = window
-    ssm = StateSpaceMap(quarter2, params.valuesdict(), params.free)
-    lean = WindowProblem(quarter2, meas, ssmap=ssm)
+    prob = _window(quarter2, meas, params)
+    lean = WindowFit(prob)
     assert lean.drift_ok
     t_end = float(meas.t[-1])
     for q in _points(s.nominal, n=4):
-        a = lean.normalized_ss(q)
+        a = prob.normalized_ss(q)
         for chunk in (0.02, 0.1, 0.35):
             assert lean.drift_ss(q, {"c1": 0.0}, t_end, chunk) == pytest.approx(a, rel=1e-8)
     # a ramp: c1 falls 6.25 %/s over the whole stream
@@ -186,12 +123,12 @@ def test_drift_residual_equals_the_lean_path_without_drift_and_fits_a_ramp(quart
     sl = slice(2000, 3501, 2)
     m2 = Measurement(w.t[sl].copy(), {k: w.data[k][sl] for k in ("r", "r_dot")},
                      {c: w.data[c][sl] for c in ("x1", "x2")}, source="window")
-    prob = WindowProblem(quarter2, m2, ssmap=ssm)
+    prob = _window(quarter2, m2, params)
     te = float(m2.t[-1])
     c_end = float(np.interp(te, w.t, w.truth["c1"]))
     p = dict(w.nominal, c1=c_end)
     g = -0.0625 * w.nominal["c1"] / c_end  # relative to the end value, 1/s
-    ramp = prob.drift_ss(p, {"c1": g}, te, 0.05)
+    ramp = WindowFit(prob).drift_ss(p, {"c1": g}, te, 0.05)
     best_const = min(prob.normalized_ss(dict(w.nominal, c1=c_end * f))
                      for f in np.linspace(1.0, 1.25, 26))
     assert ramp < 0.05 * best_const
@@ -205,8 +142,7 @@ def test_drift_sensitivity_equals_finite_differences_of_the_drifting_window(quar
     s, meas, params = window
     m = Measurement(meas.t, meas.road, {c: meas.measured[c] for c in ("x1", "x2")},
                     source="window")
-    ssm = StateSpaceMap(quarter2, params.valuesdict(), params.free)
-    prob = WindowProblem(quarter2, m, ssmap=ssm)
+    prob = WindowFit(_window(quarter2, m, params))
     te = float(m.t[-1])
     # at the window's true parameters: the residual is noise (the Gauss-Newton, Kaufman
     # form of the variable projection drops a term proportional to it)
@@ -214,12 +150,12 @@ def test_drift_sensitivity_equals_finite_differences_of_the_drifting_window(quar
     got = prob.drift_sensitivity(p, ["c1", "k1"], te)
     assert got is not None
     Ja, Jg = got
-    R0 = prob.lean_residual(p)
+    R0 = prob.residual(p)
     Rd = prob.drift_residual(p, {}, te, 0.01)
     assert R0 is not None and Rd is not None
     e = 1e-6
     for j, k in enumerate(["c1", "k1"]):
-        Ra = prob.lean_residual(dict(p, **{k: p[k] * math.exp(e)}))
+        Ra = prob.residual(dict(p, **{k: p[k] * math.exp(e)}))
         assert Ra is not None
         fa = -(Ra - R0).ravel() / e
         Rg = prob.drift_residual(p, {k: e}, te, 0.01)
@@ -232,49 +168,19 @@ def test_drift_sensitivity_equals_finite_differences_of_the_drifting_window(quar
     assert prob.drift_sensitivity(p, ["c2"], te) is None
 
 
-@pytest.mark.parametrize("name", ["quarter2", "half4", "full7"])
-def test_lean_cost_equals_the_core_on_every_model(name: str) -> None:
-    """Every model's window (positions and, where the model has one, an acceleration; every
-    road with its rate) costs the same on the lean path as on the core's, at points spread
-    35 % around the truth in every free parameter."""
-    m = get_model(name)
-    accel = (m.coords[0] + "_ddot",)
-    s = damper_wear(m, duration=4.0, fs=250.0, seed=4, wear_start=0.0,
-                    channels=tuple(m.coords) + accel)
-    sl = slice(250, 1001)
-    road = {k: s.data[k][sl] for k in s.data if k in m.input_names}
-    meas = Measurement(s.t[sl].copy(), road,
-                       {c: s.data[c][sl] for c in tuple(m.coords) + accel}, source="window")
-    fixed = {q.name: s.nominal[q.name] for q in m.params if q.kind in ("mass", "inertia", "length")}
-    params = Parameters.for_model(m, fix=fixed)
-    ref = OutputErrorProblem(m, meas)
-    lean = WindowProblem(m, meas, ssmap=StateSpaceMap(m, params.valuesdict(), params.free))
-    assert lean.lean
-    rng = np.random.default_rng(1)
-    for _ in range(6):
-        q = dict(s.nominal)
-        for k in params.free:
-            q[k] *= math.exp(rng.normal(0.0, 0.3))
-        a, b = ref.normalized_ss(q), lean.normalized_ss(q)
-        assert b == pytest.approx(a, rel=1e-9)
-        ra, rb = ref.residual_vector(q), lean.residual_vector(q)
-        assert np.max(np.abs(ra - rb)) <= 1e-9 * np.max(np.abs(ra))
-    assert lean.n_fallback == 0
-
-
 def test_cost_skips_the_residual_pass_unless_the_terms_cancel(quarter2, window) -> None:
-    """The lean cost is ``||R0||^2 - rhs . sol`` without forming the residual; on a noise-free
+    """The fast cost is ``||R0||^2 - rhs . sol`` without forming the residual; on a noise-free
     window at its true parameters that difference cancels to rounding, so the residual is
-    formed and summed instead (the cost then is the core's, at rounding level, not
-    ``~1e-16 ||R0||^2`` of cancellation). Either way the residual itself is the core's."""
+    formed and summed instead (the cost then is at rounding level, not ``~1e-16 ||R0||^2``
+    of cancellation). Either way the residual is the general path's."""
     s, meas, params = window
-    ssm = StateSpaceMap(quarter2, params.valuesdict(), params.free)
     # noisy window, away from its optimum: no residual pass for the cost
-    lean = WindowProblem(quarter2, meas, ssmap=ssm)
+    lean = _window(quarter2, meas, params)
     ref = OutputErrorProblem(quarter2, meas)
+    ref.fast = False
     q = _points(s.nominal, n=1)[0]
     assert lean.normalized_ss(q) == pytest.approx(ref.normalized_ss(q), rel=1e-10)
-    ev = lean._evaluate(q)
+    ev = lean.evaluate(q)
     assert ev is not None and ev._R is None
     rv = lean.residual_vector(q)  # formed on first use
     assert np.max(np.abs(rv - ref.residual_vector(q))) <= 1e-9 * np.max(np.abs(rv))
@@ -285,28 +191,31 @@ def test_cost_skips_the_residual_pass_unless_the_terms_cancel(quarter2, window) 
     X = simulate_states(quarter2, p, meas.t, ref.U, x0)
     out = outputs(quarter2, p, X, ref.U)
     clean = Measurement(meas.t, meas.road, {c: out[c] for c in ("x1", "x2")}, source="window")
-    lean0 = WindowProblem(quarter2, clean, ssmap=ssm)
+    lean0 = _window(quarter2, clean, params)
     v = lean0.normalized_ss(p)
-    ev0 = lean0._evaluate(p)
+    ev0 = lean0.evaluate(p)
     assert ev0 is not None and ev0._R is not None  # the guard formed the residual
     r0 = ev0.R0.ravel()
-    assert ev0.ss < wp.SS_GUARD * float(r0 @ r0)
+    assert ev0.ss < pm.SS_GUARD * float(r0 @ r0)
     r = ev0.R.ravel()
     assert v == float(r @ r) / lean0.scale
     assert 0.0 <= v < 1e-20
-    assert OutputErrorProblem(quarter2, clean).normalized_ss(p) < 1e-20
+    general = OutputErrorProblem(quarter2, clean)
+    general.fast = False
+    assert general.normalized_ss(p) < 1e-20
 
 
 @pytest.fixture(scope="module")
 def window_optimum(quarter2, window):
-    """The window's lean problem and its optimum (Nelder-Mead to 1e-9, every parameter)."""
+    """The window's fit and its optimum (Nelder-Mead to 1e-9, every parameter)."""
     s, meas, params = window
     free = params.free
-    lean = WindowProblem(quarter2, meas, ssmap=StateSpaceMap(quarter2, params.valuesdict(), free))
+    prob = _window(quarter2, meas, params)
+    lean = WindowFit(prob)
     base = dict(s.nominal)
 
     def cost(u: np.ndarray) -> float:
-        return lean.normalized_ss({**base, **{k: base[k] * math.exp(x) for k, x in zip(free, u)}})
+        return prob.normalized_ss({**base, **{k: base[k] * math.exp(x) for k, x in zip(free, u)}})
 
     best = minimize_log(cost, np.zeros(len(free)), step=0.05, restarts=3, xatol=1e-9,
                         fatol=math.inf, maxfev=4000)
@@ -326,11 +235,11 @@ def test_gauss_newton_step_lands_near_the_window_optimum(window, window_optimum)
     d0 = max(abs(math.log(off[k] / opt[k])) for k in free)
     d1 = max(abs(math.log(q[k] / opt[k])) for k in free)
     assert d1 < 0.1 * d0
-    assert lean.normalized_ss(q) < lean.normalized_ss(off)
+    assert lean.problem.normalized_ss(q) < lean.problem.normalized_ss(off)
     far = dict(opt, c1=opt["c1"] * 1.3)
     q = lean.gauss_newton(free, far, 1).params
-    assert q is not None and lean.normalized_ss(q) < lean.normalized_ss(far)
-    assert max(abs(math.log(q[k] / far[k])) for k in free) <= wp.GAUSS_NEWTON_MAX_STEP + 1e-12
+    assert q is not None and lean.problem.normalized_ss(q) < lean.problem.normalized_ss(far)
+    assert max(abs(math.log(q[k] / far[k])) for k in free) <= wf.GAUSS_NEWTON_MAX_STEP + 1e-12
 
 
 def test_gauss_newton_steps_on_one_jacobian_and_its_reuse_for_the_stderr(window, window_optimum,
@@ -349,7 +258,7 @@ def test_gauss_newton_steps_on_one_jacobian_and_its_reuse_for_the_stderr(window,
     d1 = max(abs(math.log(one.params[k] / opt[k])) for k in free)
     d3 = max(abs(math.log(three.params[k] / opt[k])) for k in free)
     assert d3 < d1
-    assert lean.normalized_ss(three.params) <= lean.normalized_ss(one.params)
+    assert lean.problem.normalized_ss(three.params) <= lean.problem.normalized_ss(one.params)
     ref = lean.finish(params, three.params, 0, True)
     monkeypatch.setattr(lean, "_forward_jacobian", lambda *a, **k: pytest.fail("evaluated"))
     got = lean.finish(params, three.params, 0, True, jacobian=three.jacobian)
