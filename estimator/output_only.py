@@ -13,8 +13,9 @@ Two estimators per window:
         S_a(f) = K w^2 (w_n^4 + 4 zeta^2 w_n^2 w^2) / ((w_n^2 - w^2)^2 + 4 zeta^2 w_n^2 w^2) + B
 
     (``w = 2 pi f``, ``w_n = 2 pi f_n``; ``B`` the sensor-noise floor). The window's Welch
-    spectrum (16 s Hann segments, 50 % overlap) is fitted in log amplitude over 0.3-5 Hz by
-    nonlinear least squares from a grid of starts; standard errors from the Jacobian.
+    spectrum (16 s Hann segments, 50 % overlap) is fitted in log amplitude over 0.3-5 Hz
+    (at most 0.8 x the Nyquist frequency) by nonlinear least squares from a grid of starts;
+    standard errors from the Jacobian, none for a fit stopped at a bound of its search.
 ``ar``: AR(p) poles
     Mean removed, decimated to 10 Hz (zero-phase FIR), AR(p) (default p = 6) by least
     squares; the pole pair in 0.5-4 Hz with the highest AR spectral peak is the body mode:
@@ -45,10 +46,11 @@ from suspid.models.base import FloatArray
 DEFAULT_WINDOW_S = 60.0
 DEFAULT_STEP_S = 30.0
 METHODS = ("carma", "ar")
-#: band (Hz) the ``carma`` spectrum is fitted over, and the damping ratios it searches
+#: band (Hz) the ``carma`` spectrum is fitted over (its top held below the Nyquist frequency)
 CARMA_BAND = (0.3, 5.0)
 #: band (Hz) the ``ar`` method looks for the body's pole pair in
 AR_BAND = (0.5, 4.0)
+#: damping ratios the ``carma`` fit searches between
 ZETA_BOUNDS = (0.02, 1.5)
 #: a fitted value within this relative distance of a search bound stopped there
 AT_BOUND = 1e-3
