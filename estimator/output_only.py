@@ -13,8 +13,9 @@ Two estimators per window:
         S_a(f) = K w^2 (w_n^4 + 4 zeta^2 w_n^2 w^2) / ((w_n^2 - w^2)^2 + 4 zeta^2 w_n^2 w^2) + B
 
     (``w = 2 pi f``, ``w_n = 2 pi f_n``; ``B`` the sensor-noise floor). The window's Welch
-    spectrum (16 s Hann segments, 50 % overlap) is fitted in log amplitude over 0.3-5 Hz by
-    nonlinear least squares from a grid of starts; standard errors from the Jacobian.
+    spectrum (16 s Hann segments, 50 % overlap) is fitted in log amplitude over 0.3-5 Hz
+    (at most 0.8 x the Nyquist frequency) by nonlinear least squares from a grid of starts;
+    standard errors from the Jacobian, none for a fit stopped at a bound of its search.
 ``ar``: AR(p) poles
     Mean removed, decimated to 10 Hz (zero-phase FIR), AR(p) (default p = 6) by least
     squares; the pole pair in 0.5-4 Hz with the highest AR spectral peak is the body mode:
@@ -45,6 +46,24 @@ from suspid.models.base import FloatArray
 DEFAULT_WINDOW_S = 60.0
 DEFAULT_STEP_S = 30.0
 METHODS = ("carma", "ar")
+#: band (Hz) the ``carma`` spectrum is fitted over (its top held below the Nyquist frequency)
+CARMA_BAND = (0.3, 5.0)
+#: band (Hz) the ``ar`` method looks for the body's pole pair in
+AR_BAND = (0.5, 4.0)
+#: damping ratios the ``carma`` fit searches between
+ZETA_BOUNDS = (0.02, 1.5)
+#: a fitted value within this relative distance of a search bound stopped there
+AT_BOUND = 1e-3
+#: highest fitted frequency as a share of the Nyquist frequency (Welch's lines near it are
+#: bent by the logger's anti-alias filter)
+NYQUIST_SHARE = 0.8
+#: lowest top of a fitted band (Hz): below it the body mode (1-2 Hz) cannot be told apart
+MIN_BAND_TOP = 2.5
+#: mean body acceleration (m/s^2) above which the channel holds gravity or another axis:
+#: a car's body cannot keep accelerating vertically
+MAX_MEAN_ACCEL = 3.0
+#: a run of this many identical samples (or more) is a frozen or invalid sensor value
+STUCK_SAMPLES = 25
 
 
 @dataclass
@@ -58,6 +77,9 @@ class BodyMode:
     f_se, zeta_se : float
         Standard errors (NaN when not available).
     method : str
+    at_bound : str
+        Which search bound the fit stopped at (``"zeta 0.02 (the lower bound)"``), ``""``
+        when none: the value is then the bound, not an estimate, and has no standard error.
     """
 
     f_hz: float
@@ -65,6 +87,7 @@ class BodyMode:
     f_se: float
     zeta_se: float
     method: str
+    at_bound: str = ""
 
 
 def carma_psd(f: FloatArray, fn: float, zeta: float) -> FloatArray:
@@ -76,9 +99,14 @@ def carma_psd(f: FloatArray, fn: float, zeta: float) -> FloatArray:
     return num / den
 
 
-def fit_carma(y: FloatArray, fs: float, band: tuple[float, float] = (0.3, 5.0),
+def fit_carma(y: FloatArray, fs: float, band: tuple[float, float] = CARMA_BAND,
               segment_s: float = 16.0) -> BodyMode:
-    """Fit the body mode to the Welch spectrum of ``y`` (m/s^2) sampled at ``fs`` (Hz)."""
+    """Fit the body mode to the Welch spectrum of ``y`` (m/s^2) sampled at ``fs`` (Hz).
+
+    A fit that stops at a bound of its search (``band``'s ends for the frequency,
+    :data:`ZETA_BOUNDS` for the damping ratio) returns that bound with no standard error and
+    names it in ``at_bound``: the record did not show a mode inside the search.
+    """
     y = np.asarray(y, dtype=float) - float(np.mean(y))
     nper = min(y.size, max(16, int(round(segment_s * fs))))
     f, P = welch(y, fs, nperseg=nper)
@@ -97,7 +125,8 @@ def fit_carma(y: FloatArray, fs: float, band: tuple[float, float] = (0.3, 5.0),
         for z0 in (0.15, 0.3, 0.5):
             lk0 = math.log(float(np.median(P)) / float(carma_psd(np.array([fn0]), fn0, z0)[0]) * 0.5)
             th0 = [fn0, z0, lk0, math.log(float(np.min(P)))]
-            r = least_squares(res, th0, bounds=([band[0], 0.02, -80, -120], [band[1], 1.5, 80, 80]))
+            r = least_squares(res, th0, bounds=([band[0], ZETA_BOUNDS[0], -80, -120],
+                                                [band[1], ZETA_BOUNDS[1], 80, 80]))
             if best is None or r.cost < best.cost:
                 best = r
     if best is None:  # pragma: no cover - the grid always yields a result
@@ -110,11 +139,20 @@ def fit_carma(y: FloatArray, fs: float, band: tuple[float, float] = (0.3, 5.0),
         se = np.sqrt(np.clip(np.diag(cov), 0, None))
     except np.linalg.LinAlgError:
         se = np.full(4, np.nan)
-    return BodyMode(float(best.x[0]), float(best.x[1]), float(se[0]), float(se[1]), "carma")
+    fn, zeta = float(best.x[0]), float(best.x[1])
+    stops = [f"f_n {bound:g} Hz (the {side} end of the fitted band {band[0]:g}-{band[1]:g} Hz)"
+             for bound, side in ((band[0], "lower"), (band[1], "upper"))
+             if abs(fn - bound) <= AT_BOUND * bound]
+    stops += [f"zeta {bound:g} (the {side} bound)"
+              for bound, side in ((ZETA_BOUNDS[0], "lower"), (ZETA_BOUNDS[1], "upper"))
+              if abs(zeta - bound) <= AT_BOUND * bound]
+    if stops:
+        return BodyMode(fn, zeta, math.nan, math.nan, "carma", " and ".join(stops))
+    return BodyMode(fn, zeta, float(se[0]), float(se[1]), "carma")
 
 
 def fit_ar(y: FloatArray, fs: float, order: int = 6, fs_ar: float = 10.0,
-           band: tuple[float, float] = (0.5, 4.0)) -> BodyMode:
+           band: tuple[float, float] = AR_BAND) -> BodyMode:
     """Body mode as the dominant AR(p) pole pair in ``band`` (see module doc)."""
     y = np.asarray(y, dtype=float) - float(np.mean(y))
     q = max(1, int(round(fs / fs_ar)))
@@ -151,6 +189,44 @@ def fit_ar(y: FloatArray, fs: float, order: int = 6, fs_ar: float = 10.0,
     return BodyMode(float(best[1]), float(best[2]), float("nan"), float("nan"), "ar")
 
 
+def _stuck_runs(y: FloatArray) -> np.ndarray:
+    """Samples of a frozen or invalid sensor value: runs of at least :data:`STUCK_SAMPLES`
+    identical finite values, with the sample before such a run when it lies far outside the
+    rest (an invalid marker, e.g. -51.2 m/s^2, then zeros)."""
+    out = np.zeros(y.size, dtype=bool)
+    if y.size < STUCK_SAMPLES:
+        return out
+    same = np.concatenate(([False], (np.diff(y) == 0) & np.isfinite(y[1:])))
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], same.view(np.int8), [0]))))
+    for a, b in zip(edges[::2], edges[1::2]):  # y[a-1] == y[a] == ... == y[b-1]
+        if b - a + 1 >= STUCK_SAMPLES:
+            out[a - 1:b] = True
+    if out.any() and (~out).sum() > 2:
+        rest = y[~out & np.isfinite(y)]
+        med = float(np.median(rest))
+        spread = 1.4826 * float(np.median(np.abs(rest - med))) or float(np.std(rest))
+        starts = np.flatnonzero(np.diff(out.view(np.int8)) == 1)  # the sample before a run
+        for k in starts:
+            if np.isfinite(y[k]) and abs(y[k] - med) > 10 * spread:
+                out[k] = True
+    return out
+
+
+def _spans(t: FloatArray, mask: np.ndarray, most: int = 3) -> str:
+    """``t 1.3 s, t 2.1-2.5 s and 4 more runs``: the time spans of ``mask``'s runs, at
+    most ``most`` of them named (times relative to the window's first sample when they
+    are epoch seconds)."""
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], mask.view(np.int8), [0]))))
+    runs = list(zip(edges[::2].tolist(), edges[1::2].tolist()))
+    base = float(t[0]) if float(t[0]) > 1e8 else 0.0
+    where = "+" if base else ""
+    named = [f"t {where}{float(t[a]) - base:.4g} s" if b - a == 1
+             else f"t {where}{float(t[a]) - base:.4g}-{float(t[b - 1]) - base:.4g} s"
+             for a, b in runs[:most]]
+    more = f" and {len(runs) - most} more runs" if len(runs) > most else ""
+    return ", ".join(named) + more + (" from the window's start" if base else "")
+
+
 class OutputOnlyEstimator:
     """Per-window body-mode tracking from one acceleration channel.
 
@@ -184,6 +260,8 @@ class OutputOnlyEstimator:
         self.windows = 0
         self.skipped = 0
         self.cpu = 0.0
+        self.missing = 0
+        self._t_done: float | None = None
 
     def process(self, t: FloatArray, data: Mapping[str, FloatArray]) -> StepResult:
         """Body mode of one window (or a skip with the reason)."""
@@ -194,9 +272,18 @@ class OutputOnlyEstimator:
             raise InputError(f"output-only mode: the stream has no channel {self.channel!r}; "
                              f"it has {', '.join(data)} (map one with --map {self.channel}=MSG.SIGNAL)")
         y = np.asarray(y, dtype=float)
+        warns: list[str] = []
+        stuck = _stuck_runs(y)
+        if stuck.any():
+            y = np.where(stuck, np.nan, y)
+            warns.append(f"{int(stuck.sum())} samples of {self.channel} frozen at one value or "
+                         f"an invalid marker ({_spans(t, stuck)}): left out as missing")
         ok = np.isfinite(y)
         frac = 1.0 - float(ok.mean())
-        warns = []
+        # missing samples not in an earlier window: the summary's total counts each once
+        new = t > self._t_done if self._t_done is not None else np.ones(t.size, dtype=bool)
+        self.missing += int((~ok & new).sum())
+        self._t_done = t1 if self._t_done is None else max(self._t_done, t1)
 
         def skip(reason: str) -> StepResult:
             self.skipped += 1
@@ -205,35 +292,65 @@ class OutputOnlyEstimator:
 
         if frac > self.max_missing or ok.sum() < 16:
             return skip(f"channel {self.channel}: {frac:.0%} of the window's samples missing "
-                        f"(> {self.max_missing:.0%})")
+                        f"(> {self.max_missing:.0%})" + (f"; {warns[0]}" if warns else ""))
         if frac > 0:
+            gaps = ~ok & ~stuck
             y = np.interp(t, t[ok], y[ok])
-            warns.append(f"{int((~ok).sum())} missing samples bridged by linear interpolation")
+            if gaps.any():
+                warns.append(f"{int(gaps.sum())} missing samples of {self.channel} "
+                             f"({_spans(t, gaps)}) bridged by linear interpolation")
+        mean = float(np.mean(y))
+        if abs(mean) > MAX_MEAN_ACCEL:
+            warns.append(f"{self.channel} averages {mean:+.3g} m/s^2 over the window, where a "
+                         "body's vertical acceleration averages 0: gravity not removed "
+                         "(e.g. --map x1_ddot=MSG.SIGNAL-9.81) or another axis mapped; the mean "
+                         "is removed before the fit, an axis other than the vertical is not "
+                         "the body mode")
         rms = float(np.std(y))
         if rms < self.min_rms:
             return skip(f"too little excitation: body acceleration RMS {rms:.3g} m/s^2 < "
                         f"{self.min_rms:g} m/s^2 (vehicle at rest?)")
         dt = float(np.median(np.diff(t)))
         fs = 1.0 / dt
+        nominal = CARMA_BAND if self.method == "carma" else AR_BAND
+        top = min(nominal[1], NYQUIST_SHARE * fs / 2)
+        if top < MIN_BAND_TOP:
+            return skip(f"sample rate {fs:.3g} Hz too low for the body mode: its Nyquist "
+                        f"frequency {fs / 2:.3g} Hz leaves a band below {MIN_BAND_TOP:g} Hz")
+        if top < nominal[1]:
+            warns.append(f"fitted up to {top:.3g} Hz, not {nominal[1]:g} Hz: the stream's "
+                         f"{fs:.3g} Hz sample rate has its Nyquist frequency at {fs / 2:.3g} Hz")
+        band = (nominal[0], top)
         try:
-            mode = (fit_carma(y, fs) if self.method == "carma"
-                    else fit_ar(y, fs, order=self.ar_order))
+            mode = (fit_carma(y, fs, band=band) if self.method == "carma"
+                    else fit_ar(y, fs, order=self.ar_order, band=band))
         except ValueError as exc:
             return skip(f"no body mode found: {exc}")
         params = {"f_body": mode.f_hz, "zeta_body": mode.zeta}
         se = {"f_body": mode.f_se, "zeta_body": mode.zeta_se}
+        if mode.at_bound:
+            warns.append(f"the spectral fit stopped at {mode.at_bound}: no body mode inside "
+                         "the search; the value is the bound, not an estimate (no standard "
+                         "error, not tracked)")
         self.windows += 1
         cpu = time.process_time() - c0
         self.cpu += cpu
         info = {"mode": "output_only", "method": mode.method, "f_hz": mode.f_hz,
                 "zeta": mode.zeta, "accel_rms": rms, "cpu_ms": 1e3 * cpu, "warnings": warns}
+        event = Estimate(t1, t0, self.name, params, se, info=info)
+        if mode.at_bound:
+            return StepResult(event)
         # the tracker needs an uncertainty: without one (AR poles), 10 % of the value
         track_se = {k: (v if math.isfinite(v) else 0.1 * params[k]) for k, v in se.items()}
-        return StepResult(Estimate(t1, t0, self.name, params, se, info=info), params, track_se)
+        return StepResult(event, params, track_se)
 
     def summary(self) -> dict[str, Any]:
-        """Windows fitted and skipped, CPU time."""
-        return {"windows": self.windows, "skipped": self.skipped, "cpu_s": self.cpu}
+        """Windows fitted and skipped, CPU time, and ``missing_samples``: the samples of the
+        channel missing on the stream's grid (no value in their slot, or left out as frozen
+        or invalid), each counted once though windows overlap: the total of what the
+        windows' warnings name."""
+        return {"windows": self.windows, "skipped": self.skipped, "cpu_s": self.cpu,
+                "missing_samples": self.missing}
 
 
 def make_output_only_estimator(spec: Any, channels: list[str], fs: float) -> OutputOnlyEstimator:

@@ -108,7 +108,10 @@ def assess(J: FloatArray, names: list[str], kinds: dict[str, str],
     if Jr.shape[1] == 0:
         out.singular_values = [0.0]
         return out
-    _, s, Vt = np.linalg.svd(Jr, full_matrices=False)
+    # fewer rows than directions: the missing singular values are zeros (an SVD reports
+    # only min(M, n) of them; the rows of the full Vt beyond M span the null space)
+    _, s, Vt = np.linalg.svd(Jr, full_matrices=Jr.shape[0] < Jr.shape[1])
+    s = np.concatenate([s, np.zeros(Vt.shape[0] - s.size)])
     if s[0] == 0:
         return Identifiability(False, [0.0] * n,
                                ["the measured channels do not depend on any free parameter"])

@@ -526,6 +526,12 @@ class OutputErrorProblem:
                 seen |= {m.coords[j] for j in np.flatnonzero(row)}
         return seen
 
+    @property
+    def is_estimating_x0(self) -> bool:
+        """Whether the fit estimates the initial state (``x0="estimate"``): one unknown
+        per state besides the parameters."""
+        return bool(self._estimate)
+
     def pieces(self, p: Mapping[str, float]) -> AffinePieces | None:
         """The forward model's affine pieces (built from the first finite ``p``)."""
         if self.affine is None and all(np.isfinite(v) for v in p.values()):

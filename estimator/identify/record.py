@@ -18,7 +18,7 @@ from estimator.identify.offset import Offset, find_offset, on_record
 from estimator.identify.params import Parameters
 from estimator.identify.problem import OutputErrorProblem
 from estimator.identify.result import IdentResult
-from estimator.identify.solver import fit
+from estimator.identify.solver import fit, too_little_data, withhold_estimates
 from estimator.identify.start import StartEstimate, estimate_start, fit_from_starts
 from suspid.errors import UsageError
 
@@ -114,7 +114,12 @@ def identify_record(problem: OutputErrorProblem, params: Parameters, *, restarts
     """
     if offset not in OFFSET_MODES:
         raise UsageError(f"offset: expected one of {', '.join(OFFSET_MODES)}, got {offset!r}")
-    found = check if check is not None else check_offset(problem, params, data_start=data_start)
+    short = too_little_data(problem, len(params.free))
+    if short is not None:  # no offset can be told from so few values either
+        found = OffsetCheck(None, None)
+    else:
+        found = check if check is not None else check_offset(problem, params,
+                                                             data_start=data_start)
     fitted = problem
     if found.offset is not None and offset == "remove":
         fitted = on_record(problem, found.offset.remove(problem.meas))
@@ -140,6 +145,10 @@ def identify_record(problem: OutputErrorProblem, params: Parameters, *, restarts
     if found.offset is not None:
         result.warnings.insert(0, found.offset.warning(problem.model, removed))
         result.offset = found.offset.to_json(removed)
+        n_values = len(result.offset.get("values", {})) if removed else 0
+        short = too_little_data(problem, len(params.free), n_values)
+        if short is not None:
+            withhold_estimates(result, short)
     return result, fitted
 
 

@@ -37,6 +37,65 @@ DEFAULT_MAXFEV = 1000
 SAME_COST = 1e-3
 
 
+def too_little_data(problem: OutputErrorProblem, n_free: int, n_extra: int = 0) -> str | None:
+    """Why the record cannot give estimates of ``n_free`` parameters, or ``None``.
+
+    The fit's unknowns are the free parameters, the initial states it estimates
+    (``x0="estimate"``: one per state) and ``n_extra`` more (a constant offset removed
+    before the fit: one per value). A record with no more measured values in the cost
+    than unknowns fits any of them exactly, whatever the parameters: its cost is zero at a
+    continuum of values, its residual holds no degree of freedom to scale a standard
+    error with, and the values reported are the start's or wherever the search stopped.
+
+    Parameters
+    ----------
+    problem : OutputErrorProblem
+        The record and its cost (``n_obs`` measured values in the cost).
+    n_free : int
+        Free parameters.
+    n_extra : int
+        Further unknowns fitted with them.
+
+    Returns
+    -------
+    str or None
+        The warning naming the counts and the remedy, ``None`` when there are more values
+        than unknowns.
+    """
+    n_x0 = problem.model.n_states if problem.is_estimating_x0 else 0
+    unknowns = n_free + n_x0 + n_extra
+    if n_free == 0 or problem.n_obs > unknowns:
+        return None
+    parts = [f"{n_free} free parameter{'s' * (n_free != 1)}"]
+    if n_x0:
+        parts.append(f"{n_x0} initial states")
+    if n_extra:
+        parts.append(f"{n_extra} offset{'s' * (n_extra != 1)}")
+    per = max(len(problem.channels), 1)
+    need = unknowns // per + 1
+    rows = int(problem.mask.any(axis=1).sum())
+    return (f"too little data: {problem.n_obs} measured values in the cost ({rows} "
+            f"sample{'s' * (rows != 1)} of {', '.join(problem.channels)}) for {unknowns} unknowns "
+            f"({' + '.join(parts)}): any parameter values fit them, so the values shown are "
+            f"not estimates and have no standard error; give at least {need} samples (more "
+            "for a useful estimate), or fix parameters (--fix) or the start (--x0 rest)")
+
+
+def withhold_estimates(res: IdentResult, reason: str) -> IdentResult:
+    """Mark ``res`` as no estimate: not a success, not identifiable, no standard error or
+    band, ``reason`` first among its warnings. Returns ``res`` (changed in place)."""
+    res.success = False
+    res.identifiable = False
+    res.stderr = {k: math.nan for k in res.stderr}
+    res.bands = None
+    res.band_method = None
+    res.cov_log = None
+    res.singular_values = []
+    if reason not in res.warnings:
+        res.warnings.insert(0, reason)
+    return res
+
+
 @dataclass
 class NMOutcome:
     """Raw outcome of :func:`minimize_log`.
@@ -328,7 +387,11 @@ def finish(problem: OutputErrorProblem, params: Parameters, p_hat: Mapping[str, 
            for c in model.channels + model.ride_height_channels if c in problem.meas.measured}
     stderr: dict[str, float] = {k: float("nan") for k in free}
     identifiable, sv, cov_log = finite, [], None
-    if with_stderr and free and finite:
+    short = too_little_data(problem, len(free))
+    if short is not None:
+        identifiable = False
+        warnings.insert(0, short)
+    elif with_stderr and free and finite:
         J = jacobian_log(problem, p_hat, free)
         # per-channel residual variance (sandwich estimate for the unweighted channels)
         rw = res * problem.w

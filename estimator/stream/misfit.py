@@ -10,6 +10,13 @@ marks every window above ``MISFIT_RATIO`` as a misfit and, when ``MISFIT_WINDOWS
 windows in a row are, says so once: a :class:`~estimator.stream.events.Notice` of kind
 ``misfit`` naming the ratio, the channels and the likely causes. The threshold lies above
 every correct fit measured (``tools/misfit_floor.py``, ``docs/monitoring.md``).
+
+A noise-free (or finely quantized) record has no noise floor: its ratio compares rounding
+errors and the window's interpolation error, and runs to 20-800 on fits that leave a
+millionth of the signal. So, as ``suspid identify`` judges a misfit
+(:func:`estimator.identify.start.misfit_channels`), a channel counts only when its residual's
+excess over the noise floor is also more than ``MISFIT_SHARE`` of the window's signal
+(:func:`misfit_shares`); the two verdicts then agree on the same record.
 """
 from __future__ import annotations
 
@@ -17,7 +24,11 @@ import math
 from dataclasses import dataclass, field
 from typing import Mapping
 
+import numpy as np
+
+from estimator.identify.start import MISFIT_SHARE
 from estimator.stream.events import Notice
+from suspid.models.base import FloatArray
 
 #: noise-floor ratio above which a window's fit counts as a misfit (dimensionless), set above
 #: every correct fit measured with ``tools/misfit_floor.py`` (docs/monitoring.md): records of
@@ -31,6 +42,44 @@ MISFIT_RATIO = 12.0
 #: consecutive fitted windows above ``MISFIT_RATIO`` before the warning (a persistent misfit,
 #: not one window disturbed by a pothole or a burst of lost frames)
 MISFIT_WINDOWS = 3
+
+
+def misfit_shares(ratios: Mapping[str, float], rms: Mapping[str, float],
+                  data: Mapping[str, FloatArray]) -> dict[str, float]:
+    """Per fitted channel: its residual's excess over the noise floor as a share of the
+    window's signal (dimensionless), as :func:`estimator.identify.start.misfit_measures`
+    forms it for ``identify``.
+
+    Parameters
+    ----------
+    ratios : mapping
+        Channel -> noise-floor ratio of the window's fit (the fitted channels).
+    rms : mapping
+        Channel -> RMS residual of the fit (channel units).
+    data : mapping
+        Channel -> the window's samples (NaN where missing).
+
+    Returns
+    -------
+    dict
+        Channel -> ``rms^2 (1 - 1/ratio)`` over the fitted channels' summed mean squares
+        about their means; ``inf`` when the window's fitted channels do not move (every
+        share of a still record counts); channels without an RMS are left out.
+    """
+    var = 0.0
+    for c in ratios:
+        y = np.asarray(data.get(c, ()), dtype=float)
+        y = y[np.isfinite(y)]
+        if y.size:
+            var += float(np.mean((y - y.mean()) ** 2))
+    out: dict[str, float] = {}
+    for c, r in ratios.items():
+        e = rms.get(c, math.nan)
+        if not math.isfinite(e):
+            continue
+        excess = e * e * (1.0 - 1.0 / r) if r > 0 and math.isfinite(r) else e * e
+        out[c] = excess / var if var > 0 else math.inf
+    return out
 
 
 @dataclass
@@ -56,13 +105,18 @@ class MisfitWatch:
     warned: bool = False
     count: int = 0
 
-    def update(self, t: float, ratios: Mapping[str, float]) -> tuple[bool, Notice | None]:
+    def update(self, t: float, ratios: Mapping[str, float],
+               shares: Mapping[str, float] | None = None) -> tuple[bool, Notice | None]:
         """One fitted window ending at ``t`` (s) with its per-channel ratios.
 
+        ``shares`` (:func:`misfit_shares`), when given, holds each channel's excess over
+        its noise floor as a share of the window's signal: a channel whose share is at most
+        ``MISFIT_SHARE`` is no misfit whatever its ratio (a noise-free record fitted well).
         Returns whether the window is a misfit, and the warning when this window makes the
         misfit persistent for the first time (``None`` otherwise).
         """
-        over = {c: float(r) for c, r in ratios.items() if not r <= self.threshold}
+        over = {c: float(r) for c, r in ratios.items() if not r <= self.threshold
+                and (shares is None or not shares.get(c, math.inf) <= MISFIT_SHARE)}
         if not over:
             self.run = 0
             self.worst = {}

@@ -23,7 +23,7 @@ from estimator.identify import Parameters
 from estimator.inspection import inspect, quarter_car_problem
 from estimator.stream.config import WindowConfig
 from estimator.stream.events import Estimate, Notice, Skip, Summary
-from estimator.stream.misfit import MisfitWatch
+from estimator.stream.misfit import MisfitWatch, misfit_shares
 from estimator.stream.offsets import OffsetStage
 from estimator.stream.tracker import TrendTracker
 from estimator.stream.window import SlidingWindowIdentifier
@@ -155,7 +155,9 @@ class NMWindowEstimator:
             except (np.linalg.LinAlgError, ValueError) as exc:
                 info["inspection"] = None
                 info["warnings"].append(f"virtual damper test failed: {exc}")
-        is_misfit, notice = self.misfit.update(res.t, res.noise_floor_ratio)
+        is_misfit, notice = self.misfit.update(
+            res.t, res.noise_floor_ratio,
+            misfit_shares(res.noise_floor_ratio, res.rms_residual, data))
         info["misfit"] = is_misfit
         finite = {k: v for k, v in res.stderr.items() if math.isfinite(v)}
         return StepResult(Estimate(res.t, res.t_start, self.name, dict(res.params),

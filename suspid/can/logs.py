@@ -37,6 +37,7 @@ exactly (python-can's would drop the sub-millisecond part of the first timestamp
 from __future__ import annotations
 
 import contextlib
+import gzip
 import io
 import locale
 import logging
@@ -62,19 +63,34 @@ _CAN_ERR_FLAG = 0x20000000
 _CAN_EFF_FLAG = 0x80000000
 
 
-def log_format(path: str | Path, option: str = "log") -> str:
-    """Normalised suffix of a CAN log path.
+#: text formats also read gzip-compressed (``F.asc.gz``), as python-can's ``LogReader`` does
+GZIP_READ = (".asc", ".trc")
+
+
+def _suffix(path: str | Path, compressed: bool = True) -> str:
+    """The format suffix of ``path``, lower case: ``.asc`` for ``F.asc`` and, with
+    ``compressed``, for ``F.asc.gz`` (:data:`GZIP_READ`)."""
+    p = Path(path)
+    suf = p.suffix.lower()
+    inner = Path(p.stem).suffix.lower()
+    return inner if compressed and suf == ".gz" and inner in GZIP_READ else suf
+
+
+def log_format(path: str | Path, option: str = "log", compressed: bool = True) -> str:
+    """Normalised suffix of a CAN log path (``.asc`` for a gzip-compressed ``F.asc.gz``
+    too, unless ``compressed`` is false: a writer writes plain files).
 
     Raises
     ------
     UsageError
         For a suffix that is not a known CAN log format, naming the known ones.
     """
-    suf = Path(path).suffix.lower()
+    suf = _suffix(path, compressed)
     if suf not in LOG_FORMATS:
         known = ", ".join(f"{s} ({f.name})" for s, f in LOG_FORMATS.items())
+        gz = f", {' '.join(f'{s}.gz' for s in GZIP_READ)} (compressed)" if compressed else ""
         raise UsageError(f"{path}: unknown {option} format {Path(path).suffix or '(no suffix)'!r}; "
-                         f"expected one of {known}")
+                         f"expected one of {known}{gz}")
     return suf
 
 
@@ -90,7 +106,7 @@ def _open_log(path: str | Path, stats: Optional["ReadStats"]) -> tuple[Path, str
 def is_can_log(path: str | Path) -> bool:
     """``True`` if the path's suffix names a CAN log format of :data:`LOG_FORMATS`
     (case-insensitive)."""
-    return Path(path).suffix.lower() in LOG_FORMATS
+    return _suffix(path) in LOG_FORMATS
 
 
 #: what python-can's reader of a format gives as ``Message.channel`` for the file's channel 1:
@@ -983,7 +999,10 @@ class _AscLines(_LineCounter):
 def _open_text(path: Path, lines: type[_LineCounter] = _LineCounter) -> _LineCounter:
     """A text log opened as python-can would open it, its lines counted (by ``lines``)."""
     try:
-        fh = path.open("r", encoding=locale.getpreferredencoding(False))
+        if path.suffix.lower() == ".gz":
+            fh = cast(TextIO, gzip.open(path, "rt", encoding=locale.getpreferredencoding(False)))
+        else:
+            fh = path.open("r", encoding=locale.getpreferredencoding(False))
     except OSError as exc:
         raise InputError(f"{path}: cannot open CAN log: {exc.strerror}") from None
     return lines(fh)
@@ -1012,6 +1031,9 @@ def _read_text_resumable(path: Path, reader: can.ASCReader | can.TRCReader,
                 stats.frames += 1
                 yield msg
             return
+        except (EOFError, gzip.BadGzipFile) as exc:  # a .gz cut short or not gzip at all
+            raise InputError(f"{path}: not a readable gzip file after line {counter.lineno} "
+                             f"({exc})") from None
         except (ValueError, IndexError, KeyError, TypeError) as exc:
             stats.bad(f"{path}:{counter.lineno}", f"{type(exc).__name__}: {exc}")
         if first:
@@ -1272,7 +1294,7 @@ def open_log_writer(path: str | Path) -> can.io.generic.MessageWriter:
         The file cannot be created.
     """
     p = Path(path)
-    fmt = LOG_FORMATS[log_format(p, "output log")]
+    fmt = LOG_FORMATS[log_format(p, "output log", compressed=False)]
     try:
         return fmt.write(str(p))
     except ImportError as exc:

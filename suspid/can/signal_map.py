@@ -245,8 +245,10 @@ class SignalMap:
             if not expected or unit in ("", "-") or normalize_unit(unit) in expected:
                 continue
             factor = TO_SI.get(unit.lower())
+            # a factor only where it converts to the channel's unit (km/h to m/s for a
+            # speed, never for an acceleration)
             hint = (f" (e.g. {m.channel}={m.message}.{m.signal}*{factor:.6g})"
-                    if factor is not None else "")
+                    if factor is not None and SI_OF.get(unit.lower()) in expected else "")
             out.append(f"{self.source}: {m}: signal {msg.name}.{m.signal} is in {unit!r} by the "
                        f"DBC but {m.channel} is read in {' or '.join(expected)}, with no scale; "
                        f"give the factor to SI{hint}")
@@ -302,6 +304,11 @@ class SignalMap:
 TO_SI = {"mm": 1e-3, "cm": 1e-2, "mm/s": 1e-3, "cm/s": 1e-2, "mm/s^2": 1e-3, "g": 9.80665,
          "mg": 9.80665e-3, "deg": math.pi / 180, "°": math.pi / 180, "deg/s": math.pi / 180,
          "°/s": math.pi / 180, "km/h": 1 / 3.6}
+#: the SI unit each of :data:`TO_SI`'s units converts to (spelled as
+#: :meth:`~suspid.models.base.SuspensionModel.column_units` spells it)
+SI_OF = {"mm": "m", "cm": "m", "mm/s": "m/s", "cm/s": "m/s", "mm/s^2": "m/s^2", "g": "m/s^2",
+         "mg": "m/s^2", "deg": "rad", "°": "rad", "deg/s": "rad/s", "°/s": "rad/s",
+         "km/h": "m/s"}
 
 SignalMapLike = Union[SignalMap, str, Path, Sequence[str], None]
 

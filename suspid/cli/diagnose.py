@@ -6,6 +6,7 @@ import sys
 from typing import TYPE_CHECKING
 
 from suspid.cli._args import FitHelp, add_fit_options, add_road_option, fit_inputs
+from suspid.cli._format import num
 from suspid.cli._common import (add_input_options, add_model_option, add_param_options,
                                 assignment_warnings, print_json)
 from suspid.cli._lazy import lazy_names
@@ -95,7 +96,8 @@ def run(args: argparse.Namespace) -> int:
         w(f"model {model.name}: effect {eff['name'] if eff else 'none'}"
           + (f" ({', '.join(sites)})" if eff and sites else "") + "\n")
         if eff and eff["params"]:
-            w("  effect parameters: " + ", ".join(f"{k}={v}" for k, v in eff["params"].items()) + "\n")
+            w("  effect parameters: " + ", ".join(f"{k}={num(v, 4)}" for k, v in eff["params"].items())
+              + "\n")
         w(f"  {out['evidence']['verdict']}\n")
         rows = [(k, out["baseline"]["params"][k], out["augmented"]["params"][k], ".6g")
                 for k in out["baseline"]["params"]]

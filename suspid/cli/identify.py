@@ -2,10 +2,12 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from typing import TYPE_CHECKING
 
 from suspid.cli._args import add_offset_option, add_road_option
+from suspid.cli._format import num
 from suspid.cli._common import (parse_state, positive_int, add_input_options, add_model_option, add_param_options,
                                 load_measurement, model_from_args, params_from_args, print_json,
                                 assignment_warnings)
@@ -104,17 +106,23 @@ def run(args: argparse.Namespace) -> int:
         print_json(result.to_json())
     else:
         w = sys.stdout.write
-        w(f"model {result.model}: cost {args.cost} = {result.cost:.6g}, nfev {result.nfev}, "
+        w(f"model {result.model}: cost {args.cost} = {num(result.cost, 6)}, nfev {result.nfev}, "
           f"success {result.success}\n")
         for k, v in result.params.items():
             se = result.stderr.get(k)
-            tag = "fixed" if k in result.fixed else (f"± {se:.4g}" if se is not None else "")
+            unit = model.spec(k).unit
+            if k in result.fixed:
+                value = f"{num(v, 6)} {unit} fixed"
+            elif se is not None and math.isfinite(se):
+                value = f"{num(v, 6)} ± {num(se, 2)} {unit}"
+            else:
+                value = f"{num(v, 6)} {unit} (no standard error)"
             if (result.band_method or {}).get(k) == "profile" and result.bands is not None:
                 lo, hi = result.bands[k]
-                tag += f" (3-sigma band {lo:.4g} .. {hi:.4g}, profile likelihood)"
-            w(f"  {k:>6} = {v:.6g} {model.spec(k).unit} {tag}\n")
+                value += f" (3-sigma band {num(lo)} .. {num(hi)} {unit}, profile likelihood)"
+            w(f"  {k:>6} = {value}\n")
         for c, v in result.rms_residual.items():
-            w(f"  rms residual {c}: {v:.3g}\n")
+            w(f"  rms residual {c}: {num(v, 3, model.column_units(c)[0] if model.column_units(c) else '')}\n")
         for msg in result.warnings:
             w(f"warning: {msg}\n")
     for msg in result.warnings if args.json else []:

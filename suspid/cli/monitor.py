@@ -16,8 +16,10 @@ from typing import TYPE_CHECKING, Any, Callable
 from suspid.can.options import add_can_arguments, add_receive_arguments, can_inputs
 from suspid.cli._args import add_offset_option, add_road_option
 from suspid.cli._common import add_model_option, assignment_warnings, parse_assignments, print_json
+from suspid.cli._format import data_time, num, summary_lines
 from suspid.errors import UsageError
 from suspid.models import get_model
+from suspid.models.base import SuspensionModel
 
 if TYPE_CHECKING:
     from estimator.stream.pipeline import Source
@@ -151,30 +153,37 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     return p
 
 
-def _text(d: dict[str, Any]) -> str:
-    """One readable line for an event's JSON form."""
+def _text(d: dict[str, Any], model: SuspensionModel | None = None) -> str:
+    """One readable line for an event's JSON form (a few lines for the summary); ``model``
+    gives the parameters' units."""
     typ = d.get("type")
+    when = data_time(float(d["t"])) if "t" in d else ""
     if typ == "estimate":
         se = d.get("stderr", {})
-        pv = ", ".join(f"{k}={v:.5g}" + (f"±{se[k]:.2g}" if se.get(k) is not None else "")
+        pv = ", ".join(f"{k} {num(v, 5)}" + (f" ± {num(se[k], 2)}" if se.get(k) is not None else "")
+                       + (f" {model.spec(k).unit}" if model is not None and k in model.param_names
+                          else "")
                        for k, v in d.get("params", {}).items() if k in se)
         ins = d.get("inspection") or {}
-        extra = (f" EUSAMA {ins['eusama_pct']:.0f}% phi_min {ins['phi_min_deg']:.0f}deg"
+        extra = (f", EUSAMA {ins['eusama_pct']:.0f} %, phi_min {ins['phi_min_deg']:.0f} deg"
                  if ins else "")
         if "f_hz" in d:
-            pv = f"f={d['f_hz']:.3g} Hz zeta={d['zeta']:.3g}"
-        return f"t={d['t']:.2f}s {pv}{extra}"
+            pv = (f"f_body {num(d['f_hz'], 3, 'Hz')}, zeta_body {num(d['zeta'], 3)}"
+                  + ("" if se.get("f_body") is not None else " (no standard error)"))
+        return f"{when} {pv}{extra}" + (" MISFIT" if d.get("misfit") else "")
     if typ == "skip":
-        return f"t={d['t']:.2f}s skipped: {d['reason']}"
+        return f"{when} skipped: {d['reason']}"
     if typ in ("alert", "clear"):
-        return f"t={d['t']:.2f}s {typ.upper()}: {d['message']}"
+        return f"{when} {typ.upper()}: {d['message']}"
     if typ == "forecast":
-        return f"t={d['t']:.2f}s FORECAST: {d['message']}"
+        return f"{when} FORECAST: {d['message']}"
     if typ == "forecast_withdrawn":
-        return f"t={d['t']:.2f}s FORECAST WITHDRAWN: {d['message']}"
+        return f"{when} FORECAST WITHDRAWN: {d['message']}"
     if typ == "warning":
-        return f"t={d['t']:.2f}s WARNING: {d['message']}"
-    return " ".join(f"{k}={v}" for k, v in d.items())
+        return f"{when} WARNING: {d['message']}"
+    if typ == "summary":
+        return "\n".join(summary_lines(d))
+    return " ".join(f"{k}={num(v)}" for k, v in d.items() if not isinstance(v, (dict, list)))
 
 
 def _drift_names(arg: str | None) -> tuple[str, ...] | None:
@@ -185,17 +194,17 @@ def _drift_names(arg: str | None) -> tuple[str, ...] | None:
     return () if names in ((), ("none",)) else names
 
 
-def _emitter(jsonl: bool) -> Callable[[Any], None]:
+def _emitter(jsonl: bool, model: SuspensionModel | None = None) -> Callable[[Any], None]:
     """The sink: JSON lines, or one readable line per event; a ``warning`` also on stderr."""
     def emit(ev: Any) -> None:
         d = ev.to_json()
         if d.get("type") == "warning":
-            sys.stderr.write(f"warning: t={d['t']:.2f} s: {d['message']}\n")
+            sys.stderr.write(f"warning: {data_time(float(d['t']))}: {d['message']}\n")
             sys.stderr.flush()
         if jsonl:
             print_json(d)
         else:
-            sys.stdout.write(_text(d) + "\n")
+            sys.stdout.write(_text(d, model) + "\n")
             sys.stdout.flush()
 
     return emit
@@ -261,7 +270,7 @@ def run(args: argparse.Namespace) -> int:
     warn(spec)
     for msg in assignment_warnings(args, model):
         sys.stderr.write(f"warning: {msg}\n")
-    emit = _emitter(args.jsonl)
+    emit = _emitter(args.jsonl, model)
     summary = run_monitor(spec, source_from_args(args), emit, alert_file=args.alert_file)
     if not args.no_summary:
         emit(summary)

@@ -99,6 +99,43 @@ def _parse_float(text: str, path: str, line: int, col: str) -> float:
     return v
 
 
+#: runs of missing samples named one by one in a column's warning; more are counted
+MAX_RUNS_NAMED = 5
+
+
+def missing_runs(t: FloatArray, values: FloatArray) -> str:
+    """The runs of missing samples (NaN) of one column, for a warning; ``""`` when none.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Sample times (s).
+    values : ndarray, shape (N,)
+        The column (NaN where a sample is missing).
+
+    Returns
+    -------
+    str
+        ``"150 missing samples in 2 runs: 100 at t 1-1.099 s, 50 at t 2-2.049 s; not
+        compared there"``: every run's count and time span, the first
+        :data:`MAX_RUNS_NAMED` of them when there are more.
+    """
+    gap = np.isnan(values)
+    if not gap.any():
+        return ""
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], gap.view(np.int8), [0]))))
+    runs = list(zip(edges[::2].tolist(), edges[1::2].tolist()))
+    def span(a: int, b: int) -> str:
+        return f"t {float(t[a]):.6g}" + (f"-{float(t[b - 1]):.6g} s" if b - a > 1 else " s")
+
+    n = int(gap.sum())
+    if len(runs) == 1:
+        return f"{n} missing sample{'s' * (n != 1)} at {span(*runs[0])}; not compared there"
+    named = [f"{b - a} at {span(a, b)}" for a, b in runs[:MAX_RUNS_NAMED]]
+    more = f" and {len(runs) - MAX_RUNS_NAMED} more runs" if len(runs) > MAX_RUNS_NAMED else ""
+    return f"{n} missing samples in {len(runs)} runs: " + ", ".join(named) + more + "; not compared there"
+
+
 def _integrated(t: FloatArray, r: FloatArray, r_dot: FloatArray) -> FloatArray:
     """``r`` (m) with each run of missing samples filled by integrating ``r_dot`` (m/s) by the
     trapezoid rule from the sample before it, the drift to the sample after it (integration
@@ -212,7 +249,12 @@ def read_measurement(path: str | Path, model: SuspensionModel, *,
                         raise InputError(f"{name}:{line}: expected {ncol} cells, got {len(row)}")
                     unnamed_data = unnamed_data or any(c.strip() for c in row[ncol:])
                 for i, h in used:
-                    cols[h].append(_parse_float(row[i], name, line, h))
+                    v = _parse_float(row[i], name, line, h)
+                    if h == "t" and math.isnan(v):
+                        got = "is empty" if not row[i].strip() else f"is {row[i].strip()!r}"
+                        raise InputError(f"{name}:{line}: column 't' {got} (data row "
+                                         f"{len(cols['t']) + 1}), expected a time in s")
+                    cols[h].append(v)
         except (csv.Error, UnicodeDecodeError) as exc:
             raise InputError(f"{name}:{line}: unreadable CSV ({exc})") from None
     if unnamed_data:
@@ -222,9 +264,6 @@ def read_measurement(path: str | Path, model: SuspensionModel, *,
     t = np.frombuffer(cols.pop("t"), dtype=float).copy()
     if t.size < 2:
         raise InputError(f"{name}: expected at least 2 data rows, got {t.size}")
-    if np.isnan(t).any():
-        k = int(np.flatnonzero(np.isnan(t))[0])
-        raise InputError(f"{name}: row {k + 1} (line {k + 2}): column 't' is empty, expected a time in s")
     d = np.diff(t)
     if (d <= 0).any():
         k = int(np.flatnonzero(d <= 0)[0])
@@ -232,6 +271,7 @@ def read_measurement(path: str | Path, model: SuspensionModel, *,
                          f"{float(t[k + 1]):.17g} after {float(t[k]):.17g}")
     road: dict[str, FloatArray] = {}
     measured: dict[str, FloatArray] = {}
+    empty: list[str] = []
     for h, vals in cols.items():
         arr = np.frombuffer(vals, dtype=float).copy()
         if h in road_cols:
@@ -241,7 +281,11 @@ def read_measurement(path: str | Path, model: SuspensionModel, *,
         else:
             if np.isnan(arr).all():
                 warnings.append(f"{name}: column {h!r} has no values; not compared")
+                empty.append(h)
                 continue
+            runs = missing_runs(t, arr)
+            if runs:
+                warnings.append(f"{name}: column {h!r}: {runs}")
             measured[h] = arr
     for r in model.roads:
         if f"{r}_dot" in road and r not in road:
@@ -266,6 +310,9 @@ def read_measurement(path: str | Path, model: SuspensionModel, *,
     if not measured and require_measured:
         units = "".join(f"; column {header[i]!r} is {col} in {unit!r}, expected "
                         f"{' or '.join(model.column_units(col))}" for i, (col, unit) in off_unit.items())
+        if empty:
+            raise InputError(f"{name}: every measured column is empty ({', '.join(empty)}: no "
+                             f"value in {t.size} rows); expected values of at least one")
         raise InputError(f"{name}:1: no measured channel for model {model.name}; expected any of "
                          f"{', '.join(measurable)}{units}")
     return Measurement(t=t, road=road, measured=measured, warnings=warnings, source=name)

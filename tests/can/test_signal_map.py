@@ -127,3 +127,20 @@ def test_the_unit_warning_reaches_identify(tmp_path, capsys):
     assert rc == 0
     out = json.loads(capsys.readouterr().out)
     assert any("Height.Body is in 'mm'" in w for w in out["warnings"])
+
+
+def test_a_speed_factor_is_offered_for_speeds_only(tmp_path):
+    """A signal in km/h mapped onto an acceleration: the unit is named, no km/h -> m/s
+    factor offered (was: 'e.g. x1_ddot=Speed.V*0.277778'); onto a velocity it is."""
+    dbc = tmp_path / "kmh.dbc"
+    dbc.write_text(MM_DBC.replace('"deg"', '"km/h"'))
+    db = load_dbc(dbc)
+    q2 = get_model("quarter2")
+    (acc,) = SignalMap.from_strings(["x1_ddot=Height.Pitch"]).unit_warnings(db, q2)
+    assert "is in 'km/h' by the DBC but x1_ddot is read in m/s^2" in acc
+    assert acc.endswith("give the factor to SI") and "0.277778" not in acc
+    (vel,) = SignalMap.from_strings(["x1_dot=Height.Pitch"]).unit_warnings(db, q2)
+    assert vel.endswith("(e.g. x1_dot=Height.Pitch*0.277778)")
+    # mm onto an acceleration is no length conversion either
+    (mm,) = SignalMap.from_strings(["x1_ddot=Height.Body"]).unit_warnings(db, q2)
+    assert mm.endswith("give the factor to SI")

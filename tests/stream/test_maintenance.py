@@ -81,7 +81,7 @@ def test_monitor_cli_forecast_line_and_text(stiff_wear_stream, tmp_path) -> None
     assert all(set(d["track"]["c1"]) == {"value", "stderr", "rate", "rate_stderr"} for d in est)
     txt = subprocess.run(base, capture_output=True, text=True, timeout=300)
     assert txt.returncode == 0
-    assert any(l.startswith(f"t={fc[0]['t']:.2f}s FORECAST: c1 = ") for l in txt.stdout.splitlines())
+    assert any(l.startswith(f"t={fc[0]['t']:.2f} s FORECAST: c1 = ") for l in txt.stdout.splitlines())
 
 
 @pytest.fixture(scope="module")

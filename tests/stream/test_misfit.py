@@ -18,7 +18,7 @@ import pytest
 
 from estimator.identify import OutputErrorProblem
 from estimator.identify.start import noise_floor_ratio, noise_floor_ratios
-from estimator.stream.misfit import MISFIT_RATIO, MISFIT_WINDOWS, MisfitWatch
+from estimator.stream.misfit import MISFIT_RATIO, MISFIT_WINDOWS, MisfitWatch, misfit_shares
 from estimator.stream.wear_streams import damper_wear
 from suspid.io.csvio import Measurement, write_measurement
 from suspid.models import get_model
@@ -122,3 +122,45 @@ def test_per_channel_ratios_add_up_to_the_identify_measure(quarter2) -> None:
     per_off = noise_floor_ratios(prob, off)
     assert max(per_off.values()) > 5.0
     assert min(per_off.values()) < noise_floor_ratio(prob, off) < max(per_off.values())
+
+
+def test_a_noise_free_record_is_no_misfit_as_identify_says(tmp_path) -> None:
+    """A noise-free ISO 8608 record: ``identify`` fits it to 1e-19 and calls it a success;
+    each window's ratio compares rounding and interpolation errors (12-22, above
+    ``MISFIT_RATIO``) on a residual a millionth of the signal. The monitor now judges as
+    identify does (was: every window misfit and the warning)."""
+    path = tmp_path / "clean.csv"
+    assert subprocess.run([sys.executable, "-m", "suspid", "simulate", "--model", "quarter2",
+                           "--scenario", "iso8608", "--duration", "12", "--fs", "200",
+                           "--out", str(path)], capture_output=True, timeout=120).returncode == 0
+    ident = subprocess.run([sys.executable, "-m", "suspid", "identify", "--model", "quarter2",
+                            "--input", str(path), "--fix", "m1=300", "--json"],
+                           capture_output=True, text=True, timeout=300)
+    res = json.loads(ident.stdout)
+    assert res["success"] and not any(w.startswith("misfit") for w in res["warnings"])
+    r = _monitor(path, "--fix", "m1=300")
+    out = [json.loads(l) for l in r.stdout.splitlines() if l.strip()]
+    est = [d for d in out if d["type"] == "estimate"]
+    assert len(est) >= 5
+    assert any(max(d["noise_floor_ratio"].values()) > MISFIT_RATIO for d in est)
+    assert not any(d["misfit"] for d in est)
+    assert not [d for d in out if d["type"] == "warning" and d["kind"] == "misfit"]
+    assert out[-1]["misfit_windows"] == 0
+    # a wrong tyre held on the same record is still a misfit in every window
+    wrong = [json.loads(l) for l in _monitor(path, "--fix", "m1=300", "--fix",
+                                             "k2=400000").stdout.splitlines() if l.strip()]
+    assert wrong[-1]["misfit_windows"] == wrong[-1]["windows"] > 0
+
+
+def test_shares_follow_identify_measure() -> None:
+    """The share is the residual's excess over its noise floor over the window's signal."""
+    t = np.arange(400) * 0.01
+    y = np.sin(t)
+    data = {"x1": y, "x2": 2 * y}
+    var = float(np.var(y) + np.var(2 * y))
+    sh = misfit_shares({"x1": 4.0, "x2": math.inf}, {"x1": 0.1, "x2": 0.2}, data)
+    assert sh["x1"] == pytest.approx(0.01 * 0.75 / var)
+    assert sh["x2"] == pytest.approx(0.04 / var)
+    w = MisfitWatch()
+    assert not w.update(0.0, {"x1": 800.0}, {"x1": 1e-8})[0]
+    assert w.update(1.0, {"x1": 800.0}, {"x1": 1e-3})[0]
