@@ -49,7 +49,7 @@ from scipy.linalg.lapack import dgeev as _dgeev
 from scipy.linalg.lapack import dsyev as _dsyev
 
 from estimator.choices import COSTS
-from suspid.errors import InputError, UsageError
+from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
 from suspid.models.base import AffinePieces, FloatArray, SuspensionModel
 from suspid.simulate import (MODE_COND_MAX, Modal, first_order_scan, foh_weights,
@@ -58,292 +58,12 @@ from suspid.simulate import (MODE_COND_MAX, Modal, first_order_scan, foh_weights
                              ride_height_maps, road_matrix, simulate_states, state_matrices,
                              uniform_step)
 
+from estimator.identify.fastpath import (CACHE_BYTES, CACHE_SIZE, MAX_DECAY_EXPONENT, MAX_GRAM_COND,
+                                         SS_GUARD, Evaluation, ForcedTrajectory, StateSpaceLayout,
+                                         eigen_pattern, re_dot)
+from estimator.identify.outputs import (Prediction, channel_kinds, check_magnitudes, output_maps,
+                                        ride_height_rows)
 
-
-@dataclass
-class Prediction:
-    """A model prediction on the measured channels."""
-
-    Y: FloatArray  # (N, p) predicted channels
-    x0: FloatArray  # initial state used (n,)
-    residual: FloatArray  # (N, p) measured - predicted, NaN where missing
-
-
-def channel_kinds(coords: Sequence[str], channels: Sequence[str]) -> list[tuple[int, int]]:
-    """``(coordinate index, derivative order)`` of each channel name (``x1_dot`` -> (i, 1))."""
-    idx = {c: i for i, c in enumerate(coords)}
-    return [(idx[c.split("_")[0]], 2 if c.endswith("_ddot") else (1 if c.endswith("_dot") else 0))
-            for c in channels]
-
-
-def output_maps(kinds: Sequence[tuple[int, int]], A: FloatArray, B: FloatArray, nq: int
-                ) -> tuple[FloatArray, FloatArray]:
-    """Output maps ``y = Cm x + Dm u`` of channels given by :func:`channel_kinds`.
-
-    Positions and velocities are rows of the identity on the state ``x = [q, q']``;
-    an acceleration is the model's row ``q'' = A[nq + i] x + B[nq + i] u``.
-    """
-    Cm = np.zeros((len(kinds), A.shape[0]))
-    Dm = np.zeros((len(kinds), B.shape[1]))
-    for j, (i, order) in enumerate(kinds):
-        if order == 0:
-            Cm[j, i] = 1.0
-        elif order == 1:
-            Cm[j, nq + i] = 1.0
-        else:
-            Cm[j] = A[nq + i]
-            Dm[j] = B[nq + i]
-    return Cm, Dm
-
-
-def ride_height_rows(model: SuspensionModel, channels: Sequence[str], p: Mapping[str, float]
-                     ) -> tuple[FloatArray, FloatArray]:
-    """Output maps ``y = C x + D u`` of ride-height channels (``d``, ``d2_dot``, ...).
-
-    A strut's extension ``g . q + gr . r`` (m) reads the positions and the roads, its rate
-    ``g . q' + gr . r'`` (m/s) the velocities and the road rates (``g``, ``gr`` of
-    ``model.strut_sites(p)``, so the geometry in ``p`` counts).
-
-    Returns
-    -------
-    C : ndarray, shape (len(channels), n_states)
-    D : ndarray, shape (len(channels), 2 n_roads)
-    """
-    G, Gr = ride_height_maps(model, p)
-    nq, nr = G.shape[1], Gr.shape[1]
-    index = {d: i for i, d in enumerate(model.ride_heights)}
-    C = np.zeros((len(channels), 2 * nq))
-    D = np.zeros((len(channels), 2 * nr))
-    for j, c in enumerate(channels):
-        rate = c.endswith("_dot")
-        i = index[c[:-4] if rate else c]
-        C[j, nq * rate:nq * (rate + 1)] = G[i]
-        D[j, nr * rate:nr * (rate + 1)] = Gr[i]
-    return C, D
-
-
-def check_magnitudes(source: str, columns: Mapping[str, FloatArray]) -> None:
-    """Raise :class:`~suspid.errors.InputError` naming the first column whose sum of squares
-    overflows (values near 1e200 and up, a unit slip): no cost can be formed on it.
-
-    Parameters
-    ----------
-    source : str
-        Where the record came from (for the message).
-    columns : mapping
-        Column name -> values (NaN for missing samples are skipped).
-    """
-    for name, col in columns.items():
-        c = np.nan_to_num(np.asarray(col, dtype=float), nan=0.0)
-        with np.errstate(over="ignore"):
-            ok = np.isfinite(float(c @ c))
-        if not ok:
-            big = float(np.max(np.abs(c)))
-            raise InputError(f"{source}: column {name!r}: values up to {big:.3g} "
-                             "overflow the sum of squares; expected SI units (m, m/s, m/s^2, rad)")
-
-
-#: largest ``max(-Re(lam)) h N`` for which ``E**-N`` is formed (e^600 ~ 1e260 < 1.8e308)
-MAX_DECAY_EXPONENT = 600.0
-#: Gram-matrix condition number above which the initial state is solved explicitly
-MAX_GRAM_COND = 1e12
-#: the fast cost is taken as ``||R0||^2 - rhs . sol`` (the pre-fit residual's norm less what
-#: the fitted free response removes, no residual pass) unless that is below this fraction of
-#: ``||R0||^2``: then the two terms cancel and the residual is formed explicitly (noise-free
-#: data at its optimum). Above it the cancellation costs at most ~1e-16 / SS_GUARD of
-#: relative precision
-SS_GUARD = 1e-4
-#: most fast evaluations cached per problem (a monitor window's Nelder-Mead final simplex
-#: is among the latest) ...
-CACHE_SIZE = 32
-#: ... and at most this many bytes of them (a long identify record keeps fewer)
-CACHE_BYTES = 8 << 20
-
-_PATTERNS: dict[tuple[int, ...], "_Pattern"] = {}
-
-
-@dataclass
-class _Pattern:
-    """Bookkeeping of one eigenvalue pattern (which ``dgeev`` columns form which mode)."""
-
-    k1: list[int]  # column of the real part (or of the real eigenvector) of each kept mode
-    k2: list[int]  # column of the imaginary part (= k1 for a real mode)
-    is_pair: list[bool]
-    fac: FloatArray  # (m,) 2 for a complex pair, 1 for a real mode
-    pairs: np.ndarray  # indices of the complex modes
-    sel_v: np.ndarray  # (n, m) complex: V = vr @ sel_v
-    sel_cv: np.ndarray  # (n, m) complex: (C V) fac = (C vr) @ sel_cv
-    k1a: np.ndarray  # k1 as an index array
-    k2a: np.ndarray  # k2 as an index array
-    pair_mask: FloatArray  # (m,) 1.0 for a complex pair, 0.0 for a real mode
-    ix_pairs: tuple[np.ndarray, ...]  # np.ix_(pairs, pairs)
-
-
-def _pattern(wi: list[float]) -> _Pattern | None:
-    """Mode bookkeeping for the eigenvalue pattern of ``dgeev`` (cached per pattern).
-
-    ``None`` when the pattern is not a clean sequence of real eigenvalues and conjugate
-    pairs (positive imaginary part first), as LAPACK returns them.
-    """
-    sig = tuple(0 if v == 0.0 else (1 if v > 0 else -1) for v in wi)
-    got = _PATTERNS.get(sig)
-    if got is not None:
-        return got
-    k1: list[int] = []
-    k2: list[int] = []
-    j = 0
-    n = len(sig)
-    while j < n:
-        if sig[j] == 0:
-            k1.append(j)
-            k2.append(j)
-            j += 1
-        elif sig[j] > 0 and j + 1 < n and sig[j + 1] < 0:
-            k1.append(j)
-            k2.append(j + 1)
-            j += 2
-        else:
-            return None
-    mm = len(k1)
-    is_pair = [x != y for x, y in zip(k1, k2)]
-    fac = np.array([2.0 if q else 1.0 for q in is_pair])
-    sel_v = np.zeros((n, mm), dtype=complex)  # V = vr @ sel_v
-    for i, (x, y) in enumerate(zip(k1, k2)):
-        sel_v[x, i] = 1.0
-        if is_pair[i]:
-            sel_v[y, i] = 1j
-    pairs = np.flatnonzero(is_pair)
-    got = _Pattern(k1, k2, is_pair, fac, pairs, sel_v, sel_v * fac, np.array(k1),
-                   np.array(k2), np.array(is_pair, dtype=float), np.ix_(pairs, pairs))
-    _PATTERNS[sig] = got
-    return got
-
-
-@dataclass
-class _Traj:
-    """Road-driven modal trajectory ``sum_j (Ca_j E^k Q_j[k] - Cb_j r_j[k]) + cc E^k``."""
-
-    Wf: np.ndarray  # (m, N) sum over roads j of Ca_j E^k Q_j[k], Ca = a0 + a1
-    Cb: np.ndarray  # (m, nr) a0
-    cc: np.ndarray  # (m,) w0 - a1 r[0]
-
-
-@dataclass
-class Evaluation:
-    """One fast evaluation (:meth:`OutputErrorProblem.evaluate`), kept for reuse at the same
-    parameters.
-
-    The residual ``R`` is formed on first use (``R0`` less the fitted free response): the
-    cost ``ss`` does not need it unless the evaluation formed it for precision.
-    """
-
-    key: tuple[float, ...]
-    vr: FloatArray  # (n, n) LAPACK right eigenvectors (real and imaginary parts)
-    pat: _Pattern
-    A: FloatArray
-    B: FloatArray
-    P: np.ndarray  # (m, N) powers E^k
-    traj: _Traj | None  # the road-driven part of the modal trajectory (None: no road)
-    coef: np.ndarray  # (m,) complex modal coefficients of the fitted free response
-    R0: FloatArray  # (p, N) residual before the free response, measured - forced
-    CV: np.ndarray  # (p, m) complex fitted channels per mode
-    ss: float  # weighted sum of squared final residuals
-    _R: FloatArray | None = None
-
-    @property
-    def R(self) -> FloatArray:
-        """Final residual (p, N), measured - predicted (unweighted, formed on first use)."""
-        R = self._R
-        if R is None:
-            R = self._R = self.R0 - (self.CV @ (self.coef[:, None] * self.P)).real
-        return R
-
-    @property
-    def c(self) -> np.ndarray:
-        """Complex free modal coefficients of the initial state (m,).
-
-        The fit absorbed the forced response's own free term ``(w0 - a1 r[0]) E^k``;
-        it is taken out again here.
-        """
-        c = self.coef
-        return c if self.traj is None else c - self.traj.cc
-
-    def modal(self, r: FloatArray) -> np.ndarray:
-        """Complete modal trajectory (m, N): road-driven part plus the fitted free response
-        (``r`` the roads, (nr, N))."""
-        W = self.coef[:, None] * self.P
-        if self.traj is not None:
-            W += self.traj.Wf
-            W -= self.traj.Cb @ r
-        return W
-
-
-class _StateSpaceLayout:
-    """``vals -> (A, B, Bz, [B | Bz])`` as one product, from a model's exact affine pieces.
-
-    The pieces' acceleration rows (:class:`~suspid.models.base.AffinePieces`) laid out once
-    as the column-major blocks ``[A | B | Bz]`` (the order LAPACK wants ``A`` in):
-    ``c0 + theta @ D``. ``Bz = A B_v + B_r`` is affine too when ``B_v`` (tyre damping over
-    wheel mass) does not move with the free parameters; otherwise it is formed per call.
-
-    Parameters
-    ----------
-    pieces : AffinePieces
-        Exact pieces (``pieces.exact``).
-    names : list of str
-        Every parameter of the model, in the order of the values passed.
-    n_roads : int
-    """
-
-    def __init__(self, pieces: AffinePieces, names: list[str], n_roads: int) -> None:
-        self.pieces = pieces
-        free = list(pieces.names)
-        fset = set(free)
-        self._ifree = [names.index(k) for k in free]
-        self._ifix = [i for i, k in enumerate(names) if k not in fset]
-        self._vfix = [float(pieces.base[names[i]]) for i in self._ifix]
-        nq = pieces.nq
-        n = 2 * nq
-        nr = n_roads
-        self._n, self._nr = n, nr
-        A0, B0 = pieces.state_space(np.zeros(len(free)))
-        dA = np.zeros((len(free), n, n))
-        dB = np.zeros((len(free), n, 2 * nr))
-        dA[:, nq:, :] = pieces.dAB[:, :, :n]
-        dB[:, nq:, :] = pieces.dAB[:, :, n:]
-        Bv0 = B0[:, nr:]
-        scale = float(np.abs(Bv0).max()) + 1e-300
-        th0 = np.abs(pieces.theta(pieces.base))
-        self.affine_bz = bool(np.all(np.abs(dB[:, :, nr:]) * th0[:, None, None]
-                                     <= 1e-12 * scale))
-        blocks0 = [A0.ravel(order="F"), B0.ravel(order="F")]
-        blocksD = [np.stack([a.ravel(order="F") for a in dA]),
-                   np.stack([b.ravel(order="F") for b in dB])]
-        if self.affine_bz:
-            blocks0.append((A0 @ Bv0 + B0[:, :nr]).ravel(order="F"))
-            blocksD.append(np.stack([(a @ Bv0 + b[:, :nr]).ravel(order="F")
-                                     for a, b in zip(dA, dB)]))
-        self._c0 = np.concatenate(blocks0)
-        self._D = np.ascontiguousarray(np.concatenate(blocksD, axis=1))
-
-    def applies(self, vals: Sequence[float]) -> bool:
-        """Whether every fixed parameter of ``vals`` is at the pieces' base value."""
-        return [vals[i] for i in self._ifix] == self._vfix
-
-    def __call__(self, vals: Sequence[float]
-                 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-        """``(A, B, Bz, [B | Bz])``: Fortran-ordered views of one vector."""
-        f = self._c0 + np.array([vals[i] for i in self._ifree]) @ self._D
-        n, nr = self._n, self._nr
-        k1 = n * n
-        k2 = k1 + 2 * n * nr
-        A = f[:k1].reshape((n, n), order="F")
-        B = f[k1:k2].reshape((n, 2 * nr), order="F")
-        if self.affine_bz:
-            BB = f[k1:].reshape((n, 3 * nr), order="F")
-            return A, B, BB[:, 2 * nr:], BB
-        Bz = A @ B[:, nr:] + B[:, :nr]
-        return A, B, Bz, np.concatenate([B, Bz], axis=1)
 
 
 @dataclass
@@ -455,7 +175,7 @@ class OutputErrorProblem:
         #: matrix) and the general path made
         self.n_fallback = 0
         self.param_names = [q.name for q in m.params]
-        self._layout: _StateSpaceLayout | None = None
+        self._layout: StateSpaceLayout | None = None
         self._hf = float(self.h) if self.h is not None else 0.0
         self.road_t = np.ascontiguousarray(self.U[:, :nr].T)  #: roads (nr, N) (m)
         self._rc = self.road_t.astype(complex)
@@ -545,7 +265,7 @@ class OutputErrorProblem:
 
         ``Bz = A B_v + B_r`` is the road's input matrix in the simulator's ``z = x - B_v r``
         coordinates (:mod:`suspid.simulate`). From the affine pieces (:meth:`pieces`, laid
-        out once as one product, see :class:`_StateSpaceLayout`) when they apply to
+        out once as one product, see :class:`StateSpaceLayout`) when they apply to
         ``vals``, else from the model.
         """
         lay = self._layout
@@ -553,7 +273,7 @@ class OutputErrorProblem:
             lay = self._layout = None
             aff = self.pieces(dict(zip(self.param_names, vals)))
             if aff is not None and aff.exact and len(aff.names):
-                lay = self._layout = _StateSpaceLayout(aff, self.param_names, self._nr)
+                lay = self._layout = StateSpaceLayout(aff, self.param_names, self._nr)
         if lay is not None and lay.applies(vals):
             return lay(vals)
         A, B = self.model.state_space(dict(zip(self.param_names, vals)))
@@ -626,7 +346,7 @@ class OutputErrorProblem:
         for v in wil:
             if v != 0.0 and abs(v) <= tol:
                 return None  # within rounding of the real axis: the general path decides
-        pat = _pattern(wil)
+        pat = eigen_pattern(wil)
         if pat is None:
             return None
         n = len(wrl)
@@ -708,7 +428,7 @@ class OutputErrorProblem:
             if not self._pos_only:  # x = z + B_v r
                 CB = B[rows, nr:] if Cm is None else Cm @ B[:, nr:]
                 R -= CB @ r
-            traj: _Traj | None = _Traj(Wf, Cb, cc)
+            traj: ForcedTrajectory | None = ForcedTrajectory(Wf, Cb, cc)
         else:
             R = self._YT.copy()
             traj = None
@@ -827,10 +547,10 @@ class OutputErrorProblem:
             nr = len(m.roads)
             r = self.U[:, :nr]
             W = modal_trajectory(modal, h, r, base_x0)
-            Y = _re_dot(W, CV.T) + r @ (Cm @ modal.Bv).T + self.U @ Dm.T
+            Y = re_dot(W, CV.T) + r @ (Cm @ modal.Bv).T + self.U @ Dm.T
         elif self._x0_nonzero:
             P = powers(E, N)
-            Y = _re_dot(P, (CV * (modal.Vinv @ base_x0)).T)
+            Y = re_dot(P, (CV * (modal.Vinv @ base_x0)).T)
         if Y is None:
             Y = np.zeros((N, len(self.channels)))
         if not self._estimate:
@@ -953,19 +673,3 @@ class OutputErrorProblem:
     def seed_cost(self, ss: float) -> float:
         """Report the seed's cost from the raw weighted sum of squares ``ss``."""
         return float(np.sqrt(ss)) if self.cost == "frobenius" else float(ss)
-
-
-def _re_dot(P: np.ndarray, X: np.ndarray) -> FloatArray:
-    """``Re(P @ X)`` for a C-contiguous ``P`` (N, m) as one real product.
-
-    A complex ``P`` is read as the real (N, 2 m) matrix of its interleaved real and
-    imaginary parts, so ``Re(P @ X) = P_real_view @ [Re X; -Im X]`` (rows interleaved):
-    one BLAS ``dgemm`` on contiguous memory, no copies of the real and imaginary parts.
-    """
-    if P.dtype.kind != "c":
-        return np.asarray(P @ X.real)
-    m, p = X.shape
-    Xs = np.empty((2 * m, p))
-    Xs[0::2] = X.real
-    Xs[1::2] = -X.imag if X.dtype.kind == "c" else 0.0
-    return np.asarray(P.view(np.float64) @ Xs)

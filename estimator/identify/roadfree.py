@@ -47,7 +47,7 @@ import numpy as np
 
 from estimator.choices import ROAD_MODES
 from estimator.identify.params import Parameters
-from estimator.identify.problem import check_magnitudes
+from estimator.identify.outputs import check_magnitudes
 from estimator.identify.result import IdentResult
 from estimator.identify.start import MISFIT_FLOOR, MISFIT_SHARE
 from suspid.errors import UsageError

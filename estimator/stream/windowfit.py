@@ -34,7 +34,8 @@ from scipy.linalg.lapack import dsyev as _dsyev
 
 from estimator.identify import OutputErrorProblem, Parameters, finish
 from estimator.identify.identifiability import WEAK_TOL, Identifiability, assess
-from estimator.identify.problem import Evaluation, channel_kinds, output_maps
+from estimator.identify.fastpath import Evaluation
+from estimator.identify.outputs import channel_kinds, output_maps
 from estimator.identify.result import IdentResult
 from suspid.models.base import FloatArray
 from suspid.simulate import foh_weights

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from estimator.identify import OutputErrorProblem
-from estimator.identify.problem import MAX_DECAY_EXPONENT
+from estimator.identify.fastpath import MAX_DECAY_EXPONENT
 from suspid.excitation import make_scenario
 from suspid.io.csvio import Measurement
 from suspid.models import get_model

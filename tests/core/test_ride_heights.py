@@ -109,7 +109,9 @@ def test_csv_reader_takes_ride_heights_as_measured_channels(tmp_path: Path, name
         rows.append(vals)
     meas = read_measurement(_write(tmp_path / "rh.csv", rows), m)
     assert set(meas.measured) == {acc, f"{heights[0]}_dot", *heights}
-    assert meas.road == {} and meas.warnings == []
+    # the missing sample is named, as every measured channel's are
+    assert meas.road == {} and len(meas.warnings) == 1
+    assert f"column '{heights[0]}_dot': 1 missing sample at t 0.02 s" in meas.warnings[0]
     for j, d in enumerate(heights):
         np.testing.assert_allclose(meas.measured[d], 0.001 * (np.arange(5) + j))
     rate = meas.measured[f"{heights[0]}_dot"]
