@@ -57,8 +57,8 @@ decay time ``tau_i = 1 / (zeta_i w_i)``):
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Mapping
+from dataclasses import dataclass, fields
+from typing import Any, Mapping
 
 
 from estimator.identify.record import OFFSET_MODES
@@ -175,28 +175,13 @@ class WindowConfig:
         drift fit (one matrix exponential per chunk; 0.2 s measured as accurate as 0.1 s
         at less CPU: ratio to the EKF's 0.41 against 0.52 on the README demo's stream).
     drift_iterations : int
-        Largest number of Gauss-Newton steps of the drift fit (``drift_solver="gauss-newton"``).
-    drift_rate : str
-        ``"free"``: each window fits its drift rate; ``"prior"``: the rate is that of the
-        last (up to 3) estimates, only the end value is fitted.
+        Largest number of Gauss-Newton steps of the drift fit where its first-order solve
+        does not apply (:attr:`~estimator.stream.window.SlidingWindowIdentifier.first_order_drift`).
     drift_rate_sd : float
-        With ``drift_rate="free"``: standard deviation (relative, 1/s) of a prior on each
-        window's rate centred on that of the last estimates (once there are two); 0: no
-        prior. 0.005 (0.5 %/s): without it the rate fitted on one window at 5 % sensor
+        Standard deviation (relative, 1/s) of a prior on each window's drift rate centred on
+        that of the last estimates (once there are two); 0: no prior. 0.005 (0.5 %/s): without it the rate fitted on one window at 5 % sensor
         noise scatters so much that the end value is worse than the middle one
         (``tools/bench_maintenance.py --drift``, docs/monitoring.md).
-    drift_solver : str
-        ``"linear"`` (default): the drift fit to first order around the constant fit, from
-        the sensitivities of the constant window (one linear least-squares solve, no
-        evaluation of the drifting window); ``"gauss-newton"``: Gauss-Newton steps on the
-        chunked drifting window with forward differences (the reference; also the fallback
-        when the linear one does not apply). Measured on every window of the bench streams
-        (``tools/bench_maintenance.py --solver-check``): end values within 0.03-0.07 of
-        their stated stderr RMS (0.18 on the quantization-only demo60), ~15-20 x less CPU.
-    drift_refine : int
-        With ``drift_solver="linear"``: chord steps on the chunked drifting window after
-        the first-order solve (one evaluation each); 0 (default): none (one step moved the
-        demo60 end values 15 % closer to the Gauss-Newton ones, at 2.5 x the drift fit's CPU).
     offset : str
         A constant offset in a road column or a measured position channel (a sensor zero not
         at the rest position, :mod:`estimator.identify.offset`) is looked for on each cold
@@ -227,10 +212,7 @@ class WindowConfig:
     drift: tuple[str, ...] = ()
     drift_chunk_s: float = 0.2
     drift_iterations: int = 3
-    drift_rate: str = "free"
     drift_rate_sd: float = 0.005
-    drift_solver: str = "linear"
-    drift_refine: int = 0
     offset: str = "remove"
 
     def validate(self) -> None:
@@ -245,26 +227,132 @@ class WindowConfig:
                              f"the {MAX_SPAN_S:g} s a monitor's decoder buffers (at up to 2 kHz); "
                              "give a shorter --window or --step, or use identify for a whole record")
         if self.decimate < 1:
-            raise UsageError(f"--decimate: expected an integer >= 1, got {self.decimate}")
+            raise UsageError(f"window.decimate: expected an integer >= 1, got {self.decimate}")
         if self.offset not in OFFSET_MODES:
-            raise UsageError(f"--offset: expected one of {', '.join(OFFSET_MODES)}, "
+            raise UsageError(f"window.offset: expected one of {', '.join(OFFSET_MODES)}, "
                              f"got {self.offset!r}")
         if self.maxfev < 10 or self.first_maxfev < 10:
-            raise UsageError(f"--budget: expected at least 10 evaluations, got {self.maxfev}")
-        if self.drift_solver not in ("linear", "gauss-newton"):
-            raise UsageError(f"drift_solver: expected linear or gauss-newton, "
-                             f"got {self.drift_solver!r}")
-        if self.drift_rate not in ("free", "prior"):
-            raise UsageError(f"drift_rate: expected free or prior, got {self.drift_rate!r}")
+            raise UsageError(f"window.budget, window.first_budget: expected at least 10 "
+                             f"evaluations, got {self.maxfev}, {self.first_maxfev}")
         if self.drift and not (self.drift_chunk_s > 0 and self.drift_iterations >= 1):
             raise UsageError(f"drift: expected drift_chunk_s > 0 s and drift_iterations >= 1, "
                              f"got {self.drift_chunk_s} s and {self.drift_iterations}")
-        for opt, hz in (("--road-fusion", self.road_fusion_hz),
-                        ("--road-lowpass", self.road_lowpass_hz)):
+        for opt, hz in (("window.road_fusion_hz", self.road_fusion_hz),
+                        ("window.road_lowpass_hz", self.road_lowpass_hz)):
             if not (hz >= 0 and math.isfinite(hz)):
                 raise UsageError(f"{opt}: expected a frequency >= 0 Hz (0: off), got {hz}")
         if not 0 <= self.max_missing < 1:
             raise UsageError(f"max_missing must be in [0, 1), got {self.max_missing}")
+
+
+@dataclass
+class WindowOptions:
+    """The sliding window's settings a user gives; ``None`` takes the model's default.
+
+    The command line gives ``window_s`` and ``step_s`` (``--window``, ``--step``), the
+    ``[window]`` table of a ``--config`` file the rest (``docs/configuration.md``).
+    :func:`estimator.stream.pipeline.monitor_spec` derives the defaults
+    (:func:`default_config`) and applies these on top.
+
+    Attributes
+    ----------
+    window_s, step_s : float or None
+        Window length and step (s of data time).
+    decimate : int or None
+        Fit every ``decimate``-th sample.
+    maxfev, first_maxfev : int or None
+        Evaluation budgets (warm windows, first window).
+    sigma_floor, min_deflection, min_snr, road_fusion_hz, road_lowpass_hz : float or None
+        :class:`WindowConfig` fields of the same names (units there).
+    drift : tuple of str or None
+        Parameters fitted with a linear drift; ``()``: none; ``None``: every free damper
+        and spring of the struts.
+    drift_chunk_s, drift_rate_sd : float or None
+        :class:`WindowConfig` fields of the same names.
+    offset : {"remove", "keep"} or None
+    """
+
+    window_s: float | None = None
+    step_s: float | None = None
+    decimate: int | None = None
+    maxfev: int | None = None
+    first_maxfev: int | None = None
+    sigma_floor: float | None = None
+    min_deflection: float | None = None
+    min_snr: float | None = None
+    road_fusion_hz: float | None = None
+    road_lowpass_hz: float | None = None
+    drift: tuple[str, ...] | None = None
+    drift_chunk_s: float | None = None
+    drift_rate_sd: float | None = None
+    offset: str | None = None
+
+    def overrides(self) -> dict[str, Any]:
+        """The :class:`WindowConfig` fields given, other than the window, step and decimation
+        (which the defaults depend on)."""
+        return {f.name: getattr(self, f.name) for f in fields(self)
+                if f.name not in ("window_s", "step_s", "decimate")
+                and getattr(self, f.name) is not None}
+
+
+@dataclass
+class AlertOptions:
+    """The alert rule and forecast settings a user gives (``--alert-drop``, ``[alert]``).
+
+    Attributes
+    ----------
+    drop : float
+        Alert below ``(1 - drop) x nominal`` (fraction, default 0.3).
+    confidence : float
+        One-sided confidence of the bound (default 0.99).
+    persistence_s : float or None
+        Data time (s) a drop must persist (``None``: one window step).
+    hysteresis : float
+        Clear only above ``(1 - drop + hysteresis) x nominal`` (default 0.05).
+    forecast_horizon_s : float or None
+        Announce a predicted crossing due within this data time (s; ``None``: the
+        library's default, 60 s).
+    """
+
+    drop: float = 0.3
+    confidence: float = 0.99
+    persistence_s: float | None = None
+    hysteresis: float = 0.05
+    forecast_horizon_s: float | None = None
+
+
+@dataclass
+class EkfOptions:
+    """Settings of the EKF baseline (``[ekf]``); ``None`` takes the default.
+
+    Attributes
+    ----------
+    params : tuple of str or None
+        Parameters in the augmented state (default every free damper and spring).
+    q : float or None
+        Parameter random walk (relative per sqrt(s), default 0.005).
+    decimate : int or None
+        Run on every N-th sample (default 250 Hz or less).
+    """
+
+    params: tuple[str, ...] | None = None
+    q: float | None = None
+    decimate: int | None = None
+
+
+@dataclass
+class OutputOnlyOptions:
+    """Settings of the output-only mode (``[output_only]``).
+
+    Attributes
+    ----------
+    accel_channel : str or None
+        Body acceleration channel (default the body's ``_ddot``).
+    method : {"carma", "ar"}
+    """
+
+    accel_channel: str | None = None
+    method: str = "carma"
 
 
 def strut_parameters(model: SuspensionModel, params: Mapping[str, float],

@@ -190,9 +190,32 @@ class SignalMap:
             raise InputError(f"{p}: cannot read signal map: {exc}") from None
         if not isinstance(data, dict) or not isinstance(data.get("map"), dict) or not data["map"]:
             raise InputError(f"{p}: expected a 'map' table of channel = \"MESSAGE.SIGNAL...\" entries")
+        dbc = data.get("dbc")
+        dbc_path = (p.parent / dbc) if isinstance(dbc, str) and dbc else None
+        return cls.from_table(data["map"], str(p), dbc_path)
+
+    @classmethod
+    def from_table(cls, table: dict[str, object], source: str,
+                   dbc: Path | None = None) -> "SignalMap":
+        """Build from a parsed ``[map]`` table (a signal-map file's, or a ``--config`` file's).
+
+        Parameters
+        ----------
+        table : dict
+            ``channel -> "MESSAGE.SIGNAL..."`` or ``channel -> {message, signal[, scale, offset]}``.
+        source : str
+            The file the table came from (named in messages).
+        dbc : Path, optional
+            DBC the file names.
+
+        Raises
+        ------
+        InputError
+            An entry that is neither, naming ``FILE: map.CHANNEL``.
+        """
         mappings = []
-        for channel, spec in data["map"].items():
-            where = f"{p}: map.{channel}"
+        for channel, spec in table.items():
+            where = f"{source}: map.{channel}"
             if isinstance(spec, str):
                 mappings.append(parse_mapping(f"{channel}={spec}", where))
             elif isinstance(spec, dict):
@@ -211,9 +234,7 @@ class SignalMap:
                                               scale, offset))
             else:
                 raise InputError(f"{where}: expected a string or a table, got {type(spec).__name__}")
-        dbc = data.get("dbc")
-        dbc_path = (p.parent / dbc) if isinstance(dbc, str) and dbc else None
-        return cls(mappings, dbc_path, str(p))
+        return cls(mappings, dbc, source)
 
     @classmethod
     def from_dbc(cls, db: Database, model_name: str) -> "SignalMap":

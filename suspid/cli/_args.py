@@ -13,10 +13,10 @@ from typing import TYPE_CHECKING
 
 from estimator.choices import COSTS, OFFSET_MODES, ROAD_MODES
 from suspid.cli._common import load_measurement, model_from_args, params_from_args, positive_int
-from suspid.errors import UsageError
 
 if TYPE_CHECKING:
     from estimator.identify import Parameters
+    from suspid.cli._config import Config
     from suspid.io.csvio import Measurement
     from suspid.models.base import SuspensionModel
 
@@ -27,37 +27,36 @@ class FitHelp:
 
     Attributes
     ----------
-    cost, x0, restarts, maxfev, multistart, polish : str
-        Help of ``--cost``, ``--x0``, ``--restarts``, ``--maxfev``, ``--multistart`` and
-        ``--no-polish``.
+    cost, x0, maxfev : str
+        Help of ``--cost``, ``--x0`` and ``--maxfev``.
     """
 
     cost: str
     x0: str
-    restarts: str
     maxfev: str
-    multistart: str
-    polish: str
 
 
-def add_fit_options(p: argparse._ActionsContainer, helps: FitHelp, restarts: int) -> None:
-    """Add the identifier's settings ``--cost``, ``--x0``, ``--restarts``, ``--maxfev``,
-    ``--multistart`` and ``--no-polish`` (in this order) to a parser or argument group.
+def add_fit_options(p: argparse.ArgumentParser, helps: FitHelp, restarts: int,
+                    group: argparse._ActionsContainer | None = None) -> None:
+    """Add the identifier's options ``--cost``, ``--x0`` and ``--maxfev`` (in this order), and
+    the defaults of the settings the ``--config`` file's ``[fit]`` table may change
+    (``restarts``, ``multistart``, ``polish``, ``data_start``; :func:`suspid.cli._can.command_config`).
 
     Parameters
     ----------
-    p : argparse parser or argument group
+    p : argparse.ArgumentParser
     helps : FitHelp
         The command's help text of each option.
     restarts : int
-        Default of ``--restarts`` (Nelder-Mead restarts).
+        Default Nelder-Mead restarts of the command.
+    group : argparse argument group, optional
+        Where the options are listed (default ``p``).
     """
-    p.add_argument("--cost", choices=list(COSTS), default="sse", help=helps.cost)
-    p.add_argument("--x0", default="estimate", metavar="estimate|rest|V1,V2,...", help=helps.x0)
-    p.add_argument("--restarts", type=int, default=restarts, help=helps.restarts)
-    p.add_argument("--maxfev", type=positive_int, default=None, help=helps.maxfev)
-    p.add_argument("--multistart", type=int, default=4, metavar="N", help=helps.multistart)
-    p.add_argument("--no-polish", dest="polish", action="store_false", help=helps.polish)
+    g = p if group is None else group
+    g.add_argument("--cost", choices=list(COSTS), default="sse", help=helps.cost)
+    g.add_argument("--x0", default="estimate", metavar="estimate|rest|V1,V2,...", help=helps.x0)
+    g.add_argument("--maxfev", type=positive_int, default=None, help=helps.maxfev)
+    p.set_defaults(restarts=restarts, multistart=4, polish=True, data_start=True)
 
 
 def add_offset_option(p: argparse._ActionsContainer, help_text: str) -> None:
@@ -73,21 +72,6 @@ def add_offset_option(p: argparse._ActionsContainer, help_text: str) -> None:
     p.add_argument("--offset", choices=list(OFFSET_MODES), default="remove", help=help_text)
 
 
-def check_counts(args: argparse.Namespace, *options: str) -> None:
-    """Raise :class:`~suspid.errors.UsageError` unless each count option is >= 0.
-
-    Parameters
-    ----------
-    args : argparse.Namespace
-    *options : str
-        Attribute names (``"restarts"``, ``"multistart"``); the message names ``--NAME``.
-    """
-    for opt in options:
-        v = getattr(args, opt)
-        if v < 0:
-            raise UsageError(f"--{opt}: expected >= 0, got {v}")
-
-
 def comma_list(text: str | None) -> list[str] | None:
     """The items of a comma-separated option (``--channels x1,x2``), stripped, empty ones
     dropped; ``None`` when the option is not given (or empty)."""
@@ -96,12 +80,12 @@ def comma_list(text: str | None) -> list[str] | None:
     return [x.strip() for x in text.split(",") if x.strip()]
 
 
-def fit_inputs(args: argparse.Namespace
+def fit_inputs(args: argparse.Namespace, cfg: Config
                ) -> tuple[SuspensionModel, Parameters, Measurement, dict[str, object] | None]:
     """The model, its parameters, the record and its frame statistics of a fitting command.
 
-    ``--model``, ``--fix``/``--init`` (``--restarts`` checked), ``--multistart`` checked,
-    then ``--input`` read (a CSV, or a CAN log decoded with ``--dbc``).
+    ``--model``, ``--fix``/``--init``, then ``--input`` read (a CSV, or a CAN log decoded
+    with ``--dbc``, ``--map`` and the ``--config`` file's ``[can]``/``[map]``).
 
     Returns
     -------
@@ -113,8 +97,7 @@ def fit_inputs(args: argparse.Namespace
     """
     model = model_from_args(args)
     params = params_from_args(args, model)
-    check_counts(args, "multistart")
-    meas, frames = load_measurement(args, model)
+    meas, frames = load_measurement(args, model, cfg)
     return model, params, meas, frames
 
 

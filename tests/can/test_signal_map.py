@@ -12,6 +12,7 @@ from suspid.can.signal_map import SignalMap, SignalMapping, parse_mapping
 from suspid.cli import main
 from suspid.errors import InputError, UsageError
 from suspid.models import get_model
+from tests.conftest import write_config
 
 
 @pytest.mark.parametrize("text, expected", [
@@ -123,7 +124,8 @@ def test_the_unit_warning_reaches_identify(tmp_path, capsys):
                            for k in range(200)))
     rc = main(["identify", "--model", "quarter2", "--input", str(log), "--dbc", str(dbc), "--map",
                "x1=Height.Body", "--map", "x2=Height.Wheel", "--fix", "m1=300", "--fix", "m2=40",
-               "--maxfev", "20", "--no-data-start", "--json"])
+               "--maxfev", "20", "--config", write_config(tmp_path, "[fit]\ndata_start = false\n"),
+               "--json"])
     assert rc == 0
     out = json.loads(capsys.readouterr().out)
     assert any("Height.Body is in 'mm'" in w for w in out["warnings"])

@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 from estimator.fleet.synthetic import DAY_S, EPOCH0, write_production_drive
+from tests.conftest import write_config
 from tests.fleet.conftest import fleet_json, run_fleet_cli
 
 NOMINAL = 1500.0
@@ -123,7 +124,7 @@ def test_the_road_mode_is_part_of_the_history_key(road_fleet: RoadFleet, tmp_pat
     first = fleet_json(*ARGS, "--input", van, "--db", str(db))
     again = fleet_json(*ARGS, "--input", van, "--db", str(db), "--road", "unknown")
     zero = fleet_json(*ARGS, "--input", van, "--db", str(db), "--road", "zero",
-                      "--restarts", "1", "--multistart", "0")
+                      "--config", write_config(tmp_path, "[fit]\nrestarts = 1\nmultistart = 0\n"))
     assert first["new"] == 6 and first["reused"] == 0
     assert again["new"] == 6 and again["reused"] == 0       # "auto" and "unknown" differ as keys
     assert zero["new"] == 6 and zero["reused"] == 0          # another road mode: identified again
