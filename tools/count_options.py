@@ -12,8 +12,13 @@ Prints one line per subcommand (the options its parser accepts: every action wit
 from __future__ import annotations
 
 import argparse
+import sys
+from pathlib import Path
 
-from suspid.cli import SUBCOMMANDS, build_parser
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from suspid.cli import SUBCOMMANDS, build_parser  # noqa: E402  (the worktree's package, above)
 
 #: most options one subcommand may have
 MAX_PER_COMMAND = 25

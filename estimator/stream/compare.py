@@ -267,10 +267,23 @@ def compare(model: SuspensionModel, t: FloatArray, data: Mapping[str, FloatArray
 
 
 def plot(path: str | Path, t: FloatArray, truth: Mapping[str, FloatArray] | None, recs: list[RunRecord],
-         param: str, nominal: float, drop: float) -> None:
-    """One figure: the parameter's tracks (with 2-sigma bands) against the truth and limit."""
-    fig = Figure(figsize=(9, 4.5))
-    ax = fig.subplots()
+         nominal: Mapping[str, float], drop: float) -> None:
+    """One figure, one panel per monitored parameter (``nominal``'s keys): its tracks (with
+    2-sigma bands) against the truth and the alert limit ``(1 - drop) x nominal``."""
+    names = list(nominal)
+    fig = Figure(figsize=(9, 3.2 * max(1, len(names)) + 0.6))
+    axes = fig.subplots(max(1, len(names)), 1, sharex=True, squeeze=False)[:, 0]
+    for ax, param in zip(axes, names):
+        _plot_param(ax, t, truth, recs, param, nominal[param], drop)
+    axes[-1].set_xlabel("data time t (s)")
+    fig.suptitle("sliding-window Nelder-Mead vs EKF (bands: +/- 2 stderr)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def _plot_param(ax: Any, t: FloatArray, truth: Mapping[str, FloatArray] | None,
+                recs: list[RunRecord], param: str, nominal: float, drop: float) -> None:
+    """One panel of :func:`plot`: ``param``'s tracks, truth and alert limit on ``ax``."""
     if truth is not None and param in truth:
         ax.plot(t, truth[param], "k-", lw=1.5, label=f"true {param}")
     ax.axhline((1 - drop) * nominal, color="r", ls="--", lw=1,
@@ -296,11 +309,7 @@ def plot(path: str | Path, t: FloatArray, truth: Mapping[str, FloatArray] | None
                 ax.axvline(a.t, color=c, ls=":", lw=1.5)
                 ax.annotate(f"{rec.name} alert", (a.t, (1 - drop) * nominal), color=c,
                             rotation=90, va="bottom", ha="right", fontsize=8)
-    ax.set_xlabel("data time t (s)")
     unit = "N s/m" if param.startswith("c") else ("N/m" if param.startswith("k") else "")
     ax.set_ylabel(f"{param} ({unit})" if unit else param)
-    ax.set_title(f"{param}: sliding-window Nelder-Mead vs EKF (bands: +/- 2 stderr)")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="best")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)

@@ -27,20 +27,19 @@ class FitHelp:
 
     Attributes
     ----------
-    cost, x0, maxfev : str
-        Help of ``--cost``, ``--x0`` and ``--maxfev``.
+    cost, maxfev : str
+        Help of ``--cost`` and ``--maxfev``.
     """
 
     cost: str
-    x0: str
     maxfev: str
 
 
 def add_fit_options(p: argparse.ArgumentParser, helps: FitHelp, restarts: int,
                     group: argparse._ActionsContainer | None = None) -> None:
-    """Add the identifier's options ``--cost``, ``--x0`` and ``--maxfev`` (in this order), and
-    the defaults of the settings the ``--config`` file's ``[fit]`` table may change
-    (``restarts``, ``multistart``, ``polish``, ``data_start``; :func:`suspid.cli._can.command_config`).
+    """Add the identifier's options ``--cost`` and ``--maxfev``, and the defaults of the
+    settings the ``--config`` file's ``[fit]`` table may change (``restarts``,
+    ``multistart``, ``polish``, ``data_start``, ``x0``; :func:`suspid.cli._can.command_config`).
 
     Parameters
     ----------
@@ -54,9 +53,8 @@ def add_fit_options(p: argparse.ArgumentParser, helps: FitHelp, restarts: int,
     """
     g = p if group is None else group
     g.add_argument("--cost", choices=list(COSTS), default="sse", help=helps.cost)
-    g.add_argument("--x0", default="estimate", metavar="estimate|rest|V1,V2,...", help=helps.x0)
     g.add_argument("--maxfev", type=positive_int, default=None, help=helps.maxfev)
-    p.set_defaults(restarts=restarts, multistart=4, polish=True, data_start=True)
+    p.set_defaults(restarts=restarts, multistart=4, polish=True, data_start=True, x0="estimate")
 
 
 def add_offset_option(p: argparse._ActionsContainer, help_text: str) -> None:

@@ -40,9 +40,10 @@ class Key:
 
     Attributes
     ----------
-    type : {"int", "float", "bool", "str", "names", "address"}
+    type : {"int", "float", "bool", "str", "names", "address", "x0"}
         ``names``: a list of strings; ``address``: a string or an integer (with ``lo`` and
-        ``hi``, an integer in that range, in a string as ``"0x47"`` or ``"71"``).
+        ``hi``, an integer in that range, in a string as ``"0x47"`` or ``"71"``); ``x0``:
+        ``"estimate"``, ``"rest"`` or a list of numbers (given on as ``"V1,V2,..."``).
     unit : str
         SI unit of the value (``""`` for none).
     default : str
@@ -71,7 +72,8 @@ class Key:
             return "one of " + ", ".join(repr(c) for c in self.choices)
         what = {"int": "an integer", "float": "a number", "bool": "true or false",
                 "str": "a string", "names": "a list of parameter names",
-                "address": "an address (string or integer)"}[self.type]
+                "address": "an address (string or integer)",
+                "x0": "\"estimate\", \"rest\" or a list of finite numbers"}[self.type]
         parts = []
         if self.lo is not None:
             parts.append(f"{'>' if self.open_lo else '>='} {self.lo:g}")
@@ -106,6 +108,14 @@ class Key:
             if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
                 raise ValueError
             return tuple(v.strip() for v in value)
+        if self.type == "x0":
+            if value in ("estimate", "rest"):
+                return value
+            if (not isinstance(value, list) or not value or not all(
+                    isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                    for v in value)):
+                raise ValueError
+            return ",".join(repr(float(v)) for v in value)
         if self.type == "address":
             if isinstance(value, bool) or not isinstance(value, (str, int)):
                 raise ValueError
@@ -164,6 +174,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
                              "Nelder-Mead to full tolerance"),
         "data_start": _b("true", "also start from the data's own estimate (false: only from "
                                  "--init and the model's defaults); identify and fleet"),
+        "x0": Key("x0", "SI", "\"estimate\"",
+                  "initial state: \"estimate\" (variable projection), \"rest\", or the "
+                  "state [q..., q_dot...] as a list of numbers"),
     },
     "window": {
         "decimate": _i("20 samples per period of the fastest mode",
@@ -231,6 +244,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "alert_frames": _b("true", "send SUSPID_Alert frames on the live bus"),
         "alert_interface": _s("the live bus", "send SUSPID_Alert frames on this bus instead"),
         "alert_channel": _s("", "channel of alert_interface"),
+        "duration_s": _f("s", "none", "stop after this much wall time", 0.0, open_lo=True),
     },
     "output_only": {
         "accel_channel": _s("x1_ddot / x_ddot", "channel of the body acceleration"),
@@ -240,6 +254,32 @@ SCHEMA: dict[str, dict[str, Key]] = {
     "monitor": {
         "summary": _b("true", "print the closing summary line"),
     },
+    "fleet": {
+        "progress": _b("true", "progress bar on stderr (one line per tenth of the work when "
+                               "stderr is not a terminal)"),
+    },
+    "simulate": {
+        "height_m": _f("m", "0.1", "curb or bump height (negative: a pothole)"),
+        "length_m": _f("m", "3", "bump length", 0.0, open_lo=True),
+        "road_class": _s("\"C\"", "ISO 8608 road class of the random scenario",
+                         tuple("ABCDEFGH")),
+        "t0_s": _f("s", "0.5", "time the wheel reaches the curb or bump", 0.0),
+    },
+    "node": {
+        "open_timeout_s": _f("s", "60", "--channel pty: wait this long for a host to open "
+                                        "the adapter", 0.0, open_lo=True),
+        "linger_s": _f("s", "3", "after the scenario, wait at most this long for the host to "
+                                 "close the adapter", 0.0),
+    },
+    "doe": {
+        "single_stage": _b("false", "fit the whole record at once (no horizon continuation; "
+                                    "ablation)"),
+        "restarts": _i("0 (6 with single_stage)", "Nelder-Mead restarts of the final stage", 0),
+        "data_start": _b("true", "also start from the data-driven estimate, keeping the "
+                                 "lower-cost answer (false: --init-scale x the truth only)"),
+        "progress": _b("false", "draw the progress bar on stderr even when it is not a "
+                                "terminal"),
+    },
     "map": {},   # channel = "MESSAGE.SIGNAL..." (suspid.can.signal_map)
 }
 
@@ -247,9 +287,12 @@ SCHEMA: dict[str, dict[str, Key]] = {
 TABLES: dict[str, tuple[str, ...]] = {
     "identify": ("can", "map", "fit"),
     "diagnose": ("can", "map", "fit"),
-    "fleet": ("can", "map", "fit", "alert"),
+    "fleet": ("can", "map", "fit", "alert", "fleet"),
     "monitor": ("can", "map", "window", "alert", "ekf", "live", "output_only", "monitor"),
     "compare": ("can", "map", "window", "alert", "ekf"),
+    "simulate": ("simulate",),
+    "node": ("node",),
+    "doe": ("doe",),
 }
 
 

@@ -69,9 +69,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--step", type=float, default=None, metavar="S",
                    help="window step of both (s; default half the window, as monitor)")
     add_road_option(p)
-    p.add_argument("--plot", metavar="PNG", default=None, help="write the comparison plot here")
-    p.add_argument("--plot-param", default="c1", metavar="NAME",
-                   help="the monitored parameter --plot draws (default c1)")
+    p.add_argument("--plot", metavar="PNG", default=None,
+                   help="write the comparison plot here: one panel per monitored parameter")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     return p
 
@@ -143,11 +142,7 @@ def run(args: argparse.Namespace) -> int:
     out, recs = compare(model, t, data, truth, fix=fix, nominal=nominal, init=init,
                         window=window, alert=alert, ekf=ekf, source=source, road=args.road)
     if args.plot:
-        if args.plot_param not in out["nominal"]:
-            raise UsageError(f"--plot-param {args.plot_param}: not a monitored parameter "
-                             f"({', '.join(out['nominal'])})")
-        plot(args.plot, t, truth, recs, args.plot_param, out["nominal"][args.plot_param],
-             args.alert_drop)
+        plot(args.plot, t, truth, recs, out["nominal"], args.alert_drop)
         out["plot"] = args.plot
     for w in out.get("warnings", []):
         sys.stderr.write(f"warning: {w}\n")

@@ -27,13 +27,12 @@ else:
 FIT_HELP = FitHelp(
     cost="sse: sum of squared position differences (seed cost 1); frobenius: "
          "Frobenius norm over all measured channels (seed cost 2)",
-    x0="initial state: estimate it (default), start at rest, or give it",
     maxfev="evaluation budget of every fit diagnose makes: the baseline fit (and, for a "
            "quarter car seen from the body, the fit from its twin), the linear refit on every "
            "channel, each candidate effect's refit and its reference fit; Nelder-Mead and "
            "Levenberg-Marquardt evaluations together, Jacobians included (default: each fit's "
-           "own budget); restarts, further starts and the polish of the baseline fit are "
-           "the --config file's [fit] table")
+           "own budget); restarts, further starts, the polish and the initial state of the "
+           "baseline fit are the --config file's [fit] table")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:

@@ -30,11 +30,10 @@ else:
 #: help of the identifier's options as fleet words them (each drive fitted as identify does)
 FIT_HELP = FitHelp(
     cost="sse (seed cost 1, default) or frobenius (seed cost 2)",
-    x0="initial state: estimate (default), rest, or [q..., q_dot...]",
     maxfev="evaluation budget of each fit over all its restarts, further starts and polish "
            "(default: 1200 per free parameter shared by every fit of a drive), as for identify; "
-           "restarts, further starts, polish and the data-driven start are the --config "
-           "file's [fit] table")
+           "restarts, further starts, polish, the data-driven start and the initial state "
+           "are the --config file's [fit] table")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -79,8 +78,6 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                         "again is one drive); without --input, report from it alone")
     r.add_argument("--report", metavar="DIR", default=None,
                    help="write DIR/index.html: vehicles by risk, trend plots, failed logs")
-    r.add_argument("--no-progress", dest="progress", action="store_false",
-                   help="no progress bar on stderr")
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
     return p
 
@@ -124,7 +121,8 @@ def run(args: argparse.Namespace) -> int:
     result = run_fleet(FleetConfig(inputs=list(args.input), settings=settings, rule=rule,
                                    scheduler=args.scheduler, workers=args.workers, db=args.db,
                                    report=args.report,
-                                   progress=ProgressBar(sys.stderr) if args.progress else None))
+                                   progress=(ProgressBar(sys.stderr)
+                                             if cfg.get("fleet", "progress", True) else None)))
     out = result.to_json()
     if args.json:
         print_json(out)

@@ -38,19 +38,16 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="sse: sum of squared position differences (seed cost 1); frobenius: "
                         "Frobenius norm of measured-minus-simulated over all measured channels "
                         "(seed cost 2)")
-    p.add_argument("--x0", default="estimate", metavar="estimate|rest|V1,V2,...",
-                   help="initial state: estimate it (variable projection, default), start at "
-                        "rest, or give [q..., q_dot...] explicitly")
     p.add_argument("--maxfev", type=positive_int, default=None,
                    help="evaluation budget of each fit over all its restarts, further starts and "
                         "polish; the fits from the data-driven start, from --init/the defaults "
                         "and from the quarter car's twin each have their own, and nfev reports "
                         "their sum (default: 1200 per free parameter shared by every fit of the "
                         "record, further starts ending once one returns to the best cost); "
-                        "restarts, further starts, polish and the data-driven start are the "
-                        "--config file's [fit] table")
+                        "restarts, further starts, polish, the data-driven start and the "
+                        "initial state are the --config file's [fit] table")
     # the [fit] table of --config may change these (suspid.cli._can.command_config)
-    p.set_defaults(restarts=6, multistart=4, polish=True, data_start=True)
+    p.set_defaults(restarts=6, multistart=4, polish=True, data_start=True, x0="estimate")
     add_offset_option(p, "a constant offset in the road column(s) or in one position channel "
                          "(a sensor zero not at the rest position; estimated at the data-driven "
                          "start as extra linear unknowns, found when it is most of the misfit): "
@@ -65,10 +62,11 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def parse_x0(text: str, n: int) -> str | FloatArray:
-    """``--x0`` of identify/diagnose: ``estimate``, ``rest`` or ``n`` finite numbers."""
+    """``[fit] x0`` of identify, diagnose and fleet: ``estimate``, ``rest`` or ``n`` finite
+    numbers (comma-separated)."""
     if text in ("estimate", "rest"):
         return text
-    return parse_state(text, n, "--x0")
+    return parse_state(text, n, "fit.x0")
 
 
 def run(args: argparse.Namespace) -> int:

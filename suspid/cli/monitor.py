@@ -78,8 +78,6 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--alert-file", metavar="PATH", default=None,
                    help="durable append-only alert log (JSON lines, fsynced); a restarted "
                         "monitor neither loses nor repeats the alerts in it")
-    p.add_argument("--duration", type=float, default=None, metavar="S",
-                   help="live bus: stop after S seconds of wall time")
     p.add_argument("--output-only", action="store_true",
                    help="no road/wheel sensor: track the body mode's frequency and damping "
                         "ratio from a body accelerometer per window (60 s every 30 s by "
@@ -151,11 +149,12 @@ def source_from_args(args: argparse.Namespace, cfg: Config) -> "Source":
     from estimator.stream.pipeline import Source  # noqa: PLC0415 - see run()
 
     dbc_path, smap = can_inputs(args, cfg)
-    # the [live] keys are Source's fields (idle_timeout_s: idle_timeout)
+    # the [live] keys are Source's fields (idle_timeout_s: idle_timeout, duration_s: duration)
     return Source(input=args.input, interface=args.interface, channel=args.channel,
                   dbc=dbc_path, signal_map=smap, can_channel=args.can_channel,
-                  j1939_source=args.j1939_source, duration=args.duration,
-                  **cfg.fields("live", {"idle_timeout_s": "idle_timeout"}))
+                  j1939_source=args.j1939_source,
+                  **cfg.fields("live", {"idle_timeout_s": "idle_timeout",
+                                        "duration_s": "duration"}))
 
 
 #: ``[window]`` keys whose :class:`~estimator.stream.config.WindowOptions` field is named

@@ -128,12 +128,13 @@ def test_slcan_adapter_timestamps_give_the_frame_times():
     assert sync[-1] - sync[0] == pytest.approx(0.5, abs=1.001e-3)
 
 
-def test_two_process_slcan_link():
+def test_two_process_slcan_link(tmp_path):
     """``suspid node --interface slcan --channel pty`` in a subprocess; python-can slcan here."""
+    config = write_config(tmp_path, "[node]\nopen_timeout_s = 20\n")
     env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     proc = subprocess.Popen(
         [sys.executable, "-m", "suspid", "node", "--scenario", "bump", "--interface", "slcan",
-         "--channel", "pty", "--duration", "1.0", "--speed", "4", "--open-timeout", "20"],
+         "--channel", "pty", "--duration", "1.0", "--speed", "4", "--config", config],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=REPO)
     try:
         first = proc.stdout.readline()
@@ -211,8 +212,9 @@ def test_two_process_node_and_monitor_cli_over_slcan(tmp_path):
     ``CanOperationError`` traceback there.
     """
     env = suspid_env()
+    pty = write_config(tmp_path, "[node]\nopen_timeout_s = 30\nlinger_s = 1\n", "node.toml")
     node, path = start_slcan_node("--scenario", "damper-wear", "--duration", "24", "--speed", "4",
-                                  "--open-timeout", "30", "--linger", "1")
+                                  "--config", pty)
     mon = None
     try:
         mon = subprocess.run(
@@ -245,8 +247,9 @@ def _slcan_monitor(tmp_path: Path, live: str = "", duration: float = 3.0) -> dic
     summary line."""
     config = write_config(tmp_path, '[live]\ntime_source = "timestamp"\nidle_timeout_s = 30\n'
                                     f"alert_frames = false\n{live}", f"live{len(live)}.toml")
+    pty = write_config(tmp_path, "[node]\nopen_timeout_s = 60\nlinger_s = 1\n", "node.toml")
     node, path = start_slcan_node("--scenario", "random", "--duration", str(duration),
-                                  "--speed", "0.5", "--open-timeout", "60", "--linger", "1")
+                                  "--speed", "0.5", "--config", pty)
     try:
         mon = subprocess.run(
             [sys.executable, "-m", "suspid", "monitor", "--model", "quarter2", "--interface",

@@ -97,7 +97,8 @@ def test_half4_through_the_cli(tmp_path: Path, capsys) -> None:
 def test_quarter1_text_output_and_option_errors(tmp_path: Path, capsys) -> None:
     csv = tmp_path / "q1.csv"
     rc = main(["simulate", "--model", "quarter1", "--scenario", "curb", "--duration", "1.6", "--fs", "200",
-               "--height", "0.05", "--effect", "sensor_offset:channel=x_dot,offset=0.01", "--noise", "0.005",
+               "--config", write_config(tmp_path, "[simulate]\nheight_m = 0.05\n", "curb.toml"),
+               "--effect", "sensor_offset:channel=x_dot,offset=0.01", "--noise", "0.005",
                "--out", str(csv)])
     assert rc == 0
     capsys.readouterr()
@@ -147,10 +148,10 @@ def test_the_fitting_commands_share_the_identifier_s_options(tmp_path: Path, cap
         sub = next(a for a in p._actions if isinstance(a, argparse._SubParsersAction))
         cmd = next(iter(sub.choices.values()))
         return {a.dest: (a.option_strings, a.default, a.type, a.metavar, a.choices)
-                for a in cmd._actions if a.dest in ("cost", "x0", "maxfev")}
+                for a in cmd._actions if a.dest in ("cost", "maxfev")}
 
     ref = options(identify)
-    assert len(ref) == 3 and ref["cost"][4] == ["sse", "frobenius"]
+    assert len(ref) == 2 and ref["cost"][4] == ["sse", "frobenius"]
     assert options(diagnose) == ref and options(fleet) == ref
     csv = tmp_path / "q1.csv"
     assert main(["simulate", "--model", "quarter1", "--duration", "1", "--fs", "100", "--out", str(csv)]) == 0

@@ -63,6 +63,9 @@ def work(tmp_path_factory: pytest.TempPathFactory) -> Path:
     (d / "lowpass.toml").write_text("[window]\nroad_lowpass_hz = -1\n")
     (d / "fusion.toml").write_text("[window]\nroad_fusion_hz = nan\n")
     (d / "bad.toml").write_text("[fit\nrestarts = 0\n")
+    (d / "x0short.toml").write_text("[fit]\nx0 = [1, 2]\n")
+    (d / "x0inf.toml").write_text("[fit]\nx0 = [0, inf, 0, 0]\n")
+    (d / "roadclass.toml").write_text('[simulate]\nroad_class = "Z"\n')
     return d
 
 
@@ -104,7 +107,9 @@ CASES: list[tuple[list[str], str]] = [
     # options
     (IDENT + ["--input", "q2.csv", "--plot", "nodir/x.png"], "nodir/x.png"),
     (IDENT + ["--input", "q2.csv", "--maxfev", "-1"], "--maxfev: expected an integer >= 1"),
-    (IDENT + ["--input", "q2.csv", "--x0", "1,2"], "--x0: expected 4 values"),
+    (IDENT[:-2] + ["--input", "q2.csv", "--config", "x0short.toml"], "fit.x0: expected 4 values"),
+    (IDENT[:-2] + ["--input", "q2.csv", "--config", "x0inf.toml"],
+     "x0inf.toml: fit.x0: expected \"estimate\", \"rest\" or a list of finite numbers"),
     (IDENT + ["--input", "q2.csv", "--fix", "zz=1"], "no parameter 'zz'"),
     (IDENT + ["--input", "q2.csv", "--fix", "m1=nan"], "--fix 'm1=nan': expected a finite number"),
     (IDENT + ["--input", "q2.csv", "--init", "m1=0"], "parameter m1: expected a finite value > 0"),
@@ -147,7 +152,9 @@ CASES: list[tuple[list[str], str]] = [
     (["simulate", "--model", "quarter2", "--out", "x.csv", "--fs", "inf"], "finite and > 0"),
     (["simulate", "--model", "quarter2", "--out", "x.csv", "--duration", "1e9"], "expected at most"),
     (["simulate", "--model", "quarter2", "--out", "x.csv", "--scenario", "iso8608",
-      "--road-class", "Z"], "road class 'Z'"),
+      "--config", "roadclass.toml"],
+     "roadclass.toml: simulate.road_class: expected one of 'A', 'B', 'C', 'D', 'E', 'F', 'G', "
+     "'H', got 'Z' (string)"),
     (NODE + ["--dbc", "bad.dbc"], "bad.dbc: cannot load DBC"),
     (NODE + ["--dbc", "foreign.dbc"], "foreign.dbc"),
     (NODE + ["--noise", "nan"], "--noise must be a finite number"),
@@ -303,8 +310,7 @@ def test_malformed_assignment_option_values(work: Path, capsys: pytest.CaptureFi
 
 @pytest.mark.parametrize("argv", [
     ["simulate", "--model", "quarter2", "--scenario", "initial", "--out", "x.csv", "--x0", "nan,0,0,0"],
-    IDENT + ["--input", "q2.csv", "--x0", "0,inf,0,0"],
-    ["diagnose", "--model", "quarter2", "--input", "q2.csv", "--x0", "0,0,-inf,0", "--json"],
+
     COMPARE + ["--duration", "1e9"],
     COMPARE + ["--fs", "1e12"],
 ])

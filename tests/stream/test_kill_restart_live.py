@@ -34,8 +34,9 @@ def test_killed_live_monitor_restarts_and_raises_the_later_alert_once(tmp_path: 
     afile = tmp_path / "alerts.jsonl"
     # c1: 1500 N s/m until 5 s, then linearly to 750 at 40 s: crosses 70 % (1050) at 26 s
     node, path = start_slcan_node("--scenario", "damper-wear", "--duration", "40", "--speed", "2",
-                                  "--wear-start", "5", "--wear-to", "0.5", "--open-timeout", "30",
-                                  "--linger", "1")
+                                  "--wear-start", "5", "--wear-to", "0.5", "--config",
+                                  write_config(tmp_path, "[node]\nopen_timeout_s = 30\n"
+                                                         "linger_s = 1\n", "node.toml"))
     try:
         mon_cmd = [sys.executable, "-u", "-m", "suspid", "monitor", "--model", "quarter2",
                    "--interface", "slcan", "--channel", path, *FIX, "--alert-file", str(afile),
