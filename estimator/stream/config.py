@@ -1,58 +1,14 @@
 """Window configuration of the streaming identifier and its defaults from the physics.
 
-Defaults are derived from the modes of the model at the nominal parameters (eigenvalues
-``lambda_i`` of ``A``; natural frequency ``w_i = |lambda_i|``, damping ratio
-``zeta_i = -Re(lambda_i) / |lambda_i|``, damped period ``T_i = 2 pi / Im(lambda_i)``,
-decay time ``tau_i = 1 / (zeta_i w_i)``):
-
-``window_s``
-    ``max(3 T_slow, 6 tau_slow)`` rounded up to 0.5 s, where *slow* is the mode of lowest
-    natural frequency (the body bounce): three oscillations and six decay times of the
-    slowest mode in every window make its damping visible, while the window stays short
-    because a window's estimate describes its middle -- it lags a drifting parameter by
-    ``window_s / 2``, which is most of the alert delay. quarter2 defaults (body mode
-    1.26 Hz, zeta 0.27, T 0.83 s, tau 0.47 s): 3.0 s.
-``step_s``
-    ``window_s / 2`` rounded to 0.05 s (1.5 s for quarter2): every sample is fitted twice;
-    a third of the window would cut the alert delay by ~0.5 s for 50 % more CPU (every sample is fitted three times; the estimate
-    lags the truth by about half a window).
-``decimate``
-    keep every ``d``-th sample with ``d = max(1, floor(fs / (20 f_fast)))``: at least 20
-    samples per period of the fastest mode (the wheel hop, 11.8 Hz for quarter2), so the
-    first-order-hold road assumption of the exact simulator stays accurate (250 Hz of a
-    500 Hz stream).
-``road_fusion_hz``
-    ``1.5 f_fast`` (31 Hz for the stiff quarter car, 17.5 Hz for quarter2's defaults): the
-    road displacement fed to each window's fit is the measured ``r`` below it and the
-    integral of the measured ``r'`` above it (:func:`estimator.stream.window.fuse_road`;
-    only when ``r'`` is in the stream). Noise on ``r`` reaches the fit through its slope
-    (the tyre damping), above all at high frequency, while ``r'`` carries no such
-    amplification; a crossover above the wheel hop keeps the integral short (a few tens of
-    ms, no drift) and leaves the suspension's band to ``r``. Measured on the held-out streams
-    (``tools/bench_maintenance.py``, docs/monitoring.md): c1 RMSE 4.09 -> 2.84 % at 5 %
-    noise on every channel, 1.75 -> 1.52 % at 2 %; at 3 f_fast 2.92 and 1.84 %.
-``xatol``, ``warm_adaptive``, ``gauss_newton_step``, ``gauss_newton_steps``, ``first_restarts``
-    Nelder-Mead's simplex-size tolerance (log units) is 2e-3; with ten or more free
-    parameters (:data:`MANY_FREE`; the full car's twelve dampers, springs and tyres) it is
-    7e-3 (:data:`XATOL_MANY_FREE`), warm windows use Nelder-Mead's standard coefficients
-    instead of the dimension-adapted ones, the first window runs Nelder-Mead once (no
-    restart), and on every window up to three Gauss-Newton steps
-    (:data:`GAUSS_NEWTON_STEPS_MANY_FREE`) on one forward-difference Jacobian at
-    Nelder-Mead's best vertex finish the fit; that Jacobian also gives the window's stderr.
-    In twelve dimensions each halving of the simplex costs Nelder-Mead many evaluations,
-    and its simplex is small long before it is at the optimum (at 7e-3 a median 1.3 %,
-    at most 5.5 %, from where the steps end). Measured on the full car's maintenance
-    stream (``tools/bench_maintenance.py --only full7``, docs/monitoring.md): 45
-    evaluations per warm window instead of 120 (4e-3 and one step) or 220 (2e-3), 400
-    instead of 949 on the first window, the estimates 0.003 % RMS from each window's exact
-    optimum (0.008 % with 4e-3 and one step), c1 RMSE, alert and first forecast unchanged.
-    Reaching the window optimum is what keeps the faster wear of
-    ``tests/stream/test_maintenance.py::test_full7_wearing_stream_through_compare``'s first
-    forecast interval holding the crossing (4e-3 without a step, or 7e-3 with steps
-    refused beyond 2 %, miss it).
-``maxfev`` / ``first_maxfev``
-    Nelder-Mead evaluation budget of a warm-started window (default ``40 n_free``) and of
-    the first, cold-started one (``250 n_free``). Every window reports the evaluations used.
+Defaults come from the modes of the model at the nominal parameters (:func:`default_config`):
+the window holds three periods and six decay times of the slowest mode, the step is half the
+window, the decimation keeps 20 samples per period of the fastest mode, the road fusion
+crosses over at 1.5 times the highest natural frequency, and models with ten or more free
+parameters get a looser simplex tolerance finished by Gauss-Newton steps. The rules, the
+numbers they give and the measurements behind each choice (with the commands that reproduce
+them): ``docs/monitoring.md``, "Windows: defaults from the system's time constants" and
+"Predictive-maintenance benchmark". The user-facing settings are the ``[window]`` table of
+a ``--config`` file (``docs/configuration.md``), given here as :class:`WindowOptions`.
 """
 from __future__ import annotations
 
@@ -84,7 +40,7 @@ MAX_SPAN_S = 1000.0
 
 @dataclass
 class WindowConfig:
-    """Sliding-window settings (see the module docstring for the defaults).
+    """Sliding-window settings (defaults: :func:`default_config`, ``docs/monitoring.md``).
 
     Attributes
     ----------
@@ -101,11 +57,8 @@ class WindowConfig:
     xatol : float
         Nelder-Mead simplex size tolerance in log-parameter units (2e-3 = 0.2 %, 2.5 times
         below the default ``sigma_floor``, so below every reported stderr); the only
-        termination test besides the budget. Measured on the damper-wear streams against
-        fits to 1e-6: the estimates are within 0.06 % RMS (0.12 stderr) of the exact window
-        optimum; 2.5e-3 saves ~1.5 evaluations per window but doubles that error. The
-        monitor's default (:func:`default_config`) is 7e-3 with ten or more free
-        parameters (module docstring: measured on the full car).
+        termination test besides the budget. The monitor's default (:func:`default_config`)
+        is 7e-3 with ten or more free parameters (measurements: ``docs/monitoring.md``).
     warm_step : float
         Edge (log units) of the warm-start simplex per parameter, at least; the simplex is
         axis-aligned and centred on the extrapolated start (0.003 = 0.3 %, 1.5 ``xatol``:
@@ -118,15 +71,14 @@ class WindowConfig:
         0.5). The adapted coefficients keep a large simplex in many dimensions from
         stalling; a warm window's simplex is a few stderr across around a good
         prediction, where the standard ones converge in fewer evaluations. The monitor's
-        default (:func:`default_config`) is ``False`` with ten or more free parameters
-        (module docstring).
+        default (:func:`default_config`) is ``False`` with ten or more free parameters.
     gauss_newton_step : bool
         After Nelder-Mead on a warm window, Gauss-Newton steps on one forward-difference
         Jacobian at its best vertex, each kept while it lowers the cost (``n_free``
         evaluations for the Jacobian, one per step;
         :meth:`~estimator.stream.windowproblem.WindowProblem.gauss_newton`); that Jacobian
         also gives the window's stderr. The monitor's default is on with ten or more free
-        parameters (module docstring).
+        parameters.
     gauss_newton_steps : int
         Most Gauss-Newton steps on that Jacobian (default 1; the monitor's default with
         ten or more free parameters: 3).
@@ -140,29 +92,22 @@ class WindowConfig:
         Skip a window when the RMS suspension deflection (or, without a wheel channel, body
         motion) is below this (m) ...
     min_snr : float
-        ... or below ``min_snr`` times the noise floor estimated from the data (3: at 2 %
-        sensor noise on a stiff suspension the deflection is 14-19 times its noise floor, at
-        5 % 3.7-5, and those windows identify c1 to 2-4 %; the former 20 skipped nine in ten
-        windows at 2 %, tools/bench_maintenance.py; a parked car's deflection is noise, ~1).
+        ... or below ``min_snr`` times the noise floor estimated from the data (default 3,
+        above a parked car's ~1; why 3: ``docs/monitoring.md``).
     sigma_floor : float
         Relative standard error added in quadrature to every window's stderr (model error,
-        within-window drift); 0.005 = 0.5 %, 2.5 x the RMS error of the window
-        estimates against the truth at the window centre on the damper-wear stream.
+        within-window drift); default 0.005 = 0.5 % (``docs/monitoring.md``).
     cost : str
         ``"sse"`` (positions) or ``"frobenius"`` (every measured channel).
     road_fusion_hz : float
         Crossover (Hz) of the complementary filter that builds each road displacement fed to
         the fit from its measured displacement (below) and the integral of its measured
         velocity (above), when both are in the stream (:func:`estimator.stream.window.fuse_road`);
-        0 uses the measured displacement as it is. Default from the model: ``1.5 f_fast``
-        (module docstring).
+        0 uses the measured displacement as it is. Default from the model: ``1.5 f_fast``.
     road_lowpass_hz : float
         Cutoff (Hz, -6 dB) of a zero-phase Butterworth low-pass applied to each road
         displacement fed to the fit, after the fusion (:func:`estimator.stream.window.lowpass_road`);
-        0 (default): none. Alone (fusion off) at 3 f_fast it cuts the 5 % noise stream's c1
-        RMSE from 4.09 to 3.27 %, but removes true road content the tyre damping responds
-        to: the quantization-only demo stream's c1 RMSE rises from 0.16 to 0.22 %
-        (docs/monitoring.md).
+        0 (default): none (it also removes true road content; ``docs/monitoring.md``).
     drift : tuple of str
         Free parameters refitted on each window with a linear drift,
         ``theta(t) = theta_end (1 + g (t - t_end))`` (``g`` one extra free parameter each),
@@ -172,16 +117,14 @@ class WindowConfig:
         free damper and spring of the struts (:func:`strut_parameters`).
     drift_chunk_s : float
         Chunk length (s) over which the drifting parameters are held constant in the
-        drift fit (one matrix exponential per chunk; 0.2 s measured as accurate as 0.1 s
-        at less CPU: ratio to the EKF's 0.41 against 0.52 on the README demo's stream).
+        drift fit (one matrix exponential per chunk; default 0.2 s, ``docs/monitoring.md``).
     drift_iterations : int
         Largest number of Gauss-Newton steps of the drift fit where its first-order solve
         does not apply (:attr:`~estimator.stream.window.SlidingWindowIdentifier.first_order_drift`).
     drift_rate_sd : float
         Standard deviation (relative, 1/s) of a prior on each window's drift rate centred on
-        that of the last estimates (once there are two); 0: no prior. 0.005 (0.5 %/s): without it the rate fitted on one window at 5 % sensor
-        noise scatters so much that the end value is worse than the middle one
-        (``tools/bench_maintenance.py --drift``, docs/monitoring.md).
+        that of the last estimates (once there are two); 0: no prior. Default 0.005
+        (0.5 %/s; why: ``docs/monitoring.md``).
     offset : str
         A constant offset in a road column or a measured position channel (a sensor zero not
         at the rest position, :mod:`estimator.identify.offset`) is looked for on each cold
