@@ -15,8 +15,9 @@ The result is ``channel = scale * signal + offset`` in the channel's SI unit. A 
 signal (``SG_ Height m0``, sent only when the multiplexer is 0) is read only from the frames
 of its pages.
 
-On the command line: ``--map 'x1_ddot=gnss_imu.AccelerationX-9.81'`` (repeatable). In a
-config file (``.toml`` or ``.json``)::
+On the command line: ``--map 'x1_ddot=gnss_imu.AccelerationX-9.81'`` (repeatable); in the
+``[map]`` table of a ``--config`` file (:mod:`suspid.cli._config`, its DBC as ``[can] dbc``).
+A signal-map file for the library (``signal_map=PATH``: ``.toml`` or ``.json``)::
 
     dbc = "canmod-gps.dbc"          # optional, relative to the config file
     [map]
@@ -158,16 +159,6 @@ class SignalMap:
     def from_strings(cls, specs: Iterable[str], where: str = "--map") -> "SignalMap":
         """Build from ``CHANNEL=MESSAGE.SIGNAL...`` strings (command line)."""
         return cls([parse_mapping(s, where) for s in specs], None, where)
-
-    @classmethod
-    def from_args(cls, specs: Sequence[str] | None, path: str | Path | None = None) -> "SignalMap | None":
-        """Map from ``--map`` strings and/or a ``--map-file`` (``--map`` entries win)."""
-        maps = []
-        if path:
-            maps.append(cls.from_file(path))
-        if specs:
-            maps.append(cls.from_strings(specs))
-        return merge_maps(maps)
 
     @classmethod
     def from_file(cls, path: str | Path) -> "SignalMap":
@@ -344,7 +335,8 @@ def as_signal_map(spec: SignalMapLike) -> SignalMap | None:
 
 
 def merge_maps(maps: Iterable[SignalMap | None]) -> SignalMap | None:
-    """Concatenate maps (e.g. a ``--map-file`` and ``--map`` options); later entries win."""
+    """Concatenate maps (e.g. a ``--config`` file's ``[map]`` and ``--map`` options); later
+    entries win."""
     result: dict[str, SignalMapping] = {}
     dbc: Path | None = None
     sources = []

@@ -8,7 +8,7 @@ import pytest
 
 from estimator.decode.listener import model_channels
 from suspid.can.dbc import load_dbc
-from suspid.can.signal_map import SignalMap, SignalMapping, parse_mapping
+from suspid.can.signal_map import SignalMap, SignalMapping, merge_maps, parse_mapping
 from suspid.cli import main
 from suspid.errors import InputError, UsageError
 from suspid.models import get_model
@@ -48,7 +48,8 @@ def test_toml_and_json_files(tmp_path):
     js = tmp_path / "m.json"
     js.write_text(json.dumps({"map": {"x1_ddot": "gnss_imu.AccelerationX-9.81"}}))
     assert SignalMap.from_file(js).mappings[0].offset == -9.81
-    merged = SignalMap.from_args(["x1_ddot=gnss_imu.AccelerationZ"], toml)
+    merged = merge_maps([sm, SignalMap.from_strings(["x1_ddot=gnss_imu.AccelerationZ"])])
+    assert merged is not None
     assert [m.signal for m in merged.mappings] == ["AccelerationY", "AccelerationZ"]
 
 
