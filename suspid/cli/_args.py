@@ -1,5 +1,6 @@
 """Option groups and checks the fitting commands share (``diagnose``, ``fleet``; ``identify``'s set;
-``--offset`` of ``identify`` and ``fleet``).
+``--offset`` of ``identify`` and ``fleet``), and the monitor's option objects from the
+options and the ``--config`` file (``monitor``, ``compare``).
 
 Each command words its own help; the option names, types, defaults and metavars and the
 checks of their values live here once.
@@ -13,12 +14,19 @@ from typing import TYPE_CHECKING
 
 from estimator.choices import COSTS, OFFSET_MODES, ROAD_MODES
 from suspid.cli._common import load_measurement, model_from_args, params_from_args, positive_int
+from suspid.cli._lazy import lazy_names
 
 if TYPE_CHECKING:
     from estimator.identify import Parameters
+    from estimator.stream.config import AlertOptions, EkfOptions, WindowOptions
     from suspid.cli._config import Config
     from suspid.io.csvio import Measurement
     from suspid.models.base import SuspensionModel
+else:
+    # the estimator loads when a command runs (monitor first keeps python-can from loading
+    # asammdf: suspid.cli.monitor._skip_mf4_backend)
+    AlertOptions, EkfOptions, WindowOptions = lazy_names(
+        "estimator.stream.config", "AlertOptions", "EkfOptions", "WindowOptions")
 
 
 @dataclass(frozen=True)
@@ -109,3 +117,21 @@ def add_road_option(p: argparse._ActionsContainer) -> None:
                         "and spring and reporting what the record cannot determine as such. "
                         "Default: measured with road columns, else zero for a free response "
                         "and unknown for driving data, named in a warning")
+
+
+#: ``[window]`` keys whose :class:`~estimator.stream.config.WindowOptions` field is named
+#: differently
+WINDOW_FIELDS = {"budget": "maxfev", "first_budget": "first_maxfev"}
+#: ``[alert]`` keys of :class:`~estimator.stream.config.AlertOptions` (the rest are fleet's)
+ALERT_KEYS = ("confidence", "persistence_s", "hysteresis", "forecast_horizon_s")
+
+
+def options_from_config(args: argparse.Namespace, cfg: Config
+                        ) -> tuple[WindowOptions, AlertOptions, EkfOptions]:
+    """``--window``, ``--step``, ``--alert-drop`` and the ``[window]``, ``[alert]`` and
+    ``[ekf]`` tables as the monitor's option objects (``monitor`` and ``compare``)."""
+    window = WindowOptions(window_s=args.window, step_s=args.step,
+                           **cfg.fields("window", WINDOW_FIELDS))
+    alert = AlertOptions(drop=args.alert_drop,
+                         **{k: v for k, v in cfg.table("alert").items() if k in ALERT_KEYS})
+    return window, alert, EkfOptions(**cfg.table("ekf"))

@@ -14,11 +14,10 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from suspid.cli._args import add_road_option
+from suspid.cli._args import add_road_option, options_from_config
 from suspid.cli._can import add_can_arguments, can_inputs, command_config
 from suspid.cli._common import add_model_option, parse_assignments, print_json
 from suspid.cli._lazy import lazy_names
-from suspid.cli.monitor import options_from_config
 from suspid.errors import UsageError
 from suspid.models import get_model
 

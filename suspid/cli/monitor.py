@@ -12,7 +12,7 @@ import argparse
 import sys
 from typing import TYPE_CHECKING, Any, Callable
 
-from suspid.cli._args import add_road_option
+from suspid.cli._args import add_road_option, options_from_config
 from suspid.cli._can import add_can_arguments, can_inputs, command_config
 from suspid.cli._common import add_model_option, assignment_warnings, parse_assignments, print_json
 from suspid.cli._lazy import lazy_names
@@ -21,14 +21,11 @@ from suspid.errors import UsageError
 from suspid.models import get_model
 
 if TYPE_CHECKING:
-    from estimator.stream.config import (AlertOptions, EkfOptions, OutputOnlyOptions,
-                                         WindowOptions)
+    from estimator.stream.config import OutputOnlyOptions
     from estimator.stream.pipeline import Source
 else:
     # resolved in run(), after _skip_mf4_backend (the estimator loads python-can)
-    AlertOptions, EkfOptions, OutputOnlyOptions, WindowOptions = lazy_names(
-        "estimator.stream.config", "AlertOptions", "EkfOptions", "OutputOnlyOptions",
-        "WindowOptions")
+    OutputOnlyOptions, = lazy_names("estimator.stream.config", "OutputOnlyOptions")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -155,24 +152,6 @@ def source_from_args(args: argparse.Namespace, cfg: Config) -> "Source":
                   j1939_source=args.j1939_source,
                   **cfg.fields("live", {"idle_timeout_s": "idle_timeout",
                                         "duration_s": "duration"}))
-
-
-#: ``[window]`` keys whose :class:`~estimator.stream.config.WindowOptions` field is named
-#: differently
-WINDOW_FIELDS = {"budget": "maxfev", "first_budget": "first_maxfev"}
-#: ``[alert]`` keys of :class:`~estimator.stream.config.AlertOptions` (the rest are fleet's)
-ALERT_KEYS = ("confidence", "persistence_s", "hysteresis", "forecast_horizon_s")
-
-
-def options_from_config(args: argparse.Namespace, cfg: Config
-                        ) -> tuple[WindowOptions, AlertOptions, EkfOptions]:
-    """``--window``, ``--step``, ``--alert-drop`` and the ``[window]``, ``[alert]`` and
-    ``[ekf]`` tables as the monitor's option objects (``monitor`` and ``compare``)."""
-    window = WindowOptions(window_s=args.window, step_s=args.step,
-                           **cfg.fields("window", WINDOW_FIELDS))
-    alert = AlertOptions(drop=args.alert_drop,
-                         **{k: v for k, v in cfg.table("alert").items() if k in ALERT_KEYS})
-    return window, alert, EkfOptions(**cfg.table("ekf"))
 
 
 def run(args: argparse.Namespace) -> int:
