@@ -8,6 +8,7 @@ import re
 from pathlib import Path
 
 import pytest
+from matplotlib.image import imread
 
 from estimator.stream.config import WindowOptions
 from estimator.stream.pipeline import monitor_spec
@@ -145,3 +146,20 @@ def test_the_example_file_loads_and_shows_every_key() -> None:
 def test_each_command_reads_known_tables() -> None:
     assert all(set(ts) <= set(SCHEMA) for ts in TABLES.values())
     assert {t for ts in TABLES.values() for t in ts} == set(SCHEMA)
+
+
+def test_compare_takes_the_tables_and_plots_every_monitored_parameter(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``compare --config``: ``[ekf] q``, ``[alert] forecast_horizon_s`` and ``[window] budget``
+    reach the report; ``--plot`` draws one panel per monitored parameter (c1 and k1 here:
+    the figure is 9 x 7 in at 110 dpi, one panel would be 9 x 4.5)."""
+    config = write_config(tmp_path, "[ekf]\nq = 0.01\n[alert]\nforecast_horizon_s = 30\n"
+                                    "[window]\nbudget = 50\n")
+    png = tmp_path / "cmp.png"
+    assert main(["compare", "--model", "quarter2", "--duration", "30", "--fs", "100",
+                 "--config", config, "--plot", str(png), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["ekf"]["q_param"] == 0.01 and out["forecast_horizon_s"] == 30.0
+    assert out["window"]["budget"] == 50 and sorted(out["nominal"]) == ["c1", "k1"]
+    height, width = imread(png).shape[:2]
+    assert (width, height) == (990, 770)
