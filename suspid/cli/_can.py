@@ -4,13 +4,14 @@
 :func:`add_can_arguments` on their parser (``--map``, ``--config``) and
 :func:`command_config` then :func:`can_inputs` on the parsed arguments::
 
-    add_can_arguments(parser)
+    add_can_arguments(parser, "identify")        # --map, --config
     cfg = command_config(args, "identify")     # reads --config, sets args.can_channel, ...
     dbc_path, signal_map = can_inputs(args, cfg)
 
 The bus channel of a multi-bus log and a J1939 source address are the ``[can]`` table's
 ``channel`` and ``j1939_source`` (:mod:`suspid.cli._config`); ``--dbc`` is part of the
-contract and stays defined by each command.
+contract and stays defined by each command. ``simulate``, ``node`` and ``doe`` add
+``--config`` alone (:func:`add_config_option`) for their own tables.
 """
 from __future__ import annotations
 
