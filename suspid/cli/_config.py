@@ -129,6 +129,7 @@ class Key:
         raise ValueError
 
     def _check_range(self, v: float) -> None:
+        """``ValueError`` unless ``v`` is within ``lo``..``hi`` (open ends as declared)."""
         if self.lo is not None and (v <= self.lo if self.open_lo else v < self.lo):
             raise ValueError
         if self.hi is not None and (v >= self.hi if self.open_hi else v > self.hi):
@@ -137,18 +138,22 @@ class Key:
 
 def _f(unit: str, default: str, meaning: str, lo: float | None = None, hi: float | None = None,
        open_lo: bool = False, open_hi: bool = False) -> Key:
+    """A number key (:class:`Key` ``float``) in ``unit``, within ``lo``..``hi`` when given."""
     return Key("float", unit, default, meaning, lo, hi, open_lo, open_hi)
 
 
 def _i(default: str, meaning: str, lo: float | None = None, unit: str = "") -> Key:
+    """An integer key, at least ``lo`` when given."""
     return Key("int", unit, default, meaning, lo)
 
 
 def _b(default: str, meaning: str) -> Key:
+    """A true/false key."""
     return Key("bool", "", default, meaning)
 
 
 def _s(default: str, meaning: str, choices: tuple[str, ...] = ()) -> Key:
+    """A string key, one of ``choices`` when given."""
     return Key("str", "", default, meaning, choices=choices)
 
 
