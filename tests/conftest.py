@@ -55,3 +55,10 @@ def start_slcan_node(*node_args: str) -> tuple[subprocess.Popen[str], str]:
         node.kill()
         raise AssertionError(f"node printed {first!r}, expected 'pty: /dev/...': {node.stderr.read()}")
     return node, first.split(":", 1)[1].strip()
+
+
+def write_config(directory: Path, text: str, name: str = "suspid.toml") -> str:
+    """Write a ``--config`` TOML file ``directory/name`` holding ``text``; its path."""
+    path = Path(directory) / name
+    path.write_text(text, encoding="utf-8")
+    return str(path)

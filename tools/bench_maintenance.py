@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from estimator.stream.config import WindowOptions
 from estimator.stream.compare import compare
 from estimator.stream.wear_streams import Stream, damper_wear
 from estimator.stream.window import SlidingWindowIdentifier
@@ -175,7 +176,7 @@ def run_case(case: Case, window_options: dict[str, Any] | None = None) -> dict[s
     fix = known(case, base)
     nominal = {k: v for k, v in base.items() if k not in fix and k in m.param_names}
     out, _ = compare(m, s.t, s.data, s.truth, fix=fix, nominal=nominal, source=case.name,
-                     window_options=window_options)
+                     window=WindowOptions(**(window_options or {})))
     row: dict[str, Any] = {"case": case.name, "key": case.key, "part": case.part}
     for side, key in (("nm", "nm"), ("ekf", "ekf_result")):
         r = out[key]
@@ -209,16 +210,14 @@ def solver_check(case: Case, window_options: dict[str, Any] | None) -> dict[str,
     def both(self: SlidingWindowIdentifier, prob: Any, t_end: float, width: float,
              p_const: Any, drift: list[str], out: Any) -> None:
         o1 = copy.deepcopy(out)
-        cfg = self.config
-        solver = cfg.drift_solver
         c0 = time.process_time()
-        cfg.drift_solver = "linear"
+        self.first_order_drift = True
         orig(self, prob, t_end, width, p_const, drift, o1)
         c1 = time.process_time()
-        cfg.drift_solver = "gauss-newton"
+        self.first_order_drift = False
         orig(self, prob, t_end, width, p_const, drift, out)
         c2 = time.process_time()
-        cfg.drift_solver = solver
+        del self.first_order_drift        # back to the class default
         for k in drift:
             rows.append(((o1.params[k] - out.params[k]) / out.stderr[k],
                          o1.stderr_fit[k] / out.stderr_fit[k], c1 - c0, c2 - c1))
@@ -259,27 +258,25 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--road-lowpass", type=float, default=None, metavar="HZ",
                     help="sliding window: zero-phase low-pass of each road displacement at HZ "
                          "(WindowConfig.road_lowpass_hz; default 0: off)")
-    ap.add_argument("--drift", nargs="?", const="free", default=None, choices=("free", "prior"),
+    ap.add_argument("--drift", action="store_true",
                     help="sliding window: refit the wearing part (only) with a linear drift "
                          "over each window (as --window-drift part), its estimate at the "
-                         "window end; the rate fitted per window (free, default) or that of "
-                         "the last estimates (prior)")
+                         "window end")
     ap.add_argument("--window-drift", default=None, metavar="NAMES",
                     help="sliding window: parameters fitted with a linear drift over each "
                          "window (WindowConfig.drift): comma-separated names, 'part' (the "
                          "wearing part) or 'none' (constant window); default the monitor's "
                          "(every free damper and spring of the struts)")
-    ap.add_argument("--drift-solver", default=None, choices=("linear", "gauss-newton"),
-                    help="WindowConfig.drift_solver (default linear)")
     ap.add_argument("--drift-rate-sd", type=float, default=None, metavar="PER_S",
-                    help="with --drift free: prior sd of each window's relative rate around "
+                    help="with a drift: prior sd of each window's relative rate around "
                          "the recent estimates' (WindowConfig.drift_rate_sd; 0: none)")
     ap.add_argument("--drift-chunk", type=float, default=None, metavar="S",
                     help="with --drift: chunk over which the drift is held constant "
                          "(WindowConfig.drift_chunk_s)")
     ap.add_argument("--solver-check", action="store_true",
                     help="run both drift solvers on every window (first-order and "
-                         "Gauss-Newton, WindowConfig.drift_solver) and print how far apart "
+                         "Gauss-Newton, SlidingWindowIdentifier.first_order_drift) and print "
+                         "how far apart "
                          "their end values are, in stated stderr, and their CPU")
     args = ap.parse_args(argv)
     cases = CASES[:args.cases]
@@ -302,10 +299,6 @@ def main(argv: list[str] | None = None) -> int:
             names = tuple(x.strip() for x in wd.split(",") if x.strip())
             o["drift"] = ((c.part,) if names == ("part",) else
                           () if names in ((), ("none",)) else names)
-        if args.drift:
-            o["drift_rate"] = args.drift
-        if args.drift_solver is not None:
-            o["drift_solver"] = args.drift_solver
         if args.drift_rate_sd is not None:
             o["drift_rate_sd"] = args.drift_rate_sd
         if args.drift_chunk is not None:

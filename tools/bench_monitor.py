@@ -68,8 +68,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 FIX = ["--fix", "m1=300", "--fix", "m2=40", "--fix", "c2=300", "--fix", "k2=200000"]
-#: further options of the end-to-end monitor runs (``--window-drift``)
+#: further options of the end-to-end monitor runs (a ``--config`` with ``--window-drift``)
 EXTRA: list[str] = []
+#: the window drift of the in-process runs (``--window-drift``; empty: the monitor's default)
+DRIFT: list[tuple[str, ...]] = []
 
 
 def _rss_mb() -> float:
@@ -223,6 +225,7 @@ def bench_windows(repeat: int = 3) -> dict[str, Any]:
     """CPU of the window fits alone (tracking, inspection, JSON lines), min of ``repeat``."""
     from estimator.identify import Parameters
     from estimator.stream.compare import metrics, run_one
+    from estimator.stream.config import WindowOptions
     from estimator.stream.pipeline import monitor_spec
     from suspid.models import get_model
 
@@ -233,9 +236,8 @@ def bench_windows(repeat: int = 3) -> dict[str, Any]:
         fix = {k: s.nominal[k] for k in ("m1", "m2", "c2", "k2")}
         params = Parameters.for_model(m, fix=fix)
         nominal = {k: s.nominal[k] for k in params.free}
-        overrides = ({"drift": () if EXTRA[1] == "none" else tuple(EXTRA[1].split(","))}
-                     if EXTRA else None)
-        spec = monitor_spec(m, fix=fix, nominal=nominal, fs=fs, window_overrides=overrides)
+        window = WindowOptions(drift=DRIFT[0]) if DRIFT else None
+        spec = monitor_spec(m, fix=fix, nominal=nominal, fs=fs, window=window)
         data = {k: s.data[k] for k in ("x1", "x2", "x1_ddot", "r", "r_dot")}
         best = None
         for _ in range(max(1, repeat)):
@@ -385,10 +387,15 @@ def main(argv: list[str] | None = None) -> int:
                     help="replay, windows, evaluations: runs (fastest kept)")
     ap.add_argument("--json", action="store_true", help="print one JSON object")
     ap.add_argument("--window-drift", default=None, metavar="NAMES",
-                    help="replay, windows: pass --window-drift NAMES to the monitor runs ('none': "
+                    help="replay, windows: the monitor runs with [window] drift = NAMES ('none': "
                          "constant windows; default: the monitor's default)")
     a = ap.parse_args(argv)
-    EXTRA[:] = ["--window-drift", a.window_drift] if a.window_drift else []
+    if a.window_drift:
+        names = () if a.window_drift == "none" else tuple(a.window_drift.split(","))
+        DRIFT[:] = [names]
+        config = Path(tempfile.mkdtemp()) / "drift.toml"
+        config.write_text("[window]\ndrift = [" + ", ".join(f'"{n}"' for n in names) + "]\n")
+        EXTRA[:] = ["--config", str(config)]
     out: dict[str, Any] = {}
     with tempfile.TemporaryDirectory() as d:
         if a.what in ("replay", "all"):

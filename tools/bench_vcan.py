@@ -33,7 +33,7 @@ from typing import Any
 from estimator.decode import DecodeListener
 from estimator.stream.drivers import CanWindowDriver, LiveStop, bus_frame_rate, run_bus
 from suspid.can.bus import open_bus
-from suspid.can.options import RECEIVE_BUFFER_S
+from estimator.stream.drivers import RECEIVE_BUFFER_S
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -71,11 +71,13 @@ def live_monitor(out: Path) -> tuple[list[dict], dict, float]:
     th.start()
     alert_file = out / "alerts.jsonl"
     alert_file.unlink(missing_ok=True)
+    # the live bus: stop 3 s after the node's last frame (docs/configuration.md)
+    config = out / "live.toml"
+    config.write_text("[live]\nidle_timeout_s = 3\n")
     try:
         text = run_cli(["monitor", "--model", "quarter2", "--interface", "virtual", "--channel",
-                        channel, *FIX, "--road", "unknown", "--jsonl", "--idle-timeout", "3",
-                        "--alert-file",
-                        str(alert_file)])
+                        channel, *FIX, "--road", "unknown", "--jsonl", "--config", str(config),
+                        "--alert-file", str(alert_file)])
         monitor_done.set()
         th.join(30)
     finally:

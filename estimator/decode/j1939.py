@@ -10,7 +10,7 @@ statistics apply unchanged; the source address stays known per message (``frames
 
 One sender per parameter group is decoded: two controllers sending the same PGN (two speeds,
 two engine controllers) interleaved would be one stream of two signals. With
-``source`` (``--j1939-source ADDR``) only that address is decoded; without it the first
+``source`` (``can.j1939_source ADDR``) only that address is decoded; without it the first
 sender of each PGN in the stream is, and a warning names every sender with its frames and
 the one used. Frames of another sender are counted (``other_source``), not decoded.
 
@@ -37,7 +37,7 @@ TOP_PGNS = 5
 
 
 def parse_source(text: str | int | None) -> int | None:
-    """``--j1939-source`` as an address: ``0x47``, ``71`` (0..253); ``None`` for none given.
+    """``can.j1939_source`` as an address: ``0x47``, ``71`` (0..253); ``None`` for none given.
 
     Raises
     ------
@@ -50,10 +50,10 @@ def parse_source(text: str | int | None) -> int | None:
         try:
             value = int(str(text).strip(), 0)
         except ValueError:
-            raise UsageError(f"--j1939-source {text!r}: expected a source address 0..253 "
+            raise UsageError(f"can.j1939_source {text!r}: expected a source address 0..253 "
                              "(decimal or 0x hex, e.g. 0x00)") from None
     if value is not None and not 0 <= value <= MAX_SOURCE:
-        raise UsageError(f"--j1939-source {text!r}: expected a source address 0..253, got "
+        raise UsageError(f"can.j1939_source {text!r}: expected a source address 0..253, got "
                          f"{value}")
     return value
 
@@ -80,7 +80,7 @@ class J1939Match:
     table : dict
         PGN -> (DBC frame ID, message name) (:func:`j1939_messages`).
     source : int, optional
-        Decode only this source address (``--j1939-source``).
+        Decode only this source address (``can.j1939_source``).
 
     Attributes
     ----------
@@ -116,7 +116,7 @@ class J1939Match:
         table = j1939_messages(db)
         if not table:
             if addr is not None:
-                raise UsageError(f"--j1939-source {source}: "
+                raise UsageError(f"can.j1939_source {source}: "
                                  f"{getattr(db, 'suspid_path', 'the DBC')} has no J1939 message "
                                  "(ProtocolType J1939 or VFrameFormat J1939PG)")
             return None
@@ -198,7 +198,7 @@ class J1939Match:
         return {"messages": msgs, "other_source": self.other_source}
 
     def warnings(self, where: str, mapped: set[str]) -> list[str]:
-        """One line per mapped message sent by several sources without ``--j1939-source``."""
+        """One line per mapped message sent by several sources without ``can.j1939_source``."""
         out = []
         for name, per in self.senders.items():
             if name not in mapped or len(per) < 2 or self.source is not None:
@@ -207,7 +207,7 @@ class J1939Match:
             listed = ", ".join(f"{sa:#04x} ({n} frames)" for sa, n in sorted(per.items()))
             out.append(f"{where}: J1939 {name} (PGN {self._pgn(name)}) is sent by {len(per)} "
                        f"sources, {listed}; decoded {used:#04x} (the first), the others "
-                       "not; choose one with --j1939-source ADDR")
+                       "not; choose one with the --config file's can.j1939_source")
         return out
 
     def _pgn(self, name: str) -> int:
@@ -224,7 +224,7 @@ class J1939Match:
                 got = ", ".join(f"{sa:#04x} ({n} frames)"
                                 for sa, n in sorted(self.senders[name].items()))
                 parts.append(f"{name} (PGN {self._pgn(name)}) is sent by {got}, not by "
-                             f"--j1939-source {self.source:#04x}")
+                             f"can.j1939_source {self.source:#04x}")
         top = sorted(self.pgns.items(), key=lambda kv: (-kv[1], kv[0]))[:TOP_PGNS]
         names = {p: n for p, (_f, n) in self.table.items()}
         have = ", ".join(f"{p} ({names[p] + ', ' if p in names else ''}{n} frames)"

@@ -62,7 +62,7 @@ def channel_notes(path: str | Path, stats: ReadStats, keys: Iterable[int],
     keys : iterable of int
         Frame keys (CAN ID, bit 31 for an extended one) of the sensor's data messages.
     channel : str or None
-        The channel asked for (``--can-channel``), ``None`` for every channel.
+        The channel asked for (``can.channel``), ``None`` for every channel.
 
     Returns
     -------
@@ -86,7 +86,7 @@ def channel_notes(path: str | Path, stats: ReadStats, keys: Iterable[int],
         return extra, []
     return extra, [f"{path}: the sensor's messages are on {len(carrying)} bus channels, "
                    f"{describe_channels(carrying)}, and were decoded together; choose one "
-                   "with --can-channel CH"]
+                   "with the --config file's can.channel"]
 
 
 def summarize_gaps(aligned: Aligned) -> list[str]:

@@ -418,7 +418,7 @@ class RoadFreeEKFEstimator:
 
 def make_roadfree_ekf_estimator(spec: Any, channels: list[str], fs: float) -> RoadFreeEKFEstimator:
     """The road-unknown EKF of a :class:`~estimator.stream.pipeline.MonitorSpec`: every free
-    strut damper and spring in the state (``--ekf-params`` narrows it, the others held)."""
+    strut damper and spring in the state (``ekf.params`` narrows it, the others held)."""
     params = spec.params.copy()
     if spec.ekf_params:
         for k in params.free:

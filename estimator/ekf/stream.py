@@ -8,7 +8,7 @@ its parameter state and standard deviations at the window end.
 A fair baseline gets what the sliding window gets:
 
 free parameters
-    every free damper and spring is in the filter's state (``--ekf-params`` narrows it); a
+    every free damper and spring is in the filter's state (``ekf.params`` narrows it); a
     free parameter the filter cannot estimate (a mass, a length: not affine in its
     matrices) is *held* at its starting value and every estimate says so, with the reason
     (``held``).
@@ -445,7 +445,7 @@ def ekf_plan(model: SuspensionModel, free: Sequence[str], requested: Sequence[st
     free : sequence of str
         The free parameters (the sliding window estimates all of them).
     requested : sequence of str, optional
-        ``--ekf-params``; default every free damper and spring.
+        ``ekf.params``; default every free damper and spring.
 
     Returns
     -------
@@ -461,7 +461,7 @@ def ekf_plan(model: SuspensionModel, free: Sequence[str], requested: Sequence[st
             held[k] = (f"a {kind} is not affine in the model's matrices, so the augmented EKF "
                        "cannot carry it in its state; held at its starting value")
         elif requested is not None and k not in requested:
-            held[k] = "left out by --ekf-params; held at its starting value"
+            held[k] = "left out by ekf.params; held at its starting value"
         else:
             aug.append(k)
     return aug, held

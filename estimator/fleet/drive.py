@@ -69,15 +69,15 @@ class IdentifySettings:
     multistart : int
     polish : bool
     data_start : bool
-        Also start from the data-driven estimate (``identify``'s default; ``--no-data-start``).
+        Also start from the data-driven estimate (``identify``'s default; ``[fit] data_start``).
     dbc : str or None
         DBC path for CAN logs (``None``: suspid's bundled DBC).
     signal_map : SignalMap or None
-        ``--map``/``--map-file`` mapping, as ``identify`` resolves it.
+        ``--map`` / ``--config`` ``[map]`` mapping, as ``identify`` resolves it.
     can_channel : str or None
-        ``--can-channel``: the bus channel of multi-bus logs to decode (``None``: all).
+        ``can.channel``: the bus channel of multi-bus logs to decode (``None``: all).
     j1939_source : str or None
-        ``--j1939-source``: the J1939 source address decoded (``None``: the first sender).
+        ``can.j1939_source``: the J1939 source address decoded (``None``: the first sender).
     offset : {"remove", "keep"}
         ``--offset``: a constant road or position offset found in a drive is subtracted
         before the fit (default) or the drive is fitted as it is; either way it is named.

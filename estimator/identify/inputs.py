@@ -52,11 +52,11 @@ def read_input(path: str | Path, model: SuspensionModel,
     signal_map : optional
         The user's signal map for a foreign DBC.
     channel : str, optional
-        The bus channel of a multi-bus CAN log to decode (``--can-channel``; see
+        The bus channel of a multi-bus CAN log to decode (``can.channel``; see
         :func:`estimator.decode.log_input.load_log_as_measurement`); a CSV has none (a
         warning says it was not used).
     j1939_source : str, optional
-        ``--j1939-source``: the source address decoded from a J1939 DBC's parameter groups.
+        ``can.j1939_source``: the source address decoded from a J1939 DBC's parameter groups.
 
     Returns
     -------
@@ -76,7 +76,7 @@ def read_input(path: str | Path, model: SuspensionModel,
     if p.suffix.lower() in CSV_SUFFIXES:
         meas, frames = read_measurement(p, model), None
         if channel is not None:
-            meas.warnings.append(f"{p}: --can-channel {channel} not used: a measurement CSV "
+            meas.warnings.append(f"{p}: can.channel {channel} not used: a measurement CSV "
                                  "has no bus channels (the option selects one bus of a CAN log)")
     else:
         formats = importlib.import_module(CAN_FORMATS)

@@ -88,7 +88,7 @@ def identify_record(problem: OutputErrorProblem, params: Parameters, *, restarts
         Settings of every :func:`~estimator.identify.solver.fit` (``identify``'s options of
         the same names; ``maxfev`` in model evaluations).
     data_start : bool
-        Start from the data-driven estimate too (``--no-data-start`` turns it off).
+        Start from the data-driven estimate too (``[fit] data_start = false`` of ``--config`` turns it off).
     keep_init : bool
         Also fit from ``params`` (``identify``: an ``--init`` given, or no data-driven
         start); see :func:`~estimator.identify.start.fit_from_starts`.

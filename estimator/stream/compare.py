@@ -36,7 +36,7 @@ from __future__ import annotations
 import csv
 import math
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -44,6 +44,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from estimator.decode import load_log_as_measurement
+from estimator.stream.config import AlertOptions, EkfOptions, WindowOptions
 from estimator.stream.drivers import run_arrays
 from estimator.stream.pipeline import (MonitorSpec, build_monitor,
                                        make_estimator, monitor_spec)
@@ -171,7 +172,7 @@ def load_stream(model: SuspensionModel, path: str | Path, dbc: Path | None = Non
                 channel: str | None = None, j1939_source: str | None = None
                 ) -> tuple[FloatArray, dict[str, FloatArray], dict[str, FloatArray] | None]:
     """``(t, data, truth or None)`` of a CAN log (its bus ``channel`` only, when given) or
-    measurement CSV and its truth file (``j1939_source``: ``--j1939-source``)."""
+    measurement CSV and its truth file (``j1939_source``: ``can.j1939_source``)."""
     p = require_file(str(path))
     if is_can_log(p):
         meas, _ = load_log_as_measurement(p, model, dbc, signal_map, channel=channel,
@@ -201,19 +202,17 @@ def load_stream(model: SuspensionModel, path: str | Path, dbc: Path | None = Non
 def compare(model: SuspensionModel, t: FloatArray, data: Mapping[str, FloatArray],
             truth: Mapping[str, FloatArray] | None, *, fix: Mapping[str, float],
             nominal: Mapping[str, float] | None = None, init: Mapping[str, float] | None = None,
-            alert_drop: float = 0.3, window: float | None = None, step: float | None = None,
-            ekf_params: list[str] | None = None, ekf_q: float | None = None,
-            ekf_decimate: int | None = None, forecast_horizon: float | None = None,
-            source: str = "", window_options: Mapping[str, Any] | None = None,
+            window: WindowOptions | None = None, alert: AlertOptions | None = None,
+            ekf: EkfOptions | None = None, source: str = "",
             road: str | None = None) -> tuple[dict[str, Any], list[RunRecord]]:
     """The sliding window and the EKF on one stream, on the same footing.
 
     Both get the same free parameters, starting values (``init``, else ``nominal``, else
     the defaults -- the EKF then starts from the first window's estimate, as the sliding
-    window does), windows, alert rule and forecast horizon. ``window_options`` overrides
-    fields of the sliding window's :class:`~estimator.stream.config.WindowConfig` (e.g.
-    ``road_fusion_hz``). ``road`` is ``--road`` (``None``: ``measured`` when the stream
-    carries every road, else ``unknown``, named in the report's ``warnings``); with
+    window does), windows, alert rule and forecast horizon (``window``, ``alert``: as
+    :func:`~estimator.stream.pipeline.monitor_spec` takes them; the window's tuning fields
+    apply to the sliding window). ``road`` is ``--road`` (``None``: ``measured`` when the
+    stream carries every road, else ``unknown``, named in the report's ``warnings``); with
     ``unknown`` both run on the body equations (:mod:`estimator.stream.roadfree`,
     :mod:`estimator.ekf.roadfree`). Returns the report (one JSON object) and the two run
     records.
@@ -231,17 +230,18 @@ def compare(model: SuspensionModel, t: FloatArray, data: Mapping[str, FloatArray
                          f"({', '.join(model.roads)}); give --road unknown for body "
                          "accelerations and ride heights")
     fs = 1.0 / float(np.median(np.diff(t)))
-    kw: dict[str, Any] = dict(fix=fix, nominal=nominal, init=init, alert_drop=alert_drop,
-                              window=window, step=step, fs=fs, inspection=False,
-                              ekf_params=ekf_params, ekf_q=ekf_q, ekf_decimate=ekf_decimate,
-                              road=road)
-    if forecast_horizon is not None:
-        kw["forecast_horizon"] = forecast_horizon
-    nm_spec = monitor_spec(model, baseline="nm", **kw)
+    wo = window or WindowOptions()
+    alert = alert or AlertOptions()
+    ekf = ekf or EkfOptions()
+    kw: dict[str, Any] = dict(fix=fix, nominal=nominal, init=init, alert=alert, fs=fs,
+                              inspection=False, ekf=ekf, road=road)
+    nm_spec = monitor_spec(model, baseline="nm", window=wo, **kw)
     warnings += nm_spec.warnings
-    if window_options:
-        nm_spec = replace(nm_spec, config=replace(nm_spec.config, **dict(window_options)))
-    ekf_spec = monitor_spec(model, baseline="ekf", **kw)
+    # the EKF shares the sliding window's length and step (its alert persistence), not its
+    # fit tuning
+    ekf_spec = monitor_spec(model, baseline="ekf",
+                            window=WindowOptions(window_s=wo.window_s, step_s=wo.step_s), **kw)
+    alert_drop = alert.drop
     rec_nm = run_one(nm_spec, t, data)
     rec_ekf = run_one(ekf_spec, t, data)
     n = int(t.size)
@@ -256,7 +256,7 @@ def compare(model: SuspensionModel, t: FloatArray, data: Mapping[str, FloatArray
                    "road_lowpass_hz": cfg.road_lowpass_hz},
         "ekf": {"augmented": rec_ekf.summary.get("augmented"),
                 "held": rec_ekf.summary.get("held"),
-                "q_param": ekf_q if ekf_q is not None else 0.005},
+                "q_param": ekf.q if ekf.q is not None else 0.005},
         "nominal": dict(nm_spec.nominal),
         "start": {k: nm_spec.params[k].value for k in nm_spec.nominal},
         "alert_drop": alert_drop, "forecast_horizon_s": nm_spec.forecast_horizon_s,
@@ -267,10 +267,23 @@ def compare(model: SuspensionModel, t: FloatArray, data: Mapping[str, FloatArray
 
 
 def plot(path: str | Path, t: FloatArray, truth: Mapping[str, FloatArray] | None, recs: list[RunRecord],
-         param: str, nominal: float, drop: float) -> None:
-    """One figure: the parameter's tracks (with 2-sigma bands) against the truth and limit."""
-    fig = Figure(figsize=(9, 4.5))
-    ax = fig.subplots()
+         nominal: Mapping[str, float], drop: float) -> None:
+    """One figure, one panel per monitored parameter (``nominal``'s keys): its tracks (with
+    2-sigma bands) against the truth and the alert limit ``(1 - drop) x nominal``."""
+    names = list(nominal)
+    fig = Figure(figsize=(9, 3.2 * max(1, len(names)) + 0.6))
+    axes = fig.subplots(max(1, len(names)), 1, sharex=True, squeeze=False)[:, 0]
+    for ax, param in zip(axes, names):
+        _plot_param(ax, t, truth, recs, param, nominal[param], drop)
+    axes[-1].set_xlabel("data time t (s)")
+    fig.suptitle("sliding-window Nelder-Mead vs EKF (bands: +/- 2 stderr)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def _plot_param(ax: Any, t: FloatArray, truth: Mapping[str, FloatArray] | None,
+                recs: list[RunRecord], param: str, nominal: float, drop: float) -> None:
+    """One panel of :func:`plot`: ``param``'s tracks, truth and alert limit on ``ax``."""
     if truth is not None and param in truth:
         ax.plot(t, truth[param], "k-", lw=1.5, label=f"true {param}")
     ax.axhline((1 - drop) * nominal, color="r", ls="--", lw=1,
@@ -296,11 +309,7 @@ def plot(path: str | Path, t: FloatArray, truth: Mapping[str, FloatArray] | None
                 ax.axvline(a.t, color=c, ls=":", lw=1.5)
                 ax.annotate(f"{rec.name} alert", (a.t, (1 - drop) * nominal), color=c,
                             rotation=90, va="bottom", ha="right", fontsize=8)
-    ax.set_xlabel("data time t (s)")
     unit = "N s/m" if param.startswith("c") else ("N/m" if param.startswith("k") else "")
     ax.set_ylabel(f"{param} ({unit})" if unit else param)
-    ax.set_title(f"{param}: sliding-window Nelder-Mead vs EKF (bands: +/- 2 stderr)")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="best")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)

@@ -1,64 +1,20 @@
 """Window configuration of the streaming identifier and its defaults from the physics.
 
-Defaults are derived from the modes of the model at the nominal parameters (eigenvalues
-``lambda_i`` of ``A``; natural frequency ``w_i = |lambda_i|``, damping ratio
-``zeta_i = -Re(lambda_i) / |lambda_i|``, damped period ``T_i = 2 pi / Im(lambda_i)``,
-decay time ``tau_i = 1 / (zeta_i w_i)``):
-
-``window_s``
-    ``max(3 T_slow, 6 tau_slow)`` rounded up to 0.5 s, where *slow* is the mode of lowest
-    natural frequency (the body bounce): three oscillations and six decay times of the
-    slowest mode in every window make its damping visible, while the window stays short
-    because a window's estimate describes its middle -- it lags a drifting parameter by
-    ``window_s / 2``, which is most of the alert delay. quarter2 defaults (body mode
-    1.26 Hz, zeta 0.27, T 0.83 s, tau 0.47 s): 3.0 s.
-``step_s``
-    ``window_s / 2`` rounded to 0.05 s (1.5 s for quarter2): every sample is fitted twice;
-    a third of the window would cut the alert delay by ~0.5 s for 50 % more CPU (every sample is fitted three times; the estimate
-    lags the truth by about half a window).
-``decimate``
-    keep every ``d``-th sample with ``d = max(1, floor(fs / (20 f_fast)))``: at least 20
-    samples per period of the fastest mode (the wheel hop, 11.8 Hz for quarter2), so the
-    first-order-hold road assumption of the exact simulator stays accurate (250 Hz of a
-    500 Hz stream).
-``road_fusion_hz``
-    ``1.5 f_fast`` (31 Hz for the stiff quarter car, 17.5 Hz for quarter2's defaults): the
-    road displacement fed to each window's fit is the measured ``r`` below it and the
-    integral of the measured ``r'`` above it (:func:`estimator.stream.window.fuse_road`;
-    only when ``r'`` is in the stream). Noise on ``r`` reaches the fit through its slope
-    (the tyre damping), above all at high frequency, while ``r'`` carries no such
-    amplification; a crossover above the wheel hop keeps the integral short (a few tens of
-    ms, no drift) and leaves the suspension's band to ``r``. Measured on the held-out streams
-    (``tools/bench_maintenance.py``, docs/monitoring.md): c1 RMSE 4.09 -> 2.84 % at 5 %
-    noise on every channel, 1.75 -> 1.52 % at 2 %; at 3 f_fast 2.92 and 1.84 %.
-``xatol``, ``warm_adaptive``, ``gauss_newton_step``, ``gauss_newton_steps``, ``first_restarts``
-    Nelder-Mead's simplex-size tolerance (log units) is 2e-3; with ten or more free
-    parameters (:data:`MANY_FREE`; the full car's twelve dampers, springs and tyres) it is
-    7e-3 (:data:`XATOL_MANY_FREE`), warm windows use Nelder-Mead's standard coefficients
-    instead of the dimension-adapted ones, the first window runs Nelder-Mead once (no
-    restart), and on every window up to three Gauss-Newton steps
-    (:data:`GAUSS_NEWTON_STEPS_MANY_FREE`) on one forward-difference Jacobian at
-    Nelder-Mead's best vertex finish the fit; that Jacobian also gives the window's stderr.
-    In twelve dimensions each halving of the simplex costs Nelder-Mead many evaluations,
-    and its simplex is small long before it is at the optimum (at 7e-3 a median 1.3 %,
-    at most 5.5 %, from where the steps end). Measured on the full car's maintenance
-    stream (``tools/bench_maintenance.py --only full7``, docs/monitoring.md): 45
-    evaluations per warm window instead of 120 (4e-3 and one step) or 220 (2e-3), 400
-    instead of 949 on the first window, the estimates 0.003 % RMS from each window's exact
-    optimum (0.008 % with 4e-3 and one step), c1 RMSE, alert and first forecast unchanged.
-    Reaching the window optimum is what keeps the faster wear of
-    ``tests/stream/test_maintenance.py::test_full7_wearing_stream_through_compare``'s first
-    forecast interval holding the crossing (4e-3 without a step, or 7e-3 with steps
-    refused beyond 2 %, miss it).
-``maxfev`` / ``first_maxfev``
-    Nelder-Mead evaluation budget of a warm-started window (default ``40 n_free``) and of
-    the first, cold-started one (``250 n_free``). Every window reports the evaluations used.
+Defaults come from the modes of the model at the nominal parameters (:func:`default_config`):
+the window holds three periods and six decay times of the slowest mode, the step is half the
+window, the decimation keeps 20 samples per period of the fastest mode, the road fusion
+crosses over at 1.5 times the highest natural frequency, and models with ten or more free
+parameters get a looser simplex tolerance finished by Gauss-Newton steps. The rules, the
+numbers they give and the measurements behind each choice (with the commands that reproduce
+them): ``docs/monitoring.md``, "Windows: defaults from the system's time constants" and
+"Predictive-maintenance benchmark". The user-facing settings are the ``[window]`` table of
+a ``--config`` file (``docs/configuration.md``), given here as :class:`WindowOptions`.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Mapping
+from dataclasses import dataclass, fields
+from typing import Any, Mapping
 
 
 from estimator.identify.record import OFFSET_MODES
@@ -84,7 +40,7 @@ MAX_SPAN_S = 1000.0
 
 @dataclass
 class WindowConfig:
-    """Sliding-window settings (see the module docstring for the defaults).
+    """Sliding-window settings (defaults: :func:`default_config`, ``docs/monitoring.md``).
 
     Attributes
     ----------
@@ -101,11 +57,8 @@ class WindowConfig:
     xatol : float
         Nelder-Mead simplex size tolerance in log-parameter units (2e-3 = 0.2 %, 2.5 times
         below the default ``sigma_floor``, so below every reported stderr); the only
-        termination test besides the budget. Measured on the damper-wear streams against
-        fits to 1e-6: the estimates are within 0.06 % RMS (0.12 stderr) of the exact window
-        optimum; 2.5e-3 saves ~1.5 evaluations per window but doubles that error. The
-        monitor's default (:func:`default_config`) is 7e-3 with ten or more free
-        parameters (module docstring: measured on the full car).
+        termination test besides the budget. The monitor's default (:func:`default_config`)
+        is 7e-3 with ten or more free parameters (measurements: ``docs/monitoring.md``).
     warm_step : float
         Edge (log units) of the warm-start simplex per parameter, at least; the simplex is
         axis-aligned and centred on the extrapolated start (0.003 = 0.3 %, 1.5 ``xatol``:
@@ -118,15 +71,14 @@ class WindowConfig:
         0.5). The adapted coefficients keep a large simplex in many dimensions from
         stalling; a warm window's simplex is a few stderr across around a good
         prediction, where the standard ones converge in fewer evaluations. The monitor's
-        default (:func:`default_config`) is ``False`` with ten or more free parameters
-        (module docstring).
+        default (:func:`default_config`) is ``False`` with ten or more free parameters.
     gauss_newton_step : bool
         After Nelder-Mead on a warm window, Gauss-Newton steps on one forward-difference
         Jacobian at its best vertex, each kept while it lowers the cost (``n_free``
         evaluations for the Jacobian, one per step;
         :meth:`~estimator.stream.windowfit.WindowFit.gauss_newton`); that Jacobian
         also gives the window's stderr. The monitor's default is on with ten or more free
-        parameters (module docstring).
+        parameters.
     gauss_newton_steps : int
         Most Gauss-Newton steps on that Jacobian (default 1; the monitor's default with
         ten or more free parameters: 3).
@@ -140,29 +92,22 @@ class WindowConfig:
         Skip a window when the RMS suspension deflection (or, without a wheel channel, body
         motion) is below this (m) ...
     min_snr : float
-        ... or below ``min_snr`` times the noise floor estimated from the data (3: at 2 %
-        sensor noise on a stiff suspension the deflection is 14-19 times its noise floor, at
-        5 % 3.7-5, and those windows identify c1 to 2-4 %; the former 20 skipped nine in ten
-        windows at 2 %, tools/bench_maintenance.py; a parked car's deflection is noise, ~1).
+        ... or below ``min_snr`` times the noise floor estimated from the data (default 3,
+        above a parked car's ~1; why 3: ``docs/monitoring.md``).
     sigma_floor : float
         Relative standard error added in quadrature to every window's stderr (model error,
-        within-window drift); 0.005 = 0.5 %, 2.5 x the RMS error of the window
-        estimates against the truth at the window centre on the damper-wear stream.
+        within-window drift); default 0.005 = 0.5 % (``docs/monitoring.md``).
     cost : str
         ``"sse"`` (positions) or ``"frobenius"`` (every measured channel).
     road_fusion_hz : float
         Crossover (Hz) of the complementary filter that builds each road displacement fed to
         the fit from its measured displacement (below) and the integral of its measured
         velocity (above), when both are in the stream (:func:`estimator.stream.window.fuse_road`);
-        0 uses the measured displacement as it is. Default from the model: ``1.5 f_fast``
-        (module docstring).
+        0 uses the measured displacement as it is. Default from the model: ``1.5 f_fast``.
     road_lowpass_hz : float
         Cutoff (Hz, -6 dB) of a zero-phase Butterworth low-pass applied to each road
         displacement fed to the fit, after the fusion (:func:`estimator.stream.window.lowpass_road`);
-        0 (default): none. Alone (fusion off) at 3 f_fast it cuts the 5 % noise stream's c1
-        RMSE from 4.09 to 3.27 %, but removes true road content the tyre damping responds
-        to: the quantization-only demo stream's c1 RMSE rises from 0.16 to 0.22 %
-        (docs/monitoring.md).
+        0 (default): none (it also removes true road content; ``docs/monitoring.md``).
     drift : tuple of str
         Free parameters refitted on each window with a linear drift,
         ``theta(t) = theta_end (1 + g (t - t_end))`` (``g`` one extra free parameter each),
@@ -172,31 +117,14 @@ class WindowConfig:
         free damper and spring of the struts (:func:`strut_parameters`).
     drift_chunk_s : float
         Chunk length (s) over which the drifting parameters are held constant in the
-        drift fit (one matrix exponential per chunk; 0.2 s measured as accurate as 0.1 s
-        at less CPU: ratio to the EKF's 0.41 against 0.52 on the README demo's stream).
+        drift fit (one matrix exponential per chunk; default 0.2 s, ``docs/monitoring.md``).
     drift_iterations : int
-        Largest number of Gauss-Newton steps of the drift fit (``drift_solver="gauss-newton"``).
-    drift_rate : str
-        ``"free"``: each window fits its drift rate; ``"prior"``: the rate is that of the
-        last (up to 3) estimates, only the end value is fitted.
+        Largest number of Gauss-Newton steps of the drift fit where its first-order solve
+        does not apply (:attr:`~estimator.stream.window.SlidingWindowIdentifier.first_order_drift`).
     drift_rate_sd : float
-        With ``drift_rate="free"``: standard deviation (relative, 1/s) of a prior on each
-        window's rate centred on that of the last estimates (once there are two); 0: no
-        prior. 0.005 (0.5 %/s): without it the rate fitted on one window at 5 % sensor
-        noise scatters so much that the end value is worse than the middle one
-        (``tools/bench_maintenance.py --drift``, docs/monitoring.md).
-    drift_solver : str
-        ``"linear"`` (default): the drift fit to first order around the constant fit, from
-        the sensitivities of the constant window (one linear least-squares solve, no
-        evaluation of the drifting window); ``"gauss-newton"``: Gauss-Newton steps on the
-        chunked drifting window with forward differences (the reference; also the fallback
-        when the linear one does not apply). Measured on every window of the bench streams
-        (``tools/bench_maintenance.py --solver-check``): end values within 0.03-0.07 of
-        their stated stderr RMS (0.18 on the quantization-only demo60), ~15-20 x less CPU.
-    drift_refine : int
-        With ``drift_solver="linear"``: chord steps on the chunked drifting window after
-        the first-order solve (one evaluation each); 0 (default): none (one step moved the
-        demo60 end values 15 % closer to the Gauss-Newton ones, at 2.5 x the drift fit's CPU).
+        Standard deviation (relative, 1/s) of a prior on each window's drift rate centred on
+        that of the last estimates (once there are two); 0: no prior. Default 0.005
+        (0.5 %/s; why: ``docs/monitoring.md``).
     offset : str
         A constant offset in a road column or a measured position channel (a sensor zero not
         at the rest position, :mod:`estimator.identify.offset`) is looked for on each cold
@@ -227,10 +155,7 @@ class WindowConfig:
     drift: tuple[str, ...] = ()
     drift_chunk_s: float = 0.2
     drift_iterations: int = 3
-    drift_rate: str = "free"
     drift_rate_sd: float = 0.005
-    drift_solver: str = "linear"
-    drift_refine: int = 0
     offset: str = "remove"
 
     def validate(self) -> None:
@@ -245,26 +170,132 @@ class WindowConfig:
                              f"the {MAX_SPAN_S:g} s a monitor's decoder buffers (at up to 2 kHz); "
                              "give a shorter --window or --step, or use identify for a whole record")
         if self.decimate < 1:
-            raise UsageError(f"--decimate: expected an integer >= 1, got {self.decimate}")
+            raise UsageError(f"window.decimate: expected an integer >= 1, got {self.decimate}")
         if self.offset not in OFFSET_MODES:
-            raise UsageError(f"--offset: expected one of {', '.join(OFFSET_MODES)}, "
+            raise UsageError(f"window.offset: expected one of {', '.join(OFFSET_MODES)}, "
                              f"got {self.offset!r}")
         if self.maxfev < 10 or self.first_maxfev < 10:
-            raise UsageError(f"--budget: expected at least 10 evaluations, got {self.maxfev}")
-        if self.drift_solver not in ("linear", "gauss-newton"):
-            raise UsageError(f"drift_solver: expected linear or gauss-newton, "
-                             f"got {self.drift_solver!r}")
-        if self.drift_rate not in ("free", "prior"):
-            raise UsageError(f"drift_rate: expected free or prior, got {self.drift_rate!r}")
+            raise UsageError(f"window.budget, window.first_budget: expected at least 10 "
+                             f"evaluations, got {self.maxfev}, {self.first_maxfev}")
         if self.drift and not (self.drift_chunk_s > 0 and self.drift_iterations >= 1):
             raise UsageError(f"drift: expected drift_chunk_s > 0 s and drift_iterations >= 1, "
                              f"got {self.drift_chunk_s} s and {self.drift_iterations}")
-        for opt, hz in (("--road-fusion", self.road_fusion_hz),
-                        ("--road-lowpass", self.road_lowpass_hz)):
+        for opt, hz in (("window.road_fusion_hz", self.road_fusion_hz),
+                        ("window.road_lowpass_hz", self.road_lowpass_hz)):
             if not (hz >= 0 and math.isfinite(hz)):
                 raise UsageError(f"{opt}: expected a frequency >= 0 Hz (0: off), got {hz}")
         if not 0 <= self.max_missing < 1:
             raise UsageError(f"max_missing must be in [0, 1), got {self.max_missing}")
+
+
+@dataclass
+class WindowOptions:
+    """The sliding window's settings a user gives; ``None`` takes the model's default.
+
+    The command line gives ``window_s`` and ``step_s`` (``--window``, ``--step``), the
+    ``[window]`` table of a ``--config`` file the rest (``docs/configuration.md``).
+    :func:`estimator.stream.pipeline.monitor_spec` derives the defaults
+    (:func:`default_config`) and applies these on top.
+
+    Attributes
+    ----------
+    window_s, step_s : float or None
+        Window length and step (s of data time).
+    decimate : int or None
+        Fit every ``decimate``-th sample.
+    maxfev, first_maxfev : int or None
+        Evaluation budgets (warm windows, first window).
+    sigma_floor, min_deflection, min_snr, road_fusion_hz, road_lowpass_hz : float or None
+        :class:`WindowConfig` fields of the same names (units there).
+    drift : tuple of str or None
+        Parameters fitted with a linear drift; ``()``: none; ``None``: every free damper
+        and spring of the struts.
+    drift_chunk_s, drift_rate_sd : float or None
+        :class:`WindowConfig` fields of the same names.
+    offset : {"remove", "keep"} or None
+    """
+
+    window_s: float | None = None
+    step_s: float | None = None
+    decimate: int | None = None
+    maxfev: int | None = None
+    first_maxfev: int | None = None
+    sigma_floor: float | None = None
+    min_deflection: float | None = None
+    min_snr: float | None = None
+    road_fusion_hz: float | None = None
+    road_lowpass_hz: float | None = None
+    drift: tuple[str, ...] | None = None
+    drift_chunk_s: float | None = None
+    drift_rate_sd: float | None = None
+    offset: str | None = None
+
+    def overrides(self) -> dict[str, Any]:
+        """The :class:`WindowConfig` fields given, other than the window, step and decimation
+        (which the defaults depend on)."""
+        return {f.name: getattr(self, f.name) for f in fields(self)
+                if f.name not in ("window_s", "step_s", "decimate")
+                and getattr(self, f.name) is not None}
+
+
+@dataclass
+class AlertOptions:
+    """The alert rule and forecast settings a user gives (``--alert-drop``, ``[alert]``).
+
+    Attributes
+    ----------
+    drop : float
+        Alert below ``(1 - drop) x nominal`` (fraction, default 0.3).
+    confidence : float
+        One-sided confidence of the bound (default 0.99).
+    persistence_s : float or None
+        Data time (s) a drop must persist (``None``: one window step).
+    hysteresis : float
+        Clear only above ``(1 - drop + hysteresis) x nominal`` (default 0.05).
+    forecast_horizon_s : float or None
+        Announce a predicted crossing due within this data time (s; ``None``: the
+        library's default, 60 s).
+    """
+
+    drop: float = 0.3
+    confidence: float = 0.99
+    persistence_s: float | None = None
+    hysteresis: float = 0.05
+    forecast_horizon_s: float | None = None
+
+
+@dataclass
+class EkfOptions:
+    """Settings of the EKF baseline (``[ekf]``); ``None`` takes the default.
+
+    Attributes
+    ----------
+    params : tuple of str or None
+        Parameters in the augmented state (default every free damper and spring).
+    q : float or None
+        Parameter random walk (relative per sqrt(s), default 0.005).
+    decimate : int or None
+        Run on every N-th sample (default 250 Hz or less).
+    """
+
+    params: tuple[str, ...] | None = None
+    q: float | None = None
+    decimate: int | None = None
+
+
+@dataclass
+class OutputOnlyOptions:
+    """Settings of the output-only mode (``[output_only]``).
+
+    Attributes
+    ----------
+    accel_channel : str or None
+        Body acceleration channel (default the body's ``_ddot``).
+    method : {"carma", "ar"}
+    """
+
+    accel_channel: str | None = None
+    method: str = "carma"
 
 
 def strut_parameters(model: SuspensionModel, params: Mapping[str, float],

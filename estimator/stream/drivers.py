@@ -25,8 +25,11 @@ from estimator.decode.replay import feed_log
 from estimator.stream.accumulator import WindowAccumulator
 from suspid.can.bus import LOSS_CLASSES, SocketcanReader
 from suspid.can.dbc import is_e2e
-from suspid.can.options import RECEIVE_BUFFER_S
 from suspid.models.base import FloatArray
+
+#: default length of the live receiver's buffer (s of data at the DBC's frame rate, at least
+#: a saturated 1 Mbit/s bus; :func:`receive_capacity`)
+RECEIVE_BUFFER_S = 10.0
 
 WindowFn = Callable[[FloatArray, Mapping[str, FloatArray]], Any]
 

@@ -245,7 +245,7 @@ class StreamMonitor:
             if n.kind == "misfit" and stage is not None and kept is not None:
                 # the likeliest cause is the one already found
                 n.message += (f". A sensor offset was found and kept: "
-                              f"{kept.describe(stage.model)} (--offset keep); --offset remove "
+                              f"{kept.describe(stage.model)} (window.offset = \"keep\"); \"remove\" "
                               "subtracts it")
                 n.fields["offset_kept"] = dict(kept.values)
             self.emit(n)

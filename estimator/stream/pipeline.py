@@ -40,16 +40,17 @@ from estimator.identify import Parameters
 from estimator.identify.inputs import CSV_SUFFIXES
 from estimator.identify.regrid import to_uniform_grid
 from estimator.identify.roadfree import ROAD_MODES, resolve_road
-from estimator.stream.config import (WindowConfig, default_config, default_decimation,
+from estimator.stream.config import (AlertOptions, EkfOptions, OutputOnlyOptions, WindowConfig,
+                                     WindowOptions, default_config, default_decimation,
                                      strut_parameters)
-from estimator.stream.drivers import CanWindowDriver, LiveStop, replay_log, run_arrays, run_bus
+from estimator.stream.drivers import (RECEIVE_BUFFER_S, CanWindowDriver, LiveStop, replay_log,
+                                      run_arrays, run_bus)
 from estimator.stream.events import Summary
 from estimator.stream.offsets import OffsetStage
 from estimator.stream.monitor import StreamMonitor
 from estimator.stream.roadfree import road_unknown_params, road_unknown_window
 from suspid.can.bus import open_bus
 from suspid.can.logs import LOG_FORMATS, ReadStats, is_can_log
-from suspid.can.options import RECEIVE_BUFFER_S
 from suspid.errors import InputError, UsageError, require_file
 from suspid.io.csvio import Measurement, read_measurement
 from suspid.models.base import FloatArray, SuspensionModel
@@ -101,7 +102,7 @@ class MonitorSpec:
     road : {"measured", "zero", "unknown"} or None
         ``--road``; ``None``: chosen on the first window (:func:`choose_road`), then set.
     drift_given : bool
-        ``--window-drift`` named parameters (a choice of the road unknown ignores it, warned).
+        ``window.drift`` named parameters (a choice of the road unknown ignores it, warned).
     """
 
     model: SuspensionModel
@@ -128,16 +129,11 @@ class MonitorSpec:
 def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = None,
                  nominal: Mapping[str, float] | None = None,
                  init: Mapping[str, float] | None = None, baseline: str = "nm",
-                 alert_drop: float = 0.3, confidence: float = 0.99,
-                 persistence: float | None = None, hysteresis: float = 0.05,
-                 window: float | None = None, step: float | None = None,
-                 window_overrides: Mapping[str, Any] | None = None,
-                 decimate: int | None = None, fs: float = 0.0, inspection: bool = True,
-                 forecast_horizon: float | None = None,
-                 ekf_params: list[str] | None = None, ekf_q: float | None = None,
-                 ekf_decimate: int | None = None, accel_channel: str | None = None,
-                 oo_method: str = "carma", road: str | None = None) -> MonitorSpec:
-    """Check the monitor's options and derive its defaults.
+                 road: str | None = None, window: WindowOptions | None = None,
+                 alert: AlertOptions | None = None, ekf: EkfOptions | None = None,
+                 output_only: OutputOnlyOptions | None = None, fs: float = 0.0,
+                 inspection: bool = True) -> MonitorSpec:
+    """Check the monitor's settings and derive its defaults.
 
     Parameters
     ----------
@@ -146,32 +142,29 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
         Known parameters; nominal values of monitored ones (also their start); starting
         values that differ from nominal (SI).
     baseline : {"nm", "ekf", "output_only"}
-    alert_drop, confidence, persistence, hysteresis
-        Alert settings (:class:`~estimator.alerts.AlertConfig`); ``persistence`` defaults
-        to one window step.
-    window, step : float, optional
-        Window length and step (s); defaults from the model's modes.
-    window_overrides : mapping, optional
-        Further :class:`WindowConfig` fields (``maxfev``, ``sigma_floor``, ...); ``drift``
-        defaults to every free damper and spring of the struts
-        (:func:`~estimator.stream.config.strut_parameters`), ``()`` turns it off.
-    decimate : int, optional
-    fs : float
-        Sample rate (Hz) when known (else the decimation is derived on the first window).
-    inspection : bool
-    forecast_horizon : float, optional
-        Data time (s) within which a predicted crossing is announced (default
-        :data:`~estimator.alerts.forecast.DEFAULT_HORIZON_S`, 60 s).
-    ekf_params, ekf_q, ekf_decimate
-        EKF state parameters (default every free damper and spring), parameter random walk
-        and decimation.
-    accel_channel, oo_method
-        Output-only channel (default the body's ``_ddot``) and method.
     road : {"measured", "zero", "unknown"}, optional
         ``--road``; ``None`` chooses on the first window (:func:`choose_road`). With
         ``unknown`` the free parameters outside the body equations are held
         (:func:`~estimator.stream.roadfree.road_unknown_params`), the window is at least
         :func:`~estimator.stream.roadfree.road_unknown_window` and the drift is off.
+    window : WindowOptions, optional
+        Window length, step, decimation and further :class:`WindowConfig` fields; unset
+        ones from the model's modes (:func:`~estimator.stream.config.default_config`);
+        ``drift`` defaults to every free damper and spring of the struts
+        (:func:`~estimator.stream.config.strut_parameters`), ``()`` turns it off.
+    alert : AlertOptions, optional
+        Alert rule (:class:`~estimator.alerts.AlertConfig`; ``persistence_s`` defaults to one
+        window step) and forecast horizon (default
+        :data:`~estimator.alerts.forecast.DEFAULT_HORIZON_S`, 60 s).
+    ekf : EkfOptions, optional
+        EKF state parameters (default every free damper and spring), parameter random walk
+        and decimation.
+    output_only : OutputOnlyOptions, optional
+        Output-only channel (default the body's ``_ddot``) and method.
+    fs : float
+        Sample rate (Hz) when known (else the decimation is derived on the first window).
+    inspection : bool
+        Virtual damper test on each quarter-car estimate.
 
     Returns
     -------
@@ -180,8 +173,18 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
     Raises
     ------
     UsageError
-        Naming the first inconsistent option.
+        Naming the first inconsistent setting.
     """
+    wo = window or WindowOptions()
+    ao = alert or AlertOptions()
+    eo = ekf or EkfOptions()
+    oo = output_only or OutputOnlyOptions()
+    alert_drop, confidence, hysteresis = ao.drop, ao.confidence, ao.hysteresis
+    persistence = ao.persistence_s
+    forecast_horizon = ao.forecast_horizon_s
+    window_s, step = wo.window_s, wo.step_s
+    decimate = wo.decimate
+    ekf_params = list(eo.params) if eo.params else None
     fix = dict(fix or {})
     nominal_in = dict(nominal or {})
     if forecast_horizon is None:
@@ -190,15 +193,15 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
     if not 0 < alert_drop < 1:
         raise UsageError(f"--alert-drop: expected a fraction in (0, 1), got {alert_drop}")
     if not 0.5 < confidence < 1:
-        raise UsageError(f"--confidence: expected a probability in (0.5, 1), got {confidence}")
+        raise UsageError(f"alert.confidence: expected a probability in (0.5, 1), got {confidence}")
     if not (forecast_horizon > 0 and math.isfinite(forecast_horizon)):
-        raise UsageError(f"--forecast-horizon: expected a time > 0 s, got {forecast_horizon}")
+        raise UsageError(f"alert.forecast_horizon_s: expected a time > 0 s, got {forecast_horizon}")
     z = float(NormalDist().inv_cdf(confidence))
     if road is not None and road not in ROAD_MODES:
         raise UsageError(f"--road: expected one of {', '.join(ROAD_MODES)}, got {road!r}")
     if baseline == "output_only":
         return _output_only_spec(model, nominal_in, alert_drop, z, persistence, hysteresis,
-                                 window, step, forecast_horizon, accel_channel, oo_method)
+                                 window_s, step, forecast_horizon, oo.accel_channel, oo.method)
     for k in list(fix) + list(nominal_in) + list(init):
         model.spec(k)
     both = set(fix) & set(nominal_in)
@@ -229,27 +232,26 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
                              + (" the road-unknown monitor follows" if road == "unknown" else ""))
         params[k].value = v
     cfg = default_config(model, values, fs, len(params.free))
-    if road == "unknown" and window is None:
+    if road == "unknown" and window_s is None:
         # the band starts at 3 / window: below the body mode (docs/monitoring.md)
         cfg.window_s = max(cfg.window_s, road_unknown_window(model, values))
         cfg.step_s = max(0.05, round(round(cfg.window_s / 2.0 / 0.05) * 0.05, 2))
-    if window is not None:
-        cfg.window_s = window
+    if window_s is not None:
+        cfg.window_s = window_s
         if step is None:
-            cfg.step_s = max(0.05, round(window / 2.0, 2))
+            cfg.step_s = max(0.05, round(window_s / 2.0, 2))
     if step is not None:
         cfg.step_s = step
     # the window's linear drift: by default every free damper and spring of the struts
     # (the parts that wear; docs/monitoring.md, "Window with a linear drift")
     cfg.drift = strut_parameters(model, values, params.free) if road != "unknown" else ()
-    given_drift = (window_overrides or {}).get("drift")
+    given_drift = wo.drift
     if road == "unknown" and given_drift:
-        raise UsageError(f"--window-drift {','.join(given_drift)}: does not apply with --road "
+        raise UsageError(f"window.drift = {list(given_drift)}: does not apply with --road "
                          "unknown (each window's body equations are one linear fit of constant "
-                         "parameters); give --window-drift none or leave it out")
-    for attr, v in (window_overrides or {}).items():
-        if v is not None:
-            setattr(cfg, attr, v)
+                         "parameters); give drift = [] or leave it out")
+    for attr, v in wo.overrides().items():
+        setattr(cfg, attr, v)
     if decimate is not None:
         cfg.decimate = decimate
     cfg.validate()
@@ -264,7 +266,7 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
                 model.spec(k)
             aug = [k for k in ekf_params if k in nominal_all]
             if not aug:
-                raise UsageError(f"--ekf-params {','.join(ekf_params)}: none of them is a free "
+                raise UsageError(f"ekf.params = {ekf_params}: none of them is a free "
                                  "parameter")
             acfg.nominal = {k: v for k, v in nominal_all.items() if k in aug}
     elif baseline != "nm":
@@ -272,8 +274,8 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
     return MonitorSpec(model, params, nominal_all, cfg, acfg, baseline=baseline,
                        start_given=set(nominal_in) | set(init),
                        decimate_given=decimate is not None, inspection=inspection,
-                       forecast_horizon_s=forecast_horizon, ekf_params=aug, ekf_q=ekf_q,
-                       ekf_decimate=ekf_decimate,
+                       forecast_horizon_s=forecast_horizon, ekf_params=aug, ekf_q=eo.q,
+                       ekf_decimate=eo.decimate,
                        units={k: model.spec(k).unit for k in nominal_all}, warnings=warnings,
                        road=road, drift_given=bool(given_drift))
 
@@ -285,7 +287,7 @@ def _output_only_spec(model: SuspensionModel, nominal: Mapping[str, float], drop
     """:func:`monitor_spec` for the output-only mode (body mode from one accelerometer)."""
     channel = accel_channel or f"{model.coords[0]}_ddot"
     if channel not in model.channels:
-        raise UsageError(f"--accel-channel {channel!r} is not a channel of model {model.name}")
+        raise UsageError(f"output_only.accel_channel {channel!r} is not a channel of model {model.name}")
     w = window if window is not None else OUTPUT_ONLY_WINDOW_S
     s = step if step is not None else (w / 2.0 if window is not None else OUTPUT_ONLY_STEP_S)
     cfg = WindowConfig(window_s=w, step_s=s)
@@ -336,7 +338,7 @@ def choose_road(spec: MonitorSpec, t: FloatArray, data: Mapping[str, FloatArray]
         spec.params, more = road_unknown_params(model, spec.params)
         notes += more
         if spec.drift_given:
-            notes.append(f"--window-drift {','.join(spec.config.drift)} ignored: with the road "
+            notes.append(f"window.drift {list(spec.config.drift)} ignored: with the road "
                          "unknown each window is one linear fit of constant parameters")
         spec.config.drift = ()
     spec.road = mode
@@ -484,9 +486,9 @@ class Source:
         DBC of the CAN data (default suspid's).
     signal_map : SignalMap or None
     can_channel : str or None
-        ``--can-channel``: the bus channel of a multi-bus log to replay (``None``: all).
+        ``can.channel``: the bus channel of a multi-bus log to replay (``None``: all).
     j1939_source : str or None
-        ``--j1939-source``: the J1939 source address decoded (``None``: the first sender).
+        ``can.j1939_source``: the J1939 source address decoded (``None``: the first sender).
     time_source : {"timestamp", "tick"} or None
         None (logs and live): the sensor's tick when the stream carries SN_Sync frames,
         the frame timestamps otherwise.
@@ -532,7 +534,7 @@ def open_checked_bus(interface: str, channel: str | None, bitrate: int | None, w
     kw: dict[str, Any] = {"bitrate": bitrate} if bitrate else {}
     if slcan_timestamps:
         if interface != "slcan":
-            raise UsageError(f"{what}: --slcan-timestamps needs --interface slcan, got {interface}")
+            raise UsageError(f"{what}: live.slcan_timestamps needs --interface slcan, got {interface}")
         kw["timestamps"] = True
     try:
         return open_bus(interface, channel, **kw)
@@ -612,7 +614,7 @@ def _alert_bus(source: Source, sinks: list[Any], listener: DecodeListener, buses
     bus = None
     if source.alert_interface:
         bus = open_checked_bus(source.alert_interface, source.alert_channel, source.bitrate,
-                               "--alert-interface")
+                               "live.alert_interface")
         buses.append(bus)
     elif live_bus is not None:
         bus = live_bus

@@ -12,7 +12,7 @@ The window's estimates go to the tracker, the alerts, the forecasts and the virt
 test exactly as the road-measured window's do. An estimate is the best *constant*
 parameter set over the window, so it describes the window's middle (``lag`` =
 ``window_s / 2``, the tracker refers it to the window end); the window's linear drift of
-the road-measured path (``--window-drift``) does not apply to the linear fit.
+the road-measured path (``window.drift``) does not apply to the linear fit.
 
 The band of the fit starts at ``3 / T`` Hz (``T`` the window length, bins 0..2 see a
 constant offset); :func:`road_unknown_window` keeps it below the body mode.

@@ -287,6 +287,12 @@ class SlidingWindowIdentifier:
         Measured channels to fit (a subset of ``model.channels``).
     """
 
+    #: the drift fit to first order (:meth:`_drift_linear`), Gauss-Newton on the chunked
+    #: window where it does not apply; ``False``: Gauss-Newton only (the reference
+    #: ``tests/stream/test_window.py`` and ``tools/bench_maintenance.py --solver-check``
+    #: compare the first-order fit with)
+    first_order_drift: bool = True
+
     def __init__(self, model: SuspensionModel, params: Parameters, config: WindowConfig,
                  channels: list[str]) -> None:
         config.validate()
@@ -481,77 +487,39 @@ class SlidingWindowIdentifier:
             return False
         Ja, Jg = sens
         nd = len(drift)
-        free_rate = cfg.drift_rate == "free"
         pch, N = R0.shape
-        sd_u = cfg.drift_rate_sd * half if (free_rate and has_prior) else 0.0
+        sd_u = cfg.drift_rate_sd * half if has_prior else 0.0
         sig = (np.maximum(np.sqrt((R0 * R0).mean(axis=1)), 1e-300) if sd_u > 0
                else np.ones(pch))
         w = np.repeat(1.0 / sig, N)[:, None]
         r0 = R0.ravel()
         Jb = Jg / half
-        # weighted least squares in x = (a, b) (b fixed at the prior's with drift_rate
-        # "prior"), factored once; step(rv, a, b) is the step from (a, b) given the
-        # residual rv there (the linear model's, or the drifting window's own for a chord
-        # step), the prior's rows included
-        M = (np.hstack([Ja, Jb]) if free_rate else Ja) * w
+        # weighted least squares in x = (a, b), the prior's rows included
+        M = np.hstack([Ja, Jb]) * w
         if sd_u > 0:
             P = np.zeros((nd, 2 * nd))
             P[:, nd:] = np.eye(nd) / sd_u
             M = np.vstack([M, P])
+        rhs = r0 * w[:, 0]
+        if sd_u > 0:
+            rhs = np.concatenate([rhs, b_prior / sd_u])
         Q, Rq = np.linalg.qr(M)
-
-        def step(rv: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
-            rhs = rv * w[:, 0]
-            if sd_u > 0:
-                rhs = np.concatenate([rhs, (b_prior - b) / sd_u])
-            return np.asarray(np.linalg.solve(Rq, Q.T @ rhs), dtype=float)
-
-        def ok(a: FloatArray, b: FloatArray) -> bool:
-            v = np.concatenate([a, b])
-            return bool(np.all(np.isfinite(v)) and np.all(np.abs(v) < 0.5))
-
-        a = np.zeros(nd)
-        b = np.zeros(nd) if free_rate else b_prior.copy()
-        x = step(r0 - Jb @ b, a, b)
-        a = a + x[:nd]
-        if free_rate:
-            b = b + x[nd:]
-        if not ok(a, b):
+        x = np.asarray(np.linalg.solve(Rq, Q.T @ rhs), dtype=float)
+        a, b = x[:nd], x[nd:]
+        if not (np.all(np.isfinite(x)) and np.all(np.abs(x) < 0.5)):
             return False
         R = (r0 - Ja @ a - Jb @ b).reshape(pch, N)
-        for _ in range(cfg.drift_refine):
-            # a chord step on the drifting window itself (the same Jacobian)
-            pq = dict(p_const)
-            for j, k in enumerate(drift):
-                pq[k] = p_const[k] * math.exp(float(a[j]))
-            try:
-                Rx = fit.drift_residual(pq, {k: float(b[j]) / half
-                                              for j, k in enumerate(drift)},
-                                         t_end, cfg.drift_chunk_s)
-            except (np.linalg.LinAlgError, ValueError, FloatingPointError, OverflowError):
-                Rx = None
-            if Rx is None:
-                break
-            x = step(Rx.ravel(), a, b)
-            a2 = a + x[:nd]
-            b2 = b + x[nd:] if free_rate else b
-            if not ok(a2, b2):
-                break
-            a, b = a2, b2
-            R = (Rx.ravel() - (Ja @ x[:nd]) - (Jb @ x[nd:] if free_rate else 0.0)
-                 ).reshape(pch, N)
         # stderr: every free parameter's column (the drifting ones' Ja) and the rates'
         cols = jac[2].copy()
         for j, k in enumerate(drift):
             cols[:, self.free.index(k)] = Ja[:, j]
-        if free_rate:
-            cols = np.hstack([cols, Jg])
+        cols = np.hstack([cols, Jg])
         nc = cols.shape[1]
         s2 = (R * R).sum(axis=1) / max(N - nc, 1)
         s2 = np.where(s2 > 0, s2, 1.0)
         Jn = cols / np.repeat(np.sqrt(s2), N)[:, None]
         H = Jn.T @ Jn
-        if free_rate and sd_u > 0:
+        if sd_u > 0:
             nf = len(self.free)
             H[nf:, nf:] += np.eye(nd) / cfg.drift_rate_sd ** 2
         try:
@@ -590,9 +558,7 @@ class SlidingWindowIdentifier:
         a few Gauss-Newton steps (forward differences, step halved when the cost does not
         fall) find them: the residual is close to linear in them over a window's drift.
         The stderr are Gauss-Newton ones with the rates free and every free parameter's
-        column (the constant fit's other parameters) in the Jacobian. With
-        ``drift_rate="prior"`` the rates stay at that of the recent estimates and only the
-        end values are fitted.
+        column (the constant fit's other parameters) in the Jacobian.
         """
         cfg = self.config
         chunk = cfg.drift_chunk_s
@@ -622,15 +588,14 @@ class SlidingWindowIdentifier:
             except (np.linalg.LinAlgError, ValueError, FloatingPointError, OverflowError):
                 return None
 
-        free_rate = cfg.drift_rate == "free"
-        if cfg.drift_solver == "linear" and self._drift_linear(
+        if self.first_order_drift and self._drift_linear(
                 fit, t_end, half, p_const, drift, u[nd:].copy(), len(h) >= 2, out):
             return
         step = 1e-4
         R = resid(u)
         ok = R is not None
         # optional prior on the rates: the recent estimates' rate, sd drift_rate_sd (1/s)
-        sd_u = cfg.drift_rate_sd * half if (free_rate and len(h) >= 2) else 0.0
+        sd_u = cfg.drift_rate_sd * half if len(h) >= 2 else 0.0
         u_prior = u[nd:].copy()
         # with a prior the residuals are weighted by their channel's RMS (noise units)
         sig = (np.ones(1) if R is None or sd_u == 0 else
@@ -645,7 +610,7 @@ class SlidingWindowIdentifier:
             if R is None:
                 break
             cols = []
-            for j in range(2 * nd if free_rate else nd):
+            for j in range(2 * nd):
                 e = u.copy()
                 e[j] += step
                 Rj = resid(e)
@@ -680,8 +645,7 @@ class SlidingWindowIdentifier:
             self._to_end(drift, g_hist, half, out, "drift fit not possible on this window")
             return
         p, rates = unpack(u)
-        se = fit.drift_stderr(p, self.free, rates if free_rate else {}, t_end, chunk,
-                               fixed_rates=None if free_rate else rates,
+        se = fit.drift_stderr(p, self.free, rates, t_end, chunk,
                                rate_prior_sd=(cfg.drift_rate_sd if sd_u > 0 else None), R0=R)
         if se is None:
             self._to_end(drift, g_hist, half, out, "drift fit without stderr")

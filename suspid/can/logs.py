@@ -873,7 +873,7 @@ def read_log_arrays(path: str | Path, stats: Optional[ReadStats] = None, *,
 
 def _missing_channel(path: Path, channel: str, stats: ReadStats) -> UsageError:
     """The one-line error of a channel option naming no channel of the log."""
-    return UsageError(f"{path}: --can-channel {channel}: no such channel in the log; "
+    return UsageError(f"{path}: can.channel {channel}: no such channel in the log; "
                       f"channels present: {describe_channels(stats.channel_frames())}")
 
 

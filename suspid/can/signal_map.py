@@ -15,8 +15,9 @@ The result is ``channel = scale * signal + offset`` in the channel's SI unit. A 
 signal (``SG_ Height m0``, sent only when the multiplexer is 0) is read only from the frames
 of its pages.
 
-On the command line: ``--map 'x1_ddot=gnss_imu.AccelerationX-9.81'`` (repeatable). In a
-config file (``.toml`` or ``.json``)::
+On the command line: ``--map 'x1_ddot=gnss_imu.AccelerationX-9.81'`` (repeatable); in the
+``[map]`` table of a ``--config`` file (:mod:`suspid.cli._config`, its DBC as ``[can] dbc``).
+A signal-map file for the library (``signal_map=PATH``: ``.toml`` or ``.json``)::
 
     dbc = "canmod-gps.dbc"          # optional, relative to the config file
     [map]
@@ -160,16 +161,6 @@ class SignalMap:
         return cls([parse_mapping(s, where) for s in specs], None, where)
 
     @classmethod
-    def from_args(cls, specs: Sequence[str] | None, path: str | Path | None = None) -> "SignalMap | None":
-        """Map from ``--map`` strings and/or a ``--map-file`` (``--map`` entries win)."""
-        maps = []
-        if path:
-            maps.append(cls.from_file(path))
-        if specs:
-            maps.append(cls.from_strings(specs))
-        return merge_maps(maps)
-
-    @classmethod
     def from_file(cls, path: str | Path) -> "SignalMap":
         """Read a ``.toml`` or ``.json`` signal-map file (see the module docstring)."""
         p = Path(path)
@@ -190,9 +181,32 @@ class SignalMap:
             raise InputError(f"{p}: cannot read signal map: {exc}") from None
         if not isinstance(data, dict) or not isinstance(data.get("map"), dict) or not data["map"]:
             raise InputError(f"{p}: expected a 'map' table of channel = \"MESSAGE.SIGNAL...\" entries")
+        dbc = data.get("dbc")
+        dbc_path = (p.parent / dbc) if isinstance(dbc, str) and dbc else None
+        return cls.from_table(data["map"], str(p), dbc_path)
+
+    @classmethod
+    def from_table(cls, table: dict[str, object], source: str,
+                   dbc: Path | None = None) -> "SignalMap":
+        """Build from a parsed ``[map]`` table (a signal-map file's, or a ``--config`` file's).
+
+        Parameters
+        ----------
+        table : dict
+            ``channel -> "MESSAGE.SIGNAL..."`` or ``channel -> {message, signal[, scale, offset]}``.
+        source : str
+            The file the table came from (named in messages).
+        dbc : Path, optional
+            DBC the file names.
+
+        Raises
+        ------
+        InputError
+            An entry that is neither, naming ``FILE: map.CHANNEL``.
+        """
         mappings = []
-        for channel, spec in data["map"].items():
-            where = f"{p}: map.{channel}"
+        for channel, spec in table.items():
+            where = f"{source}: map.{channel}"
             if isinstance(spec, str):
                 mappings.append(parse_mapping(f"{channel}={spec}", where))
             elif isinstance(spec, dict):
@@ -211,9 +225,7 @@ class SignalMap:
                                               scale, offset))
             else:
                 raise InputError(f"{where}: expected a string or a table, got {type(spec).__name__}")
-        dbc = data.get("dbc")
-        dbc_path = (p.parent / dbc) if isinstance(dbc, str) and dbc else None
-        return cls(mappings, dbc_path, str(p))
+        return cls(mappings, dbc, source)
 
     @classmethod
     def from_dbc(cls, db: Database, model_name: str) -> "SignalMap":
@@ -330,7 +342,8 @@ def as_signal_map(spec: SignalMapLike) -> SignalMap | None:
 
 
 def merge_maps(maps: Iterable[SignalMap | None]) -> SignalMap | None:
-    """Concatenate maps (e.g. a ``--map-file`` and ``--map`` options); later entries win."""
+    """Concatenate maps (e.g. a ``--config`` file's ``[map]`` and ``--map`` options); later
+    entries win."""
     result: dict[str, SignalMapping] = {}
     dbc: Path | None = None
     sources = []

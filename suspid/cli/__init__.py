@@ -50,6 +50,17 @@ class _Parser(argparse.ArgumentParser):
         sys.stderr.write(f"error: {self.prog}: {message}\n")
         raise SystemExit(2)
 
+    def parse_args(self, args: Sequence[str] | None = None,  # type: ignore[override]
+                   namespace: argparse.Namespace | None = None) -> argparse.Namespace:
+        """As argparse's, but unknown options are reported by the subcommand that was given
+        (``suspid monitor: unrecognized arguments: --foo``), not by ``suspid``."""
+        ns, extras = self.parse_known_args(args, namespace)
+        if extras:
+            prog = getattr(ns, "_prog", self.prog)
+            sys.stderr.write(f"error: {prog}: unrecognized arguments: {' '.join(extras)}\n")
+            raise SystemExit(2)
+        return ns
+
     def _get_values(self, action: argparse.Action, arg_strings: list[str]) -> object:
         # Python 3.11's argparse drops an explicit "--" value ("--fs=--") and hands the
         # subcommand an empty list instead of a usage error; convert it like any value
@@ -87,7 +98,7 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     p = module.add_parser(sub)
     p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
                    help="show Python tracebacks on errors")
-    p.set_defaults(_run=module.run)
+    p.set_defaults(_run=module.run, _prog=p.prog)
     return parser
 
 

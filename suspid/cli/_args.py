@@ -1,5 +1,6 @@
 """Option groups and checks the fitting commands share (``diagnose``, ``fleet``; ``identify``'s set;
-``--offset`` of ``identify`` and ``fleet``).
+``--offset`` of ``identify`` and ``fleet``), and the monitor's option objects from the
+options and the ``--config`` file (``monitor``, ``compare``).
 
 Each command words its own help; the option names, types, defaults and metavars and the
 checks of their values live here once.
@@ -13,12 +14,19 @@ from typing import TYPE_CHECKING
 
 from estimator.choices import COSTS, OFFSET_MODES, ROAD_MODES
 from suspid.cli._common import load_measurement, model_from_args, params_from_args, positive_int
-from suspid.errors import UsageError
+from suspid.cli._lazy import lazy_names
 
 if TYPE_CHECKING:
     from estimator.identify import Parameters
+    from estimator.stream.config import AlertOptions, EkfOptions, WindowOptions
+    from suspid.cli._config import Config
     from suspid.io.csvio import Measurement
     from suspid.models.base import SuspensionModel
+else:
+    # the estimator loads when a command runs (monitor first keeps python-can from loading
+    # asammdf: suspid.cli.monitor._skip_mf4_backend)
+    AlertOptions, EkfOptions, WindowOptions = lazy_names(
+        "estimator.stream.config", "AlertOptions", "EkfOptions", "WindowOptions")
 
 
 @dataclass(frozen=True)
@@ -27,37 +35,34 @@ class FitHelp:
 
     Attributes
     ----------
-    cost, x0, restarts, maxfev, multistart, polish : str
-        Help of ``--cost``, ``--x0``, ``--restarts``, ``--maxfev``, ``--multistart`` and
-        ``--no-polish``.
+    cost, maxfev : str
+        Help of ``--cost`` and ``--maxfev``.
     """
 
     cost: str
-    x0: str
-    restarts: str
     maxfev: str
-    multistart: str
-    polish: str
 
 
-def add_fit_options(p: argparse._ActionsContainer, helps: FitHelp, restarts: int) -> None:
-    """Add the identifier's settings ``--cost``, ``--x0``, ``--restarts``, ``--maxfev``,
-    ``--multistart`` and ``--no-polish`` (in this order) to a parser or argument group.
+def add_fit_options(p: argparse.ArgumentParser, helps: FitHelp, restarts: int,
+                    group: argparse._ActionsContainer | None = None) -> None:
+    """Add the identifier's options ``--cost`` and ``--maxfev``, and the defaults of the
+    settings the ``--config`` file's ``[fit]`` table may change (``restarts``,
+    ``multistart``, ``polish``, ``data_start``, ``x0``; :func:`suspid.cli._can.command_config`).
 
     Parameters
     ----------
-    p : argparse parser or argument group
+    p : argparse.ArgumentParser
     helps : FitHelp
         The command's help text of each option.
     restarts : int
-        Default of ``--restarts`` (Nelder-Mead restarts).
+        Default Nelder-Mead restarts of the command.
+    group : argparse argument group, optional
+        Where the options are listed (default ``p``).
     """
-    p.add_argument("--cost", choices=list(COSTS), default="sse", help=helps.cost)
-    p.add_argument("--x0", default="estimate", metavar="estimate|rest|V1,V2,...", help=helps.x0)
-    p.add_argument("--restarts", type=int, default=restarts, help=helps.restarts)
-    p.add_argument("--maxfev", type=positive_int, default=None, help=helps.maxfev)
-    p.add_argument("--multistart", type=int, default=4, metavar="N", help=helps.multistart)
-    p.add_argument("--no-polish", dest="polish", action="store_false", help=helps.polish)
+    g = p if group is None else group
+    g.add_argument("--cost", choices=list(COSTS), default="sse", help=helps.cost)
+    g.add_argument("--maxfev", type=positive_int, default=None, help=helps.maxfev)
+    p.set_defaults(restarts=restarts, multistart=4, polish=True, data_start=True, x0="estimate")
 
 
 def add_offset_option(p: argparse._ActionsContainer, help_text: str) -> None:
@@ -73,21 +78,6 @@ def add_offset_option(p: argparse._ActionsContainer, help_text: str) -> None:
     p.add_argument("--offset", choices=list(OFFSET_MODES), default="remove", help=help_text)
 
 
-def check_counts(args: argparse.Namespace, *options: str) -> None:
-    """Raise :class:`~suspid.errors.UsageError` unless each count option is >= 0.
-
-    Parameters
-    ----------
-    args : argparse.Namespace
-    *options : str
-        Attribute names (``"restarts"``, ``"multistart"``); the message names ``--NAME``.
-    """
-    for opt in options:
-        v = getattr(args, opt)
-        if v < 0:
-            raise UsageError(f"--{opt}: expected >= 0, got {v}")
-
-
 def comma_list(text: str | None) -> list[str] | None:
     """The items of a comma-separated option (``--channels x1,x2``), stripped, empty ones
     dropped; ``None`` when the option is not given (or empty)."""
@@ -96,12 +86,12 @@ def comma_list(text: str | None) -> list[str] | None:
     return [x.strip() for x in text.split(",") if x.strip()]
 
 
-def fit_inputs(args: argparse.Namespace
+def fit_inputs(args: argparse.Namespace, cfg: Config
                ) -> tuple[SuspensionModel, Parameters, Measurement, dict[str, object] | None]:
     """The model, its parameters, the record and its frame statistics of a fitting command.
 
-    ``--model``, ``--fix``/``--init`` (``--restarts`` checked), ``--multistart`` checked,
-    then ``--input`` read (a CSV, or a CAN log decoded with ``--dbc``).
+    ``--model``, ``--fix``/``--init``, then ``--input`` read (a CSV, or a CAN log decoded
+    with ``--dbc``, ``--map`` and the ``--config`` file's ``[can]``/``[map]``).
 
     Returns
     -------
@@ -113,8 +103,7 @@ def fit_inputs(args: argparse.Namespace
     """
     model = model_from_args(args)
     params = params_from_args(args, model)
-    check_counts(args, "multistart")
-    meas, frames = load_measurement(args, model)
+    meas, frames = load_measurement(args, model, cfg)
     return model, params, meas, frames
 
 
@@ -128,3 +117,21 @@ def add_road_option(p: argparse._ActionsContainer) -> None:
                         "and spring and reporting what the record cannot determine as such. "
                         "Default: measured with road columns, else zero for a free response "
                         "and unknown for driving data, named in a warning")
+
+
+#: ``[window]`` keys whose :class:`~estimator.stream.config.WindowOptions` field is named
+#: differently
+WINDOW_FIELDS = {"budget": "maxfev", "first_budget": "first_maxfev"}
+#: ``[alert]`` keys of :class:`~estimator.stream.config.AlertOptions` (the rest are fleet's)
+ALERT_KEYS = ("confidence", "persistence_s", "hysteresis", "forecast_horizon_s")
+
+
+def options_from_config(args: argparse.Namespace, cfg: Config
+                        ) -> tuple[WindowOptions, AlertOptions, EkfOptions]:
+    """``--window``, ``--step``, ``--alert-drop`` and the ``[window]``, ``[alert]`` and
+    ``[ekf]`` tables as the monitor's option objects (``monitor`` and ``compare``)."""
+    window = WindowOptions(window_s=args.window, step_s=args.step,
+                           **cfg.fields("window", WINDOW_FIELDS))
+    alert = AlertOptions(drop=args.alert_drop,
+                         **{k: v for k, v in cfg.table("alert").items() if k in ALERT_KEYS})
+    return window, alert, EkfOptions(**cfg.table("ekf"))

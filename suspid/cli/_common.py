@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 
-from suspid.can.options import add_can_arguments, can_inputs
+from suspid.cli._can import add_can_arguments, can_inputs
 from suspid.cli._lazy import lazy_names
 from suspid.errors import UsageError
 from suspid.models import MODELS, SuspensionModel, get_model
@@ -18,13 +18,11 @@ from suspid.models.base import FloatArray
 if TYPE_CHECKING:
     from estimator.identify import Parameters
     from estimator.identify.inputs import read_input
+    from suspid.cli._config import Config
     from suspid.io.csvio import Measurement
 else:
     Parameters, = lazy_names("estimator.identify", "Parameters")
     read_input, = lazy_names("estimator.identify.inputs", "read_input")
-
-#: suffixes read as CAN logs through python-can (the rest must be a measurement CSV)
-
 
 #: what ``--model`` help says of the bundled models (a plug-in model is listed by name)
 MODEL_HELP = {"quarter1": "1 DOF, eq. 1", "quarter2": "2 DOF, eqs. 2-3",
@@ -46,13 +44,14 @@ def add_param_options(p: argparse.ArgumentParser) -> None:
                         "start from the model's documented defaults; repeatable")
 
 
-def add_input_options(p: argparse.ArgumentParser) -> None:
+def add_input_options(p: argparse.ArgumentParser, command: str) -> None:
+    """``--input``, ``--dbc``, ``--map`` and ``--config`` of a command reading one record."""
     p.add_argument("--input", required=True, metavar="PATH",
                    help="measurement CSV, or a CAN log (.log candump -L, .asc, .blf, .trc, .mf4) "
                         "decoded with --dbc")
     p.add_argument("--dbc", metavar="PATH", default=None,
                    help="DBC for CAN-log input (default: the bundled dbc/suspension.dbc)")
-    add_can_arguments(p)
+    add_can_arguments(p, command)
 
 
 def positive_int(text: str) -> int:
@@ -128,10 +127,12 @@ def parse_state(text: str, n: int, option: str) -> FloatArray:
     return v
 
 
-def load_measurement(args: argparse.Namespace,
-                     model: SuspensionModel) -> tuple[Measurement, dict[str, object] | None]:
-    """Read ``--input`` as a CSV or a CAN log; returns ``(Measurement, frame statistics or None)``."""
-    dbc_path, signal_map = can_inputs(args)
+def load_measurement(args: argparse.Namespace, model: SuspensionModel,
+                     cfg: Config) -> tuple[Measurement, dict[str, object] | None]:
+    """Read ``--input`` as a CSV or a CAN log (decoded as ``--dbc``, ``--map`` and the
+    ``--config`` file's ``[can]``/``[map]`` say); returns ``(Measurement, frame statistics
+    or None)``."""
+    dbc_path, signal_map = can_inputs(args, cfg)
     return read_input(args.input, model, dbc_path, signal_map,
                       channel=getattr(args, "can_channel", None),
                       j1939_source=getattr(args, "j1939_source", None))
@@ -200,12 +201,9 @@ def assignment_warnings(args: argparse.Namespace, model: SuspensionModel) -> lis
 
 
 def params_from_args(args: argparse.Namespace, model: SuspensionModel) -> Parameters:
-    """``Parameters`` of ``model`` from ``--fix``/``--init``, with ``--restarts`` checked."""
-    params = Parameters.for_model(model, fix=parse_assignments(args.fix, "--fix"),
-                                  init=parse_assignments(args.init, "--init"))
-    if getattr(args, "restarts", 0) < 0:
-        raise UsageError(f"--restarts: expected >= 0, got {args.restarts}")
-    return params
+    """``Parameters`` of ``model`` from ``--fix``/``--init``."""
+    return Parameters.for_model(model, fix=parse_assignments(args.fix, "--fix"),
+                                init=parse_assignments(args.init, "--init"))
 
 
 def model_from_args(args: argparse.Namespace) -> SuspensionModel:

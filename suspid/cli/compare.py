@@ -14,8 +14,8 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from suspid.can.options import add_can_arguments, can_inputs
-from suspid.cli._args import add_road_option, comma_list
+from suspid.cli._args import add_road_option, options_from_config
+from suspid.cli._can import add_can_arguments, can_inputs, command_config
 from suspid.cli._common import add_model_option, parse_assignments, print_json
 from suspid.cli._lazy import lazy_names
 from suspid.errors import UsageError
@@ -43,7 +43,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     src.add_argument("--scenario", choices=["damper-wear"], default=None,
                      help="synthetic stream with known truth (default when --input is absent)")
     p.add_argument("--dbc", metavar="PATH", default=None, help="DBC for a CAN log")
-    add_can_arguments(p)
+    add_can_arguments(p, "compare")
     p.add_argument("--truth", metavar="CSV", default=None,
                    help="true parameter values over time for --input: columns t and parameter names")
     p.add_argument("--duration", type=float, default=150.0, help="scenario length (s), default 150")
@@ -59,21 +59,17 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--init", action="append", default=[], metavar="NAME=VALUE",
                    help="starting value of a free parameter for both estimators (SI; default its "
                         "nominal value) -- shows the convergence time")
-    p.add_argument("--alert-drop", type=float, default=0.3, metavar="FRACTION")
-    p.add_argument("--ekf-params", default=None, metavar="LIST",
-                   help="EKF augmented parameters (default: every free damper and spring, as "
-                        "the sliding window estimates them)")
-    p.add_argument("--forecast-horizon", type=float, default=None, metavar="SECONDS",
-                   help="forecast horizon of both sides (default as suspid monitor)")
-    p.add_argument("--ekf-q", type=float, default=None, metavar="Q",
-                   help="EKF parameter random walk (relative per sqrt(s), default 0.005)")
-    p.add_argument("--ekf-decimate", type=int, default=None, metavar="N",
-                   help="EKF on every N-th sample (default: 250 Hz or less)")
-    p.add_argument("--window", type=float, default=None, metavar="S")
-    p.add_argument("--step", type=float, default=None, metavar="S")
+    p.add_argument("--alert-drop", type=float, default=0.3, metavar="FRACTION",
+                   help="both estimators alert when a parameter is confidently below "
+                        "(1 - FRACTION) x nominal (default 0.3, as monitor)")
+    p.add_argument("--window", type=float, default=None, metavar="S",
+                   help="window length of both estimators (s; default from the model's modes, "
+                        "as monitor)")
+    p.add_argument("--step", type=float, default=None, metavar="S",
+                   help="window step of both (s; default half the window, as monitor)")
     add_road_option(p)
-    p.add_argument("--param", default="c1", help="parameter to plot (default c1)")
-    p.add_argument("--plot", metavar="PNG", default=None, help="write the comparison plot here")
+    p.add_argument("--plot", metavar="PNG", default=None,
+                   help="write the comparison plot here: one panel per monitored parameter")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     return p
 
@@ -111,6 +107,7 @@ def comparison_table(out: dict[str, Any]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    cfg = command_config(args, "compare")
     model = get_model(args.model)
     fix = parse_assignments(args.fix, "--fix")
     nominal = parse_assignments(args.nominal, "--nominal")
@@ -135,21 +132,16 @@ def run(args: argparse.Namespace) -> int:
                    if k not in fix and k in base}
         source = f"scenario damper-wear (seed {args.seed})"
     else:
-        dbc, smap = can_inputs(args)
+        dbc, smap = can_inputs(args, cfg)
         t, data, truth = load_stream(model, args.input, Path(args.dbc) if args.dbc else dbc,
                                      smap, args.truth, channel=args.can_channel,
                                      j1939_source=args.j1939_source)
         source = args.input
-    aug = comma_list(args.ekf_params)
+    window, alert, ekf = options_from_config(args, cfg)
     out, recs = compare(model, t, data, truth, fix=fix, nominal=nominal, init=init,
-                        alert_drop=args.alert_drop, window=args.window, step=args.step,
-                        ekf_params=aug, ekf_q=args.ekf_q, ekf_decimate=args.ekf_decimate,
-                        forecast_horizon=args.forecast_horizon, source=source, road=args.road)
+                        window=window, alert=alert, ekf=ekf, source=source, road=args.road)
     if args.plot:
-        if args.param not in out["nominal"]:
-            raise UsageError(f"--param {args.param}: not a monitored parameter "
-                             f"({', '.join(out['nominal'])})")
-        plot(args.plot, t, truth, recs, args.param, out["nominal"][args.param], args.alert_drop)
+        plot(args.plot, t, truth, recs, out["nominal"], args.alert_drop)
         out["plot"] = args.plot
     for w in out.get("warnings", []):
         sys.stderr.write(f"warning: {w}\n")

@@ -5,6 +5,7 @@ import argparse
 import sys
 from typing import TYPE_CHECKING
 
+from suspid.cli._can import command_config
 from suspid.cli._args import FitHelp, add_fit_options, add_road_option, fit_inputs
 from suspid.cli._format import num
 from suspid.cli._common import (add_input_options, add_model_option, add_param_options,
@@ -27,18 +28,12 @@ else:
 FIT_HELP = FitHelp(
     cost="sse: sum of squared position differences (seed cost 1); frobenius: "
          "Frobenius norm over all measured channels (seed cost 2)",
-    x0="initial state: estimate it (default), start at rest, or give it",
-    restarts="Nelder-Mead restarts of the baseline fit (default 3; the augmented refit starts "
-             "from the residual regression)",
     maxfev="evaluation budget of every fit diagnose makes: the baseline fit (and, for a "
            "quarter car seen from the body, the fit from its twin), the linear refit on every "
            "channel, each candidate effect's refit and its reference fit; Nelder-Mead and "
            "Levenberg-Marquardt evaluations together, Jacobians included (default: each fit's "
-           "own budget)",
-    multistart="baseline fit: further starts (up to N) when it lands on a suspicious "
-               "local minimum, as for identify (default 4)",
-    polish="baseline fit: pure Nelder-Mead to full tolerance (default: Nelder-Mead "
-           "to 1e-2, then a Levenberg-Marquardt polish, as identify)")
+           "own budget); restarts, further starts, the polish and the initial state of the "
+           "baseline fit are the --config file's [fit] table")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -56,7 +51,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                                    "resampled onto it (cubic spline, with a warning); a gap is an "
                                    "error. See docs/closing-the-loop.md.")
     add_model_option(p)
-    add_input_options(p)
+    add_input_options(p, "diagnose")
     add_param_options(p)
     add_fit_options(p, FIT_HELP, restarts=3)
     add_road_option(p)
@@ -69,7 +64,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     """Run ``suspid diagnose`` (JSON or text on stdout, warnings on stderr); exit status 0."""
-    model, params, meas, frames = fit_inputs(args)
+    model, params, meas, frames = fit_inputs(args, command_config(args, "diagnose"))
     road, meas, road_warnings = resolve_road(model, meas, args.road)
     if road == "unknown":
         out = diagnose_road_unknown(model, meas, params).to_json()

@@ -21,7 +21,9 @@ from typing import TYPE_CHECKING, Any, TextIO
 from threadpoolctl import threadpool_limits
 
 from estimator.doe.design import DESIGNS, experiments, setup_record
+from suspid.cli._can import add_config_option
 from suspid.cli._common import print_json
+from suspid.cli._config import load_config
 from suspid.cli._lazy import lazy_names
 from suspid.errors import UsageError
 from suspid.models import get_model
@@ -63,17 +65,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="noise seed; experiment i uses SEED + i (default 0)")
     p.add_argument("--ids", default=None, metavar="I,J,...",
                    help="run only these experiment numbers (default: the whole design)")
-    p.add_argument("--single-stage", action="store_true",
-                   help="fit the whole record at once (no horizon continuation; ablation)")
-    p.add_argument("--restarts", type=int, default=None,
-                   help="Nelder-Mead restarts of the final stage (default 0; 6 with "
-                        "--single-stage)")
-    p.add_argument("--no-data-start", dest="data_start", action="store_false",
-                   help="start from --init-scale x the truth only (default: also from the "
-                        "data-driven estimate, keeping the lower-cost answer)")
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
-    p.add_argument("--progress", action="store_true",
-                   help="draw the progress bar on stderr even when it is not a terminal")
+    add_config_option(p, "doe")
     return p
 
 
@@ -126,24 +119,23 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--init-scale: expected a number > 0, got {args.init_scale}")
     if not (0 <= args.noise < 10):
         raise UsageError(f"--noise: expected a fraction >= 0 (e.g. 0.5), got {args.noise}")
-    if args.restarts is not None and args.restarts < 0:
-        raise UsageError(f"--restarts: expected >= 0, got {args.restarts}")
     total = len(experiments(model))
     ids = _parse_ids(args.ids, total)
     if args.mass_init_scale is not None and not args.free_masses:
         raise UsageError("--mass-init-scale: only with --free-masses (fixed masses are the truth)")
+    tuning = load_config(args.config).table("doe")
     settings = Settings(cost=args.cost, init_scale=args.init_scale, free_masses=args.free_masses,
                         mass_init_scale=args.mass_init_scale, noise=args.noise, seed=args.seed,
-                        data_start=args.data_start)
-    if args.single_stage:
+                        data_start=tuning.get("data_start", True))
+    if tuning.get("single_stage", False):
         settings.stages = (1.0,)
         settings.step = 0.3
         settings.restarts = 6
-    if args.restarts is not None:
-        settings.restarts = args.restarts
+    if "restarts" in tuning:
+        settings.restarts = tuning["restarts"]
     n = len(ids) if ids is not None else total
     bar = None
-    if args.progress or sys.stderr.isatty():
+    if tuning.get("progress", False) or sys.stderr.isatty():
         bar = ProgressBar(sys.stderr, n, f"doe {args.model} {args.cost}")
     t0 = time.perf_counter()
     out = run_design(model, settings, ids=ids,

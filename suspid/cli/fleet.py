@@ -8,12 +8,11 @@ from datetime import datetime, timezone
 from statistics import NormalDist
 from typing import TYPE_CHECKING, Any
 
-from suspid.can.options import add_can_arguments, can_inputs
-from suspid.cli._args import (FitHelp, add_fit_options, add_offset_option, add_road_option,
-                              check_counts)
+from suspid.cli._args import FitHelp, add_fit_options, add_offset_option, add_road_option
+from suspid.cli._can import add_can_arguments, can_inputs, command_config
 from suspid.cli._common import (add_model_option, add_param_options, assignment_warnings,
                                 parse_assignments,
-                                positive_int, print_json)
+                                print_json)
 from suspid.cli._lazy import lazy_names
 from suspid.cli.identify import parse_x0
 from suspid.errors import UsageError
@@ -31,12 +30,10 @@ else:
 #: help of the identifier's options as fleet words them (each drive fitted as identify does)
 FIT_HELP = FitHelp(
     cost="sse (seed cost 1, default) or frobenius (seed cost 2)",
-    x0="initial state: estimate (default), rest, or [q..., q_dot...]",
-    restarts="Nelder–Mead restarts (default 6)",
     maxfev="evaluation budget of each fit over all its restarts, further starts and polish "
-           "(default: 1200 per free parameter shared by every fit of a drive), as for identify",
-    multistart="further starts on a suspicious local minimum (default 4)",
-    polish="pure Nelder–Mead to full tolerance (no Levenberg–Marquardt polish)")
+           "(default: 1200 per free parameter shared by every fit of a drive), as for identify; "
+           "restarts, further starts, polish, the data-driven start and the initial state "
+           "are the --config file's [fit] table")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -52,12 +49,10 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                         "vehicle is the folder holding each log (quote patterns)")
     p.add_argument("--dbc", metavar="PATH", default=None,
                    help="DBC for CAN-log input (default: the bundled dbc/suspension.dbc)")
-    add_can_arguments(p)
+    add_can_arguments(p, "fleet")
     add_param_options(p)
     i = p.add_argument_group("identification (as suspid identify)")
-    add_fit_options(i, FIT_HELP, restarts=6)
-    i.add_argument("--no-data-start", dest="data_start", action="store_false",
-                   help="start only from --init and the defaults (as identify's option)")
+    add_fit_options(p, FIT_HELP, restarts=6, group=i)
     add_offset_option(i, "a constant offset in a drive's road column(s) or one position channel "
                          "(a sensor zero not at rest), as identify finds it: remove: subtract "
                          "it before the drive's fit (default); keep: fit the drive as it is; "
@@ -68,16 +63,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="nominal value of a monitored (free) parameter (SI; default the "
                         "model's documented default, or the last run's in --db)")
     a.add_argument("--alert-drop", type=float, default=0.3, metavar="FRACTION",
-                   help="limit (1 - FRACTION) x nominal (default 0.3)")
-    a.add_argument("--confidence", type=float, default=0.99, metavar="P",
-                   help="one-sided confidence of the alert bound (default 0.99, as monitor)")
-    a.add_argument("--alert-drives", type=positive_int, default=1, metavar="N",
-                   help="consecutive drives the drop must hold in before an alert (default 1: "
-                        "the latest drive confidently below the limit alerts, as monitor "
-                        "decides)")
-    a.add_argument("--horizon", type=float, default=365.0, metavar="DAYS",
-                   help="report limit-crossing forecasts up to this many days after the latest "
-                        "drive (default 365)")
+                   help="limit (1 - FRACTION) x nominal (default 0.3); the confidence, the "
+                        "drives a drop must hold in and the forecast horizon are the --config "
+                        "file's [alert] table")
     r = p.add_argument_group("execution, history, report")
     r.add_argument("--scheduler", metavar="tcp://HOST:PORT", default=None,
                    help="run on this existing Dask cluster (the workers must read the logs at "
@@ -90,21 +78,19 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                         "again is one drive); without --input, report from it alone")
     r.add_argument("--report", metavar="DIR", default=None,
                    help="write DIR/index.html: vehicles by risk, trend plots, failed logs")
-    r.add_argument("--no-progress", dest="progress", action="store_false",
-                   help="no progress bar on stderr")
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
     return p
 
 
 def run(args: argparse.Namespace) -> int:
     settings = None
+    cfg = command_config(args, "fleet")
     if args.input:
         if args.model is None:
             raise UsageError("--input needs --model (quarter1, quarter2, half4, ...)")
         model = get_model(args.model)
-        check_counts(args, "restarts", "multistart")
         x0 = parse_x0(args.x0, model.n_states)
-        dbc, smap = can_inputs(args)
+        dbc, smap = can_inputs(args, cfg)
         settings = IdentifySettings(
             model=model.name, fix=parse_assignments(args.fix, "--fix"),
             init=parse_assignments(args.init, "--init"), cost=args.cost,
@@ -116,12 +102,8 @@ def run(args: argparse.Namespace) -> int:
     elif args.db is None:
         raise UsageError("give --input DIR_OR_GLOB... with --model, or --db PATH to report from "
                          "the history")
-    if not 0.5 < args.confidence < 1:
-        raise UsageError(f"--confidence: expected a probability in (0.5, 1), got {args.confidence}")
     if not 0 < args.alert_drop < 1:
         raise UsageError(f"--alert-drop: expected a fraction in (0, 1), got {args.alert_drop}")
-    if not args.horizon > 0:
-        raise UsageError(f"--horizon: expected a number of days > 0, got {args.horizon}")
     nominal = parse_assignments(args.nominal, "--nominal")
     if args.model is not None:
         for k in nominal:
@@ -133,12 +115,14 @@ def run(args: argparse.Namespace) -> int:
                          f"using {available_cpus()} worker processes (each drive is "
                          "single-threaded: more would only share the cores)\n")
     rule = AlertRule(nominal=nominal, drop=args.alert_drop,
-                     z=float(NormalDist().inv_cdf(args.confidence)), min_count=args.alert_drives,
-                     horizon_days=args.horizon)
+                     z=float(NormalDist().inv_cdf(cfg.get("alert", "confidence", 0.99))),
+                     min_count=cfg.get("alert", "drives", 1),
+                     horizon_days=cfg.get("alert", "horizon_days", 365.0))
     result = run_fleet(FleetConfig(inputs=list(args.input), settings=settings, rule=rule,
                                    scheduler=args.scheduler, workers=args.workers, db=args.db,
                                    report=args.report,
-                                   progress=ProgressBar(sys.stderr) if args.progress else None))
+                                   progress=(ProgressBar(sys.stderr)
+                                             if cfg.get("fleet", "progress", True) else None)))
     out = result.to_json()
     if args.json:
         print_json(out)

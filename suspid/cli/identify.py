@@ -11,7 +11,7 @@ from suspid.cli._format import num
 from suspid.cli._common import (parse_state, positive_int, add_input_options, add_model_option, add_param_options,
                                 load_measurement, model_from_args, params_from_args, print_json,
                                 assignment_warnings)
-from suspid.errors import UsageError
+from suspid.cli._can import command_config
 from suspid.cli._lazy import lazy_names
 from suspid.models.base import FloatArray
 
@@ -34,32 +34,22 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                                    "CAN log by Nelder–Mead in log coordinates, with standard errors "
                                    "and an identifiability verdict.")
     add_model_option(p)
-    add_input_options(p)
+    add_input_options(p, "identify")
     add_param_options(p)
     p.add_argument("--cost", choices=["sse", "frobenius"], default="sse",
                    help="sse: sum of squared position differences (seed cost 1); frobenius: "
                         "Frobenius norm of measured-minus-simulated over all measured channels "
                         "(seed cost 2)")
-    p.add_argument("--x0", default="estimate", metavar="estimate|rest|V1,V2,...",
-                   help="initial state: estimate it (variable projection, default), start at "
-                        "rest, or give [q..., q_dot...] explicitly")
-    p.add_argument("--restarts", type=int, default=6, help="Nelder–Mead restarts (default 6)")
     p.add_argument("--maxfev", type=positive_int, default=None,
                    help="evaluation budget of each fit over all its restarts, further starts and "
                         "polish; the fits from the data-driven start, from --init/the defaults "
                         "and from the quarter car's twin each have their own, and nfev reports "
                         "their sum (default: 1200 per free parameter shared by every fit of the "
-                        "record, further starts ending once one returns to the best cost)")
-    p.add_argument("--multistart", type=int, default=4, metavar="N",
-                   help="further starts (up to N) when the fit lands on a suspicious local "
-                        "minimum: a parameter > 50x from its start or no convergence (default 4)")
-    p.add_argument("--no-polish", dest="polish", action="store_false",
-                   help="pure Nelder–Mead to full tolerance (default: Nelder–Mead to 1e-4, then "
-                        "a Levenberg–Marquardt polish of the last digits)")
-    p.add_argument("--no-data-start", dest="data_start", action="store_false",
-                   help="start only from --init and the defaults (default: estimate a start "
-                        "from the record by a filtered equation-error least-squares fit, used "
-                        "as the start when no --init is given and as a further start with it)")
+                        "record, further starts ending once one returns to the best cost); "
+                        "restarts, further starts, polish, the data-driven start and the "
+                        "initial state are the --config file's [fit] table")
+    # the [fit] table of --config may change these (suspid.cli._can.command_config)
+    p.set_defaults(restarts=6, multistart=4, polish=True, data_start=True, x0="estimate")
     add_offset_option(p, "a constant offset in the road column(s) or in one position channel "
                          "(a sensor zero not at the rest position; estimated at the data-driven "
                          "start as extra linear unknowns, found when it is most of the misfit): "
@@ -74,18 +64,18 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def parse_x0(text: str, n: int) -> str | FloatArray:
-    """``--x0`` of identify/diagnose: ``estimate``, ``rest`` or ``n`` finite numbers."""
+    """``[fit] x0`` of identify, diagnose and fleet: ``estimate``, ``rest`` or ``n`` finite
+    numbers (comma-separated)."""
     if text in ("estimate", "rest"):
         return text
-    return parse_state(text, n, "--x0")
+    return parse_state(text, n, "fit.x0")
 
 
 def run(args: argparse.Namespace) -> int:
     model = model_from_args(args)
+    cfg = command_config(args, "identify")
     params = params_from_args(args, model)
-    if args.multistart < 0:
-        raise UsageError(f"--multistart: expected >= 0, got {args.multistart}")
-    meas, frames = load_measurement(args, model)
+    meas, frames = load_measurement(args, model, cfg)
     x0 = parse_x0(args.x0, model.n_states)
     road, meas, road_warnings = resolve_road(model, meas, args.road)
     if road == "unknown":

@@ -8,6 +8,8 @@ from typing import TYPE_CHECKING
 
 from firmware_sim.scenarios import SCENARIOS
 from suspid.cli._args import comma_list
+from suspid.cli._can import add_config_option
+from suspid.cli._config import load_config
 from suspid.cli._common import parse_assignments
 from suspid.cli._lazy import lazy_names
 from suspid.errors import UsageError
@@ -98,16 +100,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     p.add_argument("--dbc", metavar="PATH", help="DBC (default: suspid's dbc/suspension.dbc)")
     p.add_argument("--log", metavar="PATH",
                    help="also record every transmitted frame to this CAN log (.log/.asc/.blf/...)")
-    p.add_argument("--open-timeout", type=float, default=60.0, metavar="S",
-                   help="slcan pty: how long to wait for a host to open the channel (default 60)")
-    p.add_argument("--linger", type=float, default=3.0, metavar="S",
-                   help="slcan pty: after the run, how long to keep receiving while waiting for "
-                        "the host to close the channel before the pty disappears (default 3)")
+    add_config_option(p, "node")
     return p
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the node; exit 0 after the scenario ends."""
+    pty = load_config(args.config).table("node")
+    open_timeout, linger = pty.get("open_timeout_s", 60.0), pty.get("linger_s", 3.0)
     channels = comma_list(args.channels)
     cfg = NodeConfig(model=args.model, scenario=args.scenario, duration=args.duration,
                      rate=args.rate, speed=args.speed, noise=args.noise, channels=channels,
@@ -123,10 +123,10 @@ def run(args: argparse.Namespace) -> int:
         if isinstance(bus, SlcanPtyBus):
             sys.stdout.write(f"pty: {bus.path}\n")
             sys.stdout.flush()
-            if not bus.wait_open(args.open_timeout):
+            if not bus.wait_open(open_timeout):
                 raise UsageError(f"no host opened the SLCAN channel on {bus.path} within "
-                                 f"{args.open_timeout:g} s (open it with python-can's slcan "
-                                 "interface)")
+                                 f"{open_timeout:g} s (open it with python-can's slcan "
+                                 "interface; node.open_timeout_s of --config)")
         target: can.BusABC | _Tee = bus
         if args.log:
             writer = open_log_writer(args.log)
@@ -134,8 +134,8 @@ def run(args: argparse.Namespace) -> int:
         if isinstance(bus, SlcanPtyBus):
             # after the last sample, keep receiving (an estimator's alert frame may lag
             # behind) until the host closes the channel -- it can tell the end from the
-            # final SN_Status with State = stopping -- or --linger runs out
-            summary = node.run(target, linger=args.linger,
+            # final SN_Status with State = stopping -- or node.linger_s runs out
+            summary = node.run(target, linger=linger,
                                linger_until=bus.closed_by_host)
             bus.drain(5.0)
             summary_extra = {"slcan": {"path": bus.path, "overflows": bus.overflows,

@@ -7,6 +7,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from suspid.cli._can import add_config_option
+from suspid.cli._config import load_config
 from suspid.cli._common import (add_model_option, model_from_args, parse_assignments, parse_state,
                                 print_json)
 from suspid.cli._lazy import lazy_names
@@ -47,11 +49,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="true parameter value (SI); others use the model defaults; repeatable")
     p.add_argument("--duration", type=float, default=5.0, help="record length in s (default 5)")
     p.add_argument("--fs", type=float, default=1000.0, help="sample rate in Hz (default 1000)")
-    p.add_argument("--height", type=float, default=0.1, help="curb/bump height in m (default 0.1)")
-    p.add_argument("--length", type=float, default=3.0, help="bump length in m (default 3)")
     p.add_argument("--speed", type=float, default=20.0, help="vehicle speed in km/h (default 20)")
-    p.add_argument("--t0", type=float, default=0.5, help="time the wheel reaches the curb/bump, s")
-    p.add_argument("--road-class", default="C", help="ISO 8608 class A-H (default C)")
+    add_config_option(p, "simulate")
     p.add_argument("--x0", default=None, metavar="V1,V2,...",
                    help="initial state [q..., q_dot...] (default: the seed's for 'initial', rest otherwise)")
     p.add_argument("--noise", type=float, default=0.0,
@@ -126,6 +125,7 @@ def select_channels(model: SuspensionModel, spec: str | None) -> tuple[list[str]
 
 
 def run(args: argparse.Namespace) -> int:
+    shape = load_config(args.config).table("simulate")
     model = model_from_args(args)
     params = model.defaults()
     given = parse_assignments(args.param, "--param")
@@ -153,8 +153,10 @@ def run(args: argparse.Namespace) -> int:
         scenario = f"measured road {args.road}"
     else:
         t, road, x0 = make_scenario(model, args.scenario, duration=args.duration, fs=args.fs,
-                                    params=params, h=args.height, l=args.length, v_kmh=args.speed,
-                                    t0=args.t0, road_class=args.road_class, seed=args.seed, x0=x0)
+                                    params=params, h=shape.get("height_m", 0.1),
+                                    l=shape.get("length_m", 3.0), v_kmh=args.speed,
+                                    t0=shape.get("t0_s", 0.5),
+                                    road_class=shape.get("road_class", "C"), seed=args.seed, x0=x0)
         scenario = args.scenario
     if args.effect and args.road and uniform_step(t) is None:
         d = np.diff(t)

@@ -17,6 +17,7 @@ from estimator.decode.rules.arrival import MIN_FRAMES
 from estimator.decode.rules.arrival_live import HOLD, LiveSlots
 from tests.can.test_arrival_time import KINDS, P, _arrivals, _rel, logs  # noqa: F401
 from tests.can.test_time_base import FIX, _estimates
+from tests.conftest import write_config
 
 ALL = ["clean", *KINDS]
 
@@ -127,8 +128,10 @@ def test_a_real_gap_live(logs: dict[str, Path]) -> None:  # noqa: F811
 @pytest.mark.parametrize("kind", ALL)
 def test_live_monitor_gives_the_clean_estimates(logs: dict[str, Path], kind: str,  # noqa: F811
                                                 monkeypatch: pytest.MonkeyPatch,
-                                                capsys: pytest.CaptureFixture[str]) -> None:
-    """``suspid monitor --interface ... --time-source timestamp`` on a bus that delivers the
+                                                capsys: pytest.CaptureFixture[str],
+                                                tmp_path: Path) -> None:
+    """``suspid monitor --interface ...`` with ``[live] time_source = "timestamp"`` on a bus
+    that delivers the
     stream with its transport's timestamps (python-can's virtual bus stamps frames with the
     host clock when sent, so the frames come from a read-only bus that keeps them)."""
     msgs = _messages(logs[kind])
@@ -138,7 +141,8 @@ def test_live_monitor_gives_the_clean_estimates(logs: dict[str, Path], kind: str
            "--window", "2", "--step", "1", "--jsonl", "--no-inspection"]
     ref = _estimates([*mon, "--input", str(logs["clean"])], capsys)
     got = _estimates([*mon, "--interface", "virtual", "--channel", "live",
-                      "--time-source", "timestamp", "--idle-timeout", "1"], capsys)
+                      "--config", write_config(tmp_path, '[live]\ntime_source = "timestamp"\n'
+                                                         "idle_timeout_s = 1\n")], capsys)
     frames = got[-1]["frames"]
     assert frames["time_base"] == "timestamp"                # type: ignore[index]
     assert sum(frames["rejected"].values()) == 0             # type: ignore[index]

@@ -1,4 +1,5 @@
-"""Logs of several CAN buses: the channel python-can's readers give, ``--can-channel``.
+"""Logs of several CAN buses: the channel python-can's readers give, ``can.channel`` of a
+``--config`` file.
 
 A logger with two CAN ports writes both buses into one file. With a DBC that has no CRC or
 counter (a user's own, through ``--map``) the frames of an identifier sent on both buses
@@ -24,6 +25,7 @@ from suspid.cli import main
 from suspid.errors import UsageError
 from suspid.io.csvio import read_measurement
 from suspid.models import get_model
+from tests.conftest import write_config
 
 #: a logger's own DBC: no CRC, no counter, heights in m
 HEIGHT_DBC = '''VERSION ""
@@ -131,7 +133,7 @@ def test_without_the_option_a_warning_names_the_channels(two_bus, height_dbc):
     other = "can0" if option == "can1" else "2"
     assert len(warned) == 1
     assert f"{option} ({n} frames)" in warned[0] and f"{other} ({n} frames)" in warned[0]
-    assert "--can-channel" in warned[0]
+    assert "can.channel" in warned[0]
     assert frames["accepted"] == 2 * n          # both streams decoded: what the warning says
     assert "other_channel" not in frames
 
@@ -141,7 +143,7 @@ def test_an_absent_channel_is_an_error_listing_the_present_ones(two_bus):
     with pytest.raises(UsageError) as exc:
         list(read_log_arrays(path, ReadStats(), channel="7"))
     msg = str(exc.value)
-    assert "--can-channel 7" in msg and f"{option} ({n} frames)" in msg and str(path) in msg
+    assert "can.channel 7" in msg and f"{option} ({n} frames)" in msg and str(path) in msg
     with pytest.raises(UsageError):
         list(read_log(path, ReadStats(), channel="7"))
 
@@ -154,16 +156,22 @@ def test_message_reader_selects_too(two_bus):
     assert {channel_label(path.suffix, m.channel) for m in msgs} == {option}
 
 
-def test_identify_cli(two_bus, height_dbc, capsys):
+def _channel(tmp_path, channel: str) -> list[str]:
+    """``--config`` with ``[can] channel`` (and no data-driven start: a short fit)."""
+    return ["--config", write_config(tmp_path, f'[can]\nchannel = "{channel}"\n'
+                                               "[fit]\ndata_start = false\n")]
+
+
+def test_identify_cli(two_bus, height_dbc, capsys, tmp_path):
     path, option, n = two_bus
     args = ["identify", "--model", "quarter2", "--input", str(path), "--dbc", str(height_dbc),
             "--map", MAP[0], "--map", MAP[1], "--map", MAP[2], "--fix", "m1=300", "--fix", "m2=40",
-            "--maxfev", "10", "--no-data-start", "--json"]
-    assert main(args + ["--can-channel", option]) == 0
+            "--maxfev", "10", "--json"]
+    assert main(args + _channel(tmp_path, option)) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["frames"]["other_channel"] == n and out["frames"]["accepted"] == n
     assert not any("bus channels" in w for w in out["warnings"])
-    assert main(args + ["--can-channel", "9"]) == 2
+    assert main(args + _channel(tmp_path, "9")) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error: ") and "channels present" in err[0]
 
@@ -179,12 +187,12 @@ def test_fleet_reads_one_channel(two_bus, height_dbc):
     assert "can_channel" not in plain.key()     # the key of logs read whole is unchanged
 
 
-def test_monitor_cli(two_bus, height_dbc, capsys):
+def test_monitor_cli(two_bus, height_dbc, capsys, tmp_path):
     path, option, n = two_bus
     args = ["monitor", "--model", "quarter2", "--input", str(path), "--dbc", str(height_dbc),
             "--map", MAP[0], "--map", MAP[1], "--map", MAP[2], "--fix", "m1=300",
             "--fix", "m2=40", "--window", "1", "--step", "0.5", "--jsonl"]
-    assert main(args + ["--can-channel", option]) == 0
+    assert main(args + ["--config", write_config(tmp_path, f'[can]\nchannel = "{option}"\n')]) == 0
     cap = capsys.readouterr()
     summary = [json.loads(ln) for ln in cap.out.splitlines()][-1]
     assert summary["frames"]["other_channel"] == n and summary["frames"]["accepted"] == n
@@ -196,11 +204,11 @@ def test_monitor_cli(two_bus, height_dbc, capsys):
     assert summary["frames"]["accepted"] == 2 * n
 
 
-def test_a_csv_has_no_bus_channel_the_option_is_warned(q2_csv, capsys):
+def test_a_csv_has_no_bus_channel_the_option_is_warned(q2_csv, capsys, tmp_path):
     args = ["identify", "--model", "quarter2", "--input", str(q2_csv), "--fix", "m1=300",
-            "--fix", "m2=40", "--maxfev", "10", "--no-data-start", "--json"]
-    assert main(args + ["--can-channel", "2"]) == 0
+            "--fix", "m2=40", "--maxfev", "10", "--json"]
+    assert main(args + _channel(tmp_path, "2")) == 0
     warns = json.loads(capsys.readouterr().out)["warnings"]
-    assert any("--can-channel 2 not used" in w and str(q2_csv) in w for w in warns), warns
+    assert any("can.channel 2 not used" in w and str(q2_csv) in w for w in warns), warns
     assert main(args) == 0
-    assert not any("--can-channel" in w for w in json.loads(capsys.readouterr().out)["warnings"])
+    assert not any("can.channel" in w for w in json.loads(capsys.readouterr().out)["warnings"])

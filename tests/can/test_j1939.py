@@ -20,6 +20,7 @@ from suspid.cli import main
 from suspid.errors import InputError, UsageError
 
 from tests.can.conftest import REALDATA
+from tests.conftest import write_config
 
 J1939_DIR = REALDATA / "j1939-small"
 LOG = J1939_DIR / "FCBF0606_00003482_00000001-60B621D9.MF4"
@@ -99,21 +100,25 @@ def test_no_matching_source_names_the_senders_and_the_logs_pgns() -> None:
                                 j1939_source="0x00")
     msg = str(ei.value)
     assert "\n" not in msg
-    assert "CCVS1 (PGN 65265) is sent by 0x47 (184 frames), not by --j1939-source 0x00" in msg
+    assert "CCVS1 (PGN 65265) is sent by 0x47 (184 frames), not by can.j1939_source 0x00" in msg
     assert "PGNs in the log of 16: 61444 (EEC1, 577 frames), " in msg
 
 
-def test_identify_cli_source_filter_and_bad_address(capsys: pytest.CaptureFixture[str]) -> None:
+def test_identify_cli_source_filter_and_bad_address(capsys: pytest.CaptureFixture[str],
+                                                    tmp_path: Path) -> None:
     _realdata()
     base = ["identify", "--model", "quarter1", "--input", str(LOG), "--dbc", str(DBC),
             "--map", "x=EEC1.EngineSpeed*0.001", "--json"]
-    assert main(base + ["--j1939-source", "0x00"]) == 0
+    good = write_config(tmp_path, '[can]\nj1939_source = "0x00"\n', "good.toml")
+    assert main(base + ["--config", good]) == 0
     res = json.loads(capsys.readouterr().out)
     assert res["frames"]["accepted"] == 577
     assert res["frames"]["j1939"]["messages"]["EEC1"]["source"] == "0x00"
-    assert main(base + ["--j1939-source", "300"]) == 2
+    bad = write_config(tmp_path, "[can]\nj1939_source = 300\n", "bad.toml")
+    assert main(base + ["--config", bad]) == 2
     err = capsys.readouterr().err
-    assert err == "error: --j1939-source '300': expected a source address 0..253, got 300\n"
+    assert err == (f"error: {bad}: can.j1939_source: expected an address (string or integer) "
+                   ">= 0 and <= 253, got 300 (integer)\n")
 
 
 def _pdu_log(path: Path, senders: dict[int, float], dest: int = 0x21) -> None:
@@ -166,7 +171,7 @@ def test_several_senders_first_one_decoded_with_a_warning_or_the_one_chosen(
     warn = [w for w in meas.warnings if "J1939" in w]
     assert warn == [f"{log}: J1939 PropA (PGN 61184) is sent by 2 sources, 0x03 (200 frames), "
                     "0x0b (200 frames); decoded 0x03 (the first), the others not; choose one "
-                    "with --j1939-source ADDR"]
+                    "with the --config file's can.j1939_source"]
     meas, frames = load_log_as_measurement(log, "quarter2", pdu_dbc, maps, j1939_source="11")
     assert abs(np.nanmean(meas.measured["x1"]) + 0.2) < 0.01
     assert frames["j1939"]["messages"]["PropA"]["source"] == "0x0b"

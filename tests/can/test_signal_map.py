@@ -8,10 +8,11 @@ import pytest
 
 from estimator.decode.listener import model_channels
 from suspid.can.dbc import load_dbc
-from suspid.can.signal_map import SignalMap, SignalMapping, parse_mapping
+from suspid.can.signal_map import SignalMap, SignalMapping, merge_maps, parse_mapping
 from suspid.cli import main
 from suspid.errors import InputError, UsageError
 from suspid.models import get_model
+from tests.conftest import write_config
 
 
 @pytest.mark.parametrize("text, expected", [
@@ -47,7 +48,8 @@ def test_toml_and_json_files(tmp_path):
     js = tmp_path / "m.json"
     js.write_text(json.dumps({"map": {"x1_ddot": "gnss_imu.AccelerationX-9.81"}}))
     assert SignalMap.from_file(js).mappings[0].offset == -9.81
-    merged = SignalMap.from_args(["x1_ddot=gnss_imu.AccelerationZ"], toml)
+    merged = merge_maps([sm, SignalMap.from_strings(["x1_ddot=gnss_imu.AccelerationZ"])])
+    assert merged is not None
     assert [m.signal for m in merged.mappings] == ["AccelerationY", "AccelerationZ"]
 
 
@@ -123,7 +125,8 @@ def test_the_unit_warning_reaches_identify(tmp_path, capsys):
                            for k in range(200)))
     rc = main(["identify", "--model", "quarter2", "--input", str(log), "--dbc", str(dbc), "--map",
                "x1=Height.Body", "--map", "x2=Height.Wheel", "--fix", "m1=300", "--fix", "m2=40",
-               "--maxfev", "20", "--no-data-start", "--json"])
+               "--maxfev", "20", "--config", write_config(tmp_path, "[fit]\ndata_start = false\n"),
+               "--json"])
     assert rc == 0
     out = json.loads(capsys.readouterr().out)
     assert any("Height.Body is in 'mm'" in w for w in out["warnings"])

@@ -19,7 +19,7 @@ from estimator.decode import DecodeListener
 from firmware_sim.transport import BufferedSlcanBus, SlcanPtyBus, open_bus
 from suspid.can.codec import encode_alert
 from suspid.can.dbc import load_dbc
-from tests.conftest import start_slcan_node, suspid_env
+from tests.conftest import start_slcan_node, suspid_env, write_config
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -128,12 +128,13 @@ def test_slcan_adapter_timestamps_give_the_frame_times():
     assert sync[-1] - sync[0] == pytest.approx(0.5, abs=1.001e-3)
 
 
-def test_two_process_slcan_link():
+def test_two_process_slcan_link(tmp_path):
     """``suspid node --interface slcan --channel pty`` in a subprocess; python-can slcan here."""
+    config = write_config(tmp_path, "[node]\nopen_timeout_s = 20\n")
     env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     proc = subprocess.Popen(
         [sys.executable, "-m", "suspid", "node", "--scenario", "bump", "--interface", "slcan",
-         "--channel", "pty", "--duration", "1.0", "--speed", "4", "--open-timeout", "20"],
+         "--channel", "pty", "--duration", "1.0", "--speed", "4", "--config", config],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=REPO)
     try:
         first = proc.stdout.readline()
@@ -202,7 +203,7 @@ def test_socketcan_unavailable_is_a_clear_usage_error():
         open_bus("socketcan", "vcan0")
 
 
-def test_two_process_node_and_monitor_cli_over_slcan():
+def test_two_process_node_and_monitor_cli_over_slcan(tmp_path):
     """The contract's pair: ``suspid node --interface slcan --channel pty`` and
     ``suspid monitor --interface slcan --channel /dev/pts/N`` as two processes.
 
@@ -211,15 +212,16 @@ def test_two_process_node_and_monitor_cli_over_slcan():
     ``CanOperationError`` traceback there.
     """
     env = suspid_env()
+    pty = write_config(tmp_path, "[node]\nopen_timeout_s = 30\nlinger_s = 1\n", "node.toml")
     node, path = start_slcan_node("--scenario", "damper-wear", "--duration", "24", "--speed", "4",
-                                  "--open-timeout", "30", "--linger", "1")
+                                  "--config", pty)
     mon = None
     try:
         mon = subprocess.run(
             [sys.executable, "-m", "suspid", "monitor", "--model", "quarter2", "--interface", "slcan",
              "--channel", path, "--fix", "m1=300", "--fix", "m2=40", "--fix", "c2=300",
              "--fix", "k2=200000", "--nominal", "c1=1500", "--nominal", "k1=20000",
-             "--idle-timeout", "30", "--jsonl"],
+             "--config", write_config(tmp_path, "[live]\nidle_timeout_s = 30\n"), "--jsonl"],
             capture_output=True, text=True, env=env, cwd=REPO, timeout=180)
         out, err = node.communicate(timeout=60)
     finally:
@@ -239,18 +241,22 @@ def test_two_process_node_and_monitor_cli_over_slcan():
     assert node.returncode == 0, err
 
 
-def _slcan_monitor(*flags: str, duration: float = 3.0) -> dict:
-    """``suspid node`` at half real time over the pty adapter and ``suspid monitor
-    --time-source timestamp FLAGS`` on it; the monitor's summary line."""
+def _slcan_monitor(tmp_path: Path, live: str = "", duration: float = 3.0) -> dict:
+    """``suspid node`` at half real time over the pty adapter and ``suspid monitor`` on it
+    with the ``[live]`` settings ``time_source = "timestamp"`` and ``live``; the monitor's
+    summary line."""
+    config = write_config(tmp_path, '[live]\ntime_source = "timestamp"\nidle_timeout_s = 30\n'
+                                    f"alert_frames = false\n{live}", f"live{len(live)}.toml")
+    pty = write_config(tmp_path, "[node]\nopen_timeout_s = 60\nlinger_s = 1\n", "node.toml")
     node, path = start_slcan_node("--scenario", "random", "--duration", str(duration),
-                                  "--speed", "0.5", "--open-timeout", "60", "--linger", "1")
+                                  "--speed", "0.5", "--config", pty)
     try:
         mon = subprocess.run(
             [sys.executable, "-m", "suspid", "monitor", "--model", "quarter2", "--interface",
-             "slcan", "--channel", path, *flags, "--time-source", "timestamp", "--fix",
+             "slcan", "--channel", path, "--config", config, "--fix",
              "m1=300", "--fix", "m2=40", "--fix", "c2=300", "--fix", "k2=200000",
-             "--window", "1", "--step", "0.5", "--idle-timeout", "30", "--no-alert-frames",
-             "--jsonl"], capture_output=True, text=True, env=suspid_env(), cwd=REPO,
+             "--window", "1", "--step", "0.5", "--jsonl"],
+            capture_output=True, text=True, env=suspid_env(), cwd=REPO,
             timeout=300)
         node.communicate(timeout=60)
     finally:
@@ -262,15 +268,15 @@ def _slcan_monitor(*flags: str, duration: float = 3.0) -> dict:
     return {"summary": lines[-1], "estimates": [d for d in lines if d["type"] == "estimate"]}
 
 
-def test_monitor_cli_slcan_timestamps_time_frames_by_the_adapter():
-    """``monitor --slcan-timestamps``: the frames' times are the adapter's (Lawicel ``Z1``).
+def test_monitor_cli_slcan_timestamps_time_frames_by_the_adapter(tmp_path):
+    """``[live] slcan_timestamps = true``: the frames' times are the adapter's (Lawicel ``Z1``).
 
     The node runs at half real time and its adapter stamps the node's data time, so the
     adapter's clock runs at half the host's: 3 s of data take 6 s to arrive. Timed by the
     adapter the monitor sees 3 s of data (5 windows of 1 s every 0.5 s, exactly 0.5 s
     apart); timed by the host (without the flag) 6 s.
     """
-    a = _slcan_monitor("--slcan-timestamps")
+    a = _slcan_monitor(tmp_path, "slcan_timestamps = true\n")
     s = a["summary"]
     rx = s["frames"]["receive"]
     assert s["frames"]["time_base"] == "timestamp"
@@ -281,7 +287,7 @@ def test_monitor_cli_slcan_timestamps_time_frames_by_the_adapter():
     assert t.size == 5
     np.testing.assert_allclose(np.diff(t), 0.5, atol=1e-6)
 
-    h = _slcan_monitor()
+    h = _slcan_monitor(tmp_path)
     s = h["summary"]
     rx = s["frames"]["receive"]
     assert rx["host_timed"] == rx["read"] == s["frames"]["accepted"] > 0
@@ -290,31 +296,35 @@ def test_monitor_cli_slcan_timestamps_time_frames_by_the_adapter():
     assert s["windows_cut"] >= 9
 
 
-def test_monitor_cli_slcan_timestamps_needs_slcan():
+def test_monitor_cli_slcan_timestamps_needs_slcan(tmp_path):
+    config = write_config(tmp_path, "[live]\nslcan_timestamps = true\nidle_timeout_s = 1\n")
     out = subprocess.run([sys.executable, "-m", "suspid", "monitor", "--model", "quarter2",
-                          "--interface", "virtual", "--channel", "ts-flag", "--slcan-timestamps",
-                          "--idle-timeout", "1"], capture_output=True, text=True,
-                         env=suspid_env(), cwd=REPO, timeout=120)
+                          "--interface", "virtual", "--channel", "ts-flag", "--config", config],
+                         capture_output=True, text=True, env=suspid_env(), cwd=REPO, timeout=120)
     assert out.returncode == 2
     assert out.stderr.strip().splitlines()[-1] == \
-        "error: --interface: --slcan-timestamps needs --interface slcan, got virtual"
+        "error: --interface: live.slcan_timestamps needs --interface slcan, got virtual"
 
 
-def test_monitor_cli_rx_buffer_is_seconds_of_the_dbc_frame_rate():
-    """``--rx-buffer 0.5``: the receiver holds 0.5 s at suspid's DBC rate (every message at
+def test_monitor_cli_rx_buffer_is_seconds_of_the_dbc_frame_rate(tmp_path):
+    """``[live] rx_buffer_s = 0.5``: the receiver holds 0.5 s at suspid's DBC rate (every message at
     its ``GenMsgCycleTime``: 14,010 frames/s); a live bus other than SocketCAN reports its
     socket overrun as unknown (null)."""
     rate = sum(1000.0 / m.cycle_time for m in load_dbc().messages if m.cycle_time)
     assert rate == pytest.approx(14_010)
     out = subprocess.run([sys.executable, "-m", "suspid", "monitor", "--model", "quarter2",
-                          "--interface", "virtual", "--channel", "rx-buffer-flag",
-                          "--rx-buffer", "0.5", "--idle-timeout", "0.5", "--jsonl"],
+                          "--interface", "virtual", "--channel", "rx-buffer-flag", "--config",
+                          write_config(tmp_path, "[live]\nrx_buffer_s = 0.5\nidle_timeout_s = 0.5\n"),
+                          "--jsonl"],
                          capture_output=True, text=True, env=suspid_env(), cwd=REPO, timeout=120)
     assert out.returncode == 0, out.stderr
     rx = json.loads(out.stdout.splitlines()[-1])["frames"]["receive"]
     assert rx["buffer_capacity"] == math.ceil(0.5 * rate) and rx["read"] == 0
     assert rx["socket_overrun"] is None and rx["lost_by_cause"]["socket_overrun"] is None
+    zero = write_config(tmp_path, "[live]\nrx_buffer_s = 0\n", "zero.toml")
     bad = subprocess.run([sys.executable, "-m", "suspid", "monitor", "--model", "quarter2",
-                          "--interface", "virtual", "--channel", "x", "--rx-buffer", "0"],
+                          "--interface", "virtual", "--channel", "x", "--config", zero],
                          capture_output=True, text=True, env=suspid_env(), cwd=REPO, timeout=120)
-    assert bad.returncode == 2 and "--rx-buffer: expected seconds > 0, got '0'" in bad.stderr
+    assert bad.returncode == 2
+    assert bad.stderr == (f"error: {zero}: live.rx_buffer_s: expected a number > 0 (s), got 0 "
+                          "(integer)\n")

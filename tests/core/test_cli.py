@@ -14,6 +14,7 @@ from suspid.cli._common import implausible_values
 from suspid.models import MODELS, get_model
 
 from ..conftest import TABLE1
+from tests.conftest import write_config
 
 
 def run(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
@@ -260,7 +261,8 @@ def test_a_length_in_another_unit_is_named(tmp_path: Path,
     capsys.readouterr()
     base = ["identify", "--model", "half4", "--input", str(csv), "--fix", "m=1200",
             "--fix", "I=1500", "--fix", "m1=40", "--fix", "m2=40", "--fix", "a2=1.4",
-            "--maxfev", "20", "--no-data-start", "--json"]
+            "--maxfev", "20", "--config", write_config(tmp_path, "[fit]\ndata_start = false\n"),
+            "--json"]
     assert main(base + ["--fix", "a1=1200"]) == 0
     cap = capsys.readouterr()
     warns = json.loads(cap.out)["warnings"]

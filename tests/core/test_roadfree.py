@@ -22,7 +22,7 @@ from suspid.io.csvio import Measurement, write_measurement
 from suspid.models import get_model
 from suspid.models.base import SuspensionModel
 from suspid.simulate import simulate
-from tests.conftest import REPO, suspid_env
+from tests.conftest import REPO, suspid_env, write_config
 
 MODELS = ("quarter1", "quarter2", "half4", "full7")
 
@@ -303,7 +303,8 @@ def test_rig_scale_road_unknown_agrees_with_the_road_measured_fit(tmp_path: Path
     undetermined."""
     truth = ("--param", "m1=2.45", "--param", "m2=1", "--param", "k1=900", "--param",
              "c1=7.5", "--param", "k2=2500", "--param", "c2=5")
-    csv = _simulate(tmp_path, "rig.csv", *truth, "--road-class", "D", "--speed", "10",
+    cfg = write_config(tmp_path, '[simulate]\nroad_class = "D"\n')
+    csv = _simulate(tmp_path, "rig.csv", *truth, "--config", cfg, "--speed", "10",
                     "--fs", "500", "--channels", "x1,x2", "--effect", "coulomb_friction:F=0.3",
                     duration=10.0)
     lines = csv.read_text().splitlines()

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from suspid.cli import diagnose, fleet, identify, main
 from suspid.models import get_model
+from tests.conftest import write_config
 
 from ..conftest import TABLE1
 
@@ -96,7 +97,8 @@ def test_half4_through_the_cli(tmp_path: Path, capsys) -> None:
 def test_quarter1_text_output_and_option_errors(tmp_path: Path, capsys) -> None:
     csv = tmp_path / "q1.csv"
     rc = main(["simulate", "--model", "quarter1", "--scenario", "curb", "--duration", "1.6", "--fs", "200",
-               "--height", "0.05", "--effect", "sensor_offset:channel=x_dot,offset=0.01", "--noise", "0.005",
+               "--config", write_config(tmp_path, "[simulate]\nheight_m = 0.05\n", "curb.toml"),
+               "--effect", "sensor_offset:channel=x_dot,offset=0.01", "--noise", "0.005",
                "--out", str(csv)])
     assert rc == 0
     capsys.readouterr()
@@ -105,9 +107,10 @@ def test_quarter1_text_output_and_option_errors(tmp_path: Path, capsys) -> None:
     assert main(args) == 0
     text = capsys.readouterr().out
     assert text.startswith("model quarter1: effect sensor_offset") and "offset=0.0" in text
-    assert main([*args, "--multistart", "-1"]) == 2
+    bad = write_config(tmp_path, "[fit]\nmultistart = -1\n")
+    assert main([*args, "--config", bad]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("error:") and "--multistart" in err[0]
+    assert len(err) == 1 and err[0].startswith(f"error: {bad}: fit.multistart: ")
 
 
 def test_full7_through_the_cli(tmp_path: Path, capsys) -> None:
@@ -137,27 +140,29 @@ def test_full7_through_the_cli(tmp_path: Path, capsys) -> None:
 
 def test_the_fitting_commands_share_the_identifier_s_options(tmp_path: Path, capsys) -> None:
     """diagnose and fleet take identify's fit options with the same names, types and
-    defaults (one definition in suspid.cli._args); negative counts are refused in one line."""
+    defaults (one definition in suspid.cli._args); negative counts in the ``[fit]`` table of
+    ``--config`` are refused in one line naming the file and the key."""
     def options(mod) -> dict:
         p = argparse.ArgumentParser()
         mod.add_parser(p.add_subparsers())
         sub = next(a for a in p._actions if isinstance(a, argparse._SubParsersAction))
         cmd = next(iter(sub.choices.values()))
         return {a.dest: (a.option_strings, a.default, a.type, a.metavar, a.choices)
-                for a in cmd._actions if a.dest in ("cost", "x0", "maxfev", "multistart", "polish")}
+                for a in cmd._actions if a.dest in ("cost", "maxfev")}
 
     ref = options(identify)
-    assert len(ref) == 5 and ref["cost"][4] == ["sse", "frobenius"]
+    assert len(ref) == 2 and ref["cost"][4] == ["sse", "frobenius"]
     assert options(diagnose) == ref and options(fleet) == ref
     csv = tmp_path / "q1.csv"
     assert main(["simulate", "--model", "quarter1", "--duration", "1", "--fs", "100", "--out", str(csv)]) == 0
     capsys.readouterr()
-    for argv, opt in ((["diagnose", "--model", "quarter1", "--input", str(csv), "--restarts", "-1"], "--restarts"),
-                      (["fleet", "--model", "quarter1", "--input", str(csv), "--restarts", "-2"], "--restarts"),
-                      (["fleet", "--model", "quarter1", "--input", str(csv), "--multistart", "-1"], "--multistart")):
-        assert main(argv) == 2
+    for command, key, value in (("diagnose", "restarts", -1), ("fleet", "restarts", -2),
+                                ("fleet", "multistart", -1)):
+        bad = write_config(tmp_path, f"[fit]\n{key} = {value}\n", f"{command}-{key}.toml")
+        assert main([command, "--model", "quarter1", "--input", str(csv), "--config", bad]) == 2
         err = capsys.readouterr().err.strip().splitlines()
-        assert err == [f"error: {opt}: expected >= 0, got {argv[-1]}"], err
+        assert err == [f"error: {bad}: fit.{key}: expected an integer >= 0, got {value} "
+                       "(integer)"], err
 
 
 def test_effect_the_record_never_engages_is_warned(tmp_path: Path, capsys) -> None:

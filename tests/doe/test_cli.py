@@ -2,15 +2,18 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
 from suspid.cli import main
+from tests.conftest import write_config
 
 
-def test_doe_json_contract_and_progress_on_stderr(capsys: pytest.CaptureFixture[str]) -> None:
+def test_doe_json_contract_and_progress_on_stderr(capsys: pytest.CaptureFixture[str],
+                                                  tmp_path: Path) -> None:
     rc = main(["doe", "--model", "quarter1", "--cost", "frobenius", "--ids", "1,16",
-               "--progress", "--json"])
+               "--config", write_config(tmp_path, "[doe]\nprogress = true\n"), "--json"])
     cap = capsys.readouterr()
     assert rc == 0
     out = json.loads(cap.out)  # stdout is exactly one JSON object

@@ -46,7 +46,7 @@ def drives(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 def run(drives: dict[str, Path]) -> dict[str, Any]:
     report = drives["root"].parent / "report"
     out = fleet_json("--model", "quarter2", "--input", str(drives["root"]), *FIX,
-                     "--workers", "0", "--no-progress", "--report", str(report))
+                     "--workers", "0", "--report", str(report))
     out["_report"] = report
     return out
 

@@ -19,14 +19,14 @@ import numpy as np
 import pytest
 
 from estimator.fleet.synthetic import DAY_S, EPOCH0, write_production_drive
+from tests.conftest import write_config
 from tests.fleet.conftest import fleet_json, run_fleet_cli
 
 NOMINAL = 1500.0
 LIMIT = 0.7 * NOMINAL
 DAYS = (0.0, 8.0, 17.0, 23.0, 34.0, 40.0)      # uneven drive spacing
 CROSS_DAY = 52.0                                # VAN-CROSS reaches the limit (12 d after its last drive)
-ARGS = ["--model", "quarter2", "--fix", "k1=20000", "--nominal", "c1=1500", "--workers", "0",
-        "--no-progress"]
+ARGS = ["--model", "quarter2", "--fix", "k1=20000", "--nominal", "c1=1500", "--workers", "0"]
 
 
 def _c1(van: str, day: float) -> float:
@@ -123,7 +123,7 @@ def test_the_road_mode_is_part_of_the_history_key(road_fleet: RoadFleet, tmp_pat
     first = fleet_json(*ARGS, "--input", van, "--db", str(db))
     again = fleet_json(*ARGS, "--input", van, "--db", str(db), "--road", "unknown")
     zero = fleet_json(*ARGS, "--input", van, "--db", str(db), "--road", "zero",
-                      "--restarts", "1", "--multistart", "0")
+                      "--config", write_config(tmp_path, "[fit]\nrestarts = 1\nmultistart = 0\n"))
     assert first["new"] == 6 and first["reused"] == 0
     assert again["new"] == 6 and again["reused"] == 0       # "auto" and "unknown" differ as keys
     assert zero["new"] == 6 and zero["reused"] == 0          # another road mode: identified again
@@ -160,7 +160,7 @@ def test_accelerometer_only_drives_are_unidentified(tmp_path: Path) -> None:
     page = (report / "index.html").read_text(encoding="utf-8")
     table = page.split('id="unidentified"')[1].split("</table>")[0]
     assert table.count("<tr>") == 4 and "not identified" in table
-    text = run_fleet_cli("--model", "quarter1", "--input", str(van.parent), "--workers", "0",
-                         "--no-progress").stdout
+    text = run_fleet_cli("--model", "quarter1", "--input", str(van.parent), "--workers", "0"
+                         ).stdout
     assert "0 drives identified, 3 not identified, 0 failed" in text
     assert text.count("unidentified: ") == 3

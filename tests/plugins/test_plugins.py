@@ -37,7 +37,9 @@ def suspid(site: Path | None, *args: str) -> subprocess.CompletedProcess:
 
 def _record(site: Path | None, tmp: Path, model: str, truth: dict[str, float], *extra: str) -> Path:
     csv = tmp / f"{model}.csv"
-    r = suspid(site, "simulate", "--model", model, "--scenario", "curb", "--height", "-0.06",
+    curb = tmp / "curb.toml"
+    curb.write_text("[simulate]\nheight_m = -0.06\n")
+    r = suspid(site, "simulate", "--model", model, "--scenario", "curb", "--config", str(curb),
                "--duration", "1.6", "--fs", "200", *[f"--param={k}={v}" for k, v in truth.items()],
                "--noise", "0.005", "--out", str(csv), *extra)
     assert r.returncode == 0, r.stderr

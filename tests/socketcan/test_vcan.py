@@ -30,7 +30,7 @@ from typing import Any
 import pytest
 
 from firmware_sim.node import NodeConfig, SensorNode
-from tests.conftest import REPO, suspid_env
+from tests.conftest import REPO, suspid_env, write_config
 
 pytestmark = pytest.mark.socketcan
 
@@ -94,9 +94,17 @@ def _candump_ids(path: Path) -> Counter[int]:
     return ids
 
 
-def _live_monitor(tmp: Path, name: str, *extra: str) -> subprocess.Popen[bytes]:
+def _config(tmp: Path, alert_frames: bool = True) -> list[str]:
+    """``--config`` of a live monitor that never stops for silence (and, with
+    ``alert_frames`` false, sends no alert frames)."""
+    text = "[live]\nidle_timeout_s = 0\n" + ("" if alert_frames else "alert_frames = false\n")
+    return ["--config", write_config(tmp, text, f"live-{alert_frames}.toml")]
+
+
+def _live_monitor(tmp: Path, name: str, *extra: str,
+                  alert_frames: bool = True) -> subprocess.Popen[bytes]:
     return _start([sys.executable, "-m", "suspid", "monitor", "--interface", "socketcan",
-                   "--channel", "vcan0", "--idle-timeout", "0", *MON_ARGS, *extra],
+                   "--channel", "vcan0", *_config(tmp, alert_frames), *MON_ARGS, *extra],
                   tmp / name)
 
 
@@ -159,10 +167,10 @@ def test_node_to_monitor_with_alert_frame_on_the_bus(node_run: dict[str, Any]) -
 def test_canplayer_replay_equals_monitor_input(node_run: dict[str, Any]) -> None:
     tmp: Path = node_run["tmp"]
     log: Path = node_run["node_log"]
-    ref = _suspid("monitor", "--input", str(log), "--no-alert-frames", *MON_ARGS)
+    ref = _suspid("monitor", "--input", str(log), *_config(tmp, False), *MON_ARGS)
     assert ref.returncode == 0, ref.stderr
     ref_est = [json.loads(x) for x in ref.stdout.splitlines() if '"estimate"' in x]
-    mon = _live_monitor(tmp, "replay.jsonl", "--no-alert-frames")
+    mon = _live_monitor(tmp, "replay.jsonl", alert_frames=False)
     play = subprocess.run(["canplayer", "-I", str(log), "vcan0=can0"], capture_output=True,
                           text=True, timeout=300)
     assert play.returncode == 0, play.stderr
@@ -213,7 +221,7 @@ def test_injected_foreign_malformed_and_out_of_sequence_frames(node_run: dict[st
         bad["unknown_id"] += 1
     log = tmp / "injected.log"
     log.write_text("\n".join(lines) + "\n")
-    mon = _live_monitor(tmp, "injected.jsonl", "--no-alert-frames", "--window", "2", "--step", "1")
+    mon = _live_monitor(tmp, "injected.jsonl", "--window", "2", "--step", "1", alert_frames=False)
     n_gen = 300
     gen = subprocess.Popen(["cangen", "vcan0", "-I", "5A5", "-L", "8", "-g", "5", "-n", str(n_gen)])
     play = subprocess.run(["canplayer", "-I", str(log), "vcan0=can0"], capture_output=True,
@@ -257,8 +265,8 @@ def test_candump_recording_read_back(node_run: dict[str, Any]) -> None:
     d = _suspid("diagnose", "--model", "quarter2", "--input", str(rec), *fix, "--json")
     assert d.returncode == 0, d.stderr
     assert json.loads(d.stdout)
-    m = _suspid("monitor", "--input", str(rec), "--no-alert-frames", *MON_ARGS)
-    r = _suspid("monitor", "--input", str(log), "--no-alert-frames", *MON_ARGS)
+    m = _suspid("monitor", "--input", str(rec), *_config(rec.parent, False), *MON_ARGS)
+    r = _suspid("monitor", "--input", str(log), *_config(rec.parent, False), *MON_ARGS)
     assert m.returncode == 0 and r.returncode == 0, m.stderr + r.stderr
     em = [json.loads(x)["params"] for x in m.stdout.splitlines() if '"estimate"' in x]
     er = [json.loads(x)["params"] for x in r.stdout.splitlines() if '"estimate"' in x]
@@ -349,8 +357,8 @@ def test_lost_frames_counted_by_cause(tmp_path: Path) -> None:
     # -d: candump reports the frames its own socket dropped (a slow guest under the flood)
     dump = _start(["candump", "-L", "-d", "-r", str(64 << 20), "vcan0"],
                   tmp_path / "candump.log")
-    mon = _live_monitor(tmp_path, "lost.jsonl", "--no-alert-frames", "--window", "2",
-                        "--step", "1")
+    mon = _live_monitor(tmp_path, "lost.jsonl", "--window", "2", "--step", "1",
+                        alert_frames=False)
     flood = 50_000
     try:
         _play(logs["a"])

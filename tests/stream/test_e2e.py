@@ -14,6 +14,7 @@ from firmware_sim.transport import open_bus
 from suspid.can.codec import decode_alert
 from suspid.can.dbc import load_dbc
 from suspid.cli import main
+from tests.conftest import write_config
 
 #: the node paced at x6 on a live bus, the monitor keeping up in wall-clock time
 pytestmark = pytest.mark.realtime
@@ -60,7 +61,8 @@ def test_node_virtual_bus_monitor_alert(capsys, tmp_path) -> None:
     afile = tmp_path / "alerts.jsonl"
     try:
         rc = main(["monitor", "--model", "quarter2", "--interface", "virtual", "--channel", ch,
-                   *FIX, "--jsonl", "--idle-timeout", "3", "--alert-file", str(afile)])
+                   *FIX, "--jsonl", "--config",
+                   write_config(tmp_path, "[live]\nidle_timeout_s = 3\n"), "--alert-file", str(afile)])
         th.join(60)
     finally:
         stop.set()

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.conftest import REPO, start_slcan_node, suspid_env
+from tests.conftest import REPO, start_slcan_node, suspid_env, write_config
 
 #: the node paced at x2; the restarted monitor must attach before the alert's data go by
 pytestmark = pytest.mark.realtime
@@ -34,12 +34,14 @@ def test_killed_live_monitor_restarts_and_raises_the_later_alert_once(tmp_path: 
     afile = tmp_path / "alerts.jsonl"
     # c1: 1500 N s/m until 5 s, then linearly to 750 at 40 s: crosses 70 % (1050) at 26 s
     node, path = start_slcan_node("--scenario", "damper-wear", "--duration", "40", "--speed", "2",
-                                  "--wear-start", "5", "--wear-to", "0.5", "--open-timeout", "30",
-                                  "--linger", "1")
+                                  "--wear-start", "5", "--wear-to", "0.5", "--config",
+                                  write_config(tmp_path, "[node]\nopen_timeout_s = 30\n"
+                                                         "linger_s = 1\n", "node.toml"))
     try:
         mon_cmd = [sys.executable, "-u", "-m", "suspid", "monitor", "--model", "quarter2",
                    "--interface", "slcan", "--channel", path, *FIX, "--alert-file", str(afile),
-                   "--idle-timeout", "20", "--no-inspection", "--jsonl"]
+                   "--config", write_config(tmp_path, "[live]\nidle_timeout_s = 20\n"),
+                   "--no-inspection", "--jsonl"]
         first_mon = subprocess.Popen(mon_cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                      text=True, env=env, cwd=REPO)
         seen = []

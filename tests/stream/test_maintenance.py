@@ -22,6 +22,7 @@ from estimator.stream.wear_streams import damper_wear
 from estimator.stream.window import SlidingWindowIdentifier
 from suspid.io.csvio import write_measurement
 from suspid.models import get_model
+from tests.conftest import write_config
 from tools.bench_maintenance import FULL7_KNOWN, Case, full7_stream
 
 from .conftest import TABLE1
@@ -199,7 +200,7 @@ def test_stable_stream_tracked_no_worse_than_the_ekf() -> None:
 
 def test_monitor_cli_window_drift_refers_estimates_to_the_window_end(tmp_path) -> None:
     """The window's linear drift (by default on the struts' free dampers and springs, here
-    c1 and k1; ``--window-drift none`` turns it off) on a quantization-only ramp (c1
+    c1 and k1; ``[window] drift = []`` turns it off) on a quantization-only ramp (c1
     -2 %/s): the window estimates describe the window end (the constant windows lag it by
     half a window); a parameter that is not free is a one-line usage error."""
     m = get_model("quarter2")
@@ -211,7 +212,8 @@ def test_monitor_cli_window_drift_refers_estimates_to_the_window_end(tmp_path) -
     base = [sys.executable, "-m", "suspid", "monitor", "--model", "quarter2", "--input", str(csv),
             *fix, "--nominal", f"c1={s.nominal['c1']}", "--no-inspection", "--jsonl"]
     err = {}
-    for drift, extra in ((False, ["--window-drift", "none"]), (True, [])):
+    for drift, extra in ((False, ["--config", write_config(tmp_path, "[window]\ndrift = []\n",
+                                                           "off.toml")]), (True, [])):
         r = subprocess.run(base + extra, capture_output=True, text=True, timeout=300)
         assert r.returncode == 0, r.stderr
         est = [d for d in map(json.loads, r.stdout.splitlines()) if d["type"] == "estimate"]
@@ -226,8 +228,9 @@ def test_monitor_cli_window_drift_refers_estimates_to_the_window_end(tmp_path) -
     assert err[False] > 0.01  # the half-window lag at 2 %/s of nominal
     assert err[True] < 0.4 * err[False]
     assert err[("track", True)] < 0.5 * err[False]
-    r = subprocess.run(base + ["--window-drift", "c2"], capture_output=True, text=True,
-                       timeout=300)
+    r = subprocess.run(base + ["--config", write_config(tmp_path, '[window]\ndrift = ["c2"]\n',
+                                                        "c2.toml")],
+                       capture_output=True, text=True, timeout=300)
     assert r.returncode == 2
     assert r.stderr.strip().splitlines()[-1].startswith("error: drift: c2 not among the free")
 

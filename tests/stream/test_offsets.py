@@ -22,6 +22,7 @@ from estimator.stream.wear_streams import damper_wear
 from suspid.cli import main
 from suspid.io.csvio import read_measurement, write_measurement
 from suspid.models import get_model
+from tests.conftest import write_config
 from tests.robustness.test_offset import _shifted
 
 FIX = {"quarter2": ["--fix", "m1=300", "--fix", "m2=40"],
@@ -91,9 +92,15 @@ def test_found_once_removed_and_estimates_as_without_it(records: dict[str, Path]
             assert pb[k] == pytest.approx(v, rel=0.02), k
 
 
+def _keep(directory: Path) -> list[str]:
+    """``--config`` with ``[window] offset = "keep"``."""
+    return ["--config", write_config(directory, '[window]\noffset = "keep"\n')]
+
+
 def test_keep_names_it_and_fits_the_data_as_they_are(records: dict[str, Path],
-                                                     capsys: pytest.CaptureFixture[str]) -> None:
-    lines = _monitor(capsys, records["quarter2:x1"], "quarter2", "--offset", "keep")
+                                                     capsys: pytest.CaptureFixture[str],
+                                                     tmp_path: Path) -> None:
+    lines = _monitor(capsys, records["quarter2:x1"], "quarter2", *_keep(tmp_path))
     kinds = [d["kind"] for d in lines if d["type"] == "warning"]
     assert kinds[0] == "offset" and "misfit" in kinds
     misfit = next(d for d in lines if d["type"] == "warning" and d["kind"] == "misfit")
@@ -104,7 +111,8 @@ def test_keep_names_it_and_fits_the_data_as_they_are(records: dict[str, Path],
 
 
 def test_ekf_gets_the_corrected_windows_too(records: dict[str, Path],
-                                            capsys: pytest.CaptureFixture[str]) -> None:
+                                            capsys: pytest.CaptureFixture[str],
+                                            tmp_path: Path) -> None:
     clean = _monitor(capsys, records["quarter2"], "quarter2", "--baseline", "ekf")
     lines = _monitor(capsys, records["quarter2:x1"], "quarter2", "--baseline", "ekf")
     assert [d["kind"] for d in lines if d["type"] == "warning"] == ["offset"]
@@ -113,7 +121,7 @@ def test_ekf_gets_the_corrected_windows_too(records: dict[str, Path],
     assert b[-1]["k1"] == pytest.approx(a[-1]["k1"], rel=0.01)
     # kept, the offset drags the filter's spring far off
     kept = _estimates(_monitor(capsys, records["quarter2:x1"], "quarter2", "--baseline", "ekf",
-                               "--offset", "keep"))
+                               *_keep(tmp_path)))
     assert abs(kept[-1]["k1"] / a[-1]["k1"] - 1) > 0.1
 
 

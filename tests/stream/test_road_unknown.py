@@ -20,6 +20,7 @@ from estimator.stream.roadfree import road_unknown_params, road_unknown_window
 from estimator.stream.wear_streams import production_wear, write_log
 from suspid.io.csvio import write_measurement
 from suspid.models import get_model
+from tests.conftest import write_config
 
 FIX = ["--fix", "m1=300", "--fix", "m2=40", "--fix", "c2=300", "--fix", "k2=200000"]
 #: the node's damper-wear scenario: c1 1500 -> 750 N s/m between 20 s and the end (100 s),
@@ -124,13 +125,13 @@ def test_csv_default_road_is_unknown_and_named(csv_stream) -> None:
                                [d["params"]["c1"] for d in est], rtol=1e-3)
 
 
-def test_usage_errors_name_the_road(csv_stream) -> None:
+def test_usage_errors_name_the_road(csv_stream, tmp_path: Path) -> None:
     _, csv, _ = csv_stream
     r = run("monitor", "--model", "quarter2", "--input", str(csv), *FIX, "--road", "unknown",
-            "--window-drift", "c1", "--jsonl")
+            "--config", write_config(tmp_path, '[window]\ndrift = ["c1"]\n'), "--jsonl")
     assert r.returncode == 2
     err = [l for l in r.stderr.splitlines() if l.startswith("error:")]
-    assert len(err) == 1 and "--window-drift" in err[0] and "--road unknown" in err[0]
+    assert len(err) == 1 and "window.drift" in err[0] and "--road unknown" in err[0]
     r = run("monitor", "--model", "quarter2", "--input", str(csv), *FIX, "--road", "measured",
             "--jsonl")
     assert r.returncode == 2 and "--road unknown" in r.stderr and "Traceback" not in r.stderr
@@ -204,7 +205,8 @@ def test_road_zero_fits_a_free_response(tmp_path: Path) -> None:
     assert run("simulate", "--model", "quarter2", "--scenario", "initial", "--duration", "6",
                "--fs", "200", "--out", str(free)).returncode == 0
     r = run("monitor", "--model", "quarter2", "--input", str(free), "--fix", "m1=300", "--fix",
-            "m2=40", "--road", "zero", "--min-deflection", "0", "--jsonl")
+            "m2=40", "--road", "zero", "--config",
+            write_config(tmp_path, "[window]\nmin_deflection = 0\n"), "--jsonl")
     assert r.returncode == 0, r.stderr
     out = lines(r.stdout)
     assert out[-1]["road"] == "zero"

@@ -9,7 +9,7 @@ import pytest
 
 from estimator.identify import Parameters
 from estimator.stream.accumulator import WindowAccumulator
-from estimator.stream.config import default_config, default_decimation
+from estimator.stream.config import WindowOptions, default_config, default_decimation
 from suspid.models.modes import modes
 from estimator.stream.drivers import run_arrays
 from estimator.stream.monitor import NMWindowEstimator
@@ -345,9 +345,10 @@ def test_linear_drift_solver_matches_the_gauss_newton_one(quarter2) -> None:
         cfg = default_config(quarter2, s.nominal, 500.0, 4)
         cfg.drift = () if solver == "constant" else ("c1",)
         if solver == "gauss-newton":
-            cfg = replace(cfg, drift_solver=solver, drift_chunk_s=0.04, drift_iterations=6)
+            cfg = replace(cfg, drift_chunk_s=0.04, drift_iterations=6)
         ident = SlidingWindowIdentifier(quarter2, Parameters.for_model(quarter2, fix=fix), cfg,
                                         ["x1", "x2"])
+        ident.first_order_drift = solver != "gauss-newton"
         res: list = []
         run_arrays(s.t, s.data, cfg.window_s, cfg.step_s,
                    lambda t, d: res.append(ident.process(t, d)))
@@ -382,7 +383,7 @@ def test_monitor_default_drift_is_the_struts_dampers_and_springs() -> None:
     spec = monitor_spec(q2, fix={"m1": 300.0, "m2": 40.0, "k1": 20000.0}, fs=500.0)
     assert spec.config.drift == ("c1",)
     off = monitor_spec(q2, fix={"m1": 300.0, "m2": 40.0}, fs=500.0,
-                       window_overrides={"drift": ()})
+                       window=WindowOptions(drift=()))
     assert off.config.drift == ()
     h4 = get_model("half4")
     spec = monitor_spec(h4, fix={k: h4.defaults()[k] for k in ("m", "I", "m1", "m2", "a1", "a2")},
