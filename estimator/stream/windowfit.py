@@ -601,20 +601,18 @@ class WindowFit:
 
     def drift_stderr(self, p: Mapping[str, float], free: list[str], rates: Mapping[str, float],
                      t_ref: float, chunk_s: float, rel_step: float = 1e-4,
-                     fixed_rates: Mapping[str, float] | None = None,
                      rate_prior_sd: float | None = None, R0: FloatArray | None = None
                      ) -> dict[str, float] | None:
         """Gauss-Newton standard errors (SI) of the free parameters at ``t_ref`` with the
         drift ``rates`` free as well (forward differences, noise per channel from the
-        residual); ``fixed_rates`` drift too but are known; ``rate_prior_sd`` (1/s) adds a
+        residual); ``rate_prior_sd`` (1/s) adds a
         prior of that standard deviation on each free rate. ``R0``: the residual at ``p``
         when already computed (as :meth:`drift_residual` returns it).
         """
-        known = dict(fixed_rates or {})
         rates = dict(rates)
 
         def resid(q: Mapping[str, float], g: Mapping[str, float]) -> FloatArray | None:
-            return self.drift_residual(q, {**known, **g}, t_ref, chunk_s)
+            return self.drift_residual(q, g, t_ref, chunk_s)
 
         if R0 is None:
             R0 = resid(p, rates)
