@@ -38,7 +38,8 @@ from typing import Any
 
 import numpy as np
 
-from estimator.fleet.analysis import AlertRule, summarize_vehicle
+from estimator.alerts.engine import AlertConfig
+from estimator.fleet.analysis import summarize_vehicle
 from estimator.fleet.drive import classify
 from estimator.identify import Parameters
 from estimator.identify.roadfree import fit_road_unknown
@@ -122,7 +123,7 @@ def make_van(i: int, rng: np.random.Generator, gap: float, upto: float, duration
     return Van(f"VAN-{i:04d}", life, recs)
 
 
-def predict(van: Van, lam: float, rule: AlertRule) -> tuple[float, float, float, float] | None:
+def predict(van: Van, lam: float, rule: AlertConfig) -> tuple[float, float, float, float] | None:
     """The fleet's forecast at ``t = lam x life`` from the drives up to then: ``(t_pred,
     crossing, low, high)`` in days after the first drive; ``None`` without a forecast."""
     t_pred = lam * van.life_days
@@ -145,7 +146,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=1)
     args = ap.parse_args(argv)
     rng = np.random.default_rng(args.seed)
-    rule = AlertRule(nominal={"c1": NOMINAL}, drop=DROP, horizon_days=10_000.0)
+    rule = AlertConfig.per_drive(nominal={"c1": NOMINAL}, drop=DROP, horizon_days=10_000.0)
     wall = time.perf_counter()
     vans = [make_van(i, rng, args.gap, 0.8, args.duration, args.fs) for i in range(args.vans)]
     n_drives = sum(len(v.records) for v in vans)

@@ -22,56 +22,16 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Iterable
 
 import numpy as np
 
 from estimator.alerts.engine import AlertConfig, AlertEngine
 from estimator.fleet.drive import determined
-from estimator.fleet.trend import DAY_S, Forecast, Trend, forecast_crossing, robust_trend
+from estimator.alerts.forecast import Trend
+from estimator.fleet.trend import DAY_S, Forecast, forecast_crossing, robust_trend, trend_json
 from suspid.models import get_model
-
-
-@dataclass
-class AlertRule:
-    """Alert and forecast settings of a fleet run.
-
-    Attributes
-    ----------
-    nominal : dict
-        ``parameter -> nominal`` (SI); parameters not listed use the model's default.
-    drop : float
-        Limit is ``(1 - drop) x nominal``.
-    z : float
-        One-sided normal quantile of the alert bound (2.326: 99 %).
-    min_count : int
-        Consecutive drives the condition must hold in (default 1: the latest drive alone
-        raises the alert when it is confidently below the limit).
-    level : float
-        Two-sided level of the forecast interval.
-    horizon_days : float
-        Forecasts further ahead of the latest drive than this are not reported (a slow
-        drift that reaches the limit in years is noise for maintenance planning, and at the
-        90 % level about one flat parameter in twenty shows a 'significant' slope).
-    """
-
-    nominal: dict[str, float] = field(default_factory=dict)
-    drop: float = 0.3
-    z: float = 2.326
-    min_count: int = 1
-    level: float = 0.90
-    horizon_days: float = 365.0
-
-    def nominal_of(self, model: str, name: str) -> float:
-        if name in self.nominal:
-            return float(self.nominal[name])
-        return float(get_model(model).spec(name).default)
-
-    def to_json(self) -> dict[str, Any]:
-        return {"nominal": dict(self.nominal), "drop": self.drop, "z": self.z,
-                "min_count": self.min_count, "level": self.level,
-                "horizon_days": self.horizon_days}
 
 
 #: 2000-01-01 00:00 UTC (epoch s): a drive that starts before it carries the time since the
@@ -182,7 +142,7 @@ class VehicleSummary:
             "drives": len(self.drives),
             "latest": ({k: v for k, v in res["params"].items() if k in known} if last
                        else None),
-            "trend": {k: tr.to_json() for k, tr in self.trends.items() if tr is not None},
+            "trend": {k: trend_json(tr) for k, tr in self.trends.items() if tr is not None},
             "alerts": [a["parameter"] for a in self.alerts],
             "forecast": {k: f.to_json() for k, f in self.forecasts.items()},
             "rank": self.rank,
@@ -254,7 +214,7 @@ WEAR_KINDS = ("damping", "stiffness")
 LOAD_KINDS = ("mass", "inertia")
 
 
-def summarize_vehicle(vehicle: str, records: list[dict[str, Any]], rule: AlertRule
+def summarize_vehicle(vehicle: str, records: list[dict[str, Any]], rule: AlertConfig
                       ) -> VehicleSummary:
     """History, trends, alerts and forecasts of one vehicle from its drive records.
 
@@ -263,7 +223,8 @@ def summarize_vehicle(vehicle: str, records: list[dict[str, Any]], rule: AlertRu
     vehicle : str
     records : list of dict
         The vehicle's drive records (any status).
-    rule : AlertRule
+    rule : AlertConfig
+        Nominal values, alert and forecast settings (:meth:`AlertConfig.per_drive`).
 
     Returns
     -------
@@ -290,8 +251,7 @@ def summarize_vehicle(vehicle: str, records: list[dict[str, Any]], rule: AlertRu
     monitored = [k for k in free if spec(k).kind in WEAR_KINDS]
     loads = [k for k in free if spec(k).kind in LOAD_KINDS]
     nominal = {k: rule.nominal_of(model, k) for k in monitored}
-    cfg = AlertConfig(nominal=nominal, drop=rule.drop, z=rule.z, persistence_s=0.0,
-                      min_count=rule.min_count)
+    cfg = replace(rule, nominal=nominal)
     limits = {k: cfg.limit(k) for k in monitored}
     engine = AlertEngine(cfg, model, units={k: spec(k).unit for k in monitored})
     for r in ok:
@@ -331,7 +291,7 @@ def summarize_vehicle(vehicle: str, records: list[dict[str, Any]], rule: AlertRu
     return summary
 
 
-def summarize_fleet(records: Iterable[dict[str, Any]], rule: AlertRule) -> list[VehicleSummary]:
+def summarize_fleet(records: Iterable[dict[str, Any]], rule: AlertConfig) -> list[VehicleSummary]:
     """Every vehicle's summary, ranked most at risk first (``rank`` 1 is the first)."""
     by_vehicle: dict[str, list[dict[str, Any]]] = {}
     for r in records:

@@ -19,7 +19,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Sequence
 
-from estimator.fleet.analysis import AlertRule, VehicleSummary
+from estimator.alerts.engine import AlertConfig
+from estimator.fleet.analysis import VehicleSummary
 from estimator.fleet.drive import determined
 from estimator.fleet.trend import DAY_S, Forecast
 from suspid.errors import InputError, UsageError
@@ -144,7 +145,7 @@ def _vehicle_row(s: VehicleSummary) -> str:
 
 
 def render(vehicles: Sequence[VehicleSummary], drives: Sequence[dict[str, Any]],
-           rule: AlertRule) -> str:
+           rule: AlertConfig) -> str:
     """The report page as HTML text."""
     failed = [d for d in drives if d["status"] == "failed"]
     unidentified = [d for d in drives if d["status"] == "unidentified"]
@@ -197,8 +198,9 @@ def render(vehicles: Sequence[VehicleSummary], drives: Sequence[dict[str, Any]],
             for k in s.monitored:
                 tr = s.trends.get(k)
                 fc = s.forecasts.get(k)
-                rate = ("" if tr is None else f"{_num(tr.rate_per_day)}" +
-                        (f" ± {_num(tr.stderr)}" if math.isfinite(tr.stderr) else ""))
+                rate = ("" if tr is None else f"{_num(tr.rate * DAY_S)}" +
+                        (f" ± {_num(tr.rate_stderr * DAY_S)}" if math.isfinite(tr.rate_stderr)
+                         else ""))
                 last = s.latest_value(k)
                 parts.append(f"<tr><td>{k}</td><td>{'' if last is None else _num(last)}</td>"
                              f"<td>{_num(s.nominal[k])}</td><td>{_num(s.limits[k])}</td>"
@@ -310,7 +312,7 @@ def prepare_report_folder(folder: str | Path) -> Path:
 
 
 def write_report(folder: str | Path, vehicles: Sequence[VehicleSummary],
-                 drives: Sequence[dict[str, Any]], rule: AlertRule) -> Path:
+                 drives: Sequence[dict[str, Any]], rule: AlertConfig) -> Path:
     """Write ``folder/index.html`` (the folder is created); returns its path."""
     d = Path(folder)
     d.mkdir(parents=True, exist_ok=True)

@@ -17,14 +17,15 @@ import math
 import os
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, TextIO
 
 from distributed import Client, LocalCluster, as_completed
 
 from estimator.decode.listener import DecodeListener
-from estimator.fleet.analysis import AlertRule, VehicleSummary, summarize_fleet
+from estimator.alerts.engine import AlertConfig
+from estimator.fleet.analysis import VehicleSummary, summarize_fleet
 from estimator.fleet.discover import DriveFile, find_drives
 from estimator.fleet.drive import (CAN_SUFFIXES, IdentifySettings, cached_database, file_digest,
                                    identify_drive)
@@ -95,8 +96,8 @@ class FleetConfig:
         Directories, glob patterns or files (empty: report from ``db`` alone).
     settings : IdentifySettings or None
         How each drive is identified (``None`` only for a history-only report).
-    rule : AlertRule
-        Nominal values, alert and forecast settings.
+    rule : AlertConfig
+        Nominal values, alert and forecast settings (:meth:`AlertConfig.per_drive`).
     scheduler : str or None
         Address of an existing Dask scheduler (``tcp://HOST:PORT``).
     workers : int or None
@@ -111,7 +112,7 @@ class FleetConfig:
 
     inputs: list[str] = field(default_factory=list)
     settings: IdentifySettings | None = None
-    rule: AlertRule = field(default_factory=AlertRule)
+    rule: AlertConfig = field(default_factory=AlertConfig.per_drive)
     scheduler: str | None = None
     workers: int | None = None
     db: str | None = None
@@ -265,7 +266,7 @@ def run_fleet(config: FleetConfig) -> FleetResult:
         if history is not None and not config.inputs and not rule.nominal:
             last = history.last_options()
             if last and last.get("rule", {}).get("nominal"):
-                rule = AlertRule(**{**rule.to_json(), "nominal": last["rule"]["nominal"]})
+                rule = replace(rule, nominal=dict(last["rule"]["nominal"]))
         records: list[dict[str, Any]] = []
         new = reused = 0
         settings = config.settings

@@ -20,11 +20,11 @@ from suspid.errors import UsageError
 from suspid.models import get_model
 
 if TYPE_CHECKING:
-    from estimator.fleet import (AlertRule, FleetConfig, IdentifySettings, ProgressBar,
+    from estimator.fleet import (AlertConfig, FleetConfig, IdentifySettings, ProgressBar,
                                  available_cpus, run_fleet)
 else:
-    (AlertRule, FleetConfig, IdentifySettings, ProgressBar, available_cpus,
-     run_fleet) = lazy_names("estimator.fleet", "AlertRule", "FleetConfig", "IdentifySettings",
+    (AlertConfig, FleetConfig, IdentifySettings, ProgressBar, available_cpus,
+     run_fleet) = lazy_names("estimator.fleet", "AlertConfig", "FleetConfig", "IdentifySettings",
                              "ProgressBar", "available_cpus", "run_fleet")
 
 
@@ -132,9 +132,9 @@ def run(args: argparse.Namespace) -> int:
         sys.stderr.write(f"warning: --workers {args.workers}: {available_cpus()} CPU(s) available; "
                          f"using {available_cpus()} worker processes (each drive is "
                          "single-threaded: more would only share the cores)\n")
-    rule = AlertRule(nominal=nominal, drop=args.alert_drop,
-                     z=float(NormalDist().inv_cdf(args.confidence)), min_count=args.alert_drives,
-                     horizon_days=args.horizon)
+    rule = AlertConfig.per_drive(nominal=nominal, drop=args.alert_drop,
+                                 z=float(NormalDist().inv_cdf(args.confidence)),
+                                 min_count=args.alert_drives, horizon_days=args.horizon)
     result = run_fleet(FleetConfig(inputs=list(args.input), settings=settings, rule=rule,
                                    scheduler=args.scheduler, workers=args.workers, db=args.db,
                                    report=args.report,

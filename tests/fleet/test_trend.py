@@ -26,12 +26,12 @@ def test_one_bad_drive_does_not_move_the_trend() -> None:
     bad[-2] *= 0.5                     # a mis-scaled sensor: half the damping, small stderr
     robust = robust_trend(t, bad, s)
     assert robust is not None and clean is not None
-    assert robust.outliers == [10]
-    assert abs(robust.rate_per_day - clean.rate_per_day) < 0.5 * clean.stderr + 1e-9
+    assert robust.outliers == (10,)
+    assert abs(robust.rate - clean.rate) * DAY_S < 0.5 * clean.rate_stderr * DAY_S + 1e-9
     x = (t - t.max()) / DAY_S
     ols = np.polyfit(x, bad, 1)[0]     # ordinary least squares is dragged away
-    assert abs(ols - clean.rate_per_day) > 5 * clean.stderr
-    assert abs(robust.rate_per_day - (-5.0)) < 3 * robust.stderr
+    assert abs(ols - clean.rate * DAY_S) > 5 * clean.rate_stderr * DAY_S
+    assert abs(robust.rate * DAY_S - (-5.0)) < 3 * robust.rate_stderr * DAY_S
 
 
 def test_forecast_interval_holds_its_level() -> None:
@@ -48,7 +48,7 @@ def test_forecast_interval_holds_its_level() -> None:
         fc = forecast_crossing(tr, 1050.0, 0.90)
         assert tr is not None and fc is not None
         hits += fc.crossing_t_low <= T0 + 90 * DAY_S <= fc.crossing_t_high
-        z.append((tr.rate_per_day + 5.0) / tr.stderr)
+        z.append((tr.rate * DAY_S + 5.0) / (tr.rate_stderr * DAY_S))
     assert 0.84 <= hits / 300 <= 0.96, hits
     assert 0.05 <= np.mean(np.abs(z) > 1.812) <= 0.16
 
@@ -60,7 +60,7 @@ def test_no_forecast_without_a_falling_trend() -> None:
     assert forecast_crossing(robust_trend(t, v, s), 1050.0) is None
     assert robust_trend(t[:1], v[:1], s[:1]) is None
     two = robust_trend(t[:2], v[:2], s[:2])
-    assert two is not None and np.isnan(two.stderr) and forecast_crossing(two, 1050.0) is None
+    assert two is not None and np.isnan(two.rate_stderr) and forecast_crossing(two, 1050.0) is None
 
 
 def test_wearing_fleet_alert_forecast_and_rank(fleet: Fleet, inprocess: dict[str, Any]) -> None:
