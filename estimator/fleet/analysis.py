@@ -30,7 +30,8 @@ import numpy as np
 from estimator.alerts.engine import AlertConfig, AlertEngine
 from estimator.fleet.drive import determined
 from estimator.alerts.forecast import Trend
-from estimator.fleet.trend import DAY_S, Forecast, forecast_crossing, robust_trend, trend_json
+from estimator.fleet.trend import (DAY_S, KM, Forecast, forecast_crossing, limit_crossing,
+                                   robust_trend, trend_json)
 from suspid.models import get_model
 
 
@@ -93,6 +94,23 @@ class VehicleSummary:
     unidentified: list[dict[str, Any]] = field(default_factory=list)
     #: free masses and inertias the drives determine (the load: payload per drive)
     loads: list[str] = field(default_factory=list)
+    #: where the drives' distance comes from (:func:`drive_positions`): ``"odometer"``,
+    #: ``"speed"`` (cumulative logged distance) or ``None`` (no distance signal)
+    distance_source: str | None = None
+    #: each read drive's position on the vehicle's distance scale (m), by ``(path, t)``
+    positions: dict[tuple[str, float], float] = field(default_factory=dict)
+    #: each monitored parameter's trend against distance (rate per m)
+    trends_km: dict[str, Trend | None] = field(default_factory=dict)
+
+    def position(self, rec: dict[str, Any]) -> float | None:
+        """A drive's position on the distance scale (m), ``None`` when unknown."""
+        return self.positions.get((rec["path"], float(rec["t"])))
+
+    def latest_position(self) -> float | None:
+        """The latest ``ok`` drive's position (m), else the largest known one."""
+        last = self.latest
+        pos = self.position(last) if last is not None else None
+        return pos if pos is not None else max(self.positions.values(), default=None)
 
     @property
     def latest(self) -> dict[str, Any] | None:
@@ -165,7 +183,18 @@ class VehicleSummary:
             "loads": {k: [{"t": float(r["t"]), "value": float(r["result"]["params"][k]),
                            "stderr": r["result"]["stderr"].get(k)} for r in self.series(k)]
                       for k in self.loads},
+            "distance": self.distance_json(),
+            "trend_km": {k: trend_json(tr, per=KM, unit="km")
+                         for k, tr in self.trends_km.items() if tr is not None},
         }
+
+    def distance_json(self) -> dict[str, Any]:
+        """``source`` (``odometer``, ``speed`` or null: no distance signal), ``odometer_km``
+        (the latest drive's position), ``drives`` with a position."""
+        pos = self.latest_position()
+        return {"source": self.distance_source,
+                "odometer_km": None if pos is None else round(pos / KM, 3),
+                "drives": len(self.positions)}
 
 
 def sensor_offsets(records: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
@@ -203,6 +232,43 @@ def sensor_offsets(records: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
                     "median": float(np.median(vals)), "min": min(vals), "max": max(vals),
                     "latest_t": last[0], "removed": last[3]}
     return out
+
+
+def drive_positions(records: list[dict[str, Any]]
+                    ) -> tuple[str | None, dict[tuple[str, float], float]]:
+    """Each read drive's position on its vehicle's distance scale (m).
+
+    With an odometer (any drive's ``odometer_m``) the position is the odometer reading at
+    the drive's start; drives without one have none. With the speed alone the position is
+    the distance logged before the drive (the sum of the earlier read drives'
+    ``distance_m``): it counts only what was logged, so it is the odometer only when every
+    trip is.
+
+    Parameters
+    ----------
+    records : list of dict
+        One vehicle's read drives (``ok`` and ``unidentified``: both were driven), any order.
+
+    Returns
+    -------
+    source : str or None
+        ``"odometer"``, ``"speed"`` or ``None`` (no drive carries a distance).
+    positions : dict
+        ``(path, t) -> m`` for the drives with a position.
+    """
+    timed = sorted((r for r in records if r.get("t") is not None),
+                   key=lambda r: (float(r["t"]), r["path"]))
+    if any(r.get("odometer_m") is not None for r in timed):
+        return "odometer", {(r["path"], float(r["t"])): float(r["odometer_m"]) for r in timed
+                            if r.get("odometer_m") is not None}
+    if not any(r.get("distance_m") is not None for r in timed):
+        return None, {}
+    out: dict[tuple[str, float], float] = {}
+    done = 0.0
+    for r in timed:
+        out[(r["path"], float(r["t"]))] = done
+        done += float(r.get("distance_m") or 0.0)
+    return "speed", out
 
 
 def _model_of(rec: dict[str, Any]) -> str:
@@ -275,6 +341,8 @@ def summarize_vehicle(vehicle: str, records: list[dict[str, Any]], rule: AlertCo
                              forecasts, alerts, warnings=time_warnings(
                                  vehicle, [float(r["t"]) for r in ok]),
                              offsets=sensor_offsets(ok), unidentified=unidentified, loads=loads)
+    summary.distance_source, summary.positions = drive_positions(ok + unidentified)
+    x_latest = summary.latest_position()
     for k in monitored:
         ser = summary.series(k)
         t = np.array([float(r["t"]) for r in ser])
@@ -282,9 +350,18 @@ def summarize_vehicle(vehicle: str, records: list[dict[str, Any]], rule: AlertCo
         s = np.array([float(r["result"]["stderr"][k]) for r in ser])
         tr = robust_trend(t, v, s)
         trends[k] = tr
+        trk = None
+        if summary.distance_source is not None:
+            # the same robust fit against the drives' positions (km): its own interval
+            x = np.array([math.nan if summary.position(r) is None else summary.position(r)
+                          for r in ser], dtype=float)
+            trk = summary.trends_km[k] = robust_trend(x, v, s, scale=KM)
         if k in alerted:      # already below: an alert, not a forecast
             continue
         fc = forecast_crossing(tr, limits[k], rule.level, not_before=t_latest)
+        if fc is not None and summary.distance_source is not None:
+            fc.distance = True
+            fc.crossing_m = limit_crossing(trk, limits[k], rule.level, not_before=x_latest)
         if fc is not None and fc.crossing_t <= t_latest + rule.horizon_days * DAY_S:
             forecasts[k] = fc
     summary.risk = "alert" if alerts else ("forecast" if forecasts else "ok")

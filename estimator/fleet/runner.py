@@ -23,15 +23,16 @@ from typing import Any, Callable, TextIO
 
 from distributed import Client, LocalCluster, as_completed
 
-from estimator.decode.listener import DecodeListener
 from estimator.alerts.engine import AlertConfig
+from estimator.decode.listener import DecodeListener
 from estimator.fleet.analysis import VehicleSummary, summarize_fleet
 from estimator.fleet.discover import DriveFile, find_drives
 from estimator.fleet.drive import (CAN_SUFFIXES, IdentifySettings, cached_database, file_digest,
-                                   identify_drive)
+                                   identify_drive, with_declared_channels)
 from estimator.fleet.history import READ, History, drive_id
 from estimator.fleet.report import prepare_report_folder, write_report
 from suspid.errors import InputError, UsageError
+from suspid.models import get_model
 
 Progress = Callable[[int, int, int], None]
 
@@ -153,6 +154,12 @@ def drive_json(rec: dict[str, Any]) -> dict[str, Any]:
               "identifiable", "undetermined", "warnings", "offset", "frames"):
         if k in res:
             out[k] = res[k]
+    if rec.get("distance_source") is not None:
+        # the distance the drive covered and the odometer at its start (km)
+        for key, m in (("odometer_km", rec.get("odometer_m")),
+                       ("distance_km", rec.get("distance_m"))):
+            out[key] = None if m is None else round(float(m) / 1e3, 4)
+        out["distance_source"] = rec["distance_source"]
     return out
 
 
@@ -161,7 +168,9 @@ def check_settings(settings: IdentifySettings, files: list[DriveFile]) -> None:
     DBC that cannot be read, a signal map that does not fit the DBC or the model."""
     settings.parameters()
     if any(Path(f.path).suffix.lower() in CAN_SUFFIXES for f in files):
-        DecodeListener(settings.model, cached_database(settings.dbc), settings.signal_map)
+        db = cached_database(settings.dbc)
+        DecodeListener(settings.model, db, with_declared_channels(
+            settings.signal_map, db, get_model(settings.model)))
 
 
 def execute(jobs: list[tuple[str, str, str | None]], settings: IdentifySettings,

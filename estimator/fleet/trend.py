@@ -37,6 +37,10 @@ from scipy.stats import t as student_t
 from estimator.alerts.forecast import Trend, band_crossing, inverse_2x2, wls_line
 
 DAY_S = 86400.0
+#: m per km: the abscissa unit of a trend against distance
+KM = 1000.0
+#: a forecast's keys of the crossing against distance (odometer km, 90 % interval)
+KM_KEYS = ("crossing_km", "crossing_km_low", "crossing_km_high")
 HUBER_C = 1.345
 BISQUARE_C = 4.685
 MAD_TO_SIGMA = 1.4826
@@ -56,6 +60,13 @@ class Forecast:
         Two-sided level of the interval.
     t_latest : float
         Epoch s of the vehicle's latest drive, from which ``days`` count (NaN: unknown).
+    distance : bool
+        The vehicle's drives carry a distance (odometer or speed): the JSON has the km keys,
+        null when the trend against distance predicts no crossing.
+    crossing_m : tuple of float or None
+        Odometer at the crossing and its interval (m), from the trend against distance
+        (:func:`limit_crossing` on the drives' odometer readings), never before the latest
+        drive's reading; ``None`` without one.
     """
 
     crossing_t: float
@@ -64,6 +75,8 @@ class Forecast:
     limit: float
     level: float = 0.90
     t_latest: float = math.nan
+    distance: bool = False
+    crossing_m: tuple[float, float, float] | None = None
 
     def days(self) -> tuple[float, float, float]:
         """The crossing and its interval in days after the latest drive."""
@@ -73,12 +86,17 @@ class Forecast:
 
     def to_json(self) -> dict[str, float | None]:
         """``crossing_t``, ``crossing_t_low``, ``crossing_t_high`` (epoch s), ``limit``, and
-        ``days``, ``days_low``, ``days_high`` after the latest drive."""
+        ``days``, ``days_low``, ``days_high`` after the latest drive; with a distance
+        signal (:attr:`distance`) ``crossing_km``, ``crossing_km_low``, ``crossing_km_high``
+        (odometer km, null without a crossing against distance)."""
         out: dict[str, float | None] = {
             "crossing_t": self.crossing_t, "crossing_t_low": self.crossing_t_low,
             "crossing_t_high": self.crossing_t_high, "limit": self.limit}
         for k, d in zip(("days", "days_low", "days_high"), self.days()):
             out[k] = round(d, 3) if math.isfinite(d) else None
+        if self.distance:
+            for i, k in enumerate(KM_KEYS):
+                out[k] = None if self.crossing_m is None else round(self.crossing_m[i] / 1e3, 3)
         return out
 
 
