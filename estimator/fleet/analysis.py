@@ -17,6 +17,11 @@ confidently below is enough, as ``monitor`` decides), and it leaves the alert on
 lower bound is back above ``(1 - drop + 0.05) x nominal`` in as many drives. A vehicle's
 ``alerts`` are the parameters in alert after its latest drive. A parameter in alert has no
 forecast, and no forecast crossing is ever before the vehicle's latest drive.
+
+Where the drives carry the vehicle's distance (:func:`drive_positions`: the odometer, else
+the logged distance integrated from the speed), each monitored parameter also has a trend
+against distance (the same robust fit, the positions as abscissa), and a forecast gains the
+odometer at the crossing with its own Fieller interval (``crossing_km*``).
 """
 from __future__ import annotations
 
