@@ -6,6 +6,7 @@ from typing import Any
 
 import numpy as np
 
+from estimator.alerts.forecast import inverse_2x2, linear_trend, wls_line
 from estimator.fleet.trend import DAY_S, forecast_crossing, robust_trend
 from tests.fleet.conftest import Fleet
 
@@ -83,3 +84,20 @@ def test_wearing_fleet_alert_forecast_and_rank(fleet: Fleet, inprocess: dict[str
         assert abs(ok["trend"][k]["rate_per_day"]) < 4 * ok["trend"][k]["stderr"]
     assert [x["vehicle"] for x in inprocess["vehicles"]] == ["VAN-WORN", "VAN-WEAR", "VAN-OK"]
     assert [x["rank"] for x in inprocess["vehicles"]] == [1, 2, 3]
+
+
+def test_closed_form_line_equals_numpy_least_squares() -> None:
+    """The one closed-form weighted line (behind the fleet's and the monitor's trends)
+    against numpy's least squares on the whitened system, the oracle."""
+    rng = np.random.default_rng(11)
+    x = np.sort(rng.uniform(-60, 0, 15))
+    v = 1500 - 4.0 * x + rng.normal(0, 20, 15)
+    w = 1.0 / rng.uniform(5, 30, 15) ** 2
+    beta, M = wls_line(x, v, w)
+    X = np.column_stack([np.ones_like(x), x]) * np.sqrt(w)[:, None]
+    ref = np.linalg.lstsq(X, v * np.sqrt(w), rcond=None)[0]
+    np.testing.assert_allclose(beta, ref, rtol=1e-10)
+    np.testing.assert_allclose(inverse_2x2(M), np.linalg.inv(X.T @ X), rtol=1e-10)
+    tr = linear_trend(x, v, 1.0 / np.sqrt(w))
+    assert tr.n == 15 and tr.t == x[-1]
+    assert abs(tr.rate - ref[1]) < 1e-9 * abs(ref[1])
