@@ -6,7 +6,8 @@ margin above the limit), one section per vehicle with each monitored parameter's
 estimates (±2 standard errors), robust trend, nominal value, limit and forecast crossing
 with its 90 % interval (in days, and in odometer km where the logs carry the vehicle's
 distance or speed; "no distance signal" where they do not), a table of its drives
-(``drives-NAME``: time, road mode, odometer, each free parameter, the load -- the body mass with a spring held and the road unknown: the payload --
+(``drives-NAME``: time, road mode, odometer where the drives carry a distance, each free
+parameter, the load -- the body mass with a spring held and the road unknown: the payload --
 and what the drive left undetermined), and the drives read but not identified (table
 ``#unidentified``) and the failed logs (table ``#failed``) with their reasons.
 """
@@ -176,6 +177,13 @@ def render(vehicles: Sequence[VehicleSummary], drives: Sequence[dict[str, Any]],
         parts.append(f'<h2 id="{vehicle_anchor(s.vehicle)}">{s.rank}. {html.escape(s.vehicle)} '
                      f"({html.escape(s.model) or 'no identified drive'}, {len(s.drives)} drives"
                      f"{'; ' + roads if roads else ''}; {s.risk})</h2>")
+        pos = s.latest_position()
+        parts.append('<p class="distance">' + (
+            "Distance: no distance signal in the logs (forecasts in days only)"
+            if s.distance_source is None else
+            f"Distance: from the {s.distance_source}"
+            + (" (logged distance)" if s.distance_source == "speed" else "")
+            + ("" if pos is None else f", {pos / 1e3:,.1f} km at the latest drive")) + "</p>")
         if s.unidentified:
             parts.append(f'<p class="warn-msg unidentified"><b>NOT IDENTIFIED</b> '
                          f"{len(s.unidentified)} drive(s) read but not identified, left out of "
@@ -263,8 +271,11 @@ def _drives_table(s: VehicleSummary) -> str:
     names = s.loads + s.monitored
     head = "".join(f"<th>{html.escape(k)}{' (load)' if k in s.loads else ''}</th>"
                    for k in names)
+    # the odometer column only where the drives carry a distance (the vehicle's section
+    # says "no distance signal" otherwise)
+    odo_head = "<th>Odometer (km)</th>" if s.distance_source is not None else ""
     out = [f'<table class="drives" id="drives-{vehicle_anchor(s.vehicle)[2:]}"><thead><tr>'
-           f"<th>Drive (UTC)</th><th>Road</th><th>Odometer (km)</th><th>Status</th>{head}"
+           f"<th>Drive (UTC)</th><th>Road</th>{odo_head}<th>Status</th>{head}"
            "<th>Undetermined</th></tr></thead><tbody>"]
     for r in rows:
         res = r.get("result") or {}
@@ -278,10 +289,10 @@ def _drives_table(s: VehicleSummary) -> str:
         und = [k for k in res.get("params", {}) if k not in det and k not in res.get("fixed", [])]
         status = r["status"] if r["status"] == "ok" else f"{r['status']}: {r.get('error') or ''}"
         pos = s.position(r) if r.get("t") is not None else None
-        odo = ("no distance signal" if s.distance_source is None else
-               "" if pos is None else f"{pos / 1e3:,.1f}")
+        odo = ("" if s.distance_source is None else
+               "<td></td>" if pos is None else f"<td>{pos / 1e3:,.1f}</td>")
         out.append(f'<tr class="{html.escape(r["status"])}"><td>{_date(r.get("t"), True)}</td>'
-                   f"<td>{html.escape(str(res.get('road', '')))}</td><td>{odo}</td>"
+                   f"<td>{html.escape(str(res.get('road', '')))}</td>{odo}"
                    f"<td>{html.escape(status)}</td>"
                    + "".join(f"<td>{c}</td>" for c in cells)
                    + f"<td>{html.escape(', '.join(und))}</td></tr>")
