@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from estimator.fleet.analysis import drive_positions
-from estimator.fleet.drive import drive_distance
+from estimator.fleet.drive import IdentifySettings, drive_distance, identify_drive
 from estimator.fleet.history import History
 from estimator.fleet.synthetic import (DISTANCE_MAP, EPOCH0, FleetSpec, VehicleWear,
                                        distance_dbc, make_fleet)
@@ -158,3 +158,21 @@ def test_a_version_1_history_is_migrated_with_null_distances(tmp_path: Path) -> 
     assert con.execute("PRAGMA user_version").fetchone()[0] == 2
     con.close()
     json.dumps(rows)   # records stay JSON-ready
+
+
+def test_speed_over_can_is_integrated_to_the_drive_distance(tmp_path: Path) -> None:
+    """A candump drive carrying J1939 CCVS1 (km/h, 10 Hz, from the engine controller) beside
+    suspid's sensor messages: the speed, mapped with its factor to m/s, is integrated to
+    the distance the drive covered."""
+    spec = FleetSpec([VehicleWear("VAN-SPD")], drives=1, duration=6.0, fs=200.0,
+                     distance="speed")
+    (truth,) = make_fleet(tmp_path, spec)
+    settings = IdentifySettings(model="quarter2", fix={"m1": 300.0, "m2": 40.0},
+                                dbc=str(tmp_path / "distance.dbc"),
+                                signal_map=SignalMap.from_strings([DISTANCE_MAP["speed"]]))
+    rec = identify_drive(str(truth["path"]), "VAN-SPD", settings)
+    assert rec["status"] == "ok", rec["error"]
+    assert rec["distance_source"] == "speed" and rec["odometer_m"] is None
+    # frames every 0.1 s from the first sample to the last full period before the end
+    span = np.floor((6.0 - 1.0 / 200.0) / 0.1) * 0.1
+    assert rec["distance_m"] == pytest.approx(50 / 3.6 * span, abs=0.01)
