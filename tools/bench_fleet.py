@@ -25,7 +25,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from estimator.fleet import AlertRule, FleetConfig, IdentifySettings, run_fleet
+from estimator.fleet import AlertConfig, FleetConfig, IdentifySettings, run_fleet
 from estimator.fleet.synthetic import FleetSpec, VehicleWear, make_fleet
 
 
@@ -49,7 +49,7 @@ def run(root: Path, workers: int, db: Path | None) -> tuple[float, float, int]:
     settings = IdentifySettings(model="quarter2", fix={"m1": 300.0, "m2": 40.0})
     clock = Clock()
     t0 = time.perf_counter()
-    res = run_fleet(FleetConfig(inputs=[str(root)], settings=settings, rule=AlertRule(),
+    res = run_fleet(FleetConfig(inputs=[str(root)], settings=settings, rule=AlertConfig.per_drive(),
                                 workers=workers, db=str(db) if db else None, progress=clock))
     wall = time.perf_counter() - t0
     return wall, clock.steady_rate(), sum(r["status"] != "ok" for r in res.drives)

@@ -42,7 +42,8 @@ from typing import Any
 
 import numpy as np
 
-from estimator.fleet.analysis import AlertRule, summarize_fleet
+from estimator.alerts.engine import AlertConfig
+from estimator.fleet.analysis import summarize_fleet
 from estimator.fleet.history import History
 from estimator.fleet.report import write_report
 from estimator.identify import Parameters
@@ -114,7 +115,7 @@ def measure(vans: int, folder: Path) -> dict[str, float]:
     with History(db, readonly=True) as h:
         records = h.drives()
     out["read_s"] = time.perf_counter() - t
-    rule = AlertRule(nominal={"c1": 1500.0})
+    rule = AlertConfig.per_drive(nominal={"c1": 1500.0})
     t = time.perf_counter()
     vehicles = summarize_fleet(records, rule)
     out["analyse_s"] = time.perf_counter() - t

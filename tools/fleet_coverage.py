@@ -11,13 +11,20 @@ logged as a production car would (body acceleration and ride height with 2 % noi
 road), identified with the road unknown and the spring held (the body mass and the damper
 per drive), and the van is summarised as ``suspid fleet`` does
 (:func:`estimator.fleet.analysis.summarize_vehicle`) from its drives up to the time of
-the prediction.
+the prediction. Each van also drives a distance every day (its mean drawn from 80 to 300 km,
+each day's distance gamma-distributed around it with a 30 % coefficient of variation, from
+its own random stream so the days results do not change), and each drive carries its
+odometer (the drive's distance from :func:`estimator.fleet.drive.drive_distance`), so the
+forecast's crossing in km (the trend against the odometer) is checked against the van's
+true odometer on its crossing day. The wear here follows time, not distance: the km
+interval must also absorb the usage's day-to-day variation.
 
 Printed:
 
 coverage
     the share of forecasts whose 90 % interval holds the true crossing day ``T``, with the
-    predictions made at ``lambda`` = 0.5 and 0.8 of the van's life (``t = lambda T``).
+    predictions made at ``lambda`` = 0.5 and 0.8 of the van's life (``t = lambda T``); and
+    the share whose km interval holds the van's true odometer at ``T``.
 alpha-lambda
     the prognostics metric of NASA's ProgPy (``alpha_lambda``): at ``lambda`` = 0.5, the share
     of vans whose predicted remaining life ``crossing_t - t`` is within ``alpha`` = 20 % of
@@ -38,8 +45,9 @@ from typing import Any
 
 import numpy as np
 
-from estimator.fleet.analysis import AlertRule, summarize_vehicle
-from estimator.fleet.drive import classify
+from estimator.alerts.engine import AlertConfig
+from estimator.fleet.analysis import summarize_vehicle
+from estimator.fleet.drive import classify, drive_distance
 from estimator.identify import Parameters
 from estimator.identify.roadfree import fit_road_unknown
 from suspid.excitation import make_scenario
@@ -56,15 +64,22 @@ BASE = {"m1": 300.0, "c1": NOMINAL, "k1": 20000.0, "m2": 40.0, "c2": 300.0, "k2"
 
 @dataclass
 class Van:
-    """One simulated van: its true crossing day and its drives' records."""
+    """One simulated van: its true crossing day, its drives' records and its odometer
+    (km at the end of each day from day 0)."""
 
     name: str
     life_days: float
     records: list[dict[str, Any]]
+    odometer_km: np.ndarray
+
+    def odometer_m(self, day: float) -> float:
+        """The odometer (m) ``day`` days after the first drive (linear within a day)."""
+        days = np.arange(self.odometer_km.size, dtype=float)
+        return 1e3 * float(np.interp(day, days, self.odometer_km))
 
 
 def drive_record(van: str, day: float, c1: float, m1: float, seed: int, duration: float,
-                 fs: float) -> dict[str, Any]:
+                 fs: float, odometer_m: float = math.nan) -> dict[str, Any]:
     """Simulate one production-car drive and identify it with the road unknown.
 
     Parameters
@@ -79,6 +94,8 @@ def drive_record(van: str, day: float, c1: float, m1: float, seed: int, duration
         Road and noise seed.
     duration, fs : float
         Drive length (s) and sample rate (Hz).
+    odometer_m : float
+        The van's odometer at the drive's start (m; NaN: no odometer signal).
 
     Returns
     -------
@@ -93,17 +110,29 @@ def drive_record(van: str, day: float, c1: float, m1: float, seed: int, duration
     rng = np.random.default_rng(seed + 7919)
     meas = Measurement(t=t, road={}, measured={
         c: out[c] + rng.standard_normal(t.size) * 0.02 * np.std(out[c])
-        for c in model.channel_set("production")})
+        for c in model.channel_set("production")},
+        aux={} if math.isnan(odometer_m) else {"odometer": odometer_m + 50.0 / 3.6 * t})
     res = fit_road_unknown(model, meas, Parameters.for_model(model, fix={"k1": BASE["k1"]}))
     result = res.to_json()
     status, error = classify(result)
     return {"path": f"{van}/{day:.3f}.csv", "vehicle": van, "t": T0 + day * DAY_S,
-            "status": status, "error": error, "result": result, "sha256": f"{van}-{seed}"}
+            "status": status, "error": error, "result": result, "sha256": f"{van}-{seed}",
+            **drive_distance(meas)}
+
+
+def usage(rng: np.random.Generator, days: int = 400) -> np.ndarray:
+    """A van's odometer (km) at the end of each day: mean 80 to 300 km a day, each day's
+    distance gamma-distributed with a 30 % coefficient of variation (module docstring)."""
+    mean = float(rng.uniform(80.0, 300.0))
+    shape = 1.0 / 0.3 ** 2
+    daily = rng.gamma(shape, mean / shape, days)
+    return float(rng.uniform(5_000.0, 150_000.0)) + np.concatenate([[0.0], np.cumsum(daily)])
 
 
 def make_van(i: int, rng: np.random.Generator, gap: float, upto: float, duration: float,
-             fs: float) -> Van:
-    """A van's drives from day 0 up to ``upto`` of its life (module docstring)."""
+             fs: float, seed: int = 0) -> Van:
+    """A van's drives from day 0 up to ``upto`` of its life (module docstring); its usage
+    from a stream of its own (``seed``, ``i``)."""
     life = float(rng.uniform(60.0, 200.0))
     c0 = NOMINAL * float(rng.uniform(0.95, 1.05))
     limit = (1.0 - DROP) * NOMINAL
@@ -114,25 +143,30 @@ def make_van(i: int, rng: np.random.Generator, gap: float, upto: float, duration
         if nxt > upto * life:
             break
         days.append(nxt)
-    recs = []
+    van = Van(f"VAN-{i:04d}", life, [], usage(np.random.default_rng((seed, i))))
     for k, d in enumerate(days):
         c1 = (c0 + (limit - c0) * d / life) * (1.0 + scatter * float(rng.standard_normal()))
         m1 = float(rng.uniform(300.0, 480.0))
-        recs.append(drive_record(f"VAN-{i:04d}", d, c1, m1, 100_000 * i + k, duration, fs))
-    return Van(f"VAN-{i:04d}", life, recs)
+        van.records.append(drive_record(van.name, d, c1, m1, 100_000 * i + k, duration, fs,
+                                        van.odometer_m(d)))
+    return van
 
 
-def predict(van: Van, lam: float, rule: AlertRule) -> tuple[float, float, float, float] | None:
+def predict(van: Van, lam: float, rule: AlertConfig
+            ) -> tuple[float, float, float, float, tuple[float, float, float] | None] | None:
     """The fleet's forecast at ``t = lam x life`` from the drives up to then: ``(t_pred,
-    crossing, low, high)`` in days after the first drive; ``None`` without a forecast."""
+    crossing, low, high)`` in days after the first drive and the crossing in km (odometer,
+    ``None`` without one); ``None`` without a forecast."""
     t_pred = lam * van.life_days
     recs = [r for r in van.records if (r["t"] - T0) / DAY_S <= t_pred]
     s = summarize_vehicle(van.name, recs, rule)
     fc = s.forecasts.get("c1")
     if fc is None:
         return None
+    km = None if fc.crossing_m is None else (fc.crossing_m[0] / 1e3, fc.crossing_m[1] / 1e3,
+                                             fc.crossing_m[2] / 1e3)
     return (t_pred, (fc.crossing_t - T0) / DAY_S, (fc.crossing_t_low - T0) / DAY_S,
-            (fc.crossing_t_high - T0) / DAY_S)
+            (fc.crossing_t_high - T0) / DAY_S, km)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -145,9 +179,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=1)
     args = ap.parse_args(argv)
     rng = np.random.default_rng(args.seed)
-    rule = AlertRule(nominal={"c1": NOMINAL}, drop=DROP, horizon_days=10_000.0)
+    rule = AlertConfig.per_drive(nominal={"c1": NOMINAL}, drop=DROP, horizon_days=10_000.0)
     wall = time.perf_counter()
-    vans = [make_van(i, rng, args.gap, 0.8, args.duration, args.fs) for i in range(args.vans)]
+    vans = [make_van(i, rng, args.gap, 0.8, args.duration, args.fs, args.seed)
+            for i in range(args.vans)]
     n_drives = sum(len(v.records) for v in vans)
     n_ok = sum(r["status"] == "ok" for v in vans for r in v.records)
     sim_s = time.perf_counter() - wall
@@ -155,14 +190,19 @@ def main(argv: list[str] | None = None) -> int:
           f"gaps exponential with mean {args.gap:g} d, crossing day 60-200, damper scatter "
           f"2-3 % per drive, payload 300-480 kg; simulated and identified in {sim_s:.0f} s")
     for lam in (0.5, 0.8):
-        hits = n_fc = ontime = 0
-        widths = []
+        hits = n_fc = ontime = km_hits = n_km = 0
+        widths, km_widths = [], []
         for v in vans:
             fc = predict(v, lam, rule)
             if fc is None:
                 continue
-            t_pred, tc, lo, hi = fc
+            t_pred, tc, lo, hi, km = fc
             n_fc += 1
+            if km is not None:
+                true_km = v.odometer_m(v.life_days) / 1e3
+                n_km += 1
+                km_hits += km[1] <= true_km <= km[2]
+                km_widths.append((km[2] - km[1]) / (true_km - v.odometer_m(t_pred) / 1e3))
             hits += lo <= v.life_days <= hi
             widths.append((hi - lo) / (v.life_days - t_pred))
             true_rul, rul = v.life_days - t_pred, tc - t_pred
@@ -175,6 +215,13 @@ def main(argv: list[str] | None = None) -> int:
               f"({100 * ontime / args.vans:.1f} %); median interval width "
               f"{100 * float(np.median(widths)) if widths else math.nan:.0f} % of the "
               "remaining life")
+        kcov = km_hits / n_km if n_km else math.nan
+        kse = math.sqrt(kcov * (1 - kcov) / n_km) if n_km else math.nan
+        print(f"lambda {lam:.1f} km: {n_km} of {n_fc} forecasts with a crossing in km; 90 % "
+              f"interval holds the true odometer in {km_hits} ({100 * kcov:.1f} % +/- "
+              f"{100 * kse:.1f}); median interval width "
+              f"{100 * float(np.median(km_widths)) if km_widths else math.nan:.0f} % of the "
+              "remaining distance")
     return 0
 
 

@@ -26,6 +26,7 @@ from typing import Any, Iterable, Mapping, Protocol
 
 from estimator.alerts.event import ParameterEvent
 from suspid.errors import UsageError
+from suspid.models import get_model
 
 
 @dataclass
@@ -46,14 +47,47 @@ class AlertConfig:
         Consecutive estimates the condition must hold in.
     hysteresis : float
         Clear only above ``(1 - drop + hysteresis) x nominal`` (fraction of nominal).
+    level : float
+        Two-sided level of a forecast interval (the fleet's drive trends).
+    horizon_days : float
+        The fleet reports no forecast further ahead of a vehicle's latest drive than this
+        (a slow drift that reaches the limit in years is noise for maintenance planning, and
+        at the 90 % level about one flat parameter in twenty shows a 'significant' slope).
+
+    Notes
+    -----
+    The monitor's estimates come every window step, so the condition must persist (1.5 s of
+    data, 2 estimates); a fleet's estimates are drives days apart, and one drive confidently
+    below is enough (:meth:`per_drive`).
     """
 
-    nominal: dict[str, float]
+    nominal: dict[str, float] = field(default_factory=dict)
     drop: float = 0.3
     z: float = 2.326
     persistence_s: float = 1.5
     min_count: int = 2
     hysteresis: float = 0.05
+    level: float = 0.90
+    horizon_days: float = 365.0
+
+    @classmethod
+    def per_drive(cls, **settings: Any) -> "AlertConfig":
+        """The fleet's settings: each drive is one estimate, no data-time persistence, one
+        drive enough (``min_count`` 1) unless ``settings`` say otherwise."""
+        return cls(**{"persistence_s": 0.0, "min_count": 1, **settings})
+
+    def nominal_of(self, model: str, name: str) -> float:
+        """``name``'s nominal value (SI): the configured one, else the model's default."""
+        if name in self.nominal:
+            return float(self.nominal[name])
+        return float(get_model(model).spec(name).default)
+
+    def to_json(self) -> dict[str, Any]:
+        """The settings as a JSON object (stored with each fleet run in its history)."""
+        return {"nominal": dict(self.nominal), "drop": self.drop, "z": self.z,
+                "persistence_s": self.persistence_s, "min_count": self.min_count,
+                "hysteresis": self.hysteresis, "level": self.level,
+                "horizon_days": self.horizon_days}
 
     def validate(self) -> None:
         """Raise :class:`UsageError` for settings that cannot work."""

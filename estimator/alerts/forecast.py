@@ -14,7 +14,9 @@ Otherwise the crossing is not predicted at all (a stable part, or a trend too un
 say): no forecast. A part already inside the band at ``tau = 0`` gets ``crossing_t_low = t0``.
 
 :func:`linear_trend` fits the trend to any ``(t, value, stderr)`` series by weighted least
-squares (one vehicle's drives, a list of window estimates); the monitor's tracker
+squares (:func:`wls_line`, the 2x2 normal equations in closed form), and the fleet's robust
+fit (:func:`estimator.fleet.trend.robust_trend`: one vehicle's drives against time or
+distance) gives the same :class:`Trend` with its drive count and outliers; the monitor's tracker
 (:class:`estimator.stream.tracker.TrendTracker`) produces the same :class:`Trend` from its
 Kalman state. :class:`ForecastEngine` turns trends into forecast events: one when a
 crossing is first predicted within the horizon (and the late end of its interval within two
@@ -42,24 +44,34 @@ DEFAULT_HORIZON_S = 60.0
 
 @dataclass(frozen=True)
 class Trend:
-    """A level and rate with covariance.
+    """A level and rate with covariance: the one trend of the monitor and the fleet.
+
+    The abscissa is time (s: data time for the monitor, epoch s for a vehicle's drives) or,
+    for a fleet trend against distance, the odometer (m); ``rate`` is per unit of it.
 
     Attributes
     ----------
     t : float
-        Reference time of ``value`` (s; data time, or epoch s for drives).
+        Reference abscissa of ``value`` (s, or m for a trend against distance).
     value : float
         Level at ``t`` (SI).
     rate : float
-        Rate of change (SI per s).
+        Rate of change (SI per s, or SI per m).
     var_value, cov, var_rate : float
-        Covariance of (value, rate).
+        Covariance of (value, rate); NaN when the data cannot give it (two drives).
     q_value, q_rate : float
         Process-noise intensities of the level (SI^2/s) and the rate (SI^2/s^3): the
         extrapolated variance grows by ``q_value tau + q_rate tau^3 / 3`` as well (the wear
         may speed up, slow down or stop).
     span : float
         Data time (s) the trend's data cover (``inf`` when unknown).
+    n : int
+        Points the fit used (0: not counted, a tracker's trend).
+    outliers : tuple of int
+        Indices (into the series fitted) of points the robust fit gave no weight.
+    tau : float
+        Point-to-point scatter beyond the stated standard errors (SI; the fleet's
+        random-effects weight).
     """
 
     t: float
@@ -71,14 +83,21 @@ class Trend:
     q_value: float = 0.0
     q_rate: float = 0.0
     span: float = math.inf
+    n: int = 0
+    outliers: tuple[int, ...] = ()
+    tau: float = 0.0
 
     @property
     def value_stderr(self) -> float:
-        return math.sqrt(max(self.var_value, 0.0))
+        return math.sqrt(max(self.var_value, 0.0)) if math.isfinite(self.var_value) else math.nan
 
     @property
     def rate_stderr(self) -> float:
-        return math.sqrt(max(self.var_rate, 0.0))
+        return math.sqrt(max(self.var_rate, 0.0)) if math.isfinite(self.var_rate) else math.nan
+
+    def at(self, x: float) -> float:
+        """The line's value at abscissa ``x`` (s, or m) (SI)."""
+        return self.value + self.rate * (x - self.t)
 
 
 @dataclass(frozen=True)
@@ -88,6 +107,47 @@ class Crossing:
     t: float
     low: float
     high: float
+
+
+def wls_line(x: np.ndarray, v: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted least-squares line ``v = b0 + b1 x``: ``(b0, b1)`` and the normal matrix.
+
+    The 2x2 normal equations are solved in closed form (a fleet fits one line per parameter
+    per vehicle, thousands per report, and a general solver's overhead dominates).
+
+    Parameters
+    ----------
+    x, v : ndarray
+        Abscissae and values.
+    w : ndarray
+        Weights (``1 / variance``), >= 0.
+
+    Returns
+    -------
+    beta : ndarray, shape (2,)
+        Intercept (at ``x = 0``) and slope.
+    M : ndarray, shape (2, 2)
+        ``X' W X``; the unscaled covariance of ``beta`` is its inverse.
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        Fewer than two weighted points at distinct ``x``.
+    """
+    wx = w * x
+    s0, s1, s2 = float(np.sum(w)), float(np.sum(wx)), float(np.dot(wx, x))
+    sy, sxy = float(np.dot(w, v)), float(np.dot(wx, v))
+    det = s0 * s2 - s1 * s1
+    M = np.array([[s0, s1], [s1, s2]])
+    if not det > 0.0:
+        raise np.linalg.LinAlgError("singular weighted least-squares line")
+    return np.array([(s2 * sy - s1 * sxy) / det, (s0 * sxy - s1 * sy) / det]), M
+
+
+def inverse_2x2(M: np.ndarray) -> np.ndarray:
+    """Inverse of a symmetric positive-definite 2x2 matrix (closed form)."""
+    det = float(M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0])
+    return np.array([[M[1, 1], -M[0, 1]], [-M[1, 0], M[0, 0]]]) / det
 
 
 def linear_trend(t: Sequence[float], value: Sequence[float], stderr: Sequence[float],
@@ -118,17 +178,16 @@ def linear_trend(t: Sequence[float], value: Sequence[float], stderr: Sequence[fl
     if tt.size < 2 or float(np.ptp(tt)) <= 0:
         raise UsageError(f"a trend needs at least two points at different times, got {tt.size}")
     tr = float(tt[-1]) if t_ref is None else float(t_ref)
-    X = np.column_stack([np.ones_like(tt), tt - tr]) / s[:, None]
-    b = y / s
-    XtX = X.T @ X
-    cov = np.linalg.inv(XtX)
-    coef = cov @ (X.T @ b)
+    x = tt - tr
+    w = 1.0 / (s * s)
+    coef, M = wls_line(x, y, w)
+    cov = inverse_2x2(M)
     dof = tt.size - 2
     if dof > 0:
-        chi2 = float(np.sum((X @ coef - b) ** 2)) / dof
-        cov = cov * max(1.0, chi2)
+        r = y - (coef[0] + coef[1] * x)
+        cov = cov * max(1.0, float(np.sum(w * r * r)) / dof)
     return Trend(tr, float(coef[0]), float(coef[1]), float(cov[0, 0]), float(cov[0, 1]),
-                 float(cov[1, 1]))
+                 float(cov[1, 1]), n=int(tt.size))
 
 
 def band_crossing(a: float, r: float, var_value: float, cov: float, var_rate: float,

@@ -98,6 +98,7 @@ from suspid.can.dbc import SYNC_MESSAGE, load_dbc
 from suspid.can.logs import FrameArrays
 from suspid.can.signal_map import SignalMap, SignalMapLike, as_signal_map
 from suspid.errors import UsageError
+from suspid.io.csvio import AUX_CHANNELS
 from suspid.models import SuspensionModel, get_model
 
 #: frames waiting before ``on_message_received`` processes the queue (default batch size)
@@ -203,8 +204,10 @@ class DecodeListener(can.Listener):
                 raise UsageError(f"{getattr(db, 'suspid_path', 'the DBC')} declares no channel of "
                                  f"model {self.model.name} (no SuspidChannel attributes); give a "
                                  "signal map, e.g. --map x1_ddot=MESSAGE.SIGNAL")
-        # the motions and roads, and the ride heights (strut extensions) measured like them
-        smap.validate(db, model_channels(self.model) + list(self.model.ride_height_channels))
+        # the motions and roads, the ride heights (strut extensions) measured like them, and
+        # the vehicle's speed and odometer (never fitted: the fleet's distance per drive)
+        smap.validate(db, model_channels(self.model) + list(self.model.ride_height_channels)
+                      + list(AUX_CHANNELS))
         self.signal_map = smap
         if time_source not in ("timestamp", "tick", "auto"):
             raise UsageError(f"time_source must be 'timestamp', 'tick' or 'auto', "

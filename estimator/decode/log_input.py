@@ -25,7 +25,7 @@ from estimator.decode.replay import feed_log
 from suspid.can.logs import ReadStats, describe_channels
 from suspid.can.signal_map import SignalMapLike
 from suspid.errors import InputError
-from suspid.io.csvio import Measurement
+from suspid.io.csvio import AUX_CHANNELS, Measurement
 from suspid.models import SuspensionModel, get_model
 
 
@@ -118,18 +118,22 @@ def aligned_to_measurement(aligned: Aligned, model: SuspensionModel, source: str
 
     Road channels with gaps are linearly interpolated across them (with a warning);
     measured channels keep NaN. Channels without any valid sample (never sent, as an absent
-    CSV column) are left out.
+    CSV column) are left out. The vehicle's speed and odometer (``AUX_CHANNELS``) go to
+    ``aux``, never to the fitted channels.
     """
     warns = list(warnings or [])
     road_names = set(model.roads) | {f"{r}_dot" for r in model.roads}
     road: dict[str, np.ndarray] = {}
     measured: dict[str, np.ndarray] = {}
+    aux: dict[str, np.ndarray] = {}
     t = aligned.t
     for ch, v in aligned.values.items():
         ok = ~np.isnan(v)
         if not ok.any():
             continue  # never sent (Valid = 0 throughout), like an absent CSV column
-        if ch in road_names:
+        if ch in AUX_CHANNELS:
+            aux[ch] = v
+        elif ch in road_names:
             if not ok.all():
                 if ok.sum() < 2:
                     warns.append(f"{source}: road channel {ch!r} has fewer than 2 samples; not used")
@@ -144,7 +148,8 @@ def aligned_to_measurement(aligned: Aligned, model: SuspensionModel, source: str
         if f"{r}_dot" in road and r not in road:
             road.pop(f"{r}_dot")
             warns.append(f"{source}: road velocity {r}_dot without {r}; not used")
-    return Measurement(t=t, road=road, measured=measured, warnings=warns, source=source)
+    return Measurement(t=t, road=road, measured=measured, warnings=warns, source=source,
+                       aux=aux)
 
 
 def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,

@@ -3,15 +3,17 @@ SQLite, follow each vehicle's parameters (trends, alerts, limit-crossing forecas
 write a static HTML report. ``run_fleet(FleetConfig(...))`` is the entry point
 (``suspid fleet``); see ``docs/fleet.md``.
 """
-from estimator.fleet.analysis import AlertRule, VehicleSummary, summarize_fleet
+from estimator.alerts.engine import AlertConfig
+from estimator.alerts.forecast import Trend
+from estimator.fleet.analysis import VehicleSummary, summarize_fleet
 from estimator.fleet.discover import DriveFile, find_drives
 from estimator.fleet.drive import IdentifySettings, identify_drive
 from estimator.fleet.history import History
 from estimator.fleet.runner import (FleetConfig, FleetResult, ProgressBar, available_cpus,
                                     execute, local_workers, run_fleet)
-from estimator.fleet.trend import Forecast, Trend, forecast_crossing, robust_trend
+from estimator.fleet.trend import Forecast, forecast_crossing, robust_trend
 
-__all__ = ["AlertRule", "VehicleSummary", "summarize_fleet", "DriveFile", "find_drives",
+__all__ = ["AlertConfig", "VehicleSummary", "summarize_fleet", "DriveFile", "find_drives",
            "IdentifySettings", "identify_drive", "History", "FleetConfig", "FleetResult",
            "ProgressBar", "available_cpus", "local_workers", "execute", "run_fleet", "Forecast", "Trend", "forecast_crossing",
            "robust_trend"]

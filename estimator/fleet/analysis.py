@@ -17,61 +17,27 @@ confidently below is enough, as ``monitor`` decides), and it leaves the alert on
 lower bound is back above ``(1 - drop + 0.05) x nominal`` in as many drives. A vehicle's
 ``alerts`` are the parameters in alert after its latest drive. A parameter in alert has no
 forecast, and no forecast crossing is ever before the vehicle's latest drive.
+
+Where the drives carry the vehicle's distance (:func:`drive_positions`: the odometer, else
+the logged distance integrated from the speed), each monitored parameter also has a trend
+against distance (the same robust fit, the positions as abscissa), and a forecast gains the
+odometer at the crossing with its own Fieller interval (``crossing_km*``).
 """
 from __future__ import annotations
 
 import math
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Iterable
 
 import numpy as np
 
 from estimator.alerts.engine import AlertConfig, AlertEngine
 from estimator.fleet.drive import determined
-from estimator.fleet.trend import DAY_S, Forecast, Trend, forecast_crossing, robust_trend
+from estimator.alerts.forecast import Trend
+from estimator.fleet.trend import (DAY_S, KM, Forecast, forecast_crossing, limit_crossing,
+                                   robust_trend, trend_json)
 from suspid.models import get_model
-
-
-@dataclass
-class AlertRule:
-    """Alert and forecast settings of a fleet run.
-
-    Attributes
-    ----------
-    nominal : dict
-        ``parameter -> nominal`` (SI); parameters not listed use the model's default.
-    drop : float
-        Limit is ``(1 - drop) x nominal``.
-    z : float
-        One-sided normal quantile of the alert bound (2.326: 99 %).
-    min_count : int
-        Consecutive drives the condition must hold in (default 1: the latest drive alone
-        raises the alert when it is confidently below the limit).
-    level : float
-        Two-sided level of the forecast interval.
-    horizon_days : float
-        Forecasts further ahead of the latest drive than this are not reported (a slow
-        drift that reaches the limit in years is noise for maintenance planning, and at the
-        90 % level about one flat parameter in twenty shows a 'significant' slope).
-    """
-
-    nominal: dict[str, float] = field(default_factory=dict)
-    drop: float = 0.3
-    z: float = 2.326
-    min_count: int = 1
-    level: float = 0.90
-    horizon_days: float = 365.0
-
-    def nominal_of(self, model: str, name: str) -> float:
-        if name in self.nominal:
-            return float(self.nominal[name])
-        return float(get_model(model).spec(name).default)
-
-    def to_json(self) -> dict[str, Any]:
-        return {"nominal": dict(self.nominal), "drop": self.drop, "z": self.z,
-                "min_count": self.min_count, "level": self.level,
-                "horizon_days": self.horizon_days}
 
 
 #: 2000-01-01 00:00 UTC (epoch s): a drive that starts before it carries the time since the
@@ -133,6 +99,23 @@ class VehicleSummary:
     unidentified: list[dict[str, Any]] = field(default_factory=list)
     #: free masses and inertias the drives determine (the load: payload per drive)
     loads: list[str] = field(default_factory=list)
+    #: where the drives' distance comes from (:func:`drive_positions`): ``"odometer"``,
+    #: ``"speed"`` (cumulative logged distance) or ``None`` (no distance signal)
+    distance_source: str | None = None
+    #: each read drive's position on the vehicle's distance scale (m), by ``(path, t)``
+    positions: dict[tuple[str, float], float] = field(default_factory=dict)
+    #: each monitored parameter's trend against distance (rate per m)
+    trends_km: dict[str, Trend | None] = field(default_factory=dict)
+
+    def position(self, rec: dict[str, Any]) -> float | None:
+        """A drive's position on the distance scale (m), ``None`` when unknown."""
+        return self.positions.get((rec["path"], float(rec["t"])))
+
+    def latest_position(self) -> float | None:
+        """The latest ``ok`` drive's position (m), else the largest known one."""
+        last = self.latest
+        pos = self.position(last) if last is not None else None
+        return pos if pos is not None else max(self.positions.values(), default=None)
 
     @property
     def latest(self) -> dict[str, Any] | None:
@@ -182,7 +165,7 @@ class VehicleSummary:
             "drives": len(self.drives),
             "latest": ({k: v for k, v in res["params"].items() if k in known} if last
                        else None),
-            "trend": {k: tr.to_json() for k, tr in self.trends.items() if tr is not None},
+            "trend": {k: trend_json(tr) for k, tr in self.trends.items() if tr is not None},
             "alerts": [a["parameter"] for a in self.alerts],
             "forecast": {k: f.to_json() for k, f in self.forecasts.items()},
             "rank": self.rank,
@@ -205,7 +188,18 @@ class VehicleSummary:
             "loads": {k: [{"t": float(r["t"]), "value": float(r["result"]["params"][k]),
                            "stderr": r["result"]["stderr"].get(k)} for r in self.series(k)]
                       for k in self.loads},
+            "distance": self.distance_json(),
+            "trend_km": {k: trend_json(tr, per=KM, unit="km")
+                         for k, tr in self.trends_km.items() if tr is not None},
         }
+
+    def distance_json(self) -> dict[str, Any]:
+        """``source`` (``odometer``, ``speed`` or null: no distance signal), ``odometer_km``
+        (the latest drive's position), ``drives`` with a position."""
+        pos = self.latest_position()
+        return {"source": self.distance_source,
+                "odometer_km": None if pos is None else round(pos / KM, 3),
+                "drives": len(self.positions)}
 
 
 def sensor_offsets(records: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
@@ -245,6 +239,43 @@ def sensor_offsets(records: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
     return out
 
 
+def drive_positions(records: list[dict[str, Any]]
+                    ) -> tuple[str | None, dict[tuple[str, float], float]]:
+    """Each read drive's position on its vehicle's distance scale (m).
+
+    With an odometer (any drive's ``odometer_m``) the position is the odometer reading at
+    the drive's start; drives without one have none. With the speed alone the position is
+    the distance logged before the drive (the sum of the earlier read drives'
+    ``distance_m``): it counts only what was logged, so it is the odometer only when every
+    trip is.
+
+    Parameters
+    ----------
+    records : list of dict
+        One vehicle's read drives (``ok`` and ``unidentified``: both were driven), any order.
+
+    Returns
+    -------
+    source : str or None
+        ``"odometer"``, ``"speed"`` or ``None`` (no drive carries a distance).
+    positions : dict
+        ``(path, t) -> m`` for the drives with a position.
+    """
+    timed = sorted((r for r in records if r.get("t") is not None),
+                   key=lambda r: (float(r["t"]), r["path"]))
+    if any(r.get("odometer_m") is not None for r in timed):
+        return "odometer", {(r["path"], float(r["t"])): float(r["odometer_m"]) for r in timed
+                            if r.get("odometer_m") is not None}
+    if not any(r.get("distance_m") is not None for r in timed):
+        return None, {}
+    out: dict[tuple[str, float], float] = {}
+    done = 0.0
+    for r in timed:
+        out[(r["path"], float(r["t"]))] = done
+        done += float(r.get("distance_m") or 0.0)
+    return "speed", out
+
+
 def _model_of(rec: dict[str, Any]) -> str:
     return str(rec.get("model") or rec["result"]["model"])
 
@@ -254,7 +285,7 @@ WEAR_KINDS = ("damping", "stiffness")
 LOAD_KINDS = ("mass", "inertia")
 
 
-def summarize_vehicle(vehicle: str, records: list[dict[str, Any]], rule: AlertRule
+def summarize_vehicle(vehicle: str, records: list[dict[str, Any]], rule: AlertConfig
                       ) -> VehicleSummary:
     """History, trends, alerts and forecasts of one vehicle from its drive records.
 
@@ -263,7 +294,8 @@ def summarize_vehicle(vehicle: str, records: list[dict[str, Any]], rule: AlertRu
     vehicle : str
     records : list of dict
         The vehicle's drive records (any status).
-    rule : AlertRule
+    rule : AlertConfig
+        Nominal values, alert and forecast settings (:meth:`AlertConfig.per_drive`).
 
     Returns
     -------
@@ -290,8 +322,7 @@ def summarize_vehicle(vehicle: str, records: list[dict[str, Any]], rule: AlertRu
     monitored = [k for k in free if spec(k).kind in WEAR_KINDS]
     loads = [k for k in free if spec(k).kind in LOAD_KINDS]
     nominal = {k: rule.nominal_of(model, k) for k in monitored}
-    cfg = AlertConfig(nominal=nominal, drop=rule.drop, z=rule.z, persistence_s=0.0,
-                      min_count=rule.min_count)
+    cfg = replace(rule, nominal=nominal)
     limits = {k: cfg.limit(k) for k in monitored}
     engine = AlertEngine(cfg, model, units={k: spec(k).unit for k in monitored})
     for r in ok:
@@ -315,6 +346,8 @@ def summarize_vehicle(vehicle: str, records: list[dict[str, Any]], rule: AlertRu
                              forecasts, alerts, warnings=time_warnings(
                                  vehicle, [float(r["t"]) for r in ok]),
                              offsets=sensor_offsets(ok), unidentified=unidentified, loads=loads)
+    summary.distance_source, summary.positions = drive_positions(ok + unidentified)
+    x_latest = summary.latest_position()
     for k in monitored:
         ser = summary.series(k)
         t = np.array([float(r["t"]) for r in ser])
@@ -322,16 +355,25 @@ def summarize_vehicle(vehicle: str, records: list[dict[str, Any]], rule: AlertRu
         s = np.array([float(r["result"]["stderr"][k]) for r in ser])
         tr = robust_trend(t, v, s)
         trends[k] = tr
+        trk = None
+        if summary.distance_source is not None:
+            # the same robust fit against the drives' positions (km): its own interval
+            x = np.array([math.nan if summary.position(r) is None else summary.position(r)
+                          for r in ser], dtype=float)
+            trk = summary.trends_km[k] = robust_trend(x, v, s, scale=KM)
         if k in alerted:      # already below: an alert, not a forecast
             continue
         fc = forecast_crossing(tr, limits[k], rule.level, not_before=t_latest)
+        if fc is not None and summary.distance_source is not None:
+            fc.distance = True
+            fc.crossing_m = limit_crossing(trk, limits[k], rule.level, not_before=x_latest)
         if fc is not None and fc.crossing_t <= t_latest + rule.horizon_days * DAY_S:
             forecasts[k] = fc
     summary.risk = "alert" if alerts else ("forecast" if forecasts else "ok")
     return summary
 
 
-def summarize_fleet(records: Iterable[dict[str, Any]], rule: AlertRule) -> list[VehicleSummary]:
+def summarize_fleet(records: Iterable[dict[str, Any]], rule: AlertConfig) -> list[VehicleSummary]:
     """Every vehicle's summary, ranked most at risk first (``rank`` 1 is the first)."""
     by_vehicle: dict[str, list[dict[str, Any]]] = {}
     for r in records:

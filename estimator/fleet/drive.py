@@ -31,16 +31,18 @@ import numpy as np
 
 from cantools.database import Database
 
+from estimator.decode.listener import DecodeListener
+from estimator.decode.replay import feed_log
 from estimator.identify.inputs import read_input
 from estimator.identify import IdentResult, OutputErrorProblem, Parameters
 from estimator.identify.record import identify_record
 from estimator.identify.roadfree import fit_road_unknown, resolve_road
 from suspid import __version__
 from suspid.can.dbc import default_dbc_path, load_dbc
-from suspid.can.logs import FORMATS, first_timestamp
-from suspid.can.signal_map import SignalMap
+from suspid.can.logs import FORMATS, ReadStats, first_timestamp
+from suspid.can.signal_map import SignalMap, merge_maps
 from suspid.errors import InputError, SuspidError
-from suspid.io.csvio import Measurement
+from suspid.io.csvio import AUX_CHANNELS, Measurement
 from suspid.models import SuspensionModel, get_model
 
 #: suffixes read as CAN logs (python-can formats), and as measurement CSVs
@@ -182,8 +184,111 @@ def load_drive(path: str | Path, model: SuspensionModel, settings: IdentifySetti
     InputError, UsageError
         Unreadable or unusable log (one-line message naming the file).
     """
-    return read_input(path, model, cached_database(settings.dbc), settings.signal_map,
+    db = cached_database(settings.dbc)
+    return read_input(path, model, db, with_declared_channels(settings.signal_map, db, model),
                       channel=settings.can_channel, j1939_source=settings.j1939_source)
+
+
+def with_declared_channels(signal_map: SignalMap | None, db: Database,
+                           model: SuspensionModel) -> SignalMap | None:
+    """A map of the vehicle's distance channels alone (``--map odometer=VDHR...``) completed
+    with the channels the DBC declares for the model (``SuspidChannel`` attributes): the
+    suspension's signals need no mapping when the DBC declares them.
+
+    Parameters
+    ----------
+    signal_map : SignalMap or None
+        ``--map``/``--map-file``.
+    db : cantools Database
+    model : SuspensionModel
+
+    Returns
+    -------
+    SignalMap or None
+        ``signal_map`` itself when it maps a model channel (or is ``None``, or the DBC
+        declares nothing), else the DBC's channels followed by it.
+    """
+    if signal_map is None or any(c not in AUX_CHANNELS for c in signal_map.channels()):
+        return signal_map
+    declared = SignalMap.from_dbc(db, model.name)
+    return merge_maps([declared, signal_map]) if declared.mappings else signal_map
+
+
+def drive_distance(meas: Measurement) -> dict[str, Any]:
+    """The distance a drive covered, from the vehicle's odometer or speed (``meas.aux``).
+
+    Parameters
+    ----------
+    meas : Measurement
+        The drive, with ``aux`` ``odometer`` (m) and/or ``speed`` (m/s) when the log carries
+        them (a CSV column, or a signal mapped from the DBC: ``--map odometer=...``).
+
+    Returns
+    -------
+    dict
+        ``odometer_m`` (the first odometer reading, m: the drive's position on the vehicle's
+        distance scale, as ``t`` is on its time scale; ``None`` without an odometer),
+        ``distance_m`` (driven in the drive, m: the odometer's last minus first reading,
+        else the trapezoidal integral of the speed over its samples; ``None`` without
+        either) and ``distance_source`` (``"odometer"``, ``"speed"`` or ``None``). An
+        odometer that runs backwards within the drive (a reset, a wrong mapping) gives no
+        distance from it.
+    """
+    out: dict[str, Any] = {"odometer_m": None, "distance_m": None, "distance_source": None}
+    odo = meas.aux.get("odometer")
+    if odo is not None and np.isfinite(odo).any():
+        vals = odo[np.isfinite(odo)]
+        if float(vals[-1]) >= float(vals[0]):
+            out.update(odometer_m=float(vals[0]), distance_m=float(vals[-1] - vals[0]),
+                       distance_source="odometer")
+            return out
+    speed = meas.aux.get("speed")
+    if speed is not None and np.count_nonzero(np.isfinite(speed)) >= 2:
+        ok = np.isfinite(speed)
+        out.update(distance_m=float(np.trapezoid(np.abs(speed[ok]), meas.t[ok])),
+                   distance_source="speed")
+    return out
+
+
+def distance_by_timestamp(path: str | Path, model: SuspensionModel, settings: IdentifySettings
+                          ) -> Measurement | None:
+    """The vehicle's distance channels of a CAN log, decoded on the frames' own timestamps.
+
+    A log of suspid's sensor node is decoded on the node's tick (``SN_Sync``), and a frame
+    without the node's alive counter -- a J1939 odometer or speed from the engine
+    controller -- has no tick: the decoder rejects it (``no_sync``). The distance needs no
+    sensor clock (an odometer's first and last readings, a speed integrated over the
+    frames' times), so those channels alone are decoded again with the timestamps as the
+    time base.
+
+    Parameters
+    ----------
+    path : str or Path
+        The CAN log.
+    model : SuspensionModel
+    settings : IdentifySettings
+        Its ``signal_map`` names the distance channels (``odometer``, ``speed``).
+
+    Returns
+    -------
+    Measurement or None
+        ``t`` (s) and ``aux``; ``None`` when the map has no distance channel or the log no
+        accepted frame of one.
+    """
+    smap = settings.signal_map
+    if smap is None:
+        return None
+    aux = SignalMap([m for m in smap.mappings if m.channel in AUX_CHANNELS], smap.dbc,
+                    smap.source)
+    if not aux.mappings:
+        return None
+    listener = DecodeListener(model, cached_database(settings.dbc), aux, growable=True,
+                              time_source="timestamp", j1939_source=settings.j1939_source)
+    feed_log(listener, path, ReadStats(), channel=settings.can_channel)
+    if not any(s.n for s in listener.buffer.sources.values()):
+        return None
+    al = listener.aligned()
+    return Measurement(t=al.t, aux={k: v for k, v in al.values.items() if k in AUX_CHANNELS})
 
 
 def one_line(text: object) -> str:
@@ -296,13 +401,16 @@ def identify_drive(path: str, vehicle: str, settings: IdentifySettings,
     -------
     dict
         ``path``, ``vehicle``, ``sha256``, ``size`` (bytes), ``t`` (epoch s of the first
-        sample, ``None`` if unreadable), ``status`` (``"ok"``; ``"unidentified"``: read but
+        sample, ``None`` if unreadable), the distance (:func:`drive_distance`:
+        ``odometer_m``, ``distance_m``, ``distance_source``, ``None`` without an odometer or
+        speed signal), ``status`` (``"ok"``; ``"unidentified"``: read but
         not identified, :func:`classify`; ``"failed"``: not read), ``error`` (one-line
         reason or ``None``) and, when read, ``result``: the ``suspid identify --json`` object
         of the drive.
     """
     out: dict[str, Any] = {"path": path, "vehicle": vehicle, "sha256": digest, "size": None,
-                           "t": None, "status": "failed", "error": None, "result": None}
+                           "t": None, "status": "failed", "error": None, "result": None,
+                           "odometer_m": None, "distance_m": None, "distance_source": None}
     try:
         out["size"] = Path(path).stat().st_size
         if digest is None:
@@ -316,6 +424,13 @@ def identify_drive(path: str, vehicle: str, settings: IdentifySettings,
         if not math.isfinite(t0):
             raise InputError(f"{path}: no sample time")
         out["t"] = t0
+        dist = drive_distance(meas)
+        if (dist["distance_source"] is None and frames is not None
+                and frames.get("time_base") == "tick"):
+            again = distance_by_timestamp(path, model, settings)
+            if again is not None:
+                dist = drive_distance(again)
+        out.update(dist)
         result = identify_measurement(model, meas, settings)
         if frames is not None:
             result.frames = frames

@@ -1,6 +1,6 @@
 """The fleet's history: an SQLite database (Python's standard ``sqlite3``) of every drive.
 
-Schema (``PRAGMA user_version = 1``; query it with the ``sqlite3`` shell)::
+Schema (``PRAGMA user_version = 2``; query it with the ``sqlite3`` shell)::
 
     CREATE TABLE drives (
         id        TEXT PRIMARY KEY,  -- SHA-256 of the log's bytes; of a failed log
@@ -14,7 +14,10 @@ Schema (``PRAGMA user_version = 1``; query it with the ``sqlite3`` shell)::
         size      INTEGER,           -- bytes
         settings  TEXT NOT NULL,     -- identify options, DBC hash, suspid version (JSON)
         result    TEXT,              -- the drive's `suspid identify --json` object
-        processed REAL NOT NULL      -- epoch s when it was stored last
+        processed REAL NOT NULL,     -- epoch s when it was stored last
+        odometer_m REAL,             -- odometer at the drive's start, m (NULL: no odometer)
+        distance_m REAL,             -- distance driven in the drive, m (NULL: no distance)
+        distance_source TEXT         -- 'odometer' or 'speed' (integrated); NULL: neither
     );
     CREATE TABLE estimates (
         drive_id  TEXT NOT NULL REFERENCES drives(id) ON DELETE CASCADE,
@@ -38,6 +41,11 @@ files of several vehicles are as many failed logs, not one). A log whose bytes c
 the same path (a logger still writing it, an upload completed) replaces the row stored for
 that path when that row failed or starts at the same time; a different drive written to the
 same path later (another first timestamp) is added.
+
+A history of schema version 1 (before the distance columns) is migrated when it is opened
+for writing: the three columns are added, NULL for the drives stored before (a log is read
+again only when its settings change, e.g. a ``--map odometer=...`` added). Opened read-only
+it is read as it is, its drives without a distance.
 """
 from __future__ import annotations
 
@@ -50,7 +58,9 @@ from typing import Any, Iterable
 from estimator.fleet.drive import classify
 from suspid.errors import InputError
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+#: columns added by schema version 2 (the drive's distance), with their SQL types
+DISTANCE_COLUMNS = (("odometer_m", "REAL"), ("distance_m", "REAL"), ("distance_source", "TEXT"))
 #: statuses of a drive that was read (its result is the content's: one row per content)
 READ = ("ok", "unidentified")
 
@@ -58,7 +68,8 @@ _SCHEMA = """
 CREATE TABLE IF NOT EXISTS drives (
     id TEXT PRIMARY KEY, path TEXT NOT NULL, vehicle TEXT NOT NULL, t REAL,
     model TEXT NOT NULL, status TEXT NOT NULL, error TEXT, size INTEGER,
-    settings TEXT NOT NULL, result TEXT, processed REAL NOT NULL);
+    settings TEXT NOT NULL, result TEXT, processed REAL NOT NULL, odometer_m REAL,
+    distance_m REAL, distance_source TEXT);
 CREATE INDEX IF NOT EXISTS drives_vehicle_t ON drives (vehicle, t);
 CREATE TABLE IF NOT EXISTS estimates (
     drive_id TEXT NOT NULL REFERENCES drives(id) ON DELETE CASCADE,
@@ -102,6 +113,7 @@ class History:
 
     def __init__(self, path: str | Path, readonly: bool = False) -> None:
         self.path = Path(path)
+        self._columns: set[str] = set()
         if self.path.is_dir():
             raise InputError(f"--db {path}: is a directory, expected a database file")
         if not readonly:
@@ -122,16 +134,33 @@ class History:
                 if self.conn.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND "
                                      "name = 'drives'").fetchone() is None:
                     raise InputError(f"--db {path}: not a fleet history (no table drives)")
+                self._columns = self._drive_columns()
                 return
         except sqlite3.DatabaseError as exc:
             what = "not a usable SQLite database" if existed else "cannot create the history"
             raise InputError(f"--db {path}: {what} ({exc})") from None
         try:
             self.conn.executescript(_SCHEMA)
+            have = self._drive_columns()
+            for name, kind in DISTANCE_COLUMNS:     # a version 1 history: NULL for old rows
+                if name not in have:
+                    self.conn.execute(f"ALTER TABLE drives ADD COLUMN {name} {kind}")
             self.conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
             self.conn.commit()
+            self._columns = self._drive_columns()
         except sqlite3.DatabaseError as exc:
             raise InputError(f"--db {path}: cannot write the history ({exc})") from None
+
+    def _drive_columns(self) -> set[str]:
+        """The columns of table ``drives``."""
+        return {r[1] for r in self.conn.execute("PRAGMA table_info(drives)")}
+
+    def _select(self) -> str:
+        """The columns :func:`_record` reads; a version 1 history opened read-only gives NULL
+        for the distance columns it lacks."""
+        dist = ", ".join(name if name in self._columns else "NULL"
+                         for name, _ in DISTANCE_COLUMNS)
+        return f"SELECT id, path, vehicle, t, status, error, size, result, model, {dist} FROM drives"
 
     def close(self) -> None:
         self.conn.close()
@@ -144,8 +173,7 @@ class History:
 
     def known(self, settings_key: str) -> dict[str, dict[str, Any]]:
         """Stored drives made with these settings: ``id -> record``."""
-        rows = self.conn.execute("SELECT id, path, vehicle, t, status, error, size, result "
-                                 "FROM drives WHERE settings = ?", (settings_key,))
+        rows = self.conn.execute(self._select() + " WHERE settings = ?", (settings_key,))
         return {r[0]: _record(r) for r in rows}
 
     def add(self, records: Iterable[dict[str, Any]], model: str, settings_key: str) -> int:
@@ -177,10 +205,12 @@ class History:
                 self.conn.execute("DELETE FROM estimates WHERE drive_id = ?", (did,))
                 self.conn.execute(
                     "INSERT OR REPLACE INTO drives (id, path, vehicle, t, model, status, error, "
-                    "size, settings, result, processed) VALUES (?,?,?,?,?,?,?,?,?,?,?)",
+                    "size, settings, result, processed, odometer_m, distance_m, distance_source) "
+                    "VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
                     (did, rec["path"], rec["vehicle"], rec.get("t"), model, rec["status"],
                      rec.get("error"), rec.get("size"), settings_key,
-                     json.dumps(res) if res is not None else None, now))
+                     json.dumps(res) if res is not None else None, now,
+                     rec.get("odometer_m"), rec.get("distance_m"), rec.get("distance_source")))
                 if res is not None:
                     fixed = set(res.get("fixed", []))
                     self.conn.executemany(
@@ -193,8 +223,7 @@ class History:
 
     def drives(self) -> list[dict[str, Any]]:
         """Every stored drive as a record (``path``, ``vehicle``, ``t``, ``status``, ...)."""
-        rows = self.conn.execute("SELECT id, path, vehicle, t, status, error, size, result, "
-                                 "model FROM drives ORDER BY vehicle, t, path")
+        rows = self.conn.execute(self._select() + " ORDER BY vehicle, t, path")
         out = []
         for r in rows:
             rec = _record(r)
@@ -242,4 +271,5 @@ def _record(r: tuple[Any, ...]) -> dict[str, Any]:
         error = None if why is None else f"{r[1]}: {why}"
     return {"path": r[1], "vehicle": r[2], "t": r[3], "status": status, "error": error,
             "size": r[6], "result": result,
-            "sha256": None if did.startswith("path:") else did.split(":", 1)[0]}
+            "sha256": None if did.startswith("path:") else did.split(":", 1)[0],
+            "odometer_m": r[9], "distance_m": r[10], "distance_source": r[11]}

@@ -4,7 +4,9 @@
 first, then those with a forecast limit crossing, soonest first, then by the smallest
 margin above the limit), one section per vehicle with each monitored parameter's drive
 estimates (±2 standard errors), robust trend, nominal value, limit and forecast crossing
-with its 90 % interval, a table of its drives (``drives-NAME``: time, road mode, each free
+with its 90 % interval (in days, and in odometer km where the logs carry the vehicle's
+distance or speed; "no distance signal" where they do not), a table of its drives
+(``drives-NAME``: time, road mode, odometer where the drives carry a distance, each free
 parameter, the load -- the body mass with a spring held and the road unknown: the payload --
 and what the drive left undetermined), and the drives read but not identified (table
 ``#unidentified``) and the failed logs (table ``#failed``) with their reasons.
@@ -19,7 +21,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Sequence
 
-from estimator.fleet.analysis import AlertRule, VehicleSummary
+from estimator.alerts.engine import AlertConfig
+from estimator.fleet.analysis import VehicleSummary
 from estimator.fleet.drive import determined
 from estimator.fleet.trend import DAY_S, Forecast
 from suspid.errors import InputError, UsageError
@@ -132,7 +135,7 @@ def _vehicle_row(s: VehicleSummary) -> str:
     last = s.latest
     fc = min(s.forecasts.items(), key=lambda kv: kv[1].crossing_t, default=None)
     fc_txt = (f"{fc[0]}: {_date(fc[1].crossing_t)} ({_date(fc[1].crossing_t_low)} to "
-              f"{_date(fc[1].crossing_t_high)}; {_days(fc[1])})" if fc else "")
+              f"{_date(fc[1].crossing_t_high)}; {_days(fc[1])}; {_km(fc[1])})" if fc else "")
     margin = s.margin()
     cells = [str(s.rank), f'<a href="#{vehicle_anchor(s.vehicle)}">{html.escape(s.vehicle)}</a>',
              s.risk, str(len(s.drives)), str(s.failed), str(len(s.unidentified)),
@@ -144,7 +147,7 @@ def _vehicle_row(s: VehicleSummary) -> str:
 
 
 def render(vehicles: Sequence[VehicleSummary], drives: Sequence[dict[str, Any]],
-           rule: AlertRule) -> str:
+           rule: AlertConfig) -> str:
     """The report page as HTML text."""
     failed = [d for d in drives if d["status"] == "failed"]
     unidentified = [d for d in drives if d["status"] == "unidentified"]
@@ -157,7 +160,9 @@ def render(vehicles: Sequence[VehicleSummary], drives: Sequence[dict[str, Any]],
              f"{len(failed)} failed logs. Limit: {100 * (1 - rule.drop):.0f} % of nominal; "
              f"alert when the {100 * _conf(rule.z):.0f} % upper bound is below it in "
              f"{_drives_text(rule.min_count)}; forecasts with {100 * rule.level:.0f} % "
-             f"intervals, in days after the vehicle's latest drive. Generated "
+             f"intervals, in days after the vehicle's latest drive and, where the logs carry "
+             "the vehicle's odometer or speed, in odometer km (the trend against distance). "
+             "Generated "
              f"{_date(time.time(), True)} UTC.</p>",
              "<h2>Vehicles by risk</h2>", '<table id="vehicles"><thead><tr>',
              "".join(f"<th>{h}</th>" for h in ("Rank", "Vehicle", "Risk", "Drives", "Failed logs",
@@ -172,6 +177,13 @@ def render(vehicles: Sequence[VehicleSummary], drives: Sequence[dict[str, Any]],
         parts.append(f'<h2 id="{vehicle_anchor(s.vehicle)}">{s.rank}. {html.escape(s.vehicle)} '
                      f"({html.escape(s.model) or 'no identified drive'}, {len(s.drives)} drives"
                      f"{'; ' + roads if roads else ''}; {s.risk})</h2>")
+        pos = s.latest_position()
+        parts.append('<p class="distance">' + (
+            "Distance: no distance signal in the logs (forecasts in days only)"
+            if s.distance_source is None else
+            f"Distance: from the {s.distance_source}"
+            + (" (logged distance)" if s.distance_source == "speed" else "")
+            + ("" if pos is None else f", {pos / 1e3:,.1f} km at the latest drive")) + "</p>")
         if s.unidentified:
             parts.append(f'<p class="warn-msg unidentified"><b>NOT IDENTIFIED</b> '
                          f"{len(s.unidentified)} drive(s) read but not identified, left out of "
@@ -193,17 +205,19 @@ def render(vehicles: Sequence[VehicleSummary], drives: Sequence[dict[str, Any]],
         if s.monitored:
             parts.append('<table class="params"><tr><th>Parameter</th><th>Latest</th>'
                          "<th>Nominal</th><th>Limit</th><th>Trend per day</th>"
-                         "<th>Forecast crossing</th></tr>")
+                         "<th>Forecast crossing</th><th>Forecast crossing (odometer)</th></tr>")
             for k in s.monitored:
                 tr = s.trends.get(k)
                 fc = s.forecasts.get(k)
-                rate = ("" if tr is None else f"{_num(tr.rate_per_day)}" +
-                        (f" ± {_num(tr.stderr)}" if math.isfinite(tr.stderr) else ""))
+                rate = ("" if tr is None else f"{_num(tr.rate * DAY_S)}" +
+                        (f" ± {_num(tr.rate_stderr * DAY_S)}" if math.isfinite(tr.rate_stderr)
+                         else ""))
                 last = s.latest_value(k)
                 parts.append(f"<tr><td>{k}</td><td>{'' if last is None else _num(last)}</td>"
                              f"<td>{_num(s.nominal[k])}</td><td>{_num(s.limits[k])}</td>"
                              f"<td>{rate}</td><td>{_date(fc.crossing_t) if fc else ''}"
-                             f"{' (' + _days(fc) + ')' if fc else ''}</td></tr>")
+                             f"{' (' + _days(fc) + ')' if fc else ''}</td>"
+                             f"<td>{_km(fc) if fc else ''}</td></tr>")
             parts.append("</table><div class='plots'>")
             parts += [trend_svg(s, k) for k in s.monitored]
             parts.append("</div>")
@@ -238,6 +252,16 @@ def _days(fc: Forecast) -> str:
     return f"in {d:.0f} d ({lo:.0f} to {hi:.0f} d)"
 
 
+def _km(fc: Forecast) -> str:
+    """``at 84,200 km (79,900 to 90,100 km)``, or why there is no crossing in km."""
+    if not fc.distance:
+        return "no distance signal"
+    if fc.crossing_m is None:
+        return "no crossing against distance"
+    c, lo, hi = (x / 1e3 for x in fc.crossing_m)
+    return f"at {c:,.0f} km ({lo:,.0f} to {hi:,.0f} km)"
+
+
 def _drives_table(s: VehicleSummary) -> str:
     """A vehicle's drives: time, road mode, status, each free parameter (undetermined ones
     marked), the load (payload) columns first."""
@@ -247,9 +271,12 @@ def _drives_table(s: VehicleSummary) -> str:
     names = s.loads + s.monitored
     head = "".join(f"<th>{html.escape(k)}{' (load)' if k in s.loads else ''}</th>"
                    for k in names)
+    # the odometer column only where the drives carry a distance (the vehicle's section
+    # says "no distance signal" otherwise)
+    odo_head = "<th>Odometer (km)</th>" if s.distance_source is not None else ""
     out = [f'<table class="drives" id="drives-{vehicle_anchor(s.vehicle)[2:]}"><thead><tr>'
-           f"<th>Drive (UTC)</th><th>Road</th><th>Status</th>{head}<th>Undetermined</th>"
-           "</tr></thead><tbody>"]
+           f"<th>Drive (UTC)</th><th>Road</th>{odo_head}<th>Status</th>{head}"
+           "<th>Undetermined</th></tr></thead><tbody>"]
     for r in rows:
         res = r.get("result") or {}
         det = set(determined(res))
@@ -261,8 +288,11 @@ def _drives_table(s: VehicleSummary) -> str:
                          _num(float(v)) + (f" ± {_num(float(se))}" if se is not None else ""))
         und = [k for k in res.get("params", {}) if k not in det and k not in res.get("fixed", [])]
         status = r["status"] if r["status"] == "ok" else f"{r['status']}: {r.get('error') or ''}"
+        pos = s.position(r) if r.get("t") is not None else None
+        odo = ("" if s.distance_source is None else
+               "<td></td>" if pos is None else f"<td>{pos / 1e3:,.1f}</td>")
         out.append(f'<tr class="{html.escape(r["status"])}"><td>{_date(r.get("t"), True)}</td>'
-                   f"<td>{html.escape(str(res.get('road', '')))}</td>"
+                   f"<td>{html.escape(str(res.get('road', '')))}</td>{odo}"
                    f"<td>{html.escape(status)}</td>"
                    + "".join(f"<td>{c}</td>" for c in cells)
                    + f"<td>{html.escape(', '.join(und))}</td></tr>")
@@ -310,7 +340,7 @@ def prepare_report_folder(folder: str | Path) -> Path:
 
 
 def write_report(folder: str | Path, vehicles: Sequence[VehicleSummary],
-                 drives: Sequence[dict[str, Any]], rule: AlertRule) -> Path:
+                 drives: Sequence[dict[str, Any]], rule: AlertConfig) -> Path:
     """Write ``folder/index.html`` (the folder is created); returns its path."""
     d = Path(folder)
     d.mkdir(parents=True, exist_ok=True)

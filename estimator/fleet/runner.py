@@ -17,20 +17,22 @@ import math
 import os
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, TextIO
 
 from distributed import Client, LocalCluster, as_completed
 
+from estimator.alerts.engine import AlertConfig
 from estimator.decode.listener import DecodeListener
-from estimator.fleet.analysis import AlertRule, VehicleSummary, summarize_fleet
+from estimator.fleet.analysis import VehicleSummary, summarize_fleet
 from estimator.fleet.discover import DriveFile, find_drives
 from estimator.fleet.drive import (CAN_SUFFIXES, IdentifySettings, cached_database, file_digest,
-                                   identify_drive)
+                                   identify_drive, with_declared_channels)
 from estimator.fleet.history import READ, History, drive_id
 from estimator.fleet.report import prepare_report_folder, write_report
 from suspid.errors import InputError, UsageError
+from suspid.models import get_model
 
 Progress = Callable[[int, int, int], None]
 
@@ -95,8 +97,8 @@ class FleetConfig:
         Directories, glob patterns or files (empty: report from ``db`` alone).
     settings : IdentifySettings or None
         How each drive is identified (``None`` only for a history-only report).
-    rule : AlertRule
-        Nominal values, alert and forecast settings.
+    rule : AlertConfig
+        Nominal values, alert and forecast settings (:meth:`AlertConfig.per_drive`).
     scheduler : str or None
         Address of an existing Dask scheduler (``tcp://HOST:PORT``).
     workers : int or None
@@ -111,7 +113,7 @@ class FleetConfig:
 
     inputs: list[str] = field(default_factory=list)
     settings: IdentifySettings | None = None
-    rule: AlertRule = field(default_factory=AlertRule)
+    rule: AlertConfig = field(default_factory=AlertConfig.per_drive)
     scheduler: str | None = None
     workers: int | None = None
     db: str | None = None
@@ -152,6 +154,12 @@ def drive_json(rec: dict[str, Any]) -> dict[str, Any]:
               "identifiable", "undetermined", "warnings", "offset", "frames"):
         if k in res:
             out[k] = res[k]
+    if rec.get("distance_source") is not None:
+        # the distance the drive covered and the odometer at its start (km)
+        for key, m in (("odometer_km", rec.get("odometer_m")),
+                       ("distance_km", rec.get("distance_m"))):
+            out[key] = None if m is None else round(float(m) / 1e3, 4)
+        out["distance_source"] = rec["distance_source"]
     return out
 
 
@@ -160,7 +168,9 @@ def check_settings(settings: IdentifySettings, files: list[DriveFile]) -> None:
     DBC that cannot be read, a signal map that does not fit the DBC or the model."""
     settings.parameters()
     if any(Path(f.path).suffix.lower() in CAN_SUFFIXES for f in files):
-        DecodeListener(settings.model, cached_database(settings.dbc), settings.signal_map)
+        db = cached_database(settings.dbc)
+        DecodeListener(settings.model, db, with_declared_channels(
+            settings.signal_map, db, get_model(settings.model)))
 
 
 def execute(jobs: list[tuple[str, str, str | None]], settings: IdentifySettings,
@@ -265,7 +275,7 @@ def run_fleet(config: FleetConfig) -> FleetResult:
         if history is not None and not config.inputs and not rule.nominal:
             last = history.last_options()
             if last and last.get("rule", {}).get("nominal"):
-                rule = AlertRule(**{**rule.to_json(), "nominal": last["rule"]["nominal"]})
+                rule = replace(rule, nominal=dict(last["rule"]["nominal"]))
         records: list[dict[str, Any]] = []
         new = reused = 0
         settings = config.settings

@@ -6,6 +6,14 @@ the measured accelerations, encoded by the sensor node's encoder
 written as a candump ``-L`` log stamped at the drive's epoch time. A vehicle's damper ``c1``
 (and optionally spring ``k1``) falls linearly with time at the vehicle's wear rate, so the
 true trend and the date it crosses a limit are known.
+
+With ``FleetSpec.distance`` the drives also carry the vehicle's distance: its odometer
+(``"odometer"``) or its speed (``"speed"``), as ``odometer``/``speed`` CSV columns or, in a
+CAN log, as the SAE J1939 parameter groups VDHR (PGN 65217,
+``HighResolutionTotalVehicleDistance``, 5 m per bit) and CCVS1 (PGN 65265,
+``WheelBasedVehicleSpeed``, km/h) sent by the engine controller (source 0x00) at 10 Hz, decoded
+with the DBC :func:`distance_dbc` writes and the map :data:`DISTANCE_MAP`. Each vehicle drives
+``km_per_day`` every day, so its odometer at any time, and at the crossing, is known.
 """
 from __future__ import annotations
 
@@ -13,9 +21,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import can
 from cantools.database.can import Database
+from cantools.j1939 import frame_id_pack
 
-from suspid.can.dbc import load_dbc
+from suspid.can.dbc import default_dbc_path, load_dbc
 from suspid.can.encoder import measurement_frames
 from suspid.can.logs import open_log_writer
 from suspid.excitation import make_scenario
@@ -40,11 +50,21 @@ class VehicleWear:
         Damper loss per day as a fraction of nominal (e.g. 0.005 = 0.5 %/day).
     k1_rate : float
         Spring loss per day as a fraction of nominal.
+    km_per_day : float
+        Distance driven every day (km), from ``odometer0_km`` on day 0.
+    odometer0_km : float
+        Odometer on day 0 (km).
     """
 
     name: str
     c1_rate: float = 0.0
     k1_rate: float = 0.0
+    km_per_day: float = 150.0
+    odometer0_km: float = 20_000.0
+
+    def odometer_m(self, t: float) -> float:
+        """The odometer (m) at epoch ``t`` (s)."""
+        return 1e3 * (self.odometer0_km + self.km_per_day * (t - EPOCH0) / DAY_S)
 
 
 @dataclass
@@ -70,6 +90,9 @@ class FleetSpec:
         Vehicle speed on the ISO 8608 class C road.
     fmt : str
         Log suffix (``.log``, ``.blf``, ``.asc``, ``.csv``...).
+    distance : {"", "odometer", "speed"}
+        The vehicle signal the drives carry besides the suspension's (module docstring);
+        ``""`` none. A CAN log needs the DBC of :func:`distance_dbc` (``db``).
     """
 
     vehicles: list[VehicleWear]
@@ -82,6 +105,7 @@ class FleetSpec:
         "m1": 300.0, "c1": 1500.0, "k1": 20000.0, "m2": 40.0, "c2": 300.0, "k2": 200000.0})
     speed_kmh: float = 50.0
     fmt: str = ".log"
+    distance: str = ""
 
     def truth(self, vehicle: VehicleWear, t: float) -> dict[str, float]:
         """True parameters of ``vehicle`` at epoch ``t`` (s)."""
@@ -95,6 +119,60 @@ class FleetSpec:
         """Epoch s at which ``name`` truly falls to ``(1 - drop) x nominal``."""
         rate = {"c1": vehicle.c1_rate, "k1": vehicle.k1_rate}.get(name, 0.0)
         return EPOCH0 + drop / rate * DAY_S if rate > 0 else None
+
+
+#: J1939 parameter groups of the vehicle's distance and speed (IDs as a J1939 DBC lists them,
+#: source 0xFE), added to suspid's DBC by :func:`distance_dbc`
+J1939_DISTANCE = """BO_ 2566832638 VDHR: 8 Vector__XXX
+ SG_ HighResolutionTotalVehicleDistance : 0|32@1+ (5,0) [0|21055406000] "m" Vector__XXX
+ SG_ HighResolutionTripDistance : 32|32@1+ (5,0) [0|21055406000] "m" Vector__XXX
+
+BO_ 2566844926 CCVS1: 8 Vector__XXX
+ SG_ WheelBasedVehicleSpeed : 8|16@1+ (0.00390625,0) [0|250.996] "km/h" Vector__XXX
+
+"""
+#: the signal map of the distance channels in the DBC of :func:`distance_dbc` (the speed
+#: from km/h to m/s); suspid's own channels come from the DBC's ``SuspidChannel`` attributes
+DISTANCE_MAP = {"odometer": "odometer=VDHR.HighResolutionTotalVehicleDistance",
+                "speed": "speed=CCVS1.WheelBasedVehicleSpeed*0.2777777777777778"}
+#: source address of the controller sending them (the engine)
+J1939_SOURCE = 0x00
+#: their period (s)
+DISTANCE_PERIOD_S = 0.1
+
+
+def distance_dbc(path: str | Path) -> Path:
+    """Write suspid's DBC with the J1939 groups VDHR and CCVS1 added (``VFrameFormat``
+    ``J1939PG``: matched by PGN whatever the sender); returns ``path``."""
+    text = default_dbc_path().read_text(encoding="utf-8")
+    ids = (2566832638, 2566844926)
+    text = text.replace("\nCM_ ", "\n" + J1939_DISTANCE + "CM_ ", 1)
+    text = text.replace("\nBA_DEF_DEF_ ", '\nBA_DEF_ BO_ "VFrameFormat" ENUM "StandardCAN",'
+                        '"ExtendedCAN","reserved","J1939PG";\nBA_DEF_DEF_ ', 1)
+    text = text.replace("\nBA_ ", "\n" + "".join(f'BA_ "VFrameFormat" BO_ {i} 3;\n' for i in ids)
+                        + "BA_ ", 1)
+    p = Path(path)
+    p.write_text(text, encoding="utf-8")
+    return p
+
+
+def distance_frames(db: Database, kind: str, t: np.ndarray, t0: float, odometer_m: float,
+                    speed_ms: float) -> list[can.Message]:
+    """The VDHR (``kind`` ``"odometer"``) or CCVS1 (``"speed"``) frames of a drive at
+    :data:`DISTANCE_PERIOD_S`, from :data:`J1939_SOURCE`, stamped at epoch ``t0 + t``."""
+    name = "VDHR" if kind == "odometer" else "CCVS1"
+    msg = db.get_message_by_name(name)
+    arb = frame_id_pack(6, 0, 0, (msg.frame_id >> 16) & 0xFF, (msg.frame_id >> 8) & 0xFF,
+                        J1939_SOURCE)
+    out = []
+    for tt in np.arange(float(t[0]), float(t[-1]), DISTANCE_PERIOD_S):
+        odo = odometer_m + speed_ms * (tt - float(t[0]))
+        values = ({"HighResolutionTotalVehicleDistance": odo,
+                   "HighResolutionTripDistance": odo - odometer_m} if kind == "odometer"
+                  else {"WheelBasedVehicleSpeed": speed_ms * 3.6})
+        out.append(can.Message(timestamp=t0 + float(tt), arbitration_id=arb, is_extended_id=True,
+                               data=msg.encode(values)))
+    return out
 
 
 def _candump(path: Path, frames: list) -> None:
@@ -115,8 +193,14 @@ def write_drive(path: Path, spec: FleetSpec, vehicle: VehicleWear, t0: float, se
     measured = {c: out[c] + rng.standard_normal(t.size) * spec.noise * np.std(out[c])
                 for c in ("x1_ddot", "x2_ddot")}
     roads = {"r": out["r"], "r_dot": out["r_dot"]}
+    speed = spec.speed_kmh / 3.6
+    odo0 = vehicle.odometer_m(t0)
     if spec.fmt == ".csv":
         cols = {**roads, **measured}
+        if spec.distance == "odometer":
+            cols["odometer"] = odo0 + speed * (t - t[0])
+        elif spec.distance == "speed":
+            cols["speed"] = np.full(t.size, speed)
         data = np.column_stack([t + t0, *cols.values()])
         # %.10g (write_measurement) would round an epoch time to 1 s: t gets 6 decimals
         np.savetxt(path, data, fmt=["%.6f"] + ["%.10g"] * len(cols), delimiter=",",
@@ -124,6 +208,9 @@ def write_drive(path: Path, spec: FleetSpec, vehicle: VehicleWear, t0: float, se
         return p
     meas = Measurement(t=t, road=roads, measured=measured)
     frames = list(measurement_frames(meas, "quarter2", db, t0=t0))
+    if spec.distance:
+        frames = sorted(frames + distance_frames(db, spec.distance, t, t0, odo0, speed),
+                        key=lambda m: m.timestamp)
     if spec.fmt == ".log":
         _candump(path, frames)
     else:
@@ -190,10 +277,14 @@ def make_fleet(folder: str | Path, spec: FleetSpec) -> list[dict[str, object]]:
     Returns
     -------
     list of dict
-        ``path``, ``vehicle``, ``t`` (epoch s) and ``params`` (true values) per drive.
+        ``path``, ``vehicle``, ``t`` (epoch s), ``params`` (true values) and
+        ``odometer_m`` (the vehicle's odometer at the drive's start) per drive. With a
+        ``distance`` in CAN logs the DBC is written to ``folder/distance.dbc``.
     """
     root = Path(folder)
-    db = load_dbc(None)
+    root.mkdir(parents=True, exist_ok=True)
+    db = load_dbc(distance_dbc(root / "distance.dbc") if spec.distance and spec.fmt != ".csv"
+                  else None)
     out = []
     nv = len(spec.vehicles)
     per = max(1, -(-spec.drives // nv))
@@ -205,5 +296,6 @@ def make_fleet(folder: str | Path, spec: FleetSpec) -> list[dict[str, object]]:
         d.mkdir(parents=True, exist_ok=True)
         path = d / f"drive-{k:04d}{spec.fmt}"
         truth = write_drive(path, spec, v, t0, seed=1000 + i, db=db)
-        out.append({"path": str(path), "vehicle": v.name, "t": t0, "params": truth})
+        out.append({"path": str(path), "vehicle": v.name, "t": t0, "params": truth,
+                    "odometer_m": v.odometer_m(t0)})
     return out

@@ -29,61 +29,21 @@ Forecast (:func:`forecast_crossing`)
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.stats import t as student_t
 
-from estimator.alerts.forecast import band_crossing
+from estimator.alerts.forecast import Trend, band_crossing, inverse_2x2, wls_line
 
 DAY_S = 86400.0
+#: m per km: the abscissa unit of a trend against distance
+KM = 1000.0
+#: a forecast's keys of the crossing against distance (odometer km, 90 % interval)
+KM_KEYS = ("crossing_km", "crossing_km_low", "crossing_km_high")
 HUBER_C = 1.345
 BISQUARE_C = 4.685
 MAD_TO_SIGMA = 1.4826
-
-
-@dataclass
-class Trend:
-    """A robust straight-line trend of one parameter.
-
-    Attributes
-    ----------
-    rate_per_day : float
-        Slope (parameter units per day).
-    stderr : float
-        Standard error of the slope (units per day); NaN with fewer than 3 drives.
-    value : float
-        The line's value at ``t_ref`` (the latest drive).
-    t_ref : float
-        Epoch s of the latest drive.
-    cov : ndarray, shape (2, 2)
-        Covariance of ``(value, rate_per_day)``.
-    n : int
-        Drives used.
-    outliers : list of int
-        Indices (into the arrays given) of drives the fit gave no weight.
-    tau : float
-        Estimated drive-to-drive scatter beyond the standard errors (parameter units).
-    """
-
-    rate_per_day: float
-    stderr: float
-    value: float
-    t_ref: float
-    cov: np.ndarray
-    n: int
-    outliers: list[int] = field(default_factory=list)
-    tau: float = 0.0
-
-    def at(self, t: float) -> float:
-        """The line's value at epoch ``t`` (s)."""
-        return self.value + self.rate_per_day * (t - self.t_ref) / DAY_S
-
-    def to_json(self) -> dict[str, object]:
-        def f(x: float) -> float | None:
-            return float(x) if math.isfinite(x) else None
-        return {"rate_per_day": f(self.rate_per_day), "stderr": f(self.stderr),
-                "value": f(self.value), "drives": int(self.n), "outliers": len(self.outliers)}
 
 
 @dataclass
@@ -100,6 +60,13 @@ class Forecast:
         Two-sided level of the interval.
     t_latest : float
         Epoch s of the vehicle's latest drive, from which ``days`` count (NaN: unknown).
+    distance : bool
+        The vehicle's drives carry a distance (odometer or speed): the JSON has the km keys,
+        null when the trend against distance predicts no crossing.
+    crossing_m : tuple of float or None
+        Odometer at the crossing and its interval (m), from the trend against distance
+        (:func:`limit_crossing` on the drives' odometer readings), never before the latest
+        drive's reading; ``None`` without one.
     """
 
     crossing_t: float
@@ -108,6 +75,8 @@ class Forecast:
     limit: float
     level: float = 0.90
     t_latest: float = math.nan
+    distance: bool = False
+    crossing_m: tuple[float, float, float] | None = None
 
     def days(self) -> tuple[float, float, float]:
         """The crossing and its interval in days after the latest drive."""
@@ -117,27 +86,18 @@ class Forecast:
 
     def to_json(self) -> dict[str, float | None]:
         """``crossing_t``, ``crossing_t_low``, ``crossing_t_high`` (epoch s), ``limit``, and
-        ``days``, ``days_low``, ``days_high`` after the latest drive."""
+        ``days``, ``days_low``, ``days_high`` after the latest drive; with a distance
+        signal (:attr:`distance`) ``crossing_km``, ``crossing_km_low``, ``crossing_km_high``
+        (odometer km, null without a crossing against distance)."""
         out: dict[str, float | None] = {
             "crossing_t": self.crossing_t, "crossing_t_low": self.crossing_t_low,
             "crossing_t_high": self.crossing_t_high, "limit": self.limit}
         for k, d in zip(("days", "days_low", "days_high"), self.days()):
             out[k] = round(d, 3) if math.isfinite(d) else None
+        if self.distance:
+            for i, k in enumerate(KM_KEYS):
+                out[k] = None if self.crossing_m is None else round(self.crossing_m[i] / 1e3, 3)
         return out
-
-
-def _wls(x: np.ndarray, v: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Weighted least-squares line ``v = b0 + b1 x``: ``(b0, b1)`` and the normal matrix
-    ``X'WX`` (the 2x2 system solved in closed form: a fleet fits one per parameter per
-    vehicle, thousands of times per report)."""
-    wx = w * x
-    s0, s1, s2 = float(np.sum(w)), float(np.sum(wx)), float(np.dot(wx, x))
-    sy, sxy = float(np.dot(w, v)), float(np.dot(wx, v))
-    det = s0 * s2 - s1 * s1
-    M = np.array([[s0, s1], [s1, s2]])
-    if not det > 0.0:
-        raise np.linalg.LinAlgError("singular weighted least-squares line")
-    return np.array([(s2 * sy - s1 * sxy) / det, (s0 * sxy - s1 * sy) / det]), M
 
 
 def _median(a: np.ndarray) -> float:
@@ -157,24 +117,30 @@ def theil_sen(x: np.ndarray, v: np.ndarray) -> tuple[float, float]:
 
 
 def robust_trend(t: np.ndarray, v: np.ndarray, s: np.ndarray | None = None,
-                 iterations: int = 50) -> Trend | None:
-    """Robust weighted straight-line trend of ``v`` over time (see the module docstring).
+                 iterations: int = 50, scale: float = DAY_S) -> Trend | None:
+    """Robust weighted straight-line trend of ``v`` over time or distance (module docstring).
 
     Parameters
     ----------
     t : ndarray
-        Drive times (epoch s).
+        The drives' abscissae: times (epoch s), or odometer readings (m) for a trend
+        against distance.
     v : ndarray
         Estimates (SI).
     s : ndarray, optional
         Their standard errors (SI); NaN or missing means unknown (only the scatter counts).
     iterations : int
         IRLS iterations per stage (at most).
+    scale : float
+        The abscissa's unit in the fit (s per day by default, 1000 m for distance): the
+        line is fitted in this unit, the :class:`Trend` is returned per s (or per m).
 
     Returns
     -------
     Trend or None
-        ``None`` with fewer than two drives at distinct times.
+        Referred to the latest abscissa, with ``n`` the drives used and ``outliers`` those
+        left out; ``None`` with fewer than two drives at distinct abscissae. With two drives
+        the covariance is NaN (no scatter to judge the line by).
     """
     t = np.asarray(t, dtype=float)
     v = np.asarray(v, dtype=float)
@@ -185,13 +151,13 @@ def robust_trend(t: np.ndarray, v: np.ndarray, s: np.ndarray | None = None,
     t, v, s = t[idx], v[idx], s[idx]
     s = np.where(np.isfinite(s) & (s >= 0), s, 0.0)
     t_ref = float(t.max())
-    x = (t - t_ref) / DAY_S
+    x = (t - t_ref) / scale
     if np.ptp(x) == 0:
         return None
     n = x.size
     a, b = theil_sen(x, v)
     if n == 2:
-        return Trend(b, math.nan, a, t_ref, np.full((2, 2), np.nan), n)
+        return Trend(t_ref, a, b / scale, math.nan, math.nan, math.nan, n=n)
     floor = (1e-12 * max(float(np.max(np.abs(v))), 1e-300)) ** 2
     beta = np.array([a, b])
     h = np.ones(n)
@@ -212,7 +178,7 @@ def robust_trend(t: np.ndarray, v: np.ndarray, s: np.ndarray | None = None,
             w = h / var
             if np.count_nonzero(w) < 2 or np.ptp(x[w > 0]) == 0:
                 break
-            new, M = _wls(x, v, w)
+            new, M = wls_line(x, v, w)
             done = (abs(new[0] - beta[0]) <= 1e-12 * abs(beta[0])
                     and abs(new[1] - beta[1]) <= 1e-12 * abs(beta[1]))
             beta = new
@@ -234,10 +200,20 @@ def robust_trend(t: np.ndarray, v: np.ndarray, s: np.ndarray | None = None,
     r = v[keep] - (beta[0] + beta[1] * x[keep])
     w = 1.0 / np.maximum(s[keep] ** 2 + tau2, floor)
     phi = max(1.0, float(np.sum(w * r * r)) / max(np.count_nonzero(keep) - 2.0, 1.0))
-    cov = phi * np.linalg.inv(M)
-    outliers = [int(idx[i]) for i in np.flatnonzero(~keep)]
-    return Trend(float(beta[1]), float(math.sqrt(max(cov[1, 1], 0.0))), float(beta[0]), t_ref,
-                 cov, int(np.count_nonzero(keep)), outliers, math.sqrt(tau2))
+    cov = phi * inverse_2x2(M)
+    outliers = tuple(int(idx[i]) for i in np.flatnonzero(~keep))
+    return Trend(t_ref, float(beta[0]), float(beta[1]) / scale, float(cov[0, 0]),
+                 float(cov[0, 1]) / scale, float(cov[1, 1]) / (scale * scale),
+                 n=int(np.count_nonzero(keep)), outliers=outliers, tau=math.sqrt(tau2))
+
+
+def trend_json(trend: Trend, per: float = DAY_S, unit: str = "day") -> dict[str, object]:
+    """A fleet trend as JSON: ``rate_per_<unit>`` and ``stderr`` (SI per ``per`` s or m),
+    ``value`` at the latest drive (SI), ``drives`` used, ``outliers`` left out; NaN as null."""
+    def f(x: float) -> float | None:
+        return float(x) if math.isfinite(x) else None
+    return {f"rate_per_{unit}": f(trend.rate * per), "stderr": f(trend.rate_stderr * per),
+            "value": f(trend.value), "drives": int(trend.n), "outliers": len(trend.outliers)}
 
 
 def _random_effects(x: np.ndarray, v: np.ndarray, s: np.ndarray, floor: float
@@ -251,7 +227,7 @@ def _random_effects(x: np.ndarray, v: np.ndarray, s: np.ndarray, floor: float
 
     def at(tau2: float) -> tuple[np.ndarray, np.ndarray, float]:
         w = 1.0 / np.maximum(s * s + tau2, floor)
-        beta, M = _wls(x, v, w)
+        beta, M = wls_line(x, v, w)
         r = v - (beta[0] + beta[1] * x)
         return beta, M, float(np.sum(w * r * r))
 
@@ -273,9 +249,9 @@ def _random_effects(x: np.ndarray, v: np.ndarray, s: np.ndarray, floor: float
     return beta, M, hi
 
 
-def forecast_crossing(trend: Trend | None, limit: float, level: float = 0.90,
-                      not_before: float | None = None) -> Forecast | None:
-    """Date a falling trend crosses ``limit``, with Fieller's ``level`` interval.
+def limit_crossing(trend: Trend | None, limit: float, level: float = 0.90,
+                   not_before: float | None = None) -> tuple[float, float, float] | None:
+    """Where a falling trend crosses ``limit``, with Fieller's ``level`` interval.
 
     Parameters
     ----------
@@ -285,27 +261,42 @@ def forecast_crossing(trend: Trend | None, limit: float, level: float = 0.90,
     level : float
         Two-sided level of the interval.
     not_before : float, optional
-        Epoch s of the vehicle's latest drive (default the trend's): the crossing and both
-        ends of its interval are never before it (a line already at the limit crosses "at
-        the latest drive", never in the past).
+        The vehicle's latest abscissa (epoch s, or odometer m; default the trend's): the
+        crossing and both ends of its interval are never before it (a line already at the
+        limit crosses "at the latest drive", never in the past).
+
+    Returns
+    -------
+    tuple of float or None
+        ``(crossing, low, high)`` in the trend's abscissa (epoch s, or m); ``None`` when the
+        trend is missing, not falling, or its slope is not distinguishable from zero at
+        ``level`` (the interval would be unbounded).
+    """
+    if trend is None or not (trend.n >= 3 and math.isfinite(trend.var_rate)):
+        return None
+    a, b = trend.value - limit, trend.rate
+    if not b < 0:
+        return None
+    q = float(student_t.ppf(0.5 + level / 2.0, max(trend.n - 2, 1)))
+    fc = band_crossing(a, b, trend.var_value, trend.cov, trend.var_rate, q)
+    if fc is None:
+        return None
+    tc, lo, hi = fc
+    x0 = trend.t if not_before is None else max(float(not_before), trend.t)
+    return max(trend.t + tc, x0), max(trend.t + lo, x0), max(trend.t + hi, x0)
+
+
+def forecast_crossing(trend: Trend | None, limit: float, level: float = 0.90,
+                      not_before: float | None = None) -> Forecast | None:
+    """Date a falling trend over time crosses ``limit`` (:func:`limit_crossing`).
 
     Returns
     -------
     Forecast or None
-        ``None`` when the trend is missing, not falling, or its slope is not distinguishable
-        from zero at ``level`` (the interval would be unbounded).
+        Epoch s of the crossing and its interval; ``None`` as :func:`limit_crossing`.
     """
-    if trend is None or not (trend.n >= 3 and math.isfinite(trend.stderr)):
+    fc = limit_crossing(trend, limit, level, not_before)
+    if trend is None or fc is None:
         return None
-    a, b = trend.value - limit, trend.rate_per_day
-    if not b < 0:
-        return None
-    q = float(student_t.ppf(0.5 + level / 2.0, max(trend.n - 2, 1)))
-    fc = band_crossing(a, b, float(trend.cov[0, 0]), float(trend.cov[0, 1]),
-                       float(trend.cov[1, 1]), q)
-    if fc is None:
-        return None
-    tc, lo, hi = fc
-    t0 = trend.t_ref if not_before is None else max(float(not_before), trend.t_ref)
-    return Forecast(max(trend.t_ref + tc * DAY_S, t0), max(trend.t_ref + lo * DAY_S, t0),
-                    max(trend.t_ref + hi * DAY_S, t0), float(limit), level, t0)
+    t0 = trend.t if not_before is None else max(float(not_before), trend.t)
+    return Forecast(fc[0], fc[1], fc[2], float(limit), level, t0)

@@ -37,7 +37,7 @@ from typing import TYPE_CHECKING, Iterable, Sequence, Union
 
 from suspid.can.conventions import channel_signals, find_message
 from suspid.errors import InputError, UsageError
-from suspid.io.csvio import normalize_unit
+from suspid.io.csvio import AUX_CHANNELS, normalize_unit
 from suspid.models.base import SuspensionModel
 
 if TYPE_CHECKING:
@@ -247,7 +247,8 @@ class SignalMap:
         for m in self.mappings:
             if m.scale != 1.0:
                 continue
-            expected = model.column_units(m.channel)
+            expected = model.column_units(m.channel) or (
+                (AUX_CHANNELS[m.channel],) if m.channel in AUX_CHANNELS else ())
             try:
                 msg = find_message(db, m.message, self.source)
             except (InputError, UsageError):
@@ -315,12 +316,12 @@ class SignalMap:
 #: factors to SI of the units a DBC commonly gives motion signals in (lower case)
 TO_SI = {"mm": 1e-3, "cm": 1e-2, "mm/s": 1e-3, "cm/s": 1e-2, "mm/s^2": 1e-3, "g": 9.80665,
          "mg": 9.80665e-3, "deg": math.pi / 180, "°": math.pi / 180, "deg/s": math.pi / 180,
-         "°/s": math.pi / 180, "km/h": 1 / 3.6}
+         "°/s": math.pi / 180, "km/h": 1 / 3.6, "km": 1e3}
 #: the SI unit each of :data:`TO_SI`'s units converts to (spelled as
 #: :meth:`~suspid.models.base.SuspensionModel.column_units` spells it)
 SI_OF = {"mm": "m", "cm": "m", "mm/s": "m/s", "cm/s": "m/s", "mm/s^2": "m/s^2", "g": "m/s^2",
          "mg": "m/s^2", "deg": "rad", "°": "rad", "deg/s": "rad/s", "°/s": "rad/s",
-         "km/h": "m/s"}
+         "km/h": "m/s", "km": "m"}
 
 SignalMapLike = Union[SignalMap, str, Path, Sequence[str], None]
 

@@ -19,11 +19,11 @@ from suspid.errors import UsageError
 from suspid.models import get_model
 
 if TYPE_CHECKING:
-    from estimator.fleet import (AlertRule, FleetConfig, IdentifySettings, ProgressBar,
+    from estimator.fleet import (AlertConfig, FleetConfig, IdentifySettings, ProgressBar,
                                  available_cpus, run_fleet)
 else:
-    (AlertRule, FleetConfig, IdentifySettings, ProgressBar, available_cpus,
-     run_fleet) = lazy_names("estimator.fleet", "AlertRule", "FleetConfig", "IdentifySettings",
+    (AlertConfig, FleetConfig, IdentifySettings, ProgressBar, available_cpus,
+     run_fleet) = lazy_names("estimator.fleet", "AlertConfig", "FleetConfig", "IdentifySettings",
                              "ProgressBar", "available_cpus", "run_fleet")
 
 
@@ -114,10 +114,10 @@ def run(args: argparse.Namespace) -> int:
         sys.stderr.write(f"warning: --workers {args.workers}: {available_cpus()} CPU(s) available; "
                          f"using {available_cpus()} worker processes (each drive is "
                          "single-threaded: more would only share the cores)\n")
-    rule = AlertRule(nominal=nominal, drop=args.alert_drop,
-                     z=float(NormalDist().inv_cdf(cfg.get("alert", "confidence", 0.99))),
-                     min_count=cfg.get("alert", "drives", 1),
-                     horizon_days=cfg.get("alert", "horizon_days", 365.0))
+    rule = AlertConfig.per_drive(nominal=nominal, drop=args.alert_drop,
+                                 z=float(NormalDist().inv_cdf(cfg.get("alert", "confidence", 0.99))),
+                                 min_count=cfg.get("alert", "drives", 1),
+                                 horizon_days=cfg.get("alert", "horizon_days", 365.0))
     result = run_fleet(FleetConfig(inputs=list(args.input), settings=settings, rule=rule,
                                    scheduler=args.scheduler, workers=args.workers, db=args.db,
                                    report=args.report,
@@ -155,6 +155,16 @@ def _days(fc: dict[str, Any]) -> str:
     return f"; in {d[0]:.0f} d, {d[1]:.0f} to {d[2]:.0f} d"
 
 
+def _km(fc: dict[str, Any]) -> str:
+    """``; at 84200 km, 79900 to 90100 km``, or ``; no distance signal``."""
+    if "crossing_km" not in fc:
+        return "; no distance signal"
+    if fc["crossing_km"] is None:
+        return "; no crossing against distance"
+    return (f"; at {fc['crossing_km']:,.0f} km, {fc['crossing_km_low']:,.0f} to "
+            f"{fc['crossing_km_high']:,.0f} km")
+
+
 def _print_table(out: dict[str, Any]) -> None:
     w = sys.stdout.write
     ok = sum(1 for d in out["drives"] if d["status"] == "ok")
@@ -166,7 +176,7 @@ def _print_table(out: dict[str, Any]) -> None:
         notes = [f"ALERT {k}" for k in v["alerts"]]
         notes += [f"{k} reaches {f['limit']:.4g} on {_date(f['crossing_t'])} "
                   f"({_date(f['crossing_t_low'])} to {_date(f['crossing_t_high'])}"
-                  f"{_days(f)})" for k, f in v["forecast"].items()]
+                  f"{_days(f)}{_km(f)})" for k, f in v["forecast"].items()]
         if v.get("unidentified"):
             notes.append(f"{len(v['unidentified'])} drive(s) not identified")
         w(f"{v['rank']:>4}  {v['vehicle']:<16} {v['risk']:<9} {v['drives']:>6}  "

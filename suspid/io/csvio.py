@@ -3,7 +3,9 @@
 ``t`` (s) is required and must be strictly increasing; road columns are the model's
 ``roads`` (with optional ``_dot``); measured columns are any subset of the model's
 ``channels`` and ride heights (``ride_height_channels``: strut extensions ``d``/``dN`` in m
-and their ``_dot`` in m/s). Empty cells are missing samples (NaN). Unknown columns are ignored with a
+and their ``_dot`` in m/s). Empty cells are missing samples (NaN). The vehicle's ``speed``
+(m/s) and ``odometer`` (m) are read too (:data:`AUX_CHANNELS`: no model channel, never fitted;
+the fleet's distance per drive). Unknown columns are ignored with a
 warning. A trailing separator (an empty last column, on the header or the rows) is
 allowed. Every error names the file, the line and the column.
 
@@ -29,6 +31,12 @@ from suspid.errors import InputError, require_file
 from suspid.models.base import FloatArray, SuspensionModel
 
 
+#: channels of the vehicle, not of a model, read from a CSV or mapped from a DBC like the
+#: model's, with their SI unit: never fitted, kept in :attr:`Measurement.aux` (the fleet's
+#: distance driven and odometer reading per drive, for forecasts in km)
+AUX_CHANNELS: dict[str, str] = {"speed": "m/s", "odometer": "m"}
+
+
 @dataclass
 class Measurement:
     """A measurement record on one time base.
@@ -45,6 +53,9 @@ class Measurement:
         Non-fatal findings (ignored columns, filled gaps, ...).
     source : str
         Where the data came from (for messages).
+    aux : dict
+        The vehicle's channels of :data:`AUX_CHANNELS` (SI: ``speed`` m/s, ``odometer`` m),
+        NaN where a sample is missing; never compared with a model.
     """
 
     t: FloatArray
@@ -52,6 +63,7 @@ class Measurement:
     measured: dict[str, FloatArray] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     source: str = ""
+    aux: dict[str, FloatArray] = field(default_factory=dict)
 
 
 #: header of python-can's CSV log format (``can.CSVWriter``): CAN frames, not a measurement
@@ -70,6 +82,12 @@ def normalize_unit(unit: str) -> str:
     return _SPELLINGS.get(u, u)
 
 
+def _si_units(model: SuspensionModel, column: str) -> tuple[str, ...]:
+    """The SI unit(s) of a column: the model's, or a vehicle channel's (empty: neither)."""
+    units = model.column_units(column)
+    return units or ((AUX_CHANNELS[column],) if column in AUX_CHANNELS else ())
+
+
 def _annotated(cell: str, model: SuspensionModel) -> tuple[str, str | None]:
     """``(column name, None)`` for a header cell naming a column in its SI unit (or
     without a unit), ``(name, unit)`` for a known column annotated with another unit."""
@@ -77,7 +95,7 @@ def _annotated(cell: str, model: SuspensionModel) -> tuple[str, str | None]:
     if m is None:
         return cell, None
     name, unit = m.group("name").strip(), " ".join(m.group("unit").split())
-    units = model.column_units(name)
+    units = _si_units(model, name)
     if not units:
         return cell, None
     return (name, None) if normalize_unit(unit) in units else (name, unit)
@@ -220,7 +238,7 @@ def read_measurement(path: str | Path, model: SuspensionModel, *,
             raise InputError(f"{name}:1: duplicate column(s) {', '.join(sorted(dup))}")
         road_cols = set(model.roads) | {f"{r}_dot" for r in model.roads}
         measurable = list(model.channels) + list(model.ride_height_channels)
-        known = {"t"} | road_cols | set(measurable)
+        known = {"t"} | road_cols | set(measurable) | set(AUX_CHANNELS)
         # a trailing separator (on the header, the rows or both) is an empty last column:
         # a row holds the named columns, then at most the header's cells or empty ones
         ncol = len(header)
@@ -232,7 +250,7 @@ def read_measurement(path: str | Path, model: SuspensionModel, *,
                    if h not in known and i not in off_unit]
         for i, (col, unit) in off_unit.items():
             warnings.append(f"{name}: ignoring column {header[i]!r}: {col} in {unit!r}, expected "
-                            f"{' or '.join(model.column_units(col))} (SI; convert the column)")
+                            f"{' or '.join(_si_units(model, col))} (SI; convert the column)")
         if unknown:
             warnings.append(f"{name}: ignoring column(s) not used by model {model.name}: "
                             f"{', '.join(unknown)}")
@@ -272,9 +290,13 @@ def read_measurement(path: str | Path, model: SuspensionModel, *,
     road: dict[str, FloatArray] = {}
     measured: dict[str, FloatArray] = {}
     empty: list[str] = []
+    aux: dict[str, FloatArray] = {}
     for h, vals in cols.items():
         arr = np.frombuffer(vals, dtype=float).copy()
-        if h in road_cols:
+        if h in AUX_CHANNELS:
+            if not np.isnan(arr).all():
+                aux[h] = arr
+        elif h in road_cols:
             if np.isnan(arr).any() and (~np.isnan(arr)).sum() < 2:
                 raise InputError(f"{name}: road column {h!r} has fewer than 2 values")
             road[h] = arr
@@ -309,13 +331,14 @@ def read_measurement(path: str | Path, model: SuspensionModel, *,
         warnings.append(f"{name}: road column {h!r}: {int(gap.sum())} missing samples {how}")
     if not measured and require_measured:
         units = "".join(f"; column {header[i]!r} is {col} in {unit!r}, expected "
-                        f"{' or '.join(model.column_units(col))}" for i, (col, unit) in off_unit.items())
+                        f"{' or '.join(_si_units(model, col))}" for i, (col, unit) in off_unit.items())
         if empty:
             raise InputError(f"{name}: every measured column is empty ({', '.join(empty)}: no "
                              f"value in {t.size} rows); expected values of at least one")
         raise InputError(f"{name}:1: no measured channel for model {model.name}; expected any of "
                          f"{', '.join(measurable)}{units}")
-    return Measurement(t=t, road=road, measured=measured, warnings=warnings, source=name)
+    return Measurement(t=t, road=road, measured=measured, warnings=warnings, source=name,
+                       aux=aux)
 
 
 def write_measurement(path: str | Path, t: FloatArray, columns: Mapping[str, FloatArray],

@@ -5,7 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from estimator.fleet.analysis import AlertRule, summarize_fleet
+from estimator.alerts.engine import AlertConfig
+from estimator.fleet.analysis import summarize_fleet
 from estimator.fleet.drive import classify
 from estimator.fleet.history import History
 
@@ -29,16 +30,16 @@ def test_one_drive_confidently_below_the_limit_alerts() -> None:
     """c1 = 741 against a limit of 784 (nominal 1120): the latest drive alone alerts."""
     recs = [_record("VAN", d, 1120.0 - 2.0 * d) for d in (0, 10, 20)]
     recs.append(_record("VAN", 30, 741.0, se=5.0))
-    (s,) = summarize_fleet(recs, AlertRule(nominal={"c1": 1120.0}))
+    (s,) = summarize_fleet(recs, AlertConfig.per_drive(nominal={"c1": 1120.0}))
     j = s.to_json()
     assert j["alerts"] == ["c1"] and j["risk"] == "alert" and j["limits"]["c1"] == 784.0
     assert "c1" not in j["forecast"]
     # a persistence of two drives stays available on request, not as the default
-    (s2,) = summarize_fleet(recs, AlertRule(nominal={"c1": 1120.0}, min_count=2))
+    (s2,) = summarize_fleet(recs, AlertConfig.per_drive(nominal={"c1": 1120.0}, min_count=2))
     assert s2.to_json()["alerts"] == []
     # an uncertain estimate below the limit is not confident: no alert
     recs[-1] = _record("VAN", 30, 741.0, se=40.0)
-    (s3,) = summarize_fleet(recs, AlertRule(nominal={"c1": 1120.0}))
+    (s3,) = summarize_fleet(recs, AlertConfig.per_drive(nominal={"c1": 1120.0}))
     assert s3.to_json()["alerts"] == []
 
 
@@ -46,7 +47,7 @@ def test_a_parameter_already_below_is_an_alert_not_a_forecast() -> None:
     """900 +/- 1 against a 1050 limit: an alert, never a forecast dated in the past."""
     recs = [_record("VAN", d, v, se=1.0) for d, v in ((0, 1400), (10, 1300), (20, 1150),
                                                     (30, 900))]
-    (s,) = summarize_fleet(recs, AlertRule())
+    (s,) = summarize_fleet(recs, AlertConfig.per_drive())
     j = s.to_json()
     assert j["alerts"] == ["c1"] and j["forecast"] == {} and j["risk"] == "alert"
 
@@ -56,7 +57,7 @@ def test_no_forecast_crossing_before_the_latest_drive() -> None:
     asked for): the crossing is at the latest drive at the earliest, never before."""
     recs = [_record("VAN", d, v, se=se) for d, v, se in ((0, 1400, 5), (10, 1250, 5),
                                                          (20, 1100, 5), (30, 1040, 60))]
-    for rule in (AlertRule(), AlertRule(min_count=2)):
+    for rule in (AlertConfig.per_drive(), AlertConfig.per_drive(min_count=2)):
         (s,) = summarize_fleet(recs, rule)
         j = s.to_json()
         assert j["alerts"] == []
@@ -66,7 +67,7 @@ def test_no_forecast_crossing_before_the_latest_drive() -> None:
         assert fc["days_low"] >= 0.0 and fc["days"] >= 0.0
     # a regular forecast counts its days from the latest drive
     recs = [_record("VAN", d, 1500.0 - 5.0 * d, se=3.0) for d in (0, 9, 20, 26, 40)]
-    (s,) = summarize_fleet(recs, AlertRule())
+    (s,) = summarize_fleet(recs, AlertConfig.per_drive())
     fc = s.to_json()["forecast"]["c1"]
     assert abs(fc["days"] - 50.0) < 3.0
     assert abs(fc["crossing_t"] - (T0 + 40 * DAY) - fc["days"] * DAY) < 1e-3 * DAY
@@ -78,12 +79,12 @@ def test_failed_fits_never_enter_a_trend() -> None:
     assert classify({"success": False, "params": {"c": 1.0}, "fixed": [], "stderr": {},
                      "warnings": ["not identifiable: c, k"]})[0] == "unidentified"
     bad = [_record("VAN", d, 1.9e6 * d, success=False, status="unidentified") for d in range(5)]
-    (s,) = summarize_fleet(bad, AlertRule())
+    (s,) = summarize_fleet(bad, AlertConfig.per_drive())
     j = s.to_json()
     assert j["drives"] == 0 and j["trend"] == {} and j["forecast"] == {} and j["alerts"] == []
     assert j["risk"] == "no data" and len(j["unidentified"]) == 5
     good = [_record("VAN", d, 1500.0) for d in range(0, 50, 10)]
-    (s,) = summarize_fleet(good + bad, AlertRule())
+    (s,) = summarize_fleet(good + bad, AlertConfig.per_drive())
     tr = s.to_json()["trend"]["c1"]
     assert tr["drives"] == 5 and abs(tr["rate_per_day"]) < 1e-6
 
@@ -92,7 +93,7 @@ def test_a_parameter_left_undetermined_never_enters_a_trend() -> None:
     recs = [_record("VAN", d, 1500.0, undetermined=["c2", "k2"]) for d in (0, 10, 20)]
     for r in recs:
         del r["result"]["stderr"]["c2"], r["result"]["stderr"]["k2"]
-    (s,) = summarize_fleet(recs, AlertRule())
+    (s,) = summarize_fleet(recs, AlertConfig.per_drive())
     j = s.to_json()
     assert set(j["trend"]) == {"c1", "k1"} and set(j["latest_undetermined"]) == {"c2", "k2"}
     assert "c2" not in j["latest"] and j["latest"]["c1"] == 1500.0

@@ -152,9 +152,16 @@ def test_header_names_with_other_units_are_named_not_converted(tmp_path: Path) -
                                          r"expected m$"):
         read_measurement(_write(tmp_path, "t,x1 [mm]\n0,1\n1,1\n"), Q2)
     # a name that is no column of the model keeps the unknown-column warning
-    other = read_measurement(_write(tmp_path, "t,x1,speed [km/h]\n0,1,2\n1,1,2\n"), Q2)
+    other = read_measurement(_write(tmp_path, "t,x1,rpm [1/min]\n0,1,2\n1,1,2\n"), Q2)
     assert other.warnings == [f"{tmp_path / 'fuzz.csv'}: ignoring column(s) not used by model "
-                              "quarter2: speed [km/h]"]
+                              "quarter2: rpm [1/min]"]
+    # the vehicle's speed is read (in m/s, the fleet's distance), and named in another unit
+    speed = read_measurement(_write(tmp_path, "t,x1,speed [km/h]\n0,1,2\n1,1,2\n"), Q2)
+    assert speed.aux == {} and speed.warnings == [
+        f"{tmp_path / 'fuzz.csv'}: ignoring column 'speed [km/h]': speed in 'km/h', expected m/s "
+        "(SI; convert the column)"]
+    assert read_measurement(_write(tmp_path, "t,x1,speed [m/s]\n0,1,2\n1,1,2\n"),
+                            Q2).aux["speed"].tolist() == [2.0, 2.0]
 
 
 def test_a_semicolon_separated_export_is_named(tmp_path: Path) -> None:
