@@ -1,7 +1,8 @@
 """Finding the drive logs of a fleet: directories (recursive), glob patterns and files.
 
 Every file whose suffix is a format ``suspid identify`` reads (CAN logs ``.log``, ``.asc``,
-``.blf``, ``.trc``, ``.mf4`` and measurement ``.csv``; case-insensitive) is one drive; the
+``.blf``, ``.trc``, ``.mf4``, gzip-compressed ``.asc.gz``, ``.trc.gz``, and measurement ``.csv``;
+case-insensitive) is one drive; the
 vehicle is the name of the folder that holds it (``fleet/VAN-07/2026-11-02.blf`` belongs to
 ``VAN-07``).
 
@@ -21,6 +22,7 @@ from pathlib import Path
 from typing import Callable, Iterable, Iterator
 
 from estimator.fleet.drive import DRIVE_SUFFIXES
+from suspid.can.logs import GZIP_READ
 from suspid.errors import InputError
 
 
@@ -48,7 +50,11 @@ def vehicle_of(path: str | Path) -> str:
 
 
 def _is_drive(p: Path) -> bool:
-    return p.suffix.lower() in DRIVE_SUFFIXES and not p.name.startswith(".")
+    suf = p.suffix.lower()
+    if suf == ".gz":   # a compressed text log python-can reads (F.asc.gz)
+        inner = Path(p.stem).suffix.lower()
+        suf = inner if inner in GZIP_READ else suf
+    return suf in DRIVE_SUFFIXES and not p.name.startswith(".")
 
 
 def _entries(root: Path, descend: Callable[[tuple[str, ...]], bool] = lambda rel: True

@@ -198,7 +198,7 @@ def with_declared_channels(signal_map: SignalMap | None, db: Database,
     Parameters
     ----------
     signal_map : SignalMap or None
-        ``--map``/``--map-file``.
+        ``--map`` or the ``--config`` file's ``[map]``.
     db : cantools Database
     model : SuspensionModel
 

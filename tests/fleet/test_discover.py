@@ -15,17 +15,18 @@ from suspid.errors import InputError
 
 def test_folders_patterns_and_files(tmp_path: Path) -> None:
     for rel in ("A/d1.log", "A/d2.BLF", "A/sub/B2/x.mf4", "B/x.csv", "B/readme.txt",
-                ".hidden/V/z.log", "A/.tmp.log", "C/y.asc", "C/z.trc"):
+                ".hidden/V/z.log", "A/.tmp.log", "C/y.asc", "C/z.trc", "C/w.asc.gz",
+                "C/v.log.gz", "C/u.gz"):
         p = tmp_path / rel
         p.parent.mkdir(parents=True, exist_ok=True)
         p.write_text("x")
     found = find_drives([str(tmp_path)])
     rel = [(str(Path(d.path).relative_to(tmp_path)), d.vehicle) for d in found]
     assert rel == [("A/d1.log", "A"), ("A/d2.BLF", "A"), ("A/sub/B2/x.mf4", "B2"),
-                   ("B/x.csv", "B"), ("C/y.asc", "C"), ("C/z.trc", "C")]
+                   ("B/x.csv", "B"), ("C/w.asc.gz", "C"), ("C/y.asc", "C"), ("C/z.trc", "C")]
     pat = find_drives([str(tmp_path / "*" / "*.log"), str(tmp_path / "C"),
                        str(tmp_path / "A" / "d1.log")])           # overlaps counted once
-    assert [Path(d.path).name for d in pat] == ["d1.log", "y.asc", "z.trc"]
+    assert [Path(d.path).name for d in pat] == ["d1.log", "w.asc.gz", "y.asc", "z.trc"]
     assert vehicle_of("VAN-9/drive.blf") == "VAN-9"
     with pytest.raises(InputError, match="no such file"):
         find_drives([str(tmp_path / "missing")])
