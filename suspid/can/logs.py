@@ -59,6 +59,8 @@ from suspid.can.formats import FORMATS
 from suspid.errors import InputError, UsageError
 
 _CAN_ERR_FLAG = 0x20000000
+#: candump lines handed to python-can's reader at once
+_ODD_BLOCK = 4096
 #: characters of a hex payload
 _HEX_DIGITS = "0123456789abcdefABCDEF"
 _CAN_EFF_FLAG = 0x80000000
@@ -261,41 +263,64 @@ def _line_fault(parts: list[str]) -> str | None:
     return None
 
 
-def _candump_odd(path: Path, numbered: Iterable[tuple[int, str]],
-                 stats: ReadStats) -> Iterator[can.Message]:
+def _canutils(lines: list[str]) -> list[can.Message]:
+    """python-can's :class:`can.CanutilsLogReader` over ``lines`` (one frame each)."""
+    return list(can.CanutilsLogReader(io.StringIO("\n".join(lines))))
+
+
+def _candump_odd(path: Path, numbered: Iterable[tuple[int, int, str]],
+                 stats: ReadStats) -> Iterator[tuple[int, can.Message]]:
     """The candump -L lines the array parser (:func:`_candump_chunk`) leaves: CAN FD
     ``ID##<flags><data>``, remote ``ID#R[len]``, odd spacing, bad lines.
 
-    Each line ``(lineno, text)`` is read by python-can's :class:`can.CanutilsLogReader`;
-    error frames (the error flag in an extended ID) are made as the array parser makes
-    them, the interface name is kept as text. A line that is no frame is counted in
-    ``stats`` as ``path:lineno`` with the reason.
+    ``numbered`` gives ``(tag, lineno, text)``; yields ``(tag, message)`` in line order.
+    The lines are read by python-can's :class:`can.CanutilsLogReader` (a block of lines at
+    once; a block it fails on line by line); error frames (the error flag in an extended
+    ID) are made as the array parser makes them, the interface name is kept as text. A
+    line that is no frame is counted in ``stats`` as ``path:lineno`` with the reason.
     """
     frames = 0
+    block: list[tuple[int, int, list[str], str | None]] = []
+    it = iter(numbered)
     try:
-        for lineno, line in numbered:
-            parts = line.split()
-            if not parts:
-                continue
-            reason = _line_fault(parts)
-            msgs: list[can.Message] = []
-            if reason is None:
-                try:
-                    keep = parts[:3] + [f for f in parts[3:4] if f.lower() in ("r", "t")]
-                    msgs = list(can.CanutilsLogReader(io.StringIO(" ".join(keep))))
-                except (ValueError, IndexError) as exc:
-                    reason = str(exc) or "unparseable line"
-            if reason is not None:
-                stats.bad(f"{path}:{lineno}", reason)
-                continue
-            id_s = parts[2].partition("#")[0]
-            for msg in msgs:
+        while True:
+            block.clear()
+            for tag, lineno, line in it:
+                parts = line.split()
+                if parts:
+                    block.append((tag, lineno, parts[:3] + [f for f in parts[3:4]
+                                                            if f.lower() in ("r", "t")],
+                                  _line_fault(parts)))
+                    if len(block) >= _ODD_BLOCK:
+                        break
+            if not block:
+                return
+            good = [" ".join(p) for _, _, p, why in block if why is None]
+            try:
+                msgs = iter(_canutils(good))
+                failed: dict[int, str] = {}
+            except (ValueError, IndexError):   # the block line by line
+                got: list[can.Message] = []
+                failed = {}
+                for k, (_, _, parts, why) in enumerate(block):
+                    if why is None:
+                        try:
+                            got.extend(_canutils([" ".join(parts)]))
+                        except (ValueError, IndexError) as exc:
+                            failed[k] = str(exc) or "unparseable line"
+                msgs = iter(got)
+            for k, (tag, lineno, parts, why) in enumerate(block):
+                why = why or failed.get(k)
+                if why is not None:
+                    stats.bad(f"{path}:{lineno}", why)
+                    continue
+                msg = next(msgs)
                 frames += 1
+                id_s = parts[2].partition("#")[0]
                 if int(id_s, 16) & _CAN_ERR_FLAG and len(id_s) > 3:
-                    msg = can.Message(timestamp=msg.timestamp, is_error_frame=True,
-                                      channel=parts[1], check=False)
+                    msg = can.Message(timestamp=msg.timestamp, is_error_frame=True, check=False)
                 msg.channel = parts[1]
-                yield msg
+                yield tag, msg
     finally:
         stats.frames += frames
 
@@ -672,24 +697,21 @@ def _candump_chunk(buf: bytes, path: Path, line0: int, stats: ReadStats
         extra_cum = np.cumsum([0] + [c for _, c in extra_at]).tolist()
         line_start = starts.tolist()
         line_end = e.tolist()
-        current = [0]
-
-        def numbered() -> Iterator[tuple[int, str]]:
+        def numbered() -> Iterator[tuple[int, int, str]]:
             for i in slow_lines:
                 lineno = line0 + i + 1
                 if extra_lines:
                     lineno += extra_cum[bisect_left(extra_lines, i)]
                 text = buf[line_start[i]:line_end[i]].decode("ascii", errors="replace")
-                current[0] = i   # the parser yields a line's frames before reading on
                 if "\r" in text:
                     for k, sub in enumerate(text.split("\r")):
-                        yield lineno + k, sub
+                        yield i, lineno + k, sub
                 else:
-                    yield lineno, text
+                    yield i, lineno, text
 
-        for msg in _candump_odd(path, numbered(), stats):
+        for i, msg in _candump_odd(path, numbered(), stats):
             slow_msgs.append(msg)
-            slow_line.append(current[0])
+            slow_line.append(i)
     n_fast = int(np.count_nonzero(fast))
     stats.frames += n_fast
     total_lines = nlines + sum(c for _, c in extra_at)

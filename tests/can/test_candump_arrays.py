@@ -56,8 +56,8 @@ def _line_reader(path: Path, stats: ReadStats) -> list:  # type: ignore[type-arg
     (:func:`suspid.can.logs._candump_odd`), universal newlines as a text file reads them,
     frames counted per channel."""
     with path.open("r", encoding="ascii", errors="replace") as fh:
-        return list(logs._select_messages(path, ".log", logs._candump_odd(
-            path, enumerate(fh, 1), stats), stats, None))
+        odd = logs._candump_odd(path, ((n, n, line) for n, line in enumerate(fh, 1)), stats)
+        return list(logs._select_messages(path, ".log", (m for _, m in odd), stats, None))
 
 
 def _check_log(path: Path, chunk_bytes: int = 1 << 19, slow: "_CountSlowLines | None" = None
