@@ -25,7 +25,7 @@ from __future__ import annotations
 import threading
 from array import array
 from dataclasses import dataclass, field
-from typing import Iterable, Sequence
+from typing import Callable, Iterable, Sequence, cast
 
 import numpy as np
 
@@ -103,7 +103,7 @@ class Source:
     """Ring of rows ``(t, v_0, ..., v_{k-1})`` of one message; created by :meth:`RollingBuffer.source`."""
 
     __slots__ = ("name", "group", "channels", "t", "cols", "w", "n", "cap", "growable",
-                 "overwritten", "_lock", "_views", "_cleared", "_checked", "_drop")
+                 "overwritten", "_lock", "push", "_views", "_cleared", "_checked", "_drop")
 
     def __init__(self, name: str, channels: Sequence[str], capacity: int, growable: bool,
                  lock: threading.Lock, group: str | None = None) -> None:
@@ -128,20 +128,36 @@ class Source:
         self._drop = -1
         self._lock = lock
         self._views: list[np.ndarray] | None = None   # NumPy views of (t, *cols) for push_many
+        self.push = self._compile_push()
 
-    def push(self, t: float, values: Sequence[float]) -> None:
-        """Store one row: time ``t`` (s, data time) and a value per column."""
-        with self._lock:
-            i = self.w
-            if self.n == self.cap:
-                self.overwritten += 1
-            else:
-                self.n += 1
-            self.t[i] = t
-            for col, v in zip(self.cols, values):
-                col[i] = v
-            i += 1
-            self.w = i if i < self.cap else self._at_end()
+    def _compile_push(self) -> Callable[[float, Sequence[float]], None]:
+        """Generate ``push(t, values)`` with the column stores unrolled (no per-row loop).
+
+        Generated (``exec`` of the column count only) because ``push`` runs once per frame
+        decoded one at a time -- the small batches of a live bus polled often -- where the
+        plain loop over the columns made that path ~1.4x slower end to end
+        (``tools/bench_decode_paths.py``, docs/performance.md "One decoder path").
+        """
+        ns: dict[str, object] = {"src": self, "lock": self._lock, "T": self.t}
+        stores = []
+        for k, col in enumerate(self.cols):
+            ns[f"C{k}"] = col
+            stores.append(f"        C{k}[i] = values[{k}]")
+        code = "\n".join([
+            "def push(t, values):",
+            "    with lock:",
+            "        i = src.w",
+            "        if src.n == src.cap:",
+            "            src.overwritten += 1",
+            "        else:",
+            "            src.n += 1",
+            "        T[i] = t",
+            *stores,
+            "        i += 1",
+            "        src.w = i if i < src.cap else src._at_end()",
+        ])
+        exec(code, ns)  # noqa: S102 - generated from the column count only
+        return cast("Callable[[float, Sequence[float]], None]", ns["push"])   # exec'd above
 
     def _at_end(self) -> int:
         """The write index reached the end: grow (growable) or wrap to 0; new write index."""

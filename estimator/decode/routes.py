@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import partial
 from typing import Callable, Sequence, cast
 
 import numpy as np
@@ -78,55 +77,42 @@ class Route:
     pages: PageSplit | None = None  # multiplexed data message: stored page by page
 
 
-def _bit(byte: int, bit: int, data: Payload) -> int:
-    """Bit ``bit`` of byte ``byte`` of a payload (a little-endian one-bit signal)."""
-    return data[byte] >> bit & 1
-
-
-def _first(unpack: Unpack, data: Payload) -> int:
-    """The first raw value ``unpack`` gives of a payload."""
-    return int(unpack(data)[0])
-
-
 def compile_row(msg: Message, maps: Sequence[SignalMapping]) -> Unpack:
     """``row(payload) -> (value per mapping, ...)``: decode, validity bit, scale and offset.
 
     The values come from one :class:`MessageCodec` decode (a ``struct`` unpack for our DBC);
     a ``<Signal>Valid`` bit, when the DBC has one, turns the value into NaN when 0.
+    Generated code (``exec`` of the DBC layout and the map's numbers only): it runs once per
+    frame decoded one at a time (a live bus's small batches), where a plain loop over the
+    mappings made that path ~1.4x slower end to end, together with a plain
+    :meth:`~estimator.decode.buffer.Source.push` (``tools/bench_decode_paths.py``,
+    docs/performance.md "One decoder path").
     """
     names = list(dict.fromkeys(m.signal for m in maps))
-    dec = cast(Unpack, MessageCodec(msg, names).decode)
-    # per mapping: (index of its signal's value, scale, offset, validity bit or None)
-    terms: list[tuple[int, float, float, Callable[[Payload], int] | None]] = []
-    for m in maps:
-        offset = 0.0 if m.remove_mean else float(m.offset)
+    codec = MessageCodec(msg, names)
+    ns: dict[str, object] = {"_dec": codec.decode, "nan": math.nan}
+    terms = []
+    for j, m in enumerate(maps):
+        term = f"v[{names.index(m.signal)}]"
+        if m.scale != 1.0:
+            term = f"{term} * {float(m.scale)!r}"
+        if not m.remove_mean and float(m.offset) != 0.0:
+            term = f"{term} + {float(m.offset)!r}"
         vname = f"{m.signal}Valid"
-        valid: Callable[[Payload], int] | None = None
         if any(x.name == vname for x in msg.signals):
             spec = signal_spec(msg, vname)
             if spec.length == 1 and not spec.big_endian:
-                valid = partial(_bit, spec.start >> 3, spec.start & 7)
+                cond = f"data[{spec.start >> 3}] >> {spec.start & 7} & 1"
             else:
-                valid = partial(_first, cast(Unpack, MessageCodec(msg, [vname]).unpack_raw))
-        terms.append((names.index(m.signal), float(m.scale), offset, valid))
-    nan = math.nan
-
-    def row(data: Payload) -> tuple:
-        v = dec(data)
-        out = []
-        for k, scale, offset, valid in terms:
-            if valid is not None and not valid(data):
-                out.append(nan)
-                continue
-            x = v[k]
-            if scale != 1.0:   # as written in the map: no arithmetic on a plain value
-                x = x * scale
-            if offset != 0.0:
-                x = x + offset
-            out.append(x)
-        return tuple(out)
-
-    return row
+                ns[f"_vd{j}"] = MessageCodec(msg, [vname]).unpack_raw
+                cond = f"_vd{j}(data)[0]"
+            term = f"({term} if {cond} else nan)"
+        terms.append(term)
+    code = ("def _row(data, _dec=_dec, nan=nan):\n"
+            "    v = _dec(data)\n"
+            f"    return ({', '.join(terms)},)\n")
+    exec(code, ns)  # noqa: S102 - generated from the DBC layout and numeric map entries
+    return cast(Unpack, ns["_row"])   # defined by the exec above
 
 
 def compile_sync(codec: MessageCodec) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None:
