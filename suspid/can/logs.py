@@ -327,9 +327,13 @@ def _candump_odd(path: Path, numbered: Iterable[tuple[int, int, str]],
 
 def _read_candump(path: Path, stats: ReadStats) -> Iterator[can.Message]:
     """candump -L lines as :class:`can.Message`: the array reader's frames
-    (:func:`read_candump_arrays`), each with its interface as ``channel``."""
-    for fa, codes, names in _candump_labelled(path, stats):
-        yield from fa.messages(names, codes)
+    (:func:`read_candump_arrays`), each with its interface as ``channel``.
+
+    Read 64 KiB at a time (~1,500 frames): a stream of messages keeps the parse's
+    temporaries (~7x the chunk) small whatever the log's length.
+    """
+    for fa, codes, names in _candump_labelled(path, stats, 1 << 16):
+        yield from fa.iter_messages(names, codes)
 
 
 # ---- frames as arrays ----------------------------------------------------------------------
@@ -393,6 +397,9 @@ class FrameArrays:
         long_data: dict[int, bytes] = {}
         if n and flat.size == 8 * n and bool((lens == 8).all()):
             data = flat.reshape(n, 8)
+        elif n and int(lens.max()) <= 8:   # short payloads padded to 8 bytes in one join
+            data = np.frombuffer(b"".join([p if len(p) == 8 else bytes(p).ljust(8, b"\0")
+                                           for p in payloads]), dtype=np.uint8).reshape(n, 8)
         else:
             data = np.zeros((n, 8), dtype=np.uint8)
             if n:
@@ -423,9 +430,14 @@ class FrameArrays:
 
     def messages(self, channels: Sequence[str] | None = None,
                  codes: np.ndarray | None = None) -> list[can.Message]:
-        """The frames as python-can messages: what the decoder reads of a frame (time, ID,
-        payload; error and remote frames as error frames, payloads over 8 bytes as CAN FD),
-        with ``channels[codes[i]]`` as frame ``i``'s channel when given."""
+        """The frames as python-can messages (see :meth:`iter_messages`)."""
+        return list(self.iter_messages(channels, codes))
+
+    def iter_messages(self, channels: Sequence[str] | None = None,
+                      codes: np.ndarray | None = None) -> Iterator[can.Message]:
+        """The frames as python-can messages, one at a time: what the decoder reads of a
+        frame (time, ID, payload; error and remote frames as error frames, payloads over 8
+        bytes as CAN FD), with ``channels[codes[i]]`` as frame ``i``'s channel when given."""
         ts = self.timestamp.tolist()
         ids = self.arbitration_id.tolist()
         ext = self.is_extended.tolist()
@@ -436,14 +448,12 @@ class FrameArrays:
             [channels[c] for c in np.broadcast_to(codes, (len(ts),)).tolist()]
         long_data = self.long_data
         Message = can.Message
-        out = []
         for i in range(len(ts)):
             got = long_data.get(i) if long_data else None
             data = bytearray(raw[8 * i:8 * i + min(lens[i], 8)] if got is None else got)
-            out.append(Message(timestamp=ts[i], arbitration_id=ids[i], is_extended_id=ext[i],
-                               is_error_frame=ft[i], data=data, channel=chan[i],
-                               is_fd=lens[i] > 8, check=False))
-        return out
+            yield Message(timestamp=ts[i], arbitration_id=ids[i], is_extended_id=ext[i],
+                          is_error_frame=ft[i], data=data, channel=chan[i],
+                          is_fd=lens[i] > 8, check=False)
 
 
 #: hex digit value per byte, 255 = not a hex digit
