@@ -13,7 +13,7 @@ disturbed one):
                           on the same frames with epoch times (t0 = 1631416514 s, as real
                           candump logs have: 16-digit timestamps), and on lines the
                           column parser does not take (two blanks after the time: all of
-                          them through the message parser, merged back in file order)
+                          them through python-can's CanutilsLogReader, merged back in file order)
 * ``load_log_as_measurement``  log -> uniform-grid measurement (feed_log + alignment), on
                           the epoch-time log and on the real candump-drive log (82,558
                           frames, ../shared/realdata; skipped when absent)

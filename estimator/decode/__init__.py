@@ -4,13 +4,13 @@ Parts, by file
 --------------
 ``listener.py`` :class:`~estimator.decode.listener.DecodeListener`
     the python-can Listener (a ``can.Notifier`` drives it, or a log replay): queues frames
-    and hands them to the engine in batches; the results.
+    and hands them to the engine in batches (arrays); the results.
 ``engine.py`` :class:`~estimator.decode.engine.DecodeEngine`
-    frames (one message, or arrays of many) -> validated, decoded samples in the buffer;
-    a frame-by-frame path and an identical batch path.
-``rules/`` (``e2e.py``, ``counters.py``, ``timebase.py``)
+    batches of frames as arrays -> validated, decoded samples in the buffer; the one
+    entry (``process``) for a log and a live bus.
+``rules/`` (``e2e.py``, ``counters.py``, ``timebase.py``, ``arrival.py``, ``arrival_live.py``)
     the checks: E2E CRC and alive counter, counter continuity and lost frames, which clock
-    gives data time; scalar and array forms side by side.
+    gives data time, sample slots from arrival times.
 ``routes.py``
     per CAN ID of the DBC: kind, length, E2E check, decoders, buffer ring.
 ``vector.py``

@@ -131,7 +131,13 @@ class Source:
         self.push = self._compile_push()
 
     def _compile_push(self) -> Callable[[float, Sequence[float]], None]:
-        """Generate ``push(t, values)`` with the column stores unrolled (no per-row loop)."""
+        """Generate ``push(t, values)`` with the column stores unrolled (no per-row loop).
+
+        Generated (``exec`` of the column count only) because ``push`` runs once per frame
+        decoded one at a time -- the small batches of a live bus polled often -- where the
+        plain loop over the columns made that path ~1.4x slower end to end
+        (``tools/bench_decode_paths.py``, docs/performance.md "One decoder path").
+        """
         ns: dict[str, object] = {"src": self, "lock": self._lock, "T": self.t}
         stores = []
         for k, col in enumerate(self.cols):

@@ -1,5 +1,9 @@
-"""The decoder's engine: frames (one python-can message, or arrays of many) -> validated,
-decoded samples in the :class:`~estimator.decode.buffer.RollingBuffer`.
+"""The decoder's engine: batches of frames (:class:`~suspid.can.logs.FrameArrays`) ->
+validated, decoded samples in the :class:`~estimator.decode.buffer.RollingBuffer`.
+
+One entry, :meth:`DecodeEngine.process`, for every input: a log replay hands it chunks of
+the log, a live bus (:class:`~estimator.decode.listener.DecodeListener`) the frames queued
+since the last batch.
 
 Every frame goes through, in order (the first failing check names the rejection reason):
 frame type; time order (:class:`~estimator.decode.rules.timebase.TimeOrder`); a CAN ID of
@@ -12,23 +16,19 @@ engine's state. In tick mode the counter rules see data times: a data frame's ti
 counter, SN_Sync's own Tick, and for E2E SN_Status and SUSPID_Alert frames the last SN_Sync's
 tick (:mod:`~estimator.decode.rules.timebase`).
 
-Two paths, one result:
-
-* :meth:`DecodeEngine.message` / :meth:`DecodeEngine.validate`: one frame at a time (the
-  reference);
-* :meth:`DecodeEngine.process`: a batch of frames in :class:`~suspid.can.logs.FrameArrays`.
-  The stateless checks (frame type, ID, DLC, E2E CRC) run over all frames at once; the
-  time check splits the batch into segments of frames in time order; per message the
-  frames whose counter advances by one with a steady interval need only the period
-  recurrence (:func:`~estimator.decode.rules.counters.steady_frames`,
-  :func:`~estimator.decode.rules.counters.period_after`); the signals of the accepted
-  frames are decoded column-wise (:mod:`estimator.decode.vector`) and stored with
-  :meth:`~estimator.decode.buffer.Source.push_many`. Whatever a batch holds that the array
-  code does not cover -- a timestamp going back, NaN or inf, a counter that does not
-  advance by exactly one, a silence, a CAN FD payload, a message without an array decoder
-  -- goes through the frame-by-frame rules from that frame on, and the batch resumes after
-  it. Counters, buffer contents (bit for bit) and every piece of state are identical to
-  the frame-by-frame path (``tests/can/test_batch_equivalence.py``).
+How a batch is processed: the stateless checks (frame type, ID, DLC, E2E CRC) run over all
+frames at once; the time check splits the batch into segments of frames in time order; per
+message the frames whose counter advances by one with a steady interval need only the
+period recurrence (:func:`~estimator.decode.rules.counters.steady_frames`,
+:func:`~estimator.decode.rules.counters.period_after`); the signals of the accepted frames
+are decoded column-wise (:mod:`estimator.decode.vector`) and stored with
+:meth:`~estimator.decode.buffer.Source.push_many`. Whatever a batch holds that the array
+code does not cover -- a timestamp going back, NaN or inf, a counter that does not advance
+by exactly one, a silence, a CAN FD payload, a message without an array decoder, a batch
+smaller than ``min_batch`` -- has the rules applied to it frame by frame
+(:meth:`DecodeEngine.validate`), and the batch resumes after it. The results do not depend
+on how the frames are cut into batches (``tests/can/test_batch_equivalence.py`` compares
+batches of one frame with large ones: counters, buffer contents bit for bit, state).
 
 The engine holds no lock and no queue: :class:`~estimator.decode.listener.DecodeListener`
 serialises the calls.
@@ -39,7 +39,6 @@ import math
 from bisect import bisect_left
 from typing import Any
 
-import can
 import numpy as np
 from cantools.database.can import Database
 
@@ -135,18 +134,13 @@ class DecodeEngine:
         self._by_key = routes.by_key
         self._known = routes.known
 
-    # ---- one frame ------------------------------------------------------------------------
-    def message(self, msg: can.Message) -> None:
-        """Validate one python-can message."""
-        self.frames += 1
-        if msg.is_error_frame or msg.is_remote_frame:
-            self._rejected["frame_type"] += 1
-            return
-        self.validate(msg.timestamp, msg.arbitration_id | EXT if msg.is_extended_id
-                      else msg.arbitration_id, msg.data)
-
+    # ---- one frame (inside a batch) ------------------------------------------------------
     def validate(self, ts: float, key: int, data: Payload) -> None:
-        """Every check after the frame type, decode and store (one frame; the reference)."""
+        """Every check after the frame type, decode and store one frame of a batch.
+
+        :meth:`process` sends here what its array code does not cover (a time anomaly, a
+        CAN FD payload, a run shorter than ``min_run``, a batch smaller than ``min_batch``).
+        """
         rejected = self._rejected
         order = self.order
         if not order.last <= ts < _INF:  # one chained compare: backwards, NaN or inf
@@ -259,7 +253,7 @@ class DecodeEngine:
         if n <= 0:
             return
         if n < self.min_batch:
-            self.scalar_rows(fa, lo, hi)
+            self._small(fa, lo, hi)
             return
         self.frames += n
         ft = fa.frame_type[lo:hi]
@@ -336,12 +330,13 @@ class DecodeEngine:
                     self.validate(float(ts[k]), _row_key(fa, i), fa.payload(i))
                 pos = end
 
-    def scalar_rows(self, fa: FrameArrays, lo: int, hi: int) -> None:
-        """Frames ``lo:hi`` of ``fa`` one by one through the frame-by-frame path (counted,
-        frame type checked, then :meth:`validate`), the fields read as lists first.
+    def _small(self, fa: FrameArrays, lo: int, hi: int) -> None:
+        """A batch smaller than ``min_batch``: frames ``lo:hi`` of ``fa`` counted, frame type
+        checked, then :meth:`validate` each, the fields read as lists first.
 
-        The small batches a window driver feeds between two checks go this way; the
-        per-frame reads of NumPy scalars (~1 µs a frame) become list and bytes indexing.
+        A live bus polled often hands over such batches; below ``min_batch`` the array
+        code's fixed cost (~100 NumPy calls) exceeds the rules applied frame by frame, and
+        reading the fields as lists avoids a NumPy scalar read (~1 µs) per field.
         """
         ts = fa.timestamp[lo:hi].tolist()
         ids = fa.arbitration_id[lo:hi].tolist()

@@ -59,16 +59,18 @@ This module is the python-can side only: :class:`DecodeListener` queues the mess
 batches to :class:`~estimator.decode.engine.DecodeEngine`, which validates, decodes and
 stores them (the rules it applies are the modules of :mod:`estimator.decode.rules`: E2E,
 counters, time base). A log replay (:func:`~estimator.decode.replay.feed_log`) hands the
-engine arrays through :meth:`DecodeListener.feed_arrays`; a live bus and a log share the
-engine and its rules.
+engine arrays through :meth:`DecodeListener.feed_arrays`; the queued live frames become
+the same arrays (:meth:`~suspid.can.logs.FrameArrays.from_messages`) and take the same
+entry, :meth:`~estimator.decode.engine.DecodeEngine.process`: a live bus and a log share
+one decode path.
 
 ``on_message_received`` only queues the message (a few hundred ns); the queue is processed
 when ``batch_size`` frames are waiting, when a ``SUSPID_Alert`` frame arrives (with
 ``on_alert``, so it is called at once), and before anything reads the listener's results
 -- ``counts``, ``frame_stats()``, ``aligned()``, ``buffer``, ``node_status``, ``alerts``,
 ``period``... -- so a reader always sees every frame received so far and callers need not
-know about the queue (:meth:`DecodeListener.flush` does it explicitly). ``batch_size=0``
-validates every frame on arrival, one by one (the reference path; same results,
+know about the queue (:meth:`DecodeListener.flush` does it explicitly). ``batch_size=1``
+processes every frame on arrival as a batch of one (same results whatever the batch size,
 property-tested in ``tests/can/test_batch_equivalence.py``).
 """
 from __future__ import annotations
@@ -118,6 +120,28 @@ def _key_of(msg: can.Message) -> int | None:
     return msg.arbitration_id | EXT if msg.is_extended_id else msg.arbitration_id
 
 
+def _as_arrays(msgs: list[can.Message], counts: FrameCounts) -> FrameArrays:
+    """The queued messages as one batch of :class:`~suspid.can.logs.FrameArrays`.
+
+    A message whose fields python-can does not check (a bus or a caller may set
+    ``timestamp=None`` or a payload that is not bytes-like) cannot be converted: it is
+    counted as ``malformed`` and left out of the batch.
+    """
+    try:
+        return FrameArrays.from_messages(msgs)
+    except (TypeError, ValueError, OverflowError):
+        pass
+    good = []
+    for m in msgs:
+        try:
+            FrameArrays.from_messages([m])
+        except (TypeError, ValueError, OverflowError):
+            counts.rejected["malformed"] += 1
+            continue
+        good.append(m)
+    return FrameArrays.from_messages(good)
+
+
 def _time_of(msg: can.Message) -> float:
     """Arrival time (s) of a frame (NaN when it has none the rule can use)."""
     try:
@@ -151,8 +175,8 @@ class DecodeListener(can.Listener):
         Counter steps back still read as an old (late or duplicate) frame rather than a jump.
     batch_size : int
         Frames queued by :meth:`on_message_received` before they are processed as one
-        batch (any read of the results processes the queue first). ``0`` validates and
-        decodes every frame on arrival, one by one (the reference path; same results).
+        batch (any read of the results processes the queue first). ``1`` processes every
+        frame on arrival (same results).
     on_alert : callable, optional
         Called with each accepted ``SUSPID_Alert`` (the dict appended to ``alerts``), in
         order, as soon as the frame is received (an alert frame flushes the queue).
@@ -218,8 +242,8 @@ class DecodeListener(can.Listener):
         self.time_source = "timestamp" if self._auto else time_source
         if not 1 <= max_counter_delta <= COUNTER_MODULUS - 2:
             raise UsageError(f"max_counter_delta must be 1..13, got {max_counter_delta}")
-        if batch_size < 0:
-            raise UsageError(f"batch_size must be >= 0, got {batch_size}")
+        if batch_size < 1:
+            raise UsageError(f"batch_size must be >= 1, got {batch_size}")
         self.max_counter_delta = max_counter_delta
         self.stale_window = max(0, min(stale_window, COUNTER_MODULUS - 1 - max_counter_delta))
         self._buffer = RollingBuffer(capacity, growable)
@@ -276,7 +300,7 @@ class DecodeListener(can.Listener):
 
         The frame's fields are read when the batch is processed (at the latest when anything
         reads the results), as python-can's ``BufferedReader`` keeps messages: do not modify
-        a message after handing it over. With ``batch_size=0`` the frame is validated now.
+        a message after handing it over. With ``batch_size=1`` the frame is processed now.
         With ``arrival_slots`` and the timestamp time base the frame goes through the live
         slot rule first (:mod:`estimator.decode.rules.arrival_live`), which holds the last
         few frames of each data message (its look-ahead) and passes frames on in time order
@@ -306,24 +330,12 @@ class DecodeListener(can.Listener):
         return LivePlacer(names, _key_of, _time_of, retimed)
 
     def _receive(self, msg: can.Message) -> None:
-        """Queue (or, ``batch_size=0``, validate) one frame."""
-        if self.batch_size:
-            pend = self._pending
-            pend.append(msg)
-            if len(pend) >= self.batch_size or msg.arbitration_id in self._prompt:
-                self.flush()
-        elif self._auto:     # frames wait for the time base (the first SN_Sync)
-            self._pending.append(msg)
+        """Queue one frame; process the queue once it holds ``batch_size`` frames (or the
+        frame is an alert someone waits for)."""
+        pend = self._pending
+        pend.append(msg)
+        if len(pend) >= self.batch_size or msg.arbitration_id in self._prompt:
             self.flush()
-        else:
-            self._one(msg)
-
-    def _one(self, msg: can.Message) -> None:
-        """``batch_size=0``: validate one frame on arrival (the frame-by-frame path)."""
-        with self._lock:
-            self.engine.message(msg)
-        if self.engine.outbox:
-            self._deliver()
 
     def choose_time_base(self, ids: Any, final: bool = False) -> bool:
         """``time_source="auto"``: take the tick if ``ids`` hold an SN_Sync frame, the
@@ -401,19 +413,8 @@ class DecodeListener(can.Listener):
                     pend.appendleft(first)
             n = len(pend)
             if n:
-                eng = self.engine
                 msgs = [pend.popleft() for _ in range(n)]
-                fa = None
-                if n >= eng.min_batch:
-                    try:
-                        fa = FrameArrays.from_messages(msgs)
-                    except (TypeError, ValueError, OverflowError):
-                        fa = None   # odd field types: the frame-by-frame path handles them
-                if fa is None:
-                    for msg in msgs:
-                        eng.message(msg)
-                else:
-                    eng.process(fa, 0, n)
+                self.engine.process(_as_arrays(msgs, self.engine.counts), 0, n)
         if self.engine.outbox:
             self._deliver()
 

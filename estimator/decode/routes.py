@@ -82,6 +82,11 @@ def compile_row(msg: Message, maps: Sequence[SignalMapping]) -> Unpack:
 
     The values come from one :class:`MessageCodec` decode (a ``struct`` unpack for our DBC);
     a ``<Signal>Valid`` bit, when the DBC has one, turns the value into NaN when 0.
+    Generated code (``exec`` of the DBC layout and the map's numbers only): it runs once per
+    frame decoded one at a time (a live bus's small batches), where a plain loop over the
+    mappings made that path ~1.4x slower end to end, together with a plain
+    :meth:`~estimator.decode.buffer.Source.push` (``tools/bench_decode_paths.py``,
+    docs/performance.md "One decoder path").
     """
     names = list(dict.fromkeys(m.signal for m in maps))
     codec = MessageCodec(msg, names)

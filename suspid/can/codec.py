@@ -138,6 +138,14 @@ class MessageCodec:
 
     # ---- decoding --------------------------------------------------------------------
     def _compile_unpack(self, scaled: bool) -> Callable[[bytes], tuple]:
+        """Generate the decoder of the selected signals (``scaled``: physical values).
+
+        Generated code (``exec`` of the DBC layout's numbers only) rather than a loop over
+        the signals: the decode runs once per frame wherever frames are decoded one at a
+        time (a batch's odd frames, small live batches, SN_Sync/SN_Status), and the
+        equivalent loop is measured markedly slower per frame (``tools/bench_codec.py``,
+        see docs/performance.md "One decoder path").
+        """
         specs = self.specs
         aligned = all(not s.big_endian and s.start % 8 == 0 and s.length in (8, 16, 32, 64)
                       and (not s.is_float or s.length in (32, 64)) for s in specs)
@@ -214,22 +222,20 @@ class MessageCodec:
         return f"{term} * {_float_code(s.scale)} + {_float_code(s.offset)}"
 
     # ---- encoding --------------------------------------------------------------------
-    def _compile_pack(self) -> Callable[..., bytearray] | None:
+    def _compile_pack(self) -> list[tuple[int, int]] | None:
+        """``(mask, start bit)`` per signal of an all-Intel integer layout (``None``: any
+        other layout, encoded by cantools)."""
         if any(s.big_endian or s.is_float for s in self.specs):
             return None
-        args = ", ".join(f"r{i}" for i in range(len(self.specs)))
-        terms = " | ".join(f"((r{i} & {(1 << s.length) - 1}) << {s.start})"
-                           for i, s in enumerate(self.specs)) or "0"
-        code = (f"def _pack({args}):\n"
-                f"    return bytearray(({terms}).to_bytes({self.length}, 'little'))\n")
-        ns: dict[str, object] = {}
-        exec(code, ns)  # noqa: S102
-        return cast("Callable[..., bytearray]", ns["_pack"])
+        return [((1 << s.length) - 1, s.start) for s in self.specs]
 
     def pack_raw(self, raw: Sequence[int]) -> bytearray:
         """Payload with the raw values ``raw`` (in :attr:`names` order); other bits zero."""
         if self._pack is not None:
-            return self._pack(*raw)
+            v = 0
+            for r, (mask, start) in zip(raw, self._pack):
+                v |= (r & mask) << start
+            return bytearray(v.to_bytes(self.length, "little"))
         data = {s.name: r for s, r in zip(self.specs, raw)}
         for sig in self.message.signals:
             data.setdefault(sig.name, 0)

@@ -60,6 +60,10 @@ from suspid.can.formats import FORMATS
 from suspid.errors import InputError, UsageError
 
 _CAN_ERR_FLAG = 0x20000000
+#: candump lines handed to python-can's reader at once
+_ODD_BLOCK = 4096
+#: characters of a hex payload
+_HEX_DIGITS = "0123456789abcdefABCDEF"
 _CAN_EFF_FLAG = 0x80000000
 
 
@@ -251,124 +255,101 @@ class ReadStats:
             self.examples.append(f"{where}: {' '.join(reason.split())[:120]}")
 
 
-#: ``(timestamp, arbitration_id, is_extended_id, data, channel, is_rx) -> can.Message``
-FastMessage = Callable[[float, int, bool, bytearray, str, bool], can.Message]
+def _line_fault(parts: list[str]) -> str | None:
+    """Why the fields of a candump -L line are no frame (``None``: they may be one).
 
-
-def _compile_fast_message() -> FastMessage:
-    """A constructor of classic data frames that skips ``can.Message.__init__``'s checks.
-
-    ``Message.__init__`` validates and converts every argument (~1.2 µs); a log parser
-    that already has a well-formed ``bytearray`` only needs the slots filled (~0.4 µs).
-    The slot list comes from the installed python-can, every other slot gets the value
-    of a default-constructed message, so the objects are indistinguishable.
+    The checks python-can's reader does not make, or makes with an unhelpful error: the
+    ``(seconds)`` first, ``ID#DATA`` third, at most 8 bytes in a classic frame.
     """
-    template = can.Message()
-    given = {"timestamp", "arbitration_id", "is_extended_id", "data", "dlc", "channel", "is_rx"}
-    ns: dict[str, object] = {"_new": can.Message.__new__, "_M": can.Message}
-    lines = ["def _fast_message(timestamp, arbitration_id, is_extended_id, data, channel, is_rx):",
-             "    m = _new(_M)",
-             "    m.timestamp = timestamp",
-             "    m.arbitration_id = arbitration_id",
-             "    m.is_extended_id = is_extended_id",
-             "    m.data = data",
-             "    m.dlc = len(data)",
-             "    m.channel = channel",
-             "    m.is_rx = is_rx"]
-    for slot in can.Message.__slots__:
-        if slot in given or slot.startswith("__"):
-            continue
-        ns[f"_d_{slot}"] = getattr(template, slot)
-        lines.append(f"    m.{slot} = _d_{slot}")
-    lines.append("    return m")
-    exec("\n".join(lines), ns)  # noqa: S102 - generated from python-can's slot names
-    return cast(FastMessage, ns["_fast_message"])   # exec'd above
-
-
-_fast_message = _compile_fast_message()
-
-
-def _candump_special(ts: float, can_id: int, ext: bool, data_s: str, channel: str,
-                     is_rx: bool) -> can.Message:
-    """The rare candump frame kinds: CAN FD ``ID##<flags><data>`` and remote ``ID#R[len]``."""
-    if data_s[:1] == "#":
-        flags = int(data_s[1], 16)
-        return can.Message(timestamp=ts, arbitration_id=can_id & 0x1FFFFFFF, is_extended_id=ext,
-                           is_fd=True, bitrate_switch=bool(flags & 1),
-                           error_state_indicator=bool(flags & 2),
-                           data=bytearray.fromhex(data_s[2:]), channel=channel, is_rx=is_rx,
-                           check=False)
+    ts_s = parts[0]
+    if ts_s[0] != "(" or ts_s[-1] != ")":
+        return f"expected '(seconds)' first, got {ts_s[:24]!r}"
+    if len(parts) < 3:
+        return "expected '(seconds) interface ID#DATA'"
+    id_s, sep, data_s = parts[2].partition("#")
+    if not sep:
+        return f"expected ID#DATA, got {parts[2][:24]!r}"
     if data_s[:1] in ("R", "r"):
-        dlc = int(data_s[1:]) if len(data_s) > 1 else 0
-        return can.Message(timestamp=ts, arbitration_id=can_id & 0x1FFFFFFF, is_extended_id=ext,
-                           is_remote_frame=True, dlc=dlc, channel=channel, is_rx=is_rx,
-                           check=False)
-    raise ValueError(f"payload {data_s[:24]!r} is not hex")
+        return None
+    payload = data_s[2:] if data_s[:1] == "#" else data_s
+    if len(payload) % 2 or payload.strip(_HEX_DIGITS):
+        return f"payload {data_s[:24]!r} is not hex"
+    if data_s[:1] != "#" and len(payload) > 16:
+        return f"{len(payload) // 2} data bytes in a classic CAN frame"
+    return None
 
 
-def _candump_messages(path: Path, numbered: Iterable[tuple[int, str]],
-                      stats: ReadStats) -> Iterator[can.Message]:
-    """Parse numbered candump -L lines ``(ts) iface ID#DATA`` (also FD ``ID##F DATA``, remote
-    ``ID#R``) into messages; bad lines are counted in ``stats`` as ``path:lineno``.
+def _canutils(lines: list[str]) -> list[can.Message]:
+    """python-can's :class:`can.CanutilsLogReader` over ``lines`` (one frame each)."""
+    return list(can.CanutilsLogReader(io.StringIO("\n".join(lines))))
 
-    The common line takes one ``split``, one ``partition`` and three conversions; the
-    rare kinds (FD, remote, error frames) and bad lines leave the fast path through the
-    exception of ``bytearray.fromhex``.
+
+def _candump_odd(path: Path, numbered: Iterable[tuple[int, int, str]],
+                 stats: ReadStats) -> Iterator[tuple[int, can.Message]]:
+    """The candump -L lines the array parser (:func:`_candump_chunk`) leaves: CAN FD
+    ``ID##<flags><data>``, remote ``ID#R[len]``, odd spacing, bad lines.
+
+    ``numbered`` gives ``(tag, lineno, text)``; yields ``(tag, message)`` in line order.
+    The lines are read by python-can's :class:`can.CanutilsLogReader` (a block of lines at
+    once; a block it fails on line by line); error frames (the error flag in an extended
+    ID) are made as the array parser makes them, the interface name is kept as text. A
+    line that is no frame is counted in ``stats`` as ``path:lineno`` with the reason.
     """
-    fromhex = bytearray.fromhex
-    fast = _fast_message
-    err_flag = _CAN_ERR_FLAG
     frames = 0
+    block: list[tuple[int, int, list[str], str | None]] = []
+    it = iter(numbered)
     try:
-        for lineno, line in numbered:
-            parts = line.split()
-            try:
-                ts_s = parts[0]
-                if ts_s[0] != "(" or ts_s[-1] != ")":
-                    if not parts:
-                        continue
-                    raise ValueError(f"expected '(seconds)' first, got {ts_s[:24]!r}")
-                ts = float(ts_s[1:-1])
-                id_s, sep, data_s = parts[2].partition("#")
-                if not sep:
-                    raise ValueError(f"expected ID#DATA, got {parts[2][:24]!r}")
-                can_id = int(id_s, 16)
-                ext = len(id_s) > 3
-                is_rx = len(parts) < 4 or parts[3] != "T"
-                try:
-                    payload = fromhex(data_s)
-                except ValueError:
-                    msg = _candump_special(ts, can_id, ext, data_s, parts[1], is_rx)
-                    frames += 1
-                    yield msg
-                    continue
-                if len(payload) > 8:
-                    raise ValueError(f"{len(payload)} data bytes in a classic CAN frame")
-            except IndexError:
+        while True:
+            block.clear()
+            for tag, lineno, line in it:
+                parts = line.split()
                 if parts:
-                    stats.bad(f"{path}:{lineno}", "expected '(seconds) interface ID#DATA'")
-                continue
-            except ValueError as exc:
-                stats.bad(f"{path}:{lineno}", str(exc) or "unparseable line")
-                continue
-            frames += 1
-            if can_id & err_flag and ext:
-                yield can.Message(timestamp=ts, is_error_frame=True, channel=parts[1],
-                                  check=False)
-                continue
-            yield fast(ts, can_id, ext, payload, parts[1], is_rx)
+                    block.append((tag, lineno, parts[:3] + [f for f in parts[3:4]
+                                                            if f.lower() in ("r", "t")],
+                                  _line_fault(parts)))
+                    if len(block) >= _ODD_BLOCK:
+                        break
+            if not block:
+                return
+            good = [" ".join(p) for _, _, p, why in block if why is None]
+            try:
+                msgs = iter(_canutils(good))
+                failed: dict[int, str] = {}
+            except (ValueError, IndexError):   # the block line by line
+                got: list[can.Message] = []
+                failed = {}
+                for k, (_, _, parts, why) in enumerate(block):
+                    if why is None:
+                        try:
+                            got.extend(_canutils([" ".join(parts)]))
+                        except (ValueError, IndexError) as exc:
+                            failed[k] = str(exc) or "unparseable line"
+                msgs = iter(got)
+            for k, (tag, lineno, parts, why) in enumerate(block):
+                why = why or failed.get(k)
+                if why is not None:
+                    stats.bad(f"{path}:{lineno}", why)
+                    continue
+                msg = next(msgs)
+                frames += 1
+                id_s = parts[2].partition("#")[0]
+                if int(id_s, 16) & _CAN_ERR_FLAG and len(id_s) > 3:
+                    msg = can.Message(timestamp=msg.timestamp, is_error_frame=True, check=False)
+                msg.channel = parts[1]
+                yield tag, msg
     finally:
         stats.frames += frames
 
 
 def _read_candump(path: Path, stats: ReadStats) -> Iterator[can.Message]:
-    """candump -L lines as :class:`can.Message` (see :func:`_candump_messages`)."""
-    try:
-        fh = path.open("r", encoding="ascii", errors="replace")
-    except OSError as exc:
-        raise InputError(f"{path}: cannot open CAN log: {exc.strerror}") from None
-    with fh:
-        yield from _candump_messages(path, enumerate(fh, 1), stats)
+    """candump -L lines as :class:`can.Message`: the array reader's frames
+    (:func:`read_candump_arrays`), each with its interface as ``channel``.
+
+    Read 64 KiB at a time (~1,500 frames): a stream of messages keeps the parse's
+    temporaries (~7x the chunk) small whatever the log's length.
+    """
+    for fa, codes, names in _candump_labelled(path, stats, 1 << 16):
+        yield from fa.iter_messages(names, codes)
 
 
 # ---- frames as arrays ----------------------------------------------------------------------
@@ -432,6 +413,9 @@ class FrameArrays:
         long_data: dict[int, bytes] = {}
         if n and flat.size == 8 * n and bool((lens == 8).all()):
             data = flat.reshape(n, 8)
+        elif n and int(lens.max()) <= 8:   # short payloads padded to 8 bytes in one join
+            data = np.frombuffer(b"".join([p if len(p) == 8 else bytes(p).ljust(8, b"\0")
+                                           for p in payloads]), dtype=np.uint8).reshape(n, 8)
         else:
             data = np.zeros((n, 8), dtype=np.uint8)
             if n:
@@ -460,16 +444,32 @@ class FrameArrays:
             return got
         return self.data[i, :int(self.length[i])].tobytes()
 
-    def messages(self) -> list[can.Message]:
-        """The frames as python-can messages (data frames, or an error/remote flag)."""
-        out = []
-        for i in range(len(self)):
-            ft = bool(self.frame_type[i])
-            out.append(can.Message(timestamp=float(self.timestamp[i]),
-                                   arbitration_id=int(self.arbitration_id[i]),
-                                   is_extended_id=bool(self.is_extended[i]),
-                                   is_error_frame=ft, data=self.payload(i), check=False))
-        return out
+    def messages(self, channels: Sequence[str] | None = None,
+                 codes: np.ndarray | None = None) -> list[can.Message]:
+        """The frames as python-can messages (see :meth:`iter_messages`)."""
+        return list(self.iter_messages(channels, codes))
+
+    def iter_messages(self, channels: Sequence[str] | None = None,
+                      codes: np.ndarray | None = None) -> Iterator[can.Message]:
+        """The frames as python-can messages, one at a time: what the decoder reads of a
+        frame (time, ID, payload; error and remote frames as error frames, payloads over 8
+        bytes as CAN FD), with ``channels[codes[i]]`` as frame ``i``'s channel when given."""
+        ts = self.timestamp.tolist()
+        ids = self.arbitration_id.tolist()
+        ext = self.is_extended.tolist()
+        ft = self.frame_type.tolist()
+        lens = self.length.tolist()
+        raw = np.ascontiguousarray(self.data).tobytes()
+        chan: list[str | None] = [None] * len(ts) if channels is None or codes is None else \
+            [channels[c] for c in np.broadcast_to(codes, (len(ts),)).tolist()]
+        long_data = self.long_data
+        Message = can.Message
+        for i in range(len(ts)):
+            got = long_data.get(i) if long_data else None
+            data = bytearray(raw[8 * i:8 * i + min(lens[i], 8)] if got is None else got)
+            yield Message(timestamp=ts[i], arbitration_id=ids[i], is_extended_id=ext[i],
+                          is_error_frame=ft[i], data=data, channel=chan[i],
+                          is_fd=lens[i] > 8, check=False)
 
 
 #: hex digit value per byte, 255 = not a hex digit
@@ -632,9 +632,8 @@ def _candump_chunk(buf: bytes, path: Path, line0: int, stats: ReadStats
     Lines are grouped by length; a group's first line gives the byte positions of the
     fields (:func:`_line_layout`) and every line of that layout is parsed at once with
     column operations (:func:`_parse_layout`). Lines that fit no layout -- malformed, FD,
-    remote, odd spacing, control characters -- go through :func:`_candump_messages`, in file
-    order, so bad lines are counted with the same reasons and line numbers as the message
-    reader. Returns the frames in file order, the number of lines (for numbering the
+    remote, odd spacing, control characters -- go through :func:`_candump_odd` (python-can's
+    reader), in file order, with the bad lines counted by file line number. Returns the frames in file order, the number of lines (for numbering the
     next chunk; a lone ``\\r`` is a line break of its own, as for a text reader), and each
     frame's interface as a code (int64 per frame) into a list of interface names.
     """
@@ -724,24 +723,21 @@ def _candump_chunk(buf: bytes, path: Path, line0: int, stats: ReadStats
         extra_cum = np.cumsum([0] + [c for _, c in extra_at]).tolist()
         line_start = starts.tolist()
         line_end = e.tolist()
-        current = [0]
-
-        def numbered() -> Iterator[tuple[int, str]]:
+        def numbered() -> Iterator[tuple[int, int, str]]:
             for i in slow_lines:
                 lineno = line0 + i + 1
                 if extra_lines:
                     lineno += extra_cum[bisect_left(extra_lines, i)]
                 text = buf[line_start[i]:line_end[i]].decode("ascii", errors="replace")
-                current[0] = i   # the parser yields a line's frames before reading on
                 if "\r" in text:
                     for k, sub in enumerate(text.split("\r")):
-                        yield lineno + k, sub
+                        yield i, lineno + k, sub
                 else:
-                    yield lineno, text
+                    yield i, lineno, text
 
-        for msg in _candump_messages(path, numbered(), stats):
+        for i, msg in _candump_odd(path, numbered(), stats):
             slow_msgs.append(msg)
-            slow_line.append(current[0])
+            slow_line.append(i)
     n_fast = int(np.count_nonzero(fast))
     stats.frames += n_fast
     total_lines = nlines + sum(c for _, c in extra_at)

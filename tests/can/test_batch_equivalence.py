@@ -6,7 +6,7 @@ what the array code does not cover to its frame-by-frame code. Property: whateve
 stream -- valid node output with drops, bursts, bit flips, duplicates, reordering, foreign
 and unknown IDs, wrong DLCs, error/remote/FD frames, clocks going back, NaN/inf times, node
 restarts (counter resets), silences, corrupted alerts -- and wherever the batches are cut,
-the results are identical to feeding the same frames one by one with ``batch_size=0``:
+the results are identical to feeding the same frames one by one with ``batch_size=1``:
 every counter by reason, lost frames, per-message acceptance and state, SN_Sync/SN_Status
 and alert state, and the rolling buffers bit for bit (times, values including NaN, write
 index, fill, capacity, overwritten rows), in both time sources.
@@ -217,7 +217,7 @@ def _listeners(time_source: str, capacity: int, growable: bool, max_delta: int,
                **kw: object) -> tuple[DecodeListener, DecodeListener]:
     ref = DecodeListener("quarter2", DB, capacity=capacity, growable=growable,
                          time_source=time_source, max_counter_delta=max_delta,  # type: ignore[arg-type]
-                         batch_size=0)
+                         batch_size=1)
     lst = DecodeListener("quarter2", DB, capacity=capacity, growable=growable,
                          time_source=time_source, max_counter_delta=max_delta,  # type: ignore[arg-type]
                          **kw)  # type: ignore[arg-type]

@@ -1,12 +1,14 @@
-"""The candump -L array reader is the message reader, bit for bit, and fast on real logs.
+"""The candump -L array reader is a line-by-line reader, bit for bit, and fast on real logs.
 
 The array reader (:func:`suspid.can.logs.read_candump_arrays`, behind ``feed_log``,
-``identify``/``diagnose``/``monitor --input LOG``) must give the message reader's frames bit
-for bit, and a message reader's timestamp is ``float(text)``. Real logs carry epoch times
+``identify``/``diagnose``/``monitor --input LOG``) must give the frames of a reader that
+takes the log line by line through python-can's ``CanutilsLogReader``
+(:func:`_line_reader`, the oracle) bit for bit, and that reader's timestamp is
+``float(text)``. Real logs carry epoch times
 (``(1631416514.717133)``: 16 digits), so these must not leave the column parser: that was
 the case up to 15 digits only, which read such a log ~40x slower than one starting at 0.
 Lines the column parser does not take (FD, remote, odd spacing, CR line breaks, garbage)
-go through the message parser and are merged back in file order.
+go through python-can's reader and are merged back in file order.
 """
 from __future__ import annotations
 
@@ -19,7 +21,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import suspid.can.logs as logs
-from suspid.can.logs import FrameArrays, ReadStats, read_candump_arrays, read_log
+from suspid.can.logs import FrameArrays, ReadStats, read_candump_arrays
 from tests.can.test_batch_equivalence import (RATES, _stream, _write_candump,
                                               assert_feed_log_equals_messages, truncate_lines)
 
@@ -49,6 +51,15 @@ def _assert_same_frames(a: FrameArrays, b: FrameArrays) -> None:
     assert a.long_data == b.long_data
 
 
+def _line_reader(path: Path, stats: ReadStats) -> list:  # type: ignore[type-arg]
+    """The oracle: every line of ``path`` through python-can's reader one by one
+    (:func:`suspid.can.logs._candump_odd`), universal newlines as a text file reads them,
+    frames counted per channel."""
+    with path.open("r", encoding="ascii", errors="replace") as fh:
+        odd = logs._candump_odd(path, ((n, n, line) for n, line in enumerate(fh, 1)), stats)
+        return list(logs._select_messages(path, ".log", (m for _, m in odd), stats, None))
+
+
 def _check_log(path: Path, chunk_bytes: int = 1 << 19, slow: "_CountSlowLines | None" = None
                ) -> tuple[FrameArrays, ReadStats]:
     """Array reader = message reader (frames, counts, reasons, line numbers).
@@ -59,7 +70,7 @@ def _check_log(path: Path, chunk_bytes: int = 1 << 19, slow: "_CountSlowLines | 
     arr = _arrays(path, s_arr, chunk_bytes)
     if slow is not None:
         assert slow.lines == 0, f"{slow.lines} lines parsed one by one"
-    _assert_same_frames(arr, FrameArrays.from_messages(list(read_log(path, s_msg))))
+    _assert_same_frames(arr, FrameArrays.from_messages(_line_reader(path, s_msg)))
     assert s_arr == s_msg
     return arr, s_arr
 
@@ -69,14 +80,14 @@ class _CountSlowLines:
 
     def __init__(self, monkeypatch: pytest.MonkeyPatch) -> None:
         self.lines = 0
-        inner = logs._candump_messages
+        inner = logs._candump_odd
 
         def counted(path, numbered, stats):  # type: ignore[no-untyped-def]
             numbered = list(numbered)
             self.lines += len(numbered)
             return inner(path, numbered, stats)
 
-        monkeypatch.setattr(logs, "_candump_messages", counted)
+        monkeypatch.setattr(logs, "_candump_odd", counted)
 
 
 # ---- timestamp texts -----------------------------------------------------------------------

@@ -183,7 +183,7 @@ def test_live_frames_match_like_the_log(tmp_path: Path, pdu_dbc: Path) -> None:
     log = tmp_path / "two.log"
     _pdu_log(log, {0x03: 0.1, 0x0B: -0.2})
     db = load_dbc(pdu_dbc)
-    live = DecodeListener("quarter2", db, ["x1=PropA.Height"], batch_size=0,
+    live = DecodeListener("quarter2", db, ["x1=PropA.Height"], batch_size=1,
                           j1939_source="0x0b")
     for msg in read_log(log):
         live.on_message_received(msg)

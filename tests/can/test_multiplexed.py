@@ -201,7 +201,7 @@ def test_the_batch_path_stores_what_the_frame_by_frame_path_does(
     monkeypatch.setattr(PageSplit, "push_many", spy)
     feed_log(batch, log)
     assert sum(blocks) == ref.t.size   # every frame through the array path
-    one = DecodeListener(m, dbc, MUX_MAP, capacity=1 << 12, batch_size=0)
+    one = DecodeListener(m, dbc, MUX_MAP, capacity=1 << 12, batch_size=1)
     for msg in read_log(log):
         one.on_message_received(msg)
     a, b = snapshot(batch), snapshot(one)

@@ -54,7 +54,7 @@ def _without_status(frames: list[can.Message], n: int) -> list[can.Message]:
 
 def _decode(frames: list[can.Message], time_source: str) -> tuple[DecodeListener, DecodeListener]:
     """Frame by frame (the reference) and in batches through the array code."""
-    ref = DecodeListener("quarter2", DB, time_source=time_source, batch_size=0)  # type: ignore[arg-type]
+    ref = DecodeListener("quarter2", DB, time_source=time_source, batch_size=1)  # type: ignore[arg-type]
     for m in frames:
         ref.on_message_received(m)
     lst = DecodeListener("quarter2", DB, time_source=time_source)  # type: ignore[arg-type]

@@ -1,4 +1,4 @@
-"""The decoder's rules, each in one module, the frame-by-frame and the array form side by side.
+"""The decoder's rules, each in one module.
 
 ========================  ==================================================================
 module                    rule
@@ -14,7 +14,10 @@ module                    rule
                           arrival times of its message (a whole log at once)
 ========================  ==================================================================
 
-Each frame rule has a scalar function (the reference, used frame by frame) and an array function
-over many frames (used by :class:`~estimator.decode.engine.DecodeEngine`'s batches) that
-gives the same result bit for bit; ``tests/can/test_rules.py`` compares them directly.
+:class:`~estimator.decode.engine.DecodeEngine` applies the array functions to the frames of a
+batch and the per-frame functions (``CounterRules.step``, ``stale_tick``, ``tick_of_counter``,
+``alive_counter``...) to the frames its array code does not cover (a time anomaly, a counter
+jump, a silence, a short run); the two give the same result bit for bit, compared in
+``tests/can/test_rules.py``. :mod:`.arrival_live` is the causal form of :mod:`.arrival` for
+frames that arrive one at a time (it holds a few frames per message as look-ahead).
 """
