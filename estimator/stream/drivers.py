@@ -25,6 +25,7 @@ from estimator.decode.replay import feed_log
 from estimator.stream.accumulator import WindowAccumulator
 from suspid.can.bus import LOSS_CLASSES, SocketcanReader
 from suspid.can.dbc import is_e2e
+from suspid.io.csvio import AUX_CHANNELS
 from suspid.models.base import FloatArray
 
 #: default length of the live receiver's buffer (s of data at the DBC's frame rate, at least
@@ -167,8 +168,9 @@ class CanWindowDriver:
             if not self._sources_started(latest):
                 return
             if self.channels is None:
+                # the vehicle's speed or odometer (mapped for a fleet) is never fitted
                 live = [c for name, src in self.listener.buffer.sources.items() if src.n > 0
-                        for c in src.channels]
+                        for c in src.channels if c not in AUX_CHANNELS]
                 self.channels = live or None
             # the first window starts at the oldest sample (frames a decoder held back, e.g.
             # a live slot rule's warm-up, arrive together)
@@ -195,7 +197,8 @@ class CanWindowDriver:
                 self.on_first_dt(self.dt)
             # of the messages that started, the channels that carry data (a node's --channels
             # subset sends the others' validity bits as 0: they stay out)
-            live = [c for c, v in al.values.items() if np.isfinite(v).any()]
+            live = [c for c, v in al.values.items()
+                    if c not in AUX_CHANNELS and np.isfinite(v).any()]
             if live:
                 self.channels = live
                 al.values = {c: al.values[c] for c in live}
