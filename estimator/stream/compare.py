@@ -289,7 +289,8 @@ def _plot_param(ax: Any, t: FloatArray, truth: Mapping[str, FloatArray] | None,
     ax.axhline((1 - drop) * nominal, color="r", ls="--", lw=1,
                label=f"alert limit {(1 - drop):.0%} x nominal")
     colors = {"nm": "C0", "ekf": "C1"}
-    for rec in recs:
+    hatches = ("", "////", "\\\\", "xx")
+    for i, rec in enumerate(recs):
         est = [l for l in rec.lines if l["type"] == "estimate" and param in l["stderr"]]
         if not est:
             continue
@@ -302,13 +303,25 @@ def _plot_param(ax: Any, t: FloatArray, truth: Mapping[str, FloatArray] | None,
             s = np.array([l["track"][param]["stderr"] for l in est], dtype=float)
         c = colors.get(rec.name, None)
         what = "estimate" if rec.own_track else "tracked (window end)"
-        ax.plot(te, v, ".-", ms=3, color=c, label=f"{rec.name.upper()} {what}")
-        ax.fill_between(te, v - 2 * s, v + 2 * s, color=c, alpha=0.2, lw=0)
+        line, = ax.plot(te, v, ".-", ms=3, color=c, label=f"{rec.name.upper()} {what}")
+        c = line.get_color()
+        # each band drawn with its own edges and hatch: a narrow band, or one lying inside
+        # the other, stays visible
+        ax.fill_between(te, v - 2 * s, v + 2 * s, facecolor=c, alpha=0.15, lw=0,
+                        hatch=hatches[i % len(hatches)], edgecolor=c,
+                        label=f"{rec.name.upper()} +/- 2 stderr")
+        for edge in (v - 2 * s, v + 2 * s):
+            ax.plot(te, edge, color=c, lw=0.6, alpha=0.7)
         for a in rec.alerts:
             if a.parameter == param and a.kind == "alert":
                 ax.axvline(a.t, color=c, ls=":", lw=1.5)
-                ax.annotate(f"{rec.name} alert", (a.t, (1 - drop) * nominal), color=c,
-                            rotation=90, va="bottom", ha="right", fontsize=8)
+                # one label per estimator, on alternate sides of its line: two alerts at
+                # the same time do not print over each other
+                side = -1 if i % 2 == 0 else 1
+                ax.annotate(f"{rec.name.upper()} alert t = {a.t:.1f} s", (a.t, 0.04),
+                            xycoords=("data", "axes fraction"), xytext=(2 * side, 0),
+                            textcoords="offset points", color=c, rotation=90, va="bottom",
+                            ha="right" if side < 0 else "left", fontsize=8)
     unit = "N s/m" if param.startswith("c") else ("N/m" if param.startswith("k") else "")
     ax.set_ylabel(f"{param} ({unit})" if unit else param)
     ax.grid(alpha=0.3)
