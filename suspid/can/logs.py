@@ -1028,8 +1028,14 @@ def _read_text_resumable(path: Path, reader: can.ASCReader | can.TRCReader,
                 yield msg
             return
         except (EOFError, gzip.BadGzipFile) as exc:  # a .gz cut short or not gzip at all
-            raise InputError(f"{path}: not a readable gzip file after line {counter.lineno} "
-                             f"({exc})") from None
+            if stats.frames == 0:
+                raise InputError(f"{path}: not a readable gzip file after line {counter.lineno} "
+                                 f"({exc})") from None
+            # cut short: the lines before the cut are the log's; keep them and name the damage
+            stats.damaged(path, f"the compressed stream ends after line {counter.lineno} "
+                                f"({exc}): the file is cut short; {stats.frames} frames read "
+                                "before it are used")
+            return
         except (ValueError, IndexError, KeyError, TypeError) as exc:
             stats.bad(f"{path}:{counter.lineno}", f"{type(exc).__name__}: {exc}")
         if first:

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from suspid.can.logs import is_can_log, log_format, read_log
+from suspid.can.logs import ReadStats, is_can_log, log_format, read_log
 from suspid.cli import main
 from suspid.errors import InputError, UsageError
 
@@ -55,11 +55,23 @@ def test_identify_and_monitor_read_asc_gz(asc: Path, tmp_path: Path,
     assert summary["frames"]["accepted"] == a["frames"]["accepted"]
 
 
-def test_a_damaged_gz_is_one_error_and_writers_refuse_gz(asc: Path, tmp_path: Path) -> None:
+def test_a_damaged_gz_keeps_its_frames_and_writers_refuse_gz(asc: Path, tmp_path: Path) -> None:
+    """A .gz cut short keeps the frames before the cut and names the damage (nothing valid
+    is lost); a file that is no gzip at all, or cut before its first frame, is one error."""
+    whole = _gz(asc, tmp_path / "whole.asc.gz").read_bytes()
+    plain = [(m.timestamp, m.arbitration_id, bytes(m.data)) for m in read_log(asc)]
     cut = tmp_path / "cut.asc.gz"
-    cut.write_bytes(_gz(asc, tmp_path / "whole.asc.gz").read_bytes()[:1500])
-    with pytest.raises(InputError, match=r"cut.asc.gz: not a readable gzip file after line \d+"):
-        list(read_log(cut))
+    cut.write_bytes(whole[:int(0.6 * len(whole))])
+    stats = ReadStats()
+    kept = [(m.timestamp, m.arbitration_id, bytes(m.data)) for m in read_log(cut, stats)]
+    assert 0 < len(kept) < len(plain) and kept == plain[:len(kept)]
+    assert stats.truncated and stats.malformed == 1
+    assert stats.damage.startswith(f"{cut}: damaged ASC file: the compressed stream ends after "
+                                   "line ") and f"{len(kept)} frames read before it" in stats.damage
+    head = tmp_path / "head.asc.gz"
+    head.write_bytes(whole[:40])
+    with pytest.raises(InputError, match=r"head.asc.gz: not a readable gzip file after line \d+"):
+        list(read_log(head))
     fake = tmp_path / "fake.asc.gz"
     fake.write_bytes(asc.read_bytes())
     with pytest.raises(InputError, match="fake.asc.gz: not a readable gzip file"):
