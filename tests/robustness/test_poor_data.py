@@ -46,17 +46,24 @@ def _run(*args: str) -> subprocess.CompletedProcess[str]:
                           text=True, env=suspid_env(), cwd=REPO, timeout=120)
 
 
-def test_two_row_csv_is_no_success(tmp_path: Path) -> None:
-    """2 rows of a moving record: 4 values in the cost for 5 parameters + 4 initial states
-    (was: success, identifiable, stderr ~1e-3 and a 3-sigma band)."""
-    two = _rows(_bump(tmp_path), tmp_path / "two.csv", 300, 2)
-    proc = _run("identify", "--model", "quarter2", "--input", str(two), "--fix", "m1=300",
+def _no_success(path: Path) -> dict:
+    """``identify`` of ``path`` (quarter2, m1 held): exit 0, neither a success nor
+    identifiable, no standard error and no band; its JSON."""
+    proc = _run("identify", "--model", "quarter2", "--input", str(path), "--fix", "m1=300",
                 "--json")
     assert proc.returncode == 0, proc.stderr
     out = json.loads(proc.stdout)
     assert out["success"] is False and out["identifiable"] is False
     assert all(v is None for v in out["stderr"].values())
     assert "band_3sigma" not in out
+    return dict(out)
+
+
+def test_two_row_csv_is_no_success(tmp_path: Path) -> None:
+    """2 rows of a moving record: 4 values in the cost for 5 parameters + 4 initial states
+    (was: success, identifiable, stderr ~1e-3 and a 3-sigma band)."""
+    two = _rows(_bump(tmp_path), tmp_path / "two.csv", 300, 2)
+    out = _no_success(two)
     assert out["warnings"][0].startswith("too little data: 4 measured values in the cost "
                                          "(2 samples of x1, x2) for 9 unknowns")
 
@@ -84,13 +91,7 @@ def test_one_sample_can_log_is_no_success(tmp_path: Path) -> None:
     assert _run("encode", "--input", str(two), "--out", str(log)).returncode == 0
     one = tmp_path / "one.log"
     one.write_text("\n".join(log.read_text().splitlines()[:5]) + "\n")
-    proc = _run("identify", "--model", "quarter2", "--input", str(one), "--fix", "m1=300",
-                "--json")
-    assert proc.returncode == 0, proc.stderr
-    out = json.loads(proc.stdout)
-    assert out["success"] is False and out["identifiable"] is False
-    assert all(v is None for v in out["stderr"].values())
-    assert "band_3sigma" not in out
+    out = _no_success(one)
     assert any(w.startswith("too little data") for w in out["warnings"])
 
 
