@@ -169,6 +169,14 @@ def predict(van: Van, lam: float, rule: AlertConfig
             (fc.crossing_t_high - T0) / DAY_S, km)
 
 
+def _coverage(hits: int, n: int) -> tuple[float, float]:
+    """Share of ``n`` intervals that held the truth and its binomial standard error."""
+    if not n:
+        return math.nan, math.nan
+    cov = hits / n
+    return cov, math.sqrt(cov * (1 - cov) / n)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--vans", type=int, default=120)
@@ -207,16 +215,14 @@ def main(argv: list[str] | None = None) -> int:
             widths.append((hi - lo) / (v.life_days - t_pred))
             true_rul, rul = v.life_days - t_pred, tc - t_pred
             ontime += abs(rul - true_rul) <= args.alpha * true_rul
-        cov = hits / n_fc if n_fc else math.nan
-        se = math.sqrt(cov * (1 - cov) / n_fc) if n_fc else math.nan
+        cov, se = _coverage(hits, n_fc)
         print(f"lambda {lam:.1f}: {n_fc} of {args.vans} vans with a forecast; 90 % interval "
               f"holds the true day in {hits} ({100 * cov:.1f} % +/- {100 * se:.1f}); "
               f"alpha-lambda (alpha {args.alpha:g}): {ontime} of {args.vans} "
               f"({100 * ontime / args.vans:.1f} %); median interval width "
               f"{100 * float(np.median(widths)) if widths else math.nan:.0f} % of the "
               "remaining life")
-        kcov = km_hits / n_km if n_km else math.nan
-        kse = math.sqrt(kcov * (1 - kcov) / n_km) if n_km else math.nan
+        kcov, kse = _coverage(km_hits, n_km)
         print(f"lambda {lam:.1f} km: {n_km} of {n_fc} forecasts with a crossing in km; 90 % "
               f"interval holds the true odometer in {km_hits} ({100 * kcov:.1f} % +/- "
               f"{100 * kse:.1f}); median interval width "
