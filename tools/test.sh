@@ -20,10 +20,13 @@ export MPLBACKEND=Agg
 export OPENBLAS_NUM_THREADS=${OPENBLAS_NUM_THREADS:-1} OMP_NUM_THREADS=${OMP_NUM_THREADS:-1}
 # the linter, the import contract and the type checker (pyproject.toml) must pass too
 bash tools/lint.sh
-# The main suite runs in two pytest invocations: the tests that only compute run in parallel
-# (pytest-xdist: one worker per core, at most 4; TEST_WORKERS=N sets the number), then the
-# tests marked realtime (paced in wall-clock time: live buses, ptys, nodes with --speed) one
-# after another on an otherwise idle suite, so that the parallel load cannot make them late.
+# The tests run in four steps. The main suite: the tests that only compute, in parallel
+# (pytest-xdist: one worker per core, at most 4; TEST_WORKERS=N sets the number), minus those
+# marked slow. The slow ones (physics sweeps, long end-to-end runs: 10 s and more each) run
+# next in the same way, as their own step bounded by SLOW_LIMIT seconds (default 1200: a step
+# that overruns fails). Then the tests marked realtime (paced in wall-clock time: live buses,
+# ptys, nodes with --speed) one after another on an otherwise idle suite, so that the
+# parallel load cannot make them late.
 # The SocketCAN tests (marker socketcan: vcan0 and can-utils) run in one more pytest through
 # tools/vcan_bench.sh: natively where the kernel has SocketCAN, otherwise in one User-Mode
 # Linux guest. pytest's status 5 (no test selected, e.g. when the arguments name tests of
@@ -32,15 +35,21 @@ bash tools/lint.sh
 cores=$(env -u OMP_NUM_THREADS -u OMP_THREAD_LIMIT nproc)
 workers=${TEST_WORKERS:-$(( cores < 4 ? cores : 4 ))}
 set +e
-.venv/bin/python -m pytest -m "not socketcan and not realtime" -n "$workers" "$@"
+.venv/bin/python -m pytest -m "not socketcan and not realtime and not slow" -n "$workers" "$@"
 parallel=$?
+timeout --signal=INT --kill-after=30 "${SLOW_LIMIT:-1200}" \
+  .venv/bin/python -m pytest -m "slow and not socketcan and not realtime" -n "$workers" "$@"
+slow=$?
+if [[ $slow -eq 124 || $slow -eq 130 ]]; then
+  echo "tools/test.sh: the slow step overran its ${SLOW_LIMIT:-1200} s bound" >&2
+fi
 .venv/bin/python -m pytest -m "realtime and not socketcan" "$@"
 paced=$?
 bash tools/vcan_bench.sh .venv/bin/python -m pytest -m socketcan "$@"
 bench=$?
 set -e
 status=5
-for s in "$parallel" "$paced" "$bench"; do
+for s in "$parallel" "$slow" "$paced" "$bench"; do
   if [[ $s -ne 0 && $s -ne 5 ]]; then exit "$s"; fi
   if [[ $s -eq 0 ]]; then status=0; fi
 done

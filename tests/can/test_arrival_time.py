@@ -155,6 +155,7 @@ def test_no_frame_lost_and_the_data_unchanged(logs: dict[str, Path], kind: str) 
         assert any("already filled grid cell" in w for w in old.warnings)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", KINDS)
 def test_identify_diagnose_monitor_unchanged(logs: dict[str, Path], kind: str,
                                              capsys: pytest.CaptureFixture[str]) -> None:

@@ -96,6 +96,7 @@ def test_arrival_times_do_not_move_the_data(node_log: Path, tmp_path: Path, kind
             assert y["params"][k] == pytest.approx(v, rel=rel), k   # type: ignore[index]
 
 
+@pytest.mark.slow
 def test_diagnose_on_a_burst_log(node_log: Path, tmp_path: Path,
                                  capsys: pytest.CaptureFixture[str]) -> None:
     """Bursts of 5 sample periods once made identify/diagnose fail ("a timestamp outlier?")."""

@@ -158,6 +158,7 @@ def test_identify_on_a_csv_does_not_import_the_can_stack(tmp_path: Path) -> None
     assert second == "InputError True"   # the missing .blf is read as a CAN log
 
 
+@pytest.mark.slow
 def test_no_road_and_no_decay_is_called_out(tmp_path: Path) -> None:
     """Driving vibration without a road column cannot be a free response: say so."""
     sim = tmp_path / "road.csv"

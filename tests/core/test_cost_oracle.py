@@ -66,6 +66,7 @@ def test_fast_path_equals_the_oracle(name: str) -> None:
     _check(m, p, meas, x0, True, weights=w)
 
 
+@pytest.mark.slow
 def test_fast_path_on_a_long_record_scans_the_forced_trajectory() -> None:
     """Beyond ``MAX_DECAY_EXPONENT`` (``E**-N`` would overflow) the forced trajectory is the
     blocked scan's; the cost is still the oracle's."""

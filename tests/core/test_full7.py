@@ -145,6 +145,7 @@ def _measurement(noise: float = 0.0, seed: int = 0, duration: float = 4.0) -> Me
     return Measurement(t=t, road=road, measured=meas, source="synthetic")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("cost", ["sse", "frobenius"])
 def test_noise_free_identification_from_half_the_truth(cost: str) -> None:
     """Masses, inertias and geometry known; 12 springs, dampers and tyres from 0.5x truth."""
@@ -158,6 +159,7 @@ def test_noise_free_identification_from_half_the_truth(cost: str) -> None:
         assert res.params[k] == pytest.approx(P[k], rel=1e-5), k
 
 
+@pytest.mark.slow
 def test_noisy_identification_reports_honest_standard_errors() -> None:
     params = Parameters.for_model(FULL7, fix={k: P[k] for k in FULL7.known},
                                   init={k: 0.5 * P[k] for k in FREE})
@@ -171,6 +173,7 @@ def test_noisy_identification_reports_honest_standard_errors() -> None:
         assert res.params[k] == pytest.approx(P[k], rel=0.1), k
 
 
+@pytest.mark.slow
 def test_cli_simulate_encode_identify(tmp_path: Path) -> None:
     """simulate -> CSV -> identify; encode (model inferred) -> CAN log -> identify."""
     csv = tmp_path / "f7.csv"

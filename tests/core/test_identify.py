@@ -68,6 +68,7 @@ def test_quarter2_all_free_names_the_scale_ambiguity() -> None:
     assert "common factor" in msg and "m1" in msg and "k2" in msg
 
 
+@pytest.mark.slow
 def test_noisy_stderr_is_honest() -> None:
     """Errors over noise seeds are consistent with the reported standard errors."""
     m = get_model("quarter2")

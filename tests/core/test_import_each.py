@@ -6,6 +6,7 @@ the first one imported. Each module is imported in a fresh set of project module
 """
 from __future__ import annotations
 
+import pytest
 import subprocess
 import sys
 from pathlib import Path
@@ -34,6 +35,7 @@ print("\n".join(bad))
 """
 
 
+@pytest.mark.slow
 def test_every_module_imports_first() -> None:
     out = subprocess.run([sys.executable, "-c", SCRIPT], cwd=ROOT, capture_output=True,
                          text=True, timeout=600, env={"MPLBACKEND": "Agg", "PATH": "/usr/bin:/bin"})

@@ -64,6 +64,7 @@ def test_misfit_channels_need_a_ratio_and_a_share(tmp_path: Path,
         assert all(r > MISFIT_FLOOR and sh > MISFIT_SHARE for r, sh in bad.values())
 
 
+@pytest.mark.slow
 def test_a_length_in_mm_ends_in_a_normal_fit_time_as_a_misfit(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """``--fix a1=1200`` (mm for m) on the half car with no ``--maxfev``: the further

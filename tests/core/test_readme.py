@@ -64,6 +64,7 @@ def test_the_readme_has_the_examples() -> None:
     assert any(a.startswith("../shared/realdata/") for c in ex for a in c)
 
 
+@pytest.mark.slow
 def test_readme_examples_run_verbatim(root: Path) -> None:
     """Every example but the real logger's and the study (tests below), in order; the
     values the comments claim."""
@@ -87,6 +88,7 @@ def test_readme_examples_run_verbatim(root: Path) -> None:
     assert json.loads(outs[7].stdout)["evidence"]
 
 
+@pytest.mark.slow
 def test_readme_real_logger_example(root: Path) -> None:
     if not (SHARED / "realdata" / "canedge-imu").is_dir():
         pytest.skip(f"real recordings not found at {SHARED / 'realdata'}")

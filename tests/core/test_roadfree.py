@@ -295,6 +295,7 @@ def test_unmodelled_friction_is_a_misfit_not_a_confident_answer(tmp_path: Path) 
     assert "the x1 equation" in w and "suspid diagnose --road unknown" in w and "m1=300" in w
 
 
+@pytest.mark.slow
 def test_rig_scale_road_unknown_agrees_with_the_road_measured_fit(tmp_path: Path) -> None:
     """A laboratory quarter-car rig (2.45 kg body, 1 kg wheel, 900 N/m, 7.5 N s/m: the
     scale of a Quanser active-suspension plant) with 0.3 N of strut friction and position

@@ -93,6 +93,7 @@ def test_identify_without_init_recovers_the_truth(scale: float) -> None:
         assert res.params[k] == pytest.approx(truth[k], rel=1e-6)
 
 
+@pytest.mark.slow
 def test_a_run_away_parameter_is_not_a_success() -> None:
     """A result with a damper 1e9 x from its start and from the data estimate is flagged."""
     m = get_model("quarter2")
@@ -244,6 +245,7 @@ def test_filter_impulse_responses_are_shared_and_give_the_same_filtered_signals(
     assert len(start_mod._RESPONSES) == 2
 
 
+@pytest.mark.slow
 def test_a_white_looking_fit_far_from_the_given_start_runs_the_given_start(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """half4 sse row 25 at 0.5 sigma: the record's least-squares estimate puts k4 at 2.1e6 (truth 500) and
@@ -358,6 +360,7 @@ def test_a_noisy_fit_the_failed_given_start_cannot_confirm_is_not_a_success(
         assert not any(w.startswith("unconfirmed") for w in res.warnings)
 
 
+@pytest.mark.slow
 def test_a_fit_from_an_estimate_worse_than_the_given_start_needs_that_start(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """half4 sse row 25 from 10x at 0.5 sigma: the record's least-squares estimate begins at
@@ -379,6 +382,7 @@ def test_a_fit_from_an_estimate_worse_than_the_given_start_needs_that_start(
                for w in e["warnings"])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("row", [4, 19, 25])
 def test_far_start_at_high_noise_finds_the_truth_from_the_rescaled_start(
         monkeypatch: pytest.MonkeyPatch, row: int) -> None:
@@ -451,6 +455,7 @@ def test_no_rescaled_start_beyond_kind_max() -> None:
     assert start_mod.kind_scaled_start(problem, params) is None
 
 
+@pytest.mark.slow
 def test_a_fit_that_leaves_more_than_noise_tries_the_rescaled_start(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """half4 sse row 4 at 0.5 sigma from 10x with every start value further scattered
@@ -505,6 +510,7 @@ def _in_band(res: IdentResult, truth: dict[str, float], k: str) -> bool:
     return lo is not None and hi is not None and lo <= truth[k] <= hi
 
 
+@pytest.mark.slow
 def test_without_a_given_start_the_defaults_run_when_the_estimate_misleads(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """No --init: the documented defaults are a further start when the fit from the
@@ -531,6 +537,7 @@ def test_without_a_given_start_the_defaults_run_when_the_estimate_misleads(
     assert not any("implausible" in w for w in res.warnings)
 
 
+@pytest.mark.slow
 def test_a_far_fit_a_start_next_to_it_returns_to_is_not_a_run_away(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """A given start 333x off in c2 (and 200x in k2): the fit near the truth has c2 more

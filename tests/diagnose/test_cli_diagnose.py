@@ -1,6 +1,7 @@
 """`suspid simulate --effect` + `suspid diagnose --json`: friction on the quarter car found through the CLI."""
 from __future__ import annotations
 
+import pytest
 import argparse
 import json
 import math
@@ -20,6 +21,7 @@ def run(*args: str) -> subprocess.CompletedProcess:
                           timeout=300)
 
 
+@pytest.mark.slow
 def test_must_show_coulomb_friction_on_2dof(tmp_path: Path) -> None:
     csv = tmp_path / "friction.csv"
     truth = [f"--param={k}={v}" for k, v in TABLE1.items()]
@@ -52,6 +54,7 @@ def test_bad_effect_option_is_one_line_error(tmp_path: Path) -> None:
     assert r.stderr.startswith("error:") and "k_stop" in r.stderr and "Traceback" not in r.stderr
 
 
+@pytest.mark.slow
 def test_works_on_a_can_log(tmp_path: Path) -> None:
     csv, log = tmp_path / "bs.csv", tmp_path / "bs.log"
     truth = [f"--param={k}={v}" for k, v in TABLE1.items()]
@@ -71,6 +74,7 @@ def test_works_on_a_can_log(tmp_path: Path) -> None:
     assert out["frames"]["accepted"] > 0
 
 
+@pytest.mark.slow
 def test_half4_through_the_cli(tmp_path: Path, capsys) -> None:
     csv, png = tmp_path / "h4.csv", tmp_path / "h4.png"
     rc = main(["simulate", "--model", "half4", "--scenario", "bump", "--duration", "1.6", "--fs", "200",
@@ -113,6 +117,7 @@ def test_quarter1_text_output_and_option_errors(tmp_path: Path, capsys) -> None:
     assert len(err) == 1 and err[0].startswith(f"error: {bad}: fit.multistart: ")
 
 
+@pytest.mark.slow
 def test_full7_through_the_cli(tmp_path: Path, capsys) -> None:
     csv, png = tmp_path / "f7.csv", tmp_path / "f7.png"
     rc = main(["simulate", "--model", "full7", "--scenario", "iso8608", "--speed", "50", "--duration", "1.6",

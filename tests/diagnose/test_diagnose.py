@@ -47,6 +47,7 @@ def _params() -> Parameters:
                                 init=ROUGH)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("spec,scenario,opts,truth", CASES, ids=[f"{c[0].split(':')[0]}-{c[1]}" for c in CASES])
 def test_names_and_estimates_the_undeclared_effect(spec: str, scenario: str, opts: dict, truth: dict) -> None:
     meas = make_measurement([spec], scenario, **opts)

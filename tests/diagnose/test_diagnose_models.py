@@ -118,6 +118,7 @@ def _id(case: tuple[str, Any, str, dict[str, Any], list[str] | None]) -> str:
     return f"{model}-{name}{where}-{scenario}"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("model,injected,scenario,opts,sites", CASES, ids=[_id(c) for c in CASES])
 def test_names_and_estimates_the_effect(model: str, injected: Any, scenario: str, opts: dict[str, Any],
                                         sites: list[str] | None) -> None:
@@ -198,6 +199,7 @@ def test_structured_but_unexplained_residual_is_said_plainly(model: str, shake: 
         assert "not identifiable with half4" in ev["verdict"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scenario,opts", [("bump", {}), ("iso8608", {"v_kmh": 50})])
 def test_half4_asymmetric_dampers_in_both_struts_are_not_guessed(scenario: str, opts: dict[str, Any]) -> None:
     # both dampers asymmetric, each around its own symmetric part (c1 = 1800, c2 = 2400): one

@@ -33,6 +33,7 @@ def test_chunked_plant_with_effects_equals_whole_record_simulation() -> None:
         assert np.max(np.abs(got - lin)) > 0.01 * np.max(np.abs(lin))  # the effect is there
 
 
+@pytest.mark.slow
 def test_node_friction_found_by_diagnose_from_log(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     log = tmp_path / "node.log"
     params = [a for k, v in TABLE1.items() for a in ("--param", f"{k}={v}")]

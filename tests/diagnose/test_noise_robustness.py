@@ -61,6 +61,7 @@ def test_friction_is_named_at_higher_noise_and_small_F(F: float, noise: float, s
 # (F, noise, noise seed): before the fix sensor_delay of 1.6 ms, 1.1 ms; null at seed 7
 @pytest.mark.parametrize("F,noise,seed", [(150, 0.05, 2), (60, 0.03, 2), (150, 0.05, 7)],
                          ids=["F150-5pct-seed2", "F60-3pct-seed2", "F150-5pct-seed7"])
+@pytest.mark.slow
 def test_high_noise_names_no_subsample_delay(F: float, noise: float, seed: int) -> None:
     out = _diagnose(f"coulomb_friction:F={F}", noise, seed)
     ev = out["evidence"]

@@ -25,6 +25,7 @@ from .conftest import make_measurement
 ROAD_OFFSET = 0.01
 
 
+@pytest.mark.slow
 def test_road_offset_is_the_effect_named_once() -> None:
     model = get_model("quarter2")
     meas = make_measurement([], noise=0.005)

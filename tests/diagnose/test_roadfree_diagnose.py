@@ -48,6 +48,7 @@ def effect_drive(name: str, effect: str, values: dict[str, Any], seed: int = 1
     ("quarter2", "progressive_spring", {"k_cubic": 2e6}, "k_cubic", 0.15),
     ("half4", "coulomb_friction", {"F": 120.0}, "F", 0.15),
 ])
+@pytest.mark.slow
 def test_strut_effect_found_without_road(name: str, effect: str, values: dict[str, Any],
                                          key: str, tol: float) -> None:
     """The effect in the struts is named, its parameter comes out near the truth, and the
@@ -77,6 +78,7 @@ def test_accelerometers_alone_say_why_nothing_is_tried() -> None:
     assert r.effect is None and "ride height" in r.evidence["verdict"]
 
 
+@pytest.mark.slow
 def test_cli_diagnose_road_unknown(tmp_path: Path) -> None:
     """The command on a CSV without a road column: the contract's object with road unknown."""
     model, p, meas = effect_drive("quarter2", "coulomb_friction", {"F": 100.0})

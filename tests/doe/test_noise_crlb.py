@@ -38,6 +38,7 @@ def test_monte_carlo_error_matches_crlb_and_3_sigma_coverage() -> None:
     assert all(v < 0.2 for v in r["denoised_rms_over_noise"].values())
 
 
+@pytest.mark.slow
 def test_half4_noisy_errors_sit_at_the_cramer_rao_bound() -> None:
     """Seed §6.2 on the half car: 0.5 sigma noise, row 14, ML (1/sigma-weighted) frobenius.
 

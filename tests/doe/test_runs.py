@@ -20,20 +20,24 @@ def test_quarter1_l16_sse_16_of_16() -> None:
     _check(run_design("quarter1", Settings(cost="sse")), 16)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("cost", ["sse", "frobenius"])
 def test_quarter2_l27_27_of_27(cost: str) -> None:
     _check(run_design("quarter2", Settings(cost=cost)), 27)
 
 
+@pytest.mark.slow
 def test_half4_l27_sse_27_of_27_from_half_the_truth() -> None:
     _check(run_design("half4", Settings(cost="sse")), 27)
 
 
+@pytest.mark.slow
 def test_half4_l27_frobenius_27_of_27_from_half_the_truth() -> None:
     """The seed got 22/27 with this cost; row 20 is the one single-stage Nelder-Mead loses."""
     _check(run_design("half4", Settings(cost="frobenius")), 27)
 
 
+@pytest.mark.slow
 def test_half4_row20_single_stage_fails_so_the_continuation_matters() -> None:
     """From the 0.5x start alone (no data-driven start) a single stage loses row 20."""
     out = run_design("half4", Settings(cost="sse", stages=(1.0,), restarts=6, data_start=False),
@@ -68,6 +72,7 @@ def test_free_masses_from_a_common_scale_start_stay_put() -> None:
         assert e["identified"][k] / e["true"][k] == pytest.approx(0.5, rel=1e-6)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scale", [0.1, 10.0])
 def test_full7_design_rows_from_far_starts(scale: float) -> None:
     """The full car's L27 (16 free parameters): rows succeed from 0.1x and 10x the truth

@@ -1,6 +1,7 @@
 """``suspid fleet``: the contract's JSON, identity with ``suspid identify``, failed logs."""
 from __future__ import annotations
 
+import pytest
 import json
 import subprocess
 import sys
@@ -10,6 +11,7 @@ from tests.conftest import REPO, suspid_env
 from tests.fleet.conftest import FIX, TIMEOUT, Fleet, run_fleet_cli
 
 
+@pytest.mark.slow
 def test_contract_fields_and_failed_logs(fleet: Fleet, inprocess: dict[str, Any]) -> None:
     out = inprocess
     assert set(out) >= {"drives", "vehicles", "failed"}
@@ -47,6 +49,7 @@ def test_contract_fields_and_failed_logs(fleet: Fleet, inprocess: dict[str, Any]
     assert vehicles["VAN-OK"]["latest"] == last_ok["params"]
 
 
+@pytest.mark.slow
 def test_progress_bar_and_bad_usage(fleet: Fleet) -> None:
     proc = run_fleet_cli("--model", "quarter2", "--input", str(fleet.root / "VAN-OK" / "extra.csv"),
                          *FIX, "--workers", "0", "--json")
@@ -62,6 +65,7 @@ def test_progress_bar_and_bad_usage(fleet: Fleet) -> None:
         assert len(lines) == 1 and lines[0].startswith("error:") and words in lines[0], proc.stderr
 
 
+@pytest.mark.slow
 def test_each_drive_equals_suspid_identify(fleet: Fleet, inprocess: dict[str, Any]) -> None:
     """Same parameters to the last digit (and stderr, cost, warnings, frame counts) as
     ``suspid identify --json`` on the same file with the same options: candump, BLF, CSV."""

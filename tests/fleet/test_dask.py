@@ -84,6 +84,7 @@ def _same(a: dict[str, Any], b: dict[str, Any]) -> None:
     assert a["failed"] == b["failed"]
 
 
+@pytest.mark.slow
 def test_real_scheduler_and_workers_equal_the_local_run(fleet: Fleet, inprocess: dict[str, Any],
                                                         dask_cluster: str) -> None:
     out = fleet_json("--model", "quarter2", "--input", str(fleet.root), *FIX,
@@ -94,11 +95,13 @@ def test_real_scheduler_and_workers_equal_the_local_run(fleet: Fleet, inprocess:
     assert len(done) == 2 and all(v > 0 for v in done.values())
 
 
+@pytest.mark.slow
 def test_local_cluster_equals_in_process(fleet: Fleet, inprocess: dict[str, Any]) -> None:
     out = fleet_json("--model", "quarter2", "--input", str(fleet.root), *FIX, "--workers", "2")
     _same(out, inprocess)
 
 
+@pytest.mark.slow
 def test_unreachable_scheduler_is_one_error_line(fleet: Fleet) -> None:
     port = _free_port()
     proc = subprocess.run([sys.executable, "-m", "suspid", "fleet", "--model", "quarter2",
@@ -111,6 +114,7 @@ def test_unreachable_scheduler_is_one_error_line(fleet: Fleet) -> None:
     assert lines[-1].startswith("error: --scheduler") and len(lines) == 1, proc.stderr
 
 
+@pytest.mark.slow
 def test_a_worker_that_dies_fails_only_its_drive(fleet: Fleet, monkeypatch: pytest.MonkeyPatch) -> None:
     """A drive whose task kills its worker process (as a crash in a native library would) is
     listed as failed with the reason; the other drives on the same cluster are identified."""

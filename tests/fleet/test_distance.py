@@ -36,6 +36,7 @@ def odometer_fleet(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Flee
     return root, spec, root / "distance.dbc"
 
 
+@pytest.mark.slow
 def test_odometer_over_can_gives_the_crossing_in_km(odometer_fleet: tuple[Path, FleetSpec, Path],
                                                     tmp_path: Path) -> None:
     root, spec, dbc = odometer_fleet
@@ -81,6 +82,7 @@ def test_fleet_without_distance_has_no_km_keys(fleet: Fleet, inprocess: dict[str
     assert all("odometer_km" not in d for d in inprocess["drives"])
 
 
+@pytest.mark.slow
 def test_text_and_report_say_no_distance_signal(fleet: Fleet, tmp_path: Path) -> None:
     proc = run_fleet_cli("--model", "quarter2", "--input", str(fleet.root / "VAN-WEAR"), *FIX,
                          "--workers", "0", "--report", str(tmp_path / "rep"))

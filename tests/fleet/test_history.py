@@ -2,12 +2,14 @@
 report from the history alone."""
 from __future__ import annotations
 
+import pytest
 import sqlite3
 from typing import Any
 
 from tests.fleet.conftest import run_fleet_cli, Fleet, HistoryRuns, fleet_json
 
 
+@pytest.mark.slow
 def test_history_dedup_and_history_only_report(fleet: Fleet, inprocess: dict[str, Any],
                                                history: HistoryRuns) -> None:
     n = len(inprocess["drives"])

@@ -123,6 +123,7 @@ def test_no_more_local_workers_than_drives_or_cpus(monkeypatch: pytest.MonkeyPat
     assert started == [3, 3, 2]
 
 
+@pytest.mark.slow
 def test_more_workers_than_cpus_is_warned_about(tmp_path: Path) -> None:
     """``suspid fleet --workers N`` above the available CPUs says how many it uses."""
     n = runner.available_cpus() + 5

@@ -51,6 +51,7 @@ def run(drives: dict[str, Path]) -> dict[str, Any]:
     return out
 
 
+@pytest.mark.slow
 def test_drive_with_a_road_offset(drives: dict[str, Path], run: dict[str, Any],
                                   capsys: pytest.CaptureFixture[str]) -> None:
     by_path = {d["path"]: d for d in run["drives"]}

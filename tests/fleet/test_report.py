@@ -75,6 +75,7 @@ def _browser(args: list[str], profile: Path) -> subprocess.CompletedProcess[str]
                           capture_output=True, text=True, timeout=300)
 
 
+@pytest.mark.slow
 def test_report_in_headless_chromium(fleet: Fleet, history: HistoryRuns,
                                      tmp_path: Path) -> None:
     report = tmp_path / "report"

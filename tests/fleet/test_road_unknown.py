@@ -68,6 +68,7 @@ def result(road_fleet: RoadFleet, tmp_path_factory: pytest.TempPathFactory) -> d
     return out
 
 
+@pytest.mark.slow
 def test_every_drive_gives_its_body_mass_and_damper(road_fleet: RoadFleet,
                                                     result: dict[str, Any]) -> None:
     assert len(result["drives"]) == 24 and result["failed"] == 0
@@ -117,6 +118,7 @@ def test_report_shows_road_and_payload_per_drive(result: dict[str, Any]) -> None
     assert "road unknown: 6" in page and 'id="unidentified"' in page
 
 
+@pytest.mark.slow
 def test_the_road_mode_is_part_of_the_history_key(road_fleet: RoadFleet, tmp_path: Path) -> None:
     db = tmp_path / "h.sqlite"
     van = str(road_fleet.root / "VAN-OK")
@@ -136,6 +138,7 @@ def test_the_road_mode_is_part_of_the_history_key(road_fleet: RoadFleet, tmp_pat
     assert hist["reused"] == 6 and {d["road"] for d in hist["drives"]} == {"zero"}
 
 
+@pytest.mark.slow
 def test_accelerometer_only_drives_are_unidentified(tmp_path: Path) -> None:
     """A logger with a body accelerometer alone, fitted as quarter1: no drive is ``ok``, none
     enters a trend; each is listed with its reason, in the JSON, the table and the report."""

@@ -73,6 +73,7 @@ def _check_found(out: dict[str, Any], truth: dict[str, float]) -> None:
     assert err_b > 0.05 and err_a < 0.03, (err_b, err_a)
 
 
+@pytest.mark.slow
 def test_plugin_effect_is_injected_found_and_refitted(plugin_site: Path, tmp_path: Path) -> None:
     spec = f"rebound_stop:gap={STOP['gap']},k_top={STOP['k_top']}"
     csv = _record(plugin_site, tmp_path, "quarter2", TABLE1, "--effect", spec)
@@ -85,6 +86,7 @@ def test_plugin_effect_is_injected_found_and_refitted(plugin_site: Path, tmp_pat
     assert "rebound_stop" not in out["evidence"].get("candidates", {})
 
 
+@pytest.mark.slow
 def test_plugin_model_and_effect_through_diagnose(plugin_site: Path, tmp_path: Path) -> None:
     spec = f"rebound_stop:gap={STOP['gap']},k_top={STOP['k_top']}"
     csv = _record(plugin_site, tmp_path, "qcar5", Q5, "--effect", spec)
@@ -95,6 +97,7 @@ def test_plugin_model_and_effect_through_diagnose(plugin_site: Path, tmp_path: P
     assert r.returncode == 2 and "invalid choice: 'qcar5'" in r.stderr
 
 
+@pytest.mark.slow
 def test_plugin_model_through_monitor(plugin_site: Path, tmp_path: Path) -> None:
     csv, log = tmp_path / "q5.csv", tmp_path / "q5.log"
     r = suspid(plugin_site, "simulate", "--model", "qcar5", "--scenario", "iso8608", "--duration", "12",

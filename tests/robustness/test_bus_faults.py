@@ -158,6 +158,7 @@ def test_clock_jump_back_reanchors_and_forward_jump_is_a_gap() -> None:
     assert longest == pytest.approx(20.0 * 500, rel=0.01)
 
 
+@pytest.mark.slow
 def test_identification_degrades_gracefully_with_loss() -> None:
     """Fast version of tools/fault_table.py: error stays small as loss grows."""
     errs = {}
@@ -197,6 +198,7 @@ def _peak_stream(path: Path) -> tuple[int, DecodeListener]:
     return peak, lst
 
 
+@pytest.mark.slow
 def test_long_log_streams_in_bounded_memory(tmp_path: Path) -> None:
     """Peak traced memory of streaming a log does not grow with its length (4x frames)."""
     short, long_ = tmp_path / "short.log", tmp_path / "long.log"

@@ -335,6 +335,7 @@ def _suspid(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
     return subprocess.run([*cmd, *args], cwd=cwd, text=True, capture_output=True, timeout=120)
 
 
+@pytest.mark.slow
 def test_subprocess_bad_inputs(work: Path) -> None:
     r = _suspid("identify", "--model", "quarter2", "--input", "missing.csv", cwd=work)
     assert r.returncode == 2 and r.stderr.strip() == "error: missing.csv: no such file"

@@ -68,6 +68,7 @@ def test_time_must_strictly_increase(tmp_path: Path, t: list[float]) -> None:
         assert not ok and "increasing time" in str(exc)
 
 
+@pytest.mark.slow
 def test_large_file_is_read_in_compact_columns(tmp_path: Path) -> None:
     n = 200_000
     t = np.arange(n) / 1000.0

@@ -33,6 +33,7 @@ def _check_error(exc: InputError) -> None:
     assert "\n" not in msg and msg.split(": ")[0].endswith("fuzz.dbc")
 
 
+@pytest.mark.slow
 @_SETTINGS
 @given(data=st.data())
 def test_mutated_suspension_dbc_loads_or_names_the_line(tmp_path: Path, data: st.DataObject) -> None:

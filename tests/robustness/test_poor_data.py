@@ -83,6 +83,7 @@ def test_too_little_data_counts_states_and_channels(tmp_path: Path) -> None:
     assert too_little_data(rest, 0) is None
 
 
+@pytest.mark.slow
 def test_one_sample_can_log_is_no_success(tmp_path: Path) -> None:
     """A candump log holding one sample's frames (was: success, stderr 1e-5, a band of
     zero width)."""

@@ -8,11 +8,13 @@ No timing assertions: the host is shared.
 """
 from __future__ import annotations
 
+import pytest
 import math
 
 from tools.soak import soak
 
 
+@pytest.mark.slow
 def test_short_soak_memory_is_flat() -> None:
     rows = soak(duration=25.0, report_every=2.5, capacity=4096, identify=True)
     assert len(rows) == 10

@@ -1,6 +1,7 @@
 """The benchmark scripts run and report what docs/monitoring.md quotes (no timing asserted)."""
 from __future__ import annotations
 
+import pytest
 import json
 import subprocess
 import sys
@@ -9,6 +10,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[2]
 
 
+@pytest.mark.slow
 def test_bench_monitor_replay_reports_start_long_and_sustained_rates() -> None:
     r = subprocess.run([sys.executable, str(REPO / "tools" / "bench_monitor.py"), "replay",
                         "--duration", "8", "--long", "16", "--repeat", "1", "--json"],
@@ -27,6 +29,7 @@ def test_bench_monitor_replay_reports_start_long_and_sustained_rates() -> None:
     assert out["realtime_factor_end_to_end"] == out["data_s"] / out["wall_s"]
 
 
+@pytest.mark.slow
 def test_bench_monitor_evaluations_times_the_fast_and_general_paths_on_every_model() -> None:
     r = subprocess.run([sys.executable, str(REPO / "tools" / "bench_monitor.py"), "evaluations",
                         "--repeat", "1", "--json"],
@@ -42,6 +45,7 @@ def test_bench_monitor_evaluations_times_the_fast_and_general_paths_on_every_mod
         assert row["general_over_fast"] == round(row["general_us"] / row["fast_us"], 2)
 
 
+@pytest.mark.slow
 def test_bench_roadfree_reports_both_roads_side_by_side() -> None:
     r = subprocess.run([sys.executable, str(REPO / "tools" / "bench_roadfree.py"), "--duration",
                         "30", "--record", "8", "--repeat", "1", "--json"],

@@ -187,6 +187,7 @@ def test_input_noise_is_the_steps_sensitivity_to_its_road_samples(quarter2) -> N
     assert np.allclose(f.Q, q0 + dq)
 
 
+@pytest.mark.slow
 def test_input_noise_makes_the_stderr_honest_on_a_noisy_road(quarter2) -> None:
     """5 % white noise on the road displacement alone, stiff car, no wear: taking the road
     as exact, the EKF's innovations are 13 times their predicted variance (NIS) and its c1

@@ -60,6 +60,7 @@ def _est(lines: list[dict]) -> list[dict]:
     return [d for d in lines if d["type"] == "estimate"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["log", "csv"])
 def test_the_ekf_stays_consistent_across_a_gap(runs, name: str) -> None:
     """Every window's NIS within its band, no alert, one restart over the 0.5 s gap."""

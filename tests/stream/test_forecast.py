@@ -101,6 +101,7 @@ def test_forecasts_survive_the_alert_store(tmp_path) -> None:
         assert st.last_forecast["c1"].crossing_t == 60.0 and st.last_event == {}
 
 
+@pytest.mark.slow
 def test_estimator_does_not_import_the_cli() -> None:
     code = ("import sys; import estimator.stream.pipeline, estimator.stream.compare, "
             "estimator.output_only, estimator.ekf.stream; "

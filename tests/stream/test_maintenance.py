@@ -37,6 +37,7 @@ def stiff(stiff_wear_stream):
     return out
 
 
+@pytest.mark.slow
 def test_window_estimator_beats_the_fair_ekf_on_the_stiff_stream(stiff) -> None:
     nm, ekf = stiff["nm"], stiff["ekf_result"]
     # the EKF estimates what the window estimates and holds nothing
@@ -59,6 +60,7 @@ def test_first_forecast_ten_seconds_ahead_with_the_crossing_inside(stiff) -> Non
     assert c1["forecast_first_contains"]
 
 
+@pytest.mark.slow
 def test_monitor_cli_forecast_line_and_text(stiff_wear_stream, tmp_path) -> None:
     s = stiff_wear_stream
     csv = tmp_path / "stiff.csv"
@@ -94,6 +96,7 @@ def half4_run(half4_wear_stream):
     return out
 
 
+@pytest.mark.slow
 def test_half4_monitor_ekf_compare_and_forecast(half4_run) -> None:
     nm, ekf = half4_run["nm"], half4_run["ekf_result"]
     assert ekf["augmented"] == ["c1", "c2", "k1", "k2", "k3", "k4"] and ekf["held"] == {}
@@ -109,6 +112,7 @@ def test_half4_monitor_ekf_compare_and_forecast(half4_run) -> None:
     assert c1n["forecast_lead_s"] >= 10.0 and c1n["forecast_first_contains"]
 
 
+@pytest.mark.slow
 def test_half4_held_mass_is_reported(half4_wear_stream, tmp_path) -> None:
     """A free mass cannot be in the EKF's state: it is held, and every estimate says so."""
     s = half4_wear_stream
@@ -125,6 +129,7 @@ def test_half4_held_mass_is_reported(half4_wear_stream, tmp_path) -> None:
     assert "m1" not in est[0]["stderr"] and "c1" in est[0]["stderr"]
 
 
+@pytest.mark.slow
 def test_full7_monitor_and_fair_ekf_on_a_stable_car(tmp_path) -> None:
     """The full car: both estimators run on the same stream, estimate the same twelve dampers,
     springs and tyres, stay near the truth and neither alerts nor forecasts."""
@@ -155,6 +160,7 @@ def test_full7_monitor_and_fair_ekf_on_a_stable_car(tmp_path) -> None:
     assert outs["ekf"][-1]["held"] == {} and len(outs["ekf"][-1]["augmented"]) == 12
 
 
+@pytest.mark.slow
 def test_demo_stream_forecast_ten_seconds_ahead_and_alert_no_later_than_the_ekf() -> None:
     """``suspid compare``'s default stream (quantization only, c1 -50 % over 130 s, crossing
     at 98 s): the window's stated stderr is mostly its sigma_floor; with the tracker's
@@ -178,6 +184,7 @@ def test_demo_stream_forecast_ten_seconds_ahead_and_alert_no_later_than_the_ekf(
         assert side["params"]["k1"]["forecasts"] == 0
 
 
+@pytest.mark.slow
 def test_stable_stream_tracked_no_worse_than_the_ekf() -> None:
     """A soft quarter car at 2 % noise without wear: the tracker's steady model averages the
     windows (c1 no less accurate than the EKF's state), and neither side alerts or
@@ -198,6 +205,7 @@ def test_stable_stream_tracked_no_worse_than_the_ekf() -> None:
             assert p["alerts"] == [] and p["forecasts"] == 0
 
 
+@pytest.mark.slow
 def test_monitor_cli_window_drift_refers_estimates_to_the_window_end(tmp_path) -> None:
     """The window's linear drift (by default on the struts' free dampers and springs, here
     c1 and k1; ``[window] drift = []`` turns it off) on a quantization-only ramp (c1
@@ -235,6 +243,7 @@ def test_monitor_cli_window_drift_refers_estimates_to_the_window_end(tmp_path) -
     assert r.stderr.strip().splitlines()[-1].startswith("error: drift: c2 not among the free")
 
 
+@pytest.mark.slow
 def test_full7_wearing_stream_through_compare() -> None:
     """The full car losing front-left damping (c1 -50 % between 10 and 50 s, crossing 70 %
     at 34 s; 250 Hz, 1 % noise on the seven positions and four roads): both sides estimate the

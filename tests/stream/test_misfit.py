@@ -124,6 +124,7 @@ def test_per_channel_ratios_add_up_to_the_identify_measure(quarter2) -> None:
     assert min(per_off.values()) < noise_floor_ratio(prob, off) < max(per_off.values())
 
 
+@pytest.mark.slow
 def test_a_noise_free_record_is_no_misfit_as_identify_says(tmp_path) -> None:
     """A noise-free ISO 8608 record: ``identify`` fits it to 1e-19 and calls it a success;
     each window's ratio compares rounding and interpolation errors (12-22, above

@@ -86,6 +86,7 @@ def test_windows_recover_the_struts(name: str) -> None:
             assert abs(r.params[k] - s.nominal[k]) < 5 * r.stderr[k] + 1e-3 * s.nominal[k]
 
 
+@pytest.mark.slow
 def test_monitor_cli_on_a_full7_log(tmp_path: Path) -> None:
     m = get_model("full7")
     s = damper_wear(m, duration=12.0, wear_start=1e6, wear_end=2e6, seed=4, channels=m.coords)

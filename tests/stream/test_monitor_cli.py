@@ -74,6 +74,7 @@ def test_log_replay_jsonl_contract(fast_wear) -> None:
     assert est[-1]["inspection"]["phi_min_deg"] < est[0]["inspection"]["phi_min_deg"] - 10
 
 
+@pytest.mark.slow
 def test_csv_input_gives_the_same_windows(fast_wear) -> None:
     _, log, csv, _ = fast_wear
     ra = run("monitor", "--model", "quarter2", "--input", str(log), *FIX, "--jsonl", "--no-inspection")
@@ -121,6 +122,7 @@ def test_errors_are_one_line_exit_2(fast_wear, args, needle) -> None:
     assert "Traceback" not in r.stderr
 
 
+@pytest.mark.slow
 def test_killed_monitor_restarts_without_losing_or_duplicating(fast_wear, tmp_path: Path) -> None:
     _, log, _, _ = fast_wear
     afile = tmp_path / "alerts.jsonl"
@@ -148,6 +150,7 @@ def test_killed_monitor_restarts_without_losing_or_duplicating(fast_wear, tmp_pa
     assert afile.read_text().splitlines() == before
 
 
+@pytest.mark.slow
 def test_baseline_ekf_on_the_same_log(fast_wear) -> None:
     s, log, _, _ = fast_wear
     r = run("monitor", "--model", "quarter2", "--input", str(log), *FIX, "--baseline", "ekf", "--jsonl")
@@ -166,6 +169,7 @@ def test_baseline_ekf_on_the_same_log(fast_wear) -> None:
     assert out[-1]["cpu_us_per_sample"] > 0
 
 
+@pytest.mark.slow
 def test_a_jittered_csv_is_resampled_not_skipped(fast_wear, tmp_path: Path) -> None:
     """A logger's CSV with timing jitter (every sample within a fifth of a step of its grid
     point) was skipped window by window ("time base not uniform"); it is resampled onto the

@@ -25,6 +25,7 @@ def runs(wear_stream, quarter2):
     return rec_nm, out["nm"], rec_ekf, out["ekf_result"], cfg
 
 
+@pytest.mark.slow
 def test_first_c1_alert_after_crossing_within_a_few_seconds(runs, wear_stream) -> None:
     rec_nm, m_nm, *_ = runs
     crossing = wear_stream.crossing_time("c1", 0.7 * wear_stream.nominal["c1"])

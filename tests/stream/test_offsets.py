@@ -66,6 +66,7 @@ def _estimates(lines: list[dict[str, Any]]) -> list[dict[str, float]]:
 @pytest.mark.parametrize("key,column,value", [("quarter2:x1", "x1", 0.004),
                                               ("quarter2:r", "r", 0.01),
                                               ("half4:x1", "x1", -0.003)])
+@pytest.mark.slow
 def test_found_once_removed_and_estimates_as_without_it(records: dict[str, Path],
                                                         capsys: pytest.CaptureFixture[str],
                                                         key: str, column: str,
@@ -175,6 +176,7 @@ def test_ekf_that_diverges_is_restarted(records: dict[str, Path],
     assert est[-1]["params"]["c1"] == pytest.approx(ref[-1]["params"]["c1"], rel=0.05)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("model_name", ["quarter1", "quarter2", "half4", "full7"])
 def test_every_model_wear_stream_clean_and_with_a_body_offset(
         model_name: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

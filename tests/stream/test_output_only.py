@@ -56,6 +56,7 @@ def test_parked_vehicle_is_skipped() -> None:
     assert line["type"] == "skip" and "too little excitation" in line["reason"]
 
 
+@pytest.mark.slow
 def test_real_canedge_drive_body_bounce(realdata) -> None:
     d = realdata / "canedge-imu"
     mf4 = sorted(d.glob("*.MF4"))[0]

@@ -137,6 +137,7 @@ def test_usage_errors_name_the_road(csv_stream, tmp_path: Path) -> None:
     assert r.returncode == 2 and "--road unknown" in r.stderr and "Traceback" not in r.stderr
 
 
+@pytest.mark.slow
 def test_compare_cli_road_unknown_table() -> None:
     r = run("compare", "--model", "quarter2", "--road", "unknown", "--duration", "60", "--json")
     assert r.returncode == 0, r.stderr
