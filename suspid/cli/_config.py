@@ -1,24 +1,9 @@
 """The ``--config FILE`` of the subcommands: one TOML file with the tuning the options leave out.
 
-Window and estimator tuning, CAN decoding details, the live receiver and the fleet's alert
-rule are set in tables of one TOML file (read with :mod:`tomllib`) rather than by options::
-
-    [window]
-    sigma_floor = 0.01
-    drift = []            # every parameter constant over a window
-
-    [live]
-    idle_timeout_s = 0    # a live bus: never stop for silence
-
-:data:`SCHEMA` lists every table and key with its type, unit, range, default and meaning
-(``docs/configuration.md`` is the same table, checked by ``tests/core/test_config.py``).
-A command reads the tables it uses (:data:`TABLES`) and ignores the others, so one file
-can serve every command; a table or key the schema does not know, a value of the wrong
-type or out of range is one line naming the file, ``table.key``, expected and got
-(:class:`~suspid.errors.InputError`, exit 2).
-
-The ``[map]`` table (a DBC signal per model channel) is the signal-map format of
-:mod:`suspid.can.signal_map`.
+:data:`SCHEMA` lists every table and key (``docs/configuration.md`` is the same table). A
+command reads the tables it uses (:data:`TABLES`) and ignores the others; an unknown table or
+key, or a bad value, is one :class:`~suspid.errors.InputError` line naming the file,
+``table.key``, expected and got. ``[map]`` is :mod:`suspid.can.signal_map`'s format.
 """
 from __future__ import annotations
 
@@ -36,24 +21,11 @@ __all__ = ["Key", "SCHEMA", "TABLES", "Config", "load_config"]
 
 @dataclass(frozen=True)
 class Key:
-    """One configuration key.
+    """One configuration key: its type, SI unit, documented default, meaning and range.
 
-    Attributes
-    ----------
-    type : {"int", "float", "bool", "str", "names", "address", "x0"}
-        ``names``: a list of strings; ``address``: a string or an integer (with ``lo`` and
-        ``hi``, an integer in that range, in a string as ``"0x47"`` or ``"71"``); ``x0``:
-        ``"estimate"``, ``"rest"`` or a list of numbers (given on as ``"V1,V2,..."``).
-    unit : str
-        SI unit of the value (``""`` for none).
-    default : str
-        The default, as the documentation states it.
-    meaning : str
-        What the key sets.
-    lo, hi : float, optional
-        Allowed range (``lo`` and ``hi`` included unless ``open_lo``/``open_hi``).
-    choices : tuple of str
-        Allowed values of a ``str`` key (empty: any).
+    ``type`` is ``int``, ``float``, ``bool``, ``str`` (one of ``choices`` when given), ``names``
+    (a list of strings), ``address`` (a string or integer; with ``lo``/``hi`` an integer in that
+    range, ``"0x47"`` too) or ``x0`` (``"estimate"``, ``"rest"`` or a list of numbers).
     """
 
     type: str
@@ -129,7 +101,6 @@ class Key:
         raise ValueError
 
     def _check_range(self, v: float) -> None:
-        """``ValueError`` unless ``v`` is within ``lo``..``hi`` (open ends as declared)."""
         if self.lo is not None and (v <= self.lo if self.open_lo else v < self.lo):
             raise ValueError
         if self.hi is not None and (v >= self.hi if self.open_hi else v > self.hi):
@@ -138,22 +109,18 @@ class Key:
 
 def _f(unit: str, default: str, meaning: str, lo: float | None = None, hi: float | None = None,
        open_lo: bool = False, open_hi: bool = False) -> Key:
-    """A number key (:class:`Key` ``float``) in ``unit``, within ``lo``..``hi`` when given."""
     return Key("float", unit, default, meaning, lo, hi, open_lo, open_hi)
 
 
 def _i(default: str, meaning: str, lo: float | None = None, unit: str = "") -> Key:
-    """An integer key, at least ``lo`` when given."""
     return Key("int", unit, default, meaning, lo)
 
 
 def _b(default: str, meaning: str) -> Key:
-    """A true/false key."""
     return Key("bool", "", default, meaning)
 
 
 def _s(default: str, meaning: str, choices: tuple[str, ...] = ()) -> Key:
-    """A string key, one of ``choices`` when given."""
     return Key("str", "", default, meaning, choices=choices)
 
 
@@ -303,17 +270,8 @@ TABLES: dict[str, tuple[str, ...]] = {
 
 @dataclass
 class Config:
-    """A checked configuration file.
-
-    Attributes
-    ----------
-    path : Path or None
-        The file (``None``: no ``--config``, every default).
-    tables : dict
-        ``table -> {key: value}`` of the keys the file sets (checked, converted).
-    signal_map : SignalMap or None
-        The ``[map]`` table with the ``[can]`` DBC, if any.
-    """
+    """A checked configuration file (``path`` ``None``: every default): ``tables`` holds the
+    keys it sets (``table -> {key: value}``), ``signal_map`` its ``[map]`` table."""
 
     path: Path | None = None
     tables: dict[str, dict[str, Any]] | None = None
@@ -333,30 +291,19 @@ class Config:
 
 
 def _got(value: Any) -> str:
-    """A TOML value and its type for a message (``'abc' (string)``)."""
     kind = {bool: "boolean", int: "integer", float: "float", str: "string", list: "array",
             dict: "table"}.get(type(value), type(value).__name__)
     return f"{value!r} ({kind})"
 
 
 def load_config(path: str | Path | None) -> Config:
-    """Read and check a configuration file.
-
-    Parameters
-    ----------
-    path : str or Path or None
-        The ``--config`` file; ``None`` gives an empty :class:`Config` (every default).
-
-    Returns
-    -------
-    Config
+    """Read and check the ``--config`` file (``None``: an empty :class:`Config`).
 
     Raises
     ------
     InputError
-        The file cannot be read, is not TOML, or has an unknown table or key, or a value of
-        the wrong type or out of range: one line naming the file, ``table.key``, expected
-        and got.
+        Unreadable, not TOML, an unknown table or key, or a bad value (one line naming the
+        file, ``table.key``, expected and got).
     """
     if path is None:
         return Config()
