@@ -141,22 +141,10 @@ def make_scenario(model: SuspensionModel, name: str, duration: float = 5.0, fs: 
                   x0: FloatArray | None = None) -> tuple[FloatArray, dict[str, FloatArray], FloatArray]:
     """Build the time grid, road dict and initial state of a named scenario.
 
-    Parameters
-    ----------
-    name : {"initial", "curb", "bump", "iso8608"}
-    duration, fs : float
-        Record length (s) and sample rate (Hz).
-    params : mapping, optional
-        Model parameters (SI; the road lags may depend on them).
-    h, l, v_kmh, t0, rise, road_class, seed
-        Shape parameters (m, m, km/h, s, s; see the module docstring).
-    x0 : ndarray, optional
-        Initial state; default the model's ``initial_state()`` for ``initial``, rest otherwise.
-
-    Returns
-    -------
-    t, road, x0
-        Times (s), ``{road: r, road_dot: r'}`` (m, m/s; empty for ``initial``), ``[q, q']``.
+    ``duration`` in s, ``fs`` in Hz, ``params`` (SI) for the road lags; ``h``, ``l`` (m),
+    ``v_kmh``, ``t0``, ``rise`` (s), ``road_class``, ``seed`` shape the road (module docstring).
+    ``x0`` defaults to the model's ``initial_state()`` for ``initial``, rest otherwise. Returns
+    the times (s), ``{road: r, road_dot: r'}`` (m, m/s; empty for ``initial``) and ``x0``.
     """
     t = time_grid(duration, fs)
     p = dict(model.defaults(), **(params or {}))

@@ -19,11 +19,9 @@ from dataclasses import dataclass
 from typing import Any, Callable, Mapping, Protocol, Sequence
 
 import numpy as np
-from scipy.linalg import expm
-
 from suspid.errors import UsageError
 from suspid.models.base import AffinePieces, FloatArray, SuspensionModel
-from suspid.simulate import (foh_weights, mass_inverse, pack_channels, road_matrix,
+from suspid.simulate import (foh_expm, foh_weights, mass_inverse, pack_channels, road_matrix,
                              state_matrices, uniform_step)
 
 #: scalar force law at one site: ``phi(s, s_dot) -> force`` (N)
@@ -157,18 +155,8 @@ def _discretise(model: SuspensionModel, p: Mapping[str, float], sites: Sequence[
     for j, site in enumerate(sites):
         Bfs[nq:, j] = Minv @ site.b
     Bw = np.hstack([Bz, Bfs])
-    m = Bw.shape[1]
     modal = _modal_weights(A, Bw, h)
-    if modal is not None:
-        Phi, W0, W1 = modal
-        return _Setup(A, B, Bv, Phi, W0[:, :nr], W1[:, :nr], W0[:, nr:], W1[:, nr:], Bfs)
-    blk = np.zeros((n + 2 * m, n + 2 * m))
-    blk[:n, :n] = A * h
-    blk[:n, n:n + m] = Bw * h
-    blk[n:n + m, n + m:] = np.eye(m)
-    E = expm(blk)
-    Phi, Ga, Gb = E[:n, :n], E[:n, n:n + m], E[:n, n + m:]
-    W0, W1 = Ga - Gb, Gb  # weights of w_k and w_k+1
+    Phi, W0, W1 = modal if modal is not None else foh_expm(A, Bw, h)
     return _Setup(A, B, Bv, Phi, W0[:, :nr], W1[:, :nr], W0[:, nr:], W1[:, nr:], Bfs)
 
 
@@ -179,25 +167,10 @@ def simulate_effects(model: SuspensionModel, params: Mapping[str, float],
                      affine: AffinePieces | None = None) -> dict[str, FloatArray]:
     """Simulate ``model`` with physical ``effects`` on a uniform time grid.
 
-    Parameters
-    ----------
-    model : SuspensionModel
-        The linear base model (its own ``extra_force`` is ignored).
-    params : mapping
-        Base parameters (SI).
-    t : ndarray, shape (N,)
-        Uniformly spaced sample times (s); UsageError otherwise.
-    road, x0, affine :
-        As for :func:`suspid.simulate.simulate`.
-    substeps : int
-        Internal steps per sample interval (>= 1).
-    U : ndarray, optional
-        Precomputed :func:`suspid.simulate.road_matrix` rows.
-
-    Returns
-    -------
-    dict
-        ``channel -> ndarray``: the model's channels, ride heights and roads.
+    ``model`` is the linear base model (its ``extra_force`` ignored), ``params`` its parameters
+    (SI), ``t`` uniform sample times (s; UsageError otherwise); ``road``, ``x0``, ``affine`` and
+    the result as for :func:`suspid.simulate.simulate`. ``substeps``: internal steps per sample
+    interval; ``U``: precomputed :func:`suspid.simulate.road_matrix` rows.
     """
     t = np.asarray(t, dtype=float)
     p = dict(params)

@@ -143,21 +143,10 @@ def foh_weights(lam: np.ndarray, h: float | np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Exact first-order-hold discretisation of the modes ``w' = lam w + b(t)``.
 
-    With ``b`` linear between two samples, ``w1 = E w0 + g0 b0 + g1 b1``.
-
-    Parameters
-    ----------
-    lam : ndarray of complex
-        Eigenvalues (1/s); broadcast against ``h``.
-    h : float or ndarray
-        Sample interval(s) (s).
-
-    Returns
-    -------
-    E, g0, g1 : ndarray
-        ``exp(lam h)`` and the weights (s): ``g1 = int_0^h e^{lam (h - s)} s / h ds``,
-        ``g0 = int_0^h e^{lam (h - s)} ds - g1`` (a fourth-order series where ``|lam h| < 1e-3``,
-        as the closed forms cancel there).
+    With ``b`` linear between two samples, ``w1 = E w0 + g0 b0 + g1 b1``: ``E = exp(lam h)``,
+    ``g1 = int_0^h e^{lam (h - s)} s / h ds``, ``g0 = int_0^h e^{lam (h - s)} ds - g1`` (s), for
+    eigenvalues ``lam`` (1/s) broadcast against the step(s) ``h`` (s). Where ``|lam h| < 1e-3``
+    the closed forms cancel: a fourth-order series is used there.
     """
     z = lam * h
     E = np.exp(z)
@@ -299,18 +288,8 @@ def simulate_states(model: SuspensionModel, p: Mapping[str, float], t: FloatArra
                     modal: Modal | None = None, affine: AffinePieces | None = None) -> FloatArray:
     """State trajectory ``X`` (N, n) of the linear model under FOH road input ``U``.
 
-    Parameters
-    ----------
-    p : mapping
-        Parameters (SI).
-    t : ndarray, shape (N,)
-        Sample times (s); a defective ``A`` falls back to per-interval matrix exponentials.
-    U : ndarray, shape (N, 2 n_roads)
-        Inputs ``[r, r_dot]`` (m, m/s) from :func:`road_matrix`.
-    x0 : ndarray, shape (n,), optional
-        Initial state ``[q, q']`` at ``t[0]`` (default: rest).
-    modal, affine : optional
-        Precomputed :func:`modal_form` for ``p``; the model's affine pieces.
+    ``p`` in SI, ``t`` (N,) in s, ``U`` (N, 2 n_roads) from :func:`road_matrix`, ``x0`` at
+    ``t[0]`` (default rest); ``modal``: :func:`modal_form` for ``p`` if computed already.
     """
     n = model.n_states
     nr = len(model.roads)
@@ -329,9 +308,6 @@ def _simulate_states_loop(model: SuspensionModel, p: Mapping[str, float], t: Flo
                           U: FloatArray, x0: FloatArray,
                           affine: AffinePieces | None = None) -> FloatArray:
     """Exact FOH stepping with block matrix exponentials (defective A)."""
-    # only a defective A lands here: `suspid simulate` otherwise loads no scipy
-    from scipy.linalg import expm  # noqa: PLC0415
-
     A, B = state_matrices(model, p, affine)
     n = model.n_states
     nr = len(model.roads)
@@ -346,17 +322,27 @@ def _simulate_states_loop(model: SuspensionModel, p: Mapping[str, float], t: Flo
         h = float(t[k + 1] - t[k])
         key = round(h, 12)
         if key not in cache:
-            blk = np.zeros((n + 2 * nr, n + 2 * nr))
-            blk[:n, :n] = A * h
-            blk[:n, n:n + nr] = Bz * h
-            blk[n:n + nr, n + nr:] = np.eye(nr)
-            F = expm(blk)
-            Phi, G1, G2 = F[:n, :n], F[:n, n:n + nr], F[:n, n + nr:]
-            cache[key] = (Phi, G1 - G2, G2)
+            cache[key] = foh_expm(A, Bz, h)
         Phi, Ga, Gb = cache[key]
         z = Phi @ z + Ga @ r[k] + Gb @ r[k + 1]
         X[k + 1] = z + Bv @ r[k + 1]
     return X
+
+
+def foh_expm(A: FloatArray, Bw: FloatArray, h: float) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Exact FOH step of ``x' = A x + Bw w`` (``w`` linear over ``h``, s) by one block matrix
+    exponential: ``x1 = Phi x0 + W0 w0 + W1 w1``; returns ``(Phi, W0, W1)``."""
+    # only a defective A lands here: `suspid simulate` otherwise loads no scipy
+    from scipy.linalg import expm  # noqa: PLC0415
+
+    n, m = Bw.shape
+    blk = np.zeros((n + 2 * m, n + 2 * m))
+    blk[:n, :n] = A * h
+    blk[:n, n:n + m] = Bw * h
+    blk[n:n + m, n + m:] = np.eye(m)
+    F = expm(blk)
+    Phi, Ga, Gb = F[:n, :n], F[:n, n:n + m], F[:n, n + m:]
+    return Phi, Ga - Gb, Gb
 
 
 def ride_height_maps(model: SuspensionModel, p: Mapping[str, float]
@@ -443,16 +429,11 @@ def simulate(model: SuspensionModel, params: Mapping[str, float], t: FloatArray,
     t : ndarray, shape (N,)
         Sample times (s).
     road : dict, optional
-        Road displacement arrays by road name (m), optional ``<name>_dot`` (m/s).
+        Road arrays by road name (m), optional ``<name>_dot`` (m/s).
     x0 : ndarray, optional
         Initial state ``[q, q']`` (default: rest).
     affine : AffinePieces, optional
         The model's affine pieces, for callers that simulate many damper/spring sets.
-
-    Returns
-    -------
-    dict
-        ``channel -> ndarray``: the model's channels, ride heights and roads.
     """
     t = np.asarray(t, dtype=float)
     U = road_matrix(model, t, road)

@@ -1,25 +1,6 @@
 """Effect library: optional terms the linear suspension models lack.
 
-Every entry of the contract's ``suspid diagnose`` table is one registered class:
-
-===================== ============================== =========================================
-name                  parameters                     term
-===================== ============================== =========================================
-coulomb_friction      ``F`` (N)                      strut force ``F sgn(d')``
-asymmetric_damping    ``c_rebound``, ``c_compression`` damper ``c_rebound d'`` for ``d' > 0``
-                      (N s/m)                        (rebound = extension), ``c_compression d'``
-                                                     for ``d' < 0``; replaces ``c1 d'``
-quadratic_damping     ``c_quad`` (N s^2/m^2)         strut force ``c_quad |d'| d'``
-progressive_spring    ``k_cubic`` (N/m^3)            spring ``k1 d + k_cubic d^3``
-bump_stop             ``gap`` (m), ``k_stop`` (N/m)  ``k_stop (-d - gap)`` once the compression
-                                                     ``-d`` exceeds ``gap``
-tire_liftoff          (none)                         the tyre cannot pull: contact force
-                                                     ``W + k2 s + c2 s' >= 0``
-sensor_delay          ``channels`` (list),           listed channels read ``y(t - delay_s)``
-                      ``delay_s`` (s)
-sensor_offset         ``channel``, ``offset`` (SI)   ``channel`` reads ``y + offset``
-===================== ============================== =========================================
-
+One registered class per entry of the contract's ``suspid diagnose`` table.
 Each class carries its law, where it applies (from the model's structure, never its name:
 :func:`effects_for`) and what ``suspid diagnose`` needs to find and refit it. The strut
 deflection ``d`` (m) is the extension (``d' > 0`` rebound); a physical effect's force

@@ -17,7 +17,6 @@ from suspid.nlsim import Law
 _E = TypeVar("_E", bound="Effect")
 
 
-# ------------------------------------------------------------------------- parameters
 @dataclass(frozen=True)
 class EffectParam:
     """One parameter of an effect: name (the contract's), SI unit (``"SI"``: the channel's own)
@@ -30,7 +29,6 @@ class EffectParam:
     kind: str = "positive"
 
 
-# ------------------------------------------------------------------------- sites
 def strut_sites(model: SuspensionModel, p: Mapping[str, float]) -> list[Site]:
     """The suspension struts of ``model`` (deflection = extension, force resists extension)."""
     return model.strut_sites(p)
@@ -41,7 +39,6 @@ def tyre_sites(model: SuspensionModel, p: Mapping[str, float]) -> list[Site]:
     return model.tyre_sites(p)
 
 
-# ------------------------------------------------------------------------- effects
 #: settings of one screening trial of a physical effect (e.g. ``{"gap": 0.01}``)
 Trial = dict[str, float]
 
@@ -68,7 +65,6 @@ class Effect:
         for spec in self.params:
             self.values[spec.name] = _check_value(self.name, spec, values[spec.name])
 
-    # ---- names and values ---------------------------------------------------------
     @property
     def numeric_names(self) -> list[str]:
         """Names of the float parameters (the ones an optimiser can vary)."""
@@ -94,7 +90,6 @@ class Effect:
             out[k] = list(v) if isinstance(v, (list, tuple)) else (float(v) if isinstance(v, float) else v)
         return {"name": self.name, "params": out}
 
-    # ---- where it applies -----------------------------------------------------------
     @classmethod
     def unavailable_reason(cls, model: SuspensionModel) -> str | None:
         """Why the effect is not defined for ``model`` (``None``: it is), from its structure."""
@@ -162,7 +157,6 @@ class PhysicalEffect(Effect):
     #: what the evidence figure plots the residual force against: ``"rate"`` or ``"deflection"``
     plot_against: ClassVar[str] = "rate"
 
-    # ---- sites ------------------------------------------------------------------------
     @classmethod
     def model_sites(cls, model: SuspensionModel, p: Mapping[str, float] | None = None) -> list[Site]:
         """Every site of ``model`` of this effect's kind (``p``: parameters, default the model's)."""
@@ -190,7 +184,6 @@ class PhysicalEffect(Effect):
             raise UsageError(f"effect {self.name} is not available for model {model.name}: {why}")
         return sites
 
-    # ---- physics ----------------------------------------------------------------------
     def law(self, site: Site, base: Mapping[str, float]) -> Law:
         """Scalar force law ``phi(s, s') -> N`` at ``site`` for base parameters ``base``."""
         raise NotImplementedError(f"effect {self.name}: no force law")
@@ -223,7 +216,6 @@ class PhysicalEffect(Effect):
         them (an asymmetric damper's symmetric part is ``c``); ValueError if not one value."""
         return {}
 
-    # ---- diagnosis --------------------------------------------------------------------
     @classmethod
     def screen_trials(cls, sites: Sequence[Site], s: Sequence[FloatArray],
                       sd: Sequence[FloatArray]) -> list[Trial]:
@@ -283,7 +275,6 @@ class SensorEffect(Effect):
             raise UsageError(f"effect {self.name}: unknown channel(s) {', '.join(bad)} for model "
                              f"{model.name}; expected any of {', '.join(model.channels)}")
 
-    # ---- diagnosis --------------------------------------------------------------------
     @classmethod
     def screen_groups(cls, model: SuspensionModel, measured: Sequence[str]) -> list[list[str]]:
         """Channel groups the effect may affect (default: each measured channel alone)."""

@@ -16,7 +16,6 @@ from suspid.nlsim import simulate_effects
 from suspid.simulate import simulate, simulate_ode
 
 
-# ------------------------------------------------------------------------- construction
 def make_effect(name: str, **values: Any) -> Effect:
     """Build the effect called ``name`` with parameters ``values`` (UsageError: unknown, bad)."""
     reg = effect_classes()
@@ -52,7 +51,6 @@ def as_effect(e: "Effect | str | Mapping[str, Any]") -> Effect:
                      f"mapping, got {e!r}")
 
 
-# ------------------------------------------------------------------------- injection
 @dataclass
 class Injection:
     """A model with effects nobody declared to the estimator: ``model`` is a copy of ``base``
@@ -84,16 +82,9 @@ class Injection:
                  method: str = "fast", max_step: float = 2.5e-4) -> dict[str, FloatArray]:
         """Simulate the model with every effect and return what the sensors report.
 
-        Parameters
-        ----------
-        params : mapping
-            Base model parameters (SI); the effects carry their own.
-        t, road, x0 :
-            As for :func:`suspid.simulate.simulate` (s, m, m/s).
-        method : {"fast", "ode"}
-            ``fast``: :mod:`suspid.nlsim` with internal steps of at most ``max_step`` (s);
-            ``ode``: :func:`simulate_ode` (reference accuracy). Without physical effects the
-            exact linear simulator either way.
+        ``params`` are the base model's (SI), ``t``, ``road``, ``x0`` as for
+        :func:`suspid.simulate.simulate`. ``method``: ``fast`` (:mod:`suspid.nlsim`, steps of at
+        most ``max_step`` s) or ``ode`` (:func:`simulate_ode`, reference accuracy).
         """
         t = np.asarray(t, dtype=float)
         p = dict(params)

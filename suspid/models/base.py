@@ -204,7 +204,6 @@ class SuspensionModel:
     scale_invariant: tuple[str, ...] = ()
     extra_force: list[ForceFn] = field(default_factory=list)
 
-    # ---- names -------------------------------------------------------------------
     @property
     def param_names(self) -> tuple[str, ...]:
         """Parameter names in canonical order."""
@@ -242,7 +241,6 @@ class SuspensionModel:
         raise UsageError(f"model {self.name} has no parameter {name!r}; "
                          f"expected one of {', '.join(self.param_names)}")
 
-    # ---- model-owned facts (overridden by concrete models where they differ) -------
     def initial_state(self) -> FloatArray:
         """The ``initial`` scenario's state ``[q, q']`` (m, rad, m/s, rad/s); default rest."""
         return np.zeros(self.n_states)
@@ -363,7 +361,6 @@ class SuspensionModel:
             return ("m" + per, "rad" + per)
         return ("rad" + per,) if base in self.angles else ("m" + per,)
 
-    # ---- physics (overridden by concrete models) ---------------------------------
     def matrices(self, p: Mapping[str, float]) -> Matrices:
         """Return ``(M, C, K, Fk, Fc)`` for parameters ``p`` (SI units)."""
         raise NotImplementedError
@@ -432,16 +429,8 @@ class SuspensionModel:
     def rhs(self, t: float, x: FloatArray, u: FloatArray, params: Mapping[str, float]) -> FloatArray:
         """State derivative ``[q', q'']`` (the one right-hand side of the physics).
 
-        Parameters
-        ----------
-        t : float
-            Time (s); passed to effect terms.
-        x : ndarray, shape (n,)
-            State ``[q, q']`` (m, rad, m/s, rad/s).
-        u : ndarray, shape (2 * n_roads,)
-            Input ``[r, r']`` (m, m/s).
-        params : mapping
-            Parameter values (SI).
+        ``t`` in s (passed to effect terms), ``x = [q, q']`` (m, rad, m/s, rad/s), ``u = [r, r']``
+        (m, m/s), ``params`` in SI.
         """
         M, C, K, Fk, Fc = self.matrices(params)
         nq = len(self.coords)

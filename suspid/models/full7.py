@@ -1,10 +1,8 @@
 """7-DOF full car: body heave, pitch and roll over four wheels.
 
-Coordinates ``q = [x, delta, phi, x1, x2, x3, x4]``: body heave at the centre of mass (m),
-pitch (rad, the ``half4`` sign: the body at the front axle moves by ``x - a1 delta``, at the
-rear by ``x + a2 delta``), roll (rad, positive when the left side rises: a corner at lateral
-position ``y`` moves by an extra ``y phi``) and the wheels at the corners 1 front-left,
-2 front-right, 3 rear-left, 4 rear-right (m).
+Coordinates ``q = [x, delta, phi, x1, x2, x3, x4]``: body heave (m), pitch (rad, the ``half4``
+sign), roll (rad, positive when the left side rises) and the wheels (m) at the corners 1
+front-left, 2 front-right, 3 rear-left, 4 rear-right.
 
 Corner ``i`` at ``l_i`` (front ``-a1``, rear ``+a2``) and ``y_i`` (left ``+w/2``, right
 ``-w/2``) has the strut extension ``d_i = x + l_i delta + y_i phi - x_i`` (spring ``ki``,
