@@ -44,21 +44,19 @@ class SensorDelay(SensorEffect):
     description = "listed channels lag the others by delay_s"
     time_shift = "delay_s"
 
-    def apply(self, t: FloatArray, channels: Mapping[str, FloatArray]) -> dict[str, FloatArray]:
+    def _shifted(self, t: FloatArray, channels: Mapping[str, FloatArray], dt: float) -> dict[str, FloatArray]:
         out = dict(channels)
         tt = np.asarray(t, dtype=float)
         for c in self.values["channels"]:
             if c in out:
-                out[c] = _shift(tt, np.asarray(out[c], dtype=float), -self.values["delay_s"])
+                out[c] = _shift(tt, np.asarray(out[c], dtype=float), dt)
         return out
 
+    def apply(self, t: FloatArray, channels: Mapping[str, FloatArray]) -> dict[str, FloatArray]:
+        return self._shifted(t, channels, -self.values["delay_s"])
+
     def compensate(self, t: FloatArray, channels: Mapping[str, FloatArray]) -> dict[str, FloatArray]:
-        out = dict(channels)
-        tt = np.asarray(t, dtype=float)
-        for c in self.values["channels"]:
-            if c in out:
-                out[c] = _shift(tt, np.asarray(out[c], dtype=float), self.values["delay_s"])
-        return out
+        return self._shifted(t, channels, self.values["delay_s"])
 
     def record_problem(self, t: FloatArray) -> str | None:
         tt = np.asarray(t, dtype=float)
@@ -102,19 +100,18 @@ class SensorOffset(SensorEffect):
               EffectParam("offset", "SI", "constant offset added to the channel", "real"))
     description = "constant offset on one channel"
 
-    def apply(self, t: FloatArray, channels: Mapping[str, FloatArray]) -> dict[str, FloatArray]:
+    def _added(self, channels: Mapping[str, FloatArray], offset: float) -> dict[str, FloatArray]:
         out = dict(channels)
         c = self.values["channel"]
         if c in out:
-            out[c] = np.asarray(out[c], dtype=float) + self.values["offset"]
+            out[c] = np.asarray(out[c], dtype=float) + offset
         return out
 
+    def apply(self, t: FloatArray, channels: Mapping[str, FloatArray]) -> dict[str, FloatArray]:
+        return self._added(channels, self.values["offset"])
+
     def compensate(self, t: FloatArray, channels: Mapping[str, FloatArray]) -> dict[str, FloatArray]:
-        out = dict(channels)
-        c = self.values["channel"]
-        if c in out:
-            out[c] = np.asarray(out[c], dtype=float) - self.values["offset"]
-        return out
+        return self._added(channels, -self.values["offset"])
 
     @classmethod
     def output_sensitivity(cls, channel: str, t: FloatArray,
