@@ -6,11 +6,8 @@ from pathlib import Path
 
 
 class SuspidError(Exception):
-    """Bad usage or unusable input.
-
-    The message must name what is wrong (file, line or frame, field, expected vs got);
-    the CLI prints it as ``error: <message>`` and exits with status 2.
-    """
+    """Bad usage or unusable input; the message names what is wrong (file, line or frame,
+    field, expected vs got)."""
 
 
 class InputError(SuspidError):
@@ -22,13 +19,7 @@ class UsageError(SuspidError):
 
 
 def require_file(path: str | os.PathLike[str], what: str = "file") -> Path:
-    """``path`` as a :class:`~pathlib.Path` if it is an existing regular file.
-
-    Raises
-    ------
-    InputError
-        ``PATH: no such WHAT`` or ``PATH: is a directory, expected a WHAT``.
-    """
+    """``path`` as a :class:`~pathlib.Path` if it is an existing regular file, else InputError."""
     p = Path(path)
     if p.is_file():
         return p

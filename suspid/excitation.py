@@ -1,30 +1,16 @@
 """Excitations (road inputs and initial states) for the suspension models.
 
-Shapes (all documented in README and docs):
+* ``initial``: no road; the model's :meth:`~suspid.models.base.SuspensionModel.initial_state`.
+* ``curb``: a step of height ``h`` (m) at ``t0`` (s) with a half-cosine rise of ``rise`` (s).
+* ``bump``: the raised cosine ``r(s) = h/2 (1 - cos(2 pi s / l))`` over its length ``l`` (m),
+  crossed at ``v`` (km/h) from ``t0``.
+* ``iso8608``: a random road of ISO 8608 class A-H at ``v`` (km/h): displacement PSD
+  ``Gd(n) = Gd(n0) (n / n0)^-2``, ``n0 = 0.1 cycles/m``, ``Gd(n0)`` 16e-6 m^3 for A and 4x per
+  class, by inverse FFT with random phases over 0.011-2.83 cycles/m.
 
-* ``initial``: no road input; the body (and optionally the wheels) start away from
-  equilibrium, at the model's :meth:`~suspid.models.base.SuspensionModel.initial_state`
-  (``quarter2``: the seed's Table 2, x01 = 0.20 m, v01 = 0.50 m/s, x02 = 0.10 m,
-  v02 = 0.05 m/s; ``half4``: the seed's §6.1 body state, x = 0.05 m, x' = 0.05 m/s,
-  delta = 0.05 rad, delta' = 0.05 rad/s).
-* ``curb``: a step of height ``h`` (m) at ``t0`` (s) with a half-cosine rise of duration
-  ``rise`` (s, default 0.02 s), so ``r' = h pi / (2 rise) sin(...)`` stays finite.
-* ``bump``: a speed bump of height ``h`` (m) and length ``l`` (m) crossed at speed ``v``
-  (km/h) starting at ``t0``; the profile over the bump's length is the raised cosine
-  ``r(s) = h/2 (1 - cos(2 pi s / l))`` for ``0 <= s <= l`` (seed: 0.1 m, 3 m, 20 km/h).
-* ``iso8608``: a random road of ISO 8608 class A-H at speed ``v`` (km/h): displacement PSD
-  ``Gd(n) = Gd(n0) (n / n0)^-2`` with ``n0 = 0.1 cycles/m`` and ``Gd(n0)`` the class's
-  geometric mean (A: 16e-6 m^3, each class 4x the previous), synthesised by inverse FFT
-  with random phases over 0.011-2.83 cycles/m.
-* measured roads come from the measurement CSV.
-
-Which road follows which is the model's: every road lies on a track
-(:meth:`~suspid.models.base.SuspensionModel.road_tracks`) and runs ``L_i`` metres behind the
-first axle (:meth:`~suspid.models.base.SuspensionModel.road_lags`), so at speed ``v`` it sees
-its track delayed by ``L_i / v``: for ``half4`` ``r2(t) = r1(t - (a1 + a2) / v)``, for
-``full7`` the rear roads ``r3``, ``r4`` follow ``r1``, ``r2``. Curbs and bumps span the
-whole width (every track the same); the ISO 8608 road draws one random profile per track
-(seed ``seed + 7919 j`` for track ``j``, so track 0 is the single-track road).
+A road on track ``j`` running ``L`` m behind the first axle (the model's ``road_tracks``,
+``road_lags``) sees its track delayed by ``L / v``; curbs and bumps span every track, the
+ISO road draws one profile per track (seed ``seed + 7919 j``).
 """
 from __future__ import annotations
 
@@ -68,10 +54,7 @@ def bump_profile(t: FloatArray, h: float = 0.1, l: float = 3.0, v_kmh: float = 2
 
 def iso8608_road(length: float, road_class: str = "C", seed: int = 0,
                  ds: float = 0.02) -> tuple[FloatArray, FloatArray]:
-    """Synthesise an ISO 8608 road of at least ``length`` (m): ``(s, z)`` in m.
-
-    Cosine amplitudes from the one-sided displacement PSD on the FFT grid, random phases.
-    """
+    """Synthesise an ISO 8608 road of at least ``length`` (m): ``(s, z)`` in m."""
     cls = road_class.upper()
     if cls not in ISO8608_CLASSES:
         raise UsageError(f"unknown ISO 8608 road class {road_class!r}; expected one of A-H")
@@ -90,11 +73,8 @@ def iso8608_road(length: float, road_class: str = "C", seed: int = 0,
 
 def iso8608_profile(t: FloatArray, road_class: str = "C", v_kmh: float = 50.0, seed: int = 0,
                     lag: float = 0.0, lead: float = 0.0) -> tuple[FloatArray, FloatArray]:
-    """ISO 8608 road seen at speed ``v_kmh`` by a wheel ``lag`` m behind the first: ``r``, ``r'``.
-
-    ``lead`` (m) is the road length synthesised before the first wheel's start (>= the
-    largest lag used with the same seed, so all wheels share one road).
-    """
+    """ISO 8608 road seen at speed ``v_kmh`` by a wheel ``lag`` m behind the first: ``r``, ``r'``
+    (``lead``, m: road synthesised before the first wheel, >= the largest lag)."""
     v = v_kmh / 3.6
     if v <= 0:
         raise UsageError(f"road speed must be > 0 km/h, got {v_kmh}")
@@ -106,14 +86,8 @@ def iso8608_profile(t: FloatArray, road_class: str = "C", v_kmh: float = 50.0, s
 
 
 def time_grid(duration: float, fs: float) -> FloatArray:
-    """Sample times ``0, 1/fs, ..., duration`` (s).
-
-    Raises
-    ------
-    UsageError
-        A duration or rate that is not finite and > 0, or more than :data:`MAX_SAMPLES`
-        samples.
-    """
+    """Sample times ``0, 1/fs, ..., duration`` (s); UsageError unless finite, > 0 and at most
+    :data:`MAX_SAMPLES` samples."""
     if not (0 < duration < math.inf and 0 < fs < math.inf):
         raise UsageError(f"duration and sample rate must be finite and > 0, got {duration} s, {fs} Hz")
     if duration * fs > MAX_SAMPLES:
@@ -131,19 +105,11 @@ def _track_sources(model: SuspensionModel, p: Mapping[str, float]
 def measured_road(model: SuspensionModel, t: FloatArray, road: Mapping[str, FloatArray],
                   params: Mapping[str, float] | None = None, v_kmh: float = 20.0,
                   source: str = "road") -> dict[str, FloatArray]:
-    """A measured road (e.g. a profilometer or a rig actuator record) as the model's input.
+    """A measured road as the model's input.
 
-    Every road of the model must be given, except a road that runs behind a given one on
-    the same track (:meth:`~suspid.models.base.SuspensionModel.road_lags`): it is the given
-    road delayed by the distance between them over the speed, e.g. ``half4`` with only ``r1``
-    gets ``r2(t) = r1(t - (a1 + a2) / v)`` (held at ``r1``'s first value before the record
-    starts). A road without its ``_dot`` is differentiated numerically later
-    (:func:`suspid.simulate.road_matrix`).
-
-    Raises
-    ------
-    InputError
-        A road of the model is missing and cannot be derived (named).
+    A missing road running behind a given one on the same track is that road delayed by the
+    distance over the speed (``half4``: ``r2(t) = r1(t - (a1 + a2) / v)``); any other missing
+    road is an InputError naming it.
     """
     out = {k: np.asarray(v, dtype=float) for k, v in road.items()}
     p = dict(model.defaults(), **(params or {}))
@@ -175,29 +141,10 @@ def make_scenario(model: SuspensionModel, name: str, duration: float = 5.0, fs: 
                   x0: FloatArray | None = None) -> tuple[FloatArray, dict[str, FloatArray], FloatArray]:
     """Build the time grid, road dict and initial state of a named scenario.
 
-    Parameters
-    ----------
-    model : SuspensionModel
-    name : {"initial", "curb", "bump", "iso8608"}
-    duration : float
-        Record length (s).
-    fs : float
-        Sample rate (Hz).
-    params : mapping, optional
-        Model parameters (the model's road lags may depend on them, e.g. the wheelbase).
-    h, l, v_kmh, t0, rise, road_class, seed
-        Shape parameters (see the module docstring); ``v_kmh`` is also the ISO road speed.
-    x0 : ndarray, optional
-        Initial state; default the model's ``initial_state()`` for ``initial``, rest otherwise.
-
-    Returns
-    -------
-    t : ndarray
-        Times (s).
-    road : dict
-        ``{road: r, road_dot: r'}`` (m, m/s); empty for ``initial``.
-    x0 : ndarray
-        Initial state ``[q, q']``.
+    ``duration`` in s, ``fs`` in Hz, ``params`` (SI) for the road lags; ``h``, ``l`` (m),
+    ``v_kmh``, ``t0``, ``rise`` (s), ``road_class``, ``seed`` shape the road (module docstring).
+    ``x0`` defaults to the model's ``initial_state()`` for ``initial``, rest otherwise. Returns
+    the times (s), ``{road: r, road_dot: r'}`` (m, m/s; empty for ``initial``) and ``x0``.
     """
     t = time_grid(duration, fs)
     p = dict(model.defaults(), **(params or {}))

@@ -1,29 +1,16 @@
 """Fast simulation of a linear model plus physical effect terms (exponential integrator).
 
-The augmented model is ``x' = A x + B u + B_f Q(x, u)`` with the linear part of
-:mod:`suspid.models` and ``Q = sum_sites b * phi(s, s')`` of the physical effects
-(:mod:`suspid.effects`; any object with ``sites(model, p)`` and ``law(site, p)``,
-:class:`ForceTerm`, will do). As in :func:`suspid.simulate.simulate`, the road-velocity
-input is absorbed by ``z = x - B_v r`` and the road is a first-order hold. Each effect force
-``phi`` is a scalar per site, also interpolated linearly over the step (ETD2 /
-exponential-trapezoid predictor-corrector)::
+The model is ``x' = A x + B u + B_f Q(x, u)`` with ``Q = sum_sites b * phi(s, s')`` of the
+physical effects (any :class:`ForceTerm`). As in :func:`suspid.simulate.simulate` the road is a
+first-order hold absorbed by ``z = x - B_v r``; each site force ``phi`` is also interpolated
+linearly over the step (ETD2 predictor-corrector)::
 
     z_p     = Phi z_k + G0 r_k + G1 r_k+1 + (F0 + F1) phi_k          (predictor)
     z_k+1   = z_p + F1 (phi(z_p) - phi_k)                           (corrector)
 
-with ``Phi, G0, G1, F0, F1`` from one block matrix exponential. The linear part is exact,
-the effect term second-order accurate (first order across a kink such as ``sgn(d')``).
-The linear part is the model's one forward model (its state-space matrices, or its affine
-pieces when the caller passes them, as :func:`suspid.simulate.simulate` takes them).
-The time loop is Python code generated and unrolled for the model's size, so a 1000-sample
-``quarter2`` record costs a few milliseconds (``solve_ivp`` per sample: about a second).
-Accuracy against :func:`suspid.simulate.simulate_ode` is checked in
-``tests/diagnose/test_nlsim.py``; use ``substeps`` when the effect is stiff (a steep
-friction ramp or bump stop) relative to the sample interval.
-
-This module is part of the base layer (next to :mod:`suspid.simulate`): the effect library
-simulates injected effects with it (:meth:`suspid.effects.Injection.simulate`) and
-the diagnosis refits them with it; it knows sites and force laws, not the effect classes.
+The linear part is exact, the effect term second-order accurate (first order across a kink
+such as ``sgn(d')``; use ``substeps`` for a stiff effect). The time loop is Python generated
+and unrolled for the model's size.
 """
 from __future__ import annotations
 
@@ -32,11 +19,9 @@ from dataclasses import dataclass
 from typing import Any, Callable, Mapping, Protocol, Sequence
 
 import numpy as np
-from scipy.linalg import expm
-
 from suspid.errors import UsageError
 from suspid.models.base import AffinePieces, FloatArray, SuspensionModel
-from suspid.simulate import (foh_weights, mass_inverse, pack_channels, road_matrix,
+from suspid.simulate import (foh_expm, foh_weights, mass_inverse, pack_channels, road_matrix,
                              state_matrices, uniform_step)
 
 #: scalar force law at one site: ``phi(s, s_dot) -> force`` (N)
@@ -44,8 +29,7 @@ Law = Callable[[float, float], float]
 
 
 class SiteLike(Protocol):
-    """Where a force acts (:class:`suspid.effects.Site`): coordinate ``s = g . q + gr . r``,
-    generalised force ``Q = b * phi``."""
+    """Where a force acts (:class:`suspid.models.base.Site`)."""
 
     g: FloatArray
     gr: FloatArray
@@ -140,10 +124,7 @@ class _Setup:
 
 def _modal_weights(A: FloatArray, Bw: FloatArray, h: float
                    ) -> tuple[FloatArray, FloatArray, FloatArray] | None:
-    """``Phi`` and FOH input weights from the eigen-decomposition of ``A`` (None if defective).
-
-    Much cheaper than a block matrix exponential for the small systems here.
-    """
+    """``Phi`` and FOH input weights from the eigen-decomposition of ``A`` (None if defective)."""
     try:
         lam, V = np.linalg.eig(A)
         Vinv = np.linalg.inv(V)
@@ -161,11 +142,7 @@ def _modal_weights(A: FloatArray, Bw: FloatArray, h: float
 
 def _discretise(model: SuspensionModel, p: Mapping[str, float], sites: Sequence[SiteLike],
                 h: float, affine: AffinePieces | None = None) -> _Setup:
-    """Discretise the linear part and the site forces' input directions for step ``h`` (s).
-
-    ``A``, ``B`` and ``M^-1`` are the model's (:func:`suspid.simulate.state_matrices`,
-    :func:`suspid.simulate.mass_inverse`): its affine pieces when they apply to ``p``.
-    """
+    """Discretise the linear part and the site forces' input directions for step ``h`` (s)."""
     A, B = state_matrices(model, p, affine)
     Minv = mass_inverse(model, p, affine)
     n = model.n_states
@@ -178,18 +155,8 @@ def _discretise(model: SuspensionModel, p: Mapping[str, float], sites: Sequence[
     for j, site in enumerate(sites):
         Bfs[nq:, j] = Minv @ site.b
     Bw = np.hstack([Bz, Bfs])
-    m = Bw.shape[1]
     modal = _modal_weights(A, Bw, h)
-    if modal is not None:
-        Phi, W0, W1 = modal
-        return _Setup(A, B, Bv, Phi, W0[:, :nr], W1[:, :nr], W0[:, nr:], W1[:, nr:], Bfs)
-    blk = np.zeros((n + 2 * m, n + 2 * m))
-    blk[:n, :n] = A * h
-    blk[:n, n:n + m] = Bw * h
-    blk[n:n + m, n + m:] = np.eye(m)
-    E = expm(blk)
-    Phi, Ga, Gb = E[:n, :n], E[:n, n:n + m], E[:n, n + m:]
-    W0, W1 = Ga - Gb, Gb  # weights of w_k and w_k+1
+    Phi, W0, W1 = modal if modal is not None else foh_expm(A, Bw, h)
     return _Setup(A, B, Bv, Phi, W0[:, :nr], W1[:, :nr], W0[:, nr:], W1[:, nr:], Bfs)
 
 
@@ -200,39 +167,10 @@ def simulate_effects(model: SuspensionModel, params: Mapping[str, float],
                      affine: AffinePieces | None = None) -> dict[str, FloatArray]:
     """Simulate ``model`` with physical ``effects`` on a uniform time grid.
 
-    Parameters
-    ----------
-    model : SuspensionModel
-        The linear base model (its own ``extra_force`` is ignored; pass the effects).
-    params : mapping
-        Base parameters (SI).
-    effects : sequence of ForceTerm
-        The effect terms (each acting at all its sites).
-    t : ndarray, shape (N,)
-        Uniformly spaced sample times (s).
-    road : dict, optional
-        Road arrays (m, m/s) as for :func:`suspid.simulate.simulate`.
-    x0 : ndarray, optional
-        Initial state ``[q, q']`` (default rest).
-    substeps : int
-        Internal steps per sample interval (road interpolated linearly in between).
-    U : ndarray, optional
-        Precomputed :func:`suspid.simulate.road_matrix` rows (skips recomputing them).
-    affine : AffinePieces, optional
-        The model's affine pieces (:meth:`~suspid.models.base.SuspensionModel.affine`),
-        used for ``A``, ``B`` and ``M^-1`` when they apply to ``params`` (a caller that
-        simulates many damper/spring sets of one car builds them once).
-
-    Returns
-    -------
-    dict
-        ``channel -> ndarray`` for every channel of ``model.channels``, the ride heights and
-        the roads.
-
-    Raises
-    ------
-    UsageError
-        Non-uniform time grid or ``substeps < 1``.
+    ``model`` is the linear base model (its ``extra_force`` ignored), ``params`` its parameters
+    (SI), ``t`` uniform sample times (s; UsageError otherwise); ``road``, ``x0``, ``affine`` and
+    the result as for :func:`suspid.simulate.simulate`. ``substeps``: internal steps per sample
+    interval; ``U``: precomputed :func:`suspid.simulate.road_matrix` rows.
     """
     t = np.asarray(t, dtype=float)
     p = dict(params)
@@ -284,13 +222,4 @@ def simulate_effects(model: SuspensionModel, params: Mapping[str, float],
     return pack_channels(model, X, acc, U, params)
 
 
-def effect_forces(model: SuspensionModel, params: Mapping[str, float],
-                  effects: Sequence[ForceTerm], X: FloatArray, U: FloatArray) -> FloatArray:
-    """Generalised effect forces ``Q`` (N, nq) at state rows ``X`` and input rows ``U``."""
-    Q = np.zeros((np.atleast_2d(X).shape[0], len(model.coords)))
-    for e in effects:
-        Q += e.generalized_force(model, X, U, params)
-    return Q
-
-
-__all__ = ["simulate_effects", "effect_forces", "ForceTerm", "SiteLike", "Law"]
+__all__ = ["simulate_effects", "ForceTerm", "SiteLike", "Law"]

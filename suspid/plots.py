@@ -12,7 +12,7 @@ from suspid.simulate import outputs, road_matrix, simulate_states
 
 
 def _plt() -> ModuleType:
-    # matplotlib.pyplot costs ~1 s to import and only plotting runs need it: loaded on first use
+    # matplotlib.pyplot is slow to import: loaded on first use
     import matplotlib  # noqa: PLC0415
 
     matplotlib.use("Agg")

@@ -1,23 +1,13 @@
 """Simulation of the suspension models.
 
-Two paths share the one model definition (:mod:`suspid.models`):
+* :func:`simulate` -- exact for the linear models: the road is piecewise linear between samples
+  (first-order hold, FOH) and the state equation is solved per sample in modal form, the
+  road velocity absorbed by ``z = x - B_v r`` (``z' = A z + (A B_v + B_r) r``).
+* :func:`simulate_ode` -- :func:`scipy.integrate.solve_ivp` on ``model.rhs``, for nonlinear
+  right-hand sides (effect terms) and for validation.
 
-* :func:`simulate` — exact for the linear models. The road between samples is taken as
-  piecewise linear (first-order hold, FOH) and the state equation is solved in closed form
-  per sample with the modal decomposition of ``A``; the per-mode recursions run as
-  blocked first-order scans (:func:`first_order_scan`), so a 10 s record at 1 kHz costs
-  well under a millisecond for ``quarter2``. The road-velocity input (tyre damping ``c2``)
-  is absorbed by the change of variables ``z = x - B_v r``, so no derivative of the road is
-  needed for the state: ``z' = A z + (A B_v + B_r) r``.
-* :func:`simulate_ode` — a general path through :func:`scipy.integrate.solve_ivp` on
-  ``model.rhs`` for nonlinear right-hand sides (effect terms) and for validation.
-
-Both return a dict ``channel -> ndarray`` with positions, ``_dot`` and ``_ddot`` channels.
-
-The state and input matrices come from the model, or -- when the caller steps many
-parameter sets that differ only in dampers and springs (the node's plant under damper
-wear, a synthetic drifting stream) -- from the model's affine pieces
-(:meth:`~suspid.models.base.SuspensionModel.affine`), passed as ``affine=``.
+Both return ``channel -> ndarray`` (positions, ``_dot``, ``_ddot``, ride heights). ``affine=``
+(the model's affine pieces) gives ``A``, ``B`` when many damper/spring sets are stepped.
 """
 from __future__ import annotations
 
@@ -31,13 +21,8 @@ from suspid.models.base import AffinePieces, FloatArray, SuspensionModel
 
 
 def uniform_step(t: FloatArray, rtol: float = 1e-6) -> float | None:
-    """Return the sample interval (s) if ``t`` is uniformly spaced, else ``None``.
-
-    Uniform means every interval within ``rtol * h`` of the mean interval ``h``, plus the
-    rounding of the times themselves: a grid stamped in epoch seconds (~1.6e9 s, float
-    spacing 2.4e-7 s, as real loggers write) is uniform even though its differences
-    scatter by a few 1e-7 s.
-    """
+    """The sample interval (s) if ``t`` is uniform (to ``rtol`` plus the rounding of epoch-second
+    stamps), else ``None``."""
     if t.size < 2:
         return None
     d = np.diff(t)
@@ -50,11 +35,8 @@ def uniform_step(t: FloatArray, rtol: float = 1e-6) -> float | None:
 
 def road_matrix(model: SuspensionModel, t: FloatArray,
                 road: Mapping[str, FloatArray] | None) -> FloatArray:
-    """Input rows ``U = [r..., r_dot...]`` (N, 2 n_roads) from a road dict.
-
-    Missing roads are zero (no road input); a road without ``_dot`` gets a numerically
-    differentiated one (:func:`numpy.gradient`, second order).
-    """
+    """Input rows ``U = [r..., r_dot...]`` (N, 2 n_roads); missing roads are zero, a missing
+    ``_dot`` is :func:`numpy.gradient` of the road."""
     n = t.size
     nr = len(model.roads)
     U = np.zeros((n, 2 * nr))
@@ -74,12 +56,10 @@ def road_matrix(model: SuspensionModel, t: FloatArray,
 
 @dataclass
 class Modal:
-    """Modal form of a linear model for one parameter set.
+    """Modal form ``A = V diag(lam) V^-1`` of a linear model for one parameter set.
 
-    ``A = V diag(lam) V^-1``. Only one mode of each complex-conjugate pair is kept
-    (``keep``); its contribution counts twice (``fac = 2``), real modes once. The
-    FOH-discretised recursion for step ``h`` is ``w[k+1] = E w[k] + g0 s[k] + g1 s[k+1]``
-    with modal input ``s = V^-1 (A B_v + B_r) r``.
+    One mode of each conjugate pair is kept and counts twice (``fac = 2``). The FOH recursion
+    is ``w[k+1] = E w[k] + g0 s[k] + g1 s[k+1]`` with modal input ``s = V^-1 (A B_v + B_r) r``.
     """
 
     lam: np.ndarray  # kept eigenvalues (m,)
@@ -118,16 +98,9 @@ MODE_COND_MAX = 1e8
 
 def mode_pattern(lam: np.ndarray, V: np.ndarray, Vinv: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray] | None:
-    """The modes one eigen-decomposition ``(lam, V, Vinv)`` keeps: ``(keep, is_real)``.
-
-    ``keep`` indexes the real eigenvalues and the member of each conjugate pair with the
-    positive imaginary part (the other one is its conjugate), ``is_real`` marks the real
-    ones among them. ``None`` when ``A`` is (nearly) defective (``V``'s 1-norm condition
-    number above ``MODE_COND_MAX``, or ``V`` singular: ``Vinv`` not finite) or the
-    eigenvalues do not pair up. The test of :func:`modal_form`; the output-error cost's fast
-    path applies the same bound to its LAPACK eigenvectors.
-    """
-    # 1-norm condition number of V (max column sums), without np.linalg.norm's overhead
+    """The modes an eigen-decomposition keeps: ``(keep, is_real)``, the real eigenvalues and
+    the positive-imaginary member of each pair; ``None`` when ``A`` is (nearly) defective
+    (``V``'s 1-norm condition above ``MODE_COND_MAX``) or the eigenvalues do not pair up."""
     if not np.abs(V).sum(axis=0).max() * np.abs(Vinv).sum(axis=0).max() <= MODE_COND_MAX:
         return None
     lim = np.abs(lam).max()
@@ -144,11 +117,8 @@ def mode_pattern(lam: np.ndarray, V: np.ndarray, Vinv: np.ndarray
 
 def modal_form(model: SuspensionModel, p: Mapping[str, float],
                affine: AffinePieces | None = None) -> Modal | None:
-    """Eigen-decomposition of ``A`` for ``p``; ``None`` if ``A`` is (nearly) defective.
-
-    ``affine`` (the model's :meth:`~suspid.models.base.SuspensionModel.affine` pieces)
-    gives ``A`` and ``B`` without solving the mass matrix when it applies to ``p``.
-    """
+    """Eigen-decomposition of ``A`` for ``p`` (through ``affine`` when it applies); ``None`` if
+    ``A`` is (nearly) defective."""
     A, B = state_matrices(model, p, affine)
     nr = len(model.roads)
     Br, Bv = B[:, :nr], B[:, nr:]
@@ -173,25 +143,10 @@ def foh_weights(lam: np.ndarray, h: float | np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Exact first-order-hold discretisation of the modes ``w' = lam w + b(t)``.
 
-    With the input ``b`` linear between two samples ``b0``, ``b1`` one interval later,
-    ``w1 = E w0 + g0 b0 + g1 b1``. One function for every simulator of the project (the
-    linear and the nonlinear one, the output-error cost and the drift sensitivities).
-
-    Parameters
-    ----------
-    lam : ndarray of complex
-        Eigenvalues (1/s); broadcast against ``h``.
-    h : float or ndarray
-        Sample interval(s) (s), e.g. (N-1, 1) steps of a non-uniform grid against (1, m)
-        modes.
-
-    Returns
-    -------
-    E, g0, g1 : ndarray
-        ``exp(lam h)`` and the weights (s) of the interval's first and last input sample:
-        ``g1 = int_0^h e^{lam (h - s)} s / h ds``, ``g0 = int_0^h e^{lam (h - s)} ds - g1``.
-        Where ``|lam h| < 1e-3`` the closed forms cancel, so a fourth-order series is used
-        there.
+    With ``b`` linear between two samples, ``w1 = E w0 + g0 b0 + g1 b1``: ``E = exp(lam h)``,
+    ``g1 = int_0^h e^{lam (h - s)} s / h ds``, ``g0 = int_0^h e^{lam (h - s)} ds - g1`` (s), for
+    eigenvalues ``lam`` (1/s) broadcast against the step(s) ``h`` (s). Where ``|lam h| < 1e-3``
+    the closed forms cancel: a fourth-order series is used there.
     """
     z = lam * h
     E = np.exp(z)
@@ -212,25 +167,12 @@ _SCAN_BLOCK = 32
 
 def first_order_scan(E: np.ndarray, d: np.ndarray, w0: np.ndarray,
                      block: int = _SCAN_BLOCK) -> np.ndarray:
-    """Solve ``w[k+1] = E * w[k] + d[k]`` for every column at once; returns ``w[1:]``.
+    """Solve ``w[k+1] = E * w[k] + d[k]`` for every column at once (``E`` (m,), ``d`` (n, m),
+    ``w0`` (m,)); returns ``w[1:]``.
 
-    Parameters
-    ----------
-    E : ndarray, shape (m,)
-        Per-column multipliers (the modes' ``exp(lam h)``, ``|E| <= 1`` for a passive model).
-    d : ndarray, shape (n, m)
-        Drive sequence.
-    w0 : ndarray, shape (m,)
-        Initial value.
-
-    Notes
-    -----
-    Blocked scan: inside a block of ``L`` samples the response is a lower-triangular
-    Toeplitz product with the powers ``E**0 .. E**(L-1)`` (one batched matrix product for
-    all blocks and modes); the block-start values follow from the same recursion with
-    ``E**L`` on ``n / L`` samples, solved recursively. Only powers up to ``E**L`` appear, so
-    it is as stable as the plain recursion, and it needs nothing beyond numpy (importing
-    :mod:`scipy.signal` for ``lfilter`` costs ~0.7 s per process start).
+    Blocked scan: inside a block of ``L`` samples a lower-triangular Toeplitz product with
+    ``E**0 .. E**(L-1)``; the block starts follow recursively with ``E**L``. Only powers up to
+    ``E**L`` appear, so it is as stable as the plain recursion (and needs no scipy.signal).
     """
     n, m = d.shape
     if n == 0:
@@ -260,10 +202,8 @@ def modal_trajectory(modal: Modal, h: float | FloatArray, r: FloatArray,
                      x0: FloatArray) -> np.ndarray:
     """Kept modal coordinates ``W`` (N, m) for road ``r`` (N, nr) and initial state ``x0``.
 
-    ``h`` is the step (s) of a uniform grid, or the ``N - 1`` steps of a non-uniform one
-    (a logger's jittered time base): each interval then has its own ``exp(lam dt)`` and
-    FOH weights (elementwise, no matrix exponential) and the recursion runs sample by
-    sample instead of the blocked scan. The states follow as ``x = Re(V W fac) + B_v r``.
+    ``h`` is the step (s) of a uniform grid, or the ``N - 1`` steps (s) of a non-uniform one
+    (then stepped sample by sample). The states are ``x = Re(V W fac) + B_v r``.
     """
     N = r.shape[0]
     m = modal.lam.size
@@ -293,8 +233,7 @@ def modal_trajectory(modal: Modal, h: float | FloatArray, r: FloatArray,
 
 
 def step_powers(E: np.ndarray) -> np.ndarray:
-    """Running products ``prod_{j<k} E[j]`` for ``k = 0..N-1`` of per-step multipliers
-    ``E`` (N-1, m): the free response of each mode on a non-uniform grid, shape (N, m)."""
+    """Running products ``prod_{j<k} E[j]`` (N, m) of per-step multipliers ``E`` (N-1, m)."""
     P = np.empty((E.shape[0] + 1, E.shape[1]), dtype=np.result_type(E, 1.0))
     P[0] = 1.0
     np.cumprod(E, axis=0, out=P[1:])
@@ -302,19 +241,12 @@ def step_powers(E: np.ndarray) -> np.ndarray:
 
 
 def modal_step_powers(modal: Modal, t: FloatArray) -> np.ndarray:
-    """``exp(lam (t[k] - t[0]))`` for every sample of a (non-uniform) grid ``t``, shape (N, m),
-    as running products of the per-step ``exp(lam dt)`` (the uniform grid's
-    :func:`modal_powers`)."""
+    """``exp(lam (t[k] - t[0]))`` (N, m) on a non-uniform grid ``t`` (s)."""
     return step_powers(np.exp(np.diff(np.asarray(t, dtype=float))[:, None] * modal.lam[None, :]))
 
 
 def modal_powers(modal: Modal, h: float, N: int) -> np.ndarray:
-    """``E**k = exp(lam h k)`` for ``k = 0..N-1``, shape (N, m).
-
-    Computed as a running product of ``E = exp(lam h)`` (one complex multiply per entry,
-    ~4x faster than ``exp`` of the outer product); the rounding error grows as
-    ``k * eps``, i.e. below 1e-11 relative for a million samples.
-    """
+    """``E**k = exp(lam h k)`` for ``k = 0..N-1``, shape (N, m), as a running product."""
     return powers(np.exp(modal.lam * h), N)
 
 
@@ -331,12 +263,9 @@ def powers(E: np.ndarray, N: int) -> np.ndarray:
 
 def free_response_basis(modal: Modal, h: float, N: int, Cm: FloatArray,
                         P: np.ndarray | None = None) -> FloatArray:
-    """Real regressors of the outputs on the free modal initial conditions.
-
-    Returns ``G`` of shape (N, p, n): output ``Cm x`` at sample k caused by the n real
-    coordinates of the kept modal initial state — first the real parts of all kept modes,
-    then the imaginary parts of the complex ones. Used for variable projection of ``x0``.
-    """
+    """Real regressors ``G`` (N, p, n) of the outputs ``Cm x`` on the n real coordinates of the
+    kept modal initial state (real parts, then imaginary parts of the pairs): for ``x0``'s
+    variable projection."""
     if P is None:
         P = modal_powers(modal, h, N)
     CV = (Cm @ modal.V) * modal.fac  # (p, m)
@@ -359,23 +288,8 @@ def simulate_states(model: SuspensionModel, p: Mapping[str, float], t: FloatArra
                     modal: Modal | None = None, affine: AffinePieces | None = None) -> FloatArray:
     """State trajectory ``X`` (N, n) of the linear model under FOH road input ``U``.
 
-    Parameters
-    ----------
-    model : SuspensionModel
-    p : mapping
-        Parameters (SI).
-    t : ndarray, shape (N,)
-        Sample times (s). Uniform for the fastest path (blocked scans); a non-uniform grid
-        steps the modes interval by interval (exact, one short recursion), and only a
-        defective ``A`` falls back to per-interval matrix exponentials.
-    U : ndarray, shape (N, 2 n_roads)
-        Inputs ``[r, r_dot]`` from :func:`road_matrix`.
-    x0 : ndarray, shape (n,), optional
-        Initial state ``[q, q']`` at ``t[0]`` (default: rest).
-    modal : Modal, optional
-        Precomputed :func:`modal_form` for ``p``.
-    affine : AffinePieces, optional
-        The model's affine pieces (used for ``A``, ``B`` when they apply to ``p``).
+    ``p`` in SI, ``t`` (N,) in s, ``U`` (N, 2 n_roads) from :func:`road_matrix`, ``x0`` at
+    ``t[0]`` (default rest); ``modal``: :func:`modal_form` for ``p`` if computed already.
     """
     n = model.n_states
     nr = len(model.roads)
@@ -394,10 +308,6 @@ def _simulate_states_loop(model: SuspensionModel, p: Mapping[str, float], t: Flo
                           U: FloatArray, x0: FloatArray,
                           affine: AffinePieces | None = None) -> FloatArray:
     """Exact FOH stepping with block matrix exponentials (defective A)."""
-    # scipy.linalg costs ~0.4 s to import and only a defective A lands
-    # here; `suspid simulate` of a diagonalisable model loads no scipy at all
-    from scipy.linalg import expm  # noqa: PLC0415
-
     A, B = state_matrices(model, p, affine)
     n = model.n_states
     nr = len(model.roads)
@@ -412,33 +322,33 @@ def _simulate_states_loop(model: SuspensionModel, p: Mapping[str, float], t: Flo
         h = float(t[k + 1] - t[k])
         key = round(h, 12)
         if key not in cache:
-            blk = np.zeros((n + 2 * nr, n + 2 * nr))
-            blk[:n, :n] = A * h
-            blk[:n, n:n + nr] = Bz * h
-            blk[n:n + nr, n + nr:] = np.eye(nr)
-            F = expm(blk)
-            Phi, G1, G2 = F[:n, :n], F[:n, n:n + nr], F[:n, n + nr:]
-            cache[key] = (Phi, G1 - G2, G2)
+            cache[key] = foh_expm(A, Bz, h)
         Phi, Ga, Gb = cache[key]
         z = Phi @ z + Ga @ r[k] + Gb @ r[k + 1]
         X[k + 1] = z + Bv @ r[k + 1]
     return X
 
 
+def foh_expm(A: FloatArray, Bw: FloatArray, h: float) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Exact FOH step of ``x' = A x + Bw w`` (``w`` linear over ``h``, s) by one block matrix
+    exponential: ``x1 = Phi x0 + W0 w0 + W1 w1``; returns ``(Phi, W0, W1)``."""
+    # only a defective A lands here: `suspid simulate` otherwise loads no scipy
+    from scipy.linalg import expm  # noqa: PLC0415
+
+    n, m = Bw.shape
+    blk = np.zeros((n + 2 * m, n + 2 * m))
+    blk[:n, :n] = A * h
+    blk[:n, n:n + m] = Bw * h
+    blk[n:n + m, n + m:] = np.eye(m)
+    F = expm(blk)
+    Phi, Ga, Gb = F[:n, :n], F[:n, n:n + m], F[:n, n + m:]
+    return Phi, Ga - Gb, Gb
+
+
 def ride_height_maps(model: SuspensionModel, p: Mapping[str, float]
                      ) -> tuple[FloatArray, FloatArray]:
-    """Output maps of the ride heights: ``d = G q + Gr r`` (and ``d' = G q' + Gr r'``).
-
-    Row ``i`` is strut ``i`` of :meth:`~suspid.models.base.SuspensionModel.strut_sites`
-    (its extension, m): ``G`` (n_struts, nq) the sites' ``g``, ``Gr`` (n_struts, nr) their
-    ``gr``. Empty for a model without struts.
-
-    Parameters
-    ----------
-    model : SuspensionModel
-    p : mapping
-        Parameters (SI); the geometry (axle distances, track widths) sets the rows.
-    """
+    """Output maps of the ride heights (strut extensions, m): ``d = G q + Gr r`` (and the same
+    for the rates), one row per strut; ``p`` (SI) sets the geometry."""
     if not model.ride_heights:
         return np.zeros((0, len(model.coords))), np.zeros((0, len(model.roads)))
     sites = model.strut_sites(dict(model.defaults(), **dict(p)))
@@ -449,12 +359,8 @@ def ride_height_maps(model: SuspensionModel, p: Mapping[str, float]
 
 def ride_height_outputs(model: SuspensionModel, p: Mapping[str, float], X: FloatArray,
                         U: FloatArray | None = None) -> dict[str, FloatArray]:
-    """The ride heights ``d``/``dN`` (m, strut extensions, rebound positive) and their
-    ``_dot`` (m/s) from states ``X`` (N, n) and inputs ``U`` (N, 2 nr; ``None``: no road).
-
-    Strut ``i``'s extension is ``site.g . q + site.gr . r``, its rate
-    ``site.g . q' + site.gr . r'`` (``site = model.strut_sites(p)[i]``).
-    """
+    """The ride heights (m, rebound positive) and their ``_dot`` (m/s) from states ``X`` (N, n)
+    and inputs ``U`` (N, 2 nr; ``None``: no road)."""
     names = model.ride_heights
     if not names:
         return {}
@@ -476,9 +382,8 @@ def ride_height_outputs(model: SuspensionModel, p: Mapping[str, float], X: Float
 def pack_channels(model: SuspensionModel, X: FloatArray, acc: FloatArray,
                   U: FloatArray | None = None,
                   p: Mapping[str, float] | None = None) -> dict[str, FloatArray]:
-    """Channel dict from states ``X`` (N, n), accelerations ``acc`` (N, nq) and, if given,
-    inputs ``U`` (N, 2 nr) for the road columns; with the parameters ``p`` (SI) also the
-    ride heights (:func:`ride_height_outputs`, on the road ``U`` or none)."""
+    """Channel dict from states ``X`` (N, n), accelerations ``acc`` (N, nq), the road columns
+    of ``U`` (N, 2 nr) if given, and with ``p`` (SI) the ride heights."""
     nq = len(model.coords)
     out: dict[str, FloatArray] = {}
     for i, c in enumerate(model.coords):
@@ -505,8 +410,7 @@ def accelerations(model: SuspensionModel, p: Mapping[str, float], X: FloatArray,
 
 def outputs(model: SuspensionModel, p: Mapping[str, float], X: FloatArray,
             U: FloatArray, affine: AffinePieces | None = None) -> dict[str, FloatArray]:
-    """Every channel from states and inputs: positions, velocities, accelerations and the
-    ride heights with their rates (:func:`ride_height_outputs`); no road columns."""
+    """Every channel from states and inputs except the road columns."""
     out = pack_channels(model, X, accelerations(model, p, X, U, affine))
     out.update(ride_height_outputs(model, p, X, U))
     return out
@@ -520,24 +424,16 @@ def simulate(model: SuspensionModel, params: Mapping[str, float], t: FloatArray,
 
     Parameters
     ----------
-    model : SuspensionModel
     params : mapping
         Parameter values (SI units).
     t : ndarray, shape (N,)
         Sample times (s).
     road : dict, optional
-        Road displacement arrays by road name (m), optional ``<name>_dot`` (m/s).
+        Road arrays by road name (m), optional ``<name>_dot`` (m/s).
     x0 : ndarray, optional
         Initial state ``[q, q']`` (default: rest).
     affine : AffinePieces, optional
-        The model's affine pieces (:meth:`~suspid.models.base.SuspensionModel.affine`),
-        for callers that simulate many damper/spring sets of one car.
-
-    Returns
-    -------
-    dict
-        ``channel -> ndarray`` for every channel of ``model.channels``, the ride heights
-        (``model.ride_height_channels``) and the roads.
+        The model's affine pieces, for callers that simulate many damper/spring sets.
     """
     t = np.asarray(t, dtype=float)
     U = road_matrix(model, t, road)
@@ -553,13 +449,10 @@ def simulate_ode(model: SuspensionModel, params: Mapping[str, float], t: FloatAr
                  road_fn=None) -> dict[str, FloatArray]:
     """General path: integrate ``model.rhs`` with :func:`scipy.integrate.solve_ivp`.
 
-    The road is the same piecewise-linear interpolation of the samples that
-    :func:`simulate` assumes (its derivative piecewise constant), unless ``road_fn(t) ->
-    u`` gives the input as a continuous function. Integration restarts at every sample so
-    the kinks of the interpolated road do not cost accuracy.
+    The road is :func:`simulate`'s piecewise-linear one (integration restarts at every sample,
+    at its kinks), unless ``road_fn(t) -> u`` gives the input as a continuous function.
     """
-    # scipy.integrate costs ~0.6 s to import and only this reference path needs it (a module
-    # of its own would not help: simulate() calls this for models with extra forces)
+    # scipy.integrate is slow to import and only this reference path needs it
     from scipy.integrate import solve_ivp  # noqa: PLC0415
 
     t = np.asarray(t, dtype=float)

@@ -1,14 +1,6 @@
-"""``suspid`` command line: a thin dispatcher over one module per subcommand.
-
-Each subcommand lives in ``suspid/cli/<name>.py`` and provides
-
-``add_parser(subparsers) -> argparse.ArgumentParser``
-    register the subcommand and its options;
-``run(args) -> int``
-    do the work and return the exit status.
-
-Errors derived from :class:`suspid.errors.SuspidError` (and argparse usage errors) become a
-single ``error: ...`` line on stderr with exit status 2; ``--debug`` shows the traceback.
+"""``suspid`` command line: a dispatcher over ``suspid/cli/<name>.py``, each with
+``add_parser(subparsers)`` and ``run(args) -> exit status``. A :class:`~suspid.errors.SuspidError`
+or usage error is one ``error: ...`` line on stderr, exit 2 (``--debug``: the traceback).
 """
 from __future__ import annotations
 
@@ -22,14 +14,12 @@ from typing import NoReturn, Sequence
 from suspid import __version__
 from suspid.errors import SuspidError
 
-# The identifier works on small matrices: BLAS threads only add contention (5-10x slower
-# per evaluation on a loaded 2-core machine). Set before numpy loads; a user's setting wins.
+# small matrices: BLAS threads only add contention. Set before numpy loads; a user's setting wins
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
-#: Subcommand modules, in the order ``suspid --help`` lists them, with their one-line help
-#: (each module's ``add_parser`` uses the same words; ``tests/core/test_cli.py`` checks).
-#: ``suspid --help`` lists them from this table alone, without importing any module.
+#: subcommands in ``suspid --help``'s order with their one-line help (listed without importing
+#: any module; each ``add_parser`` uses the same words)
 SUBCOMMANDS: dict[str, str] = {
     "simulate": "simulate a model and write a measurement CSV",
     "identify": "identify suspension parameters from a measurement",
@@ -52,8 +42,7 @@ class _Parser(argparse.ArgumentParser):
 
     def parse_args(self, args: Sequence[str] | None = None,  # type: ignore[override]
                    namespace: argparse.Namespace | None = None) -> argparse.Namespace:
-        """As argparse's, but unknown options are reported by the subcommand that was given
-        (``suspid monitor: unrecognized arguments: --foo``), not by ``suspid``."""
+        """As argparse's, but unknown options are reported by the subcommand given."""
         ns, extras = self.parse_known_args(args, namespace)
         if extras:
             prog = getattr(ns, "_prog", self.prog)
@@ -62,8 +51,7 @@ class _Parser(argparse.ArgumentParser):
         return ns
 
     def _get_values(self, action: argparse.Action, arg_strings: list[str]) -> object:
-        # Python 3.11's argparse drops an explicit "--" value ("--fs=--") and hands the
-        # subcommand an empty list instead of a usage error; convert it like any value
+        # Python 3.11's argparse drops an explicit "--" value ("--fs=--"): convert it like any
         if action.option_strings and action.nargs is None and arg_strings == ["--"]:
             value = self._get_value(action, "--")
             self._check_value(action, value)
@@ -72,15 +60,8 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
-    """Build the top-level parser.
-
-    Parameters
-    ----------
-    only : str, optional
-        Register just this subcommand (``main`` passes the one on the command line: each
-        subcommand module imports what it needs, and importing all eight costs ~0.15 s of
-        every start). ``None`` registers every subcommand (``suspid --help``).
-    """
+    """Build the top-level parser with just the subcommand ``only`` (``None``: the listing of
+    every subcommand, none imported)."""
     parser = _Parser(
         prog="suspid",
         description="Identify, monitor and diagnose vehicle suspension parameters "
@@ -90,7 +71,6 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     parser.add_argument("--debug", action="store_true", help="show Python tracebacks on errors")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     if only is None:
-        # the listing only: one line per subcommand from the table, no module imported
         for name, summary in SUBCOMMANDS.items():
             sub.add_parser(name, help=summary)
         return parser
@@ -144,13 +124,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         sys.stderr.write(f"error: {_one_line(str(exc))}\n")
         return 2
     except BrokenPipeError:
-        # the reader of stdout went away (``suspid monitor --jsonl | head -1``): stop quietly;
-        # stdout goes to /dev/null so the interpreter's final flush cannot fail again
+        # the reader of stdout went away (``| head -1``): stop quietly
         _drop_stdout()
         return 0
     except OSError as exc:
-        # last resort for a file a subcommand opened without its own check (an output
-        # path in a missing directory, a directory given as a file, no permission, ...)
+        # last resort for a file a subcommand opened without its own check
         if debug:
             raise
         where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""

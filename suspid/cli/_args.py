@@ -1,9 +1,5 @@
-"""Option groups and checks the fitting commands share (``diagnose``, ``fleet``; ``identify``'s set;
-``--offset`` of ``identify`` and ``fleet``), and the monitor's option objects from the
-options and the ``--config`` file (``monitor``, ``compare``).
-
-Each command words its own help; the option names, types, defaults and metavars and the
-checks of their values live here once.
+"""Option groups the fitting commands share, and the monitor's option objects from the options
+and the ``--config`` file. Each command words its own help; names, types and defaults live here.
 """
 from __future__ import annotations
 
@@ -23,21 +19,14 @@ if TYPE_CHECKING:
     from suspid.io.csvio import Measurement
     from suspid.models.base import SuspensionModel
 else:
-    # the estimator loads when a command runs (monitor first keeps python-can from loading
-    # asammdf: suspid.cli.monitor._skip_mf4_backend)
+    # the estimator loads when a command runs
     AlertOptions, EkfOptions, WindowOptions = lazy_names(
         "estimator.stream.config", "AlertOptions", "EkfOptions", "WindowOptions")
 
 
 @dataclass(frozen=True)
 class FitHelp:
-    """Help text of the identifier's options, as one command words it.
-
-    Attributes
-    ----------
-    cost, maxfev : str
-        Help of ``--cost`` and ``--maxfev``.
-    """
+    """Help of ``--cost`` and ``--maxfev``, as one command words it."""
 
     cost: str
     maxfev: str
@@ -45,20 +34,8 @@ class FitHelp:
 
 def add_fit_options(p: argparse.ArgumentParser, helps: FitHelp, restarts: int,
                     group: argparse._ActionsContainer | None = None) -> None:
-    """Add the identifier's options ``--cost`` and ``--maxfev``, and the defaults of the
-    settings the ``--config`` file's ``[fit]`` table may change (``restarts``,
-    ``multistart``, ``polish``, ``data_start``, ``x0``; :func:`suspid.cli._can.command_config`).
-
-    Parameters
-    ----------
-    p : argparse.ArgumentParser
-    helps : FitHelp
-        The command's help text of each option.
-    restarts : int
-        Default Nelder-Mead restarts of the command.
-    group : argparse argument group, optional
-        Where the options are listed (default ``p``).
-    """
+    """Add ``--cost`` and ``--maxfev`` (to ``group``, default ``p``) and the defaults of the
+    ``[fit]`` settings (``restarts`` the command's Nelder-Mead restarts)."""
     g = p if group is None else group
     g.add_argument("--cost", choices=list(COSTS), default="sse", help=helps.cost)
     g.add_argument("--maxfev", type=positive_int, default=None, help=helps.maxfev)
@@ -66,21 +43,12 @@ def add_fit_options(p: argparse.ArgumentParser, helps: FitHelp, restarts: int,
 
 
 def add_offset_option(p: argparse._ActionsContainer, help_text: str) -> None:
-    """Add ``--offset remove|keep`` (default ``remove``): what the identification does with a
-    constant road or position offset it finds (:func:`estimator.identify.record.identify_record`).
-
-    Parameters
-    ----------
-    p : argparse parser or argument group
-    help_text : str
-        The command's help of the option.
-    """
+    """Add ``--offset remove|keep`` (default ``remove``): what to do with a constant offset found."""
     p.add_argument("--offset", choices=list(OFFSET_MODES), default="remove", help=help_text)
 
 
 def comma_list(text: str | None) -> list[str] | None:
-    """The items of a comma-separated option (``--channels x1,x2``), stripped, empty ones
-    dropped; ``None`` when the option is not given (or empty)."""
+    """The stripped, non-empty items of a comma-separated option; ``None`` when not given."""
     if not text:
         return None
     return [x.strip() for x in text.split(",") if x.strip()]
@@ -88,19 +56,8 @@ def comma_list(text: str | None) -> list[str] | None:
 
 def fit_inputs(args: argparse.Namespace, cfg: Config
                ) -> tuple[SuspensionModel, Parameters, Measurement, dict[str, object] | None]:
-    """The model, its parameters, the record and its frame statistics of a fitting command.
-
-    ``--model``, ``--fix``/``--init``, then ``--input`` read (a CSV, or a CAN log decoded
-    with ``--dbc``, ``--map`` and the ``--config`` file's ``[can]``/``[map]``).
-
-    Returns
-    -------
-    model : SuspensionModel
-    params : Parameters
-    meas : Measurement
-    frames : dict or None
-        Accepted/rejected frame counts for CAN input.
-    """
+    """The model, its parameters, the record and its frame statistics (CAN input, else
+    ``None``) of a fitting command."""
     model = model_from_args(args)
     params = params_from_args(args, model)
     meas, frames = load_measurement(args, model, cfg)
@@ -119,8 +76,7 @@ def add_road_option(p: argparse._ActionsContainer) -> None:
                         "and unknown for driving data, named in a warning")
 
 
-#: ``[window]`` keys whose :class:`~estimator.stream.config.WindowOptions` field is named
-#: differently
+#: ``[window]`` keys whose ``WindowOptions`` field is named differently
 WINDOW_FIELDS = {"budget": "maxfev", "first_budget": "first_maxfev"}
 #: ``[alert]`` keys of :class:`~estimator.stream.config.AlertOptions` (the rest are fleet's)
 ALERT_KEYS = ("confidence", "persistence_s", "hysteresis", "forecast_horizon_s")
@@ -128,8 +84,8 @@ ALERT_KEYS = ("confidence", "persistence_s", "hysteresis", "forecast_horizon_s")
 
 def options_from_config(args: argparse.Namespace, cfg: Config
                         ) -> tuple[WindowOptions, AlertOptions, EkfOptions]:
-    """``--window``, ``--step``, ``--alert-drop`` and the ``[window]``, ``[alert]`` and
-    ``[ekf]`` tables as the monitor's option objects (``monitor`` and ``compare``)."""
+    """``--window``, ``--step``, ``--alert-drop`` and the ``[window]``, ``[alert]``, ``[ekf]``
+    tables as the monitor's option objects."""
     window = WindowOptions(window_s=args.window, step_s=args.step,
                            **cfg.fields("window", WINDOW_FIELDS))
     alert = AlertOptions(drop=args.alert_drop,

@@ -1,17 +1,6 @@
-"""Command-line options of the subcommands that read CAN data, and ``--config``.
-
-``identify``, ``diagnose``, ``monitor``, ``compare`` and ``fleet`` call
-:func:`add_can_arguments` on their parser (``--map``, ``--config``) and
-:func:`command_config` then :func:`can_inputs` on the parsed arguments::
-
-    add_can_arguments(parser, "identify")        # --map, --config
-    cfg = command_config(args, "identify")     # reads --config, sets args.can_channel, ...
-    dbc_path, signal_map = can_inputs(args, cfg)
-
-The bus channel of a multi-bus log and a J1939 source address are the ``[can]`` table's
-``channel`` and ``j1939_source`` (:mod:`suspid.cli._config`); ``--dbc`` is part of the
-contract and stays defined by each command. ``simulate``, ``node`` and ``doe`` add
-``--config`` alone (:func:`add_config_option`) for their own tables.
+"""Command-line options of the subcommands that read CAN data (``--map``, ``--config``):
+:func:`add_can_arguments` on the parser, then :func:`command_config` and :func:`can_inputs`
+on the parsed arguments. ``--dbc`` stays defined by each command.
 """
 from __future__ import annotations
 
@@ -44,23 +33,8 @@ def add_can_arguments(parser: argparse.ArgumentParser, command: str) -> None:
 
 
 def command_config(args: argparse.Namespace, command: str) -> Config:
-    """Read ``--config`` and copy its ``[can]`` and ``[fit]`` settings onto ``args``.
-
-    ``args.can_channel`` and ``args.j1939_source`` become the ``[can]`` table's ``channel``
-    and ``j1939_source`` (``None`` when not set); each key of ``[fit]`` (``restarts``,
-    ``multistart``, ``polish``, ``data_start``) replaces the command's default when the
-    command reads that table.
-
-    Parameters
-    ----------
-    args : argparse.Namespace
-    command : str
-        The subcommand (the tables it reads: :data:`suspid.cli._config.TABLES`).
-
-    Returns
-    -------
-    Config
-    """
+    """Read ``--config`` and copy onto ``args`` its ``[can]`` ``channel``/``j1939_source`` (as
+    ``can_channel``/``j1939_source``) and, when ``command`` reads it, every ``[fit]`` key."""
     cfg = load_config(getattr(args, "config", None))
     args.can_channel = cfg.get("can", "channel")
     args.j1939_source = cfg.get("can", "j1939_source")

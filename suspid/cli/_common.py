@@ -65,23 +65,15 @@ def positive_int(text: str) -> int:
     return v
 
 
-#: smallest magnitude (SI) of a ``NAME=VALUE`` parameter: every one of them is a mass,
-#: inertia, stiffness, damping or length of a vehicle, none of which comes within orders of
-#: magnitude of this; a smaller non-zero value is a typo or a unit slip (below 2.2e-308 not
-#: even a normal float). Both passed the "> 0" check: ``identify --fix m1=1e-320`` spent
-#: 5001 evaluations on a response that overflows and exited 0 with ``cost: null``;
-#: ``--fix m1=1e-300`` reported ``success: true`` with every parameter near 1e-300
+#: smallest magnitude (SI) of a non-zero ``NAME=VALUE`` parameter: no mass, inertia, stiffness,
+#: damping or length of a vehicle comes near it, so a smaller one is a typo or a unit slip
 MIN_PARAM_MAGNITUDE = 1e-9
 
 
 def parse_assignments(items: list[str], option: str) -> dict[str, float]:
-    """Parse ``NAME=VALUE`` strings into a dict (UsageError naming the bad item).
-
-    The one parser of every subcommand's parameter options (``--fix``, ``--init``,
-    ``--nominal``, ``--param``): a value must be a finite number, and a non-zero one at
-    least ``MIN_PARAM_MAGNITUDE`` in magnitude (zero and negative values are left to the
-    model's own "> 0" check, which names the parameter's unit).
-    """
+    """Parse ``NAME=VALUE`` strings (``--fix``, ``--init``, ``--nominal``, ``--param``) into a
+    dict: finite numbers, non-zero ones at least ``MIN_PARAM_MAGNITUDE`` (UsageError naming the
+    bad item)."""
     out: dict[str, float] = {}
     for item in items:
         name, sep, value = item.partition("=")
@@ -106,13 +98,8 @@ def parse_assignments(items: list[str], option: str) -> dict[str, float]:
 
 
 def parse_state(text: str, n: int, option: str) -> FloatArray:
-    """A state vector given as ``n`` comma-separated finite numbers (``[q..., q_dot...]``, SI).
-
-    Raises
-    ------
-    UsageError
-        Not numbers, not ``n`` of them, or one that is not finite (named).
-    """
+    """A state vector given as ``n`` comma-separated finite numbers (``[q..., q_dot...]``, SI;
+    UsageError otherwise)."""
     parts = text.split(",")
     try:
         v = np.array([float(s) for s in parts])
@@ -129,9 +116,7 @@ def parse_state(text: str, n: int, option: str) -> FloatArray:
 
 def load_measurement(args: argparse.Namespace, model: SuspensionModel,
                      cfg: Config) -> tuple[Measurement, dict[str, object] | None]:
-    """Read ``--input`` as a CSV or a CAN log (decoded as ``--dbc``, ``--map`` and the
-    ``--config`` file's ``[can]``/``[map]`` say); returns ``(Measurement, frame statistics
-    or None)``."""
+    """Read ``--input`` as a CSV or a CAN log: ``(Measurement, frame statistics or None)``."""
     dbc_path, signal_map = can_inputs(args, cfg)
     return read_input(args.input, model, dbc_path, signal_map,
                       channel=getattr(args, "can_channel", None),
@@ -153,31 +138,14 @@ def print_json(obj: Any) -> None:
     sys.stdout.flush()
 
 
-#: the lengths (m) a vehicle's or a test rig's geometry (axle distances from the centre of
-#: mass, track widths) can have; a value outside is a unit slip (1200 for 1.2 m, in mm).
-#: Masses, stiffnesses and damping rates get no such range: the seed's own designs go from
-#: a 10 kg body on a 50 N/m tyre to a passenger car's 200 kN/m
+#: the lengths (m) of a vehicle's or test rig's geometry; a value outside is a unit slip (mm).
+#: Masses, stiffnesses and damping rates get no range: the seed's designs span orders of magnitude
 LENGTH_RANGE_M = (0.01, 20.0)
 
 
 def implausible_values(model: SuspensionModel, values: Mapping[str, float],
                        option: str) -> list[str]:
-    """Warnings for lengths outside ``LENGTH_RANGE_M``.
-
-    Parameters
-    ----------
-    model : SuspensionModel
-    values : mapping
-        Parameter name -> value (SI), as parsed from ``option``.
-    option : str
-        The option the values came from (``--fix``, ``--init``, ``--nominal``), named in
-        each warning.
-
-    Returns
-    -------
-    list of str
-        One sentence per implausible value: the value, the range and the model's default.
-    """
+    """One warning per length in ``values`` (SI, from ``option``) outside ``LENGTH_RANGE_M``."""
     lo, hi = LENGTH_RANGE_M
     out: list[str] = []
     for name, v in values.items():
@@ -190,8 +158,7 @@ def implausible_values(model: SuspensionModel, values: Mapping[str, float],
 
 
 def assignment_warnings(args: argparse.Namespace, model: SuspensionModel) -> list[str]:
-    """:func:`implausible_values` of every parameter option ``args`` has (``--fix``,
-    ``--init``, ``--nominal``)."""
+    """:func:`implausible_values` of ``--fix``, ``--init`` and ``--nominal``."""
     out: list[str] = []
     for option in ("--fix", "--init", "--nominal"):
         items = getattr(args, option[2:], None)

@@ -1,24 +1,9 @@
 """The ``--config FILE`` of the subcommands: one TOML file with the tuning the options leave out.
 
-Window and estimator tuning, CAN decoding details, the live receiver and the fleet's alert
-rule are set in tables of one TOML file (read with :mod:`tomllib`) rather than by options::
-
-    [window]
-    sigma_floor = 0.01
-    drift = []            # every parameter constant over a window
-
-    [live]
-    idle_timeout_s = 0    # a live bus: never stop for silence
-
-:data:`SCHEMA` lists every table and key with its type, unit, range, default and meaning
-(``docs/configuration.md`` is the same table, checked by ``tests/core/test_config.py``).
-A command reads the tables it uses (:data:`TABLES`) and ignores the others, so one file
-can serve every command; a table or key the schema does not know, a value of the wrong
-type or out of range is one line naming the file, ``table.key``, expected and got
-(:class:`~suspid.errors.InputError`, exit 2).
-
-The ``[map]`` table (a DBC signal per model channel) is the signal-map format of
-:mod:`suspid.can.signal_map`.
+:data:`SCHEMA` lists every table and key (``docs/configuration.md`` is the same table). A
+command reads the tables it uses (:data:`TABLES`) and ignores the others; an unknown table or
+key, or a bad value, is one :class:`~suspid.errors.InputError` line naming the file,
+``table.key``, expected and got. ``[map]`` is :mod:`suspid.can.signal_map`'s format.
 """
 from __future__ import annotations
 
@@ -36,24 +21,11 @@ __all__ = ["Key", "SCHEMA", "TABLES", "Config", "load_config"]
 
 @dataclass(frozen=True)
 class Key:
-    """One configuration key.
+    """One configuration key: its type, SI unit, documented default, meaning and range.
 
-    Attributes
-    ----------
-    type : {"int", "float", "bool", "str", "names", "address", "x0"}
-        ``names``: a list of strings; ``address``: a string or an integer (with ``lo`` and
-        ``hi``, an integer in that range, in a string as ``"0x47"`` or ``"71"``); ``x0``:
-        ``"estimate"``, ``"rest"`` or a list of numbers (given on as ``"V1,V2,..."``).
-    unit : str
-        SI unit of the value (``""`` for none).
-    default : str
-        The default, as the documentation states it.
-    meaning : str
-        What the key sets.
-    lo, hi : float, optional
-        Allowed range (``lo`` and ``hi`` included unless ``open_lo``/``open_hi``).
-    choices : tuple of str
-        Allowed values of a ``str`` key (empty: any).
+    ``type`` is ``int``, ``float``, ``bool``, ``str`` (one of ``choices`` when given), ``names``
+    (a list of strings), ``address`` (a string or integer; with ``lo``/``hi`` an integer in that
+    range, ``"0x47"`` too) or ``x0`` (``"estimate"``, ``"rest"`` or a list of numbers).
     """
 
     type: str
@@ -129,7 +101,6 @@ class Key:
         raise ValueError
 
     def _check_range(self, v: float) -> None:
-        """``ValueError`` unless ``v`` is within ``lo``..``hi`` (open ends as declared)."""
         if self.lo is not None and (v <= self.lo if self.open_lo else v < self.lo):
             raise ValueError
         if self.hi is not None and (v >= self.hi if self.open_hi else v > self.hi):
@@ -138,114 +109,96 @@ class Key:
 
 def _f(unit: str, default: str, meaning: str, lo: float | None = None, hi: float | None = None,
        open_lo: bool = False, open_hi: bool = False) -> Key:
-    """A number key (:class:`Key` ``float``) in ``unit``, within ``lo``..``hi`` when given."""
     return Key("float", unit, default, meaning, lo, hi, open_lo, open_hi)
 
 
 def _i(default: str, meaning: str, lo: float | None = None, unit: str = "") -> Key:
-    """An integer key, at least ``lo`` when given."""
     return Key("int", unit, default, meaning, lo)
 
 
 def _b(default: str, meaning: str) -> Key:
-    """A true/false key."""
     return Key("bool", "", default, meaning)
 
 
 def _s(default: str, meaning: str, choices: tuple[str, ...] = ()) -> Key:
-    """A string key, one of ``choices`` when given."""
     return Key("str", "", default, meaning, choices=choices)
 
 
 #: every table and key a configuration file may hold
 SCHEMA: dict[str, dict[str, Key]] = {
     "can": {
-        "dbc": _s("the bundled dbc/suspension.dbc",
-                  "DBC of CAN-log input, relative to the configuration file; --dbc wins"),
-        "channel": Key("address", "", "every channel (warned when the sensor's messages are "
-                       "on several)",
-                       "decode only this bus channel of a log that records several, as the "
-                       "file names it: 1, 2, ... for ASC/BLF channels, TRC buses and MDF4 "
-                       "BusChannel, can0/can1 for candump; other channels' frames are counted "
-                       "(frames.other_channel)"),
-        "j1939_source": Key("address", "", "the first sender of each PGN",
-                            "a J1939 DBC: decode its parameter groups from this source address "
-                            "only (0..253, e.g. \"0x00\" the engine)", lo=0, hi=253),
+        "dbc": _s("the bundled dbc/suspension.dbc", "DBC of CAN-log input, relative to the configuration "
+                  "file; --dbc wins"),
+        "channel": Key("address", "", "every channel (warned when the sensor's messages are on several)",
+                       "decode only this bus channel of a log that records several, as the file names it: 1, "
+                       "2, ... for ASC/BLF channels, TRC buses and MDF4 BusChannel, can0/can1 for candump; "
+                       "other channels' frames are counted (frames.other_channel)"),
+        "j1939_source": Key("address", "", "the first sender of each PGN", "a J1939 DBC: decode its "
+                            "parameter groups from this source address only (0..253, e.g. \"0x00\" the "
+                            "engine)", lo=0, hi=253),
     },
     "fit": {
         "restarts": _i("6 (diagnose: 3)", "Nelder-Mead restarts from the best vertex", 0),
         "multistart": _i("4", "further starts on a suspicious local minimum", 0),
-        "polish": _b("true", "Levenberg-Marquardt polish after Nelder-Mead; false: pure "
-                             "Nelder-Mead to full tolerance"),
-        "data_start": _b("true", "also start from the data's own estimate (false: only from "
-                                 "--init and the model's defaults); identify and fleet"),
-        "x0": Key("x0", "SI", "\"estimate\"",
-                  "initial state: \"estimate\" (variable projection), \"rest\", or the "
-                  "state [q..., q_dot...] as a list of numbers"),
+        "polish": _b("true", "Levenberg-Marquardt polish after Nelder-Mead; false: pure Nelder-Mead to full "
+                     "tolerance"),
+        "data_start": _b("true", "also start from the data's own estimate (false: only from --init and the "
+                         "model's defaults); identify and fleet"),
+        "x0": Key("x0", "SI", "\"estimate\"", "initial state: \"estimate\" (variable projection), \"rest\", "
+                  "or the state [q..., q_dot...] as a list of numbers"),
     },
     "window": {
-        "decimate": _i("20 samples per period of the fastest mode",
-                       "fit every N-th sample", 1),
-        "budget": _i("40 per free parameter",
-                     "Nelder-Mead evaluations of a warm-started window", 10),
-        "first_budget": _i("250 per free parameter",
-                           "evaluations of the first, cold-started window", 10),
-        "sigma_floor": _f("", "0.005", "relative standard error added in quadrature to each "
-                                       "window's", 0.0, 1.0),
-        "min_deflection": _f("m", "0.0005", "skip windows whose RMS suspension deflection is "
-                                            "below this", 0.0),
-        "min_snr": _f("", "3", "skip windows whose deflection is below this multiple of the "
-                               "noise floor estimated from the data", 0.0),
-        "road_fusion_hz": _f("Hz", "1.5 x the highest natural frequency",
-                             "road fed to each fit: measured r below, integral of measured "
-                             "r_dot above; 0: r as measured", 0.0),
-        "road_lowpass_hz": _f("Hz", "0 (off)", "zero-phase low-pass (-6 dB) of the road fed to "
-                                               "each fit", 0.0),
-        "drift": Key("names", "", "every free damper and spring of the struts",
-                     "free parameters fitted with a linear drift over each window, so their "
-                     "estimate refers to the window's end; []: every parameter constant"),
-        "drift_chunk_s": _f("s", "0.2", "chunk over which a drifting parameter is held "
-                                        "constant in the drift fit", 0.0, open_lo=True),
-        "drift_rate_sd": _f("1/s", "0.005", "standard deviation (relative) of the prior on "
-                                            "each window's drift rate, centred on the recent "
-                                            "estimates' rate; 0: no prior", 0.0),
-        "offset": _s("\"remove\"", "a constant offset in a road or position channel found on "
-                                   "the first fitted window: remove subtracts it, keep fits the "
-                                   "data as they are (either way warned)", ("remove", "keep")),
+        "decimate": _i("20 samples per period of the fastest mode", "fit every N-th sample", 1),
+        "budget": _i("40 per free parameter", "Nelder-Mead evaluations of a warm-started window", 10),
+        "first_budget": _i("250 per free parameter", "evaluations of the first, cold-started window", 10),
+        "sigma_floor": _f("", "0.005", "relative standard error added in quadrature to each window's", 0.0,
+                          1.0),
+        "min_deflection": _f("m", "0.0005", "skip windows whose RMS suspension deflection is below this",
+                             0.0),
+        "min_snr": _f("", "3", "skip windows whose deflection is below this multiple of the noise floor "
+                      "estimated from the data", 0.0),
+        "road_fusion_hz": _f("Hz", "1.5 x the highest natural frequency", "road fed to each fit: measured r "
+                             "below, integral of measured r_dot above; 0: r as measured", 0.0),
+        "road_lowpass_hz": _f("Hz", "0 (off)", "zero-phase low-pass (-6 dB) of the road fed to each fit",
+                              0.0),
+        "drift": Key("names", "", "every free damper and spring of the struts", "free parameters fitted with "
+                     "a linear drift over each window, so their estimate refers to the window's end; []: "
+                     "every parameter constant"),
+        "drift_chunk_s": _f("s", "0.2", "chunk over which a drifting parameter is held constant in the drift "
+                            "fit", 0.0, open_lo=True),
+        "drift_rate_sd": _f("1/s", "0.005", "standard deviation (relative) of the prior on each window's "
+                            "drift rate, centred on the recent estimates' rate; 0: no prior", 0.0),
+        "offset": _s("\"remove\"", "a constant offset in a road or position channel found on the first "
+                     "fitted window: remove subtracts it, keep fits the data as they are (either way warned)",
+                     ("remove", "keep")),
     },
     "alert": {
-        "confidence": _f("", "0.99", "one-sided confidence of the alert bound", 0.5, 1.0,
-                         open_lo=True, open_hi=True),
-        "persistence_s": _f("s", "one window step", "data time a drop must persist before "
-                                                    "alerting (monitor)", 0.0),
-        "hysteresis": _f("", "0.05", "clear an alert only above (1 - drop + this) x nominal "
-                                     "(monitor)", 0.0, 1.0, open_hi=True),
-        "forecast_horizon_s": _f("s", "60", "announce a predicted limit crossing due within "
-                                            "this much data time (monitor, compare)",
-                                 0.0, open_lo=True),
-        "drives": _i("1", "consecutive drives the drop must hold in before an alert (fleet)",
-                     1),
-        "horizon_days": _f("d", "365", "report limit-crossing forecasts up to this many days "
-                                       "after the latest drive (fleet)", 0.0, open_lo=True),
+        "confidence": _f("", "0.99", "one-sided confidence of the alert bound", 0.5, 1.0, open_lo=True,
+                         open_hi=True),
+        "persistence_s": _f("s", "one window step", "data time a drop must persist before alerting (monitor)",
+                            0.0),
+        "hysteresis": _f("", "0.05", "clear an alert only above (1 - drop + this) x nominal (monitor)", 0.0,
+                         1.0, open_hi=True),
+        "forecast_horizon_s": _f("s", "60", "announce a predicted limit crossing due within this much data "
+                                 "time (monitor, compare)", 0.0, open_lo=True),
+        "drives": _i("1", "consecutive drives the drop must hold in before an alert (fleet)", 1),
+        "horizon_days": _f("d", "365", "report limit-crossing forecasts up to this many days after the "
+                           "latest drive (fleet)", 0.0, open_lo=True),
     },
     "ekf": {
-        "params": Key("names", "", "every free damper and spring",
-                      "parameters in the EKF's augmented state"),
+        "params": Key("names", "", "every free damper and spring", "parameters in the EKF's augmented state"),
         "q": _f("1/sqrt(s)", "0.005", "parameter random walk (relative)", 0.0, open_lo=True),
         "decimate": _i("250 Hz or less", "run the EKF on every N-th sample", 1),
     },
     "live": {
         "bitrate": _i("the interface's", "bitrate of --interface", 1, unit="bit/s"),
-        "idle_timeout_s": _f("s", "5", "stop when no frame arrived for this long (0: never)",
-                             0.0),
-        "time_source": _s("tick on a live bus, timestamp for a log",
-                          "data time from frame timestamps or from the sensor node's SN_Sync "
-                          "ticks", ("timestamp", "tick")),
-        "rx_buffer_s": _f("s", "10", "frames the receiver thread may hold while the fits lag, "
-                                     "in seconds of data at the DBC's frame rate", 0.0,
-                          open_lo=True),
-        "slcan_timestamps": _b("false", "--interface slcan: time frames by the adapter's clock "
-                                        "(Lawicel Z1) instead of the host's arrival time"),
+        "idle_timeout_s": _f("s", "5", "stop when no frame arrived for this long (0: never)", 0.0),
+        "time_source": _s("tick on a live bus, timestamp for a log", "data time from frame timestamps or "
+                          "from the sensor node's SN_Sync ticks", ("timestamp", "tick")),
+        "rx_buffer_s": _f("s", "10", "frames the receiver thread may hold while the fits lag, in seconds of "
+                          "data at the DBC's frame rate", 0.0, open_lo=True),
+        "slcan_timestamps": _b("false", "--interface slcan: time frames by the adapter's clock (Lawicel Z1) "
+                               "instead of the host's arrival time"),
         "alert_frames": _b("true", "send SUSPID_Alert frames on the live bus"),
         "alert_interface": _s("the live bus", "send SUSPID_Alert frames on this bus instead"),
         "alert_channel": _s("", "channel of alert_interface"),
@@ -253,40 +206,39 @@ SCHEMA: dict[str, dict[str, Key]] = {
     },
     "output_only": {
         "accel_channel": _s("x1_ddot / x_ddot", "channel of the body acceleration"),
-        "method": _s("\"carma\"", "body-mode estimator: carma (parametric spectral fit) or ar "
-                                  "(AR(6) poles)", ("carma", "ar")),
+        "method": _s("\"carma\"", "body-mode estimator: carma (parametric spectral fit) or ar (AR(6) poles)",
+                     ("carma", "ar")),
     },
     "monitor": {
         "summary": _b("true", "print the closing summary line"),
     },
     "fleet": {
-        "progress": _b("true", "progress bar on stderr (one line per tenth of the work when "
-                               "stderr is not a terminal)"),
+        "progress": _b("true", "progress bar on stderr (one line per tenth of the work when stderr is not a "
+                       "terminal)"),
     },
     "simulate": {
         "height_m": _f("m", "0.1", "curb or bump height (negative: a pothole)"),
         "length_m": _f("m", "3", "bump length", 0.0, open_lo=True),
         "road_class": _s("\"C\"", "ISO 8608 road class of the random scenario",
-                         tuple("ABCDEFGH")),
+                         ("A", "B", "C", "D", "E", "F", "G", "H")),
         "t0_s": _f("s", "0.5", "time the wheel reaches the curb or bump", 0.0),
     },
     "node": {
-        "open_timeout_s": _f("s", "60", "--channel pty: wait this long for a host to open "
-                                        "the adapter", 0.0, open_lo=True),
-        "linger_s": _f("s", "3", "after the scenario, wait at most this long for the host to "
-                                 "close the adapter", 0.0),
+        "open_timeout_s": _f("s", "60", "--channel pty: wait this long for a host to open the adapter", 0.0,
+                             open_lo=True),
+        "linger_s": _f("s", "3", "after the scenario, wait at most this long for the host to close the "
+                       "adapter", 0.0),
     },
     "doe": {
-        "single_stage": _b("false", "fit the whole record at once (no horizon continuation; "
-                                    "ablation)"),
+        "single_stage": _b("false", "fit the whole record at once (no horizon continuation; ablation)"),
         "restarts": _i("0 (6 with single_stage)", "Nelder-Mead restarts of the final stage", 0),
-        "data_start": _b("true", "also start from the data-driven estimate, keeping the "
-                                 "lower-cost answer (false: --init-scale x the truth only)"),
-        "progress": _b("false", "draw the progress bar on stderr even when it is not a "
-                                "terminal"),
+        "data_start": _b("true", "also start from the data-driven estimate, keeping the lower-cost answer "
+                         "(false: --init-scale x the truth only)"),
+        "progress": _b("false", "draw the progress bar on stderr even when it is not a terminal"),
     },
     "map": {},   # channel = "MESSAGE.SIGNAL..." (suspid.can.signal_map)
 }
+
 
 #: the tables each subcommand reads (the others in a file are checked and ignored)
 TABLES: dict[str, tuple[str, ...]] = {
@@ -303,17 +255,8 @@ TABLES: dict[str, tuple[str, ...]] = {
 
 @dataclass
 class Config:
-    """A checked configuration file.
-
-    Attributes
-    ----------
-    path : Path or None
-        The file (``None``: no ``--config``, every default).
-    tables : dict
-        ``table -> {key: value}`` of the keys the file sets (checked, converted).
-    signal_map : SignalMap or None
-        The ``[map]`` table with the ``[can]`` DBC, if any.
-    """
+    """A checked configuration file (``path`` ``None``: every default): ``tables`` holds the
+    keys it sets (``table -> {key: value}``), ``signal_map`` its ``[map]`` table."""
 
     path: Path | None = None
     tables: dict[str, dict[str, Any]] | None = None
@@ -333,30 +276,19 @@ class Config:
 
 
 def _got(value: Any) -> str:
-    """A TOML value and its type for a message (``'abc' (string)``)."""
     kind = {bool: "boolean", int: "integer", float: "float", str: "string", list: "array",
             dict: "table"}.get(type(value), type(value).__name__)
     return f"{value!r} ({kind})"
 
 
 def load_config(path: str | Path | None) -> Config:
-    """Read and check a configuration file.
-
-    Parameters
-    ----------
-    path : str or Path or None
-        The ``--config`` file; ``None`` gives an empty :class:`Config` (every default).
-
-    Returns
-    -------
-    Config
+    """Read and check the ``--config`` file (``None``: an empty :class:`Config`).
 
     Raises
     ------
     InputError
-        The file cannot be read, is not TOML, or has an unknown table or key, or a value of
-        the wrong type or out of range: one line naming the file, ``table.key``, expected
-        and got.
+        Unreadable, not TOML, an unknown table or key, or a bad value (one line naming the
+        file, ``table.key``, expected and got).
     """
     if path is None:
         return Config()

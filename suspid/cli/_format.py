@@ -1,16 +1,12 @@
-"""Text output for people: a few significant digits with units, ISO dates for epoch times.
-
-The JSON outputs keep full precision; these helpers only shape the text lines the
-subcommands print without ``--json``/``--jsonl``.
-"""
+"""Text output for people (without ``--json``): a few significant digits with units, ISO dates
+for epoch times."""
 from __future__ import annotations
 
 import math
 from datetime import datetime, timezone
 from typing import Any, Mapping
 
-#: data times (s) from this on are read as seconds since 1970 (a logger's epoch clock):
-#: 1e8 s is March 1973, and no record runs that long from 0
+#: data times (s) from this on are seconds since 1970 (1973 on; no record runs that long from 0)
 EPOCH_FROM_S = 1e8
 
 
@@ -31,8 +27,7 @@ def num(v: Any, digits: int = 4, unit: str = "") -> str:
 
 
 def data_time(t: float) -> str:
-    """A data time (s) for a text line: ``t=12.35 s`` from the record's start, or the UTC
-    date and time (``2021-07-26T04:50:59.98Z``) when it is an epoch time."""
+    """A data time (s) for a text line: ``t=12.35 s``, or the UTC time of an epoch time."""
     if not math.isfinite(t):
         return "t=-"
     if abs(t) >= EPOCH_FROM_S:
@@ -48,8 +43,7 @@ def _pairs(d: Mapping[str, Any], skip_zero: bool = True) -> str:
 
 
 def summary_lines(d: Mapping[str, Any]) -> list[str]:
-    """The monitor's ``summary`` event as a few readable lines (no Python dict): windows,
-    time and speed, frames, estimator's counts, then any further field and the warnings."""
+    """The monitor's ``summary`` event as a few readable lines."""
     done = {"type"}
     lines: list[str] = []
     parts = []

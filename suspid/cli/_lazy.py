@@ -1,18 +1,10 @@
-"""Names a subcommand module uses only when its command runs, imported at that moment.
-
-``suspid X --help`` builds the parser of ``X`` alone, and its module must not load numpy's
-heavier neighbours, scipy, matplotlib, python-can, asammdf or Dask to print it. A
-subcommand module therefore imports the library functions its ``run`` calls through
-:func:`lazy_names`, with the real import under ``TYPE_CHECKING`` for the type checker and
-the import linter::
+"""Names a subcommand module uses only when its command runs, imported at that moment, so
+``suspid X --help`` loads no scipy, matplotlib, python-can or Dask::
 
     if TYPE_CHECKING:
         from estimator.stream.compare import compare, plot
     else:
         compare, plot = lazy_names("estimator.stream.compare", "compare", "plot")
-
-Each name is a stand-in that imports its module on first use (a call, an attribute) and
-then forwards to the real object; the call sites stay as they are.
 """
 from __future__ import annotations
 
@@ -23,15 +15,7 @@ __all__ = ["LazyName", "lazy_names"]
 
 
 class LazyName:
-    """Stand-in for ``module.name``, imported on first use.
-
-    Parameters
-    ----------
-    module : str
-        Dotted module path.
-    name : str
-        Attribute of that module (a function, class or constant).
-    """
+    """Stand-in for ``module.name`` (dotted module path, attribute), imported on first use."""
 
     __slots__ = ("_module", "_name", "_target")
 
@@ -60,17 +44,5 @@ class LazyName:
 
 
 def lazy_names(module: str, *names: str) -> tuple[LazyName, ...]:
-    """One :class:`LazyName` per name of ``module``, in the order given.
-
-    Parameters
-    ----------
-    module : str
-        Dotted module path, imported when one of the names is first used.
-    *names : str
-        Attributes of that module.
-
-    Returns
-    -------
-    tuple of LazyName
-    """
+    """One :class:`LazyName` per attribute ``names`` of the dotted ``module``, in order."""
     return tuple(LazyName(module, n) for n in names)

@@ -1,11 +1,5 @@
-"""``suspid compare``: sliding-window Nelder-Mead vs the EKF baseline on the same stream.
-
-The stream is a CAN log or measurement CSV (``--input``; truth only with ``--truth``), or
-the synthetic damper-wear stream (``--scenario damper-wear``, the default: a quarter car on
-an ISO 8608 class C road at 50 km/h whose damper ``c1`` falls linearly from nominal to half
-between 20 s and the end). Prints one JSON object (``--json``) with per-method metrics --
-parameter RMSE against the truth, convergence time, alert delay, false alarms, CPU
-microseconds per sample -- and writes one plot (``--plot PNG``).
+"""``suspid compare``: sliding-window Nelder-Mead vs the EKF baseline on the same stream (a log
+or CSV, or the synthetic damper-wear stream): accuracy, convergence, alert delay, CPU time.
 """
 from __future__ import annotations
 
@@ -82,8 +76,7 @@ TABLE_ROWS = (("rmse_pct", "RMS error vs truth (%)"), ("error_over_stderr_rms", 
 
 
 def comparison_table(out: dict[str, Any]) -> str:
-    """The report as a text table: per monitored parameter and metric, the sliding window
-    and the EKF side by side (``-`` where a metric does not apply)."""
+    """The report as a text table: the sliding window and the EKF side by side."""
     nm, ekf = out["nm"], out["ekf_result"]
 
     def cell(v: Any) -> str:
@@ -118,8 +111,7 @@ def run(args: argparse.Namespace) -> int:
         if args.duration < 30 or args.fs < 50:
             raise UsageError(f"--duration >= 30 s and --fs >= 50 Hz needed, got {args.duration}, "
                              f"{args.fs}")
-        # with the road unknown the stream is what a production car sends: body
-        # accelerations and ride heights, no road
+        # with the road unknown: what a production car sends (no road)
         make = production_wear if args.road == "unknown" else damper_wear
         s = make(model, duration=args.duration, fs=args.fs, seed=args.seed,
                  c_end_fraction=args.wear_to)

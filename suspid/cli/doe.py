@@ -1,14 +1,7 @@
 """``suspid doe``: run the seed's Taguchi designs (L16 for quarter1, L27 for quarter2/half4;
-an L27 for full7, not the seed's: ``estimator/doe/full7_design.py``).
-
-Every row of the design is simulated (noise-free, or with Gaussian noise of ``--noise``
-times each channel's std), identified from ``--init-scale`` times the truth, and scored:
-noise-free success = every identified parameter within 1 % of the truth; noisy success =
-every free parameter within its run's reported 3-sigma band (noisy runs also report, per
-row and in total, whether the truth lies in the row's joint 3-sigma confidence region,
-which a correct row misses 0.27 % of the time, not about p times that). The JSON output is the
-contract's ``{"design", "experiments", "successes", "total"}`` plus the design choices the
-seed leaves out (``setup``) and the method's settings (``method``).
+an L27 of the project's for full7). Each row is simulated, identified from ``--init-scale``
+times the truth and scored: within 1 % of the truth noise-free, within the run's 3-sigma band
+when noisy (``docs/paper-reproduction.md``).
 """
 from __future__ import annotations
 

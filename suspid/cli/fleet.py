@@ -11,8 +11,7 @@ from typing import TYPE_CHECKING, Any
 from suspid.cli._args import FitHelp, add_fit_options, add_offset_option, add_road_option
 from suspid.cli._can import add_can_arguments, can_inputs, command_config
 from suspid.cli._common import (add_model_option, add_param_options, assignment_warnings,
-                                parse_assignments,
-                                print_json)
+                                parse_assignments, print_json)
 from suspid.cli._lazy import lazy_names
 from suspid.cli.identify import parse_x0
 from suspid.errors import UsageError

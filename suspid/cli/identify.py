@@ -6,9 +6,9 @@ import math
 import sys
 from typing import TYPE_CHECKING
 
-from suspid.cli._args import add_offset_option, add_road_option
+from suspid.cli._args import FitHelp, add_fit_options, add_offset_option, add_road_option
 from suspid.cli._format import num
-from suspid.cli._common import (parse_state, positive_int, add_input_options, add_model_option, add_param_options,
+from suspid.cli._common import (parse_state, add_input_options, add_model_option, add_param_options,
                                 load_measurement, model_from_args, params_from_args, print_json,
                                 assignment_warnings)
 from suspid.cli._can import command_config
@@ -27,6 +27,19 @@ else:
                                                 "resolve_road")
     plot_comparison, = lazy_names("suspid.plots", "plot_comparison")
 
+#: help of the identifier's options as identify words them
+FIT_HELP = FitHelp(
+    cost="sse: sum of squared position differences (seed cost 1); frobenius: "
+         "Frobenius norm of measured-minus-simulated over all measured channels "
+         "(seed cost 2)",
+    maxfev="evaluation budget of each fit over all its restarts, further starts and "
+           "polish; the fits from the data-driven start, from --init/the defaults "
+           "and from the quarter car's twin each have their own, and nfev reports "
+           "their sum (default: 1200 per free parameter shared by every fit of the "
+           "record, further starts ending once one returns to the best cost); "
+           "restarts, further starts, polish, the data-driven start and the "
+           "initial state are the --config file's [fit] table")
+
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser("identify", help="identify suspension parameters from a measurement",
@@ -36,20 +49,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     add_model_option(p)
     add_input_options(p, "identify")
     add_param_options(p)
-    p.add_argument("--cost", choices=["sse", "frobenius"], default="sse",
-                   help="sse: sum of squared position differences (seed cost 1); frobenius: "
-                        "Frobenius norm of measured-minus-simulated over all measured channels "
-                        "(seed cost 2)")
-    p.add_argument("--maxfev", type=positive_int, default=None,
-                   help="evaluation budget of each fit over all its restarts, further starts and "
-                        "polish; the fits from the data-driven start, from --init/the defaults "
-                        "and from the quarter car's twin each have their own, and nfev reports "
-                        "their sum (default: 1200 per free parameter shared by every fit of the "
-                        "record, further starts ending once one returns to the best cost); "
-                        "restarts, further starts, polish, the data-driven start and the "
-                        "initial state are the --config file's [fit] table")
-    # the [fit] table of --config may change these (suspid.cli._can.command_config)
-    p.set_defaults(restarts=6, multistart=4, polish=True, data_start=True, x0="estimate")
+    add_fit_options(p, FIT_HELP, restarts=6)
     add_offset_option(p, "a constant offset in the road column(s) or in one position channel "
                          "(a sensor zero not at the rest position; estimated at the data-driven "
                          "start as extra linear unknowns, found when it is most of the misfit): "
@@ -64,8 +64,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def parse_x0(text: str, n: int) -> str | FloatArray:
-    """``[fit] x0`` of identify, diagnose and fleet: ``estimate``, ``rest`` or ``n`` finite
-    numbers (comma-separated)."""
+    """``[fit] x0``: ``estimate``, ``rest`` or ``n`` comma-separated finite numbers."""
     if text in ("estimate", "rest"):
         return text
     return parse_state(text, n, "fit.x0")

@@ -1,11 +1,5 @@
-"""``suspid monitor``: sliding-window identification (or the EKF) on a CAN stream, with alerts.
-
-Input is a CAN log replayed as fast as possible (``--input LOG``), a measurement CSV
-(``--input CSV``, same windows), or a live python-can bus (``--interface I --channel C``).
-Output is JSON lines (``--jsonl``): one ``estimate`` (or ``skip``, with the reason) per
-window, an ``alert`` (and later a ``clear``) per confident drop, and a closing ``summary``.
-See ``docs/monitoring.md``.
-"""
+"""``suspid monitor``: sliding-window identification (or the EKF) on a CAN stream, with alerts
+(``docs/monitoring.md``)."""
 from __future__ import annotations
 
 import argparse
@@ -87,8 +81,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def _text(d: dict[str, Any], model: SuspensionModel | None = None) -> str:
-    """One readable line for an event's JSON form (a few lines for the summary); ``model``
-    gives the parameters' units."""
+    """One readable line for an event's JSON form (a few for the summary)."""
     typ = d.get("type")
     when = data_time(float(d["t"])) if "t" in d else ""
     if typ == "estimate":
@@ -136,13 +129,8 @@ def _emitter(jsonl: bool, model: SuspensionModel | None = None) -> Callable[[Any
 
 
 def _skip_mf4_backend(args: argparse.Namespace) -> None:
-    """Keep python-can from importing asammdf (and with it pandas and sympy, ~1.2 s of CPU at
-    every start) when the input is not an MF4 log.
-
-    ``can.io.mf4`` imports asammdf inside ``try/except ImportError`` and is only needed to
-    read or write ``.mf4``; a ``None`` entry in :data:`sys.modules` makes that import fail
-    fast in this process only. Nothing is changed if python-can or asammdf is loaded already.
-    """
+    """Keep python-can from importing asammdf (slow) when the input is not an MF4 log: a
+    ``None`` entry in :data:`sys.modules` makes that optional import fail in this process."""
     src = str(getattr(args, "input", "") or "")
     if src.lower().endswith(".mf4") or "can" in sys.modules or "asammdf" in sys.modules:
         return
@@ -150,12 +138,10 @@ def _skip_mf4_backend(args: argparse.Namespace) -> None:
 
 
 def source_from_args(args: argparse.Namespace, cfg: Config) -> "Source":
-    """The stream options of ``monitor`` and the ``[live]`` table as a
-    :class:`~estimator.stream.pipeline.Source`."""
+    """The stream options and the ``[live]`` table as a ``Source``."""
     from estimator.stream.pipeline import Source  # noqa: PLC0415 - see run()
 
     dbc_path, smap = can_inputs(args, cfg)
-    # the [live] keys are Source's fields (idle_timeout_s: idle_timeout, duration_s: duration)
     return Source(input=args.input, interface=args.interface, channel=args.channel,
                   dbc=dbc_path, signal_map=smap, can_channel=args.can_channel,
                   j1939_source=args.j1939_source,
@@ -165,8 +151,7 @@ def source_from_args(args: argparse.Namespace, cfg: Config) -> "Source":
 
 def run(args: argparse.Namespace) -> int:
     _skip_mf4_backend(args)
-    # the estimator is imported here, not at the top: it loads python-can, and
-    # _skip_mf4_backend must run before that (python-can imports asammdf when it loads)
+    # imported here: it loads python-can, which must come after _skip_mf4_backend
     from estimator.stream.pipeline import monitor_spec, run_monitor, warn  # noqa: PLC0415
 
     cfg = command_config(args, "monitor")

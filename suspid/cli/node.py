@@ -132,9 +132,7 @@ def run(args: argparse.Namespace) -> int:
             writer = open_log_writer(args.log)
             target = _Tee(bus, writer)
         if isinstance(bus, SlcanPtyBus):
-            # after the last sample, keep receiving (an estimator's alert frame may lag
-            # behind) until the host closes the channel -- it can tell the end from the
-            # final SN_Status with State = stopping -- or node.linger_s runs out
+            # keep receiving (a late alert frame) until the host closes or node.linger_s ends
             summary = node.run(target, linger=linger,
                                linger_until=bus.closed_by_host)
             bus.drain(5.0)

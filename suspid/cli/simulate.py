@@ -25,9 +25,7 @@ else:
     to_uniform_grid, = lazy_names("estimator.identify.regrid", "to_uniform_grid")
     plot_channels, = lazy_names("suspid.plots", "plot_channels")
 
-#: an injected effect that changes no channel by more than this fraction of its RMS is
-#: reported as never engaged by the record (a bump stop beyond the largest deflection, a
-#: value in the wrong unit)
+#: an injected effect changing no channel by more than this fraction of its RMS is never engaged
 INACTIVE_EFFECT = 1e-6
 
 
@@ -74,28 +72,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def select_channels(model: SuspensionModel, spec: str | None) -> tuple[list[str], list[str]]:
-    """The measured channels and the road columns ``--channels`` asks to write.
-
-    Parameters
-    ----------
-    model : SuspensionModel
-    spec : str or None
-        Comma-separated channels (motions, ride heights, road columns) and named sets
-        (:data:`~suspid.models.base.CHANNEL_SETS`); ``None``: positions and velocities.
-
-    Returns
-    -------
-    chans : list of str
-        Measured channels, in the order given (a set expanded in place).
-    roads : list of str
-        Road columns (``r``, ``r_dot``) to write: every one unless a named set is given,
-        else those listed.
-
-    Raises
-    ------
-    UsageError
-        A name that is neither a channel, a road column nor a set, naming the valid ones.
-    """
+    """The measured channels (a named set expanded in place) and the road columns (every one
+    unless a named set is given, else those listed) that ``--channels`` asks to write."""
     road_cols = [c for r in model.roads for c in (r, f"{r}_dot")]
     if not spec:
         return [c for c in model.channels if not c.endswith("_ddot")], road_cols
@@ -141,8 +119,7 @@ def run(args: argparse.Namespace) -> int:
     if args.road:
         given_road = read_measurement(args.road, model, require_measured=False)
         if args.effect:
-            # the nonlinear simulation steps on a uniform grid: a road logged with timing
-            # jitter is resampled onto it (a gap stays the error below)
+            # the nonlinear simulation steps on a uniform grid: a jittered road is resampled
             given_road, note = to_uniform_grid(given_road)
             if note is not None:
                 warnings.append(f"{note}; the simulation and --out are on that grid")
@@ -165,8 +142,7 @@ def run(args: argparse.Namespace) -> int:
                          f"to {float(d.max()):.6g} s, more than a quarter step of jitter (resample "
                          "the road, or simulate without --effect)")
     if args.effect:
-        # suspid.effects brings scipy.interpolate/optimize (~0.6 s to import); only runs with
-        # --effect need it
+        # suspid.effects is slow to import; only runs with --effect need it
         from suspid.effects import inject  # noqa: PLC0415
         injection = inject(model, args.effect)
         injection.check_record(t)

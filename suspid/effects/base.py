@@ -9,8 +9,6 @@ from typing import Any, ClassVar, Mapping, Sequence, TypeVar
 
 import numpy as np
 
-# scipy.interpolate (which loads scipy.optimize, ~0.2 s) is reached through scipy's lazy
-# submodule attribute, so a monitor that never resamples a channel does not pay for it
 from suspid.errors import UsageError
 from suspid.models.base import FloatArray, ForceFn, Site, SuspensionModel
 from suspid.nlsim import Law
@@ -19,22 +17,11 @@ from suspid.nlsim import Law
 _E = TypeVar("_E", bound="Effect")
 
 
-# ------------------------------------------------------------------------- parameters
 @dataclass(frozen=True)
 class EffectParam:
-    """One parameter of an effect.
-
-    Attributes
-    ----------
-    name : str
-        Name as in the contract's table.
-    unit : str
-        SI unit (``"SI"`` for a sensor offset: the channel's own unit).
-    description : str
-    kind : {"positive", "real", "channel", "channels"}
-        ``positive``: a float > 0 (fitted in log coordinates); ``real``: any float;
-        ``channel``: one channel name; ``channels``: a list of channel names.
-    """
+    """One parameter of an effect: name (the contract's), SI unit (``"SI"``: the channel's own)
+    and kind: ``positive`` (a float > 0, fitted in log coordinates), ``real``, ``channel`` (one
+    channel name) or ``channels`` (a list)."""
 
     name: str
     unit: str
@@ -42,9 +29,6 @@ class EffectParam:
     kind: str = "positive"
 
 
-# ------------------------------------------------------------------------- sites
-# The models own their struts and tyres (suspid.models.base.Site); these two functions are
-# the effects' way to ask for them.
 def strut_sites(model: SuspensionModel, p: Mapping[str, float]) -> list[Site]:
     """The suspension struts of ``model`` (deflection = extension, force resists extension)."""
     return model.strut_sites(p)
@@ -55,24 +39,13 @@ def tyre_sites(model: SuspensionModel, p: Mapping[str, float]) -> list[Site]:
     return model.tyre_sites(p)
 
 
-# ------------------------------------------------------------------------- effects
 #: settings of one screening trial of a physical effect (e.g. ``{"gap": 0.01}``)
 Trial = dict[str, float]
 
 
 class Effect:
-    """Base class of every effect (see :class:`PhysicalEffect`, :class:`SensorEffect`).
-
-    Parameters
-    ----------
-    **values
-        The effect's parameters by name (see :attr:`params`).
-
-    Raises
-    ------
-    UsageError
-        Unknown or missing parameter, or a value of the wrong kind.
-    """
+    """Base class of every effect, built from its parameters by name (:attr:`params`);
+    UsageError on an unknown or missing parameter or a value of the wrong kind."""
 
     name: ClassVar[str] = ""
     kind: ClassVar[str] = ""
@@ -92,7 +65,6 @@ class Effect:
         for spec in self.params:
             self.values[spec.name] = _check_value(self.name, spec, values[spec.name])
 
-    # ---- names and values ---------------------------------------------------------
     @property
     def numeric_names(self) -> list[str]:
         """Names of the float parameters (the ones an optimiser can vary)."""
@@ -118,24 +90,15 @@ class Effect:
             out[k] = list(v) if isinstance(v, (list, tuple)) else (float(v) if isinstance(v, float) else v)
         return {"name": self.name, "params": out}
 
-    # ---- where it applies -----------------------------------------------------------
     @classmethod
     def unavailable_reason(cls, model: SuspensionModel) -> str | None:
-        """Why the effect is not defined for ``model`` (``None``: it is).
-
-        Decided from the model's structure (its sites and channels), never its name.
-        """
+        """Why the effect is not defined for ``model`` (``None``: it is), from its structure."""
         return None
 
     @classmethod
     def limits(cls, model: SuspensionModel) -> dict[str, str]:
-        """What the diagnosis cannot identify about this effect with ``model``.
-
-        Returns
-        -------
-        dict
-            ``form -> plain sentence`` (empty when nothing), printed in ``evidence.limits``.
-        """
+        """What the diagnosis cannot identify about this effect with ``model``: ``form ->
+        sentence`` (``evidence.limits``)."""
         return {}
 
     def check_model(self, model: SuspensionModel) -> None:
@@ -145,11 +108,7 @@ class Effect:
             raise UsageError(f"effect {self.name} is not available for model {model.name}: {why}")
 
     def record_problem(self, t: FloatArray) -> str | None:
-        """Why the effect cannot act on a record sampled at ``t`` (s); ``None``: it can.
-
-        The base class finds nothing; :class:`SensorDelay` objects to a delay no shorter
-        than the record (the delayed channels would hold their first value throughout).
-        """
+        """Why the effect cannot act on a record sampled at ``t`` (s); ``None``: it can."""
         return None
 
     def __repr__(self) -> str:
@@ -187,25 +146,17 @@ def _check_value(effect: str, spec: EffectParam, value: Any) -> Any:
 class PhysicalEffect(Effect):
     """An effect in the right-hand side: a scalar force law at every site of one kind.
 
-    Besides the force (:meth:`law`) the class tells the diagnosis how to find it. The
-    residual force of the fitted linear model is regressed on the base parameters'
-    sensitivities plus, per site, the columns :meth:`regressors` returns (the force per
-    unit of each coefficient, times the site's direction ``b``); :meth:`from_coefficients`
-    turns the coefficients into the effect's parameters (the refit's start) and says
-    whether they are physical. Parameters the force is not linear in are tried on a grid
-    (:meth:`screen_trials`, e.g. the bump stop's gap). The refit optimises ``positive``
-    parameters in log coordinates and ``real`` ones linearly, from those starting values;
-    base parameters the effect replaces are tied to it (:meth:`base_overrides`).
+    Besides the force (:meth:`law`) it tells the diagnosis how to find it (:meth:`regressors`,
+    :meth:`from_coefficients`, :meth:`screen_trials`, :meth:`base_overrides`; see
+    ``docs/architecture.md``).
     """
 
     kind: ClassVar[str] = "physical"
     #: ``"strut"`` or ``"tyre"``
     site_kind: ClassVar[str] = "strut"
-    #: what the evidence figure plots the residual force against: ``"rate"`` (``s'``) or
-    #: ``"deflection"`` (``s``)
+    #: what the evidence figure plots the residual force against: ``"rate"`` or ``"deflection"``
     plot_against: ClassVar[str] = "rate"
 
-    # ---- sites ------------------------------------------------------------------------
     @classmethod
     def model_sites(cls, model: SuspensionModel, p: Mapping[str, float] | None = None) -> list[Site]:
         """Every site of ``model`` of this effect's kind (``p``: parameters, default the model's)."""
@@ -233,7 +184,6 @@ class PhysicalEffect(Effect):
             raise UsageError(f"effect {self.name} is not available for model {model.name}: {why}")
         return sites
 
-    # ---- physics ----------------------------------------------------------------------
     def law(self, site: Site, base: Mapping[str, float]) -> Law:
         """Scalar force law ``phi(s, s') -> N`` at ``site`` for base parameters ``base``."""
         raise NotImplementedError(f"effect {self.name}: no force law")
@@ -258,82 +208,35 @@ class PhysicalEffect(Effect):
         def f(t: float, x: FloatArray, u: FloatArray, params: Mapping[str, float]) -> FloatArray:
             return self.generalized_force(model, x, u, params)[0]
 
-        # the term remembers its effect (model.extra_force terms are plain callables)
         f.effect = self  # type: ignore[attr-defined]
         return f
 
     def base_overrides(self, sites: Sequence[Site]) -> dict[str, float]:
-        """Base parameters this effect determines at ``sites`` (name -> value, SI).
-
-        The refit does not fit them separately: they follow the effect's parameters (an
-        asymmetric damper's symmetric part is the strut's ``c``). Default: none.
-
-        Raises
-        ------
-        ValueError
-            The sites do not allow one such value (e.g. two different dampers).
-        """
+        """Base parameters (SI) the effect's parameters determine at ``sites``, so the refit ties
+        them (an asymmetric damper's symmetric part is ``c``); ValueError if not one value."""
         return {}
 
-    # ---- diagnosis --------------------------------------------------------------------
     @classmethod
     def screen_trials(cls, sites: Sequence[Site], s: Sequence[FloatArray],
                       sd: Sequence[FloatArray]) -> list[Trial]:
-        """Settings tried when screening (default one trial, ``{}``).
-
-        Parameters
-        ----------
-        sites : sequence of Site
-            Where the effect is screened.
-        s, sd : sequence of ndarray
-            Each site's coordinate (m) and rate (m/s) over the record (smoothed measured
-            motion).
-
-        Returns
-        -------
-        list of dict
-            One dict per trial (passed to :meth:`regressors` and
-            :meth:`from_coefficients`); empty: the effect cannot show in this record.
-        """
+        """Settings tried when screening, given each site's coordinate ``s`` (m) and rate ``sd``
+        (m/s); empty: the effect cannot show in this record."""
         return [{}]
 
     @classmethod
     def regressors(cls, site: Site, s: FloatArray, sd: FloatArray, base: Mapping[str, float],
                    trial: Trial, rate_noise: float) -> list[FloatArray]:
-        """Force (N) per unit of each coefficient at ``site``: ``phi ~ sum_j beta_j col_j``.
-
-        Parameters
-        ----------
-        site : Site
-        s, sd : ndarray
-            Site coordinate (m) and rate (m/s), one value per sample.
-        base : mapping
-            Base parameters of the fitted linear model (SI).
-        trial : dict
-            One of :meth:`screen_trials`.
-        rate_noise : float
-            Standard deviation (m/s) of the white noise left in ``sd``.
-        """
+        """Force (N) per unit of each coefficient at ``site``: ``phi ~ sum_j beta_j col_j``, from
+        the site coordinate ``s`` (m), rate ``sd`` (m/s), the fitted ``base`` (SI), one trial and
+        the noise left in ``sd`` (m/s)."""
         raise NotImplementedError(f"effect {cls.name}: no screening regressors")
 
     @classmethod
     def from_coefficients(cls, coef: FloatArray, base: Mapping[str, float], trial: Trial,
                           sites: Sequence[Site], rate_noise: Sequence[float]
                           ) -> tuple[dict[str, Any], bool, str]:
-        """Effect parameters from the screening coefficients of :meth:`regressors`.
-
-        Returns
-        -------
-        params : dict
-            The effect's parameters (the refit's start).
-        plausible : bool
-            Whether they are physically possible (e.g. a friction force > 0).
-        note : str
-            A sentence for the evidence (may be empty).
-
-        The default serves an effect with one numeric parameter and one regressor: the
-        coefficient is that parameter, plausible when positive.
-        """
+        """``(params, plausible, note)`` from the coefficients of :meth:`regressors`: the refit's
+        start, whether physical, a sentence for the evidence. Default: one parameter, > 0."""
         names = [p.name for p in cls.params if p.kind in ("positive", "real")]
         if len(names) != 1 or len(cls.params) != 1:
             raise NotImplementedError(f"effect {cls.name}: no screening coefficients")
@@ -341,16 +244,8 @@ class PhysicalEffect(Effect):
 
 
 class SensorEffect(Effect):
-    """An effect in the measurement model (what the sensors report).
-
-    For the diagnosis a sensor effect names the channel groups it may affect
-    (:meth:`screen_groups`) and its reading's change per unit of its screened parameter
-    (:meth:`output_sensitivity`, linearised about no effect); the output residual of each
-    group is regressed on that, and :meth:`params_from_screen` turns the coefficient into
-    the effect's parameters. An effect that shifts its channels in time (:attr:`time_shift`
-    names the delay parameter) is also screened on the residual force with the group's
-    motion shifted, and undone by an all-pass shift in the refit.
-    """
+    """An effect in the measurement model (what the sensors report); its diagnosis hooks are
+    :meth:`screen_groups`, :meth:`output_sensitivity` and :meth:`params_from_screen`."""
 
     kind: ClassVar[str] = "sensor"
     #: name of the parameter (s) by which the effect delays its channels, for a time shift
@@ -380,7 +275,6 @@ class SensorEffect(Effect):
             raise UsageError(f"effect {self.name}: unknown channel(s) {', '.join(bad)} for model "
                              f"{model.name}; expected any of {', '.join(model.channels)}")
 
-    # ---- diagnosis --------------------------------------------------------------------
     @classmethod
     def screen_groups(cls, model: SuspensionModel, measured: Sequence[str]) -> list[list[str]]:
         """Channel groups the effect may affect (default: each measured channel alone)."""
@@ -389,16 +283,14 @@ class SensorEffect(Effect):
     @classmethod
     def output_sensitivity(cls, channel: str, t: FloatArray,
                            predicted: Mapping[str, FloatArray]) -> FloatArray | None:
-        """Change of ``channel``'s reading per unit of the screened parameter (channel units
-        per parameter unit), linearised about no effect, from the fitted model's channels
-        ``predicted``; ``None`` where it cannot be formed."""
+        """Change of ``channel``'s reading per unit of the screened parameter, linearised about
+        no effect, from the fitted channels ``predicted`` (``None``: cannot be formed)."""
         raise NotImplementedError(f"effect {cls.name}: no output sensitivity")
 
     @classmethod
     def params_from_screen(cls, group: Sequence[str], value: float,
                            max_delay: float) -> dict[str, Any] | None:
-        """The effect's parameters for channel ``group`` and screened value ``value``
-        (``None`` when that value is not physical, e.g. a delay outside ``(0, max_delay]``)."""
+        """The effect's parameters for ``group`` and screened ``value`` (``None``: not physical)."""
         raise NotImplementedError(f"effect {cls.name}: no screening parameters")
 
 
@@ -418,18 +310,9 @@ def register(cls: type[Effect]) -> type[Effect]:
 
 
 def load_plugins(force: bool = False) -> None:
-    """Add the effects other installed packages declare in the entry-point group
-    ``suspid.effects`` (``name = "module:Class"``) to :data:`REGISTRY` (once; ``force``
-    reads the group again).
-
-    Raises
-    ------
-    UsageError
-        A plugin that cannot be imported, is not an effect class, whose class ``name``
-        differs from its entry-point name, that lacks a hook the diagnosis needs, or that
-        takes a name already registered by another class. The message names the entry
-        point and the package that declares it.
-    """
+    """Add the effects of the entry-point group ``suspid.effects`` to :data:`REGISTRY` (once;
+    ``force`` reads it again). UsageError, naming the entry point and its package, for a
+    plugin that cannot load, is no effect class, lacks a hook or takes a taken name."""
     global _plugins_loaded
     if _plugins_loaded and not force:
         return

@@ -9,8 +9,6 @@ from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
-# scipy.interpolate (which loads scipy.optimize, ~0.2 s) is reached through scipy's lazy
-# submodule attribute, so a monitor that never resamples a channel does not pay for it
 from suspid.effects.base import Effect, PhysicalEffect, SensorEffect, effect_classes
 from suspid.errors import UsageError
 from suspid.models.base import FloatArray, SuspensionModel
@@ -18,15 +16,8 @@ from suspid.nlsim import simulate_effects
 from suspid.simulate import simulate, simulate_ode
 
 
-# ------------------------------------------------------------------------- construction
 def make_effect(name: str, **values: Any) -> Effect:
-    """Build the effect called ``name`` with parameters ``values``.
-
-    Raises
-    ------
-    UsageError
-        Unknown effect (lists the known ones) or bad parameters.
-    """
+    """Build the effect called ``name`` with parameters ``values`` (UsageError: unknown, bad)."""
     reg = effect_classes()
     try:
         cls = reg[name]
@@ -36,11 +27,8 @@ def make_effect(name: str, **values: Any) -> Effect:
 
 
 def parse_effect(spec: str) -> Effect:
-    """Parse ``"NAME"`` or ``"NAME:key=value,key=value"`` into an effect.
-
-    Lists (``sensor_delay``'s ``channels``) separate their items with ``+``, e.g.
-    ``sensor_delay:channels=x1+x1_dot,delay_s=0.01``.
-    """
+    """Parse ``"NAME"`` or ``"NAME:key=value,key=value"`` into an effect (list items joined by
+    ``+``: ``sensor_delay:channels=x1+x1_dot,delay_s=0.01``)."""
     name, _, rest = spec.strip().partition(":")
     values: dict[str, Any] = {}
     for item in (s for s in rest.split(",") if s.strip()):
@@ -63,21 +51,10 @@ def as_effect(e: "Effect | str | Mapping[str, Any]") -> Effect:
                      f"mapping, got {e!r}")
 
 
-# ------------------------------------------------------------------------- injection
 @dataclass
 class Injection:
-    """A model with effects nobody declared to the estimator.
-
-    Attributes
-    ----------
-    model : SuspensionModel
-        Copy of the base model whose ``extra_force`` carries the physical effects (so
-        ``model.rhs`` and :func:`suspid.simulate.simulate_ode` include them).
-    base : SuspensionModel
-        The model without effects.
-    effects : tuple of Effect
-        Every injected effect, physical and sensor.
-    """
+    """A model with effects nobody declared to the estimator: ``model`` is a copy of ``base``
+    whose ``extra_force`` carries the physical ones; ``effects`` holds them all."""
 
     model: SuspensionModel
     base: SuspensionModel
@@ -105,28 +82,9 @@ class Injection:
                  method: str = "fast", max_step: float = 2.5e-4) -> dict[str, FloatArray]:
         """Simulate the model with every effect and return what the sensors report.
 
-        Parameters
-        ----------
-        params : mapping
-            Base model parameters (SI); the effects carry their own.
-        t : ndarray
-            Sample times (s).
-        road : dict, optional
-            Road arrays (m, m/s) as for :func:`suspid.simulate.simulate`.
-        x0 : ndarray, optional
-            Initial state (default rest).
-        method : {"fast", "ode"}
-            ``fast``: the exponential integrator of :mod:`suspid.nlsim` with
-            internal steps of at most ``max_step`` (s); ``ode``: :func:`simulate_ode`
-            (solve_ivp, slow, reference accuracy). Without physical effects the exact linear
-            simulator is used either way.
-        max_step : float
-            Largest internal step of the fast path (s).
-
-        Returns
-        -------
-        dict
-            Channel -> array (positions, ``_dot``, ``_ddot``, roads), sensor effects applied.
+        ``params`` are the base model's (SI), ``t``, ``road``, ``x0`` as for
+        :func:`suspid.simulate.simulate`. ``method``: ``fast`` (:mod:`suspid.nlsim`, steps of at
+        most ``max_step`` s) or ``ode`` (:func:`simulate_ode`, reference accuracy).
         """
         t = np.asarray(t, dtype=float)
         p = dict(params)
@@ -142,10 +100,6 @@ class Injection:
             raise UsageError(f"unknown simulation method {method!r}; expected 'fast' or 'ode'")
         return self.measure(t, out)
 
-    def describe(self) -> list[dict[str, Any]]:
-        """The injected effects as contract-style ``{"name", "params"}`` objects."""
-        return [e.to_json() for e in self.effects]
-
     def check_record(self, t: FloatArray) -> None:
         """Raise :class:`UsageError` if an effect cannot act on a record sampled at ``t`` (s)."""
         for e in self.effects:
@@ -156,22 +110,9 @@ class Injection:
     def influence(self, params: Mapping[str, float], t: FloatArray,
                   road: Mapping[str, FloatArray] | None = None, x0: FloatArray | None = None,
                   combined: Mapping[str, FloatArray] | None = None) -> list[float]:
-        """How much each effect alone changes what the sensors report (1, relative).
-
-        Parameters
-        ----------
-        params, t, road, x0
-            As for :meth:`simulate`.
-        combined : dict, optional
-            :meth:`simulate`'s output with every effect, reused when there is one effect.
-
-        Returns
-        -------
-        list of float
-            Per effect, in order: the largest over the model's channels of the RMS change
-            the effect makes divided by the channel's RMS without it (0: the record never
-            engages it, e.g. a bump stop beyond the largest deflection).
-        """
+        """Per effect, the largest relative RMS change it alone makes to a channel (0: the record
+        never engages it). ``params, t, road, x0`` as for :meth:`simulate`; ``combined``: its
+        output with every effect, reused when there is one effect."""
         t = np.asarray(t, dtype=float)
         base = simulate(self.base, dict(params), t, road, x0)
         out: list[float] = []
@@ -201,25 +142,9 @@ def inject(model: SuspensionModel,
            effects: Iterable["Effect | str | Mapping[str, Any]"]) -> Injection:
     """Add effects to ``model`` without declaring them to the estimator.
 
-    Parameters
-    ----------
-    model : SuspensionModel
-        The declared (linear) model; it is not modified.
-    effects : iterable
-        :class:`Effect` instances, spec strings ``"NAME:key=value,..."`` (see
-        :func:`parse_effect`) or ``{"name": ..., "params": {...}}`` mappings.
-
-    Returns
-    -------
-    Injection
-        ``.model`` (a copy whose ``rhs`` has the physical terms), ``.measure(t, channels)``
-        for the sensor terms and ``.simulate(params, t, road, x0)`` for both.
-
-    Raises
-    ------
-    UsageError
-        Unknown effect, bad parameters, an effect not defined for the model, or a sensor
-        effect naming a channel the model does not have.
+    ``effects`` are :class:`Effect` instances, spec strings (:func:`parse_effect`) or
+    ``{"name", "params"}`` mappings; ``model`` is not modified. UsageError for an unknown or
+    unavailable effect, bad parameters or a channel the model does not have.
     """
     effs = tuple(as_effect(e) for e in effects)
     aug = copy.copy(model)
@@ -234,11 +159,6 @@ def inject(model: SuspensionModel,
 
 
 def effects_for(model: SuspensionModel, kinds: Sequence[str] = ("physical", "sensor")) -> list[str]:
-    """Names of the registered effects (plugins included) available for ``model``.
-
-    An effect is available when the model has what it needs (:meth:`Effect.unavailable_reason`:
-    struts for a strut effect, tyres for a tyre effect, one damper coefficient for every
-    strut for ``asymmetric_damping``), whatever the model is called.
-    """
+    """Names of the registered effects (plugins included) available for ``model``."""
     return [n for n, c in effect_classes().items()
             if c.kind in kinds and c.unavailable_reason(model) is None]

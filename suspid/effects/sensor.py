@@ -5,8 +5,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-# scipy.interpolate (which loads scipy.optimize, ~0.2 s) is reached through scipy's lazy
-# submodule attribute, so a monitor that never resamples a channel does not pay for it
+# scipy.interpolate is reached through scipy's lazy submodule attribute: loaded when used
 import scipy
 
 from suspid.effects.base import EffectParam, SensorEffect, register
@@ -14,10 +13,8 @@ from suspid.models.base import FloatArray, SuspensionModel
 
 
 def _shift(t: FloatArray, y: FloatArray, dt: float) -> FloatArray:
-    """``y(t + dt)`` by cubic-spline interpolation of the valid samples (s, channel units).
-
-    Before the first sample the first value is held; beyond the last the result is NaN.
-    """
+    """``y(t + dt)`` by cubic-spline interpolation of the valid samples (the first value held
+    before the first sample, NaN beyond the last)."""
     ok = ~np.isnan(y)
     if ok.sum() < 4:
         return np.interp(t + dt, t[ok], y[ok], right=np.nan)
@@ -38,11 +35,8 @@ def _rate(ch: str, t: FloatArray, predicted: Mapping[str, FloatArray]) -> FloatA
 
 @register
 class SensorDelay(SensorEffect):
-    """The listed channels lag the others by ``delay_s``: they read ``y(t - delay_s)``.
-
-    Screening: groups are the measured channels of one coordinate together and each alone;
-    a lag ``d`` changes a reading by ``-d y'`` (linearised).
-    """
+    """The listed channels lag the others by ``delay_s``: they read ``y(t - delay_s)``
+    (screened per coordinate's channels together and each alone; a lag ``d`` adds ``-d y'``)."""
 
     name = "sensor_delay"
     params = (EffectParam("channels", "", "channels that lag", "channels"),
@@ -50,21 +44,19 @@ class SensorDelay(SensorEffect):
     description = "listed channels lag the others by delay_s"
     time_shift = "delay_s"
 
-    def apply(self, t: FloatArray, channels: Mapping[str, FloatArray]) -> dict[str, FloatArray]:
+    def _shifted(self, t: FloatArray, channels: Mapping[str, FloatArray], dt: float) -> dict[str, FloatArray]:
         out = dict(channels)
         tt = np.asarray(t, dtype=float)
         for c in self.values["channels"]:
             if c in out:
-                out[c] = _shift(tt, np.asarray(out[c], dtype=float), -self.values["delay_s"])
+                out[c] = _shift(tt, np.asarray(out[c], dtype=float), dt)
         return out
 
+    def apply(self, t: FloatArray, channels: Mapping[str, FloatArray]) -> dict[str, FloatArray]:
+        return self._shifted(t, channels, -self.values["delay_s"])
+
     def compensate(self, t: FloatArray, channels: Mapping[str, FloatArray]) -> dict[str, FloatArray]:
-        out = dict(channels)
-        tt = np.asarray(t, dtype=float)
-        for c in self.values["channels"]:
-            if c in out:
-                out[c] = _shift(tt, np.asarray(out[c], dtype=float), self.values["delay_s"])
-        return out
+        return self._shifted(t, channels, self.values["delay_s"])
 
     def record_problem(self, t: FloatArray) -> str | None:
         tt = np.asarray(t, dtype=float)
@@ -108,19 +100,18 @@ class SensorOffset(SensorEffect):
               EffectParam("offset", "SI", "constant offset added to the channel", "real"))
     description = "constant offset on one channel"
 
-    def apply(self, t: FloatArray, channels: Mapping[str, FloatArray]) -> dict[str, FloatArray]:
+    def _added(self, channels: Mapping[str, FloatArray], offset: float) -> dict[str, FloatArray]:
         out = dict(channels)
         c = self.values["channel"]
         if c in out:
-            out[c] = np.asarray(out[c], dtype=float) + self.values["offset"]
+            out[c] = np.asarray(out[c], dtype=float) + offset
         return out
 
+    def apply(self, t: FloatArray, channels: Mapping[str, FloatArray]) -> dict[str, FloatArray]:
+        return self._added(channels, self.values["offset"])
+
     def compensate(self, t: FloatArray, channels: Mapping[str, FloatArray]) -> dict[str, FloatArray]:
-        out = dict(channels)
-        c = self.values["channel"]
-        if c in out:
-            out[c] = np.asarray(out[c], dtype=float) - self.values["offset"]
-        return out
+        return self._added(channels, -self.values["offset"])
 
     @classmethod
     def output_sensitivity(cls, channel: str, t: FloatArray,

@@ -18,8 +18,6 @@ from suspid.effects.base import (
     strut_sites,
 )
 
-# scipy.interpolate (which loads scipy.optimize, ~0.2 s) is reached through scipy's lazy
-# submodule attribute, so a monitor that never resamples a channel does not pay for it
 from suspid.errors import UsageError
 from suspid.models.base import FloatArray, Site, SuspensionModel
 from suspid.nlsim import Law
@@ -31,11 +29,8 @@ V_EPS = 0.01
 class CoulombFriction(PhysicalEffect):
     """Dry friction in the strut: ``F sgn(d')``, sign smoothed as ``tanh(d'/V_EPS)``.
 
-    Screening: the friction regressor is a sign of the *measured* rate. With noise it flips
-    at random while the strut sticks, which shrinks the estimate of ``F``; the expected
-    friction given a noisy rate is a softer sign, so it is screened as ``tanh(d'/w)`` with
-    ``w = hypot(V_EPS, m 1.2 sigma_rate)`` for ``m`` = 1, 2, 4, 8 (trials); with little
-    noise every ``w`` is ``V_EPS``. The refit uses the law.
+    A noisy measured rate flips the sign while the strut sticks, shrinking ``F``: screening
+    uses the softer ``tanh(d'/w)``, ``w = hypot(V_EPS, m 1.2 sigma_rate)``, ``m`` = 1, 2, 4, 8.
     """
 
     name = "coulomb_friction"
@@ -74,10 +69,8 @@ class CoulombFriction(PhysicalEffect):
 class AsymmetricDamping(PhysicalEffect):
     """Damper ``c_rebound d'`` in rebound (``d' > 0``), ``c_compression d'`` in compression.
 
-    It replaces the linear damper ``c1 d'``: the extra force is
-    ``(c_rebound - c1) max(d', 0) + (c_compression - c1) min(d', 0)``. The base ``c1`` of an
-    augmented fit is reported as the symmetric part ``(c_rebound + c_compression) / 2``.
-    Available only where one damper coefficient describes every strut.
+    It replaces the linear damper ``c1 d'`` (reported as the symmetric part, the mean of the
+    two); available only where one damper coefficient describes every strut.
     """
 
     name = "asymmetric_damping"
@@ -133,8 +126,7 @@ class AsymmetricDamping(PhysicalEffect):
     def from_coefficients(cls, coef: FloatArray, base: Mapping[str, float], trial: Trial,
                           sites: Sequence[Site], rate_noise: Sequence[float]
                           ) -> tuple[dict[str, Any], bool, str]:
-        # |d'| = max(d', 0) - min(d', 0): the coefficient splits the damper symmetrically
-        # about the strut's fitted c
+        # |d'| = max(d', 0) - min(d', 0): split symmetrically about the fitted c
         cbar = base[str(sites[0].c_name)]
         cr, cc = cbar + float(coef[0]), cbar - float(coef[0])
         return {"c_rebound": cr, "c_compression": cc}, cr > 0 and cc > 0, ""
@@ -179,12 +171,8 @@ class ProgressiveSpring(PhysicalEffect):
 
 @register
 class BumpStop(PhysicalEffect):
-    """Bump stop: ``k_stop (-d - gap)`` pushes back once the compression exceeds ``gap``.
-
-    Screening: the force is linear in ``k_stop`` for a given ``gap``; gaps from 15 % to
-    90 % of the record's largest compression (its 99.5 % quantile, over the screened
-    sites) are tried.
-    """
+    """Bump stop: ``k_stop (-d - gap)`` pushes back once the compression exceeds ``gap``;
+    screened at gaps from 15 % to 90 % of the record's largest compression."""
 
     name = "bump_stop"
     params = (EffectParam("gap", "m", "compression from static equilibrium at which the stop engages"),

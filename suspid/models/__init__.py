@@ -1,16 +1,7 @@
 """Suspension models (the physics). ``get_model(name)`` returns a fresh model instance.
 
-Registry
---------
-The built-in models are ``quarter1``, ``quarter2``, ``half4`` and ``full7``. Other installed
-packages add models through the entry-point group ``suspid.models`` (name -> a
-:class:`~suspid.models.base.SuspensionModel` subclass or a factory returning an instance),
-e.g. in the other package's ``pyproject.toml``::
-
-    [project.entry-points."suspid.models"]
-    mycar = "mypackage.mycar:MyCar"
-
-A built-in name cannot be replaced by an entry point. See ``docs/architecture.md``.
+Besides the built-ins, installed packages add models through the entry-point group
+``suspid.models`` (a built-in name cannot be replaced); see ``docs/architecture.md``.
 """
 from __future__ import annotations
 
@@ -85,14 +76,7 @@ def model_names() -> list[str]:
 
 
 def get_model(name: str) -> SuspensionModel:
-    """Return a new instance of the model called ``name``.
-
-    Raises
-    ------
-    UsageError
-        For an unknown name, listing the known ones; for an entry point that does not
-        produce a :class:`SuspensionModel`.
-    """
+    """Return a new instance of the model called ``name`` (UsageError naming the known ones)."""
     if name not in MODELS:
         raise UsageError(f"unknown model {name!r}; expected one of {', '.join(MODELS)}")
     model = MODELS[name]()
@@ -103,19 +87,10 @@ def get_model(name: str) -> SuspensionModel:
 
 
 def infer_model(columns: Iterable[str]) -> str:
-    """The model whose CSV columns these are (a measurement CSV names no model).
+    """The model whose CSV columns these are (UsageError if none owns any).
 
-    Every registered model offers its column bases (coordinates and roads,
-    :meth:`SuspensionModel.column_bases`). The models that own every recognised column
-    base are the candidates and the one with the fewest bases (the most specific) wins;
-    without such a model, the one owning most of the columns (then the fewest bases).
-    E.g. ``x`` or ``y`` alone mean ``quarter1``, ``x1``/``x2``/``r`` ``quarter2``,
-    ``delta``/``r1``/``r2`` or ``x`` with ``x1`` ``half4``, ``phi``/``x3``/``r4`` ``full7``.
-
-    Raises
-    ------
-    UsageError
-        If no column belongs to any model.
+    Of the models owning every recognised column base the one with the fewest bases wins;
+    without one, the model owning most of the columns.
     """
     cols = {c.strip() for c in columns}
     scored = []

@@ -1,27 +1,18 @@
 """7-DOF full car: body heave, pitch and roll over four wheels.
 
-Coordinates ``q = [x, delta, phi, x1, x2, x3, x4]``: body heave at the centre of mass (m),
-pitch (rad, the ``half4`` sign: the body at the front axle moves by ``x - a1 delta``, at the
-rear by ``x + a2 delta``), roll (rad, positive when the left side rises: a corner at lateral
-position ``y`` moves by an extra ``y phi``) and the wheels at the corners 1 front-left,
-2 front-right, 3 rear-left, 4 rear-right (m).
+Coordinates ``q = [x, delta, phi, x1, x2, x3, x4]``: body heave (m), pitch (rad, the ``half4``
+sign), roll (rad, positive when the left side rises) and the wheels (m) at the corners 1
+front-left, 2 front-right, 3 rear-left, 4 rear-right.
 
-Corner ``i`` sits at longitudinal position ``l_i`` (front ``-a1``, rear ``+a2``) and lateral
-position ``y_i`` (left ``+w/2``, right ``-w/2``; ``w1`` front, ``w2`` rear track), so its body
-point moves by ``z_i = x + l_i delta + y_i phi`` and its strut extends by
-``d_i = z_i - x_i``. The strut (spring ``ki``, damper ``ci``) acts along ``d_i``; the
-wheel ``mi`` stands on the tyre spring ``kti`` over road ``ri``::
+Corner ``i`` at ``l_i`` (front ``-a1``, rear ``+a2``) and ``y_i`` (left ``+w/2``, right
+``-w/2``) has the strut extension ``d_i = x + l_i delta + y_i phi - x_i`` (spring ``ki``,
+damper ``ci``); wheel ``mi`` stands on the tyre spring ``kti`` over road ``ri``::
 
     M q'' + sum_i ci g_i g_i^T q' + (sum_i ki g_i g_i^T + diag(kt)) q = Fk r
     g_i = e_x + l_i e_delta + y_i e_phi - e_xi,   M = diag(m, Iy, Ix, m1, m2, m3, m4)
 
-Roads: ``r1``/``r3`` run on the left track, ``r2``/``r4`` on the right; the rear tyres see
-their track ``a1 + a2`` metres after the front ones. The centre of mass is taken at
-mid-track, so each front corner carries ``m a2 / (2 (a1 + a2))`` of the body's weight and
-each rear corner ``m a1 / (2 (a1 + a2))``.
-
-With equal left and right parameters and roads the roll stays zero and heave and pitch
-equal a ``half4`` whose corner parameters are the sums of the two corners (tested).
+The centre of mass is at mid-track. With equal left and right parameters and roads the roll
+stays zero and heave and pitch equal a ``half4`` with summed corners (tested).
 """
 from __future__ import annotations
 
@@ -35,13 +26,8 @@ from suspid.models.base import GRAVITY, DoeDesign, FloatArray, Matrices, ParamSp
 CORNERS = ("front-left", "front-right", "rear-left", "rear-right")
 
 
-# The full car's design of experiments. The seed has none; this one reuses Table 5's L27-3
-# array and levels with the half car's reading on the *left* side of the car: E, F, G (m1, c1,
-# k1) are the front-left wheel mass, damper and spring; H, J, K (m3, c3, k3) the rear-left
-# ones; A-D the initial position and velocity of the front-left (x1) and rear-left (x3)
-# wheels. The right corners keep Table 5's middle level (every row is left-right asymmetric,
-# which couples roll to heave and pitch and lets each corner be told apart), the tyres the
-# half car's k3/k4 values, and the body twice the half car's mass and pitch inertia.
+# The full car's design of experiments (the seed has none): Table 5's L27-3 on the left side
+# of the car; FULL7_CHOICES says what and why.
 
 #: Table 5 column -> full7 initial-state name or parameter (the left side of the car)
 FULL7_COLUMNS: dict[str, str] = {"A": "x1", "B": "x1_dot", "C": "x3", "D": "x3_dot",
@@ -82,8 +68,6 @@ class Full7(SuspensionModel):
     angles = ("delta", "phi")
     alert_id = 3
     known = ("m", "Ix", "Iy", "m1", "m2", "m3", "m4", "a1", "a2", "w1", "w2")
-    #: Table 5's L27-3 on the left corners (see ``FULL7_COLUMNS``); every free parameter of
-    #: ``suspid doe`` (all but the masses and inertias) is identified
     doe_design = DoeDesign("L27-3", FULL7_COLUMNS, FULL7_CONSTANTS, FULL7_BODY_X0, FULL7_CHOICES)
 
     def __init__(self) -> None:

@@ -1,10 +1,8 @@
 """4-DOF half car (bicycle model), seed eqs. (4)-(7).
 
-Coordinates ``q = [x, delta, x1, x2]``: body heave (m), body pitch (rad, positive when the
-rear goes up / front down, as the seed's sign convention ``x - a1 delta`` at the front
-implies), front and rear wheel displacements (m). Front suspension (``k1``, ``c1``) acts at
-distance ``a1`` ahead of the centre of mass, rear (``k2``, ``c2``) at ``a2`` behind it;
-the tyres are springs ``k3`` (front) and ``k4`` (rear) on the roads ``r1``, ``r2``.
+Coordinates ``q = [x, delta, x1, x2]``: body heave (m), pitch (rad; the body at the front
+axle moves by ``x - a1 delta``), front and rear wheels (m). Suspensions ``k1``, ``c1`` at
+``a1`` ahead of the centre of mass and ``k2``, ``c2`` at ``a2`` behind; tyres ``k3``, ``k4``.
 
     m x'' + c1 (x' - x1' - a1 d') + c2 (x' - x2' + a2 d') + k1 (x - x1 - a1 d) + k2 (x - x2 + a2 d) = 0
     I d'' - a1 c1 (...) + a2 c2 (...) - a1 k1 (...) + a2 k2 (...) = 0
@@ -40,25 +38,13 @@ DOE_CHOICES: dict[str, str] = {
 
 
 class Half4(SuspensionModel):
-    """Body heave and pitch over a front and a rear wheel.
-
-    The rear road ``r2`` is the front road's track ``a1 + a2`` metres later.
-    """
+    """Body heave and pitch over a front and a rear wheel (``r2`` follows ``r1`` by ``a1 + a2``)."""
 
     sensor_set = 2
     angles = ("delta",)
     alert_id = 2
     known = ("m", "I", "m1", "m2", "a1", "a2")
-    #: the seed's section 6.1 half car: Table 5's columns map onto the half car by name
-    #: (E, F, G = m1, c1, k1 front wheel, damper, spring; H, J, K = m2, c2, k2 rear; A-D
-    #: the front ``x1`` and rear ``x2`` wheels' initial position and velocity). The body
-    #: starts at x = 0.05 m, x' = 0.05 m/s, delta = 0.05 rad, delta' = 0.05 rad/s; targets
-    #: a1 = 0.48 m, a2 = 0.52 m, k3 = 1000 N/m, k4 = 500 N/m (all identified, not fixed).
-    #: The seed gives no body mass or pitch inertia: m = 200 kg (a half car carries two
-    #: corners, each up to Table 5's top sprung-mass level of 100 kg) and I = 40 kg m^2
-    #: (radius of gyration 0.447 m, dynamic index I / (m a1 a2) = 0.80, typical of
-    #: passenger cars; an index of exactly 1 would make the front and rear dynamically
-    #: independent, a special case avoided)
+    #: the seed's section 6.1 half car (Table 5 by name; DOE_CHOICES says what the seed leaves out)
     doe_design = DoeDesign("L27-3", {"A": "x1", "B": "x1_dot", "C": "x2", "D": "x2_dot",
                                      "E": "m1", "F": "c1", "G": "k1", "H": "m2", "J": "c2",
                                      "K": "k2"},
@@ -93,7 +79,6 @@ class Half4(SuspensionModel):
         # suspension deflections: d1 = x - x1 - a1*delta, d2 = x - x2 + a2*delta
         g1 = np.array([1.0, -a1, -1.0, 0.0])
         g2 = np.array([1.0, a2, 0.0, -1.0])
-        # generalised force of a suspension force F acting to compress: Q = -F * g
         C = c1 * np.outer(g1, g1) + c2 * np.outer(g2, g2)
         K = k1 * np.outer(g1, g1) + k2 * np.outer(g2, g2)
         K[2, 2] += k3

@@ -1,10 +1,6 @@
-"""The vibration modes of a linear model: natural frequency, damping ratio, period, decay.
-
-``modes(model, params)`` takes the eigenvalues ``lambda_i`` of the model's state matrix
-``A`` (:meth:`~suspid.models.base.SuspensionModel.state_space`): natural frequency
-``w_i = |lambda_i|``, damping ratio ``zeta_i = -Re(lambda_i) / |lambda_i|``, damped period
-``T_i = 2 pi / Im(lambda_i)``, decay time ``tau_i = 1 / (zeta_i w_i)``. The monitor's window
-defaults and the virtual damper test read them.
+"""The vibration modes of a linear model from the eigenvalues ``lambda`` of its state matrix:
+``w = |lambda|``, ``zeta = -Re(lambda) / w``, damped period ``2 pi / Im(lambda)``, decay
+time ``1 / (zeta w)``.
 """
 from __future__ import annotations
 
@@ -20,19 +16,8 @@ from suspid.models.base import SuspensionModel
 
 @dataclass(frozen=True)
 class Mode:
-    """One vibration mode (complex-conjugate pair or real pole) of a linear model.
-
-    Attributes
-    ----------
-    f_n : float
-        Natural frequency (Hz).
-    zeta : float
-        Damping ratio (dimensionless).
-    period : float
-        Damped period (s); ``inf`` for a real (overdamped) pole.
-    tau : float
-        Decay time constant ``1 / (zeta w_n)`` (s).
-    """
+    """One mode (conjugate pair or real pole): natural frequency ``f_n`` (Hz), damping ratio
+    ``zeta``, damped period (s; ``inf`` for a real pole) and decay time ``tau`` (s)."""
 
     f_n: float
     zeta: float

@@ -10,11 +10,8 @@ from suspid.models.base import (GRAVITY, DoeDesign, FloatArray, Matrices, ParamS
 
 
 class Quarter1(SuspensionModel):
-    """One mass ``m`` on a spring ``k`` and damper ``c`` over the road ``y``.
-
-    The single strut (``k``, ``c``) stands on the road, so it is also the tyre contact:
-    its extension is ``x - y`` and it carries the static load ``m g``.
-    """
+    """One mass ``m`` on a spring ``k`` and damper ``c`` over the road ``y``; the one strut is
+    also the tyre contact (extension ``x - y``, static load ``m g``)."""
 
     sensor_set = 1
     angles = ()

@@ -67,18 +67,10 @@ class Quarter2(SuspensionModel):
     def twin(self, p: Mapping[str, float], measured: Collection[str]) -> Twin | None:
         """The suspension and the tyre swapped, when only the body ``x1`` is measured.
 
-        With ``A = c1 s + k1`` and ``B = c2 s + k2`` the body's response to the road is
-        ``x1 / r = A B / (m1 m2 s^4 + s^2 ((m1 + m2) A + m1 B) + A B)``. ``A' = m1 B / M``,
-        ``B' = M A / m1`` (``M = m1 + m2``) leave ``A B`` and ``M A + m1 B`` and so the
-        whole transfer function unchanged: ``c1' = m1 c2 / M``, ``k1' = m1 k2 / M``,
-        ``c2' = M c1 / m1``, ``k2' = M k1 / m1``. The free responses share the poles, so
-        an estimated initial state fits both alike. A channel of the wheel ``x2`` tells
-        them apart (its numerator ``(m1 s^2 + A) B`` is not symmetric); so does a fixed
-        ``c1``, ``k1``, ``c2`` or ``k2``, which the caller checks.
-
-        The rule: the tyre spring is the stiffer one relative to the suspension spring
-        (``k2 / k1`` the larger of the two; one of them is always above ``M / m1`` and
-        the other below, and road vehicles have ``k2 / k1`` of about 5-15).
+        With ``A = c1 s + k1``, ``B = c2 s + k2``, ``M = m1 + m2``, the body's response
+        ``x1 / r = A B / (m1 m2 s^4 + s^2 (M A + m1 B) + A B)`` is unchanged by
+        ``A' = m1 B / M``, ``B' = M A / m1``. The rule: ``k2 / k1`` the larger (road vehicles
+        have about 5-15).
         """
         if "x2" in measured or "x1" not in measured:
             return None

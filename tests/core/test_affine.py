@@ -86,18 +86,6 @@ def test_accelerations_slopes_and_mass_inverse_of_the_pieces(name: str) -> None:
     ref = m.accelerations(X, U, q)
     np.testing.assert_allclose(aff.accelerations(X, U, th), ref, rtol=0,
                                atol=1e-12 * np.abs(ref).max())
-    # the slopes are the exact derivatives of the accelerations (affine: any step will do)
-    w = np.concatenate([X[0], U[0]])
-    S = aff.slopes(w)
-    assert S.shape == (len(aff.names), nq)
-    for j in range(len(aff.names)):
-        e = np.zeros(th.size)
-        e[j] = 0.3 * th[j]
-        fd = (aff.accel_rows(th + e) @ w - aff.accel_rows(th - e) @ w) / (2 * e[j])
-        np.testing.assert_allclose(S[j], fd, rtol=1e-9, atol=1e-12 * np.abs(fd).max() + 1e-300)
-    # several points at once, as columns
-    W = np.column_stack([np.concatenate([x, u]) for x, u in zip(X, U)])
-    np.testing.assert_allclose(aff.slopes(W)[:, :, 0], S, rtol=1e-14, atol=0)
     # the inverse mass matrix of the model at the base, and the model's own
     M = m.matrices(p)[0]
     assert aff.Minv is not None
