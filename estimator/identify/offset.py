@@ -27,7 +27,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from estimator.identify.problem import OutputErrorProblem
-from estimator.identify.start import NOISE_FLOOR, noise_floor_ratio
+from estimator.identify.misfit import NOISE_FLOOR, noise_floor_ratio
 from suspid.effects import SensorOffset
 from suspid.io.csvio import Measurement
 from suspid.models.base import FloatArray, SuspensionModel
@@ -59,7 +59,7 @@ class Offset:
         Normalised output-error cost (1 = no fit) with the offsets in and removed, at the
         parameters they were estimated for.
     noise_ratio : float
-        :func:`~estimator.identify.start.noise_floor_ratio` with the offsets in.
+        :func:`~estimator.identify.misfit.noise_floor_ratio` with the offsets in.
     """
 
     kind: str
@@ -167,7 +167,7 @@ def find_offset(problem: OutputErrorProblem, p: Mapping[str, float]) -> Offset |
     Offset or None
         The candidate (all road columns together, or one measured position channel) that
         lowers the cost most, when the fit at ``p`` does not leave white noise
-        (:func:`~estimator.identify.start.noise_floor_ratio` above ``NOISE_FLOOR``) and
+        (:func:`~estimator.identify.misfit.noise_floor_ratio` above ``NOISE_FLOOR``) and
         the offsets leave at most ``OFFSET_SHARE`` of its weighted sum of squares;
         ``None`` otherwise (or when the residual cannot be evaluated).
     """

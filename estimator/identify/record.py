@@ -5,7 +5,7 @@
 (:func:`~estimator.identify.start.estimate_start`), the check for a constant offset in a
 road column or a position channel at it (:func:`check_offset`, a sensor zero not at rest,
 :mod:`estimator.identify.offset`), the offset removed before the fit (``offset="remove"``,
-the default) or kept, then :func:`~estimator.identify.start.fit_from_starts` over
+the default) or kept, then :func:`~estimator.identify.multistart.fit_from_starts` over
 :func:`~estimator.identify.solver.fit`; a found offset is named in the result's first
 warning and in its ``offset`` field.
 """
@@ -19,7 +19,8 @@ from estimator.identify.params import Parameters
 from estimator.identify.problem import OutputErrorProblem
 from estimator.identify.result import IdentResult
 from estimator.identify.solver import fit, too_little_data, withhold_estimates
-from estimator.identify.start import StartEstimate, estimate_start, fit_from_starts
+from estimator.identify.multistart import fit_from_starts
+from estimator.identify.start import StartEstimate, estimate_start
 from suspid.errors import UsageError
 
 
@@ -91,7 +92,7 @@ def identify_record(problem: OutputErrorProblem, params: Parameters, *, restarts
         Start from the data-driven estimate too (``[fit] data_start = false`` of ``--config`` turns it off).
     keep_init : bool
         Also fit from ``params`` (``identify``: an ``--init`` given, or no data-driven
-        start); see :func:`~estimator.identify.start.fit_from_starts`.
+        start); see :func:`~estimator.identify.multistart.fit_from_starts`.
     offset : {"remove", "keep"}
         A found offset is subtracted from its columns before the fit (``"remove"``), or the
         record is fitted as it is (``"keep"``); either way the first warning names it.

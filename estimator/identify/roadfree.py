@@ -49,7 +49,7 @@ from estimator.choices import ROAD_MODES
 from estimator.identify.params import Parameters
 from estimator.identify.outputs import check_magnitudes
 from estimator.identify.result import IdentResult
-from estimator.identify.start import MISFIT_FLOOR, MISFIT_SHARE
+from estimator.identify.misfit import MISFIT_FLOOR, MISFIT_SHARE
 from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
 from suspid.models.base import FloatArray, Site, SuspensionModel
@@ -671,7 +671,7 @@ def body_misfit(model: SuspensionModel, eqs: BodyEquations,
     expected power ``sum_i theta_i^2 N_i`` from the channels' noise floors alone (the
     columns' noise is independent, or in quadrature: a damper's ``j w D`` and a spring's
     ``D`` of one ride height). A row misfits, as a road-measured fit's channel does
-    (:data:`~estimator.identify.start.MISFIT_FLOOR`, :data:`~estimator.identify.start.MISFIT_SHARE`),
+    (:data:`~estimator.identify.misfit.MISFIT_FLOOR`, :data:`~estimator.identify.misfit.MISFIT_SHARE`),
     when its error's power exceeds that noise power by that ratio and the excess is more
     than that share of the row's held terms' power (the body's inertia force). Measured
     on linear and unmodelled-effect drives in docs/road-unknown.md.

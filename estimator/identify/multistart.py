@@ -1,0 +1,576 @@
+"""The starts policy: the fit from the data-driven start, the given start and the twin.
+
+:func:`fit_from_starts` runs the fit from each start it needs, keeps the lowest cost and
+rejects a result the starts do not confirm (run-away, ambiguous, unconfirmed, misfit).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+
+from estimator.identify.misfit import (EXACT_FIT, NOISE_FLOOR, misfit_channels, misfit_warning,
+                                       noise_floor_ratio)
+from estimator.identify.params import Parameters
+from estimator.identify.problem import OutputErrorProblem
+from estimator.identify.profile import SIGMAS, apply_bands
+from estimator.identify.result import IdentResult
+from estimator.identify.start import StartEstimate, estimate_start, kind_scaled_start
+from suspid.models.base import Twin
+
+#: normalised output-error cost of a data-driven estimate above which the given start is
+#: run as well (the estimate explains less than half of the record) unless the fit from it
+#: leaves only white noise
+POOR_ESTIMATE = 0.5
+
+#: a free parameter this far (factor) from its start and from the data-driven estimate ran away
+#: (unless a second start, begun far from the first in it, reached the same fit: :func:`_confirmed`)
+RUNAWAY = 100.0
+#: relative distance, or distance in standard errors, within which two fits are the same
+#: point (:func:`_same`)
+CONFIRM_TOL = 0.01
+CONFIRM_SIGMA = 0.3
+#: factor by which a confirmed parameter, moved alone up or down, must raise the cost by more
+#: than 3 sigma of the noise (:func:`_confirmed`): the record bounds it within a decade on
+#: at least one side
+CONFIRM_SPAN = 10.0
+
+#: factor beyond which two fits to a noisy record reached from different starts at costs the
+#: noise does not tell apart (:func:`_within_noise`) are reported as undecided: neither a
+#: success nor identifiable
+AGREE = 10.0
+
+#: factor within which the fit from the data-driven start must agree with the given start in
+#: every free parameter for the noise-floor rule to skip the given start. The whiteness test
+#: (:func:`noise_floor_ratio`) only sees a misfit larger than ``NOISE_FLOOR - 1`` of the
+#: residual; at 0.3-0.5 sigma noise the noise dominates the residual, and a local minimum
+#: whose misfit is a few per cent of it passes as white (half4 sse row 25: k4 at 2.3e6 N/m
+#: from an estimate of 2.1e6 against a truth of 500, ratio below 1.15, cost 21.65 against
+#: 20.63 from the given start). A fit far from the given start in some parameter is such a
+#: case or a poor given start; only running the given start tells. The factor lies between
+#: the given starts' own error in the studies (up to 10x: a correct fit from them is ~10x
+#: away, and at 10 it ran every such start in full, 1.7-5x the time) and ``RUNAWAY``; the
+#: local minimum above is 460-46000x from given starts 0.1x-10x.
+SKIP_AGREE = 30.0
+
+#: factor by which some kind's common factor must leave 1 for the rescaled given start to
+#: be run as a further start (within it, it is the given start again)
+KIND_MIN_FACTOR = 3.0
+
+#: factor by which one of two twin fits (:func:`_choose_twin`) must fit the measured
+#: channels outside the cost better (in squared residual per channel variance) for those
+#: channels to choose between them
+TWIN_DECIDE = 4.0
+
+
+def _exact(problem: OutputErrorProblem, res: IdentResult) -> bool:
+    """``res`` explains the record exactly (a noise-free record)."""
+    return bool(problem.normalized_ss(res.params) < EXACT_FIT)
+
+
+def _at_noise_floor(problem: OutputErrorProblem, res: IdentResult) -> bool:
+    """``res`` leaves only white measurement noise on a noisy record (not an exact fit)."""
+    return not _exact(problem, res) and noise_floor_ratio(problem, res.params) <= NOISE_FLOOR
+
+
+def _far(a: Mapping[str, float], b: Mapping[str, float], free: list[str],
+         factor: float) -> list[str]:
+    """Free parameters in which ``a`` and ``b`` differ by more than ``factor`` (or are not
+    both finite and positive)."""
+    out = []
+    for k in free:
+        x, y = float(a[k]), float(b[k])
+        if not (math.isfinite(x) and math.isfinite(y) and x > 0 and y > 0) \
+                or abs(math.log(x / y)) > math.log(factor):
+            out.append(k)
+    return out
+
+
+def _within_noise(problem: OutputErrorProblem, best: IdentResult, other: IdentResult,
+                  nfree: int) -> bool:
+    """``other``'s cost exceeds ``best``'s by less than 3 sigma of the noise (noisy records).
+
+    The noise-scaled expectation is the band's own level: a cost rise of ``SIGMAS**2`` times
+    the residual variance per sample, ``ss / (N - p)`` (normalised units), is what a 3-sigma
+    step of one parameter costs; two fits closer than that are not told apart by the record.
+    """
+    if _exact(problem, best):
+        return False
+    ss_best = problem.normalized_ss(best.params)
+    ss_other = problem.normalized_ss(other.params)
+    try:
+        n = int(problem.residual_vector(best.params).size)
+    except (np.linalg.LinAlgError, ValueError, FloatingPointError):
+        return False
+    if not (math.isfinite(ss_best) and math.isfinite(ss_other)) or n <= nfree:
+        return False
+    return ss_other - ss_best <= SIGMAS ** 2 * ss_best / (n - nfree)
+
+
+def _finite(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
+
+
+def _plausibility(res: IdentResult, free: list[str], start: Mapping[str, float],
+                  data: Mapping[str, float]) -> list[tuple[str, str]]:
+    """Free parameters at which ``res`` sits at an absurd place, each with the reason (empty
+    when there is none)."""
+    out = []
+    for k in free:
+        v = res.params[k]
+        if not (math.isfinite(v) and v > 0):
+            out.append((k, f"{k} reached {v!r}, not a finite positive value"))
+            continue
+        far_start = k not in start or abs(math.log(v / start[k])) > math.log(RUNAWAY)
+        far_data = k not in data or abs(math.log(v / data[k])) > math.log(RUNAWAY)
+        if far_start and far_data:
+            ref = f" and from the data-driven estimate {data[k]:.4g}" if k in data else ""
+            if k not in start and k not in data:
+                continue  # neither a given start nor a usable estimate to compare with
+            st = f"its start {start[k]:.4g}" if k in start else "its start"
+            out.append((k, f"{k} ran to {v:.4g}, more than {RUNAWAY:g}x from {st}{ref}; "
+                           "the record does not support it"))
+    return out
+
+
+def _same(a: IdentResult, b: IdentResult, k: str) -> bool:
+    """``b``'s value of ``k`` is ``a``'s: within ``CONFIRM_TOL`` (relative) or within
+    ``CONFIRM_SIGMA`` standard errors of ``a`` (a weakly determined parameter ends where
+    each search stops on a nearly flat cost)."""
+    x, y = float(a.params[k]), float(b.params[k])
+    if not (math.isfinite(x) and math.isfinite(y) and x > 0 and y > 0):
+        return False
+    se = a.stderr.get(k)
+    tol = max(CONFIRM_TOL, CONFIRM_SIGMA * se / x if se is not None and math.isfinite(se) else 0.0)
+    return abs(y / x - 1.0) <= tol
+
+
+def _confirmed(problem: OutputErrorProblem, res: IdentResult, start: Mapping[str, float],
+               k: str, free: list[str],
+               others: Sequence[tuple[str, Mapping[str, float], IdentResult]]) -> str | None:
+    """Label of another start that confirms ``res``'s value of ``k`` (``None`` if none does).
+
+    A parameter that ran far from its start along a flat direction of the cost, or into a
+    local minimum, is not confirmed. Two conditions together say the record itself puts it
+    there: a second start, begun more than ``KIND_MIN_FACTOR`` x away from this one in
+    ``k``, reached the same fit (every free parameter the same: :func:`_same`), and
+    the record bounds ``k`` on at least one side (moving ``k`` alone a factor
+    ``CONFIRM_SPAN`` up and down lowers the cost neither way by more than 3 sigma of the
+    noise and raises it one way by more than that; a drift along a flat direction to zero or
+    infinity leaves it unchanged both ways). The profile bands then say
+    how well the record bounds it, and name a side it leaves open.
+    """
+    v = res.params[k]
+    if not (math.isfinite(v) and v > 0):
+        return None
+    label = None
+    for lab, s, r in others:
+        if r is res or k not in s or k not in start \
+                or abs(math.log(s[k] / start[k])) <= math.log(KIND_MIN_FACTOR):
+            continue
+        if all(_same(res, r, j) for j in free):
+            label = lab
+            break
+    if label is None:
+        return None
+    ss = problem.normalized_ss(res.params)
+    try:
+        n = int(problem.residual_vector(res.params).size)
+    except (np.linalg.LinAlgError, ValueError, FloatingPointError):
+        return None
+    if not math.isfinite(ss) or n <= len(free):
+        return None
+    rise = max(SIGMAS ** 2 * ss / (n - len(free)), EXACT_FIT)
+    bounded = False
+    for f in (CONFIRM_SPAN, 1.0 / CONFIRM_SPAN):
+        moved = dict(res.params)
+        moved[k] = v * f
+        c = problem.normalized_ss(moved)
+        if math.isfinite(c) and c < ss - rise:
+            return None  # not even a minimum along k
+        bounded = bounded or (math.isfinite(c) and c - ss > rise)
+    return label if bounded else None
+
+
+def _reject(res: IdentResult, warnings: list[str]) -> None:
+    """Report ``res`` as neither a success nor identifiable, with the reasons."""
+    res.success = False
+    res.identifiable = False
+    for entry in res.starts or []:
+        if entry.get("chosen"):
+            entry["success"] = False
+    res.warnings += warnings
+
+
+# a parameter set far from any physical value overflows the response: such a cost is
+# infinite (the search moves on), not a RuntimeWarning with its source line on stderr
+@np.errstate(over="ignore", invalid="ignore", divide="ignore")
+def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
+                    run: Callable[[Parameters], IdentResult], *, data_start: bool = True,
+                    keep_init: bool = True, init_fallback: bool = True,
+                    intervals: bool = True, estimate: StartEstimate | None = None) -> IdentResult:
+    """Run the fit ``run`` from the data-driven start and from ``params``; keep the best.
+
+    Parameters
+    ----------
+    problem : OutputErrorProblem
+        The whole record (for the data-driven estimate).
+    params : Parameters
+        Fixed values and the given start of the free parameters.
+    run : callable
+        ``run(start) -> IdentResult``: one identification from the start ``start``.
+    data_start : bool
+        Compute the data-driven start (:func:`estimate_start`) and run from it.
+    keep_init : bool
+        Also consider ``params`` as a start (always done when no data-driven start exists).
+        It is skipped (listed as skipped, so the time per identification does not grow)
+        when the fit from the data-driven start is a clean success (converged, identifiable,
+        plausible), ``params`` begins at no lower cost than the estimate (else it may lie in
+        a better basin), and the fit either leaves only white measurement noise (a noisy
+        record: :func:`noise_floor_ratio` at most ``NOISE_FLOOR``; no start can then lower
+        the cost by more than the noise's own scatter) while agreeing with ``params`` within
+        a factor ``SKIP_AGREE`` in every free parameter (the whiteness test cannot see a
+        misfit that is a few per cent of a noise-dominated residual, so a fit far from the
+        given start is checked against it) or explains the record exactly (normalised cost
+        below ``EXACT_FIT``) from an estimate that fits well (normalised cost below
+        ``POOR_ESTIMATE``). Otherwise it runs: on a noisy record the estimate is biased and
+        may lead to a local minimum, whose residual is not white.
+    init_fallback : bool
+        With ``keep_init`` false (no start given: ``params`` holds the documented defaults),
+        still run ``params`` when the fit from the data-driven start gives no clean answer
+        (below). A noisy record can mislead the estimate badly (e.g. positions alone at 0.3
+        sigma), and the defaults, a typical car, are then the better guess.
+    intervals : bool
+        Attach honest 3-sigma bands (:func:`estimator.identify.profile.apply_bands`) to a
+        result with standard errors: the curvature band where the cost is quadratic out to
+        its ends, the profile likelihood where it is not; a parameter the profile does not
+        bound makes the result not identifiable.
+    estimate : StartEstimate, optional
+        The data-driven start of ``problem`` when already computed
+        (:func:`estimate_start`); default: computed here when ``data_start``.
+
+    Returns
+    -------
+    IdentResult
+        The lowest-cost result, with ``starts`` (every start and what it reached),
+        ``data_start`` and ``nfev`` summed over the runs. A result whose parameters ran
+        orders of magnitude away from its start and from the data-driven estimate is
+        reported neither as a success nor as identifiable; its warnings say which parameter
+        and why, and the costs reached from each start. So is a noisy result when another
+        start reached a fit more than ``AGREE`` x away in some parameter at a cost within
+        3 sigma of the noise of it (the record does not decide between the two): the
+        warning names the parameters, the starts and their costs. So is a noisy result from
+        the data-driven start when the given start ran and its fit failed while the result
+        lies more than ``SKIP_AGREE`` x from the given start, or the estimate began at a
+        higher cost than the given start (no second start confirms it; the warning begins
+        ``unconfirmed result``).
+
+        When no start gives a clean answer (the result would be rejected, is no success,
+        or leaves a residual that is not white: :func:`noise_floor_ratio` above
+        ``NOISE_FLOOR`` and no exact fit) and the given start was considered, the given start rescaled by one
+        common factor per kind of parameter (:func:`kind_scaled_start`) is a third start
+        (``"scaled"`` in ``starts``) if it begins at a lower cost than every start so far
+        and some factor lies outside ``[1/KIND_MIN_FACTOR, KIND_MIN_FACTOR]``; the rules
+        above are then applied to all three (a fit from it is checked against the given
+        start as a fit from the estimate is). A clean answer from the first two starts
+        costs nothing more.
+    """
+    free = params.free
+    est = (estimate if estimate is not None
+           else estimate_start(problem, params) if data_start and free else None)
+    runs: list[tuple[str, Parameters]] = []
+    if est is not None and est.values:
+        p = params.copy()
+        for k, v in est.values.items():
+            p[k].value = float(v)
+        runs.append(("data", p))
+    if keep_init or not runs:
+        runs.append(("init", params))
+    at_start = [problem.normalized_ss(s.valuesdict()) for _, s in runs]
+    data_vals = ({k: v for k, v in est.values.items() if k not in est.undetermined}
+                 if est is not None else {})
+
+    def usable(label: str, start: Parameters) -> dict[str, float]:
+        """Start values to judge a run-away against (not the floor of an unusable estimate)."""
+        return {k: start[k].value for k in free if label != "data" or k in data_vals}
+
+    results: list[tuple[str, Parameters, IdentResult | None]] = []
+    for i, (label, start) in enumerate(runs):
+        done = [r for _, _, r in results if r is not None]
+        # a further start only runs when the fits so far are not clean, or when it begins
+        # lower than the start they came from (it may then be in a better basin)
+        # (or when the fits so far explain the record down to its noise: no start can
+        # then lower the cost by more than the noise's own scatter)
+        if done and all(r.success for r in done) and at_start[i] >= min(at_start[:i]) \
+                and (est is not None
+                     and est.cost < POOR_ESTIMATE and all(_exact(problem, r) for r in done)
+                     or all(_at_noise_floor(problem, r) for r in done)
+                     and not any(_far(r.params, start.valuesdict(), free, SKIP_AGREE)
+                                 for r in done)) \
+                and not _plausibility(done[0], free, usable(runs[0][0], runs[0][1]), data_vals):
+            results.append((label, start, None))
+            continue
+        results.append((label, start, run(start)))
+    issues = _issues(problem, results, at_start, free, data_vals, usable)
+
+    def unclean(issues: _Issues) -> bool:
+        """No clean answer: rejected, no success, or a residual that is not white noise."""
+        return issues.rejected or not issues.res.success or not _exact(problem, issues.res) \
+            and noise_floor_ratio(problem, issues.res.params) > NOISE_FLOOR
+
+    if init_fallback and not any(label == "init" for label, _ in runs) and unclean(issues):
+        # no start was given and the record's estimate gave no clean answer: the defaults
+        runs.append(("init", params))
+        at_start.append(problem.normalized_ss(params.valuesdict()))
+        results.append(("init", params, run(params)))
+        issues = _issues(problem, results, at_start, free, data_vals, usable)
+    if unclean(issues):
+        # no clean answer (or a residual that is not white noise: a local minimum): the
+        # given start rescaled kind by kind is a further start when it begins lower than
+        # every start run and is not the given start again
+        scaled = (kind_scaled_start(problem, params)
+                  if any(label == "init" for label, _ in runs) else None)
+        if scaled is not None and scaled[2] < min(at_start) and any(
+                abs(math.log(f)) > math.log(KIND_MIN_FACTOR) for f in scaled[1].values()):
+            runs.append(("scaled", scaled[0]))
+            at_start.append(scaled[2])
+            results.append(("scaled", scaled[0], run(scaled[0])))
+            issues = _issues(problem, results, at_start, free, data_vals, usable)
+    if issues.runaway and not issues.ambiguous and not issues.unconfirmed and all(
+            math.isfinite(issues.res.params[k]) and issues.res.params[k] > 0
+            for k in issues.runaway):
+        # parameters that ran far from their start and no other start reached: a further
+        # start next to the fit, those parameters moved CONFIRM_SPAN x back towards where
+        # they came from, returns to it if the cost has a minimum there (a drift along a
+        # flat direction stays where it is put)
+        ref = usable(*issues.best[:2])
+        c = params.copy()
+        for k in free:
+            v = float(issues.res.params[k])
+            c[k].value = v if k not in issues.runaway else \
+                v * (CONFIRM_SPAN if ref.get(k, v) > v else 1.0 / CONFIRM_SPAN)
+        runs.append(("confirm", c))
+        at_start.append(problem.normalized_ss(c.valuesdict()))
+        results.append(("confirm", c, run(c)))
+        issues = _issues(problem, results, at_start, free, data_vals, usable)
+    res = issues.res
+    twin_warning = None
+    if not (issues.bad or issues.ambiguous or issues.unconfirmed):
+        res, twin_run, twin_warning = resolve_twin(problem, params, res, run)
+        if twin_run is not None:
+            runs.append(("twin", twin_run[0]))
+            at_start.append(problem.normalized_ss(twin_run[0].valuesdict()))
+            results.append(("twin", *twin_run))
+    ran = [(label, s, r) for label, s, r in results if r is not None]
+    res.nfev = int(sum(r.nfev for _, _, r in ran))
+    res.starts = []
+    for (label, s, r), c0 in zip(results, at_start):
+        entry: dict[str, Any] = {"start": label, "from": {k: float(s[k].value) for k in free},
+                                 "cost_at_start": _finite(problem.seed_cost(c0 * problem.scale))}
+        if r is None:
+            entry.update({"cost": None,
+                          "skipped": "the fit from the data-driven start is clean and "
+                                     "explains the record down to white noise within "
+                                     f"{SKIP_AGREE:g}x of this start, or exactly from a good "
+                                     "estimate while this start begins at no lower cost"})
+        else:
+            entry.update({"cost": _finite(r.cost), "params": {k: float(r.params[k]) for k in free},
+                          "success": bool(r.success), "chosen": r is res})
+        res.starts.append(entry)
+    if est is not None:
+        res.data_start = ({"values": dict(est.values), "bandwidth_hz": est.bandwidth_hz,
+                           "notes": list(est.notes)} if est.values
+                          else {"reason": est.reason})
+        if not est.values:
+            res.warnings.append(f"no data-driven start: {est.reason}")
+    if issues.bad:
+        # a parameter that ran orders of magnitude away along a flat direction of the cost
+        # is not identified by this record, whatever the curvature at the end point says
+        alts = ", ".join(f"{label} start: cost {r.cost:.4g}" for label, _, r in ran)
+        _reject(res, [f"implausible result: {b}" for b in issues.bad]
+                + [f"costs reached from each start: {alts}"])
+    elif issues.ambiguous:
+        # two starts reached places an order of magnitude apart at costs the noise does not
+        # tell apart: the record does not decide between them, whatever each curvature says
+        _reject(res, issues.ambiguous)
+    elif issues.unconfirmed:
+        _reject(res, issues.unconfirmed)
+    elif intervals:
+        apply_bands(problem, res, free)
+    if twin_warning is not None:
+        res.warnings.append(twin_warning)
+    misfit = misfit_channels(problem, res.params)
+    if misfit:
+        # the model does not explain the record, however well the optimiser converged
+        res.success = False
+        for entry in res.starts:
+            if entry.get("chosen"):
+                entry["success"] = False
+        res.warnings.append(misfit_warning(misfit, {k: res.params[k] for k in params.fixed}))
+    return res
+
+
+def twin_of(problem: OutputErrorProblem, params: Parameters, p: Mapping[str, float]
+            ) -> Twin | None:
+    """The model's twin of ``p`` on the coordinates in ``problem``'s cost, or ``None``.
+
+    :meth:`SuspensionModel.twin`, for the coordinates with a channel in the cost. ``None``
+    as well when some free value of ``p`` is not finite and positive, or the twin would
+    change a parameter ``params`` holds fixed (the record is then not ambiguous: the twin
+    lies outside what is identified).
+    """
+    model = problem.model
+    measured = problem.measured_coords()
+    if not all(math.isfinite(p[k]) and p[k] > 0 for k in params.free):
+        return None
+    tw = model.twin(p, measured)
+    if tw is None or any(not math.isclose(tw.params[k], p[k], rel_tol=1e-12)
+                         for k in params.fixed):
+        return None
+    return tw
+
+
+def resolve_twin(problem: OutputErrorProblem, params: Parameters, res: IdentResult,
+                 run: Callable[[Parameters], IdentResult]
+                 ) -> tuple[IdentResult, tuple[Parameters, IdentResult] | None, str | None]:
+    """``res`` or the fit ``run`` reaches from its twin (:func:`twin_of`), whichever is right.
+
+    Returns the chosen result, ``(start, result)`` of the fit from the twin (``None`` when
+    there is no twin: then ``res`` itself and no warning), and the warning that names the
+    other fit when the two are equally good (:func:`_choose_twin`).
+    """
+    tw = twin_of(problem, params, res.params)
+    if tw is None:
+        return res, None, None
+    start = params.copy()
+    for k in params.free:
+        start[k].value = float(tw.params[k])
+    other = run(start)
+    best, warning = _choose_twin(problem, res, other, tw)
+    return best, (start, other), warning
+
+
+def _choose_twin(problem: OutputErrorProblem, res: IdentResult, other: IdentResult,
+                 tw: Twin) -> tuple[IdentResult, str | None]:
+    """Choose between ``res`` and ``other``, the fit from the model's twin of ``res``.
+
+    A twin is a second parameter set with the same response on the channels in the cost
+    (the quarter car's suspension and tyre seen from the body alone), so both fits reach
+    the same cost and no optimiser can tell which is right. When they do (both exact, or
+    within the noise: :func:`_within_noise`), measured channels outside the cost decide if
+    one fits them ``TWIN_DECIDE`` times better (squared residual over the channel's
+    variance, summed); otherwise the twin's physical rule decides (:attr:`Twin.rule`). A
+    fit from the twin that ends at a clearly lower cost simply wins (``res`` was a local
+    minimum). Returns the chosen result and a warning naming the other (``None`` when the
+    costs decided).
+    """
+    same = (_exact(problem, res) and _exact(problem, other)
+            or _within_noise(problem, res, other, len(res.stderr)))
+    if not same:
+        return (other if other.cost < res.cost else res), None
+    outside = [c for c in res.rms_residual
+               if c not in problem.channels and c in other.rms_residual]
+
+    def misfit(r: IdentResult) -> float:
+        total = 0.0
+        for c in outside:
+            var = float(np.nanvar(problem.meas.measured[c]))
+            total += r.rms_residual[c] ** 2 / var if var > 0 else 0.0
+        return total
+
+    a, b = misfit(res), misfit(other)
+    if outside and max(a, b) > TWIN_DECIDE * min(a, b) and max(a, b) > EXACT_FIT:
+        take_other = b < a
+        why = f"as the channels outside the cost ({', '.join(outside)}) fit it better"
+    else:
+        take_other = tw.prefer
+        why = f"by the rule: {tw.rule}"
+    best, alt = (other, res) if take_other else (res, other)
+    vals = ", ".join(f"{k} = {alt.params[k]:.6g}" for k in alt.stderr)
+    return best, (f"two fits explain the record equally well (costs {res.cost:.6g} and "
+                  f"{other.cost:.6g}): the cost cannot tell {tw.swapped}; the other fit is "
+                  f"{vals}; this one is chosen {why}")
+
+
+@dataclass
+class _Issues:
+    """The lowest-cost fit of :func:`fit_from_starts` and why it is no success (if so)."""
+
+    best: tuple[str, Parameters, IdentResult]
+    bad: list[str]
+    ambiguous: list[str]
+    unconfirmed: list[str]
+    #: the free parameters behind ``bad`` (ran away, not confirmed by another start)
+    runaway: list[str]
+
+    @property
+    def res(self) -> IdentResult:
+        return self.best[2]
+
+    @property
+    def rejected(self) -> bool:
+        return bool(self.bad or self.ambiguous or self.unconfirmed)
+
+
+def _issues(problem: OutputErrorProblem,
+            results: list[tuple[str, Parameters, IdentResult | None]], at_start: list[float],
+            free: list[str], data_vals: Mapping[str, float],
+            usable: Callable[[str, Parameters], dict[str, float]]) -> _Issues:
+    """The lowest-cost fit of ``results`` and the reasons to reject it (nothing changed)."""
+    ran = [(label, s, r) for label, s, r in results if r is not None]
+
+    def key(item: tuple[str, Parameters, IdentResult]) -> float:
+        c = item[2].cost
+        return c if math.isfinite(c) else math.inf
+
+    # a confirmation run only vouches for (or against) the fit it started next to
+    best = min((item for item in ran if item[0] != "confirm"), key=key)
+    res = best[2]
+    start = usable(best[0], best[1])
+    others = [(label, usable(label, s), r) for label, s, r in ran]
+    flagged = [(k, why) for k, why in _plausibility(res, free, start, data_vals)
+               if _confirmed(problem, res, start, k, free, others) is None]
+    bad = [why for _, why in flagged]
+    ambiguous: list[str] = []
+    for label, _, r in ran:
+        far = _far(res.params, r.params, free, AGREE) if r is not res else []
+        if far and _within_noise(problem, res, r, len(free)):
+            ks = ", ".join(f"{k} {res.params[k]:.4g} ({best[0]} start) against "
+                           f"{r.params[k]:.4g} ({label} start)" for k in far)
+            ambiguous.append(
+                f"implausible result: the {best[0]} and {label} starts reached fits more than "
+                f"{AGREE:g}x apart ({ks}) at costs {res.cost:.4g} and {r.cost:.4g}, within "
+                f"{SIGMAS:g} sigma of the noise; the record does not decide between them")
+    # a noisy fit from the record's estimate (or from the rescaled given start) that the
+    # given start was run to check, while the given start's own fit failed: no second start
+    # confirms it when it lies more than SKIP_AGREE x from the given start, or (whatever the
+    # distance) when its start began at a higher cost than the given start (it then does
+    # not vouch for its basin)
+    unconfirmed: list[str] = []
+    if best[0] in ("data", "scaled") and not _exact(problem, res):
+        c_best = at_start[[label for label, _, _ in results].index(best[0])]
+        what, origin, led = {
+            "data": ("the data-driven start", "an estimate", "the record's estimate"),
+            "scaled": ("the rescaled init start", "a rescaled start", "the rescaling"),
+        }[best[0]]
+        for (label, s, got), c0 in zip(results, at_start):
+            if label != "init" or got is None or got.success:
+                continue
+            far = _far(res.params, s.valuesdict(), free, SKIP_AGREE)
+            if far:
+                ks = ", ".join(f"{k} {res.params[k]:.4g} against {s[k].value:.4g}" for k in far)
+                why = f"lies more than {SKIP_AGREE:g}x from the {label} start ({ks})"
+            elif c_best > c0:
+                why = (f"comes from {origin} that began at a higher cost than the {label} "
+                       f"start ({problem.seed_cost(c_best * problem.scale):.4g} against "
+                       f"{problem.seed_cost(c0 * problem.scale):.4g})")
+            else:
+                continue
+            unconfirmed.append(
+                f"unconfirmed result: the fit from {what} {why} on a noisy "
+                f"record, and the fit from the {label} start failed (cost {got.cost:.4g} "
+                f"against {res.cost:.4g}); no second start reached it, so {led} may have "
+                "led to a local minimum")
+    return _Issues(best, bad, ambiguous, unconfirmed, [k for k, _ in flagged])
