@@ -20,48 +20,24 @@ from estimator.identify.result import IdentResult
 from estimator.identify.start import StartEstimate, estimate_start, kind_scaled_start
 from suspid.models.base import Twin
 
-#: normalised output-error cost of a data-driven estimate above which the given start is
-#: run as well (the estimate explains less than half of the record) unless the fit from it
-#: leaves only white noise
+#: normalised cost of the data-driven estimate above which the given start runs as well
 POOR_ESTIMATE = 0.5
-
-#: a free parameter this far (factor) from its start and from the data-driven estimate ran away
-#: (unless a second start, begun far from the first in it, reached the same fit: :func:`_confirmed`)
+#: factor from its start and from the data-driven estimate beyond which a parameter ran away
 RUNAWAY = 100.0
-#: relative distance, or distance in standard errors, within which two fits are the same
-#: point (:func:`_same`)
+#: relative distance, or distance in standard errors, within which two fits are the same point
 CONFIRM_TOL = 0.01
 CONFIRM_SIGMA = 0.3
-#: factor by which a confirmed parameter, moved alone up or down, must raise the cost by more
-#: than 3 sigma of the noise (:func:`_confirmed`): the record bounds it within a decade on
-#: at least one side
+#: factor by which a confirmed parameter, moved alone, must raise the cost by more than 3 sigma
 CONFIRM_SPAN = 10.0
-
-#: factor beyond which two fits to a noisy record reached from different starts at costs the
-#: noise does not tell apart (:func:`_within_noise`) are reported as undecided: neither a
-#: success nor identifiable
+#: factor beyond which two noisy fits at costs within the noise are reported as undecided
 AGREE = 10.0
-
 #: factor within which the fit from the data-driven start must agree with the given start in
-#: every free parameter for the noise-floor rule to skip the given start. The whiteness test
-#: (:func:`noise_floor_ratio`) only sees a misfit larger than ``NOISE_FLOOR - 1`` of the
-#: residual; at 0.3-0.5 sigma noise the noise dominates the residual, and a local minimum
-#: whose misfit is a few per cent of it passes as white (half4 sse row 25: k4 at 2.3e6 N/m
-#: from an estimate of 2.1e6 against a truth of 500, ratio below 1.15, cost 21.65 against
-#: 20.63 from the given start). A fit far from the given start in some parameter is such a
-#: case or a poor given start; only running the given start tells. The factor lies between
-#: the given starts' own error in the studies (up to 10x: a correct fit from them is ~10x
-#: away, and at 10 it ran every such start in full, 1.7-5x the time) and ``RUNAWAY``; the
-#: local minimum above is 460-46000x from given starts 0.1x-10x.
+#: every free parameter for the noise-floor rule to skip the given start (the whiteness test
+#: misses a misfit of a few per cent of a noise-dominated residual; docs/performance.md)
 SKIP_AGREE = 30.0
-
-#: factor by which some kind's common factor must leave 1 for the rescaled given start to
-#: be run as a further start (within it, it is the given start again)
+#: factor by which some kind's common factor must leave 1 for the rescaled start to run
 KIND_MIN_FACTOR = 3.0
-
-#: factor by which one of two twin fits (:func:`_choose_twin`) must fit the measured
-#: channels outside the cost better (in squared residual per channel variance) for those
-#: channels to choose between them
+#: factor by which one twin fit must fit the channels outside the cost better to be chosen
 TWIN_DECIDE = 4.0
 
 
@@ -77,8 +53,7 @@ def _at_noise_floor(problem: OutputErrorProblem, res: IdentResult) -> bool:
 
 def _far(a: Mapping[str, float], b: Mapping[str, float], free: list[str],
          factor: float) -> list[str]:
-    """Free parameters in which ``a`` and ``b`` differ by more than ``factor`` (or are not
-    both finite and positive)."""
+    """Free parameters in which ``a`` and ``b`` differ by more than ``factor`` (or are not positive)."""
     out = []
     for k in free:
         x, y = float(a[k]), float(b[k])
@@ -92,9 +67,7 @@ def _within_noise(problem: OutputErrorProblem, best: IdentResult, other: IdentRe
                   nfree: int) -> bool:
     """``other``'s cost exceeds ``best``'s by less than 3 sigma of the noise (noisy records).
 
-    The noise-scaled expectation is the band's own level: a cost rise of ``SIGMAS**2`` times
-    the residual variance per sample, ``ss / (N - p)`` (normalised units), is what a 3-sigma
-    step of one parameter costs; two fits closer than that are not told apart by the record.
+    A rise of ``SIGMAS**2 * ss / (N - p)`` is what a 3-sigma step of one parameter costs.
     """
     if _exact(problem, best):
         return False
@@ -115,8 +88,7 @@ def _finite(x: float) -> float | None:
 
 def _plausibility(res: IdentResult, free: list[str], start: Mapping[str, float],
                   data: Mapping[str, float]) -> list[tuple[str, str]]:
-    """Free parameters at which ``res`` sits at an absurd place, each with the reason (empty
-    when there is none)."""
+    """Free parameters at which ``res`` sits at an absurd place, each with the reason."""
     out = []
     for k in free:
         v = res.params[k]
@@ -136,9 +108,7 @@ def _plausibility(res: IdentResult, free: list[str], start: Mapping[str, float],
 
 
 def _same(a: IdentResult, b: IdentResult, k: str) -> bool:
-    """``b``'s value of ``k`` is ``a``'s: within ``CONFIRM_TOL`` (relative) or within
-    ``CONFIRM_SIGMA`` standard errors of ``a`` (a weakly determined parameter ends where
-    each search stops on a nearly flat cost)."""
+    """``b``'s value of ``k`` is ``a``'s: within ``CONFIRM_TOL`` or ``CONFIRM_SIGMA`` standard errors."""
     x, y = float(a.params[k]), float(b.params[k])
     if not (math.isfinite(x) and math.isfinite(y) and x > 0 and y > 0):
         return False
@@ -152,15 +122,10 @@ def _confirmed(problem: OutputErrorProblem, res: IdentResult, start: Mapping[str
                others: Sequence[tuple[str, Mapping[str, float], IdentResult]]) -> str | None:
     """Label of another start that confirms ``res``'s value of ``k`` (``None`` if none does).
 
-    A parameter that ran far from its start along a flat direction of the cost, or into a
-    local minimum, is not confirmed. Two conditions together say the record itself puts it
-    there: a second start, begun more than ``KIND_MIN_FACTOR`` x away from this one in
-    ``k``, reached the same fit (every free parameter the same: :func:`_same`), and
-    the record bounds ``k`` on at least one side (moving ``k`` alone a factor
-    ``CONFIRM_SPAN`` up and down lowers the cost neither way by more than 3 sigma of the
-    noise and raises it one way by more than that; a drift along a flat direction to zero or
-    infinity leaves it unchanged both ways). The profile bands then say
-    how well the record bounds it, and name a side it leaves open.
+    Confirmed: a second start, begun more than ``KIND_MIN_FACTOR`` x away in ``k``, reached
+    the same fit, and moving ``k`` alone ``CONFIRM_SPAN`` x up and down lowers the cost
+    neither way and raises it one way by more than 3 sigma of the noise (the record bounds
+    it on at least one side; a drift along a flat direction leaves the cost unchanged).
     """
     v = res.params[k]
     if not (math.isfinite(v) and v > 0):
@@ -194,18 +159,17 @@ def _confirmed(problem: OutputErrorProblem, res: IdentResult, start: Mapping[str
     return label if bounded else None
 
 
-def _reject(res: IdentResult, warnings: list[str]) -> None:
-    """Report ``res`` as neither a success nor identifiable, with the reasons."""
+def _reject(res: IdentResult, warnings: list[str], misfit: bool = False) -> None:
+    """Report ``res`` as no success and (unless a ``misfit``) not identifiable, with the reasons."""
     res.success = False
-    res.identifiable = False
+    res.identifiable = res.identifiable and misfit
     for entry in res.starts or []:
         if entry.get("chosen"):
             entry["success"] = False
     res.warnings += warnings
 
 
-# a parameter set far from any physical value overflows the response: such a cost is
-# infinite (the search moves on), not a RuntimeWarning with its source line on stderr
+# an absurd parameter set overflows the response: an infinite cost, not a RuntimeWarning
 @np.errstate(over="ignore", invalid="ignore", divide="ignore")
 def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
                     run: Callable[[Parameters], IdentResult], *, data_start: bool = True,
@@ -213,69 +177,44 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
                     intervals: bool = True, estimate: StartEstimate | None = None) -> IdentResult:
     """Run the fit ``run`` from the data-driven start and from ``params``; keep the best.
 
+    The given start is skipped when the fit from the data-driven start is clean, ``params``
+    begins at no lower cost, and that fit either leaves only white noise
+    (:func:`noise_floor_ratio` at most ``NOISE_FLOOR``) within ``SKIP_AGREE`` x of
+    ``params``, or explains the record exactly from an estimate below ``POOR_ESTIMATE``.
+    Without a clean answer, the given start rescaled per kind (:func:`kind_scaled_start`)
+    runs as a further start when it begins lower and moves some kind by more than
+    ``KIND_MIN_FACTOR``; a parameter that ran away gets a confirming start; a twin fit is
+    resolved (:func:`resolve_twin`).
+
     Parameters
     ----------
     problem : OutputErrorProblem
-        The whole record (for the data-driven estimate).
+        The whole record.
     params : Parameters
         Fixed values and the given start of the free parameters.
     run : callable
-        ``run(start) -> IdentResult``: one identification from the start ``start``.
+        ``run(start) -> IdentResult``: one identification from ``start``.
     data_start : bool
         Compute the data-driven start (:func:`estimate_start`) and run from it.
     keep_init : bool
-        Also consider ``params`` as a start (always done when no data-driven start exists).
-        It is skipped (listed as skipped, so the time per identification does not grow)
-        when the fit from the data-driven start is a clean success (converged, identifiable,
-        plausible), ``params`` begins at no lower cost than the estimate (else it may lie in
-        a better basin), and the fit either leaves only white measurement noise (a noisy
-        record: :func:`noise_floor_ratio` at most ``NOISE_FLOOR``; no start can then lower
-        the cost by more than the noise's own scatter) while agreeing with ``params`` within
-        a factor ``SKIP_AGREE`` in every free parameter (the whiteness test cannot see a
-        misfit that is a few per cent of a noise-dominated residual, so a fit far from the
-        given start is checked against it) or explains the record exactly (normalised cost
-        below ``EXACT_FIT``) from an estimate that fits well (normalised cost below
-        ``POOR_ESTIMATE``). Otherwise it runs: on a noisy record the estimate is biased and
-        may lead to a local minimum, whose residual is not white.
+        Also consider ``params`` as a start (always when there is no data-driven start).
     init_fallback : bool
-        With ``keep_init`` false (no start given: ``params`` holds the documented defaults),
-        still run ``params`` when the fit from the data-driven start gives no clean answer
-        (below). A noisy record can mislead the estimate badly (e.g. positions alone at 0.3
-        sigma), and the defaults, a typical car, are then the better guess.
+        With ``keep_init`` false, still run ``params`` (the defaults) when the data-driven
+        start gives no clean answer.
     intervals : bool
-        Attach honest 3-sigma bands (:func:`estimator.identify.profile.apply_bands`) to a
-        result with standard errors: the curvature band where the cost is quadratic out to
-        its ends, the profile likelihood where it is not; a parameter the profile does not
-        bound makes the result not identifiable.
+        Attach the 3-sigma bands (:func:`~estimator.identify.profile.apply_bands`).
     estimate : StartEstimate, optional
-        The data-driven start of ``problem`` when already computed
-        (:func:`estimate_start`); default: computed here when ``data_start``.
+        The data-driven start when already computed.
 
     Returns
     -------
     IdentResult
-        The lowest-cost result, with ``starts`` (every start and what it reached),
-        ``data_start`` and ``nfev`` summed over the runs. A result whose parameters ran
-        orders of magnitude away from its start and from the data-driven estimate is
-        reported neither as a success nor as identifiable; its warnings say which parameter
-        and why, and the costs reached from each start. So is a noisy result when another
-        start reached a fit more than ``AGREE`` x away in some parameter at a cost within
-        3 sigma of the noise of it (the record does not decide between the two): the
-        warning names the parameters, the starts and their costs. So is a noisy result from
-        the data-driven start when the given start ran and its fit failed while the result
-        lies more than ``SKIP_AGREE`` x from the given start, or the estimate began at a
-        higher cost than the given start (no second start confirms it; the warning begins
-        ``unconfirmed result``).
-
-        When no start gives a clean answer (the result would be rejected, is no success,
-        or leaves a residual that is not white: :func:`noise_floor_ratio` above
-        ``NOISE_FLOOR`` and no exact fit) and the given start was considered, the given start rescaled by one
-        common factor per kind of parameter (:func:`kind_scaled_start`) is a third start
-        (``"scaled"`` in ``starts``) if it begins at a lower cost than every start so far
-        and some factor lies outside ``[1/KIND_MIN_FACTOR, KIND_MIN_FACTOR]``; the rules
-        above are then applied to all three (a fit from it is checked against the given
-        start as a fit from the estimate is). A clean answer from the first two starts
-        costs nothing more.
+        The lowest-cost result with ``starts``, ``data_start`` and the summed ``nfev``. It is
+        neither a success nor identifiable when a parameter ran ``RUNAWAY`` x from its
+        start and the estimate unconfirmed, when another start reached a fit ``AGREE`` x
+        away at a cost within the noise, or when a noisy fit from the estimate is not
+        confirmed by the given start (``unconfirmed result``); a misfit
+        (:func:`misfit_channels`) is no success.
     """
     free = params.free
     est = (estimate if estimate is not None
@@ -299,10 +238,7 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
     results: list[tuple[str, Parameters, IdentResult | None]] = []
     for i, (label, start) in enumerate(runs):
         done = [r for _, _, r in results if r is not None]
-        # a further start only runs when the fits so far are not clean, or when it begins
-        # lower than the start they came from (it may then be in a better basin)
-        # (or when the fits so far explain the record down to its noise: no start can
-        # then lower the cost by more than the noise's own scatter)
+        # skipped: the fits so far are clean, exact or at the noise floor, and it begins no lower
         if done and all(r.success for r in done) and at_start[i] >= min(at_start[:i]) \
                 and (est is not None
                      and est.cost < POOR_ESTIMATE and all(_exact(problem, r) for r in done)
@@ -315,46 +251,38 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         results.append((label, start, run(start)))
     issues = _issues(problem, results, at_start, free, data_vals, usable)
 
+    def add(label: str, start: Parameters, cost: float | None = None) -> _Issues:
+        """Run a further start and judge every fit again."""
+        runs.append((label, start))
+        at_start.append(problem.normalized_ss(start.valuesdict()) if cost is None else cost)
+        results.append((label, start, run(start)))
+        return _issues(problem, results, at_start, free, data_vals, usable)
+
     def unclean(issues: _Issues) -> bool:
         """No clean answer: rejected, no success, or a residual that is not white noise."""
         return issues.rejected or not issues.res.success or not _exact(problem, issues.res) \
             and noise_floor_ratio(problem, issues.res.params) > NOISE_FLOOR
 
     if init_fallback and not any(label == "init" for label, _ in runs) and unclean(issues):
-        # no start was given and the record's estimate gave no clean answer: the defaults
-        runs.append(("init", params))
-        at_start.append(problem.normalized_ss(params.valuesdict()))
-        results.append(("init", params, run(params)))
-        issues = _issues(problem, results, at_start, free, data_vals, usable)
+        issues = add("init", params)  # no start given, no clean answer: the defaults
     if unclean(issues):
-        # no clean answer (or a residual that is not white noise: a local minimum): the
-        # given start rescaled kind by kind is a further start when it begins lower than
-        # every start run and is not the given start again
         scaled = (kind_scaled_start(problem, params)
                   if any(label == "init" for label, _ in runs) else None)
         if scaled is not None and scaled[2] < min(at_start) and any(
                 abs(math.log(f)) > math.log(KIND_MIN_FACTOR) for f in scaled[1].values()):
-            runs.append(("scaled", scaled[0]))
-            at_start.append(scaled[2])
-            results.append(("scaled", scaled[0], run(scaled[0])))
-            issues = _issues(problem, results, at_start, free, data_vals, usable)
+            issues = add("scaled", scaled[0], scaled[2])
     if issues.runaway and not issues.ambiguous and not issues.unconfirmed and all(
             math.isfinite(issues.res.params[k]) and issues.res.params[k] > 0
             for k in issues.runaway):
-        # parameters that ran far from their start and no other start reached: a further
-        # start next to the fit, those parameters moved CONFIRM_SPAN x back towards where
-        # they came from, returns to it if the cost has a minimum there (a drift along a
-        # flat direction stays where it is put)
+        # a start next to the fit, the run-away parameters moved CONFIRM_SPAN x back: it
+        # returns to the fit if the cost has a minimum there
         ref = usable(*issues.best[:2])
         c = params.copy()
         for k in free:
             v = float(issues.res.params[k])
             c[k].value = v if k not in issues.runaway else \
                 v * (CONFIRM_SPAN if ref.get(k, v) > v else 1.0 / CONFIRM_SPAN)
-        runs.append(("confirm", c))
-        at_start.append(problem.normalized_ss(c.valuesdict()))
-        results.append(("confirm", c, run(c)))
-        issues = _issues(problem, results, at_start, free, data_vals, usable)
+        issues = add("confirm", c)
     res = issues.res
     twin_warning = None
     if not (issues.bad or issues.ambiguous or issues.unconfirmed):
@@ -386,14 +314,10 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         if not est.values:
             res.warnings.append(f"no data-driven start: {est.reason}")
     if issues.bad:
-        # a parameter that ran orders of magnitude away along a flat direction of the cost
-        # is not identified by this record, whatever the curvature at the end point says
         alts = ", ".join(f"{label} start: cost {r.cost:.4g}" for label, _, r in ran)
         _reject(res, [f"implausible result: {b}" for b in issues.bad]
                 + [f"costs reached from each start: {alts}"])
     elif issues.ambiguous:
-        # two starts reached places an order of magnitude apart at costs the noise does not
-        # tell apart: the record does not decide between them, whatever each curvature says
         _reject(res, issues.ambiguous)
     elif issues.unconfirmed:
         _reject(res, issues.unconfirmed)
@@ -402,13 +326,8 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
     if twin_warning is not None:
         res.warnings.append(twin_warning)
     misfit = misfit_channels(problem, res.params)
-    if misfit:
-        # the model does not explain the record, however well the optimiser converged
-        res.success = False
-        for entry in res.starts:
-            if entry.get("chosen"):
-                entry["success"] = False
-        res.warnings.append(misfit_warning(misfit, {k: res.params[k] for k in params.fixed}))
+    if misfit:  # the model does not explain the record, however well the search converged
+        _reject(res, [misfit_warning(misfit, {k: res.params[k] for k in params.fixed})], misfit=True)
     return res
 
 
@@ -416,10 +335,7 @@ def twin_of(problem: OutputErrorProblem, params: Parameters, p: Mapping[str, flo
             ) -> Twin | None:
     """The model's twin of ``p`` on the coordinates in ``problem``'s cost, or ``None``.
 
-    :meth:`SuspensionModel.twin`, for the coordinates with a channel in the cost. ``None``
-    as well when some free value of ``p`` is not finite and positive, or the twin would
-    change a parameter ``params`` holds fixed (the record is then not ambiguous: the twin
-    lies outside what is identified).
+    ``None`` as well when a free value is not positive or the twin changes a fixed parameter.
     """
     model = problem.model
     measured = problem.measured_coords()
@@ -437,9 +353,8 @@ def resolve_twin(problem: OutputErrorProblem, params: Parameters, res: IdentResu
                  ) -> tuple[IdentResult, tuple[Parameters, IdentResult] | None, str | None]:
     """``res`` or the fit ``run`` reaches from its twin (:func:`twin_of`), whichever is right.
 
-    Returns the chosen result, ``(start, result)`` of the fit from the twin (``None`` when
-    there is no twin: then ``res`` itself and no warning), and the warning that names the
-    other fit when the two are equally good (:func:`_choose_twin`).
+    Returns the chosen result, ``(start, result)`` of the twin's fit (``None`` without a
+    twin) and the warning naming the other fit when both are equally good.
     """
     tw = twin_of(problem, params, res.params)
     if tw is None:
@@ -456,15 +371,10 @@ def _choose_twin(problem: OutputErrorProblem, res: IdentResult, other: IdentResu
                  tw: Twin) -> tuple[IdentResult, str | None]:
     """Choose between ``res`` and ``other``, the fit from the model's twin of ``res``.
 
-    A twin is a second parameter set with the same response on the channels in the cost
-    (the quarter car's suspension and tyre seen from the body alone), so both fits reach
-    the same cost and no optimiser can tell which is right. When they do (both exact, or
-    within the noise: :func:`_within_noise`), measured channels outside the cost decide if
-    one fits them ``TWIN_DECIDE`` times better (squared residual over the channel's
-    variance, summed); otherwise the twin's physical rule decides (:attr:`Twin.rule`). A
-    fit from the twin that ends at a clearly lower cost simply wins (``res`` was a local
-    minimum). Returns the chosen result and a warning naming the other (``None`` when the
-    costs decided).
+    At equal costs (exact or within the noise) the measured channels outside the cost
+    decide if one fits them ``TWIN_DECIDE`` times better, else the twin's rule
+    (:attr:`Twin.rule`); a clearly lower cost wins outright. Returns the result and a
+    warning naming the other (``None`` when the costs decided).
     """
     same = (_exact(problem, res) and _exact(problem, other)
             or _within_noise(problem, res, other, len(res.stderr)))
@@ -543,11 +453,8 @@ def _issues(problem: OutputErrorProblem,
                 f"implausible result: the {best[0]} and {label} starts reached fits more than "
                 f"{AGREE:g}x apart ({ks}) at costs {res.cost:.4g} and {r.cost:.4g}, within "
                 f"{SIGMAS:g} sigma of the noise; the record does not decide between them")
-    # a noisy fit from the record's estimate (or from the rescaled given start) that the
-    # given start was run to check, while the given start's own fit failed: no second start
-    # confirms it when it lies more than SKIP_AGREE x from the given start, or (whatever the
-    # distance) when its start began at a higher cost than the given start (it then does
-    # not vouch for its basin)
+    # a noisy fit from the estimate (or the rescaled start) while the given start's fit
+    # failed: unconfirmed when far from the given start or begun at a higher cost
     unconfirmed: list[str] = []
     if best[0] in ("data", "scaled") and not _exact(problem, res):
         c_best = at_start[[label for label, _, _ in results].index(best[0])]

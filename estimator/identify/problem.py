@@ -1,42 +1,18 @@
-"""The output-error identification problem for the linear models (fast path).
+"""The output-error identification problem for the linear models.
 
-Given a :class:`~suspid.io.csvio.Measurement` and a model, :class:`OutputErrorProblem`
-predicts the measured channels for a parameter vector and returns the residual. The
-initial state is handled by *variable projection*: the response is linear in ``x0``, so
-for every parameter vector the best ``x0`` follows from a small linear least-squares
-problem (``x0="estimate"``); ``x0="rest"`` starts at equilibrium and an array fixes it.
+:class:`OutputErrorProblem` predicts the measured channels for a parameter vector and
+returns the residual; the initial state follows by variable projection
+(``x0="estimate"``), starts at equilibrium (``"rest"``) or is given. Costs: ``sse``, the
+squared differences of the measured position channels, ride heights included (all
+channels when no position is measured); ``frobenius``, the Frobenius norm over every
+measured channel. Ride heights are strut extensions ``g . q + gr . r``
+(:func:`ride_height_rows`).
 
-Cost functions (the seed's two):
-
-``sse``
-    sum of squared differences of the measured *position* channels, ride heights included
-    (all measured channels when no position is measured);
-``frobenius``
-    Frobenius norm of the measured-minus-simulated matrix over every measured channel.
-
-Nelder–Mead only compares cost values, so the two differ by the channels they use (and by
-the termination test), not by the square root.
-
-Ride heights (``d``/``dN`` and their ``_dot``: strut extensions) are compared like the
-motions: strut ``i``'s extension is ``g . q + gr . r`` (its rate with ``q'``, ``r'``) on the
-problem's road input (the record's road, or none), rows of the output map after those of the
-motion channels (:func:`ride_height_rows`).
-
-One problem class serves identify, the monitor's windows and diagnose; the path is chosen
-per problem and per parameter set:
-
-* the fast path (:meth:`OutputErrorProblem.evaluate`): a uniform grid with every fitted
-  sample observed and ``x0="estimate"`` (weights allowed) -- the common case of a record and
-  of every monitor window. Affine ``A(theta)``, one LAPACK eigen-decomposition, the forced
-  trajectory in closed form, the initial state from closed-form normal equations; cached
-  per problem, so a window's final simplex and estimate are reused (stderr, Gauss-Newton:
-  :mod:`estimator.stream.windowfit`);
-* the modal recursion on a uniform grid otherwise (missing samples, a known ``x0``, or a
-  parameter set the fast path declines: an ill-conditioned initial-state Gram matrix);
-* stepwise simulation on a non-uniform grid or for a defective ``A``.
-
-The paths agree to rounding; ``tests/core/test_cost_oracle.py`` checks each of them against
-an accurate ``scipy.integrate.solve_ivp`` simulation.
+The path is chosen per problem and parameter set: the fast path
+(:meth:`OutputErrorProblem.evaluate`) on a uniform, fully observed grid with ``x0``
+estimated; the modal recursion otherwise; stepwise simulation on a non-uniform grid or
+for a defective ``A``. ``tests/core/test_cost_oracle.py`` checks each against
+``scipy.integrate.solve_ivp``.
 """
 from __future__ import annotations
 
@@ -76,19 +52,15 @@ class OutputErrorProblem:
     meas : Measurement
     cost : {"sse", "frobenius"}
     x0 : "estimate", "rest" or ndarray
-        Initial-state handling (see module docstring).
+        Initial-state handling.
     weights : mapping, optional
         Per-channel weights multiplying the residual (default 1: the seed's raw SI cost).
     affine : AffinePieces, optional
-        The model's forward model as affine pieces
-        (:meth:`~suspid.models.base.SuspensionModel.affine`); default: built from the first
-        predicted parameter set with every damper and spring free. A parameter set they do
-        not apply to (another mass, inertia or length) is predicted from the model itself.
-        A caller with many problems of one model (the monitor's windows) passes its pieces
-        once.
+        The model's affine pieces (:meth:`~suspid.models.base.SuspensionModel.affine`);
+        default: built from the first prediction with every damper and spring free. A
+        parameter set they do not apply to is predicted from the model itself.
     ride_heights : bool
-        Whether measured ride heights enter the cost (default); ``False`` leaves them out
-        with a warning (the monitor's window compares the motion channels only).
+        Whether measured ride heights enter the cost; ``False`` leaves them out with a warning.
     """
 
     model: SuspensionModel
@@ -289,34 +261,14 @@ class OutputErrorProblem:
     def evaluate(self, p: Mapping[str, float]) -> Evaluation | None:
         """One evaluation at ``p`` by the fast path, cached; ``None`` where it does not apply.
 
-        It applies to a problem on a uniform grid with every fitted sample observed and
-        ``x0="estimate"`` (:attr:`fast`), at a ``p`` whose ``A`` is diagonalisable (the
-        test of :func:`suspid.simulate.modal_form`) and whose initial-state Gram matrix has a
-        condition number below :data:`MAX_GRAM_COND`. Steps:
-
-        1. ``A, B, Bz`` from the affine pieces (:meth:`state_space`);
-        2. the modal form ``A = V diag(lam) V^-1`` from one LAPACK ``dgeev`` (right and
-           left eigenvectors; the rows of ``V^-1`` are the left eigenvectors scaled by
-           ``1 / (u^H v)``, no inverse);
-        3. the forced modal trajectory of the first-order-hold road,
-           ``w[k+1] = E w[k] + g0 s[k] + g1 s[k+1]``, in closed form,
-           ``w[k] = E^k (w[0] + sum_{l<k} d[l] E^-(l+1))``: one ``cumsum`` per mode of
-           ``(sum_j a_j r_j[l]) E^-l`` (the roads summed first). The partial sums are
-           dominated by their newest terms, so the rounding stays ~``eps`` relative to
-           ``|w|``; used while ``|E|^-N`` stays far from overflow
-           (``max(-Re(lam)) h N <`` :data:`MAX_DECAY_EXPONENT`), else the blocked scan
-           :func:`~suspid.simulate.first_order_scan` (a long record);
-        4. the least-squares initial state without the ``(N, p, n)`` free-response
-           regressors ``Re(CV_i E_i^k)``, ``-Im(...)``: their Gram matrix from the channel
-           products ``CV^T CV``, ``CV^T conj(CV)`` and the geometric sums
-           ``sum_k (E_i E_j)^k``, their product with the residual as
-           ``sum_c CV_ci (R P^T)_ci``; the cost as ``||R0||^2 - rhs . sol`` (``R0`` the
-           residual of the forced response, ``Gram sol = rhs``) without a residual pass,
-           unless the two terms cancel (below :data:`SS_GUARD` of ``||R0||^2``: noise-free
-           data near its optimum), when the residual is formed and summed.
-
-        Arrays are laid out modes x samples, so every elementwise operation runs over
-        contiguous rows of ``N`` samples.
+        It applies on a uniform grid with every fitted sample observed and ``x0="estimate"``
+        (:attr:`fast`), at a diagonalisable ``A`` whose initial-state Gram matrix has a
+        condition number below :data:`MAX_GRAM_COND`: the modal form from one LAPACK
+        ``dgeev``, the forced first-order-hold trajectory in closed form (one ``cumsum`` per
+        mode; the blocked scan when ``max(-Re(lam)) h N`` reaches
+        :data:`MAX_DECAY_EXPONENT`), and the least-squares initial state from closed-form
+        normal equations, the cost as ``||R0||^2 - rhs . sol`` unless the terms cancel
+        (:data:`SS_GUARD`).
         """
         if not self.fast:
             return None
@@ -629,9 +581,7 @@ class OutputErrorProblem:
     def residual_vectors(self, points: Sequence[Mapping[str, float]]) -> FloatArray:
         """Residual vectors of several parameter sets, shape (k, n_obs).
 
-        Row ``i`` is :meth:`residual_vector` of ``points[i]`` (the same path, so finite
-        differences between rows are differences of one computation; the same errors
-        raise).
+        Row ``i`` is :meth:`residual_vector` of ``points[i]`` (the same path and errors).
 
         Parameters
         ----------
@@ -641,8 +591,7 @@ class OutputErrorProblem:
         Returns
         -------
         ndarray, shape (k, n_obs)
-            Weighted residuals of the observed samples (units of the channels times their
-            weights), each row flattened as :meth:`residual_vector`'s.
+            Weighted residuals of the observed samples.
         """
         R = np.empty((len(points), self.n_obs))
         for i, q in enumerate(points):

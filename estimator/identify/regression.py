@@ -1,32 +1,11 @@
 """The filtered equation-error regression behind the data-driven start.
 
-Every model is ``M q'' + C q' + K q = Fk r + Fc r'`` with matrices *linear* in the masses,
-dampers and springs. Passing every signal through the same linear filter keeps the
-equation (the filter commutes with it), so with ``F_k = s^(k+2) / D(s)`` applied to a
-position (``s^(k+1)/D`` to a velocity, ``s^k/D`` to an acceleration) and
-``D(s) = (s^2 + 2 zeta w s + w^2)^2`` the filtered equation
-
-    M F_2 q + C F_1 q + K F_0 q - Fk F_0 r - Fc F_1 r = transient
-
-holds for any measured channel set that has one channel per coordinate, with no numerical
-differentiation. The transient (the filter's own free response to the record's start) is a
-combination of the filter's four modes and is projected out. The free parameters that
-enter linearly follow from one linear least-squares problem given the known ones (masses,
-inertia, geometry); parameters that do not enter linearly (lengths) are searched on a
-log grid with the linear ones solved at each point (variable projection) and refined by
-Nelder-Mead. Several filter bandwidths are tried and the estimate whose *output-error*
-cost is lowest wins, so the choice adapts to where the record has its signal and its noise.
-
-The estimate needs neither a starting guess nor derivatives; it cannot apply when a
-coordinate has no measured channel at all (then the equations hold an unmeasured signal),
-when the time grid is not uniform, or when the record holds too little motion to separate
-the parameters (rank-deficient regression); the reason is reported and the caller falls
-back to its other starts. With measurement noise least squares is biased (the noisy
-channels are the regressors: errors in variables); where it does not explain the record
-exactly, each equation's residual over the share white noise gives it (known from the
-filters and each channel's noise variance) is minimised as well (:func:`_ratio_fit`), and
-the lower output-error cost wins. Either way it is only a start: Nelder-Mead and the
-polish refine it on the output-error cost.
+Every model is ``M q'' + C q' + K q = Fk r + Fc r'`` with matrices linear in the masses,
+dampers and springs. Passing every signal through the same filter ``F_k = s^(k+2) / D(s)``,
+``D(s) = (s^2 + 2 zeta w s + w^2)^2``, keeps the equation with no numerical
+differentiation; the filter's transient (its four modes) is projected out. The
+parameters that enter linearly follow from one least-squares problem; lengths are
+searched with the linear ones solved at each point (variable projection).
 """
 from __future__ import annotations
 
@@ -42,13 +21,10 @@ from suspid.models.base import FloatArray, SuspensionModel
 
 #: damping ratio of the filter's double pole pair
 FILTER_ZETA = 0.8
-#: longest run of missing samples of a channel the data-driven start bridges by linear
-#: interpolation (a lost frame or three); a longer gap is cut out of its regression
-#: (:func:`_segments`)
+#: longest run of missing samples bridged by linear interpolation; a longer gap is cut out
 FILL_MAX = 3
 #: shortest stretch of valid samples between cut gaps the regression keeps
 SEGMENT_MIN = 16
-#: smallest relative singular value of the regression accepted as "determined"
 
 
 def _filter_bank(w: float, h: float) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
@@ -71,7 +47,7 @@ def _filter_bank(w: float, h: float) -> tuple[FloatArray, FloatArray, FloatArray
 _Responses = tuple[FloatArray, FloatArray, NDArray[np.complex128], FloatArray]
 #: impulse responses of the filter already computed, ``(w, h, N) -> _impulse_responses``
 _RESPONSES: dict[tuple[float, float, int], "_Responses"] = {}
-#: how many of them are kept (the bandwidths of a few records' sample rates and lengths)
+#: how many of them are kept
 _RESPONSES_KEPT = 16
 
 
@@ -79,10 +55,7 @@ def _impulse_responses(w: float, h: float, N: int) -> _Responses:
     """``(Pb, T, Fh, d)`` of the filter at ``w`` (rad/s), step ``h`` (s), ``N`` samples.
 
     ``Pb[n] = Phi^n b``, ``T[n]`` the first row of ``Phi^n``, ``Fh`` the FFT of the impulse
-    response ``H`` (see :func:`_filter`) and ``d`` the filter's denominator. They depend on
-    neither the record's values nor the model, so every record of one sample rate and length
-    (the bandwidths tried, the instrumental-variable iterations at the chosen one, every row
-    of a design) shares them: computed once by the same recursion and kept (read-only).
+    response and ``d`` the denominator: independent of the record's values, so kept.
     """
     key = (float(w), float(h), int(N))
     hit = _RESPONSES.get(key)
@@ -116,10 +89,7 @@ _PRODUCTS: dict[tuple[float, float, int], FloatArray] = {}
 def _noise_products(w: float, h: float, N: int) -> FloatArray:
     """``P[a, b]``: the expected sum over the kept samples of ``(F_a e)(F_b e)``, a, b = 0..4.
 
-    ``F_a`` is ``s^a / D(s)`` as :func:`_filter` applies it to a record of ``N`` samples and
-    ``e`` unit white noise: ``sum_m c_m h_a[m] h_b[m]`` with ``h_a`` the impulse response and
-    ``c_m`` the number of kept samples (from the third) at least ``m`` after the record's
-    start. Computed once per bandwidth ``w`` (rad/s), step ``h`` (s) and length and kept.
+    ``e`` is unit white noise; kept per bandwidth ``w`` (rad/s), step ``h`` (s) and length.
     """
     key = (float(w), float(h), int(N))
     hit = _PRODUCTS.get(key)
@@ -140,20 +110,16 @@ def _noise_products(w: float, h: float, N: int) -> FloatArray:
     return P
 
 
-#: white-noise variance (from :func:`_noise_variance`), relative to a channel's variance,
-#: below which the channel counts as noise-free (noise std 1e-4 of the signal's: the bias
-#: it puts in the estimate is ~1e-8). Noise-free design records measure up to 2e-10, the
-#: seed's bump at 1 kHz 2e-12; noise at 0.001 sigma 1e-6.
+#: white-noise variance (:func:`_noise_variance`) relative to a channel's variance below
+#: which the channel counts as noise-free (noise-free records measure up to 2e-10)
 NOISE_NEGLIGIBLE = 1e-8
 
 
 def _noise_variance(y: FloatArray) -> float:
     """Variance of white noise in ``y`` from its fourth differences (``mean(d4^2) / 70``).
 
-    Differences that touch a missing (NaN) sample are left out.
-
-    A response of the model sampled well above its modes hardly enters them (a mode at a
-    tenth of the sampling rate passes ``(2 sin(pi/10))^8`` = 2 % of its variance).
+    Differences that touch a missing sample are left out; a response sampled well above
+    its modes hardly enters them.
     """
     d4 = np.diff(y, 4)
     d4 = d4[np.isfinite(d4)]  # a fourth difference that touches a missing sample: none
@@ -163,12 +129,7 @@ def _noise_variance(y: FloatArray) -> float:
 def _filter(U: FloatArray, w: float, h: float) -> tuple[FloatArray, FloatArray]:
     """Filter the columns of ``U`` (N, m): outputs ``s^k / D`` for k = 0..4 and the modes.
 
-    The recursion ``z[n+1] = Phi z[n] + a u[n] + b u[n+1]`` (zero state before the record,
-    ``a = G1 - G2/h``, ``b = G2/h``) is a convolution with the impulse response
-    ``Phi^(i-1) a + Phi^i b``, less ``Phi^n b u[0]`` (the record has no sample before
-    ``u[0]``); the responses come from one loop over 4 x 4 products
-    (:func:`_impulse_responses`, computed once per bandwidth, step and length) and the
-    convolution from an FFT of every column at once.
+    A convolution with the FOH recursion's impulse response, by FFT.
 
     Returns
     -------
@@ -191,13 +152,9 @@ def _filter(U: FloatArray, w: float, h: float) -> tuple[FloatArray, FloatArray]:
 def _segments(missing: NDArray[np.bool_]) -> list[tuple[int, int, int]]:
     """Stretches of the record the regression keeps, around the long gaps in ``missing``.
 
-    A run of more than ``FILL_MAX`` missing samples is a gap: the linear interpolation
-    that bridges it is no measurement, and the filters would carry its error on into the
-    samples after it. Each stretch between gaps is taken as a record of its own: its rows
-    (less the first two, as at the record's start) are kept and the filter's free response
-    from its start is projected out (every free response begun before, the error the
-    bridged gap left in the filter's state included, is one from there on). A stretch
-    shorter than ``SEGMENT_MIN`` samples is dropped.
+    A run of more than ``FILL_MAX`` missing samples is a gap: each stretch between gaps is
+    a record of its own (its first two rows dropped, its own transient projected out);
+    one shorter than ``SEGMENT_MIN`` samples is dropped.
 
     Parameters
     ----------
@@ -207,9 +164,8 @@ def _segments(missing: NDArray[np.bool_]) -> list[tuple[int, int, int]]:
     Returns
     -------
     list of (origin, lo, hi)
-        Rows ``lo:hi`` are kept, the transient there spanned by ``T[lo - origin:hi - origin]``
-        (:func:`_impulse_responses`). The whole record is ``[(0, 2, N)]``; so is a record
-        with no stretch left (then the gaps stay interpolated).
+        Rows ``lo:hi`` kept, the transient spanned by ``T[lo - origin:hi - origin]``; the
+        whole record ``[(0, 2, N)]`` when there is no gap or no stretch left.
     """
     N = missing.size
     edges = np.flatnonzero(np.diff(np.concatenate([[0], missing.astype(np.int8), [0]])))
@@ -245,9 +201,7 @@ class _Regression:
                  segments: list[tuple[int, int, int]] | None = None) -> None:
         """Filter the record's channels at ``w`` (rad/s), step ``h`` (s).
 
-        ``segments`` (see :func:`_segments`) fixes the rows kept, e.g. those of the
-        measured record for instruments simulated on its grid; default: from the gaps of
-        the channels used.
+        ``segments`` (:func:`_segments`) fixes the rows kept; default: from the channels' gaps.
         """
         nq = len(model.coords)
         nr = len(model.roads)
@@ -279,7 +233,6 @@ class _Regression:
         for j in range(nr):
             cols.append(U[:, j])
         self._cols = cols
-        # the filtering is the same with or without the noise weights: done once, kept
         self._Y, self._T = _filter(np.column_stack(cols), w, h)
         self._build(noise)
 
@@ -293,8 +246,7 @@ class _Regression:
     def _build(self, noise: bool, signals: bool = True) -> None:
         """``Q``, ``R``, ``S``, ``G`` (and with ``noise`` the noise share ``B``).
 
-        ``signals`` False keeps the present ``Q`` ... ``G`` (one source per coordinate:
-        the noise weights are the plain ones) and adds ``B`` only.
+        ``signals`` False keeps the present ``Q`` ... ``G`` and adds ``B`` only.
         """
         nq, nr, plan, Y, T = self._nq, self._nr, self._plan, self._Y, self._T
         N = T.shape[0]
@@ -306,9 +258,8 @@ class _Regression:
         if noise and self._sig2 is None:
             self._sig2 = [_noise_variance(y) for y in self._raw]
         sig2 = self._sig2 if noise and self._sig2 is not None else [0.0] * self._nmeas
-        # weight of each source of coordinate i in F_k q: equal (averaged), or with
-        # ``noise`` inversely as the noise each carries into F_k q (both are the same
-        # signal, so any weights summing to one keep the equation)
+        # weight of each source of coordinate i in F_k q: equal, or with ``noise`` inversely
+        # as the noise each carries (any weights summing to one keep the equation)
         wt = np.zeros((nq, 3, 2))
         for i, srcs in enumerate(plan):
             for k in range(3):
@@ -328,8 +279,7 @@ class _Regression:
             for j in range(nr):
                 for k in range(2):
                     self.R[k, j] = Y[k + 2, :, self._nmeas + j]
-            # project out the transient (the filter's modes) and the first samples, in
-            # each stretch between gaps its own
+            # project out the transient and the first samples, per stretch between gaps
             bases = [(slice(lo, hi), np.linalg.qr(T[lo - origin:hi - origin])[0])
                      for origin, lo, hi in self.segments]
 
@@ -400,11 +350,12 @@ def _monomial_slopes(eta: FloatArray) -> FloatArray:
 
 def _coef_poly(model: SuspensionModel, base: Mapping[str, float], lin: list[str],
                nonlin: list[str]) -> tuple[FloatArray, FloatArray] | None:
-    """The equation coefficients as a polynomial: ``K[j, m]`` with ``j`` = 0 the part no
-    linear parameter multiplies, ``j`` = 1.. each of ``lin``, ``m`` the monomials of the
-    lengths (:func:`_monomials`), so that ``coef = sum_j theta_j sum_m phi_m(eta) K[j, m]``
-    (``theta_0 = 1``); and the largest coefficient met per ``j``. ``None`` when the
-    dependence on the lengths is not a polynomial of degree <= 2.
+    """The equation coefficients as a polynomial of the lengths.
+
+    ``K[j, m]``: ``j`` = 0 the part no linear parameter multiplies, ``j`` = 1.. each of
+    ``lin``, ``m`` the monomials (:func:`_monomials`), so that
+    ``coef = sum_j theta_j sum_m phi_m(eta) K[j, m]``; and the largest coefficient per ``j``.
+    ``None`` when the dependence is not a polynomial of degree <= 2.
     """
     rng = np.random.default_rng(7)
     x0 = np.array([base[k] for k in nonlin])
@@ -431,13 +382,11 @@ def _coef_poly(model: SuspensionModel, base: Mapping[str, float], lin: list[str]
 
 def _lifted_seed(reg: "_Regression", model: SuspensionModel, base: Mapping[str, float],
                  lin: list[str], nonlin: list[str], wts: FloatArray) -> FloatArray | None:
-    """Log-factors of the nonlinear parameters from the *lifted* linear problem.
+    """Log-factors of the nonlinear parameters from the lifted linear problem.
 
-    Lengths enter the matrices as polynomials (``c1 a1``, ``k1 a1**2``, ...). Each product
-    of a linear parameter and a monomial of the lengths is taken as its own unknown, which
-    makes the equation-error problem linear again; the lengths follow as ratios
-    ``(theta a) / theta``. ``None`` when the dependence is not a polynomial of degree <= 2
-    or no ratio is determined.
+    Each product of a linear parameter and a monomial of the lengths is its own unknown;
+    the lengths follow as ratios ``(theta a) / theta``. ``None`` when not polynomial or
+    no ratio is determined.
     """
     x0 = np.array([base[k] for k in nonlin])
     poly = _coef_poly(model, base, lin, nonlin)
@@ -506,8 +455,7 @@ def _split_linear(model: SuspensionModel, base: Mapping[str, float], free: list[
 
 def _equation_weights(reg: "_Regression", model: SuspensionModel, p: Mapping[str, float]
                       ) -> FloatArray:
-    """Weight of each equation of motion in :func:`_solve_linear`: one over the norm of its
-    mass term (of its whole filtered coefficient row where it has none) at the values ``p``."""
+    """Weight of each equation in :func:`_solve_linear`: one over the norm of its mass term at ``p``."""
     mats = model.matrices(p)
     mk = reg.norms(reg.coef(mats))
     mass_term = reg.norms(reg.coef((mats[0],) + tuple(np.zeros_like(a) for a in mats[1:])))

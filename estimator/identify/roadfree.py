@@ -1,41 +1,14 @@
 """Identification with the road unknown: the body equations, fitted by modulating functions.
 
-No road vehicle measures the road under its tyres, but the body sees the road only
-through its struts. Every *body row* of the model (:meth:`SuspensionModel.body_rows`: the
-equations that hold strut forces alone) reads
-
-    sum_k M[j, k] q_k'' + sum_i g_i[j] (c_i d_i' + k_i d_i) = 0
-
-with ``d_i`` the extension of strut ``i`` (its ride height). It holds whatever the road
-does, and it is *linear* in the masses and inertias of ``M`` and in every strut's damper
-``c_i`` and spring ``k_i``. So body accelerations and ride heights (or wheel motions, or
-wheel accelerometers) determine every strut's ``c_i``, ``k_i`` by linear least squares,
-the body mass and inertias too when a spring or damper is held; a record cannot scale all
-of them at once (the equations are homogeneous), and nothing about the tyres or the wheel
-masses (the unknown road hides them).
-
-How the equations are formed (the modulating-function method of continuous-time system
-identification): each contiguous stretch of samples of length ``T`` is multiplied by the
-test functions ``phi_k(t) = w(t) exp(-j w_k t)``, ``w(t) = sin^4(pi t / T)``, ``w_k = 2 pi k
-/ T``, and integrated. ``phi_k`` and its first three derivatives vanish at both ends, so an
-integral of a derivative moves onto the test function exactly
-(``int phi x^(n) = (-1)^n int phi^(n) x``): no derivative of a noisy channel is ever taken,
-and a channel measured as position, velocity or acceleration enters the same equation.
-As ``w`` is the finite Fourier series ``3/8 - cos(2 pi t/T)/2 + cos(4 pi t/T)/8``, every such
-integral is five bins of the channel's plain FFT: ``J_k[x^(n)] = sum_m a_m (j w_{k-m})^n
-X_{k-m}``. Bins ``k >= 3`` see no constant, so a ride-height or accelerometer zero offset
-drops out exactly. When a quantity is only available as a higher derivative (a deflection
-from accelerometers alone) the whole equation is multiplied by ``(j w)^s`` (integrated
-against ``phi^(s)``), which keeps every power of ``j w`` non-negative: no integration
-drift, no high-pass to tune.
-
-The band: bins from ``k = 3`` up to where every regressor channel's spectrum stands out of
-its own noise floor (the median power of its top 16 % of bins) by :data:`SNR_MIN`: a
-regressor whose noise is as large as its signal would bias its parameter toward zero (errors
-in variables). The weights: a first ordinary least-squares pass gives the equation error's
-spectrum, smoothed over 17 bins; the second pass weights each bin by its inverse. The
-standard errors are the sandwich estimate with the bins' correlation over the window's
-reach (Bartlett weights over 4 bins), so they hold on a coloured equation error.
+Every body row of the model (:meth:`SuspensionModel.body_rows`) reads
+``sum_k M[j, k] q_k'' + sum_i g_i[j] (c_i d_i' + k_i d_i) = 0`` with ``d_i`` strut
+``i``'s extension (its ride height): it holds whatever the road does and is linear in
+the masses, inertias, dampers and springs, so body accelerations and ride heights
+determine them by least squares (up to one common scale). The equations are formed by
+integrating against ``phi_k(t) = sin^4(pi t / T) exp(-j w_k t)`` (five FFT bins per
+integral; no derivative of a noisy channel, offsets drop out from bin 3), on the band
+where every regressor stands ``SNR_MIN`` above its noise floor, weighted by the first
+pass's equation-error spectrum. The method and its measurements: docs/road-unknown.md.
 """
 from __future__ import annotations
 
@@ -58,8 +31,6 @@ from suspid.models.modes import modes
 #: window ``sin^4(pi t / T)`` as a Fourier series: coefficients of ``exp(j 2 pi m t / T)``,
 #: ``m = -2..2``
 WINDOW = {-2: 1.0 / 16.0, -1: -0.25, 0: 0.375, 1: -0.25, 2: 1.0 / 16.0}
-#: highest power of ``j w`` the window carries exactly (its derivatives 0..3 vanish at the ends)
-MAX_POWER = 4
 #: first bin used: bins 0..2 see the window's own mean (a constant offset)
 FIRST_BIN = 3
 #: a regressor channel's smoothed power must exceed its noise floor by this factor
@@ -487,16 +458,13 @@ def _with_columns(meas: Measurement, eqs: BodyEquations,
 
 def _jackknife(segs: list[_SegmentEquations], ip: list[int], ih: list[int],
                theta_h: FloatArray) -> FloatArray:
-    """Delete-a-group jackknife standard errors of the whole fit (weights and noise
-    compensation included): the band's bins, over every segment, in :data:`JACKKNIFE_GROUPS`
-    runs of neighbouring bins, each left out in turn."""
+    """Delete-a-group jackknife standard errors over :data:`JACKKNIFE_GROUPS` runs of bins."""
     sizes = [s.omega.size for s in segs]
     total = sum(sizes)
     groups = min(JACKKNIFE_GROUPS, total // CLUSTER_BINS)
     if groups < 3:
         return np.zeros(len(ip))
-    # runs of neighbouring bins that carry equal shares of the information (the springs'
-    # is in the few lowest bins), none shorter than CLUSTER_BINS
+    # runs of neighbouring bins of equal information, none shorter than CLUSTER_BINS
     info = np.concatenate([np.sum(np.abs(s.X[:, :, ip]) ** 2 / np.maximum(s.noise[:, :, ip], 1e-300),
                                   axis=(0, 2)) for s in segs])
     share = np.cumsum(info) / max(float(info.sum()), 1e-300)
@@ -533,33 +501,26 @@ def fit_road_unknown(model: SuspensionModel, meas: Measurement, params: Paramete
     ----------
     model : SuspensionModel
     meas : Measurement
-        Body accelerations (or body motion) and every strut's ride height (or its wheel's
-        motion); road columns, if any, are not used.
+        Body accelerations (or motion) and every strut's ride height (or its wheel's
+        motion); road columns are not used.
     params : Parameters
         Held values (``vary=False``) and the given values of the free parameters (SI).
     extra : mapping, optional
         Further generalised-force columns with free coefficients: name -> one series per
-        body row (:attr:`BodyEquations.rows` order; N, N m per unit coefficient, on the
-        record's samples), e.g. an effect's force at the struts (the diagnosis). Their
-        coefficients come back in ``params`` and ``stderr`` under their names. The band is
-        judged on the model's parameters alone.
+        body row (N, N m per unit coefficient), e.g. an effect's force at the struts. Their
+        coefficients come back in ``params`` and ``stderr`` under their names.
     jackknife : bool
-        Standard errors as the larger of the sandwich and the delete-a-group jackknife
-        (default); ``False`` the sandwich alone (screening many candidate columns).
+        Standard errors as the larger of the sandwich and the jackknife; ``False`` the
+        sandwich alone.
     misfit_fails : bool
-        Whether a misfit (:func:`body_misfit`: the equations leave clearly more than the
-        measurement noise) makes the fit unsuccessful (default, as ``identify`` judges a
-        road-measured fit); ``False`` keeps ``success`` for a solved system and only warns
-        (a monitor's window, a diagnosis baseline, whose residual is the evidence).
+        Whether a misfit (:func:`body_misfit`) makes the fit unsuccessful; ``False`` only warns.
 
     Returns
     -------
     IdentResult
-        ``params`` every parameter (a parameter the record cannot determine keeps its given
-        value and has no standard error), ``stderr`` the determined free parameters'
-        (sandwich estimate), ``identifiable`` whether every free parameter is determined,
-        ``warnings`` naming the ones that are not and why, ``road`` ``"unknown"``,
-        ``undetermined`` the free parameters without a value from the record.
+        Every parameter (an undetermined one keeps its given value, no standard error),
+        ``stderr`` of the determined free parameters, ``identifiable``, ``warnings``,
+        ``road`` ``"unknown"`` and ``undetermined``.
     """
     values = params.valuesdict()
     check_magnitudes(meas.source, meas.measured)
@@ -667,14 +628,10 @@ def body_misfit(model: SuspensionModel, eqs: BodyEquations,
                 theta: FloatArray) -> dict[str, tuple[float, float]]:
     """Body rows whose in-band equation error is clearly more than measurement noise.
 
-    The equation error of row ``r`` at the estimate, ``e = sum_i theta_i X_i``, has the
-    expected power ``sum_i theta_i^2 N_i`` from the channels' noise floors alone (the
-    columns' noise is independent, or in quadrature: a damper's ``j w D`` and a spring's
-    ``D`` of one ride height). A row misfits, as a road-measured fit's channel does
-    (:data:`~estimator.identify.misfit.MISFIT_FLOOR`, :data:`~estimator.identify.misfit.MISFIT_SHARE`),
-    when its error's power exceeds that noise power by that ratio and the excess is more
-    than that share of the row's held terms' power (the body's inertia force). Measured
-    on linear and unmodelled-effect drives in docs/road-unknown.md.
+    Row ``r``'s error power is compared with ``sum_i theta_i^2 N_i`` from the channels'
+    noise floors: a misfit exceeds it by :data:`~estimator.identify.misfit.MISFIT_FLOOR`
+    with an excess above :data:`~estimator.identify.misfit.MISFIT_SHARE` of the row's held
+    terms' power.
 
     Parameters
     ----------
@@ -688,7 +645,7 @@ def body_misfit(model: SuspensionModel, eqs: BodyEquations,
     Returns
     -------
     dict
-        ``coordinate -> (ratio, share)`` of the misfit rows (dimensionless); empty when none.
+        ``coordinate -> (ratio, share)`` of the misfit rows (dimensionless).
     """
     n_rows = len(eqs.rows)
     err = np.zeros(n_rows)
@@ -769,9 +726,7 @@ def _explain_undetermined(model: SuspensionModel, result: IdentResult, eqs: Body
 
 
 def is_free_response(meas: Measurement) -> bool:
-    """Whether the record is a free response: its motion is largest at the very start
-    (the first 5 % of the record) and has decayed by the last fifth to under a fifth of
-    that. Driving data (a road under the tyres) keeps moving; a bump record starts at rest."""
+    """Whether the record is a free response: largest motion at the start, decayed by the end."""
     n = meas.t.size
     if n < 40 or not meas.measured:
         return False
@@ -802,15 +757,14 @@ def resolve_road(model: SuspensionModel, meas: Measurement, requested: str | Non
     model : SuspensionModel
     meas : Measurement
     requested : {"measured", "zero", "unknown"} or None
-        ``--road``; ``None`` chooses: ``measured`` when the record has road columns, else
-        ``zero`` for a free response (:func:`is_free_response`) and ``unknown`` for
-        driving data, named in a warning.
+        ``--road``; ``None`` chooses ``measured`` with road columns, else ``zero`` for a
+        free response (:func:`is_free_response`) and ``unknown`` for driving data.
 
     Returns
     -------
     mode : str
     meas : Measurement
-        ``meas`` itself, or a copy without its road columns (``zero``, ``unknown``).
+        ``meas`` itself, or a copy without its road columns.
     warnings : list of str
 
     Raises

@@ -32,27 +32,20 @@ NONLIN_GRID = np.exp(np.linspace(math.log(0.05), math.log(20.0), 21))
 EXACT_COST = 1e-7
 #: floor of an estimate relative to the geometric mean of the others of its kind
 FLOOR = 0.02
-#: relative residual of the equation-error fit above which, when the equation weights at the
-#: documented defaults of the free masses differ from those at the start values by more than
-#: ``REWEIGHT_FACTOR`` in some equation, the fit is solved with those weights as well (start
-#: values decades off, e.g. a free mass given at 1e-6x its value)
+#: relative residual of the equation-error fit above which the equation weights at the
+#: documented default masses are tried too, when they differ by more than ``REWEIGHT_FACTOR``
 REWEIGHT_REL = 0.5
 REWEIGHT_FACTOR = 30.0
 #: smallest relative singular value of the regression accepted as "determined"
 RANK_TOL = 1e-9
-#: the noise-compensated fit (:func:`_ratio_fit`) stays within ``exp(RATIO_SPAN)`` of its
-#: first start (a start outside that box: of that start)
+#: the noise-compensated fit (:func:`_ratio_fit`) stays within ``exp(RATIO_SPAN)`` of its start
 RATIO_SPAN = 8.0
 #: iterations of each of its BFGS runs (scipy's L-BFGS-B, :func:`_bfgs`)
 RATIO_ITER = 200
-#: its stopping tolerance: the largest gradient component (of the mean ratio, ~1 at the
-#: truth, in the logarithms of the values)
+#: its stopping tolerance on the largest gradient component (of the mean ratio, in log values)
 RATIO_GTOL = 1e-6
 
-#: common factors tried per kind of free parameter (damping, stiffness, length, ...) on the
-#: given start by :func:`kind_scaled_start`: 0.01 to 100 in decades (a Nelder-Mead from the
-#: best point finishes; half decades, 5.8 times the costs for three kinds, found the same
-#: basins on the designs' far starts and one more of six scattered starts)
+#: common factors tried per kind of free parameter by :func:`kind_scaled_start`
 KIND_GRID = 10.0 ** np.linspace(-2.0, 2.0, 5)
 #: :func:`kind_scaled_start` searches at most this many kinds at once (``5**3`` costs)
 KIND_MAX = 3
@@ -67,15 +60,15 @@ class StartEstimate:
     values : dict
         Free parameter -> estimate (SI); empty when the method could not apply.
     reason : str or None
-        Why no estimate was made (``None`` when ``values`` is filled).
+        Why no estimate was made.
     bandwidth_hz : float
         Filter bandwidth of the chosen estimate (Hz).
     cost : float
         Normalised output-error cost at the estimate (1 = no fit).
     notes : list of str
-        Adjustments made (e.g. a negative estimate replaced by a small positive value).
+        Adjustments made.
     undetermined : list of str
-        Parameters whose estimate was not usable and was replaced by a floor value.
+        Parameters whose estimate was replaced by a floor value.
     """
 
     values: dict[str, float] = field(default_factory=dict)
@@ -89,17 +82,10 @@ class StartEstimate:
 def _bfgs(F: Callable[[FloatArray], tuple[float, FloatArray]], u0: FloatArray,
           iterations: int, gtol: float = 1e-6, span: float = math.inf
           ) -> tuple[float, FloatArray]:
-    """Minimise ``F`` (value and gradient) by scipy's box-constrained BFGS (L-BFGS-B).
+    """Minimise ``F`` (value, gradient) by scipy's L-BFGS-B within ``|u| < span``.
 
-    The box is ``|u| < span`` (``F`` is ``inf``-like outside it): a run may touch its edge
-    and come back; a component whose way down points out of the box stays on the edge
-    (the projected gradient), so a run towards a minimum beyond the region searched ends
-    there instead of crawling along it (a run-away, not an estimate; the caller's
-    output-error cost judges it). The run stops when the largest component of the
-    projected gradient is below ``gtol``, when a step lowers ``F`` by no more than its
-    rounding (``ftol`` of a few machine epsilons) or after ``iterations`` iterations.
-
-    Returns ``(value, point)`` of the end point (the lowest met: each step lowers ``F``).
+    A component pointing out of the box stays on its edge (a run-away, judged by the
+    caller). Returns ``(value, point)`` of the end point.
     """
     u = np.asarray(u0, dtype=float)
     edge = span * (1.0 - 1e-9)
@@ -114,28 +100,13 @@ def _ratio_fit(reg: _Regression, K: FloatArray, lin: list[str], nonlin: list[str
                starts: Sequence[Mapping[str, float]]) -> list[dict[str, float]] | None:
     """Free parameters minimising each equation's residual over its noise share, averaged.
 
-    With white measurement noise in the channels the filtered equation's residual at
-    coefficients ``c_i`` (equation ``i``) has the expected sum of squares
-    ``c_i' G0 c_i + c_i' B c_i`` (``G0`` the noise-free signals' Gram matrix, ``B`` the
-    noise's share, :class:`_Regression` with ``noise``), so the ratio
-    ``c_i' G c_i / c_i' B c_i`` is about 1 at the truth and larger elsewhere, as the record
-    grows: unlike least squares (which minimises ``c' G c`` and so also the noise's share,
-    pulling the estimate towards coefficients that pass little noise) its minimum is
-    consistent (errors in variables; the maximum-likelihood criterion of one equation).
-    The mean over the equations is minimised by BFGS on the logarithms of the values (all
-    positive) from each of ``starts``, each run within ``exp(RATIO_SPAN)`` of the first
-    start, or of its own start where that lies outside this box (analytic gradient through
-    the polynomial ``K`` of :func:`_coef_poly`).
-
-    Returns
-    -------
-    list of dict or None
-        The end point of every run (free parameter -> value, SI), lowest mean ratio first,
-        those within 1e-6 (relative) of an earlier one left out; ``None`` when no start
-        gives a finite ratio. The caller chooses among them by the output-error cost: the
-        ratio is about 1 at every minimum where the equations pass the noise alone,
-        including spurious ones where some term's signal vanishes (a spring or damper
-        near zero), so its value does not tell them apart.
+    With white noise in the channels, equation ``i``'s ratio ``c' G c / c' B c`` is about 1
+    at the truth and larger elsewhere: unlike least squares its minimum is consistent
+    (errors in variables). The mean is minimised by BFGS on the log values from each of
+    ``starts``, within ``exp(RATIO_SPAN)`` of the first start (or of its own start outside
+    that box). Returns every end point (free parameter -> value, SI), lowest mean ratio
+    first, duplicates left out; ``None`` when no start gives a finite ratio. The caller
+    chooses by the output-error cost.
     """
     if reg.B is None:
         return None
@@ -180,9 +151,7 @@ def _ratio_fit(reg: _Regression, K: FloatArray, lin: list[str], nonlin: list[str
         v = np.array([st[k] for k in free])
         if not (np.all(v > 0) and np.all(np.isfinite(v))):
             continue
-        # the box around the first start, or around this start when it lies outside that
-        # box (a least-squares value floored far below the given start): such a start was
-        # left out, although its run may be the one that reaches the truth's basin
+        # the box around the first start, or around this start when it lies outside that box
         centre = first if np.all(first > 0) and np.all(
             np.abs(np.log(v / first)) < RATIO_SPAN) else v
         x0[:] = centre
@@ -202,13 +171,9 @@ def _ratio_fit(reg: _Regression, K: FloatArray, lin: list[str], nonlin: list[str
 
 def _floored(model: SuspensionModel, base: Mapping[str, float], lin: list[str],
              vals: dict[str, float], what: str) -> tuple[dict[str, float], list[str], list[str]]:
-    """``vals`` with each of ``lin`` below ``FLOOR`` x the geometric mean of the others of
-    its kind (or not finite) raised to that floor: ``(values, floored names, notes)``.
+    """``vals`` with each of ``lin`` below ``FLOOR`` x the geometric mean of its kind raised to it.
 
-    An estimate that small (least-squares or noise-compensated, named by ``what``) is not
-    determined by the record (a spring or damper whose force the noise hides); as a start
-    it would send the fit off along a flat direction, so it starts at the floor and is
-    judged as undetermined.
+    Such an estimate is not determined by the record; returns ``(values, floored, notes)``.
     """
     out = dict(vals)
     floored: list[str] = []
@@ -233,17 +198,14 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
     Parameters
     ----------
     problem : OutputErrorProblem
-        The record (any measured channel set with one channel per coordinate), its road
-        and the cost used to rank candidate estimates.
+        The record (one measured channel per coordinate at least), its road and the cost
+        that ranks the candidate estimates.
     params : Parameters
-        Fixed values (known masses, inertia, geometry) and, for parameters that do not
-        enter the equations linearly, the centre of their search grid.
+        Fixed values and, for parameters that do not enter linearly, their grid's centre.
     bandwidths_hz : list of float, optional
-        Filter bandwidths (Hz) tried in turn; default four, geometrically spaced from
-        0.2 Hz to a fifth of Nyquist. The sweep ends early at an estimate that explains
-        the record exactly (noise-free) or, on a noisy record, leaves only white noise
-        (:func:`noise_floor_ratio` at most ``NOISE_FLOOR``); otherwise the estimate with
-        the lowest output-error cost wins.
+        Filter bandwidths (Hz) tried in turn; default four from 0.2 Hz to a fifth of
+        Nyquist. The sweep ends at an exact estimate or, on a noisy record, one that leaves
+        only white noise; otherwise the lowest output-error cost wins.
 
     Returns
     -------
@@ -264,8 +226,7 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
     if not lin:
         return StartEstimate(reason="no free parameter enters the equations of motion linearly")
     nyq = 0.5 / h
-    # the coefficients as a polynomial of the free values, for the noise-compensated fit
-    # (computed when first needed: a noise-free record does not need it)
+    # the coefficients as a polynomial of the free values (when the noise compensation needs it)
     poly: list[tuple[FloatArray, FloatArray] | None] = []
     if bandwidths_hz is None:
         top = nyq / 5.0
@@ -275,8 +236,7 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
     seeds: list[FloatArray] = []
     last_u: FloatArray | None = None
     best_reg: tuple[_Regression, FloatArray] | None = None
-    # the noise compensation only where some channel carries measurable white noise: on a
-    # noise-free record an inexact estimate is model or filter error, which it cannot fix
+    # the noise compensation only where some channel carries measurable white noise
     noisy = any(_noise_variance(y) > NOISE_NEGLIGIBLE * float(np.nanvar(y))
                 for y in (np.asarray(v, dtype=float) for v in meas.measured.values())
                 if np.count_nonzero(~np.isnan(y)) > 4 and not np.any(np.isinf(y)))
@@ -299,8 +259,7 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
             p.update({k: base[k] * float(f) for k, f in zip(nonlin, eta)})
             theta, rel, sv = _solve_linear(reg, model, p, lin, wts)
             p.update(zip(lin, (float(v) for v in theta)))
-            # a negative spring or damper is no physical answer: such a point of the
-            # length search ranks behind every physical one
+            # a negative spring or damper ranks behind every physical point of the search
             return p, rel + (1.0 if np.any(theta < 0) else 0.0), sv
 
         if nonlin:
@@ -328,10 +287,8 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
         else:
             p, rel, sv = solve_at(np.zeros(0))
         if rel > REWEIGHT_REL:
-            # start values decades off the record's (an absurd --init of a free mass) weigh
-            # one equation so far above the others that the one holding the known scale is
-            # ignored, and the estimate shrinks with them: weigh at the documented defaults
-            # as well and keep the estimate that explains the record better
+            # start values decades off (an absurd --init of a free mass) skew the equation
+            # weights: weigh at the documented defaults as well, keep the better estimate
             alt = _equation_weights(reg, model, {**base, **{
                 k: model.spec(k).default for k in free if model.spec(k).kind in ("mass", "inertia")}})
             if np.all(np.isfinite(alt)) and np.any(
@@ -351,15 +308,13 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
         if cost >= EXACT_COST and noisy and not poly:
             poly.append(_coef_poly(model, base, lin, nonlin))
         if cost >= EXACT_COST and noisy and poly[0] is not None:
-            # not exact: noise in the record (or too little of the model in it); the
-            # noise-compensated fit from this estimate and from the given start as well
+            # not exact: the noise-compensated fit from this estimate and from the given start
             given = {k: base[k] for k in free}
             starts = [vals, given]
             if nonlin:
                 starts += [{**vals, **{k: base[k] for k in nonlin}},
                            {**given, **{k: vals[k] for k in nonlin}}]
-            # every run's end point is a candidate; the output-error cost chooses, as it
-            # does among the bandwidths
+            # every run's end point is a candidate; the output-error cost chooses
             for comp in _ratio_fit(reg.with_noise(), poly[0][0], lin, nonlin, starts) or []:
                 comp, comp_floored, comp_notes = _floored(model, base, lin, comp,
                                                           "noise-compensated")
@@ -384,11 +339,10 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
 def _refine_iv(problem: OutputErrorProblem, est: StartEstimate, reg: "_Regression",
                wts: FloatArray, base: Mapping[str, float], lin: list[str], nonlin: list[str],
                h: float, iterations: int = 4) -> StartEstimate:
-    """Instrumental-variable iterations against the bias that noise puts in the regressors.
+    """Instrumental-variable iterations against the noise bias in the regressors.
 
-    The instruments are the same filters applied to the model's noise-free simulated
-    motion at the current estimate (refined instrumental variables); an iterate is kept
-    only when it lowers the output-error cost.
+    The instruments are the filtered noise-free simulation at the current estimate; an
+    iterate is kept only when it lowers the output-error cost.
     """
     model = problem.model
     nq = len(model.coords)
@@ -438,16 +392,14 @@ def data_driven_start(model: SuspensionModel, data: Measurement, fixed: Mapping[
     fixed : mapping
         Known parameters (SI); every other parameter is free.
     init : mapping, optional
-        Centre of the search for parameters that do not enter the equations linearly
-        (default: the model's documented defaults).
+        Centre of the search for nonlinear parameters (default: the model's defaults).
     cost : {"sse", "frobenius"}
         Cost used to rank the candidate estimates.
 
     Returns
     -------
     dict
-        Free parameter -> estimate (SI); empty when the record does not allow one (see
-        :func:`estimate_start` for the reasons).
+        Free parameter -> estimate (SI); empty when the record does not allow one.
     """
     free_init = {k: v for k, v in (init or {}).items() if k not in fixed}
     params = Parameters.for_model(model, fix=fixed, init=free_init)
@@ -459,11 +411,9 @@ def kind_scaled_start(problem: OutputErrorProblem, params: Parameters
                       ) -> tuple[Parameters, dict[str, float], float] | None:
     """The given start with each kind of free parameter rescaled by one common factor.
 
-    A start that is off by one factor per kind (every damper 10x, every length in the
-    wrong unit, a nominal vehicle of another class) keeps the *ratios* within each kind
-    right; one output-error cost per point of a coarse grid of factors (``KIND_GRID`` per
-    kind, at most ``KIND_MAX`` kinds) and a short Nelder-Mead from the best point find the
-    common factors, a search of 1-3 dimensions instead of one per parameter.
+    A start off by one factor per kind (every damper 10x, lengths in the wrong unit) keeps
+    the ratios within each kind: a grid of factors (``KIND_GRID``, at most ``KIND_MAX``
+    kinds) and a short Nelder-Mead find them.
 
     Parameters
     ----------
@@ -475,9 +425,8 @@ def kind_scaled_start(problem: OutputErrorProblem, params: Parameters
     Returns
     -------
     tuple or None
-        ``(start, factors, cost)``: the rescaled start, the factor of each kind
-        (dimensionless) and its normalised cost; ``None`` when there are more than
-        ``KIND_MAX`` kinds or no finite cost.
+        ``(start, factors, cost)``: the rescaled start, each kind's factor and its
+        normalised cost; ``None`` with more than ``KIND_MAX`` kinds or no finite cost.
     """
     free = params.free
     model = problem.model
@@ -518,10 +467,8 @@ def cold_start(model: SuspensionModel, meas: Measurement, params: Parameters,
                cost: str = "sse") -> Parameters:
     """``params`` with its free values replaced by the data-driven start when that fits better.
 
-    For a fit with no earlier estimate to start from (a monitor's first window): the
-    data-driven estimate is used when its output-error cost on ``meas`` is lower than the
-    given (nominal) start's, so a far-off ``--nominal``/``--init`` does not decide the
-    basin. Returns ``params`` itself when there is no usable estimate or it fits worse.
+    For a fit with no earlier estimate (a monitor's first window), so a far-off nominal
+    start does not decide the basin.
     """
     if not params.free:
         return params
