@@ -51,35 +51,39 @@ def _at_noise_floor(problem: OutputErrorProblem, res: IdentResult) -> bool:
     return not _exact(problem, res) and noise_floor_ratio(problem, res.params) <= NOISE_FLOOR
 
 
+def _positive(*xs: float) -> bool:
+    return all(math.isfinite(x) and x > 0 for x in xs)
+
+
 def _far(a: Mapping[str, float], b: Mapping[str, float], free: list[str],
          factor: float) -> list[str]:
     """Free parameters in which ``a`` and ``b`` differ by more than ``factor`` (or are not positive)."""
-    out = []
-    for k in free:
-        x, y = float(a[k]), float(b[k])
-        if not (math.isfinite(x) and math.isfinite(y) and x > 0 and y > 0) \
-                or abs(math.log(x / y)) > math.log(factor):
-            out.append(k)
-    return out
+    return [k for k in free if not _positive(float(a[k]), float(b[k]))
+            or abs(math.log(float(a[k]) / float(b[k]))) > math.log(factor)]
+
+
+def _noise_step(problem: OutputErrorProblem, p: Mapping[str, float], nfree: int
+                ) -> tuple[float, float] | None:
+    """The normalised cost at ``p`` and the rise a 3-sigma step of one parameter costs,
+    ``SIGMAS**2 * ss / (N - nfree)`` (``None`` where not defined)."""
+    ss = problem.normalized_ss(p)
+    try:
+        n = int(problem.residual_vector(p).size)
+    except (np.linalg.LinAlgError, ValueError, FloatingPointError):
+        return None
+    if not math.isfinite(ss) or n <= nfree:
+        return None
+    return ss, SIGMAS ** 2 * ss / (n - nfree)
 
 
 def _within_noise(problem: OutputErrorProblem, best: IdentResult, other: IdentResult,
                   nfree: int) -> bool:
-    """``other``'s cost exceeds ``best``'s by less than 3 sigma of the noise (noisy records).
-
-    A rise of ``SIGMAS**2 * ss / (N - p)`` is what a 3-sigma step of one parameter costs.
-    """
+    """``other``'s cost exceeds ``best``'s by less than 3 sigma of the noise (noisy records)."""
     if _exact(problem, best):
         return False
-    ss_best = problem.normalized_ss(best.params)
     ss_other = problem.normalized_ss(other.params)
-    try:
-        n = int(problem.residual_vector(best.params).size)
-    except (np.linalg.LinAlgError, ValueError, FloatingPointError):
-        return False
-    if not (math.isfinite(ss_best) and math.isfinite(ss_other)) or n <= nfree:
-        return False
-    return ss_other - ss_best <= SIGMAS ** 2 * ss_best / (n - nfree)
+    step = _noise_step(problem, best.params, nfree)
+    return step is not None and math.isfinite(ss_other) and ss_other - step[0] <= step[1]
 
 
 def _finite(x: float) -> float | None:
@@ -92,7 +96,7 @@ def _plausibility(res: IdentResult, free: list[str], start: Mapping[str, float],
     out = []
     for k in free:
         v = res.params[k]
-        if not (math.isfinite(v) and v > 0):
+        if not _positive(v):
             out.append((k, f"{k} reached {v!r}, not a finite positive value"))
             continue
         far_start = k not in start or abs(math.log(v / start[k])) > math.log(RUNAWAY)
@@ -110,7 +114,7 @@ def _plausibility(res: IdentResult, free: list[str], start: Mapping[str, float],
 def _same(a: IdentResult, b: IdentResult, k: str) -> bool:
     """``b``'s value of ``k`` is ``a``'s: within ``CONFIRM_TOL`` or ``CONFIRM_SIGMA`` standard errors."""
     x, y = float(a.params[k]), float(b.params[k])
-    if not (math.isfinite(x) and math.isfinite(y) and x > 0 and y > 0):
+    if not _positive(x, y):
         return False
     se = a.stderr.get(k)
     tol = max(CONFIRM_TOL, CONFIRM_SIGMA * se / x if se is not None and math.isfinite(se) else 0.0)
@@ -128,7 +132,7 @@ def _confirmed(problem: OutputErrorProblem, res: IdentResult, start: Mapping[str
     it on at least one side; a drift along a flat direction leaves the cost unchanged).
     """
     v = res.params[k]
-    if not (math.isfinite(v) and v > 0):
+    if not _positive(v):
         return None
     label = None
     for lab, s, r in others:
@@ -140,14 +144,10 @@ def _confirmed(problem: OutputErrorProblem, res: IdentResult, start: Mapping[str
             break
     if label is None:
         return None
-    ss = problem.normalized_ss(res.params)
-    try:
-        n = int(problem.residual_vector(res.params).size)
-    except (np.linalg.LinAlgError, ValueError, FloatingPointError):
+    step = _noise_step(problem, res.params, len(free))
+    if step is None:
         return None
-    if not math.isfinite(ss) or n <= len(free):
-        return None
-    rise = max(SIGMAS ** 2 * ss / (n - len(free)), EXACT_FIT)
+    ss, rise = step[0], max(step[1], EXACT_FIT)
     bounded = False
     for f in (CONFIRM_SPAN, 1.0 / CONFIRM_SPAN):
         moved = dict(res.params)
@@ -221,10 +221,7 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
            else estimate_start(problem, params) if data_start and free else None)
     runs: list[tuple[str, Parameters]] = []
     if est is not None and est.values:
-        p = params.copy()
-        for k, v in est.values.items():
-            p[k].value = float(v)
-        runs.append(("data", p))
+        runs.append(("data", params.with_values(est.values)))
     if keep_init or not runs:
         runs.append(("init", params))
     at_start = [problem.normalized_ss(s.valuesdict()) for _, s in runs]
@@ -271,21 +268,18 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         if scaled is not None and scaled[2] < min(at_start) and any(
                 abs(math.log(f)) > math.log(KIND_MIN_FACTOR) for f in scaled[1].values()):
             issues = add("scaled", scaled[0], scaled[2])
-    if issues.runaway and not issues.ambiguous and not issues.unconfirmed and all(
-            math.isfinite(issues.res.params[k]) and issues.res.params[k] > 0
-            for k in issues.runaway):
+    if issues.runaway and not issues.ambiguous and not issues.unconfirmed and _positive(
+            *(issues.res.params[k] for k in issues.runaway)):
         # a start next to the fit, the run-away parameters moved CONFIRM_SPAN x back: it
         # returns to the fit if the cost has a minimum there
         ref = usable(*issues.best[:2])
-        c = params.copy()
-        for k in free:
-            v = float(issues.res.params[k])
-            c[k].value = v if k not in issues.runaway else \
-                v * (CONFIRM_SPAN if ref.get(k, v) > v else 1.0 / CONFIRM_SPAN)
-        issues = add("confirm", c)
+        moved = {k: v if k not in issues.runaway else
+                 v * (CONFIRM_SPAN if ref.get(k, v) > v else 1.0 / CONFIRM_SPAN)
+                 for k, v in ((k, float(issues.res.params[k])) for k in free)}
+        issues = add("confirm", params.with_values(moved))
     res = issues.res
     twin_warning = None
-    if not (issues.bad or issues.ambiguous or issues.unconfirmed):
+    if not issues.rejected:
         res, twin_run, twin_warning = resolve_twin(problem, params, res, run)
         if twin_run is not None:
             runs.append(("twin", twin_run[0]))
@@ -317,10 +311,8 @@ def fit_from_starts(problem: OutputErrorProblem, params: Parameters,
         alts = ", ".join(f"{label} start: cost {r.cost:.4g}" for label, _, r in ran)
         _reject(res, [f"implausible result: {b}" for b in issues.bad]
                 + [f"costs reached from each start: {alts}"])
-    elif issues.ambiguous:
-        _reject(res, issues.ambiguous)
-    elif issues.unconfirmed:
-        _reject(res, issues.unconfirmed)
+    elif issues.rejected:
+        _reject(res, issues.ambiguous or issues.unconfirmed)
     elif intervals:
         apply_bands(problem, res, free)
     if twin_warning is not None:
@@ -339,7 +331,7 @@ def twin_of(problem: OutputErrorProblem, params: Parameters, p: Mapping[str, flo
     """
     model = problem.model
     measured = problem.measured_coords()
-    if not all(math.isfinite(p[k]) and p[k] > 0 for k in params.free):
+    if not _positive(*(p[k] for k in params.free)):
         return None
     tw = model.twin(p, measured)
     if tw is None or any(not math.isclose(tw.params[k], p[k], rel_tol=1e-12)
@@ -359,9 +351,7 @@ def resolve_twin(problem: OutputErrorProblem, params: Parameters, res: IdentResu
     tw = twin_of(problem, params, res.params)
     if tw is None:
         return res, None, None
-    start = params.copy()
-    for k in params.free:
-        start[k].value = float(tw.params[k])
+    start = params.with_values({k: tw.params[k] for k in params.free})
     other = run(start)
     best, warning = _choose_twin(problem, res, other, tw)
     return best, (start, other), warning

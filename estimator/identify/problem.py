@@ -130,8 +130,7 @@ class OutputErrorProblem:
             self._maps_fixed = self._stack_heights(output_maps(
                 self._kind, np.zeros((m.n_states, m.n_states)),
                 np.zeros((m.n_states, 2 * len(m.roads))), self._nq))
-        # weights and mask as flat (N p,) rows: an elementwise product with a broadcast
-        # (p,) row runs one short inner loop per sample, 3-4x slower
+        # weights and mask as flat (N p,) rows (a broadcast (p,) row is 3-4x slower)
         self._w_flat = np.tile(w, self.t.size)
         self._mask_flat = self.mask.reshape(-1)
         # ---- the fast path's constants (uniform grid, every sample observed, x0 estimated)
@@ -143,8 +142,7 @@ class OutputErrorProblem:
         self._cache: dict[tuple[float, ...], Evaluation] = {}
         #: the fast path applies to this problem (else every evaluation takes the general one)
         self.fast = bool(self.h is not None and self._full and self._estimate and N >= 2)
-        #: evaluations the fast path declined (a defective ``A``, an ill-conditioned Gram
-        #: matrix) and the general path made
+        #: evaluations the fast path declined and the general path made
         self.n_fallback = 0
         self.param_names = [q.name for q in m.params]
         self._layout: StateSpaceLayout | None = None
@@ -313,8 +311,7 @@ class OutputErrorProblem:
                 return None
             uv.append(x)
             bound += (2.0 if pr else 1.0) / abs(x)
-        # cond_1(V) <= sqrt(n) sum_i fac_i / |u_i^H v_i| for unit eigenvectors; the exact
-        # test of modal_form only when that bound is not already below the limit
+        # cond_1(V) <= sqrt(n) sum_i fac_i / |u_i^H v_i|: the exact test only above the limit
         if math.sqrt(n) * bound > MODE_COND_MAX:
             V = vr @ pat.sel_v
             Vinv = (vl @ pat.sel_v).conj().T / np.array(uv)[:, None]
@@ -333,13 +330,10 @@ class OutputErrorProblem:
         else:
             Cm, Dm = self._output_maps(A, B)
             CV = (Cm @ vr) @ pat.sel_cv
-        # per mode: E = exp(lam h), the first-order-hold weights and, with b = V^-1 Bz and
-        # w0 = -V^-1 Bv r[0] (forced response from rest),
-        #   w[k] = E^k (w0 + sum_{l<k} b (g0 r[l] + g1 r[l+1]) E^-(l+1))
-        #        = (a0 + a1) E^k Q[k] - a0 r[k] + (w0 - a1 r[0]) E^k,
-        # q[l] = r[l] E^-l, Q = cumsum(q), a0 = b g0 / E, a1 = b g1 (w[0] = w0 exactly).
-        # The last term is a free response: the least-squares initial state absorbs it, so
-        # it is left out of the residual and subtracted from the free coefficients after.
+        # per mode, E = exp(lam h), b = V^-1 Bz, w0 = -V^-1 Bv r[0]:
+        #   w[k] = (a0 + a1) E^k Q[k] - a0 r[k] + (w0 - a1 r[0]) E^k,
+        # Q = cumsum(r[l] E^-l), a0 = b g0 / E, a1 = b g1; the last term is a free response,
+        # absorbed by the least-squares initial state (taken out again in Evaluation.c)
         lam_a = np.array(lam)
         El_a, g0a, g1a = foh_weights(lam_a, h)  # (m,) each
         P = np.empty((mm, N), dtype=complex)
@@ -348,8 +342,7 @@ class OutputErrorProblem:
         np.cumprod(P, axis=1, out=P)
         r = self.road_t
         if self._road:
-            # rows of V^-1 [Br | Bv | Bz] from the left eigenvectors' real and imaginary
-            # parts: (a - ib)^T B / (u_i^H v_i)
+            # rows of V^-1 [Br | Bv | Bz] from the left eigenvectors: (a - ib)^T B / (u_i^H v_i)
             VZ = vl.T @ BB
             X = (VZ[pat.k1a] - 1j * (VZ[pat.k2a] * pat.pair_mask[:, None])) / np.array(uv)[:, None]
             Xb = X[:, 2 * nr:]  # b = V^-1 Bz
@@ -357,8 +350,7 @@ class OutputErrorProblem:
                 Cb = Xb * (g0a / El_a)[:, None]  # a0
                 a1 = Xb * g1a[:, None]
                 cc = -((X[:, nr:2 * nr] + a1) @ self._r0)  # w0 - a1 r[0], w0 = -V^-1 Bv r[0]
-                # the roads summed first (the trajectory is linear in them):
-                #   Wf[k] = sum_j Ca_j E^k Q_j[k] = E^k cumsum_l((sum_j Ca_j r_j[l]) E^-l)
+                # the roads summed first: Wf[k] = E^k cumsum_l((sum_j Ca_j r_j[l]) E^-l)
                 Wf = (Cb + a1) @ self._rc
                 np.divide(Wf, P, out=Wf)
                 np.cumsum(Wf, axis=1, out=Wf)
@@ -386,13 +378,10 @@ class OutputErrorProblem:
             traj = None
         if Dm is not None and self._has_road:
             R -= Dm @ self._UT
-        # least-squares free modal coefficients. The regressors are Re(CV[:, i] E_i^k) for
-        # every mode, then -Im(...) for the complex ones; with x = CV_ci E_i^k and
-        # y = CV_cj E_j^k their Gram matrix follows from the sums over channels and samples
-        #   S1 = sum x y = (CV^T CV)_ij g(E_i E_j),  S2 = sum x conj(y) = (CV^H CV)*_ij ...,
-        # g(z) = sum_{k<N} z^k = (1 - z^N) / (1 - z), as Re x Re y = Re(S1 + S2) / 2,
-        # Im x Im y = Re(S2 - S1) / 2, Re x Im y = Im(S1 - S2) / 2 -- no regressor matrix.
-        # Weights scale the channels (rows) of both.
+        # least-squares free modal coefficients, regressors Re(CV_i E_i^k) and -Im(...): with
+        # x = CV_ci E_i^k, y = CV_cj E_j^k, S1 = sum x y = (CV^T CV)_ij g(E_i E_j) and
+        # S2 = sum x conj(y), g(z) = (1 - z^N) / (1 - z), the Gram matrix is
+        # Re x Re y = Re(S1 + S2) / 2, Im x Im y = Re(S2 - S1) / 2, Re x Im y = Im(S1 - S2) / 2
         if self._unit_w:
             CVw, Rw = CV, R
         else:
@@ -429,8 +418,7 @@ class OutputErrorProblem:
         coef = sol[:mm].astype(complex)
         if npair:
             coef[pairs] += 1j * sol[mm:]
-        # the cost without the residual pass: ||R0 - G sol||^2 = ||R0||^2 - rhs . sol at the
-        # least-squares sol (Gram sol = rhs); explicit when the two terms nearly cancel
+        # the cost without a residual pass, ||R0||^2 - rhs . sol (explicit where they cancel)
         r0 = Rw.ravel()
         r0sq = float(r0 @ r0)
         ss = r0sq - float(proj @ (proj / ev))

@@ -89,9 +89,7 @@ class _Cost:
         return r if np.all(np.isfinite(r)) else None
 
     def resids(self, us: list[FloatArray]) -> list[FloatArray] | None:
-        """Residuals at every ``u`` of ``us`` (evaluated together), or ``None`` as soon as
-        one is unavailable: what calling :meth:`resid` on each in turn gives, ``nfev``
-        included."""
+        """Residuals at every ``u`` of ``us``, or ``None`` as soon as one is unavailable."""
         n = next((i for i, u in enumerate(us) if not np.all(np.abs(u) < 30)), len(us))
         qs = []
         for u in us[:n]:
@@ -146,13 +144,9 @@ def _conditional_min(cost: _Cost, k: int, t: float, u0: FloatArray, s0: float,
                      jac: dict[int, FloatArray] | None = None) -> tuple[float, FloatArray]:
     """``min S`` over every coordinate but ``k`` (held at ``t``), Levenberg–Marquardt from ``u0``.
 
-    Stops when a step lowers ``S`` by no more than ``max(tol, 1e-10 s0)`` with a Jacobian
-    from finite differences, or when the step's decrease is the Gauss–Newton model's to
-    within that and the model has no more than that left to gain (``tol``: the accuracy
-    the caller needs of ``S``). ``jac`` (``k -> Jacobian``) carries the Jacobian from one
-    profile point to the next: it is updated by Broyden's rank-one formula after each step
-    and recomputed by finite differences only when a step from it fails or gains little
-    without the model's agreement.
+    Stops when a step gains no more than ``max(tol, 1e-10 s0)``. ``jac`` (``k -> Jacobian``)
+    carries the Jacobian between profile points, updated by Broyden's formula and
+    recomputed by finite differences only when a step from it fails.
     """
     n = u0.size
     others = [i for i in range(n) if i != k]
@@ -223,11 +217,8 @@ def _conditional_min(cost: _Cost, k: int, t: float, u0: FloatArray, s0: float,
 def _from_origin(t: float, r: float, t0: float) -> float | None:
     """Where ``r = SIGMAS`` on ``r(t) = SIGMAS |t| / t0 + c t^2`` through ``(t, r)``.
 
-    ``r`` leaves the optimum with the slope ``SIGMAS / t0`` of the curvature band (``t0``
-    its half-width in ``u``) whatever the nonlinearity, so between the optimum and one
-    profile point this model interpolates ``r`` better than the secant from the origin (a
-    straight line through ``(0, 0)``, which ignores that slope). ``None`` where it has no
-    root beyond the origin on the side of ``t``.
+    The model keeps the curvature band's slope at the optimum (``t0`` its half-width in
+    ``u``); ``None`` where it has no root beyond the origin on the side of ``t``.
     """
     s = abs(t) / t0
     if s <= 0:

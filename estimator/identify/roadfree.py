@@ -69,13 +69,11 @@ class BodyEquations:
     rows : tuple of int
         The body rows (coordinate indices) fitted.
     regressors : dict
-        ``parameter -> per row: list of (target derivative order, terms)``, the channel
-        combinations that multiply the parameter in each body row.
+        ``parameter -> per row: list of (target derivative order, terms)``.
     names : tuple of str
-        Parameters that enter the body equations (masses, inertias, dampers, springs).
+        Parameters that enter the body equations.
     missing : list of str
-        Why a part of the equations could not be formed (a strut without its ride height
-        or wheel motion, a body coordinate without a channel); empty when complete.
+        Why a part of the equations could not be formed; empty when complete.
     shift : int
         Power of ``j w`` every equation is multiplied by (0 unless a quantity is measured
         only as a higher derivative).
@@ -99,8 +97,9 @@ class BodyEquations:
 
 
 def _source(name: str, order: int, measured: Mapping[str, FloatArray]) -> tuple[str, int] | None:
-    """The channel of quantity ``name`` (a coordinate or ride height) that best gives its
-    ``order``-th derivative: the same order, else the nearest lower one, else the nearest higher."""
+    """The channel of quantity ``name`` that best gives its ``order``-th derivative: the same
+    order, else the nearest lower one, else the nearest higher.
+    """
     have = {o: name + suf for o, suf in _ORDER_SUFFIX.items() if name + suf in measured}
     for o in [order] + list(range(order - 1, -1, -1)) + list(range(order + 1, 3)):
         if o in have:
@@ -205,8 +204,9 @@ def body_equations(model: SuspensionModel, measured: Mapping[str, FloatArray],
 
 def _deflection(height: str, site: Site, order: int, gj: float, model: SuspensionModel,
                 measured: Mapping[str, FloatArray]) -> list[Term] | None:
-    """Terms of ``g_i[j] d_i^(order)``: the ride height channel, else the coordinates' motion
-    (only where the strut does not stand on the road)."""
+    """Terms of ``g_i[j] d_i^(order)``: the ride height, else the coordinates' motion (a strut
+    not standing on the road).
+    """
     src = _source(height, order, measured)
     if src is not None:
         return [Term(src[0], src[1], gj)]
@@ -230,8 +230,9 @@ class _Segment:
 
 
 def _segments(meas: Measurement, channels: Sequence[str]) -> list[_Segment]:
-    """The record's stretches without a missing sample in ``channels`` or a time step
-    off the median by more than 1 %, each at least :data:`MIN_SEGMENT` samples long."""
+    """The record's stretches of at least :data:`MIN_SEGMENT` samples with no missing value in
+    ``channels`` and no time step off the median by more than 1 %.
+    """
     t = np.asarray(meas.t, dtype=float)
     if t.size < MIN_SEGMENT:
         return []
@@ -269,11 +270,9 @@ def _smooth(x: FloatArray, n: int = SMOOTH_BINS) -> FloatArray:
 
 @dataclass
 class _SegmentEquations:
-    """One segment's equations over its band.
-
-    ``X`` (rows, bins, parameters) complex regressors; ``noise`` the same shape, the
-    expected power each regressor's channel noise contributes (from the channels' noise
-    floors); ``omega`` the bins' angular frequencies (rad/s); ``T`` the length (s).
+    """One segment's equations over its band: complex regressors ``X`` (rows, bins,
+    parameters), their expected noise power ``noise``, the bins' ``omega`` (rad/s) and the
+    length ``T`` (s).
     """
 
     X: np.ndarray
@@ -283,26 +282,25 @@ class _SegmentEquations:
 
 
 def _noise_floor(Y: np.ndarray) -> float:
-    """Per-bin noise power of a spectrum: the median power of its top 16 % of bins
-    (white noise there: the median of an exponential distribution is ln 2 times its mean)."""
+    """Per-bin noise power of a spectrum: the median power of its top 16 % of bins over ln 2."""
     nb = Y.size
     top = max(4, int(0.16 * nb))
     return float(np.median(np.abs(Y[nb - top:]) ** 2) / math.log(2.0))
 
 
 def band_limit(model: SuspensionModel, p: Mapping[str, float]) -> float:
-    """Upper end of the fit band (Hz): twice the model's highest natural frequency at ``p``
-    (the wheel hop), at least :data:`MIN_BAND_HZ`. Above it a record holds what the model
-    does not (the road's roughness seen through the tyre's damping, the engine, the
-    structure) and little of the struts."""
+    """Upper end of the fit band (Hz): twice the model's highest natural frequency at ``p``, at
+    least :data:`MIN_BAND_HZ` (above it the record holds what the model does not).
+    """
     f = max((md.f_n for md in modes(model, dict(model.defaults(), **dict(p)))), default=0.0)
     return max(MIN_BAND_HZ, 2.0 * f)
 
 
 def _segment_equations(seg: _Segment, eqs: BodyEquations, free: Sequence[str], f_hi: float
                        ) -> _SegmentEquations | None:
-    """The windowed equations of one segment in the band up to ``f_hi`` (Hz) where every
-    free parameter's regressor stands :data:`SNR_MIN` above its own noise."""
+    """The windowed equations of one segment up to ``f_hi`` (Hz), on the bins where every free
+    parameter's regressor stands :data:`SNR_MIN` above its noise.
+    """
     n = seg.n
     T = n * seg.dt
     spectra = {c: np.fft.rfft(v) * seg.dt for c, v in seg.data.items()}
@@ -351,10 +349,9 @@ def _segment_equations(seg: _Segment, eqs: BodyEquations, free: Sequence[str], f
 
 
 def _cluster_scores(U: list[np.ndarray]) -> np.ndarray:
-    """Sum of the outer products of the scores summed over runs of :data:`CLUSTER_BINS`
-    neighbouring bins (a cluster-robust sandwich: the windowed bins are correlated with
-    their neighbours, runs of bins far less with each other); ``U`` holds one (bins, p)
-    score array per segment."""
+    """Cluster-robust sandwich middle: outer products of the scores summed over runs of
+    :data:`CLUSTER_BINS` bins (``U``: one (bins, p) array per segment).
+    """
     p = U[0].shape[1]
     S = np.zeros((p, p))
     for u in U:
@@ -379,10 +376,10 @@ class _Solution:
 
 def _solve(segs: list[_SegmentEquations], ip: list[int], ih: list[int],
            theta_h: FloatArray, stderr: bool = True) -> _Solution:
-    """Two passes of weighted least squares over the segments' equations: the first
-    (unweighted) gives the equation error's spectrum, the second weights each bin by its
-    inverse; the regressors' expected noise power is taken off the normal equations'
-    diagonal (errors in variables); standard errors by the sandwich with the bins' correlation."""
+    """Two passes of weighted least squares: the second weights each bin by the inverse of the
+    first pass's smoothed equation-error power; the regressors' noise power is taken off
+    the normal equations' diagonal; standard errors by the cluster sandwich.
+    """
     # per segment: A (rows, bins, p) complex, y (rows, bins) complex
     blocks = []
     for s in segs:
@@ -681,8 +678,9 @@ def _band(segs: list[_SegmentEquations]) -> list[float]:
 def _rms_residual(model: SuspensionModel, eqs: BodyEquations,
                   blocks: list[tuple[np.ndarray, np.ndarray, _SegmentEquations]],
                   theta: FloatArray, values: Mapping[str, float]) -> dict[str, float]:
-    """In-band RMS equation error of each body row, in its acceleration channel's unit
-    (Parseval over the windowed bins, divided by the row's mass or inertia)."""
+    """In-band RMS equation error of each body row in its acceleration channel's unit (Parseval
+    over the windowed bins, divided by the row's mass or inertia).
+    """
     M = model.matrices(dict(model.defaults(), **dict(values)))[0]
     num = np.zeros(len(eqs.rows))
     den = 0.0

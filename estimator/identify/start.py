@@ -456,10 +456,7 @@ def kind_scaled_start(problem: OutputErrorProblem, params: Parameters
                                                                  for e in np.eye(len(kinds))]),
                             "xatol": 1e-2, "fatol": 1e-6, "maxfev": 60 * len(kinds)})
     u, c = (np.asarray(res.x, dtype=float), float(res.fun)) if res.fun <= c0 else (u0, c0)
-    out = params.copy()
-    for k, v in scaled(u).items():
-        if k in free:
-            out[k].value = float(v)
+    out = params.with_values({k: v for k, v in scaled(u).items() if k in free})
     return out, {kd: math.exp(float(u[i])) for i, kd in enumerate(kinds)}, c
 
 
@@ -480,9 +477,7 @@ def cold_start(model: SuspensionModel, meas: Measurement, params: Parameters,
     vals = {k: v for k, v in est.values.items() if k not in est.undetermined}
     if not vals:
         return params
-    out = params.copy()
-    for k, v in vals.items():
-        out[k].value = float(v)
+    out = params.with_values(vals)
     if problem.normalized_ss(out.valuesdict()) < problem.normalized_ss(params.valuesdict()):
         return out
     return params
