@@ -380,6 +380,15 @@ def _coef_poly(model: SuspensionModel, base: Mapping[str, float], lin: list[str]
     return K, vmax
 
 
+def _normal_equations(reg: "_Regression", Cs: FloatArray, b: FloatArray
+                      ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """``A'A``, ``A'b``, the column scales ``d`` and ``A'A`` scaled by them, through ``reg.G``."""
+    GC = np.einsum("jis,st->jit", Cs, reg.G)
+    AtA = np.einsum("jit,lit->jl", GC, Cs)
+    d = np.sqrt(np.where(np.abs(np.diag(AtA)) > 0, np.abs(np.diag(AtA)), 1.0))
+    return AtA, np.einsum("jit,it->j", GC, b), d, AtA / np.outer(d, d)
+
+
 def _lifted_seed(reg: "_Regression", model: SuspensionModel, base: Mapping[str, float],
                  lin: list[str], nonlin: list[str], wts: FloatArray) -> FloatArray | None:
     """Log-factors of the nonlinear parameters from the lifted linear problem.
@@ -409,12 +418,7 @@ def _lifted_seed(reg: "_Regression", model: SuspensionModel, base: Mapping[str, 
     if not cols:
         return None
     b = b * wts[:, None]
-    Cs = np.stack(cols)
-    GC = np.einsum("jis,st->jit", Cs, reg.G)
-    AtA = np.einsum("jit,lit->jl", GC, Cs)
-    Atb = np.einsum("jit,it->j", GC, b)
-    d = np.sqrt(np.where(np.abs(np.diag(AtA)) > 0, np.abs(np.diag(AtA)), 1.0))
-    H = AtA / np.outer(d, d)
+    _, Atb, d, H = _normal_equations(reg, np.stack(cols), b)
     if reg.iv:  # instrumental variables: a square, non-symmetric system
         z = np.linalg.lstsq(H, -Atb / d, rcond=1e-12)[0] / d
     else:
@@ -473,13 +477,8 @@ def _solve_linear(reg: _Regression, model: SuspensionModel, p: Mapping[str, floa
     c1 = reg.coef(model.matrices(ones)) * wts[:, None]
     cols = [reg.coef(model.matrices({**ones, k: 2.0})) * wts[:, None] - c1 for k in lin]
     b = c1 - sum(cols)  # the part that does not depend on lin
-    Cs = np.stack(cols)  # (nl, nq, ns)
-    GC = np.einsum("jis,st->jit", Cs, reg.G)
-    AtA = np.einsum("jit,lit->jl", GC, Cs)
-    Atb = np.einsum("jit,it->j", GC, b)
+    AtA, Atb, d, H = _normal_equations(reg, np.stack(cols), b)  # cols: (nl, nq, ns)
     btb = float(np.einsum("is,st,it->", b, reg.G, b))
-    d = np.sqrt(np.where(np.abs(np.diag(AtA)) > 0, np.abs(np.diag(AtA)), 1.0))
-    H = AtA / np.outer(d, d)
     if reg.iv:  # instrumental variables: a square, non-symmetric system
         sol, *_ = np.linalg.lstsq(H, -Atb / d, rcond=1e-12)
         sv = np.linalg.svd(H, compute_uv=False)
