@@ -1,37 +1,20 @@
 """Virtual damper test: what an inspection-station shaker would report for a quarter car.
 
-Both tests put the wheel on a plate that moves sinusoidally, ``r(t) = A sin(2 pi f t)`` with
-``A = 3 mm``, swept from 25 Hz down to 2 Hz, and measure the vertical tyre contact force.
-For identified quarter-car parameters the steady-state response at every frequency is exact
-(the sweep is slow enough to be quasi-stationary). With ``s = j 2 pi f`` and the model's
-matrices ``M, C, K, Fk, Fc`` (:meth:`~suspid.models.base.SuspensionModel.matrices`)::
-
-    (s^2 M + s C + K) Q(s) = (Fk + s Fc) R          (Q = [X1, X2], body and wheel)
-    F(s) = (kt + s ct) S(s)                          (dynamic contact force, compression +)
-    Fs   = (m1 + m2) g                               (static wheel load, g = 9.80665 m/s^2)
-
-with the tyre's compression ``S = g . Q + gr R`` (its :class:`~suspid.models.base.Site`:
-``R - X2`` for ``quarter2``, whose tyre is ``kt = k2``, ``ct = c2``). Any model with two
-coordinates, one road and one tyre site is a quarter car here (:func:`quarter_car_problem`),
-a plug-in model as well as ``quarter2``.
+The wheel stands on a plate moving ``r(t) = A sin(2 pi f t)`` (``A = 3 mm``, 25 Hz down
+to 2 Hz) and the tyre contact force is measured. With ``s = j 2 pi f`` and the model's
+matrices, ``(s^2 M + s C + K) Q = (Fk + s Fc) R``, the dynamic contact force is
+``F = (kt + s ct) S`` with the tyre's compression ``S = g . Q + gr R``, and the static
+load ``Fs = (m1 + m2) g``. Any model with two coordinates, one road and one tyre site
+is a quarter car here (:func:`quarter_car_problem`).
 
 EUSAMA road holding
-    ``RH = min over f in [2, 25] Hz of (Fs - A |F(f)/R|) / Fs x 100 %`` — the lowest
-    instantaneous wheel load over the sweep relative to the static load, clipped to
-    [0, 100] % (0: the tyre lifts off). Bands: 0-20 % poor, 21-40 % sufficient, > 40 % good.
-    The minimum is located on a 200-point logarithmic grid over the sweep, then a 65-point
-    grid between the neighbours of its minimum (step 4e-4 relative) and the vertex of the
-    parabola through the best point and its neighbours (~1e-10 relative in the minimum);
-    the frequency response is evaluated in closed form (Cramer's rule on the 2x2 system),
-    vectorised over the grid.
+    ``RH = min_f (Fs - A |F(f)/R|) / Fs x 100 %``, clipped to [0, 100] %; bands 0-20 %
+    poor, 21-40 % sufficient, > 40 % good. Found on nested log grids and a parabola's
+    vertex (:func:`_grid_min`).
 EGEA phase shift
-    ``phi(f) = arg(F(f) / R)`` in degrees, continuous in ``f`` and equal to 180 deg in the
-    quasi-static limit (the plate lifting the whole corner pushes hardest at the bottom of
-    its stroke). Between the body and the wheel resonance the force is the sum of the body's
-    and the wheel's inertial reactions; with a weak damper the body's reaction swings the
-    phase down towards 0 deg. ``phi_min`` is the minimum of ``phi`` over the sweep between
-    the two resonant (natural) frequencies of the model; the EGEA (SPECSUS2018) criterion is
-    ``phi_min >= 35 deg``.
+    ``phi(f) = arg(F(f) / R)`` in degrees, continuous and 180 deg in the static limit;
+    ``phi_min`` is its minimum between the body and wheel natural frequencies, and the
+    criterion is ``phi_min >= 35 deg``.
 """
 from __future__ import annotations
 
@@ -55,16 +38,12 @@ EGEA_CRITERION_DEG = 35.0
 def quarter_car_problem(model: SuspensionModel, p: Mapping[str, float] | None = None) -> str | None:
     """What keeps ``model`` from the virtual damper test, or ``None`` when it qualifies.
 
-    The shaker's plate is the model's only road; the contact force is the force of its
-    only tyre site; the response is solved as a 2x2 system (two coordinates, body and
-    wheel). Any model with this structure qualifies (``quarter2``, a plug-in quarter car).
-
     Parameters
     ----------
     model : SuspensionModel
         The model to test.
     p : mapping, optional
-        Parameters (SI); default the model's defaults (the sites' geometry and loads).
+        Parameters (SI); default the model's defaults.
 
     Returns
     -------
@@ -93,12 +72,6 @@ def quarter_car_problem(model: SuspensionModel, p: Mapping[str, float] | None = 
 def tyre_site(model: SuspensionModel, p: Mapping[str, float]) -> Site:
     """The one tyre of a quarter car (:func:`quarter_car_problem`) at parameters ``p`` (SI).
 
-    Returns
-    -------
-    Site
-        The tyre site (its ``k_name`` the tyre spring, its ``c_name`` the tyre damper or
-        ``None``, its ``load`` the static wheel load).
-
     Raises
     ------
     UsageError
@@ -119,16 +92,12 @@ def response_function(model: SuspensionModel, p: Mapping[str, float]
                       ) -> Callable[[FloatArray], np.ndarray]:
     """``f -> F(f) / R`` (Hz -> N/m) for fixed parameters, coefficients precomputed.
 
-    The 2x2 system ``Z(s) Q = (Fk + s Fc) R``, ``Z = s^2 M + s C + K``, is solved by
-    Cramer's rule, vectorised over the frequencies: ``X1 / R = (Z22 b1 - Z12 b2) / det Z``,
-    ``X2 / R = (Z11 b2 - Z21 b1) / det Z`` with ``b = Fk + s Fc``. The tyre site
-    (:func:`tyre_site`) gives the compression ``S = g . Q + gr R`` and
-    ``F / R = (kt + s ct) S / R`` (``quarter2``: ``(k2 + s c2) (1 - X2 / R)``).
+    The 2x2 system is solved by Cramer's rule, vectorised over the frequencies.
 
     Parameters
     ----------
     model : SuspensionModel
-        A quarter car (:func:`tyre_site`): ``quarter2`` or a plug-in model alike.
+        A quarter car (:func:`tyre_site`).
     p : mapping
         Parameters (SI).
 
@@ -179,26 +148,6 @@ def response_function(model: SuspensionModel, p: Mapping[str, float]
     return H
 
 
-def contact_force_response(model: SuspensionModel, p: Mapping[str, float], f: FloatArray) -> np.ndarray:
-    """Complex ``F(f) / R`` (N/m): dynamic tyre force per metre of plate displacement.
-
-    Parameters
-    ----------
-    model : SuspensionModel
-        A quarter car (:func:`quarter_car_problem`).
-    p : mapping
-        Parameters (SI).
-    f : ndarray
-        Frequencies (Hz).
-
-    Returns
-    -------
-    ndarray of complex
-        ``F/R`` at every frequency (N/m); see :func:`response_function`.
-    """
-    return response_function(model, p)(f)
-
-
 def eusama_band(rh: float) -> str:
     """EUSAMA band of a road-holding value (%)."""
     if rh > 40.0:
@@ -217,7 +166,7 @@ class Inspection:
     eusama_pct : float
         EUSAMA road holding (%).
     eusama_band : str
-        ``poor`` (0-20 %), ``sufficient`` (21-40 %), ``good`` (> 40 %).
+        ``poor``, ``sufficient`` or ``good``.
     eusama_f_hz : float
         Frequency of the minimum wheel load (Hz).
     phi_min_deg : float
@@ -229,7 +178,7 @@ class Inspection:
     f_body_hz, f_wheel_hz : float
         Natural frequencies of the body and wheel modes (Hz).
     static_load_n : float
-        ``(m1 + m2) g`` (N): the tyre site's static load at ``g =`` :data:`G`.
+        The tyre site's static load at ``g =`` :data:`G` (N).
     """
 
     eusama_pct: float
@@ -263,19 +212,14 @@ def _phase_deg(H: Callable[[FloatArray], np.ndarray], f: FloatArray) -> FloatArr
     """Continuous phase of ``F/R`` (deg) at ``f``, anchored at 180 deg in the static limit."""
     grid = np.concatenate([[1e-3], np.asarray(f, dtype=float)])
     ph = np.angle(H(grid))
-    # unwrap: remove the 2 pi jumps between neighbours (as numpy.unwrap), then anchor
-    # the static limit at pi
+    # unwrap (as numpy.unwrap), then anchor the static limit at pi
     ph[1:] -= (2 * np.pi) * np.cumsum(np.round(np.diff(ph) / (2 * np.pi)))
     ph -= 2 * np.pi * round((float(ph[0]) - np.pi) / (2 * np.pi))
     return np.degrees(ph[1:])
 
 
 def _vertex(x: FloatArray, v: FloatArray, i: int) -> tuple[float, float]:
-    """Refine the grid minimum ``(x[i], v[i])`` by the parabola through its neighbours.
-
-    The grid is logarithmic, so the parabola is fitted in ``log x`` (equal steps); the
-    vertex is used only when it lies between the neighbours and below ``v[i]``.
-    """
+    """Refine the grid minimum ``(x[i], v[i])`` by the parabola through its neighbours (in ``log x``)."""
     if i <= 0 or i >= x.size - 1:
         return float(x[i]), float(v[i])
     vm, v0, vp = float(v[i - 1]), float(v[i]), float(v[i + 1])
@@ -294,12 +238,8 @@ def _grid_min(fun: Callable[[FloatArray], FloatArray], lo: float, hi: float, n0:
               n: int = 65, levels: int = 2) -> tuple[float, float]:
     """Minimum of a smooth vectorised function on ``[lo, hi]`` by nested log grids.
 
-    Level 1 is an ``n0``-point logarithmic grid over the whole range; each further level
-    puts ``n`` points between the neighbours of the previous minimum (the bracket shrinks
-    by ``(n - 1) / 2`` per level); the last level's minimum is refined by the parabola
-    through it and its neighbours (:func:`_vertex`). With the defaults (200 points over
-    2-25 Hz, one 65-point level) the last grid step is 4e-4 relative and the parabola's
-    error in the minimum value is ~1e-10 relative.
+    An ``n0``-point grid, then ``n`` points between the previous minimum's neighbours per
+    level, and the parabola's vertex (:func:`_vertex`).
     """
     a, b = lo, hi
     m = n0
@@ -325,16 +265,15 @@ def inspect(params: Mapping[str, float], model: SuspensionModel | None = None,
     Parameters
     ----------
     params : mapping
-        Quarter-car parameters (SI), ``m1, c1, k1, m2, c2, k2`` for ``quarter2``.
+        Quarter-car parameters (SI).
     model : SuspensionModel, optional
         Any quarter car (:func:`quarter_car_problem`); default ``quarter2``.
     amplitude : float
-        Plate amplitude (m), default 3 mm.
+        Plate amplitude (m).
     sweep : (float, float)
-        Frequency range of the sweep (Hz), default 2-25 Hz.
+        Frequency range of the sweep (Hz).
     n_grid : int
-        Points of the first logarithmic search grid over the sweep (then a 65-point grid
-        around its minimum and a parabolic vertex).
+        Points of the first logarithmic search grid over the sweep.
 
     Returns
     -------
@@ -360,8 +299,7 @@ def inspect(params: Mapping[str, float], model: SuspensionModel | None = None,
     a, b = max(f_lo, f_body), min(f_hi, f_wheel)
     if b <= a:
         a, b = f_lo, f_hi
-    # the continuous phase is anchored once on a grid from the static limit; nested levels
-    # re-anchor on the value interpolated there (the phase is smooth inside a bracket)
+    # the phase anchored once on a grid from the static limit; nested levels re-anchor on it
     grid = _log_grid(a, b, n_grid)
     anchor = _phase_deg(H, grid)
 

@@ -1,30 +1,17 @@
 """Output-only monitoring: the body mode from a body accelerometer alone.
 
-A car with only a body accelerometer (no road, no wheel sensor) cannot be identified
-input-to-output, but the body bounce -- its natural frequency ``f_n`` and damping ratio
-``zeta`` -- shows in the acceleration spectrum because the road is a broadband excitation.
-Two estimators per window:
+The body bounce (natural frequency ``f_n``, damping ratio ``zeta``) shows in the
+acceleration spectrum because the road is a broadband excitation. Two estimators:
 
-``carma`` (default): parametric spectral fit of a continuous-time ARMA model
-    A quarter car's body over an ISO 8608 road (displacement PSD ~ n^-2, i.e. *white road
-    velocity* at constant speed) has the body-acceleration spectrum of the base-excited
-    single mode::
+``carma`` (default)
+    The window's Welch spectrum (16 s Hann segments) fitted in log amplitude over
+    0.3-5 Hz by the base-excited single mode under white road velocity,
+    ``S_a(f) = K w^2 (w_n^4 + 4 zeta^2 w_n^2 w^2) / ((w_n^2 - w^2)^2 + 4 zeta^2 w_n^2 w^2) + B``.
+``ar``
+    AR(p) by least squares after decimation to 10 Hz; the pole pair in 0.5-4 Hz with the
+    highest spectral peak is the body mode.
 
-        S_a(f) = K w^2 (w_n^4 + 4 zeta^2 w_n^2 w^2) / ((w_n^2 - w^2)^2 + 4 zeta^2 w_n^2 w^2) + B
-
-    (``w = 2 pi f``, ``w_n = 2 pi f_n``; ``B`` the sensor-noise floor). The window's Welch
-    spectrum (16 s Hann segments, 50 % overlap) is fitted in log amplitude over 0.3-5 Hz
-    (at most 0.8 x the Nyquist frequency) by nonlinear least squares from a grid of starts;
-    standard errors from the Jacobian, none for a fit stopped at a bound of its search.
-``ar``: AR(p) poles
-    Mean removed, decimated to 10 Hz (zero-phase FIR), AR(p) (default p = 6) by least
-    squares; the pole pair in 0.5-4 Hz with the highest AR spectral peak is the body mode:
-    ``f_n = |s| / 2 pi``, ``zeta = -Re(s) / |s|`` with ``s = fs ln z``.
-
-On the synthetic quarter car (body mode 1.256 Hz, zeta 0.268) with 60 s windows the
-``carma`` fit finds 1.16-1.35 Hz and zeta 0.28-0.35 (the single-mode shape ignores the
-wheel's coupling); the AR poles scatter more. Results on the real CANedge recording are in
-``docs/monitoring.md``.
+Results on synthetic and real records: docs/monitoring.md.
 """
 from __future__ import annotations
 
@@ -42,9 +29,6 @@ from estimator.stream.monitor import StepResult
 from suspid.errors import InputError, UsageError
 from suspid.models.base import FloatArray
 
-#: defaults of the output-only windows (s): a spectral estimate needs many body periods
-DEFAULT_WINDOW_S = 60.0
-DEFAULT_STEP_S = 30.0
 METHODS = ("carma", "ar")
 #: band (Hz) the ``carma`` spectrum is fitted over (its top held below the Nyquist frequency)
 CARMA_BAND = (0.3, 5.0)
@@ -78,8 +62,7 @@ class BodyMode:
         Standard errors (NaN when not available).
     method : str
     at_bound : str
-        Which search bound the fit stopped at (``"zeta 0.02 (the lower bound)"``), ``""``
-        when none: the value is then the bound, not an estimate, and has no standard error.
+        The search bound the fit stopped at (then the value is no estimate), ``""`` when none.
     """
 
     f_hz: float
@@ -103,9 +86,8 @@ def fit_carma(y: FloatArray, fs: float, band: tuple[float, float] = CARMA_BAND,
               segment_s: float = 16.0) -> BodyMode:
     """Fit the body mode to the Welch spectrum of ``y`` (m/s^2) sampled at ``fs`` (Hz).
 
-    A fit that stops at a bound of its search (``band``'s ends for the frequency,
-    :data:`ZETA_BOUNDS` for the damping ratio) returns that bound with no standard error and
-    names it in ``at_bound``: the record did not show a mode inside the search.
+    A fit stopped at a bound of its search returns that bound with no standard error,
+    named in ``at_bound``.
     """
     y = np.asarray(y, dtype=float) - float(np.mean(y))
     nper = min(y.size, max(16, int(round(segment_s * fs))))
@@ -132,8 +114,7 @@ def fit_carma(y: FloatArray, fs: float, band: tuple[float, float] = CARMA_BAND,
     if best is None:  # pragma: no cover - the grid always yields a result
         raise ValueError("spectral fit failed")
     s2 = 2 * best.cost / max(1, f.size - 4)
-    # covariance from the Jacobian; a parameter parked on its bound (e.g. no visible noise
-    # floor B) has a null column and is left out through the pseudo-inverse
+    # covariance from the Jacobian (pseudo-inverse: a parameter on its bound has a null column)
     try:
         cov = np.linalg.pinv(best.jac.T @ best.jac, rcond=1e-10) * s2
         se = np.sqrt(np.clip(np.diag(cov), 0, None))
@@ -190,9 +171,9 @@ def fit_ar(y: FloatArray, fs: float, order: int = 6, fs_ar: float = 10.0,
 
 
 def _stuck_runs(y: FloatArray) -> np.ndarray:
-    """Samples of a frozen or invalid sensor value: runs of at least :data:`STUCK_SAMPLES`
-    identical finite values, with the sample before such a run when it lies far outside the
-    rest (an invalid marker, e.g. -51.2 m/s^2, then zeros)."""
+    """Samples of a frozen sensor: runs of at least :data:`STUCK_SAMPLES` identical values,
+    with the sample before a run when it is an outlier (an invalid marker).
+    """
     out = np.zeros(y.size, dtype=bool)
     if y.size < STUCK_SAMPLES:
         return out
@@ -213,9 +194,7 @@ def _stuck_runs(y: FloatArray) -> np.ndarray:
 
 
 def _spans(t: FloatArray, mask: np.ndarray, most: int = 3) -> str:
-    """``t 1.3 s, t 2.1-2.5 s and 4 more runs``: the time spans of ``mask``'s runs, at
-    most ``most`` of them named (times relative to the window's first sample when they
-    are epoch seconds)."""
+    """``t 1.3 s, t 2.1-2.5 s and 4 more runs``: the time spans of ``mask``'s runs."""
     edges = np.flatnonzero(np.diff(np.concatenate(([0], mask.view(np.int8), [0]))))
     runs = list(zip(edges[::2].tolist(), edges[1::2].tolist()))
     base = float(t[0]) if float(t[0]) > 1e8 else 0.0
@@ -236,11 +215,9 @@ class OutputOnlyEstimator:
         The body acceleration channel (``x1_ddot``).
     method : {"carma", "ar"}
     max_missing : float
-        Skip a window with more than this fraction of missing samples (shorter gaps are
-        bridged by linear interpolation, reported).
+        Skip a window with more than this fraction of missing samples.
     min_rms : float
-        Skip a window whose acceleration RMS (mean removed) is below this (m/s^2): a parked
-        car shows no body mode.
+        Skip a window whose acceleration RMS is below this (m/s^2): a parked car.
     """
 
     name = "output_only"
@@ -345,10 +322,7 @@ class OutputOnlyEstimator:
         return StepResult(event, params, track_se)
 
     def summary(self) -> dict[str, Any]:
-        """Windows fitted and skipped, CPU time, and ``missing_samples``: the samples of the
-        channel missing on the stream's grid (no value in their slot, or left out as frozen
-        or invalid), each counted once though windows overlap: the total of what the
-        windows' warnings name."""
+        """Windows fitted and skipped, CPU time and the channel's missing samples, each counted once."""
         return {"windows": self.windows, "skipped": self.skipped, "cpu_s": self.cpu,
                 "missing_samples": self.missing}
 

@@ -6,11 +6,11 @@ simulate``, 5 s at 200 Hz) and identified as ``suspid identify`` does by default
 ``--can`` the noise-free records are also sent through ``suspid encode`` (quantized as the
 DBC sends them) and read back. Per run it prints ``success``, ``nfev`` and the largest
 noise-floor ratio and excess share of any fitted channel
-(:func:`estimator.identify.start.misfit_measures`). Correct runs fix the masses needed to make
+(:func:`estimator.identify.misfit.misfit_measures`). Correct runs fix the masses needed to make
 the rest identifiable at the truth; ``all2x`` runs hold every parameter at twice the truth
 (masses at the truth: nothing free), ``body2x`` runs the body mass at twice the truth with
 the other masses at the truth and the rest free. ``MISFIT_FLOOR`` and ``MISFIT_SHARE`` of
-:mod:`estimator.identify.start` separate the two groups.
+:mod:`estimator.identify.misfit` separate the two groups.
 
 Usage::
 
@@ -27,7 +27,7 @@ from pathlib import Path
 
 from estimator.identify import OutputErrorProblem, Parameters, fit, fit_from_starts
 from estimator.identify.inputs import read_input
-from estimator.identify.start import misfit_measures
+from estimator.identify.misfit import misfit_measures
 from suspid.models import get_model
 
 #: masses held at the truth so that the rest is identifiable (the model defaults are the truth)

@@ -21,7 +21,7 @@ from scipy.stats import binom, chi2
 from estimator.doe.design import DESIGNS, FS, HORIZON, Experiment, experiments, time_grid
 from estimator.identify import OutputErrorProblem, Parameters, fit
 from estimator.identify.result import IdentResult
-from estimator.identify.start import fit_from_starts
+from estimator.identify.multistart import fit_from_starts
 from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
 from suspid.models import SuspensionModel, get_model

@@ -14,11 +14,8 @@ from suspid.models.base import AffinePieces, FloatArray
 MAX_DECAY_EXPONENT = 600.0
 #: Gram-matrix condition number above which the initial state is solved explicitly
 MAX_GRAM_COND = 1e12
-#: the fast cost is taken as ``||R0||^2 - rhs . sol`` (the pre-fit residual's norm less what
-#: the fitted free response removes, no residual pass) unless that is below this fraction of
-#: ``||R0||^2``: then the two terms cancel and the residual is formed explicitly (noise-free
-#: data at its optimum). Above it the cancellation costs at most ~1e-16 / SS_GUARD of
-#: relative precision
+#: fraction of ``||R0||^2`` below which the fast cost ``||R0||^2 - rhs . sol`` cancels and the
+#: residual is formed explicitly (noise-free data at its optimum)
 SS_GUARD = 1e-4
 #: most fast evaluations cached per problem (a monitor window's Nelder-Mead final simplex
 #: is among the latest) ...
@@ -211,7 +208,6 @@ class StateSpaceLayout:
             return A, B, BB[:, 2 * nr:], BB
         Bz = A @ B[:, nr:] + B[:, :nr]
         return A, B, Bz, np.concatenate([B, Bz], axis=1)
-
 
 
 

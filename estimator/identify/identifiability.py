@@ -1,11 +1,8 @@
-"""Identifiability verdict from the sensitivity (Jacobian) matrix at the optimum.
+"""Identifiability verdict from the log-parameter Jacobian at the optimum.
 
-The Jacobian is taken with respect to log-parameters, so its columns are relative
-sensitivities and its singular values compare across units. A (numerically) zero singular
-value means a direction in parameter space that leaves the response unchanged; its right
-singular vector names the parameters involved. For the linear models the classic case is
-the *scale ambiguity*: multiplying every mass, damping and stiffness by the same factor
-leaves the motion unchanged, so at least one of them must be known.
+A (numerically) zero relative singular value is a direction that leaves the response
+unchanged; its right singular vector names the parameters (classically the common scale
+of every mass, damper and spring).
 """
 from __future__ import annotations
 
@@ -81,11 +78,9 @@ def assess(J: FloatArray, names: list[str], kinds: dict[str, str],
     kinds : dict
         ``name -> kind`` (mass, inertia, ...) to suggest which parameter to fix.
     structural : sequence of str
-        Parameters whose common scale leaves every response of the model unchanged
-        (:attr:`SuspensionModel.scale_invariant`). When all are free that direction is
-        unidentifiable whatever the data -- decided exactly, not from a singular value that
-        finite differences at a poor optimum can blur -- and the other directions are judged
-        on ``J`` restricted to its orthogonal complement.
+        Parameters whose common scale leaves every response unchanged
+        (:attr:`SuspensionModel.scale_invariant`): with all free, that direction is
+        unidentifiable exactly and the rest is judged on its orthogonal complement.
     """
     if J.size == 0 or len(names) == 0:
         return Identifiability(True, [])

@@ -1,11 +1,8 @@
 """What ``suspid identify`` reads: a measurement CSV or a CAN log, as one :class:`Measurement`.
 
-:func:`read_input` is the one reader behind ``suspid identify``, ``suspid diagnose`` and each
-drive of ``suspid fleet``, so they see the same samples and the same warnings. It imports the
-CAN decoder (and so python-can and cantools) only when the input is not a CSV, through
-:data:`CAN_READER`: a CSV is read without loading them (about 0.4 s of every ``suspid
-identify`` process on this project's machine, ``python -X importtime``).
-:mod:`estimator.identify` itself does not import this module.
+:func:`read_input` is the one reader behind ``identify``, ``diagnose`` and ``fleet``. It
+imports the CAN decoder (python-can, cantools) only for a CAN log: a CSV is read
+without their import time.
 """
 from __future__ import annotations
 
@@ -27,9 +24,7 @@ if TYPE_CHECKING:
 #: suffixes read as a measurement CSV
 CSV_SUFFIXES = (".csv", ".txt", "")
 
-#: the modules behind a CAN log, imported by name for a CAN log only: the formats by suffix
-#: (``is_can_log``, ``LOG_FORMATS``) and the reader into a :class:`Measurement`
-#: (``load_log_as_measurement``)
+#: the CAN log formats and reader, imported by name for a CAN log only
 CAN_FORMATS, CAN_READER = "suspid.can.logs", "estimator.decode.log_input"
 
 
@@ -47,22 +42,18 @@ def read_input(path: str | Path, model: SuspensionModel,
     model : SuspensionModel
         The model whose channels are read.
     dbc : str, Path or cantools Database, optional
-        DBC for a CAN log (default suspid's ``suspension.dbc``); a loaded Database is used as
-        it is.
+        DBC for a CAN log (default suspid's ``suspension.dbc``).
     signal_map : optional
         The user's signal map for a foreign DBC.
     channel : str, optional
-        The bus channel of a multi-bus CAN log to decode (``can.channel``; see
-        :func:`estimator.decode.log_input.load_log_as_measurement`); a CSV has none (a
-        warning says it was not used).
+        The bus channel of a multi-bus CAN log (``can.channel``); unused for a CSV.
     j1939_source : str, optional
-        ``can.j1939_source``: the source address decoded from a J1939 DBC's parameter groups.
+        ``can.j1939_source``: the source address decoded from a J1939 DBC.
 
     Returns
     -------
     measurement : Measurement
-        With a warning appended when the record has no road and does not decay (driving
-        data the model can only fit as a free response).
+        With a warning when the record has no road and does not decay.
     frames : dict or None
         Frame statistics of a CAN log (``None`` for a CSV).
 
@@ -98,11 +89,8 @@ def read_input(path: str | Path, model: SuspensionModel,
 
 
 def decays(measured: dict[str, Any]) -> bool:
-    """Whether every channel's motion in the last quarter of the record is below half of
-    that in the first quarter (a free response decays everywhere; driving vibration does not).
-
-    Motion is the RMS of sample-to-sample increments: a road's displacement wanders like a
-    random walk (ISO 8608 PSD ~ n^-2), its increments are stationary.
+    """Whether every channel's motion (RMS of its increments) in the last quarter of the record
+    is below half of that in the first quarter: a free response decays, driving does not.
     """
     for v in measured.values():
         v = np.diff(np.asarray(v, dtype=float))
@@ -119,8 +107,7 @@ def decays(measured: dict[str, Any]) -> bool:
 
 
 def _rms(v: Any) -> float:
-    """RMS of finite values without overflowing on huge ones (1e300: a unit slip the
-    caller reports; squaring it here printed a RuntimeWarning above that one-line error)."""
+    """RMS of finite values without overflowing on huge ones."""
     top = float(np.max(np.abs(v))) if v.size else 0.0
     if top == 0.0:
         return 0.0

@@ -1,11 +1,8 @@
 """Levenberg–Marquardt on a residual vector within a hard evaluation budget.
 
-scipy's ``least_squares(method="lm")`` counts in ``nfev`` and bounds by ``max_nfev`` only
-the evaluations of its iterates: since scipy 1.17 the finite-difference Jacobians (``n``
-evaluations each, one more at the end) are outside both, so a polish given 10
-evaluations of a five-parameter fit made 61. :func:`lm_within` counts every call of the
-residual function itself and stops the search when the budget is spent, returning the
-best point it evaluated.
+scipy's ``least_squares(method="lm")`` leaves its finite-difference Jacobians out of
+``max_nfev``; :func:`lm_within` counts every call of the residual function and stops
+when the budget is spent, returning the best point evaluated.
 """
 from __future__ import annotations
 
@@ -23,11 +20,8 @@ class _Spent(Exception):
 
 @dataclass
 class LMOutcome:
-    """Outcome of :func:`lm_within`.
-
-    ``x`` is the solution (or, when the budget stopped the search, the best point
-    evaluated), ``fun`` its ``|r|^2``, ``nfev`` every evaluation made (Jacobians
-    included), ``stopped`` whether the budget cut the search short.
+    """Outcome of :func:`lm_within`: the solution (or best point evaluated) ``x``, its ``|r|^2``,
+    every evaluation made and whether the budget cut the search short.
     """
 
     x: FloatArray
@@ -47,12 +41,11 @@ def lm_within(fun: Callable[[FloatArray], FloatArray], x0: FloatArray, max_evals
     x0 : ndarray
         Start.
     max_evals : int or None
-        Most calls of ``fun`` in all, the finite-difference Jacobians included (None: no
-        limit beyond scipy's own ``max_nfev``).
+        Most calls of ``fun``, Jacobians included (None: scipy's ``max_nfev`` only).
     max_nfev : int
-        scipy's iteration budget (evaluations of its iterates).
+        scipy's iteration budget.
     **options
-        Further ``scipy.optimize.least_squares`` options (tolerances, ``diff_step``, ...).
+        Further ``scipy.optimize.least_squares`` options.
 
     Returns
     -------
@@ -61,7 +54,7 @@ def lm_within(fun: Callable[[FloatArray], FloatArray], x0: FloatArray, max_evals
     Raises
     ------
     ValueError, numpy.linalg.LinAlgError
-        As ``least_squares`` raises them (the caller decides what a failed polish means).
+        As ``least_squares`` raises them.
     """
     # lazy: scipy.optimize costs the monitor's start time and only the polish needs it
     from scipy.optimize import least_squares  # noqa: PLC0415

@@ -1,21 +1,10 @@
 """A constant offset in a road or position column: a sensor zero not at the rest position.
 
-The linear models measure every position from static equilibrium on a road at zero. A road
-sensor whose zero is not where the car rests (``r = road + d``), or a position sensor whose
-zero is not the rest position (``x1 = q1 + d``), puts a static level into the record that no
-parameter set can produce: an output-error fit then ends far above the noise floor, and the
-search machinery (further starts, runaway checks, profile bands) chases a misfit that no
-parameter can remove.
-
-For fixed parameters the residual is affine in such offsets: the response is linear in the
-road, and the variable projection of the initial state is a linear projection of the
-measured channels. So the offsets that minimise the cost at given parameters follow from
-one small linear least-squares problem (:func:`find_offset`), the offsets as extra linear
-unknowns of the output-error residual; its columns are exact differences of two residual
-vectors. The candidates are the road columns together (one offset each) and every measured
-position channel alone; a road offset ``d`` on every road and an offset ``-d`` on every
-position channel are the same to the model (with the initial state estimated), so the road
-columns are named first.
+Such a static level is something no parameter set can produce. At fixed parameters the
+residual is affine in the offsets, so the best offsets follow from one small linear
+least-squares problem (:func:`find_offset`). Candidates: the road columns together and
+each measured position channel alone (a road offset ``d`` and a position offset ``-d``
+look alike to the model, so a channel is named first).
 """
 from __future__ import annotations
 
@@ -27,14 +16,12 @@ from typing import Any, Mapping
 import numpy as np
 
 from estimator.identify.problem import OutputErrorProblem
-from estimator.identify.start import NOISE_FLOOR, noise_floor_ratio
+from estimator.identify.misfit import NOISE_FLOOR, noise_floor_ratio
 from suspid.effects import SensorOffset
 from suspid.io.csvio import Measurement
 from suspid.models.base import FloatArray, SuspensionModel
 
-#: share of the weighted sum of squares an offset must leave at most to count as found:
-#: removing it must explain at least three quarters of the misfit (on the bump records of
-#: docs/robustness.md it leaves 0.06 % of it; a clean record's best offset removes < 0.1 %)
+#: share of the weighted sum of squares an offset must leave at most to count as found
 OFFSET_SHARE = 0.25
 
 #: standard errors an offset must exceed to be named (a road column without one is left out)
@@ -51,22 +38,17 @@ class Offset:
     Attributes
     ----------
     kind : {"road", "channel"}
-        Road columns (``r``, ``r1`` ...) or one measured position channel.
+        Road columns or one measured position channel.
     values : dict
-        Column -> offset (the column's SI unit: m, or rad for an angle): the column reads
-        that much above the level the model expects (the rest position).
+        Column -> offset (the column's SI unit): how far it reads above the rest position.
     cost_before, cost_after : float
-        Normalised output-error cost (1 = no fit) with the offsets in and removed, at the
-        parameters they were estimated for.
-    noise_ratio : float
-        :func:`~estimator.identify.start.noise_floor_ratio` with the offsets in.
+        Normalised output-error cost with the offsets in and removed.
     """
 
     kind: str
     values: dict[str, float]
     cost_before: float
     cost_after: float
-    noise_ratio: float
 
     @property
     def share(self) -> float:
@@ -74,8 +56,7 @@ class Offset:
         return self.cost_after / self.cost_before if self.cost_before > 0 else 1.0
 
     def effects(self) -> list[SensorOffset]:
-        """The offsets as the ``sensor_offset`` effects of :mod:`suspid.effects` (one per
-        column; what ``suspid simulate --effect`` injects and ``suspid diagnose`` screens)."""
+        """The offsets as ``sensor_offset`` effects of :mod:`suspid.effects`, one per column."""
         return [SensorOffset(channel=c, offset=d) for c, d in self.values.items()]
 
     def remove(self, meas: Measurement) -> Measurement:
@@ -91,9 +72,7 @@ class Offset:
                                    warnings=list(meas.warnings))
 
     def to_json(self, removed: bool) -> dict[str, Any]:
-        """The JSON's ``offset``: ``kind``, ``values`` (SI), ``removed``, ``share`` and
-        ``effects`` (the ``--effect`` spelling of each, e.g.
-        ``sensor_offset:channel=r,offset=0.01``)."""
+        """The JSON's ``offset``: ``kind``, ``values`` (SI), ``removed``, ``share`` and ``effects``."""
         return {"kind": self.kind, "values": dict(self.values), "removed": removed,
                 "share": self.share,
                 "effects": [f"sensor_offset:channel={c},offset={d:.6g}"
@@ -138,8 +117,9 @@ def _residual(problem: OutputErrorProblem, meas: Measurement,
 
 
 def _offsets(J: FloatArray, r0: FloatArray) -> tuple[FloatArray, float, list[int]]:
-    """Offsets ``d`` minimising ``|r0 - J d|^2`` (``r(d) = r0 - J d``), that minimum, and the
-    columns whose offset exceeds ``SIGMAS`` standard errors (residual variance per sample)."""
+    """Offsets ``d`` minimising ``|r0 - J d|^2``, that minimum, and the columns whose offset
+    exceeds ``SIGMAS`` standard errors.
+    """
     d = np.asarray(np.linalg.lstsq(J, r0, rcond=None)[0], dtype=np.float64)
     rd = r0 - J @ d
     ss = float(rd @ rd)
@@ -159,17 +139,14 @@ def find_offset(problem: OutputErrorProblem, p: Mapping[str, float]) -> Offset |
     problem : OutputErrorProblem
         The record and its cost.
     p : mapping
-        Parameters (SI), every parameter of the model: the data-driven estimate, whose
-        filtered equations do not see a constant level, or the given start.
+        Every parameter's value (SI), e.g. the data-driven estimate.
 
     Returns
     -------
     Offset or None
-        The candidate (all road columns together, or one measured position channel) that
-        lowers the cost most, when the fit at ``p`` does not leave white noise
-        (:func:`~estimator.identify.start.noise_floor_ratio` above ``NOISE_FLOOR``) and
-        the offsets leave at most ``OFFSET_SHARE`` of its weighted sum of squares;
-        ``None`` otherwise (or when the residual cannot be evaluated).
+        The candidate that lowers the cost most, when the fit at ``p`` is above the noise
+        floor (``NOISE_FLOOR``) and the offsets leave at most ``OFFSET_SHARE`` of its sum of
+        squares; ``None`` otherwise.
     """
     model, meas = problem.model, problem.meas
     try:
@@ -179,13 +156,10 @@ def find_offset(problem: OutputErrorProblem, p: Mapping[str, float]) -> Offset |
     ss0 = float(r0 @ r0)
     if not (math.isfinite(ss0) and ss0 > 0):
         return None
-    ratio = noise_floor_ratio(problem, p)
-    if not ratio > NOISE_FLOOR:
+    if not noise_floor_ratio(problem, p) > NOISE_FLOOR:
         return None
     roads = [c for c in model.roads if c in meas.road and np.any(meas.road[c])]
-    # a measured channel's zero before the road's: where the two explain the record alike
-    # (quarter1's body position and its road move the same deflection), the sensor zero is
-    # named, whatever the rounding
+    # a measured channel's zero before the road's: where both explain the record alike, the sensor's
     groups: list[tuple[str, list[str]]] = [("channel", [c]) for c in problem.channels
                                            if c in model.coords]
     groups += [("road", roads)] if roads else []
@@ -206,7 +180,7 @@ def find_offset(problem: OutputErrorProblem, p: Mapping[str, float]) -> Offset |
             d, ss, _ = _offsets(J[:, keep], r0)
         if best is None or ss / problem.scale < best.cost_after * (1.0 - 1e-6):
             best = Offset(kind, {c: float(v) for c, v in zip(cols, d)},
-                          ss0 / problem.scale, ss / problem.scale, ratio)
+                          ss0 / problem.scale, ss / problem.scale)
     if best is None or best.share > OFFSET_SHARE:
         return None
     return best

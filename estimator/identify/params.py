@@ -93,3 +93,10 @@ class Parameters(Mapping[str, Parameter]):
 
     def copy(self) -> "Parameters":
         return Parameters([Parameter(p.name, p.value, p.vary, p.min, p.max) for p in self._p.values()])
+
+    def with_values(self, values: Mapping[str, float]) -> "Parameters":
+        """A copy with the ``values`` (SI) set."""
+        out = self.copy()
+        for k, v in values.items():
+            out[k].value = float(v)
+        return out

@@ -1,42 +1,18 @@
-"""The output-error identification problem for the linear models (fast path).
+"""The output-error identification problem for the linear models.
 
-Given a :class:`~suspid.io.csvio.Measurement` and a model, :class:`OutputErrorProblem`
-predicts the measured channels for a parameter vector and returns the residual. The
-initial state is handled by *variable projection*: the response is linear in ``x0``, so
-for every parameter vector the best ``x0`` follows from a small linear least-squares
-problem (``x0="estimate"``); ``x0="rest"`` starts at equilibrium and an array fixes it.
+:class:`OutputErrorProblem` predicts the measured channels for a parameter vector and
+returns the residual; the initial state follows by variable projection
+(``x0="estimate"``), starts at equilibrium (``"rest"``) or is given. Costs: ``sse``, the
+squared differences of the measured position channels, ride heights included (all
+channels when no position is measured); ``frobenius``, the Frobenius norm over every
+measured channel. Ride heights are strut extensions ``g . q + gr . r``
+(:func:`ride_height_rows`).
 
-Cost functions (the seed's two):
-
-``sse``
-    sum of squared differences of the measured *position* channels, ride heights included
-    (all measured channels when no position is measured);
-``frobenius``
-    Frobenius norm of the measured-minus-simulated matrix over every measured channel.
-
-Nelder–Mead only compares cost values, so the two differ by the channels they use (and by
-the termination test), not by the square root.
-
-Ride heights (``d``/``dN`` and their ``_dot``: strut extensions) are compared like the
-motions: strut ``i``'s extension is ``g . q + gr . r`` (its rate with ``q'``, ``r'``) on the
-problem's road input (the record's road, or none), rows of the output map after those of the
-motion channels (:func:`ride_height_rows`).
-
-One problem class serves identify, the monitor's windows and diagnose; the path is chosen
-per problem and per parameter set:
-
-* the fast path (:meth:`OutputErrorProblem.evaluate`): a uniform grid with every fitted
-  sample observed and ``x0="estimate"`` (weights allowed) -- the common case of a record and
-  of every monitor window. Affine ``A(theta)``, one LAPACK eigen-decomposition, the forced
-  trajectory in closed form, the initial state from closed-form normal equations; cached
-  per problem, so a window's final simplex and estimate are reused (stderr, Gauss-Newton:
-  :mod:`estimator.stream.windowfit`);
-* the modal recursion on a uniform grid otherwise (missing samples, a known ``x0``, or a
-  parameter set the fast path declines: an ill-conditioned initial-state Gram matrix);
-* stepwise simulation on a non-uniform grid or for a defective ``A``.
-
-The paths agree to rounding; ``tests/core/test_cost_oracle.py`` checks each of them against
-an accurate ``scipy.integrate.solve_ivp`` simulation.
+The path is chosen per problem and parameter set: the fast path
+(:meth:`OutputErrorProblem.evaluate`) on a uniform, fully observed grid with ``x0``
+estimated; the modal recursion otherwise; stepwise simulation on a non-uniform grid or
+for a defective ``A``. ``tests/core/test_cost_oracle.py`` checks each against
+``scipy.integrate.solve_ivp``.
 """
 from __future__ import annotations
 
@@ -76,19 +52,15 @@ class OutputErrorProblem:
     meas : Measurement
     cost : {"sse", "frobenius"}
     x0 : "estimate", "rest" or ndarray
-        Initial-state handling (see module docstring).
+        Initial-state handling.
     weights : mapping, optional
         Per-channel weights multiplying the residual (default 1: the seed's raw SI cost).
     affine : AffinePieces, optional
-        The model's forward model as affine pieces
-        (:meth:`~suspid.models.base.SuspensionModel.affine`); default: built from the first
-        predicted parameter set with every damper and spring free. A parameter set they do
-        not apply to (another mass, inertia or length) is predicted from the model itself.
-        A caller with many problems of one model (the monitor's windows) passes its pieces
-        once.
+        The model's affine pieces (:meth:`~suspid.models.base.SuspensionModel.affine`);
+        default: built from the first prediction with every damper and spring free. A
+        parameter set they do not apply to is predicted from the model itself.
     ride_heights : bool
-        Whether measured ride heights enter the cost (default); ``False`` leaves them out
-        with a warning (the monitor's window compares the motion channels only).
+        Whether measured ride heights enter the cost; ``False`` leaves them out with a warning.
     """
 
     model: SuspensionModel
@@ -158,8 +130,7 @@ class OutputErrorProblem:
             self._maps_fixed = self._stack_heights(output_maps(
                 self._kind, np.zeros((m.n_states, m.n_states)),
                 np.zeros((m.n_states, 2 * len(m.roads))), self._nq))
-        # weights and mask as flat (N p,) rows: an elementwise product with a broadcast
-        # (p,) row runs one short inner loop per sample, 3-4x slower
+        # weights and mask as flat (N p,) rows (a broadcast (p,) row is 3-4x slower)
         self._w_flat = np.tile(w, self.t.size)
         self._mask_flat = self.mask.reshape(-1)
         # ---- the fast path's constants (uniform grid, every sample observed, x0 estimated)
@@ -171,8 +142,7 @@ class OutputErrorProblem:
         self._cache: dict[tuple[float, ...], Evaluation] = {}
         #: the fast path applies to this problem (else every evaluation takes the general one)
         self.fast = bool(self.h is not None and self._full and self._estimate and N >= 2)
-        #: evaluations the fast path declined (a defective ``A``, an ill-conditioned Gram
-        #: matrix) and the general path made
+        #: evaluations the fast path declined and the general path made
         self.n_fallback = 0
         self.param_names = [q.name for q in m.params]
         self._layout: StateSpaceLayout | None = None
@@ -289,34 +259,14 @@ class OutputErrorProblem:
     def evaluate(self, p: Mapping[str, float]) -> Evaluation | None:
         """One evaluation at ``p`` by the fast path, cached; ``None`` where it does not apply.
 
-        It applies to a problem on a uniform grid with every fitted sample observed and
-        ``x0="estimate"`` (:attr:`fast`), at a ``p`` whose ``A`` is diagonalisable (the
-        test of :func:`suspid.simulate.modal_form`) and whose initial-state Gram matrix has a
-        condition number below :data:`MAX_GRAM_COND`. Steps:
-
-        1. ``A, B, Bz`` from the affine pieces (:meth:`state_space`);
-        2. the modal form ``A = V diag(lam) V^-1`` from one LAPACK ``dgeev`` (right and
-           left eigenvectors; the rows of ``V^-1`` are the left eigenvectors scaled by
-           ``1 / (u^H v)``, no inverse);
-        3. the forced modal trajectory of the first-order-hold road,
-           ``w[k+1] = E w[k] + g0 s[k] + g1 s[k+1]``, in closed form,
-           ``w[k] = E^k (w[0] + sum_{l<k} d[l] E^-(l+1))``: one ``cumsum`` per mode of
-           ``(sum_j a_j r_j[l]) E^-l`` (the roads summed first). The partial sums are
-           dominated by their newest terms, so the rounding stays ~``eps`` relative to
-           ``|w|``; used while ``|E|^-N`` stays far from overflow
-           (``max(-Re(lam)) h N <`` :data:`MAX_DECAY_EXPONENT`), else the blocked scan
-           :func:`~suspid.simulate.first_order_scan` (a long record);
-        4. the least-squares initial state without the ``(N, p, n)`` free-response
-           regressors ``Re(CV_i E_i^k)``, ``-Im(...)``: their Gram matrix from the channel
-           products ``CV^T CV``, ``CV^T conj(CV)`` and the geometric sums
-           ``sum_k (E_i E_j)^k``, their product with the residual as
-           ``sum_c CV_ci (R P^T)_ci``; the cost as ``||R0||^2 - rhs . sol`` (``R0`` the
-           residual of the forced response, ``Gram sol = rhs``) without a residual pass,
-           unless the two terms cancel (below :data:`SS_GUARD` of ``||R0||^2``: noise-free
-           data near its optimum), when the residual is formed and summed.
-
-        Arrays are laid out modes x samples, so every elementwise operation runs over
-        contiguous rows of ``N`` samples.
+        It applies on a uniform grid with every fitted sample observed and ``x0="estimate"``
+        (:attr:`fast`), at a diagonalisable ``A`` whose initial-state Gram matrix has a
+        condition number below :data:`MAX_GRAM_COND`: the modal form from one LAPACK
+        ``dgeev``, the forced first-order-hold trajectory in closed form (one ``cumsum`` per
+        mode; the blocked scan when ``max(-Re(lam)) h N`` reaches
+        :data:`MAX_DECAY_EXPONENT`), and the least-squares initial state from closed-form
+        normal equations, the cost as ``||R0||^2 - rhs . sol`` unless the terms cancel
+        (:data:`SS_GUARD`).
         """
         if not self.fast:
             return None
@@ -361,8 +311,7 @@ class OutputErrorProblem:
                 return None
             uv.append(x)
             bound += (2.0 if pr else 1.0) / abs(x)
-        # cond_1(V) <= sqrt(n) sum_i fac_i / |u_i^H v_i| for unit eigenvectors; the exact
-        # test of modal_form only when that bound is not already below the limit
+        # cond_1(V) <= sqrt(n) sum_i fac_i / |u_i^H v_i|: the exact test only above the limit
         if math.sqrt(n) * bound > MODE_COND_MAX:
             V = vr @ pat.sel_v
             Vinv = (vl @ pat.sel_v).conj().T / np.array(uv)[:, None]
@@ -381,13 +330,10 @@ class OutputErrorProblem:
         else:
             Cm, Dm = self._output_maps(A, B)
             CV = (Cm @ vr) @ pat.sel_cv
-        # per mode: E = exp(lam h), the first-order-hold weights and, with b = V^-1 Bz and
-        # w0 = -V^-1 Bv r[0] (forced response from rest),
-        #   w[k] = E^k (w0 + sum_{l<k} b (g0 r[l] + g1 r[l+1]) E^-(l+1))
-        #        = (a0 + a1) E^k Q[k] - a0 r[k] + (w0 - a1 r[0]) E^k,
-        # q[l] = r[l] E^-l, Q = cumsum(q), a0 = b g0 / E, a1 = b g1 (w[0] = w0 exactly).
-        # The last term is a free response: the least-squares initial state absorbs it, so
-        # it is left out of the residual and subtracted from the free coefficients after.
+        # per mode, E = exp(lam h), b = V^-1 Bz, w0 = -V^-1 Bv r[0]:
+        #   w[k] = (a0 + a1) E^k Q[k] - a0 r[k] + (w0 - a1 r[0]) E^k,
+        # Q = cumsum(r[l] E^-l), a0 = b g0 / E, a1 = b g1; the last term is a free response,
+        # absorbed by the least-squares initial state (taken out again in Evaluation.c)
         lam_a = np.array(lam)
         El_a, g0a, g1a = foh_weights(lam_a, h)  # (m,) each
         P = np.empty((mm, N), dtype=complex)
@@ -396,8 +342,7 @@ class OutputErrorProblem:
         np.cumprod(P, axis=1, out=P)
         r = self.road_t
         if self._road:
-            # rows of V^-1 [Br | Bv | Bz] from the left eigenvectors' real and imaginary
-            # parts: (a - ib)^T B / (u_i^H v_i)
+            # rows of V^-1 [Br | Bv | Bz] from the left eigenvectors: (a - ib)^T B / (u_i^H v_i)
             VZ = vl.T @ BB
             X = (VZ[pat.k1a] - 1j * (VZ[pat.k2a] * pat.pair_mask[:, None])) / np.array(uv)[:, None]
             Xb = X[:, 2 * nr:]  # b = V^-1 Bz
@@ -405,8 +350,7 @@ class OutputErrorProblem:
                 Cb = Xb * (g0a / El_a)[:, None]  # a0
                 a1 = Xb * g1a[:, None]
                 cc = -((X[:, nr:2 * nr] + a1) @ self._r0)  # w0 - a1 r[0], w0 = -V^-1 Bv r[0]
-                # the roads summed first (the trajectory is linear in them):
-                #   Wf[k] = sum_j Ca_j E^k Q_j[k] = E^k cumsum_l((sum_j Ca_j r_j[l]) E^-l)
+                # the roads summed first: Wf[k] = E^k cumsum_l((sum_j Ca_j r_j[l]) E^-l)
                 Wf = (Cb + a1) @ self._rc
                 np.divide(Wf, P, out=Wf)
                 np.cumsum(Wf, axis=1, out=Wf)
@@ -434,13 +378,10 @@ class OutputErrorProblem:
             traj = None
         if Dm is not None and self._has_road:
             R -= Dm @ self._UT
-        # least-squares free modal coefficients. The regressors are Re(CV[:, i] E_i^k) for
-        # every mode, then -Im(...) for the complex ones; with x = CV_ci E_i^k and
-        # y = CV_cj E_j^k their Gram matrix follows from the sums over channels and samples
-        #   S1 = sum x y = (CV^T CV)_ij g(E_i E_j),  S2 = sum x conj(y) = (CV^H CV)*_ij ...,
-        # g(z) = sum_{k<N} z^k = (1 - z^N) / (1 - z), as Re x Re y = Re(S1 + S2) / 2,
-        # Im x Im y = Re(S2 - S1) / 2, Re x Im y = Im(S1 - S2) / 2 -- no regressor matrix.
-        # Weights scale the channels (rows) of both.
+        # least-squares free modal coefficients, regressors Re(CV_i E_i^k) and -Im(...): with
+        # x = CV_ci E_i^k, y = CV_cj E_j^k, S1 = sum x y = (CV^T CV)_ij g(E_i E_j) and
+        # S2 = sum x conj(y), g(z) = (1 - z^N) / (1 - z), the Gram matrix is
+        # Re x Re y = Re(S1 + S2) / 2, Im x Im y = Re(S2 - S1) / 2, Re x Im y = Im(S1 - S2) / 2
         if self._unit_w:
             CVw, Rw = CV, R
         else:
@@ -477,8 +418,7 @@ class OutputErrorProblem:
         coef = sol[:mm].astype(complex)
         if npair:
             coef[pairs] += 1j * sol[mm:]
-        # the cost without the residual pass: ||R0 - G sol||^2 = ||R0||^2 - rhs . sol at the
-        # least-squares sol (Gram sol = rhs); explicit when the two terms nearly cancel
+        # the cost without a residual pass, ||R0||^2 - rhs . sol (explicit where they cancel)
         r0 = Rw.ravel()
         r0sq = float(r0 @ r0)
         ss = r0sq - float(proj @ (proj / ev))
@@ -629,9 +569,7 @@ class OutputErrorProblem:
     def residual_vectors(self, points: Sequence[Mapping[str, float]]) -> FloatArray:
         """Residual vectors of several parameter sets, shape (k, n_obs).
 
-        Row ``i`` is :meth:`residual_vector` of ``points[i]`` (the same path, so finite
-        differences between rows are differences of one computation; the same errors
-        raise).
+        Row ``i`` is :meth:`residual_vector` of ``points[i]`` (the same path and errors).
 
         Parameters
         ----------
@@ -641,8 +579,7 @@ class OutputErrorProblem:
         Returns
         -------
         ndarray, shape (k, n_obs)
-            Weighted residuals of the observed samples (units of the channels times their
-            weights), each row flattened as :meth:`residual_vector`'s.
+            Weighted residuals of the observed samples.
         """
         R = np.empty((len(points), self.n_obs))
         for i, q in enumerate(points):

@@ -1,34 +1,15 @@
 """Honest 3-sigma bands: the curvature band where the cost is quadratic, the profile
 likelihood where it is not.
 
-The standard error of :func:`estimator.identify.solver.finish` comes from the local
-curvature (Gauss–Newton, sandwich form). Its band ``theta +- 3 stderr`` is exact for a
-response linear in the parameter and reliable while the cost stays quadratic out to the
-band's ends. For a weakly determined parameter of a nonlinear model it is not: the cost
-rises more slowly on one side (a damper and a spring that can shrink together), the band
-can reach below zero, and the truth can sit outside it although the data allow it.
-
-For each free parameter ``k`` (log coordinates ``u = log(theta / theta_hat)``, Gauss–Newton
-inverse ``G = (J^T J)^-1``, sandwich covariance ``V``, noise scale ``s_k^2 = V_kk / G_kk``)
-the statistic ``r^2(t) = (S_prof(t) - S_min) / s_k^2`` of the profile cost
-``S_prof(t) = min over the others of S`` with ``u_k = t`` equals ``t^2 / V_kk`` for a
-linear response; the band is ``{theta_k : r^2 <= 9}``. So:
-
-1. **Check** (2 cost evaluations per parameter): evaluate ``r^2`` at both ends of the
-   curvature band along the Gauss–Newton profile path (the others moved by
-   ``G[:, k] / G_kk t``) and compare it with the 9 it claims there. Within
-   ``NONLINEARITY`` (relative) on both sides, the curvature band stands unchanged. (The
-   band is symmetric in the parameter, the cost is closer to quadratic in its logarithm:
-   a relative standard error of 7 % already puts the band's upper end at 2.7 sigma.)
-2. **Profile** otherwise: the other parameters are re-optimised (Levenberg–Marquardt on the
-   residual vector) at each trial ``t``, and the ends are found where ``r = 3`` (the
-   first step from the optimum's known slope of ``r``, then secant steps). A side whose
-   profile stays below 3 out to ``FAR`` (a factor 1000) does not close: the record does
-   not bound the parameter on that side; the result is then reported not identifiable,
-   with that reason.
-
-Noise-free records (relative standard errors below ``NOISE_FREE``) keep the curvature band:
-their residual is rounding, not noise, and the band is far below any tolerance anyway.
+For each free parameter ``k`` (log coordinates, Gauss–Newton inverse ``G``, sandwich
+covariance ``V``, noise scale ``s_k^2 = V_kk / G_kk``) the statistic
+``r^2(t) = (S_prof(t) - S_min) / s_k^2`` equals ``t^2 / V_kk`` for a linear response;
+the band is ``{theta_k : r^2 <= 9}``. First ``r^2`` is checked at both ends of the
+curvature band along the Gauss–Newton profile path: within ``NONLINEARITY`` the
+curvature band stands. Otherwise the other parameters are refitted at each trial ``t``
+and the ends found where ``r = 3`` (secant steps); a side still below 3 at ``FAR`` does
+not close, and the result is not identifiable. Noise-free records (relative standard
+errors below ``NOISE_FREE``) keep the curvature band.
 """
 from __future__ import annotations
 
@@ -68,14 +49,13 @@ class Bands:
     method : dict
         ``name -> "curvature"`` or ``"profile"``.
     nonlinearity : dict
-        ``name -> (lower, upper)``: ``r^2 / 9`` at the curvature band's ends (1 = the end is
-        the 3-sigma point it claims to be; ``nan`` where the end is not positive).
+        ``name -> (lower, upper)``: ``r^2 / 9`` at the curvature band's ends.
     open_sides : dict
         ``name -> ["below", "above"]`` sides whose profile does not reach 3 sigma.
     nfev : int
         Residual evaluations spent.
     lower_cost : bool
-        A profile found a lower cost than the optimum (the fit was not at the minimum).
+        A profile found a lower cost than the optimum.
     """
 
     bands: dict[str, tuple[float, float]] = field(default_factory=dict)
@@ -109,9 +89,7 @@ class _Cost:
         return r if np.all(np.isfinite(r)) else None
 
     def resids(self, us: list[FloatArray]) -> list[FloatArray] | None:
-        """Residuals at every ``u`` of ``us`` (evaluated together), or ``None`` as soon as
-        one is unavailable: what calling :meth:`resid` on each in turn gives, ``nfev``
-        included."""
+        """Residuals at every ``u`` of ``us``, or ``None`` as soon as one is unavailable."""
         n = next((i for i, u in enumerate(us) if not np.all(np.abs(u) < 30)), len(us))
         qs = []
         for u in us[:n]:
@@ -166,13 +144,9 @@ def _conditional_min(cost: _Cost, k: int, t: float, u0: FloatArray, s0: float,
                      jac: dict[int, FloatArray] | None = None) -> tuple[float, FloatArray]:
     """``min S`` over every coordinate but ``k`` (held at ``t``), Levenberg–Marquardt from ``u0``.
 
-    Stops when a step lowers ``S`` by no more than ``max(tol, 1e-10 s0)`` with a Jacobian
-    from finite differences, or when the step's decrease is the Gauss–Newton model's to
-    within that and the model has no more than that left to gain (``tol``: the accuracy
-    the caller needs of ``S``). ``jac`` (``k -> Jacobian``) carries the Jacobian from one
-    profile point to the next: it is updated by Broyden's rank-one formula after each step
-    and recomputed by finite differences only when a step from it fails or gains little
-    without the model's agreement.
+    Stops when a step gains no more than ``max(tol, 1e-10 s0)``. ``jac`` (``k -> Jacobian``)
+    carries the Jacobian between profile points, updated by Broyden's formula and
+    recomputed by finite differences only when a step from it fails.
     """
     n = u0.size
     others = [i for i in range(n) if i != k]
@@ -205,11 +179,8 @@ def _conditional_min(cost: _Cost, k: int, t: float, u0: FloatArray, s0: float,
             fn = math.inf if rn is None else float(rn @ rn)
             if rn is not None and fn < f:
                 improved = True
-                # converged: a small step judged with a Jacobian from finite differences,
-                # or a step whose decrease the Gauss-Newton model predicted to within
-                # ``stop`` and that leaves less than ``stop`` of the model's own minimum
-                # unused (with a fresh or a Broyden Jacobian: the band ends found so agree
-                # with thorough refits to within R_TOL, tests/doe/test_bands.py)
+                # converged: a small step (finite-difference Jacobian), or a decrease the
+                # Gauss-Newton model predicted to within ``stop``
                 done = fresh and ((f - fn) <= stop or np.max(np.abs(step)) < 1e-9)
                 if not done:
                     pred = -float(2.0 * (g @ step) + step @ A @ step)
@@ -246,11 +217,8 @@ def _conditional_min(cost: _Cost, k: int, t: float, u0: FloatArray, s0: float,
 def _from_origin(t: float, r: float, t0: float) -> float | None:
     """Where ``r = SIGMAS`` on ``r(t) = SIGMAS |t| / t0 + c t^2`` through ``(t, r)``.
 
-    ``r`` leaves the optimum with the slope ``SIGMAS / t0`` of the curvature band (``t0``
-    its half-width in ``u``) whatever the nonlinearity, so between the optimum and one
-    profile point this model interpolates ``r`` better than the secant from the origin (a
-    straight line through ``(0, 0)``, which ignores that slope). ``None`` where it has no
-    root beyond the origin on the side of ``t``.
+    The model keeps the curvature band's slope at the optimum (``t0`` its half-width in
+    ``u``); ``None`` where it has no root beyond the origin on the side of ``t``.
     """
     s = abs(t) / t0
     if s <= 0:
@@ -294,8 +262,7 @@ def _profile_side(cost: _Cost, k: int, side: float, t0: float, s0: float, sk2: f
         if abs(r - SIGMAS) <= R_TOL:
             return t, lower
         if r > SIGMAS:
-            # bracketed between t_prev (r_prev < 3) and t: secant inside the bracket (from
-            # the optimum itself: the model with the curvature band's slope there)
+            # bracketed between t_prev (r_prev < 3) and t: secant inside the bracket
             lo_t, lo_r, lo_u = t_prev, r_prev, u_prev
             hi_t, hi_r = t, r
             for j in range(9):
@@ -405,9 +372,8 @@ def honest_bands(problem: OutputErrorProblem, res: IdentResult, free: list[str],
 def apply_bands(problem: OutputErrorProblem, res: IdentResult, free: list[str]) -> IdentResult:
     """Attach the bands of ``res`` (``band_3sigma``, ``band_method``) and their verdict.
 
-    A parameter whose profile does not close is not determined by the record: the result
-    is then not identifiable and not a success, and a warning names the parameter and the
-    open side. Returns ``res`` (changed in place).
+    A profile that does not close makes ``res`` not identifiable and no success, with a
+    warning naming the open side. Returns ``res`` (changed in place).
     """
     if not all(math.isfinite(res.stderr.get(k, math.nan)) for k in free):
         return res  # no standard errors (not asked for, or not identifiable): no band

@@ -1,13 +1,9 @@
 """One record identified as ``suspid identify`` does it, the offset check included.
 
-``suspid identify``, each drive of ``suspid fleet`` and the offset-corrected fit of
-``suspid diagnose`` make the same call, :func:`identify_record`: the data-driven start
-(:func:`~estimator.identify.start.estimate_start`), the check for a constant offset in a
-road column or a position channel at it (:func:`check_offset`, a sensor zero not at rest,
-:mod:`estimator.identify.offset`), the offset removed before the fit (``offset="remove"``,
-the default) or kept, then :func:`~estimator.identify.start.fit_from_starts` over
-:func:`~estimator.identify.solver.fit`; a found offset is named in the result's first
-warning and in its ``offset`` field.
+``suspid identify``, each drive of ``suspid fleet`` and ``suspid diagnose``'s
+offset-corrected fit call :func:`identify_record`: the data-driven start, the check for
+a constant road or position offset at it (:func:`check_offset`), the offset removed
+(default) or kept, then :func:`~estimator.identify.multistart.fit_from_starts`.
 """
 from __future__ import annotations
 
@@ -19,7 +15,8 @@ from estimator.identify.params import Parameters
 from estimator.identify.problem import OutputErrorProblem
 from estimator.identify.result import IdentResult
 from estimator.identify.solver import fit, too_little_data, withhold_estimates
-from estimator.identify.start import StartEstimate, estimate_start, fit_from_starts
+from estimator.identify.multistart import fit_from_starts
+from estimator.identify.start import StartEstimate, estimate_start
 from suspid.errors import UsageError
 
 
@@ -35,11 +32,9 @@ class OffsetCheck:
     Attributes
     ----------
     offset : Offset or None
-        The constant road or position offsets found (``None``: none).
+        The constant road or position offsets found.
     estimate : StartEstimate or None
-        The record's data-driven start (``None`` when not computed: ``data_start`` off or
-        nothing free); its filtered equations do not see a constant level, so it is the
-        same with the offset in or removed.
+        The record's data-driven start (blind to a constant level); ``None`` when not computed.
     """
 
     offset: Offset | None
@@ -57,14 +52,12 @@ def check_offset(problem: OutputErrorProblem, params: Parameters, *,
     params : Parameters
         Fixed values (SI) and the given start of the free parameters.
     data_start : bool
-        Judge the offset at the data-driven start (``identify``'s default); otherwise, or
-        when no parameter is free, at ``params``' values.
+        Judge the offset at the data-driven start; otherwise at ``params``' values.
 
     Returns
     -------
     OffsetCheck
-        The offset found (:func:`~estimator.identify.offset.find_offset`) and the
-        data-driven start it was judged at.
+        The offset found and the data-driven start it was judged at.
     """
     est = estimate_start(problem, params) if data_start and params.free else None
     offset = find_offset(problem, {**params.valuesdict(), **(est.values if est else {})})
@@ -85,27 +78,23 @@ def identify_record(problem: OutputErrorProblem, params: Parameters, *, restarts
     params : Parameters
         Fixed values (SI) and the given start of the free parameters.
     restarts, maxfev, polish, multistart
-        Settings of every :func:`~estimator.identify.solver.fit` (``identify``'s options of
-        the same names; ``maxfev`` in model evaluations).
+        Settings of every :func:`~estimator.identify.solver.fit`.
     data_start : bool
-        Start from the data-driven estimate too (``[fit] data_start = false`` of ``--config`` turns it off).
+        Start from the data-driven estimate too.
     keep_init : bool
-        Also fit from ``params`` (``identify``: an ``--init`` given, or no data-driven
-        start); see :func:`~estimator.identify.start.fit_from_starts`.
+        Also fit from ``params`` (:func:`~estimator.identify.multistart.fit_from_starts`).
     offset : {"remove", "keep"}
-        A found offset is subtracted from its columns before the fit (``"remove"``), or the
-        record is fitted as it is (``"keep"``); either way the first warning names it.
+        Subtract a found offset before the fit, or fit the record as it is; either way the
+        first warning names it.
     check : OffsetCheck, optional
-        The record's :func:`check_offset` when already made (default: made here).
+        The record's :func:`check_offset` when already made.
 
     Returns
     -------
     result : IdentResult
-        The identification; with an offset found, its first warning names it and
-        ``result.offset`` holds it (:meth:`~estimator.identify.offset.Offset.to_json`).
+        The identification; ``result.offset`` holds a found offset.
     fitted : OutputErrorProblem
-        The problem the fit ran on: ``problem`` itself, or the record with the offset
-        removed.
+        The problem the fit ran on (``problem``, or the record with the offset removed).
 
     Raises
     ------
@@ -124,13 +113,10 @@ def identify_record(problem: OutputErrorProblem, params: Parameters, *, restarts
     if found.offset is not None and offset == "remove":
         fitted = on_record(problem, found.offset.remove(problem.meas))
     removed = fitted is not problem
-    # the estimate's values hold either way; its cost and the checks on it are the record's
-    # as read, so the corrected record gets its own
+    # the corrected record gets its own estimate (its cost and checks are the record's)
     est = None if removed else found.estimate
 
-    # without a budget, all starts of the record share RECORD_MAXFEV per free parameter: a
-    # record the model cannot fit (a length in mm) ends in a normal fit time as a misfit
-    # instead of every start and further start spending its own budget
+    # without a budget, all starts of the record share RECORD_MAXFEV per free parameter
     left = [maxfev if maxfev is not None else RECORD_MAXFEV * max(1, len(params.free))]
 
     def run(start: Parameters) -> IdentResult:

@@ -1,31 +1,11 @@
 """A record whose sample times jitter about a uniform grid, put on that grid.
 
 The nonlinear refits of :func:`estimator.diagnose.diagnose` and the monitor's windows
-(``suspid monitor --input CSV``) step on a uniform time grid. A logger's CSV often stamps its samples with a little timing jitter; such a record is
-accepted when it *is* uniform up to jitter:
-
-* the reference grid has the record's first and last time and its sample count (step
-  ``h = (t[-1] - t[0]) / (N - 1)``), so a slow clock-rate error is absorbed, and
-* every sample lies within ``JITTER_FRACTION`` (a quarter) of a step of its grid point.
-
-The rule keeps a gap out. One missing sample anywhere shifts the samples after it by a
-whole step against the samples before it, so some sample lies at least half a step from
-the same-count grid (at the gap when it is central, at the record's end when it is near
-either end); a quarter step therefore rejects every record with a missing sample while
-leaving room for jitter up to ±h/4, and it keeps every interval between h/2 and 3h/2.
-
-The measured channels and the road are then interpolated onto the grid with a cubic
-spline (``not-a-knot``, through the finite samples of each channel). A shift ``d`` of a
-smooth signal costs a cubic spline an error of order ``h^4`` times its fourth derivative,
-about ``(ωh)^4/384`` of the amplitude at angular frequency ``ω``, against ``(ωh)^2/8`` for
-linear interpolation, which flattens every peak (a systematic loss of amplitude, hence a
-bias of the fitted damping and stiffness): a 12 Hz wheel hop sampled at 200 Hz and
-shifted by half a step loses up to 1.8 % of its amplitude under linear interpolation,
-5e-5 under the spline. White measurement noise stays white: with the jitter independent
-from sample to sample the spline's weights on the neighbouring samples average out (lag-1
-autocorrelation of resampled white noise within ±0.012 at up to ±0.225 steps; no
-Ljung–Box rejection at p < 1e-3 in 200 trials of 320 and 3000 samples). A sample that was
-missing (NaN) stays missing at its grid point.
+step on a uniform grid. A record is uniform up to jitter when every sample lies within
+``JITTER_FRACTION`` of a step of the grid with its first and last time and its sample
+count; one missing sample shifts the rest by a step, so a gap is rejected. The channels
+and the road are then interpolated onto the grid by a cubic spline (far less amplitude
+loss than linear interpolation; docs/closing-the-loop.md); a missing sample stays missing.
 """
 from __future__ import annotations
 
@@ -41,19 +21,9 @@ JITTER_FRACTION = 0.25
 
 
 def grid_jitter(t: FloatArray) -> tuple[float, float]:
-    """The same-count, same-span grid's step and the largest distance from it.
+    """The same-count, same-span grid's step ``h`` (s) and the largest ``|t[i] - (t[0] + i h)|`` (s).
 
-    Parameters
-    ----------
-    t : ndarray, shape (N,)
-        Sample times (s), increasing, N >= 2.
-
-    Returns
-    -------
-    h : float
-        Step (s) of the uniform grid from ``t[0]`` to ``t[-1]`` with ``N`` points.
-    jitter : float
-        Largest ``|t[i] - (t[0] + i h)|`` (s).
+    ``t``: sample times (s), increasing, at least two.
     """
     n = t.size
     h = float((t[-1] - t[0]) / (n - 1))
@@ -62,8 +32,7 @@ def grid_jitter(t: FloatArray) -> tuple[float, float]:
 
 
 def _spline(t: FloatArray, y: FloatArray, grid: FloatArray) -> FloatArray:
-    """``y`` sampled at ``t``, interpolated at ``grid`` by a cubic spline through its finite
-    samples; a grid point whose sample was missing stays NaN."""
+    """``y`` at ``grid`` by a cubic spline through its finite samples (missing ones stay NaN)."""
     y = np.asarray(y, dtype=float)
     ok = np.isfinite(y)
     out = np.full(grid.size, np.nan)
@@ -87,9 +56,8 @@ def to_uniform_grid(meas: Measurement) -> tuple[Measurement, str | None]:
     Measurement
         The record on a uniform grid (the same object when it already was).
     str or None
-        The warning naming the record and the jitter found, when it was resampled; None
-        when it was not, or when it is not uniform up to jitter (the caller rejects it:
-        see :func:`grid_jitter`).
+        The warning naming the jitter when resampled; None when not resampled or not
+        uniform up to jitter (the caller rejects it).
     """
     t = np.asarray(meas.t, dtype=float)
     if t.size < 2 or uniform_step(t) is not None:

@@ -18,8 +18,7 @@ class IdentResult:
         Every parameter (fixed ones included), SI units.
     fixed : list of str
     stderr : dict
-        Standard error of each free parameter (SI), from the sensitivity at the optimum
-        (sandwich estimate with per-channel residual variance).
+        Standard error of each free parameter (SI), sandwich estimate.
     cost : float
         The seed's cost at the optimum (``sse`` or ``frobenius``), SI.
     nfev : int
@@ -31,29 +30,22 @@ class IdentResult:
     identifiable : bool
     warnings : list of str
     x0 : list of float
-        Initial state used (estimated or given).
+        Initial state used.
     aic, bic : float
-        Information criteria of the (normalised) least-squares fit.
+        Information criteria of the normalised least-squares fit.
     starts : list of dict, optional
-        One entry per start the fit was run from: ``start`` (``"data"`` for the
-        data-driven estimate, ``"init"`` for the given one), ``from`` (its values),
-        ``cost`` (the seed's cost reached), ``params`` (free parameters reached) and
-        ``chosen``.
+        Per start: ``start`` (``"data"``, ``"init"``, ...), ``from``, ``cost``, ``params``
+        and ``chosen``.
     data_start : dict, optional
-        The data-driven estimate (``values``, ``bandwidth_hz``) or why there is none
-        (``reason``).
+        The data-driven estimate (``values``, ``bandwidth_hz``) or ``reason``.
     bands : dict, optional
-        ``name -> (lo, hi)``: the 3-sigma band of each free parameter (SI), from the
-        curvature where the cost is quadratic out to its ends, from the profile likelihood
-        where it is not (:mod:`estimator.identify.profile`); ``inf`` for a side the record
-        does not bound.
+        ``name -> (lo, hi)``: the 3-sigma band (SI; :mod:`estimator.identify.profile`),
+        ``inf`` for a side the record does not bound.
     band_method : dict, optional
         ``name -> "curvature"`` or ``"profile"``.
     offset : dict, optional
-        A constant offset found in the record (:mod:`estimator.identify.offset`): ``kind``
-        (``"road"`` or ``"channel"``), ``values`` (column -> offset, the column's SI unit),
-        ``removed`` (subtracted before the fit), ``share`` (share of the misfit at the
-        start it leaves) and ``effects`` (each as ``suspid simulate --effect`` spells it).
+        A constant offset found (:mod:`estimator.identify.offset`): ``kind``, ``values``
+        (SI), ``removed``, ``share`` and ``effects``.
     """
 
     model: str

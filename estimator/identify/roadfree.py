@@ -1,41 +1,14 @@
 """Identification with the road unknown: the body equations, fitted by modulating functions.
 
-No road vehicle measures the road under its tyres, but the body sees the road only
-through its struts. Every *body row* of the model (:meth:`SuspensionModel.body_rows`: the
-equations that hold strut forces alone) reads
-
-    sum_k M[j, k] q_k'' + sum_i g_i[j] (c_i d_i' + k_i d_i) = 0
-
-with ``d_i`` the extension of strut ``i`` (its ride height). It holds whatever the road
-does, and it is *linear* in the masses and inertias of ``M`` and in every strut's damper
-``c_i`` and spring ``k_i``. So body accelerations and ride heights (or wheel motions, or
-wheel accelerometers) determine every strut's ``c_i``, ``k_i`` by linear least squares,
-the body mass and inertias too when a spring or damper is held; a record cannot scale all
-of them at once (the equations are homogeneous), and nothing about the tyres or the wheel
-masses (the unknown road hides them).
-
-How the equations are formed (the modulating-function method of continuous-time system
-identification): each contiguous stretch of samples of length ``T`` is multiplied by the
-test functions ``phi_k(t) = w(t) exp(-j w_k t)``, ``w(t) = sin^4(pi t / T)``, ``w_k = 2 pi k
-/ T``, and integrated. ``phi_k`` and its first three derivatives vanish at both ends, so an
-integral of a derivative moves onto the test function exactly
-(``int phi x^(n) = (-1)^n int phi^(n) x``): no derivative of a noisy channel is ever taken,
-and a channel measured as position, velocity or acceleration enters the same equation.
-As ``w`` is the finite Fourier series ``3/8 - cos(2 pi t/T)/2 + cos(4 pi t/T)/8``, every such
-integral is five bins of the channel's plain FFT: ``J_k[x^(n)] = sum_m a_m (j w_{k-m})^n
-X_{k-m}``. Bins ``k >= 3`` see no constant, so a ride-height or accelerometer zero offset
-drops out exactly. When a quantity is only available as a higher derivative (a deflection
-from accelerometers alone) the whole equation is multiplied by ``(j w)^s`` (integrated
-against ``phi^(s)``), which keeps every power of ``j w`` non-negative: no integration
-drift, no high-pass to tune.
-
-The band: bins from ``k = 3`` up to where every regressor channel's spectrum stands out of
-its own noise floor (the median power of its top 16 % of bins) by :data:`SNR_MIN`: a
-regressor whose noise is as large as its signal would bias its parameter toward zero (errors
-in variables). The weights: a first ordinary least-squares pass gives the equation error's
-spectrum, smoothed over 17 bins; the second pass weights each bin by its inverse. The
-standard errors are the sandwich estimate with the bins' correlation over the window's
-reach (Bartlett weights over 4 bins), so they hold on a coloured equation error.
+Every body row of the model (:meth:`SuspensionModel.body_rows`) reads
+``sum_k M[j, k] q_k'' + sum_i g_i[j] (c_i d_i' + k_i d_i) = 0`` with ``d_i`` strut
+``i``'s extension (its ride height): it holds whatever the road does and is linear in
+the masses, inertias, dampers and springs, so body accelerations and ride heights
+determine them by least squares (up to one common scale). The equations are formed by
+integrating against ``phi_k(t) = sin^4(pi t / T) exp(-j w_k t)`` (five FFT bins per
+integral; no derivative of a noisy channel, offsets drop out from bin 3), on the band
+where every regressor stands ``SNR_MIN`` above its noise floor, weighted by the first
+pass's equation-error spectrum. The method and its measurements: docs/road-unknown.md.
 """
 from __future__ import annotations
 
@@ -49,7 +22,7 @@ from estimator.choices import ROAD_MODES
 from estimator.identify.params import Parameters
 from estimator.identify.outputs import check_magnitudes
 from estimator.identify.result import IdentResult
-from estimator.identify.start import MISFIT_FLOOR, MISFIT_SHARE
+from estimator.identify.misfit import MISFIT_FLOOR, MISFIT_SHARE
 from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
 from suspid.models.base import FloatArray, Site, SuspensionModel
@@ -58,8 +31,6 @@ from suspid.models.modes import modes
 #: window ``sin^4(pi t / T)`` as a Fourier series: coefficients of ``exp(j 2 pi m t / T)``,
 #: ``m = -2..2``
 WINDOW = {-2: 1.0 / 16.0, -1: -0.25, 0: 0.375, 1: -0.25, 2: 1.0 / 16.0}
-#: highest power of ``j w`` the window carries exactly (its derivatives 0..3 vanish at the ends)
-MAX_POWER = 4
 #: first bin used: bins 0..2 see the window's own mean (a constant offset)
 FIRST_BIN = 3
 #: a regressor channel's smoothed power must exceed its noise floor by this factor
@@ -98,13 +69,11 @@ class BodyEquations:
     rows : tuple of int
         The body rows (coordinate indices) fitted.
     regressors : dict
-        ``parameter -> per row: list of (target derivative order, terms)``, the channel
-        combinations that multiply the parameter in each body row.
+        ``parameter -> per row: list of (target derivative order, terms)``.
     names : tuple of str
-        Parameters that enter the body equations (masses, inertias, dampers, springs).
+        Parameters that enter the body equations.
     missing : list of str
-        Why a part of the equations could not be formed (a strut without its ride height
-        or wheel motion, a body coordinate without a channel); empty when complete.
+        Why a part of the equations could not be formed; empty when complete.
     shift : int
         Power of ``j w`` every equation is multiplied by (0 unless a quantity is measured
         only as a higher derivative).
@@ -128,8 +97,9 @@ class BodyEquations:
 
 
 def _source(name: str, order: int, measured: Mapping[str, FloatArray]) -> tuple[str, int] | None:
-    """The channel of quantity ``name`` (a coordinate or ride height) that best gives its
-    ``order``-th derivative: the same order, else the nearest lower one, else the nearest higher."""
+    """The channel of quantity ``name`` that best gives its ``order``-th derivative: the same
+    order, else the nearest lower one, else the nearest higher.
+    """
     have = {o: name + suf for o, suf in _ORDER_SUFFIX.items() if name + suf in measured}
     for o in [order] + list(range(order - 1, -1, -1)) + list(range(order + 1, 3)):
         if o in have:
@@ -234,8 +204,9 @@ def body_equations(model: SuspensionModel, measured: Mapping[str, FloatArray],
 
 def _deflection(height: str, site: Site, order: int, gj: float, model: SuspensionModel,
                 measured: Mapping[str, FloatArray]) -> list[Term] | None:
-    """Terms of ``g_i[j] d_i^(order)``: the ride height channel, else the coordinates' motion
-    (only where the strut does not stand on the road)."""
+    """Terms of ``g_i[j] d_i^(order)``: the ride height, else the coordinates' motion (a strut
+    not standing on the road).
+    """
     src = _source(height, order, measured)
     if src is not None:
         return [Term(src[0], src[1], gj)]
@@ -259,8 +230,9 @@ class _Segment:
 
 
 def _segments(meas: Measurement, channels: Sequence[str]) -> list[_Segment]:
-    """The record's stretches without a missing sample in ``channels`` or a time step
-    off the median by more than 1 %, each at least :data:`MIN_SEGMENT` samples long."""
+    """The record's stretches of at least :data:`MIN_SEGMENT` samples with no missing value in
+    ``channels`` and no time step off the median by more than 1 %.
+    """
     t = np.asarray(meas.t, dtype=float)
     if t.size < MIN_SEGMENT:
         return []
@@ -298,11 +270,9 @@ def _smooth(x: FloatArray, n: int = SMOOTH_BINS) -> FloatArray:
 
 @dataclass
 class _SegmentEquations:
-    """One segment's equations over its band.
-
-    ``X`` (rows, bins, parameters) complex regressors; ``noise`` the same shape, the
-    expected power each regressor's channel noise contributes (from the channels' noise
-    floors); ``omega`` the bins' angular frequencies (rad/s); ``T`` the length (s).
+    """One segment's equations over its band: complex regressors ``X`` (rows, bins,
+    parameters), their expected noise power ``noise``, the bins' ``omega`` (rad/s) and the
+    length ``T`` (s).
     """
 
     X: np.ndarray
@@ -312,26 +282,25 @@ class _SegmentEquations:
 
 
 def _noise_floor(Y: np.ndarray) -> float:
-    """Per-bin noise power of a spectrum: the median power of its top 16 % of bins
-    (white noise there: the median of an exponential distribution is ln 2 times its mean)."""
+    """Per-bin noise power of a spectrum: the median power of its top 16 % of bins over ln 2."""
     nb = Y.size
     top = max(4, int(0.16 * nb))
     return float(np.median(np.abs(Y[nb - top:]) ** 2) / math.log(2.0))
 
 
 def band_limit(model: SuspensionModel, p: Mapping[str, float]) -> float:
-    """Upper end of the fit band (Hz): twice the model's highest natural frequency at ``p``
-    (the wheel hop), at least :data:`MIN_BAND_HZ`. Above it a record holds what the model
-    does not (the road's roughness seen through the tyre's damping, the engine, the
-    structure) and little of the struts."""
+    """Upper end of the fit band (Hz): twice the model's highest natural frequency at ``p``, at
+    least :data:`MIN_BAND_HZ` (above it the record holds what the model does not).
+    """
     f = max((md.f_n for md in modes(model, dict(model.defaults(), **dict(p)))), default=0.0)
     return max(MIN_BAND_HZ, 2.0 * f)
 
 
 def _segment_equations(seg: _Segment, eqs: BodyEquations, free: Sequence[str], f_hi: float
                        ) -> _SegmentEquations | None:
-    """The windowed equations of one segment in the band up to ``f_hi`` (Hz) where every
-    free parameter's regressor stands :data:`SNR_MIN` above its own noise."""
+    """The windowed equations of one segment up to ``f_hi`` (Hz), on the bins where every free
+    parameter's regressor stands :data:`SNR_MIN` above its noise.
+    """
     n = seg.n
     T = n * seg.dt
     spectra = {c: np.fft.rfft(v) * seg.dt for c, v in seg.data.items()}
@@ -380,10 +349,9 @@ def _segment_equations(seg: _Segment, eqs: BodyEquations, free: Sequence[str], f
 
 
 def _cluster_scores(U: list[np.ndarray]) -> np.ndarray:
-    """Sum of the outer products of the scores summed over runs of :data:`CLUSTER_BINS`
-    neighbouring bins (a cluster-robust sandwich: the windowed bins are correlated with
-    their neighbours, runs of bins far less with each other); ``U`` holds one (bins, p)
-    score array per segment."""
+    """Cluster-robust sandwich middle: outer products of the scores summed over runs of
+    :data:`CLUSTER_BINS` bins (``U``: one (bins, p) array per segment).
+    """
     p = U[0].shape[1]
     S = np.zeros((p, p))
     for u in U:
@@ -408,10 +376,10 @@ class _Solution:
 
 def _solve(segs: list[_SegmentEquations], ip: list[int], ih: list[int],
            theta_h: FloatArray, stderr: bool = True) -> _Solution:
-    """Two passes of weighted least squares over the segments' equations: the first
-    (unweighted) gives the equation error's spectrum, the second weights each bin by its
-    inverse; the regressors' expected noise power is taken off the normal equations'
-    diagonal (errors in variables); standard errors by the sandwich with the bins' correlation."""
+    """Two passes of weighted least squares: the second weights each bin by the inverse of the
+    first pass's smoothed equation-error power; the regressors' noise power is taken off
+    the normal equations' diagonal; standard errors by the cluster sandwich.
+    """
     # per segment: A (rows, bins, p) complex, y (rows, bins) complex
     blocks = []
     for s in segs:
@@ -487,16 +455,13 @@ def _with_columns(meas: Measurement, eqs: BodyEquations,
 
 def _jackknife(segs: list[_SegmentEquations], ip: list[int], ih: list[int],
                theta_h: FloatArray) -> FloatArray:
-    """Delete-a-group jackknife standard errors of the whole fit (weights and noise
-    compensation included): the band's bins, over every segment, in :data:`JACKKNIFE_GROUPS`
-    runs of neighbouring bins, each left out in turn."""
+    """Delete-a-group jackknife standard errors over :data:`JACKKNIFE_GROUPS` runs of bins."""
     sizes = [s.omega.size for s in segs]
     total = sum(sizes)
     groups = min(JACKKNIFE_GROUPS, total // CLUSTER_BINS)
     if groups < 3:
         return np.zeros(len(ip))
-    # runs of neighbouring bins that carry equal shares of the information (the springs'
-    # is in the few lowest bins), none shorter than CLUSTER_BINS
+    # runs of neighbouring bins of equal information, none shorter than CLUSTER_BINS
     info = np.concatenate([np.sum(np.abs(s.X[:, :, ip]) ** 2 / np.maximum(s.noise[:, :, ip], 1e-300),
                                   axis=(0, 2)) for s in segs])
     share = np.cumsum(info) / max(float(info.sum()), 1e-300)
@@ -533,33 +498,26 @@ def fit_road_unknown(model: SuspensionModel, meas: Measurement, params: Paramete
     ----------
     model : SuspensionModel
     meas : Measurement
-        Body accelerations (or body motion) and every strut's ride height (or its wheel's
-        motion); road columns, if any, are not used.
+        Body accelerations (or motion) and every strut's ride height (or its wheel's
+        motion); road columns are not used.
     params : Parameters
         Held values (``vary=False``) and the given values of the free parameters (SI).
     extra : mapping, optional
         Further generalised-force columns with free coefficients: name -> one series per
-        body row (:attr:`BodyEquations.rows` order; N, N m per unit coefficient, on the
-        record's samples), e.g. an effect's force at the struts (the diagnosis). Their
-        coefficients come back in ``params`` and ``stderr`` under their names. The band is
-        judged on the model's parameters alone.
+        body row (N, N m per unit coefficient), e.g. an effect's force at the struts. Their
+        coefficients come back in ``params`` and ``stderr`` under their names.
     jackknife : bool
-        Standard errors as the larger of the sandwich and the delete-a-group jackknife
-        (default); ``False`` the sandwich alone (screening many candidate columns).
+        Standard errors as the larger of the sandwich and the jackknife; ``False`` the
+        sandwich alone.
     misfit_fails : bool
-        Whether a misfit (:func:`body_misfit`: the equations leave clearly more than the
-        measurement noise) makes the fit unsuccessful (default, as ``identify`` judges a
-        road-measured fit); ``False`` keeps ``success`` for a solved system and only warns
-        (a monitor's window, a diagnosis baseline, whose residual is the evidence).
+        Whether a misfit (:func:`body_misfit`) makes the fit unsuccessful; ``False`` only warns.
 
     Returns
     -------
     IdentResult
-        ``params`` every parameter (a parameter the record cannot determine keeps its given
-        value and has no standard error), ``stderr`` the determined free parameters'
-        (sandwich estimate), ``identifiable`` whether every free parameter is determined,
-        ``warnings`` naming the ones that are not and why, ``road`` ``"unknown"``,
-        ``undetermined`` the free parameters without a value from the record.
+        Every parameter (an undetermined one keeps its given value, no standard error),
+        ``stderr`` of the determined free parameters, ``identifiable``, ``warnings``,
+        ``road`` ``"unknown"`` and ``undetermined``.
     """
     values = params.valuesdict()
     check_magnitudes(meas.source, meas.measured)
@@ -667,14 +625,10 @@ def body_misfit(model: SuspensionModel, eqs: BodyEquations,
                 theta: FloatArray) -> dict[str, tuple[float, float]]:
     """Body rows whose in-band equation error is clearly more than measurement noise.
 
-    The equation error of row ``r`` at the estimate, ``e = sum_i theta_i X_i``, has the
-    expected power ``sum_i theta_i^2 N_i`` from the channels' noise floors alone (the
-    columns' noise is independent, or in quadrature: a damper's ``j w D`` and a spring's
-    ``D`` of one ride height). A row misfits, as a road-measured fit's channel does
-    (:data:`~estimator.identify.start.MISFIT_FLOOR`, :data:`~estimator.identify.start.MISFIT_SHARE`),
-    when its error's power exceeds that noise power by that ratio and the excess is more
-    than that share of the row's held terms' power (the body's inertia force). Measured
-    on linear and unmodelled-effect drives in docs/road-unknown.md.
+    Row ``r``'s error power is compared with ``sum_i theta_i^2 N_i`` from the channels'
+    noise floors: a misfit exceeds it by :data:`~estimator.identify.misfit.MISFIT_FLOOR`
+    with an excess above :data:`~estimator.identify.misfit.MISFIT_SHARE` of the row's held
+    terms' power.
 
     Parameters
     ----------
@@ -688,7 +642,7 @@ def body_misfit(model: SuspensionModel, eqs: BodyEquations,
     Returns
     -------
     dict
-        ``coordinate -> (ratio, share)`` of the misfit rows (dimensionless); empty when none.
+        ``coordinate -> (ratio, share)`` of the misfit rows (dimensionless).
     """
     n_rows = len(eqs.rows)
     err = np.zeros(n_rows)
@@ -724,8 +678,9 @@ def _band(segs: list[_SegmentEquations]) -> list[float]:
 def _rms_residual(model: SuspensionModel, eqs: BodyEquations,
                   blocks: list[tuple[np.ndarray, np.ndarray, _SegmentEquations]],
                   theta: FloatArray, values: Mapping[str, float]) -> dict[str, float]:
-    """In-band RMS equation error of each body row, in its acceleration channel's unit
-    (Parseval over the windowed bins, divided by the row's mass or inertia)."""
+    """In-band RMS equation error of each body row in its acceleration channel's unit (Parseval
+    over the windowed bins, divided by the row's mass or inertia).
+    """
     M = model.matrices(dict(model.defaults(), **dict(values)))[0]
     num = np.zeros(len(eqs.rows))
     den = 0.0
@@ -769,9 +724,7 @@ def _explain_undetermined(model: SuspensionModel, result: IdentResult, eqs: Body
 
 
 def is_free_response(meas: Measurement) -> bool:
-    """Whether the record is a free response: its motion is largest at the very start
-    (the first 5 % of the record) and has decayed by the last fifth to under a fifth of
-    that. Driving data (a road under the tyres) keeps moving; a bump record starts at rest."""
+    """Whether the record is a free response: largest motion at the start, decayed by the end."""
     n = meas.t.size
     if n < 40 or not meas.measured:
         return False
@@ -802,15 +755,14 @@ def resolve_road(model: SuspensionModel, meas: Measurement, requested: str | Non
     model : SuspensionModel
     meas : Measurement
     requested : {"measured", "zero", "unknown"} or None
-        ``--road``; ``None`` chooses: ``measured`` when the record has road columns, else
-        ``zero`` for a free response (:func:`is_free_response`) and ``unknown`` for
-        driving data, named in a warning.
+        ``--road``; ``None`` chooses ``measured`` with road columns, else ``zero`` for a
+        free response (:func:`is_free_response`) and ``unknown`` for driving data.
 
     Returns
     -------
     mode : str
     meas : Measurement
-        ``meas`` itself, or a copy without its road columns (``zero``, ``unknown``).
+        ``meas`` itself, or a copy without its road columns.
     warnings : list of str
 
     Raises

@@ -1,13 +1,9 @@
 """The solver: Nelder–Mead identification in log coordinates with restarts and a polish.
 
-The simplex is scipy's Nelder–Mead (``scipy.optimize.minimize(method="Nelder-Mead")``).
-Its default first simplex takes 5 % steps of each coordinate's value,
-which is meaningless when parameters span six orders of magnitude (an inertia in kg m^2
-next to a tyre stiffness in N/m). suspid optimises ``u = log(theta / theta_start)``, so a
-step of 0.1 is a 10 % change of any parameter, and every coordinate starts at 0. After the
-first run it restarts from the best vertex with a fresh, smaller simplex until the cost no
-longer improves (Nelder–Mead stalls on curved valleys; a restart re-opens the simplex). The
-``final_simplex`` of every run is kept so a sliding window can warm-start from it.
+suspid optimises ``u = log(theta / theta_start)`` with scipy's Nelder–Mead, so a step of
+0.1 is a 10 % change of any parameter whatever its scale, and restarts from the best
+vertex with a smaller simplex until the cost no longer improves. The ``final_simplex``
+of every run is kept so a sliding window can warm-start from it.
 """
 from __future__ import annotations
 
@@ -40,17 +36,13 @@ SAME_COST = 1e-3
 def too_little_data(problem: OutputErrorProblem, n_free: int, n_extra: int = 0) -> str | None:
     """Why the record cannot give estimates of ``n_free`` parameters, or ``None``.
 
-    The fit's unknowns are the free parameters, the initial states it estimates
-    (``x0="estimate"``: one per state) and ``n_extra`` more (a constant offset removed
-    before the fit: one per value). A record with no more measured values in the cost
-    than unknowns fits any of them exactly, whatever the parameters: its cost is zero at a
-    continuum of values, its residual holds no degree of freedom to scale a standard
-    error with, and the values reported are the start's or wherever the search stopped.
+    The unknowns are the free parameters, the estimated initial states and ``n_extra``
+    more (removed offsets); a record with no more values in the cost fits any of them.
 
     Parameters
     ----------
     problem : OutputErrorProblem
-        The record and its cost (``n_obs`` measured values in the cost).
+        The record and its cost.
     n_free : int
         Free parameters.
     n_extra : int
@@ -59,8 +51,7 @@ def too_little_data(problem: OutputErrorProblem, n_free: int, n_extra: int = 0) 
     Returns
     -------
     str or None
-        The warning naming the counts and the remedy, ``None`` when there are more values
-        than unknowns.
+        The warning naming the counts and the remedy; ``None`` with enough values.
     """
     n_x0 = problem.model.n_states if problem.is_estimating_x0 else 0
     unknowns = n_free + n_x0 + n_extra
@@ -82,8 +73,7 @@ def too_little_data(problem: OutputErrorProblem, n_free: int, n_extra: int = 0) 
 
 
 def withhold_estimates(res: IdentResult, reason: str) -> IdentResult:
-    """Mark ``res`` as no estimate: not a success, not identifiable, no standard error or
-    band, ``reason`` first among its warnings. Returns ``res`` (changed in place)."""
+    """Mark ``res`` as no estimate (no success, stderr or band), ``reason`` first; returns ``res``."""
     res.success = False
     res.identifiable = False
     res.stderr = {k: math.nan for k in res.stderr}
@@ -98,11 +88,7 @@ def withhold_estimates(res: IdentResult, reason: str) -> IdentResult:
 
 @dataclass
 class NMOutcome:
-    """Raw outcome of :func:`minimize_log`.
-
-    ``final_simplex`` is the last run's simplex, shape ``(n + 1, n)`` in ``u``; ``None``
-    when no run happened (``maxfev <= 0`` or ``restarts < 0``).
-    """
+    """Raw outcome of :func:`minimize_log` (``final_simplex``, shape ``(n + 1, n)`` in ``u``, or ``None``)."""
 
     u: FloatArray
     fun: float
@@ -186,27 +172,14 @@ def fit(problem: OutputErrorProblem, params: Parameters, restarts: int = 6,
         polish: bool = False, multistart: int = 0) -> tuple[IdentResult, NMOutcome]:
     """Identify the free parameters of ``problem`` by Nelder–Mead in log coordinates.
 
-    With ``polish=True`` Nelder–Mead runs to a loose tolerance (``xatol = 1e-2``, i.e. about
-    1 % per parameter, at most two restarts) and a Levenberg–Marquardt (Gauss–Newton) polish
-    on the residual vector finishes from its best vertex; if the polish does not lower the
-    cost, Nelder–Mead carries on at full tolerance instead.
-
-    ``multistart > 0`` allows up to that many further starts (log-normal scatter of 0.7
-    around the start, fixed seed) when the answer looks like a spurious local minimum: a
-    parameter more than 50x away from its start, or no convergence. The lowest cost wins;
-    a further start that returns to the best cost (within ``SAME_COST``) ends the search.
-    ``maxfev`` bounds the evaluations of every run, further start and polish together;
-    without it each start has ``DEFAULT_MAXFEV`` per free parameter for its runs, its polish
-    and the Nelder-Mead that finishes a polish that did not help. Near the optimum the
-    output-error problem is almost linear, so the polish converges in a handful of
-    Jacobians instead of the hundreds of simplex steps Nelder–Mead spends resolving the
-    last digits (unbounded problems only).
-
-    ``xatol`` (in log-parameter units, i.e. relative) and ``fatol`` (in units of the
-    normalised cost, 1 = no fit) are scipy's Nelder–Mead termination tolerances per run.
-    The defaults (1e-7, 1e-14) resolve parameters to ~1e-7 relative, far below any
-    statistical error; a tighter ``fatol`` (e.g. 1e-18) is below the rounding noise of a
-    noisy record's cost (~1e-17 x its value) and makes every noisy fit run out of budget.
+    With ``polish`` Nelder–Mead runs to ``xatol = 1e-2`` and a Levenberg–Marquardt polish on
+    the residual vector finishes (Nelder–Mead carries on if it does not lower the cost).
+    ``multistart > 0`` allows that many further starts (log-normal scatter 0.7, fixed seed)
+    when a parameter ran more than 50x from its start or the fit did not converge; the
+    lowest cost wins. ``maxfev`` bounds every run, start and polish together (default
+    ``DEFAULT_MAXFEV`` per free parameter and start). ``xatol`` (relative) and ``fatol``
+    (normalised cost) are scipy's tolerances per run; a ``fatol`` below the cost's rounding
+    makes noisy fits run out of budget.
 
     Returns
     -------
@@ -266,16 +239,11 @@ def fit(problem: OutputErrorProblem, params: Parameters, restarts: int = 6,
                 out, converged = more, more.converged
         return out, converged
 
-    # ``maxfev`` covers every run, further start and polish of this fit; without it each
-    # start has DEFAULT_MAXFEV per free parameter for its runs, polish and continuation
     own = DEFAULT_MAXFEV * max(len(free), 1)
     out, converged = run_from(np.zeros(len(free)), initial_simplex,
                               maxfev if maxfev is not None else own)
-    # Multi-start only when the answer looks like a spurious local minimum: a parameter run
-    # off by more than 50x from its start (e.g. a damper collapsing to zero while another
-    # compensates), a fit that did not converge, or a cost far above the best possible.
-    # A further start that returns to the best cost (``SAME_COST``) confirms it: the
-    # scatter finds no other basin, and the rest of the starts would repeat it.
+    # further starts only for a likely spurious local minimum (run-away, no convergence);
+    # one that returns to the best cost (``SAME_COST``) ends the search
     tries = 0
     rng = np.random.default_rng(12345)
     while (multistart > tries and len(free) > 0
@@ -372,8 +340,7 @@ def finish(problem: OutputErrorProblem, params: Parameters, p_hat: Mapping[str, 
     free = params.free
     pred = problem.predict(p_hat)
     res = pred.residual
-    # a response that overflows at p_hat (parameters far from any physical value) has no
-    # finite cost: not the 0 that a NaN-skipping sum would give
+    # a response that overflows at p_hat has no finite cost (not a NaN-skipping sum's 0)
     finite = bool(np.isfinite(res[problem.mask]).all())
     ss = float(np.nansum((res * problem.w) ** 2)) if finite else math.inf
     warnings = list(problem.meas.warnings) + list(problem.warnings)
@@ -418,8 +385,7 @@ def finish(problem: OutputErrorProblem, params: Parameters, p_hat: Mapping[str, 
                 stderr[k] = float(p_hat[k] * d[i]) if identifiable else float("inf")
         except np.linalg.LinAlgError:
             warnings.append("could not invert the sensitivity matrix for standard errors")
-        # a standard error above the value itself: the local curvature does not pin the
-        # parameter down (it could as well be zero or several times larger)
+        # a standard error above the value itself: the curvature does not pin it down
         loose = [k for k in free if math.isfinite(stderr[k]) and stderr[k] > UNDETERMINED * p_hat[k]]
         if loose:
             identifiable = False

@@ -2,7 +2,7 @@
 
 Every fitted window reports, per fitted channel, its residual over what white measurement
 noise alone would leave (``noise_floor_ratio``,
-:func:`estimator.identify.start.noise_floor_ratios`: the residual's sum of squares over half
+:func:`estimator.identify.misfit.noise_floor_ratios`: the residual's sum of squares over half
 the sum of its squared sample-to-sample differences). A fit at the noise floor measures
 about 1; a model that cannot follow the data (a ``--fix`` value far from the truth, an effect
 the model lacks, a faulty sensor) leaves a smooth misfit that raises it. :class:`MisfitWatch`
@@ -14,7 +14,7 @@ every correct fit measured (``tools/misfit_floor.py``, ``docs/monitoring.md``).
 A noise-free (or finely quantized) record has no noise floor: its ratio compares rounding
 errors and the window's interpolation error, and runs to 20-800 on fits that leave a
 millionth of the signal. So, as ``suspid identify`` judges a misfit
-(:func:`estimator.identify.start.misfit_channels`), a channel counts only when its residual's
+(:func:`estimator.identify.misfit.misfit_channels`), a channel counts only when its residual's
 excess over the noise floor is also more than ``MISFIT_SHARE`` of the window's signal
 (:func:`misfit_shares`); the two verdicts then agree on the same record.
 """
@@ -26,7 +26,7 @@ from typing import Mapping
 
 import numpy as np
 
-from estimator.identify.start import MISFIT_SHARE
+from estimator.identify.misfit import MISFIT_SHARE
 from estimator.stream.events import Notice
 from suspid.models.base import FloatArray
 
@@ -47,7 +47,7 @@ MISFIT_WINDOWS = 3
 def misfit_shares(ratios: Mapping[str, float], rms: Mapping[str, float],
                   data: Mapping[str, FloatArray]) -> dict[str, float]:
     """Per fitted channel: its residual's excess over the noise floor as a share of the
-    window's signal (dimensionless), as :func:`estimator.identify.start.misfit_measures`
+    window's signal (dimensionless), as :func:`estimator.identify.misfit.misfit_measures`
     forms it for ``identify``.
 
     Parameters

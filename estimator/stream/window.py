@@ -68,8 +68,10 @@ import scipy
 
 from estimator.identify import OutputErrorProblem, Parameters, minimize_log
 from estimator.identify.profile import SIGMAS
-from estimator.identify.start import (EXACT_FIT, cold_start, noise_floor_ratios, ratios_of_parts,
-                                      residual_noise_floor_parts, twin_of)
+from estimator.identify.misfit import (EXACT_FIT, noise_floor_ratios, ratios_of_parts,
+                                       residual_noise_floor_parts)
+from estimator.identify.multistart import twin_of
+from estimator.identify.start import cold_start
 from estimator.stream.config import WindowConfig
 from estimator.stream.windowfit import WindowFit
 from suspid.errors import UsageError
@@ -108,7 +110,7 @@ class WindowResult:
         ``deflection_rms`` (m), ``noise`` (m), ``snr``, ``missing`` (fraction).
     noise_floor_ratio : dict
         Per fitted channel, the window fit's residual over what white noise alone would
-        leave (:func:`~estimator.identify.start.noise_floor_ratios`, dimensionless; about 1
+        leave (:func:`~estimator.identify.misfit.noise_floor_ratios`, dimensionless; about 1
         at the noise floor, far above it when the model or a fixed value is wrong).
     warnings : list of str
     reason : str

@@ -9,7 +9,7 @@ import pytest
 
 from estimator.identify import OutputErrorProblem, Parameters, fit
 from estimator.identify.inputs import read_input
-from estimator.identify.start import MISFIT_FLOOR, MISFIT_SHARE, misfit_channels
+from estimator.identify.misfit import MISFIT_FLOOR, MISFIT_SHARE, misfit_channels
 from suspid.cli import main
 from suspid.models import get_model
 

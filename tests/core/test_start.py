@@ -13,9 +13,11 @@ from estimator.doe.runner import (Settings, identify_staged, measurement, run_de
                                   run_experiment, start_parameters)
 from estimator.identify import (OutputErrorProblem, Parameters, data_driven_start,
                                 estimate_start, fit, fit_from_starts)
+from estimator.identify import multistart as multistart_mod
+from estimator.identify import regression as regression_mod
 from estimator.identify import start as start_mod
 from estimator.identify.result import IdentResult
-from estimator.identify.start import NOISE_FLOOR, noise_floor_ratio
+from estimator.identify.misfit import NOISE_FLOOR, noise_floor_ratio
 from estimator.stream.config import default_config
 from estimator.stream.drivers import run_arrays
 from estimator.stream.wear_streams import damper_wear
@@ -212,6 +214,7 @@ def test_a_noisy_fit_at_the_noise_floor_skips_the_given_start_with_the_same_answ
     fast = run_design("quarter2", Settings(noise=0.5), ids=[1])["experiments"][0]
     assert [s["start"] for s in fast["starts"] if s.get("cost") is not None] == ["data"]
     monkeypatch.setattr(start_mod, "NOISE_FLOOR", 0.0)
+    monkeypatch.setattr(multistart_mod, "NOISE_FLOOR", 0.0)
     both = run_design("quarter2", Settings(noise=0.5), ids=[1])["experiments"][0]
     assert [s["start"] for s in both["starts"] if s.get("cost") is not None] == ["data", "init"]
     assert both["nfev"] > fast["nfev"]
@@ -231,18 +234,18 @@ def test_filter_impulse_responses_are_shared_and_give_the_same_filtered_signals(
     rng = np.random.default_rng(3)
     w, h = 2 * np.pi * 1.7, 0.01
     U1, U2 = rng.standard_normal((600, 3)), rng.standard_normal((600, 2))
-    start_mod._RESPONSES.clear()
-    start_mod._filter(U1, w, h)
-    assert len(start_mod._RESPONSES) == 1
-    Y_shared, T_shared = start_mod._filter(U2, w, h)  # from the kept responses
-    assert len(start_mod._RESPONSES) == 1
-    start_mod._RESPONSES.clear()
-    Y_fresh, T_fresh = start_mod._filter(U2, w, h)
+    regression_mod._RESPONSES.clear()
+    regression_mod._filter(U1, w, h)
+    assert len(regression_mod._RESPONSES) == 1
+    Y_shared, T_shared = regression_mod._filter(U2, w, h)  # from the kept responses
+    assert len(regression_mod._RESPONSES) == 1
+    regression_mod._RESPONSES.clear()
+    Y_fresh, T_fresh = regression_mod._filter(U2, w, h)
     assert np.array_equal(Y_shared, Y_fresh) and np.array_equal(T_shared, T_fresh)
-    Pb, T, Fh, d = start_mod._impulse_responses(w, h, 600)
+    Pb, T, Fh, d = regression_mod._impulse_responses(w, h, 600)
     assert not (Pb.flags.writeable or T.flags.writeable or Fh.flags.writeable)
-    start_mod._filter(U2[:400], w, h)
-    assert len(start_mod._RESPONSES) == 2
+    regression_mod._filter(U2[:400], w, h)
+    assert len(regression_mod._RESPONSES) == 2
 
 
 @pytest.mark.slow
@@ -274,8 +277,8 @@ def test_within_noise_is_the_three_sigma_cost_rise() -> None:
     near, far = copy.deepcopy(best), copy.deepcopy(best)
     near.params["c2"] += 0.5 * best.stderr["c2"]
     far.params["c2"] += 10.0 * best.stderr["c2"]
-    assert start_mod._within_noise(problem, best, near, len(best.stderr))
-    assert not start_mod._within_noise(problem, best, far, len(best.stderr))
+    assert multistart_mod._within_noise(problem, best, near, len(best.stderr))
+    assert not multistart_mod._within_noise(problem, best, far, len(best.stderr))
 
 
 def test_two_fits_far_apart_within_the_noise_are_not_a_success(
@@ -289,7 +292,8 @@ def test_two_fits_far_apart_within_the_noise_are_not_a_success(
     problem = OutputErrorProblem(m, meas, x0=e.x0)
     params = start_parameters(m, e, Settings(init_scale=0.5))
     monkeypatch.setattr(start_mod, "NOISE_FLOOR", 0.0)  # the given start runs too
-    monkeypatch.setattr(start_mod, "_within_noise", lambda *a: True)
+    monkeypatch.setattr(multistart_mod, "NOISE_FLOOR", 0.0)
+    monkeypatch.setattr(multistart_mod, "_within_noise", lambda *a: True)
     first: list[IdentResult] = []
 
     def run(start: Parameters) -> IdentResult:
@@ -317,7 +321,7 @@ def test_the_noise_floor_skip_holds_for_starts_up_to_the_agreement_factor(
     the truth. A given start 10x off (the studies' farthest) lies within ``SKIP_AGREE`` of it
     and is skipped, so a far start costs no extra time; one 50x off lies beyond it and runs
     too. Either way the answer is the same fit near the truth."""
-    assert 10.0 < start_mod.SKIP_AGREE < 50.0
+    assert 10.0 < multistart_mod.SKIP_AGREE < 50.0
     e = run_design("quarter2", Settings(noise=0.5, init_scale=scale), ids=[1])["experiments"][0]
     ran = [s["start"] for s in e["starts"] if s.get("cost") is not None]
     assert ran == (["data", "init"] if both else ["data"])
@@ -338,6 +342,7 @@ def test_a_noisy_fit_the_failed_given_start_cannot_confirm_is_not_a_success(
     problem = OutputErrorProblem(m, meas, x0=e.x0)
     params = start_parameters(m, e, Settings(init_scale=scale))
     monkeypatch.setattr(start_mod, "NOISE_FLOOR", 0.0)  # the given start runs too
+    monkeypatch.setattr(multistart_mod, "NOISE_FLOOR", 0.0)
     monkeypatch.setattr(start_mod, "KIND_MAX", 0)  # and no rescaled start
 
     def run(start: Parameters) -> IdentResult:
@@ -420,7 +425,7 @@ def test_the_rescaled_start_recovers_a_common_factor_per_kind(scale: float,
     assert set(factors) == {"damping", "stiffness"}
     assert max(abs(start[k].value / e.truth[k] - 1) for k in FREE2) < 0.05
     assert cost < problem.normalized_ss(params.valuesdict())
-    far = any(abs(np.log(f)) > np.log(start_mod.KIND_MIN_FACTOR) for f in factors.values())
+    far = any(abs(np.log(f)) > np.log(multistart_mod.KIND_MIN_FACTOR) for f in factors.values())
     assert far is proposed
 
 
@@ -438,6 +443,7 @@ def test_the_rescaled_start_runs_only_without_a_clean_answer(
     params = start_parameters(m, e, Settings(init_scale=10.0))
     if not white:
         monkeypatch.setattr(start_mod, "NOISE_FLOOR", 0.0)
+        monkeypatch.setattr(multistart_mod, "NOISE_FLOOR", 0.0)
     res = fit_from_starts(problem, params, lambda s: fit(problem, s)[0])
     assert res.success is True and res.starts is not None
     assert ("scaled" in [s["start"] for s in res.starts]) is not white
@@ -581,7 +587,7 @@ def test_the_noise_share_of_the_filtered_signals_is_known() -> None:
     for _ in range(n):
         meas = Measurement(t=t, road={}, measured={c: rng.standard_normal(t.size)
                                                    for c in m.state_names})
-        reg = start_mod._Regression(m, meas, t, 0.01, np.zeros((t.size, 2)), 2 * np.pi * 2.7,
+        reg = regression_mod._Regression(m, meas, t, 0.01, np.zeros((t.size, 2)), 2 * np.pi * 2.7,
                                     noise=True)
         mean += reg.G / n
     assert reg.B is not None
@@ -589,7 +595,7 @@ def test_the_noise_share_of_the_filtered_signals_is_known() -> None:
     assert np.all(diag > 0) and np.all(np.diag(reg.B)[12:] == 0)  # the road rows: none
     assert np.allclose(np.diag(mean)[:12] / diag, 1.0, atol=0.1)
     assert np.abs(mean - reg.B).max() < 0.1 * np.abs(reg.B).max()
-    plain = start_mod._Regression(m, meas, t, 0.01, np.zeros((t.size, 2)), 2 * np.pi * 2.7)
+    plain = regression_mod._Regression(m, meas, t, 0.01, np.zeros((t.size, 2)), 2 * np.pi * 2.7)
     assert plain.B is None
 
 
@@ -745,8 +751,8 @@ def test_the_noise_regression_is_the_plain_one_plus_the_noise_share() -> None:
             meas.measured[c] = y + 0.1 * np.std(y) * rng.standard_normal(y.size)
         t = meas.t
         U = OutputErrorProblem(m, meas).U
-        fresh = start_mod._Regression(m, meas, t, 0.002, U, 2 * np.pi * 3.0, noise=True)
-        plain = start_mod._Regression(m, meas, t, 0.002, U, 2 * np.pi * 3.0)
+        fresh = regression_mod._Regression(m, meas, t, 0.002, U, 2 * np.pi * 3.0, noise=True)
+        plain = regression_mod._Regression(m, meas, t, 0.002, U, 2 * np.pi * 3.0)
         derived = plain.with_noise()
         assert plain.B is None and derived.B is not None and fresh.B is not None
         assert np.array_equal(derived.G, fresh.G) and np.array_equal(derived.B, fresh.B)
@@ -798,13 +804,13 @@ def test_the_bandwidth_sweep_ends_at_an_estimate_that_leaves_white_noise(
     problem = OutputErrorProblem(m, meas, x0=e.x0)
     params = start_parameters(m, e, settings)
     built: list[float] = []
-    real = start_mod._Regression.__init__
+    real = regression_mod._Regression.__init__
 
     def counting(self, *a, **k):  # type: ignore[no-untyped-def]
         built.append(a[5])
         real(self, *a, **k)
 
-    monkeypatch.setattr(start_mod._Regression, "__init__", counting)
+    monkeypatch.setattr(regression_mod._Regression, "__init__", counting)
     monkeypatch.setattr(start_mod, "noise_floor_ratio", lambda *a, **k: 1.0)
     est = estimate_start(problem, params)
     # one bandwidth: the sweep's first regression, the instrument ones at the same

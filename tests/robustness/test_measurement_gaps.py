@@ -13,7 +13,7 @@ import pytest
 
 from estimator.identify import OutputErrorProblem, Parameters, data_driven_start, fit, \
     fit_from_starts
-from estimator.identify.start import FILL_MAX, SEGMENT_MIN, _segments
+from estimator.identify.regression import FILL_MAX, SEGMENT_MIN, _segments
 from suspid.cli import main
 from suspid.excitation import make_scenario
 from suspid.io.csvio import Measurement, read_measurement

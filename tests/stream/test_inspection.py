@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from estimator.inspection import (EGEA_CRITERION_DEG, G, PLATE_AMPLITUDE, contact_force_response,
-                                  eusama_band, inspect, quarter_car_problem)
+from estimator.inspection import (EGEA_CRITERION_DEG, G, PLATE_AMPLITUDE, eusama_band, inspect,
+                                  quarter_car_problem, response_function)
 from suspid.errors import UsageError
 from suspid.models import get_model
 from suspid.simulate import simulate
@@ -62,7 +62,7 @@ def test_phase_equals_the_time_domain_phase(quarter2) -> None:
         a = 2 * np.mean(F * np.sin(w * t))
         b = 2 * np.mean(F * np.cos(w * t))
         ph_time = np.degrees(np.arctan2(b, a)) % 360
-        H = contact_force_response(quarter2, p, np.array([f]))[0]
+        H = response_function(quarter2, p)(np.array([f]))[0]
         assert ph_time == pytest.approx(np.degrees(np.angle(H)) % 360, abs=0.2)
 
 
@@ -102,7 +102,7 @@ def test_a_plugin_quarter_car_takes_the_test_and_matches_its_time_domain_shaker(
     t, r, F = shaker(model, p, f)
     w = 2 * np.pi * f
     ph_time = np.degrees(np.arctan2(2 * np.mean(F * np.cos(w * t)), 2 * np.mean(F * np.sin(w * t))))
-    H = contact_force_response(model, p, np.array([f]))[0]
+    H = response_function(model, p)(np.array([f]))[0]
     assert ph_time % 360 == pytest.approx(np.degrees(np.angle(H)) % 360, abs=0.2)
     # an undamped tyre is quarter2 with c2 = 0: the same numbers from the other model
     ref = inspect(dict(p, c2=0.0), get_model("quarter2"))
@@ -150,13 +150,13 @@ def test_inspection_search_finds_the_dense_grid_extrema(quarter2) -> None:
         p = dict(base, c1=c1)
         res = inspect(p, quarter2)
         f = np.geomspace(2.0, 25.0, 200_001)
-        H = contact_force_response(quarter2, p, f)
+        H = response_function(quarter2, p)(f)
         fs = (p["m1"] + p["m2"]) * 9.80665
         rh = 100 * (fs - 0.003 * np.abs(H)) / fs
         assert res.eusama_pct == pytest.approx(max(0.0, rh.min()), abs=1e-6)
         assert res.eusama_f_hz == pytest.approx(f[np.argmin(rh)], rel=1e-4)
         fb = np.geomspace(max(2.0, res.f_body_hz), min(25.0, res.f_wheel_hz), 200_001)
-        ph = np.degrees(np.unwrap(np.angle(contact_force_response(
-            quarter2, p, np.concatenate([[1e-3], fb])))))
+        ph = np.degrees(np.unwrap(np.angle(response_function(quarter2, p)(
+            np.concatenate([[1e-3], fb])))))
         ph = (ph - 360 * np.round((ph[0] - 180) / 360))[1:]
         assert res.phi_min_deg == pytest.approx(ph.min(), abs=1e-6)

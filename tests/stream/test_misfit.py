@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from estimator.identify import OutputErrorProblem
-from estimator.identify.start import noise_floor_ratio, noise_floor_ratios
+from estimator.identify.misfit import noise_floor_ratio, noise_floor_ratios
 from estimator.stream.misfit import MISFIT_RATIO, MISFIT_WINDOWS, MisfitWatch, misfit_shares
 from estimator.stream.wear_streams import damper_wear
 from suspid.io.csvio import Measurement, write_measurement
