@@ -24,15 +24,11 @@ _CAN_ERR_FLAG = 0x20000000
 _ODD_BLOCK = 4096
 #: characters of a hex payload
 _HEX_DIGITS = "0123456789abcdefABCDEF"
-_CAN_EFF_FLAG = 0x80000000
 
 
 def _line_fault(parts: list[str]) -> str | None:
-    """Why the fields of a candump -L line are no frame (``None``: they may be one).
-
-    The checks python-can's reader does not make, or makes with an unhelpful error: the
-    ``(seconds)`` first, ``ID#DATA`` third, at most 8 bytes in a classic frame.
-    """
+    """Why the fields of a candump -L line are no frame (``None``: they may be one): the checks
+    python-can's reader does not make, or makes with an unhelpful error."""
     ts_s = parts[0]
     if ts_s[0] != "(" or ts_s[-1] != ")":
         return f"expected '(seconds)' first, got {ts_s[:24]!r}"
@@ -58,14 +54,11 @@ def _canutils(lines: list[str]) -> list[can.Message]:
 
 def _candump_odd(path: Path, numbered: Iterable[tuple[int, int, str]],
                  stats: ReadStats) -> Iterator[tuple[int, can.Message]]:
-    """The candump -L lines the array parser (:func:`_candump_chunk`) leaves: CAN FD
-    ``ID##<flags><data>``, remote ``ID#R[len]``, odd spacing, bad lines.
+    """The lines the array parser leaves (CAN FD, remote, odd spacing, bad lines) through
+    python-can's reader, a block at a time (a failing block line by line).
 
-    ``numbered`` gives ``(tag, lineno, text)``; yields ``(tag, message)`` in line order.
-    The lines are read by python-can's :class:`can.CanutilsLogReader` (a block of lines at
-    once; a block it fails on line by line); error frames (the error flag in an extended
-    ID) are made as the array parser makes them, the interface name is kept as text. A
-    line that is no frame is counted in ``stats`` as ``path:lineno`` with the reason.
+    ``numbered`` gives ``(tag, lineno, text)``; yields ``(tag, message)`` in line order, error
+    frames made as the array parser makes them; a bad line is counted in ``stats``.
     """
     frames = 0
     block: list[tuple[int, int, list[str], str | None]] = []
@@ -114,12 +107,8 @@ def _candump_odd(path: Path, numbered: Iterable[tuple[int, int, str]],
 
 
 def read_candump(path: Path, stats: ReadStats) -> Iterator[can.Message]:
-    """candump -L lines as :class:`can.Message`: the array reader's frames
-    (:func:`read_candump_arrays`), each with its interface as ``channel``.
-
-    Read 64 KiB at a time (~1,500 frames): a stream of messages keeps the parse's
-    temporaries (~7x the chunk) small whatever the log's length.
-    """
+    """candump -L lines as :class:`can.Message` (the array reader's frames, 64 KiB at a time),
+    each with its interface as ``channel``."""
     for fa, codes, names in candump_batches(path, stats, 1 << 16):
         yield from fa.iter_messages(names, codes)
 
@@ -148,13 +137,9 @@ _MAX_LAYOUTS = 8
 
 
 def _line_layout(line: bytes) -> tuple[int, int, int, int, int, int] | None:
-    """Byte positions ``(close, dot, sp1, sp2, hash, sp3)`` of a regular candump line.
-
-    Regular: ``(DIGITS.DIGITS) IFACE HEXID#HEXDATA[ ...]`` with single spaces, any number
-    of timestamp digits (epoch times such as ``1631416514.717133`` have 16; the value is
-    converted exactly whatever the count, see :func:`_parse_layout`), 1-8 ID digits and an
-    even number (<= 16) of data digits; ``None`` otherwise. Only positions are read here:
-    the characters are checked by the caller for every line sharing the layout.
+    """Byte positions ``(close, dot, sp1, sp2, hash, sp3)`` of a regular candump line
+    (``(DIGITS.DIGITS) IFACE HEXID#HEXDATA[ ...]``, single spaces, 1-8 ID digits, up to 8 data
+    bytes), else ``None``. The characters are checked later, for every line of the layout.
     """
     if line[:1] != b"(":
         return None
@@ -181,10 +166,7 @@ def _digits_value(chars: np.ndarray, lut: np.ndarray, base: float
                   ) -> tuple[np.ndarray, np.ndarray]:
     """``(value, ok)`` of rows of digit characters (decimal or hex by ``lut``/``base``).
 
-    Exact while the value is below 2**53 (up to 15 decimal or 13 hex digits): every partial
-    value is then an integer below 2**53. A longer row may be rounded, but never below
-    2**53 once the exact value reaches it (each step rounds a non-decreasing result to
-    nearest and 2**53 is a float), so ``value < 2**53`` proves the value exact.
+    A ``value`` below 2**53 is exact (a rounded partial value never falls below 2**53).
     """
     d = lut[chars]
     acc = d[:, 0].astype(np.float64)
@@ -199,11 +181,8 @@ def _digits_value(chars: np.ndarray, lut: np.ndarray, base: float
 
 def _parse_layout(rows: np.ndarray, layout: tuple[int, int, int, int, int, int]
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Parse lines of one layout (``rows`` (m, L) uint8, one line per row).
-
-    Returns ``(good, timestamp, arbitration_id, data)``; ``good`` is False for a row whose
-    characters do not fit the layout (it goes through the message parser instead).
-    """
+    """Parse lines of one layout (``rows`` (m, L) uint8): ``(good, timestamp, arbitration_id,
+    data)``, ``good`` false for a row that does not fit (left to the message parser)."""
     close, dot, sp1, sp2, hs, sp3 = layout
     m, length = rows.shape
     good = (rows[:, 0] == 40) & (rows[:, close] == 41) & (rows[:, sp1] == 32)
@@ -216,14 +195,8 @@ def _parse_layout(rows: np.ndarray, layout: tuple[int, int, int, int, int, int]
     n_frac, ok_frac = _digits_value(rows[:, dot + 1:close], _DIGVAL, 10.0)
     nf = close - dot - 1
     good &= ok_int & ok_frac
-    # The timestamp INT.FRAC is the integer N = INT * 10**nf + FRAC over 10**nf. While
-    # N < 2**53 (every candump/python-can time "%.6f" before the year 2255: 1631416514.717133
-    # is N = 1.6e15) N is exact, and so is 10**nf for nf <= 22: one IEEE division then
-    # gives the correctly rounded quotient, which is what float(str) returns (Clinger's
-    # fast path). INT + FRAC / 10**nf would round twice: 1 ulp off for 3.794462 and for
-    # ~5 % of random one-digit-second times.
-    # A computed N below 2**53 proves the exact one is (see _digits_value); the other rows
-    # (17+ significant digits, e.g. nanosecond epoch times) are converted by float() itself.
+    # INT.FRAC = N / 10**nf with N exact below 2**53: one division rounds as float(text) does
+    # (docs/can.md, Logs); the other rows are converted by float() itself
     if nf <= 22:
         p10 = float(10 ** nf)
         num = n_int * p10 + n_frac
@@ -255,9 +228,8 @@ _FEW_NAMES = 4
 
 
 def _name_codes(iface: np.ndarray, code_of: Callable[[str], int]) -> np.ndarray | int:
-    """The code (``code_of(name)``) of each fixed-width interface name of ``iface`` (an
-    ``S<n>`` array): one code when all are equal, else a comparison per name while there are
-    few (a log of two or three buses), a sort beyond."""
+    """The code (``code_of(name)``) of each interface name of ``iface`` (an ``S<n>`` array):
+    one code when all are equal, a comparison per name while few, a sort beyond."""
     first = iface[0]
     same = iface == first
     if bool(same.all()):
@@ -282,13 +254,10 @@ def _candump_chunk(buf: bytes, path: Path, line0: int, stats: ReadStats
                    ) -> tuple[FrameArrays, int, np.ndarray, list[str]]:
     """Parse whole candump -L lines (``buf`` ends at a line end or at the file end).
 
-    Lines are grouped by length; a group's first line gives the byte positions of the
-    fields (:func:`_line_layout`) and every line of that layout is parsed at once with
-    column operations (:func:`_parse_layout`). Lines that fit no layout -- malformed, FD,
-    remote, odd spacing, control characters -- go through :func:`_candump_odd` (python-can's
-    reader), in file order, with the bad lines counted by file line number. Returns the frames in file order, the number of lines (for numbering the
-    next chunk; a lone ``\\r`` is a line break of its own, as for a text reader), and each
-    frame's interface as a code (int64 per frame) into a list of interface names.
+    Lines are grouped by length; a group's first line gives the field positions and every
+    line of that layout is parsed at once; the others go through :func:`_candump_odd`.
+    Returns the frames in file order, the number of lines (a lone ``\\r`` counts as a line
+    break), each frame's interface code and the interface names.
     """
     b = np.frombuffer(buf, dtype=np.uint8)
     nl = np.flatnonzero(b == 10)
@@ -400,41 +369,26 @@ def _candump_chunk(buf: bytes, path: Path, line0: int, stats: ReadStats
         lid[ft] = 0
         lnb[ft] = 0
         ldata[ft] = 0
+    regular = FrameArrays(lt, lid, ext, ft, lnb, ldata)
     if not slow_msgs:   # every frame from a regular line: in file order already
         if n_fast == nlines:
-            return FrameArrays(lt, lid, ext, ft, lnb, ldata), total_lines, lcode, names
-        return (FrameArrays(lt[fast], lid[fast], ext[fast], ft[fast], lnb[fast], ldata[fast]),
-                total_lines, lcode[fast], names)
+            return regular, total_lines, lcode, names
+        return regular.select(fast), total_lines, lcode[fast], names
     where = np.array(slow_line, dtype=np.int64)
     np.add.at(per_line, where, 1)
     n = int(per_line.sum())
     offs = np.cumsum(per_line) - per_line
-    out = FrameArrays(np.zeros(n), np.zeros(n, np.int64), np.zeros(n, bool), np.zeros(n, bool),
-                      np.zeros(n, np.int64), np.zeros((n, 8), np.uint8))
+    out = FrameArrays.empty(n)
     codes = np.zeros(n, np.int32)
-    at = offs[fast]
-    codes[at] = lcode[fast]
-    out.timestamp[at] = lt[fast]
-    out.arbitration_id[at] = lid[fast]
-    out.is_extended[at] = ext[fast]
-    out.frame_type[at] = ft[fast]
-    out.length[at] = lnb[fast]
-    out.data[at] = ldata[fast]
-    # the line-by-line frames, converted at once (a conversion per line made a log of
-    # irregular lines ~10x slower to read)
+    codes[offs[fast]] = lcode[fast]
+    out.put(offs[fast], regular.select(fast))
+    # the line-by-line frames, converted at once
     extra = FrameArrays.from_messages(slow_msgs)
     first = np.flatnonzero(np.r_[True, where[1:] != where[:-1]])   # a line's first frame
     nth = np.arange(where.size) - np.repeat(first, np.diff(np.r_[first, where.size]))
     at = offs[where] + nth
     codes[at] = [code_of(str(m.channel)) for m in slow_msgs]
-    out.timestamp[at] = extra.timestamp
-    out.arbitration_id[at] = extra.arbitration_id
-    out.is_extended[at] = extra.is_extended
-    out.frame_type[at] = extra.frame_type
-    out.length[at] = extra.length
-    out.data[at] = extra.data
-    for j, payload in extra.long_data.items():
-        out.long_data[int(at[j])] = payload
+    out.put(at, extra)
     return out, total_lines, codes, names
 
 
@@ -442,21 +396,17 @@ def read_candump_arrays(path: str | Path, stats: Optional[ReadStats] = None, *,
                         chunk_bytes: int = 1 << 19) -> Iterator[FrameArrays]:
     """The frames of a candump -L log as :class:`FrameArrays`, about ``chunk_bytes`` at a time.
 
-    Same frames, malformed-line counts, reasons and line numbers as the message reader
-    (:func:`read_log`), ~10x faster: the regular lines are parsed with array operations on
-    the file's bytes, the rest line by line.
+    Same frames, malformed-line counts, reasons and line numbers as the message reader, ~10x
+    faster.
 
     Parameters
     ----------
     path : str or Path
         A candump -L log.
     stats : ReadStats, optional
-        Filled with frames read and lines skipped, and the frames per interface.
+        Filled with frames read, lines skipped and the frames per interface.
     chunk_bytes : int
-        Bytes read per step (a chunk ends at a line end; 512 KiB is ~12 k frames). The
-        parse's temporaries are about 7x the chunk, so this bounds the reader's memory
-        whatever the log's length; larger chunks are no faster (measured: 8 MiB and 512 KiB
-        load a 79 k-frame log in the same 100 ms, with a peak of 21.7 MB against 7.9 MB).
+        Bytes read per step (ends at a line end); the parse's temporaries are ~7x the chunk.
 
     Raises
     ------
@@ -471,7 +421,7 @@ def read_candump_arrays(path: str | Path, stats: Optional[ReadStats] = None, *,
 
 def candump_batches(p: Path, stats: Optional[ReadStats],
                       chunk_bytes: int = 1 << 19) -> Iterator[LabelledFrames]:
-    """:func:`read_candump_arrays` with each frame's interface (see :data:`LabelledFrames`)."""
+    """:func:`read_candump_arrays` with each frame's interface (:data:`LabelledFrames`)."""
     st = stats if stats is not None else ReadStats()
     try:
         fh = p.open("rb")

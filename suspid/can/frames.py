@@ -17,9 +17,8 @@ import numpy as np
 from suspid.can.formats import log_suffix
 from suspid.errors import UsageError
 
-#: ASC and BLF count from 1 in the file and python-can gives ``0``; TRC's bus column and
-#: MDF4's ``BusChannel`` are given as written (``1``); candump names the interface
-#: (``can0``), a string
+#: the file's number of python-can's ``Message.channel`` 0: ASC and BLF count from 1 in the
+#: file, python-can from 0; TRC and MDF4 as written; candump names the interface (``can0``)
 _CHANNEL_BASE = {".asc": 1, ".blf": 1, ".trc": 0, ".mf4": 0}
 #: an option value naming a numbered channel: ``1``, ``CAN1`` (CANedge), ``ch1``, ``channel 1``
 _CHANNEL_NUMBER = re.compile(r"(?:can|ch|channel)?\s*(\d+)", re.IGNORECASE)
@@ -28,7 +27,7 @@ NO_CHANNEL = "none"
 
 
 def channel_label(suffix: str, channel: object) -> str:
-    """A frame's bus channel as the log file names it (what a user reads in the file).
+    """A frame's bus channel as the log file names it.
 
     Parameters
     ----------
@@ -40,9 +39,8 @@ def channel_label(suffix: str, channel: object) -> str:
     Returns
     -------
     str
-        ``"1"``, ``"2"``, ... for the numbered formats (ASC/BLF channel 1, TRC bus 1,
-        MDF4 ``BusChannel`` 1 = CANedge CAN1), the interface name for candump
-        (``"can0"``), :data:`NO_CHANNEL` when the frame carries none.
+        ``"1"``, ``"2"``, ... for the numbered formats (ASC/BLF/TRC/MDF4 channel 1 is ``"1"``),
+        the interface name for candump (``"can0"``), :data:`NO_CHANNEL` for none.
     """
     if channel is None:
         return NO_CHANNEL
@@ -52,11 +50,8 @@ def channel_label(suffix: str, channel: object) -> str:
 
 
 def channel_wanted(suffix: str, text: str) -> str:
-    """The channel label (:func:`channel_label`) that an option value names in a log.
-
-    For the numbered formats ``1``, ``CAN1``, ``ch1`` and ``channel 1`` all name channel 1;
-    for candump the value is the interface name as written (``can1``).
-    """
+    """The channel label (:func:`channel_label`) that an option value names in a log:
+    ``1``, ``CAN1``, ``ch1``, ``channel 1`` name channel 1; for candump the interface name."""
     text = text.strip()
     if suffix == ".log":
         return text
@@ -95,14 +90,13 @@ class ReadStats:
     examples : list of str
         The first few problems, ``file:line: reason``.
     channels : dict
-        Per bus channel of the log, as the file names it (:func:`channel_label`: ``"1"``,
-        ``"can0"``): frame key (CAN ID, bit 31 set for an extended one) -> frames read.
-        Filled by :func:`read_log` and :func:`read_log_arrays`.
+        Per bus channel (:func:`channel_label`): frame key (CAN ID, bit 31 set for an
+        extended one) -> frames read.
     other_channel : int
-        Frames of other channels than the one asked for, skipped (not yielded).
+        Frames of other channels than the one asked for, skipped.
     damage : str
-        Where a binary file is damaged (:mod:`suspid.can.damage`), one line naming the file
-        and the byte; ``""`` for a whole file. Counted once in ``malformed``.
+        Where a binary file is damaged, one line naming the file and the byte; ``""`` for a
+        whole file. Counted once in ``malformed``.
     """
 
     frames: int = 0
@@ -193,10 +187,17 @@ class FrameArrays:
         return int(self.timestamp.shape[0])
 
     @classmethod
-    def empty(cls) -> "FrameArrays":
-        """A batch of no frames."""
-        return cls(np.empty(0), np.empty(0, np.int64), np.empty(0, bool), np.empty(0, bool),
-                   np.empty(0, np.int64), np.empty((0, 8), np.uint8))
+    def empty(cls, n: int = 0) -> "FrameArrays":
+        """A batch of ``n`` frames of zeros."""
+        return cls(np.zeros(n), np.zeros(n, np.int64), np.zeros(n, bool), np.zeros(n, bool),
+                   np.zeros(n, np.int64), np.zeros((n, 8), np.uint8))
+
+    def put(self, at: np.ndarray, src: "FrameArrays") -> None:
+        """Write the frames of ``src`` into rows ``at``."""
+        for name in ("timestamp", "arbitration_id", "is_extended", "frame_type", "length", "data"):
+            getattr(self, name)[at] = getattr(src, name)
+        for j, payload in src.long_data.items():
+            self.long_data[int(at[j])] = payload
 
     @classmethod
     def from_messages(cls, messages: Sequence[can.Message]) -> "FrameArrays":
@@ -249,15 +250,9 @@ class FrameArrays:
             return got
         return self.data[i, :int(self.length[i])].tobytes()
 
-    def messages(self, channels: Sequence[str] | None = None,
-                 codes: np.ndarray | None = None) -> list[can.Message]:
-        """The frames as python-can messages (see :meth:`iter_messages`)."""
-        return list(self.iter_messages(channels, codes))
-
     def iter_messages(self, channels: Sequence[str] | None = None,
                       codes: np.ndarray | None = None) -> Iterator[can.Message]:
-        """The frames as python-can messages, one at a time: what the decoder reads of a
-        frame (time, ID, payload; error and remote frames as error frames, payloads over 8
+        """The frames as python-can messages (error and remote frames as error frames, over 8
         bytes as CAN FD), with ``channels[codes[i]]`` as frame ``i``'s channel when given."""
         ts = self.timestamp.tolist()
         ids = self.arbitration_id.tolist()

@@ -10,29 +10,13 @@ suffix    format                      reader / writer
 ``.mf4``  ASAM MDF 4 (CANedge)        python-can ``MF4Reader`` / ``MF4Writer`` (asammdf)
 ========  ==========================  =====================================================
 
-The formats are one table, :data:`LOG_FORMATS` (suffix -> :class:`LogFormat`: name, reader,
-writer, batch reader), which :func:`read_log`, :func:`read_log_arrays` and
-:func:`open_log_writer` dispatch on; :func:`is_can_log` and :func:`log_format` answer
-"is this a CAN log" for other modules, and an unknown suffix is a one-line
-:class:`~suspid.errors.UsageError` listing the known ones.
+The formats are one table, :data:`LOG_FORMATS` (suffix, case-insensitive -> :class:`LogFormat`),
+which :func:`read_log`, :func:`read_log_arrays` and :func:`open_log_writer` dispatch on; an
+unknown suffix is a one-line :class:`~suspid.errors.UsageError` listing the known ones.
 
-Suffixes are matched case-insensitively (CANedge writes ``.MF4``). Readers are iterators
-of :class:`can.Message` that never stop on a bad line: an unparseable line is counted in
-:class:`ReadStats` (and reported as rejected ``malformed`` by the decoder) and reading goes
-on; a binary file cut short ends the iteration with ``ReadStats.truncated`` set. The
-candump parser exists for speed: python-can's reader builds each payload byte by byte and
-stops at the first bad line; ours uses ``bytearray.fromhex`` and reads ~2x faster.
-
-For the decoder's batch path, :func:`read_log_arrays` gives the same frames as
-:class:`FrameArrays` (parallel NumPy arrays): candump logs are parsed with array
-operations on the file's bytes (:func:`read_candump_arrays`, ~10x the message reader, bad
-lines still counted with the same reasons and line numbers), the other formats are
-converted from python-can messages.
-
-Timestamps written equal the frames' ``timestamp`` to the format's resolution (1 µs for
-``.log``/``.asc``/``.trc``; BLF stores nanoseconds); the ASC writer anchors the
-``Begin Triggerblock`` date on the whole millisecond so that absolute times read back
-exactly (python-can's would drop the sub-millisecond part of the first timestamp).
+Readers never stop on a bad line: it is counted in :class:`ReadStats` and reading goes on; a
+binary file cut short ends the iteration with ``ReadStats.truncated`` set. Timestamps written
+equal the frames' ``timestamp`` to the format's resolution (1 µs; BLF ns).
 """
 from __future__ import annotations
 
@@ -83,19 +67,16 @@ def _open_log(path: str | Path, stats: Optional["ReadStats"]) -> tuple[Path, str
 
 
 def is_can_log(path: str | Path) -> bool:
-    """``True`` if the path's suffix names a CAN log format of :data:`LOG_FORMATS`
-    (case-insensitive)."""
+    """``True`` if the path's suffix names a CAN log format of :data:`LOG_FORMATS`."""
     return log_suffix(path) in LOG_FORMATS
-
 
 
 def read_log_arrays(path: str | Path, stats: Optional[ReadStats] = None, *,
                     chunk: int = 65536, channel: Optional[str] = None) -> Iterator[FrameArrays]:
     """The frames of a CAN log (format by suffix) as :class:`FrameArrays` batches.
 
-    candump -L (``.log``) goes through :func:`read_candump_arrays`; the python-can formats
-    are read as messages (:func:`read_log`) and converted ``chunk`` frames at a time.
-    Same checks, errors, ``channel`` selection and :class:`ReadStats` as :func:`read_log`.
+    candump -L is parsed as arrays; the other formats are read as messages and converted
+    ``chunk`` frames at a time. Same checks, errors, ``channel`` and stats as :func:`read_log`.
     """
     p, suf, st = _open_log(path, stats)
     batches = LOG_FORMATS[suf].read_arrays
@@ -116,21 +97,8 @@ def _message_batches(messages: Iterable[can.Message], chunk: int) -> Iterator[Fr
 
 
 def first_timestamp(path: str | Path) -> float | None:
-    """The timestamp (s; epoch where the format stores absolute times) of a log's first frame.
-
-    This is the log's own clock -- when the logger recorded the frame -- not the data time
-    the decoder derives from the sensor's tick.
-
-    Parameters
-    ----------
-    path : str or Path
-        A CAN log of any registered format.
-
-    Returns
-    -------
-    float or None
-        ``None`` for a log without a readable frame.
-    """
+    """The timestamp (s; epoch where the format stores absolute times) of a log's first frame
+    on the logger's clock, ``None`` for a log without a readable frame."""
     for msg in read_log(path):
         return float(msg.timestamp)
     return None
@@ -145,13 +113,10 @@ def read_log(path: str | Path, stats: Optional[ReadStats] = None, *,
     path : str or Path
         ``.log``, ``.asc``, ``.blf``, ``.trc`` or ``.mf4`` (any case).
     stats : ReadStats, optional
-        Filled with the number of frames read and lines skipped, and the frames per bus
-        channel (``stats.channels``).
+        Filled with the frames read, lines skipped and frames per bus channel.
     channel : str, optional
-        Only the frames of this bus channel, named as the file names it (:func:`channel_wanted`:
-        ``"1"`` or ``"CAN1"`` for channel 1 of an ASC, BLF, TRC or MDF4 log, the interface
-        name such as ``"can1"`` for candump); the others are counted in
-        ``stats.other_channel``. Default: every frame.
+        Only the frames of this bus channel (:func:`channel_wanted`: ``"1"``, ``"CAN1"``,
+        ``"can1"`` for candump); the others are counted in ``stats.other_channel``.
 
     Yields
     ------
@@ -163,8 +128,7 @@ def read_log(path: str | Path, stats: Optional[ReadStats] = None, *,
     InputError
         Missing or unreadable file, or a file whose header cannot be read.
     UsageError
-        Unknown suffix; at the end of the log, a ``channel`` that no frame has (naming the
-        channels present).
+        Unknown suffix; at the end of the log, a ``channel`` that no frame has.
     """
     p, suf, st = _open_log(path, stats)
     fmt = LOG_FORMATS[suf]
@@ -199,13 +163,8 @@ def open_log_writer(path: str | Path) -> can.io.generic.MessageWriter:
         raise InputError(f"{p}: cannot create log file: {exc.strerror or exc}") from None
 
 
-# ---- the registry ----------------------------------------------------------------------------
 def _candump_writer(path: str) -> can.io.generic.MessageWriter:
     return can.CanutilsLogWriter(path, channel="can0")
-
-
-def _candump_batches(path: Path, stats: ReadStats) -> Iterator[LabelledFrames]:
-    return candump_batches(path, stats)
 
 
 @dataclass(frozen=True)
@@ -217,14 +176,12 @@ class LogFormat:
     name : str
         Human name, for messages and docs.
     read : callable
-        ``read(path, stats) -> iterator of can.Message``, tolerant (see the module doc); may
-        raise on a file it cannot open as this format (:func:`read_log` reports it).
+        ``read(path, stats) -> iterator of can.Message``, tolerant.
     write : callable
         ``write(path) -> python-can writer``.
     read_arrays : callable or None
-        ``read_arrays(path, stats) -> iterator of LabelledFrames`` (frames with their bus
-        channels) where the format has a batch parser; ``None``: :func:`read_log_arrays`
-        converts the messages of ``read``.
+        ``read_arrays(path, stats) -> iterator of LabelledFrames`` where the format has a
+        batch parser; ``None``: the messages of ``read`` are converted.
     """
 
     name: str
@@ -233,12 +190,10 @@ class LogFormat:
     read_arrays: Optional[Callable[[Path, ReadStats], Iterator[LabelledFrames]]] = None
 
 
-#: suffix (lower case) -> format: the one table choosing readers and writers, as python-can's
-#: ``can.io`` does with its reader and writer tables. Use :func:`is_can_log` or
-#: :func:`log_format` rather than a list of suffixes of your own.
-#: The suffixes and names are :data:`suspid.can.formats.FORMATS`'s (re-exported here).
+#: suffix (lower case) -> format: the one table choosing readers and writers (use
+#: :func:`is_can_log` or :func:`log_format` rather than a list of suffixes of your own)
 LOG_FORMATS: dict[str, LogFormat] = {
-    ".log": LogFormat(FORMATS[".log"], read_candump, _candump_writer, _candump_batches),
+    ".log": LogFormat(FORMATS[".log"], read_candump, _candump_writer, candump_batches),
     ".asc": LogFormat(FORMATS[".asc"], read_asc, ASCWriter),
     ".blf": LogFormat(FORMATS[".blf"], read_blf, BLFWriter),
     ".trc": LogFormat(FORMATS[".trc"], read_trc, can.TRCWriter),

@@ -54,17 +54,11 @@ _ASC_EVENT = re.compile(r"(\s*)(\d+\.\d+)(?=\s)")
 
 
 class _AscLines(_LineCounter):
-    """ASC lines counted, with relative event times made absolute (from the trigger block).
+    """ASC lines counted, with relative event times made absolute.
 
-    An ASC file whose header says ``base hex  timestamps relative`` (a CANalyzer/CANoe
-    logging option) stamps every event with the time since the previous event; python-can's
-    reader reads every time as absolute (it records the header's mode and ignores it), so
-    such a log came out as frames about one interval after the trigger block, nearly all
-    rejected as going back in time. Here every timestamped line -- frames and the events
-    python-can skips (``Start of measurement``, status, comments with a time) alike -- adds
-    its time to a running sum kept as an exact decimal, restarted at each ``Begin
-    Triggerblock``, and the line is handed on with the sum, so the reader sees the log as if
-    it had been written with ``timestamps absolute``.
+    python-can reads the times of a ``timestamps relative`` ASC as absolute. Here every
+    timed line (frames and the events python-can skips) adds its time to an exact decimal
+    sum, restarted at each ``Begin Triggerblock``, and is handed on with the sum.
     """
 
     def __init__(self, fh: TextIO) -> None:
@@ -108,12 +102,9 @@ def _read_text_resumable(path: Path, reader: can.ASCReader | can.TRCReader,
                          counter: _LineCounter, stats: ReadStats) -> Iterator[can.Message]:
     """Run a python-can text reader on ``counter``, restarting it after a line that raises.
 
-    python-can's ASC/TRC readers parse the header inside ``__iter__`` and die on the
-    first bad data line. The reader keeps its state (base, start time, version) in
-    ``self``; after an exception the file is positioned after the bad line, so a new
-    ``__iter__`` with the header step disabled resumes exactly there. python-can has no
-    public way to resume a reader or to skip its header, hence the instance patch of
-    ``_extract_header`` below (tested in ``tests/can/test_logs.py`` on damaged logs).
+    python-can's ASC/TRC readers parse the header inside ``__iter__`` and die on the first
+    bad line; their state stays in ``self`` and the file is positioned after the bad line,
+    so a new ``__iter__`` with the header step patched out (no public API) resumes there.
     """
     first = True
     while True:
@@ -135,31 +126,31 @@ def _read_text_resumable(path: Path, reader: can.ASCReader | can.TRCReader,
             stats.bad(f"{path}:{counter.lineno}", f"{type(exc).__name__}: {exc}")
         if first:
             first = False
-            # header already parsed (state kept in the reader): do not consume lines again
-            # no public API (see above); ASC's parser returns None, TRC's the first data line
+            # header already parsed: do not consume lines again
             reader._extract_header = _skip_header  # type: ignore[method-assign, assignment]
 
 
-def read_asc(path: Path, stats: ReadStats) -> Iterator[can.Message]:
-    counter = _open_text(path, _AscLines)
+def _read_text(path: Path, stats: ReadStats, make: Callable[[TextIO], can.ASCReader | can.TRCReader],
+               lines: type[_LineCounter] = _LineCounter) -> Iterator[can.Message]:
+    """A python-can text reader (``make``) on a log opened as python-can would open it, its
+    lines counted (by ``lines``), run by :func:`_read_text_resumable`."""
+    counter = _open_text(path, lines)
     try:
-        reader = can.ASCReader(cast(TextIO, counter), relative_timestamp=False)   # duck-typed
+        reader = make(cast(TextIO, counter))   # duck-typed text stream
     except BaseException:
         counter.fh.close()
         raise
     return _read_text_resumable(path, reader, counter, stats)
+
+
+def read_asc(path: Path, stats: ReadStats) -> Iterator[can.Message]:
+    return _read_text(path, stats, lambda fh: can.ASCReader(fh, relative_timestamp=False), _AscLines)
 
 
 def read_trc(path: Path, stats: ReadStats) -> Iterator[can.Message]:
     # the TRC reader logs a warning per line it cannot parse; we count them instead
     logging.getLogger("can.io.trc").setLevel(logging.ERROR)
-    counter = _open_text(path)
-    try:
-        reader = can.TRCReader(cast(TextIO, counter))   # duck-typed text stream
-    except BaseException:
-        counter.fh.close()
-        raise
-    return _read_text_resumable(path, reader, counter, stats)
+    return _read_text(path, stats, can.TRCReader)
 
 
 #: a Vector BLF file begins with this signature and a header of ``BLF_HEADER`` bytes
@@ -183,9 +174,8 @@ def read_blf(path: Path, stats: ReadStats) -> Iterator[can.Message]:
 
 
 def _quiet_mdf4_del(original: Callable[[object], None]) -> Callable[[object], None]:
-    """``MDF4.__del__`` that skips an object whose construction failed before it opened
-    the file (asammdf's own ``__del__`` then raises ``AttributeError: _file``, which Python
-    prints as 8 lines of "Exception ignored in" after our one-line error)."""
+    """``MDF4.__del__`` that skips an object whose construction failed before it opened the
+    file (asammdf's own would print 8 lines of "Exception ignored in")."""
     def __del__(self: object) -> None:
         if hasattr(self, "_file"):
             original(self)
@@ -194,8 +184,7 @@ def _quiet_mdf4_del(original: Callable[[object], None]) -> Callable[[object], No
 
 
 def _guard_mdf4_del() -> None:
-    """Install :func:`_quiet_mdf4_del` on asammdf's ``MDF4`` (once; python-can imports it
-    as ``can.io.mf4.MDF4``, ``None`` without asammdf)."""
+    """Install :func:`_quiet_mdf4_del` on asammdf's ``MDF4`` once (if installed)."""
     mdf4 = getattr(can.io.mf4, "MDF4", None)
     if mdf4 is not None and not getattr(mdf4.__del__, "suspid_guard", False):
         mdf4.__del__ = _quiet_mdf4_del(mdf4.__del__)
@@ -207,9 +196,8 @@ def _quiet_asammdf(record: logging.LogRecord) -> bool:
 
 
 def read_mf4(path: Path, stats: ReadStats) -> Iterator[can.Message]:
-    """python-can's MF4 reader; a file cut short inside its records is read up to the last
-    whole record (:func:`~suspid.can.damage.mdf_damage`), a damaged structure is an error
-    naming the byte."""
+    """python-can's MF4 reader; a file cut inside its records is read up to the last whole
+    record, a damaged structure is an error naming the byte."""
     _guard_mdf4_del()
     damage = mdf_damage(path)
     source: str | io.BytesIO = str(path)
@@ -219,8 +207,7 @@ def read_mf4(path: Path, stats: ReadStats) -> Iterator[can.Message]:
     asammdf_log = logging.getLogger("asammdf")
     asammdf_log.addFilter(_quiet_asammdf)
     try:
-        # asammdf print()s the traceback of what it could not finalise to stdout, where the
-        # JSON result goes; the damage is named by us
+        # asammdf prints tracebacks to stdout, where the JSON result goes
         with contextlib.redirect_stdout(io.StringIO()):
             reader = can.MF4Reader(source)
     except (ValueError, OSError, struct.error, KeyError, IndexError) as exc:
@@ -259,12 +246,8 @@ def _read_binary(path: Path, reader: can.io.generic.MessageReader, stats: ReadSt
 
 
 class ASCWriter(can.ASCWriter):
-    """ASCWriter whose trigger-block date is the first timestamp floored to the millisecond.
-
-    ASC stores times relative to the ``Begin Triggerblock`` date, which has millisecond
-    resolution; python-can makes the times relative to the exact first timestamp and so
-    loses its sub-millisecond part on reading back absolute times.
-    """
+    """ASCWriter whose trigger-block date (ms resolution) is the first timestamp floored to
+    the millisecond, so that absolute times read back exactly."""
 
     def log_event(self, message: str, timestamp: Optional[float] = None) -> None:
         if not message:
@@ -284,8 +267,7 @@ class ASCWriter(can.ASCWriter):
         self.file.write(self.FORMAT_EVENT.format(timestamp=timestamp, message=message))
 
     def _format_header_datetime(self, dt: datetime) -> str:
-        # python-can writes the milliseconds unpadded ("00:00:01.5" for 5 ms), which its
-        # reader then parses as 500 ms; always write three digits
+        # python-can writes the milliseconds unpadded, which its reader misreads
         return dt.strftime(f"%a %b %d %H:%M:%S.{dt.microsecond // 1000:03d} %Y")
 
 
@@ -297,12 +279,9 @@ BLF_DATED_FROM = 631152000.0
 class BLFWriter(can.BLFWriter):
     """BLFWriter whose times read back as written when they are not epoch times.
 
-    BLF stores each frame's time as unsigned nanoseconds after the file's start date.
-    python-can takes the first frame's time as the start and writes it as a date only from
-    1990 on; below that (a CSV's ``t`` from 0.5 s, say) it writes no date, which its reader
-    takes as 0, so every time read back was short by the first one (0.5 s). Such times are
-    stored here after a start of 0, so they read back as themselves; a negative time cannot
-    be stored at all (python-can wrote it as the start) and is an error.
+    python-can writes no start date before 1990 (its reader then takes 0) while counting the
+    times from the first frame; such times are stored after a start of 0. A negative time
+    cannot be stored (BLF times are unsigned) and is an error.
     """
 
     def _add_object(self, obj_type: int, data: bytes, timestamp: Optional[float] = None) -> None:
