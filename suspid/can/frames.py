@@ -27,21 +27,9 @@ NO_CHANNEL = "none"
 
 
 def channel_label(suffix: str, channel: object) -> str:
-    """A frame's bus channel as the log file names it.
-
-    Parameters
-    ----------
-    suffix : str
-        The log's format (lower case, ``".asc"``).
-    channel : int, str or None
-        :attr:`can.Message.channel` as python-can's reader of that format gives it.
-
-    Returns
-    -------
-    str
-        ``"1"``, ``"2"``, ... for the numbered formats (ASC/BLF/TRC/MDF4 channel 1 is ``"1"``),
-        the interface name for candump (``"can0"``), :data:`NO_CHANNEL` for none.
-    """
+    """A frame's bus channel as the log file names it: ``"1"`` for channel 1 of the numbered
+    formats (``suffix`` ``.asc``, ...; ``channel`` as python-can's reader gives it), the
+    interface name for candump (``"can0"``), :data:`NO_CHANNEL` for none."""
     if channel is None:
         return NO_CHANNEL
     if isinstance(channel, (int, np.integer)) and not isinstance(channel, bool):
@@ -77,26 +65,13 @@ _KEY_SPAN = 1 << _KEY_BITS
 
 @dataclass
 class ReadStats:
-    """What a tolerant reader skipped.
+    """What a tolerant reader read and skipped.
 
-    Attributes
-    ----------
-    frames : int
-        Frames yielded.
-    malformed : int
-        Lines (or records) that could not be parsed and were skipped.
-    truncated : bool
-        A binary file ended in the middle of a record.
-    examples : list of str
-        The first few problems, ``file:line: reason``.
-    channels : dict
-        Per bus channel (:func:`channel_label`): frame key (CAN ID, bit 31 set for an
-        extended one) -> frames read.
-    other_channel : int
-        Frames of other channels than the one asked for, skipped.
-    damage : str
-        Where a binary file is damaged, one line naming the file and the byte; ``""`` for a
-        whole file. Counted once in ``malformed``.
+    ``malformed`` counts the lines or records skipped (``examples``: the first few,
+    ``file:line: reason``); ``truncated``: a binary file ended inside a record, ``damage``
+    naming where (counted once in ``malformed``); ``channels``: per bus channel
+    (:func:`channel_label`), frame key (CAN ID, bit 31 for extended) -> frames;
+    ``other_channel``: frames of other channels than the one asked for, skipped.
     """
 
     frames: int = 0
@@ -156,23 +131,10 @@ class ReadStats:
 class FrameArrays:
     """A batch of CAN frames as parallel NumPy arrays (the decoder's vectorized input).
 
-    Attributes
-    ----------
-    timestamp : ndarray of float64, shape (N,)
-        Frame times (s), as :attr:`can.Message.timestamp`.
-    arbitration_id : ndarray of int64, shape (N,)
-        CAN identifiers (without the extended flag).
-    is_extended : ndarray of bool, shape (N,)
-        29-bit identifier.
-    frame_type : ndarray of bool, shape (N,)
-        Error or remote frame (no data; the decoder rejects it as ``frame_type``).
-    length : ndarray of int64, shape (N,)
-        Payload length (bytes), ``len(msg.data)``.
-    data : ndarray of uint8, shape (N, 8)
-        Payloads, zero beyond ``length``; frames longer than 8 bytes (CAN FD) hold their
-        first 8 bytes here and the whole payload in ``long_data``.
-    long_data : dict
-        ``row index -> payload`` of the frames longer than 8 bytes.
+    Per frame: ``timestamp`` (s), ``arbitration_id`` (without the extended flag),
+    ``is_extended``, ``frame_type`` (error or remote frame: no data), ``length`` (bytes) and
+    ``data`` (N, 8) uint8, zero beyond ``length``; frames over 8 bytes (CAN FD) hold their
+    whole payload in ``long_data`` (row -> bytes).
     """
 
     timestamp: np.ndarray

@@ -1,14 +1,5 @@
-"""CAN log formats by file suffix, read tolerantly and written through python-can.
-
-========  ==========================  =====================================================
-suffix    format                      reader / writer
-========  ==========================  =====================================================
-``.log``  candump -L (SocketCAN)      own line parser (fast, bad lines counted) / python-can
-``.asc``  Vector ASCII                python-can ``ASCReader`` (absolute time) / ``ASCWriter``
-``.blf``  Vector binary logging       python-can ``BLFReader`` / ``BLFWriter``
-``.trc``  PEAK trace                  python-can ``TRCReader`` / ``TRCWriter``
-``.mf4``  ASAM MDF 4 (CANedge)        python-can ``MF4Reader`` / ``MF4Writer`` (asammdf)
-========  ==========================  =====================================================
+"""CAN log formats by file suffix (``.log`` candump, ``.asc``, ``.blf``, ``.trc``, ``.mf4``),
+read tolerantly and written through python-can (docs/can.md lists readers and writers).
 
 The formats are one table, :data:`LOG_FORMATS` (suffix, case-insensitive -> :class:`LogFormat`),
 which :func:`read_log`, :func:`read_log_arrays` and :func:`open_log_writer` dispatch on; an
@@ -111,7 +102,7 @@ def read_log(path: str | Path, stats: Optional[ReadStats] = None, *,
     Parameters
     ----------
     path : str or Path
-        ``.log``, ``.asc``, ``.blf``, ``.trc`` or ``.mf4`` (any case).
+        A log of a format of :data:`LOG_FORMATS`.
     stats : ReadStats, optional
         Filled with the frames read, lines skipped and frames per bus channel.
     channel : str, optional
@@ -121,7 +112,7 @@ def read_log(path: str | Path, stats: Optional[ReadStats] = None, *,
     Yields
     ------
     can.Message
-        In file order, with the log's timestamps (s; absolute where the format stores them).
+        In file order, with the log's timestamps (s).
 
     Raises
     ------
@@ -171,17 +162,9 @@ def _candump_writer(path: str) -> can.io.generic.MessageWriter:
 class LogFormat:
     """One CAN log format of :data:`LOG_FORMATS`.
 
-    Attributes
-    ----------
-    name : str
-        Human name, for messages and docs.
-    read : callable
-        ``read(path, stats) -> iterator of can.Message``, tolerant.
-    write : callable
-        ``write(path) -> python-can writer``.
-    read_arrays : callable or None
-        ``read_arrays(path, stats) -> iterator of LabelledFrames`` where the format has a
-        batch parser; ``None``: the messages of ``read`` are converted.
+    ``read(path, stats)`` yields messages, tolerantly; ``write(path)`` is a python-can writer;
+    ``read_arrays(path, stats)`` yields :data:`LabelledFrames` where the format has a batch
+    parser (``None``: the messages of ``read`` are converted).
     """
 
     name: str
