@@ -106,12 +106,7 @@ class BufferedSlcanBus(slcanBus):
         return msg, filtered
 
     def _read(self, timeout: Optional[float]) -> Optional[str]:
-        line = self._read_line(timeout)
-        if line is not None:
-            self._line = line
-        return line
-
-    def _read_line(self, timeout: Optional[float]) -> Optional[str]:
+        """The next Lawicel line (kept in ``_line`` for its timestamp), read in chunks."""
         buf = self._buffer
         port = self.serialPortOrig
         deadline = serial.Timeout(timeout)
@@ -122,9 +117,9 @@ class BufferedSlcanBus(slcanBus):
                 if k >= 0 and (i < 0 or k < i):
                     i = k
             if i >= 0:
-                line = buf[: i + 1].decode(errors="replace")
+                self._line = buf[: i + 1].decode(errors="replace")
                 del buf[: i + 1]
-                return line
+                return self._line
             try:
                 chunk = port.read(max(1, port.in_waiting))
             except (OSError, serial.SerialException) as exc:
@@ -232,10 +227,8 @@ class SocketcanReader:
                 if self._full:                        # behind: more is queued, no select
                     pending.extend(self.multi.recv())
                 if not pending:
-                    if timeout is not None:
-                        ready, _, _ = select.select([sock], [], [], timeout)
-                        if not ready:
-                            return None
+                    if not self._ready(timeout):
+                        return None
                     pending.extend(self.multi.recv())
                 self._full = len(pending) >= self.multi.batch
                 if not pending:
@@ -243,10 +236,8 @@ class SocketcanReader:
             if pending:
                 frame, anc, flags = pending.popleft()
             else:
-                if timeout is not None:
-                    ready, _, _ = select.select([sock], [], [], timeout)
-                    if not ready:
-                        return None
+                if not self._ready(timeout):
+                    return None
                 frame, anc, flags, _ = sock.recvmsg(CANFD_MTU, _ANC_SIZE)
         except (OSError, ValueError) as exc:
             raise can.CanOperationError(f"Error receiving: {exc}") from exc
@@ -260,6 +251,10 @@ class SocketcanReader:
             elif kind == SO_RXQ_OVFL and len(data) >= _DROPS.size:
                 self.dropped = _DROPS.unpack_from(data)[0]
         return self._message(frame, flags, stamp)
+
+    def _ready(self, timeout: Optional[float]) -> bool:
+        """Whether the socket is readable within ``timeout`` s (``None``: blocking read)."""
+        return timeout is None or bool(select.select([self.sock], [], [], timeout)[0])
 
     def _message(self, frame: bytes, flags: int, stamp: float) -> can.Message:
         ident, size, fdflags, len8 = _FRAME_HEAD.unpack_from(frame)

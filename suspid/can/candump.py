@@ -397,32 +397,16 @@ def read_candump_arrays(path: str | Path, stats: Optional[ReadStats] = None, *,
     """The frames of a candump -L log as :class:`FrameArrays`, about ``chunk_bytes`` at a time.
 
     Same frames, malformed-line counts, reasons and line numbers as the message reader, ~10x
-    faster.
-
-    Parameters
-    ----------
-    path : str or Path
-        A candump -L log.
-    stats : ReadStats, optional
-        Filled with frames read, lines skipped and the frames per interface.
-    chunk_bytes : int
-        Bytes read per step (ends at a line end); the parse's temporaries are ~7x the chunk.
-
-    Raises
-    ------
-    InputError
-        The file cannot be opened.
+    faster; ``stats`` as :func:`~suspid.can.logs.read_log` fills it; the parse's temporaries
+    are ~7x ``chunk_bytes``. Raises :class:`InputError` when the file cannot be opened.
     """
     p = Path(path)
     st = stats if stats is not None else ReadStats()
     return select_arrays(p, ".log", candump_batches(p, st, chunk_bytes), st, None)
 
 
-
-def candump_batches(p: Path, stats: Optional[ReadStats],
-                      chunk_bytes: int = 1 << 19) -> Iterator[LabelledFrames]:
+def candump_batches(p: Path, st: ReadStats, chunk_bytes: int = 1 << 19) -> Iterator[LabelledFrames]:
     """:func:`read_candump_arrays` with each frame's interface (:data:`LabelledFrames`)."""
-    st = stats if stats is not None else ReadStats()
     try:
         fh = p.open("rb")
     except OSError as exc:

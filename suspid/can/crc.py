@@ -56,15 +56,8 @@ def data_id_register(data_id: int) -> int:
 
 
 def e2e_crc(data_id: int, payload: bytes | bytearray | memoryview) -> int:
-    """E2E CRC of a frame: CRC-8 J1850 over (data ID low, data ID high, payload[1:]).
-
-    Parameters
-    ----------
-    data_id : int
-        The data ID (the frame's 11-bit CAN identifier).
-    payload : bytes-like
-        The whole frame payload; byte 0 (the CRC slot) is skipped.
-    """
+    """E2E CRC of a frame: CRC-8 J1850 over the data ID (the 11-bit CAN ID, low byte then
+    high byte) and ``payload[1:]`` (byte 0, the CRC slot, skipped)."""
     crc = data_id_register(data_id)
     table = TABLE
     for b in payload[1:]:
@@ -73,22 +66,8 @@ def e2e_crc(data_id: int, payload: bytes | bytearray | memoryview) -> int:
 
 
 def e2e_protect(payload: bytearray, data_id: int, counter: int) -> bytearray:
-    """Write the alive counter (low nibble of byte 1) and the CRC (byte 0) in place.
-
-    Parameters
-    ----------
-    payload : bytearray
-        Frame payload, at least 2 bytes; the high nibble of byte 1 is kept.
-    data_id : int
-        CAN identifier of the frame.
-    counter : int
-        Alive counter; taken modulo 15.
-
-    Returns
-    -------
-    bytearray
-        ``payload`` itself.
-    """
+    """Write the alive counter (``counter`` mod 15, low nibble of byte 1) and the CRC (byte 0)
+    into ``payload`` (at least 2 bytes) in place and return it."""
     if len(payload) < 2:
         raise ValueError(f"E2E protection needs at least 2 payload bytes, got {len(payload)}")
     payload[1] = (payload[1] & 0xF0) | (counter % COUNTER_MODULUS)

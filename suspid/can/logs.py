@@ -31,14 +31,8 @@ __all__ = ["FORMATS", "GZIP_READ", "LOG_FORMATS", "NO_CHANNEL", "FrameArrays", "
 
 
 def log_format(path: str | Path, option: str = "log", compressed: bool = True) -> str:
-    """Normalised suffix of a CAN log path (``.asc`` for a gzip-compressed ``F.asc.gz``
-    too, unless ``compressed`` is false: a writer writes plain files).
-
-    Raises
-    ------
-    UsageError
-        For a suffix that is not a known CAN log format, naming the known ones.
-    """
+    """Normalised suffix of a CAN log path (``.asc`` for ``F.asc.gz`` too, unless
+    ``compressed`` is false); a :class:`UsageError` naming the known ones for another."""
     suf = log_suffix(path, compressed)
     if suf not in LOG_FORMATS:
         known = ", ".join(f"{s} ({f.name})" for s, f in LOG_FORMATS.items())
@@ -135,15 +129,8 @@ def read_log(path: str | Path, stats: Optional[ReadStats] = None, *,
 
 
 def open_log_writer(path: str | Path) -> can.io.generic.MessageWriter:
-    """A python-can writer for the log format of ``path`` (use as a context manager).
-
-    Raises
-    ------
-    UsageError
-        Unknown suffix.
-    InputError
-        The file cannot be created.
-    """
+    """A python-can writer for the log format of ``path`` (use as a context manager); raises
+    :class:`UsageError` for an unknown suffix, :class:`InputError` if it cannot be created."""
     p = Path(path)
     fmt = LOG_FORMATS[log_format(p, "output log", compressed=False)]
     try:

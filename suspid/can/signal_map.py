@@ -105,10 +105,8 @@ def parse_mapping(text: str, where: str = "--map") -> SignalMapping:
         if m["sign"] != "-":
             raise UsageError(f"{where}: {text!r}: the mean can only be subtracted ('-mean')")
         offset = "mean"
-    elif m["off"] is not None:
-        offset = float(m["off"]) * (-1.0 if m["sign"] == "-" else 1.0)
-    elif m["poff"] is not None:
-        offset = float(m["poff"]) * (-1.0 if m["sign"] == "-" else 1.0)
+    elif m["sign"]:
+        offset = float(m["off"] if m["off"] is not None else m["poff"]) * (-1.0 if m["sign"] == "-" else 1.0)
     return SignalMapping(m["channel"], m["message"], m["signal"], scale, offset)
 
 
