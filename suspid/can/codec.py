@@ -63,9 +63,8 @@ def signal_spec(message: Message, name: str) -> SignalSpec:
     offset = float(sig.offset)
     lo, hi = lo_full, hi_full
     if not sig.is_float and scale != 0:
-        bounds = []
-        for b in (sig.minimum, sig.maximum):
-            bounds.append(None if b is None else (float(b) - offset) / scale)
+        bounds = [None if b is None else (float(b) - offset) / scale
+                  for b in (sig.minimum, sig.maximum)]
         if bounds[0] is not None and bounds[1] is not None and bounds[0] > bounds[1]:
             bounds.reverse()
         if bounds[0] is not None:
@@ -281,18 +280,13 @@ class SensorEncoder:
         for msg in sorted((db.get_message_by_name(n) for n in per_msg), key=lambda m: m.frame_id):
             pairs = per_msg[msg.name]
             sig_names = [s for _, s in pairs]
-            extra = []
-            for s in sig_names:
-                v = f"{s}Valid"
-                if any(x.name == v for x in msg.signals):
-                    extra.append(v)
-            has_sat = any(x.name == "Saturated" for x in msg.signals)
+            present = {x.name for x in msg.signals}
+            extra = [f"{s}Valid" for s in sig_names if f"{s}Valid" in present]
+            has_sat = "Saturated" in present
             names = sig_names + extra + (["Saturated"] if has_sat else [])
             codec = MessageCodec(msg, names)
-            slots = []
-            for k, (ch, s) in enumerate(pairs):
-                v = f"{s}Valid"
-                slots.append(_Slot(ch, k, names.index(v) if v in names else -1))
+            slots = [_Slot(ch, k, names.index(f"{s}Valid") if f"{s}Valid" in names else -1)
+                     for k, (ch, s) in enumerate(pairs)]
             self.plans.append(_MessagePlan(codec, slots, names.index("Saturated") if has_sat else -1))
         self.sync = MessageCodec(find_message(db, SYNC_MESSAGE), ["Tick", "PeriodUs"])
         self.saturated: dict[str, int] = {}

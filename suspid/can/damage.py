@@ -45,16 +45,8 @@ def _block(fh: BinaryIO, at: int) -> tuple[bytes, int, list[int]] | None:
 
 @dataclass(frozen=True)
 class MdfDamage:
-    """The first damage of an MDF4 file.
-
-    Attributes
-    ----------
-    what : str
-        One line without the file name.
-    whole_to : int
-        The file's first ``whole_to`` bytes hold whole records only; 0 when the file's
-        structure itself is damaged.
-    """
+    """The first damage of an MDF4 file: ``what``, one line without the file name; the file's
+    first ``whole_to`` bytes hold whole records only (0: its structure itself is damaged)."""
 
     what: str
     whole_to: int = 0

@@ -102,15 +102,9 @@ def measurement_frames(meas: Measurement, model_name: str, db: Database, t0: flo
 
 def encode_csv(csv_path: str | Path, out_path: str | Path, db: Database,
                model_name: str | None = None, t0: float = 0.0) -> EncodeResult:
-    """Encode a measurement CSV into a CAN log (format by ``out_path`` suffix).
-
-    Raises
-    ------
-    InputError
-        Unreadable CSV.
-    UsageError
-        Unknown output suffix or undeterminable model.
-    """
+    """Encode a measurement CSV into a CAN log (format by ``out_path`` suffix); raises
+    :class:`InputError` for an unreadable CSV, :class:`UsageError` for an unknown suffix or
+    model."""
     log_format(out_path, "output log")
     if is_can_log(csv_path):
         raise InputError(f"{csv_path}: --input must be a measurement CSV, got a CAN log "

@@ -81,18 +81,6 @@ class _AscLines(_LineCounter):
         return line
 
 
-def _open_text(path: Path, lines: type[_LineCounter] = _LineCounter) -> _LineCounter:
-    """A text log opened as python-can would open it, its lines counted (by ``lines``)."""
-    try:
-        if path.suffix.lower() == ".gz":
-            fh = cast(TextIO, gzip.open(path, "rt", encoding=locale.getpreferredencoding(False)))
-        else:
-            fh = path.open("r", encoding=locale.getpreferredencoding(False))
-    except OSError as exc:
-        raise InputError(f"{path}: cannot open CAN log: {exc.strerror}") from None
-    return lines(fh)
-
-
 def _skip_header(*_args: object, **_kwargs: object) -> None:
     """Stands in for a python-can text reader's header parser once the header is read."""
     return None
@@ -117,7 +105,7 @@ def _read_text_resumable(path: Path, reader: can.ASCReader | can.TRCReader,
             if stats.frames == 0:
                 raise InputError(f"{path}: not a readable gzip file after line {counter.lineno} "
                                  f"({exc})") from None
-            # cut short: the lines before the cut are the log's; keep them and name the damage
+            # cut short: keep the lines before the cut and name the damage
             stats.damaged(path, f"the compressed stream ends after line {counter.lineno} "
                                 f"({exc}): the file is cut short; {stats.frames} frames read "
                                 "before it are used")
@@ -134,7 +122,14 @@ def _read_text(path: Path, stats: ReadStats, make: Callable[[TextIO], can.ASCRea
                lines: type[_LineCounter] = _LineCounter) -> Iterator[can.Message]:
     """A python-can text reader (``make``) on a log opened as python-can would open it, its
     lines counted (by ``lines``), run by :func:`_read_text_resumable`."""
-    counter = _open_text(path, lines)
+    try:
+        if path.suffix.lower() == ".gz":
+            fh = cast(TextIO, gzip.open(path, "rt", encoding=locale.getpreferredencoding(False)))
+        else:
+            fh = path.open("r", encoding=locale.getpreferredencoding(False))
+    except OSError as exc:
+        raise InputError(f"{path}: cannot open CAN log: {exc.strerror}") from None
+    counter = lines(fh)
     try:
         reader = make(cast(TextIO, counter))   # duck-typed text stream
     except BaseException:

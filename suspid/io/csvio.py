@@ -306,13 +306,8 @@ def read_measurement(path: str | Path, model: SuspensionModel, *,
 
 def write_measurement(path: str | Path, t: FloatArray, columns: Mapping[str, FloatArray],
                       order: Iterable[str] | None = None) -> None:
-    """Write a measurement CSV with ``t`` first, then ``columns`` (SI units, ``%.10g``).
-
-    Raises
-    ------
-    InputError
-        The file cannot be created.
-    """
+    """Write a measurement CSV with ``t`` first, then ``columns`` (SI units, ``%.10g``); an
+    :class:`InputError` if the file cannot be created."""
     names = list(order) if order is not None else list(columns)
     data = np.column_stack([np.asarray(t, dtype=float)] + [np.asarray(columns[n], dtype=float)
                                                           for n in names])
