@@ -1,27 +1,13 @@
 """Opening python-can buses the same way in the node and the estimator.
 
-``--interface I --channel C`` becomes ``can.Bus(interface=I, channel=C)`` with three
-adjustments:
+``--interface I --channel C`` becomes ``can.Bus(interface=I, channel=C)``, except:
+``slcan`` + ``pty`` is the simulated node's adapter (registered in :data:`CHANNEL_FACTORIES`
+by :mod:`firmware_sim.transport`); ``slcan`` + a device is :class:`BufferedSlcanBus` (chunked
+serial reads, optionally the adapter's timestamps); ``virtual`` preserves the sender's
+timestamps; ``udp_multicast`` is refused.
 
-* ``slcan`` + ``pty``: the simulated SLCAN adapter of the sensor node
-  (:class:`firmware_sim.transport.slcan_pty.SlcanPtyBus`), for a second process to attach to;
-  it registers itself in :data:`CHANNEL_FACTORIES` when :mod:`firmware_sim.transport` is
-  imported (this base layer does not import the node);
-* ``slcan`` + a device: :class:`BufferedSlcanBus`, python-can's ``slcan`` bus reading the
-  serial port in chunks. python-can's reader takes one ``read(1)`` system call per byte
-  (~22 per frame), which caps a pty link at 1-3 k frames/s on a busy host -- about the
-  2 k frames/s of a 500 Hz quarter-car node; chunked reads lift that 5-7 fold. With
-  ``timestamps=True`` it switches the adapter's Lawicel timestamp mode on (``Z1``) and
-  gives each frame the adapter's time (ms, wrapping at 60 s, unwrapped here) instead of the
-  host's arrival time;
-* ``virtual``: ``preserve_timestamps=True`` so a frame keeps the sender's (data) time.
-
-``udp_multicast`` is refused: suspid uses no network transport.
-
-:class:`SocketcanReader` reads a SocketCAN bus's raw socket itself, to learn what
-python-can does not pass on: the kernel's count of frames dropped because the socket's
-receive queue was full (``SO_RXQ_OVFL``) and the controller's error frames by class
-(``CAN_RAW_ERR_FILTER``: RX overflow in the controller, bus-off, ...).
+:class:`SocketcanReader` reads a SocketCAN socket itself, for what python-can does not pass
+on: the kernel's drop count (``SO_RXQ_OVFL``) and the controller's error frames by class.
 """
 from __future__ import annotations
 
@@ -50,13 +36,8 @@ _HEAD = {"t": 5, "r": 5, "T": 10, "R": 10}
 
 
 def adapter_ms(line: str) -> Optional[int]:
-    """The Lawicel timestamp (ms, 0..59999) at the end of a received frame line, if any.
-
-    Parameters
-    ----------
-    line : str
-        ``tIIIL<data><tttt>\r`` and the like.
-    """
+    """The Lawicel timestamp (ms, 0..59999) at the end of a received frame line
+    (``tIIIL<data><tttt>\r``), if any."""
     body = line.rstrip("\r\a")
     head = _HEAD.get(body[:1])
     if head is None or len(body) < head:
@@ -75,15 +56,14 @@ def adapter_ms(line: str) -> Optional[int]:
 
 
 class BufferedSlcanBus(slcanBus):
-    """python-can's SLCAN bus with a chunked serial reader (same protocol, same options).
+    """python-can's SLCAN bus with a chunked serial reader (python-can reads byte by byte).
 
     Parameters
     ----------
     timestamps : bool
-        Switch the adapter's timestamp mode on (``Z1``) and use its times: frame times are
-        the host time of the first timestamped frame plus the adapter's elapsed time (the
-        4-digit ms counter unwrapped over its 60 s period). Frames without a timestamp keep
-        the host's arrival time.
+        Switch the adapter's timestamp mode on (``Z1``): frame times are the host time of the
+        first timestamped frame plus the adapter's elapsed time (its 60 s ms counter
+        unwrapped). Frames without a timestamp keep the host's arrival time.
     **kwargs
         python-can's ``slcan`` options.
     """
@@ -100,8 +80,7 @@ class BufferedSlcanBus(slcanBus):
         super().__init__(*args, **kwargs)
 
     def open(self) -> None:
-        """Open the channel (``O``); with timestamps, ``Z1`` goes first (the mode can only be
-        set while the channel is closed), so no frame arrives without its timestamp."""
+        """Open the channel (``O``); with timestamps, ``Z1`` first (set while closed)."""
         if self._ts_on:
             self._write("Z1")
         super().open()
@@ -127,12 +106,7 @@ class BufferedSlcanBus(slcanBus):
         return msg, filtered
 
     def _read(self, timeout: Optional[float]) -> Optional[str]:
-        line = self._read_line(timeout)
-        if line is not None:
-            self._line = line
-        return line
-
-    def _read_line(self, timeout: Optional[float]) -> Optional[str]:
+        """The next Lawicel line (kept in ``_line`` for its timestamp), read in chunks."""
         buf = self._buffer
         port = self.serialPortOrig
         deadline = serial.Timeout(timeout)
@@ -143,9 +117,9 @@ class BufferedSlcanBus(slcanBus):
                 if k >= 0 and (i < 0 or k < i):
                     i = k
             if i >= 0:
-                line = buf[: i + 1].decode(errors="replace")
+                self._line = buf[: i + 1].decode(errors="replace")
                 del buf[: i + 1]
-                return line
+                return self._line
             try:
                 chunk = port.read(max(1, port.in_waiting))
             except (OSError, serial.SerialException) as exc:
@@ -173,7 +147,6 @@ CAN_RTR_FLAG = 0x40000000
 CAN_ERR_FLAG = 0x20000000
 #: every error class (``CAN_ERR_MASK``)
 CAN_ERR_MASK = 0x1FFFFFFF
-CAN_MTU = 16
 CANFD_MTU = 72
 #: ``struct can_frame`` / ``canfd_frame`` head: ID, length, flags, (reserved), len8_dlc
 _FRAME_HEAD = struct.Struct("=IBB1xB")
@@ -195,13 +168,7 @@ LOSS_CLASSES = frozenset({"rx_overflow", "bus_off"})
 
 
 def error_frame_classes(msg: can.Message) -> list[str]:
-    """The classes an error frame reports (``ERROR_CLASSES``, ``CONTROLLER_DETAILS``).
-
-    Parameters
-    ----------
-    msg : can.Message
-        An error frame (``is_error_frame``); its ``arbitration_id`` holds the class bits.
-    """
+    """The classes an error frame reports (``ERROR_CLASSES``, ``CONTROLLER_DETAILS``)."""
     ident = int(msg.arbitration_id)
     out = [name for bit, name in ERROR_CLASSES.items() if ident & bit]
     if ident & 0x004 and len(msg.data) > 1:
@@ -212,33 +179,14 @@ def error_frame_classes(msg: can.Message) -> list[str]:
 class SocketcanReader:
     """Receive from a python-can SocketCAN bus with the kernel's drop count and error frames.
 
-    Switches ``SO_RXQ_OVFL`` on the bus's raw socket (the kernel then hands each frame the
-    socket's drop count so far, in the ancillary data of ``recvmsg``) and error frames on
-    (``CAN_RAW_ERR_FILTER``, every class), and parses frames as python-can's
-    ``capture_message`` does (whose ancillary-data parser expects the timestamp alone).
+    Switches ``SO_RXQ_OVFL`` and every error class on the bus's raw socket and parses frames
+    as python-can's ``capture_message`` does. Once behind, frames are taken in batches
+    (``recvmmsg``, :mod:`suspid.can.mmsg`), each with its own ancillary data.
 
-    Frames are taken off the socket in batches (``recvmmsg``, :mod:`suspid.can.mmsg`): one
-    system call for every frame queued, up to ``batch``, once the reader is behind, so a
-    reader held up (a loaded host, a virtual machine) catches up instead of losing frames at
-    the socket; each frame keeps its own ancillary data, so the drop count is exact per frame.
-
-    Parameters
-    ----------
-    bus : can.interfaces.socketcan.SocketcanBus
-        The open bus (its ``socket`` and ``channel`` are used).
-    batch : int
-        Most frames per system call (1, or no ``recvmmsg`` in the C library: one
-        ``recvmsg`` per frame).
-
-    Attributes
-    ----------
-    dropped : int
-        Frames the kernel dropped at this socket's full receive queue, as of the newest frame
-        received (drops after it show with the next frame).
-    error_frames : int
-        Error frames received (they are counted, not returned).
-    errors : collections.Counter
-        Error frames by class (:func:`error_frame_classes`).
+    ``bus`` is an open python-can SocketCAN bus; ``batch`` the most frames per system call
+    (1: one ``recvmsg`` per frame). ``dropped``: frames the kernel dropped at the socket's
+    full receive queue, as of the newest frame; ``error_frames``: error frames received
+    (counted, not returned); ``errors``: by class (:func:`error_frame_classes`).
     """
 
     def __init__(self, bus: Any, batch: int = 64) -> None:
@@ -260,8 +208,7 @@ class SocketcanReader:
         self._full = False
 
     def kernel_drops(self) -> Optional[int]:
-        """The socket's drop count now (``SO_MEMINFO``), including drops after the newest
-        frame received; ``None`` where the kernel does not report it."""
+        """The socket's drop count now (``SO_MEMINFO``); ``None`` where not reported."""
         try:
             info = self.sock.getsockopt(socket.SOL_SOCKET, SO_MEMINFO, _MEMINFO_SIZE)
         except OSError:
@@ -271,13 +218,8 @@ class SocketcanReader:
         return int(_DROPS.unpack_from(info, _MEMINFO_SIZE - _DROPS.size)[0])
 
     def recv(self, timeout: Optional[float]) -> Optional[can.Message]:
-        """The next frame or error frame (``None`` after ``timeout`` s without one).
-
-        Raises
-        ------
-        can.CanOperationError
-            The socket can no longer be read (the interface went away).
-        """
+        """The next frame or error frame (``None`` after ``timeout`` s without one); raises
+        ``can.CanOperationError`` when the socket can no longer be read."""
         sock = self.sock
         pending = self._pending
         try:
@@ -285,10 +227,8 @@ class SocketcanReader:
                 if self._full:                        # behind: more is queued, no select
                     pending.extend(self.multi.recv())
                 if not pending:
-                    if timeout is not None:
-                        ready, _, _ = select.select([sock], [], [], timeout)
-                        if not ready:
-                            return None
+                    if not self._ready(timeout):
+                        return None
                     pending.extend(self.multi.recv())
                 self._full = len(pending) >= self.multi.batch
                 if not pending:
@@ -296,10 +236,8 @@ class SocketcanReader:
             if pending:
                 frame, anc, flags = pending.popleft()
             else:
-                if timeout is not None:
-                    ready, _, _ = select.select([sock], [], [], timeout)
-                    if not ready:
-                        return None
+                if not self._ready(timeout):
+                    return None
                 frame, anc, flags, _ = sock.recvmsg(CANFD_MTU, _ANC_SIZE)
         except (OSError, ValueError) as exc:
             raise can.CanOperationError(f"Error receiving: {exc}") from exc
@@ -313,6 +251,10 @@ class SocketcanReader:
             elif kind == SO_RXQ_OVFL and len(data) >= _DROPS.size:
                 self.dropped = _DROPS.unpack_from(data)[0]
         return self._message(frame, flags, stamp)
+
+    def _ready(self, timeout: Optional[float]) -> bool:
+        """Whether the socket is readable within ``timeout`` s (``None``: blocking read)."""
+        return timeout is None or bool(select.select([self.sock], [], [], timeout)[0])
 
     def _message(self, frame: bytes, flags: int, stamp: float) -> can.Message:
         ident, size, fdflags, len8 = _FRAME_HEAD.unpack_from(frame)
@@ -342,20 +284,12 @@ class SocketcanReader:
 def open_bus(interface: str = "virtual", channel: str = "suspid", **kwargs: Any) -> can.BusABC:
     """Open a python-can bus for any suspid component.
 
-    Parameters
-    ----------
-    interface : str
-        python-can interface name (``virtual``, ``slcan``, ``socketcan``, ...).
-    channel : str
-        Channel; ``pty`` with ``slcan`` creates the simulated node adapter.
-    **kwargs
-        Passed on to the bus class.
+    ``interface`` and ``channel`` as python-can names them; ``kwargs`` go to the bus class.
 
     Raises
     ------
     UsageError
-        An interface that is refused, unknown or unavailable, or a channel that cannot be
-        opened -- in one line naming both.
+        An interface refused, unknown or unavailable, or a channel that cannot be opened.
     """
     if interface in REFUSED:
         raise UsageError(f"--interface {interface}: not supported ({REFUSED[interface]})")

@@ -1,19 +1,12 @@
 """Channel values <-> CAN frames: precompiled signal packing, quantization, E2E.
 
-Decoding every frame through ``cantools.Message.decode`` costs tens of microseconds; the
-decoder of a live bus or a 100 k-frame log needs a few. :class:`MessageCodec` therefore
-compiles, once per message, a small Python function for the selected signals: a
-:class:`struct.Struct` unpack when every signal is a byte-aligned little-endian 8/16/32/64
-bit integer (our own DBC), else shifts and masks on ``int.from_bytes`` (any Intel or
-Motorola integer signal, any bit position), with IEEE floats read by ``struct``. The scaled
-values equal cantools' ``decode(..., decode_choices=False)`` (checked in
-``tests/can/test_codec.py``).
+:class:`MessageCodec` compiles, once per message, a small decoder of the selected signals
+(one ``struct`` unpack for byte-aligned little-endian integers, else shifts and masks), far
+faster than ``cantools.Message.decode`` and equal to its ``decode_choices=False`` values.
 
-:class:`SensorEncoder` turns channel samples into the sensor frames of
-``dbc/suspension.dbc`` (the sensor node and ``suspid encode`` share it): quantization
-``raw = round((value - offset) / scale)``, saturation to the DBC range with the ``Valid``
-bit cleared and ``Saturated`` set, NaN (a missing sample) as ``Valid = 0``, then the E2E
-counter and CRC.
+:class:`SensorEncoder` turns channel samples into the sensor frames of ``dbc/suspension.dbc``:
+quantization, saturation to the DBC range (``Valid`` cleared, ``Saturated`` set), NaN as
+``Valid = 0``, then the E2E counter and CRC.
 """
 from __future__ import annotations
 
@@ -36,20 +29,9 @@ from suspid.models import get_model
 class SignalSpec:
     """Bit layout and scaling of one signal (a compiled view of a cantools signal).
 
-    Attributes
-    ----------
-    name : str
-    start : int
-        Bit position of the least significant bit counted from the right of the payload
-        read as one integer (little-endian integer for Intel signals, big-endian integer
-        for Motorola ones).
-    length : int
-        Bits.
-    signed, big_endian, is_float : bool
-    scale, offset : float
-        ``physical = raw * scale + offset``.
-    raw_min, raw_max : int
-        Raw range (from the DBC minimum/maximum, else the full bit range).
+    ``start`` is the bit of the least significant bit in the payload read as one integer
+    (little-endian for Intel signals, big-endian for Motorola ones); ``physical = raw * scale
+    + offset``; ``raw_min``/``raw_max`` the DBC range, else the full bit range.
     """
 
     name: str
@@ -81,9 +63,8 @@ def signal_spec(message: Message, name: str) -> SignalSpec:
     offset = float(sig.offset)
     lo, hi = lo_full, hi_full
     if not sig.is_float and scale != 0:
-        bounds = []
-        for b in (sig.minimum, sig.maximum):
-            bounds.append(None if b is None else (float(b) - offset) / scale)
+        bounds = [None if b is None else (float(b) - offset) / scale
+                  for b in (sig.minimum, sig.maximum)]
         if bounds[0] is not None and bounds[1] is not None and bounds[0] > bounds[1]:
             bounds.reverse()
         if bounds[0] is not None:
@@ -109,15 +90,8 @@ class MessageCodec:
     signals : sequence of str, optional
         Signals to handle, in this order (default: every non-multiplexed signal).
 
-    Attributes
-    ----------
-    names : tuple of str
-        Signal order of :meth:`decode` / :meth:`unpack_raw` results.
-    specs : tuple of SignalSpec
-    frame_id, length, name, is_extended, e2e
-        Message properties.
-    fast : bool
-        ``True`` if decoding uses one ``struct`` unpack.
+    ``names`` is the signal order of :meth:`decode` / :meth:`unpack_raw` results; ``fast``
+    is ``True`` if decoding uses one ``struct`` unpack.
     """
 
     def __init__(self, message: Message, signals: Sequence[str] | None = None) -> None:
@@ -138,14 +112,8 @@ class MessageCodec:
 
     # ---- decoding --------------------------------------------------------------------
     def _compile_unpack(self, scaled: bool) -> Callable[[bytes], tuple]:
-        """Generate the decoder of the selected signals (``scaled``: physical values).
-
-        Generated code (``exec`` of the DBC layout's numbers only) rather than a loop over
-        the signals: the decode runs once per frame wherever frames are decoded one at a
-        time (a batch's odd frames, small live batches, SN_Sync/SN_Status), and the
-        equivalent loop is measured markedly slower per frame (``tools/bench_codec.py``,
-        see docs/performance.md "One decoder path").
-        """
+        """Generate the decoder of the selected signals (``scaled``: physical values); generated
+        code is markedly faster per frame than a loop (docs/performance.md)."""
         specs = self.specs
         aligned = all(not s.big_endian and s.start % 8 == 0 and s.length in (8, 16, 32, 64)
                       and (not s.is_float or s.length in (32, 64)) for s in specs)
@@ -210,7 +178,6 @@ class MessageCodec:
                 terms.append(self._scale_term(f"r{i}", s) if scaled else f"r{i}")
             lines.append(f"    return ({', '.join(terms)}{',' if len(terms) == 1 else ''})")
         exec("\n".join(lines), ns)  # noqa: S102 - generated from the DBC layout only
-        # exec defined it from the lines above: the type system cannot see its signature
         return cast("Callable[[bytes], tuple]", ns["_dec"])
 
     @staticmethod
@@ -242,15 +209,8 @@ class MessageCodec:
         return bytearray(self.message.encode(data, scaling=False, strict=False))
 
     def to_raw(self, index: int, value: float) -> tuple[int, int]:
-        """Quantize a physical value for signal ``index``.
-
-        Returns
-        -------
-        raw : int
-            Rounded raw value, clamped to the DBC range (0 for NaN).
-        status : int
-            0 valid, 1 missing (NaN), 2 saturated (clamped).
-        """
+        """Quantize a physical value for signal ``index``: ``(raw, status)``, raw rounded and
+        clamped to the DBC range (0 for NaN), status 0 valid, 1 missing, 2 saturated."""
         s = self.specs[index]
         if value != value:  # NaN
             return 0, 1
@@ -288,20 +248,15 @@ class SensorEncoder:
     Parameters
     ----------
     db : cantools Database
-        A DBC with suspid's conventions (``SuspidChannel`` attributes, ``SN_Sync``).
+        A DBC with suspid's conventions.
     model_name : str
-        A registered model; selects the message set (the signals whose ``SuspidChannel``
-        attribute names this model).
+        A registered model; selects the message set (by ``SuspidChannel``).
     channels : iterable of str
-        Channels (and road columns) that will be given; messages carrying none of them
-        are not sent. Channels of the model that the DBC does not carry raise.
+        Channels (and road columns) that will be given; messages carrying none of them are
+        not sent; a channel the DBC does not carry raises.
 
-    Attributes
-    ----------
-    plans : list
-        The sensor messages sent each sample, in transmission order (after ``SN_Sync``).
-    saturated : dict
-        ``channel -> number of samples clamped`` so far.
+    ``plans`` are the sensor messages sent each sample, in order; ``saturated`` counts the
+    samples clamped per channel.
     """
 
     def __init__(self, db: Database, model_name: str, channels: Iterable[str]) -> None:
@@ -325,18 +280,13 @@ class SensorEncoder:
         for msg in sorted((db.get_message_by_name(n) for n in per_msg), key=lambda m: m.frame_id):
             pairs = per_msg[msg.name]
             sig_names = [s for _, s in pairs]
-            extra = []
-            for s in sig_names:
-                v = f"{s}Valid"
-                if any(x.name == v for x in msg.signals):
-                    extra.append(v)
-            has_sat = any(x.name == "Saturated" for x in msg.signals)
+            present = {x.name for x in msg.signals}
+            extra = [f"{s}Valid" for s in sig_names if f"{s}Valid" in present]
+            has_sat = "Saturated" in present
             names = sig_names + extra + (["Saturated"] if has_sat else [])
             codec = MessageCodec(msg, names)
-            slots = []
-            for k, (ch, s) in enumerate(pairs):
-                v = f"{s}Valid"
-                slots.append(_Slot(ch, k, names.index(v) if v in names else -1))
+            slots = [_Slot(ch, k, names.index(f"{s}Valid") if f"{s}Valid" in names else -1)
+                     for k, (ch, s) in enumerate(pairs)]
             self.plans.append(_MessagePlan(codec, slots, names.index("Saturated") if has_sat else -1))
         self.sync = MessageCodec(find_message(db, SYNC_MESSAGE), ["Tick", "PeriodUs"])
         self.saturated: dict[str, int] = {}
@@ -355,19 +305,8 @@ class SensorEncoder:
 
     def sample_frames(self, tick: int, values: Mapping[str, float]
                       ) -> list[tuple[int, bytearray]]:
-        """Sensor frames of one sample (without the sync frame).
-
-        Parameters
-        ----------
-        tick : int
-            Sample tick; the E2E counter of every frame is ``tick mod 15``.
-        values : mapping
-            ``channel -> value`` (SI); absent or NaN channels are sent with ``Valid = 0``.
-
-        Returns
-        -------
-        list of (frame_id, payload)
-        """
+        """``(frame_id, payload)`` of the sensor frames of sample ``tick`` (E2E counter ``tick
+        mod 15``); ``values``: channel -> value (SI), absent or NaN ones sent ``Valid = 0``."""
         counter = tick % COUNTER_MODULUS
         out = []
         for plan in self.plans:
@@ -405,9 +344,7 @@ STATE_INIT, STATE_RUNNING, STATE_DEGRADED, STATE_BUSOFF_RECOVERED, STATE_STOPPIN
 #: SN_Status.FaultFlags bits
 FAULT_BITS = {"loss": 0, "burst": 1, "stuck": 2, "bitflip": 3, "late": 4, "busoff": 5,
               "saturation": 6}
-#: SUSPID_Alert parameter kinds. The parameter ids are the DBC's ``ParamId`` value table
-#: (:func:`alert_param_ids`); the model id is the model's ``alert_id`` (the DBC's ``Model``
-#: value table names it too).
+#: SUSPID_Alert parameter kinds (parameter ids: the DBC's ``ParamId`` value table)
 PARAM_KINDS = {"mass": 0, "inertia": 1, "damping": 2, "stiffness": 3, "length": 4}
 _KIND_PREFIX = {0: "Mass", 1: "Inertia", 2: "Damping", 3: "Stiffness", 4: "Length"}
 SEVERITIES = {"info": 0, "warning": 1, "critical": 2, "forecast": 3}
@@ -449,18 +386,13 @@ def encode_alert(db: Database, model_name: str, parameter: str, value: float, no
     ----------
     db : cantools Database
         suspid's DBC.
-    model_name : str
-    parameter : str
-        Parameter name (``c1``, ``k1``, ...).
+    model_name, parameter : str
+        Model and parameter name (``c1``, ``k1``, ...).
     value, nominal : float
         Identified and nominal value (SI); clamped to the DBC range of the kind.
     severity : {"info", "warning", "critical", "forecast"}
     counter : int
-        E2E alive counter of the alert (the sender increments it per alert).
-
-    Returns
-    -------
-    can.Message
+        E2E alive counter of the alert.
     """
     param_ids = alert_param_ids(db)
     if parameter not in param_ids:

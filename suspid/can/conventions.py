@@ -1,18 +1,9 @@
 """suspid's own DBC conventions, read from a loaded database without importing cantools.
 
-Conventions of ``dbc/suspension.dbc`` (see ``docs/can.md``):
-
-* message attribute ``E2EProfile = "P01"``: byte 0 CRC-8 J1850, byte 1 low nibble alive
-  counter (:mod:`suspid.can.crc`);
-* signal attribute ``SuspidChannel = "quarter1:x quarter2:x1"``: the model channel each
-  signal carries, per model;
-* a signal ``<Name>Valid`` in the same message is the validity bit of signal ``<Name>``;
-* message ``SN_Sync`` carries the sample tick; ``SN_Status`` the node status;
-  ``SUSPID_Alert`` the estimator's maintenance alert.
-
-Loading a DBC (:func:`suspid.can.dbc.load_dbc`) needs cantools, whose import loads
-python-can and its log backends (about 0.4 s); this module only reads a database passed
-in, so the signal map and a CSV-only ``suspid identify`` do not pay that import.
+The conventions of ``dbc/suspension.dbc`` (docs/can.md): ``E2EProfile = "P01"`` messages,
+``SuspidChannel = "quarter1:x quarter2:x1"`` signal attributes, ``<Name>Valid`` validity bits,
+and the ``SN_Sync``, ``SN_Status`` and ``SUSPID_Alert`` messages. Importing cantools costs
+~0.4 s; a CSV-only ``suspid identify`` does not pay it.
 """
 from __future__ import annotations
 
@@ -35,12 +26,7 @@ ATTR_CHANNEL = "SuspidChannel"
 
 
 def default_dbc_path() -> Path:
-    """Path of suspid's ``suspension.dbc``, the one source of the bus definition.
-
-    The file is the package data ``suspid/data/suspension.dbc`` (so an installed
-    ``suspid`` finds it); the repository's ``dbc/suspension.dbc`` is a symbolic link to it
-    for users who look in ``dbc/``.
-    """
+    """Path of suspid's ``suspension.dbc`` (package data; ``dbc/`` links to it)."""
     return Path(str(resources.files("suspid") / "data" / "suspension.dbc"))
 
 
@@ -81,10 +67,8 @@ def _id_text(message: Message) -> str:
 def find_message(db: Database, ref: str, where: str = "") -> Message:
     """Message by name, or by frame ID (decimal or ``0x`` hex).
 
-    A frame ID is standard unless it has bit 31 set (the DBC's ``BO_`` notation, e.g.
-    ``0x80000100``) or exceeds 11 bits; an ID that only an extended message has also finds
-    it. A name two messages share (a standard and an extended frame of one name: an invalid
-    DBC that cantools loads, keeping one of them under the name) is an error naming both IDs.
+    A frame ID is standard unless it has bit 31 set (``0x80000100``) or exceeds 11 bits; an
+    ID only an extended message has finds it too. A name two messages share is an error.
 
     Raises
     ------
@@ -121,10 +105,8 @@ def find_message(db: Database, ref: str, where: str = "") -> Message:
 
 
 def channel_signals(db: Database, model_name: str) -> list[tuple[str, str, str]]:
-    """``(channel, message, signal)`` triples that the ``SuspidChannel`` attributes give for a model.
-
-    Empty for a DBC without suspid attributes (then a signal map is needed).
-    """
+    """``(channel, message, signal)`` triples that the ``SuspidChannel`` attributes give for a
+    model; empty for a DBC without them."""
     out: list[tuple[str, str, str]] = []
     for msg in db.messages:
         for sig in msg.signals:

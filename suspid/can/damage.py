@@ -1,18 +1,9 @@
 """Where a binary CAN log (ASAM MDF4, Vector BLF) is damaged, found from its own structure.
 
-A logger that loses power, a copy that stops early or an upload cut short leaves a binary
-log shorter than its structure says. python-can's readers then stop without a word (BLF: the
-last container is decompressed as far as it goes) or with an exception of the underlying
-library (asammdf: ``seek out of range``, ``array-shape mismatch``). The functions here read
-only block and object headers (a few bytes each) and name the first inconsistency: the
-file, the byte, what was expected and what is there.
-
-* :func:`mdf_damage`: every block reachable from the MDF4 header block must lie inside the
-  file; in an unsorted data group (a CANedge's records, each prefixed by its record ID) the
-  last record must be whole. A last data block of 24 bytes followed by data up to the end of
-  the file is the open-ended block a logger appends to (CANedge), not damage.
-* :func:`blf_damage`: every top-level object (log container) must be whole, and the file as
-  long as its header says (when the writer finalised it).
+A log cut short makes python-can's readers stop silently (BLF) or with an obscure exception
+(asammdf). These functions read only block and object headers and name the first
+inconsistency: the byte, what was expected and what is there. A last MDF4 data block of 24
+bytes followed by data up to the end is the open-ended block a CANedge appends to, not damage.
 """
 from __future__ import annotations
 
@@ -54,16 +45,8 @@ def _block(fh: BinaryIO, at: int) -> tuple[bytes, int, list[int]] | None:
 
 @dataclass(frozen=True)
 class MdfDamage:
-    """The first damage of an MDF4 file.
-
-    Attributes
-    ----------
-    what : str
-        One line without the file name (the byte, what was expected, what is there).
-    whole_to : int
-        The file's first ``whole_to`` bytes hold whole records only (a record cut short at
-        the end: read up to there); 0 when the file's structure itself is damaged.
-    """
+    """The first damage of an MDF4 file: ``what``, one line without the file name; the file's
+    first ``whole_to`` bytes hold whole records only (0: its structure itself is damaged)."""
 
     what: str
     whole_to: int = 0
@@ -74,20 +57,8 @@ def _name(bid: bytes) -> str:
 
 
 def mdf_damage(path: str | Path) -> MdfDamage | None:
-    """The first structural damage of an MDF4 file, or ``None`` when it is whole.
-
-    Parameters
-    ----------
-    path : str or Path
-        An ``.mf4`` file.
-
-    Returns
-    -------
-    MdfDamage or None
-        ``what``, e.g. ``"the block at byte 5064 (linked from the DG block at byte 2128) is
-        beyond the end of the file (4616 bytes): ..."``; ``None`` for a whole file, or one
-        that is not MDF 4 (the reader reports that itself).
-    """
+    """The first structural damage of an ``.mf4`` file; ``None`` when it is whole or not MDF 4
+    (the reader reports that itself)."""
     p = Path(path)
     size = os.path.getsize(p)
     with open(p, "rb") as fh:
@@ -191,20 +162,8 @@ def _unsorted_tail(fh: BinaryIO, size: int, cg_at: int, data_at: int) -> MdfDama
 
 
 def blf_damage(path: str | Path) -> str | None:
-    """The first structural damage of a Vector BLF file, or ``None`` when it is whole.
-
-    Parameters
-    ----------
-    path : str or Path
-        A ``.blf`` file (its 144-byte header already checked).
-
-    Returns
-    -------
-    str or None
-        One line without the file name, e.g. ``"the object at byte 5632 declares 4012
-        bytes, 1210 are left (the header announces 9616 bytes, the file has 6822): the file
-        is cut short"``.
-    """
+    """The first structural damage of a ``.blf`` file (header already checked), one line
+    without the file name; ``None`` when it is whole."""
     p = Path(path)
     size = os.path.getsize(p)
     with open(p, "rb") as fh:

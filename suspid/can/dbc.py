@@ -1,8 +1,5 @@
-"""Loading DBC files with one-line errors; suspid's DBC conventions re-exported.
-
-The conventions (special messages, ``E2EProfile`` and ``SuspidChannel`` attributes,
-message look-up) live in :mod:`suspid.can.conventions`, which needs no cantools import.
-"""
+"""Loading DBC files with one-line errors; suspid's DBC conventions
+(:mod:`suspid.can.conventions`, no cantools import) re-exported."""
 from __future__ import annotations
 
 import logging
@@ -28,9 +25,8 @@ def _one_line(text: str) -> str:
 
 
 def _not_a_name_overwrite(record: logging.LogRecord) -> bool:
-    """Drop cantools' "Overwriting message 'X' with 'X' in the name to message dictionary"
-    (two messages of one name): :func:`~suspid.can.conventions.find_message` names both IDs
-    when a map uses that name, as the one error line."""
+    """Drop cantools' "Overwriting message" log line (two messages of one name):
+    :func:`~suspid.can.conventions.find_message` names both IDs when a map uses the name."""
     return not str(record.msg).startswith("Overwriting message '%s' with '%s' in the name")
 
 
@@ -42,19 +38,18 @@ def load_dbc(path: str | Path | None = None, strict: bool = True) -> Database:
     path : str or Path, optional
         DBC file; default :func:`default_dbc_path`.
     strict : bool, optional
-        cantools strict mode (overlapping signals, signals outside the frame are errors).
-        A foreign DBC that fails only the strict checks is loaded non-strict with a
-        logged warning; suspid's own DBC must pass strict.
+        cantools strict mode; a DBC failing only the strict checks is loaded non-strict with
+        a logged warning.
 
     Returns
     -------
     cantools.database.can.Database
-        The database; ``db.suspid_path`` holds the path it came from.
+        With ``db.suspid_path``, the path it came from.
 
     Raises
     ------
     InputError
-        Missing or unreadable file, or a parse error (the message names file, line and column).
+        Missing or unreadable file, or a parse error.
     """
     p = require_file(path if path is not None else default_dbc_path(), "DBC file")
     try:
@@ -82,6 +77,5 @@ def load_dbc(path: str | Path | None = None, strict: bool = True) -> Database:
         cantools_log.removeFilter(_not_a_name_overwrite)
     if not db.messages:
         raise InputError(f"{p}: DBC defines no message (BO_), expected at least one")
-    # cantools' Database has no field for its source: an extra attribute, read with getattr
     db.suspid_path = str(p)  # type: ignore[attr-defined]
     return db

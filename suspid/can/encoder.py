@@ -1,12 +1,9 @@
 """Measurement CSV -> the CAN log the sensor node would have sent (``suspid encode``).
 
-Per CSV row ``i`` (at sample tick ``round((t_i - t_0) / period)``, the period the median
-step: the node's clock counts through a gap of missing rows, as a real node's does while
-its frames are lost), stamped with the row's ``t`` (+ ``t0``): one
-``SN_Sync`` frame, then the sensor frames of the model's message set that carry any of
-the CSV's columns (channels absent from the CSV or empty cells are sent with their
-``Valid`` bit cleared), and every ``round(fs / 10)`` rows an ``SN_Status`` frame -- the
-same packing code as the simulated node (:class:`suspid.can.codec.SensorEncoder`).
+Per CSV row, stamped with its ``t`` (+ ``t0``) at tick ``round((t - t_0) / period)`` (the
+clock counts through a gap of missing rows): ``SN_Sync``, the sensor frames carrying any of
+the CSV's columns (empty cells sent with ``Valid`` cleared), and every ``round(fs / 10)`` rows
+an ``SN_Status`` frame; packed as the simulated node packs them (:class:`SensorEncoder`).
 """
 from __future__ import annotations
 
@@ -55,14 +52,10 @@ def measurement_frames(meas: Measurement, model_name: str, db: Database, t0: flo
 
     Parameters
     ----------
-    meas : Measurement
-    model_name : str
-    db : cantools Database
-        suspid's DBC.
     t0 : float
         Added to every timestamp (s).
     status_hz : float
-        ``SN_Status`` rate (0 = none).
+        ``SN_Status`` rate (Hz; 0 = none).
     result : EncodeResult, optional
         Filled with counts while iterating.
     """
@@ -82,8 +75,7 @@ def measurement_frames(meas: Measurement, model_name: str, db: Database, t0: flo
     status_counter = 0
     sensor_set = get_model(model_name).sensor_set
     rate = 1.0 / period if period > 0 else 0.0
-    # the sensor clock's tick of every row: through a gap of missing rows it counts on
-    # (never twice the same tick, should a row's jitter exceed half a step)
+    # the sensor clock's tick of every row, never twice the same
     ticks = np.zeros(n, dtype=np.int64)
     if n > 1 and period > 0:
         ticks = np.rint((t - t[0]) / period).astype(np.int64)
@@ -110,15 +102,9 @@ def measurement_frames(meas: Measurement, model_name: str, db: Database, t0: flo
 
 def encode_csv(csv_path: str | Path, out_path: str | Path, db: Database,
                model_name: str | None = None, t0: float = 0.0) -> EncodeResult:
-    """Encode a measurement CSV into a CAN log (format by ``out_path`` suffix).
-
-    Raises
-    ------
-    InputError
-        Unreadable/garbage CSV (via :func:`suspid.io.csvio.read_measurement`).
-    UsageError
-        Unknown output suffix or undeterminable model.
-    """
+    """Encode a measurement CSV into a CAN log (format by ``out_path`` suffix); raises
+    :class:`InputError` for an unreadable CSV, :class:`UsageError` for an unknown suffix or
+    model."""
     log_format(out_path, "output log")
     if is_can_log(csv_path):
         raise InputError(f"{csv_path}: --input must be a measurement CSV, got a CAN log "

@@ -1,16 +1,9 @@
 """Many datagrams per system call: Linux ``recvmmsg(2)`` through ctypes.
 
-A SocketCAN reader that takes one frame per ``recvmsg`` pays a system call (and a
-``select``) per frame: about 2 k of each per second for a 500 Hz quarter-car node, 8.5 k on a
-saturated 1 Mbit/s bus. Where a system call is dear -- a loaded host, a virtual machine, a
-User-Mode Linux guest, whose every call is a round trip through the host -- the reader falls
-behind and the kernel drops frames at the socket's full receive queue. ``recvmmsg`` takes
-every queued frame, up to a batch, in one call, with each frame's ancillary data (arrival
-time, the socket's drop count) as ``recvmsg`` would give it.
-
-Python's :mod:`socket` does not wrap ``recvmmsg``; :class:`MultiReceiver` calls the C
-library's. Where the C library has none (not Linux/glibc/musl), :func:`available` is
-``False`` and callers use ``recvmsg``.
+Where a system call is dear (a loaded host, a virtual machine) a reader taking one frame per
+``recvmsg`` falls behind and the kernel drops frames; ``recvmmsg`` takes every queued frame,
+up to a batch, in one call, each with its ancillary data. Python's :mod:`socket` does not wrap
+it; where the C library has none, :func:`available` is ``False`` and callers use ``recvmsg``.
 """
 from __future__ import annotations
 
@@ -89,21 +82,9 @@ def parse_cmsgs(buf: bytes) -> list[tuple[int, int, bytes]]:
 class MultiReceiver:
     """Receive up to ``batch`` datagrams of a socket per system call.
 
-    Parameters
-    ----------
-    sock : socket.socket
-        A datagram socket (SocketCAN raw, UDP, a Unix datagram socket).
-    size : int
-        Largest datagram (bytes; longer ones come truncated with ``MSG_TRUNC`` set).
-    ancsize : int
-        Ancillary buffer per datagram (bytes, as ``recvmsg``'s ``ancbufsize``).
-    batch : int
-        Most datagrams per call.
-
-    Raises
-    ------
-    OSError
-        No ``recvmmsg`` in this C library (:func:`available`).
+    ``sock`` a datagram socket; ``size`` the largest datagram (bytes, longer ones truncated);
+    ``ancsize`` the ancillary buffer per datagram (bytes). Raises ``OSError`` without
+    ``recvmmsg`` (:func:`available`).
     """
 
     def __init__(self, sock: socket.socket, size: int, ancsize: int, batch: int = 64) -> None:
@@ -132,21 +113,14 @@ class MultiReceiver:
         self._ctl_off = _MsgHdr.msg_controllen.offset
         self._flags_off = _MsgHdr.msg_flags.offset
         self._len_off = _MMsgHdr.msg_len.offset
-        #: entries the last call filled (their lengths and flags to reset)
-        self._used = n
+        self._used = n   # entries the last call filled (to reset)
         #: system calls made, datagrams received (for benchmarks)
         self.calls = 0
         self.received = 0
 
     def recv(self) -> list[tuple[bytes, list[tuple[int, int, bytes]], int]]:
         """Every datagram queued now, up to ``batch``: ``(data, ancdata, flags)`` each, as
-        ``socket.recvmsg`` returns them (empty list: none queued).
-
-        Raises
-        ------
-        OSError
-            The socket cannot be read (other than "nothing queued").
-        """
+        ``socket.recvmsg`` returns them; raises ``OSError`` when the socket cannot be read."""
         vec = self._vec
         mem = self._mem
         stride = self._stride

@@ -1,28 +1,14 @@
 """Map signals of a user's DBC onto model channels (the "real logger hookup").
 
-One mapping reads like an assignment, channel on the left::
+One mapping reads like an assignment, ``x1_ddot = gnss_imu.AccelerationX - 9.81`` or
+``x2 = 0x123.Height * 0.001``: ``CHANNEL = [SCALE *] [-] MESSAGE.SIGNAL [* SCALE] [(+|-)
+OFFSET | - mean]``, i.e. ``channel = scale * signal + offset`` in the channel's SI unit
+(grammar and examples in docs/can.md). Given by ``--map`` (repeatable), the ``[map]`` table
+of a ``--config`` file, or a ``.toml``/``.json`` signal-map file::
 
-    x1_ddot = gnss_imu.AccelerationX - 9.81        # remove gravity
-    x_ddot  = -1 * gnss_imu.AccelerationX + 9.81   # sensor mounted upside down
-    x1_ddot = gnss_imu.AccelerationX - mean        # remove the record's mean
-    x2      = 0x123.Height * 0.001                 # message by frame ID, mm -> m
-
-Grammar: ``CHANNEL = [SCALE *] [-] MESSAGE.SIGNAL [* SCALE] [(+|-) OFFSET]`` where
-``MESSAGE`` is a message name or frame ID (decimal or ``0x`` hex), ``SCALE`` and
-``OFFSET`` are numbers and ``OFFSET`` may be ``mean`` (subtract the mean of the mapped
-signal over the data handed to the identifier: the whole log, or the current window).
-The result is ``channel = scale * signal + offset`` in the channel's SI unit. A multiplexed
-signal (``SG_ Height m0``, sent only when the multiplexer is 0) is read only from the frames
-of its pages.
-
-On the command line: ``--map 'x1_ddot=gnss_imu.AccelerationX-9.81'`` (repeatable); in the
-``[map]`` table of a ``--config`` file (:mod:`suspid.cli._config`, its DBC as ``[can] dbc``).
-A signal-map file for the library (``signal_map=PATH``: ``.toml`` or ``.json``)::
-
-    dbc = "canmod-gps.dbc"          # optional, relative to the config file
+    dbc = "canmod-gps.dbc"          # optional, relative to the file
     [map]
     x1_ddot = "gnss_imu.AccelerationX - 9.81"
-    # or as a table:
     # x1_ddot = { message = "gnss_imu", signal = "AccelerationX", scale = 1.0, offset = -9.81 }
 """
 from __future__ import annotations
@@ -58,17 +44,8 @@ _RE = re.compile(
 
 @dataclass(frozen=True)
 class SignalMapping:
-    """``channel = scale * MESSAGE.SIGNAL + offset`` (offset ``"mean"`` removes the mean).
-
-    Attributes
-    ----------
-    channel : str
-        Model channel (``x1_ddot``) or road column (``r``).
-    message, signal : str
-        DBC message (name or frame ID) and signal name.
-    scale : float
-    offset : float or "mean"
-    """
+    """``channel = scale * MESSAGE.SIGNAL + offset`` (offset ``"mean"`` removes the mean);
+    ``channel`` a model channel or road column, ``message`` a DBC message name or frame ID."""
 
     channel: str
     message: str
@@ -101,10 +78,7 @@ _RE_REVERSED = re.compile(
 
 
 def parse_mapping(text: str, where: str = "--map") -> SignalMapping:
-    """Parse one ``CHANNEL=MESSAGE.SIGNAL...`` mapping.
-
-    The reversed form ``MESSAGE.SIGNAL=CHANNEL[*SCALE][+-OFFSET]`` (signal on the left) is
-    accepted too and means the same ``channel = scale * signal + offset``.
+    """Parse one ``CHANNEL=MESSAGE.SIGNAL...`` mapping (or ``MESSAGE.SIGNAL=CHANNEL...``).
 
     Raises
     ------
@@ -131,25 +105,15 @@ def parse_mapping(text: str, where: str = "--map") -> SignalMapping:
         if m["sign"] != "-":
             raise UsageError(f"{where}: {text!r}: the mean can only be subtracted ('-mean')")
         offset = "mean"
-    elif m["off"] is not None:
-        offset = float(m["off"]) * (-1.0 if m["sign"] == "-" else 1.0)
-    elif m["poff"] is not None:
-        offset = float(m["poff"]) * (-1.0 if m["sign"] == "-" else 1.0)
+    elif m["sign"]:
+        offset = float(m["off"] if m["off"] is not None else m["poff"]) * (-1.0 if m["sign"] == "-" else 1.0)
     return SignalMapping(m["channel"], m["message"], m["signal"], scale, offset)
 
 
 @dataclass
 class SignalMap:
-    """An ordered set of :class:`SignalMapping` plus an optional DBC named by a config file.
-
-    Attributes
-    ----------
-    mappings : list of SignalMapping
-    dbc : Path or None
-        DBC given in the config file (resolved relative to it).
-    source : str
-        Where the map came from (for messages).
-    """
+    """An ordered set of :class:`SignalMapping`, the DBC its file names (``dbc``, resolved
+    relative to the file) and where it came from (``source``, for messages)."""
 
     mappings: list[SignalMapping]
     dbc: Path | None = None
@@ -190,14 +154,8 @@ class SignalMap:
                    dbc: Path | None = None) -> "SignalMap":
         """Build from a parsed ``[map]`` table (a signal-map file's, or a ``--config`` file's).
 
-        Parameters
-        ----------
-        table : dict
-            ``channel -> "MESSAGE.SIGNAL..."`` or ``channel -> {message, signal[, scale, offset]}``.
-        source : str
-            The file the table came from (named in messages).
-        dbc : Path, optional
-            DBC the file names.
+        ``table``: ``channel -> "MESSAGE.SIGNAL..."`` or ``channel -> {message, signal[, scale,
+        offset]}``; ``source`` names the file in messages; ``dbc`` is the DBC it names.
 
         Raises
         ------
@@ -238,11 +196,8 @@ class SignalMap:
         return [m.channel for m in self.mappings]
 
     def unit_warnings(self, db: Database, model: SuspensionModel) -> list[str]:
-        """Mappings that read a signal the DBC declares in another unit than the channel's
-        SI unit, without a scale: the likely forgotten conversion (``x2 = MSG.Height`` with
-        ``Height`` in mm). A mapping with a scale, or a signal without a unit (``""``,
-        ``"-"``), is taken as the user's.
-        """
+        """Warnings for mappings without a scale of a signal the DBC declares in another unit
+        than the channel's SI unit (a likely forgotten conversion, ``Height`` in mm)."""
         out = []
         for m in self.mappings:
             if m.scale != 1.0:
@@ -258,8 +213,7 @@ class SignalMap:
             if not expected or unit in ("", "-") or normalize_unit(unit) in expected:
                 continue
             factor = TO_SI.get(unit.lower())
-            # a factor only where it converts to the channel's unit (km/h to m/s for a
-            # speed, never for an acceleration)
+            # a factor only where it converts to the channel's unit
             hint = (f" (e.g. {m.channel}={m.message}.{m.signal}*{factor:.6g})"
                     if factor is not None and SI_OF.get(unit.lower()) in expected else "")
             out.append(f"{self.source}: {m}: signal {msg.name}.{m.signal} is in {unit!r} by the "
@@ -273,15 +227,9 @@ class SignalMap:
         Raises
         ------
         InputError
-            Unknown message or signal (naming the map entry and the DBC), or a signal of
-            nested multiplexing (its multiplexer is itself multiplexed).
+            Unknown message or signal, or a signal of nested multiplexing.
         UsageError
             A channel that the model does not have, a channel mapped twice, or a scale 0.
-
-        Notes
-        -----
-        A multiplexed signal (``SG_ Height m0``) is valid: the decoder reads it only from
-        the frames whose multiplexer value is one of its pages (``multiplexer_ids``).
         """
         seen: set[str] = set()
         for m in self.mappings:
@@ -302,7 +250,6 @@ class SignalMap:
             mux = next((s for s in msg.signals if s.name == sig.multiplexer_signal), None) \
                 if ids else None
             if mux is not None and mux.multiplexer_ids:
-                # a page of a page: the decoder reads one level of multiplexing
                 pages = ", ".join(str(i) for i in ids)
                 outer = ", ".join(str(i) for i in mux.multiplexer_ids)
                 raise InputError(f"{where}: signal {msg.name}.{m.signal} is sent only when "
@@ -317,8 +264,7 @@ class SignalMap:
 TO_SI = {"mm": 1e-3, "cm": 1e-2, "mm/s": 1e-3, "cm/s": 1e-2, "mm/s^2": 1e-3, "g": 9.80665,
          "mg": 9.80665e-3, "deg": math.pi / 180, "°": math.pi / 180, "deg/s": math.pi / 180,
          "°/s": math.pi / 180, "km/h": 1 / 3.6, "km": 1e3}
-#: the SI unit each of :data:`TO_SI`'s units converts to (spelled as
-#: :meth:`~suspid.models.base.SuspensionModel.column_units` spells it)
+#: the SI unit each of :data:`TO_SI`'s units converts to
 SI_OF = {"mm": "m", "cm": "m", "mm/s": "m/s", "cm/s": "m/s", "mm/s^2": "m/s^2", "g": "m/s^2",
          "mg": "m/s^2", "deg": "rad", "°": "rad", "deg/s": "rad/s", "°/s": "rad/s",
          "km/h": "m/s", "km": "m"}

@@ -1,19 +1,11 @@
 """Measurement CSV (see CONTRACT.md): header row, one row per sample, SI units.
 
-``t`` (s) is required and must be strictly increasing; road columns are the model's
-``roads`` (with optional ``_dot``); measured columns are any subset of the model's
-``channels`` and ride heights (``ride_height_channels``: strut extensions ``d``/``dN`` in m
-and their ``_dot`` in m/s). Empty cells are missing samples (NaN). The vehicle's ``speed``
-(m/s) and ``odometer`` (m) are read too (:data:`AUX_CHANNELS`: no model channel, never fitted;
-the fleet's distance per drive). Unknown columns are ignored with a
-warning. A trailing separator (an empty last column, on the header or the rows) is
-allowed. Every error names the file, the line and the column.
-
-A logger's export often annotates each name with its unit, ``t [s]`` or ``x1_dot (m/s)``:
-such a column is read as the named one when the unit is the SI unit the contract
-prescribes (:meth:`SuspensionModel.column_units`); with any other unit (``x1 [mm]``,
-``t [ms]``) it is not converted but ignored with a warning that names the unit found and the one expected
-(``t`` in another unit is an error, as a missing ``t`` is).
+``t`` (s) strictly increasing; road columns are the model's ``roads`` (and ``_dot``);
+measured columns any of the model's ``channels`` and ride heights; ``speed`` and ``odometer``
+(:data:`AUX_CHANNELS`) are read but never fitted. Empty cells are missing samples (NaN);
+unknown columns are ignored with a warning. A column annotated with its SI unit (``t [s]``)
+is read as the named one; with another unit it is ignored with a warning (``t``: an error).
+Every error names the file, the line and the column.
 """
 from __future__ import annotations
 
@@ -31,9 +23,8 @@ from suspid.errors import InputError, require_file
 from suspid.models.base import FloatArray, SuspensionModel
 
 
-#: channels of the vehicle, not of a model, read from a CSV or mapped from a DBC like the
-#: model's, with their SI unit: never fitted, kept in :attr:`Measurement.aux` (the fleet's
-#: distance driven and odometer reading per drive, for forecasts in km)
+#: channels of the vehicle, not of a model, with their SI unit: never fitted, kept in
+#: :attr:`Measurement.aux` (the fleet's distance per drive)
 AUX_CHANNELS: dict[str, str] = {"speed": "m/s", "odometer": "m"}
 
 
@@ -41,21 +32,9 @@ AUX_CHANNELS: dict[str, str] = {"speed": "m/s", "odometer": "m"}
 class Measurement:
     """A measurement record on one time base.
 
-    Attributes
-    ----------
-    t : ndarray, shape (N,)
-        Sample times (s), strictly increasing.
-    road : dict
-        Road inputs by name (m) and ``<name>_dot`` (m/s) when given.
-    measured : dict
-        Measured channels (SI), NaN where a sample is missing: motions and ride heights.
-    warnings : list of str
-        Non-fatal findings (ignored columns, filled gaps, ...).
-    source : str
-        Where the data came from (for messages).
-    aux : dict
-        The vehicle's channels of :data:`AUX_CHANNELS` (SI: ``speed`` m/s, ``odometer`` m),
-        NaN where a sample is missing; never compared with a model.
+    ``t`` (s) strictly increasing; ``road`` inputs by name (m, ``_dot`` m/s); ``measured``
+    channels and ``aux`` vehicle channels (:data:`AUX_CHANNELS`), SI, NaN where missing;
+    ``warnings`` non-fatal findings; ``source`` where the data came from.
     """
 
     t: FloatArray
@@ -122,22 +101,9 @@ MAX_RUNS_NAMED = 5
 
 
 def missing_runs(t: FloatArray, values: FloatArray) -> str:
-    """The runs of missing samples (NaN) of one column, for a warning; ``""`` when none.
-
-    Parameters
-    ----------
-    t : ndarray, shape (N,)
-        Sample times (s).
-    values : ndarray, shape (N,)
-        The column (NaN where a sample is missing).
-
-    Returns
-    -------
-    str
-        ``"150 missing samples in 2 runs: 100 at t 1-1.099 s, 50 at t 2-2.049 s; not
-        compared there"``: every run's count and time span, the first
-        :data:`MAX_RUNS_NAMED` of them when there are more.
-    """
+    """The runs of missing samples (NaN) of ``values`` at times ``t`` (s), for a warning
+    (``"150 missing samples in 2 runs: 100 at t 1-1.099 s, ...; not compared there"``, the
+    first :data:`MAX_RUNS_NAMED` runs named); ``""`` when none."""
     gap = np.isnan(values)
     if not gap.any():
         return ""
@@ -155,10 +121,8 @@ def missing_runs(t: FloatArray, values: FloatArray) -> str:
 
 
 def _integrated(t: FloatArray, r: FloatArray, r_dot: FloatArray) -> FloatArray:
-    """``r`` (m) with each run of missing samples filled by integrating ``r_dot`` (m/s) by the
-    trapezoid rule from the sample before it, the drift to the sample after it (integration
-    and sensor error) spread linearly over the run; a run at an end is integrated from the
-    other side."""
+    """``r`` (m) with each run of missing samples filled by integrating ``r_dot`` (m/s) from the
+    sample before it, the mismatch at the sample after it spread linearly over the run."""
     out = r.copy()
     gap = np.isnan(r)
     edges = np.flatnonzero(np.diff(np.concatenate(([0], gap.view(np.int8), [0]))))
@@ -188,14 +152,13 @@ def read_measurement(path: str | Path, model: SuspensionModel, *,
     path : str or Path
     model : SuspensionModel
     require_measured : bool
-        Whether a file without any measured channel of the model is an error (``False``
-        to read a road-only file, e.g. ``suspid simulate --road``).
+        Whether a file without any measured channel of the model is an error (``False`` for
+        a road-only file).
 
     Raises
     ------
     InputError
-        Missing/empty file, no ``t`` column, non-numeric cells, non-increasing ``t``,
-        rows with the wrong number of cells, no measured channel of the model.
+        Missing/empty file, no ``t``, bad cells or rows, non-increasing ``t``, no channel.
     """
     p = require_file(path)
     name = str(path)
@@ -343,13 +306,8 @@ def read_measurement(path: str | Path, model: SuspensionModel, *,
 
 def write_measurement(path: str | Path, t: FloatArray, columns: Mapping[str, FloatArray],
                       order: Iterable[str] | None = None) -> None:
-    """Write a measurement CSV with ``t`` first, then ``columns`` (SI units, ``%.10g``).
-
-    Raises
-    ------
-    InputError
-        The file cannot be created (missing directory, a directory, no permission).
-    """
+    """Write a measurement CSV with ``t`` first, then ``columns`` (SI units, ``%.10g``); an
+    :class:`InputError` if the file cannot be created."""
     names = list(order) if order is not None else list(columns)
     data = np.column_stack([np.asarray(t, dtype=float)] + [np.asarray(columns[n], dtype=float)
                                                           for n in names])

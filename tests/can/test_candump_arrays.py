@@ -1,6 +1,6 @@
 """The candump -L array reader is a line-by-line reader, bit for bit, and fast on real logs.
 
-The array reader (:func:`suspid.can.logs.read_candump_arrays`, behind ``feed_log``,
+The array reader (:func:`suspid.can.candump.read_candump_arrays`, behind ``feed_log``,
 ``identify``/``diagnose``/``monitor --input LOG``) must give the frames of a reader that
 takes the log line by line through python-can's ``CanutilsLogReader``
 (:func:`_line_reader`, the oracle) bit for bit, and that reader's timestamp is
@@ -20,7 +20,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import suspid.can.logs as logs
+import suspid.can.candump as candump
+from suspid.can.frames import select_messages
 from suspid.can.logs import FrameArrays, ReadStats, read_candump_arrays
 from tests.can.test_batch_equivalence import (RATES, _stream, _write_candump,
                                               assert_feed_log_equals_messages, truncate_lines)
@@ -53,11 +54,11 @@ def _assert_same_frames(a: FrameArrays, b: FrameArrays) -> None:
 
 def _line_reader(path: Path, stats: ReadStats) -> list:  # type: ignore[type-arg]
     """The oracle: every line of ``path`` through python-can's reader one by one
-    (:func:`suspid.can.logs._candump_odd`), universal newlines as a text file reads them,
+    (:func:`suspid.can.candump._candump_odd`), universal newlines as a text file reads them,
     frames counted per channel."""
     with path.open("r", encoding="ascii", errors="replace") as fh:
-        odd = logs._candump_odd(path, ((n, n, line) for n, line in enumerate(fh, 1)), stats)
-        return list(logs._select_messages(path, ".log", (m for _, m in odd), stats, None))
+        odd = candump._candump_odd(path, ((n, n, line) for n, line in enumerate(fh, 1)), stats)
+        return list(select_messages(path, ".log", (m for _, m in odd), stats, None))
 
 
 def _check_log(path: Path, chunk_bytes: int = 1 << 19, slow: "_CountSlowLines | None" = None
@@ -80,14 +81,14 @@ class _CountSlowLines:
 
     def __init__(self, monkeypatch: pytest.MonkeyPatch) -> None:
         self.lines = 0
-        inner = logs._candump_odd
+        inner = candump._candump_odd
 
         def counted(path, numbered, stats):  # type: ignore[no-untyped-def]
             numbered = list(numbered)
             self.lines += len(numbered)
             return inner(path, numbered, stats)
 
-        monkeypatch.setattr(logs, "_candump_odd", counted)
+        monkeypatch.setattr(candump, "_candump_odd", counted)
 
 
 # ---- timestamp texts -----------------------------------------------------------------------

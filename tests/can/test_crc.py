@@ -4,8 +4,7 @@ from __future__ import annotations
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from suspid.can.crc import (counter_delta, crc8_j1850, e2e_check, e2e_crc, e2e_protect,
-                            make_e2e_checker)
+from suspid.can.crc import crc8_j1850, e2e_check, e2e_crc, e2e_protect, make_e2e_checker
 
 
 def _crc_bitwise(data: bytes) -> int:
@@ -56,8 +55,3 @@ def test_counter_value_15_is_invalid():
     data[0] = e2e_crc(0x100, data)  # a correct CRC does not make counter 15 valid
     assert not e2e_check(data, 0x100)
 
-
-def test_counter_delta_wraps_at_15():
-    assert counter_delta(0, 14) == 1
-    assert counter_delta(3, 3) == 0
-    assert counter_delta(2, 14) == 3

@@ -23,7 +23,7 @@ from hypothesis import strategies as st
 
 from estimator.decode.buffer import Aligned, RollingBuffer, _gaps
 from estimator.decode.listener import _ema
-from suspid.can import logs
+from suspid.can import candump
 from suspid.can.logs import FrameArrays
 from suspid.errors import InputError
 from tests.can.test_batch_equivalence import (RATES, _listeners, _stream, feed_in_chunks,
@@ -290,9 +290,9 @@ def test_parse_layout_equals_message_parser(ts: list[tuple[int, int, int]], id_d
         lines.append(f"({t}) can0 {cid:0{id_digits}X}#{data}")
     raw = "".join(lines).encode()
     rows = np.frombuffer(raw, np.uint8).reshape(len(lines), -1)
-    layout = logs._line_layout(rows[0].tobytes())
+    layout = candump._line_layout(rows[0].tobytes())
     assert layout is not None
-    good, t, ids, data = logs._parse_layout(rows, layout)
+    good, t, ids, data = candump._parse_layout(rows, layout)
     assert good.all()
     for k, line in enumerate(lines):
         head, _, rest = line.partition(") can0 ")
