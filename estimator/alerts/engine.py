@@ -1,28 +1,17 @@
 """When is a parameter *confidently* below its limit? Confidence bound, persistence, hysteresis.
 
-For a watched parameter with nominal value ``N`` and drop fraction ``D`` (default 0.3) the
-limit is ``L = (1 - D) N``. Each estimate ``v`` with standard error ``s`` (which includes the
-identifier's ``sigma_floor``) gives the one-sided bounds ``v +/- z s`` (``z = 2.326``, 99 %).
-
-raise
-    the *upper* bound ``v + z s`` is below ``L`` in consecutive estimates spanning at least
-    ``persistence_s`` of data time and at least ``min_count`` estimates (defaults: one
-    window step, 2 estimates). Noise or one bad window therefore never raises an alert, and
-    a parameter that is merely *uncertain* (large ``s``) never does either.
-clear (hysteresis)
-    an active alert is cleared only when the *lower* bound ``v - z s`` exceeds
-    ``(1 - D + H) N`` (``H = 0.05``) with the same persistence, so an estimate hovering
-    around the limit cannot make the alert flap.
-
-Estimates of skipped windows do not exist, so they neither confirm nor reset a pending
-condition. An alert (and a clear) is emitted once per episode; its ``t`` is the data time at
-the end of the window that confirmed it, ``onset`` the first window of the episode.
+With nominal ``N`` and drop ``D`` the limit is ``L = (1 - D) N``. An alert is raised when the
+*upper* bound ``v + z s`` of the estimates stays below ``L`` for ``persistence_s`` of data
+time and ``min_count`` estimates (noise, one bad window or a merely uncertain value never
+raise one); it is cleared when the *lower* bound ``v - z s`` stays above ``(1 - D + H) N``
+likewise. Skipped windows neither confirm nor reset. One event per episode: ``t`` the window
+that confirmed it, ``onset`` the first.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Iterable, Mapping, Protocol
+from typing import Any, Mapping, Protocol
 
 from estimator.alerts.event import ParameterEvent
 from suspid.errors import UsageError
@@ -38,27 +27,17 @@ class AlertConfig:
     nominal : dict
         ``parameter -> nominal value`` (SI) of every watched parameter.
     drop : float
-        Alert when confidently below ``(1 - drop) x nominal`` (0 < drop < 1).
+        Alert when confidently below ``(1 - drop) x nominal``.
     z : float
         One-sided normal quantile of the confidence bound (2.326: 99 %).
-    persistence_s : float
-        Data time (s) the condition must hold.
-    min_count : int
-        Consecutive estimates the condition must hold in.
+    persistence_s, min_count : float, int
+        Data time (s) and consecutive estimates the condition must hold.
     hysteresis : float
-        Clear only above ``(1 - drop + hysteresis) x nominal`` (fraction of nominal).
+        Clear only above ``(1 - drop + hysteresis) x nominal``.
     level : float
         Two-sided level of a forecast interval (the fleet's drive trends).
     horizon_days : float
-        The fleet reports no forecast further ahead of a vehicle's latest drive than this
-        (a slow drift that reaches the limit in years is noise for maintenance planning, and
-        at the 90 % level about one flat parameter in twenty shows a 'significant' slope).
-
-    Notes
-    -----
-    The monitor's estimates come every window step, so the condition must persist (1.5 s of
-    data, 2 estimates); a fleet's estimates are drives days apart, and one drive confidently
-    below is enough (:meth:`per_drive`).
+        The fleet reports no forecast further ahead of a vehicle's latest drive than this.
     """
 
     nominal: dict[str, float] = field(default_factory=dict)
@@ -72,8 +51,7 @@ class AlertConfig:
 
     @classmethod
     def per_drive(cls, **settings: Any) -> "AlertConfig":
-        """The fleet's settings: each drive is one estimate, no data-time persistence, one
-        drive enough (``min_count`` 1) unless ``settings`` say otherwise."""
+        """The fleet's settings: one drive confidently below is enough."""
         return cls(**{"persistence_s": 0.0, "min_count": 1, **settings})
 
     def nominal_of(self, model: str, name: str) -> float:
@@ -111,24 +89,11 @@ class AlertConfig:
 
 @dataclass
 class AlertEvent(ParameterEvent):
-    """An alert (or the end of one).
+    """An alert (``kind`` ``"alert"``) or its clear (``"clear"``).
 
-    Attributes
-    ----------
-    kind : {"alert", "clear"}
-    t : float
-        Data time (s) at which the condition was confirmed.
-    onset : float
-        Data time (s) of the first estimate of the episode.
-    parameter : str
-    value, stderr, nominal : float
-        Estimate, its standard error and the nominal value (SI).
-    bound : float
-        The confidence bound that decided (upper for alerts, lower for clears).
-    severity : str
-        ``"warning"``, or ``"critical"`` when the upper bound is below ``(1 - 2 drop) N``.
-    model : str
-    unit : str
+    ``t`` is the data time (s) that confirmed it, ``onset`` the episode's first estimate;
+    ``value``, ``stderr``, ``nominal`` (SI); ``bound`` the confidence bound that decided;
+    ``severity`` ``"warning"``, ``"critical"`` below ``(1 - 2 drop) N``, ``"info"`` for a clear.
     """
 
     kind: str
@@ -196,9 +161,8 @@ class AlertEngine:
     units : dict, optional
         ``parameter -> unit`` for the messages.
     store : AlertStore, optional
-        Durable log; events are written (flushed, fsynced) *before* any sink sees them, and
-        events already in the log (same id, or not newer than the log's last event of the
-        parameter) are suppressed, so a restarted monitor neither loses nor repeats alerts.
+        Durable log, written (fsynced) *before* any sink sees an event; events already in it
+        are suppressed, so a restarted monitor neither loses nor repeats alerts.
     sinks : list
         Outputs called for each new event.
     """
@@ -260,10 +224,8 @@ class AlertEngine:
         return out
 
     def publish(self, ev: Any) -> bool:
-        """Write ``ev`` (an alert, clear or forecast event) to the store, then to the sinks.
-
-        Returns ``False`` (and delivers nothing) when the store already holds it.
-        """
+        """Write ``ev`` (alert, clear or forecast) to the store, then to the sinks; ``False``
+        (nothing delivered) when the store already holds it."""
         if self.store is not None:
             if not self.store.is_new(ev):
                 self.suppressed += 1
@@ -273,6 +235,3 @@ class AlertEngine:
             s.emit(ev)
         self.emitted.append(ev)
         return True
-
-    def watched(self) -> Iterable[str]:
-        return self.states.keys()

@@ -1,24 +1,10 @@
 """The monitor's wiring, once: options -> estimator -> tracker -> alerts and forecasts -> sinks.
 
-``suspid monitor`` (sliding window, EKF, output-only) and ``suspid compare`` build the same
-objects here:
-
-1. :func:`monitor_spec` checks the options and derives the window defaults
-   (:class:`MonitorSpec`);
-2. :func:`build_monitor` makes the :class:`~estimator.stream.monitor.StreamMonitor`: the
-   estimator (built on the first window, when the channels and the sample rate are known),
-   the trend tracker, the alert engine (with its durable store and sinks) and the forecast
-   engine;
-3. :func:`run_monitor` streams a :class:`Source` through it -- a CAN log replayed as fast as
-   possible, a measurement CSV, or a live python-can bus -- and returns the closing
-   :class:`~estimator.stream.events.Summary`.
-
-Every output is a typed event (:mod:`estimator.stream.events`,
-:class:`~estimator.alerts.AlertEvent`, :class:`~estimator.alerts.ForecastEvent`) handed to
-one callback; the caller's sink turns it into a JSON line or text.
-
-The estimators are found by name in :data:`ESTIMATORS` and imported on first use, so a
-replay with the sliding window does not pay for the EKF's or the output-only mode's imports.
+``suspid monitor`` and ``suspid compare`` build the same objects here: :func:`monitor_spec`
+checks the options and derives the defaults, :func:`build_monitor` makes the
+:class:`~estimator.stream.monitor.StreamMonitor`, :func:`run_monitor` streams a
+:class:`Source` (CAN log, CSV or live bus) through it. Every output is a typed event handed to
+one callback. The estimators in :data:`ESTIMATORS` are imported on first use.
 """
 from __future__ import annotations
 
@@ -75,34 +61,24 @@ class MonitorSpec:
 
     Attributes
     ----------
-    model : SuspensionModel
     params : Parameters
         Starting values of the free parameters and the fixed ones.
     nominal : dict
         ``parameter -> nominal`` (SI) of every monitored parameter.
-    start_given : set of str
-        Free parameters whose start was given (``--init`` or ``--nominal``); the EKF starts
-        the others from the first window's sliding-window estimate.
-    config : WindowConfig
-    alert : AlertConfig
     baseline : {"nm", "ekf", "output_only"}
+    start_given : set of str
+        Free parameters whose start was given; the EKF starts the others from the first
+        window's sliding-window estimate.
     decimate_given : bool
         ``config.decimate`` was set explicitly (else derived from the sample rate).
     inspection : bool
         Virtual damper test on each quarter-car estimate.
-    forecast_horizon_s : float
-    ekf_params : list of str or None
-        Parameters in the EKF's state (default: every free damper and spring).
-    ekf_q : float or None
-    ekf_decimate : int or None
-    accel_channel : str
-    oo_method : str
-    units : dict
-    warnings : list of str
+    ekf_params, ekf_q, ekf_decimate
+        :class:`~estimator.stream.config.EkfOptions` (``ekf_params`` checked).
     road : {"measured", "zero", "unknown"} or None
-        ``--road``; ``None``: chosen on the first window (:func:`choose_road`), then set.
+        ``--road``; ``None``: chosen on the first window (:func:`choose_road`).
     drift_given : bool
-        ``window.drift`` named parameters (a choice of the road unknown ignores it, warned).
+        ``window.drift`` named parameters.
     """
 
     model: SuspensionModel
@@ -143,32 +119,14 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
         values that differ from nominal (SI).
     baseline : {"nm", "ekf", "output_only"}
     road : {"measured", "zero", "unknown"}, optional
-        ``--road``; ``None`` chooses on the first window (:func:`choose_road`). With
-        ``unknown`` the free parameters outside the body equations are held
-        (:func:`~estimator.stream.roadfree.road_unknown_params`), the window is at least
-        :func:`~estimator.stream.roadfree.road_unknown_window` and the drift is off.
-    window : WindowOptions, optional
-        Window length, step, decimation and further :class:`WindowConfig` fields; unset
-        ones from the model's modes (:func:`~estimator.stream.config.default_config`);
-        ``drift`` defaults to every free damper and spring of the struts
-        (:func:`~estimator.stream.config.strut_parameters`), ``()`` turns it off.
-    alert : AlertOptions, optional
-        Alert rule (:class:`~estimator.alerts.AlertConfig`; ``persistence_s`` defaults to one
-        window step) and forecast horizon (default
-        :data:`~estimator.alerts.forecast.DEFAULT_HORIZON_S`, 60 s).
-    ekf : EkfOptions, optional
-        EKF state parameters (default every free damper and spring), parameter random walk
-        and decimation.
-    output_only : OutputOnlyOptions, optional
-        Output-only channel (default the body's ``_ddot``) and method.
+        ``--road``; ``None`` chooses on the first window (:func:`choose_road`).
+    window, alert, ekf, output_only : optional
+        The user's settings (:mod:`estimator.stream.config`); unset ones from the model's
+        modes (:func:`~estimator.stream.config.default_config`).
     fs : float
         Sample rate (Hz) when known (else the decimation is derived on the first window).
     inspection : bool
         Virtual damper test on each quarter-car estimate.
-
-    Returns
-    -------
-    MonitorSpec
 
     Raises
     ------
@@ -243,7 +201,6 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
     if step is not None:
         cfg.step_s = step
     # the window's linear drift: by default every free damper and spring of the struts
-    # (the parts that wear; docs/monitoring.md, "Window with a linear drift")
     cfg.drift = strut_parameters(model, values, params.free) if road != "unknown" else ()
     given_drift = wo.drift
     if road == "unknown" and given_drift:
@@ -306,27 +263,9 @@ def _output_only_spec(model: SuspensionModel, nominal: Mapping[str, float], drop
 
 
 def choose_road(spec: MonitorSpec, t: FloatArray, data: Mapping[str, FloatArray]) -> str:
-    """Set ``spec.road`` from the first window when ``--road`` was not given.
-
-    As :func:`estimator.identify.roadfree.resolve_road` decides for a record: ``measured``
-    when the stream carries the road, else ``zero`` for a free response and ``unknown`` for
-    driving data; the choice is written as one ``warning:`` line on stderr. With
-    ``unknown`` the free parameters outside the body equations are then held
-    (:func:`~estimator.stream.roadfree.road_unknown_params`, said the same way).
-
-    Parameters
-    ----------
-    spec : MonitorSpec
-    t : ndarray
-        The first window's times (s).
-    data : mapping
-        Its channels (SI).
-
-    Returns
-    -------
-    str
-        The road mode.
-    """
+    """Set ``spec.road`` from the first window (times ``t``, s; channels SI) when ``--road``
+    was not given, as :func:`estimator.identify.roadfree.resolve_road` decides for a record;
+    the choice is written as a ``warning:`` line on stderr. Returns the road mode."""
     if spec.road is not None or spec.baseline == "output_only":
         return spec.road or "measured"
     model = spec.model
@@ -373,13 +312,9 @@ class ZeroRoad:
 
 
 def make_estimator(spec: MonitorSpec, channels: list[str], fs: float) -> Any:
-    """The spec's estimator for a stream with ``channels`` sampled at ``fs`` (Hz).
-
-    ``spec.road`` chooses the path: ``unknown`` the body equations (no road input,
-    :data:`ESTIMATORS` ``"nm/unknown"``, ``"ekf/unknown"``), ``zero`` the road-measured
-    estimator fed zero roads (:class:`ZeroRoad`), ``measured`` (or ``None``) the road from
-    the stream, which must carry every wheel's.
-    """
+    """The spec's estimator for a stream with ``channels`` sampled at ``fs`` (Hz): the body
+    equations for ``spec.road`` ``unknown``, zero roads (:class:`ZeroRoad`) for ``zero``, else
+    the stream's roads (every wheel's)."""
     road = spec.road or "measured"
     if spec.baseline == "nm" and not spec.decimate_given:
         spec.config.decimate = default_decimation(spec.model, spec.params.valuesdict(), fs)
@@ -440,17 +375,8 @@ def build_monitor(spec: MonitorSpec, emit: Callable[[Any], None], store: AlertSt
                   sinks: list[Any] | None = None, estimator: Any = None) -> StreamMonitor:
     """The monitor of ``spec``: estimator (lazy unless given), tracker, alerts, forecasts.
 
-    Parameters
-    ----------
-    spec : MonitorSpec
-    emit : callable
-        Receives every event (estimates, skips, alerts, clears, forecasts).
-    store : AlertStore, optional
-        Durable alert log (write-ahead).
-    sinks : list, optional
-        Further alert sinks (the bus); ``emit`` is always one.
-    estimator : optional
-        A ready estimator (``compare`` builds it from the known stream).
+    ``emit`` receives every event; ``store`` is the durable alert log, ``sinks`` further alert
+    outputs (the bus); ``estimator`` a ready one (``compare`` builds it from the stream).
     """
     est = estimator if estimator is not None else LazyEstimator(spec)
     all_sinks: list[Any] = [CallbackSink(emit)] + list(sinks or [])
@@ -474,33 +400,13 @@ def build_monitor(spec: MonitorSpec, emit: Callable[[Any], None], store: AlertSt
 
 @dataclass
 class Source:
-    """Where the frames come from.
+    """Where the frames come from: a CAN log or CSV (``input``) or a live python-can bus.
 
-    Attributes
-    ----------
-    input : str or None
-        A CAN log (replayed as fast as possible) or a measurement CSV.
-    interface, channel, bitrate
-        A live python-can bus (when ``input`` is ``None``).
-    dbc : Path or None
-        DBC of the CAN data (default suspid's).
-    signal_map : SignalMap or None
-    can_channel : str or None
-        ``can.channel``: the bus channel of a multi-bus log to replay (``None``: all).
-    j1939_source : str or None
-        ``can.j1939_source``: the J1939 source address decoded (``None``: the first sender).
-    time_source : {"timestamp", "tick"} or None
-        None (logs and live): the sensor's tick when the stream carries SN_Sync frames,
-        the frame timestamps otherwise.
-    duration, idle_timeout : float or None
-        Live stop conditions (s of wall time).
-    rx_buffer_s : float
-        Live: the receiver's buffer in seconds of data (:func:`estimator.stream.drivers.receive_capacity`).
-    slcan_timestamps : bool
-        Live SLCAN: switch the adapter's timestamp mode on and time frames by its clock.
-    alert_frames : bool
-        Send SUSPID_Alert frames (live bus, or ``alert_interface``).
-    alert_interface, alert_channel : str or None
+    ``can_channel``, ``j1939_source`` select a bus channel and J1939 sender (``None``: all,
+    the first); ``time_source`` ``None`` takes the sensor's tick when the stream carries
+    ``SN_Sync`` frames; ``duration``, ``idle_timeout`` stop a live run (s of wall time);
+    ``rx_buffer_s`` sizes the receiver (:func:`estimator.stream.drivers.receive_capacity`);
+    ``alert_frames`` sends ``SUSPID_Alert`` frames (live bus, or ``alert_interface``).
     """
 
     input: str | None = None
@@ -523,9 +429,8 @@ class Source:
 
 def open_checked_bus(interface: str, channel: str | None, bitrate: int | None, what: str,
                      slcan_timestamps: bool = False) -> Any:
-    """The bus through the node's and the estimator's one opener (:func:`suspid.can.bus.open_bus`:
-    chunked SLCAN reads, data timestamps on ``virtual``, ``udp_multicast`` refused);
-    ``slcan_timestamps``: the SLCAN adapter's own frame times (Lawicel ``Z1``)."""
+    """The bus through :func:`suspid.can.bus.open_bus`, errors prefixed with ``what``;
+    ``slcan_timestamps``: the SLCAN adapter's own frame times."""
     if channel is None:
         raise UsageError(f"{what}: --channel is required with --interface {interface}")
     if interface == "slcan" and str(channel).lower() in ("pty", "pty:"):
@@ -545,9 +450,7 @@ def open_checked_bus(interface: str, channel: str | None, bitrate: int | None, w
 def run_monitor(spec: MonitorSpec, source: Source, emit: Callable[[Any], None],
                 alert_file: str | Path | None = None) -> Summary:
     """Stream ``source`` through the monitor of ``spec``; every event goes to ``emit``.
-
-    Returns the closing summary (not emitted: the caller decides).
-    """
+    Returns the closing summary (not emitted)."""
     store = AlertStore(alert_file) if alert_file else None
     sinks: list[Any] = []
     mon = build_monitor(spec, emit, store, sinks)
@@ -568,10 +471,8 @@ def run_monitor(spec: MonitorSpec, source: Source, emit: Callable[[Any], None],
 
 def run_source(source: Source, spec: MonitorSpec, mon: StreamMonitor,
                sinks: list[Any]) -> dict[str, Any]:
-    """Stream a log, a CSV or the live bus through ``mon``; shut buses down.
-
-    Returns the source's summary fields (frames, timing) for the final ``summary`` line.
-    """
+    """Stream a log, a CSV or the live bus through ``mon``; returns the summary's source
+    fields. Buses are shut down."""
     buses: list[Any] = []
     try:
         if source.input is not None:
