@@ -20,34 +20,16 @@ from suspid.models import get_model
 
 @dataclass
 class AlertConfig:
-    """Alert settings.
-
-    Attributes
-    ----------
-    nominal : dict
-        ``parameter -> nominal value`` (SI) of every watched parameter.
-    drop : float
-        Alert when confidently below ``(1 - drop) x nominal``.
-    z : float
-        One-sided normal quantile of the confidence bound (2.326: 99 %).
-    persistence_s, min_count : float, int
-        Data time (s) and consecutive estimates the condition must hold.
-    hysteresis : float
-        Clear only above ``(1 - drop + hysteresis) x nominal``.
-    level : float
-        Two-sided level of a forecast interval (the fleet's drive trends).
-    horizon_days : float
-        The fleet reports no forecast further ahead of a vehicle's latest drive than this.
-    """
+    """Alert settings (``nominal`` SI of every watched parameter)."""
 
     nominal: dict[str, float] = field(default_factory=dict)
-    drop: float = 0.3
-    z: float = 2.326
-    persistence_s: float = 1.5
-    min_count: int = 2
-    hysteresis: float = 0.05
-    level: float = 0.90
-    horizon_days: float = 365.0
+    drop: float = 0.3  # alert when confidently below (1 - drop) x nominal
+    z: float = 2.326  # one-sided normal quantile of the bound (99 %)
+    persistence_s: float = 1.5  # data time (s) the condition must hold ...
+    min_count: int = 2  # ... and consecutive estimates
+    hysteresis: float = 0.05  # clear only above (1 - drop + hysteresis) x nominal
+    level: float = 0.90  # two-sided level of a fleet forecast interval
+    horizon_days: float = 365.0  # the fleet forecasts no further ahead of the latest drive
 
     @classmethod
     def per_drive(cls, **settings: Any) -> "AlertConfig":
@@ -151,20 +133,11 @@ class _State:
 
 @dataclass
 class AlertEngine:
-    """Per-parameter alert state machines feeding sinks through a durable store.
+    """Per-parameter alert state machines feeding ``sinks`` through a durable ``store``.
 
-    Parameters
-    ----------
-    config : AlertConfig
-    model : str
-        Model name (for the alert frame and event ids).
-    units : dict, optional
-        ``parameter -> unit`` for the messages.
-    store : AlertStore, optional
-        Durable log, written (fsynced) *before* any sink sees an event; events already in it
-        are suppressed, so a restarted monitor neither loses nor repeats alerts.
-    sinks : list
-        Outputs called for each new event.
+    The store (an :class:`~estimator.alerts.store.AlertStore`) is written before any sink
+    sees an event, and events already in it are suppressed: a restarted monitor neither
+    loses nor repeats alerts. ``model`` and ``units`` go into the frames and messages.
     """
 
     config: AlertConfig

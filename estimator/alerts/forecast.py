@@ -34,40 +34,23 @@ DEFAULT_HORIZON_S = 60.0
 class Trend:
     """A level and rate with covariance: the one trend of the monitor and the fleet.
 
-    Attributes
-    ----------
-    t : float
-        Reference abscissa of ``value``: time (s) or, for a fleet trend against distance,
-        the odometer (m); ``rate`` is per unit of it.
-    value, rate : float
-        Level (SI) and rate of change.
-    var_value, cov, var_rate : float
-        Covariance of (value, rate); NaN when the data cannot give it.
-    q_value, q_rate : float
-        Process-noise intensities of the level (SI^2/s) and the rate (SI^2/s^3): the
-        extrapolated variance grows by ``q_value tau + q_rate tau^3 / 3``.
-    span : float
-        Data time (s) the trend's data cover (``inf`` when unknown).
-    n : int
-        Points the fit used (0: a tracker's trend).
-    outliers : tuple of int
-        Indices of points the robust fit gave no weight.
-    tau : float
-        Scatter beyond the stated standard errors (SI; the fleet's random-effects weight).
+    The abscissa is time (s) or, for a fleet trend against distance, the odometer (m);
+    ``rate`` is per unit of it. The extrapolated variance grows by ``q_value tau + q_rate
+    tau^3 / 3`` (process noise: the wear may speed up, slow down or stop).
     """
 
-    t: float
-    value: float
+    t: float  # reference abscissa of value
+    value: float  # level at t (SI)
     rate: float
-    var_value: float
+    var_value: float  # covariance of (value, rate); NaN when the data cannot give it
     cov: float
     var_rate: float
-    q_value: float = 0.0
-    q_rate: float = 0.0
-    span: float = math.inf
-    n: int = 0
-    outliers: tuple[int, ...] = ()
-    tau: float = 0.0
+    q_value: float = 0.0  # SI^2/s
+    q_rate: float = 0.0  # SI^2/s^3
+    span: float = math.inf  # data time (s) the trend covers
+    n: int = 0  # points fitted (0: a tracker's trend)
+    outliers: tuple[int, ...] = ()  # indices of points the robust fit gave no weight
+    tau: float = 0.0  # scatter beyond the stated stderr (SI; the fleet's random effect)
 
     @property
     def value_stderr(self) -> float:
@@ -277,26 +260,17 @@ class ForecastEvent(ParameterEvent):
 class ForecastEngine:
     """Per-parameter forecast state: announce, update and withdraw predicted crossings.
 
-    Parameters
-    ----------
-    limits, nominal : dict
-        ``parameter -> limit`` and ``-> nominal`` (SI).
-    horizon_s : float
-        Announce a crossing predicted within this much data time (s).
-    publish : callable, optional
-        Receives each new event and returns whether it was delivered (the alert engine's
-        write-ahead publisher); by default the events are only collected.
-    min_span_s : float
-        Announce nothing from a trend whose data span less than this (s).
+    ``publish`` receives each new event and returns whether it was delivered (the alert
+    engine's write-ahead publisher); by default the events are only collected.
     """
 
-    limits: dict[str, float]
+    limits: dict[str, float]  # parameter -> limit (SI)
     nominal: dict[str, float]
-    horizon_s: float = DEFAULT_HORIZON_S
+    horizon_s: float = DEFAULT_HORIZON_S  # announce crossings predicted within this (s)
     model: str = ""
     units: dict[str, str] = field(default_factory=dict)
     publish: Any = None
-    min_span_s: float = 15.0
+    min_span_s: float = 15.0  # announce nothing from a trend spanning less data time (s)
     active: dict[str, ForecastEvent] = field(default_factory=dict)
     emitted: list[ForecastEvent] = field(default_factory=list)
 

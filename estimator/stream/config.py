@@ -32,88 +32,34 @@ MAX_SPAN_S = 1000.0
 
 @dataclass
 class WindowConfig:
-    """Sliding-window settings (defaults: :func:`default_config`, ``docs/monitoring.md``).
+    """Sliding-window settings (defaults: :func:`default_config`, ``docs/monitoring.md``)."""
 
-    Attributes
-    ----------
-    window_s, step_s : float
-        Window length and step (s of data time).
-    decimate : int
-        Keep every ``decimate``-th sample for the fit.
-    maxfev, first_maxfev : int
-        Evaluation budgets (warm windows, first window).
-    first_restarts : int
-        Nelder-Mead restarts from the best vertex on the first window.
-    xatol : float
-        Nelder-Mead simplex size tolerance (log-parameter units); the only termination
-        test besides the budget.
-    warm_step : float
-        Smallest edge (log units) of the warm-start simplex per parameter.
-    warm_adaptive : bool
-        Nelder-Mead's dimension-adapted coefficients on warm windows (else the standard ones).
-    gauss_newton_step : bool
-        Gauss-Newton steps after Nelder-Mead on a warm window
-        (:meth:`~estimator.stream.windowfit.WindowFit.gauss_newton`); their Jacobian also
-        gives the stderr.
-    gauss_newton_steps : int
-        Most Gauss-Newton steps on that Jacobian.
-    warm_predict : bool
-        Start each warm window from the last estimates' straight-line trend (3 windows).
-    max_missing : float
-        Skip a window when more than this fraction of a needed channel is missing.
-    min_deflection, min_snr : float
-        Skip a window when the RMS suspension deflection (or body motion) is below this (m)
-        or below ``min_snr`` times the noise floor estimated from the data.
-    sigma_floor : float
-        Relative standard error added in quadrature to every window's stderr (model error,
-        within-window drift).
-    cost : str
-        ``"sse"`` (positions) or ``"frobenius"`` (every measured channel).
-    road_fusion_hz : float
-        Crossover (Hz) of the road displacement / integrated velocity fusion
-        (:func:`estimator.stream.window.fuse_road`); 0: the displacement as measured.
-    road_lowpass_hz : float
-        Cutoff (Hz, -6 dB) of a zero-phase low-pass on the fitted road
-        (:func:`estimator.stream.window.lowpass_road`); 0: none.
-    drift : tuple of str
-        Free parameters refitted with a linear drift, ``theta(t) = theta_end (1 + g (t -
-        t_end))``, so their estimate refers to the window's end; empty: none.
-    drift_chunk_s : float
-        Chunk length (s) over which the drifting parameters are held constant.
-    drift_iterations : int
-        Most Gauss-Newton steps of the drift fit where its first-order solve does not apply.
-    drift_rate_sd : float
-        Standard deviation (relative, 1/s) of a prior on the drift rate centred on the last
-        estimates' rate; 0: no prior.
-    offset : str
-        ``"remove"`` or ``"keep"`` a constant sensor offset found on a cold window
-        (:mod:`estimator.stream.offsets`).
-    """
-
-    window_s: float
-    step_s: float
-    decimate: int = 1
-    maxfev: int = 160
-    first_maxfev: int = 1000
-    first_restarts: int = 4
-    xatol: float = XATOL
-    warm_step: float = 0.003
-    warm_adaptive: bool = True
-    gauss_newton_step: bool = False
-    gauss_newton_steps: int = 1
-    warm_predict: bool = True
-    max_missing: float = 0.2
-    min_deflection: float = 5e-4
-    min_snr: float = 3.0
-    sigma_floor: float = 0.005
-    cost: str = "sse"
-    road_fusion_hz: float = 0.0
-    road_lowpass_hz: float = 0.0
+    window_s: float  # window length (s of data time)
+    step_s: float  # step between window ends (s of data time)
+    decimate: int = 1  # fit every decimate-th sample
+    maxfev: int = 160  # evaluation budget of a warm window
+    first_maxfev: int = 1000  # evaluation budget of the first window
+    first_restarts: int = 4  # Nelder-Mead restarts on the first window
+    xatol: float = XATOL  # simplex size tolerance (log units): the only test besides the budget
+    warm_step: float = 0.003  # smallest edge (log units) of the warm-start simplex
+    warm_adaptive: bool = True  # dimension-adapted Nelder-Mead coefficients on warm windows
+    gauss_newton_step: bool = False  # Gauss-Newton steps after Nelder-Mead (their Jacobian: stderr)
+    gauss_newton_steps: int = 1  # most Gauss-Newton steps on that Jacobian
+    warm_predict: bool = True  # start warm windows on the last 3 estimates' straight-line trend
+    max_missing: float = 0.2  # skip a window missing more than this fraction of a channel
+    min_deflection: float = 5e-4  # skip a window whose RMS strut deflection is below this (m) ...
+    min_snr: float = 3.0  # ... or below this times the noise floor
+    sigma_floor: float = 0.005  # relative stderr added in quadrature (model error, drift)
+    cost: str = "sse"  # "sse" (positions) or "frobenius" (every measured channel)
+    road_fusion_hz: float = 0.0  # crossover of the road fusion (window.fuse_road); 0: off
+    road_lowpass_hz: float = 0.0  # cutoff of the road's zero-phase low-pass; 0: off
+    #: free parameters fitted with a linear drift, ``theta_end (1 + g (t - t_end))``: their
+    #: estimate refers to the window's end
     drift: tuple[str, ...] = ()
-    drift_chunk_s: float = 0.2
-    drift_iterations: int = 3
-    drift_rate_sd: float = 0.005
-    offset: str = "remove"
+    drift_chunk_s: float = 0.2  # chunk (s) over which the drifting parameters are constant
+    drift_iterations: int = 3  # most Gauss-Newton steps where the first-order drift fit fails
+    drift_rate_sd: float = 0.005  # prior (relative, 1/s) on the drift rate around the recent one
+    offset: str = "remove"  # "remove" or "keep" a sensor offset found (estimator.stream.offsets)
 
     def validate(self) -> None:
         """Raise :class:`UsageError` naming the first inconsistent setting."""
@@ -176,27 +122,13 @@ class WindowOptions:
 
 @dataclass
 class AlertOptions:
-    """The alert rule and forecast settings a user gives (``--alert-drop``, ``[alert]``).
+    """The alert rule and forecast settings a user gives (``--alert-drop``, ``[alert]``)."""
 
-    Attributes
-    ----------
-    drop : float
-        Alert below ``(1 - drop) x nominal``.
-    confidence : float
-        One-sided confidence of the bound.
-    persistence_s : float or None
-        Data time (s) a drop must persist (``None``: one window step).
-    hysteresis : float
-        Clear only above ``(1 - drop + hysteresis) x nominal``.
-    forecast_horizon_s : float or None
-        Announce a predicted crossing due within this data time (s; ``None``: 60 s).
-    """
-
-    drop: float = 0.3
-    confidence: float = 0.99
-    persistence_s: float | None = None
-    hysteresis: float = 0.05
-    forecast_horizon_s: float | None = None
+    drop: float = 0.3  # alert below (1 - drop) x nominal
+    confidence: float = 0.99  # one-sided confidence of the bound
+    persistence_s: float | None = None  # data time (s) a drop must persist (None: one step)
+    hysteresis: float = 0.05  # clear only above (1 - drop + hysteresis) x nominal
+    forecast_horizon_s: float | None = None  # announce crossings due within this (s; None: 60)
 
 
 @dataclass

@@ -57,49 +57,29 @@ OUTPUT_ONLY_STEP_S = 30.0
 
 @dataclass
 class MonitorSpec:
-    """Everything the monitor needs besides the stream.
-
-    Attributes
-    ----------
-    params : Parameters
-        Starting values of the free parameters and the fixed ones.
-    nominal : dict
-        ``parameter -> nominal`` (SI) of every monitored parameter.
-    baseline : {"nm", "ekf", "output_only"}
-    start_given : set of str
-        Free parameters whose start was given; the EKF starts the others from the first
-        window's sliding-window estimate.
-    decimate_given : bool
-        ``config.decimate`` was set explicitly (else derived from the sample rate).
-    inspection : bool
-        Virtual damper test on each quarter-car estimate.
-    ekf_params, ekf_q, ekf_decimate
-        :class:`~estimator.stream.config.EkfOptions` (``ekf_params`` checked).
-    road : {"measured", "zero", "unknown"} or None
-        ``--road``; ``None``: chosen on the first window (:func:`choose_road`).
-    drift_given : bool
-        ``window.drift`` named parameters.
-    """
+    """Everything the monitor needs besides the stream."""
 
     model: SuspensionModel
-    params: Parameters
-    nominal: dict[str, float]
+    params: Parameters  # starting values of the free parameters, and the fixed ones
+    nominal: dict[str, float]  # nominal value (SI) of every monitored parameter
     config: WindowConfig
     alert: AlertConfig
-    baseline: str = "nm"
+    baseline: str = "nm"  # "nm", "ekf" or "output_only"
+    #: free parameters whose start was given; the EKF starts the others from the first
+    #: window's sliding-window estimate
     start_given: set[str] = field(default_factory=set)
-    decimate_given: bool = False
-    inspection: bool = True
+    decimate_given: bool = False  # config.decimate set explicitly (else from the sample rate)
+    inspection: bool = True  # virtual damper test on each quarter-car estimate
     forecast_horizon_s: float = DEFAULT_HORIZON_S
-    ekf_params: list[str] | None = None
+    ekf_params: list[str] | None = None  # EkfOptions, checked
     ekf_q: float | None = None
     ekf_decimate: int | None = None
     accel_channel: str = ""
     oo_method: str = "carma"
     units: dict[str, str] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
-    road: str | None = None
-    drift_given: bool = False
+    road: str | None = None  # --road; None: chosen on the first window (choose_road)
+    drift_given: bool = False  # window.drift named parameters
 
 
 def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = None,
@@ -400,29 +380,23 @@ def build_monitor(spec: MonitorSpec, emit: Callable[[Any], None], store: AlertSt
 
 @dataclass
 class Source:
-    """Where the frames come from: a CAN log or CSV (``input``) or a live python-can bus.
+    """Where the frames come from: a CAN log or CSV (``input``) or a live python-can bus."""
 
-    ``can_channel``, ``j1939_source`` select a bus channel and J1939 sender (``None``: all,
-    the first); ``time_source`` ``None`` takes the sensor's tick when the stream carries
-    ``SN_Sync`` frames; ``duration``, ``idle_timeout`` stop a live run (s of wall time);
-    ``rx_buffer_s`` sizes the receiver (:func:`estimator.stream.drivers.receive_capacity`);
-    ``alert_frames`` sends ``SUSPID_Alert`` frames (live bus, or ``alert_interface``).
-    """
-
-    input: str | None = None
+    input: str | None = None  # CAN log (replayed as fast as possible) or measurement CSV
     interface: str | None = None
     channel: str | None = None
     bitrate: int | None = None
-    dbc: Path | None = None
+    dbc: Path | None = None  # default suspid's
     signal_map: Any = None
-    can_channel: str | None = None
-    j1939_source: str | None = None
+    can_channel: str | None = None  # the bus channel of a multi-bus log (None: all)
+    j1939_source: str | None = None  # the J1939 sender decoded (None: the first)
+    #: None: the sensor's tick when the stream carries SN_Sync frames, else the timestamps
     time_source: Literal["timestamp", "tick"] | None = None
-    duration: float | None = None
+    duration: float | None = None  # live stop conditions (s of wall time)
     idle_timeout: float | None = 5.0
-    rx_buffer_s: float = RECEIVE_BUFFER_S
-    slcan_timestamps: bool = False
-    alert_frames: bool = True
+    rx_buffer_s: float = RECEIVE_BUFFER_S  # the live receiver's buffer (s of data)
+    slcan_timestamps: bool = False  # time live SLCAN frames by the adapter's clock
+    alert_frames: bool = True  # send SUSPID_Alert frames (live bus, or alert_interface)
     alert_interface: str | None = None
     alert_channel: str | None = None
 

@@ -52,68 +52,37 @@ class _Track:
 class TrendTracker:
     """Per-parameter two-model local-linear-trend filter (see the module docstring).
 
-    Parameters
-    ----------
-    q_level : float
-        Level random walk, relative to nominal per sqrt(s).
-    q_rate, q_rate_change : float
-        Rate random walks of the steady and the changing model (relative to nominal per s
-        per sqrt(s)); ``q_rate_change <= q_rate`` gives a single filter.
-    p_switch : float
-        Probability of a model switch between two estimates.
-    rate0 : float
-        Prior standard deviation of the rate, relative to nominal per s.
-    lag : float
-        Data time (s) between a window's end and the time its estimate describes.
-    lags : dict
-        ``parameter -> lag`` (s) for parameters fitted with a linear drift (0).
-    overlap : float
-        Measurement-variance inflation for overlapping windows (``window / step``).
-    calibrate : bool
-        Scale the stated variances by the scatter of the estimates (``calib_*``: prior
-        pseudo-observations, memory in estimates, clip range).
-    innov_scale : bool
-        Widen the reported variances by the innovations' ``kappa^2`` (``innov_*``: prior,
-        memory, upper clip; ``innov_rate`` the exponent on the rate's variance).
-    forecast_settle_s, forecast_settle_power : float
-        Extra rate variance of the trends right after a kink.
-    restart_mu, restart_rate, restart_glr : float
-        Changing-model probability that triggers a rate restart, the restarted rate's prior
-        width (relative per s; 0: no restart) and the ``2 Delta log L`` it must pass.
-    restart_back, restart_confirm, restart_hold : int
-        Estimates the restart goes back, further estimates the changing model must hold
-        first, and estimates during which the trend reports no data span.
-    nominal : dict, optional
-        ``parameter -> nominal`` (SI) scaling the noise (default: the first estimate).
+    Noise levels are relative to the nominal value: ``q_level`` per sqrt(s), the rate walks
+    per s per sqrt(s), ``rate0`` and ``restart_rate`` per s.
     """
 
-    q_level: float = 5e-4
-    q_rate: float = 5e-5
-    q_rate_change: float = 1e-3
-    p_switch: float = 0.01
-    rate0: float = 0.01
-    lag: float = 0.0
-    lags: dict[str, float] = field(default_factory=dict)
-    overlap: float = 1.0
-    calibrate: bool = True
-    calib_prior: float = 2.0
-    calib_memory: float = 50.0
+    q_level: float = 5e-4  # level random walk
+    q_rate: float = 5e-5  # rate random walk of the steady model
+    q_rate_change: float = 1e-3  # of the changing model (<= q_rate: a single filter)
+    p_switch: float = 0.01  # probability of a model switch between two estimates
+    rate0: float = 0.01  # prior standard deviation of the rate
+    lag: float = 0.0  # data time (s) from a window's end back to the time its estimate describes
+    lags: dict[str, float] = field(default_factory=dict)  # per parameter (drift-fitted: 0)
+    overlap: float = 1.0  # measurement-variance inflation of overlapping windows (window / step)
+    calibrate: bool = True  # scale the stated variances by the estimates' scatter (lambda)
+    calib_prior: float = 2.0  # pseudo-observations of lambda = 1
+    calib_memory: float = 50.0  # memory (estimates) of lambda's weighted mean
     calib_min: float = 0.05
     calib_max: float = 20.0
-    forecast_settle_s: float = 20.0
+    forecast_settle_s: float = 20.0  # extra rate variance of the trends right after a kink
     forecast_settle_power: float = 8.0
-    restart_mu: float = 0.5
-    restart_rate: float = 0.005
-    restart_glr: float = 3.84
-    restart_back: int = 1
-    restart_confirm: int = 0
-    restart_hold: int = 2
-    innov_scale: bool = True
-    innov_prior: float = 0.5
-    innov_memory: float = 2.0
-    innov_max: float = 25.0
-    innov_rate: float = 0.25
-    nominal: dict[str, float] = field(default_factory=dict)
+    restart_mu: float = 0.5  # changing-model probability that restarts the rate
+    restart_rate: float = 0.005  # width of the restarted rate's prior; 0: no restart
+    restart_glr: float = 3.84  # 2 Delta log L a restart must pass
+    restart_back: int = 1  # estimates the restart goes back
+    restart_confirm: int = 0  # further estimates the changing model must hold first
+    restart_hold: int = 2  # estimates during which the trend reports no data span
+    innov_scale: bool = True  # widen the reported variances by the innovations' kappa^2
+    innov_prior: float = 0.5  # pseudo-observations of kappa^2 = 1
+    innov_memory: float = 2.0  # memory (estimates) of the mean of nu^2 / S
+    innov_max: float = 25.0  # upper clip of kappa^2 (the lower is 1)
+    innov_rate: float = 0.25  # exponent of kappa^2 on the rate's variance
+    nominal: dict[str, float] = field(default_factory=dict)  # noise scale (else the first estimate)
     tracks: dict[str, _Track] = field(default_factory=dict)
 
     @property

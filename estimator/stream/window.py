@@ -28,7 +28,7 @@ from estimator.identify.profile import SIGMAS
 from estimator.identify.start import (EXACT_FIT, cold_start, noise_floor_ratios, ratios_of_parts,
                                       residual_noise_floor_parts, twin_of)
 from estimator.stream.config import WindowConfig
-from estimator.stream.windowfit import WindowFit
+from estimator.stream.windowfit import WindowFit, drift_cov
 from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
 from suspid.models.base import AffinePieces, FloatArray, SuspensionModel
@@ -37,27 +37,9 @@ from suspid.simulate import uniform_step
 
 @dataclass
 class WindowResult:
-    """Outcome of one window.
-
-    Attributes
-    ----------
-    t, t_start : float
-        Data time at the window end and start (s).
-    skipped : bool
-        ``True`` when the window was not fitted; ``reason`` says why.
-    params, stderr, stderr_fit : dict
-        Every parameter (SI); standard errors of the free ones with the ``sigma_floor``
-        and the fit's own (noise only).
-    nfev, budget : int
-        Evaluations used and the budget.
-    cost, cpu_s : float
-        The seed's cost of the fit (SI) and the process CPU time of the window (s).
-    excitation : dict
-        ``deflection_rms`` (m), ``noise`` (m), ``snr``, ``missing`` (fraction).
-    noise_floor_ratio : dict
-        Per fitted channel, the residual over what white noise alone would leave
-        (:func:`~estimator.identify.start.noise_floor_ratios`).
-    """
+    """Outcome of one window ending at data time ``t`` (s): the parameters (SI), their stderr
+    with the ``sigma_floor`` and the fit's own (``stderr_fit``), evaluations, cost, CPU time,
+    ``excitation`` and per-channel ``noise_floor_ratio``; or ``skipped`` with the ``reason``."""
 
     t: float
     t_start: float
@@ -125,26 +107,12 @@ def _missing(v: FloatArray) -> float:
 
 
 def fuse_road(t: FloatArray, r: FloatArray, r_dot: FloatArray, crossover_hz: float) -> FloatArray:
-    """Road displacement from its measurement (slow part) and its velocity's integral (fast).
+    """Road displacement (m) from its measurement ``r`` below ``crossover_hz`` and the integral
+    of its velocity ``r_dot`` (m/s) above, on uniform times ``t`` (s).
 
     ``r_hat = R + LP(r - R)``, ``R`` the trapezoidal integral of ``r_dot`` and ``LP`` a centred
-    moving average of ``1 / crossover_hz`` s applied twice: white noise on ``r`` (an error in
-    the input that biases the dampers) is averaged out above the crossover. A window with a
-    non-finite sample is returned unchanged.
-
-    Parameters
-    ----------
-    t : ndarray
-        Uniform sample times (s).
-    r, r_dot : ndarray
-        Measured road displacement (m) and velocity (m/s).
-    crossover_hz : float
-        Crossover frequency (Hz).
-
-    Returns
-    -------
-    ndarray
-        The fused displacement (m).
+    moving average of ``1 / crossover_hz`` s applied twice: white noise on ``r`` (an input
+    error that biases the dampers) is averaged out. A non-finite sample leaves ``r`` as it is.
     """
     r = np.asarray(r, dtype=float)
     v = np.asarray(r_dot, dtype=float)
@@ -171,23 +139,9 @@ def _butter_sos(order: int, wn: float) -> FloatArray:
 
 
 def lowpass_road(v: FloatArray, h: float, cutoff_hz: float, order: int = 2) -> FloatArray:
-    """Zero-phase Butterworth low-pass of one road channel over a window.
-
-    ``sosfiltfilt`` with odd extension of ``3 / cutoff_hz`` s at both ends; returned unchanged
-    when a sample is not finite, the cutoff is at or above 0.9 x Nyquist or the window is
-    shorter than the padding.
-
-    Parameters
-    ----------
-    v : ndarray
-        Road displacement (m) or velocity (m/s) on a uniform grid.
-    h : float
-        Sample interval (s).
-    cutoff_hz : float
-        Cutoff (Hz), -6 dB of the forward-backward pair.
-    order : int
-        Butterworth order of one pass.
-    """
+    """Zero-phase Butterworth low-pass (``sosfiltfilt``, -6 dB at ``cutoff_hz``, odd padding of
+    ``3 / cutoff_hz`` s) of one road channel sampled every ``h`` s; unchanged when a sample is
+    not finite, the cutoff is at or above 0.9 x Nyquist or the window is shorter than the pad."""
     v = np.asarray(v, dtype=float)
     wn = 2.0 * cutoff_hz * h
     pad = int(math.ceil(3.0 / (cutoff_hz * h))) if cutoff_hz > 0 else 0
@@ -198,17 +152,8 @@ def lowpass_road(v: FloatArray, h: float, cutoff_hz: float, order: int = 2) -> F
 
 
 class SlidingWindowIdentifier:
-    """Fit the free parameters on successive windows of a stream.
-
-    Parameters
-    ----------
-    model : SuspensionModel
-    params : Parameters
-        Starting values (nominal) and which parameters are fixed.
-    config : WindowConfig
-    channels : list of str
-        Measured channels to fit (a subset of ``model.channels``).
-    """
+    """Fit the free parameters of ``params`` on successive windows of a stream of ``channels``
+    (the model's measured channels to fit)."""
 
     #: the drift fit to first order (:meth:`_drift_linear`); ``False``: Gauss-Newton only
     first_order_drift: bool = True
@@ -412,17 +357,8 @@ class SlidingWindowIdentifier:
         for j, k in enumerate(drift):
             cols[:, self.free.index(k)] = Ja[:, j]
         cols = np.hstack([cols, Jg])
-        nc = cols.shape[1]
-        s2 = (R * R).sum(axis=1) / max(N - nc, 1)
-        s2 = np.where(s2 > 0, s2, 1.0)
-        Jn = cols / np.repeat(np.sqrt(s2), N)[:, None]
-        H = Jn.T @ Jn
-        if sd_u > 0:
-            nf = len(self.free)
-            H[nf:, nf:] += np.eye(nd) / cfg.drift_rate_sd ** 2
-        try:
-            cov = np.linalg.inv(H)
-        except np.linalg.LinAlgError:
+        cov = drift_cov(cols, R, len(self.free), cfg.drift_rate_sd if sd_u > 0 else None)
+        if cov is None:
             return False
         got = []
         for j, k in enumerate(drift):

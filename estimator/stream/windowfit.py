@@ -76,6 +76,24 @@ def _verdict(small: FloatArray, free: list[str], kinds: dict[str, str],
     return assess(small, free, kinds, structural)
 
 
+def drift_cov(cols: FloatArray, R: FloatArray, n_free: int,
+              rate_prior_sd: float | None) -> FloatArray | None:
+    """Gauss-Newton covariance of the Jacobian ``cols`` (p N x n: the free parameters', then
+    the rates' columns), each channel weighted by its noise in the residual ``R`` (p, N);
+    ``rate_prior_sd`` (1/s) adds a prior on the rates. ``None`` when singular."""
+    pch, N = R.shape
+    sig = np.sqrt((R * R).sum(axis=1) / max(N - cols.shape[1], 1))
+    sig = np.where(sig > 0, sig, 1.0)
+    J = (cols.reshape(pch, N, -1) / sig[:, None, None]).reshape(pch * N, -1)
+    H = J.T @ J
+    if rate_prior_sd:
+        H[n_free:, n_free:] += np.eye(H.shape[0] - n_free) / rate_prior_sd ** 2
+    try:
+        return np.asarray(np.linalg.inv(H), dtype=float)
+    except np.linalg.LinAlgError:
+        return None
+
+
 @dataclass
 class GaussNewton:
     """Outcome of :meth:`WindowFit.gauss_newton`."""
@@ -516,7 +534,6 @@ class WindowFit:
             R0 = resid(p, rates)
         if R0 is None:
             return None
-        pch, N = R0.shape
         cols = []
         for k in free:
             q = dict(p)
@@ -532,16 +549,8 @@ class WindowFit:
             if Rk is None:
                 return None
             cols.append(((Rk - R0) / rel_step).ravel())
-        sig = np.sqrt((R0 * R0).sum(axis=1) / max(N - len(cols), 1))
-        sig = np.where(sig > 0, sig, 1.0)
-        J = (np.column_stack(cols).reshape(pch, N, -1) / sig[:, None, None]).reshape(pch * N, -1)
-        H = J.T @ J
-        if rate_prior_sd:
-            nf = len(free)
-            H[nf:, nf:] += np.eye(len(rates)) / rate_prior_sd ** 2
-        try:
-            cov = np.linalg.inv(H)
-        except np.linalg.LinAlgError:
+        cov = drift_cov(np.column_stack(cols), R0, len(free), rate_prior_sd)
+        if cov is None:
             return None
         return {k: float(p[k] * math.sqrt(max(float(cov[i, i]), 0.0)))
                 for i, k in enumerate(free)}
