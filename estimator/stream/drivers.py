@@ -51,40 +51,27 @@ def run_arrays(t: FloatArray, data: Mapping[str, FloatArray], window_s: float, s
 
 @dataclass
 class CanWindowDriver:
-    """Cut windows out of a :class:`~estimator.decode.DecodeListener` as frames arrive.
-
-    Parameters
-    ----------
-    listener : DecodeListener
-    window_s, step_s : float
-    on_window : callable
-        ``(t, data)`` per window.
-    channels : list of str
-        Channels to align (default: those of the messages that delivered when the first
-        window starts, which waits up to ``start_wait_s`` of data time for late ones).
-    check_every : int
-        Fewest frames between checks of the buffer's newest time (:meth:`next_check`).
-    max_missing : float
-        A window reaching into a gap and covering less than ``1 - max_missing`` of
-        ``window_s`` is padded with NaN to its span, so it is skipped at its own end time.
-    """
+    """Cut windows out of a :class:`~estimator.decode.DecodeListener` as frames arrive."""
 
     listener: Any
     window_s: float
     step_s: float
-    on_window: WindowFn
+    on_window: WindowFn  # called with (t, data) per window
+    #: channels to align (default: those of the messages that delivered when the first window
+    #: starts, which waits up to ``start_wait_s`` of data time for late ones)
     channels: list[str] | None = None
-    check_every: int = 32
+    check_every: int = 32  # fewest frames between checks of the buffer (next_check)
     frames: int = 0
     windows: int = 0
-    #: windows that held no decoded sample of the channels (skipped)
-    empty_windows: int = 0
+    empty_windows: int = 0  # windows that held no decoded sample of the channels (skipped)
     dt: float | None = None
     t_first: float = math.nan
     next_end: float = math.nan
     _left: int = 1
     on_first_dt: Callable[[float], None] | None = None
     start_wait_s: float | None = None
+    #: a window reaching into a gap and covering less than ``1 - max_missing`` of its span is
+    #: padded with NaN, so it is skipped at its own end time
     max_missing: float = 0.2
     _t_seen: float = math.nan
 
@@ -225,21 +212,10 @@ def replay(driver: CanWindowDriver, messages: Iterable[Any]) -> int:
 
 def replay_log(driver: CanWindowDriver, path: Any, stats: Any = None,
                channel: str | None = None) -> int:
-    """Replay a CAN log file as fast as possible; returns the number of frames.
-
-    Read and decoded in NumPy batches (:func:`estimator.decode.feed_log`), with the same
-    windows, estimates and frame statistics as a frame-by-frame :func:`replay`.
-
-    Parameters
-    ----------
-    driver : CanWindowDriver
-    path : str or Path
-        ``.log``, ``.asc``, ``.blf``, ``.trc`` or ``.mf4``.
-    stats : ReadStats, optional
-        Filled with frames read and lines skipped.
-    channel : str, optional
-        Only this bus channel of a multi-bus log.
-    """
+    """Replay a CAN log file (``.log``, ``.asc``, ``.blf``, ``.trc``, ``.mf4``) as fast as
+    possible, decoded in NumPy batches (:func:`estimator.decode.feed_log`) with the windows
+    and statistics of a frame-by-frame :func:`replay`; ``stats`` (ReadStats) is filled,
+    ``channel`` selects a bus channel. Returns the number of frames."""
     fed = driver.frames + 1   # frames fed when poll() is called (first after one frame)
 
     def poll() -> int:
@@ -322,20 +298,11 @@ def enlarge_socket_buffer(bus: Any, size: int = SOCKET_RCVBUF) -> int:
 
 
 class Receiver:
-    """Read a python-can bus on its own thread into a bounded buffer.
+    """Read a python-can bus on its own thread into a buffer of ``capacity`` frames.
 
-    The fits run on the caller's thread, so a slow fit delays the decoding, not the
-    reception. Lost frames are counted by cause (``buffer_overflow``, ``socket_overrun``,
-    error frames by class) and each loss is noted in :attr:`events` at its place in the
-    frame sequence for :class:`LossLedger`.
-
-    Parameters
-    ----------
-    bus : can.BusABC
-    capacity : int, optional
-        Frames the buffer holds (default :data:`RECEIVE_BUFFER_S` s at :data:`RECEIVE_RATE`).
-    rcvbuf : int or None
-        Kernel receive queue asked for on a SocketCAN bus (bytes; ``None``: as it is).
+    A slow fit on the caller's thread delays the decoding, not the reception. Lost frames
+    are counted by cause and each loss is noted in :attr:`events` for :class:`LossLedger`;
+    ``rcvbuf`` is the kernel queue asked for on a SocketCAN bus (bytes; ``None``: as it is).
     """
 
     def __init__(self, bus: Any, capacity: int | None = None,
@@ -544,15 +511,9 @@ class LossLedger:
 
 def run_bus(driver: CanWindowDriver, bus: Any, stop: LiveStop,
             buffer_s: float = RECEIVE_BUFFER_S, rcvbuf: int | None = SOCKET_RCVBUF) -> int:
-    """Receive from a live python-can bus until a stop condition; returns frames received.
-
-    A :class:`Receiver` thread reads the bus; this thread decodes, cuts and fits. Stops on
-    ``stop`` (signal, duration, idle timeout) or when the bus can no longer be read; every
-    frame received is processed. The listener's ``receive_stats`` then carry the
-    :meth:`Receiver.stats`, ``counter_gap``, ``counter_gap_after`` (:class:`LossLedger`) and
-    ``lost_by_cause``. ``buffer_s`` sizes the receiver (s of data), ``rcvbuf`` the kernel
-    queue (bytes).
-    """
+    """Receive from a live bus until ``stop`` (signal, duration, idle) or the bus closes;
+    returns frames received. A :class:`Receiver` thread reads, this thread decodes and fits;
+    the listener's ``receive_stats`` get the losses by cause (:class:`LossLedger`)."""
     start = time.monotonic()
     last_rx = start
     n = 0

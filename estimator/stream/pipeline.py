@@ -89,57 +89,31 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
                  alert: AlertOptions | None = None, ekf: EkfOptions | None = None,
                  output_only: OutputOnlyOptions | None = None, fs: float = 0.0,
                  inspection: bool = True) -> MonitorSpec:
-    """Check the monitor's settings and derive its defaults.
+    """Check the monitor's settings (raising :class:`UsageError` naming the first bad one) and
+    derive its defaults from the model's modes (:func:`default_config`).
 
-    Parameters
-    ----------
-    model : SuspensionModel
-    fix, nominal, init : mapping, optional
-        Known parameters; nominal values of monitored ones (also their start); starting
-        values that differ from nominal (SI).
-    baseline : {"nm", "ekf", "output_only"}
-    road : {"measured", "zero", "unknown"}, optional
-        ``--road``; ``None`` chooses on the first window (:func:`choose_road`).
-    window, alert, ekf, output_only : optional
-        The user's settings (:mod:`estimator.stream.config`); unset ones from the model's
-        modes (:func:`~estimator.stream.config.default_config`).
-    fs : float
-        Sample rate (Hz) when known (else the decimation is derived on the first window).
-    inspection : bool
-        Virtual damper test on each quarter-car estimate.
-
-    Raises
-    ------
-    UsageError
-        Naming the first inconsistent setting.
+    ``fix``, ``nominal``, ``init`` (SI): known parameters, the monitored ones' nominal values
+    (also their start), other starts. ``road`` ``None`` chooses on the first window;
+    ``window``, ``alert``, ``ekf``, ``output_only`` are the user's settings
+    (:mod:`estimator.stream.config`); ``fs`` (Hz) the sample rate when known.
     """
-    wo = window or WindowOptions()
-    ao = alert or AlertOptions()
-    eo = ekf or EkfOptions()
-    oo = output_only or OutputOnlyOptions()
-    alert_drop, confidence, hysteresis = ao.drop, ao.confidence, ao.hysteresis
-    persistence = ao.persistence_s
-    forecast_horizon = ao.forecast_horizon_s
-    window_s, step = wo.window_s, wo.step_s
-    decimate = wo.decimate
+    wo, ao = window or WindowOptions(), alert or AlertOptions()
+    eo, oo = ekf or EkfOptions(), output_only or OutputOnlyOptions()
+    window_s, step, decimate = wo.window_s, wo.step_s, wo.decimate
     ekf_params = list(eo.params) if eo.params else None
-    fix = dict(fix or {})
-    nominal_in = dict(nominal or {})
-    if forecast_horizon is None:
-        forecast_horizon = DEFAULT_HORIZON_S
-    init = dict(init or {})
-    if not 0 < alert_drop < 1:
-        raise UsageError(f"--alert-drop: expected a fraction in (0, 1), got {alert_drop}")
-    if not 0.5 < confidence < 1:
-        raise UsageError(f"alert.confidence: expected a probability in (0.5, 1), got {confidence}")
-    if not (forecast_horizon > 0 and math.isfinite(forecast_horizon)):
-        raise UsageError(f"alert.forecast_horizon_s: expected a time > 0 s, got {forecast_horizon}")
-    z = float(NormalDist().inv_cdf(confidence))
+    fix, nominal_in, init = dict(fix or {}), dict(nominal or {}), dict(init or {})
+    horizon = DEFAULT_HORIZON_S if ao.forecast_horizon_s is None else ao.forecast_horizon_s
+    if not 0 < ao.drop < 1:
+        raise UsageError(f"--alert-drop: expected a fraction in (0, 1), got {ao.drop}")
+    if not 0.5 < ao.confidence < 1:
+        raise UsageError(f"alert.confidence: expected a probability in (0.5, 1), got {ao.confidence}")
+    if not (horizon > 0 and math.isfinite(horizon)):
+        raise UsageError(f"alert.forecast_horizon_s: expected a time > 0 s, got {horizon}")
+    z = float(NormalDist().inv_cdf(ao.confidence))
     if road is not None and road not in ROAD_MODES:
         raise UsageError(f"--road: expected one of {', '.join(ROAD_MODES)}, got {road!r}")
     if baseline == "output_only":
-        return _output_only_spec(model, nominal_in, alert_drop, z, persistence, hysteresis,
-                                 window_s, step, forecast_horizon, oo.accel_channel, oo.method)
+        return _output_only_spec(model, nominal_in, ao, z, wo, horizon, oo)
     for k in list(fix) + list(nominal_in) + list(init):
         model.spec(k)
     both = set(fix) & set(nominal_in)
@@ -192,9 +166,9 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
     if decimate is not None:
         cfg.decimate = decimate
     cfg.validate()
-    acfg = AlertConfig(nominal=dict(nominal_all), drop=alert_drop, z=z,
-                       persistence_s=cfg.step_s if persistence is None else persistence,
-                       hysteresis=hysteresis)
+    acfg = AlertConfig(nominal=dict(nominal_all), drop=ao.drop, z=z,
+                       persistence_s=cfg.step_s if ao.persistence_s is None else ao.persistence_s,
+                       hysteresis=ao.hysteresis)
     acfg.validate()
     aug = None
     if baseline == "ekf":
@@ -211,20 +185,20 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
     return MonitorSpec(model, params, nominal_all, cfg, acfg, baseline=baseline,
                        start_given=set(nominal_in) | set(init),
                        decimate_given=decimate is not None, inspection=inspection,
-                       forecast_horizon_s=forecast_horizon, ekf_params=aug, ekf_q=eo.q,
+                       forecast_horizon_s=horizon, ekf_params=aug, ekf_q=eo.q,
                        ekf_decimate=eo.decimate,
                        units={k: model.spec(k).unit for k in nominal_all}, warnings=warnings,
                        road=road, drift_given=bool(given_drift))
 
 
-def _output_only_spec(model: SuspensionModel, nominal: Mapping[str, float], drop: float, z: float,
-                      persistence: float | None, hysteresis: float, window: float | None,
-                      step: float | None, horizon: float, accel_channel: str | None,
-                      method: str) -> MonitorSpec:
+def _output_only_spec(model: SuspensionModel, nominal: Mapping[str, float], ao: AlertOptions,
+                      z: float, wo: WindowOptions, horizon: float,
+                      oo: OutputOnlyOptions) -> MonitorSpec:
     """:func:`monitor_spec` for the output-only mode (body mode from one accelerometer)."""
-    channel = accel_channel or f"{model.coords[0]}_ddot"
+    channel = oo.accel_channel or f"{model.coords[0]}_ddot"
     if channel not in model.channels:
         raise UsageError(f"output_only.accel_channel {channel!r} is not a channel of model {model.name}")
+    window, step = wo.window_s, wo.step_s
     w = window if window is not None else OUTPUT_ONLY_WINDOW_S
     s = step if step is not None else (w / 2.0 if window is not None else OUTPUT_ONLY_STEP_S)
     cfg = WindowConfig(window_s=w, step_s=s)
@@ -232,13 +206,13 @@ def _output_only_spec(model: SuspensionModel, nominal: Mapping[str, float], drop
     bad = [k for k in nominal if k not in ("f_body", "zeta_body")]
     if bad:
         raise UsageError(f"--nominal {bad[0]}: output-only mode monitors f_body and zeta_body")
-    acfg = AlertConfig(dict(nominal), drop=drop, z=z,
-                       persistence_s=s if persistence is None else persistence,
-                       hysteresis=min(hysteresis, drop / 2))
+    acfg = AlertConfig(dict(nominal), drop=ao.drop, z=z,
+                       persistence_s=s if ao.persistence_s is None else ao.persistence_s,
+                       hysteresis=min(ao.hysteresis, ao.drop / 2))
     acfg.validate()
     return MonitorSpec(model, Parameters.for_model(model), dict(nominal), cfg, acfg,
                        baseline="output_only", forecast_horizon_s=horizon,
-                       accel_channel=channel, oo_method=method,
+                       accel_channel=channel, oo_method=oo.method,
                        units={"f_body": "Hz", "zeta_body": ""})
 
 
@@ -466,54 +440,37 @@ def run_source(source: Source, spec: MonitorSpec, mon: StreamMonitor,
                 pass
 
 
-def _listener(source: Source, spec: MonitorSpec,
-              time_source: Literal["timestamp", "tick", "auto"]) -> DecodeListener:
-    """The CAN layer's DecodeListener with a bounded buffer sized for the windows."""
+def _can_driver(source: Source, spec: MonitorSpec, mon: StreamMonitor, sinks: list[Any],
+                buses: list[Any], live_bus: Any = None) -> tuple[DecodeListener, CanWindowDriver]:
+    """The decoder (its buffer sized for the windows), the SUSPID_Alert frame sink (the live
+    bus, or ``alert_interface``) given to the alert engine, and the window driver."""
     cfg = spec.config
     # rows per message: window + step at up to 2 kHz, power of two
     rows = 1 << max(12, math.ceil(math.log2(max(2.0, (cfg.window_s + 2 * cfg.step_s) * 2000.0))))
     listener = DecodeListener(spec.model, source.dbc, source.signal_map, capacity=rows,
-                              growable=False, time_source=time_source, arrival_slots=True,
-                              j1939_source=source.j1939_source)
+                              growable=False, time_source=source.time_source or "auto",
+                              arrival_slots=True, j1939_source=source.j1939_source)
     # a mapped signal the DBC gives in mm, g or deg without a scale: said before streaming
     for w in listener.signal_map.unit_warnings(listener.db, listener.model):
         sys.stderr.write(f"warning: {w}\n")
-    return listener
-
-
-def _alert_bus(source: Source, sinks: list[Any], listener: DecodeListener, buses: list[Any],
-               live_bus: Any = None) -> None:
-    """Add the SUSPID_Alert frame sink (live bus, or ``alert_interface`` for a replay)."""
-    if not source.alert_frames:
-        return
-    bus = None
-    if source.alert_interface:
+    bus = live_bus
+    if source.alert_frames and source.alert_interface:
         bus = open_checked_bus(source.alert_interface, source.alert_channel, source.bitrate,
                                "live.alert_interface")
         buses.append(bus)
-    elif live_bus is not None:
-        bus = live_bus
-    if bus is not None:
+    if source.alert_frames and bus is not None:
         sinks.append(BusAlertSink(bus, listener.db))
-
-
-def _attach(mon: StreamMonitor, sinks: list[Any]) -> None:
-    """Give the alert engine the sinks added after it was built (the bus)."""
     if mon.alerts is not None:
-        for s in sinks:
-            if s not in mon.alerts.sinks:
-                mon.alerts.sinks.append(s)
+        mon.alerts.sinks.extend(s for s in sinks if s not in mon.alerts.sinks)
+    return listener, CanWindowDriver(listener, cfg.window_s, cfg.step_s, mon.window,
+                                     max_missing=cfg.max_missing)
 
 
 def _run_log(source: Source, spec: MonitorSpec, mon: StreamMonitor, sinks: list[Any],
              buses: list[Any]) -> dict[str, Any]:
     """Replay a CAN log as fast as possible through the decoder and the windows."""
     cfg = spec.config
-    listener = _listener(source, spec, source.time_source or "auto")
-    _alert_bus(source, sinks, listener, buses)
-    _attach(mon, sinks)
-    drv = CanWindowDriver(listener, cfg.window_s, cfg.step_s, mon.window,
-                          max_missing=cfg.max_missing)
+    listener, drv = _can_driver(source, spec, mon, sinks, buses)
     stats = ReadStats()
     replay_log(drv, source.input, stats, channel=source.can_channel)
     listener.count_malformed(stats.malformed)
@@ -567,17 +524,12 @@ def _run_csv(source: Source, spec: MonitorSpec, mon: StreamMonitor) -> dict[str,
 def _run_live(source: Source, spec: MonitorSpec, mon: StreamMonitor, sinks: list[Any],
               buses: list[Any]) -> dict[str, Any]:
     """Receive from a live python-can bus until idle, ``duration``, SIGINT or SIGTERM."""
-    cfg = spec.config
     if source.interface is None:
         raise UsageError("give --input LOG or --interface I --channel C")
     bus = open_checked_bus(source.interface, source.channel, source.bitrate, "--interface",
                            slcan_timestamps=source.slcan_timestamps)
     buses.append(bus)
-    listener = _listener(source, spec, source.time_source or "auto")
-    _alert_bus(source, sinks, listener, buses, live_bus=bus)
-    _attach(mon, sinks)
-    drv = CanWindowDriver(listener, cfg.window_s, cfg.step_s, mon.window,
-                          max_missing=cfg.max_missing)
+    listener, drv = _can_driver(source, spec, mon, sinks, buses, live_bus=bus)
     stop = LiveStop(duration=source.duration,
                     idle_timeout=None if not source.idle_timeout else source.idle_timeout)
     stop.install()

@@ -58,31 +58,13 @@ def damper_wear(model: SuspensionModel, duration: float = 150.0, fs: float = 500
                 channels: tuple[str, ...] | None = None,
                 noise: Mapping[str, float] | None = None, quantize: bool = True,
                 chunk_s: float = 0.05, damper: str = "c1") -> Stream:
-    """A car on an ISO 8608 road while the damper ``damper`` loses damping linearly.
+    """A car on an ISO 8608 road (``road_class``, ``v_kmh``, ``seed``) for ``duration`` s at
+    ``fs`` Hz while the damper ``damper`` falls linearly to ``c_end_fraction`` of nominal
+    between ``wear_start`` and ``wear_end`` (s; default the end).
 
-    Parameters
-    ----------
-    model : SuspensionModel
-        Any model (``quarter1`` with ``damper="c"``).
-    duration, fs : float
-        Length (s) and sample rate (Hz).
-    params : mapping, optional
-        Nominal parameters (default: the model's defaults).
-    c_end_fraction : float
-        The damper at ``wear_end`` as a fraction of nominal.
-    wear_start, wear_end : float
-        Start and end of the linear decline (s); ``wear_end`` defaults to ``duration``.
-    road_class, v_kmh, seed
-        ISO 8608 road class, speed (km/h) and random seed.
-    channels : tuple of str, optional
-        Measured channels (roads always returned); default every position and the first
-        coordinate's acceleration.
-    noise : mapping, optional
-        White noise standard deviation per channel (SI); default 2 quantization steps.
-    quantize : bool
-        Round every channel to its DBC resolution (:func:`channel_resolution`).
-    chunk_s : float
-        Parameter update interval (s).
+    ``channels`` default to every position and the first coordinate's acceleration (roads
+    always included); ``noise`` (SI, per channel) defaults to 2 DBC quantization steps, and
+    ``quantize`` rounds to the DBC resolution. Parameters change every ``chunk_s`` s.
     """
     p0 = dict(model.defaults(), **(params or {}))
     if channels is None:

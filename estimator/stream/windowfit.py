@@ -144,29 +144,13 @@ class WindowFit:
     def finish(self, params: Parameters, p_hat: Mapping[str, float], nfev: int,
                converged: bool, simplex: list[Mapping[str, float]] | None = None,
                rel_step: float = 1e-6, jacobian: FloatArray | None = None) -> IdentResult:
-        """:func:`estimator.identify.finish` for a window: result, stderr, identifiability.
+        """:func:`estimator.identify.finish` for a window at the estimate ``p_hat`` (SI).
 
-        The same quantities and formulas with the evaluations reused: the Jacobian is the
-        secant through Nelder-Mead's final ``simplex`` (best vertex first) when its edges are
-        at most :data:`SECANT_MAX_EDGE` and well conditioned, else ``jacobian`` when given,
-        else a forward difference of ``rel_step`` (log units). Off the fast path:
-        :func:`estimator.identify.finish`.
-
-        Parameters
-        ----------
-        params : Parameters
-            Free/fixed split (the values are not used).
-        p_hat : mapping
-            The estimate, every parameter (SI).
-        nfev : int
-            Evaluations used (reported).
-        converged : bool
-        simplex : list of mapping, optional
-            Nelder-Mead's final simplex as parameter sets (SI), best vertex first.
-        rel_step : float
-            Forward-difference step (log units).
-        jacobian : ndarray, optional
-            Residual Jacobian (log-parameters, channel-major rows) near ``p_hat``.
+        The same quantities with the evaluations reused: the Jacobian is the secant through
+        Nelder-Mead's final ``simplex`` (parameter sets, best first) when its edges are at
+        most :data:`SECANT_MAX_EDGE` and well conditioned, else ``jacobian`` (log-parameters,
+        channel-major rows) when given, else forward differences of ``rel_step`` (log units).
+        ``params`` gives the free/fixed split only.
         """
         free = params.free
         ev = self.problem.evaluate(p_hat)
@@ -242,18 +226,9 @@ class WindowFit:
 
     def gauss_newton(self, free: list[str], p_hat: Mapping[str, float], steps: int = 1,
                      rel_step: float = 1e-6) -> GaussNewton:
-        """Chord Gauss-Newton steps from Nelder-Mead's best vertex ``p_hat`` (SI).
-
-        One forward-difference Jacobian (``rel_step``, log units) at ``p_hat``; up to ``steps``
-        steps ``du = -J^+ R``, each within :data:`GAUSS_NEWTON_MAX_STEP` of ``p_hat`` and
-        kept while it lowers the cost.
-
-        Returns
-        -------
-        GaussNewton
-            The parameters reached (``None``: off the fast path or no step lowered the cost),
-            the Jacobian at ``p_hat`` and the evaluations used.
-        """
+        """Up to ``steps`` chord Gauss-Newton steps from Nelder-Mead's best vertex ``p_hat`` (SI)
+        on one forward-difference Jacobian (``rel_step``, log units), each within
+        :data:`GAUSS_NEWTON_MAX_STEP` of ``p_hat`` and kept while it lowers the cost."""
         ev = self.problem.evaluate(p_hat)
         if ev is None or not free:
             return GaussNewton(None, None, 0)
@@ -425,18 +400,12 @@ class WindowFit:
 
     def drift_sensitivity(self, p: Mapping[str, float], names: list[str], t_ref: float
                           ) -> tuple[FloatArray, FloatArray] | None:
-        """Sensitivities of the fitted channels to a constant change and to a linear drift.
+        """Sensitivities ``(Ja, Jg)`` of the fitted channels to a constant change and a drift.
 
         For ``k`` in ``names`` and ``theta_k(t) = p_k exp(a) (1 + g (t - t_ref))``, the
-        derivatives at ``a = g = 0`` by ``a`` (log units) and ``g`` (1/s), with the initial
-        state refitted: the linear sensitivity system driven by the fast evaluation's state
-        trajectory, simulated in its modal form.
-
-        Returns
-        -------
-        (Ja, Jg) : tuple of ndarray, or None
-            Each ``(p N, len(names))``, rows channel-major; ``None`` when :attr:`drift_ok`
-            is false, ``p`` is off the fast path or ``B_v`` depends on one of ``names``.
+        derivatives at ``a = g = 0`` by ``a`` and ``g`` (1/s), each ``(p N, len(names))``
+        channel-major, the initial state refitted; simulated in the fast evaluation's modal
+        form. ``None`` off the fast path or when ``B_v`` depends on one of ``names``.
         """
         if not self.drift_ok or not names:
             return None
