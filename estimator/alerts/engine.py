@@ -1,11 +1,9 @@
 """When is a parameter *confidently* below its limit? Confidence bound, persistence, hysteresis.
 
-With nominal ``N`` and drop ``D`` the limit is ``L = (1 - D) N``. An alert is raised when the
-*upper* bound ``v + z s`` of the estimates stays below ``L`` for ``persistence_s`` of data
-time and ``min_count`` estimates (noise, one bad window or a merely uncertain value never
-raise one); it is cleared when the *lower* bound ``v - z s`` stays above ``(1 - D + H) N``
-likewise. Skipped windows neither confirm nor reset. One event per episode: ``t`` the window
-that confirmed it, ``onset`` the first.
+An alert is raised when the *upper* bound ``v + z s`` stays below ``(1 - drop) N`` for
+``persistence_s`` and ``min_count`` estimates, cleared when the *lower* bound stays above
+``(1 - drop + hysteresis) N`` likewise; skipped windows neither confirm nor reset. One event
+per episode: ``t`` the window that confirmed it, ``onset`` the first.
 """
 from __future__ import annotations
 

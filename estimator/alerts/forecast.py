@@ -1,16 +1,10 @@
 """When will a wearing part cross its limit? Trends with uncertainty and their crossing time.
 
-A :class:`Trend` is a level ``v`` (SI) at ``t0`` and a rate ``r`` with covariance ``P``; the
-limit ``L`` is crossed at ``tau* = (L - v) / r``, and the 90 % interval is where the band
-``v + r tau -/+ z s(tau)`` meets ``L`` (``z = 1.645``), the roots of::
-
-    (r^2 - z^2 P_rr) tau^2 + 2 (a r - z^2 P_vr) tau + (a^2 - z^2 P_vv) = 0,   a = v - L
-
-which exist exactly when the rate is significant at ``z``; otherwise no forecast. The
-monitor's tracker, the fleet's robust fit and :func:`linear_trend` all produce a
-:class:`Trend`. :class:`ForecastEngine` announces a crossing predicted within the horizon (its
-late edge within two), re-announces when the prediction leaves the announced interval, and
-withdraws it when no crossing is predicted within 1.5 horizons.
+A :class:`Trend` (level ``v`` at ``t0``, rate ``r``, covariance ``P``) crosses the limit ``L``
+at ``tau* = (L - v) / r``; the 90 % interval is where the band ``v + r tau -/+ z s(tau)`` meets
+``L``, the roots of ``(r^2 - z^2 P_rr) tau^2 + 2 (a r - z^2 P_vr) tau + (a^2 - z^2 P_vv) = 0``
+(``a = v - L``), which exist exactly when the rate is significant at ``z``.
+:class:`ForecastEngine` announces, updates and withdraws the predicted crossings.
 """
 from __future__ import annotations
 

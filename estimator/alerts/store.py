@@ -1,10 +1,8 @@
-"""Durable, append-only alert log (JSON lines; flushed and fsynced per event).
+"""Durable, append-only alert log (JSON lines, fsynced per event, before anybody sees it).
 
-Write-ahead: the alert engine appends an event here before printing or sending it, so an
-event anybody saw is on disk. On open the last event of each parameter restores its state,
-and an event is *new* only if its id is unknown and it is later than the parameter's last
-logged one: a replay after a crash suppresses the old events, a restarted live monitor keeps
-an alert open. A torn last line is skipped and the next record starts on a new line.
+On open the last event of each parameter restores its state; an event is *new* only if its id
+is unknown and it is later than its parameter's last one, so a replay after a crash repeats
+nothing and a restarted monitor keeps an alert open. A torn last line is skipped.
 """
 from __future__ import annotations
 

@@ -1,13 +1,7 @@
-"""Nelder-Mead windows vs the EKF on the same stream: accuracy, speed, alerts.
-
-Both estimators see the same windows, are built by :mod:`estimator.stream.pipeline` from the
-same options and feed identical alert and forecast engines. Against a known ``truth`` the
-metrics compare the values the alerts are decided on (the tracker's for the sliding window,
-the filter's state for the EKF): ``rmse``/``rmse_pct``, ``convergence_s`` (after which every
-estimate stays within 5 %), ``alert_delay_s`` and ``false_alarms`` against the true crossing
-of the limit, ``error_over_stderr_rms`` (about 1 when the stderr is honest),
-``cpu_us_per_sample`` and the first forecast's lead, error and interval
-(``forecast_first_*``).
+"""Nelder-Mead windows vs the EKF on the same stream, built by :mod:`estimator.stream.pipeline`
+from the same options: accuracy against a known truth (``rmse``, ``convergence_s``,
+``alert_delay_s``, ``false_alarms``, ``error_over_stderr_rms``, ``forecast_first_*``) of the
+values the alerts are decided on, and CPU time per sample.
 """
 from __future__ import annotations
 
@@ -260,16 +254,9 @@ def _plot_param(ax: Any, t: FloatArray, truth: Mapping[str, FloatArray] | None,
     colors = {"nm": "C0", "ekf": "C1"}
     hatches = ("", "////", "\\\\", "xx")
     for i, rec in enumerate(recs):
-        est = [l for l in rec.lines if l["type"] == "estimate" and param in l["stderr"]]
-        if not est:
+        te, v, s = _series(rec, param)
+        if not te.size:
             continue
-        te = np.array([l["t"] for l in est])
-        if rec.own_track:
-            v = np.array([l["params"][param] for l in est])
-            s = np.array([l["stderr"].get(param) or np.nan for l in est], dtype=float)
-        else:
-            v = np.array([l["track"][param]["value"] for l in est])
-            s = np.array([l["track"][param]["stderr"] for l in est], dtype=float)
         c = colors.get(rec.name, None)
         what = "estimate" if rec.own_track else "tracked (window end)"
         line, = ax.plot(te, v, ".-", ms=3, color=c, label=f"{rec.name.upper()} {what}")

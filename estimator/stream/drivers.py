@@ -82,8 +82,7 @@ class CanWindowDriver:
         if not isinstance(srcs, dict) or not srcs:
             return True
         if not math.isfinite(self._t_seen):
-            # data time counts from the oldest sample: frames a decoder held back (a live slot
-            # rule's warm-up) arrive together, already spanning part of the wait
+            # from the oldest sample: frames a decoder held back arrive together
             t0 = buf.earliest_time()
             self._t_seen = t0 if math.isfinite(t0) else latest
         if all(src.n > 0 for src in srcs.values()):
@@ -127,8 +126,7 @@ class CanWindowDriver:
                 live = [c for name, src in self.listener.buffer.sources.items() if src.n > 0
                         for c in src.channels if c not in AUX_CHANNELS]
                 self.channels = live or None
-            # the first window starts at the oldest sample (frames a decoder held back, e.g.
-            # a live slot rule's warm-up, arrive together)
+            # the first window starts at the oldest sample
             t0 = self.listener.buffer.earliest_time()
             self.t_first = t0 if math.isfinite(t0) else latest
             self.next_end = self.t_first + self.window_s
@@ -192,20 +190,12 @@ def _pad_to_window(t: np.ndarray, values: dict[str, np.ndarray], dt: float, t_st
 
 
 def replay(driver: CanWindowDriver, messages: Iterable[Any]) -> int:
-    """Feed logged frames as fast as possible (as :meth:`CanWindowDriver.on_message` per
-    frame, inlined); returns the number of frames."""
-    on = driver.listener.on_message_received
-    poll = driver.poll
+    """Feed logged frames one by one (:meth:`CanWindowDriver.on_message`), then flush;
+    returns the number of frames."""
     n = 0
-    left = 1
     for msg in messages:
-        on(msg)
+        driver.on_message(msg)
         n += 1
-        left -= 1
-        if left <= 0:
-            poll()
-            left = driver.next_check(driver.frames + n)
-    driver.frames += n
     driver.flush()
     return n
 
@@ -470,8 +460,7 @@ class LossLedger:
 
     def event(self, cause: str, t: float) -> None:
         """A loss of ``cause`` before the next frame (its time ``t``, s)."""
-        if cause != self.cause:
-            self.cause = cause
+        self.cause = cause
         per = getattr(self.listener, "per_message", None)
         seen = per() if callable(per) else {}
         self.pending = {self._ids[name] for name, n in seen.items() if n and name in self._ids}

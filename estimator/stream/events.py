@@ -6,10 +6,7 @@ Alerts and forecasts are :class:`estimator.alerts.AlertEvent` and
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Union
-
-from estimator.alerts.engine import AlertEvent
-from estimator.alerts.forecast import ForecastEvent
+from typing import Any
 
 
 @dataclass
@@ -85,5 +82,3 @@ class Summary:
         """The ``summary`` JSON line."""
         return dict({"type": "summary"}, **self.fields)
 
-
-Event = Union[Estimate, Skip, Notice, AlertEvent, ForecastEvent, Summary]

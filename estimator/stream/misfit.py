@@ -1,12 +1,8 @@
 """Windows whose fit leaves far more than white noise: the model or a fixed value is wrong.
 
-Each fitted window reports per channel its ``noise_floor_ratio``
-(:func:`estimator.identify.start.noise_floor_ratios`; about 1 at the noise floor).
-:class:`MisfitWatch` marks a window above :data:`MISFIT_RATIO` as a misfit and warns once
-(a ``misfit`` :class:`~estimator.stream.events.Notice`) when :data:`MISFIT_WINDOWS` in a row
-are. As ``suspid identify`` judges it, a channel counts only when its excess over the noise
-floor is also more than ``MISFIT_SHARE`` of the window's signal (a noise-free record has no
-noise floor). Thresholds and measurements: ``docs/monitoring.md``.
+:class:`MisfitWatch` marks a window whose ``noise_floor_ratio`` exceeds :data:`MISFIT_RATIO`
+in a channel that also misses more than ``MISFIT_SHARE`` of its signal (as ``suspid identify``
+judges it), and warns once when :data:`MISFIT_WINDOWS` in a row do (``docs/monitoring.md``).
 """
 from __future__ import annotations
 

@@ -70,6 +70,15 @@ def fill_road_gaps(model: SuspensionModel, data: Mapping[str, FloatArray], t: Fl
     return out, warns, ""
 
 
+def add_inspection(info: dict[str, Any], params: Mapping[str, float], model: SuspensionModel) -> None:
+    """Add the virtual damper test of ``params`` (SI) to an estimate's ``info``."""
+    try:
+        info["inspection"] = inspect(params, model).to_json()
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        info["inspection"] = None
+        info["warnings"].append(f"virtual damper test failed: {exc}")
+
+
 class NMWindowEstimator:
     """Sliding-window Nelder-Mead estimates with the virtual damper test (``inspection``).
 
@@ -107,11 +116,7 @@ class NMWindowEstimator:
                 if k not in ("type", "t", "t_start", "params", "stderr")}
         info["warnings"] = warns + list(info.get("warnings", []))
         if self.inspection:
-            try:
-                info["inspection"] = inspect(res.params, self.model).to_json()
-            except (np.linalg.LinAlgError, ValueError) as exc:
-                info["inspection"] = None
-                info["warnings"].append(f"virtual damper test failed: {exc}")
+            add_inspection(info, res.params, self.model)
         is_misfit, notice = self.misfit.update(
             res.t, res.noise_floor_ratio,
             misfit_shares(res.noise_floor_ratio, res.rms_residual, data))

@@ -1,11 +1,8 @@
 """A sensor zero not at rest, found on the stream's first excited window and removed from all.
 
-A constant offset in a road or position channel puts a level into every window that no
-parameter set produces (``docs/monitoring.md``, "Sensor offset"). As ``suspid identify``
-does (:mod:`estimator.identify.offset`), :class:`OffsetStage` looks for it once, on the first
-excited window without a missing sample, and with ``offset = "remove"`` subtracts it from
-every window. The finding is a ``warning`` event of kind ``offset`` and the summary's
-``offset``.
+As ``suspid identify`` does (:mod:`estimator.identify.offset`), :class:`OffsetStage` looks
+once for a constant road or position offset and, with ``offset = "remove"``, subtracts it
+from every window (``docs/monitoring.md``, "Sensor offset").
 """
 from __future__ import annotations
 

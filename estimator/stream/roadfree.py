@@ -1,10 +1,8 @@
-"""The sliding window with the road unknown: each window's body equations, fitted linearly.
+"""The sliding window with the road unknown: each window's body equations, fitted linearly
+(:func:`estimator.identify.roadfree.fit_road_unknown`, as ``suspid identify --road unknown``).
 
-Each window goes to ``suspid identify --road unknown``'s identifier
-(:func:`estimator.identify.roadfree.fit_road_unknown`: body accelerations and ride heights,
-no road), in milliseconds and without a start or budget. An estimate describes the window's
-middle (``lag = window_s / 2``); the linear drift does not apply. The fit's band starts at
-``3 / T`` Hz, which :func:`road_unknown_window` keeps below the body mode.
+An estimate describes the window's middle; the linear drift does not apply. The fit's band
+starts at ``3 / T`` Hz, which :func:`road_unknown_window` keeps below the body mode.
 """
 from __future__ import annotations
 
@@ -16,10 +14,10 @@ import numpy as np
 
 from estimator.identify import Parameters
 from estimator.identify.roadfree import FIRST_BIN, body_equations, fit_road_unknown
-from estimator.inspection import inspect, quarter_car_problem
+from estimator.inspection import quarter_car_problem
 from estimator.stream.config import WindowConfig
 from estimator.stream.events import Estimate, Skip
-from estimator.stream.monitor import StepResult
+from estimator.stream.monitor import StepResult, add_inspection
 from suspid.errors import InputError
 from suspid.io.csvio import Measurement
 from suspid.models.base import FloatArray, SuspensionModel
@@ -151,11 +149,7 @@ class RoadFreeWindowEstimator:
             "warnings": [w for w in res.warnings[1:]
                          if not w.startswith("not identifiable with the road unknown")]}
         if self.inspection and res.identifiable:
-            try:
-                info["inspection"] = inspect(res.params, self.model).to_json()
-            except (np.linalg.LinAlgError, ValueError) as exc:
-                info["inspection"] = None
-                info["warnings"].append(f"virtual damper test failed: {exc}")
+            add_inspection(info, res.params, self.model)
         cpu = time.process_time() - c0
         info["cpu_ms"] = 1e3 * cpu
         self.n_windows += 1

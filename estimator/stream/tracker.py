@@ -1,19 +1,12 @@
 """Parameter tracking with a trend: a two-model local-linear-trend filter over window estimates.
 
-Each monitored parameter has a state ``[v, r]`` (value SI, rate SI/s) at the data time of the
-last estimate, moved by ``v += r dt`` with process noise scaled by the nominal value ``N``: a
-level random walk ``(q_level N)^2 dt`` and an integrated rate random walk. Two rate walks run
-as an interacting-multiple-model filter: a *steady* one (``q_rate``) and a *changing* one
-(``q_rate_change``, a wear that starts, speeds up or stops), switching with ``p_switch``.
-
-A window estimate describes the window's middle, ``lag`` before its end: it is folded in as
-``y = v(t) - lag r(t)``, so the track refers to the window's end; overlapping windows count
-with variance ``lambda s^2 overlap``. ``lambda`` (``calibrate``) scales the stated variances
-to the scatter of the estimates' second differences, and the one-step innovations widen the
-reported variances where the track lags (``innov_scale``). When the changing model takes over
-the rate is restarted an estimate back, kept only if a likelihood-ratio test prefers it.
-Neither calibration nor restart applies to the EKF (its outputs are already filtered). The
-rules and their measurements: ``docs/monitoring.md``.
+Each parameter's state is ``[value, rate]`` (SI, SI/s) with level and rate random walks scaled
+by its nominal value; a *steady* and a *changing* rate model run as an interacting-multiple-
+model filter. A window estimate, describing the window's middle, is folded in as ``y = v(t) -
+lag r(t)`` so the track refers to the window's end. The stated variances are calibrated to
+the estimates' scatter and widened where the innovations show the track lagging; a rate that
+changes is restarted an estimate back when a likelihood-ratio test prefers it. Rules and
+measurements: ``docs/monitoring.md``.
 """
 from __future__ import annotations
 
@@ -137,9 +130,7 @@ class TrendTracker:
     def scale(self, name: str) -> float:
         """The calibrated variance scale ``lambda`` of a parameter (1 without calibration)."""
         tr = self.tracks.get(name)
-        if tr is None or not self.calibrate:
-            return 1.0
-        return self.scale_of(tr)
+        return 1.0 if tr is None else self.scale_of(tr)
 
     def honesty(self, name: str) -> float:
         """The factor ``kappa^2`` on a parameter's tracked variances (1 without it)."""

@@ -1,15 +1,10 @@
 """Sliding-window identification: one warm-started, budgeted Nelder-Mead fit per window.
 
-Each window is a small output-error problem (:class:`~estimator.identify.OutputErrorProblem`
-on its fast path) fitted with :func:`~estimator.identify.minimize_log` and given the sandwich
-standard errors of ``suspid identify``. The first window starts cold (nominal or data-driven
-start, with restarts); later ones start from the last estimates' extrapolated trend with a
-small fresh simplex. A window is skipped, with the reason, when a channel misses too many
-samples, its time base is not uniform, or its strut deflection is too small against
-``min_deflection`` or the noise floor. The road displacement may be fused with its integrated
-velocity (:func:`fuse_road`) and low-passed (:func:`lowpass_road`) before the fit; the outputs
-are never filtered. Settings and measurements: :mod:`estimator.stream.config`,
-``docs/monitoring.md``.
+Each window is an :class:`~estimator.identify.OutputErrorProblem` fitted with
+:func:`~estimator.identify.minimize_log` and given ``suspid identify``'s sandwich standard
+errors; later windows start from the last estimates' trend with a small fresh simplex. A
+window lacking samples or excitation is skipped with the reason. Settings and measurements:
+:mod:`estimator.stream.config`, ``docs/monitoring.md``.
 """
 from __future__ import annotations
 
@@ -195,7 +190,6 @@ class SlidingWindowIdentifier:
         self._struts = list(model.deflections(probe, self.nominal))
         self._motion = next((c for c in self.channels if c in model.coords), self.channels[0])
 
-    # ---- excitation --------------------------------------------------------------------
     def excitation(self, t: FloatArray, data: Mapping[str, FloatArray]) -> tuple[dict[str, float], str]:
         """Excitation statistics of a window and the reason to skip it (``""`` to fit)."""
         cfg = self.config
@@ -233,7 +227,6 @@ class SlidingWindowIdentifier:
                         f"({nf:.3g}), below {cfg.min_snr:g}")
         return ex, ""
 
-    # ---- fit ----------------------------------------------------------------------------
     def _problem(self, t: FloatArray, data: Mapping[str, FloatArray]) -> OutputErrorProblem:
         d = self.config.decimate
         fc = self.config.road_fusion_hz
@@ -537,8 +530,7 @@ class SlidingWindowIdentifier:
             return prob.normalized_ss(to_params(u))
 
         budget = cfg.maxfev if warm else cfg.first_maxfev
-        # termination on the simplex size alone (xatol, log units): the cost's own scale
-        # says nothing about the precision that matters here (sigma_floor)
+        # termination on the simplex size alone (xatol): the cost's scale says nothing here
         nm = minimize_log(cost, np.zeros(len(free)), step=0.3,
                           restarts=0 if warm else cfg.first_restarts,
                           maxfev=budget, xatol=cfg.xatol, fatol=math.inf,
@@ -570,8 +562,7 @@ class SlidingWindowIdentifier:
         out.identifiable = bool(res.identifiable)
         out.cost = res.cost
         out.rms_residual = res.rms_residual
-        # the constant fit's residual against white noise (one cached evaluation; a drift
-        # fit below replaces it with its own)
+        # the constant fit's residual against white noise (a drift fit replaces it)
         out.noise_floor_ratio = noise_floor_ratios(prob, res.params)
         out.warnings = [w for w in res.warnings if "evaluation budget" not in w]
         if twin_note is not None:

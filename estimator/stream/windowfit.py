@@ -31,9 +31,6 @@ SECANT_MAX_COND = 1e3
 #: farthest (log units, per parameter) the Gauss-Newton steps go from Nelder-Mead's best vertex
 GAUSS_NEWTON_MAX_STEP = 0.06
 
-_UPPER: dict[int, FloatArray] = {}
-
-
 def small_inverse(M: FloatArray) -> tuple[FloatArray | None, float]:
     """Inverse of a small square matrix and its 1-norm condition number (closed form up to
     2x2, else LAPACK ``dgesv``); ``(None, inf)`` when ``M`` is singular or not finite."""
@@ -104,15 +101,8 @@ class GaussNewton:
 
 
 class WindowFit:
-    """What a monitor window needs beyond its cost: the result at the optimum (:meth:`finish`),
-    Gauss-Newton steps (:meth:`gauss_newton`) and the window with drifting parameters
-    (:meth:`drift_residual`, :meth:`drift_sensitivity`, :meth:`drift_stderr`).
-
-    Parameters
-    ----------
-    problem : OutputErrorProblem
-        The window's problem (``ride_heights=False``: the motion channels are compared).
-    """
+    """What a monitor window needs beyond its cost, on the window's ``problem`` (built with
+    ``ride_heights=False``: the motion channels are compared)."""
 
     def __init__(self, problem: OutputErrorProblem) -> None:
         self.problem = problem
@@ -140,7 +130,6 @@ class WindowFit:
         Y = (CV @ ev.modal(self._r)).real + (Cm @ ev.B[:, self._nr:]) @ self._r + Dm @ self.problem.U.T
         return Y
 
-    # ---- result at the optimum ----------------------------------------------------------------
     def finish(self, params: Parameters, p_hat: Mapping[str, float], nfev: int,
                converged: bool, simplex: list[Mapping[str, float]] | None = None,
                rel_step: float = 1e-6, jacobian: FloatArray | None = None) -> IdentResult:
@@ -185,10 +174,9 @@ class WindowFit:
                            np.maximum(ref, 1e-300))
         J3 = J.reshape(pch, N, nf)
         Jn = (J3 / scale_c[:, None, None]).reshape(n_obs, nf)
-        # the verdict needs the singular values and right singular vectors of Jn only:
-        # those of its QR factor R (n_free x n_free), computed without an SVD of Jn
+        # the verdict needs only Jn's singular values and right vectors: those of its QR's R
         qr, _, _, info = _dgeqrf(Jn)
-        small = qr[:nf] * self._upper(nf)
+        small = np.triu(qr[:nf])
         if info != 0 or not np.isfinite(small).all():
             small = Jn
         verdict = _verdict(small, free, {q.name: q.kind for q in model.params},
@@ -304,7 +292,6 @@ class WindowFit:
         # dR = J D^T  ->  J = dR D^-T
         return dR @ Dinv.T
 
-    # ---- linear drift inside the window --------------------------------------------------
     @property
     def drift_ok(self) -> bool:
         """Whether :meth:`drift_residual` applies (fast path, fitted channels are states)."""
@@ -523,11 +510,3 @@ class WindowFit:
             return None
         return {k: float(p[k] * math.sqrt(max(float(cov[i, i]), 0.0)))
                 for i, k in enumerate(free)}
-
-    @staticmethod
-    def _upper(n: int) -> FloatArray:
-        """Upper-triangular 0/1 mask (n x n), cached for the process."""
-        got = _UPPER.get(n)
-        if got is None:
-            got = _UPPER[n] = np.triu(np.ones((n, n)))
-        return got
