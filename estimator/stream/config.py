@@ -171,15 +171,9 @@ def default_decimation(model: SuspensionModel, params: Mapping[str, float], fs: 
 
 def default_config(model: SuspensionModel, params: Mapping[str, float], fs: float,
                    n_free: int) -> WindowConfig:
-    """Window defaults for ``model`` at nominal ``params`` (SI).
-
-    Parameters
-    ----------
-    fs : float
-        Sample rate of the stream (Hz); 0 when not known yet (``decimate`` is then 1).
-    n_free : int
-        Number of free parameters (scales the budgets; sets the solver settings).
-    """
+    """Window defaults for ``model`` at nominal ``params`` (SI), a stream sampled at ``fs`` Hz
+    (0 when not known yet: ``decimate`` 1) and ``n_free`` free parameters (the budgets scale
+    with it; ten or more switch the solver settings)."""
     ms = modes(model, params)
     if not ms:
         raise UsageError(f"model {model.name} has no oscillating mode at the nominal parameters")

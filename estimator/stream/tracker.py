@@ -175,13 +175,8 @@ class TrendTracker:
 
     def update(self, t: float, values: Mapping[str, float], stderr: Mapping[str, float]
                ) -> dict[str, dict[str, float]]:
-        """Fold in one window estimate ending at ``t`` (s).
-
-        Returns
-        -------
-        dict
-            ``parameter -> {"value", "stderr", "rate", "rate_stderr"}`` (SI, SI/s) at ``t``.
-        """
+        """Fold in one window estimate ending at ``t`` (s); returns ``parameter -> {"value",
+        "stderr", "rate", "rate_stderr"}`` (SI, SI/s) at ``t``."""
         for k, se in stderr.items():
             v = values.get(k)
             if v is None or not (math.isfinite(v) and math.isfinite(se) and se > 0):
