@@ -195,8 +195,7 @@ class AlertEngine:
         return out
 
     def publish(self, ev: Any) -> bool:
-        """Write ``ev`` (alert, clear or forecast) to the store, then to the sinks; ``False``
-        (nothing delivered) when the store already holds it."""
+        """Write ``ev`` to the store, then to the sinks; ``False`` when the store has it already."""
         if self.store is not None:
             if not self.store.is_new(ev):
                 self.suppressed += 1

@@ -190,8 +190,7 @@ def _pad_to_window(t: np.ndarray, values: dict[str, np.ndarray], dt: float, t_st
 
 
 def replay(driver: CanWindowDriver, messages: Iterable[Any]) -> int:
-    """Feed logged frames one by one (:meth:`CanWindowDriver.on_message`), then flush;
-    returns the number of frames."""
+    """Feed frames one by one (:meth:`CanWindowDriver.on_message`), flush; returns their number."""
     n = 0
     for msg in messages:
         driver.on_message(msg)

@@ -46,8 +46,7 @@ def misfit_shares(ratios: Mapping[str, float], rms: Mapping[str, float],
 
 @dataclass
 class MisfitWatch:
-    """Mark misfit windows and warn once when they persist (``fixed``: the ``--fix`` values,
-    named in the warning)."""
+    """Mark misfit windows and warn once, naming the ``fixed`` values, when they persist."""
 
     fixed: Mapping[str, float] = field(default_factory=dict)
     threshold: float = MISFIT_RATIO

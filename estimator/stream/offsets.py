@@ -80,8 +80,7 @@ class OffsetStage:
         return Notice(self.t, "offset", found.warning(self.model, self.remove), fields)
 
     def apply(self, t: FloatArray, data: Mapping[str, FloatArray]) -> Mapping[str, FloatArray]:
-        """``data`` with the offset subtracted (as :meth:`Offset.remove`), unless none was
-        found or it is kept."""
+        """``data`` with the offset subtracted, unless none was found or it is kept."""
         if self.offset is None or not self.remove:
             return data
         out = dict(data)

@@ -397,8 +397,7 @@ def open_checked_bus(interface: str, channel: str | None, bitrate: int | None, w
 
 def run_monitor(spec: MonitorSpec, source: Source, emit: Callable[[Any], None],
                 alert_file: str | Path | None = None) -> Summary:
-    """Stream ``source`` through the monitor of ``spec``; every event goes to ``emit``.
-    Returns the closing summary (not emitted)."""
+    """Stream ``source`` through the monitor of ``spec`` (events to ``emit``); the summary."""
     store = AlertStore(alert_file) if alert_file else None
     sinks: list[Any] = []
     mon = build_monitor(spec, emit, store, sinks)
@@ -419,8 +418,7 @@ def run_monitor(spec: MonitorSpec, source: Source, emit: Callable[[Any], None],
 
 def run_source(source: Source, spec: MonitorSpec, mon: StreamMonitor,
                sinks: list[Any]) -> dict[str, Any]:
-    """Stream a log, a CSV or the live bus through ``mon``; returns the summary's source
-    fields. Buses are shut down."""
+    """Stream a log, a CSV or the live bus through ``mon``; the summary's source fields."""
     buses: list[Any] = []
     try:
         if source.input is not None:

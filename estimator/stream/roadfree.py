@@ -38,8 +38,7 @@ def road_unknown_window(model: SuspensionModel, params: Mapping[str, float]) -> 
 
 
 def production_channels(model: SuspensionModel) -> list[str]:
-    """Every channel the body equations may use: the coordinates' motion channels and the
-    ride heights with their rates."""
+    """Every channel the body equations may use: motion channels, ride heights and their rates."""
     return list(model.channels) + list(model.ride_height_channels)
 
 

@@ -147,8 +147,7 @@ def lowpass_road(v: FloatArray, h: float, cutoff_hz: float, order: int = 2) -> F
 
 
 class SlidingWindowIdentifier:
-    """Fit the free parameters of ``params`` on successive windows of a stream of ``channels``
-    (the model's measured channels to fit)."""
+    """Fit the free parameters of ``params`` on successive windows of the measured ``channels``."""
 
     #: the drift fit to first order (:meth:`_drift_linear`); ``False``: Gauss-Newton only
     first_order_drift: bool = True
@@ -361,17 +360,17 @@ class SlidingWindowIdentifier:
             if not (math.isfinite(se) and se > 0):
                 return False
             got.append((k, pk, se))
+        self._drift_result(fit, R, out, got)
+        return True
+
+    def _drift_result(self, fit: WindowFit, R: FloatArray, out: WindowResult,
+                      got: list[tuple[str, float, float]]) -> None:
+        """Set the drifting parameters' ``(name, end value, stderr_fit)`` (SI) and the noise-floor
+        ratios of the drifting fit's residual ``R`` (channels x samples)."""
         for k, pk, se in got:
             out.params[k] = pk
             out.stderr_fit[k] = se
-            out.stderr[k] = float(math.hypot(se, cfg.sigma_floor * pk))
-        self._drift_ratios(fit, R, out)
-        return True
-
-    @staticmethod
-    def _drift_ratios(fit: WindowFit, R: FloatArray, out: WindowResult) -> None:
-        """The noise-floor ratios of the drifting fit's residual ``R`` (channels x samples):
-        the fit the window reports; a constant fit to a drifting damper leaves the drift."""
+            out.stderr[k] = float(math.hypot(se, self.config.sigma_floor * pk))
         out.noise_floor_ratio = ratios_of_parts(
             residual_noise_floor_parts(np.asarray(R, dtype=float).T, fit.problem.channels))
 
@@ -473,11 +472,7 @@ class SlidingWindowIdentifier:
         if se is None:
             self._to_end(drift, g_hist, half, out, "drift fit without stderr")
             return
-        for k in drift:
-            out.params[k] = p[k]
-            out.stderr_fit[k] = se[k]
-            out.stderr[k] = float(math.hypot(se[k], cfg.sigma_floor * p[k]))
-        self._drift_ratios(fit, R, out)
+        self._drift_result(fit, R, out, [(k, p[k], se[k]) for k in drift])
 
     def _twin_choice(self, prob: OutputErrorProblem, params: Parameters, p_hat: dict[str, float]
                      ) -> tuple[dict[str, float], str | None]:
