@@ -1,10 +1,5 @@
-"""Maintenance alerts: confident-drop detection, durable alert log, CAN alert frames.
-
-See :mod:`estimator.alerts.engine` for the decision logic, :mod:`estimator.alerts.store`
-for the append-only file that survives a killed monitor, and :mod:`estimator.alerts.sinks`
-for the outputs (JSON lines, the DBC ``SUSPID_Alert`` frame), :mod:`estimator.alerts.forecast`
-for trends and predicted limit crossings.
-"""
+"""Maintenance alerts: confident-drop detection (:mod:`~estimator.alerts.engine`), forecasts,
+the durable alert log (:mod:`~estimator.alerts.store`) and the outputs (:mod:`~estimator.alerts.sinks`)."""
 from estimator.alerts.engine import AlertConfig, AlertEngine, AlertEvent
 from estimator.alerts.forecast import (DEFAULT_HORIZON_S, Crossing, ForecastEngine, ForecastEvent,
                                        Trend, band_crossing, crossing,

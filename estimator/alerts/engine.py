@@ -1,28 +1,15 @@
 """When is a parameter *confidently* below its limit? Confidence bound, persistence, hysteresis.
 
-For a watched parameter with nominal value ``N`` and drop fraction ``D`` (default 0.3) the
-limit is ``L = (1 - D) N``. Each estimate ``v`` with standard error ``s`` (which includes the
-identifier's ``sigma_floor``) gives the one-sided bounds ``v +/- z s`` (``z = 2.326``, 99 %).
-
-raise
-    the *upper* bound ``v + z s`` is below ``L`` in consecutive estimates spanning at least
-    ``persistence_s`` of data time and at least ``min_count`` estimates (defaults: one
-    window step, 2 estimates). Noise or one bad window therefore never raises an alert, and
-    a parameter that is merely *uncertain* (large ``s``) never does either.
-clear (hysteresis)
-    an active alert is cleared only when the *lower* bound ``v - z s`` exceeds
-    ``(1 - D + H) N`` (``H = 0.05``) with the same persistence, so an estimate hovering
-    around the limit cannot make the alert flap.
-
-Estimates of skipped windows do not exist, so they neither confirm nor reset a pending
-condition. An alert (and a clear) is emitted once per episode; its ``t`` is the data time at
-the end of the window that confirmed it, ``onset`` the first window of the episode.
+An alert is raised when the *upper* bound ``v + z s`` stays below ``(1 - drop) N`` for
+``persistence_s`` and ``min_count`` estimates, cleared when the *lower* bound stays above
+``(1 - drop + hysteresis) N`` likewise; skipped windows neither confirm nor reset. One event
+per episode: ``t`` the window that confirmed it, ``onset`` the first.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Iterable, Mapping, Protocol
+from typing import Any, Mapping, Protocol
 
 from estimator.alerts.event import ParameterEvent
 from suspid.errors import UsageError
@@ -31,49 +18,20 @@ from suspid.models import get_model
 
 @dataclass
 class AlertConfig:
-    """Alert settings.
-
-    Attributes
-    ----------
-    nominal : dict
-        ``parameter -> nominal value`` (SI) of every watched parameter.
-    drop : float
-        Alert when confidently below ``(1 - drop) x nominal`` (0 < drop < 1).
-    z : float
-        One-sided normal quantile of the confidence bound (2.326: 99 %).
-    persistence_s : float
-        Data time (s) the condition must hold.
-    min_count : int
-        Consecutive estimates the condition must hold in.
-    hysteresis : float
-        Clear only above ``(1 - drop + hysteresis) x nominal`` (fraction of nominal).
-    level : float
-        Two-sided level of a forecast interval (the fleet's drive trends).
-    horizon_days : float
-        The fleet reports no forecast further ahead of a vehicle's latest drive than this
-        (a slow drift that reaches the limit in years is noise for maintenance planning, and
-        at the 90 % level about one flat parameter in twenty shows a 'significant' slope).
-
-    Notes
-    -----
-    The monitor's estimates come every window step, so the condition must persist (1.5 s of
-    data, 2 estimates); a fleet's estimates are drives days apart, and one drive confidently
-    below is enough (:meth:`per_drive`).
-    """
+    """Alert settings (``nominal`` SI of every watched parameter)."""
 
     nominal: dict[str, float] = field(default_factory=dict)
-    drop: float = 0.3
-    z: float = 2.326
-    persistence_s: float = 1.5
-    min_count: int = 2
-    hysteresis: float = 0.05
-    level: float = 0.90
-    horizon_days: float = 365.0
+    drop: float = 0.3  # alert when confidently below (1 - drop) x nominal
+    z: float = 2.326  # one-sided normal quantile of the bound (99 %)
+    persistence_s: float = 1.5  # data time (s) the condition must hold ...
+    min_count: int = 2  # ... and consecutive estimates
+    hysteresis: float = 0.05  # clear only above (1 - drop + hysteresis) x nominal
+    level: float = 0.90  # two-sided level of a fleet forecast interval
+    horizon_days: float = 365.0  # the fleet forecasts no further ahead of the latest drive
 
     @classmethod
     def per_drive(cls, **settings: Any) -> "AlertConfig":
-        """The fleet's settings: each drive is one estimate, no data-time persistence, one
-        drive enough (``min_count`` 1) unless ``settings`` say otherwise."""
+        """The fleet's settings: one drive confidently below is enough."""
         return cls(**{"persistence_s": 0.0, "min_count": 1, **settings})
 
     def nominal_of(self, model: str, name: str) -> float:
@@ -111,24 +69,11 @@ class AlertConfig:
 
 @dataclass
 class AlertEvent(ParameterEvent):
-    """An alert (or the end of one).
+    """An alert (``kind`` ``"alert"``) or its clear (``"clear"``).
 
-    Attributes
-    ----------
-    kind : {"alert", "clear"}
-    t : float
-        Data time (s) at which the condition was confirmed.
-    onset : float
-        Data time (s) of the first estimate of the episode.
-    parameter : str
-    value, stderr, nominal : float
-        Estimate, its standard error and the nominal value (SI).
-    bound : float
-        The confidence bound that decided (upper for alerts, lower for clears).
-    severity : str
-        ``"warning"``, or ``"critical"`` when the upper bound is below ``(1 - 2 drop) N``.
-    model : str
-    unit : str
+    ``t`` is the data time (s) that confirmed it, ``onset`` the episode's first estimate;
+    ``value``, ``stderr``, ``nominal`` (SI); ``bound`` the confidence bound that decided;
+    ``severity`` ``"warning"``, ``"critical"`` below ``(1 - 2 drop) N``, ``"info"`` for a clear.
     """
 
     kind: str
@@ -186,21 +131,11 @@ class _State:
 
 @dataclass
 class AlertEngine:
-    """Per-parameter alert state machines feeding sinks through a durable store.
+    """Per-parameter alert state machines feeding ``sinks`` through a durable ``store``.
 
-    Parameters
-    ----------
-    config : AlertConfig
-    model : str
-        Model name (for the alert frame and event ids).
-    units : dict, optional
-        ``parameter -> unit`` for the messages.
-    store : AlertStore, optional
-        Durable log; events are written (flushed, fsynced) *before* any sink sees them, and
-        events already in the log (same id, or not newer than the log's last event of the
-        parameter) are suppressed, so a restarted monitor neither loses nor repeats alerts.
-    sinks : list
-        Outputs called for each new event.
+    The store (an :class:`~estimator.alerts.store.AlertStore`) is written before any sink
+    sees an event, and events already in it are suppressed: a restarted monitor neither
+    loses nor repeats alerts. ``model`` and ``units`` go into the frames and messages.
     """
 
     config: AlertConfig
@@ -260,10 +195,7 @@ class AlertEngine:
         return out
 
     def publish(self, ev: Any) -> bool:
-        """Write ``ev`` (an alert, clear or forecast event) to the store, then to the sinks.
-
-        Returns ``False`` (and delivers nothing) when the store already holds it.
-        """
+        """Write ``ev`` to the store, then to the sinks; ``False`` when the store has it already."""
         if self.store is not None:
             if not self.store.is_new(ev):
                 self.suppressed += 1
@@ -273,6 +205,3 @@ class AlertEngine:
             s.emit(ev)
         self.emitted.append(ev)
         return True
-
-    def watched(self) -> Iterable[str]:
-        return self.states.keys()

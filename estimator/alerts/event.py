@@ -1,25 +1,10 @@
-"""What every parameter event (alert, clear, forecast, withdrawal) shares: identity and units.
-
-:class:`estimator.alerts.AlertEvent` and :class:`estimator.alerts.ForecastEvent` derive from
-:class:`ParameterEvent`, so the deduplicating identity of the alert store and the pieces of
-their messages are built in one place.
-"""
+"""What every parameter event (alert, clear, forecast, withdrawal) shares: identity and units."""
 from __future__ import annotations
 
 
 class ParameterEvent:
-    """Mixin of the parameter events (dataclasses declaring these attributes).
-
-    Attributes
-    ----------
-    kind : str
-        ``"alert"``, ``"clear"``, ``"forecast"`` or ``"forecast_withdrawn"``.
-    t : float
-        Data time of the event (s).
-    parameter, model, unit : str
-    limit, nominal : float
-        The alert limit ``(1 - drop) x nominal`` and the nominal value (SI).
-    """
+    """Mixin of the parameter events (dataclasses declaring these attributes): ``kind``, data
+    time ``t`` (s), ``limit`` and ``nominal`` (SI)."""
 
     kind: str
     t: float

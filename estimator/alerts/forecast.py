@@ -1,28 +1,10 @@
 """When will a wearing part cross its limit? Trends with uncertainty and their crossing time.
 
-A trend is a level ``v`` (SI) at data time ``t0`` and a rate ``r`` (SI/s) with their 2x2
-covariance ``P``. Extrapolated, the level at ``t0 + tau`` is ``m(tau) = v + r tau`` with
-variance ``s^2(tau) = P_vv + 2 tau P_vr + tau^2 P_rr``. The limit ``L`` is crossed at
-``tau* = (L - v) / r``; the two-sided 90 % interval of the crossing time is where the
-band ``m(tau) -/+ z s(tau)`` (``z = 1.645``) meets ``L``: with ``a = v - L`` the edges solve
-``(a + r tau)^2 = z^2 s^2(tau)``, a quadratic::
-
-    (r^2 - z^2 P_rr) tau^2 + 2 (a r - z^2 P_vr) tau + (a^2 - z^2 P_vv) = 0
-
-which has two roots exactly when the rate is significant at ``z`` (``r^2 > z^2 P_rr``).
-Otherwise the crossing is not predicted at all (a stable part, or a trend too uncertain to
-say): no forecast. A part already inside the band at ``tau = 0`` gets ``crossing_t_low = t0``.
-
-:func:`linear_trend` fits the trend to any ``(t, value, stderr)`` series by weighted least
-squares (:func:`wls_line`, the 2x2 normal equations in closed form), and the fleet's robust
-fit (:func:`estimator.fleet.trend.robust_trend`: one vehicle's drives against time or
-distance) gives the same :class:`Trend` with its drive count and outliers; the monitor's tracker
-(:class:`estimator.stream.tracker.TrendTracker`) produces the same :class:`Trend` from its
-Kalman state. :class:`ForecastEngine` turns trends into forecast events: one when a
-crossing is first predicted within the horizon (and the late end of its interval within two
-horizons: a crossing that may as well come much later is not announced yet), a new one when the predicted crossing
-leaves the last announced interval, and a withdrawal when the trend no longer predicts a
-crossing within 1.5 horizons (a part that stopped wearing, or recovered after a repair).
+A :class:`Trend` (level ``v`` at ``t0``, rate ``r``, covariance ``P``) crosses the limit ``L``
+at ``tau* = (L - v) / r``; the 90 % interval is where the band ``v + r tau -/+ z s(tau)`` meets
+``L``, the roots of ``(r^2 - z^2 P_rr) tau^2 + 2 (a r - z^2 P_vr) tau + (a^2 - z^2 P_vv) = 0``
+(``a = v - L``), which exist exactly when the rate is significant at ``z``.
+:class:`ForecastEngine` announces, updates and withdraws the predicted crossings.
 """
 from __future__ import annotations
 
@@ -46,46 +28,23 @@ DEFAULT_HORIZON_S = 60.0
 class Trend:
     """A level and rate with covariance: the one trend of the monitor and the fleet.
 
-    The abscissa is time (s: data time for the monitor, epoch s for a vehicle's drives) or,
-    for a fleet trend against distance, the odometer (m); ``rate`` is per unit of it.
-
-    Attributes
-    ----------
-    t : float
-        Reference abscissa of ``value`` (s, or m for a trend against distance).
-    value : float
-        Level at ``t`` (SI).
-    rate : float
-        Rate of change (SI per s, or SI per m).
-    var_value, cov, var_rate : float
-        Covariance of (value, rate); NaN when the data cannot give it (two drives).
-    q_value, q_rate : float
-        Process-noise intensities of the level (SI^2/s) and the rate (SI^2/s^3): the
-        extrapolated variance grows by ``q_value tau + q_rate tau^3 / 3`` as well (the wear
-        may speed up, slow down or stop).
-    span : float
-        Data time (s) the trend's data cover (``inf`` when unknown).
-    n : int
-        Points the fit used (0: not counted, a tracker's trend).
-    outliers : tuple of int
-        Indices (into the series fitted) of points the robust fit gave no weight.
-    tau : float
-        Point-to-point scatter beyond the stated standard errors (SI; the fleet's
-        random-effects weight).
+    The abscissa is time (s) or, for a fleet trend against distance, the odometer (m);
+    ``rate`` is per unit of it. The extrapolated variance grows by ``q_value tau + q_rate
+    tau^3 / 3`` (process noise: the wear may speed up, slow down or stop).
     """
 
-    t: float
-    value: float
+    t: float  # reference abscissa of value
+    value: float  # level at t (SI)
     rate: float
-    var_value: float
+    var_value: float  # covariance of (value, rate); NaN when the data cannot give it
     cov: float
     var_rate: float
-    q_value: float = 0.0
-    q_rate: float = 0.0
-    span: float = math.inf
-    n: int = 0
-    outliers: tuple[int, ...] = ()
-    tau: float = 0.0
+    q_value: float = 0.0  # SI^2/s
+    q_rate: float = 0.0  # SI^2/s^3
+    span: float = math.inf  # data time (s) the trend covers
+    n: int = 0  # points fitted (0: a tracker's trend)
+    outliers: tuple[int, ...] = ()  # indices of points the robust fit gave no weight
+    tau: float = 0.0  # scatter beyond the stated stderr (SI; the fleet's random effect)
 
     @property
     def value_stderr(self) -> float:
@@ -110,29 +69,11 @@ class Crossing:
 
 
 def wls_line(x: np.ndarray, v: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Weighted least-squares line ``v = b0 + b1 x``: ``(b0, b1)`` and the normal matrix.
+    """Weighted least-squares line ``v = b0 + b1 x`` in closed form (a fleet fits thousands).
 
-    The 2x2 normal equations are solved in closed form (a fleet fits one line per parameter
-    per vehicle, thousands per report, and a general solver's overhead dominates).
-
-    Parameters
-    ----------
-    x, v : ndarray
-        Abscissae and values.
-    w : ndarray
-        Weights (``1 / variance``), >= 0.
-
-    Returns
-    -------
-    beta : ndarray, shape (2,)
-        Intercept (at ``x = 0``) and slope.
-    M : ndarray, shape (2, 2)
-        ``X' W X``; the unscaled covariance of ``beta`` is its inverse.
-
-    Raises
-    ------
-    numpy.linalg.LinAlgError
-        Fewer than two weighted points at distinct ``x``.
+    ``w`` are the weights (``1 / variance``). Returns ``(b0, b1)`` and ``M = X' W X`` (the
+    unscaled covariance is its inverse); raises :class:`numpy.linalg.LinAlgError` with fewer
+    than two weighted points at distinct ``x``.
     """
     wx = w * x
     s0, s1, s2 = float(np.sum(w)), float(np.sum(wx)), float(np.dot(wx, x))
@@ -152,23 +93,10 @@ def inverse_2x2(M: np.ndarray) -> np.ndarray:
 
 def linear_trend(t: Sequence[float], value: Sequence[float], stderr: Sequence[float],
                  t_ref: float | None = None) -> Trend:
-    """Weighted least-squares straight line through ``(t, value +/- stderr)``.
+    """Weighted least-squares straight line through ``(t, value +/- stderr)`` (s, SI).
 
-    Parameters
-    ----------
-    t : sequence of float
-        Times (s, any origin).
-    value : sequence of float
-        Values (SI).
-    stderr : sequence of float
-        Their standard errors (SI, > 0). The covariance is scaled by the reduced chi-square
-        when that exceeds 1 (scatter larger than the stated errors widens the trend).
-    t_ref : float, optional
-        Time the level refers to (default the last ``t``).
-
-    Returns
-    -------
-    Trend
+    The covariance is scaled by the reduced chi-square when that exceeds 1; the level refers
+    to ``t_ref`` (default the last ``t``).
     """
     tt = np.asarray(t, dtype=float)
     y = np.asarray(value, dtype=float)
@@ -192,18 +120,11 @@ def linear_trend(t: Sequence[float], value: Sequence[float], stderr: Sequence[fl
 
 def band_crossing(a: float, r: float, var_value: float, cov: float, var_rate: float,
                   z: float = Z90) -> tuple[float, float, float] | None:
-    """Time to a crossing and the edges of its interval, without process noise (closed form).
+    """Time to a crossing and its interval edges without process noise (Fieller's interval).
 
-    The line ``a + r tau`` (``a`` = level minus limit, ``r`` the rate, with covariance
-    ``[[var_value, cov], [cov, var_rate]]``) meets zero at ``tau* = -a / r``; the band
-    ``a + r tau -/+ z s(tau)`` meets it at the roots of the quadratic of the module docstring
-    (Fieller's interval), which are finite exactly when ``r^2 > z^2 var_rate``.
-
-    Returns
-    -------
-    tuple of float or None
-        ``(tau*, tau_low, tau_high)`` (same time unit as ``r``), ``None`` when the rate is not
-        significant at ``z``. The edges may be negative (the band holds the limit already).
+    ``a`` is level minus limit, ``r`` the rate, with covariance ``[[var_value, cov], [cov,
+    var_rate]]``. Returns ``(tau*, tau_low, tau_high)`` (the unit of ``r``'s time; the edges
+    may be negative), ``None`` when the rate is not significant at ``z``.
     """
     qa = r * r - z * z * var_rate
     if r == 0 or not qa > 0:
@@ -222,10 +143,8 @@ def band_crossing(a: float, r: float, var_value: float, cov: float, var_rate: fl
 def crossing(trend: Trend, limit: float, z: float = Z90) -> Crossing | None:
     """When ``trend`` reaches ``limit`` (module docstring); ``None`` when not predicted.
 
-    ``None`` also when the trend moves away from the limit or its rate is not significant
-    at ``z``. Without process noise the interval is :func:`band_crossing`'s closed form;
-    with it (``q_value``, ``q_rate``) the band edges are found by bisection and the late
-    edge is capped at 100 times the predicted time to the crossing.
+    With process noise the band edges are found by bisection, the late one capped at 100
+    times the predicted time to the crossing.
     """
     a = trend.value - limit
     r = trend.rate
@@ -276,23 +195,10 @@ def crossing(trend: Trend, limit: float, z: float = Z90) -> Crossing | None:
 
 @dataclass
 class ForecastEvent(ParameterEvent):
-    """A predicted limit crossing (``kind="forecast"``) or its withdrawal.
-
-    Attributes
-    ----------
-    kind : {"forecast", "forecast_withdrawn"}
-    t : float
-        Data time (s) of the estimate the forecast is based on.
-    parameter : str
-    value, rate, rate_stderr : float
-        Tracked level (SI) and rate (SI/s) at ``t``.
-    limit, nominal : float
-        The alert limit ``(1 - drop) x nominal`` and the nominal value (SI).
-    crossing_t, crossing_t_low, crossing_t_high : float or None
-        Predicted data time of the crossing and its 90 % interval (s); ``None`` in a
-        withdrawal.
-    model, unit : str
-    """
+    """A predicted limit crossing (``kind="forecast"``) or its withdrawal
+    (``"forecast_withdrawn"``): tracked level (SI) and rate (SI/s) at data time ``t`` (s), the
+    limit and nominal (SI), and the predicted crossing time with its 90 % interval (s;
+    ``None`` in a withdrawal)."""
 
     kind: str
     t: float
@@ -348,31 +254,17 @@ class ForecastEvent(ParameterEvent):
 class ForecastEngine:
     """Per-parameter forecast state: announce, update and withdraw predicted crossings.
 
-    Parameters
-    ----------
-    limits : dict
-        ``parameter -> limit`` (SI), the alert engine's ``(1 - drop) x nominal``.
-    nominal : dict
-        ``parameter -> nominal`` (SI).
-    horizon_s : float
-        Announce a crossing predicted within this much data time (s).
-    model : str
-    units : dict, optional
-    publish : callable, optional
-        Receives each new event and returns whether it was delivered (the alert engine's
-        write-ahead publisher); by default the events are only collected.
-    min_span_s : float
-        Announce nothing from a trend whose data span less than this (s; 15): a trend of a
-        few windows cannot tell a wear that started inside them from a steady one.
+    ``publish`` receives each new event and returns whether it was delivered (the alert
+    engine's write-ahead publisher); by default the events are only collected.
     """
 
-    limits: dict[str, float]
+    limits: dict[str, float]  # parameter -> limit (SI)
     nominal: dict[str, float]
-    horizon_s: float = DEFAULT_HORIZON_S
+    horizon_s: float = DEFAULT_HORIZON_S  # announce crossings predicted within this (s)
     model: str = ""
     units: dict[str, str] = field(default_factory=dict)
     publish: Any = None
-    min_span_s: float = 15.0
+    min_span_s: float = 15.0  # announce nothing from a trend spanning less data time (s)
     active: dict[str, ForecastEvent] = field(default_factory=dict)
     emitted: list[ForecastEvent] = field(default_factory=list)
 

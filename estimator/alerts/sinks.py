@@ -22,18 +22,9 @@ class CallbackSink:
 
 @dataclass
 class BusAlertSink:
-    """Send each *alert* and *forecast* (not clears or withdrawals) as the DBC's ``SUSPID_Alert``
-    frame; a forecast has severity ``forecast`` (3), its value the tracked value and its
-    nominal the nominal value.
-
-    Parameters
-    ----------
-    bus : can.BusABC
-        A python-can bus (``send``).
-    db : cantools Database
-        suspid's DBC (the frame layout comes from it through
-        :func:`suspid.can.codec.encode_alert`).
-    """
+    """Send each *alert* and *forecast* (not clears or withdrawals) as the DBC's
+    ``SUSPID_Alert`` frame on ``bus`` (``db``: suspid's DBC); a forecast has severity
+    ``forecast``."""
 
     bus: Any
     db: Any

@@ -1,14 +1,8 @@
-"""Durable, append-only alert log (JSON lines; flushed and fsynced per event).
+"""Durable, append-only alert log (JSON lines, fsynced per event, before anybody sees it).
 
-Write-ahead: :class:`~estimator.alerts.engine.AlertEngine` appends an event here and waits
-for ``fsync`` before printing it or sending the CAN frame, so an event that anybody saw is
-on disk. On start the log is read back: the last event of each parameter restores its state
-(an open alert stays open, no second alert for the same episode), and an event is *new*
-only if its id is unknown and its data time is later than the last logged event of its
-parameter. Replaying the same CAN log after a crash therefore re-derives the old events and
-suppresses them; a live monitor restarted mid-episode keeps the alert open. A line cut
-short by a crash (no trailing newline) is ignored and the file is repaired by starting the
-next record on a new line.
+On open the last event of each parameter restores its state; an event is *new* only if its id
+is unknown and it is later than its parameter's last one, so a replay after a crash repeats
+nothing and a restarted monitor keeps an alert open. A torn last line is skipped.
 """
 from __future__ import annotations
 
@@ -33,24 +27,11 @@ def event_from_json(d: Mapping[str, Any]) -> StoredEvent:
 
 
 class AlertStore:
-    """Append-only alert file.
+    """Append-only alert file at ``path`` (created with its directories).
 
-    Parameters
-    ----------
-    path : str or Path
-        The log; created (with parent directories) if missing.
-
-    Attributes
-    ----------
-    events : list
-        Events (:class:`AlertEvent`, :class:`ForecastEvent`) read at open plus those
-        appended since.
-    last_event : dict
-        ``parameter -> latest alert or clear`` (by data time).
-    last_forecast : dict
-        ``parameter -> latest forecast or withdrawal`` (by data time).
-    skipped_lines : int
-        Unreadable lines found at open (a torn last write).
+    ``events`` holds the events read and appended, ``last_event`` / ``last_forecast`` each
+    parameter's latest alert or clear / forecast or withdrawal (by data time), and
+    ``skipped_lines`` the unreadable lines found at open.
     """
 
     def __init__(self, path: str | Path) -> None:

@@ -1,10 +1,7 @@
 """Bounded window accumulator: the last ``window`` samples of every channel, preallocated.
 
-Samples arrive in blocks of any size (one CAN sample, a decoder batch, a whole CSV); a
-window is handed out every ``step`` samples once ``window`` samples have arrived. Memory is
-fixed at construction (``2 x window + max_block`` samples per channel), so a monitor that
-runs for hours keeps a flat footprint. Missing samples are NaN (gaps are marked by the
-decoder, never interpolated here).
+Blocks of any size go in; a window comes out every ``step`` samples. Memory is fixed
+(``2 x window + max_block`` samples per channel); missing samples are NaN.
 """
 from __future__ import annotations
 
@@ -16,19 +13,9 @@ from suspid.models.base import FloatArray
 
 
 class WindowAccumulator:
-    """Collect samples and yield overlapping windows.
-
-    Parameters
-    ----------
-    names : sequence of str
-        Channels kept (others in pushed blocks are ignored; absent ones are NaN).
-    window : int
-        Window length (samples).
-    step : int
-        Samples between window ends.
-    max_block : int
-        Largest block accepted by one :meth:`push` call without splitting.
-    """
+    """Collect samples and yield overlapping windows of ``window`` samples every ``step``
+    (``names``: the channels kept; absent ones are NaN; ``max_block``: the largest block
+    taken without splitting)."""
 
     def __init__(self, names: Sequence[str], window: int, step: int, max_block: int = 4096) -> None:
         if window < 2 or step < 1:
@@ -45,20 +32,8 @@ class WindowAccumulator:
         self._next_end = self.window
 
     def push(self, t: FloatArray, data: Mapping[str, FloatArray]) -> Iterator[tuple[FloatArray, dict[str, FloatArray]]]:
-        """Append a block and yield every window completed by it.
-
-        Parameters
-        ----------
-        t : ndarray, shape (n,)
-            Sample times (s), increasing.
-        data : mapping
-            ``channel -> ndarray (n,)``.
-
-        Yields
-        ------
-        (t, data)
-            Copies of the window's times and channel arrays.
-        """
+        """Append a block (increasing times ``t``, s; channel arrays) and yield copies of
+        every window ``(t, data)`` it completes."""
         t = np.asarray(t, dtype=float)
         for s in range(0, t.size, self.max_block):
             e = min(s + self.max_block, t.size)

@@ -1,35 +1,7 @@
-"""Nelder-Mead windows vs the EKF on the same stream: accuracy, speed, alerts.
-
-Both estimators see the same samples through the same windows (the NM one fits each
-window, the EKF filters the samples new in each window), are built by the same wiring
-(:mod:`estimator.stream.pipeline`) from the same options and feed identical alert and
-forecast engines.
-Metrics (``truth`` known for synthetic streams):
-
-``rmse`` / ``rmse_pct``
-    RMS over estimates of ``estimate(t) - truth(t)`` (SI and relative %), ``t`` the data
-    time at the window end (the contract's ``t``).
-``convergence_s``
-    data time from the stream start after which every later estimate stays within 5 % of
-    the truth (``null`` if never).
-``alert_delay_s``
-    first alert of the parameter minus the time the truth crossed ``(1 - drop) x nominal``.
-``false_alarms``
-    alerts raised while the truth was still above the limit.
-``error_over_stderr_rms``
-    RMS of ``(estimate - truth) / stderr`` with the stderr the alerts use: about 1 when the
-    stated uncertainty is honest, above 1 when it understates the error (alerts then come
-    earlier than their confidence level warrants), below 1 when it is conservative.
-``cpu_us_per_sample``
-    process CPU time of the estimator divided by the samples of the stream.
-``forecast_lead_s``, ``forecast_first_error_s``, ``forecast_first_contains``, ``forecast_first_margin_s``
-    the first forecast before the true crossing: how long before it came, the error of its
-    predicted crossing time, whether its 90 % interval holds the true crossing, and by how
-    much (s): the distance from the true crossing to the interval's nearer end, negative
-    when the crossing lies outside.
-
-The values compared with the truth are those the alerts are decided on: the tracker's value
-at the window end for the sliding window, the filter's own state for the EKF.
+"""Nelder-Mead windows vs the EKF on the same stream, built by :mod:`estimator.stream.pipeline`
+from the same options: accuracy against a known truth (``rmse``, ``convergence_s``,
+``alert_delay_s``, ``false_alarms``, ``error_over_stderr_rms``, ``forecast_first_*``) of the
+values the alerts are decided on, and CPU time per sample.
 """
 from __future__ import annotations
 
@@ -85,8 +57,7 @@ def run_one(spec: MonitorSpec, t: FloatArray, data: Mapping[str, FloatArray]) ->
 
 
 def _series(rec: RunRecord, k: str) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Times, the values the alerts were decided on (the tracker's for the sliding window,
-    the filter's own state for the EKF) and their standard errors."""
+    """Times, the values the alerts were decided on and their standard errors."""
     te, ve, se = [], [], []
     for l in rec.lines:
         if l["type"] != "estimate" or k not in l.get("stderr", {}):
@@ -171,8 +142,7 @@ def load_stream(model: SuspensionModel, path: str | Path, dbc: Path | None = Non
                 signal_map: Any = None, truth_csv: str | Path | None = None,
                 channel: str | None = None, j1939_source: str | None = None
                 ) -> tuple[FloatArray, dict[str, FloatArray], dict[str, FloatArray] | None]:
-    """``(t, data, truth or None)`` of a CAN log (its bus ``channel`` only, when given) or
-    measurement CSV and its truth file (``j1939_source``: ``can.j1939_source``)."""
+    """``(t, data, truth or None)`` of a CAN log or measurement CSV and its truth file."""
     p = require_file(str(path))
     if is_can_log(p):
         meas, _ = load_log_as_measurement(p, model, dbc, signal_map, channel=channel,
@@ -207,15 +177,10 @@ def compare(model: SuspensionModel, t: FloatArray, data: Mapping[str, FloatArray
             road: str | None = None) -> tuple[dict[str, Any], list[RunRecord]]:
     """The sliding window and the EKF on one stream, on the same footing.
 
-    Both get the same free parameters, starting values (``init``, else ``nominal``, else
-    the defaults -- the EKF then starts from the first window's estimate, as the sliding
-    window does), windows, alert rule and forecast horizon (``window``, ``alert``: as
-    :func:`~estimator.stream.pipeline.monitor_spec` takes them; the window's tuning fields
-    apply to the sliding window). ``road`` is ``--road`` (``None``: ``measured`` when the
-    stream carries every road, else ``unknown``, named in the report's ``warnings``); with
-    ``unknown`` both run on the body equations (:mod:`estimator.stream.roadfree`,
-    :mod:`estimator.ekf.roadfree`). Returns the report (one JSON object) and the two run
-    records.
+    Both get the same free parameters, starts, windows, alert rule and forecast horizon (as
+    :func:`~estimator.stream.pipeline.monitor_spec` takes them; the window's tuning applies
+    to the sliding window only). ``road`` ``None`` is ``measured`` when the stream carries
+    every road, else ``unknown``. Returns the report and the two run records.
     """
     has_road = all(r in data for r in model.roads)
     warnings: list[str] = []
@@ -237,8 +202,7 @@ def compare(model: SuspensionModel, t: FloatArray, data: Mapping[str, FloatArray
                               inspection=False, ekf=ekf, road=road)
     nm_spec = monitor_spec(model, baseline="nm", window=wo, **kw)
     warnings += nm_spec.warnings
-    # the EKF shares the sliding window's length and step (its alert persistence), not its
-    # fit tuning
+    # the EKF shares the window length and step (its alert persistence), not the fit tuning
     ekf_spec = monitor_spec(model, baseline="ekf",
                             window=WindowOptions(window_s=wo.window_s, step_s=wo.step_s), **kw)
     alert_drop = alert.drop
@@ -268,8 +232,7 @@ def compare(model: SuspensionModel, t: FloatArray, data: Mapping[str, FloatArray
 
 def plot(path: str | Path, t: FloatArray, truth: Mapping[str, FloatArray] | None, recs: list[RunRecord],
          nominal: Mapping[str, float], drop: float) -> None:
-    """One figure, one panel per monitored parameter (``nominal``'s keys): its tracks (with
-    2-sigma bands) against the truth and the alert limit ``(1 - drop) x nominal``."""
+    """One figure, a panel per parameter: the tracks (2-sigma bands), truth and alert limit."""
     names = list(nominal)
     fig = Figure(figsize=(9, 3.2 * max(1, len(names)) + 0.6))
     axes = fig.subplots(max(1, len(names)), 1, sharex=True, squeeze=False)[:, 0]
@@ -291,22 +254,14 @@ def _plot_param(ax: Any, t: FloatArray, truth: Mapping[str, FloatArray] | None,
     colors = {"nm": "C0", "ekf": "C1"}
     hatches = ("", "////", "\\\\", "xx")
     for i, rec in enumerate(recs):
-        est = [l for l in rec.lines if l["type"] == "estimate" and param in l["stderr"]]
-        if not est:
+        te, v, s = _series(rec, param)
+        if not te.size:
             continue
-        te = np.array([l["t"] for l in est])
-        if rec.own_track:
-            v = np.array([l["params"][param] for l in est])
-            s = np.array([l["stderr"].get(param) or np.nan for l in est], dtype=float)
-        else:
-            v = np.array([l["track"][param]["value"] for l in est])
-            s = np.array([l["track"][param]["stderr"] for l in est], dtype=float)
         c = colors.get(rec.name, None)
         what = "estimate" if rec.own_track else "tracked (window end)"
         line, = ax.plot(te, v, ".-", ms=3, color=c, label=f"{rec.name.upper()} {what}")
         c = line.get_color()
-        # each band drawn with its own edges and hatch: a narrow band, or one lying inside
-        # the other, stays visible
+        # own edges and hatch: a narrow band, or one inside the other, stays visible
         ax.fill_between(te, v - 2 * s, v + 2 * s, facecolor=c, alpha=0.15, lw=0,
                         hatch=hatches[i % len(hatches)], edgecolor=c,
                         label=f"{rec.name.upper()} +/- 2 stderr")
@@ -315,8 +270,7 @@ def _plot_param(ax: Any, t: FloatArray, truth: Mapping[str, FloatArray] | None,
         for a in rec.alerts:
             if a.parameter == param and a.kind == "alert":
                 ax.axvline(a.t, color=c, ls=":", lw=1.5)
-                # one label per estimator, on alternate sides of its line: two alerts at
-                # the same time do not print over each other
+                # alternate sides: two alerts at the same time do not overprint
                 side = -1 if i % 2 == 0 else 1
                 ax.annotate(f"{rec.name.upper()} alert t = {a.t:.1f} s", (a.t, 0.04),
                             xycoords=("data", "axes fraction"), xytext=(2 * side, 0),

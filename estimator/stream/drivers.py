@@ -1,10 +1,8 @@
 """Feeding a monitor: in-memory arrays, a CAN log replayed as fast as possible, a live bus.
 
-All three cut the stream into the same windows: the first ends ``window_s`` after the first
-sample, the next ones every ``step_s`` of data time. For CAN input the windows come from the
-decoder's bounded rolling buffer (:class:`estimator.decode.DecodeListener`), aligned on a
-uniform grid with gaps as NaN; a window is cut once a frame *later* than its end has been
-accepted, so every frame of its last sample is in.
+All three cut the same windows: the first ends ``window_s`` after the first sample, the next
+every ``step_s`` of data time. CAN windows come from the decoder's bounded buffer
+(:class:`estimator.decode.DecodeListener`), cut once a frame later than their end is in.
 """
 from __future__ import annotations
 
@@ -28,8 +26,7 @@ from suspid.can.dbc import is_e2e
 from suspid.io.csvio import AUX_CHANNELS
 from suspid.models.base import FloatArray
 
-#: default length of the live receiver's buffer (s of data at the DBC's frame rate, at least
-#: a saturated 1 Mbit/s bus; :func:`receive_capacity`)
+#: default length of the live receiver's buffer (s of data, :func:`receive_capacity`)
 RECEIVE_BUFFER_S = 10.0
 
 WindowFn = Callable[[FloatArray, Mapping[str, FloatArray]], Any]
@@ -37,21 +34,8 @@ WindowFn = Callable[[FloatArray, Mapping[str, FloatArray]], Any]
 
 def run_arrays(t: FloatArray, data: Mapping[str, FloatArray], window_s: float, step_s: float,
                on_window: WindowFn, block: int = 1000) -> int:
-    """Stream arrays through a :class:`WindowAccumulator` in blocks; returns windows cut.
-
-    Parameters
-    ----------
-    t : ndarray
-        Sample times (s), uniform.
-    data : mapping
-        Channel arrays on ``t``.
-    window_s, step_s : float
-        Window length and step (s).
-    on_window : callable
-        Called with ``(t, data)`` of each window.
-    block : int
-        Samples per pushed block (a decoder batch).
-    """
+    """Stream arrays (uniform times ``t``, s) through a :class:`WindowAccumulator` in blocks
+    of ``block`` samples, calling ``on_window(t, data)`` per window; returns windows cut."""
     t = np.asarray(t, dtype=float)
     dt = float(np.median(np.diff(t)))
     acc = WindowAccumulator(list(data), int(round(window_s / dt)) + 1, max(1, int(round(step_s / dt))),
@@ -67,51 +51,27 @@ def run_arrays(t: FloatArray, data: Mapping[str, FloatArray], window_s: float, s
 
 @dataclass
 class CanWindowDriver:
-    """Cut windows out of a :class:`~estimator.decode.DecodeListener` as frames arrive.
-
-    Parameters
-    ----------
-    listener : DecodeListener
-    window_s, step_s : float
-    on_window : callable
-        ``(t, data)`` per window.
-    channels : list of str
-        Channels to align (default: every channel the listener's signal map takes from the
-        DBC, whose message has delivered a frame when the first window starts; the first
-        window waits up to ``start_wait_s`` of data time for messages that start late, e.g.
-        a road message, instead of deciding from whichever frames came first).
-    check_every : int
-        Fewest frames between checks of the buffer's newest time. Between checks the driver
-        takes as many frames as the frame rate seen so far says arrive before the next
-        window end, at most half a step's worth (:meth:`next_check`), so the decoder
-        validates large batches; a window is aligned from the samples inside it and the
-        listener's buffer holds a window plus two steps, so a window cut a little after its
-        end is the same window.
-    max_missing : float
-        A window whose samples start or end inside a gap in the stream (the aligned grid runs
-        from the first to the last sample it holds) and so cover less than ``1 - max_missing``
-        of ``window_s`` is padded with missing samples (NaN) to its whole span: the
-        estimator skips it as a gap in the data, at the window's own end time. (Unpadded,
-        both windows that straddle the start of a long gap were fitted on their part before
-        it and reported at the same time, the last sample's.)
-    """
+    """Cut windows out of a :class:`~estimator.decode.DecodeListener` as frames arrive."""
 
     listener: Any
     window_s: float
     step_s: float
-    on_window: WindowFn
+    on_window: WindowFn  # called with (t, data) per window
+    #: channels to align (default: those of the messages that delivered when the first window
+    #: starts, which waits up to ``start_wait_s`` of data time for late ones)
     channels: list[str] | None = None
-    check_every: int = 32
+    check_every: int = 32  # fewest frames between checks of the buffer (next_check)
     frames: int = 0
     windows: int = 0
-    #: windows that held no decoded sample of the channels (skipped)
-    empty_windows: int = 0
+    empty_windows: int = 0  # windows that held no decoded sample of the channels (skipped)
     dt: float | None = None
     t_first: float = math.nan
     next_end: float = math.nan
     _left: int = 1
     on_first_dt: Callable[[float], None] | None = None
     start_wait_s: float | None = None
+    #: a window reaching into a gap and covering less than ``1 - max_missing`` of its span is
+    #: padded with NaN, so it is skipped at its own end time
     max_missing: float = 0.2
     _t_seen: float = math.nan
 
@@ -122,8 +82,7 @@ class CanWindowDriver:
         if not isinstance(srcs, dict) or not srcs:
             return True
         if not math.isfinite(self._t_seen):
-            # data time counts from the oldest sample: frames a decoder held back (a live slot
-            # rule's warm-up) arrive together, already spanning part of the wait
+            # from the oldest sample: frames a decoder held back arrive together
             t0 = buf.earliest_time()
             self._t_seen = t0 if math.isfinite(t0) else latest
         if all(src.n > 0 for src in srcs.values()):
@@ -141,14 +100,9 @@ class CanWindowDriver:
             self._left = self.next_check(self.frames)
 
     def next_check(self, fed: int, max_steps: float = 0.5) -> int:
-        """Frames to take before the next :meth:`poll`, after ``fed`` frames in all.
-
-        1 until the first sample is in; then the frames expected before the next window end
-        at the rate seen so far (``fed`` over the data time since the first sample), at
-        least ``check_every`` and at most ``max_steps`` steps' worth (half a step live, so
-        a window is never cut much later than its end; a replay has no such deadline and
-        takes up to a whole step: fewer, larger decoder batches).
-        """
+        """Frames to take before the next :meth:`poll` after ``fed`` frames: those expected
+        before the next window end at the rate seen, at least ``check_every`` and at most
+        ``max_steps`` steps' worth (1 until the first sample is in)."""
         if not math.isfinite(self.t_first):
             return 1
         every = max(1, self.check_every)
@@ -172,8 +126,7 @@ class CanWindowDriver:
                 live = [c for name, src in self.listener.buffer.sources.items() if src.n > 0
                         for c in src.channels if c not in AUX_CHANNELS]
                 self.channels = live or None
-            # the first window starts at the oldest sample (frames a decoder held back, e.g.
-            # a live slot rule's warm-up, arrive together)
+            # the first window starts at the oldest sample
             t0 = self.listener.buffer.earliest_time()
             self.t_first = t0 if math.isfinite(t0) else latest
             self.next_end = self.t_first + self.window_s
@@ -186,9 +139,7 @@ class CanWindowDriver:
             al = self.listener.aligned(window=self.window_s, t_end=t_end, dt=self.dt,
                                        channels=self.channels)
         except NoSamplesError:
-            # a gap in the stream longer than a window (a dead link, a node that paused, the
-            # last frames of other messages after the measurements ended): nothing to fit,
-            # as a window with fewer than 3 samples
+            # a gap in the stream longer than a window: nothing to fit
             self.empty_windows += 1
             return
         if self.dt is None:
@@ -224,9 +175,8 @@ class CanWindowDriver:
 
 def _pad_to_window(t: np.ndarray, values: dict[str, np.ndarray], dt: float, t_start: float,
                    t_end: float, max_missing: float) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """A window's grid ``t`` (s, step ``dt``) and ``values``, extended with NaN samples on
-    the grid to ``[t_start, t_end]`` when they cover less than ``1 - max_missing`` of it
-    (the window reaches into a gap at its start or end); unchanged otherwise."""
+    """A window's grid ``t`` (s) and ``values``, padded with NaN to ``[t_start, t_end]`` when
+    they cover less than ``1 - max_missing`` of it."""
     span = t_end - t_start
     if not (dt > 0 and span > 0) or t[-1] - t[0] + dt >= (1.0 - max_missing) * span:
         return t, values
@@ -240,46 +190,21 @@ def _pad_to_window(t: np.ndarray, values: dict[str, np.ndarray], dt: float, t_st
 
 
 def replay(driver: CanWindowDriver, messages: Iterable[Any]) -> int:
-    """Feed logged frames as fast as possible; returns the number of frames.
-
-    Same as calling :meth:`CanWindowDriver.on_message` per frame, with the per-frame work
-    inlined (the listener call and a countdown to the next window check).
-    """
-    on = driver.listener.on_message_received
-    poll = driver.poll
+    """Feed frames one by one (:meth:`CanWindowDriver.on_message`), flush; returns their number."""
     n = 0
-    left = 1
     for msg in messages:
-        on(msg)
+        driver.on_message(msg)
         n += 1
-        left -= 1
-        if left <= 0:
-            poll()
-            left = driver.next_check(driver.frames + n)
-    driver.frames += n
     driver.flush()
     return n
 
 
 def replay_log(driver: CanWindowDriver, path: Any, stats: Any = None,
                channel: str | None = None) -> int:
-    """Replay a CAN log file as fast as possible; returns the number of frames.
-
-    The log is read and decoded in NumPy batches (:func:`estimator.decode.feed_log`: a
-    candump log never becomes :class:`can.Message` objects), checked for due windows where
-    :meth:`CanWindowDriver.next_check` says: windows, estimates, alerts and frame statistics
-    equal a frame-by-frame :func:`replay` (``tests/stream/test_replay_log.py``).
-
-    Parameters
-    ----------
-    driver : CanWindowDriver
-    path : str or Path
-        ``.log``, ``.asc``, ``.blf``, ``.trc`` or ``.mf4``.
-    stats : ReadStats, optional
-        Filled with frames read and lines skipped.
-    channel : str, optional
-        Only this bus channel of a multi-bus log (see :func:`estimator.decode.feed_log`).
-    """
+    """Replay a CAN log file (``.log``, ``.asc``, ``.blf``, ``.trc``, ``.mf4``) as fast as
+    possible, decoded in NumPy batches (:func:`estimator.decode.feed_log`) with the windows
+    and statistics of a frame-by-frame :func:`replay`; ``stats`` (ReadStats) is filled,
+    ``channel`` selects a bus channel. Returns the number of frames."""
     fed = driver.frames + 1   # frames fed when poll() is called (first after one frame)
 
     def poll() -> int:
@@ -320,28 +245,19 @@ class LiveStop:
             signal.signal(s, h)
 
 
-#: fewest frames per second the receiver's buffer is sized for: a saturated 1 Mbit/s
-#: classic CAN bus carries about 8.5 k frames/s of 8 bytes
+#: fewest frames per second the receiver's buffer is sized for (a saturated 1 Mbit/s bus
+#: carries about 8.5 k frames/s)
 RECEIVE_RATE = 10_000.0
-#: kernel socket receive buffer asked for on a SocketCAN bus (bytes; a CAN frame costs about
-#: 1 kB of it), so the reader thread may be held up a while without the kernel dropping frames
+#: kernel socket receive buffer asked for on a SocketCAN bus (bytes)
 SOCKET_RCVBUF = 8 << 20
-#: longest wait (s of frame time) after a socket overrun, a controller loss (error frame) or
-#: a buffer overflow for each counter-carrying message's next frame, whose counter gap is
-#: booked to that loss (:class:`LossLedger`)
+#: longest wait (s of frame time) after a loss for each counter-carrying message's next
+#: frame, whose counter gap is booked to that loss (:class:`LossLedger`)
 LOSS_ATTRIBUTION_S = 1.0
 
 
 def bus_frame_rate(db: Any) -> float:
-    """Frames per second the receiver's buffer is sized for.
-
-    The DBC describes the bus: every message with a cycle time (``GenMsgCycleTime``, ms) at
-    that rate, and at least :data:`RECEIVE_RATE` (foreign traffic the DBC does not list).
-
-    Parameters
-    ----------
-    db : cantools Database or None
-    """
+    """Frames per second the receiver's buffer is sized for: the DBC's messages at their
+    cycle times (``db``: cantools Database or None), at least :data:`RECEIVE_RATE`."""
     rate = 0.0
     for msg in getattr(db, "messages", None) or ():
         cycle = getattr(msg, "cycle_time", None)
@@ -356,12 +272,8 @@ def receive_capacity(seconds: float, db: Any = None) -> int:
 
 
 def enlarge_socket_buffer(bus: Any, size: int = SOCKET_RCVBUF) -> int:
-    """Ask for a larger kernel receive queue on a SocketCAN bus; returns its size (bytes).
-
-    ``SO_RCVBUFFORCE`` (root) passes ``net.core.rmem_max``; otherwise ``SO_RCVBUF`` up to
-    it. The kernel doubles the size asked for (its bookkeeping) and keeps a floor of a few
-    kB. 0 when the bus has no socket (other interfaces).
-    """
+    """Ask for a larger kernel receive queue on a SocketCAN bus (``SO_RCVBUFFORCE``, else
+    ``SO_RCVBUF``); returns its size (bytes), 0 without a socket."""
     sock = getattr(bus, "socket", None)
     if not isinstance(sock, socket.socket):
         return 0
@@ -375,30 +287,11 @@ def enlarge_socket_buffer(bus: Any, size: int = SOCKET_RCVBUF) -> int:
 
 
 class Receiver:
-    """Read a python-can bus on its own thread into a bounded buffer (seconds of data).
+    """Read a python-can bus on its own thread into a buffer of ``capacity`` frames.
 
-    The window fits run on the caller's thread; this thread only takes frames off the
-    socket, so a fit that outlasts its step delays the decoding, not the reception, and
-    the kernel's socket queue does not overflow. Frames lost anyway are counted by cause:
-
-    * ``buffer_overflow``: the buffer was full; the newest frame is dropped;
-    * ``socket_overrun`` (SocketCAN): the kernel dropped frames because this socket's
-      receive queue was full (``SO_RXQ_OVFL``; ``None`` on other interfaces: unknown);
-    * error frames (SocketCAN: every class; other interfaces: whatever their bus returns as
-      error frames) are counted by class (``bus_errors``) and never reach the decoder; an RX
-      overflow in the controller or a bus-off means frames were lost on the bus side.
-
-    Each loss is also noted as an event at its place in the frame sequence (:attr:`events`)
-    so that :func:`run_bus` can tell which counter gaps it explains.
-
-    Parameters
-    ----------
-    bus : can.BusABC
-    capacity : int, optional
-        Frames the buffer holds (default :data:`RECEIVE_BUFFER_S` s at
-        :data:`RECEIVE_RATE`; :func:`receive_capacity` sizes it from a DBC).
-    rcvbuf : int or None
-        Kernel receive queue asked for on a SocketCAN bus (bytes; ``None``: as it is).
+    A slow fit on the caller's thread delays the decoding, not the reception. Lost frames
+    are counted by cause and each loss is noted in :attr:`events` for :class:`LossLedger`;
+    ``rcvbuf`` is the kernel queue asked for on a SocketCAN bus (bytes; ``None``: as it is).
     """
 
     def __init__(self, bus: Any, capacity: int | None = None,
@@ -495,8 +388,7 @@ class Receiver:
         return [q.popleft() for _ in range(n)]
 
     def drain(self) -> list[Any]:
-        """After :meth:`stop`: the buffered frames, then what the kernel still holds for the
-        socket (a stop while lagging), error frames counted as on the thread."""
+        """After :meth:`stop`: the buffered frames, then what the kernel still holds."""
         out = self.take(0.0)
         if self.error is not None:
             return out
@@ -546,21 +438,9 @@ class Receiver:
 class LossLedger:
     """Which loss the decoder's counter gaps follow, so that no lost frame counts twice.
 
-    A sensor frame lost in the socket (or in the controller, or at the full buffer) also
-    leaves a gap in its message's alive counter, which the decoder finds at that message's
-    next frame. After each loss event the ledger watches, for every counter-carrying (E2E)
-    message the decoder has accepted frames of, its first frame after the event: the
-    counter gap found at that frame (``counts.lost`` just before and just after it, which
-    processes the decoder's pending batch) is booked to the event's cause. Gaps found
-    elsewhere (``none``) were lost before this receiver saw any trace of a loss: at the
-    sender, or on a bus that reports no errors. The watch ends when every such message has
-    delivered, or after :data:`LOSS_ATTRIBUTION_S` of frame time (a message that stopped).
-
-    Parameters
-    ----------
-    listener : DecodeListener
-    span : float
-        Longest watch after an event (s of frame time).
+    After each loss event the ledger books the counter gap found at the first frame of each
+    counter-carrying (E2E) message to the event's cause, for at most ``span`` s of frame
+    time; gaps found elsewhere (``none``) were lost before this receiver saw a loss.
     """
 
     def __init__(self, listener: Any, span: float = LOSS_ATTRIBUTION_S) -> None:
@@ -579,8 +459,7 @@ class LossLedger:
 
     def event(self, cause: str, t: float) -> None:
         """A loss of ``cause`` before the next frame (its time ``t``, s)."""
-        if cause != self.cause:
-            self.cause = cause
+        self.cause = cause
         per = getattr(self.listener, "per_message", None)
         seen = per() if callable(per) else {}
         self.pending = {self._ids[name] for name, n in seen.items() if n and name in self._ids}
@@ -620,30 +499,9 @@ class LossLedger:
 
 def run_bus(driver: CanWindowDriver, bus: Any, stop: LiveStop,
             buffer_s: float = RECEIVE_BUFFER_S, rcvbuf: int | None = SOCKET_RCVBUF) -> int:
-    """Receive from a live python-can bus until a stop condition; returns frames received.
-
-    A :class:`Receiver` thread reads the bus into a bounded buffer; this thread decodes the
-    frames and cuts and fits the windows. Stops on ``stop`` (SIGINT/SIGTERM, duration,
-    idle timeout) or when the bus reports that it can no longer be read
-    (``can.CanOperationError``: the adapter or the pty of an SLCAN node went away); either
-    way every frame received is processed and the windows it completes are cut. The
-    listener's frame statistics then carry ``receive`` (:meth:`Receiver.stats`): frames read,
-    frames lost by cause -- ``buffer_overflow``, ``socket_overrun``, error frames by class
-    (``bus_errors``) -- and ``counter_gap``, the frames missing from the sensor's counter
-    sequences, split in ``counter_gap_after`` by the loss they followed
-    (:class:`LossLedger`); ``lost_by_cause`` counts every lost frame once.
-
-    Parameters
-    ----------
-    driver : CanWindowDriver
-    bus : can.BusABC
-    stop : LiveStop
-    buffer_s : float
-        The receiver's buffer in seconds of data (:func:`receive_capacity` with the
-        listener's DBC).
-    rcvbuf : int or None
-        Kernel receive queue asked for on a SocketCAN bus (bytes).
-    """
+    """Receive from a live bus until ``stop`` (signal, duration, idle) or the bus closes;
+    returns frames received. A :class:`Receiver` thread reads, this thread decodes and fits;
+    the listener's ``receive_stats`` get the losses by cause (:class:`LossLedger`)."""
     start = time.monotonic()
     last_rx = start
     n = 0

@@ -1,41 +1,20 @@
-"""Typed events of the monitor: what a window, the tracker and the alerting produce.
+"""Typed events of the monitor; only the sinks turn them into JSON lines (``to_json``) or text.
 
-The monitor (:mod:`estimator.stream.pipeline`) passes these objects to its sinks; only the
-sinks turn them into JSON lines (:meth:`to_json`) or text. Alerts and clears are
-:class:`estimator.alerts.AlertEvent`, forecasts :class:`estimator.alerts.ForecastEvent`; both
-share their identity (``model:parameter:kind@t``, the alert store's deduplication key) and
-message pieces through :class:`estimator.alerts.event.ParameterEvent`.
+Alerts and forecasts are :class:`estimator.alerts.AlertEvent` and
+:class:`estimator.alerts.ForecastEvent`.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Union
-
-from estimator.alerts.engine import AlertEvent
-from estimator.alerts.forecast import ForecastEvent
+from typing import Any
 
 
 @dataclass
 class Estimate:
-    """One window's parameter estimate.
-
-    Attributes
-    ----------
-    t, t_start : float
-        Data time (s) at the window's end and start.
-    baseline : str
-        The estimator (``"nm"``, ``"ekf"``, ``"output_only"``).
-    params : dict
-        Every parameter value (SI), fixed ones included.
-    stderr : dict
-        Standard error of each estimated parameter (SI).
-    track : dict or None
-        The tracker's state at ``t``: ``parameter -> {"value", "stderr", "rate", "rate_stderr"}``
-        (SI, SI/s); the alerts and forecasts are decided on it.
-    info : dict
-        Everything else the estimator reports (evaluations, CPU, excitation, warnings, ...),
-        as JSON-ready values.
-    """
+    """One window's estimate: data times (s) of the window's end and start, the estimator
+    (``baseline``), every parameter and the free ones' stderr (SI), the tracker's state at
+    ``t`` (``track``: ``{"value", "stderr", "rate", "rate_stderr"}`` per parameter, what the
+    alerts and forecasts are decided on) and everything else JSON-ready in ``info``."""
 
     t: float
     t_start: float
@@ -77,19 +56,8 @@ class Skip:
 
 @dataclass
 class Notice:
-    """A warning about the run as a whole, said once (e.g. the fits persistently miss).
-
-    Attributes
-    ----------
-    t : float
-        Data time (s) of the window that decided it.
-    kind : str
-        What it is about (``"misfit"``).
-    message : str
-        One plain sentence or two: what was seen, the likely causes, what to do.
-    fields : dict
-        The numbers behind it, as JSON-ready values.
-    """
+    """A warning about the run as a whole, said once: data time (s) of the window that decided
+    it, ``kind`` (``"misfit"``, ``"offset"``), a plain ``message`` and the numbers behind it."""
 
     t: float
     kind: str
@@ -114,5 +82,3 @@ class Summary:
         """The ``summary`` JSON line."""
         return dict({"type": "summary"}, **self.fields)
 
-
-Event = Union[Estimate, Skip, Notice, AlertEvent, ForecastEvent, Summary]

@@ -1,20 +1,16 @@
 """The monitor: windows of a stream -> estimates (NM or EKF) -> tracking, inspection, alerts.
 
-:class:`NMWindowEstimator` (the default) fits every window with
-:class:`~estimator.stream.window.SlidingWindowIdentifier` and runs the virtual damper test
-(:mod:`estimator.inspection`) on each estimate of a quarter car. The EKF baseline
-(:class:`estimator.ekf.EKFWindowEstimator`) has the same ``process(t, data)`` interface and
-consumes only the samples it has not seen. :class:`StreamMonitor` turns their results into
-typed events (:mod:`estimator.stream.events`), tracks them with a trend
-(:class:`~estimator.stream.tracker.TrendTracker`) and feeds the alert and forecast engines
-from the tracker.
+:class:`NMWindowEstimator` fits every window (:class:`~estimator.stream.window.SlidingWindowIdentifier`)
+and runs the virtual damper test on quarter-car estimates; the EKF baseline has the same
+``process(t, data)`` interface. :class:`StreamMonitor` turns results into typed events,
+tracks them (:class:`~estimator.stream.tracker.TrendTracker`) and feeds alerts and forecasts.
 """
 from __future__ import annotations
 
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping, Protocol
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
@@ -32,17 +28,8 @@ from suspid.models.base import FloatArray, SuspensionModel
 
 @dataclass
 class StepResult:
-    """What one window produced.
-
-    Attributes
-    ----------
-    event : Estimate or Skip
-        The window's typed event.
-    values, stderr : dict or None
-        Parameter values and standard errors for the tracker (``None`` when skipped).
-    notices : list of Notice
-        Warnings about the run that this window decided (emitted after the event).
-    """
+    """What one window produced: its event, the values and stderr for the tracker (``None``
+    when skipped) and notices about the run decided on it."""
 
     event: Estimate | Skip
     values: dict[str, float] | None = None
@@ -55,23 +42,10 @@ class StepResult:
         return self.event.to_json()
 
 
-class WindowEstimator(Protocol):
-    """Anything that turns a window of samples into a :class:`StepResult`."""
-
-    name: str
-
-    def process(self, t: FloatArray, data: Mapping[str, FloatArray]) -> StepResult: ...
-
-    def summary(self) -> dict[str, Any]: ...
-
-
 def fill_road_gaps(model: SuspensionModel, data: Mapping[str, FloatArray], t: FloatArray,
                    max_missing: float) -> tuple[dict[str, FloatArray], list[str], str]:
     """Bridge short gaps in road channels by linear interpolation (reported, never silent).
-
-    Returns the new data dict, warnings, and a skip reason when a road channel misses more
-    than ``max_missing`` of the window (or everything).
-    """
+    Returns the data, warnings, and a skip reason when a road misses over ``max_missing``."""
     out = dict(data)
     warns: list[str] = []
     for r in list(model.roads) + [f"{r}_dot" for r in model.roads]:
@@ -96,28 +70,20 @@ def fill_road_gaps(model: SuspensionModel, data: Mapping[str, FloatArray], t: Fl
     return out, warns, ""
 
 
+def add_inspection(info: dict[str, Any], params: Mapping[str, float], model: SuspensionModel) -> None:
+    """Add the virtual damper test of ``params`` (SI) to an estimate's ``info``."""
+    try:
+        info["inspection"] = inspect(params, model).to_json()
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        info["inspection"] = None
+        info["warnings"].append(f"virtual damper test failed: {exc}")
+
+
 class NMWindowEstimator:
-    """Sliding-window Nelder-Mead estimates with the virtual damper test.
+    """Sliding-window Nelder-Mead estimates with the virtual damper test (``inspection``).
 
-    Parameters
-    ----------
-    model : SuspensionModel
-    params : Parameters
-        Starting values and fixed parameters.
-    config : WindowConfig
-    channels : list of str
-        Measured channels in the stream.
-    inspection : bool
-        Add EUSAMA / EGEA results to every estimate of a model that takes the virtual
-        damper test (:func:`estimator.inspection.quarter_car_problem`).
-
-    Attributes
-    ----------
-    lag : float
-        A window's estimate describes the parameters near the window's middle:
-        ``window_s / 2`` before its end (the tracker refers it to the end).
-    overlap : float
-        ``window_s / step_s``: windows sharing data count as that many fewer looks.
+    ``lag`` (``window_s / 2``: an estimate describes the window's middle) and ``overlap``
+    (``window_s / step_s``) tell the tracker how to fold the estimates in.
     """
 
     name = "nm"
@@ -150,11 +116,7 @@ class NMWindowEstimator:
                 if k not in ("type", "t", "t_start", "params", "stderr")}
         info["warnings"] = warns + list(info.get("warnings", []))
         if self.inspection:
-            try:
-                info["inspection"] = inspect(res.params, self.model).to_json()
-            except (np.linalg.LinAlgError, ValueError) as exc:
-                info["inspection"] = None
-                info["warnings"].append(f"virtual damper test failed: {exc}")
+            add_inspection(info, res.params, self.model)
         is_misfit, notice = self.misfit.update(
             res.t, res.noise_floor_ratio,
             misfit_shares(res.noise_floor_ratio, res.rms_residual, data))
@@ -173,27 +135,13 @@ class NMWindowEstimator:
 
 @dataclass
 class StreamMonitor:
-    """Drive an estimator window by window: track, alert, forecast, hand events to a sink.
+    """Drive an estimator window by window: track, alert, forecast, hand events to ``emit``.
 
-    Every estimate goes through the tracker (:class:`TrendTracker`, referred to the window's
-    end); the alert engine decides on the tracked value and its standard error, the forecast
-    engine on the tracked trend. An estimator that is itself a tracker (``own_track``: the
-    EKF, whose state is the filtered parameter) feeds the alerts with its own estimate and
-    the trend tracker only for the forecast.
-
-    Parameters
-    ----------
-    estimator : WindowEstimator
-    emit : callable
-        Receives every event (:class:`Estimate`, :class:`Skip`; alerts and forecasts go
-        through the alert engine's sinks).
-    alerts : AlertEngine, optional
-    tracker : TrendTracker, optional
-        Built from the estimator's ``lag`` and ``overlap`` when not given.
-    forecasts : ForecastEngine, optional
-    offsets : OffsetStage, optional
-        Finds a constant road or position offset on the first excited window and removes it
-        from every window before the estimator sees it (:mod:`estimator.stream.offsets`).
+    Alerts are decided on the tracked value at the window's end, forecasts on the tracked
+    trend; an estimator that is itself a tracker (``own_track``: the EKF) feeds the alerts
+    its own estimate. ``offsets`` removes a sensor offset found on the first excited window
+    (:mod:`estimator.stream.offsets`); the tracker is built from the estimator's ``lag`` and
+    ``overlap`` when not given.
     """
 
     estimator: Any

@@ -1,17 +1,8 @@
 """A sensor zero not at rest, found on the stream's first excited window and removed from all.
 
-A road sensor whose zero is not where the car rests, or a position sensor whose zero is not
-the rest position, puts a constant level into every window that no parameter set produces:
-every window fit then ends far above its noise floor and drifts away from the truth (on a
-quarter car with x1 reading +4 mm, the window fits put k1 between 0.80 and 1.32 of the truth
-and the EKF at 0.50-0.79; docs/monitoring.md, "Sensor offset"). ``suspid identify``
-finds such an offset from the data-driven start (:mod:`estimator.identify.offset`); the
-monitor does the same once, on the first window that is excited enough to fit and has no
-missing sample (:class:`OffsetStage`), and -- with ``--offset remove``, the default -- hands
-every window to its estimator (the sliding-window fits or the EKF alike) with the offset
-subtracted. The finding is said once, as a ``warning`` event of kind ``offset``
-(``offset_kind`` ``road`` or ``channel``, ``values`` per column in SI units, ``removed``,
-``share`` of the misfit left, ``effects``), and in the summary's ``offset``.
+As ``suspid identify`` does (:mod:`estimator.identify.offset`), :class:`OffsetStage` looks
+once for a constant road or position offset and, with ``offset = "remove"``, subtracts it
+from every window (``docs/monitoring.md``, "Sensor offset").
 """
 from __future__ import annotations
 
@@ -35,23 +26,9 @@ from suspid.models.base import FloatArray, SuspensionModel
 class OffsetStage:
     """Look for a constant road or position offset once, then remove it from every window.
 
-    Parameters
-    ----------
-    model : SuspensionModel
-    params : Parameters
-        The monitor's fixed values and starting values of the free parameters (the offset is
-        judged at the data-driven start of the window, as ``identify`` does).
-    config : WindowConfig
-        ``offset`` (``"remove"`` or ``"keep"``), ``cost`` and the excitation thresholds.
-
-    Attributes
-    ----------
-    offset : Offset or None
-        The offset found (``None``: none, or not checked yet).
-    t : float
-        End time (s) of the window it was judged on (NaN until then).
-    checked : bool
-        Whether an excited window has been checked (no later window is).
+    ``params`` are the monitor's (the offset is judged at the window's data-driven start);
+    ``config`` gives ``offset``, ``cost`` and the excitation thresholds. ``offset`` holds the
+    offset found, ``t`` the end (s) of the window it was found on.
     """
 
     def __init__(self, model: SuspensionModel, params: Parameters, config: WindowConfig) -> None:
@@ -103,9 +80,7 @@ class OffsetStage:
         return Notice(self.t, "offset", found.warning(self.model, self.remove), fields)
 
     def apply(self, t: FloatArray, data: Mapping[str, FloatArray]) -> Mapping[str, FloatArray]:
-        """``data`` (on times ``t``, s) with the offset subtracted from its columns (the
-        ``sensor_offset`` effects' compensation, as :meth:`Offset.remove`); as given when none
-        is found, or with ``--offset keep``."""
+        """``data`` with the offset subtracted, unless none was found or it is kept."""
         if self.offset is None or not self.remove:
             return data
         out = dict(data)
@@ -115,21 +90,13 @@ class OffsetStage:
 
     def process(self, t: FloatArray, data: Mapping[str, FloatArray]
                 ) -> tuple[Mapping[str, FloatArray], Notice | None]:
-        """One window: checked while no excited window has been, then corrected.
-
-        Returns
-        -------
-        data : mapping
-            The window for the estimator.
-        notice : Notice or None
-            The ``offset`` warning, on the window that found it.
-        """
+        """One window: checked while no excited window has been, then corrected; returns the
+        window for the estimator and the ``offset`` notice on the window that found it."""
         notice = None if self.checked else self._check(t, data)
         return self.apply(t, data), notice
 
     def summary(self) -> dict[str, Any] | None:
-        """The summary's ``offset``: ``None``, or the window end ``t`` (s) it was found at
-        and :meth:`~estimator.identify.offset.Offset.to_json`."""
+        """The summary's ``offset``: ``None``, or ``t`` (s) and :meth:`Offset.to_json`."""
         if self.offset is None:
             return None
         return {"t": self.t, **self.offset.to_json(self.remove)}

@@ -1,24 +1,10 @@
 """The monitor's wiring, once: options -> estimator -> tracker -> alerts and forecasts -> sinks.
 
-``suspid monitor`` (sliding window, EKF, output-only) and ``suspid compare`` build the same
-objects here:
-
-1. :func:`monitor_spec` checks the options and derives the window defaults
-   (:class:`MonitorSpec`);
-2. :func:`build_monitor` makes the :class:`~estimator.stream.monitor.StreamMonitor`: the
-   estimator (built on the first window, when the channels and the sample rate are known),
-   the trend tracker, the alert engine (with its durable store and sinks) and the forecast
-   engine;
-3. :func:`run_monitor` streams a :class:`Source` through it -- a CAN log replayed as fast as
-   possible, a measurement CSV, or a live python-can bus -- and returns the closing
-   :class:`~estimator.stream.events.Summary`.
-
-Every output is a typed event (:mod:`estimator.stream.events`,
-:class:`~estimator.alerts.AlertEvent`, :class:`~estimator.alerts.ForecastEvent`) handed to
-one callback; the caller's sink turns it into a JSON line or text.
-
-The estimators are found by name in :data:`ESTIMATORS` and imported on first use, so a
-replay with the sliding window does not pay for the EKF's or the output-only mode's imports.
+``suspid monitor`` and ``suspid compare`` build the same objects here: :func:`monitor_spec`
+checks the options and derives the defaults, :func:`build_monitor` makes the
+:class:`~estimator.stream.monitor.StreamMonitor`, :func:`run_monitor` streams a
+:class:`Source` (CAN log, CSV or live bus) through it. Every output is a typed event handed to
+one callback. The estimators in :data:`ESTIMATORS` are imported on first use.
 """
 from __future__ import annotations
 
@@ -71,59 +57,29 @@ OUTPUT_ONLY_STEP_S = 30.0
 
 @dataclass
 class MonitorSpec:
-    """Everything the monitor needs besides the stream.
-
-    Attributes
-    ----------
-    model : SuspensionModel
-    params : Parameters
-        Starting values of the free parameters and the fixed ones.
-    nominal : dict
-        ``parameter -> nominal`` (SI) of every monitored parameter.
-    start_given : set of str
-        Free parameters whose start was given (``--init`` or ``--nominal``); the EKF starts
-        the others from the first window's sliding-window estimate.
-    config : WindowConfig
-    alert : AlertConfig
-    baseline : {"nm", "ekf", "output_only"}
-    decimate_given : bool
-        ``config.decimate`` was set explicitly (else derived from the sample rate).
-    inspection : bool
-        Virtual damper test on each quarter-car estimate.
-    forecast_horizon_s : float
-    ekf_params : list of str or None
-        Parameters in the EKF's state (default: every free damper and spring).
-    ekf_q : float or None
-    ekf_decimate : int or None
-    accel_channel : str
-    oo_method : str
-    units : dict
-    warnings : list of str
-    road : {"measured", "zero", "unknown"} or None
-        ``--road``; ``None``: chosen on the first window (:func:`choose_road`), then set.
-    drift_given : bool
-        ``window.drift`` named parameters (a choice of the road unknown ignores it, warned).
-    """
+    """Everything the monitor needs besides the stream."""
 
     model: SuspensionModel
-    params: Parameters
-    nominal: dict[str, float]
+    params: Parameters  # starting values of the free parameters, and the fixed ones
+    nominal: dict[str, float]  # nominal value (SI) of every monitored parameter
     config: WindowConfig
     alert: AlertConfig
-    baseline: str = "nm"
+    baseline: str = "nm"  # "nm", "ekf" or "output_only"
+    #: free parameters whose start was given; the EKF starts the others from the first
+    #: window's sliding-window estimate
     start_given: set[str] = field(default_factory=set)
-    decimate_given: bool = False
-    inspection: bool = True
+    decimate_given: bool = False  # config.decimate set explicitly (else from the sample rate)
+    inspection: bool = True  # virtual damper test on each quarter-car estimate
     forecast_horizon_s: float = DEFAULT_HORIZON_S
-    ekf_params: list[str] | None = None
+    ekf_params: list[str] | None = None  # EkfOptions, checked
     ekf_q: float | None = None
     ekf_decimate: int | None = None
     accel_channel: str = ""
     oo_method: str = "carma"
     units: dict[str, str] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
-    road: str | None = None
-    drift_given: bool = False
+    road: str | None = None  # --road; None: chosen on the first window (choose_road)
+    drift_given: bool = False  # window.drift named parameters
 
 
 def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = None,
@@ -133,75 +89,31 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
                  alert: AlertOptions | None = None, ekf: EkfOptions | None = None,
                  output_only: OutputOnlyOptions | None = None, fs: float = 0.0,
                  inspection: bool = True) -> MonitorSpec:
-    """Check the monitor's settings and derive its defaults.
+    """Check the monitor's settings (raising :class:`UsageError` naming the first bad one) and
+    derive its defaults from the model's modes (:func:`default_config`).
 
-    Parameters
-    ----------
-    model : SuspensionModel
-    fix, nominal, init : mapping, optional
-        Known parameters; nominal values of monitored ones (also their start); starting
-        values that differ from nominal (SI).
-    baseline : {"nm", "ekf", "output_only"}
-    road : {"measured", "zero", "unknown"}, optional
-        ``--road``; ``None`` chooses on the first window (:func:`choose_road`). With
-        ``unknown`` the free parameters outside the body equations are held
-        (:func:`~estimator.stream.roadfree.road_unknown_params`), the window is at least
-        :func:`~estimator.stream.roadfree.road_unknown_window` and the drift is off.
-    window : WindowOptions, optional
-        Window length, step, decimation and further :class:`WindowConfig` fields; unset
-        ones from the model's modes (:func:`~estimator.stream.config.default_config`);
-        ``drift`` defaults to every free damper and spring of the struts
-        (:func:`~estimator.stream.config.strut_parameters`), ``()`` turns it off.
-    alert : AlertOptions, optional
-        Alert rule (:class:`~estimator.alerts.AlertConfig`; ``persistence_s`` defaults to one
-        window step) and forecast horizon (default
-        :data:`~estimator.alerts.forecast.DEFAULT_HORIZON_S`, 60 s).
-    ekf : EkfOptions, optional
-        EKF state parameters (default every free damper and spring), parameter random walk
-        and decimation.
-    output_only : OutputOnlyOptions, optional
-        Output-only channel (default the body's ``_ddot``) and method.
-    fs : float
-        Sample rate (Hz) when known (else the decimation is derived on the first window).
-    inspection : bool
-        Virtual damper test on each quarter-car estimate.
-
-    Returns
-    -------
-    MonitorSpec
-
-    Raises
-    ------
-    UsageError
-        Naming the first inconsistent setting.
+    ``fix``, ``nominal``, ``init`` (SI): known parameters, the monitored ones' nominal values
+    (also their start), other starts. ``road`` ``None`` chooses on the first window;
+    ``window``, ``alert``, ``ekf``, ``output_only`` are the user's settings
+    (:mod:`estimator.stream.config`); ``fs`` (Hz) the sample rate when known.
     """
-    wo = window or WindowOptions()
-    ao = alert or AlertOptions()
-    eo = ekf or EkfOptions()
-    oo = output_only or OutputOnlyOptions()
-    alert_drop, confidence, hysteresis = ao.drop, ao.confidence, ao.hysteresis
-    persistence = ao.persistence_s
-    forecast_horizon = ao.forecast_horizon_s
-    window_s, step = wo.window_s, wo.step_s
-    decimate = wo.decimate
+    wo, ao = window or WindowOptions(), alert or AlertOptions()
+    eo, oo = ekf or EkfOptions(), output_only or OutputOnlyOptions()
+    window_s, step, decimate = wo.window_s, wo.step_s, wo.decimate
     ekf_params = list(eo.params) if eo.params else None
-    fix = dict(fix or {})
-    nominal_in = dict(nominal or {})
-    if forecast_horizon is None:
-        forecast_horizon = DEFAULT_HORIZON_S
-    init = dict(init or {})
-    if not 0 < alert_drop < 1:
-        raise UsageError(f"--alert-drop: expected a fraction in (0, 1), got {alert_drop}")
-    if not 0.5 < confidence < 1:
-        raise UsageError(f"alert.confidence: expected a probability in (0.5, 1), got {confidence}")
-    if not (forecast_horizon > 0 and math.isfinite(forecast_horizon)):
-        raise UsageError(f"alert.forecast_horizon_s: expected a time > 0 s, got {forecast_horizon}")
-    z = float(NormalDist().inv_cdf(confidence))
+    fix, nominal_in, init = dict(fix or {}), dict(nominal or {}), dict(init or {})
+    horizon = DEFAULT_HORIZON_S if ao.forecast_horizon_s is None else ao.forecast_horizon_s
+    if not 0 < ao.drop < 1:
+        raise UsageError(f"--alert-drop: expected a fraction in (0, 1), got {ao.drop}")
+    if not 0.5 < ao.confidence < 1:
+        raise UsageError(f"alert.confidence: expected a probability in (0.5, 1), got {ao.confidence}")
+    if not (horizon > 0 and math.isfinite(horizon)):
+        raise UsageError(f"alert.forecast_horizon_s: expected a time > 0 s, got {horizon}")
+    z = float(NormalDist().inv_cdf(ao.confidence))
     if road is not None and road not in ROAD_MODES:
         raise UsageError(f"--road: expected one of {', '.join(ROAD_MODES)}, got {road!r}")
     if baseline == "output_only":
-        return _output_only_spec(model, nominal_in, alert_drop, z, persistence, hysteresis,
-                                 window_s, step, forecast_horizon, oo.accel_channel, oo.method)
+        return _output_only_spec(model, nominal_in, ao, z, wo, horizon, oo)
     for k in list(fix) + list(nominal_in) + list(init):
         model.spec(k)
     both = set(fix) & set(nominal_in)
@@ -243,7 +155,6 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
     if step is not None:
         cfg.step_s = step
     # the window's linear drift: by default every free damper and spring of the struts
-    # (the parts that wear; docs/monitoring.md, "Window with a linear drift")
     cfg.drift = strut_parameters(model, values, params.free) if road != "unknown" else ()
     given_drift = wo.drift
     if road == "unknown" and given_drift:
@@ -255,9 +166,9 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
     if decimate is not None:
         cfg.decimate = decimate
     cfg.validate()
-    acfg = AlertConfig(nominal=dict(nominal_all), drop=alert_drop, z=z,
-                       persistence_s=cfg.step_s if persistence is None else persistence,
-                       hysteresis=hysteresis)
+    acfg = AlertConfig(nominal=dict(nominal_all), drop=ao.drop, z=z,
+                       persistence_s=cfg.step_s if ao.persistence_s is None else ao.persistence_s,
+                       hysteresis=ao.hysteresis)
     acfg.validate()
     aug = None
     if baseline == "ekf":
@@ -274,20 +185,20 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
     return MonitorSpec(model, params, nominal_all, cfg, acfg, baseline=baseline,
                        start_given=set(nominal_in) | set(init),
                        decimate_given=decimate is not None, inspection=inspection,
-                       forecast_horizon_s=forecast_horizon, ekf_params=aug, ekf_q=eo.q,
+                       forecast_horizon_s=horizon, ekf_params=aug, ekf_q=eo.q,
                        ekf_decimate=eo.decimate,
                        units={k: model.spec(k).unit for k in nominal_all}, warnings=warnings,
                        road=road, drift_given=bool(given_drift))
 
 
-def _output_only_spec(model: SuspensionModel, nominal: Mapping[str, float], drop: float, z: float,
-                      persistence: float | None, hysteresis: float, window: float | None,
-                      step: float | None, horizon: float, accel_channel: str | None,
-                      method: str) -> MonitorSpec:
+def _output_only_spec(model: SuspensionModel, nominal: Mapping[str, float], ao: AlertOptions,
+                      z: float, wo: WindowOptions, horizon: float,
+                      oo: OutputOnlyOptions) -> MonitorSpec:
     """:func:`monitor_spec` for the output-only mode (body mode from one accelerometer)."""
-    channel = accel_channel or f"{model.coords[0]}_ddot"
+    channel = oo.accel_channel or f"{model.coords[0]}_ddot"
     if channel not in model.channels:
         raise UsageError(f"output_only.accel_channel {channel!r} is not a channel of model {model.name}")
+    window, step = wo.window_s, wo.step_s
     w = window if window is not None else OUTPUT_ONLY_WINDOW_S
     s = step if step is not None else (w / 2.0 if window is not None else OUTPUT_ONLY_STEP_S)
     cfg = WindowConfig(window_s=w, step_s=s)
@@ -295,38 +206,20 @@ def _output_only_spec(model: SuspensionModel, nominal: Mapping[str, float], drop
     bad = [k for k in nominal if k not in ("f_body", "zeta_body")]
     if bad:
         raise UsageError(f"--nominal {bad[0]}: output-only mode monitors f_body and zeta_body")
-    acfg = AlertConfig(dict(nominal), drop=drop, z=z,
-                       persistence_s=s if persistence is None else persistence,
-                       hysteresis=min(hysteresis, drop / 2))
+    acfg = AlertConfig(dict(nominal), drop=ao.drop, z=z,
+                       persistence_s=s if ao.persistence_s is None else ao.persistence_s,
+                       hysteresis=min(ao.hysteresis, ao.drop / 2))
     acfg.validate()
     return MonitorSpec(model, Parameters.for_model(model), dict(nominal), cfg, acfg,
                        baseline="output_only", forecast_horizon_s=horizon,
-                       accel_channel=channel, oo_method=method,
+                       accel_channel=channel, oo_method=oo.method,
                        units={"f_body": "Hz", "zeta_body": ""})
 
 
 def choose_road(spec: MonitorSpec, t: FloatArray, data: Mapping[str, FloatArray]) -> str:
-    """Set ``spec.road`` from the first window when ``--road`` was not given.
-
-    As :func:`estimator.identify.roadfree.resolve_road` decides for a record: ``measured``
-    when the stream carries the road, else ``zero`` for a free response and ``unknown`` for
-    driving data; the choice is written as one ``warning:`` line on stderr. With
-    ``unknown`` the free parameters outside the body equations are then held
-    (:func:`~estimator.stream.roadfree.road_unknown_params`, said the same way).
-
-    Parameters
-    ----------
-    spec : MonitorSpec
-    t : ndarray
-        The first window's times (s).
-    data : mapping
-        Its channels (SI).
-
-    Returns
-    -------
-    str
-        The road mode.
-    """
+    """Set ``spec.road`` from the first window (times ``t``, s; channels SI) when ``--road``
+    was not given, as :func:`estimator.identify.roadfree.resolve_road` decides for a record;
+    the choice is written as a ``warning:`` line on stderr. Returns the road mode."""
     if spec.road is not None or spec.baseline == "output_only":
         return spec.road or "measured"
     model = spec.model
@@ -373,13 +266,9 @@ class ZeroRoad:
 
 
 def make_estimator(spec: MonitorSpec, channels: list[str], fs: float) -> Any:
-    """The spec's estimator for a stream with ``channels`` sampled at ``fs`` (Hz).
-
-    ``spec.road`` chooses the path: ``unknown`` the body equations (no road input,
-    :data:`ESTIMATORS` ``"nm/unknown"``, ``"ekf/unknown"``), ``zero`` the road-measured
-    estimator fed zero roads (:class:`ZeroRoad`), ``measured`` (or ``None``) the road from
-    the stream, which must carry every wheel's.
-    """
+    """The spec's estimator for a stream with ``channels`` sampled at ``fs`` (Hz): the body
+    equations for ``spec.road`` ``unknown``, zero roads (:class:`ZeroRoad`) for ``zero``, else
+    the stream's roads (every wheel's)."""
     road = spec.road or "measured"
     if spec.baseline == "nm" and not spec.decimate_given:
         spec.config.decimate = default_decimation(spec.model, spec.params.valuesdict(), fs)
@@ -440,17 +329,8 @@ def build_monitor(spec: MonitorSpec, emit: Callable[[Any], None], store: AlertSt
                   sinks: list[Any] | None = None, estimator: Any = None) -> StreamMonitor:
     """The monitor of ``spec``: estimator (lazy unless given), tracker, alerts, forecasts.
 
-    Parameters
-    ----------
-    spec : MonitorSpec
-    emit : callable
-        Receives every event (estimates, skips, alerts, clears, forecasts).
-    store : AlertStore, optional
-        Durable alert log (write-ahead).
-    sinks : list, optional
-        Further alert sinks (the bus); ``emit`` is always one.
-    estimator : optional
-        A ready estimator (``compare`` builds it from the known stream).
+    ``emit`` receives every event; ``store`` is the durable alert log, ``sinks`` further alert
+    outputs (the bus); ``estimator`` a ready one (``compare`` builds it from the stream).
     """
     est = estimator if estimator is not None else LazyEstimator(spec)
     all_sinks: list[Any] = [CallbackSink(emit)] + list(sinks or [])
@@ -474,58 +354,31 @@ def build_monitor(spec: MonitorSpec, emit: Callable[[Any], None], store: AlertSt
 
 @dataclass
 class Source:
-    """Where the frames come from.
+    """Where the frames come from: a CAN log or CSV (``input``) or a live python-can bus."""
 
-    Attributes
-    ----------
-    input : str or None
-        A CAN log (replayed as fast as possible) or a measurement CSV.
-    interface, channel, bitrate
-        A live python-can bus (when ``input`` is ``None``).
-    dbc : Path or None
-        DBC of the CAN data (default suspid's).
-    signal_map : SignalMap or None
-    can_channel : str or None
-        ``can.channel``: the bus channel of a multi-bus log to replay (``None``: all).
-    j1939_source : str or None
-        ``can.j1939_source``: the J1939 source address decoded (``None``: the first sender).
-    time_source : {"timestamp", "tick"} or None
-        None (logs and live): the sensor's tick when the stream carries SN_Sync frames,
-        the frame timestamps otherwise.
-    duration, idle_timeout : float or None
-        Live stop conditions (s of wall time).
-    rx_buffer_s : float
-        Live: the receiver's buffer in seconds of data (:func:`estimator.stream.drivers.receive_capacity`).
-    slcan_timestamps : bool
-        Live SLCAN: switch the adapter's timestamp mode on and time frames by its clock.
-    alert_frames : bool
-        Send SUSPID_Alert frames (live bus, or ``alert_interface``).
-    alert_interface, alert_channel : str or None
-    """
-
-    input: str | None = None
+    input: str | None = None  # CAN log (replayed as fast as possible) or measurement CSV
     interface: str | None = None
     channel: str | None = None
     bitrate: int | None = None
-    dbc: Path | None = None
+    dbc: Path | None = None  # default suspid's
     signal_map: Any = None
-    can_channel: str | None = None
-    j1939_source: str | None = None
+    can_channel: str | None = None  # the bus channel of a multi-bus log (None: all)
+    j1939_source: str | None = None  # the J1939 sender decoded (None: the first)
+    #: None: the sensor's tick when the stream carries SN_Sync frames, else the timestamps
     time_source: Literal["timestamp", "tick"] | None = None
-    duration: float | None = None
+    duration: float | None = None  # live stop conditions (s of wall time)
     idle_timeout: float | None = 5.0
-    rx_buffer_s: float = RECEIVE_BUFFER_S
-    slcan_timestamps: bool = False
-    alert_frames: bool = True
+    rx_buffer_s: float = RECEIVE_BUFFER_S  # the live receiver's buffer (s of data)
+    slcan_timestamps: bool = False  # time live SLCAN frames by the adapter's clock
+    alert_frames: bool = True  # send SUSPID_Alert frames (live bus, or alert_interface)
     alert_interface: str | None = None
     alert_channel: str | None = None
 
 
 def open_checked_bus(interface: str, channel: str | None, bitrate: int | None, what: str,
                      slcan_timestamps: bool = False) -> Any:
-    """The bus through the node's and the estimator's one opener (:func:`suspid.can.bus.open_bus`:
-    chunked SLCAN reads, data timestamps on ``virtual``, ``udp_multicast`` refused);
-    ``slcan_timestamps``: the SLCAN adapter's own frame times (Lawicel ``Z1``)."""
+    """The bus through :func:`suspid.can.bus.open_bus`, errors prefixed with ``what``;
+    ``slcan_timestamps``: the SLCAN adapter's own frame times."""
     if channel is None:
         raise UsageError(f"{what}: --channel is required with --interface {interface}")
     if interface == "slcan" and str(channel).lower() in ("pty", "pty:"):
@@ -544,10 +397,7 @@ def open_checked_bus(interface: str, channel: str | None, bitrate: int | None, w
 
 def run_monitor(spec: MonitorSpec, source: Source, emit: Callable[[Any], None],
                 alert_file: str | Path | None = None) -> Summary:
-    """Stream ``source`` through the monitor of ``spec``; every event goes to ``emit``.
-
-    Returns the closing summary (not emitted: the caller decides).
-    """
+    """Stream ``source`` through the monitor of ``spec`` (events to ``emit``); the summary."""
     store = AlertStore(alert_file) if alert_file else None
     sinks: list[Any] = []
     mon = build_monitor(spec, emit, store, sinks)
@@ -568,10 +418,7 @@ def run_monitor(spec: MonitorSpec, source: Source, emit: Callable[[Any], None],
 
 def run_source(source: Source, spec: MonitorSpec, mon: StreamMonitor,
                sinks: list[Any]) -> dict[str, Any]:
-    """Stream a log, a CSV or the live bus through ``mon``; shut buses down.
-
-    Returns the source's summary fields (frames, timing) for the final ``summary`` line.
-    """
+    """Stream a log, a CSV or the live bus through ``mon``; the summary's source fields."""
     buses: list[Any] = []
     try:
         if source.input is not None:
@@ -591,54 +438,37 @@ def run_source(source: Source, spec: MonitorSpec, mon: StreamMonitor,
                 pass
 
 
-def _listener(source: Source, spec: MonitorSpec,
-              time_source: Literal["timestamp", "tick", "auto"]) -> DecodeListener:
-    """The CAN layer's DecodeListener with a bounded buffer sized for the windows."""
+def _can_driver(source: Source, spec: MonitorSpec, mon: StreamMonitor, sinks: list[Any],
+                buses: list[Any], live_bus: Any = None) -> tuple[DecodeListener, CanWindowDriver]:
+    """The decoder (its buffer sized for the windows), the SUSPID_Alert frame sink (the live
+    bus, or ``alert_interface``) given to the alert engine, and the window driver."""
     cfg = spec.config
     # rows per message: window + step at up to 2 kHz, power of two
     rows = 1 << max(12, math.ceil(math.log2(max(2.0, (cfg.window_s + 2 * cfg.step_s) * 2000.0))))
     listener = DecodeListener(spec.model, source.dbc, source.signal_map, capacity=rows,
-                              growable=False, time_source=time_source, arrival_slots=True,
-                              j1939_source=source.j1939_source)
+                              growable=False, time_source=source.time_source or "auto",
+                              arrival_slots=True, j1939_source=source.j1939_source)
     # a mapped signal the DBC gives in mm, g or deg without a scale: said before streaming
     for w in listener.signal_map.unit_warnings(listener.db, listener.model):
         sys.stderr.write(f"warning: {w}\n")
-    return listener
-
-
-def _alert_bus(source: Source, sinks: list[Any], listener: DecodeListener, buses: list[Any],
-               live_bus: Any = None) -> None:
-    """Add the SUSPID_Alert frame sink (live bus, or ``alert_interface`` for a replay)."""
-    if not source.alert_frames:
-        return
-    bus = None
-    if source.alert_interface:
+    bus = live_bus
+    if source.alert_frames and source.alert_interface:
         bus = open_checked_bus(source.alert_interface, source.alert_channel, source.bitrate,
                                "live.alert_interface")
         buses.append(bus)
-    elif live_bus is not None:
-        bus = live_bus
-    if bus is not None:
+    if source.alert_frames and bus is not None:
         sinks.append(BusAlertSink(bus, listener.db))
-
-
-def _attach(mon: StreamMonitor, sinks: list[Any]) -> None:
-    """Give the alert engine the sinks added after it was built (the bus)."""
     if mon.alerts is not None:
-        for s in sinks:
-            if s not in mon.alerts.sinks:
-                mon.alerts.sinks.append(s)
+        mon.alerts.sinks.extend(s for s in sinks if s not in mon.alerts.sinks)
+    return listener, CanWindowDriver(listener, cfg.window_s, cfg.step_s, mon.window,
+                                     max_missing=cfg.max_missing)
 
 
 def _run_log(source: Source, spec: MonitorSpec, mon: StreamMonitor, sinks: list[Any],
              buses: list[Any]) -> dict[str, Any]:
     """Replay a CAN log as fast as possible through the decoder and the windows."""
     cfg = spec.config
-    listener = _listener(source, spec, source.time_source or "auto")
-    _alert_bus(source, sinks, listener, buses)
-    _attach(mon, sinks)
-    drv = CanWindowDriver(listener, cfg.window_s, cfg.step_s, mon.window,
-                          max_missing=cfg.max_missing)
+    listener, drv = _can_driver(source, spec, mon, sinks, buses)
     stats = ReadStats()
     replay_log(drv, source.input, stats, channel=source.can_channel)
     listener.count_malformed(stats.malformed)
@@ -692,17 +522,12 @@ def _run_csv(source: Source, spec: MonitorSpec, mon: StreamMonitor) -> dict[str,
 def _run_live(source: Source, spec: MonitorSpec, mon: StreamMonitor, sinks: list[Any],
               buses: list[Any]) -> dict[str, Any]:
     """Receive from a live python-can bus until idle, ``duration``, SIGINT or SIGTERM."""
-    cfg = spec.config
     if source.interface is None:
         raise UsageError("give --input LOG or --interface I --channel C")
     bus = open_checked_bus(source.interface, source.channel, source.bitrate, "--interface",
                            slcan_timestamps=source.slcan_timestamps)
     buses.append(bus)
-    listener = _listener(source, spec, source.time_source or "auto")
-    _alert_bus(source, sinks, listener, buses, live_bus=bus)
-    _attach(mon, sinks)
-    drv = CanWindowDriver(listener, cfg.window_s, cfg.step_s, mon.window,
-                          max_missing=cfg.max_missing)
+    listener, drv = _can_driver(source, spec, mon, sinks, buses, live_bus=bus)
     stop = LiveStop(duration=source.duration,
                     idle_timeout=None if not source.idle_timeout else source.idle_timeout)
     stop.install()

@@ -1,21 +1,8 @@
-"""The sliding window with the road unknown: each window's body equations, fitted linearly.
+"""The sliding window with the road unknown: each window's body equations, fitted linearly
+(:func:`estimator.identify.roadfree.fit_road_unknown`, as ``suspid identify --road unknown``).
 
-No road vehicle measures its road. Production cars carry body accelerometers and
-ride-height sensors (the strut extensions ``d_i``), and the body equations
-``M q'' + sum_i g_i (c_i d_i' + k_i d_i) = 0`` hold whatever the road does. Each window of
-the stream is handed to the one road-unknown identifier of ``suspid identify --road
-unknown`` (:func:`estimator.identify.roadfree.fit_road_unknown`: modulating functions,
-bias-compensated weighted linear least squares, sandwich standard errors), so a window
-costs milliseconds and needs no start, no budget and no warm start.
-
-The window's estimates go to the tracker, the alerts, the forecasts and the virtual damper
-test exactly as the road-measured window's do. An estimate is the best *constant*
-parameter set over the window, so it describes the window's middle (``lag`` =
-``window_s / 2``, the tracker refers it to the window end); the window's linear drift of
-the road-measured path (``window.drift``) does not apply to the linear fit.
-
-The band of the fit starts at ``3 / T`` Hz (``T`` the window length, bins 0..2 see a
-constant offset); :func:`road_unknown_window` keeps it below the body mode.
+An estimate describes the window's middle; the linear drift does not apply. The fit's band
+starts at ``3 / T`` Hz, which :func:`road_unknown_window` keeps below the body mode.
 """
 from __future__ import annotations
 
@@ -27,10 +14,10 @@ import numpy as np
 
 from estimator.identify import Parameters
 from estimator.identify.roadfree import FIRST_BIN, body_equations, fit_road_unknown
-from estimator.inspection import inspect, quarter_car_problem
+from estimator.inspection import quarter_car_problem
 from estimator.stream.config import WindowConfig
 from estimator.stream.events import Estimate, Skip
-from estimator.stream.monitor import StepResult
+from estimator.stream.monitor import StepResult, add_inspection
 from suspid.errors import InputError
 from suspid.io.csvio import Measurement
 from suspid.models.base import FloatArray, SuspensionModel
@@ -41,20 +28,9 @@ BAND_START_OF_BODY_MODE = 0.8
 
 
 def road_unknown_window(model: SuspensionModel, params: Mapping[str, float]) -> float:
-    """Shortest window (s) whose band starts below the body mode: ``3 / T`` at most
-    :data:`BAND_START_OF_BODY_MODE` times the slowest natural frequency, rounded up to 0.5 s.
-
-    Parameters
-    ----------
-    model : SuspensionModel
-    params : mapping
-        Nominal parameters (SI).
-
-    Returns
-    -------
-    float
-        Window length (s); 0 when the model has no oscillating mode.
-    """
+    """Shortest window (s) whose band starts below the body mode at nominal ``params`` (SI):
+    ``3 / T`` at most :data:`BAND_START_OF_BODY_MODE` times the slowest natural frequency,
+    rounded up to 0.5 s; 0 without an oscillating mode."""
     ms = modes(model, dict(model.defaults(), **dict(params)))
     if not ms:
         return 0.0
@@ -62,8 +38,7 @@ def road_unknown_window(model: SuspensionModel, params: Mapping[str, float]) -> 
 
 
 def production_channels(model: SuspensionModel) -> list[str]:
-    """Every channel the body equations may use: the coordinates' motion channels and the
-    ride heights with their rates."""
+    """Every channel the body equations may use: motion channels, ride heights and their rates."""
     return list(model.channels) + list(model.ride_height_channels)
 
 
@@ -71,23 +46,9 @@ def road_unknown_params(model: SuspensionModel, params: Parameters
                         ) -> tuple[Parameters, list[str]]:
     """The free parameters a road-unknown monitor can follow, the others held.
 
-    A free parameter outside the body equations (a wheel mass, a tyre) cannot be determined
-    without the road: it is held at its given value. When every parameter of the body
-    equations is free, they are homogeneous (only ratios are determined): the first mass is
-    held, as the road-measured monitor holds one when every mass, damper and spring is free.
-
-    Parameters
-    ----------
-    model : SuspensionModel
-    params : Parameters
-        The monitor's parameters (not changed).
-
-    Returns
-    -------
-    params : Parameters
-        A copy with those parameters held.
-    warnings : list of str
-        One line per change, naming the parameters and the values they are held at.
+    A free parameter outside the body equations (a wheel mass, a tyre) is held at its value;
+    when every parameter of the body equations is free (only ratios determined) the first
+    mass is held. Returns a copy of ``params`` and one warning per change.
     """
     out = params.copy()
     values = out.valuesdict()
@@ -114,32 +75,10 @@ def road_unknown_params(model: SuspensionModel, params: Parameters
 class RoadFreeWindowEstimator:
     """Each window's body equations fitted with the road unknown (module docstring).
 
-    Parameters
-    ----------
-    model : SuspensionModel
-    params : Parameters
-        Held values and the given values of the free parameters (SI); free parameters
-        outside the body equations should be held (:func:`road_unknown_params`).
-    config : WindowConfig
-        ``window_s``, ``step_s``, ``max_missing``, ``min_deflection`` and ``sigma_floor``
-        apply; the Nelder-Mead settings and the drift do not.
-    channels : list of str
-        Channels in the stream.
-    inspection : bool
-        Virtual damper test on each estimate of a quarter car.
-
-    Raises
-    ------
-    InputError
-        When the stream's channels form no body equation with a free parameter in it
-        (naming what is missing).
-
-    Attributes
-    ----------
-    lag : float
-        ``window_s / 2``: an estimate describes the window's middle.
-    overlap : float
-        ``window_s / step_s``.
+    ``params``: held values and the free parameters' given values (SI), those outside the
+    body equations held (:func:`road_unknown_params`); of ``config`` only the window, step,
+    ``max_missing``, ``min_deflection`` and ``sigma_floor`` apply. Raises
+    :class:`InputError` when the ``channels`` form no body equation with a free parameter.
     """
 
     name = "nm"
@@ -177,19 +116,7 @@ class RoadFreeWindowEstimator:
         return StepResult(Skip(float(t[-1]), float(t[0]), self.name, reason))
 
     def process(self, t: FloatArray, data: Mapping[str, FloatArray]) -> StepResult:
-        """Fit one window's body equations (or skip it, with the reason).
-
-        Parameters
-        ----------
-        t : ndarray
-            Sample times of the window (s).
-        data : mapping
-            Channel arrays on ``t`` (SI), NaN for missing samples; road channels are not used.
-
-        Returns
-        -------
-        StepResult
-        """
+        """Fit one window's body equations (times ``t``, s; channels SI, NaN where missing)."""
         c0 = time.process_time()
         cfg = self.config
         for c in self.channels:
@@ -221,11 +148,7 @@ class RoadFreeWindowEstimator:
             "warnings": [w for w in res.warnings[1:]
                          if not w.startswith("not identifiable with the road unknown")]}
         if self.inspection and res.identifiable:
-            try:
-                info["inspection"] = inspect(res.params, self.model).to_json()
-            except (np.linalg.LinAlgError, ValueError) as exc:
-                info["inspection"] = None
-                info["warnings"].append(f"virtual damper test failed: {exc}")
+            add_inspection(info, res.params, self.model)
         cpu = time.process_time() - c0
         info["cpu_ms"] = 1e3 * cpu
         self.n_windows += 1

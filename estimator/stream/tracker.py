@@ -1,69 +1,12 @@
 """Parameter tracking with a trend: a two-model local-linear-trend filter over window estimates.
 
-Each monitored parameter has a state ``[v, r]`` -- its value (SI) and its rate of change
-(SI/s) -- at the data time of the last estimate. Between estimates ``dt`` apart the state
-moves as ``v += r dt`` and picks up process noise scaled by the nominal value ``N``: a
-level random walk ``(q_level N)^2 dt`` and an integrated rate random walk
-``(q N)^2 [[dt^3/3, dt^2/2], [dt^2/2, dt]]``.
-
-Two rate random walks (an interacting-multiple-model filter, IMM): a *steady* model
-(``q = q_rate``, small: the part keeps its value or wears at a constant rate) and a
-*changing* one (``q = q_rate_change``: a wear that starts, speeds up or stops), with
-probability ``p_switch`` of a switch between estimates. Each estimate updates both; their
-likelihoods weight them, and the tracked state and covariance are the mixture. A stable
-part is averaged over many windows (the steady model), a kink in the wear is followed
-within a few windows (the changing model takes over while the innovations say so); a
-single random walk has to trade one for the other.
-
-A window estimate ``y +/- s`` ending at ``t`` describes the parameter over the window, i.e.
-near its middle ``t - lag`` (``lag = window / 2`` for the sliding window; 0 for the EKF,
-whose state refers to its last sample): it is folded in with ``y = v(t) - lag r(t)``, so the
-tracked value refers to the window's *end*. Windows that share data have correlated errors:
-the measurement variance is ``lambda s^2 overlap`` (``overlap = window / step``).
-
-``lambda`` (``calibrate``) scales the window's stated variance to its actual scatter: the
-stated stderr carries the ``sigma_floor`` and is 3 times the actual error on a quantization-
-only stream and half of it at 5 % noise. It is estimated from the second differences of the
-estimates, ``d_i = y_i - 2 y_{i-1} + y_{i-2}`` (free of a linear trend), as the
-exponentially weighted mean of ``d_i^2 / (s_i^2 + 4 s_{i-1}^2 + s_{i-2}^2)`` (memory
-``calib_memory`` estimates, ``calib_prior`` pseudo-observations of 1), clipped to
-``[calib_min, calib_max]``. So the alerts' confidence bound and the forecasts' intervals
-rest on the scatter the estimates actually show. Not for an estimator whose outputs are
-themselves filtered (the EKF): their differences understate the error.
-
-The scatter does not show the track's own lag where a wear starts or stops: for a few
-windows the changing model has not yet taken the new rate up, and the tracked error is 3-8
-times the tracked stderr there (between the kinks about 1). The one-step innovations do show
-it: each estimate's ``nu = y - H x`` against the prediction before it, with
-``S = H P H' + lambda s^2 overlap``. Their short exponentially weighted mean ``kappa^2`` of
-``nu^2 / S`` (memory ``innov_memory`` estimates, ``innov_prior`` pseudo-observations of 1,
-clipped to ``[1, innov_max]``) widens the reported variances (``innov_scale``): the value's
-by ``kappa^2``, the rate's by ``kappa^(2 innov_rate)`` (the rate is learnt over many windows;
-widened fully it delays the first forecasts). The filter itself (its state, gains and model
-probabilities) is unchanged, so are the tracked values; only the stderr the alerts and
-forecasts use grows where the innovations exceed their stated spread. Not for the EKF.
-
-A wear that starts (or stops) shows first as the changing model taking over, and its new
-rate is then two estimates old (the newest estimate describes its window's middle: a rate
-that changed in the last step does not show in it yet). When the changing model's
-probability first reaches ``restart_mu`` the tracker goes back one estimate, widens the
-rate (``restart_rate`` of nominal per s) and folds the two estimates in again; the restart
-is kept only if a likelihood-ratio test over those estimates prefers it (``restart_glr``),
-and no new forecast is announced from the restarted rate for ``restart_hold`` estimates.
-Only for window estimates: those that describe an earlier time (``lag > 0``: the window's
-middle) and those referred to the window's end by its linear drift (the parameters in
-``lags``): the drift window's rate prior is centred on the recent estimates' rate, so its
-end value too shows a new wear rate late. Not for the EKF (no ``lags``, lag 0).
-
-The alerts (:class:`estimator.alerts.AlertEngine`) are decided on the tracked value and its
-standard error, the forecasts (:class:`estimator.alerts.ForecastEngine`) on the trend
-(:meth:`TrendTracker.trends`): right after a kink the trend's rate variance gets the
-changing model's rate walk over ``forecast_settle_s`` more seconds, weighted by that model's
-probability to the power ``forecast_settle_power`` (the windows straddling the start of a
-wear cannot pin its rate down yet), and each trend carries the data time it spans.
-
-Defaults measured with the damper- and spring-wear streams of
-``tools/bench_maintenance.py`` (docs/monitoring.md).
+Each parameter's state is ``[value, rate]`` (SI, SI/s) with level and rate random walks scaled
+by its nominal value; a *steady* and a *changing* rate model run as an interacting-multiple-
+model filter. A window estimate, describing the window's middle, is folded in as ``y = v(t) -
+lag r(t)`` so the track refers to the window's end. The stated variances are calibrated to
+the estimates' scatter and widened where the innovations show the track lagging; a rate that
+changes is restarted an estimate back when a likelihood-ratio test prefers it. Rules and
+measurements: ``docs/monitoring.md``.
 """
 from __future__ import annotations
 
@@ -102,87 +45,37 @@ class _Track:
 class TrendTracker:
     """Per-parameter two-model local-linear-trend filter (see the module docstring).
 
-    Parameters
-    ----------
-    q_level : float
-        Level random walk, relative to nominal per sqrt(s).
-    q_rate : float
-        Rate random walk of the steady model, relative to nominal per s per sqrt(s).
-    q_rate_change : float
-        Rate random walk of the changing model (same unit); ``<= q_rate`` gives a single
-        filter with ``q_rate``.
-    p_switch : float
-        Probability of a switch between the two models from one estimate to the next.
-    rate0 : float
-        Prior standard deviation of the rate, relative to nominal per s.
-    lag : float
-        Data time (s) between a window's end and the time its estimate describes.
-    lags : dict
-        ``parameter -> lag`` (s) for parameters whose estimates describe another time
-        (0 for those the window fits with a linear drift, :attr:`WindowConfig.drift`);
-        the rate restart applies to these as to the lagged ones.
-    overlap : float
-        Measurement-variance inflation for overlapping windows (``window / step``).
-    calibrate : bool
-        Scale each parameter's stated variances by the scatter of its estimates.
-    calib_prior, calib_memory, calib_min, calib_max : float
-        Pseudo-observations of ``lambda = 1``, memory (estimates) of the weighted mean,
-        and the clip range of ``lambda``.
-    innov_scale : bool
-        Widen the reported variances by the innovations' ``kappa^2`` (calibrated tracks only).
-    innov_prior, innov_memory, innov_max : float
-        Pseudo-observations of ``kappa^2 = 1``, memory (estimates) of the weighted mean of
-        ``nu^2 / S`` and the upper clip of ``kappa^2`` (the lower is 1).
-    innov_rate : float
-        Exponent of ``kappa^2`` on the rate's variance (the covariance gets the geometric mean).
-    forecast_settle_s, forecast_settle_power : float
-        Extra rate variance of the trends right after a kink (see the module docstring).
-    restart_mu : float
-        Probability of the changing model at which the rate is restarted (``_restart``).
-    restart_rate : float
-        Width of the restarted rate's prior, relative to nominal per s; 0: no restart.
-    restart_glr : float
-        Log-likelihood-ratio threshold (``2 Delta log L``) a restart must pass.
-    restart_back : int
-        Estimates before the one that shows the take-over from which the rate restarts.
-    restart_confirm : int
-        Further estimates the changing model must hold before the restart is tried (it
-        then goes back ``restart_back + restart_confirm`` estimates).
-    restart_hold : int
-        Estimates, counting the restarting one, during which the trend reports no data
-        span (the forecast engine announces nothing new from it).
-    nominal : dict, optional
-        ``parameter -> nominal`` (SI) scaling the noise; a parameter without one is scaled by
-        its first estimate.
+    Noise levels are relative to the nominal value: ``q_level`` per sqrt(s), the rate walks
+    per s per sqrt(s), ``rate0`` and ``restart_rate`` per s.
     """
 
-    q_level: float = 5e-4
-    q_rate: float = 5e-5
-    q_rate_change: float = 1e-3
-    p_switch: float = 0.01
-    rate0: float = 0.01
-    lag: float = 0.0
-    lags: dict[str, float] = field(default_factory=dict)
-    overlap: float = 1.0
-    calibrate: bool = True
-    calib_prior: float = 2.0
-    calib_memory: float = 50.0
+    q_level: float = 5e-4  # level random walk
+    q_rate: float = 5e-5  # rate random walk of the steady model
+    q_rate_change: float = 1e-3  # of the changing model (<= q_rate: a single filter)
+    p_switch: float = 0.01  # probability of a model switch between two estimates
+    rate0: float = 0.01  # prior standard deviation of the rate
+    lag: float = 0.0  # data time (s) from a window's end back to the time its estimate describes
+    lags: dict[str, float] = field(default_factory=dict)  # per parameter (drift-fitted: 0)
+    overlap: float = 1.0  # measurement-variance inflation of overlapping windows (window / step)
+    calibrate: bool = True  # scale the stated variances by the estimates' scatter (lambda)
+    calib_prior: float = 2.0  # pseudo-observations of lambda = 1
+    calib_memory: float = 50.0  # memory (estimates) of lambda's weighted mean
     calib_min: float = 0.05
     calib_max: float = 20.0
-    forecast_settle_s: float = 20.0
+    forecast_settle_s: float = 20.0  # extra rate variance of the trends right after a kink
     forecast_settle_power: float = 8.0
-    restart_mu: float = 0.5
-    restart_rate: float = 0.005
-    restart_glr: float = 3.84
-    restart_back: int = 1
-    restart_confirm: int = 0
-    restart_hold: int = 2
-    innov_scale: bool = True
-    innov_prior: float = 0.5
-    innov_memory: float = 2.0
-    innov_max: float = 25.0
-    innov_rate: float = 0.25
-    nominal: dict[str, float] = field(default_factory=dict)
+    restart_mu: float = 0.5  # changing-model probability that restarts the rate
+    restart_rate: float = 0.005  # width of the restarted rate's prior; 0: no restart
+    restart_glr: float = 3.84  # 2 Delta log L a restart must pass
+    restart_back: int = 1  # estimates the restart goes back
+    restart_confirm: int = 0  # further estimates the changing model must hold first
+    restart_hold: int = 2  # estimates during which the trend reports no data span
+    innov_scale: bool = True  # widen the reported variances by the innovations' kappa^2
+    innov_prior: float = 0.5  # pseudo-observations of kappa^2 = 1
+    innov_memory: float = 2.0  # memory (estimates) of the mean of nu^2 / S
+    innov_max: float = 25.0  # upper clip of kappa^2 (the lower is 1)
+    innov_rate: float = 0.25  # exponent of kappa^2 on the rate's variance
+    nominal: dict[str, float] = field(default_factory=dict)  # noise scale (else the first estimate)
     tracks: dict[str, _Track] = field(default_factory=dict)
 
     @property
@@ -198,8 +91,7 @@ class TrendTracker:
         return Q
 
     def _mix(self, tr: _Track) -> tuple[list[np.ndarray], list[np.ndarray], np.ndarray]:
-        """IMM interaction: the models' starting states before a prediction, and the
-        predicted model probabilities."""
+        """IMM interaction: the models' starting states and the predicted probabilities."""
         m = len(tr.xs)
         if m == 1:
             return [tr.xs[0]], [tr.Ps[0]], tr.mu
@@ -238,9 +130,7 @@ class TrendTracker:
     def scale(self, name: str) -> float:
         """The calibrated variance scale ``lambda`` of a parameter (1 without calibration)."""
         tr = self.tracks.get(name)
-        if tr is None or not self.calibrate:
-            return 1.0
-        return self.scale_of(tr)
+        return 1.0 if tr is None else self.scale_of(tr)
 
     def honesty(self, name: str) -> float:
         """The factor ``kappa^2`` on a parameter's tracked variances (1 without it)."""
@@ -252,8 +142,7 @@ class TrendTracker:
         return min(self.innov_max, max(1.0, k2))
 
     def _innovate(self, tr: _Track, t: float, v: float, se: float, lag: float) -> None:
-        """Fold the normalized innovation ``nu^2 / S`` of the estimate ``v`` (SI) at ``t``
-        (s), against the one-step prediction before the estimate is used."""
+        """Fold the normalized innovation ``nu^2 / S`` of estimate ``v`` (SI) at ``t`` (s)."""
         if not (self.calibrate and self.innov_scale):
             return
         self._predict(tr, t)
@@ -286,13 +175,8 @@ class TrendTracker:
 
     def update(self, t: float, values: Mapping[str, float], stderr: Mapping[str, float]
                ) -> dict[str, dict[str, float]]:
-        """Fold in one window estimate ending at ``t`` (s).
-
-        Returns
-        -------
-        dict
-            ``parameter -> {"value", "stderr", "rate", "rate_stderr"}`` (SI, SI/s) at ``t``.
-        """
+        """Fold in one window estimate ending at ``t`` (s); returns ``parameter -> {"value",
+        "stderr", "rate", "rate_stderr"}`` (SI, SI/s) at ``t``."""
         for k, se in stderr.items():
             v = values.get(k)
             if v is None or not (math.isfinite(v) and math.isfinite(se) and se > 0):
@@ -356,19 +240,9 @@ class TrendTracker:
         self._combine(tr)
 
     def _restart(self, tr: _Track, lag: float, back: int) -> None:
-        """The changing model has just taken over: restart the rate ``back`` estimates back.
-
-        A window estimate describes the window's middle (``y = v - lag r``), so a rate that
-        changed during the last step does not show in the newest estimate: when the changing
-        model's probability first reaches ``restart_mu`` the change happened before the
-        previous estimate. The filter goes back to its state before that estimate, each
-        model's rate variance gets ``(restart_rate N)^2`` (the rate is learnt afresh from the
-        estimates since), and the estimates since are folded in again. The restart is kept
-        only if it explains them better, by a generalized likelihood ratio
-        ``2 (log L_restart - log L) >= restart_glr`` (3.84: chi-square, 1 dof, 95 %), and
-        the trend then reports no data span for ``restart_hold`` estimates (no forecast
-        announced from a rate two estimates old: two outlying windows look like a kink).
-        """
+        """The changing model has just taken over: go back ``back`` estimates, widen the rate
+        by ``restart_rate`` and fold them in again; kept only if ``2 (log L_restart - log L)
+        >= restart_glr``, then no forecast span for ``restart_hold`` estimates."""
         old = tr.hist[-(back + 1):]
         keep = self._snapshot(tr)
         self._restore(tr, old[0][0])
@@ -399,13 +273,8 @@ class TrendTracker:
             if t is not None and t > tr.t:
                 self._predict(tr, t)
             n2 = tr.nominal * tr.nominal
-            # the extrapolation keeps the level's random walk but not the rate's: a forecast
-            # assumes the wear goes on at the estimated rate, with that rate's uncertainty
-            # (with the rate walk the band widens as tau^1.5 and no crossing further than a
-            # few tens of seconds could ever be bounded). While the changing model holds
-            # (right after a wear started or changed), the rate may still move: its variance
-            # gets the rate walk of ``forecast_settle_s`` more seconds, weighted by that
-            # model's probability
+            # the extrapolation keeps the level's random walk, not the rate's; right after a
+            # kink the rate variance gets ``forecast_settle_s`` more of the changing model's
             extra = (float(tr.mu[1]) ** self.forecast_settle_power * self.q_rate_change ** 2
                      * n2 * self.forecast_settle_s if tr.mu.size > 1 else 0.0)
             h = self.honesty(k)
@@ -415,10 +284,3 @@ class TrendTracker:
                            self.q_level ** 2 * n2, 0.0, 0.0 if tr.hold else tr.t - tr.t0)
         return out
 
-
-def ParameterTracker(q: float = 0.01, overlap: float = 1.0) -> TrendTracker:  # noqa: N802
-    """A random-walk tracker without trend (the former interface): ``TrendTracker`` with level
-    noise ``q`` (relative per sqrt(s)), no rate noise, a rate prior of zero width, one model
-    and the stated variances as they are."""
-    return TrendTracker(q_level=q, q_rate=0.0, q_rate_change=0.0, rate0=1e-12,
-                        overlap=overlap, calibrate=False)

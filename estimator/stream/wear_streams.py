@@ -1,9 +1,7 @@
 """Synthetic streams with time-varying parameters (damper wear) for tests and benchmarks.
 
-The physics is the core's exact linear simulator (:func:`suspid.simulate.simulate_states`)
-applied piecewise: parameters are held constant over chunks of ``chunk_s`` seconds and the
-state is carried across chunk boundaries, so a slow drift (a damper losing oil over
-minutes) is reproduced without approximation beyond the staircase of the chunks.
+The core's exact linear simulator applied piecewise: parameters held over chunks of
+``chunk_s`` seconds, the state carried across chunk boundaries.
 """
 from __future__ import annotations
 
@@ -38,19 +36,8 @@ def channel_resolution(model_name: str) -> dict[str, float]:
 
 @dataclass
 class Stream:
-    """A synthetic measurement stream with its ground truth.
-
-    Attributes
-    ----------
-    t : ndarray
-        Sample times (s).
-    data : dict
-        Measured channels and road inputs (SI), as the sensor node would send them.
-    truth : dict
-        ``parameter -> ndarray`` of the true value at every sample (SI).
-    nominal : dict
-        Parameter values at the start (SI).
-    """
+    """A synthetic stream: times ``t`` (s), channels and roads ``data`` (SI, as the node sends
+    them), ``truth`` (``parameter -> value at every sample``, SI), ``nominal`` start values."""
 
     t: FloatArray
     data: dict[str, FloatArray]
@@ -71,45 +58,18 @@ def damper_wear(model: SuspensionModel, duration: float = 150.0, fs: float = 500
                 channels: tuple[str, ...] | None = None,
                 noise: Mapping[str, float] | None = None, quantize: bool = True,
                 chunk_s: float = 0.05, damper: str = "c1") -> Stream:
-    """A car on an ISO 8608 road while the damper ``c1`` loses damping linearly.
+    """A car on an ISO 8608 road (``road_class``, ``v_kmh``, ``seed``) for ``duration`` s at
+    ``fs`` Hz while the damper ``damper`` falls linearly to ``c_end_fraction`` of nominal
+    between ``wear_start`` and ``wear_end`` (s; default the end).
 
-    Parameters
-    ----------
-    model : SuspensionModel
-        Any model (``quarter1`` with ``damper="c"``); its roads follow each other as the
-        model says (:func:`suspid.excitation.make_scenario`).
-    duration, fs : float
-        Length (s) and sample rate (Hz).
-    params : mapping, optional
-        Nominal parameters (default: the model's defaults).
-    c_end_fraction : float
-        ``c1`` at ``wear_end`` as a fraction of nominal (0.5: half the damping).
-    wear_start, wear_end : float
-        Start and end of the linear decline (s); ``wear_end`` defaults to ``duration``.
-    road_class, v_kmh, seed
-        ISO 8608 road class, speed (km/h) and random seed.
-    channels : tuple of str, optional
-        Measured channels to return (the roads and their ``_dot`` are always returned);
-        default every position and the first coordinate's acceleration (``x1``, ``x2``,
-        ``x1_ddot`` for ``quarter2``).
-    noise : mapping, optional
-        White sensor noise standard deviation per channel (SI); default 2 quantization steps.
-    quantize : bool
-        Round every channel to its DBC resolution (:func:`channel_resolution`).
-    chunk_s : float
-        Parameter update interval (s).
-    damper : str
-        Name of the drifting damping parameter.
-
-    Returns
-    -------
-    Stream
+    ``channels`` default to every position and the first coordinate's acceleration (roads
+    always included); ``noise`` (SI, per channel) defaults to 2 DBC quantization steps, and
+    ``quantize`` rounds to the DBC resolution. Parameters change every ``chunk_s`` s.
     """
     p0 = dict(model.defaults(), **(params or {}))
     if channels is None:
         channels = tuple(model.coords) + (f"{model.coords[0]}_ddot",)
     wear_end = duration if wear_end is None else wear_end
-    # time grid finite, > 0 and at most MAX_SAMPLES, or a UsageError
     t, road, _ = make_scenario(model, "iso8608", duration=duration, fs=fs, params=p0,
                                v_kmh=v_kmh, road_class=road_class, seed=seed)
     n = t.size
@@ -155,22 +115,8 @@ def damper_wear(model: SuspensionModel, duration: float = 150.0, fs: float = 500
 
 
 def production_wear(model: SuspensionModel, **kwargs: object) -> Stream:
-    """:func:`damper_wear` as a production car sends it: the body accelerations and the ride
-    heights (strut extensions ``d``/``dN``, the states' ``x1 - x2`` for ``quarter2``), with the
-    node's quantization and noise, and no road (no vehicle measures it).
-
-    Parameters
-    ----------
-    model : SuspensionModel
-    **kwargs
-        Further arguments of :func:`damper_wear` (``duration``, ``fs``, ``seed``, ...;
-        ``channels`` defaults to ``model.channel_set("production")``).
-
-    Returns
-    -------
-    Stream
-        ``data`` without the road columns.
-    """
+    """:func:`damper_wear` as a production car sends it: body accelerations and ride heights
+    (default ``model.channel_set("production")``), quantized and noisy, without the road."""
     kw = dict(kwargs)
     kw.setdefault("channels", model.channel_set("production"))
     s = damper_wear(model, **kw)  # type: ignore[arg-type]
@@ -179,12 +125,8 @@ def production_wear(model: SuspensionModel, **kwargs: object) -> Stream:
 
 
 def write_log(stream: Stream, path: str, model_name: str = "quarter2", t0: float = 0.0) -> int:
-    """Write a stream as the CAN log the sensor node would send (format by suffix).
-
-    Uses the CAN layer's encoder (:func:`suspid.can.encoder.measurement_frames`): one
-    ``SN_Sync`` plus the model's sensor frames per sample, signals quantized per the DBC,
-    E2E protected. Returns the number of frames written.
-    """
+    """Write a stream as the CAN log the sensor node would send (format by suffix, frames by
+    :func:`suspid.can.encoder.measurement_frames`); returns the number of frames."""
     inputs = get_model(model_name).input_names
     roads = {k: v for k, v in stream.data.items() if k in inputs}
     measured = {k: v for k, v in stream.data.items() if k not in roads}

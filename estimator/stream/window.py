@@ -1,57 +1,10 @@
 """Sliding-window identification: one warm-started, budgeted Nelder-Mead fit per window.
 
-Each window of the stream becomes a small output-error problem
-(the core's :class:`~estimator.identify.OutputErrorProblem` on its fast path, the motion
-channels compared; decimated as
-:mod:`estimator.stream.config` documents) and is fitted with the core's
-:func:`~estimator.identify.minimize_log` (scipy-identical Nelder-Mead in log coordinates) and the
-same sandwich standard errors as ``suspid identify``.
-
-Warm start
-    The first window starts cold from the nominal values (or the data-driven start when it
-    fits better) with ``first_restarts`` restarts and budget ``first_maxfev``. Every later
-    window starts from the previous estimate extrapolated along the straight line through
-    the last (up to 3) estimates of consecutive windows (``warm_predict``; a drifting
-    damper moves ~1 % per step), with a fresh axis-aligned simplex of edge
-    ``max(warm_step, 3 x previous relative stderr_fit)`` per parameter (log units) centred
-    on that start. With ten or more free parameters warm windows use Nelder-Mead's
-    standard coefficients, not the dimension-adapted ones, the first window no restart,
-    and every window ends with up to three Gauss-Newton steps on one Jacobian
-    (``WindowConfig.warm_adaptive``, ``first_restarts``, ``gauss_newton_step``,
-    ``gauss_newton_steps``). Windows whose fit is not identifiable do not update the warm
-    state.
-Termination and budget
-    Nelder-Mead stops when every vertex is within ``xatol`` (log units, 0.2 %: 0.4 x the
-    ``sigma_floor`` below every reported stderr; 0.7 % with ten or more free parameters,
-    where the Gauss-Newton steps finish, :mod:`estimator.stream.config`) of the best one,
-    or at ``maxfev`` evaluations; every estimate reports ``nfev`` (the Gauss-Newton
-    steps' included), ``budget``, ``converged`` and the CPU time of the window. The stderr
-    costs no further evaluation on the fast path: its Jacobian is the secant through the
-    final simplex, or the Gauss-Newton steps' (see
-    :meth:`~estimator.stream.windowfit.WindowFit.finish`).
-Excitation
-    A window is skipped, with the reason, when a needed channel misses more than
-    ``max_missing`` of its samples, when its time base is not uniform, or when the RMS
-    suspension deflection is below ``min_deflection`` or below ``min_snr`` times the noise
-    floor. The deflections are the model's own
-    (:meth:`~suspid.models.base.SuspensionModel.deflections`: ``x1 - x2`` for ``quarter2``,
-    ``x - x1 - a1 delta`` / ``x - x2 + a2 delta`` for ``half4``, the four corners of
-    ``full7``), of every strut whose coordinates are measured; the most excited strut
-    counts. Without any, the first measured motion channel is used. The noise floor is
-    estimated from the data as ``std(diff4(y)) / sqrt(70)`` at the full rate (the fourth
-    difference removes the smooth suspension motion, 70 = C(8,4) is its white-noise gain).
-Road input (errors in the variables)
-    The fit drives the model with the measured road displacement ``r`` interpolated
-    linearly between samples, so the tyre damping sees its slope: white noise on ``r``
-    becomes force noise rising with frequency, fed to the simulator as if it were road,
-    which biases the dampers (+1.9 % on c1 at 5 % noise on a stiff car). Before decimation
-    each window's road is rebuilt from ``r`` below a crossover and the integral of the
-    measured ``r'`` above it (:func:`fuse_road`, ``WindowConfig.road_fusion_hz``; by default
-    1.5 x the highest natural frequency, :mod:`estimator.stream.config`) when ``r'`` is in
-    the stream; optionally ``r`` is also low-passed with a zero-phase Butterworth
-    (:func:`lowpass_road`, ``WindowConfig.road_lowpass_hz``, off by default). The measured
-    outputs are not filtered, so the residual's noise stays white and the stderr need no
-    correction.
+Each window is an :class:`~estimator.identify.OutputErrorProblem` fitted with
+:func:`~estimator.identify.minimize_log` and given ``suspid identify``'s sandwich standard
+errors; later windows start from the last estimates' trend with a small fresh simplex. A
+window lacking samples or excitation is skipped with the reason. Settings and measurements:
+:mod:`estimator.stream.config`, ``docs/monitoring.md``.
 """
 from __future__ import annotations
 
@@ -62,8 +15,7 @@ from functools import lru_cache
 from typing import Any, Mapping
 
 import numpy as np
-# scipy.signal (which loads scipy.optimize, ~0.3 s) is reached through scipy's lazy
-# submodule attribute, so only a monitor with the road low-pass on pays for it
+# scipy.signal is reached lazily: only a monitor with the road low-pass loads it
 import scipy
 
 from estimator.identify import OutputErrorProblem, Parameters, minimize_log
@@ -73,7 +25,7 @@ from estimator.identify.misfit import (EXACT_FIT, noise_floor_ratios, ratios_of_
 from estimator.identify.multistart import twin_of
 from estimator.identify.start import cold_start
 from estimator.stream.config import WindowConfig
-from estimator.stream.windowfit import WindowFit
+from estimator.stream.windowfit import WindowFit, drift_cov
 from suspid.errors import UsageError
 from suspid.io.csvio import Measurement
 from suspid.models.base import AffinePieces, FloatArray, SuspensionModel
@@ -82,39 +34,9 @@ from suspid.simulate import uniform_step
 
 @dataclass
 class WindowResult:
-    """Outcome of one window.
-
-    Attributes
-    ----------
-    t : float
-        Data time at the window end (s).
-    t_start : float
-        Data time at the window start (s).
-    skipped : bool
-        ``True`` when the window was not fitted; ``reason`` says why.
-    params : dict
-        Every parameter (SI), fixed ones included (empty when skipped).
-    stderr : dict
-        Standard error of each free parameter (SI) including the ``sigma_floor``.
-    stderr_fit : dict
-        The fit's own standard error (noise only).
-    nfev, budget : int
-        Evaluations used by Nelder-Mead and its budget.
-    converged : bool
-    cost : float
-        The seed's cost of the window fit (SI).
-    rms_residual : dict
-    cpu_s : float
-        Process CPU time spent on the window (s).
-    excitation : dict
-        ``deflection_rms`` (m), ``noise`` (m), ``snr``, ``missing`` (fraction).
-    noise_floor_ratio : dict
-        Per fitted channel, the window fit's residual over what white noise alone would
-        leave (:func:`~estimator.identify.misfit.noise_floor_ratios`, dimensionless; about 1
-        at the noise floor, far above it when the model or a fixed value is wrong).
-    warnings : list of str
-    reason : str
-    """
+    """Outcome of one window ending at data time ``t`` (s): the parameters (SI), their stderr
+    with the ``sigma_floor`` and the fit's own (``stderr_fit``), evaluations, cost, CPU time,
+    ``excitation`` and per-channel ``noise_floor_ratio``; or ``skipped`` with the ``reason``."""
 
     t: float
     t_start: float
@@ -160,11 +82,8 @@ def _std(y: FloatArray) -> float:
 
 
 def noise_floor(y: FloatArray) -> float:
-    """White-noise standard deviation of ``y`` from its fourth difference (same units).
-
-    ``var(diff4(e)) = 70 var(e)`` for white ``e``; smooth motion sampled well above its
-    frequencies contributes ``(w h)^4`` of its amplitude, negligible here.
-    """
+    """White-noise standard deviation of ``y`` from its fourth difference (same units):
+    ``var(diff4(e)) = 70 var(e)`` for white ``e``, smooth motion contributes little."""
     y = _finite(y)
     if y.size < 10:
         return float("nan")
@@ -172,14 +91,8 @@ def noise_floor(y: FloatArray) -> float:
 
 
 def _missing(v: FloatArray) -> float:
-    """Fraction of the samples of ``v`` that are missing (NaN/inf), at its own cadence.
-
-    A channel that fills only every ``N``-th grid cell (a page of a multiplexed message,
-    a message at ``1/N`` of the grid's rate: the median distance between its samples is
-    ``N`` cells) misses nothing when it has one sample every ``N`` cells; it misses the
-    fraction of those ``ceil(size / N)`` samples that are not there. One reduction when
-    nothing is NaN.
-    """
+    """Fraction of the samples of ``v`` missing (NaN/inf) at its own cadence: a channel
+    filling every ``N``-th cell (a multiplexed page, a slower message) misses nothing then."""
     if math.isfinite(float(np.add.reduce(v))):
         return 0.0
     at = np.flatnonzero(np.isfinite(v))
@@ -191,38 +104,19 @@ def _missing(v: FloatArray) -> float:
 
 
 def fuse_road(t: FloatArray, r: FloatArray, r_dot: FloatArray, crossover_hz: float) -> FloatArray:
-    """Road displacement from its measurement (slow part) and its velocity's integral (fast).
+    """Road displacement (m) from its measurement ``r`` below ``crossover_hz`` and the integral
+    of its velocity ``r_dot`` (m/s) above, on uniform times ``t`` (s).
 
-    ``r_hat = R + LP(r - R)`` with ``R`` the trapezoidal integral of ``r_dot`` over the window
-    and ``LP`` a zero-phase low-pass (a centred moving average of ``1 / crossover_hz``
-    seconds, applied twice; normalised at the window's edges). For noise-free data
-    ``r - R`` is a constant and ``r_hat = r``; white noise on ``r`` (which the simulator
-    would feed into the tyre force at every frequency, biasing the damper estimate as an
-    error in the input) is averaged out above the crossover, where the integrated velocity
-    takes over. A window with a missing or non-finite sample is returned unchanged; in a
-    window shorter than the average, the average spans the window.
-
-    Parameters
-    ----------
-    t : ndarray
-        Uniform sample times (s).
-    r, r_dot : ndarray
-        Measured road displacement (m) and velocity (m/s) on ``t``.
-    crossover_hz : float
-        Crossover frequency (Hz).
-
-    Returns
-    -------
-    ndarray
-        The fused displacement (m).
+    ``r_hat = R + LP(r - R)``, ``R`` the trapezoidal integral of ``r_dot`` and ``LP`` a centred
+    moving average of ``1 / crossover_hz`` s applied twice: white noise on ``r`` (an input
+    error that biases the dampers) is averaged out. A non-finite sample leaves ``r`` as it is.
     """
     r = np.asarray(r, dtype=float)
     v = np.asarray(r_dot, dtype=float)
     if r.size < 3 or not (np.isfinite(r).all() and np.isfinite(v).all()):
         return r
     h = float(t[1] - t[0])
-    # at most the window itself (a longer average is the window's mean, and np.convolve's
-    # "same" output would take the kernel's length)
+    # at most the window itself
     w = min(2 * int(round(0.5 / (crossover_hz * h))) + 1, r.size - 1 + r.size % 2)
     if w < 3:
         return r
@@ -242,57 +136,22 @@ def _butter_sos(order: int, wn: float) -> FloatArray:
 
 
 def lowpass_road(v: FloatArray, h: float, cutoff_hz: float, order: int = 2) -> FloatArray:
-    """Zero-phase Butterworth low-pass of one road channel over a window.
-
-    ``sosfiltfilt`` (forward and backward: no phase lag, squared magnitude, so the cutoff
-    ``cutoff_hz`` is where the gain is 1/2) with odd extension of ``3 / cutoff_hz`` seconds
-    at both ends (value and slope continue through the edge, so a smooth road passes the
-    window's edges unchanged). A channel with a non-finite sample, a cutoff at or above
-    0.9 x the Nyquist frequency, or fewer samples than the padding is returned unchanged.
-
-    Parameters
-    ----------
-    v : ndarray
-        Road displacement (m) or velocity (m/s) on a uniform grid.
-    h : float
-        Sample interval (s).
-    cutoff_hz : float
-        Cutoff (Hz), -6 dB of the zero-phase pair.
-    order : int
-        Butterworth order of one pass.
-
-    Returns
-    -------
-    ndarray
-        The filtered channel (same units).
-    """
+    """Zero-phase Butterworth low-pass (``sosfiltfilt``, -6 dB at ``cutoff_hz``, odd padding of
+    ``3 / cutoff_hz`` s) of one road channel sampled every ``h`` s; unchanged when a sample is
+    not finite, the cutoff is at or above 0.9 x Nyquist or the window is shorter than the pad."""
     v = np.asarray(v, dtype=float)
     wn = 2.0 * cutoff_hz * h
     pad = int(math.ceil(3.0 / (cutoff_hz * h))) if cutoff_hz > 0 else 0
     if not 0 < wn < 0.9 or v.size <= pad + 1 or not math.isfinite(float(np.add.reduce(v))):
         return v
-    # the -6 dB point of the forward-backward pair at cutoff_hz: one pass at -3 dB there
     return np.asarray(scipy.signal.sosfiltfilt(_butter_sos(order, wn), v, padtype="odd", padlen=pad),
                       dtype=float)
 
 
 class SlidingWindowIdentifier:
-    """Fit the free parameters on successive windows of a stream.
+    """Fit the free parameters of ``params`` on successive windows of the measured ``channels``."""
 
-    Parameters
-    ----------
-    model : SuspensionModel
-    params : Parameters
-        Starting values (nominal) and which parameters are fixed.
-    config : WindowConfig
-    channels : list of str
-        Measured channels to fit (a subset of ``model.channels``).
-    """
-
-    #: the drift fit to first order (:meth:`_drift_linear`), Gauss-Newton on the chunked
-    #: window where it does not apply; ``False``: Gauss-Newton only (the reference
-    #: ``tests/stream/test_window.py`` and ``tools/bench_maintenance.py --solver-check``
-    #: compare the first-order fit with)
+    #: the drift fit to first order (:meth:`_drift_linear`); ``False``: Gauss-Newton only
     first_order_drift: bool = True
 
     def __init__(self, model: SuspensionModel, params: Parameters, config: WindowConfig,
@@ -332,7 +191,6 @@ class SlidingWindowIdentifier:
         self._struts = list(model.deflections(probe, self.nominal))
         self._motion = next((c for c in self.channels if c in model.coords), self.channels[0])
 
-    # ---- excitation --------------------------------------------------------------------
     def excitation(self, t: FloatArray, data: Mapping[str, FloatArray]) -> tuple[dict[str, float], str]:
         """Excitation statistics of a window and the reason to skip it (``""`` to fit)."""
         cfg = self.config
@@ -370,7 +228,6 @@ class SlidingWindowIdentifier:
                         f"({nf:.3g}), below {cfg.min_snr:g}")
         return ex, ""
 
-    # ---- fit ----------------------------------------------------------------------------
     def _problem(self, t: FloatArray, data: Mapping[str, FloatArray]) -> OutputErrorProblem:
         d = self.config.decimate
         fc = self.config.road_fusion_hz
@@ -394,12 +251,8 @@ class SlidingWindowIdentifier:
                                   ride_heights=False)
 
     def _predict(self, t_end: float) -> list[float] | None:
-        """Log of the free parameters extrapolated to the window ending at ``t_end``.
-
-        The least-squares straight line through the last (up to 3) accepted estimates,
-        when they come from consecutive windows; ``None`` otherwise. The extrapolation is
-        capped at 5 % per parameter (a jump is Nelder-Mead's job, not the predictor's).
-        """
+        """Log of the free parameters extrapolated to ``t_end`` along the line through the last
+        (up to 3) estimates of consecutive windows, capped at 5 %; ``None`` otherwise."""
         cfg = self.config
         h = self._hist
         if not cfg.warm_predict or len(h) < 2:
@@ -421,16 +274,9 @@ class SlidingWindowIdentifier:
         return out
 
     def _start(self, t_end: float) -> tuple[Parameters, FloatArray | None, bool]:
-        """Starting parameters, initial simplex (or ``None``) and whether this is a warm start.
-
-        Warm: the start is the previous estimate extrapolated along its recent trend
-        (:meth:`_predict`), or the previous estimate itself; the simplex is axis-aligned in
-        log units with edge ``max(warm_step, 3 x relative stderr_fit)`` per parameter and
-        its centroid on the start (a drifting parameter lies on either side of the
-        prediction). Reusing the previous *final* simplex instead (stretched to that size
-        per axis) was measured worse: a converged simplex is often nearly flat, the
-        stretched copy stays flat, and Nelder-Mead then stops up to 0.7 % off the optimum.
-        """
+        """Starting parameters, initial simplex (or ``None``) and whether this is a warm start:
+        the predicted (:meth:`_predict`) or last estimate, with an axis-aligned simplex of edge
+        ``max(warm_step, 3 x relative stderr_fit)`` (log units) centred on it."""
         p = self.params.copy()
         if self._warm is None:
             return p, None, False
@@ -448,11 +294,8 @@ class SlidingWindowIdentifier:
     @staticmethod
     def _to_end(drift: list[str], g: list[float], half: float, out: WindowResult,
                 why: str) -> None:
-        """Move constant-window estimates to the window end with the recent rates ``g``.
-
-        The tracker takes the drifting parameters' estimates as describing the window end;
-        when a window cannot be fitted with the drift, its middle estimate is carried there.
-        """
+        """Carry constant-window estimates of ``drift`` to the window end at the recent rates
+        ``g`` (1/s) when the drift fit is not possible."""
         for k, gk in zip(drift, g):
             f = math.exp(max(-0.2, min(0.2, gk * half)))
             out.params[k] *= f
@@ -466,18 +309,10 @@ class SlidingWindowIdentifier:
                       has_prior: bool, out: WindowResult) -> bool:
         """The drift fit to first order around the constant fit; ``False``: not applicable.
 
-        The residual of the drifting window is taken linear in ``a = log(theta_end /
-        theta_const)`` and ``b = g width / 2`` around the constant fit (``a = b = 0``),
-        ``R(a, b) = R0 - Ja a - Jb b``, with ``Ja``, ``Jb`` the sensitivities of
-        :meth:`~estimator.stream.windowfit.WindowFit.drift_sensitivity` (one linear
-        simulation of the sensitivity system per column, on the constant fit's state
-        trajectory and modal form) and ``R0`` the constant fit's residual; the rate prior
-        (``drift_rate_sd``, around ``b_prior``) adds its rows, and one linear least-squares
-        solve gives ``a`` and ``b``. The neglected terms are second order in the drift over
-        half a window (a few % at most). The stderr are Gauss-Newton ones on the same
-        Jacobian: the constant fit's own (:attr:`WindowFit.jacobian`) for the other
-        free parameters, ``Ja`` and the rate columns ``Jb / (width / 2)`` for the drifting
-        ones. No evaluation of the drifting window at all.
+        The residual is taken linear in ``a = log(theta_end / theta_const)`` and ``b = g width
+        / 2`` (:meth:`~estimator.stream.windowfit.WindowFit.drift_sensitivity`); with the rate
+        prior's rows, one linear least-squares solve gives both, and the stderr are
+        Gauss-Newton ones on the same Jacobian. No evaluation of the drifting window.
         """
         cfg = self.config
         jac = fit.jacobian
@@ -516,17 +351,8 @@ class SlidingWindowIdentifier:
         for j, k in enumerate(drift):
             cols[:, self.free.index(k)] = Ja[:, j]
         cols = np.hstack([cols, Jg])
-        nc = cols.shape[1]
-        s2 = (R * R).sum(axis=1) / max(N - nc, 1)
-        s2 = np.where(s2 > 0, s2, 1.0)
-        Jn = cols / np.repeat(np.sqrt(s2), N)[:, None]
-        H = Jn.T @ Jn
-        if sd_u > 0:
-            nf = len(self.free)
-            H[nf:, nf:] += np.eye(nd) / cfg.drift_rate_sd ** 2
-        try:
-            cov = np.linalg.inv(H)
-        except np.linalg.LinAlgError:
+        cov = drift_cov(cols, R, len(self.free), cfg.drift_rate_sd if sd_u > 0 else None)
+        if cov is None:
             return False
         got = []
         for j, k in enumerate(drift):
@@ -536,17 +362,17 @@ class SlidingWindowIdentifier:
             if not (math.isfinite(se) and se > 0):
                 return False
             got.append((k, pk, se))
+        self._drift_result(fit, R, out, got)
+        return True
+
+    def _drift_result(self, fit: WindowFit, R: FloatArray, out: WindowResult,
+                      got: list[tuple[str, float, float]]) -> None:
+        """Set the drifting parameters' ``(name, end value, stderr_fit)`` (SI) and the noise-floor
+        ratios of the drifting fit's residual ``R`` (channels x samples)."""
         for k, pk, se in got:
             out.params[k] = pk
             out.stderr_fit[k] = se
-            out.stderr[k] = float(math.hypot(se, cfg.sigma_floor * pk))
-        self._drift_ratios(fit, R, out)
-        return True
-
-    @staticmethod
-    def _drift_ratios(fit: WindowFit, R: FloatArray, out: WindowResult) -> None:
-        """The noise-floor ratios of the drifting fit's residual ``R`` (channels x samples):
-        the fit the window reports; a constant fit to a drifting damper leaves the drift."""
+            out.stderr[k] = float(math.hypot(se, self.config.sigma_floor * pk))
         out.noise_floor_ratio = ratios_of_parts(
             residual_noise_floor_parts(np.asarray(R, dtype=float).T, fit.problem.channels))
 
@@ -554,13 +380,9 @@ class SlidingWindowIdentifier:
                    p_const: Mapping[str, float], drift: list[str], out: WindowResult) -> None:
         """Refit ``drift`` with a linear drift over the window; their values at its end.
 
-        The unknowns are ``log(theta_end / theta_const)`` and ``g width / 2`` per drifting
-        parameter (both the change over half a window), the other parameters held at the
-        constant fit. Starting from the constant fit and the rate of the recent estimates,
-        a few Gauss-Newton steps (forward differences, step halved when the cost does not
-        fall) find them: the residual is close to linear in them over a window's drift.
-        The stderr are Gauss-Newton ones with the rates free and every free parameter's
-        column (the constant fit's other parameters) in the Jacobian.
+        First order when it applies (:meth:`_drift_linear`), else a few Gauss-Newton steps in
+        ``log(theta_end / theta_const)`` and ``g width / 2`` from the recent rate, the other
+        parameters held at the constant fit; stderr with the rates free.
         """
         cfg = self.config
         chunk = cfg.drift_chunk_s
@@ -652,18 +474,12 @@ class SlidingWindowIdentifier:
         if se is None:
             self._to_end(drift, g_hist, half, out, "drift fit without stderr")
             return
-        for k in drift:
-            out.params[k] = p[k]
-            out.stderr_fit[k] = se[k]
-            out.stderr[k] = float(math.hypot(se[k], cfg.sigma_floor * p[k]))
-        self._drift_ratios(fit, R, out)
+        self._drift_result(fit, R, out, [(k, p[k], se[k]) for k in drift])
 
     def _twin_choice(self, prob: OutputErrorProblem, params: Parameters, p_hat: dict[str, float]
                      ) -> tuple[dict[str, float], str | None]:
-        """The first window's fit, or its twin when the twin fits as well and the model's
-        rule prefers it (:meth:`SuspensionModel.twin`: the quarter car seen from the body
-        alone); later windows start next to the choice. Returns the parameters and a
-        warning when the twin was taken."""
+        """The first window's fit, or its twin (:meth:`SuspensionModel.twin`) when that fits as
+        well and the model's rule prefers it; with a warning when the twin was taken."""
         tw = twin_of(prob, params, p_hat)
         if tw is None or not tw.prefer:
             return p_hat, None
@@ -678,19 +494,7 @@ class SlidingWindowIdentifier:
                            f"{tw.rule}")
 
     def process(self, t: FloatArray, data: Mapping[str, FloatArray]) -> WindowResult:
-        """Fit one window (or skip it).
-
-        Parameters
-        ----------
-        t : ndarray
-            Sample times of the window (s).
-        data : mapping
-            Channel and road arrays on ``t`` (SI), NaN for missing samples.
-
-        Returns
-        -------
-        WindowResult
-        """
+        """Fit one window (times ``t``, s; channel and road arrays, SI, NaN where missing)."""
         c0 = time.process_time()
         out = WindowResult(t=float(t[-1]), t_start=float(t[0]))
         ex, reason = self.excitation(t, data)
@@ -723,8 +527,7 @@ class SlidingWindowIdentifier:
             return prob.normalized_ss(to_params(u))
 
         budget = cfg.maxfev if warm else cfg.first_maxfev
-        # termination on the simplex size alone (xatol, log units): the cost's own scale
-        # says nothing about the precision that matters here (sigma_floor)
+        # termination on the simplex size alone (xatol): the cost's scale says nothing here
         nm = minimize_log(cost, np.zeros(len(free)), step=0.3,
                           restarts=0 if warm else cfg.first_restarts,
                           maxfev=budget, xatol=cfg.xatol, fatol=math.inf,
@@ -756,8 +559,7 @@ class SlidingWindowIdentifier:
         out.identifiable = bool(res.identifiable)
         out.cost = res.cost
         out.rms_residual = res.rms_residual
-        # the constant fit's residual against white noise (one cached evaluation; a drift
-        # fit below replaces it with its own)
+        # the constant fit's residual against white noise (a drift fit replaces it)
         out.noise_floor_ratio = noise_floor_ratios(prob, res.params)
         out.warnings = [w for w in res.warnings if "evaluation budget" not in w]
         if twin_note is not None:

@@ -1,24 +1,8 @@
 """A monitor window's fit beyond its cost: stderr, Gauss-Newton steps, drifting parameters.
 
-A window's cost, residuals and initial state are those of the one output-error problem,
-:class:`~estimator.identify.OutputErrorProblem`, on its fast path
-(:meth:`~estimator.identify.OutputErrorProblem.evaluate`: a uniform grid with every sample
-observed and the initial state estimated, evaluations cached per problem). A warm window is
-fitted with ~10 Nelder-Mead evaluations on ~750 samples; :class:`WindowFit` reuses those
-cached evaluations:
-
-* :meth:`WindowFit.finish` -- the result at the optimum with stderr from the secant through
-  Nelder-Mead's final simplex (no further evaluation);
-* :meth:`WindowFit.gauss_newton` -- chord Gauss-Newton steps from Nelder-Mead's best vertex;
-* :meth:`WindowFit.drift_residual` -- the window with some parameters drifting linearly in
-  time (``WindowConfig.drift``): ``A`` and ``Bz`` per chunk of the window, one batched
-  matrix exponential for every chunk's first-order-hold discretisation, the initial state
-  again by least squares; with zero rates it equals the constant window's residual to
-  rounding. :meth:`WindowFit.drift_sensitivity` is its first-order form around the constant
-  fit.
-
-Where the fast path does not apply (a gap in the window, a non-uniform grid) the core's
-:func:`estimator.identify.finish` is used.
+:class:`WindowFit` reuses the cached evaluations of the window's
+:class:`~estimator.identify.OutputErrorProblem` (its fast path); where the fast path does not
+apply (a gap, a non-uniform grid) the core's :func:`estimator.identify.finish` is used.
 """
 from __future__ import annotations
 
@@ -41,25 +25,15 @@ from suspid.models.base import FloatArray
 from suspid.simulate import foh_weights
 
 #: largest final-simplex edge (log units) and edge-matrix condition number (1-norm) for
-#: which the Jacobian is taken from the simplex's residuals (secant) instead of forward
-#: differences
+#: which the Jacobian is the simplex's secant instead of forward differences
 SECANT_MAX_EDGE = 0.02
 SECANT_MAX_COND = 1e3
-#: farthest (log units, per parameter) the Gauss-Newton steps go from Nelder-Mead's best
-#: vertex: a loose Nelder-Mead in twelve dimensions stops up to 4 % from the window's
-#: optimum (measured on the full car's maintenance stream)
+#: farthest (log units, per parameter) the Gauss-Newton steps go from Nelder-Mead's best vertex
 GAUSS_NEWTON_MAX_STEP = 0.06
 
-_UPPER: dict[int, FloatArray] = {}
-
-
 def small_inverse(M: FloatArray) -> tuple[FloatArray | None, float]:
-    """Inverse of a small square matrix and its 1-norm condition number.
-
-    Closed form for 1x1 and 2x2, one LAPACK ``dgesv`` (LU with partial pivoting) on the
-    identity otherwise; ``(None, inf)`` when ``M`` is singular or not finite.
-    ``cond_1 = ||M||_1 ||M^-1||_1``.
-    """
+    """Inverse of a small square matrix and its 1-norm condition number (closed form up to
+    2x2, else LAPACK ``dgesv``); ``(None, inf)`` when ``M`` is singular or not finite."""
     n = M.shape[0]
     if n <= 2:
         if n == 1:
@@ -85,12 +59,8 @@ def small_inverse(M: FloatArray) -> tuple[FloatArray | None, float]:
 
 def _verdict(small: FloatArray, free: list[str], kinds: dict[str, str],
              structural: tuple[str, ...] = ()) -> Identifiability:
-    """:func:`~estimator.identify.identifiability.assess` of a square QR factor.
-
-    When every relative singular value is at least the weak-identifiability threshold the
-    verdict is "identifiable, no warning" and only the singular values are needed: closed
-    form for 2x2; otherwise (or for larger factors) ``assess`` itself.
-    """
+    """:func:`~estimator.identify.identifiability.assess` of a square QR factor; a 2x2 factor
+    with well separated singular values is judged in closed form."""
     if small.shape == (2, 2) and not (structural and set(structural) <= set(free)):
         (a, b), (c, d) = small.tolist()
         ssq = a * a + b * b + c * c + d * d
@@ -103,6 +73,24 @@ def _verdict(small: FloatArray, free: list[str], kinds: dict[str, str],
     return assess(small, free, kinds, structural)
 
 
+def drift_cov(cols: FloatArray, R: FloatArray, n_free: int,
+              rate_prior_sd: float | None) -> FloatArray | None:
+    """Gauss-Newton covariance of the Jacobian ``cols`` (p N x n: the free parameters', then
+    the rates' columns), each channel weighted by its noise in the residual ``R`` (p, N);
+    ``rate_prior_sd`` (1/s) adds a prior on the rates. ``None`` when singular."""
+    pch, N = R.shape
+    sig = np.sqrt((R * R).sum(axis=1) / max(N - cols.shape[1], 1))
+    sig = np.where(sig > 0, sig, 1.0)
+    J = (cols.reshape(pch, N, -1) / sig[:, None, None]).reshape(pch * N, -1)
+    H = J.T @ J
+    if rate_prior_sd:
+        H[n_free:, n_free:] += np.eye(H.shape[0] - n_free) / rate_prior_sd ** 2
+    try:
+        return np.asarray(np.linalg.inv(H), dtype=float)
+    except np.linalg.LinAlgError:
+        return None
+
+
 @dataclass
 class GaussNewton:
     """Outcome of :meth:`WindowFit.gauss_newton`."""
@@ -113,29 +101,15 @@ class GaussNewton:
 
 
 class WindowFit:
-    """What a monitor window needs beyond its cost, on the one output-error problem.
-
-    The cost, residuals and initial state are :class:`~estimator.identify.OutputErrorProblem`'s
-    (its fast path, :meth:`~estimator.identify.OutputErrorProblem.evaluate`, cached per
-    problem); this layer adds the window's result at the optimum (:meth:`finish`: stderr
-    from the final simplex's secant), Gauss-Newton steps from Nelder-Mead's best vertex
-    (:meth:`gauss_newton`) and the window with drifting parameters (:meth:`drift_residual`,
-    :meth:`drift_sensitivity`, :meth:`drift_stderr`).
-
-    Parameters
-    ----------
-    problem : OutputErrorProblem
-        The window's problem (built with ``ride_heights=False``: the window compares the
-        motion channels).
-    """
+    """What a monitor window needs beyond its cost, on the window's ``problem`` (built with
+    ``ride_heights=False``: the motion channels are compared)."""
 
     def __init__(self, problem: OutputErrorProblem) -> None:
         self.problem = problem
         m = problem.model
         self.model = m
         #: ``(free, p_hat, J)`` of the last fast :meth:`finish`: ``J`` (p N x n_free) the
-        #: derivative of the predicted fitted channels (channel-major rows) with respect to
-        #: the log-parameters at ``p_hat``
+        #: derivative of the predicted channels (channel-major) by the log-parameters
         self.jacobian: tuple[list[str], dict[str, float], FloatArray] | None = None
         self._nq = len(m.coords)
         self._nr = len(m.roads)
@@ -156,51 +130,16 @@ class WindowFit:
         Y = (CV @ ev.modal(self._r)).real + (Cm @ ev.B[:, self._nr:]) @ self._r + Dm @ self.problem.U.T
         return Y
 
-    # ---- result at the optimum ----------------------------------------------------------------
     def finish(self, params: Parameters, p_hat: Mapping[str, float], nfev: int,
                converged: bool, simplex: list[Mapping[str, float]] | None = None,
                rel_step: float = 1e-6, jacobian: FloatArray | None = None) -> IdentResult:
-        """:func:`estimator.identify.finish` for a window: result, stderr, identifiability.
+        """:func:`estimator.identify.finish` for a window at the estimate ``p_hat`` (SI).
 
-        Same quantities and formulas (RMS of every measured channel, per-channel residual
-        variance, sandwich covariance of the log-parameters, identifiability verdict on the
-        noise-normalised Jacobian), with the evaluations reused on the fast path:
-
-        * the residual at ``p_hat`` is Nelder-Mead's best vertex (cached);
-        * the Jacobian of the residuals with respect to the log-parameters is the *secant*
-          through Nelder-Mead's final simplex (``simplex``: its vertices, best first, all
-          evaluated already): ``J = dR D^-1`` with ``D`` the edges from the best vertex
-          (log units) and ``dR`` the residual differences. With edges of ~``xatol``
-          (0.2 %) its truncation error is ~0.1-1 % of the Jacobian, i.e. of ``stderr_fit``
-          (itself a small part of ``stderr`` next to the ``sigma_floor``). When an edge
-          is longer than :data:`SECANT_MAX_EDGE`, the edge matrix is ill-conditioned
-          (condition number > :data:`SECANT_MAX_COND`) or a vertex was not evaluated on
-          the fast path, ``jacobian`` when given (the Gauss-Newton steps' forward
-          difference, within :data:`GAUSS_NEWTON_MAX_STEP` of ``p_hat``), else a forward
-          difference (``rel_step``, ``n_free`` evaluations) is used instead.
-
-        Off the fast path: :func:`estimator.identify.finish` (central differences).
-
-        Parameters
-        ----------
-        params : Parameters
-            Free/fixed split (the values are not used).
-        p_hat : mapping
-            The estimate, every parameter (SI).
-        nfev : int
-            Nelder-Mead evaluations (reported).
-        converged : bool
-        simplex : list of mapping, optional
-            Nelder-Mead's final simplex as parameter sets (SI), best vertex first.
-        rel_step : float
-            Forward-difference step in log-parameter units.
-        jacobian : ndarray, optional
-            Residual Jacobian (log-parameters, channel-major rows, as
-            :meth:`gauss_newton` returns it) near ``p_hat``, used when the secant is not.
-
-        Returns
-        -------
-        IdentResult
+        The same quantities with the evaluations reused: the Jacobian is the secant through
+        Nelder-Mead's final ``simplex`` (parameter sets, best first) when its edges are at
+        most :data:`SECANT_MAX_EDGE` and well conditioned, else ``jacobian`` (log-parameters,
+        channel-major rows) when given, else forward differences of ``rel_step`` (log units).
+        ``params`` gives the free/fixed split only.
         """
         free = params.free
         ev = self.problem.evaluate(p_hat)
@@ -235,10 +174,9 @@ class WindowFit:
                            np.maximum(ref, 1e-300))
         J3 = J.reshape(pch, N, nf)
         Jn = (J3 / scale_c[:, None, None]).reshape(n_obs, nf)
-        # the verdict needs the singular values and right singular vectors of Jn only:
-        # those of its QR factor R (n_free x n_free), computed without an SVD of Jn
+        # the verdict needs only Jn's singular values and right vectors: those of its QR's R
         qr, _, _, info = _dgeqrf(Jn)
-        small = qr[:nf] * self._upper(nf)
+        small = np.triu(qr[:nf])
         if info != 0 or not np.isfinite(small).all():
             small = Jn
         verdict = _verdict(small, free, {q.name: q.kind for q in model.params},
@@ -276,35 +214,9 @@ class WindowFit:
 
     def gauss_newton(self, free: list[str], p_hat: Mapping[str, float], steps: int = 1,
                      rel_step: float = 1e-6) -> GaussNewton:
-        """Gauss-Newton steps from Nelder-Mead's best vertex on one Jacobian.
-
-        Nelder-Mead stops with every vertex within ``xatol`` of the best one, not at the
-        optimum; from there a Gauss-Newton step on the residuals' Jacobian (forward
-        differences of ``rel_step`` in log units at ``p_hat``: ``n_free`` evaluations)
-        lands much closer to it. Each step ``du = -J^+ R(p)`` (one evaluation; shortened
-        to end within :data:`GAUSS_NEWTON_MAX_STEP` of ``p_hat`` in every parameter, a
-        trust region) is taken while it lowers the cost; up to ``steps`` of them, all on
-        the Jacobian at ``p_hat`` (the chord method: near the optimum the Jacobian barely
-        changes, and a new one would cost ``n_free`` evaluations per step).
-
-        Parameters
-        ----------
-        free : list of str
-            Free parameter names.
-        p_hat : mapping
-            Nelder-Mead's best vertex, every parameter (SI).
-        steps : int
-            Most steps taken.
-        rel_step : float
-            Forward-difference step (log units).
-
-        Returns
-        -------
-        GaussNewton
-            The parameters reached (``None``: not on the fast path or no step lowered the
-            cost), the Jacobian at ``p_hat`` (``None`` off the fast path) and the
-            evaluations used.
-        """
+        """Up to ``steps`` chord Gauss-Newton steps from Nelder-Mead's best vertex ``p_hat`` (SI)
+        on one forward-difference Jacobian (``rel_step``, log units), each within
+        :data:`GAUSS_NEWTON_MAX_STEP` of ``p_hat`` and kept while it lowers the cost."""
         ev = self.problem.evaluate(p_hat)
         if ev is None or not free:
             return GaussNewton(None, None, 0)
@@ -313,9 +225,7 @@ class WindowFit:
         nfev = len(free)
         if J is None:
             return GaussNewton(None, None, nfev)
-        # the normal equations (n_free x n_free, formed once): a QR factorisation of the
-        # tall J with its explicit Q costs as much as three evaluations; each step is
-        # checked on the cost anyway
+        # the normal equations, formed once (cheaper than a QR of the tall J)
         H = J.T @ J
         u = np.zeros(len(free))
         ss = ev.ss
@@ -347,12 +257,8 @@ class WindowFit:
 
     def _forward_jacobian(self, free: list[str], p_hat: Mapping[str, float], r0: FloatArray,
                           rel_step: float) -> FloatArray | None:
-        """Residual Jacobian (log-parameters) by forward differences on the fast path.
-
-        ``r0`` is the residual at ``p_hat`` (channel-major); one evaluation per free
-        parameter, step ``rel_step`` (log units). ``None`` when an evaluation leaves the
-        fast path.
-        """
+        """Residual Jacobian (log-parameters) by forward differences at ``p_hat`` (residual
+        ``r0``); ``None`` when an evaluation leaves the fast path."""
         cols = []
         for k in free:
             q = dict(p_hat)
@@ -386,7 +292,6 @@ class WindowFit:
         # dR = J D^T  ->  J = dR D^-T
         return dR @ Dinv.T
 
-    # ---- linear drift inside the window --------------------------------------------------
     @property
     def drift_ok(self) -> bool:
         """Whether :meth:`drift_residual` applies (fast path, fitted channels are states)."""
@@ -396,14 +301,10 @@ class WindowFit:
                        t_ref: float, chunk_s: float) -> FloatArray | None:
         """Residual (p, N) of a window whose parameters drift linearly in time.
 
-        ``theta_k(t) = p_k (1 + g_k (t - t_ref))`` for every ``k`` in ``rates`` (``g_k``
-        relative rate, 1/s), the others constant at ``p``. The window is cut into chunks of
-        ``chunk_s``; in each ``A`` and ``Bz`` are taken at the chunk's middle time and the
-        first-order-hold road is discretised exactly (one matrix exponential per chunk).
-        The initial state is fitted by least squares as on the constant path; with every
-        rate zero the residual equals the fast evaluation's to rounding. ``None`` when
-        :attr:`drift_ok` is false, a chunk's matrices are not finite or a drifting parameter
-        enters ``B_v`` (the road-rate input).
+        ``theta_k(t) = p_k (1 + g_k (t - t_ref))`` for ``k`` in ``rates`` (1/s). ``A`` and
+        ``Bz`` are taken at each chunk's (``chunk_s``) middle and discretised exactly with a
+        first-order-hold road; the initial state is fitted by least squares. ``None`` when
+        :attr:`drift_ok` is false, a chunk is not finite or a drifting parameter enters ``B_v``.
         """
         if not self.drift_ok:
             return None
@@ -435,9 +336,8 @@ class WindowFit:
                 Bv = B[:, nr:].copy()
             elif c == C - 1 and float(np.abs(B[:, nr:] - Bv).max()) > 1e-12 * float(
                     np.abs(Bv).max()):
-                # B_v is affine in the parameters, which move linearly in time: equal at
-                # the first and last chunk means constant. Otherwise a drifting tyre
-                # damping: z = x - B_v r would change in time
+                # B_v is affine in the parameters: equal at the first and last chunk means
+                # constant (a drifting tyre damping is not handled)
                 return None
             aug[c, :n, :n] = A * h
             aug[c, :n, n:n + nr] = Bz * h
@@ -487,34 +387,12 @@ class WindowFit:
 
     def drift_sensitivity(self, p: Mapping[str, float], names: list[str], t_ref: float
                           ) -> tuple[FloatArray, FloatArray] | None:
-        """Sensitivities of the fitted channels to a constant change and to a linear drift.
+        """Sensitivities ``(Ja, Jg)`` of the fitted channels to a constant change and a drift.
 
-        For each ``k`` in ``names``, with ``theta_k(t) = p_k exp(a) (1 + g (t - t_ref))``, the
-        derivatives at ``a = g = 0`` of the predicted fitted channels with respect to ``a``
-        (log units) and to ``g`` (1/s), the initial state refitted (the columns projected
-        off the free-response regressors, as the least-squares initial state does). They
-        are the responses of the linear sensitivity system ``s' = A s + f(t)`` from rest to
-        ``f = p_k (dA/dtheta_k z(t) + dBz/dtheta_k r(t))`` and to ``(t - t_ref) f``, ``z``
-        the fast evaluation's state trajectory at ``p`` (the simulator's ``z = x - B_v r``
-        coordinates), simulated in the evaluation's modal form with the first-order hold
-        of the exact discretisation. ``B_v`` must not depend on ``names`` (as for
-        :meth:`drift_residual`).
-
-        Parameters
-        ----------
-        p : mapping
-            Parameters (SI), typically the constant fit's estimate.
-        names : list of str
-            Parameters whose sensitivities are wanted.
-        t_ref : float
-            Reference time of the drift (s; the window end).
-
-        Returns
-        -------
-        (Ja, Jg) : tuple of ndarray, or None
-            Each ``(p N, len(names))``, rows channel-major as :meth:`drift_residual`'s
-            residual raveled; ``None`` when :attr:`drift_ok` is false, ``p`` is not on the
-            fast path or ``B_v`` depends on one of ``names``.
+        For ``k`` in ``names`` and ``theta_k(t) = p_k exp(a) (1 + g (t - t_ref))``, the
+        derivatives at ``a = g = 0`` by ``a`` and ``g`` (1/s), each ``(p N, len(names))``
+        channel-major, the initial state refitted; simulated in the fast evaluation's modal
+        form. ``None`` off the fast path or when ``B_v`` depends on one of ``names``.
         """
         if not self.drift_ok or not names:
             return None
@@ -553,10 +431,8 @@ class WindowFit:
         tt = self.problem.t - t_ref
         q = len(names)
         n = A.shape[0]
-        # modal forcing (2 q, m, N): constant columns (per unit a) V^-1 (dA_k z + dBz_k r),
-        # then the ramp's (per unit g), the constant ones times (t - t_ref); the small
-        # products V^-1 dA_k, V^-1 dBz_k first, their real and imaginary parts in one real
-        # product with [z; r]
+        # modal forcing (2 q, m, N): per unit a V^-1 (dA_k z + dBz_k r), per unit g the same
+        # times (t - t_ref)
         K = np.concatenate([np.stack([Vinv @ a for a in dA]).reshape(q * mm, n),
                             np.stack([Vinv @ b for b in dBz]).reshape(q * mm, nr)], axis=1)
         KX = np.concatenate([K.real, K.imag]) @ np.concatenate([zr, self._r])
@@ -575,8 +451,7 @@ class WindowFit:
         S = np.matmul(CV, W).real  # (2 q, p, N)
         pch = CV.shape[0]
         Sf = S.reshape(S.shape[0], pch * N)
-        # the initial state refitted: project off the free-response regressors (full
-        # column rank: the fast evaluation checked their Gram matrix's condition number)
+        # the initial state refitted: project off the free-response regressors
         T = CV.T[:, :, None] * P[:, None, :]
         pairs = pat.pairs
         G = np.concatenate([T.real, -T.imag[pairs]]).reshape(mm + pairs.size, pch * N)
@@ -603,12 +478,9 @@ class WindowFit:
                      t_ref: float, chunk_s: float, rel_step: float = 1e-4,
                      rate_prior_sd: float | None = None, R0: FloatArray | None = None
                      ) -> dict[str, float] | None:
-        """Gauss-Newton standard errors (SI) of the free parameters at ``t_ref`` with the
-        drift ``rates`` free as well (forward differences, noise per channel from the
-        residual); ``rate_prior_sd`` (1/s) adds a
-        prior of that standard deviation on each free rate. ``R0``: the residual at ``p``
-        when already computed (as :meth:`drift_residual` returns it).
-        """
+        """Gauss-Newton standard errors (SI) of ``free`` at ``t_ref`` with the drift ``rates``
+        free too (forward differences); ``rate_prior_sd`` (1/s) adds a prior on each rate;
+        ``R0`` the residual at ``p`` when already computed."""
         rates = dict(rates)
 
         def resid(q: Mapping[str, float], g: Mapping[str, float]) -> FloatArray | None:
@@ -618,7 +490,6 @@ class WindowFit:
             R0 = resid(p, rates)
         if R0 is None:
             return None
-        pch, N = R0.shape
         cols = []
         for k in free:
             q = dict(p)
@@ -634,24 +505,8 @@ class WindowFit:
             if Rk is None:
                 return None
             cols.append(((Rk - R0) / rel_step).ravel())
-        sig = np.sqrt((R0 * R0).sum(axis=1) / max(N - len(cols), 1))
-        sig = np.where(sig > 0, sig, 1.0)
-        J = (np.column_stack(cols).reshape(pch, N, -1) / sig[:, None, None]).reshape(pch * N, -1)
-        H = J.T @ J
-        if rate_prior_sd:
-            nf = len(free)
-            H[nf:, nf:] += np.eye(len(rates)) / rate_prior_sd ** 2
-        try:
-            cov = np.linalg.inv(H)
-        except np.linalg.LinAlgError:
+        cov = drift_cov(np.column_stack(cols), R0, len(free), rate_prior_sd)
+        if cov is None:
             return None
         return {k: float(p[k] * math.sqrt(max(float(cov[i, i]), 0.0)))
                 for i, k in enumerate(free)}
-
-    @staticmethod
-    def _upper(n: int) -> FloatArray:
-        """Upper-triangular 0/1 mask (n x n), cached for the process."""
-        got = _UPPER.get(n)
-        if got is None:
-            got = _UPPER[n] = np.triu(np.ones((n, n)))
-        return got

@@ -16,7 +16,7 @@ from estimator.stream.monitor import NMWindowEstimator
 from estimator.stream.pipeline import monitor_spec
 from suspid.models import get_model
 from estimator.stream.wear_streams import damper_wear
-from estimator.stream.tracker import ParameterTracker
+from estimator.stream.tracker import TrendTracker
 from estimator.stream.window import SlidingWindowIdentifier, fuse_road, lowpass_road, noise_floor
 from suspid.errors import UsageError
 
@@ -129,7 +129,8 @@ def test_skip_reasons(quarter2, const_stream) -> None:
 
 
 def test_tracker_combines_windows_and_grows_over_gaps() -> None:
-    tr = ParameterTracker(q=0.01, overlap=3.0)
+    tr = TrendTracker(q_level=0.01, q_rate=0.0, q_rate_change=0.0, rate0=1e-12, overlap=3.0,
+                      calibrate=False)
     a = tr.update(0.0, {"c1": 1500.0}, {"c1": 15.0})
     b = tr.update(1.0, {"c1": 1500.0}, {"c1": 15.0})
     assert b["c1"]["stderr"] < a["c1"]["stderr"]
