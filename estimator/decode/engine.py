@@ -1,37 +1,15 @@
 """The decoder's engine: batches of frames (:class:`~suspid.can.logs.FrameArrays`) ->
 validated, decoded samples in the :class:`~estimator.decode.buffer.RollingBuffer`.
 
-One entry, :meth:`DecodeEngine.process`, for every input: a log replay hands it chunks of
-the log, a live bus (:class:`~estimator.decode.listener.DecodeListener`) the frames queued
-since the last batch.
-
-Every frame goes through, in order (the first failing check names the rejection reason):
-frame type; time order (:class:`~estimator.decode.rules.timebase.TimeOrder`); a CAN ID of
-the DBC (:class:`~estimator.decode.routes.Routes`); its DLC; the E2E CRC
-(:mod:`~estimator.decode.rules.e2e`); the alive counter
-(:class:`~estimator.decode.rules.counters.CounterRules`); in tick mode a known tick
-(:mod:`~estimator.decode.rules.timebase`). Accepted data frames are decoded and pushed into
-the buffer with their data time; SN_Sync, SN_Status and SUSPID_Alert frames update the
-engine's state. In tick mode the counter rules see data times: a data frame's tick from its
-counter, SN_Sync's own Tick, and for E2E SN_Status and SUSPID_Alert frames the last SN_Sync's
-tick (:mod:`~estimator.decode.rules.timebase`).
-
-How a batch is processed: the stateless checks (frame type, ID, DLC, E2E CRC) run over all
-frames at once; the time check splits the batch into segments of frames in time order; per
-message the frames whose counter advances by one with a steady interval need only the
-period recurrence (:func:`~estimator.decode.rules.counters.steady_frames`,
-:func:`~estimator.decode.rules.counters.period_after`); the signals of the accepted frames
-are decoded column-wise (:mod:`estimator.decode.vector`) and stored with
-:meth:`~estimator.decode.buffer.Source.push_many`. Whatever a batch holds that the array
-code does not cover -- a timestamp going back, NaN or inf, a counter that does not advance
-by exactly one, a silence, a CAN FD payload, a message without an array decoder, a batch
-smaller than ``min_batch`` -- has the rules applied to it frame by frame
-(:meth:`DecodeEngine.validate`), and the batch resumes after it. The results do not depend
-on how the frames are cut into batches (``tests/can/test_batch_equivalence.py`` compares
-batches of one frame with large ones: counters, buffer contents bit for bit, state).
-
-The engine holds no lock and no queue: :class:`~estimator.decode.listener.DecodeListener`
-serialises the calls.
+One entry, :meth:`DecodeEngine.process`, for a log's chunks and a live bus's queued frames.
+The stateless checks (frame type, ID, DLC, E2E CRC) run over the whole batch; the time check
+splits it into segments in time order; per message the frames whose counter advances by one
+with a steady interval need only the period recurrence
+(:func:`~estimator.decode.rules.counters.steady_frames`); accepted signals are decoded
+column-wise (:mod:`estimator.decode.vector`). What the array code does not cover (a time
+anomaly, a counter jump, a silence, a CAN FD payload, a small batch) goes through the
+per-frame rules (:meth:`DecodeEngine.validate`); the results do not depend on how frames are
+cut into batches. The engine holds no lock: the listener serialises the calls.
 """
 from __future__ import annotations
 
@@ -56,8 +34,7 @@ from suspid.can.crc import COUNTER_MODULUS
 from suspid.can.logs import FrameArrays
 
 _INF = math.inf
-#: default ``min_batch``: fewer frames than this are validated one by one (below it the
-#: array code's fixed cost, ~100 NumPy calls, exceeds the per-frame path's)
+#: default ``min_batch``: fewer frames than this are validated one by one
 SMALL_BATCH = 192
 #: default ``min_run``: a run between two time anomalies shorter than this goes frame by frame
 MIN_RUN = 192
@@ -86,27 +63,6 @@ class DecodeEngine:
         See :class:`~estimator.decode.rules.counters.CounterRules`.
     collect_alerts : bool
         Keep accepted alerts in :attr:`outbox` for a callback.
-
-    Attributes
-    ----------
-    counts : FrameCounts
-    order : TimeOrder
-    tick_time : bool
-        The time base in use (may be switched on before the first frame: ``auto``).
-    sync_tick : int or None
-        ``Tick`` of the last SN_Sync.
-    sync_n : int
-        SN_Sync frames accepted.
-    period : float or None
-        Sample period (s) announced by SN_Sync.
-    node_status : dict
-    alerts : list of dict
-    outbox : list of dict
-        Accepted alerts not yet delivered (``collect_alerts``).
-    frames : int
-        Frames processed.
-    min_batch, min_run : int
-        Tuning of the batch path (same results).
     """
 
     def __init__(self, db: Database, routes: Routes, buffer: RollingBuffer, *, tick_time: bool,
@@ -134,13 +90,8 @@ class DecodeEngine:
         self._by_key = routes.by_key
         self._known = routes.known
 
-    # ---- one frame (inside a batch) ------------------------------------------------------
     def validate(self, ts: float, key: int, data: Payload) -> None:
-        """Every check after the frame type, decode and store one frame of a batch.
-
-        :meth:`process` sends here what its array code does not cover (a time anomaly, a
-        CAN FD payload, a run shorter than ``min_run``, a batch smaller than ``min_batch``).
-        """
+        """Every check after the frame type, decode and store one frame of a batch."""
         rejected = self._rejected
         order = self.order
         if not order.last <= ts < _INF:  # one chained compare: backwards, NaN or inf
@@ -168,9 +119,7 @@ class DecodeEngine:
             c = alive_counter(data)
             arrival = ts
             if self.tick_time:
-                # the gap rules below need data time: a host's arrival times bunch (a
-                # serial reader hands over a chunk of frames at once), which made the
-                # period estimate tiny and counted thousands of frames 'lost'
+                # the gap rules below need data time (a host's arrival times bunch)
                 if route.kind == SYNC:
                     tick, period_us = route.decode(data)
                     ext = self.clock.extend(int(tick), period_us, arrival)
@@ -184,9 +133,7 @@ class DecodeEngine:
                     ts = tick_time(tick_of_counter(
                         self.sync_tick, (c + self.sync_shift) % COUNTER_MODULUS), self.period)
                 elif route.kind != DATA and self.sync_tick is not None and self.period:
-                    # SN_Status (SUSPID_Alert): its own counter and rate, sent in the tick
-                    # of the last SN_Sync -- timed by it, a host's late delivery of a
-                    # status is no silence of the sender
+                    # SN_Status (SUSPID_Alert): sent in the tick of the last SN_Sync
                     ts = tick_time(self.sync_tick, self.period)
                 route.last_arrival = arrival
                 route.sync_n = self.sync_n
@@ -237,17 +184,12 @@ class DecodeEngine:
                 self.outbox.append(alert)
         return True
 
-    # ---- a batch --------------------------------------------------------------------------
     def process(self, fa: FrameArrays, lo: int, hi: int) -> None:
         """Frames ``lo:hi`` of ``fa``, as the frame-by-frame path would.
 
-        The stateless checks (frame type, ID, DLC, E2E CRC) are done for the whole batch;
-        their counts are taken per segment because a frame rejected for its time is
-        counted as ``time`` only. The time check is the state every frame shares: runs
-        of frames that pass it (each timestamp finite and not earlier than the previous
-        frame's) are processed as one segment (:meth:`_segment`); a frame that fails it,
-        a payload longer than 8 bytes, and runs shorter than ``min_run`` go through
-        :meth:`validate`.
+        The stateless outcomes are counted per segment (a frame rejected for its time
+        counts as ``time`` only); runs that pass the time check are one segment
+        (:meth:`_segment`), the rest goes through :meth:`validate`.
         """
         n = hi - lo
         if n <= 0:
@@ -331,13 +273,8 @@ class DecodeEngine:
                 pos = end
 
     def _small(self, fa: FrameArrays, lo: int, hi: int) -> None:
-        """A batch smaller than ``min_batch``: frames ``lo:hi`` of ``fa`` counted, frame type
-        checked, then :meth:`validate` each, the fields read as lists first.
-
-        A live bus polled often hands over such batches; below ``min_batch`` the array
-        code's fixed cost (~100 NumPy calls) exceeds the rules applied frame by frame, and
-        reading the fields as lists avoids a NumPy scalar read (~1 µs) per field.
-        """
+        """A batch smaller than ``min_batch``: frame type, then :meth:`validate` each frame
+        (the fields read as lists, cheaper than NumPy scalars)."""
         ts = fa.timestamp[lo:hi].tolist()
         ids = fa.arbitration_id[lo:hi].tolist()
         ext = fa.is_extended[lo:hi].tolist()
@@ -360,14 +297,9 @@ class DecodeEngine:
 
     def _segment(self, lo: int, hi: int, ts: np.ndarray, r: np.ndarray, outcome: np.ndarray,
                  rows: np.ndarray) -> None:
-        """Batch frames ``lo:hi`` (in order, all passing the time check).
-
-        The stateless outcomes are counted; the frames that passed them are grouped by
-        message (a stable sort keeps their order) for the counter and period rules
-        (:meth:`_runs`) -- in tick mode SN_Sync first, whose accepted frames give every
-        other frame its tick and period -- and per message decoded and stored
-        (:meth:`_accepted`).
-        """
+        """Batch frames ``lo:hi`` (in order, all passing the time check): grouped by message
+        (stable sort) for the counter rules (:meth:`_runs`; in tick mode SN_Sync first, which
+        gives the others their tick), then decoded and stored (:meth:`_accepted`)."""
         self.order.last = float(ts[hi - 1])
         self.order.rejects = 0
         oc = outcome[lo:hi]
@@ -430,10 +362,7 @@ class DecodeEngine:
             if not runs:
                 return
         if syncs is not None:
-            # every other message: the SN_Sync state each frame sees, and the data time of
-            # the E2E data frames: the tick nearest the last SN_Sync's with their counter's
-            # residue mod 15, times the period; of the E2E SN_Status and SUSPID_Alert frames:
-            # the last SN_Sync's tick times the period
+            # the SN_Sync state each other frame sees, and the data time of the E2E frames
             a0 = runs[0][1]
             sn, st, known, per, shift = syncs.at(h[a0:])
             syncs.sn, syncs.known, syncs.per, syncs.lo = sn, known, per, a0
@@ -442,7 +371,6 @@ class DecodeEngine:
             at_sync = has & self.routes.tick_e2e[r_h[a0:]]
             tsd = arr
             if conv.any() or at_sync.any():
-                # SN_Status and SUSPID_Alert: the last SN_Sync's tick
                 tk = np.where(conv, ticks_of_counters(
                     st, (alive_counters(rows[a0:]) + shift) % COUNTER_MODULUS), st)
                 tsd = arr.copy()
@@ -470,15 +398,9 @@ class DecodeEngine:
 
     def _runs(self, runs: list[tuple[int, int, int]], rows: np.ndarray, arr: np.ndarray,
               tsd: np.ndarray, lo: int, syncs: SyncTrack | None) -> np.ndarray:
-        """Counter and period rules of consecutive message runs ``rows[lo:hi]``; accepted mask.
-
-        ``runs`` are ``(route index, start, end)`` in the sorted frame arrays (``rows``:
-        payloads as uint64, ``arr``: frame times), contiguous from ``lo``; ``tsd`` the data
-        times of ``lo:hi``. In every run the prefix of steady frames
-        (:func:`~estimator.decode.rules.counters.steady_frames`; in tick mode also no data
-        frame that could be ``no_sync``) needs only the period recurrence; from its first
-        other frame on, the rules of :meth:`validate` run frame by frame.
-        """
+        """Counter and period rules of consecutive message runs ``(route index, start, end)``
+        from ``lo``; accepted mask. Each run's steady prefix needs only the period
+        recurrence, the rest goes frame by frame (:meth:`_route_rest`)."""
         hi = runs[-1][2]
         m = hi - lo
         routes = self.routes.ordered
@@ -491,8 +413,7 @@ class DecodeEngine:
         fresh = starts[last_c < 0]          # first frame ever of its message
         is_data = np.array([routes[r].kind == DATA for r, _, _ in runs])
         if syncs is not None and is_data.any():
-            # tick mode: a data frame is accepted only with a known tick and period, and
-            # none may qualify for the stale-tick rule
+            # tick mode: a known tick and period, and no stale tick
             o = lo - syncs.lo
             sn = syncs.sn[o:o + m]
             per = syncs.per[o:o + m]
@@ -539,12 +460,9 @@ class DecodeEngine:
 
     def _route_rest(self, route: Route, cl: list[int], tl: list[float], al: list[float],
                     n_before: int, at: int, syncs: SyncTrack | None) -> np.ndarray:
-        """The rules of :meth:`validate` for frames of one message, one by one; accepted mask.
-
-        ``cl``, ``tl``, ``al``: counters, data times, arrival times; ``n_before``: frames of
-        this message accepted earlier in the segment; ``at``: position of the first frame
-        in the sorted segment arrays (tick mode: index into the SN_Sync state).
-        """
+        """The rules of :meth:`validate` for frames of one message (counters, data and
+        arrival times), one by one; accepted mask. ``n_before``: frames accepted earlier
+        in the segment; ``at``: position of the first frame (tick mode: SN_Sync state)."""
         rejected = self._rejected
         step = self.counters.step
         tick = syncs is not None
@@ -591,11 +509,8 @@ class DecodeEngine:
     def _accepted(self, route: Route, rows: np.ndarray, tsd: np.ndarray,
                   acc: np.ndarray, sync_vals: tuple[Any, Any] | None,
                   syncs: SyncTrack | None, q: np.ndarray) -> None:
-        """Decode and store (data) or apply (SN_Sync, SN_Status, alert) the accepted frames.
-
-        ``rows`` (m, 8) uint8 payloads, ``tsd`` data times, ``acc`` accepted mask,
-        ``sync_vals`` (tick mode SN_Sync) Tick and PeriodUs, ``q`` segment positions.
-        """
+        """Decode and store (data) or apply (SN_Sync, SN_Status, alert) the frames ``acc``
+        of ``rows`` (m, 8); ``sync_vals``: tick mode SN_Sync values; ``q``: positions."""
         n_acc = int(np.count_nonzero(acc))
         if not n_acc:
             return

@@ -1,33 +1,12 @@
 """Data time: which clock places a frame, the time order check, the tick of a frame.
 
-Two clocks can give a frame its data time:
-
-* ``"tick"``, the sensor's own: every sample the node sends ``SN_Sync`` with its ``Tick``
-  and ``PeriodUs``; an E2E data frame's sample is the tick nearest the last SN_Sync's
-  whose residue mod 15 is the frame's alive counter (:func:`tick_of_counter`), its data
-  time ``tick x period`` (:func:`tick_time`) -- exact whatever the transport's latency.
-  An E2E ``SN_Status`` (or ``SUSPID_Alert``) frame has a counter of its own, not the tick's:
-  the node sends its status in the tick of the SN_Sync just before it, so its data time is
-  that SN_Sync's tick x period (a host that delivers frames late, in a bunch, then shows no
-  silence of the sender to the counter rules).
-* ``"timestamp"``, the frame's arrival time (logs, buses that stamp on reception), for
-  foreign streams that carry no sensor clock.
-
-``"auto"`` takes the tick once an ``SN_Sync`` frame is among the first ``AUTO_FRAMES``
-frames of the DBC's messages (:func:`choose_time_base`), the arrival times otherwise.
-
-Every frame must also arrive in time order: a timestamp earlier than the last accepted
-frame's, NaN or inf is rejected as ``time`` (:class:`TimeOrder`); after ``TIME_RESYNC``
-such frames in a row the clock was reset and the time base is re-anchored.
-
-In tick mode a data frame after a silence longer than 7 periods with no SN_Sync since its
-message's last frame is ``no_sync`` (:func:`stale_tick`): a link closed and reopened, the
-last tick is stale and would place the frame in the past.
-
-Scalar and array forms: :func:`tick_of_counter` / :func:`ticks_of_counters`,
-:func:`tick_time` / :func:`tick_times`, :func:`sync_time` / :func:`sync_times`,
-:meth:`TimeOrder.admit` / :func:`time_breaks`, :func:`stale_tick` / :func:`fresh_ticks`;
-:class:`SyncTrack` gives every frame of a batch the SN_Sync state it would have seen.
+``"tick"``: the sensor's own clock. An E2E data frame's sample is the tick nearest the last
+SN_Sync's whose residue mod 15 is its alive counter (:func:`tick_of_counter`); an E2E
+``SN_Status``/``SUSPID_Alert`` frame is timed by the last SN_Sync's tick. ``"timestamp"``:
+the arrival time, for streams without a sensor clock; ``"auto"`` chooses
+(:func:`choose_time_base`). Every frame must arrive in time order (:class:`TimeOrder`). In
+tick mode a data frame after a silence longer than 7 periods with no SN_Sync since its
+message's last frame is ``no_sync`` (:func:`stale_tick`): its last tick is stale.
 """
 from __future__ import annotations
 
@@ -42,26 +21,16 @@ from suspid.can.crc import COUNTER_MODULUS
 _INF = math.inf
 #: consecutive 'time' rejections after which the time base is re-anchored (a clock reset)
 TIME_RESYNC = 16
-#: ``time_source="auto"``: frames held while waiting for an ``SN_Sync`` before the time base
-#: falls back to the frame timestamps (the node sends SN_Sync with every sample)
+#: ``time_source="auto"``: frames of the DBC held while waiting for an ``SN_Sync``
 AUTO_FRAMES = 64
 #: silence (in periods, half the counter cycle) after which a data frame needs a new SN_Sync
 STALE_PERIODS = COUNTER_MODULUS // 2
 
 
-# ---- the time order ---------------------------------------------------------------------
 class TimeOrder:
-    """The time order check of a decoder (frame by frame: the reference).
-
-    Attributes
-    ----------
-    last : float
-        Timestamp of the last frame that passed (any finite time passes the first check).
-    rejects : int
-        Consecutive frames rejected for their time.
-    resyncs : int
-        Times the time base was re-anchored after a clock reset.
-    """
+    """The time order check: a timestamp before ``last`` (the last that passed), NaN or inf
+    is rejected as ``time``; after ``TIME_RESYNC`` such frames in a row (``rejects``) the
+    clock was reset and the time base is re-anchored (counted in ``resyncs``)."""
 
     __slots__ = ("last", "rejects", "resyncs")
 
@@ -81,7 +50,7 @@ class TimeOrder:
 
     def out_of_order(self, ts: float) -> bool:
         """A frame that failed ``last <= ts < inf``: ``True`` when it re-anchors the time base
-        (the caller then takes it as the new last), ``False`` when it is rejected."""
+        (the caller takes it as the new last), ``False`` when rejected."""
         if not -_INF < ts < _INF:
             return False  # NaN/inf: never a data time, never a re-anchor
         self.rejects += 1
@@ -92,15 +61,14 @@ class TimeOrder:
 
 
 def time_breaks(last: float, ts: np.ndarray) -> np.ndarray:
-    """Frames of a batch that fail the time order against their predecessor (the first one
-    against ``last``): the places where :meth:`TimeOrder.admit` may reject or re-anchor."""
+    """Frames of a batch that fail the time order against their predecessor (the first
+    against ``last``)."""
     prev = np.empty(ts.size)
     prev[0] = last
     prev[1:] = ts[:-1]
     return ~((prev <= ts) & (ts < _INF))
 
 
-# ---- the sensor tick --------------------------------------------------------------------
 def tick_of_counter(sync_tick: int, c: int) -> int:
     """The tick nearest ``sync_tick`` (at most half a counter cycle later) whose residue
     mod 15 is the alive counter ``c``."""
@@ -146,35 +114,22 @@ class TickState(Protocol):
 
 def stale_tick(route: TickState, sync_n: int, period: float, arrival: float) -> bool:
     """Tick mode: a data frame arriving at ``arrival`` (s) with ``sync_n`` SN_Sync frames
-    seen must wait for a new SN_Sync (``no_sync``): none came since its message's last frame
-    and the silence is longer than the counter can match."""
+    seen is ``no_sync``: no SN_Sync since its message's last frame, and a long silence."""
     return (route.sync_n == sync_n and route.last_c >= 0 and arrival - route.last_arrival
             > STALE_PERIODS * max(route.period, period))
 
 
 def fresh_ticks(sn: np.ndarray, prev_sn: np.ndarray, arrival: np.ndarray,
                 prev_arrival: np.ndarray, period: np.ndarray, known: np.ndarray) -> np.ndarray:
-    """Data frames that certainly have a usable tick: known tick and period, and an SN_Sync
-    since the message's previous frame or a silence short enough (:func:`stale_tick` is then
-    False whatever the message's own period estimate)."""
+    """Data frames that certainly have a usable tick (:func:`stale_tick` False whatever the
+    message's period estimate)."""
     return known & ~np.isnan(period) & ((sn != prev_sn)
                                         | (arrival - prev_arrival <= STALE_PERIODS * period))
 
 
 class SyncTrack:
-    """SN_Sync state along a batch segment (tick mode): what every frame position sees.
-
-    Parameters
-    ----------
-    tick0 : int or None
-        ``Tick`` of the last accepted SN_Sync before the segment.
-    n0 : int
-        SN_Sync frames accepted before the segment.
-    period0 : float or None
-        Period (s) before the segment.
-    shift0 : int
-        Counter shift (:attr:`TickClock.shift`) of that SN_Sync.
-    """
+    """SN_Sync state along a batch segment (tick mode): what every frame position sees,
+    from the last SN_Sync's tick, count, period (s) and counter shift before it."""
 
     def __init__(self, tick0: int | None, n0: int, period0: float | None,
                  shift0: int = 0) -> None:
@@ -186,10 +141,9 @@ class SyncTrack:
         self.ticks = np.empty(0, dtype=np.int64)
         self.periods = np.empty(0)
         self.shifts = np.empty(0, dtype=np.int64)
-        #: counter shifts (:attr:`TickClock.shift`) of the SN_Sync run being accepted
+        #: counter shifts of the SN_Sync run being accepted
         self.pending_shifts: np.ndarray | None = None
-        # filled by the segment for the frames of the other messages (from index lo of the
-        # sorted segment arrays on): SN_Sync count, tick known, period (NaN unknown)
+        # the other messages' frames from index lo on: SN_Sync count, tick known, period
         self.lo = 0
         self.sn = np.empty(0, dtype=np.int64)
         self.known = np.empty(0, dtype=bool)
@@ -197,8 +151,7 @@ class SyncTrack:
 
     def add(self, pos: np.ndarray, ticks: np.ndarray, period_us: np.ndarray,
             shifts: np.ndarray | None = None) -> None:
-        """The accepted SN_Sync frames of the segment: positions, (unbroken) ticks, periods
-        (µs) and counter shifts (default none)."""
+        """The accepted SN_Sync frames of the segment: positions, ticks, periods (µs), shifts."""
         self.shifts = np.zeros(len(pos), dtype=np.int64) if shifts is None else \
             np.asarray(shifts, dtype=np.int64)
         given = period_us > 0
@@ -231,43 +184,21 @@ class SyncTrack:
         return sn, st.astype(np.int64), known, per, sh.astype(np.int64)
 
 
-# ---- the sensor clock across wraps and node restarts ------------------------------------
-#: SN_Sync's Tick is a 32-bit counter: it wraps to 0 after 2^32 ticks
+#: SN_Sync's Tick is a 32-bit counter
 TICK_MODULUS = 1 << 32
-#: a node restart is recognised when SN_Sync's Tick falls back by more than this much time
-#: and the new Tick is within this much time (plus the silence before it) of the node's start
+#: a restart: the Tick falls back by more than this (s) and lies within it (plus the
+#: silence) of 0
 RESTART_S = 1.0
 
 
 class TickClock:
-    """The node's tick as one unbroken count: SN_Sync's raw ``Tick`` plus a ``base``.
+    """The node's tick as one unbroken count: SN_Sync's raw ``Tick`` plus ``base``.
 
-    The 32-bit ``Tick`` wraps after 2^32 samples (99 days at 500 Hz) and starts again at 0
-    when the node restarts (power cycle, watchdog reset) mid-drive. Raw, either would send
-    data time back and every later sample would land in the past of the stream (the
-    windows after it were never cut). A raw Tick below the last one is
-
-    * a **wrap** when counting on from the last Tick through 2^32 reaches it within the
-      silence between the two SN_Sync frames (arrival times) plus ``RESTART_S``: ``base``
-      grows by 2^32, data time goes on exactly;
-    * a **restart** when it falls back by more than ``RESTART_S`` of ticks and is itself
-      within that silence plus ``RESTART_S`` of 0: data time continues after the silence
-      (the arrival times' measure of it, at least one period), the pause a gap;
-    * else a late or replayed SN_Sync: placed with the current ``base``, the state kept.
-
-    A data frame's alive counter is its raw tick mod 15, so its tick is matched with the
-    counter shifted by ``base`` mod 15 (:attr:`shift`).
-
-    Attributes
-    ----------
-    base : int
-        Ticks added to the raw Tick.
-    last_raw : int or None
-        Raw Tick of the last SN_Sync that moved the clock.
-    last_arrival : float
-        Its arrival time (s).
-    wraps, restarts : int
-        Wraps and node restarts recognised.
+    A raw Tick below the last one is a **wrap** (``base`` grows by 2^32) when counting on
+    through 2^32 reaches it within the silence between the two SN_Sync arrivals plus
+    ``RESTART_S``; a **restart** (data time continues after the silence) when it falls back
+    by more than ``RESTART_S`` and lies within the silence plus ``RESTART_S`` of 0; else a
+    late SN_Sync, placed with the current ``base``. Counted in ``wraps`` and ``restarts``.
     """
 
     __slots__ = ("base", "last_raw", "last_arrival", "wraps", "restarts")
@@ -301,8 +232,7 @@ class TickClock:
         return raw + self.base
 
     def extend_many(self, raw: Any, period_us: Any, arrival: np.ndarray) -> np.ndarray:
-        """:meth:`extend` of SN_Sync frames in order (int64 array; one pass of numpy when no
-        Tick falls back)."""
+        """:meth:`extend` of SN_Sync frames in order (int64 array)."""
         tk = np.asarray(raw, dtype=np.int64)
         if not tk.size:
             return tk
@@ -322,7 +252,6 @@ class TickClock:
         return self.base % COUNTER_MODULUS
 
 
-# ---- which clock ------------------------------------------------------------------------
 def choose_time_base(ids: np.ndarray, sync_ids: np.ndarray, known_ids: np.ndarray,
                      final: bool) -> str | None:
     """``time_source="auto"``: ``"tick"`` if the first frames ``ids`` hold an SN_Sync,
