@@ -1,24 +1,17 @@
-"""Fault injection of the simulated node: sensor faults and bus/transmission faults.
-
-Specified on the command line as ``--fault KIND=ARGS`` (repeatable):
+"""Fault injection of the simulated node, ``--fault KIND=ARGS`` (repeatable):
 
 =========================  ================================================================
 spec                       effect
 =========================  ================================================================
-``loss=P``                 each frame is lost with probability P (random loss)
-``burst=RATE:LEN``         bursts of frame loss: RATE bursts per second (Poisson), each
-                           LEN seconds long; every frame inside a burst is lost
+``loss=P``                 each frame is lost with probability P
+``burst=RATE:LEN``         RATE bursts per second (Poisson), each LEN s, lose every frame
 ``stuck=CH:START:LEN``     sensor channel CH freezes at its value at START (s) for LEN s
-``bitflip=P``              with probability P a frame is sent with one random payload bit
-                           flipped after the CRC was computed (the receiver's CRC check
-                           must catch it)
-``late=P:DELAY``           with probability P a frame is held back DELAY seconds and sent
-                           after newer frames (out of order)
-``busoff=AT:LEN``          the CAN controller goes bus-off at AT (s) and recovers after LEN
-                           s; nothing is sent meanwhile; status reports the recovery
+``bitflip=P``              with probability P one payload bit is flipped after the CRC
+``late=P:DELAY``           with probability P a frame is sent DELAY s late (out of order)
+``busoff=AT:LEN``          the controller is bus-off from AT (s) for LEN s
 =========================  ================================================================
 
-All random choices come from one seeded generator, so a run is reproducible.
+All random choices come from one seeded generator.
 """
 from __future__ import annotations
 
@@ -35,19 +28,7 @@ FAULT_KINDS = ("loss", "burst", "stuck", "bitflip", "late", "busoff")
 
 @dataclass
 class FaultConfig:
-    """Parsed fault specification (see the module docstring).
-
-    Attributes
-    ----------
-    loss : float
-        Random frame-loss probability.
-    bursts : list of (rate_hz, length_s)
-    stuck : list of (channel, start_s, length_s)
-    bitflip : float
-        Probability of one flipped bit per frame.
-    late : tuple (probability, delay_s) or None
-    busoff : list of (at_s, length_s)
-    """
+    """Parsed fault specification (see the module docstring; times in s, rates in Hz)."""
 
     loss: float = 0.0
     bursts: list[tuple[float, float]] = field(default_factory=list)
@@ -56,21 +37,9 @@ class FaultConfig:
     late: tuple[float, float] | None = None
     busoff: list[tuple[float, float]] = field(default_factory=list)
 
-    @property
-    def active(self) -> bool:
-        """``True`` if any fault is configured."""
-        return bool(self.loss or self.bursts or self.stuck or self.bitflip or self.late
-                    or self.busoff)
-
     @classmethod
     def parse(cls, specs: Iterable[str], channels: Iterable[str] | None = None) -> "FaultConfig":
-        """Parse ``KIND=ARGS`` strings.
-
-        Raises
-        ------
-        UsageError
-            Naming the bad spec and the expected form.
-        """
+        """Parse ``KIND=ARGS`` strings (UsageError naming a bad spec and the expected form)."""
         cfg = cls()
         chans = set(channels) if channels is not None else None
         forms = {"loss": "loss=P", "burst": "burst=RATE_HZ:LENGTH_S",
@@ -109,13 +78,7 @@ class FaultConfig:
 
 
 def _fault_number(spec: str, form: str, s: str, lo: float, hi: float, what: str) -> float:
-    """Parse one number of a ``--fault`` spec, in ``[lo, hi]``.
-
-    Raises
-    ------
-    UsageError
-        Naming the spec, the field, its expected form or range and the value got.
-    """
+    """Parse one number of a ``--fault`` spec, in ``[lo, hi]`` (else UsageError)."""
     try:
         v = float(s)
     except ValueError:
@@ -127,21 +90,8 @@ def _fault_number(spec: str, form: str, s: str, lo: float, hi: float, what: str)
 
 
 class FaultInjector:
-    """Applies a :class:`FaultConfig` to the node's sensor values and transmissions.
-
-    Parameters
-    ----------
-    config : FaultConfig
-    rng : numpy Generator
-    duration : float
-        Run length (s), to draw the burst times.
-
-    Attributes
-    ----------
-    counts : dict
-        Frames affected per fault kind (``loss``, ``burst``, ``bitflip``, ``late``,
-        ``busoff``) and sensor samples held (``stuck``).
-    """
+    """Applies a :class:`FaultConfig` to the node's sensor values and transmissions over a
+    run of ``duration`` s; ``counts``: frames affected per fault kind, samples held (``stuck``)."""
 
     def __init__(self, config: FaultConfig, rng: np.random.Generator, duration: float) -> None:
         self.config = config
@@ -159,7 +109,6 @@ class FaultInjector:
         self.burst_windows = sorted(windows)
         self.busoff_windows = sorted((a, a + n) for a, n in config.busoff)
 
-    # ---- sensor side -------------------------------------------------------------------
     def sensors(self, t: float, values: dict[str, float]) -> dict[str, float]:
         """Apply stuck-sensor faults to one sample (in place) and return it."""
         for ch, start, length in self.config.stuck:
@@ -177,7 +126,6 @@ class FaultInjector:
     def stuck_active(self, t: float) -> bool:
         return any(s <= t < s + n for _, s, n in self.config.stuck)
 
-    # ---- bus side ----------------------------------------------------------------------
     def in_busoff(self, t: float) -> bool:
         """``True`` while the controller is bus-off at time ``t``."""
         return any(a <= t < b for a, b in self.busoff_windows)
@@ -190,16 +138,8 @@ class FaultInjector:
         return any(a <= t < b for a, b in self.burst_windows)
 
     def transmit(self, t: float, data: bytearray) -> tuple[bool, float]:
-        """Decide the fate of one frame at time ``t``.
-
-        Returns
-        -------
-        send : bool
-            ``False`` if the frame is lost.
-        delay : float
-            Seconds to hold it back (late frame), 0 for now. ``data`` may have been
-            corrupted in place (bit flip).
-        """
+        """Decide the fate of one frame at time ``t``: ``(send, delay s)``; a bit flip
+        corrupts ``data`` in place."""
         cfg = self.config
         if self.busoff_windows and self.in_busoff(t):
             self.counts["busoff"] += 1

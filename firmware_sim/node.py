@@ -1,20 +1,10 @@
 """The simulated suspension sensor node, written like its firmware.
 
-Main loop = :class:`firmware_sim.scheduler.Scheduler` with three tasks:
-
-* **sensor task** (500 Hz - 1 kHz): read every sensor of the plant at the tick, add sensor
-  noise, apply sensor faults (stuck), quantize and pack per the DBC
-  (:class:`suspid.can.codec.SensorEncoder`: ``SN_Sync`` with the tick, then the model's
-  sensor frames -- QC_*, HC_* or FC_* -- E2E counter = tick mod 15 and CRC), hand the frames
-  to the CAN driver;
-* **status task** (10 Hz): ``SN_Status`` with state, sample rate, fault flags, bus-off count;
-* **rx task** (every tick): drain frames from the bus (e.g. the estimator's
-  ``SUSPID_Alert``), count and keep the alerts.
-
-The *CAN driver* applies transmission faults (loss, bursts, bit flips, late frames,
-bus-off) and sends through any python-can bus; each frame's ``timestamp`` is its data time
-(s since node start). The plant is :class:`firmware_sim.plant.Plant` over the core's model;
-extra effects go in through ``extra_forces`` (or a model with ``extra_force`` set).
+A :class:`firmware_sim.scheduler.Scheduler` runs three tasks: the **sensor task** (every
+tick: sample the plant, add noise and sensor faults, send ``SN_Sync`` and the model's sensor
+frames with E2E counter = tick mod 15 and CRC), the **status task** (``SN_Status``, 10 Hz)
+and the **rx task** (drain the bus, keep ``SUSPID_Alert`` frames). The :class:`CanDriver`
+applies transmission faults; each frame's ``timestamp`` is its data time (s since start).
 """
 from __future__ import annotations
 
@@ -74,26 +64,20 @@ class NodeConfig:
     Attributes
     ----------
     model : str
-        A registered model (``quarter1``, ``quarter2``, ``half4``, ``full7``); selects the
-        model's sensor message set (QC_*, HC_* or FC_*) and ``SN_Status.SensorSet``.
+        A registered model; selects the sensor message set and ``SN_Status.SensorSet``.
     scenario : str
         See :mod:`firmware_sim.scenarios`.
     duration : float or None
         Run length (s); default per scenario.
-    rate : float
-        Sensor task rate (Hz), 500 - 1000 typical.
-    status_hz : float
-        Status task rate (Hz).
+    rate, status_hz : float
+        Sensor and status task rates (Hz).
     speed : float
         Pacing: 1 real time, X times real time, 0 as fast as possible.
     noise : float
         Multiplier of :data:`DEFAULT_NOISE` (0 = noise-free sensors).
     channels : list of str or None
-        Channels sent (default: every motion channel of the model and the roads). Ride
-        heights (``d``, ``d1_dot``, ...) may be named, and the sets of
-        :data:`~suspid.models.base.CHANNEL_SETS` (``production``: body accelerations and
-        ride heights; ``accelerometers``: every coordinate's acceleration), which send no
-        road and no wheel motion.
+        Channels sent, ride heights and :data:`~suspid.models.base.CHANNEL_SETS` names
+        allowed (default: every motion channel of the model and the roads).
     params : dict
         Plant parameter overrides (SI).
     faults : FaultConfig
@@ -143,14 +127,8 @@ class NodeSummary:
 
 
 class CanDriver:
-    """The node's CAN controller: transmission faults, late-frame queue, bus-off, send.
-
-    Parameters
-    ----------
-    sink : callable
-        ``sink(msg)`` puts a frame on the bus (``bus.send``) or into a list.
-    faults : FaultInjector
-    """
+    """The node's CAN controller: transmission faults, late-frame queue, bus-off, and
+    ``sink(msg)`` (``bus.send`` or a list's append)."""
 
     def __init__(self, sink: Callable[[can.Message], None], faults: FaultInjector) -> None:
         self.sink = sink
@@ -199,12 +177,12 @@ class SensorNode:
     dbc : path or cantools Database, optional
         Default suspid's ``suspension.dbc``.
     model : SuspensionModel, optional
-        Plant model instance (e.g. with ``extra_force`` set); default ``get_model(config.model)``.
+        Plant model instance; default ``get_model(config.model)``.
     extra_forces : sequence of callables, optional
-        Extra generalised forces ``f(t, x, u, params)`` added to the plant (the undeclared-effect hook).
+        Extra generalised forces ``f(t, x, u, params)`` added to the plant.
     effects : sequence, optional
-        Undeclared effects of :mod:`suspid.effects` (e.g. ``"coulomb_friction:F=120"``)
-        injected into the plant and the sensors without telling the estimator.
+        Undeclared effects of :mod:`suspid.effects` (``"coulomb_friction:F=120"``) injected
+        into the plant and the sensors.
     """
 
     def __init__(self, config: NodeConfig, dbc: str | Path | Database | None = None,
@@ -261,7 +239,6 @@ class SensorNode:
         except KeyError:
             self._alert_id = -1
 
-    # ---- tasks -------------------------------------------------------------------------
     def _need_driver(self) -> CanDriver:
         if self._driver is None:
             raise RuntimeError("the node's tasks run only inside run() or frames()")
@@ -336,7 +313,6 @@ class SensorNode:
                     continue
                 self.summary.alerts.append(alert)
 
-    # ---- running -------------------------------------------------------------------------
     def _scheduler(self, speed: float) -> Scheduler:
         sched = Scheduler(self.config.rate, speed)
         sched.add_task("sensor", self.config.rate, self._sensor_task)
@@ -363,24 +339,20 @@ class SensorNode:
     def run(self, bus: FrameBus, speed: float | None = None,
             stop: threading.Event | None = None, linger: float = 0.0,
             linger_until: threading.Event | None = None) -> NodeSummary:
-        """Run the scenario on a python-can bus.
+        """Run the scenario on a python-can bus (or a proxy with ``send`` and ``recv``).
 
         Parameters
         ----------
         bus : FrameBus
-            Any python-can bus (virtual, slcan, socketcan, the SLCAN pty adapter), or a proxy
-            with its ``send`` and ``recv``.
         speed : float, optional
             Overrides ``config.speed`` (0 = as fast as possible).
         stop : threading.Event, optional
             Set it to end the run early.
         linger : float, optional
-            Seconds (wall) to stay on the bus after the last sample, still receiving (e.g. an
-            alert frame from an estimator that lags behind), until ``stop`` or
-            ``linger_until`` is set. Default 0.
+            Seconds (wall) to stay on the bus after the last sample, still receiving, until
+            ``stop`` or ``linger_until`` is set.
         linger_until : threading.Event, optional
-            Ends the linger only (e.g. the SLCAN host closed the channel); unlike ``stop``
-            it does not end the run itself (a host may close and reopen mid-run).
+            Ends the linger only (e.g. the SLCAN host closed the channel).
         """
         self._bus = bus
         self._driver = CanDriver(bus.send, self.faults)
@@ -396,11 +368,8 @@ class SensorNode:
         return self._finish(stats)
 
     def frames(self) -> Iterator[can.Message]:
-        """Every frame the node would send, in order, without a bus or pacing.
-
-        Frames are stamped with their data time (s since node start); useful to write a
-        log (``suspid node --log``) or to feed a listener directly.
-        """
+        """Every frame the node would send, in order, stamped with its data time, without a
+        bus or pacing."""
         out: list[can.Message] = []
         self._bus = None
         self._driver = CanDriver(out.append, self.faults)

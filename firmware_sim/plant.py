@@ -1,19 +1,6 @@
-"""The node's plant: the core's suspension model, stepped in chunks.
-
-The physics stays in :mod:`suspid.models` / :mod:`suspid.simulate`: the plant asks
-:func:`suspid.simulate.simulate` for one chunk of samples at a time (exact for the linear
-models; the ODE path when the model has ``extra_force`` terms) and carries the state
-``[q, q']`` across chunk boundaries. Parameters may change with time (damper wear): they
-are evaluated once per chunk, i.e. held piecewise constant over ``chunk_s``.
-
-The linear chunks share one set of the model's affine pieces
-(:meth:`~suspid.models.base.SuspensionModel.affine`, computed once from the parameters at
-the start): a wearing damper or a sagging spring changes only the free parameters, so each
-chunk's state matrices are one small product instead of a new solve with the mass matrix.
-
-Undeclared effects go in through the model: pass a model whose ``extra_force`` list holds
-the extra generalised forces, or ``extra_forces=[...]`` here (appended to a copy of the
-model's list).
+"""The node's plant: the core's suspension model (:func:`suspid.simulate.simulate`) stepped
+in chunks, the state carried across them; parameters may change with time (held constant
+within a chunk) and share one set of the model's affine pieces.
 """
 from __future__ import annotations
 
@@ -48,16 +35,8 @@ class Plant:
     extra_forces : sequence of callables, optional
         Added to the model's ``extra_force`` (on a copy of the model).
     effects : sequence, optional
-        Undeclared effects from :mod:`suspid.effects` (objects, ``"NAME:k=v"``
-        strings or ``{"name", "params"}`` dicts). Physical ones go into the plant's
-        right-hand side (fast exponential integrator of :mod:`estimator.diagnose.nlsim`),
-        sensor ones (delay, offset) into what the sensors report; the sensor effects see
-        the previous chunk too, so a delay is continuous across chunk boundaries.
-
-    Attributes
-    ----------
-    channels : tuple of str
-        Channels :meth:`sample` returns (model channels, ride heights and road columns).
+        Undeclared effects from :mod:`suspid.effects`: physical ones in the plant, sensor
+        ones (delay, offset) in what the sensors report, continuous across chunks.
     """
 
     def __init__(self, model: SuspensionModel, params: Mapping[str, float] | ParamsFn,
@@ -86,7 +65,6 @@ class Plant:
             fixed = dict(params)
             self._params = lambda _t: fixed
         self.t = np.asarray(t, dtype=float)
-        #: the forward model's affine pieces in the dampers and springs (one set per plant)
         self.affine = model.affine(self._params(float(self.t[0]) if self.t.size else 0.0))
         self.road = {k: np.asarray(v, dtype=float) for k, v in (road or {}).items()}
         self.fs = 1.0 / float(self.t[1] - self.t[0]) if self.t.size > 1 else 1.0

@@ -1,19 +1,7 @@
-"""What the simulated node's sensors see: the core's excitations plus damper wear.
-
-=============  ==========================================================================
-scenario       plant and road
-=============  ==========================================================================
-initial        no road; the body (and wheel) released from the seed's initial state
-curb           a 0.1 m curb (half-cosine rise over 20 ms) at t = 0.5 s
-bump           the seed's speed bump: 0.1 m high, 3 m long, crossed at 20 km/h
-random         ISO 8608 class C road at 50 km/h (alias ``iso8608``)
-damper-wear    random road (class C, 50 km/h) while the damper ``c1`` loses damping
-               linearly from its nominal value, starting at ``wear_start`` (20 s) and
-               reaching ``wear_to`` (0.5) x nominal at the end of the run
-=============  ==========================================================================
-
-Road shapes come from :func:`suspid.excitation.make_scenario`; the plant from
-:class:`firmware_sim.plant.Plant`.
+"""What the simulated node's sensors see: ``initial`` (released from the seed's initial
+state), ``curb`` (0.1 m at t = 0.5 s), ``bump`` (the seed's speed bump at 20 km/h),
+``random`` (ISO 8608 class C at 50 km/h) and ``damper-wear`` (random road while the damper
+loses damping linearly from ``wear_start`` to ``wear_to`` x nominal at the end).
 """
 from __future__ import annotations
 
@@ -35,24 +23,8 @@ DEFAULT_DURATION = {"initial": 5.0, "curb": 5.0, "bump": 5.0, "random": 30.0, "d
 
 @dataclass
 class ScenarioSetup:
-    """A node scenario, ready for the plant.
-
-    Attributes
-    ----------
-    name : str
-    t : ndarray
-        Sample times (s).
-    road : dict
-        Road arrays (m, m/s).
-    x0 : ndarray
-        Initial state.
-    params : callable
-        ``params(t) -> dict`` (SI); constant except for damper wear.
-    nominal : dict
-        Parameters at t = 0.
-    events : dict
-        Named times (s) of interest (e.g. ``wear_start``, ``c1_below_70pct``).
-    """
+    """A node scenario, ready for the plant: sample times (s), road arrays, initial state,
+    ``params(t)`` (SI), the parameters at t = 0 and named times (s) of interest."""
 
     name: str
     t: FloatArray
@@ -87,16 +59,13 @@ def build_scenario(model: SuspensionModel, name: str, duration: float | None = N
     fs : float
         Sample rate (Hz).
     params : mapping, optional
-        Parameter overrides (SI); default the model's defaults.
+        Parameter overrides (SI).
     seed : int
         Random road seed.
-    wear_start : float
-        Damper wear: time (s) the damping starts to fall.
-    wear_to : float
-        Damper wear: damping at the end of the run as a fraction of nominal (0 < f <= 1).
+    wear_start, wear_to : float
+        Damper wear: start (s), and damping at the end as a fraction of nominal (0 < f <= 1).
     damper : str, optional
-        Damper parameter that wears (default the model's first strut damper: ``c1``;
-        ``c`` for quarter1).
+        Damper parameter that wears (default the model's first strut damper).
     """
     n = canonical_name(name)
     dur = DEFAULT_DURATION[n] if duration is None else float(duration)

@@ -1,16 +1,14 @@
 """A fixed-rate cooperative scheduler, as on a microcontroller with a timer tick.
 
-One base tick (the sensor task period, e.g. 2 ms at 500 Hz) drives every task; a task runs
-every ``n`` ticks (the 10 Hz status task every 50 ticks at 500 Hz). Pacing maps data time to
-wall time: ``speed = 1`` is real time, ``speed = X`` runs X times faster, ``speed = 0``
-runs as fast as possible. A tick that starts more than one period late is an *overrun*
-(counted, never skipped: a sample is never dropped because the host is slow).
+A task runs every ``n`` base ticks. ``speed = 1`` paces in real time, ``X`` X times faster,
+``0`` as fast as possible; a tick starting more than one period late is an *overrun*
+(counted, never skipped).
 """
 from __future__ import annotations
 
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable
 
 
@@ -22,44 +20,21 @@ class Task:
     every: int
     fn: Callable[[int], None]
     offset: int = 0
-    runs: int = 0
 
 
 @dataclass
 class SchedulerStats:
-    """What the scheduler observed.
-
-    Attributes
-    ----------
-    ticks : int
-        Base ticks executed.
-    overruns : int
-        Ticks that started more than one period behind the pacing clock.
-    max_late : float
-        Largest lateness (s, wall time) of a tick start.
-    wall : float
-        Wall-clock duration of the run (s).
-    runs : dict
-        Executions per task.
-    """
+    """Base ticks executed, overruns (ticks started more than one period late) and the
+    wall-clock duration (s) of a run."""
 
     ticks: int = 0
     overruns: int = 0
-    max_late: float = 0.0
     wall: float = 0.0
-    runs: dict[str, int] = field(default_factory=dict)
 
 
 class Scheduler:
-    """Fixed-rate scheduler with wall-clock pacing.
-
-    Parameters
-    ----------
-    tick_hz : float
-        Base tick rate (Hz).
-    speed : float
-        Data time per wall time; 0 = as fast as possible.
-    """
+    """Fixed-rate scheduler at ``tick_hz`` (Hz) with wall-clock pacing (``speed``: data time
+    per wall time; 0 = as fast as possible)."""
 
     def __init__(self, tick_hz: float, speed: float = 1.0) -> None:
         if not tick_hz > 0:
@@ -95,17 +70,11 @@ class Scheduler:
                 now = clock()
                 if target > now:
                     sleep(target - now)
-                else:
-                    late = now - target
-                    if late > stats.max_late:
-                        stats.max_late = late
-                    if late > wall_per_tick:
-                        stats.overruns += 1
+                elif now - target > wall_per_tick:
+                    stats.overruns += 1
             for task in tasks:
                 if k % task.every == task.offset:
                     task.fn(k)
-                    task.runs += 1
             stats.ticks += 1
         stats.wall = clock() - wall0
-        stats.runs = {t.name: t.runs for t in tasks}
         return stats

@@ -1,23 +1,13 @@
 """SAE J1939 frames matched to a DBC's messages by parameter group (PGN), whatever their sender.
 
-A J1939 DBC lists each parameter group under one 29-bit identifier, with some source address
-(CSS Electronics' demo DBC: 0xFE, the null address); a vehicle's frames carry the address of
-the controller that sends them (the engine 0x00, a tachograph 0xEE, ...) and, for a PDU1 group
-(PDU format < 240), the destination address in the PDU-specific byte. Neither is part of the
-PGN, nor is the priority. :class:`J1939Match` gives every extended frame whose PGN is one of
-the DBC's J1939 messages that message's identifier, so the decoder's routes, validity and
-statistics apply unchanged; the source address stays known per message (``frames.j1939``).
-
-One sender per parameter group is decoded: two controllers sending the same PGN (two speeds,
-two engine controllers) interleaved would be one stream of two signals. With
-``source`` (``can.j1939_source ADDR``) only that address is decoded; without it the first
-sender of each PGN in the stream is, and a warning names every sender with its frames and
-the one used. Frames of another sender are counted (``other_source``), not decoded.
-
-A message is J1939 when its ID is extended and cantools says so (``Message.protocol ==
-"j1939"``: the message's ``VFrameFormat J1939PG``) or the DBC's ``ProtocolType`` is ``"J1939"``.
-The PGN and source address come from cantools' own helpers
-(:func:`cantools.j1939.pgn_from_frame_id`, :func:`cantools.j1939.frame_id_unpack`).
+A J1939 DBC lists each parameter group under one 29-bit ID with some source address; a
+vehicle's frames carry their sender's address (and a PDU1 group's destination), which are
+not part of the PGN. :class:`J1939Match` gives every extended frame whose PGN is a J1939
+message of the DBC that message's ID. One sender per PGN is decoded: ``source``
+(``can.j1939_source``), else the first in the stream (with a warning naming the others);
+other senders' frames are counted (``other_source``). A message is J1939 when its ID is
+extended and cantools says so (``VFrameFormat J1939PG``) or the DBC's ``ProtocolType`` is
+``"J1939"``.
 """
 from __future__ import annotations
 
@@ -29,8 +19,7 @@ from cantools.j1939 import frame_id_unpack, pgn_from_frame_id
 from suspid.can.logs import FrameArrays
 from suspid.errors import UsageError
 
-#: the largest J1939 source address a controller may have (254 is the null address, 255
-#: the global one)
+#: the largest J1939 source address a controller may have (254: null, 255: global)
 MAX_SOURCE = 253
 #: PGNs named in the error of a log without the mapped ones
 TOP_PGNS = 5
@@ -38,12 +27,7 @@ TOP_PGNS = 5
 
 def parse_source(text: str | int | None) -> int | None:
     """``can.j1939_source`` as an address: ``0x47``, ``71`` (0..253); ``None`` for none given.
-
-    Raises
-    ------
-    UsageError
-        Not an integer, or outside 0..253.
-    """
+    Raises UsageError for anything else."""
     if text is None or isinstance(text, int):
         value = text
     else:
@@ -85,11 +69,9 @@ class J1939Match:
     Attributes
     ----------
     pgns : dict
-        PGN -> extended frames seen (all, matched or not).
-    senders : dict
-        Message name -> {source address: frames}.
-    used : dict
-        Message name -> the source address decoded.
+        PGN -> extended frames seen.
+    senders, used : dict
+        Message name -> {source address: frames}, and the address decoded.
     other_source : int
         Frames of a DBC PGN from another sender, not decoded.
     """
@@ -105,13 +87,8 @@ class J1939Match:
 
     @classmethod
     def from_db(cls, db: Database, source: str | int | None = None) -> "J1939Match | None":
-        """The match of a DBC's J1939 messages; ``None`` when it has none.
-
-        Raises
-        ------
-        UsageError
-            ``source`` given for a DBC without J1939 messages, or not an address.
-        """
+        """The match of a DBC's J1939 messages; ``None`` when it has none (UsageError when
+        ``source`` is given then, or is not an address)."""
         addr = parse_source(source)
         table = j1939_messages(db)
         if not table:
@@ -160,10 +137,9 @@ class J1939Match:
             return msg
         if fid < 0:
             return None
-        out = can.Message(timestamp=msg.timestamp, arbitration_id=fid, is_extended_id=True,
-                          data=msg.data, dlc=msg.dlc, channel=msg.channel, is_rx=msg.is_rx,
-                          is_fd=msg.is_fd, check=False)
-        return out
+        return can.Message(timestamp=msg.timestamp, arbitration_id=fid, is_extended_id=True,
+                           data=msg.data, dlc=msg.dlc, channel=msg.channel, is_rx=msg.is_rx,
+                           is_fd=msg.is_fd, check=False)
 
     def arrays(self, fa: FrameArrays) -> FrameArrays:
         """The frames with the DBC's IDs; another sender's frames left out (counted)."""

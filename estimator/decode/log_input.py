@@ -1,15 +1,8 @@
 """A CAN log as a :class:`suspid.io.csvio.Measurement` -- what ``suspid identify --input LOG`` uses.
 
-The log is read tolerantly (:func:`estimator.decode.replay.feed_log`: a candump log as
-arrays, the other formats through python-can), every frame is validated and decoded by
-:class:`~estimator.decode.listener.DecodeListener`, and the channels are aligned on a
-uniform grid. For a log written by ``suspid encode`` from a measurement CSV
-the grid is the CSV's time column and the values differ from the CSV by quantization
-only (at most half a DBC resolution step).
-
-Missing samples of measured channels stay NaN (the identifier skips them, as empty CSV
-cells); road inputs cannot have holes in a simulation, so gaps in a road channel are
-bridged by linear interpolation -- reported in ``warnings`` with their count, never silently.
+The log is fed to a :class:`~estimator.decode.listener.DecodeListener` and its channels
+aligned on a uniform grid. Missing samples of measured channels stay NaN; gaps in a road
+channel are bridged linearly, with a warning.
 """
 from __future__ import annotations
 
@@ -31,12 +24,7 @@ from suspid.models import SuspensionModel, get_model
 
 def unparsed_hint(path: str | Path, stats: ReadStats) -> str:
     """``"; nothing parsed, the first skipped: line N: reason (...)"`` when a log reader
-    parsed no frame at all but skipped lines, else ``""``.
-
-    Nothing parsed means the file is not in the format its suffix names: plain
-    ``candump can0`` output saved as ``.log`` is the usual case (suspid reads a ``.log`` as
-    ``candump -L``).
-    """
+    parsed no frame but skipped lines (the file is not in its suffix's format), else ``""``."""
     if stats.damage and not stats.frames:
         return f"; {stats.damage}"
     if stats.frames or not stats.examples:
@@ -56,9 +44,8 @@ def channel_notes(path: str | Path, stats: ReadStats, keys: Iterable[int],
     Parameters
     ----------
     path : str or Path
-        The log (for the warning).
     stats : ReadStats
-        Of the reader (``stats.channels``: frames per channel and frame key).
+        Of the reader.
     keys : iterable of int
         Frame keys (CAN ID, bit 31 for an extended one) of the sensor's data messages.
     channel : str or None
@@ -67,12 +54,10 @@ def channel_notes(path: str | Path, stats: ReadStats, keys: Iterable[int],
     Returns
     -------
     frames : dict
-        To add to the frame statistics: ``channels`` (channel -> frames read) for a log of
-        more than one channel, ``channel`` and ``other_channel`` (frames of the other
-        channels, not decoded) when one was asked for; empty for a one-channel log read whole.
+        ``channels`` (channel -> frames read) for a multi-channel log, ``channel`` and
+        ``other_channel`` when one was asked for.
     warnings : list of str
-        When no channel was asked for and the sensor's messages arrive on more than one:
-        the channels with their counts (the frames of every channel were decoded together).
+        When no channel was asked for and the sensor's messages are on more than one.
     """
     extra: dict[str, object] = {}
     if len(stats.channels) > 1 or channel is not None:
@@ -90,12 +75,8 @@ def channel_notes(path: str | Path, stats: ReadStats, keys: Iterable[int],
 
 
 def summarize_gaps(aligned: Aligned) -> list[str]:
-    """One warning line per channel with missing samples.
-
-    A channel with a sample every ``N`` cells (:func:`~estimator.decode.buffer.cadence`:
-    a page of a multiplexed message) has gaps only where ``N`` or more cells are empty
-    (:attr:`Aligned.gaps <estimator.decode.buffer.Aligned.gaps>`); its line says so.
-    """
+    """One warning line per channel with missing samples (naming the cadence of a channel
+    with one sample every ``N`` cells)."""
     out = []
     by_ch: dict[str, list] = {}
     for g in aligned.gaps:
@@ -114,13 +95,9 @@ def summarize_gaps(aligned: Aligned) -> list[str]:
 
 def aligned_to_measurement(aligned: Aligned, model: SuspensionModel, source: str = "",
                            warnings: list[str] | None = None) -> Measurement:
-    """Split aligned channels into the model's road inputs and measured channels.
-
-    Road channels with gaps are linearly interpolated across them (with a warning);
-    measured channels keep NaN. Channels without any valid sample (never sent, as an absent
-    CSV column) are left out. The vehicle's speed and odometer (``AUX_CHANNELS``) go to
-    ``aux``, never to the fitted channels.
-    """
+    """Split aligned channels into the model's road inputs (gaps bridged linearly, with a
+    warning), measured channels (NaN kept) and ``aux`` (speed, odometer); channels without
+    a valid sample are left out."""
     warns = list(warnings or [])
     road_names = set(model.roads) | {f"{r}_dot" for r in model.roads}
     road: dict[str, np.ndarray] = {}
@@ -170,41 +147,23 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
         ``.log`` (candump -L), ``.asc``, ``.blf``, ``.trc`` or ``.mf4``.
     model : str or SuspensionModel
     dbc_path : str, Path or cantools Database, optional
-        Default: the signal map file's ``dbc``, else suspid's ``suspension.dbc``; a loaded
-        Database is used as it is (no parsing per log).
+        Default: the signal map file's ``dbc``, else suspid's ``suspension.dbc``.
     signal_map : SignalMap, path or list of str, optional
         Needed for a foreign DBC (see :mod:`suspid.can.signal_map`).
-    time_source : {"timestamp", "tick", "auto"}
-        Frame timestamps, the node's ``SN_Sync`` ticks, or (default) the ticks when the log
-        carries ``SN_Sync`` frames and the timestamps otherwise.
+    time_source, max_counter_delta, arrival_slots, j1939_source
+        See :class:`~estimator.decode.listener.DecodeListener` (default: ``"auto"``, and
+        frames placed in their sample slots when the log has no sensor clock).
     dt : float, optional
         Grid step (s); default the median frame interval.
-    max_counter_delta : int
-        See :class:`~estimator.decode.listener.DecodeListener`.
-    arrival_slots : bool
-        With the timestamp time base (no sensor clock in the log), place each frame in its
-        sample slot from its arrival time and its order within its message
-        (:mod:`estimator.decode.rules.arrival`) instead of the nearest grid cell of its
-        timestamp: arrival jitter, bursts and delivery delay then lose no frame.
     channel : str, optional
-        Decode only this bus channel of a multi-bus log, as the file names it (``"1"`` for
-        channel 1 of an ASC, BLF, TRC or MDF4 log, ``"can1"`` for a candump interface; see
-        :func:`suspid.can.logs.channel_wanted`). Default: every channel, with a warning when
-        the sensor's messages are on more than one.
-    j1939_source : str or int, optional
-        A J1939 DBC: decode the parameter groups from this source address only (``"0x47"``);
-        default the first sender of each (:mod:`estimator.decode.j1939`, with a warning
-        naming the senders when a mapped one has several).
+        Decode only this bus channel of a multi-bus log (``"1"``, ``"can1"``; see
+        :func:`suspid.can.logs.channel_wanted`); default every channel.
 
     Returns
     -------
     measurement : Measurement
-        ``t`` (s), ``road``, ``measured`` (NaN for missing samples), ``warnings``.
     frame_stats : dict
-        ``{"accepted": N, "rejected": {reason: n, ...}, "ignored": n, "lost": n,
-        "time_base": "tick" | "timestamp"}``, with ``channels``, ``channel`` and
-        ``other_channel`` as :func:`channel_notes` gives them, and ``unknown_page``
-        (message -> frames) as :meth:`DecodeListener.frame_stats` gives it.
+        :meth:`DecodeListener.frame_stats`, with what :func:`channel_notes` adds.
 
     Raises
     ------

@@ -1,15 +1,9 @@
 """Feeding logged frames to listeners: arrays, a direct loop, or a bus for ``can.Notifier``.
 
-A live bus and a replayed log go through the same listener. For a log file,
-:func:`feed_log` reads a candump log straight into arrays
-(:func:`suspid.can.logs.read_log_arrays`) and hands them to
-:meth:`DecodeListener.feed_arrays <estimator.decode.listener.DecodeListener.feed_arrays>`:
-no :class:`can.Message` is built at all (the other formats are read as messages by
-python-can and converted). :func:`feed` calls ``on_message_received`` in a plain loop for
-messages already in memory. ``can.Notifier`` would add a reader thread, a ``recv`` per frame
-and a thread hand-off (about 3x slower) and nothing is gained when the source is a file;
-:class:`ReplayBus` is the same log as a python-can bus, for code that wants a Notifier
-either way (a test checks both paths give identical results).
+:func:`feed_log` reads a log as arrays (:func:`suspid.can.logs.read_log_arrays`) into
+:meth:`DecodeListener.feed_arrays <estimator.decode.listener.DecodeListener.feed_arrays>`;
+:func:`feed` calls ``on_message_received`` in a loop; :class:`ReplayBus` is a log as a
+python-can bus, for a Notifier (same results, slower).
 """
 from __future__ import annotations
 
@@ -49,12 +43,8 @@ def feed(listener: can.Listener, messages: Iterable[can.Message]) -> int:
 
 def feed_log(listener: can.Listener, path: str | Path, stats: Optional[ReadStats] = None, *,
              poll: Optional[Callable[[], int]] = None, channel: Optional[str] = None) -> int:
-    """Feed every frame of a CAN log to a listener, as fast as possible.
-
-    A :class:`~estimator.decode.listener.DecodeListener` gets the frames as arrays
-    (:meth:`~estimator.decode.listener.DecodeListener.feed_arrays`: a candump log is parsed
-    without building a message per frame); any other listener gets python-can messages.
-    The results equal feeding :func:`suspid.can.logs.read_log` message by message.
+    """Feed every frame of a CAN log to a listener, as fast as possible (a
+    ``DecodeListener`` gets arrays, any other listener python-can messages; same results).
 
     Parameters
     ----------
@@ -62,16 +52,13 @@ def feed_log(listener: can.Listener, path: str | Path, stats: Optional[ReadStats
     path : str or Path
         ``.log``, ``.asc``, ``.blf``, ``.trc`` or ``.mf4``.
     stats : ReadStats, optional
-        Filled with frames read and lines skipped (the caller counts
-        ``stats.malformed`` into the listener).
+        Filled with frames read and lines skipped (the caller counts ``stats.malformed``).
     poll : callable, optional
         Called after the first frame, then again after as many frames as it returns (at
-        least 1) -- e.g. a window driver checking the buffer's newest time, exactly where a
-        frame-by-frame loop with that countdown would have checked it.
+        least 1), as a frame-by-frame loop with that countdown would.
     channel : str, optional
-        Feed only this bus channel of a multi-bus log, named as the file names it
-        (:func:`suspid.can.logs.channel_wanted`); the other frames are counted in
-        ``stats.other_channel``. Default: every frame.
+        Feed only this bus channel of a multi-bus log (:func:`suspid.can.logs.channel_wanted`);
+        the others are counted in ``stats.other_channel``.
 
     Returns
     -------
@@ -132,11 +119,9 @@ def feed_log(listener: can.Listener, path: str | Path, stats: Optional[ReadStats
 
 def _placed(listener: can.Listener, path: str | Path, stats: Optional[ReadStats],
             channel: Optional[str] = None) -> Iterator[FrameArrays]:
-    """The chunks of a log; for a listener that places arrival times in sample slots
-    (``DecodeListener(arrival_slots=True)`` with the timestamp time base, decided on the
-    first chunk) the log is read twice: first its times and IDs alone (the slots), then its
-    frames -- as they are when no frame moves, else as one chunk with the slot times,
-    sorted by them."""
+    """The chunks of a log; for a listener that places arrival times in sample slots the
+    log is read twice: its times (the slots), then its frames, as one chunk at the slot
+    times, sorted, when any moves."""
     chunks = read_log_arrays(path, stats, channel=channel)
     first = next(chunks, None)
     if first is None:
@@ -149,8 +134,7 @@ def _placed(listener: can.Listener, path: str | Path, stats: Optional[ReadStats]
         yield first
         yield from chunks
         return
-    # pass 1: the arrival times of each data message, and whether the log's times are
-    # finite and in order (else it is decoded as it is: the time check handles it)
+    # pass 1: each data message's arrival times; are they finite and in order?
     per: dict[int, list[np.ndarray]] = {k: [] for k in listener.data_keys()}  # type: ignore[attr-defined]
     ordered = True
     last = -np.inf
@@ -196,19 +180,8 @@ def sync_to_front(fa: FrameArrays, k: int) -> FrameArrays:
 
 
 class ReplayBus(can.BusABC):
-    """A read-only python-can bus that yields the frames of an iterable (e.g. a log).
-
-    Parameters
-    ----------
-    messages : iterable of can.Message
-    channel : str, optional
-        Channel name reported by the bus.
-
-    Attributes
-    ----------
-    exhausted : bool
-        ``True`` once every message has been received.
-    """
+    """A read-only python-can bus that yields the frames of an iterable (e.g. a log);
+    ``exhausted`` once every message has been received."""
 
     def __init__(self, messages: Iterable[can.Message], channel: str = "replay",
                  **kwargs: Any) -> None:

@@ -1,29 +1,10 @@
 """The sensor node as an SLCAN (Lawicel) USB-CAN adapter on a pseudo-terminal.
 
-:class:`SlcanPtyBus` is a python-can bus for the node's side: it creates a pty with
-:func:`os.openpty` (raw mode), and a host process attaches to the slave end exactly as to a
-real adapter, e.g. ``can.Bus(interface="slcan", channel="/dev/pts/5")`` or
-``suspid monitor --interface slcan --channel /dev/pts/5``. Frames the node sends are written
-as SLCAN lines; frames the host transmits arrive through :meth:`recv`.
-
-Protocol subset (what python-can's ``slcan`` interface and common tools send), each command
-ending in ``\\r``; reply ``\\r`` for OK, ``\\a`` (BEL) for error:
-
-==========  =====================================================================
-``O``/``L``  open the channel (normal / listen-only); frames flow only while open
-``C``        close the channel
-``Sn``       bitrate code 0..8 (10 k .. 1 M), ``sXXYY`` BTR registers, ``Yn`` FD
-``V``/``v``  hardware/software version -> ``V1013`` / ``v0107``
-``N``        serial number -> ``NSUSP``
-``F``        status flags -> ``F00``
-``Zn``       timestamps off/on: frames then end in 4 hex digits of ms (0..59999)
-``t``/``T``  host transmits a standard/extended frame -> ``z`` / ``Z``
-``r``/``R``  host transmits a remote frame
-==========  =====================================================================
-
-Frame lines from the adapter: ``tIIILDD..[TTTT]\\r`` (standard) and
-``TIIIIIIIILDD..[TTTT]\\r`` (extended). Like a real adapter powered by the host, the
-simulated node waits in reset until the host opens the channel (:meth:`wait_open`).
+A host attaches to :attr:`SlcanPtyBus.path` as to a real adapter
+(``can.Bus(interface="slcan", channel="/dev/pts/5")``). Commands (ending in ``\\r``; reply
+``\\r`` OK, ``\\a`` error): ``O``/``L`` open, ``C`` close, ``Sn``/``sXXYY``/``Yn`` bitrate,
+``V``/``v``/``N``/``F`` version, serial, flags, ``Zn`` timestamps, ``t``/``T``/``r``/``R``
+host frames. The node waits until the host opens the channel (:meth:`SlcanPtyBus.wait_open`).
 """
 from __future__ import annotations
 
@@ -52,7 +33,7 @@ class SlcanPtyBus(can.BusABC):
     ----------
     write_timeout : float
         Seconds a frame may wait for room in the pty before it is dropped (counted in
-        :attr:`overflows`); the pty buffer fills when the host stops reading.
+        :attr:`overflows`).
     timestamps : bool
         Start with SLCAN timestamps on (the host can switch with ``Z0``/``Z1``).
 
@@ -60,10 +41,6 @@ class SlcanPtyBus(can.BusABC):
     ----------
     path : str
         The slave device (``/dev/pts/N``) the host opens.
-    is_open : bool
-        The host has opened the channel.
-    bitrate : int or None
-        Last bitrate the host set.
     overflows, dropped_closed, host_frames : int
         Frames dropped on a full pty, dropped while the channel was closed, and frames
         received from the host.
@@ -82,7 +59,6 @@ class SlcanPtyBus(can.BusABC):
         self.overflows = 0
         self.dropped_closed = 0
         self.host_frames = 0
-        self.commands: list[str] = []
         self._opened = threading.Event()
         self._closed_by_host = threading.Event()
         self._stop = threading.Event()
@@ -95,7 +71,6 @@ class SlcanPtyBus(can.BusABC):
         self.channel_info = f"SLCAN adapter on {self.path}"
         super().__init__(channel=self.path, **kwargs)
 
-    # ---- host side ---------------------------------------------------------------------
     @property
     def is_open(self) -> bool:
         return self._opened.is_set()
@@ -145,7 +120,6 @@ class SlcanPtyBus(can.BusABC):
         """Execute one host command; return the reply (``None`` for a blank line)."""
         if line == "":
             return "\r"
-        self.commands.append(line[:1])
         c = line[0]
         if c in "OL":
             # python-can sends 'O' twice when it sets a bitrate; accept a repeated open
@@ -207,7 +181,6 @@ class SlcanPtyBus(can.BusABC):
         except (ValueError, IndexError):
             return None
 
-    # ---- node side ---------------------------------------------------------------------
     def _write(self, data: bytes, urgent: bool = False) -> bool:
         deadline = time.monotonic() + (self.write_timeout if not urgent else 1.0)
         view = memoryview(data)
