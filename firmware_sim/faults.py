@@ -163,15 +163,5 @@ class FaultInjector:
     def flags(self, t: float) -> int:
         """SN_Status FaultFlags bits of the faults active at ``t``."""
         cfg = self.config
-        f = 0
-        if cfg.loss:
-            f |= 1 << 0
-        if self.burst_windows:
-            f |= 1 << 1
-        if self.stuck_active(t):
-            f |= 1 << 2
-        if cfg.bitflip:
-            f |= 1 << 3
-        if cfg.late:
-            f |= 1 << 4
-        return f
+        active = (cfg.loss, self.burst_windows, self.stuck_active(t), cfg.bitflip, cfg.late)
+        return sum(1 << bit for bit, on in enumerate(active) if on)

@@ -46,12 +46,9 @@ class Scheduler:
         self.speed = float(speed)
         self.tasks: list[Task] = []
 
-    def add_task(self, name: str, rate_hz: float, fn: Callable[[int], None], offset: int = 0) -> Task:
+    def add_task(self, name: str, rate_hz: float, fn: Callable[[int], None]) -> None:
         """Run ``fn(tick)`` at ``rate_hz`` (rounded to a whole number of base ticks)."""
-        every = max(1, int(round(self.tick_hz / rate_hz)))
-        task = Task(name, every, fn, offset % every)
-        self.tasks.append(task)
-        return task
+        self.tasks.append(Task(name, max(1, int(round(self.tick_hz / rate_hz))), fn))
 
     def run(self, n_ticks: int, stop: threading.Event | None = None) -> SchedulerStats:
         """Execute ``n_ticks`` base ticks (fewer if ``stop`` is set)."""

@@ -181,19 +181,9 @@ class Source:
 
     def snapshot(self) -> tuple[np.ndarray, np.ndarray]:
         """Copies ``(t (n,), values (n, k))`` in arrival order (oldest first)."""
-        with self._lock:
-            n, w, cap = self.n, self.w, self.cap
-            # views released before the lock is: an array.array cannot resize under a view
-            views = [np.frombuffer(c, dtype=np.float64, count=cap) for c in (self.t, *self.cols)]
-            if n < cap or w == 0:
-                lo = w - n if n < cap else 0
-                parts = [v[lo:lo + n].copy() for v in views]
-            else:
-                parts = [np.concatenate((v[w:], v[:w])) for v in views]
-            del views
-        tt = parts[0]
-        vv = np.column_stack(parts[1:]) if len(parts) > 1 else np.empty((n, 0))
-        return tt, vv
+        k = len(self.cols)
+        t, v = self.rows_between(None, None, range(k))
+        return t, np.column_stack([v[j] for j in range(k)]) if k else np.empty((t.size, 0))
 
     def _in_order(self) -> bool:
         """Whether the rows held have non-decreasing times (caller holds the lock); each row
@@ -224,7 +214,8 @@ class Source:
         the times held are in order."""
         with self._lock:
             n, w, cap = self.n, self.w, self.cap
-            tv = np.frombuffer(self.t, dtype=np.float64, count=cap)   # released below
+            # views released before the lock is: an array.array cannot resize under a view
+            tv = np.frombuffer(self.t, dtype=np.float64, count=cap)
             if n < cap or w == 0:
                 lo = w - n if n < cap else 0
                 spans = [(lo, lo + n)]

@@ -560,11 +560,8 @@ class DecodeEngine:
                     self.period = pus_acc[pos[-1]].item() * 1e-6
             self.sync_n += n_acc
         elif kind == STATUS:
-            i = int(np.flatnonzero(acc)[-1])
-            state, rate, flags, busoff, sset = route.decode(rows[i, :route.dlc].tobytes())
-            self.node_status = {"t": float(tsd[i]), "state": int(state),
-                                "sample_rate": float(rate), "fault_flags": int(flags),
-                                "busoff_count": int(busoff), "sensor_set": int(sset)}
+            i = int(np.flatnonzero(acc)[-1])   # the last status only
+            self._special(route, rows[i, :route.dlc].tobytes(), float(tsd[i]))
         else:
             for i in np.flatnonzero(acc).tolist():
                 if not self._special(route, rows[i, :route.dlc].tobytes(), float(tsd[i])):

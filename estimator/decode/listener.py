@@ -1,42 +1,13 @@
 """The estimator's CAN front end: a python-can Listener that validates, decodes and buffers.
 
-Every frame goes through, in order (the first failing check names the rejection reason):
-
-==================  ====================================================================
-reason              check
-==================  ====================================================================
-``frame_type``      error and remote frames carry no data
-``time``            the frame's timestamp is earlier than the last accepted frame's,
-                    or is not finite (NaN, inf)
-``unknown_id``      the CAN ID is not a message of the DBC (foreign traffic)
-``dlc``             payload length differs from the DBC's message length
-``crc``             E2E CRC-8 J1850 mismatch (corrupted payload, wrong ID)
-``counter_stale``   alive counter repeated or older (duplicate / out-of-order frame)
-``counter_jump``    counter advanced by more than ``max_counter_delta`` or is the invalid
-                    value 15; the frame re-synchronises the sequence (AUTOSAR E2E profile 1)
-``no_sync``         ``time_source="tick"`` and no ``SN_Sync`` frame received yet, or none
-                    since this message's last frame after a silence longer than 7 periods
-==================  ====================================================================
-
-Frames of DBC messages that carry no mapped channel are counted as ``ignored``; an advance
-of 2..``max_counter_delta`` is accepted and its missing frames counted as ``lost``; lines a
-log reader could not parse arrive as ``malformed`` (:meth:`DecodeListener.count_malformed`).
-Nothing is fatal: a bad frame is counted and dropped.
-
-Data time is the frame timestamp (``time_source="timestamp"``), the sensor node's sample
-tick (``"tick"``: ``Tick * PeriodUs`` of the last ``SN_Sync``, matched through the frame's
-counter, exact whatever the transport's latency), or the tick when an ``SN_Sync`` is among
-the first ``AUTO_FRAMES`` frames of the DBC and the timestamps otherwise (``"auto"``). With
-the timestamps and ``arrival_slots=True`` data frames are placed in their sample slots from
-their arrival times (:mod:`estimator.decode.rules.arrival`; frames fed one by one through
-its causal form, :mod:`estimator.decode.rules.arrival_live`).
-
-:class:`DecodeListener` only queues what a ``can.Notifier`` hands it and passes the queue
-as arrays to :meth:`~estimator.decode.engine.DecodeEngine.process`, the one decode path of
-a live bus and a log (:meth:`DecodeListener.feed_arrays`). The queue is processed when
-``batch_size`` frames wait, when a ``SUSPID_Alert`` arrives (with ``on_alert``), and before
-any result is read, so callers need not know about it; the results do not depend on the
-batch size (``tests/can/test_batch_equivalence.py``).
+Every frame is checked in order -- frame type, time order, known ID, DLC, E2E CRC, alive
+counter, (tick mode) a known tick -- and the first failing check names the rejection reason
+(:data:`~estimator.decode.stats.REJECT_REASONS`; docs/can.md "Rejection classes"). Nothing is
+fatal: a bad frame is counted and dropped. :class:`DecodeListener` queues what a
+``can.Notifier`` hands it and passes the queue as arrays to
+:meth:`~estimator.decode.engine.DecodeEngine.process`, the one decode path of a live bus and
+a log; the queue is processed when ``batch_size`` frames wait, for an awaited alert, and
+before any result is read (same results whatever the batch size).
 """
 from __future__ import annotations
 
@@ -112,40 +83,33 @@ class DecodeListener(can.Listener):
     Parameters
     ----------
     model : str or SuspensionModel
-        Which channels to extract (``quarter2`` -> x1, x2, r, ...).
     dbc : str, Path or cantools Database, optional
         Default suspid's ``suspension.dbc``.
     signal_map : SignalMap, path or list of str, optional
-        ``channel = MESSAGE.SIGNAL`` mappings; default the DBC's ``SuspidChannel``
-        attributes (suspid's DBC). Required for a foreign DBC.
+        ``channel = MESSAGE.SIGNAL`` mappings; default the DBC's ``SuspidChannel`` attributes.
     capacity : int
         Rows per message in the rolling buffer.
     growable : bool
         Grow the buffer instead of overwriting (offline loading of a whole log).
     time_source : {"timestamp", "tick", "auto"}
-        See the module docstring.
-    max_counter_delta : int
-        Largest accepted counter advance (1 = no frame may be lost).
-    stale_window : int
-        Counter steps back still read as an old (late or duplicate) frame rather than a jump.
+        Data time from the frame timestamps, the ``SN_Sync`` tick, or the tick when an
+        ``SN_Sync`` comes among the first ``AUTO_FRAMES`` frames of the DBC.
+    max_counter_delta, stale_window : int
+        Largest accepted counter advance; counter steps back read as an old frame.
     batch_size : int
-        Frames queued by :meth:`on_message_received` before they are processed as one
-        batch (``1``: every frame on arrival; same results).
+        Frames queued before they are processed as one batch (``1``: on arrival).
     on_alert : callable, optional
-        Called with each accepted ``SUSPID_Alert`` dict, in order, as soon as it arrives.
+        Called with each accepted ``SUSPID_Alert`` dict as soon as it arrives.
     arrival_slots : bool
         With the timestamp time base, place data frames in their sample slots from their
-        arrival times (:meth:`finish` releases the frames the live rule holds).
+        arrival times (:mod:`estimator.decode.rules.arrival`, ``arrival_live`` when live).
     j1939_source : str or int, optional
-        A J1939 DBC: decode each PGN from this source address only (``"0x47"``); default
-        its first sender (:class:`~estimator.decode.j1939.J1939Match`).
+        A J1939 DBC: decode each PGN from this source address only (``"0x47"``).
 
     Attributes
     ----------
-    engine : DecodeEngine
     time_source : str
         The time base in use (``"timestamp"`` while ``"auto"`` is undecided).
-    time_source_requested : str
     mean_channels : list of str
         Channels whose map subtracts the data's mean (applied at alignment).
     receive_stats : dict
@@ -174,8 +138,7 @@ class DecodeListener(can.Listener):
                 raise UsageError(f"{getattr(db, 'suspid_path', 'the DBC')} declares no channel of "
                                  f"model {self.model.name} (no SuspidChannel attributes); give a "
                                  "signal map, e.g. --map x1_ddot=MESSAGE.SIGNAL")
-        # the motions and roads, the ride heights (strut extensions) measured like them, and
-        # the vehicle's speed and odometer (never fitted: the fleet's distance per drive)
+        # motions, roads, ride heights, and speed and odometer (never fitted)
         smap.validate(db, model_channels(self.model) + list(self.model.ride_height_channels)
                       + list(AUX_CHANNELS))
         self.signal_map = smap

@@ -84,12 +84,8 @@ def feed_log(listener: can.Listener, path: str | Path, stats: Optional[ReadStats
                 left -= 1
                 if left <= 0:
                     left = max(1, int(poll()))
-        finish = getattr(listener, "finish", None)
-        if finish is not None:
-            finish()
-        return n
     chooser = listener if isinstance(listener, _TimeBaseChooser) else None
-    for fa in _placed(listener, path, stats, channel):
+    for fa in _placed(listener, path, stats, channel) if feed_arrays is not None else ():
         size = len(fa)
         if chooser is not None:
             # "auto": decided on the first chunk

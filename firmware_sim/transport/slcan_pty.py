@@ -24,6 +24,8 @@ import can
 
 _BITRATES = {"S0": 10000, "S1": 20000, "S2": 50000, "S3": 100000, "S4": 125000,
              "S5": 250000, "S6": 500000, "S7": 750000, "S8": 1000000, "S9": 83300}
+#: version, software version, serial number and status flags
+_REPLIES = {"V": "V1013\r", "v": "v0107\r", "N": "NSUSP\r", "F": "F00\r"}
 
 
 class SlcanPtyBus(can.BusABC):
@@ -138,14 +140,8 @@ class SlcanPtyBus(can.BusABC):
             return "\r"
         if c in "sYMm":
             return "\a" if self.is_open and c in "sY" else "\r"
-        if c == "V":
-            return "V1013\r"
-        if c == "v":
-            return "v0107\r"
-        if c == "N":
-            return "NSUSP\r"
-        if c == "F":
-            return "F00\r"
+        if c in _REPLIES:
+            return _REPLIES[c]
         if c == "Z":
             self.timestamps = line[1:2] == "1"
             return "\r"

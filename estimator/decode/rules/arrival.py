@@ -1,23 +1,10 @@
 """Sample slots from arrival times: the time base of a stream that carries no sensor clock.
 
-Arrival timestamps carry jitter, bursts and delivery delays, but for one message's frames:
-they arrive in order, one per period ``P``, never before their sample was taken, and a gap
-delays every later frame by whole periods while a delay or burst moves only a few. So frame
-``i`` gets slot ``k_i = i + (frames missing before it)`` and data time ``a + k_i P``:
-
-1. ``P`` from the lower convex hull of ``(i, t_i)`` (:func:`hull_period`);
-2. gaps where the lower envelope of ``u_i = t_i - i P`` (the least ``u`` of ``DETECT``
-   frames ahead minus the least of ``DETECT`` behind) rises by more than half a period,
-   sized in whole periods from up to ``SIDE`` frames on each side; in the last ``TAIL``
-   frames a gap cannot be told from a delay;
-3. ``P`` refitted by least squares of ``t`` on the slots, steps 2-3 repeated, the result
-   rounded to whole µs within ``SNAP_SE`` standard errors;
-4. the anchor ``a = min(t_i - k_i P)``.
-
-A message whose times already lie on their slot grid (within ``REGULAR_TOL``), or more than
-``STAMPED`` of whose intervals are exactly one period (stamped by a clock that ticks with the
-samples), keeps them. Messages whose periods agree within ``SAME_RATE`` share one period and
-phase (:func:`place_messages`).
+Per message, frame ``i`` gets slot ``k_i = i + (frames missing before it)`` and data time
+``a + k_i P``: ``P`` from the lower convex hull of ``(i, t_i)`` (:func:`hull_period`), gaps
+where the lower envelope of ``t_i - i P`` rises by more than half a period, ``P`` refitted on
+the slots, ``a`` the envelope. Regular or sender-stamped times are kept; messages of one rate
+share period and phase (:func:`place_messages`). docs/can.md "Without a sensor clock".
 """
 from __future__ import annotations
 

@@ -1,18 +1,10 @@
 """Sample slots from arrival times, causally: the live version of :mod:`.arrival`.
 
-Per data message (:class:`LiveSlots`): the first ``WARMUP`` frames (fewer when they span more
-than ``WARMUP_S``) are placed by the offline rule; a message that lies on a uniform grid
-already, or cannot be placed, keeps its timestamps from then on. After that the last
-``HOLD`` frames are held as look-ahead; the oldest is released in slot ``k_prev + 1`` unless
-the lower envelope of ``u = t - k P`` rises by more than half a period (a gap, as in the
-offline rule's step 2). ``P`` is refitted on the envelope of the released slots (the least
-``t - k P`` of every ``BLOCK`` frames) and rounded to whole µs within ``SNAP_SE`` standard
-errors; the anchor moves down only by more than ``ANCHOR_TOL`` periods, and where ``P``
-changes so that data times never jump.
-
-Messages whose periods agree within ``SAME_RATE`` share the first one's period and phase
-(:class:`LivePlacer`). Released and other frames are merged in time order; an arrival time
-more than ``RESET_S`` before the newest is a clock reset: the rule starts over.
+Per data message (:class:`LiveSlots`) a warm-up is placed by the offline rule, then the last
+``HOLD`` frames are held as look-ahead and the oldest released in the next slot unless the
+lower envelope of ``t - k P`` rises (a gap); ``P`` is refitted as frames are released.
+:class:`LivePlacer` shares period and phase within a rate and merges every frame back into
+time order. docs/can.md "Without a sensor clock".
 """
 from __future__ import annotations
 
@@ -93,24 +85,25 @@ class LiveSlots:
             self._release(out)
         return False
 
-    def _start(self, out: list[tuple[float, int, Any]]) -> None:
-        """The warm-up is full: place it by the offline rule."""
+    def _start(self, out: list[tuple[float, int, Any]], final: bool = False) -> None:
+        """Place the warm-up by the offline rule (``final``: the input ended, hold none)."""
         warm, self.warm = self.warm, []
         ts = np.array([w[0] for w in warm])
         sl = arrival_slots(ts)
         if sl is None or sl.regular:
             self.state = "kept"
-            if sl is not None:
+            if sl is not None and not final:
                 self.period = sl.period
             out.extend((t, -1, f) for t, f in warm)
             return
         self.state = "placing"
         self.period = sl.period
         self._t0 = float(ts[0])
-        n_out = len(warm) - min(HOLD, len(warm) // 2)
+        n_out = len(warm) if final else len(warm) - min(HOLD, len(warm) // 2)
         for i in range(n_out):
             self._take(float(ts[i]), int(sl.k[i]))
-        self._refit()
+        if not final:
+            self._refit()
         self.anchor = float(np.min(ts[:n_out] - sl.k[:n_out] * self.period))
         self.missing = int(sl.k[n_out - 1]) - (n_out - 1)
         for i in range(n_out):
@@ -218,23 +211,7 @@ class LiveSlots:
     def flush(self, out: list[tuple[float, int, Any]]) -> None:
         """The input ended: place a warm-up that did not fill, release the held frames."""
         if self.state == "warmup" and self.warm:
-            warm, self.warm = self.warm, []
-            ts = np.array([w[0] for w in warm])
-            sl = arrival_slots(ts)
-            if sl is None or sl.regular:
-                self.state = "kept"
-                out.extend((t, -1, f) for t, f in warm)
-                return
-            self.state = "placing"
-            self.period = sl.period
-            self._t0 = float(ts[0])
-            for i in range(len(warm)):
-                self._take(float(ts[i]), int(sl.k[i]))
-            self.anchor = sl.anchor
-            self.missing = sl.missing
-            for i in range(len(warm)):
-                out.append((math.nan, int(sl.k[i]), warm[i][1]))
-            self.first = (ts, sl.k)
+            self._start(out, final=True)
             return
         while self.hold:
             # the last frames: a gap cannot be told from a delay, they are consecutive

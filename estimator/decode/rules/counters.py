@@ -1,12 +1,6 @@
-"""Alive counter continuity and the per-message period estimate.
-
-Per message: the last counter ``last_c`` (-1: none yet), its data time ``last_ts`` (s) and a
-period estimate ``period`` (s; ``0.9 period + 0.1 interval`` over frames advancing by one).
-The next counter value is accepted (after a silence of more than 1.5 periods the frames a
-4-bit counter cannot show are counted ``lost``); an advance of 2..``max_counter_delta`` is
-accepted, its missing frames counted lost; a repeated or older counter (up to
-``stale_window`` steps back) is ``counter_stale`` unless the sender was silent for a counter
-cycle; anything else, and 15, is ``counter_jump`` and re-synchronises the sequence.
+"""Alive counter continuity (stale, jump, lost frames) and the per-message period estimate
+(``0.9 period + 0.1 interval`` over frames advancing by one) that tells a silence from a
+jump; docs/can.md "End-to-end protection".
 """
 from __future__ import annotations
 

@@ -1,12 +1,7 @@
-"""Data time: which clock places a frame, the time order check, the tick of a frame.
-
-``"tick"``: the sensor's own clock. An E2E data frame's sample is the tick nearest the last
-SN_Sync's whose residue mod 15 is its alive counter (:func:`tick_of_counter`); an E2E
-``SN_Status``/``SUSPID_Alert`` frame is timed by the last SN_Sync's tick. ``"timestamp"``:
-the arrival time, for streams without a sensor clock; ``"auto"`` chooses
-(:func:`choose_time_base`). Every frame must arrive in time order (:class:`TimeOrder`). In
-tick mode a data frame after a silence longer than 7 periods with no SN_Sync since its
-message's last frame is ``no_sync`` (:func:`stale_tick`): its last tick is stale.
+"""Data time: which clock places a frame (:func:`choose_time_base`), the time order check
+(:class:`TimeOrder`), a frame's tick from its alive counter (:func:`tick_of_counter`), the
+stale-tick rule (:func:`stale_tick`) and the sensor clock across wraps and restarts
+(:class:`TickClock`). docs/can.md "Sample time: SN_Sync".
 """
 from __future__ import annotations
 
