@@ -59,33 +59,11 @@ def _order(channel: str) -> int:
 
 @dataclass
 class NodeConfig:
-    """Configuration of a node run.
-
-    Attributes
-    ----------
-    model : str
-        A registered model; selects the sensor message set and ``SN_Status.SensorSet``.
-    scenario : str
-        See :mod:`firmware_sim.scenarios`.
-    duration : float or None
-        Run length (s); default per scenario.
-    rate, status_hz : float
-        Sensor and status task rates (Hz).
-    speed : float
-        Pacing: 1 real time, X times real time, 0 as fast as possible.
-    noise : float
-        Multiplier of :data:`DEFAULT_NOISE` (0 = noise-free sensors).
-    channels : list of str or None
-        Channels sent, ride heights and :data:`~suspid.models.base.CHANNEL_SETS` names
-        allowed (default: every motion channel of the model and the roads).
-    params : dict
-        Plant parameter overrides (SI).
-    faults : FaultConfig
-    seed : int
-        Seed of road, noise and faults.
-    wear_start, wear_to : float
-        Damper-wear schedule (see :func:`firmware_sim.scenarios.build_scenario`).
-    """
+    """Configuration of a node run: model and scenario (:mod:`firmware_sim.scenarios`), run
+    length (s, default per scenario), sensor and status rates (Hz), pacing ``speed`` (0: as
+    fast as possible), ``noise`` x :data:`DEFAULT_NOISE`, channels sent (names of
+    :data:`~suspid.models.base.CHANNEL_SETS` allowed; default every motion and road),
+    parameter overrides (SI), faults, seed, damper-wear schedule (s, fraction)."""
 
     model: str = "quarter2"
     scenario: str = "bump"
@@ -169,21 +147,9 @@ class CanDriver:
 
 
 class SensorNode:
-    """The simulated sensor node.
-
-    Parameters
-    ----------
-    config : NodeConfig
-    dbc : path or cantools Database, optional
-        Default suspid's ``suspension.dbc``.
-    model : SuspensionModel, optional
-        Plant model instance; default ``get_model(config.model)``.
-    extra_forces : sequence of callables, optional
-        Extra generalised forces ``f(t, x, u, params)`` added to the plant.
-    effects : sequence, optional
-        Undeclared effects of :mod:`suspid.effects` (``"coulomb_friction:F=120"``) injected
-        into the plant and the sensors.
-    """
+    """The simulated sensor node of ``config`` on a DBC (default suspid's); ``model`` (default
+    ``config.model``), ``extra_forces`` ``f(t, x, u, params)`` and undeclared ``effects``
+    (:mod:`suspid.effects`, ``"coulomb_friction:F=120"``) go into the plant."""
 
     def __init__(self, config: NodeConfig, dbc: str | Path | Database | None = None,
                  model: SuspensionModel | None = None,
@@ -339,21 +305,10 @@ class SensorNode:
     def run(self, bus: FrameBus, speed: float | None = None,
             stop: threading.Event | None = None, linger: float = 0.0,
             linger_until: threading.Event | None = None) -> NodeSummary:
-        """Run the scenario on a python-can bus (or a proxy with ``send`` and ``recv``).
-
-        Parameters
-        ----------
-        bus : FrameBus
-        speed : float, optional
-            Overrides ``config.speed`` (0 = as fast as possible).
-        stop : threading.Event, optional
-            Set it to end the run early.
-        linger : float, optional
-            Seconds (wall) to stay on the bus after the last sample, still receiving, until
-            ``stop`` or ``linger_until`` is set.
-        linger_until : threading.Event, optional
-            Ends the linger only (e.g. the SLCAN host closed the channel).
-        """
+        """Run the scenario on a python-can bus (or a proxy with ``send`` and ``recv``);
+        ``speed`` overrides ``config.speed``, ``stop`` ends the run early. After the last
+        sample the node keeps receiving for ``linger`` s (wall) unless ``stop`` or
+        ``linger_until`` (e.g. the SLCAN host closed the channel) is set."""
         self._bus = bus
         self._driver = CanDriver(bus.send, self.faults)
         sched = self._scheduler(self.config.speed if speed is None else speed)

@@ -17,27 +17,10 @@ ParamsFn = Callable[[float], Mapping[str, float]]
 
 
 class Plant:
-    """Suspension model driven by a precomputed road, sampled on a uniform grid.
-
-    Parameters
-    ----------
-    model : SuspensionModel
-    params : mapping or callable
-        Parameters (SI), or ``params(t) -> mapping`` for time-varying ones.
-    t : ndarray, shape (N,)
-        Sample times (s), uniform.
-    road : dict
-        Road arrays (m, m/s) of length N (may be empty: no road input).
-    x0 : ndarray, optional
-        Initial state ``[q, q']``.
-    chunk_s : float
-        Simulation chunk length (s); parameters are constant within a chunk.
-    extra_forces : sequence of callables, optional
-        Added to the model's ``extra_force`` (on a copy of the model).
-    effects : sequence, optional
-        Undeclared effects from :mod:`suspid.effects`: physical ones in the plant, sensor
-        ones (delay, offset) in what the sensors report, continuous across chunks.
-    """
+    """Suspension model driven by a precomputed road (m, m/s; may be empty), sampled at the
+    uniform times ``t`` (s) from ``x0`` (``[q, q']``). ``params`` (SI) may be a function of
+    time, constant within a ``chunk_s`` (s) chunk; ``extra_forces`` are added to a copy of
+    the model; ``effects`` (:mod:`suspid.effects`) act on the plant or the sensors."""
 
     def __init__(self, model: SuspensionModel, params: Mapping[str, float] | ParamsFn,
                  t: FloatArray, road: Mapping[str, FloatArray] | None = None,

@@ -47,26 +47,10 @@ def build_scenario(model: SuspensionModel, name: str, duration: float | None = N
                    fs: float = 500.0, params: Mapping[str, float] | None = None,
                    seed: int = 0, wear_start: float = 20.0, wear_to: float = 0.5,
                    damper: str | None = None) -> ScenarioSetup:
-    """Build the road, initial state and parameter schedule of a node scenario.
-
-    Parameters
-    ----------
-    model : SuspensionModel
-    name : str
-        One of :data:`SCENARIOS` (or an alias).
-    duration : float, optional
-        Run length (s); default :data:`DEFAULT_DURATION`.
-    fs : float
-        Sample rate (Hz).
-    params : mapping, optional
-        Parameter overrides (SI).
-    seed : int
-        Random road seed.
-    wear_start, wear_to : float
-        Damper wear: start (s), and damping at the end as a fraction of nominal (0 < f <= 1).
-    damper : str, optional
-        Damper parameter that wears (default the model's first strut damper).
-    """
+    """Build the road, initial state and parameter schedule of scenario ``name`` (or an
+    alias): ``duration`` (s, default :data:`DEFAULT_DURATION`), sample rate ``fs`` (Hz),
+    parameter overrides (SI), road ``seed``; damper wear from ``wear_start`` (s) to
+    ``wear_to`` x nominal at the end, of ``damper`` (default the first strut damper)."""
     n = canonical_name(name)
     dur = DEFAULT_DURATION[n] if duration is None else float(duration)
     if not dur > 0:

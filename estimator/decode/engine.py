@@ -50,20 +50,8 @@ def _row_key(fa: FrameArrays, i: int) -> int:
 
 class DecodeEngine:
     """Validate, decode and store frames; the state that carries from frame to frame.
-
-    Parameters
-    ----------
-    db : cantools Database
-        For the alert frames' decoder.
-    routes : Routes
-    buffer : RollingBuffer
-    tick_time : bool
-        Data time from the SN_Sync tick (else the frame timestamps).
-    max_counter_delta, stale_window : int
-        See :class:`~estimator.decode.rules.counters.CounterRules`.
-    collect_alerts : bool
-        Keep accepted alerts in :attr:`outbox` for a callback.
-    """
+    ``tick_time``: data time from the SN_Sync tick; ``collect_alerts``: keep accepted
+    alerts in :attr:`outbox` for a callback."""
 
     def __init__(self, db: Database, routes: Routes, buffer: RollingBuffer, *, tick_time: bool,
                  max_counter_delta: int, stale_window: int, collect_alerts: bool) -> None:
@@ -200,25 +188,20 @@ class DecodeEngine:
         self.frames += n
         ft = fa.frame_type[lo:hi]
         data64 = np.ascontiguousarray(fa.data).view(np.uint64).reshape(-1)
+        nf = None
+        sel: slice | np.ndarray = slice(lo, hi)
+        m = n
         if ft.any():
             self._rejected["frame_type"] += int(np.count_nonzero(ft))
-            nf = np.flatnonzero(~ft) + lo
+            nf = sel = np.flatnonzero(~ft) + lo
             m = int(nf.size)
             if not m:
                 return
-            ts = fa.timestamp[nf]
-            fid = fa.arbitration_id[nf]
-            ext = fa.is_extended[nf]
-            length = fa.length[nf]
-            rows = data64[nf]
-        else:
-            nf = None
-            m = n
-            ts = fa.timestamp[lo:hi]
-            fid = fa.arbitration_id[lo:hi]
-            ext = fa.is_extended[lo:hi]
-            length = fa.length[lo:hi]
-            rows = data64[lo:hi]
+        ts = fa.timestamp[sel]
+        fid = fa.arbitration_id[sel]
+        ext = fa.is_extended[sel]
+        length = fa.length[sel]
+        rows = data64[sel]
         # ---- stateless checks: outcome per frame, route, payload
         rt = self.routes
         keys = fid | (ext.astype(np.int64) << 31) if ext.any() else fid

@@ -57,23 +57,11 @@ def j1939_messages(db: Database) -> dict[int, tuple[int, str]]:
 
 
 class J1939Match:
-    """Translate the extended frames of a stream to the DBC's J1939 identifiers by PGN.
+    """Translate the extended frames of a stream to the DBC's J1939 identifiers by PGN
+    (``table``: :func:`j1939_messages`), decoding only ``source`` when given.
 
-    Parameters
-    ----------
-    table : dict
-        PGN -> (DBC frame ID, message name) (:func:`j1939_messages`).
-    source : int, optional
-        Decode only this source address (``can.j1939_source``).
-
-    Attributes
-    ----------
-    pgns : dict
-        PGN -> extended frames seen.
-    senders, used : dict
-        Message name -> {source address: frames}, and the address decoded.
-    other_source : int
-        Frames of a DBC PGN from another sender, not decoded.
+    Counts: :attr:`pgns` (PGN -> frames seen), :attr:`senders` (message -> {address:
+    frames}), :attr:`used` (message -> address decoded), :attr:`other_source`.
     """
 
     def __init__(self, table: dict[int, tuple[int, str]], source: int | None = None) -> None:

@@ -39,26 +39,9 @@ def unparsed_hint(path: str | Path, stats: ReadStats) -> str:
 
 def channel_notes(path: str | Path, stats: ReadStats, keys: Iterable[int],
                   channel: str | None) -> tuple[dict[str, object], list[str]]:
-    """Frame statistics and warnings about the bus channels of a log that has been read.
-
-    Parameters
-    ----------
-    path : str or Path
-    stats : ReadStats
-        Of the reader.
-    keys : iterable of int
-        Frame keys (CAN ID, bit 31 for an extended one) of the sensor's data messages.
-    channel : str or None
-        The channel asked for (``can.channel``), ``None`` for every channel.
-
-    Returns
-    -------
-    frames : dict
-        ``channels`` (channel -> frames read) for a multi-channel log, ``channel`` and
-        ``other_channel`` when one was asked for.
-    warnings : list of str
-        When no channel was asked for and the sensor's messages are on more than one.
-    """
+    """Frame statistics (``channels``, ``channel``, ``other_channel``) and warnings about
+    the bus channels of a log read with ``stats``; ``keys``: the sensor's data messages'
+    frame keys, ``channel``: the one asked for (None: every channel)."""
     extra: dict[str, object] = {}
     if len(stats.channels) > 1 or channel is not None:
         extra["channels"] = stats.channel_frames()

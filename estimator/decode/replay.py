@@ -74,7 +74,7 @@ def feed_log(listener: can.Listener, path: str | Path, stats: Optional[ReadStats
     """
     left = 1
     n = 0
-    feed_arrays = getattr(listener, "feed_arrays", None)
+    feed_arrays: Any = getattr(listener, "feed_arrays", None)
     if feed_arrays is None:
         on = listener.on_message_received
         for msg in read_log(path, stats, channel=channel):

@@ -149,22 +149,9 @@ def model_channels(model: SuspensionModel) -> list[str]:
 
 
 class Routes:
-    """The routes of a DBC and validated signal map, and the lookup tables of the batch path.
-
-    Attributes
-    ----------
-    by_key : dict
-        Route key -> :class:`Route`.
-    known : set of int
-        Keys of every DBC message (routed or not).
-    ordered : list of Route
-        SN_Sync first, then the E2E-protected ones (the order of a batch's frame groups).
-    keys, num : ndarray of int64
-        Sorted route keys and their index in ``ordered``.
-    dlc, e2e, start, data_e2e, tick_e2e : ndarray
-        Per route of ``ordered``: length, E2E protected, CRC start register, E2E data,
-        E2E SN_Status or SUSPID_Alert.
-    """
+    """The routes of a DBC and validated signal map (:attr:`by_key`; :attr:`ordered`: SN_Sync
+    first, then the E2E-protected ones), and the lookup tables of the batch path (sorted
+    keys, and per route of ``ordered`` its length, E2E flags, CRC start register)."""
 
     def __init__(self, db: Database, signal_map: SignalMap, buffer: RollingBuffer) -> None:
         self.by_key: dict[int, Route] = {}

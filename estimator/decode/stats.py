@@ -10,19 +10,9 @@ REJECT_REASONS: tuple[str, ...] = ("malformed", "frame_type", "time", "unknown_i
 
 @dataclass
 class FrameCounts:
-    """Frame counters of a decoder (see :mod:`estimator.decode.listener`).
-
-    Attributes
-    ----------
-    accepted : int
-        Frames validated and stored (data) or applied (SN_Sync, SN_Status, alerts).
-    ignored : int
-        Frames of DBC messages that carry no mapped channel.
-    lost : int
-        Frames the counters and the time say are missing.
-    rejected : dict
-        Reason (:data:`REJECT_REASONS`) -> frames rejected for it.
-    """
+    """Frame counters of a decoder: ``accepted`` (stored or applied), ``ignored`` (DBC
+    messages without a mapped channel), ``lost`` (missing by the counters and the time),
+    ``rejected`` (reason -> frames)."""
 
     accepted: int = 0
     ignored: int = 0

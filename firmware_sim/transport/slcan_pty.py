@@ -29,23 +29,11 @@ _REPLIES = {"V": "V1013\r", "v": "v0107\r", "N": "NSUSP\r", "F": "F00\r"}
 
 
 class SlcanPtyBus(can.BusABC):
-    """python-can bus of a simulated SLCAN adapter on a pseudo-terminal.
+    """python-can bus of a simulated SLCAN adapter on a pseudo-terminal (:attr:`path`).
 
-    Parameters
-    ----------
-    write_timeout : float
-        Seconds a frame may wait for room in the pty before it is dropped (counted in
-        :attr:`overflows`).
-    timestamps : bool
-        Start with SLCAN timestamps on (the host can switch with ``Z0``/``Z1``).
-
-    Attributes
-    ----------
-    path : str
-        The slave device (``/dev/pts/N``) the host opens.
-    overflows, dropped_closed, host_frames : int
-        Frames dropped on a full pty, dropped while the channel was closed, and frames
-        received from the host.
+    A frame that finds no room in the pty for ``write_timeout`` s is dropped and counted in
+    :attr:`overflows`, one sent while the channel is closed in :attr:`dropped_closed`;
+    :attr:`host_frames` counts the host's frames. ``timestamps``: SLCAN timestamps on.
     """
 
     def __init__(self, channel: Any = "pty", write_timeout: float = 5.0, timestamps: bool = False,

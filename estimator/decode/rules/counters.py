@@ -92,19 +92,9 @@ def steady_frames(c: np.ndarray, t: np.ndarray, starts: np.ndarray, last_c: np.n
     smallest of the run's intervals and its period before (the first frame ever always).
     Up to a run's first other frame, :meth:`CounterRules.step` reduces to :func:`period_after`.
 
-    Parameters
-    ----------
-    c, t : ndarray, shape (m,)
-        Counters and data times (s), the runs one after the other.
-    starts : ndarray of int64, shape (runs,)
-        Index of each run's first frame.
-    last_c, last_t, period0 : ndarray, shape (runs,)
-        Each message's counter (-1: none yet), data time and period before its run.
-
-    Returns
-    -------
-    steady, el, rid : ndarray, shape (m,)
-        Steady mask, interval since the message's previous frame (s), run of each frame.
+    ``c``, ``t``: counters and data times (s) of the runs one after the other, ``starts``
+    their first indices, ``last_c``, ``last_t``, ``period0`` each message's state before its
+    run. Returns the steady mask, each frame's interval (s) and run.
     """
     m = c.size
     rid = np.repeat(np.arange(starts.size), np.diff(np.r_[starts, m]))

@@ -28,20 +28,9 @@ def alive_counters(rows: np.ndarray) -> np.ndarray:
 
 def crc_ok_rows(b8: np.ndarray, start: np.ndarray, dlc: np.ndarray,
                 check: np.ndarray) -> np.ndarray:
-    """Which frames pass the E2E CRC (``True`` also where ``check`` is False), as the
-    per-frame checker says.
-
-    Parameters
-    ----------
-    b8 : ndarray of uint8, shape (m, 8)
-        Payloads (zero padded).
-    start : ndarray of uint8, shape (m,)
-        CRC register after each frame ID's data-ID bytes.
-    dlc : ndarray of int, shape (m,)
-        Each frame's message length (bytes; at most 8).
-    check : ndarray of bool, shape (m,)
-        Frames to check.
-    """
+    """Which frames of zero-padded payloads ``b8`` (m, 8) pass the E2E CRC, as the
+    per-frame checker says (``True`` where ``check`` is False); ``start``: each frame's
+    :data:`crc_start`, ``dlc``: its message length (bytes, at most 8)."""
     ok = np.ones(b8.shape[0], dtype=bool)
     if not check.any():
         return ok
