@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import math
 from bisect import bisect_left
-from typing import Any
 
 import numpy as np
 from cantools.database.can import Database
@@ -28,7 +27,7 @@ from estimator.decode.rules.timebase import (SyncTrack, TickClock, TimeOrder, fr
                                              stale_tick,
                                              sync_time, sync_times, tick_of_counter, tick_time,
                                              tick_times, ticks_of_counters, time_breaks)
-from estimator.decode.stats import FrameCounts
+from estimator.decode.rules.counters import FrameCounts
 from suspid.can.codec import decode_alert
 from suspid.can.crc import COUNTER_MODULUS
 from suspid.can.logs import FrameArrays
@@ -329,14 +328,9 @@ class DecodeEngine:
                 # the unbroken tick across wraps and node restarts (TickClock)
                 raw = np.asarray(tk, dtype=np.int64)
                 tk = self.clock.extend_many(raw, pus, t_s)
-                pus = np.asarray(pus)
                 vals = (tk, pus)
                 syncs.pending_shifts = (tk - raw) % COUNTER_MODULUS
-                if isinstance(tk, np.ndarray):
-                    t_s = sync_times(tk, pus, t_s)
-                else:
-                    t_s = np.array([sync_time(t, u) if u > 0 else x
-                                    for t, u, x in zip(tk, pus, t_s.tolist())], dtype=np.float64)
+                t_s = sync_times(tk, pus, t_s)
                 acc = self._runs(runs[:1], rows, arr, t_s, a, syncs)
             else:
                 acc = np.ones(b - a, dtype=bool)
@@ -482,15 +476,16 @@ class DecodeEngine:
                 sn_sync += 1
         return acc
 
-    def _sync_values(self, route: Route, rows: np.ndarray) -> tuple[Any, Any]:
-        """``(Tick, PeriodUs)`` of SN_Sync payloads: int64 arrays, or lists of decoded values."""
+    def _sync_values(self, route: Route, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(Tick, PeriodUs)`` of SN_Sync payloads (int64 arrays, or int64 and float64)."""
         if route.vsync is not None:
             return route.vsync(rows)
         vals = [route.decode(r.tobytes()) for r in rows[:, :route.dlc]]
-        return [v[0] for v in vals], [v[1] for v in vals]
+        return (np.array([int(v[0]) for v in vals], dtype=np.int64),
+                np.array([v[1] for v in vals], dtype=np.float64))
 
     def _accepted(self, route: Route, rows: np.ndarray, tsd: np.ndarray,
-                  acc: np.ndarray, sync_vals: tuple[Any, Any] | None,
+                  acc: np.ndarray, sync_vals: tuple[np.ndarray, np.ndarray] | None,
                   syncs: SyncTrack | None, q: np.ndarray) -> None:
         """Decode and store (data) or apply (SN_Sync, SN_Status, alert) the frames ``acc``
         of ``rows`` (m, 8); ``sync_vals``: tick mode SN_Sync values; ``q``: positions."""
@@ -528,11 +523,7 @@ class DecodeEngine:
                 if syncs is None:   # sync_vals are computed in tick mode only
                     raise RuntimeError("SN_Sync values without the tick-mode sync state")
                 tk, pus = sync_vals
-                if isinstance(tk, np.ndarray):
-                    tk_acc, pus_acc = tk[at], pus[at]
-                else:
-                    tk_acc = np.array([int(tk[i]) for i in at.tolist()], dtype=np.int64)
-                    pus_acc = np.array([pus[i] for i in at.tolist()], dtype=np.float64)
+                tk_acc, pus_acc = tk[at], pus[at]
                 shifts = None if syncs.pending_shifts is None else syncs.pending_shifts[at]
                 syncs.pending_shifts = None
                 syncs.add(q[at], tk_acc, pus_acc, shifts)

@@ -2,7 +2,7 @@
 
 Every frame is checked in order -- frame type, time order, known ID, DLC, E2E CRC, alive
 counter, (tick mode) a known tick -- and the first failing check names the rejection reason
-(:data:`~estimator.decode.stats.REJECT_REASONS`; docs/can.md "Rejection classes"). Nothing is
+(:data:`~estimator.decode.rules.counters.REJECT_REASONS`; docs/can.md "Rejection classes"). Nothing is
 fatal: a bad frame is counted and dropped. :class:`DecodeListener` queues what a
 ``can.Notifier`` hands it and passes the queue as arrays to
 :meth:`~estimator.decode.engine.DecodeEngine.process`, the one decode path of a live bus and
@@ -28,7 +28,7 @@ from estimator.decode.routes import DATA, EXT, SYNC, Routes, model_channels
 from estimator.decode.rules.arrival import arrival_slots, place_messages
 from estimator.decode.rules.arrival_live import LivePlacer, retimed
 from estimator.decode.rules.timebase import AUTO_FRAMES, TIME_RESYNC, choose_time_base, first_sync
-from estimator.decode.stats import REJECT_REASONS, FrameCounts
+from estimator.decode.rules.counters import REJECT_REASONS, FrameCounts
 from suspid.can.crc import COUNTER_MODULUS
 from suspid.can.dbc import SYNC_MESSAGE, load_dbc
 from suspid.can.logs import FrameArrays

@@ -5,17 +5,32 @@ jump; docs/can.md "End-to-end protection".
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
 
-from estimator.decode.stats import FrameCounts
 from suspid.can.crc import COUNTER_MODULUS
 
 _INF = math.inf
 #: no silence while every interval stays below this x the smallest of the estimate and the
 #: intervals so far (the estimate is a convex combination of them; margin for rounding)
 SILENCE_SAFE = 1.5 * (1.0 - 1e-9)
+#: rejection reasons, in check order
+REJECT_REASONS: tuple[str, ...] = ("malformed", "frame_type", "time", "unknown_id", "dlc", "crc",
+                                   "counter_stale", "counter_jump", "no_sync")
+
+
+@dataclass
+class FrameCounts:
+    """Frame counters of a decoder: ``accepted`` (stored or applied), ``ignored`` (DBC
+    messages without a mapped channel), ``lost`` (missing by the counters and the time),
+    ``rejected`` (reason -> frames)."""
+
+    accepted: int = 0
+    ignored: int = 0
+    lost: int = 0
+    rejected: dict[str, int] = field(default_factory=lambda: dict.fromkeys(REJECT_REASONS, 0))
 
 
 class CounterState(Protocol):

@@ -162,21 +162,11 @@ class SyncTrack:
                                          np.ndarray]:
         """At segment positions ``q``: SN_Sync count, tick, tick known, period (NaN unknown),
         counter shift."""
-        k = np.searchsorted(self.pos, q)
-        sn = self.n0 + k
-        has = k > 0
-        km1 = np.maximum(k - 1, 0)
-        if self.ticks.size:
-            st = np.where(has, self.ticks[km1], 0 if self.tick0 is None else self.tick0)
-            per = np.where(has, self.periods[km1],
-                           math.nan if self.period0 is None else self.period0)
-            sh = np.where(has, self.shifts[km1], self.shift0)
-        else:
-            st = np.full(q.size, 0 if self.tick0 is None else self.tick0, dtype=np.int64)
-            per = np.full(q.size, math.nan if self.period0 is None else self.period0)
-            sh = np.full(q.size, self.shift0, dtype=np.int64)
-        known = has | (self.tick0 is not None)
-        return sn, st.astype(np.int64), known, per, sh.astype(np.int64)
+        k = np.searchsorted(self.pos, q)   # 0: the state before the segment
+        st = np.r_[0 if self.tick0 is None else self.tick0, self.ticks].astype(np.int64)[k]
+        per = np.r_[math.nan if self.period0 is None else self.period0, self.periods][k]
+        sh = np.r_[self.shift0, self.shifts].astype(np.int64)[k]
+        return self.n0 + k, st, (k > 0) | (self.tick0 is not None), per, sh
 
 
 #: SN_Sync's Tick is a 32-bit counter
