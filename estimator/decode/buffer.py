@@ -54,12 +54,9 @@ class Aligned:
     values : dict
         ``channel -> ndarray (N,)``, NaN where no valid sample fell.
     gaps : list of Gap
-        Runs of NaN per channel; for a channel with one sample every ``N`` cells
-        (:func:`cadence`), only runs of ``N`` cells or more.
-    collisions : int
-        Samples that fell on an already filled cell (the later one is kept).
-    snapped : float
-        Largest distance (s) between a frame time and its grid cell.
+        Runs of NaN per channel (for one sample every ``N`` cells: of ``N`` or more).
+    collisions, snapped
+        Samples that fell on a filled cell (the later kept); largest snap (s) to a cell.
     """
 
     t: np.ndarray
@@ -271,15 +268,9 @@ class Source:
 
 
 class RollingBuffer:
-    """Bounded rolling store of decoded channels, one ring per message.
-
-    Parameters
-    ----------
-    capacity : int
-        Rows per message ring (e.g. 65536 = 65 s at 1 kHz). Preallocated.
-    growable : bool
-        Double a full ring instead of overwriting (offline loading of a whole log).
-    """
+    """Bounded rolling store of decoded channels, one preallocated ring of ``capacity`` rows
+    per message (65536 = 65 s at 1 kHz); ``growable``: double a full ring instead of
+    overwriting (offline loading of a whole log)."""
 
     def __init__(self, capacity: int = 1 << 16, growable: bool = False) -> None:
         if capacity < 2:
@@ -347,25 +338,19 @@ class RollingBuffer:
         t, v = src.snapshot()
         return t, v[:, k]
 
-
     def align(self, channels: Iterable[str] | None = None, dt: float | None = None,
               t_start: float | None = None, t_end: float | None = None) -> Aligned:
-        """Put channels on one uniform grid without interpolating.
+        """Put ``channels`` (default all) on one uniform grid without interpolating.
 
         Parameters
         ----------
-        channels : iterable of str, optional
-            Channels to align (default all).
         dt : float, optional
-            Grid step (s); default the smallest median frame interval of the messages (the
-            page rings of a multiplexed message taken together as that message).
+            Grid step (s); default the smallest median frame interval of the messages (a
+            multiplexed message's page rings taken together).
         t_start, t_end : float, optional
             Window (s, inclusive); default everything held.
 
-        Raises
-        ------
-        InputError
-            No data, or a grid far longer than the data (a timestamp outlier).
+        Raises InputError for no data or a grid far longer than the data (a timestamp outlier).
         """
         names = list(channels) if channels is not None else self.channels
         unknown = [c for c in names if c not in self._where]

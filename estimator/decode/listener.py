@@ -328,12 +328,9 @@ class DecodeListener(can.Listener):
         return [r.key for r in self.routes.ordered if r.kind == DATA]
 
     def message_slot_times(self, arrivals: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
-        """Route key (:meth:`data_keys`) -> data times (s) of the data frames placed in their
-        sample slots, from the arrival times (s) of each message's frames in a whole log.
-
-        Messages that keep their timestamps (regular, or not placeable) are not listed;
-        what was done goes to :attr:`arrival_stats`.
-        """
+        """Route key -> data times (s) of the data frames placed in their sample slots, from
+        each message's arrival times (s) in a whole log; messages that keep their timestamps
+        are not listed. What was done goes to :attr:`arrival_stats`."""
         names, keys, slots = [], [], []
         for r in self.routes.ordered:
             t = arrivals.get(r.key)
@@ -483,20 +480,17 @@ class DecodeListener(can.Listener):
 
     def aligned(self, window: float | None = None, t_end: float | None = None,
                 dt: float | None = None, channels: Sequence[str] | None = None) -> Aligned:
-        """Buffered channels on a uniform grid (NaN and gap records where samples are missing).
+        """Buffered ``channels`` (default all mapped; a map's mean removal applied) on a
+        uniform grid, NaN and gap records where samples are missing.
 
         Parameters
         ----------
-        window : float, optional
-            Length (s) of the window ending at ``t_end`` (default: everything buffered).
-        t_end : float, optional
-            End of the window (s, data time); default the newest sample.
+        window, t_end : float, optional
+            Length (s) of the window ending at data time ``t_end`` (s; default the newest
+            sample); default everything buffered.
         dt : float, optional
             Grid step (s); default the ``SN_Sync`` period in tick mode, else the median
             frame interval.
-        channels : sequence of str, optional
-            Default every mapped channel; those whose map subtracts the mean have the
-            window's mean removed.
         """
         self.flush()
         self._live_stats()

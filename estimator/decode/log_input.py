@@ -128,33 +128,19 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
     ----------
     path : str or Path
         ``.log`` (candump -L), ``.asc``, ``.blf``, ``.trc`` or ``.mf4``.
-    model : str or SuspensionModel
     dbc_path : str, Path or cantools Database, optional
-        Default: the signal map file's ``dbc``, else suspid's ``suspension.dbc``.
-    signal_map : SignalMap, path or list of str, optional
-        Needed for a foreign DBC (see :mod:`suspid.can.signal_map`).
-    time_source, max_counter_delta, arrival_slots, j1939_source
-        See :class:`~estimator.decode.listener.DecodeListener` (default: ``"auto"``, and
-        frames placed in their sample slots when the log has no sensor clock).
+        Default: the signal map's ``dbc``, else suspid's ``suspension.dbc``.
     dt : float, optional
         Grid step (s); default the median frame interval.
     channel : str, optional
-        Decode only this bus channel of a multi-bus log (``"1"``, ``"can1"``; see
-        :func:`suspid.can.logs.channel_wanted`); default every channel.
+        One bus channel of a multi-bus log (:func:`suspid.can.logs.channel_wanted`).
+    signal_map, time_source, max_counter_delta, arrival_slots, j1939_source
+        As :class:`~estimator.decode.listener.DecodeListener`'s.
 
     Returns
     -------
-    measurement : Measurement
-    frame_stats : dict
-        :meth:`DecodeListener.frame_stats`, with what :func:`channel_notes` adds.
-
-    Raises
-    ------
-    InputError
-        Missing/unreadable log or DBC, or no accepted frame carrying a mapped channel.
-    UsageError
-        Unknown log suffix, a signal map that does not fit the DBC or model, or a
-        ``channel`` the log does not have.
+    measurement, frame_stats
+        The measurement; :meth:`DecodeListener.frame_stats` plus :func:`channel_notes`.
     """
     m = get_model(model) if isinstance(model, str) else model
     listener = DecodeListener(m, dbc_path, signal_map, capacity=1 << 14, growable=True,

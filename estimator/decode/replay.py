@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import itertools
 import time
-from dataclasses import fields
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Optional, Protocol, runtime_checkable
 
@@ -50,7 +49,11 @@ def concat_frames(parts: list[FrameArrays]) -> FrameArrays:
 
 def sort_frames(fa: FrameArrays) -> FrameArrays:
     """``fa`` in time order (stable: frames of equal time keep their order)."""
-    order = np.argsort(fa.timestamp, kind="stable")
+    return _reorder(fa, np.argsort(fa.timestamp, kind="stable"))
+
+
+def _reorder(fa: FrameArrays, order: np.ndarray) -> FrameArrays:
+    """The frames of ``fa`` in the order of the row indices ``order``."""
     out = FrameArrays(fa.timestamp[order], fa.arbitration_id[order], fa.is_extended[order],
                       fa.frame_type[order], fa.length[order], fa.data[order])
     if fa.long_data:
@@ -73,33 +76,18 @@ def feed(listener: can.Listener, messages: Iterable[can.Message]) -> int:
 def feed_log(listener: can.Listener, path: str | Path, stats: Optional[ReadStats] = None, *,
              poll: Optional[Callable[[], int]] = None, channel: Optional[str] = None) -> int:
     """Feed every frame of a CAN log to a listener, as fast as possible (a
-    ``DecodeListener`` gets arrays, any other listener python-can messages; same results).
+    ``DecodeListener`` gets arrays; same results); returns the frames fed.
 
     Parameters
     ----------
-    listener : can.Listener
     path : str or Path
-        ``.log``, ``.asc``, ``.blf``, ``.trc`` or ``.mf4``.
+        ``.log``, ``.asc``, ``.blf``, ``.trc`` or ``.mf4`` (InputError, UsageError).
     stats : ReadStats, optional
-        Filled with frames read and lines skipped (the caller counts ``stats.malformed``).
+        Filled with frames read and lines skipped.
     poll : callable, optional
-        Called after the first frame, then again after as many frames as it returns (at
-        least 1), as a frame-by-frame loop with that countdown would.
+        Called after the first frame, then after as many frames as it returns.
     channel : str, optional
-        Feed only this bus channel of a multi-bus log (:func:`suspid.can.logs.channel_wanted`);
-        the others are counted in ``stats.other_channel``.
-
-    Returns
-    -------
-    int
-        Frames fed.
-
-    Raises
-    ------
-    InputError
-        Missing or unreadable file.
-    UsageError
-        Unknown suffix, or a ``channel`` the log does not have.
+        One bus channel of a multi-bus log (:func:`suspid.can.logs.channel_wanted`).
     """
     left = 1
     n = 0
@@ -195,12 +183,8 @@ def _placed(listener: can.Listener, path: str | Path, stats: Optional[ReadStats]
 def sync_to_front(fa: FrameArrays, k: int) -> FrameArrays:
     """``fa`` with row ``k`` (the stream's first SN_Sync) moved to the front, with the first
     row's timestamp (see :meth:`DecodeListener.sync_first_index`)."""
-    order = np.r_[k, np.arange(k), np.arange(k + 1, len(fa))]
-    out = FrameArrays(**{f.name: getattr(fa, f.name)[order] for f in fields(fa)
-                         if f.name != "long_data"})
-    out.long_data = {(0 if i == k else i + 1 if i < k else i): v for i, v in fa.long_data.items()}
-    out.timestamp = out.timestamp.copy()
-    out.timestamp[0] = fa.timestamp[0]
+    out = _reorder(fa, np.r_[k, np.arange(k), np.arange(k + 1, len(fa))])
+    out.timestamp[0] = fa.timestamp[0]   # a copy: fancy indexing
     return out
 
 
