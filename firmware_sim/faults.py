@@ -138,8 +138,7 @@ class FaultInjector:
         return any(a <= t < b for a, b in self.burst_windows)
 
     def transmit(self, t: float, data: bytearray) -> tuple[bool, float]:
-        """Decide the fate of one frame at time ``t``: ``(send, delay s)``; a bit flip
-        corrupts ``data`` in place."""
+        """The fate of one frame at ``t`` (s): ``(send, delay s)``; a bit flip changes ``data``."""
         cfg = self.config
         if self.busoff_windows and self.in_busoff(t):
             self.counts["busoff"] += 1

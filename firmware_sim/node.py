@@ -45,8 +45,7 @@ class FrameBus(Protocol):
 
 
 def expand_channel_sets(model: SuspensionModel, names: Sequence[str]) -> list[str]:
-    """Channel names with each named set (:data:`~suspid.models.base.CHANNEL_SETS`)
-    replaced by its channels (:meth:`SuspensionModel.channel_set`), duplicates dropped."""
+    """Channel names with each set of :data:`~suspid.models.base.CHANNEL_SETS` expanded."""
     out: list[str] = []
     for n in names:
         out += model.channel_set(n) if n in CHANNEL_SETS else [n]
@@ -105,8 +104,7 @@ class NodeSummary:
 
 
 class CanDriver:
-    """The node's CAN controller: transmission faults, late-frame queue, bus-off, and
-    ``sink(msg)`` (``bus.send`` or a list's append)."""
+    """The node's CAN controller: transmission faults, late frames, bus-off, ``sink(msg)``."""
 
     def __init__(self, sink: Callable[[can.Message], None], faults: FaultInjector) -> None:
         self.sink = sink
@@ -323,8 +321,7 @@ class SensorNode:
         return self._finish(stats)
 
     def frames(self) -> Iterator[can.Message]:
-        """Every frame the node would send, in order, stamped with its data time, without a
-        bus or pacing."""
+        """Every frame the node would send, in order, without a bus or pacing."""
         out: list[can.Message] = []
         self._bus = None
         self._driver = CanDriver(out.append, self.faults)

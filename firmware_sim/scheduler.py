@@ -24,8 +24,7 @@ class Task:
 
 @dataclass
 class SchedulerStats:
-    """Base ticks executed, overruns (ticks started more than one period late) and the
-    wall-clock duration (s) of a run."""
+    """Base ticks run, overruns (started over a period late), wall-clock duration (s)."""
 
     ticks: int = 0
     overruns: int = 0
@@ -33,8 +32,7 @@ class SchedulerStats:
 
 
 class Scheduler:
-    """Fixed-rate scheduler at ``tick_hz`` (Hz) with wall-clock pacing (``speed``: data time
-    per wall time; 0 = as fast as possible)."""
+    """Fixed-rate scheduler with wall-clock pacing (``speed`` 0: as fast as possible)."""
 
     def __init__(self, tick_hz: float, speed: float = 1.0) -> None:
         if not tick_hz > 0:

@@ -101,8 +101,7 @@ class Source:
         self.push = self._compile_push()
 
     def _compile_push(self) -> Callable[[float, Sequence[float]], None]:
-        """Generate ``push(t, values)`` with the column stores unrolled: it runs once per
-        frame decoded one at a time (docs/performance.md "One decoder path")."""
+        """Generate ``push(t, values)``, column stores unrolled (docs/performance.md "One decoder path")."""
         ns: dict[str, object] = {"src": self, "lock": self._lock, "T": self.t}
         stores = []
         for k, col in enumerate(self.cols):
@@ -141,8 +140,7 @@ class Source:
         self.cap = cap
 
     def push_many(self, t: np.ndarray, values: np.ndarray | Sequence[np.ndarray]) -> None:
-        """Append rows ``(t[i], values[i, :])`` (``values``: (m, k) array or k columns),
-        leaving the ring exactly as :attr:`push` of every row in turn would."""
+        """Append rows ``(t[i], values[i, :])`` exactly as :attr:`push` of each row in turn would."""
         m = int(np.shape(t)[0])
         if m == 0:
             return
@@ -183,8 +181,7 @@ class Source:
         return t, np.column_stack([v[j] for j in range(k)]) if k else np.empty((t.size, 0))
 
     def _in_order(self) -> bool:
-        """Whether the rows held have non-decreasing times (caller holds the lock); each row
-        is compared with its predecessor once, at the first call after its push."""
+        """Whether the rows held have non-decreasing times (caller holds the lock; each row checked once)."""
         n, cap = self.n, self.cap
         total = self.overwritten + n + self._cleared
         first = total - n                         # number of the oldest row held
@@ -287,8 +284,7 @@ class RollingBuffer:
         return self._sources
 
     def source(self, name: str, channels: Sequence[str], group: str | None = None) -> Source:
-        """Create (or return) the ring of message ``name`` carrying ``channels`` (``group``:
-        the message of a multiplexed page's ring)."""
+        """Create (or return) the ring of message ``name`` (``group``: a multiplexed page's message)."""
         if name in self._sources:
             return self._sources[name]
         for ch in channels:
@@ -455,8 +451,7 @@ def cadence(v: np.ndarray) -> int:
 
 
 def _gaps(channel: str, v: np.ndarray, t: np.ndarray) -> list[Gap]:
-    """Runs of NaN of ``v`` as Gap records; for a channel with one sample every ``N``
-    cells (:func:`cadence`) only runs of ``N`` cells or more."""
+    """Runs of NaN of ``v`` as Gap records (of ``N`` cells or more for a :func:`cadence` of ``N``)."""
     miss = np.isnan(v)
     if not miss.any():
         return []

@@ -255,8 +255,7 @@ class DecodeEngine:
                 pos = end
 
     def _small(self, fa: FrameArrays, lo: int, hi: int) -> None:
-        """A batch smaller than ``min_batch``: frame type, then :meth:`validate` each frame
-        (the fields read as lists, cheaper than NumPy scalars)."""
+        """A batch smaller than ``min_batch``: frame type, then :meth:`validate` each frame."""
         ts = fa.timestamp[lo:hi].tolist()
         ids = fa.arbitration_id[lo:hi].tolist()
         ext = fa.is_extended[lo:hi].tolist()
@@ -487,8 +486,7 @@ class DecodeEngine:
     def _accepted(self, route: Route, rows: np.ndarray, tsd: np.ndarray,
                   acc: np.ndarray, sync_vals: tuple[np.ndarray, np.ndarray] | None,
                   syncs: SyncTrack | None, q: np.ndarray) -> None:
-        """Decode and store (data) or apply (SN_Sync, SN_Status, alert) the frames ``acc``
-        of ``rows`` (m, 8); ``sync_vals``: tick mode SN_Sync values; ``q``: positions."""
+        """Decode and store (data) or apply (SN_Sync, SN_Status, alert) the accepted frames ``acc``."""
         n_acc = int(np.count_nonzero(acc))
         if not n_acc:
             return

@@ -26,8 +26,7 @@ TOP_PGNS = 5
 
 
 def parse_source(text: str | int | None) -> int | None:
-    """``can.j1939_source`` as an address: ``0x47``, ``71`` (0..253); ``None`` for none given.
-    Raises UsageError for anything else."""
+    """``can.j1939_source`` as an address 0..253 (``0x47``, ``71``; None: none); else UsageError."""
     if text is None or isinstance(text, int):
         value = text
     else:
@@ -75,8 +74,7 @@ class J1939Match:
 
     @classmethod
     def from_db(cls, db: Database, source: str | int | None = None) -> "J1939Match | None":
-        """The match of a DBC's J1939 messages; ``None`` when it has none (UsageError when
-        ``source`` is given then, or is not an address)."""
+        """The match of a DBC's J1939 messages; ``None`` when it has none."""
         addr = parse_source(source)
         table = j1939_messages(db)
         if not table:
@@ -97,8 +95,7 @@ class J1939Match:
         return self._ids[frame_id]
 
     def _target(self, frame_id: int, count: int) -> int:
-        """The DBC frame ID for ``count`` frames of ``frame_id`` (counted), -1: another
-        sender's, ``frame_id`` itself: no J1939 message of the DBC."""
+        """The DBC frame ID for ``count`` frames of ``frame_id`` (-1: another sender's), counted."""
         pgn = pgn_from_frame_id(frame_id)
         self.pgns[pgn] = self.pgns.get(pgn, 0) + count
         hit = self._lookup(frame_id)
@@ -116,8 +113,7 @@ class J1939Match:
         return self.table[pgn][0]
 
     def message(self, msg: can.Message) -> can.Message | None:
-        """The frame with the DBC's ID (a copy), itself when not J1939, ``None`` when it is
-        another sender's."""
+        """The frame with the DBC's ID (itself when not J1939, None: another sender's)."""
         if not msg.is_extended_id or msg.is_error_frame or msg.is_remote_frame:
             return msg
         fid = self._target(msg.arbitration_id, 1)
@@ -151,8 +147,7 @@ class J1939Match:
         return out
 
     def stats(self) -> dict[str, object]:
-        """``{"messages": {name: {"pgn", "source", "sources"}}, "other_source": n}``
-        (addresses as ``"0x47"``), for ``frames.j1939``."""
+        """``{"messages": {name: {"pgn", "source", "sources"}}, "other_source": n}``."""
         msgs: dict[str, object] = {}
         for pgn, (_fid, name) in self.table.items():
             per = self.senders.get(name, {})
@@ -178,8 +173,7 @@ class J1939Match:
         return next(p for p, (_f, n) in self.table.items() if n == name)
 
     def hint(self, mapped: set[str]) -> str:
-        """Why no frame of the mapped J1939 messages was decoded: their PGNs' senders, and the
-        log's most frequent PGNs with counts (``"; ..."``), for the no-data error."""
+        """Why no frame of the mapped J1939 messages was decoded (``"; ..."``, for the error)."""
         parts = []
         for name in sorted(mapped):
             if name not in self.used and name not in self.senders:

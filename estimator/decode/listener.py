@@ -22,13 +22,13 @@ import numpy as np
 from cantools.database.can import Database
 
 from estimator.decode.buffer import Aligned, RollingBuffer
-from estimator.decode.engine import MIN_RUN, SMALL_BATCH, DecodeEngine
+from estimator.decode.engine import DecodeEngine
 from estimator.decode.j1939 import J1939Match
 from estimator.decode.routes import DATA, EXT, SYNC, Routes, model_channels
 from estimator.decode.rules.arrival import arrival_slots, place_messages
 from estimator.decode.rules.arrival_live import LivePlacer, retimed
-from estimator.decode.rules.timebase import AUTO_FRAMES, TIME_RESYNC, choose_time_base, first_sync
 from estimator.decode.rules.counters import REJECT_REASONS, FrameCounts
+from estimator.decode.rules.timebase import AUTO_FRAMES, choose_time_base, first_sync
 from suspid.can.crc import COUNTER_MODULUS
 from suspid.can.dbc import SYNC_MESSAGE, load_dbc
 from suspid.can.logs import FrameArrays
@@ -40,8 +40,7 @@ from suspid.models import SuspensionModel, get_model
 #: frames waiting before ``on_message_received`` processes the queue (default batch size)
 BATCH_SIZE = 2048
 
-__all__ = ["AUTO_FRAMES", "BATCH_SIZE", "DecodeListener", "FrameCounts", "MIN_RUN",
-           "REJECT_REASONS", "SMALL_BATCH", "TIME_RESYNC", "model_channels"]
+__all__ = ["BATCH_SIZE", "DecodeListener", "REJECT_REASONS", "model_channels"]
 
 
 def _key_of(msg: can.Message) -> int | None:
@@ -52,8 +51,7 @@ def _key_of(msg: can.Message) -> int | None:
 
 
 def _as_arrays(msgs: list[can.Message], counts: FrameCounts) -> FrameArrays:
-    """The queued messages as one batch; one that cannot be converted (``timestamp=None``, a
-    payload that is not bytes-like) is counted as ``malformed`` and left out."""
+    """The queued messages as one batch; unconvertible ones counted ``malformed`` and left out."""
     try:
         return FrameArrays.from_messages(msgs)
     except (TypeError, ValueError, OverflowError):
@@ -201,8 +199,7 @@ class DecodeListener(can.Listener):
         self.engine.min_run = value
 
     def on_message_received(self, msg: can.Message) -> None:
-        """Queue one frame (do not modify it after: its fields are read when the batch is
-        processed); with ``arrival_slots`` it goes through the live slot rule first."""
+        """Queue one frame (not to be modified after), through the live slot rule with ``arrival_slots``."""
         if self.j1939 is not None:
             got = self.j1939.message(msg)
             if got is None:
@@ -272,8 +269,7 @@ class DecodeListener(can.Listener):
         self.flush()
 
     def flush(self) -> None:
-        """Validate, decode and buffer every queued frame (readers call it implicitly);
-        with ``"auto"`` undecided the frames stay queued."""
+        """Validate, decode and buffer every queued frame (readers call it implicitly)."""
         with self._lock:
             pend = self._pending
             if self._auto:
@@ -293,8 +289,7 @@ class DecodeListener(can.Listener):
             self._deliver()
 
     def feed_arrays(self, frames: FrameArrays, start: int = 0, stop: int | None = None) -> int:
-        """Validate, decode and buffer rows ``start:stop`` of ``frames`` (after any queued
-        message); returns the frames taken."""
+        """Validate, decode and buffer rows ``start:stop`` of ``frames``; returns the frames taken."""
         stop = len(frames) if stop is None else min(stop, len(frames))
         if stop <= start:
             return 0
@@ -452,8 +447,7 @@ class DecodeListener(can.Listener):
         return out
 
     def unknown_pages(self) -> dict[str, int]:
-        """Per multiplexed message, the accepted frames whose multiplexer value is no page
-        of the DBC (stored in no ring); messages without such frames left out."""
+        """Multiplexed message -> accepted frames whose multiplexer value is no page of the DBC."""
         self.flush()
         return {r.name: r.pages.unknown for r in self.routes.ordered
                 if r.pages is not None and r.pages.unknown}

@@ -23,8 +23,7 @@ from suspid.models import SuspensionModel, get_model
 
 
 def unparsed_hint(path: str | Path, stats: ReadStats) -> str:
-    """``"; nothing parsed, the first skipped: line N: reason (...)"`` when a log reader
-    parsed no frame but skipped lines (the file is not in its suffix's format), else ``""``."""
+    """``"; nothing parsed, ..."`` when a log reader parsed no frame but skipped lines, else ``""``."""
     if stats.damage and not stats.frames:
         return f"; {stats.damage}"
     if stats.frames or not stats.examples:
@@ -58,8 +57,7 @@ def channel_notes(path: str | Path, stats: ReadStats, keys: Iterable[int],
 
 
 def summarize_gaps(aligned: Aligned) -> list[str]:
-    """One warning line per channel with missing samples (naming the cadence of a channel
-    with one sample every ``N`` cells)."""
+    """One warning line per channel with missing samples."""
     out = []
     by_ch: dict[str, list] = {}
     for g in aligned.gaps:

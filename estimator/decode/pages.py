@@ -27,8 +27,7 @@ Row = Callable[[Payload], tuple]
 
 @dataclass(eq=False)
 class PageSink:
-    """The ring of the signals of one set of pages: per-frame and array decoders, index
-    of its multiplexer in :attr:`PageSplit.muxes` (-1: every frame) and its raw pages."""
+    """The ring of the signals of one set of pages (``mux`` -1: of every frame)."""
 
     source: Source
     row: Row

@@ -181,16 +181,14 @@ def _placed(listener: can.Listener, path: str | Path, stats: Optional[ReadStats]
 
 
 def sync_to_front(fa: FrameArrays, k: int) -> FrameArrays:
-    """``fa`` with row ``k`` (the stream's first SN_Sync) moved to the front, with the first
-    row's timestamp (see :meth:`DecodeListener.sync_first_index`)."""
+    """``fa`` with row ``k`` moved to the front, with the first row's timestamp."""
     out = _reorder(fa, np.r_[k, np.arange(k), np.arange(k + 1, len(fa))])
     out.timestamp[0] = fa.timestamp[0]   # a copy: fancy indexing
     return out
 
 
 class ReplayBus(can.BusABC):
-    """A read-only python-can bus that yields the frames of an iterable (e.g. a log);
-    ``exhausted`` once every message has been received."""
+    """A read-only python-can bus that yields the frames of an iterable (e.g. a log)."""
 
     def __init__(self, messages: Iterable[can.Message], channel: str = "replay",
                  **kwargs: Any) -> None:

@@ -125,8 +125,7 @@ def _multiplexer_of(msg: Message, signal: str) -> str | None:
 
 def _page_split(msg: Message, name: str, maps: Sequence[SignalMapping],
                 buffer: RollingBuffer) -> PageSplit:
-    """The rings of a multiplexed message's mapped signals: ``name`` for those in every frame,
-    ``name[Mux=ids]`` per set of pages; every ring's group is ``name``."""
+    """The rings of a multiplexed message's mapped signals, one per set of pages."""
     groups: dict[tuple[str, tuple[int, ...]] | None, list[SignalMapping]] = {}
     for m in maps:
         mux = _multiplexer_of(msg, m.signal)

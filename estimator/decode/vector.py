@@ -35,8 +35,7 @@ def _strided(rows: np.ndarray, offset: int, dtype: str) -> np.ndarray:
 
 
 def compile_raw(spec: SignalSpec, length: int) -> RawFn | None:
-    """``f(rows (m, 8)) -> raw values (m,)`` of one signal of a ``length``-byte message, as
-    :meth:`MessageCodec.unpack_raw` gives them; ``None`` without an exact array form."""
+    """Raw values ``(m,)`` of one signal from payloads ``(m, 8)``; None without an array form."""
     if length > 8:
         return None
     if spec.is_float:

@@ -56,8 +56,7 @@ class Slots:
 
 
 def _window_min(u: np.ndarray, w: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(ahead, behind)``: at each ``i`` the least of ``u[i:i+w]`` and of ``u[i-w:i]`` (the
-    windows cut at the ends; ``behind[0]`` is ``u[0]``)."""
+    """``(ahead, behind)``: at each ``i`` the least of ``u[i:i+w]`` and of ``u[i-w:i]``."""
     n = u.size
     pad = np.full(w - 1, np.inf)
     ahead = sliding_window_view(np.r_[u, pad], w).min(axis=1)
@@ -99,8 +98,7 @@ def _slots(t: np.ndarray, period: float) -> np.ndarray:
 
 
 def hull_period(t: np.ndarray) -> float:
-    """Slope (s per frame) of the lower convex hull of ``(i, t_i)`` under the middle frame
-    (bursts and delays lie above the hull, a gap makes it bend)."""
+    """Slope (s per frame) of the lower convex hull of ``(i, t_i)`` under the middle frame."""
     n = t.size
     hull: list[int] = []
     tl = t.tolist()
@@ -131,8 +129,7 @@ def _fit_period(t: np.ndarray, k: np.ndarray) -> float:
 
 
 def arrival_slots(t: np.ndarray) -> Slots | None:
-    """Sample slots of one message's arrival times ``t`` (s, in arrival order); None when
-    they cannot be placed (fewer than ``MIN_FRAMES``, not finite or going back, no period)."""
+    """Sample slots of one message's arrival times ``t`` (s); None when they cannot be placed."""
     n = t.size
     if n < MIN_FRAMES or not bool(np.isfinite(t).all()) or bool((np.diff(t) < 0).any()):
         return None

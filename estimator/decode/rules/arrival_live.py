@@ -188,8 +188,7 @@ class LiveSlots:
         out.append((self.place(k), k, frame))
 
     def _refit(self) -> None:
-        """Refit the period on the envelope's points; the anchor moves so that the newest
-        slot keeps its data time."""
+        """Refit the period; the anchor moves so that the newest slot keeps its data time."""
         n, sk, st, skk, skt, stt = self._sums
         den = n * skk - sk * sk
         if n < 3 or not den > 0:
@@ -222,8 +221,7 @@ class LiveSlots:
             out.append((self.place(k), k, frame))
 
     def _lower(self, u: float) -> None:
-        """Take ``u = t - k P`` into the anchor: only a drop by more than ``ANCHOR_TOL``
-        periods moves it (samples must not move against windows already cut)."""
+        """Take ``u = t - k P`` into the anchor if it drops more than ``ANCHOR_TOL`` periods below."""
         if u < self.anchor - ANCHOR_TOL * self.period:
             self.anchor = u
 

@@ -42,8 +42,7 @@ class CounterState(Protocol):
 
 
 class CounterRules:
-    """The counter rules of one decoder, frame by frame (see the module docstring); lost
-    frames and rejections are counted in ``counts``."""
+    """The counter rules of one decoder, frame by frame (see the module docstring)."""
 
     __slots__ = ("counts", "rejected", "max_counter_delta", "stale_window")
 

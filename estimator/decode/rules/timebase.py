@@ -44,8 +44,7 @@ class TimeOrder:
         return True
 
     def out_of_order(self, ts: float) -> bool:
-        """A frame that failed ``last <= ts < inf``: ``True`` when it re-anchors the time base
-        (the caller takes it as the new last), ``False`` when rejected."""
+        """A frame that failed ``last <= ts < inf``: True when it re-anchors the time base."""
         if not -_INF < ts < _INF:
             return False  # NaN/inf: never a data time, never a re-anchor
         self.rejects += 1
@@ -56,8 +55,7 @@ class TimeOrder:
 
 
 def time_breaks(last: float, ts: np.ndarray) -> np.ndarray:
-    """Frames of a batch that fail the time order against their predecessor (the first
-    against ``last``)."""
+    """Frames of a batch out of time order with their predecessor (the first: with ``last``)."""
     prev = np.empty(ts.size)
     prev[0] = last
     prev[1:] = ts[:-1]
@@ -65,8 +63,7 @@ def time_breaks(last: float, ts: np.ndarray) -> np.ndarray:
 
 
 def tick_of_counter(sync_tick: int, c: int) -> int:
-    """The tick nearest ``sync_tick`` (at most half a counter cycle later) whose residue
-    mod 15 is the alive counter ``c``."""
+    """The tick nearest ``sync_tick`` whose residue mod 15 is the alive counter ``c``."""
     d = (sync_tick - c) % COUNTER_MODULUS
     return sync_tick - d if d <= COUNTER_MODULUS // 2 else sync_tick - d + COUNTER_MODULUS
 
@@ -78,8 +75,7 @@ def ticks_of_counters(sync_tick: np.ndarray, c: np.ndarray) -> np.ndarray:
 
 
 def tick_time(tick: int, period: float) -> float:
-    """Data time (s) of sample ``tick`` at ``period`` s, rounded to the µs as SN_Sync's own
-    (``PeriodUs`` is an integer)."""
+    """Data time (s) of sample ``tick`` at ``period`` s, rounded to the µs as SN_Sync's own."""
     return round(tick * period * 1e6) / 1e6
 
 
@@ -108,23 +104,20 @@ class TickState(Protocol):
 
 
 def stale_tick(route: TickState, sync_n: int, period: float, arrival: float) -> bool:
-    """Tick mode: a data frame arriving at ``arrival`` (s) with ``sync_n`` SN_Sync frames
-    seen is ``no_sync``: no SN_Sync since its message's last frame, and a long silence."""
+    """Tick mode: whether a data frame arriving at ``arrival`` (s) is ``no_sync`` (a stale tick)."""
     return (route.sync_n == sync_n and route.last_c >= 0 and arrival - route.last_arrival
             > STALE_PERIODS * max(route.period, period))
 
 
 def fresh_ticks(sn: np.ndarray, prev_sn: np.ndarray, arrival: np.ndarray,
                 prev_arrival: np.ndarray, period: np.ndarray, known: np.ndarray) -> np.ndarray:
-    """Data frames that certainly have a usable tick (:func:`stale_tick` False whatever the
-    message's period estimate)."""
+    """Data frames whose tick is certainly usable (:func:`stale_tick` False)."""
     return known & ~np.isnan(period) & ((sn != prev_sn)
                                         | (arrival - prev_arrival <= STALE_PERIODS * period))
 
 
 class SyncTrack:
-    """SN_Sync state along a batch segment (tick mode): what every frame position sees,
-    from the last SN_Sync's tick, count, period (s) and counter shift before it."""
+    """SN_Sync state along a batch segment (tick mode): what every frame position sees."""
 
     def __init__(self, tick0: int | None, n0: int, period0: float | None,
                  shift0: int = 0) -> None:
@@ -160,8 +153,7 @@ class SyncTrack:
 
     def at(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
                                          np.ndarray]:
-        """At segment positions ``q``: SN_Sync count, tick, tick known, period (NaN unknown),
-        counter shift."""
+        """At positions ``q``: SN_Sync count, tick, tick known, period (NaN unknown), shift."""
         k = np.searchsorted(self.pos, q)   # 0: the state before the segment
         st = np.r_[0 if self.tick0 is None else self.tick0, self.ticks].astype(np.int64)[k]
         per = np.r_[math.nan if self.period0 is None else self.period0, self.periods][k]
@@ -196,8 +188,7 @@ class TickClock:
         self.restarts = 0
 
     def extend(self, raw: int, period_us: float, arrival: float) -> int:
-        """The unbroken tick of an SN_Sync with raw ``Tick`` ``raw`` and ``PeriodUs``
-        ``period_us`` arriving at ``arrival`` (s)."""
+        """The unbroken tick of an SN_Sync (raw ``Tick``, ``PeriodUs``, arrival time in s)."""
         last = self.last_raw
         if last is not None and raw < last:
             period = period_us * 1e-6
