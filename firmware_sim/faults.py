@@ -1,18 +1,6 @@
-"""Fault injection of the simulated node, ``--fault KIND=ARGS`` (repeatable):
-
-=========================  ================================================================
-spec                       effect
-=========================  ================================================================
-``loss=P``                 each frame is lost with probability P
-``burst=RATE:LEN``         RATE bursts per second (Poisson), each LEN s, lose every frame
-``stuck=CH:START:LEN``     sensor channel CH freezes at its value at START (s) for LEN s
-``bitflip=P``              with probability P one payload bit is flipped after the CRC
-``late=P:DELAY``           with probability P a frame is sent DELAY s late (out of order)
-``busoff=AT:LEN``          the controller is bus-off from AT (s) for LEN s
-=========================  ================================================================
-
-All random choices come from one seeded generator.
-"""
+"""Fault injection of the simulated node, ``--fault KIND=ARGS`` (repeatable; docs/can.md):
+frame ``loss``, loss ``burst`` windows, ``stuck`` sensors, ``bitflip`` after the CRC,
+``late`` frames, ``busoff`` windows; all random choices come from one seeded generator."""
 from __future__ import annotations
 
 import functools

@@ -1,10 +1,7 @@
-"""The simulated suspension sensor node, written like its firmware.
-
-A :class:`firmware_sim.scheduler.Scheduler` runs three tasks: the **sensor task** (every
-tick: sample the plant, add noise and sensor faults, send ``SN_Sync`` and the model's sensor
-frames with E2E counter = tick mod 15 and CRC), the **status task** (``SN_Status``, 10 Hz)
-and the **rx task** (drain the bus, keep ``SUSPID_Alert`` frames). The :class:`CanDriver`
-applies transmission faults; each frame's ``timestamp`` is its data time (s since start).
+"""The simulated suspension sensor node, written like its firmware: a scheduler runs the
+sensor task (``SN_Sync`` and the sensor frames every tick), the status task (``SN_Status``)
+and the rx task (keeps ``SUSPID_Alert`` frames); the :class:`CanDriver` applies
+transmission faults. Each frame's ``timestamp`` is its data time (s since start).
 """
 from __future__ import annotations
 

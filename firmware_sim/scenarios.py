@@ -6,7 +6,7 @@ loses damping linearly from ``wear_start`` to ``wear_to`` x nominal at the end).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable, Mapping
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
@@ -63,11 +63,9 @@ def build_scenario(model: SuspensionModel, name: str, duration: float | None = N
                              f"{model.name}; expected {', '.join(nominal)}")
         nominal.update(params)
     core = {"random": "iso8608", "damper-wear": "iso8608"}.get(n, n)
-    if core == "iso8608":
-        t, road, x0 = make_scenario(model, core, duration=dur, fs=fs, params=nominal, seed=seed,
-                                    road_class="C", v_kmh=50.0)
-    else:
-        t, road, x0 = make_scenario(model, core, duration=dur, fs=fs, params=nominal, seed=seed)
+    road_opts: dict[str, Any] = {"road_class": "C", "v_kmh": 50.0} if core == "iso8608" else {}
+    t, road, x0 = make_scenario(model, core, duration=dur, fs=fs, params=nominal, seed=seed,
+                                **road_opts)
     events: dict[str, float] = {}
     if n != "damper-wear":
         fixed = dict(nominal)

@@ -1,12 +1,8 @@
 """Bounded, preallocated rolling buffer of decoded samples, and alignment on a uniform grid.
 
-Each *source* (one CAN message: one timestamp, several channels) owns a ring of ``capacity``
-rows as :class:`array.array` columns of doubles (cheap element stores; NumPy reads them
-without copying). A full ring overwrites its oldest row (counted in
-:attr:`RollingBuffer.overwritten`: memory stays flat on an endless stream), or doubles with
-``growable=True`` (offline loading of a whole log). :meth:`RollingBuffer.align` puts channels
-on one uniform grid without interpolating: empty cells stay NaN and are listed as
-:class:`Gap` records.
+One ring of :class:`array.array` columns per message: full, it overwrites its oldest row
+(:attr:`RollingBuffer.overwritten`) or doubles (``growable``). :meth:`RollingBuffer.align`
+puts channels on one grid without interpolating; empty cells stay NaN (:class:`Gap`).
 """
 from __future__ import annotations
 
@@ -234,13 +230,8 @@ class Source:
                         keep &= part >= t_start
                     if t_end is not None:
                         keep &= part <= t_end
-                    at = np.flatnonzero(keep)
-                    if at.size == b - a:
-                        pick.append(slice(a, b))
-                    elif at.size and at[-1] - at[0] + 1 == at.size:
-                        pick.append(slice(a + int(at[0]), a + int(at[-1]) + 1))   # one run
-                    elif at.size:
-                        pick.append(at + a)
+                    if keep.any():
+                        pick.append(np.flatnonzero(keep) + a)
             if not pick:
                 pick = [slice(0, 0)]
 

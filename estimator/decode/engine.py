@@ -1,15 +1,11 @@
 """The decoder's engine: batches of frames (:class:`~suspid.can.logs.FrameArrays`) ->
 validated, decoded samples in the :class:`~estimator.decode.buffer.RollingBuffer`.
 
-One entry, :meth:`DecodeEngine.process`, for a log's chunks and a live bus's queued frames.
-The stateless checks (frame type, ID, DLC, E2E CRC) run over the whole batch; the time check
-splits it into segments in time order; per message the frames whose counter advances by one
-with a steady interval need only the period recurrence
-(:func:`~estimator.decode.rules.counters.steady_frames`); accepted signals are decoded
-column-wise (:mod:`estimator.decode.vector`). What the array code does not cover (a time
-anomaly, a counter jump, a silence, a CAN FD payload, a small batch) goes through the
-per-frame rules (:meth:`DecodeEngine.validate`); the results do not depend on how frames are
-cut into batches. The engine holds no lock: the listener serialises the calls.
+:meth:`DecodeEngine.process` is the one entry, for a log's chunks and a live bus's queue.
+The stateless checks run over the whole batch, the time check splits it into segments, and
+per message the steady frames need only the period recurrence; what the array code does not
+cover (anomalies, CAN FD payloads, small batches) goes through the per-frame rules
+(:meth:`DecodeEngine.validate`) with the same results. No lock: the listener serialises calls.
 """
 from __future__ import annotations
 
@@ -172,12 +168,8 @@ class DecodeEngine:
         return True
 
     def process(self, fa: FrameArrays, lo: int, hi: int) -> None:
-        """Frames ``lo:hi`` of ``fa``, as the frame-by-frame path would.
-
-        The stateless outcomes are counted per segment (a frame rejected for its time
-        counts as ``time`` only); runs that pass the time check are one segment
-        (:meth:`_segment`), the rest goes through :meth:`validate`.
-        """
+        """Frames ``lo:hi`` of ``fa``, as the frame-by-frame path would: runs that pass the
+        time check as segments (:meth:`_segment`), the rest through :meth:`validate`."""
         n = hi - lo
         if n <= 0:
             return

@@ -1,14 +1,6 @@
-"""SAE J1939 frames matched to a DBC's messages by parameter group (PGN), whatever their sender.
-
-A J1939 DBC lists each parameter group under one 29-bit ID with some source address; a
-vehicle's frames carry their sender's address (and a PDU1 group's destination), which are
-not part of the PGN. :class:`J1939Match` gives every extended frame whose PGN is a J1939
-message of the DBC that message's ID. One sender per PGN is decoded: ``source``
-(``can.j1939_source``), else the first in the stream (with a warning naming the others);
-other senders' frames are counted (``other_source``). A message is J1939 when its ID is
-extended and cantools says so (``VFrameFormat J1939PG``) or the DBC's ``ProtocolType`` is
-``"J1939"``.
-"""
+"""SAE J1939 frames matched to a DBC's messages by parameter group (PGN), whatever their sender
+(the source address is no part of the PGN); one sender per PGN is decoded (docs/can.md
+"J1939")."""
 from __future__ import annotations
 
 import can

@@ -104,14 +104,8 @@ class DecodeListener(can.Listener):
     j1939_source : str or int, optional
         A J1939 DBC: decode each PGN from this source address only (``"0x47"``).
 
-    Attributes
-    ----------
-    time_source : str
-        The time base in use (``"timestamp"`` while ``"auto"`` is undecided).
-    mean_channels : list of str
-        Channels whose map subtracts the data's mean (applied at alignment).
-    receive_stats : dict
-        Live reception's own counters, set by the receiver.
+    :attr:`time_source` names the time base in use (``"timestamp"`` while ``"auto"`` is
+    undecided); :attr:`receive_stats` holds a live receiver's own counters.
     """
 
     def __init__(self, model: str | SuspensionModel, dbc: str | Path | Database | None = None,

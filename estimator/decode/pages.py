@@ -1,13 +1,6 @@
-"""The pages of a multiplexed message: each page's frames stored as a message of its own.
-
-A multiplexed message's frames are validated as one message (length, E2E check, alive
-counter); then each mapped signal takes its samples only from the frames whose multiplexer
-value is one of its pages (cantools ``Signal.multiplexer_ids``). The mapped signals of one
-set of pages share a ring named ``Message[Multiplexer=ids]`` (``Chassis[Page=0]``), those in
-every frame the message's ring; all share the message's name as their group (the grid step,
-:meth:`~estimator.decode.buffer.RollingBuffer.align`). A frame whose multiplexer value is no
-page of the DBC is counted (:attr:`PageSplit.unknown`) and stored in no page ring.
-"""
+"""The pages of a multiplexed message: validated as one message, each set of pages stored in a
+ring of its own (``Chassis[Page=0]``; signals in every frame in the message's ring), all of the
+message's group; frames whose multiplexer value is no page of the DBC are counted."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -46,11 +39,8 @@ class PageSink:
 
 
 class PageSplit:
-    """Store the accepted frames of one multiplexed message, page by page.
-
-    ``muxes``: the multiplexer signals the mapped signals depend on; ``sinks``: one per
-    ring. :attr:`unknown` counts frames whose multiplexer value is no page of the DBC.
-    """
+    """Store the accepted frames of one multiplexed message (``muxes``: its multiplexers)
+    in its rings, page by page; :attr:`unknown` counts frames of no page of the DBC."""
 
     def __init__(self, msg: Message, muxes: list[str], sinks: list[PageSink]) -> None:
         self.name = msg.name

@@ -1,11 +1,6 @@
-"""Array versions of the decoder's per-frame signal extraction (the batch path).
-
-On a ``(m, 8)`` uint8 array of one message's payloads: a byte-aligned little-endian
-8/16/32-bit integer or 32/64-bit float is a strided view, any other integer up to 52 bits a
-shift and mask of the payload as one 64-bit integer; then the scalar code's operations in its
-order (DBC scale and offset, the map's, NaN where the ``<Name>Valid`` bit is 0), so every
-value is bit for bit the scalar one. Other layouts have no array form (``None``): the caller
-decodes them frame by frame.
+"""Array versions of the decoder's per-frame signal extraction (the batch path): on ``(m, 8)``
+payloads, strided views or shifts and masks, then the scalar code's operations in its order,
+so every value is bit for bit the scalar one; other layouts return ``None`` (frame by frame).
 """
 from __future__ import annotations
 

@@ -1,10 +1,6 @@
-"""The sensor node as an SLCAN (Lawicel) USB-CAN adapter on a pseudo-terminal.
-
-A host attaches to :attr:`SlcanPtyBus.path` as to a real adapter
-(``can.Bus(interface="slcan", channel="/dev/pts/5")``). Commands (ending in ``\\r``; reply
-``\\r`` OK, ``\\a`` error): ``O``/``L`` open, ``C`` close, ``Sn``/``sXXYY``/``Yn`` bitrate,
-``V``/``v``/``N``/``F`` version, serial, flags, ``Zn`` timestamps, ``t``/``T``/``r``/``R``
-host frames. The node waits until the host opens the channel (:meth:`SlcanPtyBus.wait_open`).
+"""The sensor node as an SLCAN (Lawicel) USB-CAN adapter on a pseudo-terminal: a host
+attaches to :attr:`SlcanPtyBus.path` as to a real adapter (docs/can.md); the node waits until
+the host opens the channel (:meth:`SlcanPtyBus.wait_open`).
 """
 from __future__ import annotations
 

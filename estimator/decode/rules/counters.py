@@ -101,15 +101,9 @@ class CounterRules:
 def steady_frames(c: np.ndarray, t: np.ndarray, starts: np.ndarray, last_c: np.ndarray,
                   last_t: np.ndarray, period0: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Frames of consecutive message runs that only update the period estimate: the counter
-    advances by one and the interval is positive and below :data:`SILENCE_SAFE` x the
-    smallest of the run's intervals and its period before (the first frame ever always).
-    Up to a run's first other frame, :meth:`CounterRules.step` reduces to :func:`period_after`.
-
-    ``c``, ``t``: counters and data times (s) of the runs one after the other, ``starts``
-    their first indices, ``last_c``, ``last_t``, ``period0`` each message's state before its
-    run. Returns the steady mask, each frame's interval (s) and run.
-    """
+    """Steady frames of consecutive message runs (counters ``c``, data times ``t`` in s, from
+    ``starts``; each message's state before): those for which :meth:`CounterRules.step`
+    reduces to :func:`period_after`. Returns the mask, each frame's interval (s) and run."""
     m = c.size
     rid = np.repeat(np.arange(starts.size), np.diff(np.r_[starts, m]))
     prev_c = np.empty(m, dtype=np.int64)
@@ -131,10 +125,8 @@ def steady_frames(c: np.ndarray, t: np.ndarray, starts: np.ndarray, last_c: np.n
 
 
 def period_after(jobs: list[tuple[float, int, int]], el: np.ndarray) -> list[float]:
-    """Period estimates after the scalar rule's recurrence ``period = el if period <= 0 else
-    0.9 * period + 0.1 * el`` over ``el[start:stop]`` for every job ``(period before, start,
-    stop)``, bit for bit. The products are one array operation; with all of them positive
-    a positive period stays positive, so the test ``period > 0`` is made once."""
+    """Period estimates after the scalar rule's recurrence over ``el[start:stop]`` for every
+    job ``(period before, start, stop)``, bit for bit (products taken as one array)."""
     out = []
     for p, a, b in jobs:
         if a >= b:

@@ -169,14 +169,9 @@ RESTART_S = 1.0
 
 
 class TickClock:
-    """The node's tick as one unbroken count: SN_Sync's raw ``Tick`` plus ``base``.
-
-    A raw Tick below the last one is a **wrap** (``base`` grows by 2^32) when counting on
-    through 2^32 reaches it within the silence between the two SN_Sync arrivals plus
-    ``RESTART_S``; a **restart** (data time continues after the silence) when it falls back
-    by more than ``RESTART_S`` and lies within the silence plus ``RESTART_S`` of 0; else a
-    late SN_Sync, placed with the current ``base``. Counted in ``wraps`` and ``restarts``.
-    """
+    """The node's tick as one unbroken count, SN_Sync's raw ``Tick`` plus ``base``, across
+    32-bit ``wraps`` and node ``restarts`` (a Tick that falls back within ``RESTART_S`` of
+    the silence between two SN_Sync frames; anything else is a late SN_Sync)."""
 
     __slots__ = ("base", "last_raw", "last_arrival", "wraps", "restarts")
 
