@@ -142,9 +142,8 @@ class CanDriver:
 
 
 class SensorNode:
-    """The simulated sensor node of ``config`` on a DBC (default suspid's); ``model`` (default
-    ``config.model``), ``extra_forces`` ``f(t, x, u, params)`` and undeclared ``effects``
-    (:mod:`suspid.effects`, ``"coulomb_friction:F=120"``) go into the plant."""
+    """The simulated sensor node of ``config``; ``model``, ``extra_forces`` ``f(t, x, u, params)`` and
+    undeclared ``effects`` go into the plant."""
 
     def __init__(self, config: NodeConfig, dbc: str | Path | Database | None = None,
                  model: SuspensionModel | None = None,

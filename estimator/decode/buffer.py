@@ -199,9 +199,8 @@ class Source:
 
     def rows_between(self, t_start: float | None, t_end: float | None,
                      cols: Sequence[int]) -> tuple[np.ndarray, dict[int, np.ndarray]]:
-        """Copies of the times and ``{column: values}`` of columns ``cols`` of the rows with
-        ``t_start <= t <= t_end`` (None: open), in arrival order; found by bisection while
-        the times held are in order."""
+        """Copies of the times and ``{column: values}`` (columns ``cols``) of the rows with ``t_start <= t <=
+        t_end`` (None: open), in arrival order."""
         with self._lock:
             n, w, cap = self.n, self.w, self.cap
             # views released before the lock is: an array.array cannot resize under a view
@@ -256,9 +255,8 @@ class Source:
 
 
 class RollingBuffer:
-    """Bounded rolling store of decoded channels, one preallocated ring of ``capacity`` rows
-    per message (65536 = 65 s at 1 kHz); ``growable``: double a full ring instead of
-    overwriting (offline loading of a whole log)."""
+    """Bounded rolling store of decoded channels, one preallocated ring of ``capacity`` rows per message;
+    ``growable``: double a full ring instead of overwriting."""
 
     def __init__(self, capacity: int = 1 << 16, growable: bool = False) -> None:
         if capacity < 2:

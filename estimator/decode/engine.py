@@ -44,9 +44,8 @@ def _row_key(fa: FrameArrays, i: int) -> int:
 
 
 class DecodeEngine:
-    """Validate, decode and store frames; the state that carries from frame to frame.
-    ``tick_time``: data time from the SN_Sync tick; ``collect_alerts``: keep accepted
-    alerts in :attr:`outbox` for a callback."""
+    """Validate, decode and store frames; the state that carries from frame to frame (``collect_alerts``:
+    accepted alerts kept in :attr:`outbox`)."""
 
     def __init__(self, db: Database, routes: Routes, buffer: RollingBuffer, *, tick_time: bool,
                  max_counter_delta: int, stale_window: int, collect_alerts: bool) -> None:
@@ -270,9 +269,8 @@ class DecodeEngine:
 
     def _segment(self, lo: int, hi: int, ts: np.ndarray, r: np.ndarray, outcome: np.ndarray,
                  rows: np.ndarray) -> None:
-        """Batch frames ``lo:hi`` (in order, all passing the time check): grouped by message
-        (stable sort) for the counter rules (:meth:`_runs`; in tick mode SN_Sync first, which
-        gives the others their tick), then decoded and stored (:meth:`_accepted`)."""
+        """Batch frames ``lo:hi`` passing the time check: grouped by message for the counter rules
+        (:meth:`_runs`; SN_Sync first), then stored (:meth:`_accepted`)."""
         self.order.last = float(ts[hi - 1])
         self.order.rejects = 0
         oc = outcome[lo:hi]
@@ -366,9 +364,8 @@ class DecodeEngine:
 
     def _runs(self, runs: list[tuple[int, int, int]], rows: np.ndarray, arr: np.ndarray,
               tsd: np.ndarray, lo: int, syncs: SyncTrack | None) -> np.ndarray:
-        """Counter and period rules of consecutive message runs ``(route index, start, end)``
-        from ``lo``; accepted mask. Each run's steady prefix needs only the period
-        recurrence, the rest goes frame by frame (:meth:`_route_rest`)."""
+        """Counter and period rules of consecutive message runs ``(route index, start, end)``; accepted mask
+        (steady prefixes in one recurrence)."""
         hi = runs[-1][2]
         m = hi - lo
         routes = self.routes.ordered
@@ -428,9 +425,8 @@ class DecodeEngine:
 
     def _route_rest(self, route: Route, cl: list[int], tl: list[float], al: list[float],
                     n_before: int, at: int, syncs: SyncTrack | None) -> np.ndarray:
-        """The rules of :meth:`validate` for frames of one message (counters, data and
-        arrival times), one by one; accepted mask. ``n_before``: frames accepted earlier
-        in the segment; ``at``: position of the first frame (tick mode: SN_Sync state)."""
+        """The rules of :meth:`validate` for frames of one message, one by one; accepted mask (``at``: first
+        frame's segment position)."""
         rejected = self._rejected
         step = self.counters.step
         tick = syncs is not None

@@ -34,9 +34,8 @@ def parse_source(text: str | int | None) -> int | None:
 
 
 def j1939_messages(db: Database) -> dict[int, tuple[int, str]]:
-    """PGN -> (DBC frame ID, message name) of the DBC's J1939 messages: its extended
-    messages that cantools marks J1939 (``VFrameFormat J1939PG``), all of them when the DBC
-    says ``ProtocolType "J1939"``."""
+    """PGN -> (DBC frame ID, message name) of the DBC's J1939 messages (``VFrameFormat J1939PG``, or all
+    extended ones under ``ProtocolType "J1939"``)."""
     attrs = db.dbc.attributes if db.dbc is not None else {}
     proto = attrs.get("ProtocolType")
     whole = proto is not None and str(proto.value).strip().upper() == "J1939"

@@ -224,9 +224,8 @@ class DecodeListener(can.Listener):
             self.flush()
 
     def choose_time_base(self, ids: Any, final: bool = False) -> bool:
-        """``time_source="auto"``: decide from the CAN IDs ``ids`` of the first frames
-        (:func:`~estimator.decode.rules.timebase.choose_time_base`; ``final``: the input
-        ended); True when the base is decided."""
+        """``time_source="auto"``: decide from the CAN IDs ``ids`` of the first frames (``final``: the input
+        ended); True when decided."""
         if not self._auto:
             return True
         arr = np.asarray(ids, dtype=np.int64) & ~EXT
@@ -240,9 +239,8 @@ class DecodeListener(can.Listener):
         return True
 
     def sync_first_index(self, ids: Any) -> int:
-        """Tick base, start of a stream: index of the first ``SN_Sync`` among the first
-        frames ``ids`` (-1: none, or not the start). Callers move it to the front so that
-        the first sample's frames that arrived before it are not ``no_sync``."""
+        """Tick base, start of a stream: index of the first ``SN_Sync`` among the first frames ``ids`` (-1:
+        none), which callers move to the front."""
         eng = self.engine
         c = eng.counts
         if not eng.tick_time or eng.sync_tick is not None or \
@@ -317,9 +315,8 @@ class DecodeListener(can.Listener):
         return [r.key for r in self.routes.ordered if r.kind == DATA]
 
     def message_slot_times(self, arrivals: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
-        """Route key -> data times (s) of the data frames placed in their sample slots, from
-        each message's arrival times (s) in a whole log; messages that keep their timestamps
-        are not listed. What was done goes to :attr:`arrival_stats`."""
+        """Route key -> data times (s) of the data frames placed in their sample slots, from each message's
+        arrival times (s) in a whole log."""
         names, keys, slots = [], [], []
         for r in self.routes.ordered:
             t = arrivals.get(r.key)
@@ -365,8 +362,7 @@ class DecodeListener(can.Listener):
 
     def on_error(self, exc: Exception) -> None:  # called by can.Notifier
         """Bus errors are counted as malformed input, never raised into the Notifier."""
-        with self._lock:
-            self.engine.counts.rejected["malformed"] += 1
+        self.count_malformed(1)
 
     def stop(self) -> None:
         """Process the queued frames (part of the can.Listener interface)."""
@@ -415,10 +411,8 @@ class DecodeListener(can.Listener):
         return self.engine.order.resyncs
 
     def frame_stats(self) -> dict[str, object]:
-        """``{"accepted": N, "rejected": {reason: n}, "ignored": n, "lost": n,
-        "time_base": "tick" | "timestamp"}`` (JSON-ready), with ``arrival_slots``,
-        ``receive``, ``node_restarts``, ``tick_wraps``, ``unknown_page`` and ``j1939``
-        where they apply."""
+        """``{"accepted", "rejected": {reason: n}, "ignored", "lost", "time_base"}``, with
+        ``arrival_slots``, ``receive``, ``node_restarts``, ``tick_wraps``, ``unknown_page``, ``j1939``."""
         c = self.counts
         out: dict[str, object] = {"accepted": c.accepted, "rejected": dict(c.rejected),
                                   "ignored": c.ignored, "lost": c.lost,

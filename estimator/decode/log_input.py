@@ -38,9 +38,8 @@ def unparsed_hint(path: str | Path, stats: ReadStats) -> str:
 
 def channel_notes(path: str | Path, stats: ReadStats, keys: Iterable[int],
                   channel: str | None) -> tuple[dict[str, object], list[str]]:
-    """Frame statistics (``channels``, ``channel``, ``other_channel``) and warnings about
-    the bus channels of a log read with ``stats``; ``keys``: the sensor's data messages'
-    frame keys, ``channel``: the one asked for (None: every channel)."""
+    """Frame statistics (``channels``, ``channel``, ``other_channel``) and warnings about the bus channels of
+    a log read with ``stats``."""
     extra: dict[str, object] = {}
     if len(stats.channels) > 1 or channel is not None:
         extra["channels"] = stats.channel_frames()
@@ -76,9 +75,8 @@ def summarize_gaps(aligned: Aligned) -> list[str]:
 
 def aligned_to_measurement(aligned: Aligned, model: SuspensionModel, source: str = "",
                            warnings: list[str] | None = None) -> Measurement:
-    """Split aligned channels into the model's road inputs (gaps bridged linearly, with a
-    warning), measured channels (NaN kept) and ``aux`` (speed, odometer); channels without
-    a valid sample are left out."""
+    """Split aligned channels into road inputs (gaps bridged linearly, with a warning), measured channels (NaN
+    kept) and ``aux``."""
     warns = list(warnings or [])
     road_names = set(model.roads) | {f"{r}_dot" for r in model.roads}
     road: dict[str, np.ndarray] = {}

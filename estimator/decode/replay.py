@@ -132,9 +132,8 @@ def feed_log(listener: can.Listener, path: str | Path, stats: Optional[ReadStats
 
 def _placed(listener: can.Listener, path: str | Path, stats: Optional[ReadStats],
             channel: Optional[str] = None) -> Iterator[FrameArrays]:
-    """The chunks of a log; for a listener that places arrival times in sample slots the
-    log is read twice: its times (the slots), then its frames, as one chunk at the slot
-    times, sorted, when any moves."""
+    """The chunks of a log; with arrival slots, the log is read twice: its times (the slots), then its frames
+    (one sorted chunk when any moves)."""
     chunks = read_log_arrays(path, stats, channel=channel)
     first = next(chunks, None)
     if first is None:

@@ -72,9 +72,8 @@ class Route:
 
 
 def compile_row(msg: Message, maps: Sequence[SignalMapping]) -> Unpack:
-    """``row(payload) -> (value per mapping, ...)``: one :class:`MessageCodec` decode, scale
-    and offset, NaN where a ``<Signal>Valid`` bit is 0. Generated code: it runs once per frame
-    decoded one at a time (docs/performance.md "One decoder path")."""
+    """``row(payload) -> (value per mapping, ...)``: scaled, NaN where a ``<Signal>Valid`` bit is 0; generated
+    code (docs/performance.md)."""
     names = list(dict.fromkeys(m.signal for m in maps))
     codec = MessageCodec(msg, names)
     ns: dict[str, object] = {"_dec": codec.decode, "nan": math.nan}
@@ -148,9 +147,8 @@ def model_channels(model: SuspensionModel) -> list[str]:
 
 
 class Routes:
-    """The routes of a DBC and validated signal map (:attr:`by_key`; :attr:`ordered`: SN_Sync
-    first, then the E2E-protected ones), and the lookup tables of the batch path (sorted
-    keys, and per route of ``ordered`` its length, E2E flags, CRC start register)."""
+    """The routes of a DBC and validated signal map (:attr:`ordered`: SN_Sync first, then the E2E-protected
+    ones), and the batch path's lookup tables."""
 
     def __init__(self, db: Database, signal_map: SignalMap, buffer: RollingBuffer) -> None:
         self.by_key: dict[int, Route] = {}

@@ -35,9 +35,8 @@ REFITS = 3
 
 @dataclass
 class Slots:
-    """The sample slots ``k`` of one message's frames (arrival times ``t``, s): ``period``
-    (s), ``anchor`` (data time of slot 0, s), frames ``missing``, ``regular`` (the arrival
-    times are kept)."""
+    """The sample slots ``k`` of one message's frames (arrival times ``t``, s): ``period`` (s), ``anchor``
+    (s), frames ``missing``, ``regular`` (times kept)."""
 
     k: np.ndarray
     period: float
@@ -191,9 +190,8 @@ def _regular(t: np.ndarray) -> Slots | None:
 
 
 def place_messages(slots: list[Slots]) -> list[np.ndarray | None]:
-    """Data times ``anchor + k period`` of several messages' frames (None: kept); messages
-    whose periods agree within ``SAME_RATE`` share their mean period and the phase of the
-    group's first (frames of one sample get one time)."""
+    """Data times ``anchor + k period`` of several messages' frames (None: kept); messages of one rate share
+    their mean period and the first one's phase."""
     out: list[np.ndarray | None] = [None] * len(slots)
     groups: list[list[int]] = []
     for j, s in enumerate(slots):

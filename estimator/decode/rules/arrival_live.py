@@ -66,8 +66,7 @@ class LiveSlots:
         self.first: tuple[np.ndarray, np.ndarray] | None = None
 
     def push(self, t: float, frame: Any, out: list[tuple[float, int, Any]]) -> bool:
-        """Take one frame arrived at ``t`` (s); released frames go to ``out`` as ``(data
-        time, slot, frame)`` (time NaN: timed by the caller; slot -1: arrival time kept).
+        """Take one frame arrived at ``t`` (s); released frames go to ``out`` as ``(data time, slot, frame)``.
         True when the warm-up just ended."""
         self.last_arrival = t
         if self.state == "kept":
@@ -254,9 +253,8 @@ class LiveSlots:
 
 
 class LivePlacer:
-    """Place the data frames of a live stream in their sample slots and merge every frame
-    back into time order. ``names``: route key -> name of the data messages; ``key_of``,
-    ``time_of``, ``retime``: a frame's route key, arrival time (s), copy at a data time."""
+    """Place the data frames of a live stream (``names``: route key -> data message) in their sample slots;
+    merge every frame back into time order."""
 
     def __init__(self, names: dict[int, str], key_of: Callable[[Any], int | None],
                  time_of: Callable[[Any], float], retime: Callable[[Any, float], Any]) -> None:

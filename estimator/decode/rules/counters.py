@@ -23,9 +23,8 @@ REJECT_REASONS: tuple[str, ...] = ("malformed", "frame_type", "time", "unknown_i
 
 @dataclass
 class FrameCounts:
-    """Frame counters of a decoder: ``accepted`` (stored or applied), ``ignored`` (DBC
-    messages without a mapped channel), ``lost`` (missing by the counters and the time),
-    ``rejected`` (reason -> frames)."""
+    """Frame counters of a decoder: ``accepted``, ``ignored`` (DBC messages without a mapped channel),
+    ``lost``, ``rejected`` (reason -> frames)."""
 
     accepted: int = 0
     ignored: int = 0
@@ -33,12 +32,14 @@ class FrameCounts:
     rejected: dict[str, int] = field(default_factory=lambda: dict.fromkeys(REJECT_REASONS, 0))
 
 
-class CounterState(Protocol):
-    """What the counter rules keep per message (see the module docstring)."""
+class RouteState(Protocol):
+    """What the counter and stale-tick rules keep per message."""
 
     last_c: int
     last_ts: float
     period: float
+    last_arrival: float
+    sync_n: int
 
 
 class CounterRules:
@@ -52,7 +53,7 @@ class CounterRules:
         self.max_counter_delta = max_counter_delta
         self.stale_window = stale_window
 
-    def step(self, route: CounterState, c: int, t: float) -> bool:
+    def step(self, route: RouteState, c: int, t: float) -> bool:
         """Counter continuity of one frame at data time ``t`` (s); ``False``: rejected."""
         last = route.last_c
         if last >= 0 and (c - last) % COUNTER_MODULUS != 1:
@@ -71,7 +72,7 @@ class CounterRules:
         route.last_ts = t
         return True
 
-    def gap(self, route: CounterState, c: int, last: int, ts: float) -> bool:
+    def gap(self, route: RouteState, c: int, last: int, ts: float) -> bool:
         """Counter did not advance by one: accept (lost frames) or reject; ``True`` = accept."""
         rejected = self.rejected
         if c == 15:

@@ -28,9 +28,8 @@ def alive_counters(rows: np.ndarray) -> np.ndarray:
 
 def crc_ok_rows(b8: np.ndarray, start: np.ndarray, dlc: np.ndarray,
                 check: np.ndarray) -> np.ndarray:
-    """Which frames of zero-padded payloads ``b8`` (m, 8) pass the E2E CRC, as the
-    per-frame checker says (``True`` where ``check`` is False); ``start``: each frame's
-    :data:`crc_start`, ``dlc``: its message length (bytes, at most 8)."""
+    """Which frames of zero-padded payloads ``b8`` (m, 8) pass the E2E CRC (``True`` where ``check`` is
+    False), as the per-frame checker says."""
     ok = np.ones(b8.shape[0], dtype=bool)
     if not check.any():
         return ok

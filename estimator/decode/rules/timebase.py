@@ -7,10 +7,11 @@ from __future__ import annotations
 
 import math
 import sys
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
+from estimator.decode.rules.counters import RouteState
 from suspid.can.crc import COUNTER_MODULUS
 
 _INF = math.inf
@@ -23,9 +24,8 @@ STALE_PERIODS = COUNTER_MODULUS // 2
 
 
 class TimeOrder:
-    """The time order check: a timestamp before ``last`` (the last that passed), NaN or inf
-    is rejected as ``time``; after ``TIME_RESYNC`` such frames in a row (``rejects``) the
-    clock was reset and the time base is re-anchored (counted in ``resyncs``)."""
+    """The time order check: a time before ``last``, NaN or inf is rejected as ``time``; ``TIME_RESYNC`` in a
+    row re-anchor the time base (``resyncs``)."""
 
     __slots__ = ("last", "rejects", "resyncs")
 
@@ -94,16 +94,7 @@ def sync_times(ticks: np.ndarray, period_us: np.ndarray, arrival: np.ndarray) ->
     return np.where(period_us > 0, (ticks * period_us).astype(np.float64) / 1e6, arrival)
 
 
-class TickState(Protocol):
-    """What the stale-tick rule keeps per message."""
-
-    last_c: int
-    period: float
-    last_arrival: float
-    sync_n: int
-
-
-def stale_tick(route: TickState, sync_n: int, period: float, arrival: float) -> bool:
+def stale_tick(route: RouteState, sync_n: int, period: float, arrival: float) -> bool:
     """Tick mode: whether a data frame arriving at ``arrival`` (s) is ``no_sync`` (a stale tick)."""
     return (route.sync_n == sync_n and route.last_c >= 0 and arrival - route.last_arrival
             > STALE_PERIODS * max(route.period, period))
@@ -225,9 +216,8 @@ class TickClock:
 
 def choose_time_base(ids: np.ndarray, sync_ids: np.ndarray, known_ids: np.ndarray,
                      final: bool) -> str | None:
-    """``time_source="auto"``: ``"tick"`` if the first frames ``ids`` hold an SN_Sync,
-    ``"timestamp"`` once ``AUTO_FRAMES`` frames of the DBC (or, ``final``, the whole input)
-    came without one, ``None`` while undecided. Foreign frames do not count."""
+    """``time_source="auto"``: ``"tick"`` if the frames ``ids`` hold an SN_Sync, ``"timestamp"`` after
+    ``AUTO_FRAMES`` (or ``final``), else None."""
     if np.isin(ids, sync_ids).any():
         return "tick"
     if final or int(np.isin(ids, known_ids).sum()) >= AUTO_FRAMES:
