@@ -18,7 +18,7 @@ from cantools.database.can import Database
 
 from firmware_sim.faults import FaultConfig, FaultInjector
 from firmware_sim.plant import Plant
-from firmware_sim.scenarios import build_scenario, canonical_name
+from firmware_sim.scenarios import build_scenario
 from firmware_sim.scheduler import Scheduler, SchedulerStats
 from suspid.can.codec import (FAULT_BITS, STATE_BUSOFF_RECOVERED, STATE_DEGRADED, STATE_RUNNING,
                               STATE_STOPPING, SensorEncoder, decode_alert, encode_status,
@@ -158,7 +158,6 @@ class SensorNode:
             raise UsageError(f"status rate must be in (0, {config.rate}] Hz, got {config.status_hz}")
         if not 0 <= config.noise < float("inf"):
             raise UsageError(f"--noise must be a finite number >= 0, got {config.noise}")
-        canonical_name(config.scenario)
         self.setup = build_scenario(self.model, config.scenario, config.duration, config.rate,
                                     config.params, config.seed, config.wear_start, config.wear_to)
         self.plant = Plant(self.model, self.setup.params, self.setup.t, self.setup.road,

@@ -42,11 +42,8 @@ class Aligned:
 
     Attributes
     ----------
-    t : ndarray, shape (N,)
-        Grid times (s): the frames' own timestamps where all lie within 1e-9 dt of the
-        grid (an encoded CSV reads back exactly), else ``t0 + k dt``.
-    dt : float
-        Grid step (s).
+    t, dt : ndarray (N,), float
+        Grid times (s; the frames' own where all lie within 1e-9 dt of the grid) and step (s).
     values : dict
         ``channel -> ndarray (N,)``, NaN where no valid sample fell.
     gaps : list of Gap
@@ -330,8 +327,7 @@ class RollingBuffer:
         Parameters
         ----------
         dt : float, optional
-            Grid step (s); default the smallest median frame interval of the messages (a
-            multiplexed message's page rings taken together).
+            Grid step (s); default the smallest median frame interval of the messages.
         t_start, t_end : float, optional
             Window (s, inclusive); default everything held.
 

@@ -81,14 +81,11 @@ class DecodeListener(can.Listener):
     Parameters
     ----------
     model : str or SuspensionModel
-    dbc : str, Path or cantools Database, optional
-        Default suspid's ``suspension.dbc``.
-    signal_map : SignalMap, path or list of str, optional
-        ``channel = MESSAGE.SIGNAL`` mappings; default the DBC's ``SuspidChannel`` attributes.
-    capacity : int
-        Rows per message in the rolling buffer.
-    growable : bool
-        Grow the buffer instead of overwriting (offline loading of a whole log).
+    dbc, signal_map : optional
+        The DBC (default suspid's) and its ``channel = MESSAGE.SIGNAL`` mappings (default
+        the DBC's ``SuspidChannel`` attributes).
+    capacity, growable : int, bool
+        Rows per message in the rolling buffer; grow it instead of overwriting.
     time_source : {"timestamp", "tick", "auto"}
         Data time from the frame timestamps, the ``SN_Sync`` tick, or the tick when an
         ``SN_Sync`` comes among the first ``AUTO_FRAMES`` frames of the DBC.
@@ -99,13 +96,11 @@ class DecodeListener(can.Listener):
     on_alert : callable, optional
         Called with each accepted ``SUSPID_Alert`` dict as soon as it arrives.
     arrival_slots : bool
-        With the timestamp time base, place data frames in their sample slots from their
-        arrival times (:mod:`estimator.decode.rules.arrival`, ``arrival_live`` when live).
+        With the timestamp time base, place data frames in their sample slots.
     j1939_source : str or int, optional
         A J1939 DBC: decode each PGN from this source address only (``"0x47"``).
 
-    :attr:`time_source` names the time base in use (``"timestamp"`` while ``"auto"`` is
-    undecided); :attr:`receive_stats` holds a live receiver's own counters.
+    :attr:`time_source` names the time base in use, :attr:`receive_stats` live counters.
     """
 
     def __init__(self, model: str | SuspensionModel, dbc: str | Path | Database | None = None,
@@ -468,11 +463,9 @@ class DecodeListener(can.Listener):
         Parameters
         ----------
         window, t_end : float, optional
-            Length (s) of the window ending at data time ``t_end`` (s; default the newest
-            sample); default everything buffered.
+            Window length and end (s, data time; default everything, the newest sample).
         dt : float, optional
-            Grid step (s); default the ``SN_Sync`` period in tick mode, else the median
-            frame interval.
+            Grid step (s); default the ``SN_Sync`` period in tick mode, else the median interval.
         """
         self.flush()
         self._live_stats()

@@ -122,10 +122,9 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
 
     Parameters
     ----------
-    path : str or Path
-        ``.log`` (candump -L), ``.asc``, ``.blf``, ``.trc`` or ``.mf4``.
-    dbc_path : str, Path or cantools Database, optional
-        Default: the signal map's ``dbc``, else suspid's ``suspension.dbc``.
+    path, dbc_path : str or Path
+        The log (``.log`` candump -L, ``.asc``, ``.blf``, ``.trc``, ``.mf4``); the DBC (or a
+        Database; default the signal map's ``dbc``, else suspid's).
     dt : float, optional
         Grid step (s); default the median frame interval.
     channel : str, optional

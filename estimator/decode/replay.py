@@ -81,9 +81,7 @@ def feed_log(listener: can.Listener, path: str | Path, stats: Optional[ReadStats
     Parameters
     ----------
     path : str or Path
-        ``.log``, ``.asc``, ``.blf``, ``.trc`` or ``.mf4`` (InputError, UsageError).
-    stats : ReadStats, optional
-        Filled with frames read and lines skipped.
+        ``.log``, ``.asc``, ``.blf``, ``.trc`` or ``.mf4``; ``stats`` counts what was read.
     poll : callable, optional
         Called after the first frame, then after as many frames as it returns.
     channel : str, optional
