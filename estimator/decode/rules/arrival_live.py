@@ -143,26 +143,22 @@ class LiveSlots:
         lim = near_b + 0.5 * p
         rises = u0 > lim
         if rises:   # ... when all of the next DETECT frames lie above
-            j = 1
-            for th, _ in self.hold:
+            for j, (th, _) in enumerate(self.hold, 1):
                 if j >= DETECT:
                     break
                 if th - (k + j) * p <= lim:
                     rises = False
                     break
-                j += 1
         if rises:
             # a gap of g frames: the frames beyond the next DETECT against the last released
             near_a = u0
             far = math.inf
-            j = 1
-            for th, _ in self.hold:
+            for j, (th, _) in enumerate(self.hold, 1):
                 if j < DETECT:
                     near_a = min(near_a, th - (k + j) * p)
                 else:
                     far = min(far, th - (k + j) * p)
-                j += 1
-            ahead = min(near_a, far) if j <= DETECT else far
+            ahead = min(near_a, far) if len(self.hold) < DETECT else far
             before = min(tr - kr * p for tr, kr in recent)
             # what the period's uncertainty can lift u over the two sides is not a gap
             slack = SNAP_SE * self.se * (len(recent) + len(self.hold) + 1)
@@ -171,12 +167,10 @@ class LiveSlots:
                 # the gap lies after the frames that arrived too early to be after it
                 early = before + (g - 0.5) * p
                 late = u0 >= early
-                j = 1
-                for th, _ in self.hold:
+                for j, (th, _) in enumerate(self.hold, 1):
                     if j >= DETECT or not late:
                         break
                     late = th - (k + j) * p >= early
-                    j += 1
                 if late:
                     k += g
                     self.missing += g
@@ -343,21 +337,13 @@ class LivePlacer:
         heap = self._heap
         if not heap:
             return []
-        if all_:
-            mark = math.inf
-        else:
-            mark = math.inf
-            quiet = self._newest
-            for ls in self.msgs.values():
-                if ls.state == "warmup" and not ls.warm:
-                    if quiet - self._first <= SILENT_S:
-                        return []     # a message not seen yet may still start before
-                    continue
-                if ls.state == "kept":
-                    continue
-                silent = max(SILENT_S, SILENT_PERIODS * ls.period)
-                if quiet - ls.last_arrival > silent:
-                    continue
+        mark = math.inf
+        for ls in () if all_ else self.msgs.values():
+            if ls.state == "warmup" and not ls.warm:
+                if self._newest - self._first <= SILENT_S:
+                    return []     # a message not seen yet may still start before
+            elif ls.state != "kept" and self._newest - ls.last_arrival <= max(
+                    SILENT_S, SILENT_PERIODS * ls.period):
                 mark = min(mark, ls.next_time())
         out = []
         while heap and heap[0][0] <= mark:
