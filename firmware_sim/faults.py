@@ -41,9 +41,7 @@ class FaultConfig:
                                  f"{', '.join(forms.values())}")
             parts = [a.strip() for a in arg.split(":")]
             num = functools.partial(_fault_number, spec, forms[kind])
-
-            want = {"loss": 1, "bitflip": 1, "burst": 2, "late": 2, "busoff": 2, "stuck": 3}[kind]
-            if len(parts) != want:
+            if len(parts) != forms[kind].count(":") + 1:
                 raise UsageError(f"--fault {spec!r}: expected {forms[kind]}")
             inf = float("inf")
             if kind == "loss":

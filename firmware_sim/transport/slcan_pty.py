@@ -98,12 +98,10 @@ class SlcanPtyBus(can.BusABC):
                 i = min(cut)
                 line = bytes(buf[:i]).decode("ascii", errors="replace")
                 del buf[: i + 1]
-                reply = self._command(line)
-                if reply is not None:
-                    self._write(reply.encode("ascii"), urgent=True)
+                self._write(self._command(line).encode("ascii"), urgent=True)
 
-    def _command(self, line: str) -> Optional[str]:
-        """Execute one host command; return the reply (``None`` for a blank line)."""
+    def _command(self, line: str) -> str:
+        """Execute one host command; return the reply."""
         if line == "":
             return "\r"
         c = line[0]

@@ -208,11 +208,6 @@ class TickClock:
                          for t, u, a in zip(tk.tolist(), pus.tolist(), arrival.tolist())],
                         dtype=np.int64)
 
-    @property
-    def shift(self) -> int:
-        """``base`` mod 15: what the raw counters lag the unbroken tick's residue by."""
-        return self.base % COUNTER_MODULUS
-
 
 def choose_time_base(ids: np.ndarray, sync_ids: np.ndarray, known_ids: np.ndarray,
                      final: bool) -> str | None:
