@@ -37,12 +37,6 @@ MIN_RUN = 192
 _O_UNKNOWN, _O_IGNORED, _O_DLC, _O_CRC = 1, 2, 3, 4
 
 
-def _row_key(fa: FrameArrays, i: int) -> int:
-    """Route key (CAN ID | extended flag) of frame ``i``."""
-    fid = int(fa.arbitration_id[i])
-    return fid | EXT if fa.is_extended[i] else fid
-
-
 class DecodeEngine:
     """Validate, decode and store frames; the state that carries from frame to frame (``collect_alerts``:
     accepted alerts kept in :attr:`outbox`)."""
@@ -126,7 +120,6 @@ class DecodeEngine:
                 if self.sync_tick is None or c < 0:
                     rejected["no_sync"] += 1
                     return
-                # ts is the data time matched through the counter above
             if route.source is not None and route.row is not None:
                 route.source.push(ts, route.row(data))
             elif route.pages is not None:   # a multiplexed message: page by page
@@ -192,8 +185,7 @@ class DecodeEngine:
         ext = fa.is_extended[sel]
         length = fa.length[sel]
         rows = data64[sel]
-        # ---- stateless checks: outcome per frame, route, payload
-        rt = self.routes
+        rt = self.routes   # the stateless checks: outcome per frame
         keys = fid | (ext.astype(np.int64) << 31) if ext.any() else fid
         rkeys = rt.keys   # never empty: a decoder has at least one data message
         p = np.searchsorted(rkeys, keys)
@@ -215,7 +207,6 @@ class DecodeEngine:
         if e2e.any():
             ok = crc_ok_rows(rows.view(np.uint8).reshape(m, 8), rt.start[r], rdlc, e2e)
             outcome[~ok] = _O_CRC
-        # ---- the time check, segment by segment
         badt = time_breaks(self.order.last, ts)
         long_rows = None
         if fa.long_data:
@@ -226,8 +217,8 @@ class DecodeEngine:
         b = 0
         pos = 0
         while pos < m:
-            # the frame at pos against the time base as it is now (an earlier frame may
-            # have been rejected), the later ones against their predecessor
+            # the frame at pos against the time base as it is now, the later ones against
+            # their predecessor
             while b < nb and bad_at[b] <= pos:
                 b += 1
             if not self.order.last <= float(ts[pos]) < _INF or (long_rows is not None
@@ -242,7 +233,7 @@ class DecodeEngine:
                 end = min(j + 1, m)
                 for k in range(pos, end):
                     i = int(nf[k]) if nf is not None else lo + k
-                    self.validate(float(ts[k]), _row_key(fa, i), fa.payload(i))
+                    self.validate(float(ts[k]), int(keys[k]), fa.payload(i))
                 pos = end
 
     def _small(self, fa: FrameArrays, lo: int, hi: int) -> None:

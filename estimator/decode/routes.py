@@ -37,11 +37,6 @@ def route_key(frame_id: int, extended: bool) -> int:
     return frame_id | (EXT if extended else 0)
 
 
-def _any_buffer(unpack: Callable[[bytes], tuple]) -> Unpack:
-    """A :class:`MessageCodec` unpacker (typed for ``bytes``, takes any buffer) as a decoder."""
-    return cast(Unpack, unpack)
-
-
 def _decoded_elsewhere(data: Payload) -> tuple:
     """``decode`` of data messages (``row``/``vrow``) and SUSPID_Alert (``decode_alert``)."""
     return ()
@@ -183,12 +178,13 @@ class Routes:
                 continue
             if kind == SYNC:
                 codec = MessageCodec(msg, ["Tick", "PeriodUs"])
-                route = self._add(msg, kind, _any_buffer(codec.decode))
+                # the codec's unpackers are typed for bytes and take any buffer
+                route = self._add(msg, kind, cast(Unpack, codec.decode))
                 route.vsync = compile_sync(codec)
                 continue
             if kind == STATUS:
-                dec = _any_buffer(MessageCodec(msg, ["State", "SampleRate", "FaultFlags",
-                                                     "BusOffCount", "SensorSet"]).decode)
+                dec = cast(Unpack, MessageCodec(msg, ["State", "SampleRate", "FaultFlags",
+                                                      "BusOffCount", "SensorSet"]).decode)
             else:
                 dec = _decoded_elsewhere  # decode_alert, with cantools (multiplexed, rare)
             self._add(msg, kind, dec)

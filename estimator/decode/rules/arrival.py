@@ -89,8 +89,7 @@ def _slots(t: np.ndarray, period: float) -> np.ndarray:
         after = float(u[b:min(hi, b + side)].min())
         g = int(np.rint((after - before) / period))
         if g > 0:
-            # the gap lies after the last frame of the stretch that arrived too early to
-            # be after it (a sample is never taken after its frame arrives)
+            # after the last frame of the stretch that arrived too early to be after the gap
             early = np.flatnonzero(u[a:b] < before + (g - 0.5) * period)
             k[a + (int(early[-1]) + 1 if early.size else 0):] += g
     return k

@@ -33,8 +33,7 @@ REFIT_EVERY = 16
 ANCHOR_TOL = 0.25
 #: released frames per point of the lower envelope the period is fitted to
 BLOCK = 8
-#: a message silent for this many of its periods (and at least ``SILENT_S``) no longer
-#: holds the others back in the merge
+#: a message silent for this many periods (and ``SILENT_S``) no longer holds the merge back
 SILENT_PERIODS = 64
 SILENT_S = 0.25
 
