@@ -13,8 +13,7 @@ FOREIGN_IDS = (0x7DF, 0x7E8, 0x0C4, 0x3B3, 0x18F)
 
 def corrupt_candump(src: str | Path, dst: str | Path, truncated: int = 0, corrupted: int = 0,
                     foreign: int = 0, seed: int = 0, skip: int = 20) -> dict[str, int]:
-    """Copy a candump -L log with ``truncated`` lines cut, ``corrupted`` payloads and ``foreign`` frames
-    inserted after ``skip`` lines; returns the counts."""
+    """Copy a candump -L log with lines cut, payloads corrupted and foreign frames inserted."""
     lines = Path(src).read_text(encoding="ascii").splitlines()
     rng = np.random.default_rng(seed)
     candidates = np.arange(min(skip, len(lines)), len(lines))

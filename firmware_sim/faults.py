@@ -76,8 +76,7 @@ def _fault_number(spec: str, form: str, s: str, lo: float, hi: float, what: str)
 
 
 class FaultInjector:
-    """Applies a :class:`FaultConfig` to the node's sensor values and transmissions over a
-    run of ``duration`` s; ``counts``: frames affected per fault kind, samples held (``stuck``)."""
+    """Applies a :class:`FaultConfig` to the node's sensor values and transmissions."""
 
     def __init__(self, config: FaultConfig, rng: np.random.Generator, duration: float) -> None:
         self.config = config
@@ -109,9 +108,6 @@ class FaultInjector:
                 self._held.pop(ch, None)
         return values
 
-    def stuck_active(self, t: float) -> bool:
-        return any(s <= t < s + n for _, s, n in self.config.stuck)
-
     def in_busoff(self, t: float) -> bool:
         """``True`` while the controller is bus-off at time ``t``."""
         return any(a <= t < b for a, b in self.busoff_windows)
@@ -120,16 +116,13 @@ class FaultInjector:
         """Number of bus-off events starting in ``(t_prev, t]``."""
         return sum(1 for a, _ in self.busoff_windows if t_prev < a <= t)
 
-    def in_burst(self, t: float) -> bool:
-        return any(a <= t < b for a, b in self.burst_windows)
-
     def transmit(self, t: float, data: bytearray) -> tuple[bool, float]:
         """The fate of one frame at ``t`` (s): ``(send, delay s)``; a bit flip changes ``data``."""
         cfg = self.config
         if self.busoff_windows and self.in_busoff(t):
             self.counts["busoff"] += 1
             return False, 0.0
-        if self.burst_windows and self.in_burst(t):
+        if self.burst_windows and any(a <= t < b for a, b in self.burst_windows):
             self.counts["burst"] += 1
             return False, 0.0
         rng = self.rng
@@ -148,5 +141,6 @@ class FaultInjector:
     def flags(self, t: float) -> int:
         """SN_Status FaultFlags bits of the faults active at ``t``."""
         cfg = self.config
-        active = (cfg.loss, self.burst_windows, self.stuck_active(t), cfg.bitflip, cfg.late)
+        stuck = any(s <= t < s + n for _, s, n in cfg.stuck)
+        active = (cfg.loss, self.burst_windows, stuck, cfg.bitflip, cfg.late)
         return sum(1 << bit for bit, on in enumerate(active) if on)

@@ -205,7 +205,7 @@ class SensorNode:
 
     def truth(self, t: float) -> Mapping[str, float]:
         """Plant parameters in force at data time ``t`` (s) -- the ground truth."""
-        return self.plant.params_at(t)
+        return self.setup.params(t)
 
     def _sensor_task(self, k: int) -> None:
         driver = self._need_driver()

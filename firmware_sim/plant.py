@@ -1,7 +1,5 @@
 """The node's plant: the core's suspension model (:func:`suspid.simulate.simulate`) stepped
-in chunks, the state carried across them; parameters may change with time (held constant
-within a chunk) and share one set of the model's affine pieces.
-"""
+in chunks, the state carried across them, parameters held constant within a chunk."""
 from __future__ import annotations
 
 import copy
@@ -58,10 +56,6 @@ class Plant:
             c for r in model.roads for c in (r, f"{r}_dot") if r in self.road)
         self._start = -1   # first sample index of the cached chunk
         self._cols: dict[str, FloatArray] = {}
-
-    def params_at(self, t: float) -> Mapping[str, float]:
-        """Parameters (SI) in force at time ``t`` (s)."""
-        return self._params(t)
 
     def _compute(self, k: int) -> None:
         """Simulate the chunk starting at sample ``k`` (the state is at sample ``k``)."""

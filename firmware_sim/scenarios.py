@@ -23,8 +23,7 @@ DEFAULT_DURATION = {"initial": 5.0, "curb": 5.0, "bump": 5.0, "random": 30.0, "d
 
 @dataclass
 class ScenarioSetup:
-    """A node scenario, ready for the plant: sample times (s), road arrays, initial state,
-    ``params(t)`` (SI), the parameters at t = 0 and named times (s) of interest."""
+    """A node scenario, ready for the plant (``params(t)`` SI, ``events``: named times in s)."""
 
     name: str
     t: FloatArray

@@ -1,9 +1,5 @@
-"""A fixed-rate cooperative scheduler, as on a microcontroller with a timer tick.
-
-A task runs every ``n`` base ticks. ``speed = 1`` paces in real time, ``X`` X times faster,
-``0`` as fast as possible; a tick starting more than one period late is an *overrun*
-(counted, never skipped).
-"""
+"""A fixed-rate cooperative scheduler, as on a microcontroller with a timer tick; a tick
+starting more than one period late is an *overrun* (counted, never skipped)."""
 from __future__ import annotations
 
 import threading

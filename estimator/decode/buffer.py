@@ -196,8 +196,7 @@ class Source:
 
     def rows_between(self, t_start: float | None, t_end: float | None,
                      cols: Sequence[int]) -> tuple[np.ndarray, dict[int, np.ndarray]]:
-        """Copies of the times and ``{column: values}`` (columns ``cols``) of the rows with ``t_start <= t <=
-        t_end`` (None: open), in arrival order."""
+        """Copies of the times and ``{column: values}`` of the rows with ``t_start <= t <= t_end``."""
         with self._lock:
             n, w, cap = self.n, self.w, self.cap
             # views released before the lock is: an array.array cannot resize under a view
@@ -260,24 +259,19 @@ class RollingBuffer:
             raise ValueError(f"buffer capacity must be >= 2 rows, got {capacity}")
         self.capacity = int(capacity)
         self.growable = growable
-        self._sources: dict[str, Source] = {}
+        self.sources: dict[str, Source] = {}   # message name -> ring
         self._where: dict[str, tuple[Source, int]] = {}
         self._lock = threading.Lock()
 
-    @property
-    def sources(self) -> dict[str, Source]:
-        """``message name -> Source`` (every row received so far stored)."""
-        return self._sources
-
     def source(self, name: str, channels: Sequence[str], group: str | None = None) -> Source:
         """Create (or return) the ring of message ``name`` (``group``: a multiplexed page's message)."""
-        if name in self._sources:
-            return self._sources[name]
+        if name in self.sources:
+            return self.sources[name]
         for ch in channels:
             if ch in self._where:
                 raise ValueError(f"channel {ch!r} already comes from {self._where[ch][0].name}")
         src = Source(name, channels, self.capacity, self.growable, self._lock, group)
-        self._sources[name] = src
+        self.sources[name] = src
         for k, ch in enumerate(channels):
             self._where[ch] = (src, k)
         return src
@@ -296,7 +290,7 @@ class RollingBuffer:
         """Time (s) of the newest row of any source (NaN if empty)."""
         best = float("nan")
         with self._lock:
-            for s in self._sources.values():
+            for s in self.sources.values():
                 if s.n:
                     t = s.t[(s.w - 1) % s.cap]
                     if not best >= t:
@@ -307,7 +301,7 @@ class RollingBuffer:
         """Time (s) of the oldest row held of any source (NaN if empty)."""
         best = float("nan")
         with self._lock:
-            for s in self._sources.values():
+            for s in self.sources.values():
                 if s.n:
                     t = s.t[(s.w - s.n) % s.cap] if not s.growable else s.t[s.w - s.n]
                     if not best <= t:
@@ -391,19 +385,13 @@ class RollingBuffer:
         collisions = 0
         cells: dict[str, np.ndarray] = {}
         filled = np.zeros(n, dtype=bool)
-        for name, (t, v) in snaps.items():
-            cell = np.rint((t - t0) / dt).astype(np.int64)
-            ok = (cell >= 0) & (cell < n)
-            whole = bool(ok.all())   # always, as t0 <= t <= t_last; kept as a guard
-            kk = cell if whole else cell[ok]
-            cells[name] = kk
-            stamps[kk] = t if whole else t[ok]
+        for name, (t, _) in snaps.items():
+            kk = cells[name] = np.rint((t - t0) / dt).astype(np.int64)   # t0 <= t <= t_last
+            stamps[kk] = t
             if kk.size:   # frames minus distinct cells
                 filled[:] = False
                 filled[kk] = True
                 collisions = max(collisions, int(kk.size - np.count_nonzero(filled)))
-            if not whole:
-                snaps[name] = (t, {j: x[ok] for j, x in v.items()})
         for c in names:
             src, col = self._where[c]
             out = np.full(n, np.nan)
@@ -425,8 +413,7 @@ class RollingBuffer:
 
 
 def cadence(v: np.ndarray) -> int:
-    """Grid cells from one sample (non-NaN value of ``v``) to the next: the median distance;
-    ``N`` for one page of ``N`` sent in turn, 1 when more than 2/3 of the cells are filled."""
+    """Grid cells from one sample (non-NaN value of ``v``) to the next: the median distance."""
     n = v.size
     ok = ~np.isnan(v)
     p = int(np.count_nonzero(ok))

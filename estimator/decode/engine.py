@@ -38,8 +38,7 @@ _O_UNKNOWN, _O_IGNORED, _O_DLC, _O_CRC = 1, 2, 3, 4
 
 
 class DecodeEngine:
-    """Validate, decode and store frames; the state that carries from frame to frame (``collect_alerts``:
-    accepted alerts kept in :attr:`outbox`)."""
+    """Validate, decode and store frames; the state that carries from frame to frame."""
 
     def __init__(self, db: Database, routes: Routes, buffer: RollingBuffer, *, tick_time: bool,
                  max_counter_delta: int, stale_window: int, collect_alerts: bool) -> None:
@@ -160,8 +159,7 @@ class DecodeEngine:
         return True
 
     def process(self, fa: FrameArrays, lo: int, hi: int) -> None:
-        """Frames ``lo:hi`` of ``fa``, as the frame-by-frame path would: runs that pass the
-        time check as segments (:meth:`_segment`), the rest through :meth:`validate`."""
+        """Frames ``lo:hi`` of ``fa``, exactly as the frame-by-frame path would take them."""
         n = hi - lo
         if n <= 0:
             return
@@ -260,8 +258,7 @@ class DecodeEngine:
 
     def _segment(self, lo: int, hi: int, ts: np.ndarray, r: np.ndarray, outcome: np.ndarray,
                  rows: np.ndarray) -> None:
-        """Batch frames ``lo:hi`` passing the time check: grouped by message for the counter rules
-        (:meth:`_runs`; SN_Sync first), then stored (:meth:`_accepted`)."""
+        """Batch frames ``lo:hi`` passing the time check: counter rules by message, then stored."""
         self.order.last = float(ts[hi - 1])
         self.order.rejects = 0
         oc = outcome[lo:hi]
@@ -355,8 +352,7 @@ class DecodeEngine:
 
     def _runs(self, runs: list[tuple[int, int, int]], rows: np.ndarray, arr: np.ndarray,
               tsd: np.ndarray, lo: int, syncs: SyncTrack | None) -> np.ndarray:
-        """Counter and period rules of consecutive message runs ``(route index, start, end)``; accepted mask
-        (steady prefixes in one recurrence)."""
+        """Counter and period rules of consecutive message runs; the accepted mask."""
         hi = runs[-1][2]
         m = hi - lo
         routes = self.routes.ordered
@@ -416,8 +412,7 @@ class DecodeEngine:
 
     def _route_rest(self, route: Route, cl: list[int], tl: list[float], al: list[float],
                     n_before: int, at: int, syncs: SyncTrack | None) -> np.ndarray:
-        """The rules of :meth:`validate` for frames of one message, one by one; accepted mask (``at``: first
-        frame's segment position)."""
+        """The rules of :meth:`validate` for frames of one message, one by one; accepted mask."""
         rejected = self._rejected
         step = self.counters.step
         tick = syncs is not None

@@ -62,6 +62,7 @@ class J1939Match:
         self.used: dict[str, int] = {}
         self.other_source = 0
         self._ids: dict[int, tuple[int, int, str] | None] = {}   # frame ID -> (pgn, sa, name)
+        self._pgn = {n: p for p, (_f, n) in table.items()}
 
     @classmethod
     def from_db(cls, db: Database, source: str | int | None = None) -> "J1939Match | None":
@@ -155,24 +156,21 @@ class J1939Match:
                 continue
             used = self.used[name]
             listed = ", ".join(f"{sa:#04x} ({n} frames)" for sa, n in sorted(per.items()))
-            out.append(f"{where}: J1939 {name} (PGN {self._pgn(name)}) is sent by {len(per)} "
+            out.append(f"{where}: J1939 {name} (PGN {self._pgn[name]}) is sent by {len(per)} "
                        f"sources, {listed}; decoded {used:#04x} (the first), the others "
                        "not; choose one with the --config file's can.j1939_source")
         return out
-
-    def _pgn(self, name: str) -> int:
-        return next(p for p, (_f, n) in self.table.items() if n == name)
 
     def hint(self, mapped: set[str]) -> str:
         """Why no frame of the mapped J1939 messages was decoded (``"; ..."``, for the error)."""
         parts = []
         for name in sorted(mapped):
             if name not in self.used and name not in self.senders:
-                parts.append(f"{name} (PGN {self._pgn(name)}) not in the log")
+                parts.append(f"{name} (PGN {self._pgn[name]}) not in the log")
             elif self.source is not None and self.source not in self.senders.get(name, {}):
                 got = ", ".join(f"{sa:#04x} ({n} frames)"
                                 for sa, n in sorted(self.senders[name].items()))
-                parts.append(f"{name} (PGN {self._pgn(name)}) is sent by {got}, not by "
+                parts.append(f"{name} (PGN {self._pgn[name]}) is sent by {got}, not by "
                              f"can.j1939_source {self.source:#04x}")
         top = sorted(self.pgns.items(), key=lambda kv: (-kv[1], kv[0]))[:TOP_PGNS]
         names = {p: n for p, (_f, n) in self.table.items()}

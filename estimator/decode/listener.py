@@ -1,13 +1,10 @@
 """The estimator's CAN front end: a python-can Listener that validates, decodes and buffers.
 
-Every frame is checked in order -- frame type, time order, known ID, DLC, E2E CRC, alive
-counter, (tick mode) a known tick -- and the first failing check names the rejection reason
-(:data:`~estimator.decode.rules.counters.REJECT_REASONS`; docs/can.md "Rejection classes"). Nothing is
-fatal: a bad frame is counted and dropped. :class:`DecodeListener` queues what a
-``can.Notifier`` hands it and passes the queue as arrays to
-:meth:`~estimator.decode.engine.DecodeEngine.process`, the one decode path of a live bus and
-a log; the queue is processed when ``batch_size`` frames wait, for an awaited alert, and
-before any result is read (same results whatever the batch size).
+Every frame is checked in order (frame type, time order, known ID, DLC, E2E CRC, alive
+counter, in tick mode a known tick); the first failing check names the rejection reason
+(docs/can.md "Rejection classes"); a bad frame is counted and dropped, never fatal. Queued
+frames go as arrays to :meth:`~estimator.decode.engine.DecodeEngine.process`, the one decode
+path of a live bus and a log, at the latest before any result is read.
 """
 from __future__ import annotations
 
@@ -73,6 +70,16 @@ def _time_of(msg: can.Message) -> float:
         return float(msg.timestamp)
     except (TypeError, ValueError):
         return float("nan")
+
+
+def _engine_setting(name: str, doc: str) -> Any:
+    """A listener property that reads and sets the engine's ``name`` (tuning: same results)."""
+    def get(self: DecodeListener) -> int:
+        return int(getattr(self.engine, name))
+
+    def put(self: DecodeListener, value: int) -> None:
+        setattr(self.engine, name, value)
+    return property(get, put, doc=doc)
 
 
 class DecodeListener(can.Listener):
@@ -169,23 +176,8 @@ class DecodeListener(can.Listener):
         if not routes.sync_ids.size:
             self._auto = False   # no SN_Sync in the DBC: the timestamps are the only clock
 
-    @property
-    def min_batch(self) -> int:
-        """Batches smaller than this are validated frame by frame (same results)."""
-        return self.engine.min_batch
-
-    @min_batch.setter
-    def min_batch(self, value: int) -> None:
-        self.engine.min_batch = value
-
-    @property
-    def min_run(self) -> int:
-        """Runs of frames between time anomalies shorter than this go frame by frame."""
-        return self.engine.min_run
-
-    @min_run.setter
-    def min_run(self, value: int) -> None:
-        self.engine.min_run = value
+    min_batch = _engine_setting("min_batch", "Batches smaller than this go frame by frame.")
+    min_run = _engine_setting("min_run", "Runs between time anomalies shorter than this go frame by frame.")
 
     def on_message_received(self, msg: can.Message) -> None:
         """Queue one frame (not to be modified after), through the live slot rule with ``arrival_slots``."""
@@ -200,16 +192,12 @@ class DecodeListener(can.Listener):
         elif self.arrival_slots and not self._live_off and not self.engine.tick_time:
             live = self._live
             if live is None:
-                live = self._live = self._placer()
+                names = {r.key: r.name for r in self.routes.ordered if r.kind == DATA}
+                live = self._live = LivePlacer(names, _key_of, _time_of, retimed)
             for m in live.push(msg):
                 self._receive(m)
             return
         self._receive(msg)
-
-    def _placer(self) -> LivePlacer:
-        """The live slot rule over this listener's data messages."""
-        names = {r.key: r.name for r in self.routes.ordered if r.kind == DATA}
-        return LivePlacer(names, _key_of, _time_of, retimed)
 
     def _receive(self, msg: can.Message) -> None:
         """Queue one frame; process the queue when full or for an awaited alert."""
@@ -219,8 +207,7 @@ class DecodeListener(can.Listener):
             self.flush()
 
     def choose_time_base(self, ids: Any, final: bool = False) -> bool:
-        """``time_source="auto"``: decide from the CAN IDs ``ids`` of the first frames (``final``: the input
-        ended); True when decided."""
+        """``"auto"``: decide from the CAN IDs of the first frames; True when decided."""
         if not self._auto:
             return True
         arr = np.asarray(ids, dtype=np.int64) & ~EXT
@@ -234,8 +221,7 @@ class DecodeListener(can.Listener):
         return True
 
     def sync_first_index(self, ids: Any) -> int:
-        """Tick base, start of a stream: index of the first ``SN_Sync`` among the first frames ``ids`` (-1:
-        none), which callers move to the front."""
+        """Tick base, start of a stream: index of the first ``SN_Sync`` in ``ids`` (-1: none)."""
         eng = self.engine
         c = eng.counts
         if not eng.tick_time or eng.sync_tick is not None or \
@@ -310,8 +296,7 @@ class DecodeListener(can.Listener):
         return [r.key for r in self.routes.ordered if r.kind == DATA]
 
     def message_slot_times(self, arrivals: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
-        """Route key -> data times (s) of the data frames placed in their sample slots, from each message's
-        arrival times (s) in a whole log."""
+        """Route key -> data times (s) of the frames placed in sample slots, from arrival times."""
         names, keys, slots = [], [], []
         for r in self.routes.ordered:
             t = arrivals.get(r.key)

@@ -1,9 +1,5 @@
-"""A CAN log as a :class:`suspid.io.csvio.Measurement` -- what ``suspid identify --input LOG`` uses.
-
-The log is fed to a :class:`~estimator.decode.listener.DecodeListener` and its channels
-aligned on a uniform grid. Missing samples of measured channels stay NaN; gaps in a road
-channel are bridged linearly, with a warning.
-"""
+"""A CAN log as a :class:`suspid.io.csvio.Measurement` (``suspid identify --input LOG``): decoded,
+aligned on a uniform grid; gaps in a road channel bridged linearly, with a warning."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -38,8 +34,7 @@ def unparsed_hint(path: str | Path, stats: ReadStats) -> str:
 
 def channel_notes(path: str | Path, stats: ReadStats, keys: Iterable[int],
                   channel: str | None) -> tuple[dict[str, object], list[str]]:
-    """Frame statistics (``channels``, ``channel``, ``other_channel``) and warnings about the bus channels of
-    a log read with ``stats``."""
+    """Frame statistics and warnings about the bus channels of a log read with ``stats``."""
     extra: dict[str, object] = {}
     if len(stats.channels) > 1 or channel is not None:
         extra["channels"] = stats.channel_frames()

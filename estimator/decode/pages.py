@@ -39,8 +39,7 @@ class PageSink:
 
 
 class PageSplit:
-    """Store the accepted frames of one multiplexed message (``muxes``: its multiplexers)
-    in its rings, page by page; :attr:`unknown` counts frames of no page of the DBC."""
+    """Store the accepted frames of one multiplexed message page by page (``unknown``: no page)."""
 
     def __init__(self, msg: Message, muxes: list[str], sinks: list[PageSink]) -> None:
         self.name = msg.name

@@ -1,10 +1,5 @@
-"""Feeding logged frames to listeners: arrays, a direct loop, or a bus for ``can.Notifier``.
-
-:func:`feed_log` reads a log as arrays (:func:`suspid.can.logs.read_log_arrays`) into
-:meth:`DecodeListener.feed_arrays <estimator.decode.listener.DecodeListener.feed_arrays>`;
-:func:`feed` calls ``on_message_received`` in a loop; :class:`ReplayBus` is a log as a
-python-can bus, for a Notifier (same results, slower).
-"""
+"""Feeding logged frames to listeners: as arrays (:func:`feed_log`), in a direct loop
+(:func:`feed`), or through ``can.Notifier`` (:class:`ReplayBus`; same results, slower)."""
 from __future__ import annotations
 
 import itertools
@@ -130,8 +125,7 @@ def feed_log(listener: can.Listener, path: str | Path, stats: Optional[ReadStats
 
 def _placed(listener: can.Listener, path: str | Path, stats: Optional[ReadStats],
             channel: Optional[str] = None) -> Iterator[FrameArrays]:
-    """The chunks of a log; with arrival slots, the log is read twice: its times (the slots), then its frames
-    (one sorted chunk when any moves)."""
+    """The chunks of a log (with arrival slots: read twice, the times then the frames)."""
     chunks = read_log_arrays(path, stats, channel=channel)
     first = next(chunks, None)
     if first is None:

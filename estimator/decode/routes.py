@@ -1,9 +1,6 @@
-"""How the decoder treats each CAN ID of the DBC: its route (kind, length, E2E check, decoders,
-buffer ring, per-message state), and the tables the batch path looks frames up in.
-
-Kinds: data messages, ``SN_Sync``, ``SN_Status`` and ``SUSPID_Alert``. A DBC message without
-a mapped channel has no route (its frames are ``ignored``); a multiplexed data message is
-stored page by page (:mod:`estimator.decode.pages`).
+"""How the decoder treats each CAN ID of the DBC (data, ``SN_Sync``, ``SN_Status``,
+``SUSPID_Alert``): its route (length, E2E check, decoders, ring, per-message state), and the
+batch path's lookup tables. A DBC message without a mapped channel has no route (``ignored``).
 """
 from __future__ import annotations
 
@@ -67,8 +64,7 @@ class Route:
 
 
 def compile_row(msg: Message, maps: Sequence[SignalMapping]) -> Unpack:
-    """``row(payload) -> (value per mapping, ...)``: scaled, NaN where a ``<Signal>Valid`` bit is 0; generated
-    code (docs/performance.md)."""
+    """``row(payload) -> (value per mapping, ...)``, NaN where a ``<Signal>Valid`` bit is 0."""
     names = list(dict.fromkeys(m.signal for m in maps))
     codec = MessageCodec(msg, names)
     ns: dict[str, object] = {"_dec": codec.decode, "nan": math.nan}
@@ -142,8 +138,7 @@ def model_channels(model: SuspensionModel) -> list[str]:
 
 
 class Routes:
-    """The routes of a DBC and validated signal map (:attr:`ordered`: SN_Sync first, then the E2E-protected
-    ones), and the batch path's lookup tables."""
+    """The routes of a DBC and validated signal map, and the batch path's lookup tables."""
 
     def __init__(self, db: Database, signal_map: SignalMap, buffer: RollingBuffer) -> None:
         self.by_key: dict[int, Route] = {}

@@ -1,10 +1,7 @@
-"""Sample slots from arrival times: the time base of a stream that carries no sensor clock.
-
-Per message, frame ``i`` gets slot ``k_i = i + (frames missing before it)`` and data time
-``a + k_i P``: ``P`` from the lower convex hull of ``(i, t_i)`` (:func:`hull_period`), gaps
-where the lower envelope of ``t_i - i P`` rises by more than half a period, ``P`` refitted on
-the slots, ``a`` the envelope. Regular or sender-stamped times are kept; messages of one rate
-share period and phase (:func:`place_messages`). docs/can.md "Without a sensor clock".
+"""Sample slots from arrival times (docs/can.md "Without a sensor clock"): frame ``i`` of a
+message gets slot ``k_i = i + (frames missing before it)`` and data time ``a + k_i P``, ``P``
+from the lower convex hull of ``(i, t_i)`` then refitted, gaps where the lower envelope of
+``t_i - i P`` rises by more than half a period, ``a`` the envelope.
 """
 from __future__ import annotations
 

@@ -1,10 +1,6 @@
-"""Sample slots from arrival times, causally: the live version of :mod:`.arrival`.
-
-Per data message (:class:`LiveSlots`) a warm-up is placed by the offline rule, then the last
-``HOLD`` frames are held as look-ahead and the oldest released in the next slot unless the
-lower envelope of ``t - k P`` rises (a gap); ``P`` is refitted as frames are released.
-:class:`LivePlacer` shares period and phase within a rate and merges every frame back into
-time order. docs/can.md "Without a sensor clock".
+"""Sample slots from arrival times, causally (the live version of :mod:`.arrival`): per
+message a warm-up placed by the offline rule, then ``HOLD`` frames of look-ahead; every frame
+merged back into time order (:class:`LivePlacer`). docs/can.md "Without a sensor clock".
 """
 from __future__ import annotations
 
@@ -65,8 +61,7 @@ class LiveSlots:
         self.first: tuple[np.ndarray, np.ndarray] | None = None
 
     def push(self, t: float, frame: Any, out: list[tuple[float, int, Any]]) -> bool:
-        """Take one frame arrived at ``t`` (s); released frames go to ``out`` as ``(data time, slot, frame)``.
-        True when the warm-up just ended."""
+        """Take one frame arrived at ``t`` (s), release frames to ``out``; True: warm-up ended."""
         self.last_arrival = t
         if self.state == "kept":
             out.append((t, -1, frame))
@@ -246,8 +241,7 @@ class LiveSlots:
 
 
 class LivePlacer:
-    """Place the data frames of a live stream (``names``: route key -> data message) in their sample slots;
-    merge every frame back into time order."""
+    """Place a live stream's data frames in their sample slots, every frame in time order."""
 
     def __init__(self, names: dict[int, str], key_of: Callable[[Any], int | None],
                  time_of: Callable[[Any], float], retime: Callable[[Any, float], Any]) -> None:

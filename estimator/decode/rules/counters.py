@@ -23,8 +23,7 @@ REJECT_REASONS: tuple[str, ...] = ("malformed", "frame_type", "time", "unknown_i
 
 @dataclass
 class FrameCounts:
-    """Frame counters of a decoder: ``accepted``, ``ignored`` (DBC messages without a mapped channel),
-    ``lost``, ``rejected`` (reason -> frames)."""
+    """Frame counters of a decoder (``rejected``: reason -> frames)."""
 
     accepted: int = 0
     ignored: int = 0
@@ -126,8 +125,7 @@ def steady_frames(c: np.ndarray, t: np.ndarray, starts: np.ndarray, last_c: np.n
 
 
 def period_after(jobs: list[tuple[float, int, int]], el: np.ndarray) -> list[float]:
-    """Period estimates after the scalar rule's recurrence over ``el[start:stop]`` for every
-    job ``(period before, start, stop)``, bit for bit (products taken as one array)."""
+    """Period estimates after the scalar recurrence over ``el[start:stop]``, bit for bit."""
     out = []
     for p, a, b in jobs:
         if a >= b:

@@ -28,8 +28,7 @@ def alive_counters(rows: np.ndarray) -> np.ndarray:
 
 def crc_ok_rows(b8: np.ndarray, start: np.ndarray, dlc: np.ndarray,
                 check: np.ndarray) -> np.ndarray:
-    """Which frames of zero-padded payloads ``b8`` (m, 8) pass the E2E CRC (``True`` where ``check`` is
-    False), as the per-frame checker says."""
+    """Which frames of payloads ``b8`` (m, 8) pass the E2E CRC (True where not ``check``)."""
     ok = np.ones(b8.shape[0], dtype=bool)
     if not check.any():
         return ok

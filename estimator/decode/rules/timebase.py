@@ -211,8 +211,7 @@ class TickClock:
 
 def choose_time_base(ids: np.ndarray, sync_ids: np.ndarray, known_ids: np.ndarray,
                      final: bool) -> str | None:
-    """``time_source="auto"``: ``"tick"`` if the frames ``ids`` hold an SN_Sync, ``"timestamp"`` after
-    ``AUTO_FRAMES`` (or ``final``), else None."""
+    """``"auto"``: ``"tick"``, ``"timestamp"`` or None (undecided) from the first frames."""
     if np.isin(ids, sync_ids).any():
         return "tick"
     if final or int(np.isin(ids, known_ids).sum()) >= AUTO_FRAMES:
