@@ -1,15 +1,6 @@
-"""Damage a candump -L log on purpose: truncated lines, corrupted payloads, foreign IDs.
-
-Used to show that the decoder counts every bad frame and keeps going
-(``tools/corrupt_log.py``, ``tests/can``). Every damaged line is guaranteed to be rejected
-by :class:`estimator.decode.listener.DecodeListener` for a log of E2E-protected frames:
-
-* **truncated**: the line is cut inside its timestamp or its hex payload (at least one hex
-  digit removed) -> ``malformed`` (unparseable) or ``dlc`` (too few bytes);
-* **corrupted**: one payload bit is flipped -> ``crc`` (CRC-8 detects every single-bit
-  error);
-* **foreign**: a frame with an ID not in the DBC is inserted -> ``unknown_id``.
-"""
+"""Damage a candump -L log on purpose, each damaged line rejected by the decoder: truncated
+lines (``malformed`` or ``dlc``), one flipped payload bit (``crc``), inserted foreign IDs
+(``unknown_id``)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -22,25 +13,7 @@ FOREIGN_IDS = (0x7DF, 0x7E8, 0x0C4, 0x3B3, 0x18F)
 
 def corrupt_candump(src: str | Path, dst: str | Path, truncated: int = 0, corrupted: int = 0,
                     foreign: int = 0, seed: int = 0, skip: int = 20) -> dict[str, int]:
-    """Copy a candump -L log with damaged and inserted lines.
-
-    Parameters
-    ----------
-    src, dst : path
-        Input and output ``.log`` files.
-    truncated, corrupted, foreign : int
-        How many lines to truncate, how many payloads to corrupt, how many foreign frames
-        to insert (distinct lines are chosen for truncation and corruption).
-    seed : int
-        Random seed.
-    skip : int
-        Leave the first ``skip`` lines intact (so every message's counter is established).
-
-    Returns
-    -------
-    dict
-        ``{"truncated": n, "corrupted": n, "foreign": n, "lines": total_lines_written}``.
-    """
+    """Copy a candump -L log with lines cut, payloads corrupted and foreign frames inserted."""
     lines = Path(src).read_text(encoding="ascii").splitlines()
     rng = np.random.default_rng(seed)
     candidates = np.arange(min(skip, len(lines)), len(lines))

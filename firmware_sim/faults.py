@@ -1,25 +1,6 @@
-"""Fault injection of the simulated node: sensor faults and bus/transmission faults.
-
-Specified on the command line as ``--fault KIND=ARGS`` (repeatable):
-
-=========================  ================================================================
-spec                       effect
-=========================  ================================================================
-``loss=P``                 each frame is lost with probability P (random loss)
-``burst=RATE:LEN``         bursts of frame loss: RATE bursts per second (Poisson), each
-                           LEN seconds long; every frame inside a burst is lost
-``stuck=CH:START:LEN``     sensor channel CH freezes at its value at START (s) for LEN s
-``bitflip=P``              with probability P a frame is sent with one random payload bit
-                           flipped after the CRC was computed (the receiver's CRC check
-                           must catch it)
-``late=P:DELAY``           with probability P a frame is held back DELAY seconds and sent
-                           after newer frames (out of order)
-``busoff=AT:LEN``          the CAN controller goes bus-off at AT (s) and recovers after LEN
-                           s; nothing is sent meanwhile; status reports the recovery
-=========================  ================================================================
-
-All random choices come from one seeded generator, so a run is reproducible.
-"""
+"""Fault injection of the simulated node, ``--fault KIND=ARGS`` (repeatable; docs/can.md):
+frame ``loss``, loss ``burst`` windows, ``stuck`` sensors, ``bitflip`` after the CRC,
+``late`` frames, ``busoff`` windows; all random choices come from one seeded generator."""
 from __future__ import annotations
 
 import functools
@@ -35,19 +16,7 @@ FAULT_KINDS = ("loss", "burst", "stuck", "bitflip", "late", "busoff")
 
 @dataclass
 class FaultConfig:
-    """Parsed fault specification (see the module docstring).
-
-    Attributes
-    ----------
-    loss : float
-        Random frame-loss probability.
-    bursts : list of (rate_hz, length_s)
-    stuck : list of (channel, start_s, length_s)
-    bitflip : float
-        Probability of one flipped bit per frame.
-    late : tuple (probability, delay_s) or None
-    busoff : list of (at_s, length_s)
-    """
+    """Parsed fault specification (see the module docstring; times in s, rates in Hz)."""
 
     loss: float = 0.0
     bursts: list[tuple[float, float]] = field(default_factory=list)
@@ -56,21 +25,9 @@ class FaultConfig:
     late: tuple[float, float] | None = None
     busoff: list[tuple[float, float]] = field(default_factory=list)
 
-    @property
-    def active(self) -> bool:
-        """``True`` if any fault is configured."""
-        return bool(self.loss or self.bursts or self.stuck or self.bitflip or self.late
-                    or self.busoff)
-
     @classmethod
     def parse(cls, specs: Iterable[str], channels: Iterable[str] | None = None) -> "FaultConfig":
-        """Parse ``KIND=ARGS`` strings.
-
-        Raises
-        ------
-        UsageError
-            Naming the bad spec and the expected form.
-        """
+        """Parse ``KIND=ARGS`` strings (UsageError naming a bad spec and the expected form)."""
         cfg = cls()
         chans = set(channels) if channels is not None else None
         forms = {"loss": "loss=P", "burst": "burst=RATE_HZ:LENGTH_S",
@@ -84,9 +41,7 @@ class FaultConfig:
                                  f"{', '.join(forms.values())}")
             parts = [a.strip() for a in arg.split(":")]
             num = functools.partial(_fault_number, spec, forms[kind])
-
-            want = {"loss": 1, "bitflip": 1, "burst": 2, "late": 2, "busoff": 2, "stuck": 3}[kind]
-            if len(parts) != want:
+            if len(parts) != forms[kind].count(":") + 1:
                 raise UsageError(f"--fault {spec!r}: expected {forms[kind]}")
             inf = float("inf")
             if kind == "loss":
@@ -109,13 +64,7 @@ class FaultConfig:
 
 
 def _fault_number(spec: str, form: str, s: str, lo: float, hi: float, what: str) -> float:
-    """Parse one number of a ``--fault`` spec, in ``[lo, hi]``.
-
-    Raises
-    ------
-    UsageError
-        Naming the spec, the field, its expected form or range and the value got.
-    """
+    """Parse one number of a ``--fault`` spec, in ``[lo, hi]`` (else UsageError)."""
     try:
         v = float(s)
     except ValueError:
@@ -127,21 +76,7 @@ def _fault_number(spec: str, form: str, s: str, lo: float, hi: float, what: str)
 
 
 class FaultInjector:
-    """Applies a :class:`FaultConfig` to the node's sensor values and transmissions.
-
-    Parameters
-    ----------
-    config : FaultConfig
-    rng : numpy Generator
-    duration : float
-        Run length (s), to draw the burst times.
-
-    Attributes
-    ----------
-    counts : dict
-        Frames affected per fault kind (``loss``, ``burst``, ``bitflip``, ``late``,
-        ``busoff``) and sensor samples held (``stuck``).
-    """
+    """Applies a :class:`FaultConfig` to the node's sensor values and transmissions."""
 
     def __init__(self, config: FaultConfig, rng: np.random.Generator, duration: float) -> None:
         self.config = config
@@ -159,7 +94,6 @@ class FaultInjector:
         self.burst_windows = sorted(windows)
         self.busoff_windows = sorted((a, a + n) for a, n in config.busoff)
 
-    # ---- sensor side -------------------------------------------------------------------
     def sensors(self, t: float, values: dict[str, float]) -> dict[str, float]:
         """Apply stuck-sensor faults to one sample (in place) and return it."""
         for ch, start, length in self.config.stuck:
@@ -174,10 +108,6 @@ class FaultInjector:
                 self._held.pop(ch, None)
         return values
 
-    def stuck_active(self, t: float) -> bool:
-        return any(s <= t < s + n for _, s, n in self.config.stuck)
-
-    # ---- bus side ----------------------------------------------------------------------
     def in_busoff(self, t: float) -> bool:
         """``True`` while the controller is bus-off at time ``t``."""
         return any(a <= t < b for a, b in self.busoff_windows)
@@ -186,25 +116,13 @@ class FaultInjector:
         """Number of bus-off events starting in ``(t_prev, t]``."""
         return sum(1 for a, _ in self.busoff_windows if t_prev < a <= t)
 
-    def in_burst(self, t: float) -> bool:
-        return any(a <= t < b for a, b in self.burst_windows)
-
     def transmit(self, t: float, data: bytearray) -> tuple[bool, float]:
-        """Decide the fate of one frame at time ``t``.
-
-        Returns
-        -------
-        send : bool
-            ``False`` if the frame is lost.
-        delay : float
-            Seconds to hold it back (late frame), 0 for now. ``data`` may have been
-            corrupted in place (bit flip).
-        """
+        """The fate of one frame at ``t`` (s): ``(send, delay s)``; a bit flip changes ``data``."""
         cfg = self.config
         if self.busoff_windows and self.in_busoff(t):
             self.counts["busoff"] += 1
             return False, 0.0
-        if self.burst_windows and self.in_burst(t):
+        if self.burst_windows and any(a <= t < b for a, b in self.burst_windows):
             self.counts["burst"] += 1
             return False, 0.0
         rng = self.rng
@@ -223,15 +141,6 @@ class FaultInjector:
     def flags(self, t: float) -> int:
         """SN_Status FaultFlags bits of the faults active at ``t``."""
         cfg = self.config
-        f = 0
-        if cfg.loss:
-            f |= 1 << 0
-        if self.burst_windows:
-            f |= 1 << 1
-        if self.stuck_active(t):
-            f |= 1 << 2
-        if cfg.bitflip:
-            f |= 1 << 3
-        if cfg.late:
-            f |= 1 << 4
-        return f
+        stuck = any(s <= t < s + n for _, s, n in cfg.stuck)
+        active = (cfg.loss, self.burst_windows, stuck, cfg.bitflip, cfg.late)
+        return sum(1 << bit for bit, on in enumerate(active) if on)

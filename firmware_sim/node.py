@@ -1,20 +1,7 @@
-"""The simulated suspension sensor node, written like its firmware.
-
-Main loop = :class:`firmware_sim.scheduler.Scheduler` with three tasks:
-
-* **sensor task** (500 Hz - 1 kHz): read every sensor of the plant at the tick, add sensor
-  noise, apply sensor faults (stuck), quantize and pack per the DBC
-  (:class:`suspid.can.codec.SensorEncoder`: ``SN_Sync`` with the tick, then the model's
-  sensor frames -- QC_*, HC_* or FC_* -- E2E counter = tick mod 15 and CRC), hand the frames
-  to the CAN driver;
-* **status task** (10 Hz): ``SN_Status`` with state, sample rate, fault flags, bus-off count;
-* **rx task** (every tick): drain frames from the bus (e.g. the estimator's
-  ``SUSPID_Alert``), count and keep the alerts.
-
-The *CAN driver* applies transmission faults (loss, bursts, bit flips, late frames,
-bus-off) and sends through any python-can bus; each frame's ``timestamp`` is its data time
-(s since node start). The plant is :class:`firmware_sim.plant.Plant` over the core's model;
-extra effects go in through ``extra_forces`` (or a model with ``extra_force`` set).
+"""The simulated suspension sensor node, written like its firmware: a scheduler runs the
+sensor task (``SN_Sync`` and the sensor frames every tick), the status task (``SN_Status``)
+and the rx task (keeps ``SUSPID_Alert`` frames); the :class:`CanDriver` applies
+transmission faults. Each frame's ``timestamp`` is its data time (s since start).
 """
 from __future__ import annotations
 
@@ -31,7 +18,7 @@ from cantools.database.can import Database
 
 from firmware_sim.faults import FaultConfig, FaultInjector
 from firmware_sim.plant import Plant
-from firmware_sim.scenarios import build_scenario, canonical_name
+from firmware_sim.scenarios import build_scenario
 from firmware_sim.scheduler import Scheduler, SchedulerStats
 from suspid.can.codec import (FAULT_BITS, STATE_BUSOFF_RECOVERED, STATE_DEGRADED, STATE_RUNNING,
                               STATE_STOPPING, SensorEncoder, decode_alert, encode_status,
@@ -55,8 +42,7 @@ class FrameBus(Protocol):
 
 
 def expand_channel_sets(model: SuspensionModel, names: Sequence[str]) -> list[str]:
-    """Channel names with each named set (:data:`~suspid.models.base.CHANNEL_SETS`)
-    replaced by its channels (:meth:`SuspensionModel.channel_set`), duplicates dropped."""
+    """Channel names with each set of :data:`~suspid.models.base.CHANNEL_SETS` expanded."""
     out: list[str] = []
     for n in names:
         out += model.channel_set(n) if n in CHANNEL_SETS else [n]
@@ -69,39 +55,11 @@ def _order(channel: str) -> int:
 
 @dataclass
 class NodeConfig:
-    """Configuration of a node run.
-
-    Attributes
-    ----------
-    model : str
-        A registered model (``quarter1``, ``quarter2``, ``half4``, ``full7``); selects the
-        model's sensor message set (QC_*, HC_* or FC_*) and ``SN_Status.SensorSet``.
-    scenario : str
-        See :mod:`firmware_sim.scenarios`.
-    duration : float or None
-        Run length (s); default per scenario.
-    rate : float
-        Sensor task rate (Hz), 500 - 1000 typical.
-    status_hz : float
-        Status task rate (Hz).
-    speed : float
-        Pacing: 1 real time, X times real time, 0 as fast as possible.
-    noise : float
-        Multiplier of :data:`DEFAULT_NOISE` (0 = noise-free sensors).
-    channels : list of str or None
-        Channels sent (default: every motion channel of the model and the roads). Ride
-        heights (``d``, ``d1_dot``, ...) may be named, and the sets of
-        :data:`~suspid.models.base.CHANNEL_SETS` (``production``: body accelerations and
-        ride heights; ``accelerometers``: every coordinate's acceleration), which send no
-        road and no wheel motion.
-    params : dict
-        Plant parameter overrides (SI).
-    faults : FaultConfig
-    seed : int
-        Seed of road, noise and faults.
-    wear_start, wear_to : float
-        Damper-wear schedule (see :func:`firmware_sim.scenarios.build_scenario`).
-    """
+    """Configuration of a node run: model and scenario (:mod:`firmware_sim.scenarios`), run
+    length (s, default per scenario), sensor and status rates (Hz), pacing ``speed`` (0: as
+    fast as possible), ``noise`` x :data:`DEFAULT_NOISE`, channels sent (names of
+    :data:`~suspid.models.base.CHANNEL_SETS` allowed; default every motion and road),
+    parameter overrides (SI), faults, seed, damper-wear schedule (s, fraction)."""
 
     model: str = "quarter2"
     scenario: str = "bump"
@@ -143,14 +101,7 @@ class NodeSummary:
 
 
 class CanDriver:
-    """The node's CAN controller: transmission faults, late-frame queue, bus-off, send.
-
-    Parameters
-    ----------
-    sink : callable
-        ``sink(msg)`` puts a frame on the bus (``bus.send``) or into a list.
-    faults : FaultInjector
-    """
+    """The node's CAN controller: transmission faults, late frames, bus-off, ``sink(msg)``."""
 
     def __init__(self, sink: Callable[[can.Message], None], faults: FaultInjector) -> None:
         self.sink = sink
@@ -191,21 +142,8 @@ class CanDriver:
 
 
 class SensorNode:
-    """The simulated sensor node.
-
-    Parameters
-    ----------
-    config : NodeConfig
-    dbc : path or cantools Database, optional
-        Default suspid's ``suspension.dbc``.
-    model : SuspensionModel, optional
-        Plant model instance (e.g. with ``extra_force`` set); default ``get_model(config.model)``.
-    extra_forces : sequence of callables, optional
-        Extra generalised forces ``f(t, x, u, params)`` added to the plant (the undeclared-effect hook).
-    effects : sequence, optional
-        Undeclared effects of :mod:`suspid.effects` (e.g. ``"coulomb_friction:F=120"``)
-        injected into the plant and the sensors without telling the estimator.
-    """
+    """The simulated sensor node of ``config``; ``model``, ``extra_forces`` ``f(t, x, u, params)`` and
+    undeclared ``effects`` go into the plant."""
 
     def __init__(self, config: NodeConfig, dbc: str | Path | Database | None = None,
                  model: SuspensionModel | None = None,
@@ -220,7 +158,6 @@ class SensorNode:
             raise UsageError(f"status rate must be in (0, {config.rate}] Hz, got {config.status_hz}")
         if not 0 <= config.noise < float("inf"):
             raise UsageError(f"--noise must be a finite number >= 0, got {config.noise}")
-        canonical_name(config.scenario)
         self.setup = build_scenario(self.model, config.scenario, config.duration, config.rate,
                                     config.params, config.seed, config.wear_start, config.wear_to)
         self.plant = Plant(self.model, self.setup.params, self.setup.t, self.setup.road,
@@ -261,7 +198,6 @@ class SensorNode:
         except KeyError:
             self._alert_id = -1
 
-    # ---- tasks -------------------------------------------------------------------------
     def _need_driver(self) -> CanDriver:
         if self._driver is None:
             raise RuntimeError("the node's tasks run only inside run() or frames()")
@@ -269,7 +205,7 @@ class SensorNode:
 
     def truth(self, t: float) -> Mapping[str, float]:
         """Plant parameters in force at data time ``t`` (s) -- the ground truth."""
-        return self.plant.params_at(t)
+        return self.setup.params(t)
 
     def _sensor_task(self, k: int) -> None:
         driver = self._need_driver()
@@ -336,7 +272,6 @@ class SensorNode:
                     continue
                 self.summary.alerts.append(alert)
 
-    # ---- running -------------------------------------------------------------------------
     def _scheduler(self, speed: float) -> Scheduler:
         sched = Scheduler(self.config.rate, speed)
         sched.add_task("sensor", self.config.rate, self._sensor_task)
@@ -363,25 +298,10 @@ class SensorNode:
     def run(self, bus: FrameBus, speed: float | None = None,
             stop: threading.Event | None = None, linger: float = 0.0,
             linger_until: threading.Event | None = None) -> NodeSummary:
-        """Run the scenario on a python-can bus.
-
-        Parameters
-        ----------
-        bus : FrameBus
-            Any python-can bus (virtual, slcan, socketcan, the SLCAN pty adapter), or a proxy
-            with its ``send`` and ``recv``.
-        speed : float, optional
-            Overrides ``config.speed`` (0 = as fast as possible).
-        stop : threading.Event, optional
-            Set it to end the run early.
-        linger : float, optional
-            Seconds (wall) to stay on the bus after the last sample, still receiving (e.g. an
-            alert frame from an estimator that lags behind), until ``stop`` or
-            ``linger_until`` is set. Default 0.
-        linger_until : threading.Event, optional
-            Ends the linger only (e.g. the SLCAN host closed the channel); unlike ``stop``
-            it does not end the run itself (a host may close and reopen mid-run).
-        """
+        """Run the scenario on a python-can bus (or a proxy with ``send`` and ``recv``);
+        ``speed`` overrides ``config.speed``, ``stop`` ends the run early. After the last
+        sample the node keeps receiving for ``linger`` s (wall) unless ``stop`` or
+        ``linger_until`` (e.g. the SLCAN host closed the channel) is set."""
         self._bus = bus
         self._driver = CanDriver(bus.send, self.faults)
         sched = self._scheduler(self.config.speed if speed is None else speed)
@@ -396,11 +316,7 @@ class SensorNode:
         return self._finish(stats)
 
     def frames(self) -> Iterator[can.Message]:
-        """Every frame the node would send, in order, without a bus or pacing.
-
-        Frames are stamped with their data time (s since node start); useful to write a
-        log (``suspid node --log``) or to feed a listener directly.
-        """
+        """Every frame the node would send, in order, without a bus or pacing."""
         out: list[can.Message] = []
         self._bus = None
         self._driver = CanDriver(out.append, self.faults)

@@ -1,20 +1,5 @@
-"""The node's plant: the core's suspension model, stepped in chunks.
-
-The physics stays in :mod:`suspid.models` / :mod:`suspid.simulate`: the plant asks
-:func:`suspid.simulate.simulate` for one chunk of samples at a time (exact for the linear
-models; the ODE path when the model has ``extra_force`` terms) and carries the state
-``[q, q']`` across chunk boundaries. Parameters may change with time (damper wear): they
-are evaluated once per chunk, i.e. held piecewise constant over ``chunk_s``.
-
-The linear chunks share one set of the model's affine pieces
-(:meth:`~suspid.models.base.SuspensionModel.affine`, computed once from the parameters at
-the start): a wearing damper or a sagging spring changes only the free parameters, so each
-chunk's state matrices are one small product instead of a new solve with the mass matrix.
-
-Undeclared effects go in through the model: pass a model whose ``extra_force`` list holds
-the extra generalised forces, or ``extra_forces=[...]`` here (appended to a copy of the
-model's list).
-"""
+"""The node's plant: the core's suspension model (:func:`suspid.simulate.simulate`) stepped
+in chunks, the state carried across them, parameters held constant within a chunk."""
 from __future__ import annotations
 
 import copy
@@ -30,35 +15,10 @@ ParamsFn = Callable[[float], Mapping[str, float]]
 
 
 class Plant:
-    """Suspension model driven by a precomputed road, sampled on a uniform grid.
-
-    Parameters
-    ----------
-    model : SuspensionModel
-    params : mapping or callable
-        Parameters (SI), or ``params(t) -> mapping`` for time-varying ones.
-    t : ndarray, shape (N,)
-        Sample times (s), uniform.
-    road : dict
-        Road arrays (m, m/s) of length N (may be empty: no road input).
-    x0 : ndarray, optional
-        Initial state ``[q, q']``.
-    chunk_s : float
-        Simulation chunk length (s); parameters are constant within a chunk.
-    extra_forces : sequence of callables, optional
-        Added to the model's ``extra_force`` (on a copy of the model).
-    effects : sequence, optional
-        Undeclared effects from :mod:`suspid.effects` (objects, ``"NAME:k=v"``
-        strings or ``{"name", "params"}`` dicts). Physical ones go into the plant's
-        right-hand side (fast exponential integrator of :mod:`estimator.diagnose.nlsim`),
-        sensor ones (delay, offset) into what the sensors report; the sensor effects see
-        the previous chunk too, so a delay is continuous across chunk boundaries.
-
-    Attributes
-    ----------
-    channels : tuple of str
-        Channels :meth:`sample` returns (model channels, ride heights and road columns).
-    """
+    """Suspension model driven by a precomputed road (m, m/s; may be empty), sampled at the
+    uniform times ``t`` (s) from ``x0`` (``[q, q']``). ``params`` (SI) may be a function of
+    time, constant within a ``chunk_s`` (s) chunk; ``extra_forces`` are added to a copy of
+    the model; ``effects`` (:mod:`suspid.effects`) act on the plant or the sensors."""
 
     def __init__(self, model: SuspensionModel, params: Mapping[str, float] | ParamsFn,
                  t: FloatArray, road: Mapping[str, FloatArray] | None = None,
@@ -86,7 +46,6 @@ class Plant:
             fixed = dict(params)
             self._params = lambda _t: fixed
         self.t = np.asarray(t, dtype=float)
-        #: the forward model's affine pieces in the dampers and springs (one set per plant)
         self.affine = model.affine(self._params(float(self.t[0]) if self.t.size else 0.0))
         self.road = {k: np.asarray(v, dtype=float) for k, v in (road or {}).items()}
         self.fs = 1.0 / float(self.t[1] - self.t[0]) if self.t.size > 1 else 1.0
@@ -97,10 +56,6 @@ class Plant:
             c for r in model.roads for c in (r, f"{r}_dot") if r in self.road)
         self._start = -1   # first sample index of the cached chunk
         self._cols: dict[str, FloatArray] = {}
-
-    def params_at(self, t: float) -> Mapping[str, float]:
-        """Parameters (SI) in force at time ``t`` (s)."""
-        return self._params(t)
 
     def _compute(self, k: int) -> None:
         """Simulate the chunk starting at sample ``k`` (the state is at sample ``k``)."""

@@ -1,24 +1,12 @@
-"""What the simulated node's sensors see: the core's excitations plus damper wear.
-
-=============  ==========================================================================
-scenario       plant and road
-=============  ==========================================================================
-initial        no road; the body (and wheel) released from the seed's initial state
-curb           a 0.1 m curb (half-cosine rise over 20 ms) at t = 0.5 s
-bump           the seed's speed bump: 0.1 m high, 3 m long, crossed at 20 km/h
-random         ISO 8608 class C road at 50 km/h (alias ``iso8608``)
-damper-wear    random road (class C, 50 km/h) while the damper ``c1`` loses damping
-               linearly from its nominal value, starting at ``wear_start`` (20 s) and
-               reaching ``wear_to`` (0.5) x nominal at the end of the run
-=============  ==========================================================================
-
-Road shapes come from :func:`suspid.excitation.make_scenario`; the plant from
-:class:`firmware_sim.plant.Plant`.
+"""What the simulated node's sensors see: ``initial`` (released from the seed's initial
+state), ``curb`` (0.1 m at t = 0.5 s), ``bump`` (the seed's speed bump at 20 km/h),
+``random`` (ISO 8608 class C at 50 km/h) and ``damper-wear`` (random road while the damper
+loses damping linearly from ``wear_start`` to ``wear_to`` x nominal at the end).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable, Mapping
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
@@ -35,24 +23,7 @@ DEFAULT_DURATION = {"initial": 5.0, "curb": 5.0, "bump": 5.0, "random": 30.0, "d
 
 @dataclass
 class ScenarioSetup:
-    """A node scenario, ready for the plant.
-
-    Attributes
-    ----------
-    name : str
-    t : ndarray
-        Sample times (s).
-    road : dict
-        Road arrays (m, m/s).
-    x0 : ndarray
-        Initial state.
-    params : callable
-        ``params(t) -> dict`` (SI); constant except for damper wear.
-    nominal : dict
-        Parameters at t = 0.
-    events : dict
-        Named times (s) of interest (e.g. ``wear_start``, ``c1_below_70pct``).
-    """
+    """A node scenario, ready for the plant (``params(t)`` SI, ``events``: named times in s)."""
 
     name: str
     t: FloatArray
@@ -75,29 +46,10 @@ def build_scenario(model: SuspensionModel, name: str, duration: float | None = N
                    fs: float = 500.0, params: Mapping[str, float] | None = None,
                    seed: int = 0, wear_start: float = 20.0, wear_to: float = 0.5,
                    damper: str | None = None) -> ScenarioSetup:
-    """Build the road, initial state and parameter schedule of a node scenario.
-
-    Parameters
-    ----------
-    model : SuspensionModel
-    name : str
-        One of :data:`SCENARIOS` (or an alias).
-    duration : float, optional
-        Run length (s); default :data:`DEFAULT_DURATION`.
-    fs : float
-        Sample rate (Hz).
-    params : mapping, optional
-        Parameter overrides (SI); default the model's defaults.
-    seed : int
-        Random road seed.
-    wear_start : float
-        Damper wear: time (s) the damping starts to fall.
-    wear_to : float
-        Damper wear: damping at the end of the run as a fraction of nominal (0 < f <= 1).
-    damper : str, optional
-        Damper parameter that wears (default the model's first strut damper: ``c1``;
-        ``c`` for quarter1).
-    """
+    """Build the road, initial state and parameter schedule of scenario ``name`` (or an
+    alias): ``duration`` (s, default :data:`DEFAULT_DURATION`), sample rate ``fs`` (Hz),
+    parameter overrides (SI), road ``seed``; damper wear from ``wear_start`` (s) to
+    ``wear_to`` x nominal at the end, of ``damper`` (default the first strut damper)."""
     n = canonical_name(name)
     dur = DEFAULT_DURATION[n] if duration is None else float(duration)
     if not dur > 0:
@@ -110,11 +62,9 @@ def build_scenario(model: SuspensionModel, name: str, duration: float | None = N
                              f"{model.name}; expected {', '.join(nominal)}")
         nominal.update(params)
     core = {"random": "iso8608", "damper-wear": "iso8608"}.get(n, n)
-    if core == "iso8608":
-        t, road, x0 = make_scenario(model, core, duration=dur, fs=fs, params=nominal, seed=seed,
-                                    road_class="C", v_kmh=50.0)
-    else:
-        t, road, x0 = make_scenario(model, core, duration=dur, fs=fs, params=nominal, seed=seed)
+    road_opts: dict[str, Any] = {"road_class": "C", "v_kmh": 50.0} if core == "iso8608" else {}
+    t, road, x0 = make_scenario(model, core, duration=dur, fs=fs, params=nominal, seed=seed,
+                                **road_opts)
     events: dict[str, float] = {}
     if n != "damper-wear":
         fixed = dict(nominal)

@@ -1,24 +1,8 @@
 """Bounded, preallocated rolling buffer of decoded samples, and alignment on a uniform grid.
 
-Each *source* (one CAN message: one timestamp, several channels) owns a ring of
-``capacity`` rows preallocated as :class:`array.array` columns of doubles (an element store
-costs ~50 ns, a third of a NumPy scalar store; NumPy reads the columns without copying
-through :func:`numpy.frombuffer`). When a ring is full the oldest row is overwritten and
-counted in :attr:`RollingBuffer.overwritten` -- memory stays flat on an endless stream. For
-offline loading of a whole log, ``growable=True`` doubles the rings in place instead.
-:meth:`Source.push_many` stores a block of rows at once (the decoder's batch path); the
-ring ends up exactly as after the same rows pushed one by one.
-
-The buffer calls nobody: it holds what was pushed. A producer that holds rows back (the
-decoder batches frames) hands out the buffer only after storing them
-(:attr:`DecodeListener.buffer <estimator.decode.listener.DecodeListener.buffer>`).
-
-:meth:`RollingBuffer.align` puts the channels on one uniform time base: every sample goes
-to the grid cell nearest its time; cells without a sample stay NaN and are listed as
-:class:`Gap` records -- nothing is interpolated. A window reads only its own rows of each
-ring (:meth:`Source.rows_between`: found by bisection while the ring's times are in
-arrival order, which each read checks for the rows pushed since the previous one), and
-only the columns asked for; a monitor aligns a few seconds out of a ring of tens.
+One ring of :class:`array.array` columns per message: full, it overwrites its oldest row
+(:attr:`RollingBuffer.overwritten`) or doubles (``growable``). :meth:`RollingBuffer.align`
+puts channels on one grid without interpolating; empty cells stay NaN (:class:`Gap`).
 """
 from __future__ import annotations
 
@@ -31,26 +15,16 @@ import numpy as np
 
 from suspid.errors import InputError
 
-#: alignment refuses grids longer than this (a timestamp outlier, not a real record)
+#: alignment refuses grids longer than this (a timestamp outlier, not a real record) ...
 MAX_GRID = 50_000_000
-#: ... and grids of more than SPARSE_FREE cells that are SPARSE_RATIO times longer than the
-#: data (one timestamp outlier would otherwise make a mostly-NaN grid of GBs)
+#: ... and grids of more than SPARSE_FREE cells SPARSE_RATIO times longer than the data
 SPARSE_FREE = 2_000_000
 SPARSE_RATIO = 50
 
 
 @dataclass(frozen=True)
 class Gap:
-    """A run of missing samples of one channel on the aligned grid.
-
-    Attributes
-    ----------
-    channel : str
-    t_start, t_end : float
-        Times (s) of the first and last missing grid cell.
-    samples : int
-        Number of missing cells.
-    """
+    """A run of ``samples`` missing cells of one channel, ``t_start`` to ``t_end`` (s)."""
 
     channel: str
     t_start: float
@@ -68,22 +42,14 @@ class Aligned:
 
     Attributes
     ----------
-    t : ndarray, shape (N,)
-        Grid times (s). Where a frame fell on a cell its own timestamp is used, provided
-        all frames lie within 1e-9 dt of the grid (an encoded CSV reads back exactly);
-        otherwise the ideal grid ``t0 + k dt``.
-    dt : float
-        Grid step (s).
+    t, dt : ndarray (N,), float
+        Grid times (s; the frames' own where all lie within 1e-9 dt of the grid) and step (s).
     values : dict
         ``channel -> ndarray (N,)``, NaN where no valid sample fell.
     gaps : list of Gap
-        Runs of NaN per channel (leading and trailing runs included); for a channel with
-        one sample every ``N`` cells (a page of a multiplexed message), only the runs of
-        ``N`` cells or more (:func:`cadence`).
-    collisions : int
-        Samples that fell on an already filled cell (the later one is kept).
-    snapped : float
-        Largest distance (s) between a frame time and its grid cell.
+        Runs of NaN per channel (for one sample every ``N`` cells: of ``N`` or more).
+    collisions, snapped
+        Samples that fell on a filled cell (the later kept); largest snap (s) to a cell.
     """
 
     t: np.ndarray
@@ -95,8 +61,7 @@ class Aligned:
 
 
 class NoSamplesError(InputError):
-    """No accepted frame carries the asked channels in the asked span (a stream's gap
-    longer than a window, or the end of a stream)."""
+    """No accepted frame carries the asked channels in the asked span."""
 
 
 class Source:
@@ -108,8 +73,7 @@ class Source:
     def __init__(self, name: str, channels: Sequence[str], capacity: int, growable: bool,
                  lock: threading.Lock, group: str | None = None) -> None:
         self.name = name
-        #: the message whose frames fill this ring: its own name, or for a page of a
-        #: multiplexed message the message's (the pages of one message share a rate)
+        #: the message whose frames fill this ring (a page's: its message's)
         self.group = name if group is None else group
         self.channels = tuple(channels)
         self.cap = capacity
@@ -120,9 +84,8 @@ class Source:
         self.n = 0          # rows held (<= cap)
         self.growable = growable
         self.overwritten = 0
-        # time order of the rows held, checked at reads (rows are numbered in push order;
-        # the pushes are left alone): rows dropped by clear(), rows checked so far, and the
-        # newest row whose time is not >= its predecessor's (-1: none)
+        # time order, checked at reads (rows numbered in push order): rows cleared, rows
+        # checked, the newest row whose time is not >= its predecessor's (-1: none)
         self._cleared = 0
         self._checked = 0
         self._drop = -1
@@ -131,13 +94,7 @@ class Source:
         self.push = self._compile_push()
 
     def _compile_push(self) -> Callable[[float, Sequence[float]], None]:
-        """Generate ``push(t, values)`` with the column stores unrolled (no per-row loop).
-
-        Generated (``exec`` of the column count only) because ``push`` runs once per frame
-        decoded one at a time -- the small batches of a live bus polled often -- where the
-        plain loop over the columns made that path ~1.4x slower end to end
-        (``tools/bench_decode_paths.py``, docs/performance.md "One decoder path").
-        """
+        """Generate ``push(t, values)``, column stores unrolled (docs/performance.md "One decoder path")."""
         ns: dict[str, object] = {"src": self, "lock": self._lock, "T": self.t}
         stores = []
         for k, col in enumerate(self.cols):
@@ -160,7 +117,7 @@ class Source:
         return cast("Callable[[float, Sequence[float]], None]", ns["push"])   # exec'd above
 
     def _at_end(self) -> int:
-        """The write index reached the end: grow (growable) or wrap to 0; new write index."""
+        """The write index reached the end: grow or wrap; the new write index."""
         if not self.growable:
             return 0
         self._grow(2 * self.cap)
@@ -176,18 +133,7 @@ class Source:
         self.cap = cap
 
     def push_many(self, t: np.ndarray, values: np.ndarray | Sequence[np.ndarray]) -> None:
-        """Append rows ``(t[i], values[i, 0], ..., values[i, k-1])`` in order.
-
-        The ring ends up exactly as after :attr:`push` of every row in turn: the same
-        overwritten rows and count when bounded, the same doublings when growable.
-
-        Parameters
-        ----------
-        t : ndarray of float64, shape (m,)
-            Row times (s).
-        values : ndarray, shape (m, k), or sequence of k arrays of shape (m,)
-            Channel values, one column per channel of the source.
-        """
+        """Append rows ``(t[i], values[i, :])`` exactly as :attr:`push` of each row in turn would."""
         m = int(np.shape(t)[0])
         if m == 0:
             return
@@ -223,28 +169,12 @@ class Source:
 
     def snapshot(self) -> tuple[np.ndarray, np.ndarray]:
         """Copies ``(t (n,), values (n, k))`` in arrival order (oldest first)."""
-        with self._lock:
-            n, w, cap = self.n, self.w, self.cap
-            # zero-copy views of the columns, released before the lock is: a growable ring
-            # cannot resize an array.array while a view of it exists
-            views = [np.frombuffer(c, dtype=np.float64, count=cap) for c in (self.t, *self.cols)]
-            if n < cap or w == 0:
-                lo = w - n if n < cap else 0
-                parts = [v[lo:lo + n].copy() for v in views]
-            else:
-                parts = [np.concatenate((v[w:], v[:w])) for v in views]
-            del views
-        tt = parts[0]
-        vv = np.column_stack(parts[1:]) if len(parts) > 1 else np.empty((n, 0))
-        return tt, vv
+        k = len(self.cols)
+        t, v = self.rows_between(None, None, range(k))
+        return t, np.column_stack([v[j] for j in range(k)]) if k else np.empty((t.size, 0))
 
     def _in_order(self) -> bool:
-        """Whether the rows held have non-decreasing times in arrival order (caller holds the lock).
-
-        Rows are numbered in push order (``overwritten + n`` plus the rows cleared is the
-        count pushed); the rows pushed since the last call are compared with their
-        predecessors here, so each row is checked once, whatever the pushes were.
-        """
+        """Whether the rows held have non-decreasing times (caller holds the lock; each row checked once)."""
         n, cap = self.n, self.cap
         total = self.overwritten + n + self._cleared
         first = total - n                         # number of the oldest row held
@@ -259,25 +189,17 @@ class Source:
         self._checked = total
         if self._drop > first:
             return False
-        # the oldest row held is compared with no predecessor: a NaN there (a ring of one
-        # row, or the rows before it overwritten) would still sort wrongly for bisection
-        if n:
+        if n:   # the oldest row has no predecessor: a NaN there would break bisection
             t0 = self.t[(self.w - n) % cap]
             return t0 == t0
         return True
 
     def rows_between(self, t_start: float | None, t_end: float | None,
                      cols: Sequence[int]) -> tuple[np.ndarray, dict[int, np.ndarray]]:
-        """Copies of the rows with ``t_start <= t <= t_end`` (a bound None: open), in arrival order.
-
-        What :meth:`snapshot` filtered by time gives, without copying the whole ring: the
-        times, and ``{column index: values}`` of the columns ``cols`` only. While the
-        times held are in order (always, for the listener's timestamp time base) the
-        window's rows are found by bisection; otherwise by comparing every time.
-        """
+        """Copies of the times and ``{column: values}`` of the rows with ``t_start <= t <= t_end``."""
         with self._lock:
             n, w, cap = self.n, self.w, self.cap
-            # zero-copy views, released before the lock is (see snapshot)
+            # views released before the lock is: an array.array cannot resize under a view
             tv = np.frombuffer(self.t, dtype=np.float64, count=cap)
             if n < cap or w == 0:
                 lo = w - n if n < cap else 0
@@ -289,8 +211,6 @@ class Source:
                 pick = [slice(a, b) for a, b in spans]
             elif (t_start is None or t_start == t_start) and (t_end is None or t_end == t_end) \
                     and self._in_order():
-                # sorted times: t >= t_start from the left bisection on, t <= t_end up
-                # to the right one (the comparisons below, on a sorted array)
                 for a, b in spans:
                     part = tv[a:b]
                     i = 0 if t_start is None else int(np.searchsorted(part, t_start, "left"))
@@ -305,13 +225,8 @@ class Source:
                         keep &= part >= t_start
                     if t_end is not None:
                         keep &= part <= t_end
-                    at = np.flatnonzero(keep)
-                    if at.size == b - a:
-                        pick.append(slice(a, b))
-                    elif at.size and at[-1] - at[0] + 1 == at.size:
-                        pick.append(slice(a + int(at[0]), a + int(at[-1]) + 1))   # one run
-                    elif at.size:
-                        pick.append(at + a)
+                    if keep.any():
+                        pick.append(np.flatnonzero(keep) + a)
             if not pick:
                 pick = [slice(0, 0)]
 
@@ -336,43 +251,27 @@ class Source:
 
 
 class RollingBuffer:
-    """Bounded rolling store of decoded channels, one ring per message.
-
-    Parameters
-    ----------
-    capacity : int
-        Rows per message ring (e.g. 65536 = 65 s at 1 kHz). Preallocated.
-    growable : bool
-        Double a full ring instead of overwriting (offline loading of a whole log).
-    """
+    """Bounded rolling store of decoded channels, one preallocated ring of ``capacity`` rows per message;
+    ``growable``: double a full ring instead of overwriting."""
 
     def __init__(self, capacity: int = 1 << 16, growable: bool = False) -> None:
         if capacity < 2:
             raise ValueError(f"buffer capacity must be >= 2 rows, got {capacity}")
         self.capacity = int(capacity)
         self.growable = growable
-        self._sources: dict[str, Source] = {}
+        self.sources: dict[str, Source] = {}   # message name -> ring
         self._where: dict[str, tuple[Source, int]] = {}
         self._lock = threading.Lock()
 
-    @property
-    def sources(self) -> dict[str, Source]:
-        """``message name -> Source`` (every row received so far stored)."""
-        return self._sources
-
     def source(self, name: str, channels: Sequence[str], group: str | None = None) -> Source:
-        """Create (or return) the ring of message ``name`` carrying ``channels``.
-
-        ``group`` names the message when the ring holds one page of a multiplexed message
-        (the rings of its pages share the message's frame interval, see :meth:`align`).
-        """
-        if name in self._sources:
-            return self._sources[name]
+        """Create (or return) the ring of message ``name`` (``group``: a multiplexed page's message)."""
+        if name in self.sources:
+            return self.sources[name]
         for ch in channels:
             if ch in self._where:
                 raise ValueError(f"channel {ch!r} already comes from {self._where[ch][0].name}")
         src = Source(name, channels, self.capacity, self.growable, self._lock, group)
-        self._sources[name] = src
+        self.sources[name] = src
         for k, ch in enumerate(channels):
             self._where[ch] = (src, k)
         return src
@@ -391,7 +290,7 @@ class RollingBuffer:
         """Time (s) of the newest row of any source (NaN if empty)."""
         best = float("nan")
         with self._lock:
-            for s in self._sources.values():
+            for s in self.sources.values():
                 if s.n:
                     t = s.t[(s.w - 1) % s.cap]
                     if not best >= t:
@@ -402,7 +301,7 @@ class RollingBuffer:
         """Time (s) of the oldest row held of any source (NaN if empty)."""
         best = float("nan")
         with self._lock:
-            for s in self._sources.values():
+            for s in self.sources.values():
                 if s.n:
                     t = s.t[(s.w - s.n) % s.cap] if not s.growable else s.t[s.w - s.n]
                     if not best <= t:
@@ -415,43 +314,24 @@ class RollingBuffer:
         t, v = src.snapshot()
         return t, v[:, k]
 
-    def clear(self) -> None:
-        """Forget all rows."""
-        for s in self.sources.values():
-            s.clear()
-
     def align(self, channels: Iterable[str] | None = None, dt: float | None = None,
               t_start: float | None = None, t_end: float | None = None) -> Aligned:
-        """Put channels on one uniform grid without interpolating.
+        """Put ``channels`` (default all) on one uniform grid without interpolating.
 
         Parameters
         ----------
-        channels : iterable of str, optional
-            Channels to align (default all).
         dt : float, optional
-            Grid step (s); default the smallest median frame interval of the messages:
-            the rings of the pages of one multiplexed message count as that message, the
-            median interval of their times taken together (page 0 at ``t``, page 1 at
-            ``t + P``: the grid step is ``P``, each page fills every other cell).
+            Grid step (s); default the smallest median frame interval of the messages.
         t_start, t_end : float, optional
             Window (s, inclusive); default everything held.
 
-        Returns
-        -------
-        Aligned
-
-        Raises
-        ------
-        InputError
-            No data, or a time span that would need more than 50 M grid cells, or more
-            than 2 M cells and 50 x the frames held (a timestamp outlier).
+        Raises InputError for no data or a grid far longer than the data (a timestamp outlier).
         """
         names = list(channels) if channels is not None else self.channels
         unknown = [c for c in names if c not in self._where]
         if unknown:
             raise KeyError(f"channel(s) not in buffer: {', '.join(unknown)}")
-        # per source: the rows inside the window, in arrival order, and only the value
-        # columns asked for (a copy of the whole ring per window was most of the cost)
+        # per source: the window's rows, only the columns asked for
         want: dict[str, tuple[Source, list[int]]] = {}
         for c in names:
             src, k = self._where[c]
@@ -462,8 +342,8 @@ class RollingBuffer:
         for name, (src, cols) in want.items():
             t, v = src.rows_between(t_start, t_end, cols)
             fin = np.isfinite(t)
-            if not fin.all():   # a NaN/inf time has no place on a grid (the listener never
-                t = t[fin]      # stores one; a direct push can)
+            if not fin.all():   # a NaN/inf time has no place on a grid
+                t = t[fin]
                 v = {j: x[fin] for j, x in v.items()}
             snaps[name] = (t, v)
         nonempty = [s for s in snaps.values() if s[0].size]
@@ -492,8 +372,6 @@ class RollingBuffer:
         span = (t_last - t0) / dt
         rows = max(t.size for t, _ in nonempty)
         if span > MAX_GRID or (span > SPARSE_FREE and span > SPARSE_RATIO * rows):
-            # a grid far larger than the data is a timestamp outlier (one corrupted or
-            # jumped timestamp), not a record: refuse it instead of allocating GBs of NaN
             big = max(((float(np.max(np.abs(np.diff(t)))) if t.size > 1 else 0.0), name)
                       for name, (t, _) in snaps.items() if t.size)
             raise InputError(f"decoded frames span {t_last - t0:.6g} s ({t0:.6g} .. "
@@ -507,20 +385,13 @@ class RollingBuffer:
         collisions = 0
         cells: dict[str, np.ndarray] = {}
         filled = np.zeros(n, dtype=bool)
-        for name, (t, v) in snaps.items():
-            cell = np.rint((t - t0) / dt).astype(np.int64)
-            ok = (cell >= 0) & (cell < n)
-            whole = bool(ok.all())   # always, as t0 <= t <= t_last; kept as a guard
-            kk = cell if whole else cell[ok]
-            cells[name] = kk
-            stamps[kk] = t if whole else t[ok]
-            if kk.size:
-                # frames minus distinct cells (what np.unique counted, without its sort)
+        for name, (t, _) in snaps.items():
+            kk = cells[name] = np.rint((t - t0) / dt).astype(np.int64)   # t0 <= t <= t_last
+            stamps[kk] = t
+            if kk.size:   # frames minus distinct cells
                 filled[:] = False
                 filled[kk] = True
                 collisions = max(collisions, int(kk.size - np.count_nonzero(filled)))
-            if not whole:
-                snaps[name] = (t, {j: x[ok] for j, x in v.items()})
         for c in names:
             src, col = self._where[c]
             out = np.full(n, np.nan)
@@ -542,14 +413,7 @@ class RollingBuffer:
 
 
 def cadence(v: np.ndarray) -> int:
-    """Grid cells from one sample of a channel to the next: the median distance between its
-    samples (non-NaN values of ``v``).
-
-    1 for a channel that fills every cell but where samples are missing, ``N`` for one page
-    of ``N`` pages of a multiplexed message sent in turn (or a message at ``1/N`` of the
-    grid's rate). With more than ``2/3`` of the cells filled the median distance is 1 (half
-    the distances at least 2 would span ``1.5`` cells per sample): no median is taken.
-    """
+    """Grid cells from one sample (non-NaN value of ``v``) to the next: the median distance."""
     n = v.size
     ok = ~np.isnan(v)
     p = int(np.count_nonzero(ok))
@@ -559,10 +423,7 @@ def cadence(v: np.ndarray) -> int:
 
 
 def _gaps(channel: str, v: np.ndarray, t: np.ndarray) -> list[Gap]:
-    """Runs of missing samples of ``v`` as Gap records: runs of NaN, but for a channel
-    with one sample every ``N`` cells (:func:`cadence`) only runs of ``N`` cells or more --
-    the ``N - 1`` cells between two of its samples (the other pages of its message) are
-    not missing samples."""
+    """Runs of NaN of ``v`` as Gap records (of ``N`` cells or more for a :func:`cadence` of ``N``)."""
     miss = np.isnan(v)
     if not miss.any():
         return []

@@ -1,43 +1,16 @@
 """The decoder's engine: batches of frames (:class:`~suspid.can.logs.FrameArrays`) ->
 validated, decoded samples in the :class:`~estimator.decode.buffer.RollingBuffer`.
 
-One entry, :meth:`DecodeEngine.process`, for every input: a log replay hands it chunks of
-the log, a live bus (:class:`~estimator.decode.listener.DecodeListener`) the frames queued
-since the last batch.
-
-Every frame goes through, in order (the first failing check names the rejection reason):
-frame type; time order (:class:`~estimator.decode.rules.timebase.TimeOrder`); a CAN ID of
-the DBC (:class:`~estimator.decode.routes.Routes`); its DLC; the E2E CRC
-(:mod:`~estimator.decode.rules.e2e`); the alive counter
-(:class:`~estimator.decode.rules.counters.CounterRules`); in tick mode a known tick
-(:mod:`~estimator.decode.rules.timebase`). Accepted data frames are decoded and pushed into
-the buffer with their data time; SN_Sync, SN_Status and SUSPID_Alert frames update the
-engine's state. In tick mode the counter rules see data times: a data frame's tick from its
-counter, SN_Sync's own Tick, and for E2E SN_Status and SUSPID_Alert frames the last SN_Sync's
-tick (:mod:`~estimator.decode.rules.timebase`).
-
-How a batch is processed: the stateless checks (frame type, ID, DLC, E2E CRC) run over all
-frames at once; the time check splits the batch into segments of frames in time order; per
-message the frames whose counter advances by one with a steady interval need only the
-period recurrence (:func:`~estimator.decode.rules.counters.steady_frames`,
-:func:`~estimator.decode.rules.counters.period_after`); the signals of the accepted frames
-are decoded column-wise (:mod:`estimator.decode.vector`) and stored with
-:meth:`~estimator.decode.buffer.Source.push_many`. Whatever a batch holds that the array
-code does not cover -- a timestamp going back, NaN or inf, a counter that does not advance
-by exactly one, a silence, a CAN FD payload, a message without an array decoder, a batch
-smaller than ``min_batch`` -- has the rules applied to it frame by frame
-(:meth:`DecodeEngine.validate`), and the batch resumes after it. The results do not depend
-on how the frames are cut into batches (``tests/can/test_batch_equivalence.py`` compares
-batches of one frame with large ones: counters, buffer contents bit for bit, state).
-
-The engine holds no lock and no queue: :class:`~estimator.decode.listener.DecodeListener`
-serialises the calls.
+:meth:`DecodeEngine.process` is the one entry, for a log's chunks and a live bus's queue.
+The stateless checks run over the whole batch, the time check splits it into segments, and
+per message the steady frames need only the period recurrence; what the array code does not
+cover (anomalies, CAN FD payloads, small batches) goes through the per-frame rules
+(:meth:`DecodeEngine.validate`) with the same results. No lock: the listener serialises calls.
 """
 from __future__ import annotations
 
 import math
 from bisect import bisect_left
-from typing import Any
 
 import numpy as np
 from cantools.database.can import Database
@@ -50,14 +23,13 @@ from estimator.decode.rules.timebase import (SyncTrack, TickClock, TimeOrder, fr
                                              stale_tick,
                                              sync_time, sync_times, tick_of_counter, tick_time,
                                              tick_times, ticks_of_counters, time_breaks)
-from estimator.decode.stats import FrameCounts
+from estimator.decode.rules.counters import FrameCounts
 from suspid.can.codec import decode_alert
 from suspid.can.crc import COUNTER_MODULUS
 from suspid.can.logs import FrameArrays
 
 _INF = math.inf
-#: default ``min_batch``: fewer frames than this are validated one by one (below it the
-#: array code's fixed cost, ~100 NumPy calls, exceeds the per-frame path's)
+#: default ``min_batch``: fewer frames than this are validated one by one
 SMALL_BATCH = 192
 #: default ``min_run``: a run between two time anomalies shorter than this goes frame by frame
 MIN_RUN = 192
@@ -65,49 +37,8 @@ MIN_RUN = 192
 _O_UNKNOWN, _O_IGNORED, _O_DLC, _O_CRC = 1, 2, 3, 4
 
 
-def _row_key(fa: FrameArrays, i: int) -> int:
-    """Route key (CAN ID | extended flag) of frame ``i``."""
-    fid = int(fa.arbitration_id[i])
-    return fid | EXT if fa.is_extended[i] else fid
-
-
 class DecodeEngine:
-    """Validate, decode and store frames; the state that carries from frame to frame.
-
-    Parameters
-    ----------
-    db : cantools Database
-        For the alert frames' decoder.
-    routes : Routes
-    buffer : RollingBuffer
-    tick_time : bool
-        Data time from the SN_Sync tick (else the frame timestamps).
-    max_counter_delta, stale_window : int
-        See :class:`~estimator.decode.rules.counters.CounterRules`.
-    collect_alerts : bool
-        Keep accepted alerts in :attr:`outbox` for a callback.
-
-    Attributes
-    ----------
-    counts : FrameCounts
-    order : TimeOrder
-    tick_time : bool
-        The time base in use (may be switched on before the first frame: ``auto``).
-    sync_tick : int or None
-        ``Tick`` of the last SN_Sync.
-    sync_n : int
-        SN_Sync frames accepted.
-    period : float or None
-        Sample period (s) announced by SN_Sync.
-    node_status : dict
-    alerts : list of dict
-    outbox : list of dict
-        Accepted alerts not yet delivered (``collect_alerts``).
-    frames : int
-        Frames processed.
-    min_batch, min_run : int
-        Tuning of the batch path (same results).
-    """
+    """Validate, decode and store frames; the state that carries from frame to frame."""
 
     def __init__(self, db: Database, routes: Routes, buffer: RollingBuffer, *, tick_time: bool,
                  max_counter_delta: int, stale_window: int, collect_alerts: bool) -> None:
@@ -134,13 +65,8 @@ class DecodeEngine:
         self._by_key = routes.by_key
         self._known = routes.known
 
-    # ---- one frame (inside a batch) ------------------------------------------------------
     def validate(self, ts: float, key: int, data: Payload) -> None:
-        """Every check after the frame type, decode and store one frame of a batch.
-
-        :meth:`process` sends here what its array code does not cover (a time anomaly, a
-        CAN FD payload, a run shorter than ``min_run``, a batch smaller than ``min_batch``).
-        """
+        """Every check after the frame type, decode and store one frame of a batch."""
         rejected = self._rejected
         order = self.order
         if not order.last <= ts < _INF:  # one chained compare: backwards, NaN or inf
@@ -168,9 +94,7 @@ class DecodeEngine:
             c = alive_counter(data)
             arrival = ts
             if self.tick_time:
-                # the gap rules below need data time: a host's arrival times bunch (a
-                # serial reader hands over a chunk of frames at once), which made the
-                # period estimate tiny and counted thousands of frames 'lost'
+                # the gap rules below need data time (a host's arrival times bunch)
                 if route.kind == SYNC:
                     tick, period_us = route.decode(data)
                     ext = self.clock.extend(int(tick), period_us, arrival)
@@ -184,9 +108,7 @@ class DecodeEngine:
                     ts = tick_time(tick_of_counter(
                         self.sync_tick, (c + self.sync_shift) % COUNTER_MODULUS), self.period)
                 elif route.kind != DATA and self.sync_tick is not None and self.period:
-                    # SN_Status (SUSPID_Alert): its own counter and rate, sent in the tick
-                    # of the last SN_Sync -- timed by it, a host's late delivery of a
-                    # status is no silence of the sender
+                    # SN_Status (SUSPID_Alert): sent in the tick of the last SN_Sync
                     ts = tick_time(self.sync_tick, self.period)
                 route.last_arrival = arrival
                 route.sync_n = self.sync_n
@@ -197,7 +119,6 @@ class DecodeEngine:
                 if self.sync_tick is None or c < 0:
                     rejected["no_sync"] += 1
                     return
-                # ts is the data time matched through the counter above
             if route.source is not None and route.row is not None:
                 route.source.push(ts, route.row(data))
             elif route.pages is not None:   # a multiplexed message: page by page
@@ -237,18 +158,8 @@ class DecodeEngine:
                 self.outbox.append(alert)
         return True
 
-    # ---- a batch --------------------------------------------------------------------------
     def process(self, fa: FrameArrays, lo: int, hi: int) -> None:
-        """Frames ``lo:hi`` of ``fa``, as the frame-by-frame path would.
-
-        The stateless checks (frame type, ID, DLC, E2E CRC) are done for the whole batch;
-        their counts are taken per segment because a frame rejected for its time is
-        counted as ``time`` only. The time check is the state every frame shares: runs
-        of frames that pass it (each timestamp finite and not earlier than the previous
-        frame's) are processed as one segment (:meth:`_segment`); a frame that fails it,
-        a payload longer than 8 bytes, and runs shorter than ``min_run`` go through
-        :meth:`validate`.
-        """
+        """Frames ``lo:hi`` of ``fa``, exactly as the frame-by-frame path would take them."""
         n = hi - lo
         if n <= 0:
             return
@@ -258,27 +169,21 @@ class DecodeEngine:
         self.frames += n
         ft = fa.frame_type[lo:hi]
         data64 = np.ascontiguousarray(fa.data).view(np.uint64).reshape(-1)
+        nf = None
+        sel: slice | np.ndarray = slice(lo, hi)
+        m = n
         if ft.any():
             self._rejected["frame_type"] += int(np.count_nonzero(ft))
-            nf = np.flatnonzero(~ft) + lo
+            nf = sel = np.flatnonzero(~ft) + lo
             m = int(nf.size)
             if not m:
                 return
-            ts = fa.timestamp[nf]
-            fid = fa.arbitration_id[nf]
-            ext = fa.is_extended[nf]
-            length = fa.length[nf]
-            rows = data64[nf]
-        else:
-            nf = None
-            m = n
-            ts = fa.timestamp[lo:hi]
-            fid = fa.arbitration_id[lo:hi]
-            ext = fa.is_extended[lo:hi]
-            length = fa.length[lo:hi]
-            rows = data64[lo:hi]
-        # ---- stateless checks: outcome per frame, route, payload
-        rt = self.routes
+        ts = fa.timestamp[sel]
+        fid = fa.arbitration_id[sel]
+        ext = fa.is_extended[sel]
+        length = fa.length[sel]
+        rows = data64[sel]
+        rt = self.routes   # the stateless checks: outcome per frame
         keys = fid | (ext.astype(np.int64) << 31) if ext.any() else fid
         rkeys = rt.keys   # never empty: a decoder has at least one data message
         p = np.searchsorted(rkeys, keys)
@@ -300,7 +205,6 @@ class DecodeEngine:
         if e2e.any():
             ok = crc_ok_rows(rows.view(np.uint8).reshape(m, 8), rt.start[r], rdlc, e2e)
             outcome[~ok] = _O_CRC
-        # ---- the time check, segment by segment
         badt = time_breaks(self.order.last, ts)
         long_rows = None
         if fa.long_data:
@@ -311,8 +215,8 @@ class DecodeEngine:
         b = 0
         pos = 0
         while pos < m:
-            # the frame at pos against the time base as it is now (an earlier frame may
-            # have been rejected), the later ones against their predecessor
+            # the frame at pos against the time base as it is now, the later ones against
+            # their predecessor
             while b < nb and bad_at[b] <= pos:
                 b += 1
             if not self.order.last <= float(ts[pos]) < _INF or (long_rows is not None
@@ -327,17 +231,11 @@ class DecodeEngine:
                 end = min(j + 1, m)
                 for k in range(pos, end):
                     i = int(nf[k]) if nf is not None else lo + k
-                    self.validate(float(ts[k]), _row_key(fa, i), fa.payload(i))
+                    self.validate(float(ts[k]), int(keys[k]), fa.payload(i))
                 pos = end
 
     def _small(self, fa: FrameArrays, lo: int, hi: int) -> None:
-        """A batch smaller than ``min_batch``: frames ``lo:hi`` of ``fa`` counted, frame type
-        checked, then :meth:`validate` each, the fields read as lists first.
-
-        A live bus polled often hands over such batches; below ``min_batch`` the array
-        code's fixed cost (~100 NumPy calls) exceeds the rules applied frame by frame, and
-        reading the fields as lists avoids a NumPy scalar read (~1 µs) per field.
-        """
+        """A batch smaller than ``min_batch``: frame type, then :meth:`validate` each frame."""
         ts = fa.timestamp[lo:hi].tolist()
         ids = fa.arbitration_id[lo:hi].tolist()
         ext = fa.is_extended[lo:hi].tolist()
@@ -360,14 +258,7 @@ class DecodeEngine:
 
     def _segment(self, lo: int, hi: int, ts: np.ndarray, r: np.ndarray, outcome: np.ndarray,
                  rows: np.ndarray) -> None:
-        """Batch frames ``lo:hi`` (in order, all passing the time check).
-
-        The stateless outcomes are counted; the frames that passed them are grouped by
-        message (a stable sort keeps their order) for the counter and period rules
-        (:meth:`_runs`) -- in tick mode SN_Sync first, whose accepted frames give every
-        other frame its tick and period -- and per message decoded and stored
-        (:meth:`_accepted`).
-        """
+        """Batch frames ``lo:hi`` passing the time check: counter rules by message, then stored."""
         self.order.last = float(ts[hi - 1])
         self.order.rejects = 0
         oc = outcome[lo:hi]
@@ -414,14 +305,9 @@ class DecodeEngine:
                 # the unbroken tick across wraps and node restarts (TickClock)
                 raw = np.asarray(tk, dtype=np.int64)
                 tk = self.clock.extend_many(raw, pus, t_s)
-                pus = np.asarray(pus)
                 vals = (tk, pus)
                 syncs.pending_shifts = (tk - raw) % COUNTER_MODULUS
-                if isinstance(tk, np.ndarray):
-                    t_s = sync_times(tk, pus, t_s)
-                else:
-                    t_s = np.array([sync_time(t, u) if u > 0 else x
-                                    for t, u, x in zip(tk, pus, t_s.tolist())], dtype=np.float64)
+                t_s = sync_times(tk, pus, t_s)
                 acc = self._runs(runs[:1], rows, arr, t_s, a, syncs)
             else:
                 acc = np.ones(b - a, dtype=bool)
@@ -430,10 +316,7 @@ class DecodeEngine:
             if not runs:
                 return
         if syncs is not None:
-            # every other message: the SN_Sync state each frame sees, and the data time of
-            # the E2E data frames: the tick nearest the last SN_Sync's with their counter's
-            # residue mod 15, times the period; of the E2E SN_Status and SUSPID_Alert frames:
-            # the last SN_Sync's tick times the period
+            # the SN_Sync state each other frame sees, and the data time of the E2E frames
             a0 = runs[0][1]
             sn, st, known, per, shift = syncs.at(h[a0:])
             syncs.sn, syncs.known, syncs.per, syncs.lo = sn, known, per, a0
@@ -442,7 +325,6 @@ class DecodeEngine:
             at_sync = has & self.routes.tick_e2e[r_h[a0:]]
             tsd = arr
             if conv.any() or at_sync.any():
-                # SN_Status and SUSPID_Alert: the last SN_Sync's tick
                 tk = np.where(conv, ticks_of_counters(
                     st, (alive_counters(rows[a0:]) + shift) % COUNTER_MODULUS), st)
                 tsd = arr.copy()
@@ -470,15 +352,7 @@ class DecodeEngine:
 
     def _runs(self, runs: list[tuple[int, int, int]], rows: np.ndarray, arr: np.ndarray,
               tsd: np.ndarray, lo: int, syncs: SyncTrack | None) -> np.ndarray:
-        """Counter and period rules of consecutive message runs ``rows[lo:hi]``; accepted mask.
-
-        ``runs`` are ``(route index, start, end)`` in the sorted frame arrays (``rows``:
-        payloads as uint64, ``arr``: frame times), contiguous from ``lo``; ``tsd`` the data
-        times of ``lo:hi``. In every run the prefix of steady frames
-        (:func:`~estimator.decode.rules.counters.steady_frames`; in tick mode also no data
-        frame that could be ``no_sync``) needs only the period recurrence; from its first
-        other frame on, the rules of :meth:`validate` run frame by frame.
-        """
+        """Counter and period rules of consecutive message runs; the accepted mask."""
         hi = runs[-1][2]
         m = hi - lo
         routes = self.routes.ordered
@@ -491,8 +365,7 @@ class DecodeEngine:
         fresh = starts[last_c < 0]          # first frame ever of its message
         is_data = np.array([routes[r].kind == DATA for r, _, _ in runs])
         if syncs is not None and is_data.any():
-            # tick mode: a data frame is accepted only with a known tick and period, and
-            # none may qualify for the stale-tick rule
+            # tick mode: a known tick and period, and no stale tick
             o = lo - syncs.lo
             sn = syncs.sn[o:o + m]
             per = syncs.per[o:o + m]
@@ -539,12 +412,7 @@ class DecodeEngine:
 
     def _route_rest(self, route: Route, cl: list[int], tl: list[float], al: list[float],
                     n_before: int, at: int, syncs: SyncTrack | None) -> np.ndarray:
-        """The rules of :meth:`validate` for frames of one message, one by one; accepted mask.
-
-        ``cl``, ``tl``, ``al``: counters, data times, arrival times; ``n_before``: frames of
-        this message accepted earlier in the segment; ``at``: position of the first frame
-        in the sorted segment arrays (tick mode: index into the SN_Sync state).
-        """
+        """The rules of :meth:`validate` for frames of one message, one by one; accepted mask."""
         rejected = self._rejected
         step = self.counters.step
         tick = syncs is not None
@@ -581,21 +449,18 @@ class DecodeEngine:
                 sn_sync += 1
         return acc
 
-    def _sync_values(self, route: Route, rows: np.ndarray) -> tuple[Any, Any]:
-        """``(Tick, PeriodUs)`` of SN_Sync payloads: int64 arrays, or lists of decoded values."""
+    def _sync_values(self, route: Route, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(Tick, PeriodUs)`` of SN_Sync payloads (int64 arrays, or int64 and float64)."""
         if route.vsync is not None:
             return route.vsync(rows)
         vals = [route.decode(r.tobytes()) for r in rows[:, :route.dlc]]
-        return [v[0] for v in vals], [v[1] for v in vals]
+        return (np.array([int(v[0]) for v in vals], dtype=np.int64),
+                np.array([v[1] for v in vals], dtype=np.float64))
 
     def _accepted(self, route: Route, rows: np.ndarray, tsd: np.ndarray,
-                  acc: np.ndarray, sync_vals: tuple[Any, Any] | None,
+                  acc: np.ndarray, sync_vals: tuple[np.ndarray, np.ndarray] | None,
                   syncs: SyncTrack | None, q: np.ndarray) -> None:
-        """Decode and store (data) or apply (SN_Sync, SN_Status, alert) the accepted frames.
-
-        ``rows`` (m, 8) uint8 payloads, ``tsd`` data times, ``acc`` accepted mask,
-        ``sync_vals`` (tick mode SN_Sync) Tick and PeriodUs, ``q`` segment positions.
-        """
+        """Decode and store (data) or apply (SN_Sync, SN_Status, alert) the accepted frames ``acc``."""
         n_acc = int(np.count_nonzero(acc))
         if not n_acc:
             return
@@ -630,11 +495,7 @@ class DecodeEngine:
                 if syncs is None:   # sync_vals are computed in tick mode only
                     raise RuntimeError("SN_Sync values without the tick-mode sync state")
                 tk, pus = sync_vals
-                if isinstance(tk, np.ndarray):
-                    tk_acc, pus_acc = tk[at], pus[at]
-                else:
-                    tk_acc = np.array([int(tk[i]) for i in at.tolist()], dtype=np.int64)
-                    pus_acc = np.array([pus[i] for i in at.tolist()], dtype=np.float64)
+                tk_acc, pus_acc = tk[at], pus[at]
                 shifts = None if syncs.pending_shifts is None else syncs.pending_shifts[at]
                 syncs.pending_shifts = None
                 syncs.add(q[at], tk_acc, pus_acc, shifts)
@@ -645,11 +506,8 @@ class DecodeEngine:
                     self.period = pus_acc[pos[-1]].item() * 1e-6
             self.sync_n += n_acc
         elif kind == STATUS:
-            i = int(np.flatnonzero(acc)[-1])
-            state, rate, flags, busoff, sset = route.decode(rows[i, :route.dlc].tobytes())
-            self.node_status = {"t": float(tsd[i]), "state": int(state),
-                                "sample_rate": float(rate), "fault_flags": int(flags),
-                                "busoff_count": int(busoff), "sensor_set": int(sset)}
+            i = int(np.flatnonzero(acc)[-1])   # the last status only
+            self._special(route, rows[i, :route.dlc].tobytes(), float(tsd[i]))
         else:
             for i in np.flatnonzero(acc).tolist():
                 if not self._special(route, rows[i, :route.dlc].tobytes(), float(tsd[i])):

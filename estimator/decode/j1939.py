@@ -1,24 +1,6 @@
-"""SAE J1939 frames matched to a DBC's messages by parameter group (PGN), whatever their sender.
-
-A J1939 DBC lists each parameter group under one 29-bit identifier, with some source address
-(CSS Electronics' demo DBC: 0xFE, the null address); a vehicle's frames carry the address of
-the controller that sends them (the engine 0x00, a tachograph 0xEE, ...) and, for a PDU1 group
-(PDU format < 240), the destination address in the PDU-specific byte. Neither is part of the
-PGN, nor is the priority. :class:`J1939Match` gives every extended frame whose PGN is one of
-the DBC's J1939 messages that message's identifier, so the decoder's routes, validity and
-statistics apply unchanged; the source address stays known per message (``frames.j1939``).
-
-One sender per parameter group is decoded: two controllers sending the same PGN (two speeds,
-two engine controllers) interleaved would be one stream of two signals. With
-``source`` (``can.j1939_source ADDR``) only that address is decoded; without it the first
-sender of each PGN in the stream is, and a warning names every sender with its frames and
-the one used. Frames of another sender are counted (``other_source``), not decoded.
-
-A message is J1939 when its ID is extended and cantools says so (``Message.protocol ==
-"j1939"``: the message's ``VFrameFormat J1939PG``) or the DBC's ``ProtocolType`` is ``"J1939"``.
-The PGN and source address come from cantools' own helpers
-(:func:`cantools.j1939.pgn_from_frame_id`, :func:`cantools.j1939.frame_id_unpack`).
-"""
+"""SAE J1939 frames matched to a DBC's messages by parameter group (PGN), whatever their sender
+(the source address is no part of the PGN); one sender per PGN is decoded (docs/can.md
+"J1939")."""
 from __future__ import annotations
 
 import can
@@ -29,21 +11,14 @@ from cantools.j1939 import frame_id_unpack, pgn_from_frame_id
 from suspid.can.logs import FrameArrays
 from suspid.errors import UsageError
 
-#: the largest J1939 source address a controller may have (254 is the null address, 255
-#: the global one)
+#: the largest J1939 source address a controller may have (254: null, 255: global)
 MAX_SOURCE = 253
 #: PGNs named in the error of a log without the mapped ones
 TOP_PGNS = 5
 
 
 def parse_source(text: str | int | None) -> int | None:
-    """``can.j1939_source`` as an address: ``0x47``, ``71`` (0..253); ``None`` for none given.
-
-    Raises
-    ------
-    UsageError
-        Not an integer, or outside 0..253.
-    """
+    """``can.j1939_source`` as an address 0..253 (``0x47``, ``71``; None: none); else UsageError."""
     if text is None or isinstance(text, int):
         value = text
     else:
@@ -59,9 +34,8 @@ def parse_source(text: str | int | None) -> int | None:
 
 
 def j1939_messages(db: Database) -> dict[int, tuple[int, str]]:
-    """PGN -> (DBC frame ID, message name) of the DBC's J1939 messages: its extended
-    messages that cantools marks J1939 (``VFrameFormat J1939PG``), all of them when the DBC
-    says ``ProtocolType "J1939"``."""
+    """PGN -> (DBC frame ID, message name) of the DBC's J1939 messages (``VFrameFormat J1939PG``, or all
+    extended ones under ``ProtocolType "J1939"``)."""
     attrs = db.dbc.attributes if db.dbc is not None else {}
     proto = attrs.get("ProtocolType")
     whole = proto is not None and str(proto.value).strip().upper() == "J1939"
@@ -73,25 +47,11 @@ def j1939_messages(db: Database) -> dict[int, tuple[int, str]]:
 
 
 class J1939Match:
-    """Translate the extended frames of a stream to the DBC's J1939 identifiers by PGN.
+    """Translate the extended frames of a stream to the DBC's J1939 identifiers by PGN
+    (``table``: :func:`j1939_messages`), decoding only ``source`` when given.
 
-    Parameters
-    ----------
-    table : dict
-        PGN -> (DBC frame ID, message name) (:func:`j1939_messages`).
-    source : int, optional
-        Decode only this source address (``can.j1939_source``).
-
-    Attributes
-    ----------
-    pgns : dict
-        PGN -> extended frames seen (all, matched or not).
-    senders : dict
-        Message name -> {source address: frames}.
-    used : dict
-        Message name -> the source address decoded.
-    other_source : int
-        Frames of a DBC PGN from another sender, not decoded.
+    Counts: :attr:`pgns` (PGN -> frames seen), :attr:`senders` (message -> {address:
+    frames}), :attr:`used` (message -> address decoded), :attr:`other_source`.
     """
 
     def __init__(self, table: dict[int, tuple[int, str]], source: int | None = None) -> None:
@@ -102,16 +62,11 @@ class J1939Match:
         self.used: dict[str, int] = {}
         self.other_source = 0
         self._ids: dict[int, tuple[int, int, str] | None] = {}   # frame ID -> (pgn, sa, name)
+        self._pgn = {n: p for p, (_f, n) in table.items()}
 
     @classmethod
     def from_db(cls, db: Database, source: str | int | None = None) -> "J1939Match | None":
-        """The match of a DBC's J1939 messages; ``None`` when it has none.
-
-        Raises
-        ------
-        UsageError
-            ``source`` given for a DBC without J1939 messages, or not an address.
-        """
+        """The match of a DBC's J1939 messages; ``None`` when it has none."""
         addr = parse_source(source)
         table = j1939_messages(db)
         if not table:
@@ -132,8 +87,7 @@ class J1939Match:
         return self._ids[frame_id]
 
     def _target(self, frame_id: int, count: int) -> int:
-        """The DBC frame ID for ``count`` frames of ``frame_id`` (counted), -1: another
-        sender's, ``frame_id`` itself: no J1939 message of the DBC."""
+        """The DBC frame ID for ``count`` frames of ``frame_id`` (-1: another sender's), counted."""
         pgn = pgn_from_frame_id(frame_id)
         self.pgns[pgn] = self.pgns.get(pgn, 0) + count
         hit = self._lookup(frame_id)
@@ -151,8 +105,7 @@ class J1939Match:
         return self.table[pgn][0]
 
     def message(self, msg: can.Message) -> can.Message | None:
-        """The frame with the DBC's ID (a copy), itself when not J1939, ``None`` when it is
-        another sender's."""
+        """The frame with the DBC's ID (itself when not J1939, None: another sender's)."""
         if not msg.is_extended_id or msg.is_error_frame or msg.is_remote_frame:
             return msg
         fid = self._target(msg.arbitration_id, 1)
@@ -160,10 +113,9 @@ class J1939Match:
             return msg
         if fid < 0:
             return None
-        out = can.Message(timestamp=msg.timestamp, arbitration_id=fid, is_extended_id=True,
-                          data=msg.data, dlc=msg.dlc, channel=msg.channel, is_rx=msg.is_rx,
-                          is_fd=msg.is_fd, check=False)
-        return out
+        return can.Message(timestamp=msg.timestamp, arbitration_id=fid, is_extended_id=True,
+                           data=msg.data, dlc=msg.dlc, channel=msg.channel, is_rx=msg.is_rx,
+                           is_fd=msg.is_fd, check=False)
 
     def arrays(self, fa: FrameArrays) -> FrameArrays:
         """The frames with the DBC's IDs; another sender's frames left out (counted)."""
@@ -187,8 +139,7 @@ class J1939Match:
         return out
 
     def stats(self) -> dict[str, object]:
-        """``{"messages": {name: {"pgn", "source", "sources"}}, "other_source": n}``
-        (addresses as ``"0x47"``), for ``frames.j1939``."""
+        """``{"messages": {name: {"pgn", "source", "sources"}}, "other_source": n}``."""
         msgs: dict[str, object] = {}
         for pgn, (_fid, name) in self.table.items():
             per = self.senders.get(name, {})
@@ -205,25 +156,21 @@ class J1939Match:
                 continue
             used = self.used[name]
             listed = ", ".join(f"{sa:#04x} ({n} frames)" for sa, n in sorted(per.items()))
-            out.append(f"{where}: J1939 {name} (PGN {self._pgn(name)}) is sent by {len(per)} "
+            out.append(f"{where}: J1939 {name} (PGN {self._pgn[name]}) is sent by {len(per)} "
                        f"sources, {listed}; decoded {used:#04x} (the first), the others "
                        "not; choose one with the --config file's can.j1939_source")
         return out
 
-    def _pgn(self, name: str) -> int:
-        return next(p for p, (_f, n) in self.table.items() if n == name)
-
     def hint(self, mapped: set[str]) -> str:
-        """Why no frame of the mapped J1939 messages was decoded: their PGNs' senders, and the
-        log's most frequent PGNs with counts (``"; ..."``), for the no-data error."""
+        """Why no frame of the mapped J1939 messages was decoded (``"; ..."``, for the error)."""
         parts = []
         for name in sorted(mapped):
             if name not in self.used and name not in self.senders:
-                parts.append(f"{name} (PGN {self._pgn(name)}) not in the log")
+                parts.append(f"{name} (PGN {self._pgn[name]}) not in the log")
             elif self.source is not None and self.source not in self.senders.get(name, {}):
                 got = ", ".join(f"{sa:#04x} ({n} frames)"
                                 for sa, n in sorted(self.senders[name].items()))
-                parts.append(f"{name} (PGN {self._pgn(name)}) is sent by {got}, not by "
+                parts.append(f"{name} (PGN {self._pgn[name]}) is sent by {got}, not by "
                              f"can.j1939_source {self.source:#04x}")
         top = sorted(self.pgns.items(), key=lambda kv: (-kv[1], kv[0]))[:TOP_PGNS]
         names = {p: n for p, (_f, n) in self.table.items()}

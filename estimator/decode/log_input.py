@@ -1,16 +1,5 @@
-"""A CAN log as a :class:`suspid.io.csvio.Measurement` -- what ``suspid identify --input LOG`` uses.
-
-The log is read tolerantly (:func:`estimator.decode.replay.feed_log`: a candump log as
-arrays, the other formats through python-can), every frame is validated and decoded by
-:class:`~estimator.decode.listener.DecodeListener`, and the channels are aligned on a
-uniform grid. For a log written by ``suspid encode`` from a measurement CSV
-the grid is the CSV's time column and the values differ from the CSV by quantization
-only (at most half a DBC resolution step).
-
-Missing samples of measured channels stay NaN (the identifier skips them, as empty CSV
-cells); road inputs cannot have holes in a simulation, so gaps in a road channel are
-bridged by linear interpolation -- reported in ``warnings`` with their count, never silently.
-"""
+"""A CAN log as a :class:`suspid.io.csvio.Measurement` (``suspid identify --input LOG``): decoded,
+aligned on a uniform grid; gaps in a road channel bridged linearly, with a warning."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -30,13 +19,7 @@ from suspid.models import SuspensionModel, get_model
 
 
 def unparsed_hint(path: str | Path, stats: ReadStats) -> str:
-    """``"; nothing parsed, the first skipped: line N: reason (...)"`` when a log reader
-    parsed no frame at all but skipped lines, else ``""``.
-
-    Nothing parsed means the file is not in the format its suffix names: plain
-    ``candump can0`` output saved as ``.log`` is the usual case (suspid reads a ``.log`` as
-    ``candump -L``).
-    """
+    """``"; nothing parsed, ..."`` when a log reader parsed no frame but skipped lines, else ``""``."""
     if stats.damage and not stats.frames:
         return f"; {stats.damage}"
     if stats.frames or not stats.examples:
@@ -51,29 +34,7 @@ def unparsed_hint(path: str | Path, stats: ReadStats) -> str:
 
 def channel_notes(path: str | Path, stats: ReadStats, keys: Iterable[int],
                   channel: str | None) -> tuple[dict[str, object], list[str]]:
-    """Frame statistics and warnings about the bus channels of a log that has been read.
-
-    Parameters
-    ----------
-    path : str or Path
-        The log (for the warning).
-    stats : ReadStats
-        Of the reader (``stats.channels``: frames per channel and frame key).
-    keys : iterable of int
-        Frame keys (CAN ID, bit 31 for an extended one) of the sensor's data messages.
-    channel : str or None
-        The channel asked for (``can.channel``), ``None`` for every channel.
-
-    Returns
-    -------
-    frames : dict
-        To add to the frame statistics: ``channels`` (channel -> frames read) for a log of
-        more than one channel, ``channel`` and ``other_channel`` (frames of the other
-        channels, not decoded) when one was asked for; empty for a one-channel log read whole.
-    warnings : list of str
-        When no channel was asked for and the sensor's messages arrive on more than one:
-        the channels with their counts (the frames of every channel were decoded together).
-    """
+    """Frame statistics and warnings about the bus channels of a log read with ``stats``."""
     extra: dict[str, object] = {}
     if len(stats.channels) > 1 or channel is not None:
         extra["channels"] = stats.channel_frames()
@@ -90,12 +51,7 @@ def channel_notes(path: str | Path, stats: ReadStats, keys: Iterable[int],
 
 
 def summarize_gaps(aligned: Aligned) -> list[str]:
-    """One warning line per channel with missing samples.
-
-    A channel with a sample every ``N`` cells (:func:`~estimator.decode.buffer.cadence`:
-    a page of a multiplexed message) has gaps only where ``N`` or more cells are empty
-    (:attr:`Aligned.gaps <estimator.decode.buffer.Aligned.gaps>`); its line says so.
-    """
+    """One warning line per channel with missing samples."""
     out = []
     by_ch: dict[str, list] = {}
     for g in aligned.gaps:
@@ -114,13 +70,8 @@ def summarize_gaps(aligned: Aligned) -> list[str]:
 
 def aligned_to_measurement(aligned: Aligned, model: SuspensionModel, source: str = "",
                            warnings: list[str] | None = None) -> Measurement:
-    """Split aligned channels into the model's road inputs and measured channels.
-
-    Road channels with gaps are linearly interpolated across them (with a warning);
-    measured channels keep NaN. Channels without any valid sample (never sent, as an absent
-    CSV column) are left out. The vehicle's speed and odometer (``AUX_CHANNELS``) go to
-    ``aux``, never to the fitted channels.
-    """
+    """Split aligned channels into road inputs (gaps bridged linearly, with a warning), measured channels (NaN
+    kept) and ``aux``."""
     warns = list(warnings or [])
     road_names = set(model.roads) | {f"{r}_dot" for r in model.roads}
     road: dict[str, np.ndarray] = {}
@@ -166,53 +117,20 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
 
     Parameters
     ----------
-    path : str or Path
-        ``.log`` (candump -L), ``.asc``, ``.blf``, ``.trc`` or ``.mf4``.
-    model : str or SuspensionModel
-    dbc_path : str, Path or cantools Database, optional
-        Default: the signal map file's ``dbc``, else suspid's ``suspension.dbc``; a loaded
-        Database is used as it is (no parsing per log).
-    signal_map : SignalMap, path or list of str, optional
-        Needed for a foreign DBC (see :mod:`suspid.can.signal_map`).
-    time_source : {"timestamp", "tick", "auto"}
-        Frame timestamps, the node's ``SN_Sync`` ticks, or (default) the ticks when the log
-        carries ``SN_Sync`` frames and the timestamps otherwise.
+    path, dbc_path : str or Path
+        The log (``.log`` candump -L, ``.asc``, ``.blf``, ``.trc``, ``.mf4``); the DBC (or a
+        Database; default the signal map's ``dbc``, else suspid's).
     dt : float, optional
         Grid step (s); default the median frame interval.
-    max_counter_delta : int
-        See :class:`~estimator.decode.listener.DecodeListener`.
-    arrival_slots : bool
-        With the timestamp time base (no sensor clock in the log), place each frame in its
-        sample slot from its arrival time and its order within its message
-        (:mod:`estimator.decode.rules.arrival`) instead of the nearest grid cell of its
-        timestamp: arrival jitter, bursts and delivery delay then lose no frame.
     channel : str, optional
-        Decode only this bus channel of a multi-bus log, as the file names it (``"1"`` for
-        channel 1 of an ASC, BLF, TRC or MDF4 log, ``"can1"`` for a candump interface; see
-        :func:`suspid.can.logs.channel_wanted`). Default: every channel, with a warning when
-        the sensor's messages are on more than one.
-    j1939_source : str or int, optional
-        A J1939 DBC: decode the parameter groups from this source address only (``"0x47"``);
-        default the first sender of each (:mod:`estimator.decode.j1939`, with a warning
-        naming the senders when a mapped one has several).
+        One bus channel of a multi-bus log (:func:`suspid.can.logs.channel_wanted`).
+    signal_map, time_source, max_counter_delta, arrival_slots, j1939_source
+        As :class:`~estimator.decode.listener.DecodeListener`'s.
 
     Returns
     -------
-    measurement : Measurement
-        ``t`` (s), ``road``, ``measured`` (NaN for missing samples), ``warnings``.
-    frame_stats : dict
-        ``{"accepted": N, "rejected": {reason: n, ...}, "ignored": n, "lost": n,
-        "time_base": "tick" | "timestamp"}``, with ``channels``, ``channel`` and
-        ``other_channel`` as :func:`channel_notes` gives them, and ``unknown_page``
-        (message -> frames) as :meth:`DecodeListener.frame_stats` gives it.
-
-    Raises
-    ------
-    InputError
-        Missing/unreadable log or DBC, or no accepted frame carrying a mapped channel.
-    UsageError
-        Unknown log suffix, a signal map that does not fit the DBC or model, or a
-        ``channel`` the log does not have.
+    measurement, frame_stats
+        The measurement; :meth:`DecodeListener.frame_stats` plus :func:`channel_notes`.
     """
     m = get_model(model) if isinstance(model, str) else model
     listener = DecodeListener(m, dbc_path, signal_map, capacity=1 << 14, growable=True,

@@ -1,30 +1,6 @@
-"""The pages of a multiplexed message: each page's frames stored as a message of its own.
-
-A DBC multiplexes a message when one of its signals, the multiplexer (``SG_ Page M``),
-says which of several layouts a frame carries: ``SG_ Height m0`` is sent only in the
-frames with ``Page = 0``, ``SG_ Wheel m1`` only in those with ``Page = 1``; the signals
-without ``m<n>`` are in every frame. A logger sends the pages in turn, so each page is a
-stream of its own, at its own times (page 0 at ``t``, page 1 at ``t + P``, ...) and at
-``1/N`` of the message's rate for ``N`` pages in turn.
-
-:class:`PageSplit` is the store of such a message's accepted frames. The frames are
-validated as one message (its length, its E2E check and alive counter when it has them:
-the counter counts the frames of the message, whatever their page); then each mapped
-signal takes its samples only from the frames whose multiplexer value is one of the
-signal's pages (cantools ``Signal.multiplexer_ids``). The mapped signals of one set of
-pages share a ring of the buffer named ``Message[Multiplexer=ids]`` (``Chassis[Page=0]``);
-the non-multiplexed ones, the multiplexer itself included when it is mapped, keep the
-message's ring, filled from every frame. The rings of one message share its name as their
-group: the alignment takes the grid step from the message's frame interval
-(:meth:`~estimator.decode.buffer.RollingBuffer.align`), as it takes every other message's.
-
-Frames of the other pages are not read as a page's signals, and are no error: they are
-other pages. A frame whose multiplexer value is not a page of the DBC at all is counted
-(:attr:`PageSplit.unknown`) and stores nothing in the page rings.
-
-Nested multiplexing (a multiplexer that is itself multiplexed) is refused by
-:meth:`suspid.can.signal_map.SignalMap.validate`.
-"""
+"""The pages of a multiplexed message: validated as one message, each set of pages stored in a
+ring of its own (``Chassis[Page=0]``; signals in every frame in the message's ring), all of the
+message's group; frames whose multiplexer value is no page of the DBC are counted."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -44,22 +20,7 @@ Row = Callable[[Payload], tuple]
 
 @dataclass(eq=False)
 class PageSink:
-    """The ring of the signals of one set of pages (or of every frame).
-
-    Attributes
-    ----------
-    source : Source
-        The ring.
-    row : callable
-        ``row(payload) -> (value per channel, ...)`` (scalar path).
-    vrow : callable or None
-        ``vrow(rows (m, 8) uint8) -> values (m, k)`` (batch path); ``None``: frame by frame.
-    mux : int
-        Index of the multiplexer in :attr:`PageSplit.muxes`; ``-1`` for the ring of the
-        non-multiplexed signals (every frame).
-    pages : frozenset of int
-        Raw multiplexer values whose frames carry the ring's signals.
-    """
+    """The ring of the signals of one set of pages (``mux`` -1: of every frame)."""
 
     source: Source
     row: Row
@@ -78,22 +39,7 @@ class PageSink:
 
 
 class PageSplit:
-    """Store the accepted frames of one multiplexed message, page by page.
-
-    Parameters
-    ----------
-    msg : cantools Message
-    muxes : sequence of str
-        The multiplexers (signal names) that the mapped signals depend on: one for a
-        plain multiplexed message, more for a message with several independent ones.
-    sinks : sequence of PageSink
-        One per ring (:attr:`PageSink.mux` indexes ``muxes``).
-
-    Attributes
-    ----------
-    unknown : int
-        Frames whose multiplexer value is not a page of the DBC (for any of ``muxes``).
-    """
+    """Store the accepted frames of one multiplexed message page by page (``unknown``: no page)."""
 
     def __init__(self, msg: Message, muxes: list[str], sinks: list[PageSink]) -> None:
         self.name = msg.name
@@ -102,7 +48,6 @@ class PageSplit:
         self.sinks = tuple(sinks)
         self.unknown = 0
         codecs = [MessageCodec(msg, [m]) for m in muxes]
-        # the codec types its unpackers for bytes; they take any buffer (struct, int.from_bytes)
         self._raw = [cast(Row, c.unpack_raw) for c in codecs]
         self._vraw: list[RawFn | None] = [compile_raw(c.specs[0], msg.length) for c in codecs]
         defined: list[set[int]] = [set() for _ in muxes]
@@ -132,8 +77,7 @@ class PageSplit:
                 s.source.push(t, s.row(data))
 
     def push_many(self, t: np.ndarray, rows: np.ndarray) -> None:
-        """Store accepted frames (times ``t`` (m,) in s, payloads ``rows`` (m, 8) uint8,
-        zero-padded and C-contiguous) in their rings, each ring's frames in order."""
+        """Store accepted frames (times ``t`` in s, zero-padded payloads ``rows`` (m, 8))."""
         page = [self._page_rows(k, rows) for k in range(len(self.muxes))]
         bad = np.zeros(t.shape[0], dtype=bool)
         for k, p in enumerate(page):

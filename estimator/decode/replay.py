@@ -1,28 +1,15 @@
-"""Feeding logged frames to listeners: arrays, a direct loop, or a bus for ``can.Notifier``.
-
-A live bus and a replayed log go through the same listener. For a log file,
-:func:`feed_log` reads a candump log straight into arrays
-(:func:`suspid.can.logs.read_log_arrays`) and hands them to
-:meth:`DecodeListener.feed_arrays <estimator.decode.listener.DecodeListener.feed_arrays>`:
-no :class:`can.Message` is built at all (the other formats are read as messages by
-python-can and converted). :func:`feed` calls ``on_message_received`` in a plain loop for
-messages already in memory. ``can.Notifier`` would add a reader thread, a ``recv`` per frame
-and a thread hand-off (about 3x slower) and nothing is gained when the source is a file;
-:class:`ReplayBus` is the same log as a python-can bus, for code that wants a Notifier
-either way (a test checks both paths give identical results).
-"""
+"""Feeding logged frames to listeners: as arrays (:func:`feed_log`), in a direct loop
+(:func:`feed`), or through ``can.Notifier`` (:class:`ReplayBus`; same results, slower)."""
 from __future__ import annotations
 
 import itertools
 import time
-from dataclasses import fields
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Optional, Protocol, runtime_checkable
 
 import can
 import numpy as np
 
-from estimator.decode.frames import concat_frames, sort_frames
 from suspid.can.logs import FrameArrays, ReadStats, read_log, read_log_arrays
 
 
@@ -37,6 +24,40 @@ class _TimeBaseChooser(Protocol):
     def sync_first_index(self, ids: Any) -> int: ...
 
 
+def concat_frames(parts: list[FrameArrays]) -> FrameArrays:
+    """Frame batches joined into one (row indices of ``long_data`` shifted)."""
+    if len(parts) == 1:
+        return parts[0]
+    out = FrameArrays(np.concatenate([p.timestamp for p in parts]),
+                      np.concatenate([p.arbitration_id for p in parts]),
+                      np.concatenate([p.is_extended for p in parts]),
+                      np.concatenate([p.frame_type for p in parts]),
+                      np.concatenate([p.length for p in parts]),
+                      np.concatenate([p.data for p in parts]))
+    base = 0
+    for p in parts:
+        for i, v in p.long_data.items():
+            out.long_data[base + i] = v
+        base += len(p)
+    return out
+
+
+def sort_frames(fa: FrameArrays) -> FrameArrays:
+    """``fa`` in time order (stable: frames of equal time keep their order)."""
+    return _reorder(fa, np.argsort(fa.timestamp, kind="stable"))
+
+
+def _reorder(fa: FrameArrays, order: np.ndarray) -> FrameArrays:
+    """The frames of ``fa`` in the order of the row indices ``order``."""
+    out = FrameArrays(fa.timestamp[order], fa.arbitration_id[order], fa.is_extended[order],
+                      fa.frame_type[order], fa.length[order], fa.data[order])
+    if fa.long_data:
+        where = np.empty(order.size, dtype=np.int64)
+        where[order] = np.arange(order.size)
+        out.long_data = {int(where[i]): v for i, v in fa.long_data.items()}
+    return out
+
+
 def feed(listener: can.Listener, messages: Iterable[can.Message]) -> int:
     """Call ``listener.on_message_received`` for every message; return how many."""
     on = listener.on_message_received
@@ -49,45 +70,21 @@ def feed(listener: can.Listener, messages: Iterable[can.Message]) -> int:
 
 def feed_log(listener: can.Listener, path: str | Path, stats: Optional[ReadStats] = None, *,
              poll: Optional[Callable[[], int]] = None, channel: Optional[str] = None) -> int:
-    """Feed every frame of a CAN log to a listener, as fast as possible.
-
-    A :class:`~estimator.decode.listener.DecodeListener` gets the frames as arrays
-    (:meth:`~estimator.decode.listener.DecodeListener.feed_arrays`: a candump log is parsed
-    without building a message per frame); any other listener gets python-can messages.
-    The results equal feeding :func:`suspid.can.logs.read_log` message by message.
+    """Feed every frame of a CAN log to a listener, as fast as possible (a
+    ``DecodeListener`` gets arrays; same results); returns the frames fed.
 
     Parameters
     ----------
-    listener : can.Listener
     path : str or Path
-        ``.log``, ``.asc``, ``.blf``, ``.trc`` or ``.mf4``.
-    stats : ReadStats, optional
-        Filled with frames read and lines skipped (the caller counts
-        ``stats.malformed`` into the listener).
+        ``.log``, ``.asc``, ``.blf``, ``.trc`` or ``.mf4``; ``stats`` counts what was read.
     poll : callable, optional
-        Called after the first frame, then again after as many frames as it returns (at
-        least 1) -- e.g. a window driver checking the buffer's newest time, exactly where a
-        frame-by-frame loop with that countdown would have checked it.
+        Called after the first frame, then after as many frames as it returns.
     channel : str, optional
-        Feed only this bus channel of a multi-bus log, named as the file names it
-        (:func:`suspid.can.logs.channel_wanted`); the other frames are counted in
-        ``stats.other_channel``. Default: every frame.
-
-    Returns
-    -------
-    int
-        Frames fed.
-
-    Raises
-    ------
-    InputError
-        Missing or unreadable file.
-    UsageError
-        Unknown suffix, or a ``channel`` the log does not have.
+        One bus channel of a multi-bus log (:func:`suspid.can.logs.channel_wanted`).
     """
     left = 1
     n = 0
-    feed_arrays = getattr(listener, "feed_arrays", None)
+    feed_arrays: Any = getattr(listener, "feed_arrays", None)
     if feed_arrays is None:
         on = listener.on_message_received
         for msg in read_log(path, stats, channel=channel):
@@ -97,12 +94,8 @@ def feed_log(listener: can.Listener, path: str | Path, stats: Optional[ReadStats
                 left -= 1
                 if left <= 0:
                     left = max(1, int(poll()))
-        finish = getattr(listener, "finish", None)
-        if finish is not None:
-            finish()
-        return n
     chooser = listener if isinstance(listener, _TimeBaseChooser) else None
-    for fa in _placed(listener, path, stats, channel):
+    for fa in _placed(listener, path, stats, channel) if feed_arrays is not None else ():
         size = len(fa)
         if chooser is not None:
             # "auto": decided on the first chunk
@@ -132,11 +125,7 @@ def feed_log(listener: can.Listener, path: str | Path, stats: Optional[ReadStats
 
 def _placed(listener: can.Listener, path: str | Path, stats: Optional[ReadStats],
             channel: Optional[str] = None) -> Iterator[FrameArrays]:
-    """The chunks of a log; for a listener that places arrival times in sample slots
-    (``DecodeListener(arrival_slots=True)`` with the timestamp time base, decided on the
-    first chunk) the log is read twice: first its times and IDs alone (the slots), then its
-    frames -- as they are when no frame moves, else as one chunk with the slot times,
-    sorted by them."""
+    """The chunks of a log (with arrival slots: read twice, the times then the frames)."""
     chunks = read_log_arrays(path, stats, channel=channel)
     first = next(chunks, None)
     if first is None:
@@ -149,8 +138,7 @@ def _placed(listener: can.Listener, path: str | Path, stats: Optional[ReadStats]
         yield first
         yield from chunks
         return
-    # pass 1: the arrival times of each data message, and whether the log's times are
-    # finite and in order (else it is decoded as it is: the time check handles it)
+    # pass 1: each data message's arrival times; are they finite and in order?
     per: dict[int, list[np.ndarray]] = {k: [] for k in listener.data_keys()}  # type: ignore[attr-defined]
     ordered = True
     last = -np.inf
@@ -184,31 +172,14 @@ def _placed(listener: can.Listener, path: str | Path, stats: Optional[ReadStats]
 
 
 def sync_to_front(fa: FrameArrays, k: int) -> FrameArrays:
-    """``fa`` with row ``k`` (the stream's first SN_Sync) moved to the front, with the first
-    row's timestamp (see :meth:`DecodeListener.sync_first_index`)."""
-    order = np.r_[k, np.arange(k), np.arange(k + 1, len(fa))]
-    out = FrameArrays(**{f.name: getattr(fa, f.name)[order] for f in fields(fa)
-                         if f.name != "long_data"})
-    out.long_data = {(0 if i == k else i + 1 if i < k else i): v for i, v in fa.long_data.items()}
-    out.timestamp = out.timestamp.copy()
-    out.timestamp[0] = fa.timestamp[0]
+    """``fa`` with row ``k`` moved to the front, with the first row's timestamp."""
+    out = _reorder(fa, np.r_[k, np.arange(k), np.arange(k + 1, len(fa))])
+    out.timestamp[0] = fa.timestamp[0]   # a copy: fancy indexing
     return out
 
 
 class ReplayBus(can.BusABC):
-    """A read-only python-can bus that yields the frames of an iterable (e.g. a log).
-
-    Parameters
-    ----------
-    messages : iterable of can.Message
-    channel : str, optional
-        Channel name reported by the bus.
-
-    Attributes
-    ----------
-    exhausted : bool
-        ``True`` once every message has been received.
-    """
+    """A read-only python-can bus that yields the frames of an iterable (e.g. a log)."""
 
     def __init__(self, messages: Iterable[can.Message], channel: str = "replay",
                  **kwargs: Any) -> None:

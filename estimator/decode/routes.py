@@ -1,10 +1,6 @@
-"""How the decoder treats each CAN ID of the DBC: its route (kind, length, E2E check, decoders,
-buffer ring, per-message state), and the tables the batch path looks frames up in.
-
-Kinds: data messages (mapped channels, stored in the buffer), ``SN_Sync`` (the sensor's
-tick and period), ``SN_Status`` and ``SUSPID_Alert``. A DBC message that carries no mapped
-channel has no route: its frames are counted as ``ignored``. A data message with mapped
-multiplexed signals stores its frames page by page (:mod:`estimator.decode.pages`).
+"""How the decoder treats each CAN ID of the DBC (data, ``SN_Sync``, ``SN_Status``,
+``SUSPID_Alert``): its route (length, E2E check, decoders, ring, per-message state), and the
+batch path's lookup tables. A DBC message without a mapped channel has no route (``ignored``).
 """
 from __future__ import annotations
 
@@ -38,18 +34,8 @@ def route_key(frame_id: int, extended: bool) -> int:
     return frame_id | (EXT if extended else 0)
 
 
-def _any_buffer(unpack: Callable[[bytes], tuple]) -> Unpack:
-    """A :class:`MessageCodec` unpacker as a payload decoder.
-
-    The codec types its compiled unpackers for ``bytes``; they unpack with ``struct`` (or
-    cantools), which take any buffer, ``bytearray`` included.
-    """
-    return cast(Unpack, unpack)
-
-
 def _decoded_elsewhere(data: Payload) -> tuple:
-    """``decode`` of routes never decoded by it: data messages (``row``/``vrow``) and
-    SUSPID_Alert (:func:`~suspid.can.codec.decode_alert`)."""
+    """``decode`` of data messages (``row``/``vrow``) and SUSPID_Alert (``decode_alert``)."""
     return ()
 
 
@@ -78,16 +64,7 @@ class Route:
 
 
 def compile_row(msg: Message, maps: Sequence[SignalMapping]) -> Unpack:
-    """``row(payload) -> (value per mapping, ...)``: decode, validity bit, scale and offset.
-
-    The values come from one :class:`MessageCodec` decode (a ``struct`` unpack for our DBC);
-    a ``<Signal>Valid`` bit, when the DBC has one, turns the value into NaN when 0.
-    Generated code (``exec`` of the DBC layout and the map's numbers only): it runs once per
-    frame decoded one at a time (a live bus's small batches), where a plain loop over the
-    mappings made that path ~1.4x slower end to end, together with a plain
-    :meth:`~estimator.decode.buffer.Source.push` (``tools/bench_decode_paths.py``,
-    docs/performance.md "One decoder path").
-    """
+    """``row(payload) -> (value per mapping, ...)``, NaN where a ``<Signal>Valid`` bit is 0."""
     names = list(dict.fromkeys(m.signal for m in maps))
     codec = MessageCodec(msg, names)
     ns: dict[str, object] = {"_dec": codec.decode, "nan": math.nan}
@@ -138,12 +115,7 @@ def _multiplexer_of(msg: Message, signal: str) -> str | None:
 
 def _page_split(msg: Message, name: str, maps: Sequence[SignalMapping],
                 buffer: RollingBuffer) -> PageSplit:
-    """The rings of a multiplexed message's mapped signals, one per set of pages.
-
-    The mappings of signals sent in every frame (the multiplexer included) share the ring
-    ``name``; those of the signals of one set of pages the ring ``name[Mux=ids]``; every
-    ring's group is ``name``.
-    """
+    """The rings of a multiplexed message's mapped signals, one per set of pages."""
     groups: dict[tuple[str, tuple[int, ...]] | None, list[SignalMapping]] = {}
     for m in maps:
         mux = _multiplexer_of(msg, m.signal)
@@ -166,41 +138,13 @@ def model_channels(model: SuspensionModel) -> list[str]:
 
 
 class Routes:
-    """The routes of a DBC and signal map, and the lookup tables of the batch path.
-
-    Parameters
-    ----------
-    db : cantools Database
-    signal_map : SignalMap
-        Validated against the DBC.
-    buffer : RollingBuffer
-        Gets one ring per data message (per set of pages of a multiplexed one).
-
-    Attributes
-    ----------
-    by_key : dict
-        Route key -> :class:`Route`.
-    known : set of int
-        Keys of every DBC message (routed or not).
-    ordered : list of Route
-        SN_Sync first, then the E2E-protected ones (the order of a batch's frame groups).
-    keys, num : ndarray of int64
-        Sorted route keys and their index in ``ordered``.
-    ignored_keys : ndarray of int64
-        Sorted keys of DBC messages without a route.
-    dlc, e2e, start, data_e2e, tick_e2e : ndarray
-        Per route of ``ordered``: length, E2E protected, CRC start register, E2E data,
-        E2E SN_Status or SUSPID_Alert (tick mode: timed by the last SN_Sync's tick).
-    known_ids, sync_ids, alert_ids : ndarray / frozenset
-        CAN IDs of the DBC, of SN_Sync, of SUSPID_Alert.
-    """
+    """The routes of a DBC and validated signal map, and the batch path's lookup tables."""
 
     def __init__(self, db: Database, signal_map: SignalMap, buffer: RollingBuffer) -> None:
         self.by_key: dict[int, Route] = {}
         self.known: set[int] = {route_key(msg.frame_id, msg.is_extended_frame)
                                 for msg in db.messages}
-        # by the message itself, not its name: a standard and an extended frame may share
-        # a name (mapped by frame ID), and a name lookup would give the other one
+        # by frame key, not name: a standard and an extended frame may share a name
         per_msg: dict[int, tuple[Message, list[SignalMapping]]] = {}
         for m in signal_map.mappings:
             msg = find_message(db, m.message, signal_map.source)
@@ -229,12 +173,13 @@ class Routes:
                 continue
             if kind == SYNC:
                 codec = MessageCodec(msg, ["Tick", "PeriodUs"])
-                route = self._add(msg, kind, _any_buffer(codec.decode))
+                # the codec's unpackers are typed for bytes and take any buffer
+                route = self._add(msg, kind, cast(Unpack, codec.decode))
                 route.vsync = compile_sync(codec)
                 continue
             if kind == STATUS:
-                dec = _any_buffer(MessageCodec(msg, ["State", "SampleRate", "FaultFlags",
-                                                     "BusOffCount", "SensorSet"]).decode)
+                dec = cast(Unpack, MessageCodec(msg, ["State", "SampleRate", "FaultFlags",
+                                                      "BusOffCount", "SensorSet"]).decode)
             else:
                 dec = _decoded_elsewhere  # decode_alert, with cantools (multiplexed, rare)
             self._add(msg, kind, dec)

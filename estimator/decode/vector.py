@@ -1,21 +1,6 @@
-"""Array versions of the decoder's per-frame signal extraction (the batch path).
-
-:class:`~estimator.decode.listener.DecodeListener` validates and decodes frames one at a
-time with functions generated per message (:func:`estimator.decode.listener._compile_row`:
-one ``struct`` unpack, validity bits, scale and offset). Its batch path does the same for a
-block of accepted frames of one message at once, on a ``(m, 8)`` uint8 array of payloads:
-
-* a byte-aligned little-endian 8/16/32-bit integer or 32/64-bit float signal is a strided
-  view of the payload bytes; any other integer signal up to 52 bits (Intel or Motorola, any
-  bit position) is a shift and mask of the payload read as one 64-bit integer;
-* then the same operations in the same order as the scalar code -- raw to float, DBC
-  ``scale`` and ``offset`` (skipped where the scalar code skips them, so even the sign of a
-  zero is the same), the map's ``scale`` and ``offset``, ``NaN`` where the ``<Name>Valid``
-  bit is 0 -- so every value is bit for bit the scalar one (IEEE double arithmetic).
-
-Messages longer than 8 bytes, signals wider than 52 bits (not exact in a double) and
-unaligned or big-endian floats have no array form: :func:`compile_vector_row` returns
-``None`` and the caller decodes those frames with the scalar row function.
+"""Array versions of the decoder's per-frame signal extraction (the batch path): on ``(m, 8)``
+payloads, strided views or shifts and masks, then the scalar code's operations in its order,
+so every value is bit for bit the scalar one; other layouts return ``None`` (frame by frame).
 """
 from __future__ import annotations
 
@@ -45,21 +30,7 @@ def _strided(rows: np.ndarray, offset: int, dtype: str) -> np.ndarray:
 
 
 def compile_raw(spec: SignalSpec, length: int) -> RawFn | None:
-    """Raw (unscaled) values of one signal, as :meth:`MessageCodec.unpack_raw` gives them.
-
-    Parameters
-    ----------
-    spec : SignalSpec
-        Layout of the signal (:func:`suspid.can.codec.signal_spec`).
-    length : int
-        Payload length (bytes) of the message, at most 8.
-
-    Returns
-    -------
-    callable or None
-        ``f(rows) -> ndarray (m,)`` for C-contiguous ``rows`` of shape ``(m, 8)``; ``None``
-        if the signal has no exact array form.
-    """
+    """Raw values ``(m,)`` of one signal from payloads ``(m, 8)``; None without an array form."""
     if length > 8:
         return None
     if spec.is_float:
@@ -93,28 +64,10 @@ def compile_raw(spec: SignalSpec, length: int) -> RawFn | None:
 
 
 def compile_vector_row(msg: Message, maps: Sequence[SignalMapping]) -> RowsFn | None:
-    """Array twin of the scalar row function of one data message.
-
-    Parameters
-    ----------
-    msg : cantools Message
-    maps : sequence of SignalMapping
-        The map entries carried by ``msg``, in the listener's channel order.
-
-    Returns
-    -------
-    callable or None
-        ``f(rows) -> values (m, k) float64``, one column per mapping, equal bit for bit to
-        what the scalar ``_row(payload)`` gives per frame (NaN where the ``Valid`` bit is
-        0), for C-contiguous ``rows`` of shape ``(m, 8)`` uint8 (payloads zero-padded to 8
-        bytes); ``None`` if the message has no exact array form.
-
-    Notes
-    -----
-    Column-wise constants stand in for the operations the scalar code skips: a factor
-    ``1.0`` and an offset ``-0.0`` leave every double unchanged (including the sign of a
-    zero), so one broadcast operation per step serves all columns.
-    """
+    """Array twin of the scalar row function of one data message: ``f(rows (m, 8) uint8)
+    -> values (m, k)``, one column per mapping of ``maps``, bit for bit the scalar values;
+    ``None`` without an exact array form. A factor ``1.0`` and an offset ``-0.0`` stand in
+    for the operations the scalar code skips (they change no double)."""
     if msg.length > 8:
         return None
     names = list(dict.fromkeys(m.signal for m in maps))
@@ -125,8 +78,7 @@ def compile_vector_row(msg: Message, maps: Sequence[SignalMapping]) -> RowsFn | 
     if len(raws) < len(maybe):
         return None
     k = len(specs)
-    # raw values: one view for all signals when they are integers of one width at offsets
-    # that are multiples of it (suspid's DBC), else one column per signal
+    # one view for all signals when they are integers of one width at multiples of it
     widths = {s.length for s in specs}
     view_code = None
     view_cols: list[int] = []
@@ -137,8 +89,7 @@ def compile_vector_row(msg: Message, maps: Sequence[SignalMapping]) -> RowsFn | 
         w = specs[0].length
         view_code = f"<{'i' if specs[0].signed else 'u'}{w // 8}"
         view_cols = [s.start // w for s in specs]
-    # MessageCodec._scale_term: DBC scale and offset, the same skips in the same order
-    # (float signals are not scaled)
+    # MessageCodec._scale_term: DBC scale and offset, the same skips (floats not scaled)
     dbc_scale = np.array([1.0 if s.is_float or (s.scale == 1.0 and s.offset == 0.0)
                           else s.scale for s in specs])
     dbc_off = np.array([s.offset if not s.is_float and s.offset != 0.0 else -0.0
@@ -152,8 +103,7 @@ def compile_vector_row(msg: Message, maps: Sequence[SignalMapping]) -> RowsFn | 
                         else -0.0 for m in maps])
     any_map_scale = bool((map_scale != 1.0).any())
     any_map_off = any(not m.remove_mean and float(m.offset) != 0.0 for m in maps)
-    # validity: 1-bit little-endian Valid signals as (byte, bit) per column, others as
-    # raw extractors; columns without a Valid signal are always valid
+    # validity: 1-bit little-endian Valid signals as (byte, bit), others as raw extractors
     vbyte: list[int] = []
     vbit: list[int] = []
     vcols: list[int] = []

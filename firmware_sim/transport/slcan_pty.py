@@ -1,29 +1,6 @@
-"""The sensor node as an SLCAN (Lawicel) USB-CAN adapter on a pseudo-terminal.
-
-:class:`SlcanPtyBus` is a python-can bus for the node's side: it creates a pty with
-:func:`os.openpty` (raw mode), and a host process attaches to the slave end exactly as to a
-real adapter, e.g. ``can.Bus(interface="slcan", channel="/dev/pts/5")`` or
-``suspid monitor --interface slcan --channel /dev/pts/5``. Frames the node sends are written
-as SLCAN lines; frames the host transmits arrive through :meth:`recv`.
-
-Protocol subset (what python-can's ``slcan`` interface and common tools send), each command
-ending in ``\\r``; reply ``\\r`` for OK, ``\\a`` (BEL) for error:
-
-==========  =====================================================================
-``O``/``L``  open the channel (normal / listen-only); frames flow only while open
-``C``        close the channel
-``Sn``       bitrate code 0..8 (10 k .. 1 M), ``sXXYY`` BTR registers, ``Yn`` FD
-``V``/``v``  hardware/software version -> ``V1013`` / ``v0107``
-``N``        serial number -> ``NSUSP``
-``F``        status flags -> ``F00``
-``Zn``       timestamps off/on: frames then end in 4 hex digits of ms (0..59999)
-``t``/``T``  host transmits a standard/extended frame -> ``z`` / ``Z``
-``r``/``R``  host transmits a remote frame
-==========  =====================================================================
-
-Frame lines from the adapter: ``tIIILDD..[TTTT]\\r`` (standard) and
-``TIIIIIIIILDD..[TTTT]\\r`` (extended). Like a real adapter powered by the host, the
-simulated node waits in reset until the host opens the channel (:meth:`wait_open`).
+"""The sensor node as an SLCAN (Lawicel) USB-CAN adapter on a pseudo-terminal: a host
+attaches to :attr:`SlcanPtyBus.path` as to a real adapter (docs/can.md); the node waits until
+the host opens the channel (:meth:`SlcanPtyBus.wait_open`).
 """
 from __future__ import annotations
 
@@ -43,30 +20,16 @@ import can
 
 _BITRATES = {"S0": 10000, "S1": 20000, "S2": 50000, "S3": 100000, "S4": 125000,
              "S5": 250000, "S6": 500000, "S7": 750000, "S8": 1000000, "S9": 83300}
+#: version, software version, serial number and status flags
+_REPLIES = {"V": "V1013\r", "v": "v0107\r", "N": "NSUSP\r", "F": "F00\r"}
 
 
 class SlcanPtyBus(can.BusABC):
-    """python-can bus of a simulated SLCAN adapter on a pseudo-terminal.
+    """python-can bus of a simulated SLCAN adapter on a pseudo-terminal (:attr:`path`).
 
-    Parameters
-    ----------
-    write_timeout : float
-        Seconds a frame may wait for room in the pty before it is dropped (counted in
-        :attr:`overflows`); the pty buffer fills when the host stops reading.
-    timestamps : bool
-        Start with SLCAN timestamps on (the host can switch with ``Z0``/``Z1``).
-
-    Attributes
-    ----------
-    path : str
-        The slave device (``/dev/pts/N``) the host opens.
-    is_open : bool
-        The host has opened the channel.
-    bitrate : int or None
-        Last bitrate the host set.
-    overflows, dropped_closed, host_frames : int
-        Frames dropped on a full pty, dropped while the channel was closed, and frames
-        received from the host.
+    A frame that finds no room in the pty for ``write_timeout`` s is dropped and counted in
+    :attr:`overflows`, one sent while the channel is closed in :attr:`dropped_closed`;
+    :attr:`host_frames` counts the host's frames. ``timestamps``: SLCAN timestamps on.
     """
 
     def __init__(self, channel: Any = "pty", write_timeout: float = 5.0, timestamps: bool = False,
@@ -82,7 +45,6 @@ class SlcanPtyBus(can.BusABC):
         self.overflows = 0
         self.dropped_closed = 0
         self.host_frames = 0
-        self.commands: list[str] = []
         self._opened = threading.Event()
         self._closed_by_host = threading.Event()
         self._stop = threading.Event()
@@ -95,7 +57,6 @@ class SlcanPtyBus(can.BusABC):
         self.channel_info = f"SLCAN adapter on {self.path}"
         super().__init__(channel=self.path, **kwargs)
 
-    # ---- host side ---------------------------------------------------------------------
     @property
     def is_open(self) -> bool:
         return self._opened.is_set()
@@ -137,15 +98,12 @@ class SlcanPtyBus(can.BusABC):
                 i = min(cut)
                 line = bytes(buf[:i]).decode("ascii", errors="replace")
                 del buf[: i + 1]
-                reply = self._command(line)
-                if reply is not None:
-                    self._write(reply.encode("ascii"), urgent=True)
+                self._write(self._command(line).encode("ascii"), urgent=True)
 
-    def _command(self, line: str) -> Optional[str]:
-        """Execute one host command; return the reply (``None`` for a blank line)."""
+    def _command(self, line: str) -> str:
+        """Execute one host command; return the reply."""
         if line == "":
             return "\r"
-        self.commands.append(line[:1])
         c = line[0]
         if c in "OL":
             # python-can sends 'O' twice when it sets a bitrate; accept a repeated open
@@ -164,14 +122,8 @@ class SlcanPtyBus(can.BusABC):
             return "\r"
         if c in "sYMm":
             return "\a" if self.is_open and c in "sY" else "\r"
-        if c == "V":
-            return "V1013\r"
-        if c == "v":
-            return "v0107\r"
-        if c == "N":
-            return "NSUSP\r"
-        if c == "F":
-            return "F00\r"
+        if c in _REPLIES:
+            return _REPLIES[c]
         if c == "Z":
             self.timestamps = line[1:2] == "1"
             return "\r"
@@ -207,7 +159,6 @@ class SlcanPtyBus(can.BusABC):
         except (ValueError, IndexError):
             return None
 
-    # ---- node side ---------------------------------------------------------------------
     def _write(self, data: bytes, urgent: bool = False) -> bool:
         deadline = time.monotonic() + (self.write_timeout if not urgent else 1.0)
         view = memoryview(data)

@@ -16,7 +16,7 @@ from suspid.can.signal_map import SignalMap
 from suspid.errors import UsageError
 from suspid.models import MODELS, get_model
 
-from estimator.decode.listener import _compile_row
+from estimator.decode.routes import compile_row as _compile_row
 
 
 def _channel_specs(db, model_name):

@@ -22,7 +22,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from estimator.decode.buffer import Aligned, RollingBuffer, _gaps
-from estimator.decode.listener import _ema
+from estimator.decode.rules.counters import period_after as _ema
 from suspid.can import candump
 from suspid.can.logs import FrameArrays
 from suspid.errors import InputError

@@ -11,7 +11,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from estimator.decode.rules import counters, e2e, timebase
-from estimator.decode.stats import FrameCounts
+from estimator.decode.rules.counters import FrameCounts
 from suspid.can.crc import COUNTER_MODULUS, e2e_crc
 
 _SETTINGS = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])

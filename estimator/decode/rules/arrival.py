@@ -1,46 +1,7 @@
-"""Sample slots from arrival times: the time base of a stream that carries no sensor clock.
-
-A foreign stream (no ``SN_Sync`` tick, often no counters) has only the frames' arrival
-timestamps. They are not the times the samples were taken: a USB adapter or a busy bus adds
-jitter, delivers several sample periods at once (bursts) and delays frames. What arrival
-times do tell, for the frames of one message:
-
-* the frames arrive in the order they were sent, one per sample period ``P``;
-* a frame arrives no earlier than its sample was taken (arrival is an upper bound);
-* a gap (frames missing) delays every later frame for good, by whole periods; a delivery
-  delay or a burst delays a few frames, and later frames arrive early again.
-
-So each frame ``i`` of a message is given the slot ``k_i = i + (frames missing before
-it)``, and the data time ``a + k_i P``:
-
-1. ``P`` is first estimated from the lower convex hull of the points ``(i, t_i)``
-   (:func:`hull_period`): sample times lie on a line below every arrival; the hull runs
-   through the least delayed frames (the last of each burst, the undelayed ones) with the
-   slope ``P``, and bends only where a gap lifts the later frames; the slope of the hull
-   edge under the median frame is taken;
-2. gaps are where the lower envelope of ``u_i = t_i - i P`` rises: at each frame the
-   least ``u`` of the ``DETECT`` frames from it on minus the least of the ``DETECT``
-   frames before it. A delay or a burst raises a few frames' ``u``, which the other frames of
-   the window hide; jitter moves both minima alike; a gap raises every later ``u`` by
-   whole periods, which nothing hides. Where the rise exceeds half a period, the frames
-   missing are the least ``u`` of up to ``SIDE`` frames after that stretch above the
-   least of up to ``SIDE`` frames before it, in whole periods. Frames inside the stretch
-   may be read as before or after the gap (arrival times cannot tell); the gap's size is
-   right. In the last ``TAIL`` frames a gap cannot be told from a delay: they are counted
-   consecutive;
-3. ``P`` is refitted by least squares of ``t`` on the slots (delays that do not drift do
-   not bias the slope), and steps 2-3 are repeated; the last fit is rounded to whole
-   microseconds when that lies within ``SNAP_SE`` standard errors (timers count µs);
-4. the anchor ``a`` is the lower envelope ``min(t_i - k_i P)``: the earliest the samples
-   can have been taken.
-
-A message whose arrival times already lie on their slot grid (within ``REGULAR_TOL`` of a
-period: an encoded CSV, a node's log) keeps them, and so does one more than ``STAMPED`` of
-whose intervals are exactly one period: a clock that ticks with the samples stamped them
-(a logger's schedule, the sender's own clock), so they carry no transport jitter and the
-odd intervals are the source's own. Messages whose periods agree within
-``SAME_RATE`` share one period and the phase of the first of them
-(:func:`place_messages`), so the frames of one sample land on one grid cell.
+"""Sample slots from arrival times (docs/can.md "Without a sensor clock"): frame ``i`` of a
+message gets slot ``k_i = i + (frames missing before it)`` and data time ``a + k_i P``, ``P``
+from the lower convex hull of ``(i, t_i)`` then refitted, gaps where the lower envelope of
+``t_i - i P`` rises by more than half a period, ``a`` the envelope.
 """
 from __future__ import annotations
 
@@ -51,17 +12,15 @@ from numpy.lib.stride_tricks import sliding_window_view
 
 #: the last frames of a message, in which a gap cannot be told from a delivery delay
 TAIL = 32
-#: frames whose least arrival delay gives the lower envelope on each side of a frame, to
-#: find where it rises (short: two gaps close together stay apart) ...
+#: frames per side whose least delay finds where the envelope rises (short) ...
 DETECT = 32
-#: ... and to measure by how much (long: the least delay of a few frames varies)
+#: ... and measures by how much (long)
 SIDE = 128
 #: fewest frames of a message whose arrival times are placed in slots
 MIN_FRAMES = 8
 #: arrival times within this fraction of a period of their slot grid are kept as they are
 REGULAR_TOL = 1e-4
-#: a message more than this fraction of whose arrival intervals are exactly its median
-#: positive interval was stamped by a clock that ticks with its samples: kept as it is
+#: more than this fraction of intervals exactly the median: stamped by the sender's clock
 STAMPED = 0.5
 #: messages whose periods differ by less than this (relative) share one period and phase
 SAME_RATE = 1e-3
@@ -73,24 +32,8 @@ REFITS = 3
 
 @dataclass
 class Slots:
-    """The sample slots of one message's frames.
-
-    Attributes
-    ----------
-    k : ndarray of int64, shape (n,)
-        Slot of each frame (0 for the first; a gap of ``g`` frames adds ``g``).
-    period : float
-        Sample period (s).
-    anchor : float
-        Data time (s) of slot 0: the lower envelope of ``t - k P``.
-    missing : int
-        Frames missing (the gaps' total).
-    regular : bool
-        The arrival times are kept: they lie on the slot grid, or a clock that ticks with
-        the samples stamped them.
-    t : ndarray of float64, shape (n,)
-        The arrival times (s).
-    """
+    """The sample slots ``k`` of one message's frames (arrival times ``t``, s): ``period`` (s), ``anchor``
+    (s), frames ``missing``, ``regular`` (times kept)."""
 
     k: np.ndarray
     period: float
@@ -109,8 +52,7 @@ class Slots:
 
 
 def _window_min(u: np.ndarray, w: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(ahead, behind)``: at each ``i`` the least of ``u[i:i+w]`` and of ``u[i-w:i]`` (the
-    windows cut at the ends; ``behind[0]`` is ``u[0]``)."""
+    """``(ahead, behind)``: at each ``i`` the least of ``u[i:i+w]`` and of ``u[i-w:i]``."""
     n = u.size
     pad = np.full(w - 1, np.inf)
     ahead = sliding_window_view(np.r_[u, pad], w).min(axis=1)
@@ -136,9 +78,7 @@ def _slots(t: np.ndarray, period: float) -> np.ndarray:
     edge = np.diff(np.r_[False, up, False].astype(np.int8))
     starts = np.flatnonzero(edge == 1).tolist()
     ends = np.flatnonzero(edge == -1).tolist()
-    # each stretch where the envelope rises: the least u of up to SIDE frames after it
-    # (before the next stretch) above the least of up to SIDE frames before it (after the
-    # previous one), in whole periods
+    # each rising stretch: the least u of up to SIDE frames after it above that before it
     for q, (a, b) in enumerate(zip(starts, ends)):
         lo = ends[q - 1] if q else 0
         hi = starts[q + 1] if q + 1 < len(starts) else n
@@ -146,21 +86,14 @@ def _slots(t: np.ndarray, period: float) -> np.ndarray:
         after = float(u[b:min(hi, b + side)].min())
         g = int(np.rint((after - before) / period))
         if g > 0:
-            # the gap lies after the last frame of the stretch that arrived too early to
-            # be after it (a sample is never taken after its frame arrives)
+            # after the last frame of the stretch that arrived too early to be after the gap
             early = np.flatnonzero(u[a:b] < before + (g - 0.5) * period)
             k[a + (int(early[-1]) + 1 if early.size else 0):] += g
     return k
 
 
 def hull_period(t: np.ndarray) -> float:
-    """Slope (s per frame) of the lower convex hull of ``(i, t_i)`` under the middle frame.
-
-    The hull's edges are the straight runs of the lower envelope; bursts and delays lie
-    above it, a gap makes it bend (a steeper edge across the gap): the edge the middle
-    frame lies under belongs to the longest stretch without a gap, or is the slope of a
-    stretch that holds half the frames.
-    """
+    """Slope (s per frame) of the lower convex hull of ``(i, t_i)`` under the middle frame."""
     n = t.size
     hull: list[int] = []
     tl = t.tolist()
@@ -191,20 +124,7 @@ def _fit_period(t: np.ndarray, k: np.ndarray) -> float:
 
 
 def arrival_slots(t: np.ndarray) -> Slots | None:
-    """Sample slots of one message's arrival times (see the module docstring).
-
-    Parameters
-    ----------
-    t : ndarray of float64, shape (n,)
-        Arrival times (s) of the message's frames, in arrival order.
-
-    Returns
-    -------
-    Slots or None
-        None when the times cannot be placed: fewer than ``MIN_FRAMES`` frames, a time
-        that is not finite or goes back (a clock reset: left to the decoder's time check),
-        or no positive period.
-    """
+    """Sample slots of one message's arrival times ``t`` (s); None when they cannot be placed."""
     n = t.size
     if n < MIN_FRAMES or not bool(np.isfinite(t).all()) or bool((np.diff(t) < 0).any()):
         return None
@@ -216,8 +136,6 @@ def arrival_slots(t: np.ndarray) -> Slots | None:
     if pos.size:
         med = float(np.median(pos))
         if float(np.mean(np.abs(d - med) <= REGULAR_TOL * med)) > STAMPED:
-            # most intervals are exactly one period: a clock that ticks with the samples
-            # stamped them (no transport jitter); the odd intervals are the source's own
             return Slots(np.arange(n, dtype=np.int64), med, float(t[0]), 0, True, t)
     p = hull_period(t)
     if not p > 0:
@@ -237,9 +155,7 @@ def arrival_slots(t: np.ndarray) -> Slots | None:
 
 
 def _snap(t: np.ndarray, k: np.ndarray, p: float) -> float:
-    """``p`` rounded to whole microseconds when that lies within ``SNAP_SE`` standard errors
-    of the least-squares slope (timers count whole µs; the data cannot tell the difference,
-    and a slot grid then ends where the sender's does)."""
+    """``p`` rounded to whole µs when within ``SNAP_SE`` standard errors (timers count µs)."""
     p_us = round(p * 1e6) / 1e6
     kc = k - k.mean()
     den = float(np.dot(kc, kc))
@@ -251,8 +167,7 @@ def _snap(t: np.ndarray, k: np.ndarray, p: float) -> float:
 
 
 def _regular(t: np.ndarray) -> Slots | None:
-    """The slots of arrival times that already lie on a uniform grid (within
-    ``REGULAR_TOL`` of its step, gaps allowed), else None."""
+    """The slots of arrival times already on a uniform grid (gaps allowed), else None."""
     d = np.diff(t)
     d = d[d > 0]
     if not d.size:
@@ -271,13 +186,8 @@ def _regular(t: np.ndarray) -> Slots | None:
 
 
 def place_messages(slots: list[Slots]) -> list[np.ndarray | None]:
-    """Data times of several messages' frames: per message ``anchor + k period``, or None
-    where the arrival times are kept (regular).
-
-    Messages whose periods agree within ``SAME_RATE`` share their frame-weighted mean
-    period, and their anchors are moved by whole periods to the phase of the group's
-    first message: frames of one sample get one time.
-    """
+    """Data times ``anchor + k period`` of several messages' frames (None: kept); messages of one rate share
+    their mean period and the first one's phase."""
     out: list[np.ndarray | None] = [None] * len(slots)
     groups: list[list[int]] = []
     for j, s in enumerate(slots):

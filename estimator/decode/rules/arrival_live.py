@@ -1,34 +1,6 @@
-"""Sample slots from arrival times, causally: the live version of :mod:`.arrival`.
-
-A live bus hands the frames over one by one; there is no whole log to look ahead in. Per
-data message (:class:`LiveSlots`):
-
-1. warm-up: the first ``WARMUP`` frames (fewer when they span more than ``WARMUP_S``) are
-   held, then placed by the offline rule
-   (:func:`~estimator.decode.rules.arrival.arrival_slots`) -- all but the last ``HOLD``,
-   which stay held. A message whose warm-up lies on a uniform grid (or was stamped by a clock
-   that ticks with its samples), or cannot be placed, keeps its timestamps from then on;
-2. after it, the last ``HOLD`` frames of the message are held (the look-ahead; it adds that
-   latency only). The oldest held frame is released with slot ``k_prev + 1`` unless the lower
-   envelope of ``u = t - k P`` rises: the least ``u`` of the held frames (counted
-   consecutive from it) above the least of the last ``HOLD`` released frames by more than
-   half a period is a gap of ``g = rint(rise / P)`` frames, after the frames that arrived too
-   early to be after it -- the offline rule's step 2 with the look-ahead it has;
-3. ``P`` is refitted by least squares (running sums) on the lower envelope of the released
-   slots (the least ``t - k P`` of every ``BLOCK`` frames: delays and jitter move it far
-   less than the frames), rounded to whole µs within ``SNAP_SE`` standard errors; the anchor
-   ``a`` is the lower envelope ``min(t - k P)`` of the warm-up, moved down only where a
-   frame lies more than ``ANCHOR_TOL`` periods below it (and where ``P`` changes, so that
-   the newest slot keeps its time: data times never jump); the data time is ``a + k P``. A rise
-   that the period's uncertainty can explain (``SNAP_SE`` standard errors over the frames
-   compared) is not a gap.
-
-Messages whose periods agree within ``SAME_RATE`` share the period and phase of the first one
-placed (:class:`LivePlacer`), as :func:`~estimator.decode.rules.arrival.place_messages` does.
-The released frames of all messages and every other frame (arrival time kept) are merged in
-time order: a frame leaves once no message can still release an earlier one. An arrival time
-more than ``RESET_S`` before the newest is a clock reset: everything held is passed on and
-the rule starts over.
+"""Sample slots from arrival times, causally (the live version of :mod:`.arrival`): per
+message a warm-up placed by the offline rule, then ``HOLD`` frames of look-ahead; every frame
+merged back into time order (:class:`LivePlacer`). docs/can.md "Without a sensor clock".
 """
 from __future__ import annotations
 
@@ -49,8 +21,7 @@ WARMUP = 1024
 WARMUP_S = 2.0
 #: an arrival time this far (s) before the newest is a clock reset: the rule starts over
 RESET_S = 1.0
-#: frames of a message held before they are released (the look-ahead: a rise of the lower
-#: envelope is found over ``DETECT`` frames and measured over these, as ``SIDE``)
+#: frames of a message held before they are released (the look-ahead)
 HOLD = SIDE
 #: the period is refitted every this many released frames
 REFIT_EVERY = 16
@@ -58,20 +29,13 @@ REFIT_EVERY = 16
 ANCHOR_TOL = 0.25
 #: released frames per point of the lower envelope the period is fitted to
 BLOCK = 8
-#: a message silent for this many of its periods (and at least ``SILENT_S``) no longer
-#: holds the others back in the merge
+#: a message silent for this many periods (and ``SILENT_S``) no longer holds the merge back
 SILENT_PERIODS = 64
 SILENT_S = 0.25
 
 
 class LiveSlots:
-    """The online slot rule of one message (see the module docstring).
-
-    Parameters
-    ----------
-    name : str
-        Message name (for the statistics).
-    """
+    """The online slot rule of one message (see the module docstring)."""
 
     def __init__(self, name: str) -> None:
         self.name = name
@@ -96,12 +60,8 @@ class LiveSlots:
         #: arrival times and slots of the frames placed at the end of the warm-up
         self.first: tuple[np.ndarray, np.ndarray] | None = None
 
-    # ---- the rule ----------------------------------------------------------------------
     def push(self, t: float, frame: Any, out: list[tuple[float, int, Any]]) -> bool:
-        """Take one frame arrived at ``t`` (s); released frames go to ``out`` as
-        ``(data time, slot, frame)`` (time NaN: the warm-up's, timed by the caller with
-        :meth:`place`; slot -1: the arrival time kept). Returns True when the warm-up just
-        ended."""
+        """Take one frame arrived at ``t`` (s), release frames to ``out``; True: warm-up ended."""
         self.last_arrival = t
         if self.state == "kept":
             out.append((t, -1, frame))
@@ -118,24 +78,25 @@ class LiveSlots:
             self._release(out)
         return False
 
-    def _start(self, out: list[tuple[float, int, Any]]) -> None:
-        """The warm-up is full: place it by the offline rule."""
+    def _start(self, out: list[tuple[float, int, Any]], final: bool = False) -> None:
+        """Place the warm-up by the offline rule (``final``: the input ended, hold none)."""
         warm, self.warm = self.warm, []
         ts = np.array([w[0] for w in warm])
         sl = arrival_slots(ts)
         if sl is None or sl.regular:
             self.state = "kept"
-            if sl is not None:
+            if sl is not None and not final:
                 self.period = sl.period
             out.extend((t, -1, f) for t, f in warm)
             return
         self.state = "placing"
         self.period = sl.period
         self._t0 = float(ts[0])
-        n_out = len(warm) - min(HOLD, len(warm) // 2)
+        n_out = len(warm) if final else len(warm) - min(HOLD, len(warm) // 2)
         for i in range(n_out):
             self._take(float(ts[i]), int(sl.k[i]))
-        self._refit()
+        if not final:
+            self._refit()
         self.anchor = float(np.min(ts[:n_out] - sl.k[:n_out] * self.period))
         self.missing = int(sl.k[n_out - 1]) - (n_out - 1)
         for i in range(n_out):
@@ -144,8 +105,7 @@ class LiveSlots:
         self.hold.extend(warm[n_out:])
 
     def _take(self, t: float, k: int) -> None:
-        """Book one released frame (slot ``k``, arrival ``t``): the lower envelope's point
-        of each ``BLOCK`` frames (least ``t - k P``) goes into the period's fit."""
+        """Book one released frame (slot ``k``, arrival ``t``) into the period's fit."""
         self.k_last = k
         self.released += 1
         self.recent.append((t, k))
@@ -176,46 +136,35 @@ class LiveSlots:
         near_b = min(recent[i][0] - recent[i][1] * p for i in range(max(0, nr - DETECT), nr))
         lim = near_b + 0.5 * p
         rises = u0 > lim
-        if rises:
-            # the envelope rises over the next DETECT frames when all of them lie above
-            # (most frames end the check at once: one of the next lies below)
-            j = 1
-            for th, _ in self.hold:
+        if rises:   # ... when all of the next DETECT frames lie above
+            for j, (th, _) in enumerate(self.hold, 1):
                 if j >= DETECT:
                     break
                 if th - (k + j) * p <= lim:
                     rises = False
                     break
-                j += 1
         if rises:
-            # a gap of g frames, measured from the frames beyond the next DETECT (as
-            # offline: after the stretch where it rises) to the last HOLD released, after
-            # the frames that arrived too early to be after it
+            # a gap of g frames: the frames beyond the next DETECT against the last released
             near_a = u0
             far = math.inf
-            j = 1
-            for th, _ in self.hold:
+            for j, (th, _) in enumerate(self.hold, 1):
                 if j < DETECT:
                     near_a = min(near_a, th - (k + j) * p)
                 else:
                     far = min(far, th - (k + j) * p)
-                j += 1
-            ahead = min(near_a, far) if j <= DETECT else far
+            ahead = min(near_a, far) if len(self.hold) < DETECT else far
             before = min(tr - kr * p for tr, kr in recent)
             # what the period's uncertainty can lift u over the two sides is not a gap
             slack = SNAP_SE * self.se * (len(recent) + len(self.hold) + 1)
             g = int(math.floor((ahead - before - slack) / p + 0.5))
             if g > 0:
-                # the gap lies after the last frame of the next DETECT that arrived too early
-                # to be after it (a sample is never taken after its frame arrives)
+                # the gap lies after the frames that arrived too early to be after it
                 early = before + (g - 0.5) * p
                 late = u0 >= early
-                j = 1
-                for th, _ in self.hold:
+                for j, (th, _) in enumerate(self.hold, 1):
                     if j >= DETECT or not late:
                         break
                     late = th - (k + j) * p >= early
-                    j += 1
                 if late:
                     k += g
                     self.missing += g
@@ -226,10 +175,7 @@ class LiveSlots:
         out.append((self.place(k), k, frame))
 
     def _refit(self) -> None:
-        """The period: least-squares slope of the lower envelope's points (one per
-        ``BLOCK`` released slots; delays and jitter move them far less than the frames),
-        rounded to whole µs within ``SNAP_SE`` standard errors; the anchor moved so that
-        the newest slot keeps its data time (no jump where the estimate changes)."""
+        """Refit the period; the anchor moves so that the newest slot keeps its data time."""
         n, sk, st, skk, skt, stt = self._sums
         den = n * skk - sk * sk
         if n < 3 or not den > 0:
@@ -251,23 +197,7 @@ class LiveSlots:
     def flush(self, out: list[tuple[float, int, Any]]) -> None:
         """The input ended: place a warm-up that did not fill, release the held frames."""
         if self.state == "warmup" and self.warm:
-            warm, self.warm = self.warm, []
-            ts = np.array([w[0] for w in warm])
-            sl = arrival_slots(ts)
-            if sl is None or sl.regular:
-                self.state = "kept"
-                out.extend((t, -1, f) for t, f in warm)
-                return
-            self.state = "placing"
-            self.period = sl.period
-            self._t0 = float(ts[0])
-            for i in range(len(warm)):
-                self._take(float(ts[i]), int(sl.k[i]))
-            self.anchor = sl.anchor
-            self.missing = sl.missing
-            for i in range(len(warm)):
-                out.append((math.nan, int(sl.k[i]), warm[i][1]))
-            self.first = (ts, sl.k)
+            self._start(out, final=True)
             return
         while self.hold:
             # the last frames: a gap cannot be told from a delay, they are consecutive
@@ -277,12 +207,8 @@ class LiveSlots:
             self._lower(t - k * self.period)
             out.append((self.place(k), k, frame))
 
-    # ---- times -------------------------------------------------------------------------
     def _lower(self, u: float) -> None:
-        """Take ``u = t - k P`` into the anchor: only a drop by more than ``ANCHOR_TOL``
-        periods moves it (the warm-up's envelope lies within a fraction of a period of the
-        final one; following every new minimum would move later samples against the
-        windows already cut)."""
+        """Take ``u = t - k P`` into the anchor if it drops more than ``ANCHOR_TOL`` periods below."""
         if u < self.anchor - ANCHOR_TOL * self.period:
             self.anchor = u
 
@@ -315,20 +241,7 @@ class LiveSlots:
 
 
 class LivePlacer:
-    """Place the data frames of a live stream in their sample slots and merge every frame
-    back into time order (see the module docstring).
-
-    Parameters
-    ----------
-    names : dict
-        Route key (CAN ID | extended flag) -> message name, of the data messages.
-    key_of : callable
-        Frame -> route key.
-    time_of : callable
-        Frame -> arrival time (s).
-    retime : callable
-        ``(frame, data time)`` -> the frame with that time.
-    """
+    """Place a live stream's data frames in their sample slots, every frame in time order."""
 
     def __init__(self, names: dict[int, str], key_of: Callable[[Any], int | None],
                  time_of: Callable[[Any], float], retime: Callable[[Any, float], Any]) -> None:
@@ -346,13 +259,10 @@ class LivePlacer:
     def push(self, frame: Any) -> list[Any]:
         """Take one frame; returns the frames that may go to the decoder now, in time order."""
         t = self._time_of(frame)
-        if not math.isfinite(t):
-            # not a time the rule can place (the time check rejects it)
+        if not math.isfinite(t):   # the time check rejects it
             self._add(t, frame, False)
             return self._drain(False)
-        if t < self._newest - RESET_S:
-            # a clock reset: pass on everything held, start over with the new clock (the
-            # decoder's time check re-anchors its time base)
+        if t < self._newest - RESET_S:   # a clock reset: pass on everything, start over
             done = self.finish()
             self.msgs = {k: LiveSlots(ls.name) for k, ls in self.msgs.items()}
             self._groups = []
@@ -388,9 +298,7 @@ class LivePlacer:
         return {ls.name: ls.stats() for ls in self.msgs.values() if ls.state != "warmup"}
 
     def _take(self, ls: LiveSlots, rel: list[tuple[float, int, Any]]) -> None:
-        """Frames a message released: ``(data time, slot, frame)``, the time NaN for those
-        placed at the end of its warm-up (timed here, once its rate group is known); slot
-        -1 for frames that keep their arrival time."""
+        """Queue the frames a message released (see :meth:`LiveSlots.push`)."""
         placing = ls.state == "placing"
         for tm, k, fr in rel:
             if k >= 0 and math.isnan(tm):
@@ -422,28 +330,18 @@ class LivePlacer:
         heap = self._heap
         if not heap:
             return []
-        if all_:
-            mark = math.inf
-        else:
-            mark = math.inf
-            quiet = self._newest
-            for ls in self.msgs.values():
-                if ls.state == "warmup" and not ls.warm:
-                    if quiet - self._first <= SILENT_S:
-                        return []     # a message not seen yet may still start before
-                    continue
-                if ls.state == "kept":
-                    continue
-                silent = max(SILENT_S, SILENT_PERIODS * ls.period)
-                if quiet - ls.last_arrival > silent:
-                    continue
+        mark = math.inf
+        for ls in () if all_ else self.msgs.values():
+            if ls.state == "warmup" and not ls.warm:
+                if self._newest - self._first <= SILENT_S:
+                    return []     # a message not seen yet may still start before
+            elif ls.state != "kept" and self._newest - ls.last_arrival <= max(
+                    SILENT_S, SILENT_PERIODS * ls.period):
                 mark = min(mark, ls.next_time())
         out = []
         while heap and heap[0][0] <= mark:
             tm, _, moved, frame = heapq.heappop(heap)
-            if moved:
-                # a placed frame never goes back behind one already passed on (a message
-                # that started late, an anchor that went down)
+            if moved:   # never behind a frame already passed on
                 tm = max(tm, self._last_out)
                 frame = self._retime(frame, tm)
             if tm > self._last_out:

@@ -1,61 +1,48 @@
-"""Alive counter continuity and the per-message period estimate.
-
-Per message the decoder keeps the last counter ``last_c`` (-1: no frame yet), the data time
-of the last frame ``last_ts`` (s) and a period estimate ``period`` (s, 0: none yet; an
-exponential average ``0.9 period + 0.1 interval`` of the intervals between frames whose
-counters advance by one).
-
-* The next counter value (advance 1 mod 15) is accepted. After a silence of more than 1.5
-  periods an advance of 1 means 15, 30, ... frames were lost that a 4-bit counter cannot
-  show; the time shows them and they are counted in ``lost``.
-* An advance of 2..``max_counter_delta`` is accepted and its missing frames counted lost
-  (more, when the time since the last frame says a whole counter cycle more went missing).
-* A repeated or older counter (up to ``stale_window`` steps back) is ``counter_stale``,
-  unless the message was silent for more than a counter cycle (a restarted sender).
-* Anything else, and the invalid value 15, is ``counter_jump``: the frame re-synchronises
-  the sequence (AUTOSAR E2E profile 1) but is not accepted.
-
-Scalar: :class:`CounterRules` (one frame). Arrays: :func:`steady_frames` (which frames of a
-run of messages need only the period recurrence) and :func:`period_after` (that recurrence,
-bit for bit the scalar one).
+"""Alive counter continuity (stale, jump, lost frames) and the per-message period estimate
+(``0.9 period + 0.1 interval`` over frames advancing by one) that tells a silence from a
+jump; docs/can.md "End-to-end protection".
 """
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
 
-from estimator.decode.stats import FrameCounts
 from suspid.can.crc import COUNTER_MODULUS
 
 _INF = math.inf
-#: the period estimate cannot trigger the silence rule while every interval stays below
-#: 1.5 x (1 - 1e-9) x the smallest of the estimate and the intervals so far (the estimate
-#: is a convex combination of them; the margin covers its rounding over 1e5+ updates)
+#: no silence while every interval stays below this x the smallest of the estimate and the
+#: intervals so far (the estimate is a convex combination of them; margin for rounding)
 SILENCE_SAFE = 1.5 * (1.0 - 1e-9)
+#: rejection reasons, in check order
+REJECT_REASONS: tuple[str, ...] = ("malformed", "frame_type", "time", "unknown_id", "dlc", "crc",
+                                   "counter_stale", "counter_jump", "no_sync")
 
 
-class CounterState(Protocol):
-    """What the counter rules keep per message (see the module docstring)."""
+@dataclass
+class FrameCounts:
+    """Frame counters of a decoder (``rejected``: reason -> frames)."""
+
+    accepted: int = 0
+    ignored: int = 0
+    lost: int = 0
+    rejected: dict[str, int] = field(default_factory=lambda: dict.fromkeys(REJECT_REASONS, 0))
+
+
+class RouteState(Protocol):
+    """What the counter and stale-tick rules keep per message."""
 
     last_c: int
     last_ts: float
     period: float
+    last_arrival: float
+    sync_n: int
 
 
 class CounterRules:
-    """The counter rules of one decoder (frame by frame: the reference).
-
-    Parameters
-    ----------
-    counts : FrameCounts
-        Where lost frames and ``counter_stale``/``counter_jump`` rejections are counted.
-    max_counter_delta : int
-        Largest accepted counter advance (1 = no frame may be lost).
-    stale_window : int
-        Counter steps back still read as an old (late or duplicate) frame.
-    """
+    """The counter rules of one decoder, frame by frame (see the module docstring)."""
 
     __slots__ = ("counts", "rejected", "max_counter_delta", "stale_window")
 
@@ -65,13 +52,8 @@ class CounterRules:
         self.max_counter_delta = max_counter_delta
         self.stale_window = stale_window
 
-    def step(self, route: CounterState, c: int, t: float) -> bool:
-        """Counter continuity of one frame at data time ``t`` (s); ``False``: rejected.
-
-        The next counter value is accepted and updates the period estimate; a silence
-        whose length in periods is 1 mod 15 counts the frames the counter cannot show as
-        lost. Any other value goes to :meth:`gap`.
-        """
+    def step(self, route: RouteState, c: int, t: float) -> bool:
+        """Counter continuity of one frame at data time ``t`` (s); ``False``: rejected."""
         last = route.last_c
         if last >= 0 and (c - last) % COUNTER_MODULUS != 1:
             if not self.gap(route, c, last, t):
@@ -89,16 +71,14 @@ class CounterRules:
         route.last_ts = t
         return True
 
-    def gap(self, route: CounterState, c: int, last: int, ts: float) -> bool:
+    def gap(self, route: RouteState, c: int, last: int, ts: float) -> bool:
         """Counter did not advance by one: accept (lost frames) or reject; ``True`` = accept."""
         rejected = self.rejected
         if c == 15:
             rejected["counter_jump"] += 1
             return False
         delta = (c - last) % COUNTER_MODULUS
-        # a 4-bit counter cannot tell 11 lost frames from a frame 4 steps old, nor 2 lost
-        # frames from 17; the time since the last frame of this ID can: a gap whose length
-        # in periods matches the counter advance is counted from the time
+        # a gap whose length in periods matches the counter advance is counted from the time
         steps = int((ts - route.last_ts) / route.period + 0.5) if route.period > 0 else 0
         if 2 <= delta <= self.max_counter_delta:
             matched = steps > delta and (steps - delta) % COUNTER_MODULUS == 0
@@ -108,8 +88,7 @@ class CounterRules:
             self.counts.lost += steps - 1
             return True
         if delta == 0 or delta >= COUNTER_MODULUS - self.stale_window:
-            # an old or repeated frame arrives close to the newest one; after a silence of
-            # more than a counter cycle it is a restarted sender (node reboot): re-sync
+            # old or repeated, unless a silence of a counter cycle: a restarted sender
             if not (route.period > 0 and ts - route.last_ts > COUNTER_MODULUS * route.period):
                 rejected["counter_stale"] += 1
                 return False
@@ -122,34 +101,9 @@ class CounterRules:
 def steady_frames(c: np.ndarray, t: np.ndarray, starts: np.ndarray, last_c: np.ndarray,
                   last_t: np.ndarray, period0: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Frames of consecutive message runs that only update the period estimate.
-
-    A frame is *steady* when its counter advances by exactly one, and its interval is
-    positive and short enough that no period estimate reachable from the run's start can
-    call it a silence (below :data:`SILENCE_SAFE` x the smallest of the run's intervals and
-    its period before); the first frame ever of a message always is. For the frames of a
-    run up to its first unsteady one, :meth:`CounterRules.step` reduces to
-    :func:`period_after`.
-
-    Parameters
-    ----------
-    c : ndarray of int64, shape (m,)
-        Counters, the runs one after the other.
-    t : ndarray of float64, shape (m,)
-        Data times (s).
-    starts : ndarray of int64, shape (runs,)
-        Index of each run's first frame.
-    last_c, last_t, period0 : ndarray, shape (runs,)
-        Each message's counter (-1: none yet), data time and period before its run.
-
-    Returns
-    -------
-    steady : ndarray of bool, shape (m,)
-    el : ndarray of float64, shape (m,)
-        Interval of each frame since the message's previous one (s).
-    rid : ndarray of int64, shape (m,)
-        Run of each frame.
-    """
+    """Steady frames of consecutive message runs (counters ``c``, data times ``t`` in s, from
+    ``starts``; each message's state before): those for which :meth:`CounterRules.step`
+    reduces to :func:`period_after`. Returns the mask, each frame's interval (s) and run."""
     m = c.size
     rid = np.repeat(np.arange(starts.size), np.diff(np.r_[starts, m]))
     prev_c = np.empty(m, dtype=np.int64)
@@ -171,21 +125,7 @@ def steady_frames(c: np.ndarray, t: np.ndarray, starts: np.ndarray, last_c: np.n
 
 
 def period_after(jobs: list[tuple[float, int, int]], el: np.ndarray) -> list[float]:
-    """Period estimates after the recurrence over ``el[start:stop]`` for every job.
-
-    ``jobs``: ``(period before, start, stop)``; the recurrence is the scalar rule's
-    ``period = el if period <= 0 else 0.9 * period + 0.1 * el``. A Python loop: the result
-    must be bit for bit the scalar one, and no array operation rounds the same way step by
-    step (``scipy.signal.lfilter`` would, but importing ``scipy.signal`` costs ~1 s per
-    process start).
-
-    The loop is the scalar one with two steps taken out of it, which changes no rounding:
-    the products ``0.1 * el`` are computed as one array operation (one IEEE multiplication
-    each, the same double), and the test ``period > 0`` is made once: when every product
-    is positive, a positive period stays positive (``0.9 * p`` is >= 0 and adding a
-    positive double to it rounds to at least that double), so the test would always pass.
-    A job with a non-positive (or NaN) product runs the scalar loop as it is.
-    """
+    """Period estimates after the scalar recurrence over ``el[start:stop]``, bit for bit."""
     out = []
     for p, a, b in jobs:
         if a >= b:

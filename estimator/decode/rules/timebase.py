@@ -1,67 +1,31 @@
-"""Data time: which clock places a frame, the time order check, the tick of a frame.
-
-Two clocks can give a frame its data time:
-
-* ``"tick"``, the sensor's own: every sample the node sends ``SN_Sync`` with its ``Tick``
-  and ``PeriodUs``; an E2E data frame's sample is the tick nearest the last SN_Sync's
-  whose residue mod 15 is the frame's alive counter (:func:`tick_of_counter`), its data
-  time ``tick x period`` (:func:`tick_time`) -- exact whatever the transport's latency.
-  An E2E ``SN_Status`` (or ``SUSPID_Alert``) frame has a counter of its own, not the tick's:
-  the node sends its status in the tick of the SN_Sync just before it, so its data time is
-  that SN_Sync's tick x period (a host that delivers frames late, in a bunch, then shows no
-  silence of the sender to the counter rules).
-* ``"timestamp"``, the frame's arrival time (logs, buses that stamp on reception), for
-  foreign streams that carry no sensor clock.
-
-``"auto"`` takes the tick once an ``SN_Sync`` frame is among the first ``AUTO_FRAMES``
-frames of the DBC's messages (:func:`choose_time_base`), the arrival times otherwise.
-
-Every frame must also arrive in time order: a timestamp earlier than the last accepted
-frame's, NaN or inf is rejected as ``time`` (:class:`TimeOrder`); after ``TIME_RESYNC``
-such frames in a row the clock was reset and the time base is re-anchored.
-
-In tick mode a data frame after a silence longer than 7 periods with no SN_Sync since its
-message's last frame is ``no_sync`` (:func:`stale_tick`): a link closed and reopened, the
-last tick is stale and would place the frame in the past.
-
-Scalar and array forms: :func:`tick_of_counter` / :func:`ticks_of_counters`,
-:func:`tick_time` / :func:`tick_times`, :func:`sync_time` / :func:`sync_times`,
-:meth:`TimeOrder.admit` / :func:`time_breaks`, :func:`stale_tick` / :func:`fresh_ticks`;
-:class:`SyncTrack` gives every frame of a batch the SN_Sync state it would have seen.
+"""Data time: which clock places a frame (:func:`choose_time_base`), the time order check
+(:class:`TimeOrder`), a frame's tick from its alive counter (:func:`tick_of_counter`), the
+stale-tick rule (:func:`stale_tick`) and the sensor clock across wraps and restarts
+(:class:`TickClock`). docs/can.md "Sample time: SN_Sync".
 """
 from __future__ import annotations
 
 import math
 import sys
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
+from estimator.decode.rules.counters import RouteState
 from suspid.can.crc import COUNTER_MODULUS
 
 _INF = math.inf
 #: consecutive 'time' rejections after which the time base is re-anchored (a clock reset)
 TIME_RESYNC = 16
-#: ``time_source="auto"``: frames held while waiting for an ``SN_Sync`` before the time base
-#: falls back to the frame timestamps (the node sends SN_Sync with every sample)
+#: ``time_source="auto"``: frames of the DBC held while waiting for an ``SN_Sync``
 AUTO_FRAMES = 64
 #: silence (in periods, half the counter cycle) after which a data frame needs a new SN_Sync
 STALE_PERIODS = COUNTER_MODULUS // 2
 
 
-# ---- the time order ---------------------------------------------------------------------
 class TimeOrder:
-    """The time order check of a decoder (frame by frame: the reference).
-
-    Attributes
-    ----------
-    last : float
-        Timestamp of the last frame that passed (any finite time passes the first check).
-    rejects : int
-        Consecutive frames rejected for their time.
-    resyncs : int
-        Times the time base was re-anchored after a clock reset.
-    """
+    """The time order check: a time before ``last``, NaN or inf is rejected as ``time``; ``TIME_RESYNC`` in a
+    row re-anchor the time base (``resyncs``)."""
 
     __slots__ = ("last", "rejects", "resyncs")
 
@@ -80,8 +44,7 @@ class TimeOrder:
         return True
 
     def out_of_order(self, ts: float) -> bool:
-        """A frame that failed ``last <= ts < inf``: ``True`` when it re-anchors the time base
-        (the caller then takes it as the new last), ``False`` when it is rejected."""
+        """A frame that failed ``last <= ts < inf``: True when it re-anchors the time base."""
         if not -_INF < ts < _INF:
             return False  # NaN/inf: never a data time, never a re-anchor
         self.rejects += 1
@@ -92,18 +55,15 @@ class TimeOrder:
 
 
 def time_breaks(last: float, ts: np.ndarray) -> np.ndarray:
-    """Frames of a batch that fail the time order against their predecessor (the first one
-    against ``last``): the places where :meth:`TimeOrder.admit` may reject or re-anchor."""
+    """Frames of a batch out of time order with their predecessor (the first: with ``last``)."""
     prev = np.empty(ts.size)
     prev[0] = last
     prev[1:] = ts[:-1]
     return ~((prev <= ts) & (ts < _INF))
 
 
-# ---- the sensor tick --------------------------------------------------------------------
 def tick_of_counter(sync_tick: int, c: int) -> int:
-    """The tick nearest ``sync_tick`` (at most half a counter cycle later) whose residue
-    mod 15 is the alive counter ``c``."""
+    """The tick nearest ``sync_tick`` whose residue mod 15 is the alive counter ``c``."""
     d = (sync_tick - c) % COUNTER_MODULUS
     return sync_tick - d if d <= COUNTER_MODULUS // 2 else sync_tick - d + COUNTER_MODULUS
 
@@ -115,8 +75,7 @@ def ticks_of_counters(sync_tick: np.ndarray, c: np.ndarray) -> np.ndarray:
 
 
 def tick_time(tick: int, period: float) -> float:
-    """Data time (s) of sample ``tick`` at ``period`` s, rounded to the µs as SN_Sync's own
-    (``PeriodUs`` is an integer)."""
+    """Data time (s) of sample ``tick`` at ``period`` s, rounded to the µs as SN_Sync's own."""
     return round(tick * period * 1e6) / 1e6
 
 
@@ -135,46 +94,21 @@ def sync_times(ticks: np.ndarray, period_us: np.ndarray, arrival: np.ndarray) ->
     return np.where(period_us > 0, (ticks * period_us).astype(np.float64) / 1e6, arrival)
 
 
-class TickState(Protocol):
-    """What the stale-tick rule keeps per message."""
-
-    last_c: int
-    period: float
-    last_arrival: float
-    sync_n: int
-
-
-def stale_tick(route: TickState, sync_n: int, period: float, arrival: float) -> bool:
-    """Tick mode: a data frame arriving at ``arrival`` (s) with ``sync_n`` SN_Sync frames
-    seen must wait for a new SN_Sync (``no_sync``): none came since its message's last frame
-    and the silence is longer than the counter can match."""
+def stale_tick(route: RouteState, sync_n: int, period: float, arrival: float) -> bool:
+    """Tick mode: whether a data frame arriving at ``arrival`` (s) is ``no_sync`` (a stale tick)."""
     return (route.sync_n == sync_n and route.last_c >= 0 and arrival - route.last_arrival
             > STALE_PERIODS * max(route.period, period))
 
 
 def fresh_ticks(sn: np.ndarray, prev_sn: np.ndarray, arrival: np.ndarray,
                 prev_arrival: np.ndarray, period: np.ndarray, known: np.ndarray) -> np.ndarray:
-    """Data frames that certainly have a usable tick: known tick and period, and an SN_Sync
-    since the message's previous frame or a silence short enough (:func:`stale_tick` is then
-    False whatever the message's own period estimate)."""
+    """Data frames whose tick is certainly usable (:func:`stale_tick` False)."""
     return known & ~np.isnan(period) & ((sn != prev_sn)
                                         | (arrival - prev_arrival <= STALE_PERIODS * period))
 
 
 class SyncTrack:
-    """SN_Sync state along a batch segment (tick mode): what every frame position sees.
-
-    Parameters
-    ----------
-    tick0 : int or None
-        ``Tick`` of the last accepted SN_Sync before the segment.
-    n0 : int
-        SN_Sync frames accepted before the segment.
-    period0 : float or None
-        Period (s) before the segment.
-    shift0 : int
-        Counter shift (:attr:`TickClock.shift`) of that SN_Sync.
-    """
+    """SN_Sync state along a batch segment (tick mode): what every frame position sees."""
 
     def __init__(self, tick0: int | None, n0: int, period0: float | None,
                  shift0: int = 0) -> None:
@@ -186,10 +120,9 @@ class SyncTrack:
         self.ticks = np.empty(0, dtype=np.int64)
         self.periods = np.empty(0)
         self.shifts = np.empty(0, dtype=np.int64)
-        #: counter shifts (:attr:`TickClock.shift`) of the SN_Sync run being accepted
+        #: counter shifts of the SN_Sync run being accepted
         self.pending_shifts: np.ndarray | None = None
-        # filled by the segment for the frames of the other messages (from index lo of the
-        # sorted segment arrays on): SN_Sync count, tick known, period (NaN unknown)
+        # the other messages' frames from index lo on: SN_Sync count, tick known, period
         self.lo = 0
         self.sn = np.empty(0, dtype=np.int64)
         self.known = np.empty(0, dtype=bool)
@@ -197,8 +130,7 @@ class SyncTrack:
 
     def add(self, pos: np.ndarray, ticks: np.ndarray, period_us: np.ndarray,
             shifts: np.ndarray | None = None) -> None:
-        """The accepted SN_Sync frames of the segment: positions, (unbroken) ticks, periods
-        (µs) and counter shifts (default none)."""
+        """The accepted SN_Sync frames of the segment: positions, ticks, periods (µs), shifts."""
         self.shifts = np.zeros(len(pos), dtype=np.int64) if shifts is None else \
             np.asarray(shifts, dtype=np.int64)
         given = period_us > 0
@@ -212,63 +144,25 @@ class SyncTrack:
 
     def at(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
                                          np.ndarray]:
-        """At segment positions ``q``: SN_Sync count, tick, tick known, period (NaN unknown),
-        counter shift."""
-        k = np.searchsorted(self.pos, q)
-        sn = self.n0 + k
-        has = k > 0
-        km1 = np.maximum(k - 1, 0)
-        if self.ticks.size:
-            st = np.where(has, self.ticks[km1], 0 if self.tick0 is None else self.tick0)
-            per = np.where(has, self.periods[km1],
-                           math.nan if self.period0 is None else self.period0)
-            sh = np.where(has, self.shifts[km1], self.shift0)
-        else:
-            st = np.full(q.size, 0 if self.tick0 is None else self.tick0, dtype=np.int64)
-            per = np.full(q.size, math.nan if self.period0 is None else self.period0)
-            sh = np.full(q.size, self.shift0, dtype=np.int64)
-        known = has | (self.tick0 is not None)
-        return sn, st.astype(np.int64), known, per, sh.astype(np.int64)
+        """At positions ``q``: SN_Sync count, tick, tick known, period (NaN unknown), shift."""
+        k = np.searchsorted(self.pos, q)   # 0: the state before the segment
+        st = np.r_[0 if self.tick0 is None else self.tick0, self.ticks].astype(np.int64)[k]
+        per = np.r_[math.nan if self.period0 is None else self.period0, self.periods][k]
+        sh = np.r_[self.shift0, self.shifts].astype(np.int64)[k]
+        return self.n0 + k, st, (k > 0) | (self.tick0 is not None), per, sh
 
 
-# ---- the sensor clock across wraps and node restarts ------------------------------------
-#: SN_Sync's Tick is a 32-bit counter: it wraps to 0 after 2^32 ticks
+#: SN_Sync's Tick is a 32-bit counter
 TICK_MODULUS = 1 << 32
-#: a node restart is recognised when SN_Sync's Tick falls back by more than this much time
-#: and the new Tick is within this much time (plus the silence before it) of the node's start
+#: a restart: the Tick falls back by more than this (s) and lies within it (plus the
+#: silence) of 0
 RESTART_S = 1.0
 
 
 class TickClock:
-    """The node's tick as one unbroken count: SN_Sync's raw ``Tick`` plus a ``base``.
-
-    The 32-bit ``Tick`` wraps after 2^32 samples (99 days at 500 Hz) and starts again at 0
-    when the node restarts (power cycle, watchdog reset) mid-drive. Raw, either would send
-    data time back and every later sample would land in the past of the stream (the
-    windows after it were never cut). A raw Tick below the last one is
-
-    * a **wrap** when counting on from the last Tick through 2^32 reaches it within the
-      silence between the two SN_Sync frames (arrival times) plus ``RESTART_S``: ``base``
-      grows by 2^32, data time goes on exactly;
-    * a **restart** when it falls back by more than ``RESTART_S`` of ticks and is itself
-      within that silence plus ``RESTART_S`` of 0: data time continues after the silence
-      (the arrival times' measure of it, at least one period), the pause a gap;
-    * else a late or replayed SN_Sync: placed with the current ``base``, the state kept.
-
-    A data frame's alive counter is its raw tick mod 15, so its tick is matched with the
-    counter shifted by ``base`` mod 15 (:attr:`shift`).
-
-    Attributes
-    ----------
-    base : int
-        Ticks added to the raw Tick.
-    last_raw : int or None
-        Raw Tick of the last SN_Sync that moved the clock.
-    last_arrival : float
-        Its arrival time (s).
-    wraps, restarts : int
-        Wraps and node restarts recognised.
-    """
+    """The node's tick as one unbroken count, SN_Sync's raw ``Tick`` plus ``base``, across
+    32-bit ``wraps`` and node ``restarts`` (a Tick that falls back within ``RESTART_S`` of
+    the silence between two SN_Sync frames; anything else is a late SN_Sync)."""
 
     __slots__ = ("base", "last_raw", "last_arrival", "wraps", "restarts")
 
@@ -280,8 +174,7 @@ class TickClock:
         self.restarts = 0
 
     def extend(self, raw: int, period_us: float, arrival: float) -> int:
-        """The unbroken tick of an SN_Sync with raw ``Tick`` ``raw`` and ``PeriodUs``
-        ``period_us`` arriving at ``arrival`` (s)."""
+        """The unbroken tick of an SN_Sync (raw ``Tick``, ``PeriodUs``, arrival time in s)."""
         last = self.last_raw
         if last is not None and raw < last:
             period = period_us * 1e-6
@@ -301,8 +194,7 @@ class TickClock:
         return raw + self.base
 
     def extend_many(self, raw: Any, period_us: Any, arrival: np.ndarray) -> np.ndarray:
-        """:meth:`extend` of SN_Sync frames in order (int64 array; one pass of numpy when no
-        Tick falls back)."""
+        """:meth:`extend` of SN_Sync frames in order (int64 array)."""
         tk = np.asarray(raw, dtype=np.int64)
         if not tk.size:
             return tk
@@ -316,18 +208,10 @@ class TickClock:
                          for t, u, a in zip(tk.tolist(), pus.tolist(), arrival.tolist())],
                         dtype=np.int64)
 
-    @property
-    def shift(self) -> int:
-        """``base`` mod 15: what the raw counters lag the unbroken tick's residue by."""
-        return self.base % COUNTER_MODULUS
 
-
-# ---- which clock ------------------------------------------------------------------------
 def choose_time_base(ids: np.ndarray, sync_ids: np.ndarray, known_ids: np.ndarray,
                      final: bool) -> str | None:
-    """``time_source="auto"``: ``"tick"`` if the first frames ``ids`` hold an SN_Sync,
-    ``"timestamp"`` once ``AUTO_FRAMES`` frames of the DBC (or, ``final``, the whole input)
-    came without one, ``None`` while undecided. Foreign frames do not count."""
+    """``"auto"``: ``"tick"``, ``"timestamp"`` or None (undecided) from the first frames."""
     if np.isin(ids, sync_ids).any():
         return "tick"
     if final or int(np.isin(ids, known_ids).sum()) >= AUTO_FRAMES:
