@@ -1,11 +1,4 @@
-"""Synthetic records with undeclared effects (the diagnose tests and ``tools/diagnose_matrix.py``).
-
-One recipe, so the measured tables in ``docs/closing-the-loop.md`` and the tests use the
-same data: a named scenario (:func:`suspid.excitation.make_scenario`), the effects injected
-with :func:`suspid.effects.inject` (plus an optional arbitrary generalised force,
-integrated by ``solve_ivp``), every position and velocity channel with white noise of a
-given fraction of the channel's standard deviation.
-"""
+"""Synthetic records with undeclared effects (the diagnose tests and ``tools/diagnose_matrix.py``)."""
 from __future__ import annotations
 
 from typing import Any, Mapping, Sequence
@@ -30,30 +23,22 @@ def synthetic_record(model: str, effects: Sequence["str | Effect"], scenario: st
     Parameters
     ----------
     model : str
-        A registered model name (``quarter1``, ``quarter2``, ``half4``, ...).
+        A registered model name.
     effects : sequence
         Effect spec strings (``"coulomb_friction:F=120"``) or effect objects.
     scenario : str
-        Scenario name (``bump``, ``curb``, ``iso8608``, ``initial``).
+        Scenario name (``bump``, ``curb``, ``iso8608``, ``initial``); ``**scen`` its options.
     params : mapping, optional
-        True parameters (SI; default the model's documented defaults).
-    fs : float
-        Sample rate (Hz).
-    duration : float
-        Record length (s).
+        True parameters (SI; default the model's defaults).
+    fs, duration : float
+        Sample rate (Hz) and record length (s).
     noise : float
         White noise on every channel, as a fraction of the channel's standard deviation.
-    seed : int
-        Seed of the scenario (ISO road) and, plus 101, of the noise.
+    seed, noise_seed : int
+        Seed of the scenario; of the noise (default ``seed + 101``; ``suspid simulate --seed S``
+        draws the same noise as ``noise_seed=S``).
     extra_force : callable, optional
-        A further generalised force ``f(t, x, u, params)`` (N, N m) outside the library
-        (e.g. an engine shake); the record is then integrated by ``solve_ivp``.
-    noise_seed : int, optional
-        Seed of the noise instead of ``seed + 101``; ``suspid simulate --seed S`` draws the
-        same noise as ``noise_seed=S`` (same channel order), so a record made on the
-        command line can be rebuilt here.
-    **scen
-        Scenario options (``h``, ``v_kmh``, ``road_class``, ...).
+        A further generalised force ``f(t, x, u, params)`` (N, N m), integrated by ``solve_ivp``.
 
     Returns
     -------

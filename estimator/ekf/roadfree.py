@@ -1,36 +1,11 @@
 """The EKF baseline with the road unknown: the body equations, filtered sample by sample.
 
-The sliding window with the road unknown (:mod:`estimator.stream.roadfree`) fits each
-window's body equations ``M_b q_b'' = -sum_i g_i (c_i d_i' + k_i d_i)`` on the body
-accelerations and the ride heights ``d_i``. The fair EKF gets exactly that information and
-the same equations:
-
-state
-    every strut's extension ``d_i`` and its rate ``d_i'`` (the rate is a state: no
-    derivative of a noisy channel is taken), one zero offset ``b_j`` per body
-    acceleration channel (a slow random walk: a body accelerometer's zero and the static
-    load on the springs, which the window's band leaves out by starting at its bin 3), and
-    the free struts' dampers and springs as relative random-walk states ``theta_p = p /
-    p_start`` (``q_param``, as the road-measured EKF).
-prediction
-    linear: ``d <- d + h d'`` with a white deflection acceleration of the variance the first
-    window's ride heights show (their second difference, less its noise part), the
-    offsets and the parameters unchanged (their random walks in ``Q``).
-measurements
-    the ride heights (linear, their noise floor or DBC quantization as ``R``), their
-    rates when the stream carries them, and the body accelerations
-    ``-M_b^-1 G (c o d' + k o d) + b`` (nonlinear: products of a parameter and a state; the
-    analytic Jacobian), ``R`` from their noise floor.
-
-Why this and not the road as a random-walk state of the full model: the road enters the
-full model only through the tyres, so that filter would also need the wheel masses and the
-tyre springs and dampers, which the record cannot determine without the road (they would be
-held at guesses the window never uses), and a random-walk road prior besides. The
-deflection states need neither: the same channels and the same equations as the window.
-
-Start, consistency (NIS per window and its band), gaps (the deflection states restart from
-the ride heights after a jump in the time base) and the events are those of
-:class:`estimator.ekf.stream.EKFWindowEstimator`.
+It gets the information and equations of the road-unknown sliding window
+(:mod:`estimator.stream.roadfree`): the state is every strut's extension and rate, one zero
+offset per body acceleration and the free struts' relative dampers and springs; the prediction
+is linear, the body accelerations ``-M_b^-1 G (c o d' + k o d) + b`` the nonlinear measurement.
+Unlike a random-walk road in the full model, this needs no tyre or wheel parameters the record
+cannot determine. Start, NIS and gaps as :class:`estimator.ekf.stream.EKFWindowEstimator`.
 """
 from __future__ import annotations
 
@@ -42,12 +17,12 @@ import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
 from estimator.ekf.filter import EKFTuning, window_nis
+from estimator.ekf.stream import noise_sd
 from estimator.identify import Parameters
 from estimator.identify.roadfree import fit_road_unknown
 from estimator.stream.events import Estimate
 from estimator.stream.monitor import StepResult
 from estimator.stream.wear_streams import channel_resolution
-from estimator.stream.window import noise_floor
 from suspid.errors import InputError
 from suspid.io.csvio import Measurement
 from suspid.models.base import FloatArray, SuspensionModel
@@ -68,20 +43,17 @@ class BodyEquationEKF(ExtendedKalmanFilter):
     ----------
     model : SuspensionModel
     params : mapping
-        Every parameter (SI): masses and inertias of the body rows, held struts, and the
-        start values of ``augmented``.
+        Every parameter (SI); the augmented ones at their start values.
     augmented : sequence of str
         Strut dampers and springs the filter estimates (relative random-walk states).
     channels : sequence of str
-        Measured channels: body accelerations (``x1_ddot``, ``delta_ddot``, ...), ride
-        heights (``d``, ``d1``, ...) and their rates (``d_dot``, ...).
+        Body accelerations, ride heights and their rates.
     dt : float
         Filter step (s).
     tuning : EKFTuning
         ``q_param``, ``p0_param``, ``p0_pos``, ``p0_vel`` apply.
     accel_var : ndarray
-        Per strut, the variance of its deflection acceleration ((m/s^2)^2): the process
-        noise of the rate states.
+        Per strut, the variance of its deflection acceleration ((m/s^2)^2).
 
     Raises
     ------
@@ -141,7 +113,6 @@ class BodyEquationEKF(ExtendedKalmanFilter):
         self._I = np.eye(nz)
         self.nis_sum = 0.0
         self.nis_dof = 0
-        # the linear rows of H: ride heights and their rates
         H0 = np.zeros((len(self.channels), nz))
         for r, c in enumerate(self.channels[nb:], start=nb):
             base = c.removesuffix("_dot")
@@ -187,8 +158,7 @@ class BodyEquationEKF(ExtendedKalmanFilter):
         return y, H
 
     def step(self, y: FloatArray) -> None:
-        """Predict one step and update with measurement ``y`` (NaN entries left out);
-        Joseph form, as :meth:`estimator.ekf.filter.AugmentedEKF.update`."""
+        """Predict one step and update with ``y`` (NaN entries left out; Joseph form)."""
         self.x = self.F @ self.x
         self.P = self.F @ self.P @ self.F.T + self.Q
         zz = np.asarray(y, dtype=float)
@@ -229,16 +199,14 @@ class RoadFreeEKFEstimator:
     ----------
     model : SuspensionModel
     params : Parameters
-        Held values and the start values of the free parameters (SI); the free ones are
-        the filter's augmented states.
+        Held values and the start values of the free parameters (SI), the augmented states.
     channels : sequence of str
         Channels in the stream.
     tuning : EKFTuning
     decimate : int
         Filter every ``decimate``-th sample.
     first_window : sequence of str
-        Free parameters started from the first window's road-unknown fit (their start not
-        given), as the road-measured EKF starts from the first window's sliding-window fit.
+        Free parameters started from the first window's road-unknown fit.
     nis_level, nis_tolerance : float
         The NIS band (as :class:`estimator.ekf.stream.EKFWindowEstimator`).
     """
@@ -301,25 +269,19 @@ class RoadFreeEKFEstimator:
                 acc_var.append(1.0)
                 continue
             a = np.diff(dv, 2) / dt ** 2
-            nf = noise_floor(np.asarray(data[name], dtype=float))
-            s = max(nf if math.isfinite(nf) else 0.0, res_q.get(name, 0.0) / math.sqrt(12.0))
+            s = noise_sd(data[name], res_q.get(name, 0.0))
             acc_var.append(max(float(np.var(a)) - 6.0 * s * s / dt ** 4, 0.1 * float(np.var(a)),
                                1e-6))
         aug = list(self.params.free)
         ekf = BodyEquationEKF(model, self.params.valuesdict(), aug, self.channels, dt,
                               self.tuning, np.array(acc_var))
-        sig = []
-        for c in ekf.channels:
-            nf = noise_floor(np.asarray(data[c], dtype=float))
-            q = res_q.get(c, 0.0) / math.sqrt(12.0)
-            sig.append(max(nf if math.isfinite(nf) else 0.0, q, 1e-9))
+        sig = [max(noise_sd(data[c], res_q.get(c, 0.0)), 1e-9) for c in ekf.channels]
         ekf.R = np.diag(np.square(sig))
         self._init_motion(ekf, data, 0)
         return ekf
 
     def _init_motion(self, ekf: BodyEquationEKF, data: Mapping[str, FloatArray], k: int) -> None:
-        """Deflections and rates from the ride heights at sample ``k`` (central difference
-        for the rate without a ``_dot`` channel), the initial covariance of the motion."""
+        """Deflections and rates from the ride heights at sample ``k``; the motion's initial covariance."""
         ns = ekf.ns
         tu = self.tuning
         for i, name in enumerate(self.model.ride_heights):
@@ -417,8 +379,7 @@ class RoadFreeEKFEstimator:
 
 
 def make_roadfree_ekf_estimator(spec: Any, channels: list[str], fs: float) -> RoadFreeEKFEstimator:
-    """The road-unknown EKF of a :class:`~estimator.stream.pipeline.MonitorSpec`: every free
-    strut damper and spring in the state (``ekf.params`` narrows it, the others held)."""
+    """The road-unknown EKF of a :class:`~estimator.stream.pipeline.MonitorSpec`."""
     params = spec.params.copy()
     if spec.ekf_params:
         for k in params.free:
