@@ -132,9 +132,8 @@ def compare(base: ModelFit, aug: ModelFit, noise_var: Mapping[str, float],
             channels: list[str]) -> tuple[float, float, float, float, dict[str, float]]:
     """Evidence of ``aug`` against ``base``: ``(dBIC, LR p, structured fraction explained, f, rms)``.
 
-    Gaussian log-likelihood with one variance per channel on the samples valid in both fits; the
-    effective-sample fraction ``f`` (AR(1)) scales it so serially correlated residuals do not
-    overstate the evidence.
+    ``f``, the effective-sample fraction (AR(1)), scales the Gaussian log-likelihood so serially
+    correlated residuals do not overstate the evidence.
     """
     common = {c: ~(np.isnan(base.residual[c]) | np.isnan(aug.residual[c])) for c in channels}
     tb, ta = _loglik_terms(base, common), _loglik_terms(aug, common)
@@ -170,26 +169,10 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
              multistart: int = 4) -> DiagnoseResult:
     """Fit ``model``, trace its residual to a missing effect, add it and refit.
 
-    Parameters
-    ----------
-    model : SuspensionModel
-        The declared linear model.
-    meas : Measurement
-        The record (CSV or decoded CAN log).
-    params : Parameters
-        Starting values and fixed parameters, as for ``identify``.
-    cost, x0, restarts, polish, multistart
-        Baseline fit settings, as for ``suspid identify``.
-    maxfev : int, optional
-        Evaluation budget of every fit (baseline, linear refit, each candidate's refit and
-        reference), Jacobians included. Default: each fit's own.
-    thresholds : Thresholds, optional
-        Decision thresholds.
-
-    Raises
-    ------
-    InputError
-        Fewer than ``MIN_SAMPLES`` samples, or a time grid not uniform even up to timing jitter.
+    ``params`` are the starting and fixed values; ``cost``, ``x0``, ``restarts``, ``polish`` and
+    ``multistart`` the baseline fit's settings (as for ``suspid identify``); ``maxfev`` the budget
+    of every fit, Jacobians included. InputError for fewer than ``MIN_SAMPLES`` samples or a time
+    grid not uniform even up to timing jitter.
     """
     th = thresholds or Thresholds()
     t = np.asarray(meas.t, dtype=float)
@@ -416,10 +399,8 @@ def _offset_refit(problem: OutputErrorProblem, params: Parameters, check: Offset
                   base: ModelFit, noise_var: Mapping[str, float], channels: list[str],
                   th: Thresholds, settings: Mapping[str, Any]
                   ) -> tuple[Screen, Verdict, ModelFit, list[str]]:
-    """The offset :func:`~estimator.identify.record.check_offset` found, as a candidate.
-
-    Returns the check as a ``sensor_offset`` screen, the refit's verdict against ``base``,
-    identify's fit of the record with the offsets removed, and that fit's other warnings.
+    """The offset :func:`~estimator.identify.record.check_offset` found, as a candidate: its screen,
+    verdict, identify's fit of the record with the offsets removed and that fit's other warnings.
     """
     offset = check.offset
     if offset is None:
@@ -454,10 +435,8 @@ def _fmt(v: Mapping[str, Any]) -> str:
 
 def _not_identifiable(model: SuspensionModel, screens: list[Screen], limits: Mapping[str, str],
                       th: Thresholds) -> dict[str, str]:
-    """Strut effects the residual force points to in a form no candidate can express.
-
-    One coefficient per strut explains at least 30 % of the residual force and 1.5 times the best
-    expressible form, with physical values in every strut. Returns ``effect name -> sentence``.
+    """Strut effects the residual force points to in every strut with different parameters, a form no
+    candidate can express: ``effect name -> sentence``.
     """
     out: dict[str, str] = {}
     for s in screens:
@@ -481,11 +460,9 @@ def select_for_refit(screens: list[Screen], blocked: Mapping[str, str],
                      th: Thresholds) -> tuple[list[Screen], list[Screen]]:
     """The screened candidates worth an output-error refit: ``(first, fallback)``.
 
-    Physical and sensor candidates are ranked separately (their shares are not comparable).
-    First: the best plausible, not blocked physical candidate with at least ``min_screen`` and
-    runners-up within half its share (``max_physical`` in all), and every plausible sensor one
-    with at least ``min_screen``. ``fallback`` (refitted only when none is accepted): the best
-    physical candidates below ``min_screen`` (the force screen is noise-bound), unless blocked.
+    Physical and sensor candidates are ranked separately (their shares are not comparable);
+    ``fallback``, refitted only when none of ``first`` is accepted, holds the best physical
+    candidates below ``min_screen`` (the force screen is noise-bound).
     """
     reg = effect_classes()
     phys = sorted([s for s in screens if s.name in reg and reg[s.name].kind == "physical"
@@ -538,10 +515,8 @@ def _refit(problem: OutputErrorProblem, p0: Mapping[str, float], free: list[str]
            noise_var: Mapping[str, float] | None = None,
            references: dict[tuple[str, ...], ModelFit] | None = None,
            maxfev: int | None = None) -> tuple[ModelFit, ModelFit]:
-    """Refit the model augmented with ``sc``; returns the fit and the fit it is judged against.
-
-    That is the baseline, or for a sensor effect adding channels the linear model fitted on them
-    (:meth:`SensorRefit.fit_null`, cached in ``references``).
+    """Refit the model augmented with ``sc``: the fit and the one it is judged against (the baseline,
+    or the linear model fitted on the channels a sensor effect adds).
     """
     if effect_classes()[sc.name].kind == "physical":
         values = dict(sc.params)

@@ -27,10 +27,7 @@ from suspid.simulate import (free_coeffs_to_state, free_response_basis, mass_inv
 
 @dataclass
 class ModelFit:
-    """A fitted (base or augmented) model: parameters (SI), effect, residual and predicted channels.
-
-    ``cost`` is the seed cost on the cost channels; ``k`` the number of fitted parameters.
-    """
+    """A fitted (base or augmented) model: parameters (SI), effect, residuals, the seed ``cost``."""
 
     params: dict[str, float]
     effect: Effect | None
@@ -66,10 +63,8 @@ def substeps_for(problem: OutputErrorProblem, p: Mapping[str, float], effect: Ph
                  h: float, x0: FloatArray | None = None, affine: AffinePieces | None = None) -> int:
     """Internal steps per sample (1 to :data:`MAX_SUBSTEPS`) so the explicit effect term stays stable.
 
-    The effect's stiffness at each site against the site's inverse mass ``g . M^-1 . g`` bounds the
-    step; then the count is doubled while that still changes the channels by more than
-    :data:`ACCURACY` of the data's sum of squares. ``h`` is the sample interval (s), ``x0`` the
-    initial state of the linear response that bounds the site coordinates.
+    The effect's stiffness against each site's inverse mass ``g . M^-1 . g`` bounds the step; the
+    count is then doubled while that still changes the channels by more than :data:`ACCURACY`.
     """
     model = problem.model
     Minv = mass_inverse(model, p, affine)
@@ -200,10 +195,8 @@ class PhysicalRefit:
             worth: Callable[[Mapping[str, FloatArray]], bool] | None = None) -> ModelFit:
         """Nelder–Mead to about 1 %, then Levenberg–Marquardt, from ``start`` (SI, by name).
 
-        Up to ``passes`` runs: after each the initial state is re-centred and the substeps re-checked,
-        and the search restarts if either changed the problem. ``maxfev`` bounds all evaluations
-        (``suspid diagnose --maxfev``). ``worth(simulated channels)`` says whether the fit beats the
-        linear baseline and so is worth simulating more finely.
+        Up to ``passes`` runs, restarted while re-centring the initial state or re-checking the
+        substeps changes the problem; ``worth(channels)``: whether finer simulation is worth it.
         """
         names = self.base_free + self.eff_names
         th0 = np.array([float(start[k]) for k in names])
@@ -264,10 +257,8 @@ def nm_then_lm(vec: Callable[[FloatArray], FloatArray], u0: FloatArray, step: fl
                coarse: bool = True, cap: int | None = None) -> tuple[FloatArray, float, int]:
     """Minimise ``|vec(u)|^2``: a short Nelder–Mead into the basin, then a Levenberg–Marquardt polish.
 
-    If the polish does not lower the cost, Nelder–Mead carries on at full tolerance. ``vec`` has
-    constant length (failed evaluations return large finite values); ``maxfev`` is the fallback's
-    budget (default 150 per coordinate), ``cap`` the most evaluations in all; ``coarse=False`` starts
-    Levenberg–Marquardt at ``u0``. Returns ``(u, |vec(u)|^2, nfev)``.
+    If the polish does not lower the cost, Nelder–Mead carries on at full tolerance; ``cap`` bounds
+    all evaluations. Returns ``(u, |vec(u)|^2, nfev)``.
     """
     n = u0.size
     budget = maxfev if maxfev is not None else 150 * max(n, 1)
@@ -337,10 +328,8 @@ def compensated(meas: Measurement, effect: SensorEffect | None, tail: int = 0,
 class SensorRefit:
     """Output-error problem of the base model seen through one sensor effect.
 
-    Affected channels outside the cost join the residual, each weighted by ``sigma_ref / sigma_c``
-    (so it counts as one more channel at the cost channels' noise); the reported ``cost`` stays the
-    seed cost. ``max_delay`` (s) is the largest delay considered (that tail is left out);
-    ``noise_var`` the white-noise variance per channel.
+    Affected channels outside the cost join the residual, weighted by their noise so each counts as
+    one more cost channel; the tail of ``max_delay`` (s) is left out.
     """
 
     def __init__(self, problem: OutputErrorProblem, base: Mapping[str, float], free: list[str],
@@ -434,10 +423,8 @@ class SensorRefit:
         return bool(self.extra)
 
     def fit_null(self, start_base: Mapping[str, float], maxfev: int | None = None) -> ModelFit:
-        """The declared linear model fitted as :meth:`fit` fits the augmented one, without the effect.
-
-        Refitting on channels outside the baseline's cost lowers their residual whether or not the
-        effect exists, so the effect is judged against this fit.
+        """The declared linear model fitted as :meth:`fit` fits the augmented one, without the effect
+        (the fair reference when the effect adds channels).
         """
         sp = self.sub_problem(None)
         inv = 1.0 / math.sqrt(sp.scale)
@@ -501,10 +488,8 @@ def _lm_log(residual: Callable[[dict[str, float]], FloatArray], base: Mapping[st
 def reweighted_linear_fit(problem: OutputErrorProblem, p: Mapping[str, float], free: list[str],
                           noise_var: Mapping[str, float],
                           maxfev: int | None = None) -> tuple[dict[str, float], dict[str, FloatArray]]:
-    """The declared linear model refitted on every measured channel, each weighted by its noise.
-
-    The baseline's ``sse`` cost leaves a smooth echo of parameter errors on other channels; what
-    this fit cannot whiten the linear model cannot explain. Returns parameters (SI) and residuals.
+    """The declared linear model refitted on every measured channel, each weighted by its noise:
+    what this fit cannot whiten the linear model cannot explain. Returns parameters and residuals.
     """
     model = problem.model
     meas = problem.meas

@@ -1,10 +1,8 @@
 """Residual analysis: output-residual statistics and the residual *force* against candidate effects.
 
-The output residual ``y_measured - y_model`` gives RMS, whiteness (Ljung–Box, zero mean) and
-noise level per channel. The residual force ``R = M q'' + C q' + K q - Fk r - Fc r'`` at the
-fitted parameters is regressed on the parameter sensitivities plus each candidate effect's
-regressors: that gives the candidate's parameters, refined base parameters (the refit's start)
-and the share of ``R`` it explains. Sensor effects are screened in the output residual.
+The residual force ``R = M q'' + C q' + K q - Fk r - Fc r'`` is regressed on the parameter
+sensitivities plus each candidate's regressors (its parameters, refined base parameters and
+the share of ``R`` it explains); sensor effects are screened in the output residual.
 """
 from __future__ import annotations
 
@@ -142,9 +140,8 @@ def mean_test(e: FloatArray) -> tuple[float, float]:
 def shift_allpass(t: FloatArray, y: FloatArray, dt: float) -> FloatArray:
     """``y(t + dt)`` by an all-pass (Fourier) fractional shift (s, channel units).
 
-    Interpolation would low-pass the noise and make any sub-sample shift look like an improvement;
-    the phase-only shift keeps white noise white. The first value is held before the start, NaN
-    beyond the end; non-uniform sampling falls back to a cubic spline.
+    Interpolation would low-pass the noise and reward any sub-sample shift. The first value is held
+    before the start, NaN beyond the end; non-uniform sampling falls back to a cubic spline.
     """
     tt = np.asarray(t, dtype=float)
     yy = np.asarray(y, dtype=float)
@@ -265,12 +262,8 @@ def force_sensitivity(model: SuspensionModel, p: Mapping[str, float], mo: Motion
 # ------------------------------------------------------------------------- screening
 @dataclass
 class Screen:
-    """Screening of one candidate effect (regression on the residual force or output residual).
-
-    ``explained`` is the share (0..1) of the residual sum of squares removed beyond the base
-    parameters; ``tstat`` the largest effective-sample |t|; ``params``/``base`` start the refit;
-    ``sites`` the struts screened when not the library's form (``None``: every site);
-    ``alternatives`` close runners-up; ``per_site`` the one-coefficient-per-strut regression.
+    """Screening of one candidate effect: ``explained`` share (0..1) beyond the base parameters, ``tstat``,
+    ``params``/``base`` (the refit's start), ``sites`` (``None``: every site), runners-up, per-strut fit.
     """
 
     name: str
@@ -334,10 +327,8 @@ def screen_physical(model: SuspensionModel, p: Mapping[str, float], free: list[s
                     h: float | None = None) -> tuple[list[Screen], dict[str, Any]]:
     """Regress the residual force on base sensitivities plus each registered physical candidate.
 
-    Each effect is screened in the library's form (all sites, shared parameters) and, with several
-    struts, in each strut alone; the best plausible form and trial is kept. ``noise_var`` and ``h``
-    give the noise of the smoothed strut rates (the friction sign widens with it).
-    Returns the screens and the force-domain summary.
+    Each effect is tried in the library's form and in each strut alone; the best plausible form is
+    kept. Returns the screens and the force-domain summary.
     """
     R = residual_force(model, p, mo)
     nq = R.shape[1]
@@ -452,10 +443,8 @@ def output_residuals(meas: Measurement, predicted: Mapping[str, FloatArray]) -> 
 def output_regression(cls: type[SensorEffect], group: Sequence[str], t: FloatArray,
                       resid: Mapping[str, FloatArray], predicted: Mapping[str, FloatArray]
                       ) -> tuple[float, float, float] | None:
-    """Pooled regression ``e_c ~ beta r_c`` of the group's output residual on the effect's sensitivity.
-
-    Returns ``(beta, share, tstat)`` (``share`` of the channel-normalised output residual removed),
-    or ``None`` when no channel of the group can be regressed.
+    """Pooled regression ``e_c ~ beta r_c`` of the group's output residual: ``(beta, share, tstat)``
+    or ``None``.
     """
     used: list[tuple[FloatArray, FloatArray]] = []
     for c in group:
@@ -518,11 +507,8 @@ def screen_sensor(model: SuspensionModel, meas: Measurement, p: Mapping[str, flo
 def screen_time_shift(cls: type[SensorEffect], model: SuspensionModel, meas: Measurement,
                       p: Mapping[str, float], free: list[str], predicted: Mapping[str, FloatArray],
                       U: FloatArray, max_delay: float) -> Screen | None:
-    """Screen a time shift of each channel group against the others (``sensor_delay``).
-
-    Each group is advanced (all-pass) over a delay grid and the residual force regressed on the base
-    sensitivities; the output residual (``-d`` times the model's rate) scores it too, and the better
-    view ranks the group. Close runners-up go to :attr:`Screen.alternatives`.
+    """Screen a time shift of each channel group against the others (``sensor_delay``) in the residual
+    force and in the output residual; close runners-up go to :attr:`Screen.alternatives`.
     """
     t = meas.t
     h = float(np.median(np.diff(t)))

@@ -1,10 +1,8 @@
 """Closing the loop with the road unknown: a strut effect found in the body equations.
 
-A missing strut effect is one more force ``phi(d_i, d_i')`` in the body rows, so each registered
-strut effect's regressors on the measured ride heights become one more column of
-:func:`~estimator.identify.roadfree.fit_road_unknown` (``extra``). The candidate explaining most
-of the equation error with a physical coefficient clear of its standard error wins. Tyre and
-sensor effects are not tried (the road hides them; offsets drop out of the equations).
+Each registered strut effect's regressors on the measured ride heights become one more column
+of :func:`~estimator.identify.roadfree.fit_road_unknown`; the candidate explaining most of the
+equation error with a physical coefficient clear of its standard error wins.
 """
 from __future__ import annotations
 

@@ -20,30 +20,12 @@ def synthetic_record(model: str, effects: Sequence["str | Effect"], scenario: st
                      **scen: Any) -> Measurement:
     """Simulate ``model`` with ``effects`` nobody declared and return the noisy record.
 
-    Parameters
-    ----------
-    model : str
-        A registered model name.
-    effects : sequence
-        Effect spec strings (``"coulomb_friction:F=120"``) or effect objects.
-    scenario : str
-        Scenario name (``bump``, ``curb``, ``iso8608``, ``initial``); ``**scen`` its options.
-    params : mapping, optional
-        True parameters (SI; default the model's defaults).
-    fs, duration : float
-        Sample rate (Hz) and record length (s).
-    noise : float
-        White noise on every channel, as a fraction of the channel's standard deviation.
-    seed, noise_seed : int
-        Seed of the scenario; of the noise (default ``seed + 101``; ``suspid simulate --seed S``
-        draws the same noise as ``noise_seed=S``).
-    extra_force : callable, optional
-        A further generalised force ``f(t, x, u, params)`` (N, N m), integrated by ``solve_ivp``.
-
-    Returns
-    -------
-    Measurement
-        Positions and velocities (no accelerations) with noise, the road without.
+    ``effects`` are spec strings (``"coulomb_friction:F=120"``) or effect objects; ``scenario`` a
+    scenario name with options ``**scen``; ``params`` the truth (SI, default the model's); ``fs``
+    (Hz), ``duration`` (s); ``noise`` the white noise per channel as a fraction of its std, seeded
+    by ``noise_seed`` (default ``seed + 101``; ``suspid simulate --seed S`` draws ``noise_seed=S``);
+    ``extra_force(t, x, u, params)`` a further generalised force (N, N m), integrated by
+    ``solve_ivp``. Returns positions and velocities with noise, the road without.
     """
     m = get_model(model)
     p = dict(m.defaults(), **(params or {}))

@@ -1,10 +1,8 @@
 """The seed's designs of experiments as concrete identification problems.
 
-Each Taguchi row becomes an :class:`Experiment`: the true parameters, the known initial state
-and the time grid of the noise-free target curve (a free response, no road input; ``HORIZON``
-at ``FS`` for every model, see ``docs/paper-reproduction.md``). The array, factor mapping and
-constants belong to the model (:attr:`~suspid.models.base.SuspensionModel.doe_design`); the
-choices the seed leaves out are reported by :func:`setup_record`.
+Each Taguchi row becomes an :class:`Experiment` (truth, known initial state, free response on
+the grid of ``HORIZON`` s at ``FS`` Hz, see ``docs/paper-reproduction.md``); the array and
+factor map belong to the model (:attr:`~suspid.models.base.SuspensionModel.doe_design`).
 """
 from __future__ import annotations
 
@@ -32,11 +30,8 @@ SEED_ARRAYS: dict[str, tuple[Any, dict[str, Any]]] = {
 
 @dataclass(frozen=True)
 class DesignSpec:
-    """One model's design resolved: the orthogonal array, its factor levels, the column map.
-
-    ``levels``: factor letter -> (name, unit, level values); ``columns``: factor letter -> the
-    model's parameter or state; ``constants``/``body_x0``: values every row shares (SI);
-    ``choices``: the design choices the seed leaves out, with their reasons.
+    """One model's design resolved: array, factor ``levels`` (name, unit, values), ``columns`` (factor ->
+    parameter or state), shared ``constants`` and ``body_x0`` (SI) and the seed's missing ``choices``.
     """
 
     name: str

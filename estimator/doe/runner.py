@@ -39,34 +39,13 @@ def _num(x: float) -> float | None:
 class Settings:
     """How one design is run.
 
-    Attributes
-    ----------
-    cost : {"sse", "frobenius"}
-    init_scale : float
-        Free parameters start at ``init_scale`` x truth.
-    free_masses : bool
-        Identify masses and inertia too (unrestricted; scale-ambiguous).
-    mass_init_scale : float, optional
-        With ``free_masses``: their start factor instead of ``init_scale`` (one common factor
-        for every parameter is an exactly scaled copy of the truth, where nothing moves).
-    noise : float
-        Gaussian noise std as a fraction of each channel's std (0 = noise-free).
-    seed : int
-        Base seed of the noise generator (experiment ``i`` uses ``seed + i``).
-    restarts, step, maxfev, xatol, fatol
-        Nelder-Mead settings of :func:`estimator.identify.fit` (per stage; ``restarts`` of the last).
-    stages : tuple of float
-        Horizon continuation: fit the first ``stages[0]`` fraction of the record, then restart
-        from that answer on the next, ending with the whole record (short records make the cost
-        far less multimodal for lightly damped oscillators).
-    polish_step : float
-        Initial simplex edge (log units) of every stage after the first.
-    early_restarts, early_xatol
-        Restarts and ``xatol`` of the stages before the last.
-    horizon, fs : float
-        Record length (s) and sample rate (Hz).
-    data_start : bool
-        Also start from the data-driven estimate and keep the lower-cost answer.
+    Free parameters start at ``init_scale`` x truth (masses and inertia at ``mass_init_scale`` when
+    given and ``free_masses``); ``noise`` is the Gaussian noise std as a fraction of each channel's,
+    seeded by ``seed + experiment id``. ``restarts``, ``step``, ``maxfev``, ``xatol``, ``fatol`` are
+    Nelder-Mead settings of :func:`estimator.identify.fit`. ``stages``: horizon continuation, fit
+    the first fractions of the record first (far less multimodal for light damping), each stage
+    after the first starting with ``polish_step`` (``early_*`` settings before the last).
+    ``horizon`` (s) and ``fs`` (Hz) set the record; ``data_start`` also starts from the data.
     """
 
     cost: str = "sse"
@@ -204,9 +183,8 @@ def joint_region(res: IdentResult, truth: dict[str, float], free: list[str]
                  ) -> dict[str, Any] | None:
     """Whether the truth lies in the row's joint 3-sigma confidence region (``None`` without covariance).
 
-    The region ``d' C^-1 d <= chi2_p(1 - 0.27 %)`` (``d`` the log-parameter error) misses a
-    correct truth 0.27 % of the time per row, as one band does per value. Returns ``d2``,
-    ``limit``, ``dof`` and ``inside``.
+    The region ``d' C^-1 d <= chi2_p(1 - 0.27 %)`` (``d`` the log-parameter error) misses a correct
+    truth as often per row as one band per value. Returns ``d2``, ``limit``, ``dof`` and ``inside``.
     """
     if res.cov_log is None or not free:
         return None
@@ -300,11 +278,8 @@ def run_design(model: SuspensionModel | str, settings: Settings,
 def band_coverage(rows: list[dict[str, Any]]) -> dict[str, Any]:
     """Do a noisy design's bands and joint regions miss their truths as often as correct ones?
 
-    Each closed band misses a correct truth with probability ``JOINT_ALPHA``; misses within a
-    row are correlated, but rows are independent, so the number of rows outside their joint
-    region is binomial, which ``p_value`` tests (small: regions, and so bands, too narrow).
-    Returns ``bands``, ``missed``, ``expected``, ``rows_missed``, ``joint_rows``,
-    ``joint_outside``, ``joint_expected`` and ``p_value``.
+    Rows are independent, so the rows outside their joint region are binomial, which ``p_value``
+    tests (small: regions, and so bands, too narrow).
     """
     n = missed = 0
     rows_missed: list[int] = []

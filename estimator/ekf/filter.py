@@ -1,9 +1,7 @@
 """Extended Kalman filter on the state augmented with suspension parameters.
 
-State ``z = [q, q', theta]`` with ``theta_p = p / p_nominal`` (1 at nominal, keeps the
-covariance well conditioned); the parameters follow a random walk. Prediction is RK4 on
-``model.rhs`` with the road interpolated linearly, its Jacobian the exact tangent-linear RK4
-map; the design and tuning are in ``docs/monitoring.md``.
+State ``z = [q, q', theta]``, ``theta_p = p / p_nominal`` (a random walk); prediction by RK4 on
+``model.rhs`` with its exact tangent-linear Jacobian. Design and tuning: ``docs/monitoring.md``.
 """
 from __future__ import annotations
 
@@ -22,20 +20,10 @@ from suspid.models.base import FloatArray, SuspensionModel
 class EKFTuning:
     """Noise settings of the augmented EKF (documented in ``docs/monitoring.md``).
 
-    Attributes
-    ----------
-    q_param : float
-        Parameter random-walk intensity, relative per sqrt(s).
-    q_state : float
-        Acceleration process noise (m/s^2 per sqrt(Hz)).
-    p0_param : float
-        Initial relative standard deviation of the parameters (0.3 = 30 %).
-    p0_pos, p0_vel : float
-        Initial standard deviation of positions (m) and velocities (m/s).
-    substeps : int
-        RK4 sub-intervals per sample.
-    input_noise : bool
-        Treat the measured road's white noise as process noise (:meth:`AugmentedEKF.set_input_noise`).
+    ``q_param``: parameter random walk, relative per sqrt(s); ``q_state``: acceleration noise
+    (m/s^2 per sqrt(Hz)); ``p0_param``: initial relative std of the parameters; ``p0_pos``,
+    ``p0_vel``: initial std of positions (m) and velocities (m/s); ``substeps``: RK4 sub-intervals
+    per sample; ``input_noise``: the road's white noise as process noise.
     """
 
     q_param: float = 0.005
@@ -50,18 +38,8 @@ class EKFTuning:
 class AugmentedEKF(ExtendedKalmanFilter):
     """filterpy EKF whose prediction integrates the model's right-hand side.
 
-    Parameters
-    ----------
-    model : SuspensionModel
-        A model whose augmented parameters (dampers and springs) enter its matrices affinely.
-    params : mapping
-        Every parameter's value (SI); the augmented ones are their nominal values.
-    augmented : sequence of str
-        Parameters estimated by the filter, e.g. ``("c1", "k1")``.
-    channels : sequence of str
-        Measured channels (``x1``, ``x2_dot``, ``x1_ddot``, ...).
-    dt : float
-        Sample interval (s).
+    ``params`` holds every value (SI), the ``augmented`` dampers and springs at nominal;
+    ``channels`` are the measured channels, ``dt`` the sample interval (s).
     """
 
     def __init__(self, model: SuspensionModel, params: Mapping[str, float],
@@ -142,10 +120,8 @@ class AugmentedEKF(ExtendedKalmanFilter):
         self.Q = Q + self._q_input
 
     def set_input_noise(self, sig_u: FloatArray) -> None:
-        """Add the road's white noise ``sig_u`` (m, m/s per road input) to ``Q`` (errors in the input).
-
-        White errors on the step's two road samples move the predicted state by ``G0 e0 + G1 e1``;
-        the step gains ``G0 R_u G0^T + G1 R_u G1^T`` (exact for a model without effect terms).
+        """Add the road's white noise ``sig_u`` (m, m/s per road input) to ``Q`` through the step's
+        sensitivity ``G0``, ``G1`` to its two road samples: ``G0 R_u G0^T + G1 R_u G1^T``.
         """
         sig = np.asarray(sig_u, dtype=float)
         z = self.x[:, 0].copy()
@@ -303,9 +279,8 @@ class AugmentedEKF(ExtendedKalmanFilter):
                Hx: Callable[..., FloatArray], R: FloatArray | float | None = None,
                args: Any = (), hx_args: Any = (),
                residual: Callable[[FloatArray, FloatArray], FloatArray] = np.subtract) -> None:
-        """Kalman update with measurement ``z`` (filterpy's signature; Joseph form; NaN entries left out).
-
-        filterpy's algebra without its per-call deep copies.
+        """Kalman update with measurement ``z`` (filterpy's signature and algebra, Joseph form, without
+        its deep copies); NaN entries left out.
         """
         if z is None:
             return
@@ -344,10 +319,8 @@ class AugmentedEKF(ExtendedKalmanFilter):
 
 def window_nis(nis_sum: float, nis_dof: int, before: tuple[float, int], level: float,
                tolerance: float) -> tuple[float, int, float, float, str | None]:
-    """Mean normalised innovation squared per dof since ``before`` and its consistency band.
-
-    Returns ``(nis, dof, lo, hi, warning)``: the ``level`` chi-square band per dof widened
-    ``tolerance`` times (NaN without innovations), and a sentence when ``nis`` is outside it.
+    """Mean normalised innovation squared per dof since ``before`` and its consistency band:
+    ``(nis, dof, lo, hi, warning)``, the ``level`` band widened ``tolerance`` times.
     """
     s0, n0 = before
     dof = nis_dof - n0

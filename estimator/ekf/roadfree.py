@@ -1,11 +1,9 @@
 """The EKF baseline with the road unknown: the body equations, filtered sample by sample.
 
-It gets the information and equations of the road-unknown sliding window
-(:mod:`estimator.stream.roadfree`): the state is every strut's extension and rate, one zero
-offset per body acceleration and the free struts' relative dampers and springs; the prediction
-is linear, the body accelerations ``-M_b^-1 G (c o d' + k o d) + b`` the nonlinear measurement.
-Unlike a random-walk road in the full model, this needs no tyre or wheel parameters the record
-cannot determine. Start, NIS and gaps as :class:`estimator.ekf.stream.EKFWindowEstimator`.
+The information and equations of the road-unknown sliding window: the state is every strut's
+extension and rate, one zero offset per body acceleration and the free struts' relative dampers
+and springs; the body accelerations ``-M_b^-1 G (c o d' + k o d) + b`` are the measurement.
+No tyre or wheel parameter is needed. Start, NIS and gaps as the road-measured EKF.
 """
 from __future__ import annotations
 
@@ -39,26 +37,10 @@ GAP_STEPS = 1.5
 class BodyEquationEKF(ExtendedKalmanFilter):
     """filterpy EKF on the body equations: deflections and their rates, offsets, struts.
 
-    Parameters
-    ----------
-    model : SuspensionModel
-    params : mapping
-        Every parameter (SI); the augmented ones at their start values.
-    augmented : sequence of str
-        Strut dampers and springs the filter estimates (relative random-walk states).
-    channels : sequence of str
-        Body accelerations, ride heights and their rates.
-    dt : float
-        Filter step (s).
-    tuning : EKFTuning
-        ``q_param``, ``p0_param``, ``p0_pos``, ``p0_vel`` apply.
-    accel_var : ndarray
-        Per strut, the variance of its deflection acceleration ((m/s^2)^2).
-
-    Raises
-    ------
-    InputError
-        When a strut's ride height or every body acceleration is missing.
+    ``params`` (SI) hold the ``augmented`` struts' start values; ``channels`` are the body
+    accelerations, ride heights and their rates; ``dt`` the step (s); ``accel_var`` each strut's
+    deflection-acceleration variance ((m/s^2)^2). InputError when a strut's ride height or every
+    body acceleration is missing.
     """
 
     def __init__(self, model: SuspensionModel, params: Mapping[str, float],
@@ -195,20 +177,9 @@ class BodyEquationEKF(ExtendedKalmanFilter):
 class RoadFreeEKFEstimator:
     """The body-equation EKF fed window by window (module docstring).
 
-    Parameters
-    ----------
-    model : SuspensionModel
-    params : Parameters
-        Held values and the start values of the free parameters (SI), the augmented states.
-    channels : sequence of str
-        Channels in the stream.
-    tuning : EKFTuning
-    decimate : int
-        Filter every ``decimate``-th sample.
-    first_window : sequence of str
-        Free parameters started from the first window's road-unknown fit.
-    nis_level, nis_tolerance : float
-        The NIS band (as :class:`estimator.ekf.stream.EKFWindowEstimator`).
+    ``params`` hold the held values and the free parameters' starts (SI); ``first_window`` the free
+    parameters started from the first window's road-unknown fit; the rest as
+    :class:`estimator.ekf.stream.EKFWindowEstimator`.
     """
 
     name = "ekf"

@@ -1,12 +1,7 @@
 """The EKF as a window estimator for the monitor: same interface and same information as the
 sliding window (the fair baseline of ``docs/monitoring.md``).
 
-Every call filters the window's samples not seen yet (one predict/update per sample at the
-stream's rate over ``decimate``) and reports the parameter state and its standard deviations
-at the window end. Free parameters it cannot carry are *held* (``held``); starting values are
-``--init``/``--nominal`` or the first window's sliding-window fit; ``R`` comes from the first
-window's noise floor; after a gap in the road the motion restarts from the measurements; the
-mean NIS per window checks consistency.
+Each call filters the window's new samples and reports the parameter state at the window end.
 """
 from __future__ import annotations
 
@@ -42,26 +37,10 @@ def noise_sd(y: FloatArray, resolution: float) -> float:
 class EKFWindowEstimator:
     """Joint state/parameter EKF fed window by window.
 
-    Parameters
-    ----------
-    model : SuspensionModel
-    params : mapping
-        Every parameter value (SI): fixed ones and the nominal values of ``augmented``.
-    augmented : sequence of str
-        Parameters the filter estimates.
-    channels : sequence of str
-        Measured channels used in the update.
-    tuning : EKFTuning, optional
-    decimate : int
-        Use every ``decimate``-th sample.
-    held : dict, optional
-        ``parameter -> reason`` of free parameters the filter holds (reported per estimate).
-    first_window : tuple, optional
-        ``(Parameters, WindowConfig, names)``: start ``names`` from a sliding-window fit of
-        the first window instead of ``params``.
-    nis_level, nis_tolerance : float
-        Two-sided probability of the NIS band and the factor it is widened by (estimated
-        ``R``/``Q`` and correlated samples).
+    ``params`` (SI) hold the fixed values and the ``augmented`` ones' starts; ``decimate``: use every
+    n-th sample; ``held``: ``parameter -> reason`` of free parameters the filter holds;
+    ``first_window`` ``(Parameters, WindowConfig, names)`` starts ``names`` from a sliding-window fit
+    of the first window; ``nis_level`` and ``nis_tolerance`` set the NIS band and its widening.
     """
 
     name = "ekf"

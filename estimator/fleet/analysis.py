@@ -1,10 +1,8 @@
 """Per-vehicle history, trends, alerts, forecasts and risk ranking from drive records.
 
-Only ``ok`` drives count, and of each only the parameters it determined; free dampers and
-springs are monitored (wear), free masses and inertias are the drive's load (shown, never
-trended). Alerts follow the monitor's rule with each drive as one estimate; a parameter in
-alert has no forecast. With a distance signal each parameter also has a trend against
-distance and a forecast the odometer at the crossing. See ``docs/fleet.md``.
+Only ``ok`` drives and the parameters they determined count; dampers and springs are monitored,
+masses and inertias are the load. Alerts follow the monitor's rule with each drive as one
+estimate. See ``docs/fleet.md``.
 """
 from __future__ import annotations
 
@@ -162,10 +160,8 @@ class VehicleSummary:
 
 
 def sensor_offsets(records: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
-    """The constant offsets ``identify`` found in a vehicle's drives (oldest first), by column.
-
-    Found drive after drive, an offset is the sensor's calibration, for the workshop. Column ->
-    ``kind``, ``drives`` (of ``of``), ``median``, ``min``, ``max`` (SI), ``latest_t``, ``removed``.
+    """The constant offsets ``identify`` found in a vehicle's drives, by column (a calibration when
+    found drive after drive): ``kind``, ``drives`` of ``of``, ``median``/``min``/``max``, ``latest_t``.
     """
     found: dict[str, list[tuple[float, float, str, bool]]] = {}
     for r in records:
@@ -187,10 +183,8 @@ def sensor_offsets(records: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
 
 def drive_positions(records: list[dict[str, Any]]
                     ) -> tuple[str | None, dict[tuple[str, float], float]]:
-    """Each read drive's position on its vehicle's distance scale: ``(source, {(path, t): m})``.
-
-    With an odometer, its reading at the drive's start; with the speed alone, the distance logged
-    before the drive (the odometer only when every trip is logged).
+    """Each read drive's position on its vehicle's distance scale: ``(source, {(path, t): m})``; with
+    the speed alone, the distance logged before the drive.
     """
     timed = sorted((r for r in records if r.get("t") is not None),
                    key=lambda r: (float(r["t"]), r["path"]))
@@ -218,11 +212,7 @@ LOAD_KINDS = ("mass", "inertia")
 
 def summarize_vehicle(vehicle: str, records: list[dict[str, Any]], rule: AlertConfig
                       ) -> VehicleSummary:
-    """History, trends, alerts and forecasts of one vehicle from its drive records (any status).
-
-    ``rule`` gives the nominal values and alert and forecast settings; ``risk`` is ``"no data"``
-    without an ``ok`` drive.
-    """
+    """History, trends, alerts and forecasts of one vehicle from its drive records (any status)."""
     def when(r: dict[str, Any]) -> tuple[float, str]:
         return (float(r["t"]) if r.get("t") is not None else math.inf, r["path"])
 

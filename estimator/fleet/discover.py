@@ -1,8 +1,5 @@
-"""Finding the drive logs of a fleet: directories (recursive), glob patterns and files.
-
-Every file with a suffix ``suspid identify`` reads is one drive; its vehicle is the name of the
-folder holding it. Folders are searched through symbolic links, each real folder once (a link
-loop ends the descent); a link to a log that is gone is kept, and its drive fails.
+"""Finding the drive logs of a fleet: directories (recursive, through links, each real folder
+once), glob patterns and files; a log's vehicle is the name of its folder.
 """
 from __future__ import annotations
 
@@ -43,10 +40,8 @@ def _is_drive(p: Path) -> bool:
 
 def _entries(root: Path, descend: Callable[[tuple[str, ...]], bool] = lambda rel: True
              ) -> Iterator[tuple[Path, tuple[str, ...], bool]]:
-    """Every entry below ``root`` as ``(path, parts relative to root, is_dir)``, in name order.
-
-    Hidden names skipped, folder links followed, each real folder entered once and only if
-    ``descend(parts)``; unreadable folders skipped.
+    """Every entry below ``root`` as ``(path, parts, is_dir)`` in name order: hidden names skipped,
+    each real folder entered once and only if ``descend(parts)``.
     """
     seen: set[tuple[int, int]] = set()
 

@@ -1,9 +1,7 @@
 """One drive: identify one log exactly as ``suspid identify`` does (the Dask task).
 
-:func:`identify_drive` is module level so a worker imports this module once; the DBC is
-parsed once per worker process (:func:`cached_database`). The measurement and the
-identification are ``identify``'s own calls, so a drive's parameters equal
-``suspid identify --json`` on the same file to the last digit.
+A worker imports this module once and parses the DBC once (:func:`cached_database`); the
+calls are ``identify``'s own, so the results are equal to the last digit.
 """
 from __future__ import annotations
 
@@ -43,12 +41,8 @@ _HASH_CHUNK = 1 << 20
 
 @dataclass(frozen=True)
 class IdentifySettings:
-    """The options of ``suspid identify`` that decide a drive's result.
-
-    ``fix``/``init`` are in SI; ``x0`` is ``"estimate"``, ``"rest"`` or a state; ``dbc`` ``None``
-    is suspid's bundled DBC; ``signal_map`` the ``--map``/``[map]`` mapping; ``can_channel`` and
-    ``j1939_source`` the ``can.*`` settings; ``offset`` ``"remove"`` or ``"keep"``; ``road``
-    ``None`` chooses per drive as ``identify`` does (part of :meth:`key`).
+    """The options of ``suspid identify`` that decide a drive's result (``fix``/``init`` in SI;
+    ``road`` ``None`` chooses per drive as ``identify`` does).
     """
 
     model: str
@@ -134,11 +128,8 @@ def with_declared_channels(signal_map: SignalMap | None, db: Database,
 
 
 def drive_distance(meas: Measurement) -> dict[str, Any]:
-    """The distance a drive covered, from the vehicle's odometer or speed (``meas.aux``).
-
-    Returns ``odometer_m`` (first reading, m), ``distance_m`` (odometer's last minus first, else
-    the integrated speed, m) and ``distance_source`` (``"odometer"``, ``"speed"`` or ``None``); an
-    odometer running backwards gives no distance.
+    """The distance a drive covered: ``odometer_m`` (first reading), ``distance_m`` (odometer, else
+    integrated speed; m) and ``distance_source``; an odometer running backwards gives none.
     """
     out: dict[str, Any] = {"odometer_m": None, "distance_m": None, "distance_source": None}
     odo = meas.aux.get("odometer")
@@ -158,10 +149,8 @@ def drive_distance(meas: Measurement) -> dict[str, Any]:
 
 def distance_by_timestamp(path: str | Path, model: SuspensionModel, settings: IdentifySettings
                           ) -> Measurement | None:
-    """The distance channels of a CAN log decoded on the frames' timestamps (``t`` and ``aux``).
-
-    Frames without the sensor node's tick (a J1939 odometer) are rejected by the tick decoder;
-    the distance needs no sensor clock. ``None`` without a mapped or accepted distance channel.
+    """The distance channels of a CAN log decoded on the frames' timestamps (a J1939 odometer has no
+    sensor tick); ``None`` without a mapped or accepted distance channel.
     """
     smap = settings.signal_map
     if smap is None:
@@ -243,9 +232,8 @@ def identify_drive(path: str, vehicle: str, settings: IdentifySettings,
                    digest: str | None = None) -> dict[str, Any]:
     """Identify one drive; never raises for a bad log (the Dask task).
 
-    Returns ``path``, ``vehicle``, ``sha256``, ``size`` (bytes), ``t`` (epoch s of the first
-    sample), the distance (:func:`drive_distance`), ``status`` (``"ok"``, ``"unidentified"`` or
-    ``"failed"``: not read), ``error`` (one line or ``None``) and ``result`` (identify's JSON).
+    Returns ``path``, ``vehicle``, ``sha256``, ``size``, ``t`` (epoch s), the distance, ``status``
+    (``"ok"``, ``"unidentified"``, ``"failed"``), ``error`` and ``result`` (identify's JSON).
     """
     out: dict[str, Any] = {"path": path, "vehicle": vehicle, "sha256": digest, "size": None,
                            "t": None, "status": "failed", "error": None, "result": None,

@@ -1,10 +1,7 @@
-"""The fleet's history: an SQLite database (Python's ``sqlite3``) of every drive.
+"""The fleet's history: an SQLite database (schema in ``docs/fleet.md``) of every drive.
 
-The schema is in ``docs/fleet.md``. A log is one drive whatever its path: its content hash is
-the key, so the same bytes again replace their row, and a log already stored with the same
-settings is not identified again. A failed log is one row per path; a log whose bytes changed
-at the same path replaces that row when it failed or starts at the same time. A version 1
-history (without the distance columns) is migrated when opened for writing.
+A drive's key is its content hash: the same bytes replace their row and are not identified
+again with the same settings; a failed log is one row per path.
 """
 from __future__ import annotations
 
@@ -47,13 +44,8 @@ def drive_id(record: dict[str, Any]) -> str:
 
 
 class History:
-    """An open fleet history database at ``path`` (created unless ``readonly``).
-
-    Raises
-    ------
-    InputError
-        Not an SQLite database, one of a newer schema, not a fleet history (``readonly``),
-        or one that cannot be written (not ``readonly``).
+    """An open fleet history database at ``path`` (created unless ``readonly``); InputError when it
+    is not a usable fleet history or cannot be written.
     """
 
     #: seconds to wait for another run's write to end before failing

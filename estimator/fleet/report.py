@@ -1,9 +1,6 @@
-"""The fleet report: one static HTML page (inline SVG plots, no server, no script).
-
-``index.html`` ranks the vehicles by risk (table ``#vehicles``), then gives one section per
-vehicle (each monitored parameter's estimates, trend, limit and forecast; its drives in table
-``drives-NAME``), the drives read but not identified (``#unidentified``) and the failed logs
-(``#failed``) with their reasons.
+"""The fleet report: one static HTML page (inline SVG plots, no server, no script): vehicles by
+risk (``#vehicles``), a section per vehicle (drives in ``drives-NAME``), ``#unidentified`` and
+``#failed``.
 """
 from __future__ import annotations
 

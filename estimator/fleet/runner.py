@@ -1,9 +1,4 @@
-"""Running a fleet: discover the logs, identify each drive on Dask, keep the history, summarise.
-
-Each drive is one Dask task (:func:`estimator.fleet.drive.identify_drive`) on a local cluster
-of single-threaded worker processes, or on the cluster at ``scheduler`` (logs at the same path
-on every machine; ``docs/fleet.md``); ``workers=0`` runs them in this process.
-"""
+"""Running a fleet: discover the logs, identify each drive on Dask, keep the history, summarise."""
 from __future__ import annotations
 
 import logging
@@ -75,13 +70,8 @@ class ProgressBar:
 
 @dataclass
 class FleetConfig:
-    """What ``suspid fleet`` was asked to do.
-
-    ``inputs``: directories, globs or files (empty: report from ``db`` alone); ``settings``: how
-    each drive is identified; ``rule``: nominal values, alert and forecast settings;
-    ``scheduler``: a Dask scheduler address; ``workers``: local processes (0: no cluster);
-    ``db``: the history (SQLite); ``report``: the HTML report's folder; ``progress(done, total,
-    failed)`` after each drive.
+    """What ``suspid fleet`` was asked to do (``inputs`` empty: report from ``db`` alone; ``workers``
+    0: no cluster; ``progress(done, total, failed)`` after each drive).
     """
 
     inputs: list[str] = field(default_factory=list)
@@ -147,9 +137,8 @@ def check_settings(settings: IdentifySettings, files: list[DriveFile]) -> None:
 def execute(jobs: list[tuple[str, str, str | None]], settings: IdentifySettings,
             scheduler: str | None = None, workers: int | None = None,
             progress: Progress | None = None) -> list[dict[str, Any]]:
-    """Identify drives ``(path, vehicle, sha256 or None)`` on Dask; records in job order.
-
-    UsageError when the scheduler cannot be reached or ``workers`` < 0.
+    """Identify drives ``(path, vehicle, sha256 or None)`` on Dask (local cluster, ``scheduler``, or
+    in this process with ``workers=0``); records in job order.
     """
     if not jobs:
         return []

@@ -1,10 +1,8 @@
 """A synthetic fleet of drive logs with known wear (benchmarks, tests, demonstrations).
 
-Each drive is a ``quarter2`` simulation over an ISO 8608 road with noisy accelerations,
-encoded as ``suspid encode`` does and written as a log stamped at the drive's epoch time. A
-vehicle's ``c1`` (and ``k1``) falls linearly at its wear rate, so the true trend and crossing
-are known. With ``FleetSpec.distance`` the drives also carry the odometer or speed (CSV
-columns, or the J1939 groups VDHR and CCVS1 of :func:`distance_dbc` with :data:`DISTANCE_MAP`).
+Each drive is a ``quarter2`` simulation over an ISO 8608 road, encoded as ``suspid encode``
+does; ``c1`` (and ``k1``) fall linearly at the vehicle's rate. With ``FleetSpec.distance`` the
+drives carry the odometer or speed (CSV columns, or J1939 VDHR/CCVS1, :func:`distance_dbc`).
 """
 from __future__ import annotations
 
@@ -182,12 +180,8 @@ def write_production_drive(path: str | Path, params: dict[str, float], t0: float
                            duration: float = 20.0, fs: float = 200.0, noise: float = 0.02,
                            seed: int = 0, speed_kmh: float = 50.0, model: str = "quarter2"
                            ) -> dict[str, float]:
-    """Simulate one drive over an ISO 8608 road and write what a production car logs.
-
-    The CSV holds ``t`` (epoch s from ``t0``) and the model's production channels (body
-    accelerations, ride heights) with Gaussian noise of ``noise`` times their std; no road column.
-    ``duration`` (s), ``fs`` (Hz), ``speed_kmh`` (km/h); ``seed`` seeds the road and the noise.
-    Returns the true parameters (``params`` completed with the model's defaults).
+    """Write one ISO 8608 drive as a production car logs it (body accelerations, ride heights, noise;
+    no road) to a CSV from epoch ``t0``; returns the truth (``params`` with the defaults).
     """
     m = get_model(model)
     p = {**m.defaults(), **params}

@@ -1,9 +1,7 @@
 """Per-vehicle trends of identified parameters across drives, and limit-crossing forecasts.
 
-:func:`robust_trend` fits a straight line through one parameter's drive estimates with
-random-effects weights ``1 / (s_i^2 + tau^2)`` after Huber and bisquare IRLS has set gross
-outliers aside (``tau^2`` by Paule–Mandel); :func:`limit_crossing` gives where a significantly
-falling line meets a limit with Fieller's interval. The method is described in ``docs/fleet.md``.
+A robust random-effects line (Huber and bisquare IRLS, Paule–Mandel ``tau^2``) and Fieller's
+interval of its limit crossing, described in ``docs/fleet.md``.
 """
 from __future__ import annotations
 
@@ -27,11 +25,8 @@ MAD_TO_SIGMA = 1.4826
 
 @dataclass
 class Forecast:
-    """When a falling trend crosses its limit (epoch s, 90 % interval).
-
-    ``crossing_t*`` are never before ``t_latest`` (epoch s of the latest drive, from which
-    ``days`` count); ``distance``: the drives carry a distance, so the JSON has the km keys;
-    ``crossing_m``: odometer at the crossing and its interval (m) from the trend against distance.
+    """When a falling trend crosses its limit (epoch s, 90 % interval), never before ``t_latest``;
+    ``crossing_m`` the odometer (m) at the crossing from the trend against distance.
     """
 
     crossing_t: float
@@ -84,24 +79,11 @@ def theil_sen(x: np.ndarray, v: np.ndarray) -> tuple[float, float]:
 
 def robust_trend(t: np.ndarray, v: np.ndarray, s: np.ndarray | None = None,
                  iterations: int = 50, scale: float = DAY_S) -> Trend | None:
-    """Robust weighted straight-line trend of ``v`` (SI, stderr ``s``) over time or distance.
+    """Robust weighted straight-line trend of ``v`` (SI, stderr ``s``; NaN: unknown) over ``t``.
 
-    Parameters
-    ----------
-    t : ndarray
-        The drives' abscissae: epoch s, or odometer m for a trend against distance.
-    v, s : ndarray
-        Estimates and their standard errors (SI; NaN: unknown, only the scatter counts).
-    iterations : int
-        IRLS iterations per stage (at most).
-    scale : float
-        The abscissa's unit in the fit (s per day, or 1000 m); the :class:`Trend` is per s (or m).
-
-    Returns
-    -------
-    Trend or None
-        Referred to the latest abscissa (``n`` drives used, ``outliers`` left out); ``None``
-        with fewer than two distinct abscissae; NaN covariance with two drives.
+    ``t`` is epoch s, or odometer m for a trend against distance; ``scale`` the abscissa's unit in
+    the fit (s per day, or 1000 m). Returns the :class:`Trend` (per s or m) at the latest abscissa,
+    ``None`` with fewer than two distinct abscissae (NaN covariance with two).
     """
     t = np.asarray(t, dtype=float)
     v = np.asarray(v, dtype=float)
@@ -204,10 +186,8 @@ def _random_effects(x: np.ndarray, v: np.ndarray, s: np.ndarray, floor: float
 
 def limit_crossing(trend: Trend | None, limit: float, level: float = 0.90,
                    not_before: float | None = None) -> tuple[float, float, float] | None:
-    """Where a falling trend crosses ``limit``: ``(crossing, low, high)`` with Fieller's ``level`` interval.
-
-    In the trend's abscissa, never before ``not_before`` (default the trend's latest); ``None``
-    when the trend is not falling or its slope is not distinguishable from zero at ``level``.
+    """Where a falling trend crosses ``limit``: ``(crossing, low, high)`` with Fieller's ``level``
+    interval, never before ``not_before``; ``None`` when its slope is not clearly below zero.
     """
     if trend is None or not (trend.n >= 3 and math.isfinite(trend.var_rate)):
         return None
