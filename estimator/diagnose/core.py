@@ -368,16 +368,13 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
     else:
         tried = sorted(verdicts, key=lambda v: -v.explained)
         if blocked:
-            evidence["verdict"] = (f"residual structured ({lb}) but no candidate effect explains it: "
-                                   + "; ".join(blocked.values()))
+            why = "; ".join(blocked.values())
         elif tried:
-            bv = tried[0]
-            evidence["verdict"] = (f"residual structured ({lb}) but no candidate effect explains it: "
-                                   f"best {bv.name} explains {bv.explained:.0%} of the structured "
-                                   f"residual ({bv.reason})")
+            why = (f"best {tried[0].name} explains {tried[0].explained:.0%} of the structured "
+                   f"residual ({tried[0].reason})")
         else:
-            evidence["verdict"] = (f"residual structured ({lb}) but no candidate effect explains it: "
-                                   "no candidate's regressor correlates with the residual")
+            why = "no candidate's regressor correlates with the residual"
+        evidence["verdict"] = f"residual structured ({lb}) but no candidate effect explains it: {why}"
         if limits and not blocked:
             evidence["verdict"] += ("; not identifiable with " + model.name + ": "
                                     + "; ".join(limits))

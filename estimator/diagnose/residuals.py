@@ -305,6 +305,15 @@ def _regress(y: FloatArray, X: FloatArray) -> tuple[FloatArray, float, FloatArra
     return np.asarray(beta, dtype=float), ss, np.asarray(se, dtype=float)
 
 
+def _refined(p: Mapping[str, float], names: list[str], delta: FloatArray) -> dict[str, float]:
+    """``p`` with each of ``names`` moved by ``-delta`` where that stays positive."""
+    out = dict(p)
+    for k, d in zip(names, delta):
+        if p[k] - d > 0:
+            out[k] = float(p[k] - d)
+    return out
+
+
 def velocity_noise(mo: Motion, noise_var: Mapping[str, float], coords: tuple[str, ...] | list[str],
                    h: float) -> FloatArray:
     """Per-coordinate std of the white noise left in the smoothed velocities ``mo.qd``."""
@@ -340,7 +349,7 @@ def screen_physical(model: SuspensionModel, p: Mapping[str, float], free: list[s
     base_names = [k for k in free if k in p]
     D = [(force_sensitivity(model, p, mo, k) * wrow).reshape(-1) for k in base_names]
     X0 = np.column_stack(D) if D else np.zeros((y.size, 0))
-    beta0, ss0, _ = _regress(y, X0) if D else (np.zeros(0), float(y @ y), np.zeros(0))
+    _, ss0, _ = _regress(y, X0) if D else (np.zeros(0), float(y @ y), np.zeros(0))
     ss_raw = float(y @ y)
     neff = effective_n(y[: n])  # serial correlation of the first equation
     infl = math.sqrt(max(n / neff, 1.0))
@@ -356,11 +365,7 @@ def screen_physical(model: SuspensionModel, p: Mapping[str, float], free: list[s
         X = np.column_stack([X0] + [e[:, None] for e in E]) if D else np.column_stack(E)
         beta, ss1, se = _regress(y, X)
         explained = max(0.0, (ss0 - ss1) / ss0) if ss0 > 0 else 0.0
-        refined = dict(p)
-        for k, d in zip(base_names, beta[: len(D)]):
-            if p[k] - d > 0:
-                refined[k] = float(p[k] - d)
-        return beta[len(D):], explained, se[len(D):] * infl, refined
+        return beta[len(D):], explained, se[len(D):] * infl, _refined(p, base_names, beta[: len(D)])
 
     def rate_noise(site: Site) -> float:
         """Standard deviation (m/s) of the noise in the smoothed rate at ``site``."""
@@ -526,11 +531,7 @@ def screen_time_shift(cls: type[SensorEffect], model: SuspensionModel, meas: Mea
         sub = Motion(m.q[:-trim], m.qd[:-trim], m.qdd[:-trim], m.r[:-trim], m.rd[:-trim], m.source)
         X = np.column_stack([(force_sensitivity(model, p, sub, k) * wrow).reshape(-1) for k in base_names])
         beta, ss, _ = _regress(y, X)
-        refined = dict(p)
-        for k, dlt in zip(base_names, beta):
-            if p[k] - dlt > 0:
-                refined[k] = float(p[k] - dlt)
-        return ss, refined
+        return ss, _refined(p, base_names, beta)
 
     def ss_for(m: Motion) -> float:
         return regress_for(m)[0]

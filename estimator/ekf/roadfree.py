@@ -14,11 +14,10 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
-from estimator.ekf.filter import EKFTuning, window_nis
-from estimator.ekf.stream import noise_sd
+from estimator.ekf.filter import EKFTuning
+from estimator.ekf.stream import WindowEKF, ekf_tuning, noise_sd
 from estimator.identify import Parameters
 from estimator.identify.roadfree import fit_road_unknown
-from estimator.stream.events import Estimate
 from estimator.stream.monitor import StepResult
 from estimator.stream.wear_streams import channel_resolution
 from suspid.errors import InputError
@@ -174,7 +173,7 @@ class BodyEquationEKF(ExtendedKalmanFilter):
         return {k: float(self.nominal[j] * d[j]) for j, k in enumerate(self.aug)}
 
 
-class RoadFreeEKFEstimator:
+class RoadFreeEKFEstimator(WindowEKF):
     """The body-equation EKF fed window by window (module docstring).
 
     ``params`` hold the held values and the free parameters' starts (SI); ``first_window`` the free
@@ -182,35 +181,16 @@ class RoadFreeEKFEstimator:
     :class:`estimator.ekf.stream.EKFWindowEstimator`.
     """
 
-    name = "ekf"
     road = "unknown"
-    own_track = True
-    lag = 0.0
-    overlap = 1.0
 
     def __init__(self, model: SuspensionModel, params: Parameters, channels: Sequence[str],
                  tuning: EKFTuning, decimate: int = 1, first_window: Sequence[str] = (),
                  nis_level: float = 0.999, nis_tolerance: float = 1.5) -> None:
-        self.model = model
+        self._setup(model, tuning, decimate, nis_level, nis_tolerance)
         self.params = params.copy()
         self.channels = list(channels)
-        self.tuning = tuning
-        self.decimate = max(1, int(decimate))
         self.first_window = list(first_window)
-        self.nis_level = nis_level
-        self.nis_tolerance = nis_tolerance
         self.ekf: BodyEquationEKF | None = None
-        self.t_last = -math.inf
-        self._t_seen = -math.inf
-        self._phase = 0
-        self.h = math.nan
-        self.samples = 0
-        self.cpu = 0.0
-        self.restarts = 0
-        self.gap_s = 0.0
-        self.nis_windows_out = 0
-        self._nis0 = (0.0, 0)
-        self.start_from: dict[str, float] = {}
         self.note = ""
 
     def _start(self, t: FloatArray, data: Mapping[str, FloatArray]) -> BodyEquationEKF:
@@ -314,39 +294,15 @@ class RoadFreeEKFEstimator:
             self.t_last = float(tn[-1])
         cpu = time.process_time() - c0
         self.cpu += cpu
-        vals = ekf.param_values()
-        se = ekf.param_stderr()
-        ok = all(math.isfinite(vals[k]) and vals[k] > 0 for k in ekf.aug)
-        warns = [] if ok else ["EKF parameter state left the physical range"]
-        nis, dof, lo, hi, nis_warning = window_nis(ekf.nis_sum, ekf.nis_dof, self._nis0,
-                                                   self.nis_level, self.nis_tolerance)
-        self._nis0 = (ekf.nis_sum, ekf.nis_dof)
-        if nis_warning is not None:
-            self.nis_windows_out += 1
-            warns.append(nis_warning)
-        if self.note:
-            warns.append(self.note)
-            self.note = ""
-        warns.extend(gaps)
-        info: dict[str, Any] = {"road": "unknown", "samples": self.samples, "cpu_ms": 1e3 * cpu,
-                                "augmented": list(ekf.aug), "nis": nis, "nis_band": [lo, hi],
-                                "warnings": warns}
-        if gaps:
-            info["gaps"] = len(gaps)
-        if self.start_from:
-            info["start_from_first_window"] = dict(self.start_from)
-        ev = Estimate(float(t[-1]), float(t[0]), self.name, vals, se, info=info)
-        return StepResult(ev, vals if ok else None, se if ok else None)
+        notes = ([self.note] if self.note else []) + gaps
+        self.note = ""
+        return self._report(t, ekf, cpu, ekf.aug, notes, {"road": "unknown"},
+                            {"gaps": len(gaps)} if gaps else {})
 
     def summary(self) -> dict[str, Any]:
         """Samples filtered, CPU time, consistency, restarts."""
         ekf = self.ekf
-        return {"road": "unknown", "samples": self.samples, "cpu_s": self.cpu,
-                "cpu_us_per_sample": 1e6 * self.cpu / self.samples if self.samples else None,
-                "augmented": list(ekf.aug) if ekf is not None else [], "held": {},
-                "nis": (ekf.nis_sum / ekf.nis_dof) if ekf is not None and ekf.nis_dof else None,
-                "nis_windows_inconsistent": self.nis_windows_out,
-                "restarts": self.restarts, "gap_s": self.gap_s}
+        return self._summary(ekf, {"road": "unknown"}, list(ekf.aug) if ekf is not None else [], {})
 
 
 def make_roadfree_ekf_estimator(spec: Any, channels: list[str], fs: float) -> RoadFreeEKFEstimator:
@@ -356,10 +312,7 @@ def make_roadfree_ekf_estimator(spec: Any, channels: list[str], fs: float) -> Ro
         for k in params.free:
             if k not in spec.ekf_params:
                 params[k].vary = False
-    tun = EKFTuning()
-    if spec.ekf_q is not None:
-        tun.q_param = spec.ekf_q
-    dec = spec.ekf_decimate or max(1, int(math.floor(fs / 250.0 + 1e-9)))
+    tun, dec = ekf_tuning(spec, fs)
     unknown = [k for k in params.free if k not in spec.start_given]
     return RoadFreeEKFEstimator(spec.model, params, channels, tun, decimate=dec,
                                 first_window=unknown)

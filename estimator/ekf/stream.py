@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any, Mapping, Sequence
+from typing import Any, Mapping, Protocol, Sequence
 
 import numpy as np
 
@@ -34,7 +34,92 @@ def noise_sd(y: FloatArray, resolution: float) -> float:
     return max(nf if math.isfinite(nf) else 0.0, resolution / math.sqrt(12.0))
 
 
-class EKFWindowEstimator:
+class _Filter(Protocol):
+    nis_sum: float
+    nis_dof: int
+    aug: list[str]
+
+    def param_values(self) -> dict[str, float]: ...
+
+    def param_stderr(self) -> dict[str, float]: ...
+
+
+class WindowEKF:
+    """What both window EKFs share: the monitor's estimator interface, counters, the report."""
+
+    name = "ekf"
+    #: the filter's state is itself the tracked parameter (alerts use it directly)
+    own_track = True
+    lag = 0.0
+    overlap = 1.0
+
+    def _setup(self, model: SuspensionModel, tuning: EKFTuning, decimate: int, nis_level: float,
+               nis_tolerance: float) -> None:
+        self.model = model
+        self.tuning = tuning
+        self.decimate = max(1, int(decimate))
+        self.nis_level = nis_level
+        self.nis_tolerance = nis_tolerance
+        self.t_last = -math.inf
+        self._t_seen = -math.inf
+        self._phase = 0
+        #: nominal sample step of the stream (s), set on the first window
+        self.h = math.nan
+        self.samples = 0
+        self.cpu = 0.0
+        #: motion restarts after gaps and the data time they bridged (s)
+        self.restarts = 0
+        self.gap_s = 0.0
+        self.nis_windows_out = 0
+        self._nis0 = (0.0, 0)
+        self.start_from: dict[str, float] = {}
+
+    def _report(self, t: FloatArray, ekf: _Filter, cpu: float, checked: Sequence[str] | None,
+                notes: list[str], head: dict[str, Any], tail: dict[str, Any],
+                track: bool = True, first: str | None = None) -> StepResult:
+        """The window's estimate: parameters, NIS and its band, warnings (``first`` leads)."""
+        vals = ekf.param_values()
+        se = ekf.param_stderr()
+        ok = all(math.isfinite(vals[k]) and vals[k] > 0 for k in (vals if checked is None else checked))
+        warns = [] if ok else ["EKF parameter state left the physical range"]
+        nis, _, lo, hi, nis_warning = window_nis(ekf.nis_sum, ekf.nis_dof, self._nis0,
+                                                 self.nis_level, self.nis_tolerance)
+        self._nis0 = (ekf.nis_sum, ekf.nis_dof)
+        if nis_warning is not None:
+            self.nis_windows_out += 1
+            warns.append(nis_warning)
+        warns += notes
+        if first is not None:
+            warns.insert(0, first)
+        info: dict[str, Any] = {**head, "samples": self.samples, "cpu_ms": 1e3 * cpu,
+                                "augmented": list(ekf.aug), "nis": nis, "nis_band": [lo, hi],
+                                "warnings": warns, **tail}
+        if self.start_from:
+            info["start_from_first_window"] = dict(self.start_from)
+        ev = Estimate(float(t[-1]), float(t[0]), self.name, vals, se, info=info)
+        track = track and ok
+        return StepResult(ev, vals if track else None, se if track else None)
+
+    def _summary(self, ekf: _Filter | None, head: dict[str, Any], augmented: list[str],
+                 held: dict[str, str]) -> dict[str, Any]:
+        """Samples filtered, CPU time, consistency, restarts."""
+        return {**head, "samples": self.samples, "cpu_s": self.cpu,
+                "cpu_us_per_sample": 1e6 * self.cpu / self.samples if self.samples else None,
+                "augmented": augmented, "held": held,
+                "nis": (ekf.nis_sum / ekf.nis_dof) if ekf is not None and ekf.nis_dof else None,
+                "nis_windows_inconsistent": self.nis_windows_out,
+                "restarts": self.restarts, "gap_s": self.gap_s}
+
+
+def ekf_tuning(spec: Any, fs: float) -> tuple[EKFTuning, int]:
+    """The EKF's tuning (``ekf.q``) and decimation (``ekf.decimate``, default to about 250 Hz)."""
+    tun = EKFTuning()
+    if spec.ekf_q is not None:
+        tun.q_param = spec.ekf_q
+    return tun, spec.ekf_decimate or max(1, int(math.floor(fs / 250.0 + 1e-9)))
+
+
+class EKFWindowEstimator(WindowEKF):
     """Joint state/parameter EKF fed window by window.
 
     ``params`` (SI) hold the fixed values and the ``augmented`` ones' starts; ``decimate``: use every
@@ -43,44 +128,23 @@ class EKFWindowEstimator:
     of the first window; ``nis_level`` and ``nis_tolerance`` set the NIS band and its widening.
     """
 
-    name = "ekf"
-    #: the filter's state is itself the tracked parameter (alerts use it directly)
-    own_track = True
-    lag = 0.0
-    overlap = 1.0
-
     def __init__(self, model: SuspensionModel, params: Mapping[str, float],
                  augmented: Sequence[str], channels: Sequence[str],
                  tuning: EKFTuning | None = None, decimate: int = 1,
                  held: Mapping[str, str] | None = None,
                  first_window: tuple[Parameters, WindowConfig, Sequence[str]] | None = None,
                  nis_level: float = 0.999, nis_tolerance: float = 1.5) -> None:
-        self.model = model
+        self._setup(model, tuning or EKFTuning(), decimate, nis_level, nis_tolerance)
         self.held = dict(held or {})
         self.first_window = first_window
-        self.nis_level = nis_level
-        self.nis_tolerance = nis_tolerance
-        self.start_from: dict[str, float] = {}
-        self.nis_windows_out = 0
-        self._nis0 = (0.0, 0)
         self.params = dict(params)
         self.augmented = list(augmented)
         self.channels = [c for c in model.channels if c in channels]
-        self.tuning = tuning or EKFTuning()
-        self.decimate = max(1, int(decimate))
         self.ekf: AugmentedEKF | None = None
-        self.t_last = -math.inf
-        self.samples = 0
-        self.cpu = 0.0
         self._u_prev: FloatArray | None = None
-        self._phase = 0
         self.held_note = ""
-        self.h = math.nan
-        self._t_seen = -math.inf
         self._t_step = -math.inf
-        #: motion restarts after gaps, the data time they bridged (s), restarts after divergence
-        self.restarts = 0
-        self.gap_s = 0.0
+        #: restarts after the filter diverged (:meth:`_recover`)
         self.divergences = 0
         self._nis_ok: tuple[float, int] = (0.0, 0)
         self._sig_u: FloatArray | None = None
@@ -296,51 +360,29 @@ class EKFWindowEstimator:
             self.t_last = float(tn[-1])
         cpu = time.process_time() - c0
         self.cpu += cpu
-        ekf = self._filter()
-        vals = ekf.param_values()
-        se = ekf.param_stderr()
-        ok = all(math.isfinite(v) and v > 0 for v in vals.values())
-        warns = [] if ok else ["EKF parameter state left the physical range"]
-        nis, dof, lo, hi, nis_warning = window_nis(ekf.nis_sum, ekf.nis_dof, self._nis0,
-                                                   self.nis_level, self.nis_tolerance)
-        self._nis0 = (ekf.nis_sum, ekf.nis_dof)
-        if nis_warning is not None:
-            self.nis_windows_out += 1
-            warns.append(nis_warning)
-        if self.held_note and self.samples == 0:
-            warns.append(self.held_note)
-        warns.extend(gaps)
+        notes = ([self.held_note] if self.held_note and self.samples == 0 else []) + gaps
+        first = None
         if diverged:
-            warns.insert(0, f"EKF diverged {diverged} time{'s' if diverged > 1 else ''} in this "
-                            f"window (first at t={first_div:.4f} s): its state or covariance "
-                            "was no longer finite; restarted from the start values and the "
-                            "measurements each time; this estimate goes to neither the "
-                            "tracker nor the alerts (the model does not describe the data: a "
-                            "sensor offset kept, a wrong fixed value)")
-        info: dict[str, Any] = {"samples": self.samples, "cpu_ms": 1e3 * cpu,
-                                "augmented": list(self.augmented),
-                                "nis": nis, "nis_band": [lo, hi], "warnings": warns}
+            first = (f"EKF diverged {diverged} time{'s' if diverged > 1 else ''} in this "
+                     f"window (first at t={first_div:.4f} s): its state or covariance "
+                     "was no longer finite; restarted from the start values and the "
+                     "measurements each time; this estimate goes to neither the "
+                     "tracker nor the alerts (the model does not describe the data: a "
+                     "sensor offset kept, a wrong fixed value)")
+        tail: dict[str, Any] = {}
         if gaps:
-            info["gaps"] = len(gaps)
+            tail["gaps"] = len(gaps)
         if diverged:
-            info["divergences"] = diverged
+            tail["divergences"] = diverged
         if self.held:
-            info["held"] = dict(self.held)
-        if self.start_from:
-            info["start_from_first_window"] = dict(self.start_from)
-        ev = Estimate(float(t[-1]), float(t[0]), self.name, vals, se, info=info)
-        track = ok and not diverged        # a restarted filter's values are no estimate
-        return StepResult(ev, vals if track else None, se if track else None)
+            tail["held"] = dict(self.held)
+        # a restarted filter's values are no estimate
+        return self._report(t, self._filter(), cpu, None, notes, {}, tail, not diverged, first)
 
     def summary(self) -> dict[str, Any]:
-        """Samples filtered and CPU time."""
-        ekf = self.ekf
-        return {"samples": self.samples, "cpu_s": self.cpu,
-                "cpu_us_per_sample": 1e6 * self.cpu / self.samples if self.samples else None,
-                "augmented": list(self.augmented), "held": dict(self.held),
-                "nis": (ekf.nis_sum / ekf.nis_dof) if ekf is not None and ekf.nis_dof else None,
-                "nis_windows_inconsistent": self.nis_windows_out,
-                "restarts": self.restarts, "gap_s": self.gap_s, "divergences": self.divergences}
+        """Samples filtered, CPU time, consistency, restarts and divergences."""
+        return {**self._summary(self.ekf, {}, list(self.augmented), dict(self.held)),
+                "divergences": self.divergences}
 
 
 #: parameter kinds the augmented EKF can carry in its state (affine in the model's matrices)
@@ -370,10 +412,7 @@ def make_ekf_estimator(spec: Any, channels: list[str], fs: float) -> EKFWindowEs
     """The fair EKF of a :class:`~estimator.stream.pipeline.MonitorSpec` (module docstring)."""
     model = spec.model
     aug, held = ekf_plan(model, spec.params.free, spec.ekf_params)
-    tun = EKFTuning()
-    if spec.ekf_q is not None:
-        tun.q_param = spec.ekf_q
-    dec = spec.ekf_decimate or max(1, int(math.floor(fs / 250.0 + 1e-9)))
+    tun, dec = ekf_tuning(spec, fs)
     meas = [c for c in channels if c in model.channels]
     unknown = [k for k in spec.params.free if k not in spec.start_given]
     first = None

@@ -117,37 +117,34 @@ class History:
 
     def add(self, records: Iterable[dict[str, Any]], model: str, settings_key: str) -> int:
         """Insert or replace drives (one transaction); returns how many (InputError if not writable)."""
-        try:
-            return self._add(records, model, settings_key)
-        except sqlite3.DatabaseError as exc:
-            raise InputError(f"--db {self.path}: cannot store the drives ({exc})") from None
-
-    def _add(self, records: Iterable[dict[str, Any]], model: str, settings_key: str) -> int:
         now = time.time()
         n = 0
-        with self.conn:
-            for rec in records:
-                did = drive_id(rec)
-                res = rec.get("result")
-                self.conn.execute("DELETE FROM drives WHERE path = ? AND id != ? AND "
-                                  "(status != 'ok' OR t = ?)", (rec["path"], did, rec.get("t")))
-                self.conn.execute("DELETE FROM estimates WHERE drive_id = ?", (did,))
-                self.conn.execute(
-                    "INSERT OR REPLACE INTO drives (id, path, vehicle, t, model, status, error, "
-                    "size, settings, result, processed, odometer_m, distance_m, distance_source) "
-                    "VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
-                    (did, rec["path"], rec["vehicle"], rec.get("t"), model, rec["status"],
-                     rec.get("error"), rec.get("size"), settings_key,
-                     json.dumps(res) if res is not None else None, now,
-                     rec.get("odometer_m"), rec.get("distance_m"), rec.get("distance_source")))
-                if res is not None:
-                    fixed = set(res.get("fixed", []))
-                    self.conn.executemany(
-                        "INSERT INTO estimates (drive_id, parameter, value, stderr, fixed) "
-                        "VALUES (?,?,?,?,?)",
-                        [(did, k, float(v), res.get("stderr", {}).get(k), int(k in fixed))
-                         for k, v in res["params"].items()])
-                n += 1
+        try:
+            with self.conn:
+                for rec in records:
+                    did = drive_id(rec)
+                    res = rec.get("result")
+                    self.conn.execute("DELETE FROM drives WHERE path = ? AND id != ? AND "
+                                      "(status != 'ok' OR t = ?)", (rec["path"], did, rec.get("t")))
+                    self.conn.execute("DELETE FROM estimates WHERE drive_id = ?", (did,))
+                    self.conn.execute(
+                        "INSERT OR REPLACE INTO drives (id, path, vehicle, t, model, status, error, "
+                        "size, settings, result, processed, odometer_m, distance_m, distance_source) "
+                        "VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
+                        (did, rec["path"], rec["vehicle"], rec.get("t"), model, rec["status"],
+                         rec.get("error"), rec.get("size"), settings_key,
+                         json.dumps(res) if res is not None else None, now,
+                         rec.get("odometer_m"), rec.get("distance_m"), rec.get("distance_source")))
+                    if res is not None:
+                        fixed = set(res.get("fixed", []))
+                        self.conn.executemany(
+                            "INSERT INTO estimates (drive_id, parameter, value, stderr, fixed) "
+                            "VALUES (?,?,?,?,?)",
+                            [(did, k, float(v), res.get("stderr", {}).get(k), int(k in fixed))
+                             for k, v in res["params"].items()])
+                    n += 1
+        except sqlite3.DatabaseError as exc:
+            raise InputError(f"--db {self.path}: cannot store the drives ({exc})") from None
         return n
 
     def drives(self) -> list[dict[str, Any]]:
@@ -169,17 +166,13 @@ class History:
                 reused: int, failed: int) -> None:
         """Record a run (its options, counts); InputError if the database cannot be written."""
         try:
-            self._add_run(started, model, options, new, reused, failed)
+            with self.conn:
+                self.conn.execute("INSERT INTO runs (started, finished, model, options, new, reused, "
+                                  "failed) VALUES (?,?,?,?,?,?,?)",
+                                  (started, time.time(), model, json.dumps(options), new, reused,
+                                   failed))
         except sqlite3.DatabaseError as exc:
             raise InputError(f"--db {self.path}: cannot store the run ({exc})") from None
-
-    def _add_run(self, started: float, model: str, options: dict[str, Any], new: int,
-                 reused: int, failed: int) -> None:
-        with self.conn:
-            self.conn.execute("INSERT INTO runs (started, finished, model, options, new, reused, "
-                              "failed) VALUES (?,?,?,?,?,?,?)",
-                              (started, time.time(), model, json.dumps(options), new, reused,
-                               failed))
 
 
 def _record(r: tuple[Any, ...]) -> dict[str, Any]:
