@@ -78,8 +78,11 @@ def design_spec(model: SuspensionModel) -> DesignSpec:
                       dict(d.body_x0), dict(d.choices))
 
 
-class _Designs(Mapping[str, DesignSpec]):
-    """``model name -> DesignSpec`` of every registered model that declares a design."""
+class _Designs(Mapping[str, Any]):
+    """``model name -> DesignSpec`` (or its attribute ``attr``) of every model with a design."""
+
+    def __init__(self, attr: str | None = None) -> None:
+        self._attr = attr
 
     def _names(self) -> list[str]:
         out = []
@@ -91,13 +94,14 @@ class _Designs(Mapping[str, DesignSpec]):
                 continue
         return out
 
-    def __getitem__(self, name: str) -> DesignSpec:
+    def __getitem__(self, name: str) -> Any:
         if name not in MODELS:
             raise KeyError(name)
         model = get_model(name)
         if model.doe_design is None:
             raise KeyError(name)
-        return design_spec(model)
+        spec = design_spec(model)
+        return spec if self._attr is None else getattr(spec, self._attr)
 
     def __iter__(self) -> Iterator[str]:
         return iter(self._names())
@@ -106,23 +110,10 @@ class _Designs(Mapping[str, DesignSpec]):
         return len(self._names())
 
 
-class _DesignNames(Mapping[str, str]):
-    """``model name -> design name`` (``L16-4``, ``L27-3``) of every model with a design."""
-
-    def __getitem__(self, name: str) -> str:
-        return DESIGN_SPECS[name].name
-
-    def __iter__(self) -> Iterator[str]:
-        return iter(DESIGN_SPECS)
-
-    def __len__(self) -> int:
-        return len(DESIGN_SPECS)
-
-
 #: every model's design, by model name (read from the models; nothing here names one)
 DESIGN_SPECS: Mapping[str, DesignSpec] = _Designs()
 #: the design's name of every model that has one (``suspid doe --model`` choices)
-DESIGNS: Mapping[str, str] = _DesignNames()
+DESIGNS: Mapping[str, str] = _Designs("name")
 
 
 @dataclass
