@@ -1,35 +1,9 @@
 """Close the loop: fit, analyse the residual, trace it to a missing effect, augment, refit.
 
-:func:`diagnose` runs
-
-1. the ordinary linear fit (:func:`estimator.identify.fit`, with the Levenberg–Marquardt
-   polish and multistart of ``suspid identify``) — the *baseline*;
-2. residual analysis (:mod:`estimator.diagnose.residuals`): per-channel RMS, Ljung–Box
-   whiteness and a zero-mean test, noise level, cross-correlation with the road and the
-   suspension states, the residual force regressed on every physical candidate (in the
-   library's form and, for a model with several struts, in each strut alone), the output
-   residual on the sensor candidates;
-3. if the residual is structured (Ljung–Box or the mean test rejects whiteness on some
-   channel at ``whiteness_p``, also after refitting the linear model on every channel with
-   noise weights, and the residual is above numerical precision), an output-error refit
-   (short Nelder–Mead, then Levenberg–Marquardt) of the most promising candidates, physical
-   and sensor ones ranked separately (:func:`select_for_refit`): the best physical effect
-   and a second one (``max_physical``) within half its share, and every sensor effect
-   (time shift, offset), whose screens explain at least ``min_screen``; if none of them is
-   accepted, the best physical effect however small its share (the force screen is
-   noise-bound at a few per cent of noise); a strut effect the residual force shows in
-   every strut with different parameters, which no candidate form expresses, is reported
-   as not identifiable instead (:mod:`estimator.diagnose.corners`);
-4. selection by evidence: a candidate is accepted when its refit lowers the Bayesian
-   information criterion by more than ``dbic`` (computed with the per-channel Gaussian
-   likelihood and an effective sample count that discounts serial correlation), its
-   likelihood-ratio p-value is below ``lr_p``, and it removes at least ``explained`` of
-   the *structured* part of the residual (residual minus the white-noise floor), all
-   against the baseline — or, for a sensor effect whose refit adds channels outside the
-   cost, against the linear model fitted on those same channels, so the change of channels
-   earns the effect nothing. The accepted candidate with the lowest BIC wins; with none
-   accepted the result says whether the residual was white (nothing to explain) or
-   structured but unexplained, and what the model cannot identify (``evidence.limits``).
+:func:`diagnose` fits the linear baseline, tests its residual for whiteness, screens every
+candidate effect on the residual force and output residual, refits the promising ones
+(:func:`select_for_refit`) and accepts the one with the lowest BIC whose evidence passes
+:class:`Thresholds`. The steps and thresholds are described in ``docs/closing-the-loop.md``.
 """
 from __future__ import annotations
 
@@ -58,8 +32,7 @@ from suspid.simulate import uniform_step
 from suspid.effects import PhysicalEffect, SensorEffect, effect_classes, make_effect, strut_sites
 
 
-#: a channel whose signal RMS is below this fraction of the largest channel's is numerically
-#: silent (e.g. roll on a road the same under both sides): neither structure nor evidence
+#: signal RMS below this fraction of the largest channel's is numerically silent
 SILENT_RMS = 1e-9
 
 
@@ -102,11 +75,9 @@ class Verdict:
     params: dict[str, Any]
     accepted: bool
     reason: str
-    #: every setting refitted when the screen had close alternatives (``params``, ``dbic``,
-    #: ``explained``); the verdict is the best of them by dBIC
+    #: every setting refitted when the screen had close alternatives (best by dBIC)
     alternatives: list[dict[str, Any]] = field(default_factory=list)
-    #: the fit the evidence is measured against ("baseline", or the linear model fitted on
-    #: the channels a sensor effect adds to its refit)
+    #: the fit the evidence is measured against
     reference: str = "baseline"
 
     def to_json(self) -> dict[str, Any]:
@@ -132,7 +103,6 @@ class DiagnoseResult:
     motion: Motion | None = None
     fits: dict[str, ModelFit] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
-    #: the record as analysed (resampled onto its uniform grid when its times jittered)
     record: Measurement | None = None
 
     def to_json(self) -> dict[str, Any]:
@@ -160,13 +130,10 @@ def _loglik_terms(fitm: ModelFit, common: Mapping[str, NDArray[np.bool_]]) -> di
 
 def compare(base: ModelFit, aug: ModelFit, noise_var: Mapping[str, float],
             channels: list[str]) -> tuple[float, float, float, float, dict[str, float]]:
-    """Evidence of ``aug`` against ``base``: ``dBIC, LR p-value, structured fraction explained,
-    effective-sample fraction`` and the augmented RMS per channel.
+    """Evidence of ``aug`` against ``base``: ``(dBIC, LR p, structured fraction explained, f, rms)``.
 
-    The log-likelihood is Gaussian with one variance per channel (scale free across
-    channels); both use the samples valid in both fits. The effective-sample fraction
-    (AR(1) of the augmented residual) scales the likelihood ratio so serially correlated
-    residuals do not overstate the evidence.
+    ``f``, the effective-sample fraction (AR(1)), scales the Gaussian log-likelihood so serially
+    correlated residuals do not overstate the evidence.
     """
     common = {c: ~(np.isnan(base.residual[c]) | np.isnan(aug.residual[c])) for c in channels}
     tb, ta = _loglik_terms(base, common), _loglik_terms(aug, common)
@@ -202,45 +169,10 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
              multistart: int = 4) -> DiagnoseResult:
     """Fit ``model``, trace its residual to a missing effect, add it and refit.
 
-    Parameters
-    ----------
-    model : SuspensionModel
-        The declared linear model.
-    meas : Measurement
-        The record (CSV or decoded CAN log).
-    params : Parameters
-        Starting values, fixed parameters (e.g. weighed masses) as for ``identify``.
-    cost : {"sse", "frobenius"}
-        The seed cost of every fit.
-    x0 : "estimate", "rest" or ndarray
-        Initial-state handling (as for ``identify``).
-    restarts : int
-        Nelder–Mead restarts of the baseline fit.
-    maxfev : int, optional
-        Evaluation budget of every fit: the baseline (and the quarter car's twin, each a
-        fit of its own), the linear refit on every channel, each candidate's refit and the
-        reference fit a sensor effect is judged against (Nelder–Mead and
-        Levenberg–Marquardt evaluations together, Jacobians included). Default: each
-        fit's own budget.
-    thresholds : Thresholds, optional
-        Decision thresholds.
-    polish, multistart
-        Baseline fit settings as for ``suspid identify`` (Levenberg–Marquardt polish;
-        further starts when the fit lands on a suspicious local minimum).
-
-    Returns
-    -------
-    DiagnoseResult
-
-    Raises
-    ------
-    InputError
-        A record the residual analysis cannot use: fewer than ``MIN_SAMPLES`` samples (the
-        smoothing filter's window), or a time grid that is not uniform even up to timing
-        jitter (the nonlinear refits step on a uniform one; a record whose samples lie
-        within a quarter step of the uniform grid of the same span and count is resampled
-        onto it by a cubic spline, with a warning, :mod:`estimator.identify.regrid`); the
-        message names the record and what it holds.
+    ``params`` are the starting and fixed values; ``cost``, ``x0``, ``restarts``, ``polish`` and
+    ``multistart`` the baseline fit's settings (as for ``suspid identify``); ``maxfev`` the budget
+    of every fit, Jacobians included. InputError for fewer than ``MIN_SAMPLES`` samples or a time
+    grid not uniform even up to timing jitter.
     """
     th = thresholds or Thresholds()
     t = np.asarray(meas.t, dtype=float)
@@ -285,7 +217,6 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
     limits = model_limits(model)
     if limits:
         evidence["limits"] = limits
-    # cross-correlation with inputs and states
     mo = motion_from(model, meas, base.predicted, problem.U)
     h = problem.h or float(np.median(np.diff(meas.t)))
     maxlag = max(1, int(round(0.1 / h)))
@@ -305,8 +236,6 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
     evidence["cross_correlation"] = {
         c: {k: dict(zip(("rho", "lag_s"), (lambda rl: (rl[0], rl[1] * h))(xcorr_peak(base.residual[c], v, maxlag))))
             for k, v in refs.items() if np.any(v)} for c in channels}
-    # a motion the record never excites (a car's roll on a road the same under both
-    # sides) is numerical round-off: its "residual" is neither structure nor evidence
     top = max((s.signal_rms for s in stats.values()), default=0.0)
     silent = [c for c, s in stats.items() if s.signal_rms <= SILENT_RMS * top]
     if silent:
@@ -316,9 +245,7 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
                   if c not in silent and s.white_p < th.whiteness_p
                   and s.rms > th.min_relative_rms * max(s.signal_rms, 1e-300)]
     if structured and len(problem.channels) < len(channels):
-        # channels outside the cost carry the echo of the baseline's parameter and
-        # initial-state errors; structure the linear model itself removes once it is fitted
-        # on every channel (noise-weighted) is not a missing effect
+        # structure the linear model removes once fitted on every channel is not a missing effect
         p_lin, r_lin = reweighted_linear_fit(problem, p0, free, noise_var, maxfev)
         lin_stats = {c: channel_stats(c, r_lin[c], np.asarray(meas.measured[c], dtype=float), skip=skip)
                      for c in channels}
@@ -341,10 +268,7 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
         lb = f"mean {stats[worst].mean:.3g} is not zero, p = {stats[worst].mean_p:.2g}, on {worst}"
     else:
         lb = f"Ljung-Box p = {stats[worst].ljung_box_p:.2g} on {worst}"
-    # a constant road or position offset (a sensor zero not at rest), checked as identify
-    # checks it (the road columns together, which the one-channel screen below cannot
-    # express); found, it is the effect, and its refit is identify's fit of the record with
-    # the offset removed, against this baseline of the record as it is
+    # a constant road or position offset, checked as identify checks it: found, it is the effect
     check = check_offset(problem, params)
     offset_verdict: Verdict | None = None
     if check.offset is not None:
@@ -352,12 +276,10 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
             problem, params, check, base, noise_var, evidenced, th,
             dict(restarts=restarts, maxfev=maxfev, polish=polish, multistart=multistart))
         evidence["offset"] = check.offset.to_json(removed=True)
-    # screening
     screens, force_summary = screen_physical(model, p0, free, mo, noise_var, h)
     evidence["force_residual"] = force_summary
     screens += screen_sensor(model, meas, p0, free, base.predicted, problem.U, th.max_delay_s)
     if offset_verdict is not None:
-        # the check's offset replaces the one-channel screen's: one offset, named once
         screens = [s for s in screens if s.name != offset_verdict.name]
     blocked = _not_identifiable(model, screens, limits, th)
     if blocked:
@@ -400,8 +322,6 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
     for sc in first:
         refit_candidate(sc)
     if fallback and not any(v.accepted for v in verdicts):
-        # nothing the screen ranked high explains the residual: try the best physical
-        # candidate however small its share (the force screen is noise-bound)
         for sc in fallback:
             refit_candidate(sc)
     result.verdicts = verdicts
@@ -438,7 +358,6 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
                                    f"(sensor_offset), explains {best.explained:.0%} of the "
                                    f"structured residual, dBIC {best.dbic:.4g}, LR p "
                                    f"{best.lr_p:.2g}")
-            # the baseline fit's own warnings are of the record as it is
             warnings[:] = [w if w == jitter_note else f"baseline (the record as it is): {w}"
                            for w in warnings] + offset_notes
         for name, why in blocked.items():
@@ -449,16 +368,13 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
     else:
         tried = sorted(verdicts, key=lambda v: -v.explained)
         if blocked:
-            evidence["verdict"] = (f"residual structured ({lb}) but no candidate effect explains it: "
-                                   + "; ".join(blocked.values()))
+            why = "; ".join(blocked.values())
         elif tried:
-            bv = tried[0]
-            evidence["verdict"] = (f"residual structured ({lb}) but no candidate effect explains it: "
-                                   f"best {bv.name} explains {bv.explained:.0%} of the structured "
-                                   f"residual ({bv.reason})")
+            why = (f"best {tried[0].name} explains {tried[0].explained:.0%} of the structured "
+                   f"residual ({tried[0].reason})")
         else:
-            evidence["verdict"] = (f"residual structured ({lb}) but no candidate effect explains it: "
-                                   "no candidate's regressor correlates with the residual")
+            why = "no candidate's regressor correlates with the residual"
+        evidence["verdict"] = f"residual structured ({lb}) but no candidate effect explains it: {why}"
         if limits and not blocked:
             evidence["verdict"] += ("; not identifiable with " + model.name + ": "
                                     + "; ".join(limits))
@@ -480,39 +396,8 @@ def _offset_refit(problem: OutputErrorProblem, params: Parameters, check: Offset
                   base: ModelFit, noise_var: Mapping[str, float], channels: list[str],
                   th: Thresholds, settings: Mapping[str, Any]
                   ) -> tuple[Screen, Verdict, ModelFit, list[str]]:
-    """The offset :func:`~estimator.identify.record.check_offset` found, as a candidate.
-
-    Parameters
-    ----------
-    problem : OutputErrorProblem
-        The record as it is (the baseline's).
-    params : Parameters
-        Fixed values (SI) and the given start.
-    check : OffsetCheck
-        The check of ``problem``'s record, with an offset found.
-    base : ModelFit
-        The baseline: the declared model fitted to the record as it is.
-    noise_var : mapping
-        Channel -> white-noise variance of the baseline residual (channel unit squared).
-    channels : list of str
-        The channels the evidence is measured on.
-    th : Thresholds
-    settings : mapping
-        ``restarts``, ``maxfev``, ``polish``, ``multistart`` of the fit.
-
-    Returns
-    -------
-    screen : Screen
-        The check as a ``sensor_offset`` screen: the share of the misfit at the
-        data-driven start the offsets explain.
-    verdict : Verdict
-        The refit's evidence against the baseline.
-    fit : ModelFit
-        ``identify``'s fit of the record with the offsets removed (:func:`identify_record`):
-        its ``effect`` is the ``sensor_offset`` of the largest offset, its ``k`` counts
-        every offset, its ``predicted`` channels read the channel offset.
-    notes : list of str
-        The fit's warnings other than the offset's own line (which the effect states).
+    """The offset :func:`~estimator.identify.record.check_offset` found, as a candidate: its screen,
+    verdict, identify's fit of the record with the offsets removed and that fit's other warnings.
     """
     offset = check.offset
     if offset is None:
@@ -547,18 +432,8 @@ def _fmt(v: Mapping[str, Any]) -> str:
 
 def _not_identifiable(model: SuspensionModel, screens: list[Screen], limits: Mapping[str, str],
                       th: Thresholds) -> dict[str, str]:
-    """Strut effects the residual force points to in a form no candidate can express.
-
-    A strut effect of a model with several struts is *not identifiable* here when one
-    coefficient per strut explains at least 30 % of the residual force and 1.5 times what
-    its best expressible form (shared, or one strut alone) explains, with physical values
-    in every strut: the effect is in every strut with different parameters, which the
-    contract's effect parameters cannot state. It is then reported, not refitted.
-
-    Returns
-    -------
-    dict
-        ``effect name -> plain sentence`` (empty when nothing is blocked).
+    """Strut effects the residual force points to in every strut with different parameters, a form no
+    candidate can express: ``effect name -> sentence``.
     """
     out: dict[str, str] = {}
     for s in screens:
@@ -582,23 +457,9 @@ def select_for_refit(screens: list[Screen], blocked: Mapping[str, str],
                      th: Thresholds) -> tuple[list[Screen], list[Screen]]:
     """The screened candidates worth an output-error refit: ``(first, fallback)``.
 
-    Physical and sensor candidates are ranked separately: their screen shares are not
-    comparable (a time shift moves the shifted channels' noise along with their signal, an
-    offset is judged on the output residual), and the screen only decides what is worth
-    refitting — the refit's evidence decides what is accepted. Refitted first:
-
-    * the best plausible physical candidate (not blocked as not identifiable) whose share
-      of the residual force is at least ``min_screen``, and a runner-up (``max_physical``
-      in all) with at least ``min_screen`` and half the best one's share;
-    * every plausible sensor candidate (``sensor_delay``, ``sensor_offset``) explaining at
-      least ``min_screen`` of its residual.
-
-    ``fallback`` — refitted only when none of those is accepted — is the best plausible
-    physical candidate (and a runner-up within half its share) when its share is below
-    ``min_screen``: at a few per cent of noise the residual force is mostly the noise of
-    the differentiated measurements and a real effect's share is small (dry friction of
-    150 N at 3 % noise: 1–5 %). Nothing falls back when a strut effect is blocked as not
-    identifiable (that already accounts for the residual).
+    Physical and sensor candidates are ranked separately (their shares are not comparable);
+    ``fallback``, refitted only when none of ``first`` is accepted, holds the best physical
+    candidates below ``min_screen`` (the force screen is noise-bound).
     """
     reg = effect_classes()
     phys = sorted([s for s in screens if s.name in reg and reg[s.name].kind == "physical"
@@ -615,9 +476,7 @@ def select_for_refit(screens: list[Screen], blocked: Mapping[str, str],
 
 
 def _x0_start(problem: OutputErrorProblem, base: ModelFit, motion: Motion) -> FloatArray:
-    """Initial state for a nonlinear refit: the measured first sample where a coordinate's
-    position and velocity are measured (the linear fit's ``x0`` is biased by the missing
-    effect), else the baseline's estimate. With ``x0="rest"`` or a given state, that one."""
+    """Initial state for a nonlinear refit: the measured first sample where measured, else the baseline's."""
     if not (isinstance(problem.x0, str) and problem.x0 == "estimate"):
         return np.asarray(base.x0, dtype=float)
     model = problem.model
@@ -632,8 +491,7 @@ def _x0_start(problem: OutputErrorProblem, base: ModelFit, motion: Motion) -> Fl
 
 def _beats(base: ModelFit, problem: OutputErrorProblem,
            noise_var: Mapping[str, float] | None) -> Callable[[Mapping[str, FloatArray]], bool]:
-    """``worth(simulated channels)``: True when a simulation's residual, summed over every
-    measured channel in units of its white-noise variance, is below the baseline's."""
+    """``worth(simulated channels)``: True when the noise-weighted residual is below the baseline's."""
     meas = problem.meas.measured
     nv = dict(noise_var or {})
     scale = {c: 1.0 / max(float(nv.get(c, 0.0)),
@@ -654,15 +512,8 @@ def _refit(problem: OutputErrorProblem, p0: Mapping[str, float], free: list[str]
            noise_var: Mapping[str, float] | None = None,
            references: dict[tuple[str, ...], ModelFit] | None = None,
            maxfev: int | None = None) -> tuple[ModelFit, ModelFit]:
-    """Refit the model augmented with the screened candidate ``sc``.
-
-    ``noise_var`` (channel -> white-noise variance of the baseline residual) weights the
-    channels a sensor effect changes outside the cost (see :class:`SensorRefit`);
-    ``maxfev`` bounds the evaluations of the refit and of its reference fit.
-
-    Returns the augmented fit and the fit it is judged against: the baseline, or for a
-    sensor effect that adds channels to the refit the linear model fitted on those same
-    channels (:meth:`SensorRefit.fit_null`, cached in ``references`` by channel set).
+    """Refit the model augmented with ``sc``: the fit and the one it is judged against (the baseline,
+    or the linear model fitted on the channels a sensor effect adds).
     """
     if effect_classes()[sc.name].kind == "physical":
         values = dict(sc.params)
@@ -684,7 +535,6 @@ def _refit(problem: OutputErrorProblem, p0: Mapping[str, float], free: list[str]
     fm = rf2.fit(start_base, sc.params, maxfev=maxfev)
     if not rf2.needs_reference:
         return fm, base
-    # the reference depends on the channels added and on those whose tail is left out
     key = (sc.name, *sorted(rf2.extra), "|", *sorted(eff.affected()))
     if references is None:
         references = {}

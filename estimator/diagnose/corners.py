@@ -1,14 +1,8 @@
 """Where an effect acts: one strut of a model with several, and what a model cannot tell apart.
 
-The effect library (:mod:`suspid.effects`) applies a strut effect to *every* strut
-with one parameter set (the same hardware at every corner) and offers
-``asymmetric_damping`` only where one damper coefficient describes every strut. A worn or
-sticking damper is usually one corner, though, so ``diagnose`` also tests every strut
-effect in each strut alone when the model has several (:class:`SiteRestricted`,
-diagnose-internal: the contract's effect parameters are unchanged and the strut is
-reported in ``evidence.effect_sites``). What no candidate form can express for a model is
-listed by :func:`model_limits` (from the effect classes and the model's struts) and said
-in the verdict instead of guessed.
+The library applies a strut effect to every strut with one parameter set; a worn damper is
+usually one corner, so ``diagnose`` also tries each strut alone (:class:`SiteRestricted`).
+What no candidate form can express is listed by :func:`model_limits`.
 """
 from __future__ import annotations
 
@@ -20,27 +14,16 @@ from suspid.effects import Law, PhysicalEffect, Site, effect_classes, strut_site
 
 
 class SiteRestricted(PhysicalEffect):
-    """A library physical effect acting at some of its sites only (e.g. the front strut).
+    """A library physical effect acting at some of its sites only (``site_names``, e.g. the front strut).
 
-    Parameters
-    ----------
-    inner : PhysicalEffect
-        The library effect (its parameters, law and JSON form are used unchanged).
-    site_names : sequence of str
-        Names of the sites it acts at (``"front strut"``, ``"rear strut"``).
-
-    Notes
-    -----
-    The restriction bypasses the library's availability rule on purpose:
-    ``asymmetric_damping`` in *one* strut of ``half4`` is well defined (its symmetric part
-    is that strut's ``c1`` or ``c2``); only the shared two-strut form is not.
+    It bypasses the library's availability rule on purpose: ``asymmetric_damping`` in one strut of
+    ``half4`` is well defined.
     """
 
     def __init__(self, inner: PhysicalEffect, site_names: Sequence[str]) -> None:
         self.inner = inner
         self.site_names = list(site_names)
         self.values = inner.values
-        # the wrapped effect's class-level facts, copied per instance (ClassVars in Effect)
         self.name = inner.name  # type: ignore[misc]
         self.params = inner.params  # type: ignore[misc]
         self.site_kind = inner.site_kind  # type: ignore[misc]
@@ -100,18 +83,7 @@ def strut_limit_key(model: SuspensionModel) -> str:
 
 
 def model_limits(model: SuspensionModel) -> dict[str, str]:
-    """What ``diagnose`` cannot identify with ``model``, by effect (empty if nothing).
-
-    Each effect class states its own limits (:meth:`~suspid.effects.Effect.limits`,
-    e.g. ``asymmetric_damping`` where several dampers differ, ``tire_liftoff`` where no wheel
-    mass separates tyre and strut); a model with several struts adds that a strut effect of
-    different size in each strut has no form in the contract.
-
-    Returns
-    -------
-    dict
-        ``effect or form -> reason`` (plain sentences, printed in ``evidence.limits``).
-    """
+    """What ``diagnose`` cannot identify with ``model``: ``effect or form -> reason``."""
     out: dict[str, str] = {}
     for cls in effect_classes().values():
         out.update(cls.limits(model))

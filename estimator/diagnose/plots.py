@@ -17,12 +17,8 @@ from suspid.plots import _plt
 def plot_evidence(res: DiagnoseResult, meas: Measurement, path: str | Path) -> None:
     """Write the evidence figure for a :func:`~estimator.diagnose.diagnose` result.
 
-    Left: residual of every measured channel before (baseline) and after (augmented).
-    Right, top to bottom: autocorrelation of the most structured channel's residual with the
-    white-noise 99 % band; the residual force of the first coordinate's equation (baseline
-    parameters) against the rate or deflection of the chosen effect's site (its class's
-    ``plot_against``; the first strut when there is no effect); the share of the residual each
-    candidate's screen explained and, for refitted ones, its refit.
+    Left: every channel's residual before and after. Right: the autocorrelation of the most
+    structured residual, the residual force against the effect's site, and each candidate's share.
     """
     plt = _plt()
     model = get_model(res.model)

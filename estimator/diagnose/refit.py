@@ -1,21 +1,9 @@
-"""Output-error refit of the model augmented with one effect (short Nelder–Mead, then
-Levenberg–Marquardt, in log coordinates: :func:`nm_then_lm`).
+"""Output-error refit of the model augmented with one effect (:func:`nm_then_lm`, log coordinates).
 
-Physical effects are simulated by :func:`suspid.nlsim.simulate_effects` with
-enough internal steps for stability and accuracy (:func:`substeps_for`); the initial state
-is handled by an approximate variable projection (the free response of the linear part,
-exact when the effect is inactive near the start). Sensor effects keep the exact linear
-fast path: the measurement is *compensated* (offset removed, lagging channels advanced) and
-the ordinary :class:`~estimator.identify.OutputErrorProblem` is evaluated, with the affected
-channels added when the cost would not see them (:class:`SensorRefit`; such an effect is
-judged against the linear model fitted on the same channels, :meth:`SensorRefit.fit_null`;
-a time shift, :attr:`~suspid.effects.SensorEffect.time_shift`, is undone by an
-all-pass shift that leaves the noise as it is). Positive parameters (the effect's
-``EffectParam.kind``) are optimised as ``log(theta / theta_start)``, real ones (a sensor
-offset) as ``(theta - theta_start) / scale``; base parameters an effect determines
-(:meth:`~suspid.effects.PhysicalEffect.base_overrides`) follow it. Nothing here
-depends on which effect it is. :func:`reweighted_linear_fit` refits the declared
-linear model on every channel (the whiteness check's reference).
+Physical effects are simulated by :func:`suspid.nlsim.simulate_effects` with enough internal
+steps (:func:`substeps_for`); the initial state by an approximate variable projection. Sensor
+effects keep the linear fast path on the *compensated* measurement (:class:`SensorRefit`).
+:func:`reweighted_linear_fit` refits the declared linear model on every channel.
 """
 from __future__ import annotations
 
@@ -39,25 +27,7 @@ from suspid.simulate import (free_coeffs_to_state, free_response_basis, mass_inv
 
 @dataclass
 class ModelFit:
-    """A fitted (base or augmented) model and its residuals.
-
-    Attributes
-    ----------
-    params : dict
-        Base model parameters (SI); for ``asymmetric_damping`` the base damping is the
-        symmetric part.
-    effect : Effect or None
-    residual : dict
-        ``channel -> measured - predicted`` for every measured channel (NaN where unknown).
-    predicted : dict
-        Every channel of the fitted model (true-sensor view: sensor effect applied).
-    cost : float
-        The seed cost (``sse`` or ``frobenius``) on the cost channels, SI.
-    nfev : int
-    x0 : ndarray
-    k : int
-        Number of fitted parameters (free base + effect).
-    """
+    """A fitted (base or augmented) model: parameters (SI), effect, residuals, the seed ``cost``."""
 
     params: dict[str, float]
     effect: Effect | None
@@ -76,11 +46,7 @@ class ModelFit:
 
 def all_channels(problem: OutputErrorProblem, p: Mapping[str, float],
                  x0: FloatArray) -> dict[str, FloatArray]:
-    """Every channel of the linear model at ``p`` from ``x0`` on the problem's record.
-
-    Simulated through the problem's forward-model pieces
-    (:meth:`~estimator.identify.OutputErrorProblem.pieces`) where they apply.
-    """
+    """Every channel of the linear model at ``p`` from ``x0`` on the problem's record."""
     aff = problem.pieces(p)
     X = simulate_states(problem.model, p, problem.t, problem.U, x0, affine=aff)
     return outputs(problem.model, p, X, problem.U, aff)
@@ -95,38 +61,10 @@ def residuals_of(model_channels: tuple[str, ...] | list[str], measured: Mapping[
 
 def substeps_for(problem: OutputErrorProblem, p: Mapping[str, float], effect: PhysicalEffect,
                  h: float, x0: FloatArray | None = None, affine: AffinePieces | None = None) -> int:
-    """Internal steps per sample so the explicit effect term stays well inside stability.
+    """Internal steps per sample (1 to :data:`MAX_SUBSTEPS`) so the explicit effect term stays stable.
 
-    Uses the effect's stiffness at each of its sites (``d phi / d s'`` and ``d phi / d s``
-    by finite differences over 1.5 times the range the linear model's response covers)
-    against the site's effective inverse mass ``g . M^-1 . g`` (``1/m1 + 1/m2`` for the
-    ``quarter2`` strut, ``1/m + a1^2/I + 1/m1`` for the ``half4`` front strut), taking the
-    largest rate over the sites. A saturating law (friction) tolerates ``h * rate`` well
-    above the linear stability limit; the factors were set so the discretisation error at
-    the truth stays below 1e-6 of the data's sum of squares (``tests/diagnose/test_nlsim.py``).
-    The count is then doubled while doubling it still changes the simulated channels by
-    more than :data:`ACCURACY` of the data's sum of squares (a short, large force).
-
-    Parameters
-    ----------
-    problem : OutputErrorProblem
-        The record (time grid, road) and model.
-    p : mapping
-        Base parameters (SI).
-    effect : PhysicalEffect
-        The effect term at its current values.
-    h : float
-        Sample interval (s).
-    x0 : ndarray, optional
-        Initial state of the linear response used to bound the site coordinates (m, m/s).
-    affine : AffinePieces, optional
-        The model's affine pieces (:meth:`~suspid.models.base.SuspensionModel.affine`):
-        the forward model and ``M^-1`` when they apply to ``p``.
-
-    Returns
-    -------
-    int
-        Substeps per sample, 1 to :data:`MAX_SUBSTEPS`.
+    The effect's stiffness against each site's inverse mass ``g . M^-1 . g`` bounds the step; the
+    count is then doubled while that still changes the channels by more than :data:`ACCURACY`.
     """
     model = problem.model
     Minv = mass_inverse(model, p, affine)
@@ -148,11 +86,6 @@ def substeps_for(problem: OutputErrorProblem, p: Mapping[str, float], effect: Ph
         rate_k = max(rate_k, math.sqrt(kmax * inv_mass))
     need = max(h * rate_c / _RATE_C_LIMIT, h * rate_k / _RATE_K_LIMIT, 1.0)
     sub = int(min(math.ceil(need), MAX_SUBSTEPS))
-    # Stability is not accuracy: a force that is large only briefly (a quadratic damper
-    # while a quarter1 strut, standing on the road, rides a 20 ms curb rise at 6 m/s) is
-    # stable at one substep but badly resolved. Step doubling on the measured channels
-    # at these parameters: double until the change is below ACCURACY of the data's sum
-    # of squares.
     if problem.h is None:
         return sub
     chans = [c for c in problem.model.channels if c in problem.meas.measured]
@@ -176,9 +109,7 @@ MAX_SUBSTEPS = 16
 #: largest change of the simulated channels' sum of squares (fraction of the data's) when
 #: the substeps are doubled
 ACCURACY = 1e-6
-#: largest ``h * c_eff / m_eff`` (damping-like effect stiffness) per substep; calibrated on
-#: ``quarter2`` (the earlier smallest-mass bound ``g.g / min(m)`` with limit 4.5 is 1.82x
-#: the exact ``g M^-1 g`` there), so quarter2 keeps its substeps
+#: largest ``h * c_eff / m_eff`` (damping-like effect stiffness) per substep
 _RATE_C_LIMIT = 4.5 / 1.82
 #: largest ``h * sqrt(k_eff / m_eff)`` (spring-like effect stiffness) per substep
 _RATE_K_LIMIT = 0.75 / math.sqrt(1.82)
@@ -186,13 +117,7 @@ _RATE_K_LIMIT = 0.75 / math.sqrt(1.82)
 
 def forward_pieces(problem: OutputErrorProblem, base: Mapping[str, float],
                    free: list[str] | None = None) -> AffinePieces:
-    """The forward model's affine pieces for a refit that moves ``free`` away from ``base``.
-
-    The problem's own pieces (:meth:`~estimator.identify.OutputErrorProblem.pieces`) when
-    they apply to ``base`` and leave every parameter of ``free`` free, else new ones
-    (:meth:`~suspid.models.base.SuspensionModel.affine`; default: every damper and spring).
-    Built once per refit, they serve each of its many simulations.
-    """
+    """The forward model's affine pieces for a refit moving ``free``: the problem's own when they apply."""
     own = problem.affine
     if own is not None and own.matches(base) and set(free or own.names) <= set(own.names):
         return own
@@ -200,13 +125,7 @@ def forward_pieces(problem: OutputErrorProblem, base: Mapping[str, float],
 
 
 class PhysicalRefit:
-    """Output-error problem of the base model plus one physical effect.
-
-    The forward model's affine pieces in the parameters the refit moves (the free base
-    parameters and those the effect determines) are built once
-    (:meth:`~suspid.models.base.SuspensionModel.affine`) and passed to every simulation;
-    where they do not apply (a free mass) the model is used, as without them.
-    """
+    """Output-error problem of the base model plus one physical effect (affine pieces built once)."""
 
     def __init__(self, problem: OutputErrorProblem, base: Mapping[str, float], free: list[str],
                  effect: PhysicalEffect, x0: FloatArray) -> None:
@@ -214,7 +133,6 @@ class PhysicalRefit:
         self.model = problem.model
         self.effect0 = effect
         self.base = dict(base)
-        # base parameters the effect determines (an asymmetric damper's symmetric part)
         self.sites = effect.sites(self.model, base)
         self.tied = list(effect.base_overrides(self.sites))
         self.base_free = [k for k in free if k not in self.tied]
@@ -275,44 +193,16 @@ class PhysicalRefit:
     def fit(self, start: Mapping[str, float], restarts: int = 3, maxfev: int | None = None,
             step: float = 0.15, passes: int = 3,
             worth: Callable[[Mapping[str, FloatArray]], bool] | None = None) -> ModelFit:
-        """Nelder–Mead to about 1 %, then Levenberg–Marquardt, from ``start``.
+        """Nelder–Mead to about 1 %, then Levenberg–Marquardt, from ``start`` (SI, by name).
 
-        Parameters
-        ----------
-        start : mapping
-            Starting values of the free base parameters and the effect's numeric
-            parameters by name (SI).
-        restarts : int
-            Nelder–Mead restarts of the first pass.
-        maxfev : int, optional
-            Evaluation budget of the whole refit, every pass's Nelder–Mead and
-            Levenberg–Marquardt evaluations together (``suspid diagnose --maxfev``); default
-            150 per fitted parameter for each pass's Nelder–Mead.
-        step : float
-            First simplex edge in log coordinates.
-        passes : int
-            Up to ``passes`` runs: after each the initial state is re-centred on its
-            projected value (the projection is linear around the current ``x0``), the
-            internal steps are re-checked at the current parameters (:func:`substeps_for`),
-            and the search restarts from the best point with a smaller simplex if either
-            changed the problem.
-        worth : callable, optional
-            ``worth(simulated channels) -> bool``: whether the current fit is worth
-            simulating more finely (it beats the linear baseline on the whole record). A
-            candidate that cannot beat the linear model it contains is rejected however
-            accurately it is simulated (a wrong friction candidate that trades the dampers
-            for a stiff ``F`` would need 12 steps per sample for nothing).
-
-        Returns
-        -------
-        ModelFit
+        Up to ``passes`` runs, restarted while re-centring the initial state or re-checking the
+        substeps changes the problem; ``worth(channels)``: whether finer simulation is worth it.
         """
         names = self.base_free + self.eff_names
         th0 = np.array([float(start[k]) for k in names])
         pr = self.problem
         inv = 1.0 / math.sqrt(pr.scale)
         big = np.full(int(pr.mask.sum()), 1e3)
-        # positive parameters in log coordinates, real ones linear in units of their start
         logc = np.array([True] * len(self.base_free)
                         + [self.effect0.spec(k).kind != "real" for k in self.eff_names])
         rscale = np.where(logc, 1.0, np.maximum(np.abs(th0), 1e-9))
@@ -337,7 +227,6 @@ class PhysicalRefit:
             left = None if maxfev is None else maxfev - nfev
             if left is not None and left <= 0:
                 break
-            # the initial state is projected linearly around self.x0; re-centre and repeat
             u, f, n_used = nm_then_lm(vec, u, step=step if sweep == 0 else step / 4,
                                       restarts=restarts if sweep == 0 else 1,
                                       maxfev=150 * len(names) if left is None else left,
@@ -345,10 +234,6 @@ class PhysicalRefit:
             nfev += n_used
             _, x0_new, _ = self.residual(to_theta(u))
             self.x0 = x0_new
-            # the internal steps were chosen at the start; the effect found may be stiffer
-            # (friction 40 % above the screen's estimate needs twice the steps at 200 Hz,
-            # and one step too few biases F and the damping by several per cent). The
-            # optimum moves little with the steps: Levenberg–Marquardt alone finishes it.
             theta = to_theta(u)
             finer = ((worth is None or worth(self.simulate(*self.split(theta), self.x0)))
                      and self._substeps_at(theta))
@@ -370,44 +255,10 @@ class PhysicalRefit:
 def nm_then_lm(vec: Callable[[FloatArray], FloatArray], u0: FloatArray, step: float = 0.15,
                restarts: int = 3, maxfev: int | None = None,
                coarse: bool = True, cap: int | None = None) -> tuple[FloatArray, float, int]:
-    """Minimise ``|vec(u)|^2``: a short Nelder–Mead, then Levenberg–Marquardt.
+    """Minimise ``|vec(u)|^2``: a short Nelder–Mead into the basin, then a Levenberg–Marquardt polish.
 
-    Nelder–Mead (log coordinates, :func:`~estimator.identify.minimize_log`) gets from the
-    screening start into the basin; near the optimum the output-error problem is almost
-    linear, so a Levenberg–Marquardt polish on the residual vector finishes in a few
-    Jacobians instead of the hundreds of simplex steps Nelder–Mead spends on the last
-    digits. If the polish does not lower the cost, Nelder–Mead carries on at full
-    tolerance from its own best point.
-
-    Parameters
-    ----------
-    vec : callable
-        Normalised residual vector of the coordinates ``u`` (constant length; a failed
-        evaluation returns large finite values).
-    u0 : ndarray
-        Start (dimensionless coordinates).
-    step : float
-        First simplex edge.
-    restarts : int
-        Nelder–Mead restarts of the coarse run (at most 1 are used) and of the fallback.
-    maxfev : int, optional
-        Nelder–Mead evaluation budget of the fallback (default 150 per coordinate); the
-        coarse run stops after 10 per coordinate.
-    coarse : bool
-        Run the coarse Nelder–Mead first (``False``: start Levenberg–Marquardt at ``u0``,
-        already in the basin).
-    cap : int, optional
-        Most evaluations in all (coarse run, polish with its Jacobians, fallback); the
-        polish is skipped when fewer are left than one Jacobian takes.
-
-    Returns
-    -------
-    u : ndarray
-        Best coordinates.
-    f : float
-        ``|vec(u)|^2`` there.
-    nfev : int
-        Evaluations used.
+    If the polish does not lower the cost, Nelder–Mead carries on at full tolerance; ``cap`` bounds
+    all evaluations. Returns ``(u, |vec(u)|^2, nfev)``.
     """
     n = u0.size
     budget = maxfev if maxfev is not None else 150 * max(n, 1)
@@ -451,13 +302,9 @@ def nm_then_lm(vec: Callable[[FloatArray], FloatArray], u0: FloatArray, step: fl
 
 def compensated(meas: Measurement, effect: SensorEffect | None, tail: int = 0,
                 affected: list[str] | None = None) -> Measurement:
-    """``meas`` with a sensor effect undone; the last ``tail`` samples of affected channels NaN.
+    """``meas`` with a sensor effect undone (delays all-pass); the last ``tail`` affected samples NaN.
 
-    A delay is undone by the all-pass shift (:func:`~estimator.diagnose.residuals.shift_allpass`),
-    not by interpolation: interpolating the noisy record between samples would smooth its
-    noise, and the refit would take that for evidence of a (sub-sample) delay.
-    ``effect=None`` leaves the data as they are but drops the same tail of the channels
-    ``affected`` (the reference the effect is judged against).
+    ``effect=None`` leaves the data but drops the same tail of ``affected`` (the reference).
     """
     if effect is None:
         chans = dict(meas.measured)
@@ -481,28 +328,8 @@ def compensated(meas: Measurement, effect: SensorEffect | None, tail: int = 0,
 class SensorRefit:
     """Output-error problem of the base model seen through one sensor effect.
 
-    The fit uses the problem's cost channels. A sensor effect that changes only channels
-    outside the cost (a lagging or offset velocity channel under the ``sse`` cost, which
-    uses the positions) would leave its own parameters undetermined there, so those
-    affected channels join the refit's residual, each weighted by ``sigma_ref / sigma_c``
-    (its white-noise level against the cost channels' mean one) so it counts as one more
-    channel at the cost channels' noise. The reported ``cost`` stays the seed cost on the
-    problem's own channels.
-
-    Parameters
-    ----------
-    problem : OutputErrorProblem
-        The declared model's problem (measurement, cost, initial-state handling).
-    base : mapping
-        Base parameters (SI); the fixed ones are held.
-    free : list of str
-        Free base parameters.
-    effect : SensorEffect
-        The candidate, with its channels and starting values.
-    max_delay : float
-        Largest delay considered (s); the compensated tail of that length is left out.
-    noise_var : mapping, optional
-        White-noise variance per channel (channel units squared), for the weights above.
+    Affected channels outside the cost join the residual, weighted by their noise so each counts as
+    one more cost channel; the tail of ``max_delay`` (s) is left out.
     """
 
     def __init__(self, problem: OutputErrorProblem, base: Mapping[str, float], free: list[str],
@@ -534,12 +361,10 @@ class SensorRefit:
             self.weights = dict(w_user)
             self.weights.update({c: ref / sigma(c) for c in self.extra})
             self.channels += self.extra
-        # one set of forward-model pieces for every compensated sub-problem
         self.affine = forward_pieces(problem, self.base)
 
     def sub_problem(self, eff: SensorEffect | None) -> OutputErrorProblem:
-        """The linear problem on the data with ``eff`` undone (plus the affected channels);
-        ``None``: the same problem without the effect (see :meth:`fit_null`)."""
+        """The linear problem with ``eff`` undone (plus affected channels); ``None``: no effect."""
         pr = self.problem
         meas = compensated(pr.meas, eff, self.tail, self.effect0.affected())
         if not self.extra:
@@ -554,22 +379,7 @@ class SensorRefit:
             restarts: int = 3, maxfev: int | None = None, step: float = 0.15) -> ModelFit:
         """Fit base and effect parameters from the screening start (see :func:`nm_then_lm`).
 
-        Parameters
-        ----------
-        start_base : mapping
-            Starting base parameters (SI).
-        start_effect : mapping
-            Starting effect parameters (``delay_s`` in s, ``offset`` in the channel's unit).
-        restarts, step
-            Search settings (see :func:`nm_then_lm`).
-        maxfev : int, optional
-            Evaluation budget of the whole refit (Nelder–Mead and Levenberg–Marquardt
-            together, ``suspid diagnose --maxfev``); default 200 per fitted parameter for
-            the Nelder–Mead fallback.
-
-        Returns
-        -------
-        ModelFit
+        ``maxfev`` bounds the whole refit (default 200 per fitted parameter).
         """
         real = [k for k in self.effect0.numeric_names if self.effect0.spec(k).kind == "real"]
         pos = [k for k in self.effect0.numeric_names if k not in real]
@@ -613,47 +423,14 @@ class SensorRefit:
         return bool(self.extra)
 
     def fit_null(self, start_base: Mapping[str, float], maxfev: int | None = None) -> ModelFit:
-        """The declared linear model fitted exactly as :meth:`fit` fits the augmented one —
-        same channels, weights and left-out tail — but without the effect.
-
-        When the effect adds channels outside the baseline's cost, the baseline is the
-        wrong reference: refitting the base parameters on those channels lowers their
-        residual whether or not the effect exists (a "delay" of 1e-11 s would be credited
-        with it). The effect is judged against this fit instead. ``maxfev`` bounds its
-        Levenberg–Marquardt evaluations, Jacobians included.
+        """The declared linear model fitted as :meth:`fit` fits the augmented one, without the effect
+        (the fair reference when the effect adds channels).
         """
         sp = self.sub_problem(None)
-        th0 = np.array([float(start_base[k]) for k in self.free])
         inv = 1.0 / math.sqrt(sp.scale)
-        big = np.full(sp.n_obs, 1e3)
-
-        def params_of(u: FloatArray) -> dict[str, float]:
-            q = dict(self.base)
-            q.update(zip(self.free, th0 * np.exp(u)))
-            return q
-
-        def vec(u: FloatArray) -> FloatArray:
-            if not np.all(np.abs(u) < 20):
-                return big
-            try:
-                r = sp.residual_vector(params_of(u)) * inv
-            except (np.linalg.LinAlgError, ValueError, FloatingPointError, UsageError):
-                return big
-            return r if r.size == big.size and np.all(np.isfinite(r)) else big
-
-        u0 = np.zeros(len(self.free))
-        u, nfev = u0, 1
-        if self.free:
-            try:
-                sol = lm_within(vec, u0, maxfev, max_nfev=30 * (len(self.free) + 1),
-                                diff_step=1e-6, xtol=1e-10, ftol=1e-10, gtol=1e-10)
-                nfev = sol.nfev
-                r0 = vec(u0)
-                if sol.fun <= float(r0 @ r0):
-                    u = sol.x
-            except (ValueError, np.linalg.LinAlgError):
-                pass
-        out = self._model_fit(params_of(u), None, nfev, len(self.free))
+        q, nfev = _lm_log(lambda q: sp.residual_vector(q) * inv, self.base, self.free, maxfev, sp.n_obs,
+                          1e3, (UsageError,))
+        out = self._model_fit(q, None, nfev, len(self.free))
         out.notes.append("declared linear model fitted on " + ", ".join(self.channels)
                          + " (noise-weighted), without the effect")
         return out
@@ -671,37 +448,48 @@ class SensorRefit:
         return ModelFit(p, eff, resid, allout, pr.seed_cost(ss), nfev, pred.x0, k)
 
 
+def _lm_log(residual: Callable[[dict[str, float]], FloatArray], base: Mapping[str, float], free: list[str],
+            maxfev: int | None, n_obs: int, big: float,
+            errors: tuple[type[Exception], ...] = ()) -> tuple[dict[str, float], int]:
+    """Levenberg–Marquardt of ``residual`` over ``free`` in log coordinates from ``base``: (params, nfev)."""
+    th0 = np.array([float(base[k]) for k in free])
+    bad = np.full(n_obs, big)
+    caught: tuple[type[Exception], ...] = (np.linalg.LinAlgError, ValueError, FloatingPointError, *errors)
+
+    def params_of(u: FloatArray) -> dict[str, float]:
+        q = dict(base)
+        q.update(zip(free, th0 * np.exp(u)))
+        return q
+
+    def vec(u: FloatArray) -> FloatArray:
+        if not np.all(np.abs(u) < 20):
+            return bad
+        try:
+            r = residual(params_of(u))
+        except caught:
+            return bad
+        return r if r.size == n_obs and np.all(np.isfinite(r)) else bad
+
+    u0 = np.zeros(len(free))
+    u, nfev = u0, 1
+    if free:
+        try:
+            sol = lm_within(vec, u0, maxfev, max_nfev=30 * (len(free) + 1),
+                            diff_step=1e-6, xtol=1e-10, ftol=1e-10, gtol=1e-10)
+            nfev = sol.nfev
+            r0 = vec(u0)
+            if sol.fun <= float(r0 @ r0):
+                u = sol.x
+        except (ValueError, np.linalg.LinAlgError):
+            pass
+    return params_of(u), nfev
+
+
 def reweighted_linear_fit(problem: OutputErrorProblem, p: Mapping[str, float], free: list[str],
                           noise_var: Mapping[str, float],
                           maxfev: int | None = None) -> tuple[dict[str, float], dict[str, FloatArray]]:
-    """The declared linear model refitted on *every* measured channel, each weighted by its
-    white-noise level (Levenberg–Marquardt from ``p``, initial state re-estimated).
-
-    The baseline fit uses the user's cost (``sse``: positions only), so on the other
-    channels its residual carries the echo of parameter and initial-state errors the
-    positions tolerate: smooth, well above the noise where a channel is sharp (a wheel's
-    velocity over a curb), and not a missing effect. What this fit cannot whiten the linear
-    model cannot explain.
-
-    Parameters
-    ----------
-    problem : OutputErrorProblem
-        The baseline problem (its measurement, ``x0`` handling and model).
-    p : mapping
-        Baseline parameters (SI), the start.
-    free : list of str
-        Parameters to refit.
-    noise_var : mapping
-        White-noise variance per channel (channel units squared).
-    maxfev : int, optional
-        Most residual evaluations, the Jacobians included (``suspid diagnose --maxfev``).
-
-    Returns
-    -------
-    params : dict
-        Refitted parameters (SI).
-    residual : dict
-        ``channel -> measured - predicted`` for every measured channel of the model.
+    """The declared linear model refitted on every measured channel, each weighted by its noise:
+    what this fit cannot whiten the linear model cannot explain. Returns parameters and residuals.
     """
     model = problem.model
     meas = problem.meas
@@ -715,32 +503,7 @@ def reweighted_linear_fit(problem: OutputErrorProblem, p: Mapping[str, float], f
                       meas.source)
     pr = OutputErrorProblem(model, sub, cost="frobenius", x0=problem.x0, weights=w,
                             affine=forward_pieces(problem, p))
-    th0 = np.array([float(p[k]) for k in free])
-    big = np.full(pr.n_obs, 1e6)
-
-    def params_of(u: FloatArray) -> dict[str, float]:
-        q = dict(p)
-        q.update(zip(free, th0 * np.exp(u)))
-        return q
-
-    def vec(u: FloatArray) -> FloatArray:
-        if not np.all(np.abs(u) < 20):
-            return big
-        try:
-            r = pr.residual_vector(params_of(u))
-        except (np.linalg.LinAlgError, ValueError, FloatingPointError):
-            return big
-        return r if np.all(np.isfinite(r)) else big
-
-    q = dict(p)
-    if free:
-        try:
-            sol = lm_within(vec, np.zeros(len(free)), maxfev, max_nfev=30 * (len(free) + 1),
-                            diff_step=1e-6, xtol=1e-10, ftol=1e-10, gtol=1e-10)
-            if sol.fun <= float(vec(np.zeros(len(free))) @ vec(np.zeros(len(free)))):
-                q = params_of(sol.x)
-        except (ValueError, np.linalg.LinAlgError):
-            pass
+    q, _ = _lm_log(pr.residual_vector, p, free, maxfev, pr.n_obs, 1e6)
     pred = pr.predict(q)
     return q, residuals_of(chans, meas.measured, all_channels(pr, q, pred.x0))
 

@@ -1,26 +1,8 @@
-"""Residual analysis: whiteness, correlations, and the residual *force* against candidate effects.
+"""Residual analysis: output-residual statistics and the residual *force* against candidate effects.
 
-Two views of what the fitted linear model misses:
-
-* **Output residual** ``e = y_measured - y_model`` per channel: RMS, autocorrelation and
-  the Ljung–Box statistic (is it white noise?), a noise level from second differences
-  (``var(diff2 e) / 6`` is the variance of white noise and nearly blind to a smooth
-  structured residual), and cross-correlation with the road inputs and the suspension
-  states.
-* **Residual force** reconstructed from the measured motion,
-  ``R = M q'' + C q' + K q - Fk r - Fc r'`` at the fitted parameters (for ``quarter2`` the
-  body row is ``m1 x1'' + c1 d' + k1 d``). If the truth has an effect force ``Q``, then
-  ``R = Q + (linear terms of the parameter errors)``, so ``R`` is regressed on the
-  parameter sensitivities plus each candidate's regressors (each effect class supplies
-  its own: ``sgn d'`` for friction, ``d^3`` for a progressive spring, the tyre's pulling
-  force for lift-off, ...). The regression gives each physical candidate's parameters and refined base parameters —
-  the starting point of the output-error refit — and the fraction of the residual force
-  it explains. Sensor effects are screened in the output residual (each effect class
-  gives its reading's sensitivity to its parameter), a time shift between channels also
-  in the residual force.
-
-All signals are smoothed by the same Savitzky–Golay filter before the force is formed, so
-the equation stays consistent (a linear filter commutes with the linear terms).
+The residual force ``R = M q'' + C q' + K q - Fk r - Fc r'`` is regressed on the parameter
+sensitivities plus each candidate's regressors (its parameters, refined base parameters and
+the share of ``R`` it explains); sensor effects are screened in the output residual.
 """
 from __future__ import annotations
 
@@ -54,10 +36,7 @@ def autocorr(e: FloatArray, maxlag: int) -> FloatArray:
 
 
 def ljung_box(e: FloatArray, lags: int = 20) -> tuple[float, float]:
-    """Ljung–Box statistic ``Q`` and its chi-square p-value over ``lags`` lags.
-
-    ``Q = n (n + 2) sum_k rho_k^2 / (n - k)``; a small p-value rejects whiteness.
-    """
+    """Ljung–Box statistic ``Q`` and its chi-square p-value over ``lags`` lags."""
     x = np.asarray(e, dtype=float)
     n = int(np.sum(~np.isnan(x)))
     if n < 3:  # no lag to test (autocorr's own limit): no evidence against whiteness
@@ -78,11 +57,7 @@ def noise_variance(e: FloatArray) -> float:
 
 
 def xcorr_peak(a: FloatArray, b: FloatArray, maxlag: int) -> tuple[float, int]:
-    """Largest normalised cross-correlation of ``a`` and ``b`` over ``|lag| <= maxlag``.
-
-    Returns ``(rho, lag)``; lag > 0 means ``a`` follows ``b``. Lags beyond the record's
-    length (a short record) are not tried.
-    """
+    """Largest normalised cross-correlation ``(rho, lag)``, ``|lag| <= maxlag`` (> 0: ``a`` follows)."""
     ok = ~(np.isnan(a) | np.isnan(b))
     if not ok.any():
         return 0.0, 0
@@ -137,12 +112,7 @@ class ChannelStats:
 
 
 def channel_stats(name: str, e: FloatArray, y: FloatArray, lags: int = 20, skip: int = 0) -> ChannelStats:
-    """:class:`ChannelStats` of residual ``e`` of measured signal ``y``.
-
-    The whiteness statistics (Ljung–Box, lag-1 autocorrelation, zero-mean test) ignore the
-    first ``skip`` samples, where the fitted initial state's error still decays (it is
-    estimated from the cost channels and shows as a short transient on the others).
-    """
+    """Residual ``e`` of signal ``y``; whiteness ignores the first ``skip`` samples."""
     rms = float(np.sqrt(np.nanmean(e ** 2)))
     nv = noise_variance(e)
     q, p = ljung_box(e[skip:], lags)
@@ -153,12 +123,7 @@ def channel_stats(name: str, e: FloatArray, y: FloatArray, lags: int = 20, skip:
 
 
 def mean_test(e: FloatArray) -> tuple[float, float]:
-    """Mean of ``e`` and the two-sided p-value of ``mean = 0`` (effective sample count).
-
-    Ljung–Box works on the autocorrelation of the mean-removed residual and cannot see a
-    constant offset; on a channel outside the cost (a velocity under ``sse``) nothing else
-    would show it.
-    """
+    """Mean of ``e`` and the p-value of ``mean = 0`` (Ljung–Box cannot see a constant offset)."""
     x = np.asarray(e, dtype=float)
     x = x[~np.isnan(x)]
     if x.size < 3:
@@ -175,18 +140,8 @@ def mean_test(e: FloatArray) -> tuple[float, float]:
 def shift_allpass(t: FloatArray, y: FloatArray, dt: float) -> FloatArray:
     """``y(t + dt)`` by an all-pass (Fourier) fractional shift (s, channel units).
 
-    Interpolating a noisy record at a fraction of a sample is a low-pass filter: linear
-    interpolation halfway between samples halves the variance of white noise, a cubic
-    spline takes a quarter off it. A trial time shift of a noisy channel then looks like
-    an improvement for no other reason than the smoothing — a spurious sub-sample
-    ``sensor_delay`` that screens and refits above any real effect at a few per cent of
-    noise. The phase-only shift keeps every frequency's amplitude (white noise stays white
-    at the same variance; integer shifts are exact). The record is extended by its mirror
-    image so the periodic continuation has no step at the ends.
-
-    Before the first sample the first value is held; beyond the last the result is NaN
-    (as :meth:`suspid.effects.SensorDelay.compensate`). NaN samples stay NaN where
-    they land. Non-uniform sampling falls back to a cubic spline.
+    Interpolation would low-pass the noise and reward any sub-sample shift. The first value is held
+    before the start, NaN beyond the end; non-uniform sampling falls back to a cubic spline.
     """
     tt = np.asarray(t, dtype=float)
     yy = np.asarray(y, dtype=float)
@@ -201,8 +156,6 @@ def shift_allpass(t: FloatArray, y: FloatArray, dt: float) -> FloatArray:
         out = CubicSpline(tt[ok], yy[ok], extrapolate=False)(tq)
     else:
         yf = yy if ok.all() else np.interp(tt, tt[ok], yy[ok])
-        # take out a quadratic with the record's end slopes (shifted exactly, added back) so
-        # the mirrored continuation has no kink either
         tau, T = tt - tt[0], tt[-1] - tt[0]
         m = min(n, 5)
         a0 = np.polyfit(tau[:m], yf[:m], 2)
@@ -246,13 +199,7 @@ class Motion:
 
 def motion_from(model: SuspensionModel, meas: Measurement, predicted: Mapping[str, FloatArray],
                 U: FloatArray) -> Motion:
-    """Coordinates and derivatives from the measurement, filling gaps from the model.
-
-    A coordinate's velocity is the measured ``_dot`` channel, else the derivative of the
-    measured position; its acceleration the measured ``_ddot``, else the derivative of the
-    velocity; anything not measured comes from the fitted model's simulation
-    ``predicted``. Everything is smoothed by one Savitzky–Golay filter (20 ms, cubic).
-    """
+    """Coordinates and derivatives from the measurement (Savitzky–Golay smoothed), gaps from ``predicted``."""
     t = meas.t
     n = t.size
     fs = (n - 1) / (t[-1] - t[0])
@@ -315,36 +262,8 @@ def force_sensitivity(model: SuspensionModel, p: Mapping[str, float], mo: Motion
 # ------------------------------------------------------------------------- screening
 @dataclass
 class Screen:
-    """Screening of one candidate effect (regression on the residual force or output residual).
-
-    Attributes
-    ----------
-    name : str
-        Effect name.
-    domain : {"force", "output"}
-    explained : float
-        Fraction of the (weighted) residual sum of squares the candidate removes beyond
-        what the base parameters alone remove (0..1).
-    tstat : float
-        Largest |t| of the candidate's coefficients (effective-sample corrected).
-    plausible : bool
-        Signs and magnitudes physically possible (e.g. friction > 0).
-    params : dict
-        Estimated effect parameters (start of the refit).
-    base : dict
-        Refined base parameters from the regression (start of the refit).
-    note : str
-    sites : list of str or None
-        For a physical effect, the sites it was screened at when not the library's form
-        (``["front strut"]`` of a half car); ``None`` = every site, shared parameters.
-    alternatives : list of Screen
-        Close runners-up of the same effect with other settings (``sensor_delay``: other
-        channel groups), refitted alongside it.
-    per_site : dict
-        For a strut effect of a model with several struts, the regression with one
-        coefficient per strut: ``"sites"`` (site name -> params), ``"explained"`` (share of
-        the residual force) and ``"plausible"`` (every strut's values physical) — do front
-        and rear agree?
+    """Screening of one candidate effect: ``explained`` share (0..1) beyond the base parameters, ``tstat``,
+    ``params``/``base`` (the refit's start), ``sites`` (``None``: every site), runners-up, per-strut fit.
     """
 
     name: str
@@ -386,12 +305,18 @@ def _regress(y: FloatArray, X: FloatArray) -> tuple[FloatArray, float, FloatArra
     return np.asarray(beta, dtype=float), ss, np.asarray(se, dtype=float)
 
 
+def _refined(p: Mapping[str, float], names: list[str], delta: FloatArray) -> dict[str, float]:
+    """``p`` with each of ``names`` moved by ``-delta`` where that stays positive."""
+    out = dict(p)
+    for k, d in zip(names, delta):
+        if p[k] - d > 0:
+            out[k] = float(p[k] - d)
+    return out
+
+
 def velocity_noise(mo: Motion, noise_var: Mapping[str, float], coords: tuple[str, ...] | list[str],
                    h: float) -> FloatArray:
-    """Standard deviation (per coordinate) of the white noise left in the smoothed velocities
-    ``mo.qd``: the channel's white-noise variance (e.g. of the baseline residual) through
-    the Savitzky–Golay filter of :func:`motion_from` (smoothing a measured velocity, or
-    differentiating a measured position); zero where the model supplied it."""
+    """Per-coordinate std of the white noise left in the smoothed velocities ``mo.qd``."""
     n = mo.qd.shape[0]
     w = _savgol_window(n, 1.0 / h)
     g0 = float(np.sum(savgol_coeffs(w, 3) ** 2))
@@ -409,23 +334,10 @@ def velocity_noise(mo: Motion, noise_var: Mapping[str, float], coords: tuple[str
 def screen_physical(model: SuspensionModel, p: Mapping[str, float], free: list[str],
                     mo: Motion, noise_var: Mapping[str, float] | None = None,
                     h: float | None = None) -> tuple[list[Screen], dict[str, Any]]:
-    """Regress the residual force on base sensitivities plus each physical candidate.
+    """Regress the residual force on base sensitivities plus each registered physical candidate.
 
-    Generic over the effect registry: every registered physical effect contributes its
-    regressors (:meth:`~suspid.effects.PhysicalEffect.regressors`, one column per
-    coefficient, times each site's direction ``b``) for each of its screening trials
-    (:meth:`~suspid.effects.PhysicalEffect.screen_trials`: the bump stop's gaps,
-    the friction sign's widths), and its parameters come from the coefficients
-    (:meth:`~suspid.effects.PhysicalEffect.from_coefficients`). Each effect is
-    screened in the library's form where it is available for the model (all its sites,
-    one shared parameter set) and, for a model with several struts, in each strut alone;
-    the best plausible form and trial are kept (:attr:`Screen.sites`). ``noise_var``
-    (channel -> white-noise variance) and the sample interval ``h`` give the noise of the
-    smoothed strut rates (:func:`velocity_noise`), passed to the regressors (the friction
-    sign widens with it).
-
-    Returns the screens (one per applicable candidate) and the force-domain summary
-    (weighted RMS of the residual force per coordinate before and after the base refinement).
+    Each effect is tried in the library's form and in each strut alone; the best plausible form is
+    kept. Returns the screens and the force-domain summary.
     """
     R = residual_force(model, p, mo)
     nq = R.shape[1]
@@ -434,11 +346,10 @@ def screen_physical(model: SuspensionModel, p: Mapping[str, float], free: list[s
                 else np.zeros(nq))
     wrow = 1.0 / np.maximum(np.sqrt(np.mean(R ** 2, axis=0)), 1e-12)
     y = (R * wrow).reshape(-1)
-    # base sensitivities (free parameters only); R(theta_hat) ~ sum_i D_i delta_i + Q
     base_names = [k for k in free if k in p]
     D = [(force_sensitivity(model, p, mo, k) * wrow).reshape(-1) for k in base_names]
     X0 = np.column_stack(D) if D else np.zeros((y.size, 0))
-    beta0, ss0, _ = _regress(y, X0) if D else (np.zeros(0), float(y @ y), np.zeros(0))
+    _, ss0, _ = _regress(y, X0) if D else (np.zeros(0), float(y @ y), np.zeros(0))
     ss_raw = float(y @ y)
     neff = effective_n(y[: n])  # serial correlation of the first equation
     infl = math.sqrt(max(n / neff, 1.0))
@@ -454,11 +365,7 @@ def screen_physical(model: SuspensionModel, p: Mapping[str, float], free: list[s
         X = np.column_stack([X0] + [e[:, None] for e in E]) if D else np.column_stack(E)
         beta, ss1, se = _regress(y, X)
         explained = max(0.0, (ss0 - ss1) / ss0) if ss0 > 0 else 0.0
-        refined = dict(p)
-        for k, d in zip(base_names, beta[: len(D)]):
-            if p[k] - d > 0:
-                refined[k] = float(p[k] - d)
-        return beta[len(D):], explained, se[len(D):] * infl, refined
+        return beta[len(D):], explained, se[len(D):] * infl, _refined(p, base_names, beta[: len(D)])
 
     def rate_noise(site: Site) -> float:
         """Standard deviation (m/s) of the noise in the smoothed rate at ``site``."""
@@ -484,8 +391,6 @@ def screen_physical(model: SuspensionModel, p: Mapping[str, float], free: list[s
             continue
         if not every:
             continue
-        # candidate forms: the library's (every site, shared parameters) where the effect
-        # is available for this model, and each strut alone where there are several
         variants: list[list[Site] | None] = [None] if cls.sites_problem(every) is None else []
         if cls.site_kind == "strut" and len(every) > 1:
             variants += [[site] for site in every]
@@ -543,20 +448,8 @@ def output_residuals(meas: Measurement, predicted: Mapping[str, FloatArray]) -> 
 def output_regression(cls: type[SensorEffect], group: Sequence[str], t: FloatArray,
                       resid: Mapping[str, FloatArray], predicted: Mapping[str, FloatArray]
                       ) -> tuple[float, float, float] | None:
-    """Regress the output residual of ``group`` on the effect's output sensitivity.
-
-    ``e_c ~ beta r_c`` over the group's channels ``c`` (``r_c`` from
-    :meth:`~suspid.effects.SensorEffect.output_sensitivity`), pooled:
-    ``beta = sum_c mean(e_c r_c) / sum_c mean(r_c^2)``.
-
-    Returns
-    -------
-    tuple or None
-        ``(beta, share, tstat)``: the screened parameter's value; the share of the
-        channel-normalised output residual (each of the ``resid`` channels weighs
-        ``1 / n_channels``) it removes, ``sum_c beta^2 mean(r_c^2) / mean(e_c^2) / n``; its
-        t-statistic with the effective sample count of the group's first channel
-        (serial correlation). ``None`` when no channel of the group can be regressed.
+    """Pooled regression ``e_c ~ beta r_c`` of the group's output residual: ``(beta, share, tstat)``
+    or ``None``.
     """
     used: list[tuple[FloatArray, FloatArray]] = []
     for c in group:
@@ -589,14 +482,7 @@ def output_regression(cls: type[SensorEffect], group: Sequence[str], t: FloatArr
 def screen_sensor(model: SuspensionModel, meas: Measurement, p: Mapping[str, float], free: list[str],
                   predicted: Mapping[str, FloatArray], U: FloatArray,
                   max_delay: float) -> list[Screen]:
-    """Screen every registered sensor effect (one :class:`Screen` per effect with a candidate).
-
-    A time shift (:attr:`~suspid.effects.SensorEffect.time_shift`) is screened by
-    :func:`screen_time_shift`; any other sensor effect by regressing the output residual of
-    each of its channel groups (:meth:`~suspid.effects.SensorEffect.screen_groups`)
-    on its output sensitivity (:func:`output_regression`); the group explaining the largest
-    share of the channel-normalised output residual is the candidate.
-    """
+    """Screen every registered sensor effect: one :class:`Screen` per effect with a candidate."""
     out: list[Screen] = []
     resid = output_residuals(meas, predicted)
     for cls in effect_classes().values():
@@ -626,24 +512,8 @@ def screen_sensor(model: SuspensionModel, meas: Measurement, p: Mapping[str, flo
 def screen_time_shift(cls: type[SensorEffect], model: SuspensionModel, meas: Measurement,
                       p: Mapping[str, float], free: list[str], predicted: Mapping[str, FloatArray],
                       U: FloatArray, max_delay: float) -> Screen | None:
-    """Screen a time shift between channels (``sensor_delay``, any effect with ``time_shift``).
-
-    For every channel group of the effect (:meth:`~suspid.effects.SensorEffect.screen_groups`:
-    all channels of one coordinate, or one channel) and every trial delay on a grid up to
-    ``max_delay``, the group is advanced by the delay and the residual force is regressed
-    on the base sensitivities; a lag makes position, velocity and acceleration of different
-    coordinates inconsistent, so the right compensation removes most of the residual force.
-    The best grid point is refined by a parabola through its neighbours. The trial shifts
-    are all-pass (:func:`shift_allpass`): an interpolating shift would smooth the noise of
-    the shifted channels and reward every half-sample delay.
-
-    The residual force is built from differentiated measurements and, at a few per cent of
-    noise, is mostly their noise; a lag of a channel outside the baseline's cost is plainer
-    in its output residual, which is ``-d`` times the model's rate of that channel. Each
-    group is also scored that way (:func:`output_regression`, only for a lag the effect
-    accepts, :meth:`~suspid.effects.SensorEffect.params_from_screen`), and the better
-    of the two views ranks the group (:attr:`Screen.domain` says which). Close runners-up
-    (other channel groups) are returned in :attr:`Screen.alternatives`.
+    """Screen a time shift of each channel group against the others (``sensor_delay``) in the residual
+    force and in the output residual; close runners-up go to :attr:`Screen.alternatives`.
     """
     t = meas.t
     h = float(np.median(np.diff(t)))
@@ -661,11 +531,7 @@ def screen_time_shift(cls: type[SensorEffect], model: SuspensionModel, meas: Mea
         sub = Motion(m.q[:-trim], m.qd[:-trim], m.qdd[:-trim], m.r[:-trim], m.rd[:-trim], m.source)
         X = np.column_stack([(force_sensitivity(model, p, sub, k) * wrow).reshape(-1) for k in base_names])
         beta, ss, _ = _regress(y, X)
-        refined = dict(p)
-        for k, dlt in zip(base_names, beta):
-            if p[k] - dlt > 0:
-                refined[k] = float(p[k] - dlt)
-        return ss, refined
+        return ss, _refined(p, base_names, beta)
 
     def ss_for(m: Motion) -> float:
         return regress_for(m)[0]
@@ -674,7 +540,6 @@ def screen_time_shift(cls: type[SensorEffect], model: SuspensionModel, meas: Mea
     shifted: dict[tuple[int, float], Motion] = {}
     groups = cls.screen_groups(model, list(meas.measured))
     grid = [d for d in h * np.array([0.5, 1, 1.5, 2, 3, 4, 6, 8, 11, 16, 22, 32]) if d <= max_delay]
-    # which measured channel each smoothed column comes from (a lag moves what it feeds)
     feeds: list[tuple[str, int, str]] = []
     for i, c in enumerate(model.coords):
         for kind, chain in (("q", (c,)), ("qd", (f"{c}_dot", c)), ("qdd", (f"{c}_ddot", f"{c}_dot", c))):
@@ -684,13 +549,7 @@ def screen_time_shift(cls: type[SensorEffect], model: SuspensionModel, meas: Mea
                 if ch in meas.measured:
                     feeds.append((kind, i, ch))
                     break
-    # The same question in the output residual: a channel lagging by d reads
-    # y(t - d) ~ y - d y', so its residual is -d times the model's rate. The residual force
-    # is formed from differentiated measurements and is dominated by their noise at a few
-    # per cent (a 5 ms lag of x1_dot at 3 % noise moves it by nothing); the output residual
-    # of a channel the baseline's cost does not fit (a velocity under sse) shows the lag
-    # directly. Channels are normalised by their residual RMS (each weighs 1 / n_channels,
-    # as for sensor_offset); only a lag (d > 0) within max_delay counts.
+    # a channel lagging by d reads y - d y': the output residual scores the lag too
     resid = output_residuals(meas, predicted)
 
     n_out = max(len(resid), 1)
@@ -767,10 +626,7 @@ def screen_time_shift(cls: type[SensorEffect], model: SuspensionModel, meas: Mea
                            "residual force")
 
     best = screen_of(*per_group[0][1:])
-    # Near ties between channel groups (one channel of a coordinate or all of them) are
-    # common: the residual force is dominated by the stiff terms, which see positions only.
-    # The refit decides between them on the output residual of every channel, so keep the
-    # close runners-up and the whole coordinate's group of a single-channel winner.
+    # near ties between channel groups are common: keep close runners-up for the refit to decide
     g0 = groups[per_group[0][1]]
     closure = next((gi for gi, g in enumerate(groups)
                     if len(g0) == 1 and len(g) > 1 and g0[0] in g), None)

@@ -1,19 +1,8 @@
 """Closing the loop with the road unknown: a strut effect found in the body equations.
 
-With the road unknown the record's equations are the body rows (``M q'' + sum_i g_i (c_i d_i'
-+ k_i d_i) = 0``, :mod:`estimator.identify.roadfree`). A strut effect the model lacks is one
-more force ``phi(d_i, d_i')`` in the struts, so it enters the same equations as one more
-column: each registered strut effect supplies its regressors (``sgn d'`` for friction,
-``|d'|`` for asymmetric damping, ``|d'| d'``, ``d^3``, the bump stop's engaged compression
-for a grid of gaps) evaluated on the measured ride heights, and the fit of the body equations
-is made again with that column's coefficient free, through the very same path
-(:func:`~estimator.identify.roadfree.fit_road_unknown` with ``extra``). The candidate chosen
-is the one that explains most of the equation error with a coefficient that is physical and
-stands clear of its standard error; with none such, the answer is "no missing effect".
-
-What the road hides is not tried: a tyre effect (lift-off) acts through the unmeasured road,
-and a sensor delay or offset of the road does not exist here; a constant ride-height or
-accelerometer offset drops out of the equations by construction.
+Each registered strut effect's regressors on the measured ride heights become one more column
+of :func:`~estimator.identify.roadfree.fit_road_unknown`; the candidate explaining most of the
+equation error with a physical coefficient clear of its standard error wins.
 """
 from __future__ import annotations
 
@@ -61,8 +50,7 @@ class RoadUnknownDiagnosis:
 
 
 def _lowpass_and_rate(x: FloatArray, dt: float, f_hi: float) -> tuple[FloatArray, FloatArray, float]:
-    """``x`` low-passed at ``f_hi`` (Hz, a cosine taper over the last fifth), its rate by the
-    spectral derivative, and the standard deviation (m/s) of the white noise left in the rate."""
+    """``x`` low-passed at ``f_hi`` (Hz), its spectral rate, and the white-noise std (m/s) of the rate."""
     n = x.size
     X = np.fft.rfft(x - x.mean())
     f = np.fft.rfftfreq(n, dt)
@@ -79,9 +67,7 @@ def _lowpass_and_rate(x: FloatArray, dt: float, f_hi: float) -> tuple[FloatArray
 
 def _strut_motion(model: SuspensionModel, meas: Measurement, p: Mapping[str, float],
                   f_hi: float) -> tuple[list[FloatArray], list[FloatArray], list[float]] | None:
-    """Each strut's extension (m) and rate (m/s) on the record's samples, low-passed to the
-    fit band, from its ride height or its coordinates' positions; None when a strut has
-    neither or the record has gaps."""
+    """Each strut's extension (m) and rate (m/s), low-passed; None when a strut is unmeasured or gapped."""
     t = np.asarray(meas.t, dtype=float)
     if t.size < 64:
         return None
@@ -109,8 +95,7 @@ def _columns(cls: type[PhysicalEffect], trial: dict[str, Any], sites: Sequence[S
              idx: Sequence[int], rows: Sequence[int], s: Sequence[FloatArray],
              sd: Sequence[FloatArray], base: Mapping[str, float], noise: Sequence[float]
              ) -> dict[str, list[FloatArray]]:
-    """The effect's force columns in the body rows: coefficient ``j``'s column in row ``r``
-    is ``sum_i g_i[row] col_ij(d_i, d_i')`` over the struts ``idx``."""
+    """The effect's force columns in the body rows, summed over the struts ``idx``."""
     cols: dict[str, list[FloatArray]] = {}
     for i in idx:
         regs = cls.regressors(sites[i], s[i], sd[i], base, trial, noise[i])
@@ -124,8 +109,7 @@ def _columns(cls: type[PhysicalEffect], trial: dict[str, Any], sites: Sequence[S
 
 def diagnose_road_unknown(model: SuspensionModel, meas: Measurement, params: Parameters
                           ) -> RoadUnknownDiagnosis:
-    """Fit the body equations, try every registered strut effect in them, keep the one the
-    equation error supports (see the module docstring)."""
+    """Fit the body equations, try every strut effect in them, keep the one the equation error supports."""
     base = fit_road_unknown(model, meas, params, misfit_fails=False)
     warnings = list(base.warnings)
     evidence: dict[str, Any] = {"road": "unknown", "candidates": [], "not_tried": {}}

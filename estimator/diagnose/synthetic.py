@@ -1,11 +1,4 @@
-"""Synthetic records with undeclared effects (the diagnose tests and ``tools/diagnose_matrix.py``).
-
-One recipe, so the measured tables in ``docs/closing-the-loop.md`` and the tests use the
-same data: a named scenario (:func:`suspid.excitation.make_scenario`), the effects injected
-with :func:`suspid.effects.inject` (plus an optional arbitrary generalised force,
-integrated by ``solve_ivp``), every position and velocity channel with white noise of a
-given fraction of the channel's standard deviation.
-"""
+"""Synthetic records with undeclared effects (the diagnose tests and ``tools/diagnose_matrix.py``)."""
 from __future__ import annotations
 
 from typing import Any, Mapping, Sequence
@@ -27,38 +20,12 @@ def synthetic_record(model: str, effects: Sequence["str | Effect"], scenario: st
                      **scen: Any) -> Measurement:
     """Simulate ``model`` with ``effects`` nobody declared and return the noisy record.
 
-    Parameters
-    ----------
-    model : str
-        A registered model name (``quarter1``, ``quarter2``, ``half4``, ...).
-    effects : sequence
-        Effect spec strings (``"coulomb_friction:F=120"``) or effect objects.
-    scenario : str
-        Scenario name (``bump``, ``curb``, ``iso8608``, ``initial``).
-    params : mapping, optional
-        True parameters (SI; default the model's documented defaults).
-    fs : float
-        Sample rate (Hz).
-    duration : float
-        Record length (s).
-    noise : float
-        White noise on every channel, as a fraction of the channel's standard deviation.
-    seed : int
-        Seed of the scenario (ISO road) and, plus 101, of the noise.
-    extra_force : callable, optional
-        A further generalised force ``f(t, x, u, params)`` (N, N m) outside the library
-        (e.g. an engine shake); the record is then integrated by ``solve_ivp``.
-    noise_seed : int, optional
-        Seed of the noise instead of ``seed + 101``; ``suspid simulate --seed S`` draws the
-        same noise as ``noise_seed=S`` (same channel order), so a record made on the
-        command line can be rebuilt here.
-    **scen
-        Scenario options (``h``, ``v_kmh``, ``road_class``, ...).
-
-    Returns
-    -------
-    Measurement
-        Positions and velocities (no accelerations) with noise, the road without.
+    ``effects`` are spec strings (``"coulomb_friction:F=120"``) or effect objects; ``scenario`` a
+    scenario name with options ``**scen``; ``params`` the truth (SI, default the model's); ``fs``
+    (Hz), ``duration`` (s); ``noise`` the white noise per channel as a fraction of its std, seeded
+    by ``noise_seed`` (default ``seed + 101``; ``suspid simulate --seed S`` draws ``noise_seed=S``);
+    ``extra_force(t, x, u, params)`` a further generalised force (N, N m), integrated by
+    ``solve_ivp``. Returns positions and velocities with noise, the road without.
     """
     m = get_model(model)
     p = dict(m.defaults(), **(params or {}))

@@ -1,9 +1,6 @@
-"""The seed's Taguchi orthogonal arrays and level values (Tables 3-6), verbatim.
+"""The seed's Taguchi orthogonal arrays and level values (Tables 3-6, SI units), verbatim.
 
-The seed generated the run orders with R's *qualityTools* (no randomisation). The arrays
-below are copied from its Table 4 (L16, 4 levels, 5 factors A-E) and Table 6 (L27, 3 levels,
-13 columns of which A-K are used and L-N are "alt11..alt13", unused). Level values are the
-seed's Tables 3 and 5, SI units.
+L16: 4 levels, factors A-E; L27: 3 levels, columns A-K (the seed's unused L-N left out).
 """
 from __future__ import annotations
 
@@ -88,13 +85,7 @@ L27_ARRAY: IntArray = np.array([
 
 
 def is_orthogonal(array: IntArray) -> bool:
-    """``True`` if every pair of columns shows every level pair equally often (strength 2).
-
-    Parameters
-    ----------
-    array : ndarray of int, shape (runs, factors)
-        Levels numbered from 1.
-    """
+    """``True`` if every pair of columns (levels from 1) shows every level pair equally often."""
     runs, k = array.shape
     levels = int(array.max())
     expected = runs / levels ** 2

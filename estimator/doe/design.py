@@ -1,25 +1,8 @@
 """The seed's designs of experiments as concrete identification problems.
 
-Each Taguchi row becomes an :class:`Experiment`: the true parameters, the known initial
-state and the time grid of the noise-free target curve. What the seed leaves out is fixed
-here and reported by :func:`setup_record` (it goes into ``suspid doe --json``):
-
-* **Excitation**: the seed's DoE factors are initial states only, so every experiment is a
-  free response from a known initial state (no road input), as in its Table 2 / §6.1.
-* **Horizon and sample rate**: ``HORIZON`` = 20 s at ``FS`` = 100 Hz for every model. The
-  designs span damping time constants from ~20 ms (``c1/m1`` = 100 1/s) to ~50 s and
-  periods up to ~30 s (1-DOF, m = 2500 kg, k = 100 N/m); 20 s shows at least two thirds
-  of the slowest period and 100 Hz resolves the fastest decay over a few samples. The
-  simulation is exact at any sample rate (modal FOH), so the rate only sets how much
-  information each record holds, not its accuracy.
-* **Measured channels**: positions and velocities of every coordinate (the state matrix
-  MATLAB's ode45 returns); cost ``sse`` uses the positions, ``frobenius`` all of them.
-* **The model's own part**: which array, which factor sets which parameter or initial
-  state, the constants every row shares and the choices behind them belong to the model
-  (:attr:`~suspid.models.base.SuspensionModel.doe_design`, a
-  :class:`~suspid.models.base.DoeDesign`; e.g. the seed's section 6.1 half car in
-  ``suspid/models/half4.py``). This module is generic: a model with a design, built in or
-  from another package, runs under ``suspid doe`` without a change here.
+Each Taguchi row becomes an :class:`Experiment` (truth, known initial state, free response on
+the grid of ``HORIZON`` s at ``FS`` Hz, see ``docs/paper-reproduction.md``); the array and
+factor map belong to the model (:attr:`~suspid.models.base.SuspensionModel.doe_design`).
 """
 from __future__ import annotations
 
@@ -47,24 +30,8 @@ SEED_ARRAYS: dict[str, tuple[Any, dict[str, Any]]] = {
 
 @dataclass(frozen=True)
 class DesignSpec:
-    """One model's design resolved: the orthogonal array, its factor levels, the column map.
-
-    Attributes
-    ----------
-    name : str
-        The design's name (``L16-4``, ``L27-3``).
-    array : ndarray
-        Rows of factor levels (1-based).
-    levels : dict
-        Factor letter -> (name, unit, level values), the used factors only.
-    columns : dict
-        Factor letter -> the model's parameter or initial-state name.
-    constants : dict
-        Further true parameter values every row shares (SI).
-    body_x0 : dict
-        Further initial-state values every row shares.
-    choices : dict
-        The design choices the seed leaves out, with their reasons (for ``setup_record``).
+    """One model's design resolved: array, factor ``levels`` (name, unit, values), ``columns`` (factor ->
+    parameter or state), shared ``constants`` and ``body_x0`` (SI) and the seed's missing ``choices``.
     """
 
     name: str
@@ -77,15 +44,7 @@ class DesignSpec:
 
 
 def design_spec(model: SuspensionModel) -> DesignSpec:
-    """The design ``model`` declares (:attr:`~suspid.models.base.SuspensionModel.doe_design`).
-
-    Raises
-    ------
-    UsageError
-        The model has no design (naming the models that have one), names an unknown array,
-        maps a factor onto something that is neither its parameter nor its state, or leaves
-        a parameter without a value.
-    """
+    """The design ``model`` declares; UsageError when it has none or it does not fit the model."""
     d = model.doe_design
     if d is None:
         raise UsageError(f"no design for model {model.name!r}; "
@@ -119,8 +78,11 @@ def design_spec(model: SuspensionModel) -> DesignSpec:
                       dict(d.body_x0), dict(d.choices))
 
 
-class _Designs(Mapping[str, DesignSpec]):
-    """``model name -> DesignSpec`` of every registered model that declares a design."""
+class _Designs(Mapping[str, Any]):
+    """``model name -> DesignSpec`` (or its attribute ``attr``) of every model with a design."""
+
+    def __init__(self, attr: str | None = None) -> None:
+        self._attr = attr
 
     def _names(self) -> list[str]:
         out = []
@@ -132,13 +94,14 @@ class _Designs(Mapping[str, DesignSpec]):
                 continue
         return out
 
-    def __getitem__(self, name: str) -> DesignSpec:
+    def __getitem__(self, name: str) -> Any:
         if name not in MODELS:
             raise KeyError(name)
         model = get_model(name)
         if model.doe_design is None:
             raise KeyError(name)
-        return design_spec(model)
+        spec = design_spec(model)
+        return spec if self._attr is None else getattr(spec, self._attr)
 
     def __iter__(self) -> Iterator[str]:
         return iter(self._names())
@@ -147,40 +110,15 @@ class _Designs(Mapping[str, DesignSpec]):
         return len(self._names())
 
 
-class _DesignNames(Mapping[str, str]):
-    """``model name -> design name`` (``L16-4``, ``L27-3``) of every model with a design."""
-
-    def __getitem__(self, name: str) -> str:
-        return DESIGN_SPECS[name].name
-
-    def __iter__(self) -> Iterator[str]:
-        return iter(DESIGN_SPECS)
-
-    def __len__(self) -> int:
-        return len(DESIGN_SPECS)
-
-
 #: every model's design, by model name (read from the models; nothing here names one)
 DESIGN_SPECS: Mapping[str, DesignSpec] = _Designs()
 #: the design's name of every model that has one (``suspid doe --model`` choices)
-DESIGNS: Mapping[str, str] = _DesignNames()
+DESIGNS: Mapping[str, str] = _Designs("name")
 
 
 @dataclass
 class Experiment:
-    """One row of a design: the truth and the known initial state.
-
-    Attributes
-    ----------
-    id : int
-        Row number as in the seed's Table 4 / 6 (1-based).
-    levels : dict
-        Factor letter -> level (1-based).
-    truth : dict
-        Every model parameter (SI units).
-    x0 : ndarray
-        Initial state ``[q..., q'...]`` (m, rad, m/s, rad/s).
-    """
+    """One row of a design: ``id`` (1-based, as in the seed), factor ``levels``, ``truth`` (SI), ``x0``."""
 
     id: int
     levels: dict[str, int]
@@ -189,14 +127,7 @@ class Experiment:
 
 
 def experiments(model: SuspensionModel | str) -> list[Experiment]:
-    """All experiments of the seed's design for ``model`` in the seed's order.
-
-    Parameters
-    ----------
-    model : SuspensionModel or str
-        A model with a design (e.g. ``quarter1``: L16-4, Tables 3-4; ``quarter2``,
-        ``half4``: L27-3, Tables 5-6).
-    """
+    """All experiments of the seed's design for ``model`` in the seed's order."""
     if isinstance(model, str):
         model = get_model(model)
     spec = design_spec(model)

@@ -1,12 +1,8 @@
 """Run the seed's designs: simulate each target curve, identify, score.
 
-:func:`run_experiment` is one row; :func:`run_design` the whole table (optionally with a
-progress callback). Starting values are ``init_scale`` times the truth for every free
-parameter; masses (and the pitch inertia) are fixed at the truth unless ``free_masses``.
-Noise-free success = every identified parameter within 1 % of the truth; noisy success =
-every free parameter within its run's reported 3-sigma band (:func:`band_of`: the
-identifier's honest band, the profile likelihood where the curvature band is unreliable),
-and that band closed on both sides.
+Free parameters start at ``init_scale`` times the truth; masses and inertia are fixed at the
+truth unless ``free_masses``. Noise-free success: every identified parameter within 1 % of the
+truth; noisy success: every free parameter within its run's closed 3-sigma band (:func:`band_of`).
 """
 from __future__ import annotations
 
@@ -31,49 +27,25 @@ from suspid.simulate import simulate
 TOL = 0.01
 #: noisy success band (standard errors)
 SIGMAS = 3.0
-#: the probability a Gaussian value lies beyond ``SIGMAS`` standard errors (0.27 %): the
-#: joint region of a row (:func:`joint_region`) misses the truth as often as one band does
+#: probability a Gaussian value lies beyond ``SIGMAS`` standard errors (0.27 %)
 JOINT_ALPHA = math.erfc(SIGMAS / math.sqrt(2.0))
+
+
+def _num(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
 
 
 @dataclass
 class Settings:
     """How one design is run.
 
-    Attributes
-    ----------
-    cost : {"sse", "frobenius"}
-    init_scale : float
-        Free parameters start at ``init_scale`` x truth.
-    free_masses : bool
-        Identify masses and inertia too (unrestricted; scale-ambiguous).
-    mass_init_scale : float, optional
-        With ``free_masses``: masses and inertia start at this times the truth instead of
-        ``init_scale`` (the seed started them at the truth, 1.0, and the rest at 0.5). With
-        every parameter at one common factor the start is already an exactly scaled copy
-        of the truth: the fit is perfect there and nothing moves.
-    noise : float
-        Gaussian noise std as a fraction of each channel's std (0 = noise-free).
-    seed : int
-        Base seed of the noise generator (experiment ``i`` uses ``seed + i``).
-    restarts, step, maxfev, xatol, fatol
-        Nelder-Mead settings passed to :func:`estimator.identify.fit` (``maxfev`` per
-        stage; ``restarts`` of the last stage, which is itself a restart of the earlier
-        stages' answer with a fresh simplex).
-    stages : tuple of float
-        Horizon continuation: fit the first ``stages[0]`` fraction of the record first,
-        then restart from that answer on the next fraction, ..., ending with the whole
-        record (``(1.0,)`` = a single fit of the whole record). Short records make the
-        output-error cost far less multimodal for lightly damped oscillators.
-    polish_step : float
-        Initial simplex edge (log units) of every stage after the first.
-    early_restarts, early_xatol
-        Restarts and ``xatol`` of the stages before the last (they only find the basin).
-    horizon, fs : float
-        Record length (s) and sample rate (Hz).
-    data_start : bool
-        Also start from the data-driven estimate (:mod:`estimator.identify.start`) and keep
-        the lower-cost answer (``False``: the ``init_scale`` start only, as before).
+    Free parameters start at ``init_scale`` x truth (masses and inertia at ``mass_init_scale`` when
+    given and ``free_masses``); ``noise`` is the Gaussian noise std as a fraction of each channel's,
+    seeded by ``seed + experiment id``. ``restarts``, ``step``, ``maxfev``, ``xatol``, ``fatol`` are
+    Nelder-Mead settings of :func:`estimator.identify.fit`. ``stages``: horizon continuation, fit
+    the first fractions of the record first (far less multimodal for light damping), each stage
+    after the first starting with ``polish_step`` (``early_*`` settings before the last).
+    ``horizon`` (s) and ``fs`` (Hz) set the record; ``data_start`` also starts from the data.
     """
 
     cost: str = "sse"
@@ -114,13 +86,10 @@ class Outcome:
     extra: dict[str, Any] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
-        def f(x: float) -> float | None:
-            return float(x) if math.isfinite(x) else None
-
         out = {"id": self.id, "true": self.true, "identified": self.identified,
-               "max_rel_error": f(self.max_rel_error), "success": self.success,
-               "start": self.start, "stderr": {k: f(v) for k, v in self.stderr.items()},
-               "nfev": self.nfev, "cost": f(self.cost), "seconds": round(self.seconds, 4),
+               "max_rel_error": _num(self.max_rel_error), "success": self.success,
+               "start": self.start, "stderr": {k: _num(v) for k, v in self.stderr.items()},
+               "nfev": self.nfev, "cost": _num(self.cost), "seconds": round(self.seconds, 4),
                "identifiable": self.identifiable}
         out.update(self.extra)
         return out
@@ -128,10 +97,7 @@ class Outcome:
 
 def measurement(model: SuspensionModel, exp: Experiment, noise: float = 0.0, seed: int = 0,
                 horizon: float = HORIZON, fs: float = FS) -> tuple[Measurement, dict[str, np.ndarray]]:
-    """Target curve of ``exp``: measured positions and velocities, and the clean ones.
-
-    Noise is Gaussian with std ``noise`` x the channel's own std (seed §6.2).
-    """
+    """Target curve of ``exp`` (noise std ``noise`` x each channel's std): measured and clean channels."""
     t = time_grid(horizon, fs)
     clean = simulate(model, exp.truth, t, None, exp.x0)
     rng = np.random.default_rng(seed)
@@ -162,9 +128,7 @@ def identify_staged(model: SuspensionModel, meas: Measurement, x0: np.ndarray,
                     weights: dict[str, float] | None = None) -> IdentResult:
     """Nelder-Mead in log coordinates with horizon continuation (see :class:`Settings`).
 
-    ``weights`` (channel -> factor on its residual) default to 1, the seed's raw cost.
-    Returns the :class:`IdentResult` of the last (whole-record) stage with ``nfev``
-    summed over the stages.
+    ``weights`` (channel -> residual factor) default to 1; ``nfev`` is summed over the stages.
     """
     stages = tuple(settings.stages) if settings.stages else (1.0,)
     if stages[-1] != 1.0:
@@ -193,11 +157,7 @@ def identify_staged(model: SuspensionModel, meas: Measurement, x0: np.ndarray,
 
 
 def start_parameters(model: SuspensionModel, exp: Experiment, settings: Settings) -> Parameters:
-    """The design's known values fixed at the truth, the free ones at their start.
-
-    Free parameters start at ``init_scale`` x truth; with ``free_masses`` the masses and
-    inertia start at ``mass_init_scale`` x truth when that is given.
-    """
+    """The design's known values fixed at the truth, the free ones at their start (see :class:`Settings`)."""
     free = free_names(model, settings.free_masses)
     mass_scale = settings.init_scale if settings.mass_init_scale is None else settings.mass_init_scale
     kind = {p.name: p.kind for p in model.params}
@@ -208,11 +168,7 @@ def start_parameters(model: SuspensionModel, exp: Experiment, settings: Settings
 
 
 def band_of(res: IdentResult, free: list[str]) -> dict[str, tuple[float, float]]:
-    """The reported 3-sigma band of each free parameter (``nan`` ends without a stderr).
-
-    The identifier's honest band (:mod:`estimator.identify.profile`) where it gave one,
-    else ``value +- SIGMAS x stderr``.
-    """
+    """The reported 3-sigma band of each free parameter (honest band, else ``+- 3 stderr``)."""
     out = {}
     for k in free:
         if res.bands is not None and k in res.bands:
@@ -225,14 +181,10 @@ def band_of(res: IdentResult, free: list[str]) -> dict[str, tuple[float, float]]
 
 def joint_region(res: IdentResult, truth: dict[str, float], free: list[str]
                  ) -> dict[str, Any] | None:
-    """Whether the truth lies in the row's joint 3-sigma confidence region.
+    """Whether the truth lies in the row's joint 3-sigma confidence region (``None`` without covariance).
 
-    The per-parameter band of :func:`band_of` misses a correct truth with probability
-    0.27 % per value, so a row of ``p`` values misses one about ``p`` times as often; the
-    region ``d' C^-1 d <= chi2_p(1 - 0.27 %)`` (``d`` the log-parameter error, ``C`` the
-    identifier's covariance of the log-parameters) misses it 0.27 % of the time per row.
-    ``None`` without a covariance (no standard errors). Returns ``d2`` (the squared
-    Mahalanobis distance), ``limit`` (the chi-square quantile), ``dof`` and ``inside``.
+    The region ``d' C^-1 d <= chi2_p(1 - 0.27 %)`` (``d`` the log-parameter error) misses a correct
+    truth as often per row as one band per value. Returns ``d2``, ``limit``, ``dof`` and ``inside``.
     """
     if res.cov_log is None or not free:
         return None
@@ -245,9 +197,6 @@ def joint_region(res: IdentResult, truth: dict[str, float], free: list[str]
     limit = float(chi2.isf(JOINT_ALPHA, len(free)))
     return {"d2": d2, "limit": limit, "dof": len(free), "inside": bool(d2 <= limit)}
 
-
-def _num(x: float) -> float | None:
-    return float(x) if math.isfinite(x) else None
 
 
 def run_experiment(model: SuspensionModel, exp: Experiment, settings: Settings) -> tuple[Outcome, IdentResult]:
@@ -279,7 +228,6 @@ def run_experiment(model: SuspensionModel, exp: Experiment, settings: Settings) 
     max_rel = max((abs(v) for v in rel.values()), default=0.0)
     bands = band_of(res, free)
     if settings.noise > 0:
-        # inside a closed band (a side the record does not bound is no success)
         success = all(0 < bands[k][0] <= exp.truth[k] <= bands[k][1] < math.inf for k in free)
     else:
         success = max_rel <= TOL
@@ -302,13 +250,9 @@ def run_design(model: SuspensionModel | str, settings: Settings,
                progress: Callable[[int, int, Outcome], None] | None = None) -> dict[str, Any]:
     """Run every (or the listed) experiment of the model's design.
 
-    Returns the contract's object ``{"design", "experiments", "successes", "total"}`` and
-    ``success_beyond_10x``: the rows reported a success (by the study's rule or by the
-    identifier) with a free parameter more than 10x from the truth, which must stay empty.
-    Noisy designs add ``in_joint_region``: the rows whose truth lies in their joint 3-sigma
-    confidence region (:func:`joint_region`; each row's is under ``joint_3sigma``), and
-    ``band_coverage`` (:func:`band_coverage`): how many of the design's closed bands miss
-    their truth against how many correct bands would.
+    Returns the contract's object plus ``success_beyond_10x`` (successes with a parameter more
+    than 10x off, which must stay empty) and, for noisy designs, ``in_joint_region`` and
+    ``band_coverage``.
     """
     if isinstance(model, str):
         model = get_model(model)
@@ -334,30 +278,8 @@ def run_design(model: SuspensionModel | str, settings: Settings,
 def band_coverage(rows: list[dict[str, Any]]) -> dict[str, Any]:
     """Do a noisy design's bands and joint regions miss their truths as often as correct ones?
 
-    Every closed band of every row (``band_3sigma`` of a row's JSON; a band open on a side
-    belongs to a row reported not identifiable and is not counted) misses a correct truth
-    with probability ``JOINT_ALPHA`` (0.27 %), so a design of ``n`` bands misses
-    ``n x 0.27 %`` of them on average (an exact expectation, whatever the correlations). The
-    misses of one row are correlated (one noise realisation moves correlated values
-    together), so their count is not binomial; the rows are independent, and the truth
-    leaves a correct row's joint 3-sigma region (``joint_3sigma``) with probability
-    ``JOINT_ALPHA``: the number of rows outside theirs is binomial, which ``p_value`` tests.
-
-    Parameters
-    ----------
-    rows : list of dict
-        The design's rows (``Outcome.to_json()``: ``id``, ``true``, ``band_3sigma`` and,
-        where there is a covariance, ``joint_3sigma``).
-
-    Returns
-    -------
-    dict
-        ``bands`` (closed bands counted), ``missed`` (those whose truth lies outside),
-        ``expected`` (``bands x 0.27 %``), ``rows_missed`` (ids of rows with a missed band),
-        ``joint_rows`` (rows with a joint region), ``joint_outside`` (ids of rows whose truth
-        lies outside it), ``joint_expected`` (``joint_rows x 0.27 %``) and ``p_value``
-        (the binomial probability of at least that many rows outside if every region is
-        correct: a small value means regions, and so bands, too narrow).
+    Rows are independent, so the rows outside their joint region are binomial, which ``p_value``
+    tests (small: regions, and so bands, too narrow).
     """
     n = missed = 0
     rows_missed: list[int] = []
@@ -393,8 +315,7 @@ FAR_OFF = 10.0
 
 
 def success_beyond(o: Outcome, factor: float) -> bool:
-    """Whether ``o`` is a success (by the study's rule or the identifier's) with a free
-    parameter more than ``factor`` times from the truth (either way)."""
+    """Whether ``o`` is a success with a free parameter more than ``factor`` times from the truth."""
     rel = o.extra.get("rel_error", {})
     far = any(not (1.0 / factor <= 1.0 + v <= factor) for v in rel.values())
     return bool(far and (o.success or o.extra.get("reported_success")))

@@ -1,44 +1,7 @@
 """Extended Kalman filter on the state augmented with suspension parameters.
 
-State (quarter2)::
-
-    z = [x1, x2, v1, v2, theta_c1, theta_k1 (, theta_c2, theta_k2)]
-
-with ``theta_p = p / p_nominal`` (dimensionless, 1 at nominal): scaling the parameters keeps
-the covariance well conditioned next to states of centimetres. The parameters follow a
-random walk; the motion follows the model's one right-hand side.
-
-Prediction (nonlinear)
-    Classical RK4 over each sample interval ``dt`` (``substeps`` sub-intervals) on
-    ``model.rhs(t, x, u, params(theta))`` with the road ``u = [r, r']`` interpolated
-    linearly between the samples. The transition Jacobian ``F = d z_{k+1} / d z_k`` is the
-    *exact* derivative of that RK4 map (tangent-linear RK4: each stage's Jacobian chained
-    through the stages), built from the continuous Jacobian::
-
-        df/dx     = A(theta)                                  (model.state_space)
-        dv'/dtheta_p = p_nom M^-1 (dFk/dp r + dFc/dp r' - dC/dp q' - dK/dp q)
-
-    The matrices are affine in dampers and springs: ``[A(theta) | B(theta)]`` and these
-    slopes are the model's affine pieces
-    (:meth:`~suspid.models.base.SuspensionModel.affine`, ``AB0``, ``dAB``), built once per
-    filter. Tests compare ``F`` and ``H`` with central finite differences of the RK4 map
-    and of ``h``, and the pieces' slopes with the model. For a model without effect terms
-    ``model.rhs`` is ``A(theta) x + B(theta) u``: the step then builds ``[A | B]`` once
-    from the pieces and runs the stages as small products
-    (:meth:`AugmentedEKF._rk4_linear`, tested equal to the ``model.rhs`` step to 1e-12).
-Measurement
-    Positions and velocities are linear in ``z``; an acceleration channel is
-    ``model.rhs(...)[nq + i]``, nonlinear in ``z`` (``c1 (v1 - v2) / m1``), with the same
-    analytic Jacobian rows.
-Noise (see :class:`EKFTuning`)
-    ``R``: per channel, the larger of the white-noise floor measured on the first window
-    (:func:`estimator.stream.window.noise_floor`) and the DBC quantization ``q / sqrt(12)``.
-    ``Q``: random walk of every ``theta`` with intensity ``q_param`` (1/sqrt(s)), i.e.
-    variance ``q_param^2 dt`` per step; the motion states get ``q_state`` (m/s^2/sqrt(Hz))
-    acceleration noise for unmodelled road/quantization effects; with
-    ``EKFTuning.input_noise`` the measured road's own white noise is added as process noise
-    through the step's sensitivity to its road samples (:meth:`AugmentedEKF.set_input_noise`:
-    the road is an input measured with error, not an exact one).
+State ``z = [q, q', theta]``, ``theta_p = p / p_nominal`` (a random walk); prediction by RK4 on
+``model.rhs`` with its exact tangent-linear Jacobian. Design and tuning: ``docs/monitoring.md``.
 """
 from __future__ import annotations
 
@@ -57,28 +20,10 @@ from suspid.models.base import FloatArray, SuspensionModel
 class EKFTuning:
     """Noise settings of the augmented EKF (documented in ``docs/monitoring.md``).
 
-    Attributes
-    ----------
-    q_param : float
-        Parameter random-walk intensity, relative per sqrt(s) (0.005: a 1-sigma drift of
-        0.5 % in one second, 3.9 % in a minute). Tuned on the damper-wear stream (c1 falling
-        0.42 %/s): it gives the lowest c1 RMS error (0.23 %) and a calibrated stderr (the
-        reported sigma matches the actual error); 0.002 lags and is overconfident, 0.02 and
-        more let the track jitter and widen the bound, delaying alerts (table in
-        ``docs/monitoring.md``).
-    q_state : float
-        Acceleration process noise (m/s^2 per sqrt(Hz)).
-    p0_param : float
-        Initial relative standard deviation of the parameters (0.3 = 30 %).
-    p0_pos, p0_vel : float
-        Initial standard deviation of positions (m) and velocities (m/s).
-    substeps : int
-        RK4 sub-intervals per sample.
-    input_noise : bool
-        Treat the measured road's white noise as process noise (errors in the input):
-        ``Q += G0 R_u G0^T + G1 R_u G1^T`` with ``G0``, ``G1`` the step's sensitivity to
-        the road samples at its start and end (:meth:`AugmentedEKF.set_input_noise`) and
-        ``R_u`` the road channels' noise floor; ``False`` takes the road as exact.
+    ``q_param``: parameter random walk, relative per sqrt(s); ``q_state``: acceleration noise
+    (m/s^2 per sqrt(Hz)); ``p0_param``: initial relative std of the parameters; ``p0_pos``,
+    ``p0_vel``: initial std of positions (m) and velocities (m/s); ``substeps``: RK4 sub-intervals
+    per sample; ``input_noise``: the road's white noise as process noise.
     """
 
     q_param: float = 0.005
@@ -93,20 +38,8 @@ class EKFTuning:
 class AugmentedEKF(ExtendedKalmanFilter):
     """filterpy EKF whose prediction integrates the model's right-hand side.
 
-    Parameters
-    ----------
-    model : SuspensionModel
-        ``quarter2`` (or any model whose augmented parameters enter ``C``, ``K``, ``Fk``,
-        ``Fc`` affinely -- dampers and springs).
-    params : mapping
-        Every parameter's value (SI); the augmented ones are their nominal values.
-    augmented : sequence of str
-        Parameters estimated by the filter (dampers/springs), e.g. ``("c1", "k1")``.
-    channels : sequence of str
-        Measured channels (``x1``, ``x2_dot``, ``x1_ddot``, ...).
-    dt : float
-        Sample interval (s).
-    tuning : EKFTuning
+    ``params`` holds every value (SI), the ``augmented`` dampers and springs at nominal;
+    ``channels`` are the measured channels, ``dt`` the sample interval (s).
     """
 
     def __init__(self, model: SuspensionModel, params: Mapping[str, float],
@@ -128,11 +61,7 @@ class AugmentedEKF(ExtendedKalmanFilter):
         self.dt = float(dt)
         nz = self.nx + len(self.aug)
         super().__init__(dim_x=nz, dim_z=len(self.channels))
-        # [A(theta) | B(theta)]: the acceleration rows acting on [q, q', r, r'], affine in
-        # the augmented parameters: the model's forward model as affine pieces. The
-        # Jacobian's state block is its A part; its parameter columns are the pieces'
-        # slopes p_nom dAB_j [q, q', r, r'] (= p_nom M^-1 (dFk r + dFc r' - dC q' - dK q)).
-        # rk4 also steps models without effect terms with it (model.rhs is A x + B u there).
+        # [A(theta) | B(theta)] affine in the augmented parameters; _G: slopes per relative unit
         self.pieces = model.affine(self.params, self.aug)
         if not self.pieces.exact:
             raise UsageError(f"model {model.name}: the parameters {', '.join(self.aug)} do not "
@@ -191,23 +120,8 @@ class AugmentedEKF(ExtendedKalmanFilter):
         self.Q = Q + self._q_input
 
     def set_input_noise(self, sig_u: FloatArray) -> None:
-        """Add the road's white noise to ``Q`` (errors in the input).
-
-        The prediction interpolates the road ``u = [r, r']`` linearly between its samples
-        at the start and the end of a step, so white errors ``e0``, ``e1`` on those samples
-        move the predicted state by ``G0 e0 + G1 e1``, ``G0``, ``G1`` the sensitivities of
-        the step (:meth:`rk4`) to its two road samples at the current state; the step
-        gains ``G0 R_u G0^T + G1 R_u G1^T`` of process noise, ``R_u = diag(sig_u^2)``.
-        The step is affine in ``u`` for a model without effect terms, so the one-sigma
-        differences that give ``G0 R_u^(1/2)`` and ``G1 R_u^(1/2)`` are exact there. (The
-        error of a sample is shared by two consecutive steps; that correlation is left
-        out, as a filter with white process noise must.)
-
-        Parameters
-        ----------
-        sig_u : ndarray
-            Standard deviation of the white noise on each road input ``[r..., r'...]``
-            (m, m/s), length ``2 x number of roads``.
+        """Add the road's white noise ``sig_u`` (m, m/s per road input) to ``Q`` through the step's
+        sensitivity ``G0``, ``G1`` to its two road samples: ``G0 R_u G0^T + G1 R_u G1^T``.
         """
         sig = np.asarray(sig_u, dtype=float)
         z = self.x[:, 0].copy()
@@ -234,12 +148,7 @@ class AugmentedEKF(ExtendedKalmanFilter):
         return dz
 
     def jac(self, z: FloatArray, u: FloatArray) -> FloatArray:
-        """Continuous Jacobian ``df/dz`` (analytic).
-
-        ``df/dx = A(theta)`` (the state matrix of :meth:`state_space`, affine in the
-        augmented parameters: ``A = A0 + sum_j dp_j dA_j``) and the parameter columns
-        ``p_nom M^-1 (dFk r + dFc r' - dC q' - dK q)``.
-        """
+        """Continuous Jacobian ``df/dz`` (analytic): ``A(theta)`` and the parameter columns."""
         nq, nx = self.nq, self.nx
         J = self._J0.copy()
         J[nq:nx, :nx] = self._ab(z[nx:])[:, :nx]
@@ -248,23 +157,7 @@ class AugmentedEKF(ExtendedKalmanFilter):
 
     def rk4(self, z: FloatArray, u0: FloatArray, u1: FloatArray, dt: float,
             with_jacobian: bool = True) -> tuple[FloatArray, FloatArray | None]:
-        """One RK4 step (``substeps`` sub-intervals) and its exact Jacobian.
-
-        Parameters
-        ----------
-        z : ndarray
-            Augmented state at the start.
-        u0, u1 : ndarray
-            Road input ``[r, r']`` at the start and the end of the interval.
-        dt : float
-            Interval (s).
-
-        Returns
-        -------
-        z_next : ndarray
-        F : ndarray or None
-            ``d z_next / d z``.
-        """
+        """One RK4 step over ``dt`` (s), road ``[r, r']`` from ``u0`` to ``u1``, and its exact Jacobian."""
         n = max(1, self.tuning.substeps)
         h = dt / n
         if self._linear:
@@ -298,13 +191,7 @@ class AugmentedEKF(ExtendedKalmanFilter):
 
     def _rk4_linear(self, z: FloatArray, u0: FloatArray, u1: FloatArray, h: float, n: int,
                     with_jacobian: bool) -> tuple[FloatArray, FloatArray | None]:
-        """:meth:`rk4` for a model without effect terms, the same arithmetic made lean.
-
-        The parameters are constant over the step, so ``f`` is linear in ``x`` with one
-        ``[A | B]`` for every stage (``model.rhs`` evaluated as ``A x + B u``, equal to
-        rounding) and the Jacobian's state block is that same ``A``; only its parameter
-        columns ``p_nom dAB_j [q, q', r, r']`` change from stage to stage.
-        """
+        """:meth:`rk4` for a model without effect terms: one ``[A | B]`` for every stage."""
         nq, nx = self.nq, self.nx
         theta = z[nx:]
         AB = self._ab(theta)                                         # (nq, nx + 2 nr)
@@ -392,11 +279,8 @@ class AugmentedEKF(ExtendedKalmanFilter):
                Hx: Callable[..., FloatArray], R: FloatArray | float | None = None,
                args: Any = (), hx_args: Any = (),
                residual: Callable[[FloatArray, FloatArray], FloatArray] = np.subtract) -> None:
-        """Kalman update with measurement ``z`` (filterpy's signature; Joseph form).
-
-        Same algebra as :meth:`filterpy.kalman.ExtendedKalmanFilter.update` without its
-        per-call deep copies (a third of the cost at 500 Hz). Entries of ``z`` that are NaN
-        (missing samples) are left out.
+        """Kalman update with measurement ``z`` (filterpy's signature and algebra, Joseph form, without
+        its deep copies); NaN entries left out.
         """
         if z is None:
             return
@@ -423,34 +307,20 @@ class AugmentedEKF(ExtendedKalmanFilter):
         I_KH = self._I - K @ H
         self.P = I_KH @ self.P @ I_KH.T + K @ Rm @ K.T
         self.y, self.K, self.S = y, K, S
-        # normalised innovation squared: chi-square with y.size degrees of freedom when the
-        # filter's model and noise levels fit the data
+        # normalised innovation squared: chi-square with y.size dof when the filter fits
         self.nis_sum += float(y @ np.linalg.solve(S, y))
         self.nis_dof += int(y.size)
-        self.x_post = self.x.copy()
-        self.P_post = self.P.copy()
 
     def step(self, y: FloatArray, u0: FloatArray, u1: FloatArray) -> None:
-        """Predict from the previous sample to this one and update with measurement ``y``.
-
-        Missing measurement entries (NaN) are left out of the update.
-        """
+        """Predict to this sample and update with measurement ``y`` (NaN entries left out)."""
         self.predict_step(u0, u1)
         self.update(y, self.HJ, self.hx, args=(u1,), hx_args=(u1,))
 
 
 def window_nis(nis_sum: float, nis_dof: int, before: tuple[float, int], level: float,
                tolerance: float) -> tuple[float, int, float, float, str | None]:
-    """The mean normalised innovation squared per degree of freedom since ``before`` (the
-    filter's running ``(nis_sum, nis_dof)`` at the previous window) and its consistency band.
-
-    Returns
-    -------
-    nis, dof, lo, hi : float, int, float, float
-        The window's mean NIS per dof, its dof, and the ``level`` chi-square band per dof
-        widened ``tolerance`` times (NaN without innovations).
-    warning : str or None
-        One sentence when ``nis`` lies outside the band: the filter no longer fits the data.
+    """Mean normalised innovation squared per dof since ``before`` and its consistency band:
+    ``(nis, dof, lo, hi, warning)``, the ``level`` band widened ``tolerance`` times.
     """
     s0, n0 = before
     dof = nis_dof - n0

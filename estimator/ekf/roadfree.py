@@ -1,36 +1,9 @@
 """The EKF baseline with the road unknown: the body equations, filtered sample by sample.
 
-The sliding window with the road unknown (:mod:`estimator.stream.roadfree`) fits each
-window's body equations ``M_b q_b'' = -sum_i g_i (c_i d_i' + k_i d_i)`` on the body
-accelerations and the ride heights ``d_i``. The fair EKF gets exactly that information and
-the same equations:
-
-state
-    every strut's extension ``d_i`` and its rate ``d_i'`` (the rate is a state: no
-    derivative of a noisy channel is taken), one zero offset ``b_j`` per body
-    acceleration channel (a slow random walk: a body accelerometer's zero and the static
-    load on the springs, which the window's band leaves out by starting at its bin 3), and
-    the free struts' dampers and springs as relative random-walk states ``theta_p = p /
-    p_start`` (``q_param``, as the road-measured EKF).
-prediction
-    linear: ``d <- d + h d'`` with a white deflection acceleration of the variance the first
-    window's ride heights show (their second difference, less its noise part), the
-    offsets and the parameters unchanged (their random walks in ``Q``).
-measurements
-    the ride heights (linear, their noise floor or DBC quantization as ``R``), their
-    rates when the stream carries them, and the body accelerations
-    ``-M_b^-1 G (c o d' + k o d) + b`` (nonlinear: products of a parameter and a state; the
-    analytic Jacobian), ``R`` from their noise floor.
-
-Why this and not the road as a random-walk state of the full model: the road enters the
-full model only through the tyres, so that filter would also need the wheel masses and the
-tyre springs and dampers, which the record cannot determine without the road (they would be
-held at guesses the window never uses), and a random-walk road prior besides. The
-deflection states need neither: the same channels and the same equations as the window.
-
-Start, consistency (NIS per window and its band), gaps (the deflection states restart from
-the ride heights after a jump in the time base) and the events are those of
-:class:`estimator.ekf.stream.EKFWindowEstimator`.
+The information and equations of the road-unknown sliding window: the state is every strut's
+extension and rate, one zero offset per body acceleration and the free struts' relative dampers
+and springs; the body accelerations ``-M_b^-1 G (c o d' + k o d) + b`` are the measurement.
+No tyre or wheel parameter is needed. Start, NIS and gaps as the road-measured EKF.
 """
 from __future__ import annotations
 
@@ -41,13 +14,12 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
-from estimator.ekf.filter import EKFTuning, window_nis
+from estimator.ekf.filter import EKFTuning
+from estimator.ekf.stream import WindowEKF, ekf_tuning, noise_sd
 from estimator.identify import Parameters
 from estimator.identify.roadfree import fit_road_unknown
-from estimator.stream.events import Estimate
 from estimator.stream.monitor import StepResult
 from estimator.stream.wear_streams import channel_resolution
-from estimator.stream.window import noise_floor
 from suspid.errors import InputError
 from suspid.io.csvio import Measurement
 from suspid.models.base import FloatArray, SuspensionModel
@@ -64,29 +36,10 @@ GAP_STEPS = 1.5
 class BodyEquationEKF(ExtendedKalmanFilter):
     """filterpy EKF on the body equations: deflections and their rates, offsets, struts.
 
-    Parameters
-    ----------
-    model : SuspensionModel
-    params : mapping
-        Every parameter (SI): masses and inertias of the body rows, held struts, and the
-        start values of ``augmented``.
-    augmented : sequence of str
-        Strut dampers and springs the filter estimates (relative random-walk states).
-    channels : sequence of str
-        Measured channels: body accelerations (``x1_ddot``, ``delta_ddot``, ...), ride
-        heights (``d``, ``d1``, ...) and their rates (``d_dot``, ...).
-    dt : float
-        Filter step (s).
-    tuning : EKFTuning
-        ``q_param``, ``p0_param``, ``p0_pos``, ``p0_vel`` apply.
-    accel_var : ndarray
-        Per strut, the variance of its deflection acceleration ((m/s^2)^2): the process
-        noise of the rate states.
-
-    Raises
-    ------
-    InputError
-        When a strut's ride height or every body acceleration is missing.
+    ``params`` (SI) hold the ``augmented`` struts' start values; ``channels`` are the body
+    accelerations, ride heights and their rates; ``dt`` the step (s); ``accel_var`` each strut's
+    deflection-acceleration variance ((m/s^2)^2). InputError when a strut's ride height or every
+    body acceleration is missing.
     """
 
     def __init__(self, model: SuspensionModel, params: Mapping[str, float],
@@ -141,7 +94,6 @@ class BodyEquationEKF(ExtendedKalmanFilter):
         self._I = np.eye(nz)
         self.nis_sum = 0.0
         self.nis_dof = 0
-        # the linear rows of H: ride heights and their rates
         H0 = np.zeros((len(self.channels), nz))
         for r, c in enumerate(self.channels[nb:], start=nb):
             base = c.removesuffix("_dot")
@@ -187,8 +139,7 @@ class BodyEquationEKF(ExtendedKalmanFilter):
         return y, H
 
     def step(self, y: FloatArray) -> None:
-        """Predict one step and update with measurement ``y`` (NaN entries left out);
-        Joseph form, as :meth:`estimator.ekf.filter.AugmentedEKF.update`."""
+        """Predict one step and update with ``y`` (NaN entries left out; Joseph form)."""
         self.x = self.F @ self.x
         self.P = self.F @ self.P @ self.F.T + self.Q
         zz = np.asarray(y, dtype=float)
@@ -222,56 +173,24 @@ class BodyEquationEKF(ExtendedKalmanFilter):
         return {k: float(self.nominal[j] * d[j]) for j, k in enumerate(self.aug)}
 
 
-class RoadFreeEKFEstimator:
+class RoadFreeEKFEstimator(WindowEKF):
     """The body-equation EKF fed window by window (module docstring).
 
-    Parameters
-    ----------
-    model : SuspensionModel
-    params : Parameters
-        Held values and the start values of the free parameters (SI); the free ones are
-        the filter's augmented states.
-    channels : sequence of str
-        Channels in the stream.
-    tuning : EKFTuning
-    decimate : int
-        Filter every ``decimate``-th sample.
-    first_window : sequence of str
-        Free parameters started from the first window's road-unknown fit (their start not
-        given), as the road-measured EKF starts from the first window's sliding-window fit.
-    nis_level, nis_tolerance : float
-        The NIS band (as :class:`estimator.ekf.stream.EKFWindowEstimator`).
+    ``params`` hold the held values and the free parameters' starts (SI); ``first_window`` the free
+    parameters started from the first window's road-unknown fit; the rest as
+    :class:`estimator.ekf.stream.EKFWindowEstimator`.
     """
 
-    name = "ekf"
     road = "unknown"
-    own_track = True
-    lag = 0.0
-    overlap = 1.0
 
     def __init__(self, model: SuspensionModel, params: Parameters, channels: Sequence[str],
                  tuning: EKFTuning, decimate: int = 1, first_window: Sequence[str] = (),
                  nis_level: float = 0.999, nis_tolerance: float = 1.5) -> None:
-        self.model = model
+        self._setup(model, tuning, decimate, nis_level, nis_tolerance)
         self.params = params.copy()
         self.channels = list(channels)
-        self.tuning = tuning
-        self.decimate = max(1, int(decimate))
         self.first_window = list(first_window)
-        self.nis_level = nis_level
-        self.nis_tolerance = nis_tolerance
         self.ekf: BodyEquationEKF | None = None
-        self.t_last = -math.inf
-        self._t_seen = -math.inf
-        self._phase = 0
-        self.h = math.nan
-        self.samples = 0
-        self.cpu = 0.0
-        self.restarts = 0
-        self.gap_s = 0.0
-        self.nis_windows_out = 0
-        self._nis0 = (0.0, 0)
-        self.start_from: dict[str, float] = {}
         self.note = ""
 
     def _start(self, t: FloatArray, data: Mapping[str, FloatArray]) -> BodyEquationEKF:
@@ -301,25 +220,19 @@ class RoadFreeEKFEstimator:
                 acc_var.append(1.0)
                 continue
             a = np.diff(dv, 2) / dt ** 2
-            nf = noise_floor(np.asarray(data[name], dtype=float))
-            s = max(nf if math.isfinite(nf) else 0.0, res_q.get(name, 0.0) / math.sqrt(12.0))
+            s = noise_sd(data[name], res_q.get(name, 0.0))
             acc_var.append(max(float(np.var(a)) - 6.0 * s * s / dt ** 4, 0.1 * float(np.var(a)),
                                1e-6))
         aug = list(self.params.free)
         ekf = BodyEquationEKF(model, self.params.valuesdict(), aug, self.channels, dt,
                               self.tuning, np.array(acc_var))
-        sig = []
-        for c in ekf.channels:
-            nf = noise_floor(np.asarray(data[c], dtype=float))
-            q = res_q.get(c, 0.0) / math.sqrt(12.0)
-            sig.append(max(nf if math.isfinite(nf) else 0.0, q, 1e-9))
+        sig = [max(noise_sd(data[c], res_q.get(c, 0.0)), 1e-9) for c in ekf.channels]
         ekf.R = np.diag(np.square(sig))
         self._init_motion(ekf, data, 0)
         return ekf
 
     def _init_motion(self, ekf: BodyEquationEKF, data: Mapping[str, FloatArray], k: int) -> None:
-        """Deflections and rates from the ride heights at sample ``k`` (central difference
-        for the rate without a ``_dot`` channel), the initial covariance of the motion."""
+        """Deflections and rates from the ride heights at sample ``k``; the motion's initial covariance."""
         ns = ekf.ns
         tu = self.tuning
         for i, name in enumerate(self.model.ride_heights):
@@ -381,53 +294,25 @@ class RoadFreeEKFEstimator:
             self.t_last = float(tn[-1])
         cpu = time.process_time() - c0
         self.cpu += cpu
-        vals = ekf.param_values()
-        se = ekf.param_stderr()
-        ok = all(math.isfinite(vals[k]) and vals[k] > 0 for k in ekf.aug)
-        warns = [] if ok else ["EKF parameter state left the physical range"]
-        nis, dof, lo, hi, nis_warning = window_nis(ekf.nis_sum, ekf.nis_dof, self._nis0,
-                                                   self.nis_level, self.nis_tolerance)
-        self._nis0 = (ekf.nis_sum, ekf.nis_dof)
-        if nis_warning is not None:
-            self.nis_windows_out += 1
-            warns.append(nis_warning)
-        if self.note:
-            warns.append(self.note)
-            self.note = ""
-        warns.extend(gaps)
-        info: dict[str, Any] = {"road": "unknown", "samples": self.samples, "cpu_ms": 1e3 * cpu,
-                                "augmented": list(ekf.aug), "nis": nis, "nis_band": [lo, hi],
-                                "warnings": warns}
-        if gaps:
-            info["gaps"] = len(gaps)
-        if self.start_from:
-            info["start_from_first_window"] = dict(self.start_from)
-        ev = Estimate(float(t[-1]), float(t[0]), self.name, vals, se, info=info)
-        return StepResult(ev, vals if ok else None, se if ok else None)
+        notes = ([self.note] if self.note else []) + gaps
+        self.note = ""
+        return self._report(t, ekf, cpu, ekf.aug, notes, {"road": "unknown"},
+                            {"gaps": len(gaps)} if gaps else {})
 
     def summary(self) -> dict[str, Any]:
         """Samples filtered, CPU time, consistency, restarts."""
         ekf = self.ekf
-        return {"road": "unknown", "samples": self.samples, "cpu_s": self.cpu,
-                "cpu_us_per_sample": 1e6 * self.cpu / self.samples if self.samples else None,
-                "augmented": list(ekf.aug) if ekf is not None else [], "held": {},
-                "nis": (ekf.nis_sum / ekf.nis_dof) if ekf is not None and ekf.nis_dof else None,
-                "nis_windows_inconsistent": self.nis_windows_out,
-                "restarts": self.restarts, "gap_s": self.gap_s}
+        return self._summary(ekf, {"road": "unknown"}, list(ekf.aug) if ekf is not None else [], {})
 
 
 def make_roadfree_ekf_estimator(spec: Any, channels: list[str], fs: float) -> RoadFreeEKFEstimator:
-    """The road-unknown EKF of a :class:`~estimator.stream.pipeline.MonitorSpec`: every free
-    strut damper and spring in the state (``ekf.params`` narrows it, the others held)."""
+    """The road-unknown EKF of a :class:`~estimator.stream.pipeline.MonitorSpec`."""
     params = spec.params.copy()
     if spec.ekf_params:
         for k in params.free:
             if k not in spec.ekf_params:
                 params[k].vary = False
-    tun = EKFTuning()
-    if spec.ekf_q is not None:
-        tun.q_param = spec.ekf_q
-    dec = spec.ekf_decimate or max(1, int(math.floor(fs / 250.0 + 1e-9)))
+    tun, dec = ekf_tuning(spec, fs)
     unknown = [k for k in params.free if k not in spec.start_given]
     return RoadFreeEKFEstimator(spec.model, params, channels, tun, decimate=dec,
                                 first_window=unknown)

@@ -1,56 +1,15 @@
 """The EKF as a window estimator for the monitor: same interface and same information as the
-sliding window.
+sliding window (the fair baseline of ``docs/monitoring.md``).
 
-Every call gets the current window; the filter runs over the samples it has not seen yet
-(one predict/update per sample, at the stream's rate divided by ``decimate``) and reports
-its parameter state and standard deviations at the window end.
-
-A fair baseline gets what the sliding window gets:
-
-free parameters
-    every free damper and spring is in the filter's state (``ekf.params`` narrows it); a
-    free parameter the filter cannot estimate (a mass, a length: not affine in its
-    matrices) is *held* at its starting value and every estimate says so, with the reason
-    (``held``).
-starting values
-    ``--init`` or ``--nominal`` when given; otherwise the first window's sliding-window
-    estimate (a cold Nelder-Mead fit of that window, its CPU counted as the EKF's), so
-    neither side starts from a default the other does not use.
-measurement noise
-    ``R`` from the data's own noise floor on the first window (fourth differences,
-    :func:`estimator.stream.window.noise_floor`), never below the DBC quantization; the
-    road channels' noise floor, found the same way, enters ``Q`` through the prediction's
-    sensitivity to the road (``EKFTuning.input_noise``): the road is an input measured with
-    error on both sides (the sliding window fuses its displacement with the integral of its
-    velocity above ``WindowConfig.road_fusion_hz``).
-gaps in the data
-    the sliding window fits every window from a fresh initial state (least squares) and
-    skips a window whose time base jumps or whose channels miss more than ``max_missing``,
-    so after a gap it starts over with the parameters carried on. The filter does the same
-    (:meth:`EKFWindowEstimator._restart`): where the time between two samples with the road
-    exceeds ``GAP_STEPS`` sample steps (a jump in the time base, windows without data, or a
-    hole in the road longer than ``BRIDGE_SAMPLES`` samples: the motion cannot be predicted
-    without its input), it does not bridge the gap with one step of the nominal length nor
-    with an interpolated road; the motion states restart from the measurements
-    after the gap (as at the first sample, with the initial motion covariance), and the
-    parameters are predicted over the real elapsed time (their random walk, ``q_param^2``
-    times the gap's length, added to their variance). Each such restart is reported in the
-    window's ``gaps`` and ``warnings`` and counted in the summary (``restarts``).
-consistency
-    the normalised innovation squared (NIS) of every update is summed per window; its mean
-    per degree of freedom is ``1`` for a filter whose model and noise fit the data. Each
-    estimate reports it (``nis``, with ``nis_band``) and warns when it leaves the chi-square
-    99.9 % band of the window widened 1.5 times: the filter no longer fits the data and its
-    error bars are not to be trusted.
+Each call filters the window's new samples and reports the parameter state at the window end.
 """
 from __future__ import annotations
 
 import math
 import time
-from typing import Any, Mapping, Sequence
+from typing import Any, Mapping, Protocol, Sequence
 
 import numpy as np
-
 
 from estimator.ekf.filter import AugmentedEKF, EKFTuning, window_nis
 from estimator.identify import Parameters
@@ -63,43 +22,30 @@ from suspid.models.base import FloatArray, SuspensionModel
 from suspid.simulate import uniform_step
 
 
-#: a step between two consecutive samples with the road longer than this many sample steps
-#: is a gap in the data: the filter restarts its motion states after it
+#: a step between two samples with the road longer than this many sample steps is a gap
 GAP_STEPS = 1.5
-#: holes in the road of up to this many samples between two samples with it are bridged by
-#: linear interpolation (4 ms at 500 Hz, under a twentieth of a wheel-hop period: the rule
-#: the decimation keeps for the road's first-order hold); longer ones are gaps
+#: holes in the road of up to this many samples between two with it are bridged linearly
 BRIDGE_SAMPLES = 2
 
 
-class EKFWindowEstimator:
-    """Joint state/parameter EKF fed window by window.
+def noise_sd(y: FloatArray, resolution: float) -> float:
+    """White-noise std of ``y``: its noise floor, never below the quantization ``resolution / sqrt(12)``."""
+    nf = noise_floor(np.asarray(y, dtype=float))
+    return max(nf if math.isfinite(nf) else 0.0, resolution / math.sqrt(12.0))
 
-    Parameters
-    ----------
-    model : SuspensionModel
-    params : mapping
-        Every parameter value (SI): fixed ones and the nominal values of ``augmented``.
-    augmented : sequence of str
-        Parameters the filter estimates (default ``c1, k1``).
-    channels : sequence of str
-        Measured channels used in the update.
-    tuning : EKFTuning, optional
-    decimate : int
-        Use every ``decimate``-th sample.
-    held : dict, optional
-        ``parameter -> reason`` of free parameters the filter holds (reported per estimate).
-    first_window : tuple, optional
-        ``(Parameters, WindowConfig, names)``: start ``names`` from a sliding-window fit of
-        the first window instead of ``params``.
-    nis_level : float
-        Two-sided probability of the NIS band (0.999).
-    nis_tolerance : float
-        Factor the band is widened by (1.5): the chi-square band assumes white innovations
-        and exact noise levels, while ``R`` and ``Q`` are estimated and the samples are
-        correlated; a consistent filter stays within 0.85-1.25 per dof on the benchmark
-        streams, one holding wrong tyre parameters at 13-25.
-    """
+
+class _Filter(Protocol):
+    nis_sum: float
+    nis_dof: int
+    aug: list[str]
+
+    def param_values(self) -> dict[str, float]: ...
+
+    def param_stderr(self) -> dict[str, float]: ...
+
+
+class WindowEKF:
+    """What both window EKFs share: the monitor's estimator interface, counters, the report."""
 
     name = "ekf"
     #: the filter's state is itself the tracked parameter (alerts use it directly)
@@ -107,40 +53,97 @@ class EKFWindowEstimator:
     lag = 0.0
     overlap = 1.0
 
+    def _setup(self, model: SuspensionModel, tuning: EKFTuning, decimate: int, nis_level: float,
+               nis_tolerance: float) -> None:
+        self.model = model
+        self.tuning = tuning
+        self.decimate = max(1, int(decimate))
+        self.nis_level = nis_level
+        self.nis_tolerance = nis_tolerance
+        self.t_last = -math.inf
+        self._t_seen = -math.inf
+        self._phase = 0
+        #: nominal sample step of the stream (s), set on the first window
+        self.h = math.nan
+        self.samples = 0
+        self.cpu = 0.0
+        #: motion restarts after gaps and the data time they bridged (s)
+        self.restarts = 0
+        self.gap_s = 0.0
+        self.nis_windows_out = 0
+        self._nis0 = (0.0, 0)
+        self.start_from: dict[str, float] = {}
+
+    def _report(self, t: FloatArray, ekf: _Filter, cpu: float, checked: Sequence[str] | None,
+                notes: list[str], head: dict[str, Any], tail: dict[str, Any],
+                track: bool = True, first: str | None = None) -> StepResult:
+        """The window's estimate: parameters, NIS and its band, warnings (``first`` leads)."""
+        vals = ekf.param_values()
+        se = ekf.param_stderr()
+        ok = all(math.isfinite(vals[k]) and vals[k] > 0 for k in (vals if checked is None else checked))
+        warns = [] if ok else ["EKF parameter state left the physical range"]
+        nis, _, lo, hi, nis_warning = window_nis(ekf.nis_sum, ekf.nis_dof, self._nis0,
+                                                 self.nis_level, self.nis_tolerance)
+        self._nis0 = (ekf.nis_sum, ekf.nis_dof)
+        if nis_warning is not None:
+            self.nis_windows_out += 1
+            warns.append(nis_warning)
+        warns += notes
+        if first is not None:
+            warns.insert(0, first)
+        info: dict[str, Any] = {**head, "samples": self.samples, "cpu_ms": 1e3 * cpu,
+                                "augmented": list(ekf.aug), "nis": nis, "nis_band": [lo, hi],
+                                "warnings": warns, **tail}
+        if self.start_from:
+            info["start_from_first_window"] = dict(self.start_from)
+        ev = Estimate(float(t[-1]), float(t[0]), self.name, vals, se, info=info)
+        track = track and ok
+        return StepResult(ev, vals if track else None, se if track else None)
+
+    def _summary(self, ekf: _Filter | None, head: dict[str, Any], augmented: list[str],
+                 held: dict[str, str]) -> dict[str, Any]:
+        """Samples filtered, CPU time, consistency, restarts."""
+        return {**head, "samples": self.samples, "cpu_s": self.cpu,
+                "cpu_us_per_sample": 1e6 * self.cpu / self.samples if self.samples else None,
+                "augmented": augmented, "held": held,
+                "nis": (ekf.nis_sum / ekf.nis_dof) if ekf is not None and ekf.nis_dof else None,
+                "nis_windows_inconsistent": self.nis_windows_out,
+                "restarts": self.restarts, "gap_s": self.gap_s}
+
+
+def ekf_tuning(spec: Any, fs: float) -> tuple[EKFTuning, int]:
+    """The EKF's tuning (``ekf.q``) and decimation (``ekf.decimate``, default to about 250 Hz)."""
+    tun = EKFTuning()
+    if spec.ekf_q is not None:
+        tun.q_param = spec.ekf_q
+    return tun, spec.ekf_decimate or max(1, int(math.floor(fs / 250.0 + 1e-9)))
+
+
+class EKFWindowEstimator(WindowEKF):
+    """Joint state/parameter EKF fed window by window.
+
+    ``params`` (SI) hold the fixed values and the ``augmented`` ones' starts; ``decimate``: use every
+    n-th sample; ``held``: ``parameter -> reason`` of free parameters the filter holds;
+    ``first_window`` ``(Parameters, WindowConfig, names)`` starts ``names`` from a sliding-window fit
+    of the first window; ``nis_level`` and ``nis_tolerance`` set the NIS band and its widening.
+    """
+
     def __init__(self, model: SuspensionModel, params: Mapping[str, float],
                  augmented: Sequence[str], channels: Sequence[str],
                  tuning: EKFTuning | None = None, decimate: int = 1,
                  held: Mapping[str, str] | None = None,
                  first_window: tuple[Parameters, WindowConfig, Sequence[str]] | None = None,
                  nis_level: float = 0.999, nis_tolerance: float = 1.5) -> None:
-        self.model = model
+        self._setup(model, tuning or EKFTuning(), decimate, nis_level, nis_tolerance)
         self.held = dict(held or {})
         self.first_window = first_window
-        self.nis_level = nis_level
-        self.nis_tolerance = nis_tolerance
-        self.start_from: dict[str, float] = {}
-        self.nis_windows_out = 0
-        self._nis0 = (0.0, 0)
         self.params = dict(params)
         self.augmented = list(augmented)
         self.channels = [c for c in model.channels if c in channels]
-        self.tuning = tuning or EKFTuning()
-        self.decimate = max(1, int(decimate))
         self.ekf: AugmentedEKF | None = None
-        self.t_last = -math.inf
-        self.samples = 0
-        self.cpu = 0.0
         self._u_prev: FloatArray | None = None
-        self._phase = 0
         self.held_note = ""
-        #: nominal sample step of the stream (s), set on the first window
-        self.h = math.nan
-        #: data time of the last sample with the road (s) and of the last filtered one
-        self._t_seen = -math.inf
         self._t_step = -math.inf
-        #: motion restarts after gaps, and the data time they bridged (s)
-        self.restarts = 0
-        self.gap_s = 0.0
         #: restarts after the filter diverged (:meth:`_recover`)
         self.divergences = 0
         self._nis_ok: tuple[float, int] = (0.0, 0)
@@ -189,21 +192,14 @@ class EKFWindowEstimator:
         h = uniform_step(t) or float(np.median(np.diff(t)))
         dt = h * self.decimate
         self.ekf = self._new_filter(dt)
-        sig = []
-        for c in self.channels:
-            nf = noise_floor(np.asarray(data[c], dtype=float))
-            q = DBC_RESOLUTION.get(c, 0.0) / math.sqrt(12.0)
-            s = max(nf if math.isfinite(nf) else 0.0, q, 1e-9)
-            sig.append(s)
+        sig = [max(noise_sd(data[c], DBC_RESOLUTION.get(c, 0.0)), 1e-9) for c in self.channels]
         self.ekf.R = np.diag(np.square(sig))
         if self.tuning.input_noise:
             roads = list(self.model.roads) + [f"{r}_dot" for r in self.model.roads]
             sig_u = np.zeros(len(roads))
             for i, c in enumerate(roads):
                 if c in data:
-                    nf = noise_floor(np.asarray(data[c], dtype=float))
-                    q = DBC_RESOLUTION.get(c, 0.0) / math.sqrt(12.0)
-                    sig_u[i] = max(nf if math.isfinite(nf) else 0.0, q)
+                    sig_u[i] = noise_sd(data[c], DBC_RESOLUTION.get(c, 0.0))
             nr = len(self.model.roads)
             for i, r in enumerate(self.model.roads):
                 if f"{r}_dot" not in data:  # the road's central difference (see _road)
@@ -214,8 +210,7 @@ class EKFWindowEstimator:
         self.ekf.x[:self.ekf.nx, 0] = self._motion_state(data, 0)
 
     def _new_filter(self, dt: float) -> AugmentedEKF:
-        """A filter at the start values (motion at rest, the initial covariance), with the
-        measurement and road noise of the first window when they are known."""
+        """A filter at the start values, with the first window's measurement and road noise when known."""
         ekf = AugmentedEKF(self.model, self.params, self.augmented, self.channels, dt,
                            self.tuning)
         if self.ekf is not None:
@@ -225,13 +220,7 @@ class EKFWindowEstimator:
         return ekf
 
     def _recover(self, data: Mapping[str, FloatArray], k: int, t_k: float) -> None:
-        """Start the filter over at sample ``k`` (time ``t_k``, s) after it diverged.
-
-        A state or covariance that is no longer finite (a model far from the data: a sensor
-        offset kept, a wrong fixed value) makes every later update fail; the filter starts
-        over from the start values and the measurements at ``k``, its consistency sums kept.
-        Counted per window (:meth:`process`) and in the summary (``divergences``).
-        """
+        """Start the filter over at sample ``k`` (time ``t_k``, s) after its state stopped being finite."""
         old = self._filter()
         ekf = self._new_filter(old.dt)
         ekf.x[:ekf.nx, 0] = self._motion_state(data, k)
@@ -241,11 +230,7 @@ class EKFWindowEstimator:
         self.divergences += 1
 
     def _motion_state(self, data: Mapping[str, FloatArray], k: int) -> FloatArray:
-        """Motion states ``[q, q']`` from the measurements at sample ``k`` of ``data``.
-
-        A measured coordinate gives its position, its ``_dot`` channel (or the central
-        difference of the next samples) its velocity; the others start at rest (m, m/s).
-        """
+        """Motion states ``[q, q']`` (m, m/s) from the measurements at sample ``k``; the others at rest."""
         nq = len(self.model.coords)
         z = np.zeros(2 * nq)
         h = self.h
@@ -262,11 +247,7 @@ class EKFWindowEstimator:
         return z
 
     def _usable(self, data: Mapping[str, FloatArray], n: int) -> np.ndarray:
-        """Which of ``n`` samples the filter steps to: those with every road channel, and
-        holes of at most ``BRIDGE_SAMPLES`` samples between two of them (their road
-        interpolated linearly, :meth:`_road`). A longer hole, or one at either end of the
-        samples, is left out: the next sample after it restarts the motion (:meth:`_restart`).
-        """
+        """Which of ``n`` samples the filter steps to: those with the road, and short holes between them."""
         ok = np.ones(n, dtype=bool)
         for r in self.model.roads:
             if r in data:
@@ -283,12 +264,9 @@ class EKFWindowEstimator:
         return out
 
     def _restart(self, data: Mapping[str, FloatArray], k: int, t_k: float) -> str:
-        """Start the motion over at sample ``k`` (time ``t_k``, s) after a gap in the data.
+        """Start the motion over at sample ``k`` (time ``t_k``, s) after a gap; returns the warning.
 
-        The motion states come from the measurements at ``k`` (:meth:`_motion_state`) with
-        the initial motion covariance and no correlation with the parameters; the parameters
-        keep their estimate and covariance, their random walk predicted over the real time
-        elapsed since the last filtered sample. Returns the warning that reports it.
+        The parameters keep their estimate, their random walk predicted over the real elapsed time.
         """
         ekf = self._filter()
         nx = ekf.nx
@@ -317,9 +295,7 @@ class EKFWindowEstimator:
     def _run(self, tn: FloatArray, U: FloatArray, Y: FloatArray,
              dnew: Mapping[str, FloatArray], usable: np.ndarray, gaps: list[str]
              ) -> tuple[int, float]:
-        """Step the filter through the new samples (times ``tn``, road ``U``, measurements
-        ``Y``); gaps are appended to ``gaps``. Returns the divergences (:meth:`_recover`) and
-        the time of the first (s; NaN without one)."""
+        """Step the filter through the new samples; returns the divergences and the first one's time (s)."""
         ekf = self._filter()
         step = ekf.step
         limit = GAP_STEPS * self.h
@@ -384,51 +360,29 @@ class EKFWindowEstimator:
             self.t_last = float(tn[-1])
         cpu = time.process_time() - c0
         self.cpu += cpu
-        ekf = self._filter()
-        vals = ekf.param_values()
-        se = ekf.param_stderr()
-        ok = all(math.isfinite(v) and v > 0 for v in vals.values())
-        warns = [] if ok else ["EKF parameter state left the physical range"]
-        nis, dof, lo, hi, nis_warning = window_nis(ekf.nis_sum, ekf.nis_dof, self._nis0,
-                                                   self.nis_level, self.nis_tolerance)
-        self._nis0 = (ekf.nis_sum, ekf.nis_dof)
-        if nis_warning is not None:
-            self.nis_windows_out += 1
-            warns.append(nis_warning)
-        if self.held_note and self.samples == 0:
-            warns.append(self.held_note)
-        warns.extend(gaps)
+        notes = ([self.held_note] if self.held_note and self.samples == 0 else []) + gaps
+        first = None
         if diverged:
-            warns.insert(0, f"EKF diverged {diverged} time{'s' if diverged > 1 else ''} in this "
-                            f"window (first at t={first_div:.4f} s): its state or covariance "
-                            "was no longer finite; restarted from the start values and the "
-                            "measurements each time; this estimate goes to neither the "
-                            "tracker nor the alerts (the model does not describe the data: a "
-                            "sensor offset kept, a wrong fixed value)")
-        info: dict[str, Any] = {"samples": self.samples, "cpu_ms": 1e3 * cpu,
-                                "augmented": list(self.augmented),
-                                "nis": nis, "nis_band": [lo, hi], "warnings": warns}
+            first = (f"EKF diverged {diverged} time{'s' if diverged > 1 else ''} in this "
+                     f"window (first at t={first_div:.4f} s): its state or covariance "
+                     "was no longer finite; restarted from the start values and the "
+                     "measurements each time; this estimate goes to neither the "
+                     "tracker nor the alerts (the model does not describe the data: a "
+                     "sensor offset kept, a wrong fixed value)")
+        tail: dict[str, Any] = {}
         if gaps:
-            info["gaps"] = len(gaps)
+            tail["gaps"] = len(gaps)
         if diverged:
-            info["divergences"] = diverged
+            tail["divergences"] = diverged
         if self.held:
-            info["held"] = dict(self.held)
-        if self.start_from:
-            info["start_from_first_window"] = dict(self.start_from)
-        ev = Estimate(float(t[-1]), float(t[0]), self.name, vals, se, info=info)
-        track = ok and not diverged        # a restarted filter's values are no estimate
-        return StepResult(ev, vals if track else None, se if track else None)
+            tail["held"] = dict(self.held)
+        # a restarted filter's values are no estimate
+        return self._report(t, self._filter(), cpu, None, notes, {}, tail, not diverged, first)
 
     def summary(self) -> dict[str, Any]:
-        """Samples filtered and CPU time."""
-        ekf = self.ekf
-        return {"samples": self.samples, "cpu_s": self.cpu,
-                "cpu_us_per_sample": 1e6 * self.cpu / self.samples if self.samples else None,
-                "augmented": list(self.augmented), "held": dict(self.held),
-                "nis": (ekf.nis_sum / ekf.nis_dof) if ekf is not None and ekf.nis_dof else None,
-                "nis_windows_inconsistent": self.nis_windows_out,
-                "restarts": self.restarts, "gap_s": self.gap_s, "divergences": self.divergences}
+        """Samples filtered, CPU time, consistency, restarts and divergences."""
+        return {**self._summary(self.ekf, {}, list(self.augmented), dict(self.held)),
+                "divergences": self.divergences}
 
 
 #: parameter kinds the augmented EKF can carry in its state (affine in the model's matrices)
@@ -437,21 +391,8 @@ EKF_KINDS = ("damping", "stiffness")
 
 def ekf_plan(model: SuspensionModel, free: Sequence[str], requested: Sequence[str] | None = None
              ) -> tuple[list[str], dict[str, str]]:
-    """Which free parameters the EKF estimates, and which it holds with the reason.
-
-    Parameters
-    ----------
-    model : SuspensionModel
-    free : sequence of str
-        The free parameters (the sliding window estimates all of them).
-    requested : sequence of str, optional
-        ``ekf.params``; default every free damper and spring.
-
-    Returns
-    -------
-    augmented : list of str
-    held : dict
-        ``parameter -> reason`` for every free parameter left out.
+    """Which free parameters the EKF estimates (default: ``requested`` or every free damper and
+    spring), and ``parameter -> reason`` of those it holds.
     """
     held: dict[str, str] = {}
     aug: list[str] = []
@@ -471,10 +412,7 @@ def make_ekf_estimator(spec: Any, channels: list[str], fs: float) -> EKFWindowEs
     """The fair EKF of a :class:`~estimator.stream.pipeline.MonitorSpec` (module docstring)."""
     model = spec.model
     aug, held = ekf_plan(model, spec.params.free, spec.ekf_params)
-    tun = EKFTuning()
-    if spec.ekf_q is not None:
-        tun.q_param = spec.ekf_q
-    dec = spec.ekf_decimate or max(1, int(math.floor(fs / 250.0 + 1e-9)))
+    tun, dec = ekf_tuning(spec, fs)
     meas = [c for c in channels if c in model.channels]
     unknown = [k for k in spec.params.free if k not in spec.start_given]
     first = None

@@ -1,7 +1,5 @@
-"""The fleet: identify every drive log of many vehicles on Dask, keep their history in
-SQLite, follow each vehicle's parameters (trends, alerts, limit-crossing forecasts) and
-write a static HTML report. ``run_fleet(FleetConfig(...))`` is the entry point
-(``suspid fleet``); see ``docs/fleet.md``.
+"""The fleet: identify every drive log on Dask, keep their history in SQLite, follow each
+vehicle's parameters and write a static HTML report (``suspid fleet``; ``docs/fleet.md``).
 """
 from estimator.alerts.engine import AlertConfig
 from estimator.alerts.forecast import Trend

@@ -1,27 +1,8 @@
 """Per-vehicle history, trends, alerts, forecasts and risk ranking from drive records.
 
-Only ``ok`` drives count (:func:`estimator.fleet.drive.classify`: the identification
-succeeded), and of each only the parameters it determined
-(:func:`estimator.fleet.drive.determined`: free, not ``undetermined`` -- the tyres with the
-road unknown -- and with a standard error): a drive read but not identified
-(``unidentified``) is listed with its reason and never enters a trend, an alert or a
-forecast. The **monitored** parameters are the free dampers and springs (wear); free masses
-and inertias are the drive's **load** (the body mass with a spring held and the road
-unknown: the payload), shown per drive, never trended or alerted.
-
-Alerts follow the monitor's rule (:class:`estimator.alerts.engine.AlertEngine`) with each
-drive as one estimate in time order: a parameter is in alert when the upper one-sided
-confidence bound ``v + z s`` (default 99 %, ``z = 2.326``) of its estimate is below
-``(1 - drop) x nominal`` in ``min_count`` consecutive drives (default 1: one drive
-confidently below is enough, as ``monitor`` decides), and it leaves the alert only when the
-lower bound is back above ``(1 - drop + 0.05) x nominal`` in as many drives. A vehicle's
-``alerts`` are the parameters in alert after its latest drive. A parameter in alert has no
-forecast, and no forecast crossing is ever before the vehicle's latest drive.
-
-Where the drives carry the vehicle's distance (:func:`drive_positions`: the odometer, else
-the logged distance integrated from the speed), each monitored parameter also has a trend
-against distance (the same robust fit, the positions as abscissa), and a forecast gains the
-odometer at the crossing with its own Fieller interval (``crossing_km*``).
+Only ``ok`` drives and the parameters they determined count; dampers and springs are monitored,
+masses and inertias are the load. Alerts follow the monitor's rule with each drive as one
+estimate. See ``docs/fleet.md``.
 """
 from __future__ import annotations
 
@@ -40,27 +21,12 @@ from estimator.fleet.trend import (DAY_S, KM, Forecast, forecast_crossing, limit
 from suspid.models import get_model
 
 
-#: 2000-01-01 00:00 UTC (epoch s): a drive that starts before it carries the time since the
-#: start of its record (a CSV whose ``t`` starts at 0, a logger without a clock), not the
-#: epoch time the trend is fitted over
+#: 2000-01-01 00:00 UTC (epoch s): a drive starting before it carries no epoch time
 EPOCH_FLOOR = 946684800.0
 
 
 def time_warnings(vehicle: str, times: list[float]) -> list[str]:
-    """What makes a vehicle's drive times unfit for a trend, one line each.
-
-    Parameters
-    ----------
-    vehicle : str
-        The vehicle's name (folder).
-    times : list of float
-        Its identified drives' times (epoch s), one per drive.
-
-    Returns
-    -------
-    list of str
-        Empty when every drive starts after :data:`EPOCH_FLOOR` at a time of its own.
-    """
+    """What makes a vehicle's drive times (epoch s) unfit for a trend, one line each."""
     out: list[str] = []
     early = [t for t in times if t < EPOCH_FLOOR]
     if early:
@@ -93,18 +59,13 @@ class VehicleSummary:
     risk: str = "ok"
     rank: int = 0
     warnings: list[str] = field(default_factory=list)
-    #: constant road or position offsets found in the drives, by column (:func:`sensor_offsets`)
     offsets: dict[str, dict[str, Any]] = field(default_factory=dict)
-    #: drives read but not identified (status ``unidentified``), oldest first
     unidentified: list[dict[str, Any]] = field(default_factory=list)
-    #: free masses and inertias the drives determine (the load: payload per drive)
     loads: list[str] = field(default_factory=list)
-    #: where the drives' distance comes from (:func:`drive_positions`): ``"odometer"``,
-    #: ``"speed"`` (cumulative logged distance) or ``None`` (no distance signal)
+    #: ``"odometer"``, ``"speed"`` (cumulative logged distance) or ``None``
     distance_source: str | None = None
     #: each read drive's position on the vehicle's distance scale (m), by ``(path, t)``
     positions: dict[tuple[str, float], float] = field(default_factory=dict)
-    #: each monitored parameter's trend against distance (rate per m)
     trends_km: dict[str, Trend | None] = field(default_factory=dict)
 
     def position(self, rec: dict[str, Any]) -> float | None:
@@ -135,8 +96,7 @@ class VehicleSummary:
         return dict(Counter(str(r["result"].get("road", "measured")) for r in self.drives))
 
     def sort_key(self) -> tuple[int, float, float, str]:
-        """Most at risk first: alerts, then the earliest forecast crossing, then the
-        smallest margin above the limit (fraction of the allowed drop)."""
+        """Most at risk first: alerts, the earliest forecast crossing, the smallest margin."""
         level = {"alert": 0, "forecast": 1, "ok": 2, "no data": 3}[self.risk]
         first = min((f.crossing_t for f in self.forecasts.values()), default=math.inf)
         return level, first, self.margin(), self.vehicle
@@ -154,9 +114,7 @@ class VehicleSummary:
         return out
 
     def to_json(self) -> dict[str, Any]:
-        """The contract's vehicle object (``vehicle``, ``drives``, ``latest``, ``trend``,
-        ``alerts``, ``forecast``), then the rest. ``latest`` holds the parameters the latest
-        drive determined or held; those it left undetermined are in ``latest_undetermined``."""
+        """The contract's vehicle object, then the rest."""
         last = self.latest
         res = last["result"] if last else {}
         known = set(determined(res)) | set(res.get("fixed", [])) if last else set()
@@ -194,8 +152,7 @@ class VehicleSummary:
         }
 
     def distance_json(self) -> dict[str, Any]:
-        """``source`` (``odometer``, ``speed`` or null: no distance signal), ``odometer_km``
-        (the latest drive's position), ``drives`` with a position."""
+        """``source``, ``odometer_km`` (the latest drive's position) and ``drives`` with a position."""
         pos = self.latest_position()
         return {"source": self.distance_source,
                 "odometer_km": None if pos is None else round(pos / KM, 3),
@@ -203,23 +160,8 @@ class VehicleSummary:
 
 
 def sensor_offsets(records: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
-    """The constant offsets ``identify`` found in a vehicle's drives, by column.
-
-    A sensor zero not at the rest position (:mod:`estimator.identify.offset`) found in one
-    drive is that drive's matter (removed before its fit unless ``--offset keep``); found in
-    drive after drive it is the sensor's calibration, for the workshop.
-
-    Parameters
-    ----------
-    records : list of dict
-        The vehicle's identified drives, oldest first (each ``result`` an identify JSON).
-
-    Returns
-    -------
-    dict
-        Column -> ``kind`` (``road`` or ``channel``), ``drives`` (how many of ``of`` drives
-        had it), ``median``, ``min``, ``max`` (SI, over those drives), ``latest_t`` (epoch s
-        of the latest such drive), ``removed`` (in that drive). Empty when none was found.
+    """The constant offsets ``identify`` found in a vehicle's drives, by column (a calibration when
+    found drive after drive): ``kind``, ``drives`` of ``of``, ``median``/``min``/``max``, ``latest_t``.
     """
     found: dict[str, list[tuple[float, float, str, bool]]] = {}
     for r in records:
@@ -241,25 +183,8 @@ def sensor_offsets(records: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
 
 def drive_positions(records: list[dict[str, Any]]
                     ) -> tuple[str | None, dict[tuple[str, float], float]]:
-    """Each read drive's position on its vehicle's distance scale (m).
-
-    With an odometer (any drive's ``odometer_m``) the position is the odometer reading at
-    the drive's start; drives without one have none. With the speed alone the position is
-    the distance logged before the drive (the sum of the earlier read drives'
-    ``distance_m``): it counts only what was logged, so it is the odometer only when every
-    trip is.
-
-    Parameters
-    ----------
-    records : list of dict
-        One vehicle's read drives (``ok`` and ``unidentified``: both were driven), any order.
-
-    Returns
-    -------
-    source : str or None
-        ``"odometer"``, ``"speed"`` or ``None`` (no drive carries a distance).
-    positions : dict
-        ``(path, t) -> m`` for the drives with a position.
+    """Each read drive's position on its vehicle's distance scale: ``(source, {(path, t): m})``; with
+    the speed alone, the distance logged before the drive.
     """
     timed = sorted((r for r in records if r.get("t") is not None),
                    key=lambda r: (float(r["t"]), r["path"]))
@@ -287,22 +212,7 @@ LOAD_KINDS = ("mass", "inertia")
 
 def summarize_vehicle(vehicle: str, records: list[dict[str, Any]], rule: AlertConfig
                       ) -> VehicleSummary:
-    """History, trends, alerts and forecasts of one vehicle from its drive records.
-
-    Parameters
-    ----------
-    vehicle : str
-    records : list of dict
-        The vehicle's drive records (any status).
-    rule : AlertConfig
-        Nominal values, alert and forecast settings (:meth:`AlertConfig.per_drive`).
-
-    Returns
-    -------
-    VehicleSummary
-        Built from the ``ok`` drives only (module docstring); ``risk`` ``"no data"`` when
-        there is none.
-    """
+    """History, trends, alerts and forecasts of one vehicle from its drive records (any status)."""
     def when(r: dict[str, Any]) -> tuple[float, str]:
         return (float(r["t"]) if r.get("t") is not None else math.inf, r["path"])
 
@@ -313,7 +223,7 @@ def summarize_vehicle(vehicle: str, records: list[dict[str, Any]], rule: AlertCo
         return VehicleSummary(vehicle, "", [], failed, [], {}, {}, {}, {}, [], "no data",
                               unidentified=unidentified)
     model = _model_of(ok[-1])
-    # a history may mix models or --fix sets over the years: follow the latest drive's
+    # a history may mix models: follow the latest drive's
     ok = [r for r in ok if _model_of(r) == model]
     spec = get_model(model).spec
     fixed = set(ok[-1]["result"].get("fixed", []))
@@ -357,7 +267,6 @@ def summarize_vehicle(vehicle: str, records: list[dict[str, Any]], rule: AlertCo
         trends[k] = tr
         trk = None
         if summary.distance_source is not None:
-            # the same robust fit against the drives' positions (km): its own interval
             x = np.array([math.nan if summary.position(r) is None else summary.position(r)
                           for r in ser], dtype=float)
             trk = summary.trends_km[k] = robust_trend(x, v, s, scale=KM)

@@ -1,16 +1,5 @@
-"""Finding the drive logs of a fleet: directories (recursive), glob patterns and files.
-
-Every file whose suffix is a format ``suspid identify`` reads (CAN logs ``.log``, ``.asc``,
-``.blf``, ``.trc``, ``.mf4``, gzip-compressed ``.asc.gz``, ``.trc.gz``, and measurement ``.csv``;
-case-insensitive) is one drive; the
-vehicle is the name of the folder that holds it (``fleet/VAN-07/2026-11-02.blf`` belongs to
-``VAN-07``).
-
-Folders are searched through symbolic links (a vehicle folder linked from another disk is
-searched like any other), each real folder once, so a link back up the tree (a loop) ends
-the descent instead of repeating it; glob patterns are matched over the same walk, so a
-``**`` over a tree with a loop finishes too. A link to a log that no longer exists is
-kept: its drive fails with the reason (``No such file or directory``).
+"""Finding the drive logs of a fleet: directories (recursive, through links, each real folder
+once), glob patterns and files; a log's vehicle is the name of its folder.
 """
 from __future__ import annotations
 
@@ -28,15 +17,7 @@ from suspid.errors import InputError
 
 @dataclass(frozen=True)
 class DriveFile:
-    """A drive log found on disk.
-
-    Attributes
-    ----------
-    path : str
-        As found (absolute if the input was).
-    vehicle : str
-        Name of the folder holding the file.
-    """
+    """A drive log found on disk: ``path`` as found, ``vehicle`` the name of its folder."""
 
     path: str
     vehicle: str
@@ -59,10 +40,9 @@ def _is_drive(p: Path) -> bool:
 
 def _entries(root: Path, descend: Callable[[tuple[str, ...]], bool] = lambda rel: True
              ) -> Iterator[tuple[Path, tuple[str, ...], bool]]:
-    """Every entry below ``root`` (not ``root`` itself) as ``(path, parts relative to root,
-    is_dir)``, in name order: hidden names skipped, symbolic links to folders followed, each
-    real folder (device, inode) entered once, a folder entered only if ``descend(parts)``;
-    unreadable folders skipped."""
+    """Every entry below ``root`` as ``(path, parts, is_dir)`` in name order: hidden names skipped,
+    each real folder entered once and only if ``descend(parts)``.
+    """
     seen: set[tuple[int, int]] = set()
 
     def visit(d: Path, rel: tuple[str, ...]) -> Iterator[tuple[Path, tuple[str, ...], bool]]:
@@ -101,9 +81,7 @@ def _match(parts: tuple[str, ...], pattern: tuple[str, ...]) -> bool:
 
 
 def _glob(pattern: str) -> tuple[bool, list[Path]]:
-    """Whether a glob pattern (``*``, ``?``, ``[...]``, ``**``) matches anything, and the
-    files it names: those it matches and those in the folders it matches (one walk by
-    :func:`_entries` below the pattern's literal leading folders)."""
+    """Whether a glob pattern matches anything, and the files it or its matched folders name."""
     parts = Path(pattern).parts
     n = next((i for i, part in enumerate(parts) if glob.has_magic(part)), len(parts))
     root, rest = Path(*parts[:n]) if n else Path("."), parts[n:]
@@ -126,20 +104,10 @@ def _glob(pattern: str) -> tuple[bool, list[Path]]:
 
 
 def find_drives(inputs: Iterable[str]) -> list[DriveFile]:
-    """Every drive log named by ``inputs``, sorted by path, each once.
+    """Every drive log named by ``inputs`` (directories, glob patterns or files), sorted, each once.
 
-    Parameters
-    ----------
-    inputs : iterable of str
-        Directories (searched recursively through symbolic links, each real folder once;
-        hidden files and folders skipped), glob
-        patterns (``*``, ``?``, ``[...]``, ``**``; a matching directory is searched too) or
-        files. An explicitly named file is taken whatever its suffix (identify decides).
-
-    Raises
-    ------
-    InputError
-        An input that is neither an existing path nor a pattern matching anything.
+    An explicitly named file is taken whatever its suffix. InputError for an input that is
+    neither an existing path nor a pattern matching anything.
     """
     found: dict[str, DriveFile] = {}
 
@@ -150,8 +118,6 @@ def find_drives(inputs: Iterable[str]) -> list[DriveFile]:
 
     def walk(d: Path) -> None:
         for q, _, is_dir in _entries(d):
-            # a link to a log that is gone (an unmounted share) is a drive that fails with
-            # its reason, not a log silently left out
             if not is_dir and _is_drive(q) and (q.is_file() or q.is_symlink()):
                 add(q)
 

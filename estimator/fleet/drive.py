@@ -1,21 +1,7 @@
 """One drive: identify one log exactly as ``suspid identify`` does (the Dask task).
 
-The task is :func:`identify_drive`, a module-level function: a Dask worker imports this
-module once and runs the task for every drive it is given, so nothing is imported per task,
-and the DBC is parsed once per worker process (:func:`cached_database`, keyed by path,
-modification time and size) instead of once per drive.
-
-The identification is the same library call as ``suspid identify`` makes --
-:class:`~estimator.identify.OutputErrorProblem`, then
-:func:`~estimator.identify.record.identify_record` with the same options (:func:`identify`):
-the data-driven start, the check for a constant road or position offset (a sensor zero not
-at rest, named in the drive's first warning and its ``offset`` field, removed before the
-fit unless ``offset="keep"``), :func:`~estimator.identify.fit_from_starts` over
-:func:`~estimator.identify.fit` -- on the same measurement (:func:`load_drive`, which reads a CAN log through
-:func:`~estimator.decode.log_input.load_log_as_measurement` and a CSV through
-:func:`~suspid.io.csvio.read_measurement`, and adds identify's "motion does not decay"
-warning), so a drive's parameters equal ``suspid identify --json`` on the same file to the
-last digit.
+A worker imports this module once and parses the DBC once (:func:`cached_database`); the
+calls are ``identify``'s own, so the results are equal to the last digit.
 """
 from __future__ import annotations
 
@@ -55,39 +41,8 @@ _HASH_CHUNK = 1 << 20
 
 @dataclass(frozen=True)
 class IdentifySettings:
-    """The options of ``suspid identify`` that decide a drive's result.
-
-    Attributes
-    ----------
-    model : str
-        Model name.
-    fix, init : dict
-        ``--fix`` / ``--init`` values (SI).
-    cost : {"sse", "frobenius"}
-    x0 : str or tuple of float
-        ``"estimate"``, ``"rest"`` or an explicit state ``[q..., q_dot...]``.
-    restarts : int
-    maxfev : int or None
-    multistart : int
-    polish : bool
-    data_start : bool
-        Also start from the data-driven estimate (``identify``'s default; ``[fit] data_start``).
-    dbc : str or None
-        DBC path for CAN logs (``None``: suspid's bundled DBC).
-    signal_map : SignalMap or None
-        ``--map`` / ``--config`` ``[map]`` mapping, as ``identify`` resolves it.
-    can_channel : str or None
-        ``can.channel``: the bus channel of multi-bus logs to decode (``None``: all).
-    j1939_source : str or None
-        ``can.j1939_source``: the J1939 source address decoded (``None``: the first sender).
-    offset : {"remove", "keep"}
-        ``--offset``: a constant road or position offset found in a drive is subtracted
-        before the fit (default) or the drive is fitted as it is; either way it is named.
-    road : {"measured", "zero", "unknown"} or None
-        ``--road``; ``None`` chooses per drive from its record as ``identify`` does
-        (:func:`~estimator.identify.roadfree.resolve_road`: ``measured`` with road columns,
-        else ``zero`` for a free response and ``unknown`` for driving data), named in the
-        drive's first warning. Part of :meth:`key`, and each result carries the mode used.
+    """The options of ``suspid identify`` that decide a drive's result (``fix``/``init`` in SI;
+    ``road`` ``None`` chooses per drive as ``identify`` does).
     """
 
     model: str
@@ -112,9 +67,7 @@ class IdentifySettings:
         return Parameters.for_model(get_model(self.model), fix=self.fix, init=self.init)
 
     def key(self) -> str:
-        """A stable text key of the settings (stored with each drive in the history): the
-        options, the DBC's content hash and the suspid version, so a changed DBC or a new
-        identifier makes stored results stale."""
+        """A stable text key of the settings, the DBC's content hash and the suspid version."""
         d = asdict(self)
         dbc = Path(self.dbc) if self.dbc is not None else default_dbc_path()
         try:
@@ -122,7 +75,7 @@ class IdentifySettings:
         except OSError:
             d["dbc_sha256"] = None
         d["suspid"] = __version__
-        if d["can_channel"] is None:   # the key of every log read whole stays as it was
+        if d["can_channel"] is None:
             del d["can_channel"]
         if d["j1939_source"] is None:
             del d["j1939_source"]
@@ -134,13 +87,7 @@ class IdentifySettings:
 
 
 def file_digest(path: str | Path) -> str:
-    """SHA-256 of a file's bytes (hex): a drive's identity in the history.
-
-    Raises
-    ------
-    OSError
-        The file cannot be read.
-    """
+    """SHA-256 of a file's bytes (hex): a drive's identity in the history (OSError if unreadable)."""
     h = hashlib.sha256()
     with open(path, "rb") as fh:
         for chunk in iter(lambda: fh.read(_HASH_CHUNK), b""):
@@ -154,13 +101,7 @@ def _database(path: str, mtime_ns: int, size: int) -> Database:
 
 
 def cached_database(path: str | None) -> Database:
-    """The DBC at ``path`` (default: suspid's), parsed once per process and file version.
-
-    Raises
-    ------
-    InputError
-        Missing or unparsable DBC (as :func:`suspid.can.dbc.load_dbc`).
-    """
+    """The DBC at ``path`` (default: suspid's), parsed once per process and file version."""
     p = Path(path) if path is not None else default_dbc_path()
     try:
         st = p.stat()
@@ -171,19 +112,7 @@ def cached_database(path: str | None) -> Database:
 
 def load_drive(path: str | Path, model: SuspensionModel, settings: IdentifySettings
                ) -> tuple[Measurement, dict[str, Any] | None]:
-    """Read a drive log as ``suspid identify --input PATH`` does.
-
-    Returns
-    -------
-    measurement : Measurement
-    frames : dict or None
-        Frame counts of a CAN log (``None`` for a CSV).
-
-    Raises
-    ------
-    InputError, UsageError
-        Unreadable or unusable log (one-line message naming the file).
-    """
+    """Read a drive log as ``suspid identify --input PATH`` does: the measurement and CAN frame counts."""
     db = cached_database(settings.dbc)
     return read_input(path, model, db, with_declared_channels(settings.signal_map, db, model),
                       channel=settings.can_channel, j1939_source=settings.j1939_source)
@@ -191,23 +120,7 @@ def load_drive(path: str | Path, model: SuspensionModel, settings: IdentifySetti
 
 def with_declared_channels(signal_map: SignalMap | None, db: Database,
                            model: SuspensionModel) -> SignalMap | None:
-    """A map of the vehicle's distance channels alone (``--map odometer=VDHR...``) completed
-    with the channels the DBC declares for the model (``SuspidChannel`` attributes): the
-    suspension's signals need no mapping when the DBC declares them.
-
-    Parameters
-    ----------
-    signal_map : SignalMap or None
-        ``--map`` or the ``--config`` file's ``[map]``.
-    db : cantools Database
-    model : SuspensionModel
-
-    Returns
-    -------
-    SignalMap or None
-        ``signal_map`` itself when it maps a model channel (or is ``None``, or the DBC
-        declares nothing), else the DBC's channels followed by it.
-    """
+    """A map of distance channels alone completed with the channels the DBC declares for the model."""
     if signal_map is None or any(c not in AUX_CHANNELS for c in signal_map.channels()):
         return signal_map
     declared = SignalMap.from_dbc(db, model.name)
@@ -215,24 +128,8 @@ def with_declared_channels(signal_map: SignalMap | None, db: Database,
 
 
 def drive_distance(meas: Measurement) -> dict[str, Any]:
-    """The distance a drive covered, from the vehicle's odometer or speed (``meas.aux``).
-
-    Parameters
-    ----------
-    meas : Measurement
-        The drive, with ``aux`` ``odometer`` (m) and/or ``speed`` (m/s) when the log carries
-        them (a CSV column, or a signal mapped from the DBC: ``--map odometer=...``).
-
-    Returns
-    -------
-    dict
-        ``odometer_m`` (the first odometer reading, m: the drive's position on the vehicle's
-        distance scale, as ``t`` is on its time scale; ``None`` without an odometer),
-        ``distance_m`` (driven in the drive, m: the odometer's last minus first reading,
-        else the trapezoidal integral of the speed over its samples; ``None`` without
-        either) and ``distance_source`` (``"odometer"``, ``"speed"`` or ``None``). An
-        odometer that runs backwards within the drive (a reset, a wrong mapping) gives no
-        distance from it.
+    """The distance a drive covered: ``odometer_m`` (first reading), ``distance_m`` (odometer, else
+    integrated speed; m) and ``distance_source``; an odometer running backwards gives none.
     """
     out: dict[str, Any] = {"odometer_m": None, "distance_m": None, "distance_source": None}
     odo = meas.aux.get("odometer")
@@ -252,28 +149,8 @@ def drive_distance(meas: Measurement) -> dict[str, Any]:
 
 def distance_by_timestamp(path: str | Path, model: SuspensionModel, settings: IdentifySettings
                           ) -> Measurement | None:
-    """The vehicle's distance channels of a CAN log, decoded on the frames' own timestamps.
-
-    A log of suspid's sensor node is decoded on the node's tick (``SN_Sync``), and a frame
-    without the node's alive counter -- a J1939 odometer or speed from the engine
-    controller -- has no tick: the decoder rejects it (``no_sync``). The distance needs no
-    sensor clock (an odometer's first and last readings, a speed integrated over the
-    frames' times), so those channels alone are decoded again with the timestamps as the
-    time base.
-
-    Parameters
-    ----------
-    path : str or Path
-        The CAN log.
-    model : SuspensionModel
-    settings : IdentifySettings
-        Its ``signal_map`` names the distance channels (``odometer``, ``speed``).
-
-    Returns
-    -------
-    Measurement or None
-        ``t`` (s) and ``aux``; ``None`` when the map has no distance channel or the log no
-        accepted frame of one.
+    """The distance channels of a CAN log decoded on the frames' timestamps (a J1939 odometer has no
+    sensor tick); ``None`` without a mapped or accepted distance channel.
     """
     smap = settings.signal_map
     if smap is None:
@@ -297,9 +174,7 @@ def one_line(text: object) -> str:
 
 
 def identify(problem: OutputErrorProblem, settings: IdentifySettings) -> IdentResult:
-    """The identification ``suspid identify`` runs on a measurement with the road measured or
-    zero, with the same arguments (the offset check included: a found offset is in the
-    result's first warning and its ``offset``)."""
+    """The identification ``suspid identify`` runs with the road measured or zero, same arguments."""
     return identify_record(problem, settings.parameters(), restarts=settings.restarts,
                            maxfev=settings.maxfev, polish=settings.polish,
                            multistart=settings.multistart, data_start=settings.data_start,
@@ -309,21 +184,7 @@ def identify(problem: OutputErrorProblem, settings: IdentifySettings) -> IdentRe
 
 def identify_measurement(model: SuspensionModel, meas: Measurement,
                          settings: IdentifySettings) -> IdentResult:
-    """Identify one record as ``suspid identify --road ...`` does: the road mode resolved
-    from the record (:func:`~estimator.identify.roadfree.resolve_road`), then the body
-    equations with the road unknown (:func:`~estimator.identify.roadfree.fit_road_unknown`)
-    or the output-error fit (:func:`identify`) with the road measured or zero.
-
-    Returns
-    -------
-    IdentResult
-        With ``road`` the mode used and the choice's warning first.
-
-    Raises
-    ------
-    UsageError
-        ``--road measured`` on a record without a road column.
-    """
+    """Identify one record as ``suspid identify --road ...`` does (the road mode resolved first)."""
     road, meas, road_warnings = resolve_road(model, meas, settings.road)
     if road == "unknown":
         result = fit_road_unknown(model, meas, settings.parameters())
@@ -338,15 +199,7 @@ def identify_measurement(model: SuspensionModel, meas: Measurement,
 
 
 def determined(result: dict[str, Any]) -> list[str]:
-    """The free parameters a drive's result gives a value for: not held, not left
-    ``undetermined`` by the record (the tyres with the road unknown), with a finite standard
-    error; empty when the fit did not succeed.
-
-    Parameters
-    ----------
-    result : dict
-        An identify JSON object.
-    """
+    """The free parameters a drive's result (an identify JSON object) gives a finite value for."""
     if not result.get("success"):
         return []
     fixed = set(result.get("fixed", []))
@@ -362,15 +215,7 @@ def determined(result: dict[str, Any]) -> list[str]:
 
 
 def classify(result: dict[str, Any] | None) -> tuple[str, str | None]:
-    """A read drive's status from its identify result: ``("ok", None)`` when the
-    identification succeeded and determined at least one free parameter, else
-    ``("unidentified", reason)`` (the reason on one line, from the result's warnings).
-
-    Parameters
-    ----------
-    result : dict or None
-        An identify JSON object (``None``: nothing was identified).
-    """
+    """A read drive's status: ``("ok", None)`` or ``("unidentified", one-line reason)``."""
     if result is None:
         return "unidentified", "no identification result"
     if determined(result):
@@ -387,26 +232,8 @@ def identify_drive(path: str, vehicle: str, settings: IdentifySettings,
                    digest: str | None = None) -> dict[str, Any]:
     """Identify one drive; never raises for a bad log (the Dask task).
 
-    Parameters
-    ----------
-    path : str
-        The log (CAN log or measurement CSV), readable at this path on the worker.
-    vehicle : str
-        The vehicle it belongs to (the folder holding the log).
-    settings : IdentifySettings
-    digest : str, optional
-        SHA-256 of the file if the client already computed it.
-
-    Returns
-    -------
-    dict
-        ``path``, ``vehicle``, ``sha256``, ``size`` (bytes), ``t`` (epoch s of the first
-        sample, ``None`` if unreadable), the distance (:func:`drive_distance`:
-        ``odometer_m``, ``distance_m``, ``distance_source``, ``None`` without an odometer or
-        speed signal), ``status`` (``"ok"``; ``"unidentified"``: read but
-        not identified, :func:`classify`; ``"failed"``: not read), ``error`` (one-line
-        reason or ``None``) and, when read, ``result``: the ``suspid identify --json`` object
-        of the drive.
+    Returns ``path``, ``vehicle``, ``sha256``, ``size``, ``t`` (epoch s), the distance, ``status``
+    (``"ok"``, ``"unidentified"``, ``"failed"``), ``error`` and ``result`` (identify's JSON).
     """
     out: dict[str, Any] = {"path": path, "vehicle": vehicle, "sha256": digest, "size": None,
                            "t": None, "status": "failed", "error": None, "result": None,
@@ -417,8 +244,7 @@ def identify_drive(path: str, vehicle: str, settings: IdentifySettings,
             out["sha256"] = file_digest(path)
         model = get_model(settings.model)
         meas, frames = load_drive(path, model, settings)
-        # the drive's time is the log's own first timestamp (epoch s), not the data time,
-        # which a stream with the sensor's tick counts from the node's start
+        # the drive's time is the log's own first timestamp (epoch s), not the data time
         stamp = first_timestamp(path) if frames is not None else None
         t0 = stamp if stamp is not None else (float(meas.t[0]) if meas.t.size else math.nan)
         if not math.isfinite(t0):

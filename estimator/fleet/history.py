@@ -1,51 +1,7 @@
-"""The fleet's history: an SQLite database (Python's standard ``sqlite3``) of every drive.
+"""The fleet's history: an SQLite database (schema in ``docs/fleet.md``) of every drive.
 
-Schema (``PRAGMA user_version = 2``; query it with the ``sqlite3`` shell)::
-
-    CREATE TABLE drives (
-        id        TEXT PRIMARY KEY,  -- SHA-256 of the log's bytes; of a failed log
-                                     -- SHA-256 + ':' + path ('path:' + path if unreadable)
-        path      TEXT NOT NULL,     -- where it was read last
-        vehicle   TEXT NOT NULL,     -- the folder holding the log
-        t         REAL,              -- first sample, epoch s (NULL if unreadable)
-        model     TEXT NOT NULL,
-        status    TEXT NOT NULL,     -- 'ok', 'unidentified' (read, not identified) or 'failed'
-        error     TEXT,              -- one-line reason when unidentified or failed
-        size      INTEGER,           -- bytes
-        settings  TEXT NOT NULL,     -- identify options, DBC hash, suspid version (JSON)
-        result    TEXT,              -- the drive's `suspid identify --json` object
-        processed REAL NOT NULL,     -- epoch s when it was stored last
-        odometer_m REAL,             -- odometer at the drive's start, m (NULL: no odometer)
-        distance_m REAL,             -- distance driven in the drive, m (NULL: no distance)
-        distance_source TEXT         -- 'odometer' or 'speed' (integrated); NULL: neither
-    );
-    CREATE TABLE estimates (
-        drive_id  TEXT NOT NULL REFERENCES drives(id) ON DELETE CASCADE,
-        parameter TEXT NOT NULL,
-        value     REAL NOT NULL,     -- SI
-        stderr    REAL,              -- SI, NULL for fixed or unidentifiable
-        fixed     INTEGER NOT NULL,  -- 1 if held by --fix
-        PRIMARY KEY (drive_id, parameter)
-    );
-    CREATE TABLE runs (
-        id INTEGER PRIMARY KEY AUTOINCREMENT,
-        started REAL, finished REAL, model TEXT,
-        options TEXT,                -- identify options and nominal/alert settings (JSON)
-        new INTEGER, reused INTEGER, failed INTEGER
-    );
-
-A log is one drive whatever its path: processing the same bytes again replaces its row
-(``INSERT OR REPLACE`` on ``id``) instead of adding one; a log already stored with the same
-``settings`` is not identified again. A failed log is one row per path (empty or garbage
-files of several vehicles are as many failed logs, not one). A log whose bytes changed at
-the same path (a logger still writing it, an upload completed) replaces the row stored for
-that path when that row failed or starts at the same time; a different drive written to the
-same path later (another first timestamp) is added.
-
-A history of schema version 1 (before the distance columns) is migrated when it is opened
-for writing: the three columns are added, NULL for the drives stored before (a log is read
-again only when its settings change, e.g. a ``--map odometer=...`` added). Opened read-only
-it is read as it is, its drives without a distance.
+A drive's key is its content hash: the same bytes replace their row and are not identified
+again with the same settings; a failed log is one row per path.
 """
 from __future__ import annotations
 
@@ -59,9 +15,7 @@ from estimator.fleet.drive import classify
 from suspid.errors import InputError
 
 SCHEMA_VERSION = 2
-#: columns added by schema version 2 (the drive's distance), with their SQL types
 DISTANCE_COLUMNS = (("odometer_m", "REAL"), ("distance_m", "REAL"), ("distance_source", "TEXT"))
-#: statuses of a drive that was read (its result is the content's: one row per content)
 READ = ("ok", "unidentified")
 
 _SCHEMA = """
@@ -82,8 +36,7 @@ CREATE TABLE IF NOT EXISTS runs (
 
 
 def drive_id(record: dict[str, Any]) -> str:
-    """A drive's key: its content hash; for a failed log the hash and its path (each failed
-    file is listed), or its path alone when the file could not be read."""
+    """A drive's key: its content hash (plus the path for a failed log; the path alone if unread)."""
     sha = record.get("sha256")
     if not sha:
         return f"path:{record['path']}"
@@ -91,21 +44,8 @@ def drive_id(record: dict[str, Any]) -> str:
 
 
 class History:
-    """An open fleet history database.
-
-    Parameters
-    ----------
-    path : str or Path
-        The SQLite file (created with its folder if missing, unless ``readonly``).
-    readonly : bool
-        Open an existing history for reading only (a report from the history: works on a
-        read-only file, folder or mount).
-
-    Raises
-    ------
-    InputError
-        Not an SQLite database, one of a newer schema, not a fleet history (``readonly``),
-        or one that cannot be written (not ``readonly``).
+    """An open fleet history database at ``path`` (created unless ``readonly``); InputError when it
+    is not a usable fleet history or cannot be written.
     """
 
     #: seconds to wait for another run's write to end before failing
@@ -156,8 +96,7 @@ class History:
         return {r[1] for r in self.conn.execute("PRAGMA table_info(drives)")}
 
     def _select(self) -> str:
-        """The columns :func:`_record` reads; a version 1 history opened read-only gives NULL
-        for the distance columns it lacks."""
+        """The columns :func:`_record` reads (NULL for distance columns a version 1 history lacks)."""
         dist = ", ".join(name if name in self._columns else "NULL"
                          for name, _ in DISTANCE_COLUMNS)
         return f"SELECT id, path, vehicle, t, status, error, size, result, model, {dist} FROM drives"
@@ -177,48 +116,35 @@ class History:
         return {r[0]: _record(r) for r in rows}
 
     def add(self, records: Iterable[dict[str, Any]], model: str, settings_key: str) -> int:
-        """Insert or replace drives (one transaction); returns how many.
-
-        A row stored for the same path with other bytes is replaced when it failed or starts
-        at the same time (the same log, grown or repaired since).
-
-        Raises
-        ------
-        InputError
-            The database cannot be written (read-only, locked longer than
-            :attr:`BUSY_TIMEOUT_S`, disk full).
-        """
-        try:
-            return self._add(records, model, settings_key)
-        except sqlite3.DatabaseError as exc:
-            raise InputError(f"--db {self.path}: cannot store the drives ({exc})") from None
-
-    def _add(self, records: Iterable[dict[str, Any]], model: str, settings_key: str) -> int:
+        """Insert or replace drives (one transaction); returns how many (InputError if not writable)."""
         now = time.time()
         n = 0
-        with self.conn:
-            for rec in records:
-                did = drive_id(rec)
-                res = rec.get("result")
-                self.conn.execute("DELETE FROM drives WHERE path = ? AND id != ? AND "
-                                  "(status != 'ok' OR t = ?)", (rec["path"], did, rec.get("t")))
-                self.conn.execute("DELETE FROM estimates WHERE drive_id = ?", (did,))
-                self.conn.execute(
-                    "INSERT OR REPLACE INTO drives (id, path, vehicle, t, model, status, error, "
-                    "size, settings, result, processed, odometer_m, distance_m, distance_source) "
-                    "VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
-                    (did, rec["path"], rec["vehicle"], rec.get("t"), model, rec["status"],
-                     rec.get("error"), rec.get("size"), settings_key,
-                     json.dumps(res) if res is not None else None, now,
-                     rec.get("odometer_m"), rec.get("distance_m"), rec.get("distance_source")))
-                if res is not None:
-                    fixed = set(res.get("fixed", []))
-                    self.conn.executemany(
-                        "INSERT INTO estimates (drive_id, parameter, value, stderr, fixed) "
-                        "VALUES (?,?,?,?,?)",
-                        [(did, k, float(v), res.get("stderr", {}).get(k), int(k in fixed))
-                         for k, v in res["params"].items()])
-                n += 1
+        try:
+            with self.conn:
+                for rec in records:
+                    did = drive_id(rec)
+                    res = rec.get("result")
+                    self.conn.execute("DELETE FROM drives WHERE path = ? AND id != ? AND "
+                                      "(status != 'ok' OR t = ?)", (rec["path"], did, rec.get("t")))
+                    self.conn.execute("DELETE FROM estimates WHERE drive_id = ?", (did,))
+                    self.conn.execute(
+                        "INSERT OR REPLACE INTO drives (id, path, vehicle, t, model, status, error, "
+                        "size, settings, result, processed, odometer_m, distance_m, distance_source) "
+                        "VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
+                        (did, rec["path"], rec["vehicle"], rec.get("t"), model, rec["status"],
+                         rec.get("error"), rec.get("size"), settings_key,
+                         json.dumps(res) if res is not None else None, now,
+                         rec.get("odometer_m"), rec.get("distance_m"), rec.get("distance_source")))
+                    if res is not None:
+                        fixed = set(res.get("fixed", []))
+                        self.conn.executemany(
+                            "INSERT INTO estimates (drive_id, parameter, value, stderr, fixed) "
+                            "VALUES (?,?,?,?,?)",
+                            [(did, k, float(v), res.get("stderr", {}).get(k), int(k in fixed))
+                             for k, v in res["params"].items()])
+                    n += 1
+        except sqlite3.DatabaseError as exc:
+            raise InputError(f"--db {self.path}: cannot store the drives ({exc})") from None
         return n
 
     def drives(self) -> list[dict[str, Any]]:
@@ -238,31 +164,19 @@ class History:
 
     def add_run(self, started: float, model: str, options: dict[str, Any], new: int,
                 reused: int, failed: int) -> None:
-        """Record a run (its options, counts).
-
-        Raises
-        ------
-        InputError
-            The database cannot be written.
-        """
+        """Record a run (its options, counts); InputError if the database cannot be written."""
         try:
-            self._add_run(started, model, options, new, reused, failed)
+            with self.conn:
+                self.conn.execute("INSERT INTO runs (started, finished, model, options, new, reused, "
+                                  "failed) VALUES (?,?,?,?,?,?,?)",
+                                  (started, time.time(), model, json.dumps(options), new, reused,
+                                   failed))
         except sqlite3.DatabaseError as exc:
             raise InputError(f"--db {self.path}: cannot store the run ({exc})") from None
 
-    def _add_run(self, started: float, model: str, options: dict[str, Any], new: int,
-                 reused: int, failed: int) -> None:
-        with self.conn:
-            self.conn.execute("INSERT INTO runs (started, finished, model, options, new, reused, "
-                              "failed) VALUES (?,?,?,?,?,?,?)",
-                              (started, time.time(), model, json.dumps(options), new, reused,
-                               failed))
-
 
 def _record(r: tuple[Any, ...]) -> dict[str, Any]:
-    """A stored row as a drive record; a read drive's status is decided again from its
-    result (:func:`~estimator.fleet.drive.classify`), so a history written when every
-    read drive was ``ok`` lists a failed fit as ``unidentified``."""
+    """A stored row as a drive record, a read drive's status decided again from its result."""
     did = r[0]
     result = json.loads(r[7]) if r[7] else None
     status, error = r[4], r[5]

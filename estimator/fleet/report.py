@@ -1,15 +1,6 @@
-"""The fleet report: one static HTML page (inline SVG plots, no server, no script).
-
-``index.html`` holds the vehicles ranked by risk (table ``#vehicles``: vehicles in alert
-first, then those with a forecast limit crossing, soonest first, then by the smallest
-margin above the limit), one section per vehicle with each monitored parameter's drive
-estimates (±2 standard errors), robust trend, nominal value, limit and forecast crossing
-with its 90 % interval (in days, and in odometer km where the logs carry the vehicle's
-distance or speed; "no distance signal" where they do not), a table of its drives
-(``drives-NAME``: time, road mode, odometer where the drives carry a distance, each free
-parameter, the load -- the body mass with a spring held and the road unknown: the payload --
-and what the drive left undetermined), and the drives read but not identified (table
-``#unidentified``) and the failed logs (table ``#failed``) with their reasons.
+"""The fleet report: one static HTML page (inline SVG plots, no server, no script): vehicles by
+risk (``#vehicles``), a section per vehicle (drives in ``drives-NAME``), ``#unidentified`` and
+``#failed``.
 """
 from __future__ import annotations
 
@@ -124,9 +115,9 @@ def trend_svg(s: VehicleSummary, name: str, width: int = 440, height: int = 210)
 
 
 def vehicle_anchor(name: str) -> str:
-    """The HTML id of a vehicle's section: ``v-`` and the name, every character other than
-    an ASCII letter, digit or ``-`` written as ``_HEX_`` (ids hold no whitespace; distinct
-    names give distinct ids; the same name the same id from run to run)."""
+    """The HTML id of a vehicle's section: ``v-`` and the name, characters other than ASCII
+    letters, digits and ``-`` written as ``_HEX_`` (stable and distinct).
+    """
     return "v-" + "".join(c if (c.isascii() and c.isalnum()) or c == "-" else f"_{ord(c):x}_"
                           for c in name)
 
@@ -263,16 +254,13 @@ def _km(fc: Forecast) -> str:
 
 
 def _drives_table(s: VehicleSummary) -> str:
-    """A vehicle's drives: time, road mode, status, each free parameter (undetermined ones
-    marked), the load (payload) columns first."""
+    """A vehicle's drives: time, road, status, the load and monitored parameters, undetermined ones."""
     rows = sorted(s.drives + s.unidentified,
                   key=lambda r: (float(r["t"]) if r.get("t") is not None else math.inf,
                                  r["path"]))
     names = s.loads + s.monitored
     head = "".join(f"<th>{html.escape(k)}{' (load)' if k in s.loads else ''}</th>"
                    for k in names)
-    # the odometer column only where the drives carry a distance (the vehicle's section
-    # says "no distance signal" otherwise)
     odo_head = "<th>Odometer (km)</th>" if s.distance_source is not None else ""
     out = [f'<table class="drives" id="drives-{vehicle_anchor(s.vehicle)[2:]}"><thead><tr>'
            f"<th>Drive (UTC)</th><th>Road</th>{odo_head}<th>Status</th>{head}"
@@ -316,11 +304,8 @@ def _conf(z: float) -> float:
 def prepare_report_folder(folder: str | Path) -> Path:
     """Create the report's folder before any drive is identified; returns the page's path.
 
-    Raises
-    ------
-    InputError
-        ``folder`` is a file, cannot be created or written, or its ``index.html`` is a
-        folder (found at the start of a run, not after hours of identification).
+    InputError when ``folder`` is a file, cannot be created or written, or its ``index.html`` is
+    a folder.
     """
     d = Path(folder)
     if d.exists() and not d.is_dir():

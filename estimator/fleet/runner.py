@@ -1,15 +1,4 @@
-"""Running a fleet: discover the logs, identify each drive on Dask, keep the history, summarise.
-
-Execution
-    Each drive is one Dask task (:func:`estimator.fleet.drive.identify_drive`). By default a
-    :class:`distributed.LocalCluster` of worker *processes* (one thread each; ``workers``
-    of them, default and at most the CPUs available to the process) is started for the run and closed after it; with
-    ``scheduler="tcp://HOST:PORT"`` the tasks go to that existing cluster. The workers open
-    the logs by the path the client found them at, so on a cluster of several machines the
-    logs must be at the same path on every machine (a shared file system); see
-    ``docs/fleet.md``. ``workers=0`` runs the drives one after another in this process
-    (debugging, tiny batches).
-"""
+"""Running a fleet: discover the logs, identify each drive on Dask, keep the history, summarise."""
 from __future__ import annotations
 
 import logging
@@ -38,8 +27,7 @@ Progress = Callable[[int, int, int], None]
 
 
 def available_cpus() -> int:
-    """The CPUs this process may run on (its affinity mask where the system has one, as in a
-    container or under ``taskset``; else the machine's count)."""
+    """The CPUs this process may run on (its affinity mask where there is one, else the count)."""
     try:
         return max(1, len(os.sched_getaffinity(0)))
     except (AttributeError, OSError):
@@ -47,20 +35,13 @@ def available_cpus() -> int:
 
 
 def local_workers(workers: int | None, drives: int) -> int:
-    """Local worker processes for ``drives`` drives: ``workers`` (default the available
-    CPUs), but no more than the available CPUs (each drive's identification is
-    single-threaded CPU work: more processes only share the cores and add memory) and no more
-    than the drives (each costs a process start and its memory)."""
+    """Local worker processes: ``workers`` (default the CPUs), at most the CPUs and the drives."""
     cpus = available_cpus()
     return max(1, min(cpus if workers is None else workers, cpus, drives))
 
 
 class ProgressBar:
-    """A text progress bar on a stream (stderr): ``[#####.....] 12/40 drives, 1 failed``.
-
-    On a terminal it redraws one line; elsewhere (a log file, CI) it writes a line at each
-    tenth of the work.
-    """
+    """A text progress bar on a stream: one redrawn line on a terminal, else a line per tenth."""
 
     def __init__(self, stream: TextIO = sys.stderr, width: int = 30) -> None:
         self.stream = stream
@@ -89,26 +70,8 @@ class ProgressBar:
 
 @dataclass
 class FleetConfig:
-    """What ``suspid fleet`` was asked to do.
-
-    Attributes
-    ----------
-    inputs : list of str
-        Directories, glob patterns or files (empty: report from ``db`` alone).
-    settings : IdentifySettings or None
-        How each drive is identified (``None`` only for a history-only report).
-    rule : AlertConfig
-        Nominal values, alert and forecast settings (:meth:`AlertConfig.per_drive`).
-    scheduler : str or None
-        Address of an existing Dask scheduler (``tcp://HOST:PORT``).
-    workers : int or None
-        Local worker processes (default: CPU count; 0: in this process, no cluster).
-    db : str or None
-        History database (SQLite file).
-    report : str or None
-        Folder for the HTML report.
-    progress : callable or None
-        ``progress(done, total, failed)`` after each drive.
+    """What ``suspid fleet`` was asked to do (``inputs`` empty: report from ``db`` alone; ``workers``
+    0: no cluster; ``progress(done, total, failed)`` after each drive).
     """
 
     inputs: list[str] = field(default_factory=list)
@@ -155,7 +118,6 @@ def drive_json(rec: dict[str, Any]) -> dict[str, Any]:
         if k in res:
             out[k] = res[k]
     if rec.get("distance_source") is not None:
-        # the distance the drive covered and the odometer at its start (km)
         for key, m in (("odometer_km", rec.get("odometer_m")),
                        ("distance_km", rec.get("distance_m"))):
             out[key] = None if m is None else round(float(m) / 1e3, 4)
@@ -164,8 +126,7 @@ def drive_json(rec: dict[str, Any]) -> dict[str, Any]:
 
 
 def check_settings(settings: IdentifySettings, files: list[DriveFile]) -> None:
-    """Fail early (exit 2) on options that would fail every drive: unknown parameters, a
-    DBC that cannot be read, a signal map that does not fit the DBC or the model."""
+    """Fail early (exit 2) on options that would fail every drive (parameters, DBC, signal map)."""
     settings.parameters()
     if any(Path(f.path).suffix.lower() in CAN_SUFFIXES for f in files):
         db = cached_database(settings.dbc)
@@ -176,12 +137,8 @@ def check_settings(settings: IdentifySettings, files: list[DriveFile]) -> None:
 def execute(jobs: list[tuple[str, str, str | None]], settings: IdentifySettings,
             scheduler: str | None = None, workers: int | None = None,
             progress: Progress | None = None) -> list[dict[str, Any]]:
-    """Identify drives ``(path, vehicle, sha256 or None)`` on Dask; records in job order.
-
-    Raises
-    ------
-    UsageError
-        The scheduler cannot be reached, or ``workers`` < 0.
+    """Identify drives ``(path, vehicle, sha256 or None)`` on Dask (local cluster, ``scheduler``, or
+    in this process with ``workers=0``); records in job order.
     """
     if not jobs:
         return []
@@ -242,12 +199,7 @@ def execute(jobs: list[tuple[str, str, str | None]], settings: IdentifySettings,
 def run_fleet(config: FleetConfig) -> FleetResult:
     """Discover, identify, store and summarise a fleet's drives (``suspid fleet``).
 
-    Raises
-    ------
-    UsageError
-        No ``inputs`` and no ``db``; inputs without identify settings; bad options.
-    InputError
-        An input that does not exist, or no drive log found.
+    UsageError for missing or bad options; InputError for a missing input or no drive log found.
     """
     t_start = time.time()
     wall = time.perf_counter()
@@ -291,8 +243,7 @@ def run_fleet(config: FleetConfig) -> FleetResult:
                                 new, reused, sum(r["status"] == "failed" for r in records))
             records = history.drives()
             if not files:
-                # a report from the history alone: every read drive comes from it (the count
-                # a run with --input over the same logs gives; failed logs are tried again)
+                # a report from the history alone: every read drive comes from it
                 reused = sum(r["status"] in READ for r in records)
 
         records = sort_drives(records)
@@ -309,15 +260,7 @@ def run_fleet(config: FleetConfig) -> FleetResult:
 
 def _identify(files: list[DriveFile], settings: IdentifySettings, history: History | None,
               config: FleetConfig) -> tuple[list[dict[str, Any]], int, int]:
-    """Records of ``files`` in order: drives already in the history with the same settings
-    (same content hash) are taken from it, the others identified on Dask.
-
-    Returns
-    -------
-    records : list of dict
-    new, reused : int
-        Drives identified now, and taken from the history.
-    """
+    """Records of ``files`` in order, stored ones reused: ``(records, new, reused)``."""
     known = history.known(settings.key()) if history is not None else {}
     jobs: list[tuple[str, str, str | None]] = []
     reuse: dict[int, dict[str, Any]] = {}

@@ -1,19 +1,8 @@
 """A synthetic fleet of drive logs with known wear (benchmarks, tests, demonstrations).
 
-Each drive is a ``quarter2`` simulation over an ISO 8608 road (its own seed), with noise on
-the measured accelerations, encoded by the sensor node's encoder
-(:func:`suspid.can.encoder.measurement_frames`, the code behind ``suspid encode``) and
-written as a candump ``-L`` log stamped at the drive's epoch time. A vehicle's damper ``c1``
-(and optionally spring ``k1``) falls linearly with time at the vehicle's wear rate, so the
-true trend and the date it crosses a limit are known.
-
-With ``FleetSpec.distance`` the drives also carry the vehicle's distance: its odometer
-(``"odometer"``) or its speed (``"speed"``), as ``odometer``/``speed`` CSV columns or, in a
-CAN log, as the SAE J1939 parameter groups VDHR (PGN 65217,
-``HighResolutionTotalVehicleDistance``, 5 m per bit) and CCVS1 (PGN 65265,
-``WheelBasedVehicleSpeed``, km/h) sent by the engine controller (source 0x00) at 10 Hz, decoded
-with the DBC :func:`distance_dbc` writes and the map :data:`DISTANCE_MAP`. Each vehicle drives
-``km_per_day`` every day, so its odometer at any time, and at the crossing, is known.
+Each drive is a ``quarter2`` simulation over an ISO 8608 road, encoded as ``suspid encode``
+does; ``c1`` (and ``k1``) fall linearly at the vehicle's rate. With ``FleetSpec.distance`` the
+drives carry the odometer or speed (CSV columns, or J1939 VDHR/CCVS1, :func:`distance_dbc`).
 """
 from __future__ import annotations
 
@@ -40,20 +29,8 @@ EPOCH0 = 1788220800.0
 
 @dataclass
 class VehicleWear:
-    """One synthetic vehicle.
-
-    Attributes
-    ----------
-    name : str
-        Folder name (the vehicle id).
-    c1_rate : float
-        Damper loss per day as a fraction of nominal (e.g. 0.005 = 0.5 %/day).
-    k1_rate : float
-        Spring loss per day as a fraction of nominal.
-    km_per_day : float
-        Distance driven every day (km), from ``odometer0_km`` on day 0.
-    odometer0_km : float
-        Odometer on day 0 (km).
+    """One synthetic vehicle: folder ``name``, damper and spring loss per day (fraction of nominal),
+    ``km_per_day`` driven from ``odometer0_km`` on day 0.
     """
 
     name: str
@@ -69,30 +46,10 @@ class VehicleWear:
 
 @dataclass
 class FleetSpec:
-    """A synthetic fleet.
+    """A synthetic fleet: ``drives`` in all over ``days``, each ``duration`` s at ``fs`` Hz.
 
-    Attributes
-    ----------
-    vehicles : list of VehicleWear
-    drives : int
-        Drives in all (spread over the vehicles in turn).
-    days : float
-        The drives are spread evenly over this many days.
-    duration : float
-        Length of a drive (s).
-    fs : float
-        Sample rate (Hz).
-    noise : float
-        Noise on each measured channel, fraction of its standard deviation.
-    params : dict
-        Nominal ``quarter2`` parameters (SI).
-    speed_kmh : float
-        Vehicle speed on the ISO 8608 class C road.
-    fmt : str
-        Log suffix (``.log``, ``.blf``, ``.asc``, ``.csv``...).
-    distance : {"", "odometer", "speed"}
-        The vehicle signal the drives carry besides the suspension's (module docstring);
-        ``""`` none. A CAN log needs the DBC of :func:`distance_dbc` (``db``).
+    ``noise`` is a fraction of each channel's std, ``params`` the nominal ``quarter2`` values (SI),
+    ``fmt`` the log suffix and ``distance`` ``""``, ``"odometer"`` or ``"speed"``.
     """
 
     vehicles: list[VehicleWear]
@@ -121,8 +78,7 @@ class FleetSpec:
         return EPOCH0 + drop / rate * DAY_S if rate > 0 else None
 
 
-#: J1939 parameter groups of the vehicle's distance and speed (IDs as a J1939 DBC lists them,
-#: source 0xFE), added to suspid's DBC by :func:`distance_dbc`
+#: J1939 groups of the vehicle's distance and speed, added to suspid's DBC by :func:`distance_dbc`
 J1939_DISTANCE = """BO_ 2566832638 VDHR: 8 Vector__XXX
  SG_ HighResolutionTotalVehicleDistance : 0|32@1+ (5,0) [0|21055406000] "m" Vector__XXX
  SG_ HighResolutionTripDistance : 32|32@1+ (5,0) [0|21055406000] "m" Vector__XXX
@@ -131,8 +87,7 @@ BO_ 2566844926 CCVS1: 8 Vector__XXX
  SG_ WheelBasedVehicleSpeed : 8|16@1+ (0.00390625,0) [0|250.996] "km/h" Vector__XXX
 
 """
-#: the signal map of the distance channels in the DBC of :func:`distance_dbc` (the speed
-#: from km/h to m/s); suspid's own channels come from the DBC's ``SuspidChannel`` attributes
+#: the signal map of the distance channels in the DBC of :func:`distance_dbc`
 DISTANCE_MAP = {"odometer": "odometer=VDHR.HighResolutionTotalVehicleDistance",
                 "speed": "speed=CCVS1.WheelBasedVehicleSpeed*0.2777777777777778"}
 #: source address of the controller sending them (the engine)
@@ -142,8 +97,7 @@ DISTANCE_PERIOD_S = 0.1
 
 
 def distance_dbc(path: str | Path) -> Path:
-    """Write suspid's DBC with the J1939 groups VDHR and CCVS1 added (``VFrameFormat``
-    ``J1939PG``: matched by PGN whatever the sender); returns ``path``."""
+    """Write suspid's DBC with the J1939 groups VDHR and CCVS1 added (matched by PGN); returns ``path``."""
     text = default_dbc_path().read_text(encoding="utf-8")
     ids = (2566832638, 2566844926)
     text = text.replace("\nCM_ ", "\n" + J1939_DISTANCE + "CM_ ", 1)
@@ -158,8 +112,7 @@ def distance_dbc(path: str | Path) -> Path:
 
 def distance_frames(db: Database, kind: str, t: np.ndarray, t0: float, odometer_m: float,
                     speed_ms: float) -> list[can.Message]:
-    """The VDHR (``kind`` ``"odometer"``) or CCVS1 (``"speed"``) frames of a drive at
-    :data:`DISTANCE_PERIOD_S`, from :data:`J1939_SOURCE`, stamped at epoch ``t0 + t``."""
+    """The VDHR (``"odometer"``) or CCVS1 (``"speed"``) frames of a drive, stamped at epoch ``t0 + t``."""
     name = "VDHR" if kind == "odometer" else "CCVS1"
     msg = db.get_message_by_name(name)
     arb = frame_id_pack(6, 0, 0, (msg.frame_id >> 16) & 0xFF, (msg.frame_id >> 8) & 0xFF,
@@ -179,6 +132,12 @@ def _candump(path: Path, frames: list) -> None:
     with open(path, "w", encoding="ascii") as fh:
         fh.writelines(f"({m.timestamp:.6f}) can0 {m.arbitration_id:03X}#{bytes(m.data).hex().upper()}\n"
                       for m in frames)
+
+
+def _write_csv(path: str | Path, t: np.ndarray, cols: dict[str, np.ndarray]) -> None:
+    """A measurement CSV with epoch ``t`` to 6 decimals (``%.10g`` would round it to 1 s)."""
+    np.savetxt(path, np.column_stack([t, *cols.values()]), fmt=["%.6f"] + ["%.10g"] * len(cols),
+               delimiter=",", header=",".join(["t", *cols]), comments="")
 
 
 def write_drive(path: Path, spec: FleetSpec, vehicle: VehicleWear, t0: float, seed: int,
@@ -201,10 +160,7 @@ def write_drive(path: Path, spec: FleetSpec, vehicle: VehicleWear, t0: float, se
             cols["odometer"] = odo0 + speed * (t - t[0])
         elif spec.distance == "speed":
             cols["speed"] = np.full(t.size, speed)
-        data = np.column_stack([t + t0, *cols.values()])
-        # %.10g (write_measurement) would round an epoch time to 1 s: t gets 6 decimals
-        np.savetxt(path, data, fmt=["%.6f"] + ["%.10g"] * len(cols), delimiter=",",
-                   header=",".join(["t", *cols]), comments="")
+        _write_csv(path, t + t0, cols)
         return p
     meas = Measurement(t=t, road=roads, measured=measured)
     frames = list(measurement_frames(meas, "quarter2", db, t0=t0))
@@ -224,38 +180,8 @@ def write_production_drive(path: str | Path, params: dict[str, float], t0: float
                            duration: float = 20.0, fs: float = 200.0, noise: float = 0.02,
                            seed: int = 0, speed_kmh: float = 50.0, model: str = "quarter2"
                            ) -> dict[str, float]:
-    """Simulate one drive over an ISO 8608 road and write what a production car logs.
-
-    The CSV holds ``t`` (epoch s, from ``t0``) and the model's production sensor set
-    (:meth:`~suspid.models.base.SuspensionModel.channel_set` ``"production"``: the body
-    accelerations, m/s^2, and the ride heights, m), each with Gaussian noise of ``noise``
-    times its standard deviation; no road column (the road is never measured).
-
-    Parameters
-    ----------
-    path : str or Path
-        The CSV to write (its folder must exist).
-    params : dict
-        The drive's true parameters (SI), e.g. with this drive's body mass (payload).
-    t0 : float
-        Epoch s of the first sample.
-    duration : float
-        Length (s).
-    fs : float
-        Sample rate (Hz).
-    noise : float
-        Noise standard deviation as a fraction of each channel's.
-    seed : int
-        Seed of the road and the noise.
-    speed_kmh : float
-        Speed over the class C road (km/h).
-    model : str
-        Model name.
-
-    Returns
-    -------
-    dict
-        The true parameters (``params`` completed with the model's defaults).
+    """Write one ISO 8608 drive as a production car logs it (body accelerations, ride heights, noise;
+    no road) to a CSV from epoch ``t0``; returns the truth (``params`` with the defaults).
     """
     m = get_model(model)
     p = {**m.defaults(), **params}
@@ -265,21 +191,14 @@ def write_production_drive(path: str | Path, params: dict[str, float], t0: float
     rng = np.random.default_rng(seed + 7919)
     cols = {c: out[c] + rng.standard_normal(t.size) * noise * np.std(out[c])
             for c in m.channel_set("production")}
-    data = np.column_stack([t + t0, *cols.values()])
-    np.savetxt(path, data, fmt=["%.6f"] + ["%.10g"] * len(cols), delimiter=",",
-               header=",".join(["t", *cols]), comments="")
+    _write_csv(path, t + t0, cols)
     return p
 
 
 def make_fleet(folder: str | Path, spec: FleetSpec) -> list[dict[str, object]]:
     """Write ``spec.drives`` logs under ``folder/<vehicle>/``; returns each drive's truth.
 
-    Returns
-    -------
-    list of dict
-        ``path``, ``vehicle``, ``t`` (epoch s), ``params`` (true values) and
-        ``odometer_m`` (the vehicle's odometer at the drive's start) per drive. With a
-        ``distance`` in CAN logs the DBC is written to ``folder/distance.dbc``.
+    Per drive: ``path``, ``vehicle``, ``t`` (epoch s), ``params`` and ``odometer_m``.
     """
     root = Path(folder)
     root.mkdir(parents=True, exist_ok=True)

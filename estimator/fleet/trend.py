@@ -1,30 +1,7 @@
 """Per-vehicle trends of identified parameters across drives, and limit-crossing forecasts.
 
-Trend (:func:`robust_trend`)
-    A straight line ``v(t) = a + b (t - t_latest)`` through one parameter's drive estimates
-    ``v_i +/- s_i`` (``s_i`` the identifier's standard error), ``b`` in units per day.
-    Drive-to-drive scatter is usually larger than ``s_i`` (roads, loads, temperatures), so
-    each drive is weighted by ``1 / (s_i^2 + tau^2)``, ``tau^2`` the extra scatter estimated
-    from the residuals (a random-effects weight). Outliers first: starting from the
-    Theil--Sen line (median of pairwise slopes), iteratively reweighted least squares with
-    Huber weights (``c = 1.345``) and then Tukey's bisquare (``c = 4.685``, scale from the
-    median absolute deviation) gives a grossly wrong drive (a bad sensor, a mis-mapped log)
-    zero weight, and such drives are left out unless they lie within the bisquare cut of
-    the final fit's own scale: one bad drive does not move the trend. On
-    the rest, ``tau^2`` is estimated by Paule--Mandel (the weighted residual sum of squares
-    equals its expectation ``n - 2``) and the line is the weighted least-squares fit; the
-    slope's standard error is ``sqrt(phi (X'WX)^-1)`` with
-    ``phi = max(1, sum W r^2 / (n - 2))``, never below what the per-drive standard errors
-    allow.
-
-Forecast (:func:`forecast_crossing`)
-    Where a significantly falling trend (``b < 0`` and ``|b| > q se(b)``) meets the limit
-    ``L``: ``t_c = t_latest + (L - a) / b``, and its 90 % interval by Fieller's method --
-    the times at which the two-sided 90 % confidence band of the fitted line contains ``L``
-    (``q`` the Student-t quantile with ``n - 2`` degrees of freedom), so the interval is
-    asymmetric when the slope is uncertain, and no forecast is given when the slope is not
-    distinguishable from zero at that level (the interval would be unbounded). The roots
-    are those of the monitor's forecasts (:func:`estimator.alerts.forecast.band_crossing`).
+A robust random-effects line (Huber and bisquare IRLS, Paule–Mandel ``tau^2``) and Fieller's
+interval of its limit crossing, described in ``docs/fleet.md``.
 """
 from __future__ import annotations
 
@@ -48,25 +25,8 @@ MAD_TO_SIGMA = 1.4826
 
 @dataclass
 class Forecast:
-    """When a falling trend crosses its limit (epoch s, 90 % interval).
-
-    Attributes
-    ----------
-    crossing_t, crossing_t_low, crossing_t_high : float
-        The predicted crossing and its interval (epoch s), never before ``t_latest``.
-    limit : float
-        The limit (SI).
-    level : float
-        Two-sided level of the interval.
-    t_latest : float
-        Epoch s of the vehicle's latest drive, from which ``days`` count (NaN: unknown).
-    distance : bool
-        The vehicle's drives carry a distance (odometer or speed): the JSON has the km keys,
-        null when the trend against distance predicts no crossing.
-    crossing_m : tuple of float or None
-        Odometer at the crossing and its interval (m), from the trend against distance
-        (:func:`limit_crossing` on the drives' odometer readings), never before the latest
-        drive's reading; ``None`` without one.
+    """When a falling trend crosses its limit (epoch s, 90 % interval), never before ``t_latest``;
+    ``crossing_m`` the odometer (m) at the crossing from the trend against distance.
     """
 
     crossing_t: float
@@ -85,10 +45,7 @@ class Forecast:
                 (self.crossing_t_high - self.t_latest) / DAY_S)
 
     def to_json(self) -> dict[str, float | None]:
-        """``crossing_t``, ``crossing_t_low``, ``crossing_t_high`` (epoch s), ``limit``, and
-        ``days``, ``days_low``, ``days_high`` after the latest drive; with a distance
-        signal (:attr:`distance`) ``crossing_km``, ``crossing_km_low``, ``crossing_km_high``
-        (odometer km, null without a crossing against distance)."""
+        """``crossing_t*`` (epoch s), ``limit``, ``days*`` after the latest drive, ``crossing_km*``."""
         out: dict[str, float | None] = {
             "crossing_t": self.crossing_t, "crossing_t_low": self.crossing_t_low,
             "crossing_t_high": self.crossing_t_high, "limit": self.limit}
@@ -98,6 +55,10 @@ class Forecast:
             for i, k in enumerate(KM_KEYS):
                 out[k] = None if self.crossing_m is None else round(self.crossing_m[i] / 1e3, 3)
         return out
+
+
+def _num(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
 
 
 def _median(a: np.ndarray) -> float:
@@ -118,29 +79,11 @@ def theil_sen(x: np.ndarray, v: np.ndarray) -> tuple[float, float]:
 
 def robust_trend(t: np.ndarray, v: np.ndarray, s: np.ndarray | None = None,
                  iterations: int = 50, scale: float = DAY_S) -> Trend | None:
-    """Robust weighted straight-line trend of ``v`` over time or distance (module docstring).
+    """Robust weighted straight-line trend of ``v`` (SI, stderr ``s``; NaN: unknown) over ``t``.
 
-    Parameters
-    ----------
-    t : ndarray
-        The drives' abscissae: times (epoch s), or odometer readings (m) for a trend
-        against distance.
-    v : ndarray
-        Estimates (SI).
-    s : ndarray, optional
-        Their standard errors (SI); NaN or missing means unknown (only the scatter counts).
-    iterations : int
-        IRLS iterations per stage (at most).
-    scale : float
-        The abscissa's unit in the fit (s per day by default, 1000 m for distance): the
-        line is fitted in this unit, the :class:`Trend` is returned per s (or per m).
-
-    Returns
-    -------
-    Trend or None
-        Referred to the latest abscissa, with ``n`` the drives used and ``outliers`` those
-        left out; ``None`` with fewer than two drives at distinct abscissae. With two drives
-        the covariance is NaN (no scatter to judge the line by).
+    ``t`` is epoch s, or odometer m for a trend against distance; ``scale`` the abscissa's unit in
+    the fit (s per day, or 1000 m). Returns the :class:`Trend` (per s or m) at the latest abscissa,
+    ``None`` with fewer than two distinct abscissae (NaN covariance with two).
     """
     t = np.asarray(t, dtype=float)
     v = np.asarray(v, dtype=float)
@@ -188,8 +131,7 @@ def robust_trend(t: np.ndarray, v: np.ndarray, s: np.ndarray | None = None,
     if np.count_nonzero(keep) < 3 or np.ptp(x[keep]) == 0:
         keep = np.ones(n, dtype=bool)
     beta, M, tau2 = _random_effects(x[keep], v[keep], s[keep], floor)
-    # the MAD of a few residuals can be small by chance: a rejected drive within the
-    # bisquare cut of the final fit's own scale is readmitted (and the line refitted)
+    # a rejected drive within the bisquare cut of the final fit's own scale is readmitted
     for _ in range(3):
         u = np.abs(v - (beta[0] + beta[1] * x)) / np.sqrt(np.maximum(s * s + tau2, floor))
         again = keep | (u < BISQUARE_C)
@@ -208,21 +150,14 @@ def robust_trend(t: np.ndarray, v: np.ndarray, s: np.ndarray | None = None,
 
 
 def trend_json(trend: Trend, per: float = DAY_S, unit: str = "day") -> dict[str, object]:
-    """A fleet trend as JSON: ``rate_per_<unit>`` and ``stderr`` (SI per ``per`` s or m),
-    ``value`` at the latest drive (SI), ``drives`` used, ``outliers`` left out; NaN as null."""
-    def f(x: float) -> float | None:
-        return float(x) if math.isfinite(x) else None
-    return {f"rate_per_{unit}": f(trend.rate * per), "stderr": f(trend.rate_stderr * per),
-            "value": f(trend.value), "drives": int(trend.n), "outliers": len(trend.outliers)}
+    """A fleet trend as JSON (``rate_per_<unit>``, ``stderr``, ``value``, ``drives``, ``outliers``)."""
+    return {f"rate_per_{unit}": _num(trend.rate * per), "stderr": _num(trend.rate_stderr * per),
+            "value": _num(trend.value), "drives": int(trend.n), "outliers": len(trend.outliers)}
 
 
 def _random_effects(x: np.ndarray, v: np.ndarray, s: np.ndarray, floor: float
                     ) -> tuple[np.ndarray, np.ndarray, float]:
-    """WLS line with weights ``1 / (s^2 + tau^2)``, ``tau^2`` by Paule--Mandel.
-
-    ``tau^2 >= 0`` is chosen so that the weighted residual sum of squares equals its
-    expectation ``n - 2`` (0 when the standard errors already explain the scatter).
-    """
+    """WLS line with weights ``1 / (s^2 + tau^2)``, ``tau^2 >= 0`` by Paule–Mandel (RSS = ``n - 2``)."""
     dof = max(x.size - 2.0, 1.0)
 
     def at(tau2: float) -> tuple[np.ndarray, np.ndarray, float]:
@@ -251,26 +186,8 @@ def _random_effects(x: np.ndarray, v: np.ndarray, s: np.ndarray, floor: float
 
 def limit_crossing(trend: Trend | None, limit: float, level: float = 0.90,
                    not_before: float | None = None) -> tuple[float, float, float] | None:
-    """Where a falling trend crosses ``limit``, with Fieller's ``level`` interval.
-
-    Parameters
-    ----------
-    trend : Trend or None
-    limit : float
-        The limit (SI).
-    level : float
-        Two-sided level of the interval.
-    not_before : float, optional
-        The vehicle's latest abscissa (epoch s, or odometer m; default the trend's): the
-        crossing and both ends of its interval are never before it (a line already at the
-        limit crosses "at the latest drive", never in the past).
-
-    Returns
-    -------
-    tuple of float or None
-        ``(crossing, low, high)`` in the trend's abscissa (epoch s, or m); ``None`` when the
-        trend is missing, not falling, or its slope is not distinguishable from zero at
-        ``level`` (the interval would be unbounded).
+    """Where a falling trend crosses ``limit``: ``(crossing, low, high)`` with Fieller's ``level``
+    interval, never before ``not_before``; ``None`` when its slope is not clearly below zero.
     """
     if trend is None or not (trend.n >= 3 and math.isfinite(trend.var_rate)):
         return None
@@ -288,13 +205,7 @@ def limit_crossing(trend: Trend | None, limit: float, level: float = 0.90,
 
 def forecast_crossing(trend: Trend | None, limit: float, level: float = 0.90,
                       not_before: float | None = None) -> Forecast | None:
-    """Date a falling trend over time crosses ``limit`` (:func:`limit_crossing`).
-
-    Returns
-    -------
-    Forecast or None
-        Epoch s of the crossing and its interval; ``None`` as :func:`limit_crossing`.
-    """
+    """Date a falling trend over time crosses ``limit`` (:func:`limit_crossing`; ``None`` as it)."""
     fc = limit_crossing(trend, limit, level, not_before)
     if trend is None or fc is None:
         return None
