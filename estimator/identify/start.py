@@ -9,7 +9,7 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass, field
-from typing import Callable, Mapping, Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 from scipy.optimize import minimize
@@ -40,7 +40,7 @@ REWEIGHT_FACTOR = 30.0
 RANK_TOL = 1e-9
 #: the noise-compensated fit (:func:`_ratio_fit`) stays within ``exp(RATIO_SPAN)`` of its start
 RATIO_SPAN = 8.0
-#: iterations of each of its BFGS runs (scipy's L-BFGS-B, :func:`_bfgs`)
+#: iterations of each of its BFGS runs (scipy's L-BFGS-B)
 RATIO_ITER = 200
 #: its stopping tolerance on the largest gradient component (of the mean ratio, in log values)
 RATIO_GTOL = 1e-6
@@ -53,22 +53,10 @@ KIND_MAX = 3
 
 @dataclass
 class StartEstimate:
-    """A data-driven starting point.
-
-    Attributes
-    ----------
-    values : dict
-        Free parameter -> estimate (SI); empty when the method could not apply.
-    reason : str or None
-        Why no estimate was made.
-    bandwidth_hz : float
-        Filter bandwidth of the chosen estimate (Hz).
-    cost : float
-        Normalised output-error cost at the estimate (1 = no fit).
-    notes : list of str
-        Adjustments made.
-    undetermined : list of str
-        Parameters whose estimate was replaced by a floor value.
+    """A data-driven starting point: ``values`` (free parameter -> estimate, SI; empty when
+    the method could not apply, ``reason`` says why), the chosen filter ``bandwidth_hz``, the
+    normalised output-error ``cost`` there (1 = no fit), the adjustments made (``notes``) and
+    the parameters whose estimate was replaced by a floor value (``undetermined``).
     """
 
     values: dict[str, float] = field(default_factory=dict)
@@ -77,23 +65,6 @@ class StartEstimate:
     cost: float = float("inf")
     notes: list[str] = field(default_factory=list)
     undetermined: list[str] = field(default_factory=list)
-
-
-def _bfgs(F: Callable[[FloatArray], tuple[float, FloatArray]], u0: FloatArray,
-          iterations: int, gtol: float = 1e-6, span: float = math.inf
-          ) -> tuple[float, FloatArray]:
-    """Minimise ``F`` (value, gradient) by scipy's L-BFGS-B within ``|u| < span``.
-
-    A component pointing out of the box stays on its edge (a run-away, judged by the
-    caller). Returns ``(value, point)`` of the end point.
-    """
-    u = np.asarray(u0, dtype=float)
-    edge = span * (1.0 - 1e-9)
-    bounds = [(-edge, edge)] * u.size if math.isfinite(span) else None
-    res = minimize(F, u, jac=True, method="L-BFGS-B", bounds=bounds,
-                   options={"maxiter": iterations, "gtol": gtol,
-                            "ftol": 8.0 * float(np.finfo(float).eps)})
-    return float(res.fun), np.asarray(res.x, dtype=float)
 
 
 def _ratio_fit(reg: _Regression, K: FloatArray, lin: list[str], nonlin: list[str],
@@ -158,8 +129,14 @@ def _ratio_fit(reg: _Regression, K: FloatArray, lin: list[str], nonlin: list[str
         u0 = np.log(v / centre)
         if not F(u0)[0] < big:
             continue
-        f, u = _bfgs(F, u0, RATIO_ITER, gtol=RATIO_GTOL, span=RATIO_SPAN)
-        x = centre * np.exp(u)
+        # L-BFGS-B within |u| < RATIO_SPAN: a component pointing out stays on its edge
+        edge = RATIO_SPAN * (1.0 - 1e-9)
+        res = minimize(F, np.asarray(u0, dtype=float), jac=True, method="L-BFGS-B",
+                       bounds=[(-edge, edge)] * u0.size,
+                       options={"maxiter": RATIO_ITER, "gtol": RATIO_GTOL,
+                                "ftol": 8.0 * float(np.finfo(float).eps)})
+        f = float(res.fun)
+        x = centre * np.exp(np.asarray(res.x, dtype=float))
         if math.isfinite(f) and f < big and not any(
                 np.allclose(x, y, rtol=1e-6, atol=0.0) for _, y in ends):
             ends.append((f, x))
@@ -191,8 +168,7 @@ def _floored(model: SuspensionModel, base: Mapping[str, float], lin: list[str],
     return out, floored, notes
 
 
-def estimate_start(problem: OutputErrorProblem, params: Parameters,
-                   bandwidths_hz: list[float] | None = None) -> StartEstimate:
+def estimate_start(problem: OutputErrorProblem, params: Parameters) -> StartEstimate:
     """Data-driven start of the free parameters of ``params`` for ``problem``'s record.
 
     Parameters
@@ -202,10 +178,9 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
         that ranks the candidate estimates.
     params : Parameters
         Fixed values and, for parameters that do not enter linearly, their grid's centre.
-    bandwidths_hz : list of float, optional
-        Filter bandwidths (Hz) tried in turn; default four from 0.2 Hz to a fifth of
-        Nyquist. The sweep ends at an exact estimate or, on a noisy record, one that leaves
-        only white noise; otherwise the lowest output-error cost wins.
+        Four filter bandwidths from 0.2 Hz to a fifth of Nyquist are tried in turn; the
+        sweep ends at an exact estimate or, on a noisy record, one that leaves only white
+        noise; otherwise the lowest output-error cost wins.
 
     Returns
     -------
@@ -225,12 +200,9 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
     lin, nonlin = _split_linear(model, base, free)
     if not lin:
         return StartEstimate(reason="no free parameter enters the equations of motion linearly")
-    nyq = 0.5 / h
     # the coefficients as a polynomial of the free values (when the noise compensation needs it)
     poly: list[tuple[FloatArray, FloatArray] | None] = []
-    if bandwidths_hz is None:
-        top = nyq / 5.0
-        bandwidths_hz = [float(f) for f in np.geomspace(0.2, max(top, 0.3), 4)]
+    bandwidths_hz = [float(f) for f in np.geomspace(0.2, max(0.5 / h / 5.0, 0.3), 4)]
     best = StartEstimate(reason="no filter bandwidth gave a usable estimate")
     reasons: list[str] = []
     seeds: list[FloatArray] = []
@@ -338,15 +310,15 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
 
 def _refine_iv(problem: OutputErrorProblem, est: StartEstimate, reg: "_Regression",
                wts: FloatArray, base: Mapping[str, float], lin: list[str], nonlin: list[str],
-               h: float, iterations: int = 4) -> StartEstimate:
-    """Instrumental-variable iterations against the noise bias in the regressors.
+               h: float) -> StartEstimate:
+    """Four instrumental-variable iterations against the noise bias in the regressors.
 
     The instruments are the filtered noise-free simulation at the current estimate; an
     iterate is kept only when it lowers the output-error cost.
     """
     model = problem.model
     nq = len(model.coords)
-    for _ in range(iterations):
+    for _ in range(4):
         p = {**base, **est.values}
         try:
             x0 = problem.predict(p).x0
