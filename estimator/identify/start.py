@@ -9,7 +9,7 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass, field
-from typing import Mapping, Sequence
+from typing import Callable, Mapping, Sequence
 
 import numpy as np
 from scipy.optimize import minimize
@@ -40,7 +40,7 @@ REWEIGHT_FACTOR = 30.0
 RANK_TOL = 1e-9
 #: the noise-compensated fit (:func:`_ratio_fit`) stays within ``exp(RATIO_SPAN)`` of its start
 RATIO_SPAN = 8.0
-#: iterations of each of its BFGS runs (scipy's L-BFGS-B)
+#: iterations of each of its BFGS runs (scipy's L-BFGS-B, :func:`_bfgs`)
 RATIO_ITER = 200
 #: its stopping tolerance on the largest gradient component (of the mean ratio, in log values)
 RATIO_GTOL = 1e-6
@@ -65,6 +65,23 @@ class StartEstimate:
     cost: float = float("inf")
     notes: list[str] = field(default_factory=list)
     undetermined: list[str] = field(default_factory=list)
+
+
+def _bfgs(F: Callable[[FloatArray], tuple[float, FloatArray]], u0: FloatArray,
+          iterations: int, gtol: float = 1e-6, span: float = math.inf
+          ) -> tuple[float, FloatArray]:
+    """Minimise ``F`` (value, gradient) by scipy's L-BFGS-B within ``|u| < span``.
+
+    A component pointing out of the box stays on its edge (a run-away, judged by the
+    caller). Returns ``(value, point)`` of the end point.
+    """
+    u = np.asarray(u0, dtype=float)
+    edge = span * (1.0 - 1e-9)
+    bounds = [(-edge, edge)] * u.size if math.isfinite(span) else None
+    res = minimize(F, u, jac=True, method="L-BFGS-B", bounds=bounds,
+                   options={"maxiter": iterations, "gtol": gtol,
+                            "ftol": 8.0 * float(np.finfo(float).eps)})
+    return float(res.fun), np.asarray(res.x, dtype=float)
 
 
 def _ratio_fit(reg: _Regression, K: FloatArray, lin: list[str], nonlin: list[str],
@@ -129,14 +146,8 @@ def _ratio_fit(reg: _Regression, K: FloatArray, lin: list[str], nonlin: list[str
         u0 = np.log(v / centre)
         if not F(u0)[0] < big:
             continue
-        # L-BFGS-B within |u| < RATIO_SPAN: a component pointing out stays on its edge
-        edge = RATIO_SPAN * (1.0 - 1e-9)
-        res = minimize(F, np.asarray(u0, dtype=float), jac=True, method="L-BFGS-B",
-                       bounds=[(-edge, edge)] * u0.size,
-                       options={"maxiter": RATIO_ITER, "gtol": RATIO_GTOL,
-                                "ftol": 8.0 * float(np.finfo(float).eps)})
-        f = float(res.fun)
-        x = centre * np.exp(np.asarray(res.x, dtype=float))
+        f, u = _bfgs(F, u0, RATIO_ITER, gtol=RATIO_GTOL, span=RATIO_SPAN)
+        x = centre * np.exp(u)
         if math.isfinite(f) and f < big and not any(
                 np.allclose(x, y, rtol=1e-6, atol=0.0) for _, y in ends):
             ends.append((f, x))
