@@ -33,23 +33,13 @@ G = 9.80665
 PLATE_AMPLITUDE = 0.003
 SWEEP_HZ = (2.0, 25.0)
 EGEA_CRITERION_DEG = 35.0
+N_GRID = 200
 
 
 def quarter_car_problem(model: SuspensionModel, p: Mapping[str, float] | None = None) -> str | None:
-    """What keeps ``model`` from the virtual damper test, or ``None`` when it qualifies.
-
-    Parameters
-    ----------
-    model : SuspensionModel
-        The model to test.
-    p : mapping, optional
-        Parameters (SI); default the model's defaults.
-
-    Returns
-    -------
-    str or None
-        One sentence naming what the model lacks (two coordinates, one road, one tyre site
-        with a spring and a static load), or ``None``.
+    """What keeps ``model`` from the virtual damper test at ``p`` (SI; default its defaults):
+    one sentence naming what it lacks (two coordinates, one road, one tyre site with a
+    spring and a static load), or ``None`` when it qualifies.
     """
     need = "the virtual damper test needs a quarter car (two coordinates, one road, one tyre)"
     if len(model.coords) != 2:
@@ -70,12 +60,8 @@ def quarter_car_problem(model: SuspensionModel, p: Mapping[str, float] | None = 
 
 
 def tyre_site(model: SuspensionModel, p: Mapping[str, float]) -> Site:
-    """The one tyre of a quarter car (:func:`quarter_car_problem`) at parameters ``p`` (SI).
-
-    Raises
-    ------
-    UsageError
-        When the model is no quarter car, naming what it lacks.
+    """The one tyre of a quarter car at parameters ``p`` (SI); :class:`UsageError` naming
+    what the model lacks when it is none (:func:`quarter_car_problem`).
     """
     why = quarter_car_problem(model, p)
     if why is not None:
@@ -83,28 +69,11 @@ def tyre_site(model: SuspensionModel, p: Mapping[str, float]) -> Site:
     return model.tyre_sites(p)[0]
 
 
-def static_load(site: Site) -> float:
-    """Static wheel load (N) of a tyre site, with the standard gravity :data:`G`."""
-    return float(site.load) * (G / GRAVITY)
-
-
 def response_function(model: SuspensionModel, p: Mapping[str, float]
                       ) -> Callable[[FloatArray], np.ndarray]:
-    """``f -> F(f) / R`` (Hz -> N/m) for fixed parameters, coefficients precomputed.
-
-    The 2x2 system is solved by Cramer's rule, vectorised over the frequencies.
-
-    Parameters
-    ----------
-    model : SuspensionModel
-        A quarter car (:func:`tyre_site`).
-    p : mapping
-        Parameters (SI).
-
-    Returns
-    -------
-    callable
-        ``H(f)``: complex ``F/R`` (N/m) at the frequencies ``f`` (Hz, ndarray).
+    """``H(f) = F(f) / R`` (Hz -> complex N/m) of a quarter car (:func:`tyre_site`) at
+    parameters ``p`` (SI), coefficients precomputed; the 2x2 system is solved by Cramer's
+    rule, vectorised over the frequencies.
     """
     site = tyre_site(model, p)
     M, C, K, Fk, Fc = model.matrices(p)
@@ -159,26 +128,10 @@ def eusama_band(rh: float) -> str:
 
 @dataclass
 class Inspection:
-    """Virtual shaker result.
-
-    Attributes
-    ----------
-    eusama_pct : float
-        EUSAMA road holding (%).
-    eusama_band : str
-        ``poor``, ``sufficient`` or ``good``.
-    eusama_f_hz : float
-        Frequency of the minimum wheel load (Hz).
-    phi_min_deg : float
-        EGEA minimum phase shift (deg).
-    phi_f_hz : float
-        Frequency of ``phi_min`` (Hz).
-    egea_pass : bool
-        ``phi_min >= 35 deg``.
-    f_body_hz, f_wheel_hz : float
-        Natural frequencies of the body and wheel modes (Hz).
-    static_load_n : float
-        The tyre site's static load at ``g =`` :data:`G` (N).
+    """Virtual shaker result: EUSAMA road holding (%), its band and the frequency of the
+    minimum wheel load (Hz); the EGEA minimum phase shift (deg), its frequency (Hz) and
+    whether it passes (``phi_min >= 35 deg``); the body and wheel natural frequencies (Hz);
+    the tyre site's static load at ``g =`` :data:`G` (N).
     """
 
     eusama_pct: float
@@ -235,54 +188,36 @@ def _vertex(x: FloatArray, v: FloatArray, i: int) -> tuple[float, float]:
 
 
 def _grid_min(fun: Callable[[FloatArray], FloatArray], lo: float, hi: float, n0: int,
-              n: int = 65, levels: int = 2) -> tuple[float, float]:
-    """Minimum of a smooth vectorised function on ``[lo, hi]`` by nested log grids.
-
-    An ``n0``-point grid, then ``n`` points between the previous minimum's neighbours per
-    level, and the parabola's vertex (:func:`_vertex`).
+              levels: int = 2) -> tuple[float, float]:
+    """Minimum of a smooth vectorised function on ``[lo, hi]`` by nested log grids: an
+    ``n0``-point grid, then 65 points between the previous minimum's neighbours per level,
+    and the parabola's vertex (:func:`_vertex`).
     """
     a, b = lo, hi
     m = n0
     x: FloatArray = np.empty(0)
     v: FloatArray = np.empty(0)
     i = 0
-    for _ in range(max(1, levels)):  # at least once: x, v, i come from a grid
+    for _ in range(levels):
         x = _log_grid(a, b, m)
         v = fun(x)
         i = int(np.argmin(v))
         a, b = float(x[max(i - 1, 0)]), float(x[min(i + 1, m - 1)])
-        m = n
+        m = 65
         if b <= a:
             break
     return _vertex(x, v, i)
 
 
-def inspect(params: Mapping[str, float], model: SuspensionModel | None = None,
-            amplitude: float = PLATE_AMPLITUDE, sweep: tuple[float, float] = SWEEP_HZ,
-            n_grid: int = 200) -> Inspection:
-    """EUSAMA road holding and EGEA phase shift of a quarter car.
-
-    Parameters
-    ----------
-    params : mapping
-        Quarter-car parameters (SI).
-    model : SuspensionModel, optional
-        Any quarter car (:func:`quarter_car_problem`); default ``quarter2``.
-    amplitude : float
-        Plate amplitude (m).
-    sweep : (float, float)
-        Frequency range of the sweep (Hz).
-    n_grid : int
-        Points of the first logarithmic search grid over the sweep.
-
-    Returns
-    -------
-    Inspection
+def inspect(params: Mapping[str, float], model: SuspensionModel | None = None) -> Inspection:
+    """EUSAMA road holding and EGEA phase shift of a quarter car (:func:`quarter_car_problem`,
+    default ``quarter2``) at ``params`` (SI), swept over :data:`SWEEP_HZ` at
+    :data:`PLATE_AMPLITUDE` from a first log grid of :data:`N_GRID` points.
     """
     model = model or get_model("quarter2")
-    fs = static_load(tyre_site(model, params))
-    f_lo, f_hi = sweep
-    a2 = (amplitude / fs) ** 2
+    fs = float(tyre_site(model, params).load) * (G / GRAVITY)
+    f_lo, f_hi = SWEEP_HZ
+    a2 = (PLATE_AMPLITUDE / fs) ** 2
 
     H = response_function(model, params)
 
@@ -291,7 +226,7 @@ def inspect(params: Mapping[str, float], model: SuspensionModel | None = None,
         h = H(f)
         return -(h.real * h.real + h.imag * h.imag)
 
-    f_min, v = _grid_min(neg_force2, f_lo, f_hi, n_grid)
+    f_min, v = _grid_min(neg_force2, f_lo, f_hi, N_GRID)
     rh = 1.0 - math.sqrt(-v * a2)
     rh_pct = float(min(100.0, max(0.0, 100.0 * rh)))
     ms = modes(model, params)
@@ -300,7 +235,7 @@ def inspect(params: Mapping[str, float], model: SuspensionModel | None = None,
     if b <= a:
         a, b = f_lo, f_hi
     # the phase anchored once on a grid from the static limit; nested levels re-anchor on it
-    grid = _log_grid(a, b, n_grid)
+    grid = _log_grid(a, b, N_GRID)
     anchor = _phase_deg(H, grid)
 
     def phase(f: FloatArray) -> FloatArray:
@@ -310,7 +245,7 @@ def inspect(params: Mapping[str, float], model: SuspensionModel | None = None,
 
     i = int(np.argmin(anchor))
     f_phi, phi = float(grid[i]), float(anchor[i])
-    lo_b, hi_b = float(grid[max(i - 1, 0)]), float(grid[min(i + 1, n_grid - 1)])
+    lo_b, hi_b = float(grid[max(i - 1, 0)]), float(grid[min(i + 1, N_GRID - 1)])
     if hi_b > lo_b:
         f2, phi2 = _grid_min(phase, lo_b, hi_b, 65, levels=1)
         if phi2 < phi:

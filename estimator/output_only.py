@@ -48,21 +48,20 @@ MIN_BAND_TOP = 2.5
 MAX_MEAN_ACCEL = 3.0
 #: a run of this many identical samples (or more) is a frozen or invalid sensor value
 STUCK_SAMPLES = 25
+#: a window with more than this fraction of missing samples is skipped
+MAX_MISSING = 0.1
+#: a window whose acceleration RMS (m/s^2) is below this is skipped: a parked car
+MIN_RMS = 0.02
+#: order of the ``ar`` method's model and the rate (Hz) it decimates to
+AR_ORDER = 6
+AR_RATE = 10.0
 
 
 @dataclass
 class BodyMode:
-    """Body-mode estimate of one window.
-
-    Attributes
-    ----------
-    f_hz, zeta : float
-        Natural frequency (Hz) and damping ratio.
-    f_se, zeta_se : float
-        Standard errors (NaN when not available).
-    method : str
-    at_bound : str
-        The search bound the fit stopped at (then the value is no estimate), ``""`` when none.
+    """Body-mode estimate of one window: natural frequency (Hz), damping ratio, their
+    standard errors (NaN when not available), the method, and the search bound the fit
+    stopped at (then the value is no estimate; ``""`` when none).
     """
 
     f_hz: float
@@ -82,15 +81,14 @@ def carma_psd(f: FloatArray, fn: float, zeta: float) -> FloatArray:
     return num / den
 
 
-def fit_carma(y: FloatArray, fs: float, band: tuple[float, float] = CARMA_BAND,
-              segment_s: float = 16.0) -> BodyMode:
+def fit_carma(y: FloatArray, fs: float, band: tuple[float, float] = CARMA_BAND) -> BodyMode:
     """Fit the body mode to the Welch spectrum of ``y`` (m/s^2) sampled at ``fs`` (Hz).
 
     A fit stopped at a bound of its search returns that bound with no standard error,
     named in ``at_bound``.
     """
     y = np.asarray(y, dtype=float) - float(np.mean(y))
-    nper = min(y.size, max(16, int(round(segment_s * fs))))
+    nper = min(y.size, max(16, int(round(16.0 * fs))))
     f, P = welch(y, fs, nperseg=nper)
     m = (f >= band[0]) & (f <= band[1]) & (P > 0)
     f, P = f[m], P[m]
@@ -132,11 +130,11 @@ def fit_carma(y: FloatArray, fs: float, band: tuple[float, float] = CARMA_BAND,
     return BodyMode(fn, zeta, float(se[0]), float(se[1]), "carma")
 
 
-def fit_ar(y: FloatArray, fs: float, order: int = 6, fs_ar: float = 10.0,
-           band: tuple[float, float] = AR_BAND) -> BodyMode:
+def fit_ar(y: FloatArray, fs: float, band: tuple[float, float] = AR_BAND) -> BodyMode:
     """Body mode as the dominant AR(p) pole pair in ``band`` (see module doc)."""
     y = np.asarray(y, dtype=float) - float(np.mean(y))
-    q = max(1, int(round(fs / fs_ar)))
+    order = AR_ORDER
+    q = max(1, int(round(fs / AR_RATE)))
     if q > 1:
         y = decimate(y, q, ftype="fir", zero_phase=True)
     fs2 = fs / q
@@ -207,31 +205,18 @@ def _spans(t: FloatArray, mask: np.ndarray, most: int = 3) -> str:
 
 
 class OutputOnlyEstimator:
-    """Per-window body-mode tracking from one acceleration channel.
-
-    Parameters
-    ----------
-    channel : str
-        The body acceleration channel (``x1_ddot``).
-    method : {"carma", "ar"}
-    max_missing : float
-        Skip a window with more than this fraction of missing samples.
-    min_rms : float
-        Skip a window whose acceleration RMS is below this (m/s^2): a parked car.
+    """Per-window body-mode tracking from one acceleration ``channel`` (``x1_ddot``) by
+    ``method`` ``"carma"`` or ``"ar"``.
     """
 
     name = "output_only"
     own_track = False
 
-    def __init__(self, channel: str, method: str = "carma", max_missing: float = 0.1,
-                 min_rms: float = 0.02, ar_order: int = 6) -> None:
+    def __init__(self, channel: str, method: str = "carma") -> None:
         if method not in METHODS:
             raise UsageError(f"output-only method {method!r} unknown; expected one of {', '.join(METHODS)}")
         self.channel = channel
         self.method = method
-        self.max_missing = max_missing
-        self.min_rms = min_rms
-        self.ar_order = ar_order
         self.lag = 0.0
         self.overlap = 1.0
         self.windows = 0
@@ -267,9 +252,9 @@ class OutputOnlyEstimator:
             self.cpu += time.process_time() - c0
             return StepResult(Skip(t1, t0, self.name, reason))
 
-        if frac > self.max_missing or ok.sum() < 16:
+        if frac > MAX_MISSING or ok.sum() < 16:
             return skip(f"channel {self.channel}: {frac:.0%} of the window's samples missing "
-                        f"(> {self.max_missing:.0%})" + (f"; {warns[0]}" if warns else ""))
+                        f"(> {MAX_MISSING:.0%})" + (f"; {warns[0]}" if warns else ""))
         if frac > 0:
             gaps = ~ok & ~stuck
             y = np.interp(t, t[ok], y[ok])
@@ -284,9 +269,9 @@ class OutputOnlyEstimator:
                          "is removed before the fit, an axis other than the vertical is not "
                          "the body mode")
         rms = float(np.std(y))
-        if rms < self.min_rms:
+        if rms < MIN_RMS:
             return skip(f"too little excitation: body acceleration RMS {rms:.3g} m/s^2 < "
-                        f"{self.min_rms:g} m/s^2 (vehicle at rest?)")
+                        f"{MIN_RMS:g} m/s^2 (vehicle at rest?)")
         dt = float(np.median(np.diff(t)))
         fs = 1.0 / dt
         nominal = CARMA_BAND if self.method == "carma" else AR_BAND
@@ -300,7 +285,7 @@ class OutputOnlyEstimator:
         band = (nominal[0], top)
         try:
             mode = (fit_carma(y, fs, band=band) if self.method == "carma"
-                    else fit_ar(y, fs, order=self.ar_order, band=band))
+                    else fit_ar(y, fs, band=band))
         except ValueError as exc:
             return skip(f"no body mode found: {exc}")
         params = {"f_body": mode.f_hz, "zeta_body": mode.zeta}

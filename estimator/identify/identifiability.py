@@ -21,17 +21,9 @@ WEAK_TOL = 1e-3
 
 @dataclass
 class Identifiability:
-    """Verdict on the free parameters.
-
-    Attributes
-    ----------
-    identifiable : bool
-    singular_values : list of float
-        Relative singular values (largest = 1).
-    warnings : list of str
-        One message per unidentifiable or weak combination, naming the parameters.
-    null_directions : list of dict
-        ``parameter -> component`` of each unidentifiable direction in log space.
+    """Verdict on the free parameters: the relative singular values (largest = 1), one
+    warning per unidentifiable or weak combination naming the parameters, and each
+    unidentifiable direction in log space as ``parameter -> component``.
     """
 
     identifiable: bool

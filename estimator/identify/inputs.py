@@ -33,34 +33,14 @@ def read_input(path: str | Path, model: SuspensionModel,
                signal_map: SignalMapLike = None,
                channel: str | None = None,
                j1939_source: str | None = None) -> tuple[Measurement, dict[str, Any] | None]:
-    """Read a measurement CSV or a CAN log (format by suffix) for ``model``.
+    """Read a measurement CSV (``.csv``, ``.txt``, no suffix) or a CAN log of a registered
+    format for ``model``: the measurement (with a warning when it has no road and does not
+    decay) and a CAN log's frame statistics (``None`` for a CSV).
 
-    Parameters
-    ----------
-    path : str or Path
-        ``.csv`` (or ``.txt``, no suffix) or a CAN log of a registered format.
-    model : SuspensionModel
-        The model whose channels are read.
-    dbc : str, Path or cantools Database, optional
-        DBC for a CAN log (default suspid's ``suspension.dbc``).
-    signal_map : optional
-        The user's signal map for a foreign DBC.
-    channel : str, optional
-        The bus channel of a multi-bus CAN log (``can.channel``); unused for a CSV.
-    j1939_source : str, optional
-        ``can.j1939_source``: the source address decoded from a J1939 DBC.
-
-    Returns
-    -------
-    measurement : Measurement
-        With a warning when the record has no road and does not decay.
-    frames : dict or None
-        Frame statistics of a CAN log (``None`` for a CSV).
-
-    Raises
-    ------
-    InputError
-        Unknown suffix, unreadable or unusable file (one line naming the file).
+    A CAN log is decoded with ``dbc`` (default suspid's ``suspension.dbc``) and the user's
+    ``signal_map``, on bus ``channel`` (``can.channel``; unused for a CSV) and, for a J1939
+    DBC, source address ``j1939_source``. :class:`InputError` (one line naming the file) for
+    an unknown suffix or an unreadable or unusable file.
     """
     p = Path(path)
     frames: dict[str, Any] | None

@@ -32,29 +32,10 @@ class LMOutcome:
 
 def lm_within(fun: Callable[[FloatArray], FloatArray], x0: FloatArray, max_evals: int | None,
               max_nfev: int, **options: Any) -> LMOutcome:
-    """Minimise ``|fun(x)|^2`` by Levenberg–Marquardt with at most ``max_evals`` calls.
-
-    Parameters
-    ----------
-    fun : callable
-        Residual vector of ``x`` (constant length).
-    x0 : ndarray
-        Start.
-    max_evals : int or None
-        Most calls of ``fun``, Jacobians included (None: scipy's ``max_nfev`` only).
-    max_nfev : int
-        scipy's iteration budget.
-    **options
-        Further ``scipy.optimize.least_squares`` options.
-
-    Returns
-    -------
-    LMOutcome
-
-    Raises
-    ------
-    ValueError, numpy.linalg.LinAlgError
-        As ``least_squares`` raises them.
+    """Minimise ``|fun(x)|^2`` (``fun``: a residual vector of constant length) by
+    Levenberg–Marquardt from ``x0`` with at most ``max_evals`` calls of ``fun``, Jacobians
+    included (None: scipy's iteration budget ``max_nfev`` only); ``options`` go to
+    ``scipy.optimize.least_squares``, whose ``ValueError`` and ``LinAlgError`` pass through.
     """
     # lazy: scipy.optimize costs the monitor's start time and only the polish needs it
     from scipy.optimize import least_squares  # noqa: PLC0415

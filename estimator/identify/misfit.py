@@ -109,22 +109,9 @@ def misfit_measures(problem: OutputErrorProblem, p: Mapping[str, float]
 
 def misfit_channels(problem: OutputErrorProblem, p: Mapping[str, float]
                     ) -> dict[str, tuple[float, float]]:
-    """Fitted channels whose residual at ``p`` is clearly more than measurement noise.
-
-    A misfit has a noise-floor ratio above ``MISFIT_FLOOR`` and an excess above
-    ``MISFIT_SHARE`` of the signal (:func:`misfit_measures`).
-
-    Parameters
-    ----------
-    problem : OutputErrorProblem
-        The record and cost.
-    p : mapping
-        Every parameter's value (SI).
-
-    Returns
-    -------
-    dict
-        Channel -> ``(ratio, share)`` (dimensionless) of the misfit channels.
+    """Fitted channels whose residual at ``p`` (every parameter, SI) is clearly more than
+    measurement noise, ``channel -> (ratio, share)``: a noise-floor ratio above
+    ``MISFIT_FLOOR`` and an excess above ``MISFIT_SHARE`` of the signal (:func:`misfit_measures`).
     """
     return {c: (r, sh) for c, (r, sh) in misfit_measures(problem, p).items()
             if r > MISFIT_FLOOR and sh > MISFIT_SHARE}

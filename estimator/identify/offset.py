@@ -33,16 +33,9 @@ _PROBE = 1e-2
 
 @dataclass
 class Offset:
-    """Constant offsets found in columns of a record.
-
-    Attributes
-    ----------
-    kind : {"road", "channel"}
-        Road columns or one measured position channel.
-    values : dict
-        Column -> offset (the column's SI unit): how far it reads above the rest position.
-    cost_before, cost_after : float
-        Normalised output-error cost with the offsets in and removed.
+    """Constant offsets found in road columns (``kind`` ``"road"``) or one measured position
+    channel (``"channel"``): column -> how far it reads above the rest position (SI), and
+    the normalised output-error cost with the offsets in and removed.
     """
 
     kind: str
@@ -110,12 +103,6 @@ def on_record(problem: OutputErrorProblem, meas: Measurement) -> OutputErrorProb
                               weights=problem.weights, affine=problem.affine)
 
 
-def _residual(problem: OutputErrorProblem, meas: Measurement,
-              p: Mapping[str, float]) -> FloatArray:
-    """``problem``'s weighted residual vector on ``meas`` instead of its own record."""
-    return on_record(problem, meas).residual_vector(p)
-
-
 def _offsets(J: FloatArray, r0: FloatArray) -> tuple[FloatArray, float, list[int]]:
     """Offsets ``d`` minimising ``|r0 - J d|^2``, that minimum, and the columns whose offset
     exceeds ``SIGMAS`` standard errors.
@@ -132,21 +119,10 @@ def _offsets(J: FloatArray, r0: FloatArray) -> tuple[FloatArray, float, list[int
 
 
 def find_offset(problem: OutputErrorProblem, p: Mapping[str, float]) -> Offset | None:
-    """The constant road or position offsets that best explain ``problem``'s misfit at ``p``.
-
-    Parameters
-    ----------
-    problem : OutputErrorProblem
-        The record and its cost.
-    p : mapping
-        Every parameter's value (SI), e.g. the data-driven estimate.
-
-    Returns
-    -------
-    Offset or None
-        The candidate that lowers the cost most, when the fit at ``p`` is above the noise
-        floor (``NOISE_FLOOR``) and the offsets leave at most ``OFFSET_SHARE`` of its sum of
-        squares; ``None`` otherwise.
+    """The constant road or position offsets that best explain ``problem``'s misfit at ``p``
+    (every parameter, SI): the candidate that lowers the cost most, when the fit at ``p`` is
+    above the noise floor (``NOISE_FLOOR``) and the offsets leave at most ``OFFSET_SHARE``
+    of its sum of squares; ``None`` otherwise.
     """
     model, meas = problem.model, problem.meas
     try:
@@ -166,8 +142,8 @@ def find_offset(problem: OutputErrorProblem, p: Mapping[str, float]) -> Offset |
     best: Offset | None = None
     for kind, cols in groups:
         try:
-            J = np.column_stack([(r0 - _residual(problem, _with_shift(meas, kind, c, _PROBE), p))
-                                 / _PROBE for c in cols])
+            J = np.column_stack([(r0 - on_record(problem, _with_shift(meas, kind, c, _PROBE))
+                                  .residual_vector(p)) / _PROBE for c in cols])
         except (np.linalg.LinAlgError, ValueError, FloatingPointError):
             continue
         if not np.all(np.isfinite(J)):

@@ -11,17 +11,9 @@ from suspid.models.base import SuspensionModel
 
 @dataclass
 class Parameter:
-    """One model parameter.
-
-    Attributes
-    ----------
-    name : str
-    value : float
-        Current value (SI units); the starting guess before a fit.
-    vary : bool
-        ``False`` holds the parameter at ``value`` (known, e.g. a weighed mass).
-    min, max : float
-        Bounds (SI); the identifier works in log coordinates, so ``min`` must be >= 0.
+    """One model parameter: its current ``value`` (SI; the starting guess before a fit),
+    whether it varies (``False`` holds it at ``value``: known, e.g. a weighed mass) and its
+    bounds (SI; the identifier works in log coordinates, so ``min`` must be >= 0).
     """
 
     name: str
@@ -39,18 +31,9 @@ class Parameters(Mapping[str, Parameter]):
 
     @classmethod
     def for_model(cls, model: SuspensionModel, fix: Mapping[str, float] | None = None,
-                  init: Mapping[str, float] | None = None,
-                  free: set[str] | None = None) -> "Parameters":
-        """Parameters of ``model`` starting at its documented defaults.
-
-        Parameters
-        ----------
-        fix : mapping, optional
-            ``name -> value`` held fixed.
-        init : mapping, optional
-            ``name -> starting value`` of free parameters.
-        free : set, optional
-            If given, only these vary; the rest are fixed at their ``init``/default values.
+                  init: Mapping[str, float] | None = None) -> "Parameters":
+        """Parameters of ``model`` starting at its documented defaults, ``fix`` (``name ->
+        value``) held fixed and ``init`` (``name -> starting value``) of free ones.
         """
         fix = dict(fix or {})
         init = dict(init or {})
@@ -64,8 +47,7 @@ class Parameters(Mapping[str, Parameter]):
             v = fix.get(spec.name, init.get(spec.name, spec.default))
             if not (v > 0 and math.isfinite(v)):
                 raise UsageError(f"parameter {spec.name}: expected a finite value > 0 {spec.unit}, got {v}")
-            vary = spec.name not in fix and (free is None or spec.name in free)
-            items.append(Parameter(spec.name, float(v), vary))
+            items.append(Parameter(spec.name, float(v), spec.name not in fix))
         return cls(items)
 
     def __getitem__(self, key: str) -> Parameter:

@@ -40,22 +40,11 @@ TOL_S = 1e-2
 
 @dataclass
 class Bands:
-    """The reported bands.
-
-    Attributes
-    ----------
-    bands : dict
-        ``name -> (lo, hi)`` in SI units (``0`` / ``inf`` for a side that does not close).
-    method : dict
-        ``name -> "curvature"`` or ``"profile"``.
-    nonlinearity : dict
-        ``name -> (lower, upper)``: ``r^2 / 9`` at the curvature band's ends.
-    open_sides : dict
-        ``name -> ["below", "above"]`` sides whose profile does not reach 3 sigma.
-    nfev : int
-        Residual evaluations spent.
-    lower_cost : bool
-        A profile found a lower cost than the optimum.
+    """The reported bands, ``name -> (lo, hi)`` (SI; ``0`` / ``inf`` for a side that does not
+    close), each one's ``method`` (``"curvature"`` or ``"profile"``), ``nonlinearity``
+    (``r^2 / 9`` at the curvature band's lower and upper end), the ``open_sides``
+    (``"below"``, ``"above"``) whose profile does not reach 3 sigma, the residual
+    evaluations spent and whether a profile found a lower cost than the optimum.
     """
 
     bands: dict[str, tuple[float, float]] = field(default_factory=dict)
@@ -119,12 +108,12 @@ class _Cost:
         return math.inf if r is None else float(r @ r)
 
 
-def _fd_jacobian(cost: _Cost, u: FloatArray, r: FloatArray, others: list[int],
-                 h: float = 1e-6) -> FloatArray | None:
-    """Forward-difference Jacobian of the residual in the coordinates ``others``.
-
-    The shifted points are evaluated together (:meth:`_Cost.resids`).
+def _fd_jacobian(cost: _Cost, u: FloatArray, r: FloatArray, others: list[int]
+                 ) -> FloatArray | None:
+    """Forward-difference Jacobian of the residual in the coordinates ``others``, the shifted
+    points evaluated together (:meth:`_Cost.resids`).
     """
+    h = 1e-6
     ups = []
     for i in others:
         up = u.copy()
@@ -140,8 +129,7 @@ def _fd_jacobian(cost: _Cost, u: FloatArray, r: FloatArray, others: list[int],
 
 
 def _conditional_min(cost: _Cost, k: int, t: float, u0: FloatArray, s0: float,
-                     tol: float = 0.0, max_iter: int = 12,
-                     jac: dict[int, FloatArray] | None = None) -> tuple[float, FloatArray]:
+                     tol: float, jac: dict[int, FloatArray]) -> tuple[float, FloatArray]:
     """``min S`` over every coordinate but ``k`` (held at ``t``), Levenberg–Marquardt from ``u0``.
 
     Stops when a step gains no more than ``max(tol, 1e-10 s0)``. ``jac`` (``k -> Jacobian``)
@@ -160,14 +148,14 @@ def _conditional_min(cost: _Cost, k: int, t: float, u0: FloatArray, s0: float,
         return f, u
     lam = 1e-3
     stop = max(tol, 1e-10 * max(s0, 1e-300))
-    J = None if jac is None else jac.get(k)
+    J = jac.get(k)
     fresh = False
     if J is None or J.shape[0] != r.size:
         J = _fd_jacobian(cost, u, r, others)
         fresh = True
         if J is None:
             return f, u
-    for _ in range(max_iter):
+    for _ in range(12):
         A = J.T @ J
         g = J.T @ r
         improved = done = small = False
@@ -209,7 +197,7 @@ def _conditional_min(cost: _Cost, k: int, t: float, u0: FloatArray, s0: float,
             lam = 1e-3
             if J is None:
                 return f, u
-    if jac is not None and J is not None:
+    if J is not None:
         jac[k] = J
     return f, u
 
@@ -249,7 +237,7 @@ def _profile_side(cost: _Cost, k: int, side: float, t0: float, s0: float, sk2: f
 
     def r_at(t: float, start: FloatArray) -> tuple[float, FloatArray]:
         nonlocal lower
-        f, u = _conditional_min(cost, k, t, start, s0, tol=TOL_S * sk2, jac=jac)
+        f, u = _conditional_min(cost, k, t, start, s0, TOL_S * sk2, jac)
         if f < s0 * (1 - 1e-9):
             lower = True
         return math.sqrt(max(f - s0, 0.0) / sk2), u
@@ -294,25 +282,10 @@ def _profile_side(cost: _Cost, k: int, side: float, t0: float, s0: float, sk2: f
     return None, lower
 
 
-def honest_bands(problem: OutputErrorProblem, res: IdentResult, free: list[str],
-                 nonlinearity: float = NONLINEARITY) -> Bands:
-    """3-sigma band of every free parameter of ``res`` (see the module's description).
-
-    Parameters
-    ----------
-    problem : OutputErrorProblem
-        The problem ``res`` solved (its residual vector is the cost).
-    res : IdentResult
-        Needs ``cov_log`` (the sandwich covariance of the log-parameters) and ``params``.
-    free : list of str
-        The free parameters, in the order of ``cov_log``.
-    nonlinearity : float
-        Allowed relative deviation of ``r^2`` at the band's ends from 9.
-
-    Returns
-    -------
-    Bands
-        Empty when there is no covariance.
+def honest_bands(problem: OutputErrorProblem, res: IdentResult, free: list[str]) -> Bands:
+    """3-sigma band of every free parameter of ``res`` (see the module's description) on
+    the problem it solved: from ``res.cov_log`` (the sandwich covariance of the
+    log-parameters, ``free`` in its order) and ``res.params``; empty without a covariance.
     """
     out = Bands()
     V = res.cov_log
@@ -351,7 +324,7 @@ def honest_bands(problem: OutputErrorProblem, res: IdentResult, free: list[str],
             rise = cost.ss(G[:, i] / G[i, i] * t) - s0
             ratios.append(rise / sk2 / SIGMAS ** 2)
         out.nonlinearity[k] = (ratios[0], ratios[1])
-        if all(math.isfinite(x) and abs(x - 1) <= nonlinearity for x in ratios):
+        if all(math.isfinite(x) and abs(x - 1) <= NONLINEARITY for x in ratios):
             continue
         ends = []
         for side in (-1.0, 1.0):

@@ -20,21 +20,15 @@ from estimator.identify.start import StartEstimate, estimate_start
 from suspid.errors import UsageError
 
 
-
 #: evaluations per free parameter shared by every start of one record when no ``maxfev``
 #: is given (a converging fit takes a few hundred)
 RECORD_MAXFEV = 1200
 
+
 @dataclass
 class OffsetCheck:
-    """The offset check of a record at its data-driven start.
-
-    Attributes
-    ----------
-    offset : Offset or None
-        The constant road or position offsets found.
-    estimate : StartEstimate or None
-        The record's data-driven start (blind to a constant level); ``None`` when not computed.
+    """The offset check of a record: the constant road or position offsets found, and the
+    data-driven start (blind to a constant level; ``None`` when not computed) it was made at.
     """
 
     offset: Offset | None
@@ -43,21 +37,8 @@ class OffsetCheck:
 
 def check_offset(problem: OutputErrorProblem, params: Parameters, *,
                  data_start: bool = True) -> OffsetCheck:
-    """Look for a constant road or position offset in ``problem``'s record.
-
-    Parameters
-    ----------
-    problem : OutputErrorProblem
-        The record as read, and its cost.
-    params : Parameters
-        Fixed values (SI) and the given start of the free parameters.
-    data_start : bool
-        Judge the offset at the data-driven start; otherwise at ``params``' values.
-
-    Returns
-    -------
-    OffsetCheck
-        The offset found and the data-driven start it was judged at.
+    """Look for a constant road or position offset in ``problem``'s record, at the
+    data-driven start (``data_start``) or else at ``params``' values.
     """
     est = estimate_start(problem, params) if data_start and params.free else None
     offset = find_offset(problem, {**params.valuesdict(), **(est.values if est else {})})
@@ -79,10 +60,8 @@ def identify_record(problem: OutputErrorProblem, params: Parameters, *, restarts
         Fixed values (SI) and the given start of the free parameters.
     restarts, maxfev, polish, multistart
         Settings of every :func:`~estimator.identify.solver.fit`.
-    data_start : bool
-        Start from the data-driven estimate too.
-    keep_init : bool
-        Also fit from ``params`` (:func:`~estimator.identify.multistart.fit_from_starts`).
+    data_start, keep_init
+        Start from the data-driven estimate too, and from ``params`` (:func:`fit_from_starts`).
     offset : {"remove", "keep"}
         Subtract a found offset before the fit, or fit the record as it is; either way the
         first warning names it.
@@ -95,11 +74,6 @@ def identify_record(problem: OutputErrorProblem, params: Parameters, *, restarts
         The identification; ``result.offset`` holds a found offset.
     fitted : OutputErrorProblem
         The problem the fit ran on (``problem``, or the record with the offset removed).
-
-    Raises
-    ------
-    UsageError
-        ``offset`` is not one of ``OFFSET_MODES``.
     """
     if offset not in OFFSET_MODES:
         raise UsageError(f"offset: expected one of {', '.join(OFFSET_MODES)}, got {offset!r}")

@@ -44,20 +44,8 @@ def _spline(t: FloatArray, y: FloatArray, grid: FloatArray) -> FloatArray:
 
 
 def to_uniform_grid(meas: Measurement) -> tuple[Measurement, str | None]:
-    """The record on a uniform grid: itself when already uniform, else resampled.
-
-    Parameters
-    ----------
-    meas : Measurement
-        The record (at least two samples).
-
-    Returns
-    -------
-    Measurement
-        The record on a uniform grid (the same object when it already was).
-    str or None
-        The warning naming the jitter when resampled; None when not resampled or not
-        uniform up to jitter (the caller rejects it).
+    """The record on a uniform grid (the same object when it already was, or is not uniform
+    up to jitter: the caller rejects it) and the warning naming the jitter when resampled.
     """
     t = np.asarray(meas.t, dtype=float)
     if t.size < 2 or uniform_step(t) is not None:

@@ -9,43 +9,17 @@ import numpy as np
 
 @dataclass
 class IdentResult:
-    """Outcome of :func:`estimator.identify.fit`.
+    """Outcome of :func:`estimator.identify.fit` (SI units throughout).
 
-    Attributes
-    ----------
-    model : str
-    params : dict
-        Every parameter (fixed ones included), SI units.
-    fixed : list of str
-    stderr : dict
-        Standard error of each free parameter (SI), sandwich estimate.
-    cost : float
-        The seed's cost at the optimum (``sse`` or ``frobenius``), SI.
-    nfev : int
-        Cost evaluations, all restarts included.
-    success : bool
-        Converged and identifiable.
-    rms_residual : dict
-        RMS residual per measured channel (SI).
-    identifiable : bool
-    warnings : list of str
-    x0 : list of float
-        Initial state used.
-    aic, bic : float
-        Information criteria of the normalised least-squares fit.
-    starts : list of dict, optional
-        Per start: ``start`` (``"data"``, ``"init"``, ...), ``from``, ``cost``, ``params``
-        and ``chosen``.
-    data_start : dict, optional
-        The data-driven estimate (``values``, ``bandwidth_hz``) or ``reason``.
-    bands : dict, optional
-        ``name -> (lo, hi)``: the 3-sigma band (SI; :mod:`estimator.identify.profile`),
-        ``inf`` for a side the record does not bound.
-    band_method : dict, optional
-        ``name -> "curvature"`` or ``"profile"``.
-    offset : dict, optional
-        A constant offset found (:mod:`estimator.identify.offset`): ``kind``, ``values``
-        (SI), ``removed``, ``share`` and ``effects``.
+    Every parameter (fixed ones included) and the names held fixed; the sandwich standard
+    error of each free one; the seed's cost at the optimum (``sse`` or ``frobenius``); cost
+    evaluations over all restarts; ``success`` (converged and identifiable); the RMS
+    residual per measured channel; the initial state used; AIC and BIC of the normalised
+    least-squares fit. Optional: ``starts`` (per start: ``start``, ``from``, ``cost``,
+    ``params``, ``chosen``), ``data_start`` (the data-driven estimate or ``reason``),
+    ``bands`` (``name -> (lo, hi)``, the 3-sigma band, ``inf`` for a side the record does
+    not bound; :mod:`estimator.identify.profile`) with ``band_method`` (``"curvature"`` or
+    ``"profile"``), and ``offset`` (:mod:`estimator.identify.offset`).
     """
 
     model: str

@@ -62,21 +62,11 @@ class Term:
 
 @dataclass
 class BodyEquations:
-    """Which measured channels form the body equations of a model, and what they determine.
-
-    Attributes
-    ----------
-    rows : tuple of int
-        The body rows (coordinate indices) fitted.
-    regressors : dict
-        ``parameter -> per row: list of (target derivative order, terms)``.
-    names : tuple of str
-        Parameters that enter the body equations.
-    missing : list of str
-        Why a part of the equations could not be formed; empty when complete.
-    shift : int
-        Power of ``j w`` every equation is multiplied by (0 unless a quantity is measured
-        only as a higher derivative).
+    """Which measured channels form the body equations of a model, and what they determine:
+    the body ``rows`` (coordinate indices) fitted, ``regressors`` (``parameter -> per row:
+    list of (target derivative order, terms)``), the parameter ``names`` that enter them, why
+    a part could not be formed (``missing``) and the power of ``j w`` every equation is
+    multiplied by (``shift``: 0 unless a quantity is measured only as a higher derivative).
     """
 
     rows: tuple[int, ...]
@@ -224,10 +214,6 @@ class _Segment:
     dt: float
     data: dict[str, FloatArray]
 
-    @property
-    def n(self) -> int:
-        return next(iter(self.data.values())).size
-
 
 def _segments(meas: Measurement, channels: Sequence[str]) -> list[_Segment]:
     """The record's stretches of at least :data:`MIN_SEGMENT` samples with no missing value in
@@ -301,7 +287,7 @@ def _segment_equations(seg: _Segment, eqs: BodyEquations, free: Sequence[str], f
     """The windowed equations of one segment up to ``f_hi`` (Hz), on the bins where every free
     parameter's regressor stands :data:`SNR_MIN` above its noise.
     """
-    n = seg.n
+    n = next(iter(seg.data.values())).size
     T = n * seg.dt
     spectra = {c: np.fft.rfft(v) * seg.dt for c, v in seg.data.items()}
     floors = {c: _noise_floor(Y) for c, Y in spectra.items()}
@@ -348,20 +334,6 @@ def _segment_equations(seg: _Segment, eqs: BodyEquations, free: Sequence[str], f
     return _SegmentEquations(X[:, ok], N[:, ok], np.asarray(omega_all[bins[ok]], dtype=float), T)
 
 
-def _cluster_scores(U: list[np.ndarray]) -> np.ndarray:
-    """Cluster-robust sandwich middle: outer products of the scores summed over runs of
-    :data:`CLUSTER_BINS` bins (``U``: one (bins, p) array per segment).
-    """
-    p = U[0].shape[1]
-    S = np.zeros((p, p))
-    for u in U:
-        n = u.shape[0]
-        for i in range(0, n, CLUSTER_BINS):
-            g = u[i:i + CLUSTER_BINS].sum(axis=0)
-            S += np.outer(g, g)
-    return S
-
-
 @dataclass
 class _Solution:
     """The bias-compensated weighted least-squares solution over a set of segments."""
@@ -371,7 +343,6 @@ class _Solution:
     cost: float                # weighted residual sum of squares
     n_obs: int                 # real equations
     blocks: list[tuple[np.ndarray, np.ndarray, _SegmentEquations]]
-    col: FloatArray
 
 
 def _solve(segs: list[_SegmentEquations], ip: list[int], ih: list[int],
@@ -412,9 +383,9 @@ def _solve(segs: list[_SegmentEquations], ip: list[int], ih: list[int],
     beta, AA, yy, H = solve(weights)
     resid = yy - AA @ beta
     if not stderr:
-        return _Solution(beta / col, np.zeros(len(ip)), float(resid @ resid), int(yy.size),
-                         blocks, col)
-    scores = []
+        return _Solution(beta / col, np.zeros(len(ip)), float(resid @ resid), int(yy.size), blocks)
+    # the sandwich's middle: outer products of the scores summed over runs of CLUSTER_BINS bins
+    S = np.zeros((len(ip), len(ip)))
     start = 0
     for A, _, _ in blocks:
         nr, nbins = A.shape[:2]
@@ -422,15 +393,17 @@ def _solve(segs: list[_SegmentEquations], ip: list[int], ih: list[int],
         a_re, a_im = AA[start:start + m], AA[start + m:start + 2 * m]
         e_re, e_im = resid[start:start + m], resid[start + m:start + 2 * m]
         u = (a_re * e_re[:, None] + a_im * e_im[:, None]).reshape(nr, nbins, -1).sum(axis=0)
-        scores.append(u)
+        for i in range(0, nbins, CLUSTER_BINS):
+            g = u[i:i + CLUSTER_BINS].sum(axis=0)
+            S += np.outer(g, g)
         start += 2 * m
     try:
         Hinv = np.linalg.inv(H)
     except np.linalg.LinAlgError:
         Hinv = np.full_like(H, np.inf)
-    cov = Hinv @ _cluster_scores(scores) @ Hinv
+    cov = Hinv @ S @ Hinv
     se = np.sqrt(np.clip(np.diag(cov), 0.0, None)) / col
-    return _Solution(beta / col, se, float(resid @ resid), int(yy.size), blocks, col)
+    return _Solution(beta / col, se, float(resid @ resid), int(yy.size), blocks)
 
 
 def _with_columns(meas: Measurement, eqs: BodyEquations,
@@ -545,8 +518,12 @@ def fit_road_unknown(model: SuspensionModel, meas: Measurement, params: Paramete
     pieces = _segments(meas, eqs.channels) if eqs.rows else []
     f_hi = band_limit(model, values)
     model_free = [n for n in free if n not in extra]
-    segs = [s for s in (_segment_equations(seg, eqs, model_free, f_hi) for seg in pieces)
-            if s is not None]
+
+    def equations(f: float) -> list[_SegmentEquations]:
+        return [s for s in (_segment_equations(seg, eqs, model_free, f) for seg in pieces)
+                if s is not None]
+
+    segs = equations(f_hi)
     undetermined = [n for n in params.free if n not in free]
     if not free or not segs:
         why = ("no free parameter enters the body equations" if not free and eqs.rows
@@ -567,8 +544,7 @@ def fit_road_unknown(model: SuspensionModel, meas: Measurement, params: Paramete
         f_est = band_limit(model, {**values, **{n: v for n, v in zip(free, sol.theta.tolist())
                                                 if n not in extra}})
         if abs(f_est / f_hi - 1.0) > 0.2:
-            again = [s for s in (_segment_equations(seg, eqs, model_free, f_est) for seg in pieces)
-                     if s is not None]
+            again = equations(f_est)
             if again:
                 segs, sol = again, _solve(again, ip, ih, theta_h)
     theta, se = sol.theta, (np.maximum(sol.se, _jackknife(segs, ip, ih, theta_h)) if jackknife
@@ -599,7 +575,8 @@ def fit_road_unknown(model: SuspensionModel, meas: Measurement, params: Paramete
     result.rms_residual = _rms_residual(model, eqs, sol.blocks, theta, values)
     # the cost: the body rows' in-band mean-square equation error, (m/s^2)^2 (rad/s^2)^2
     result.cost = float(sum(v * v for v in result.rms_residual.values()))
-    result.band_hz = _band(segs)
+    result.band_hz = [round(min(float(s.omega.min()) for s in segs) / (2 * np.pi), 4),
+                      round(max(float(s.omega.max()) for s in segs) / (2 * np.pi), 4)]
     full = np.zeros(len(eqs.names))
     full[ip], full[ih] = theta, theta_h
     misfit = body_misfit(model, eqs, sol.blocks, full)
@@ -623,26 +600,11 @@ def fit_road_unknown(model: SuspensionModel, meas: Measurement, params: Paramete
 def body_misfit(model: SuspensionModel, eqs: BodyEquations,
                 blocks: list[tuple[np.ndarray, np.ndarray, _SegmentEquations]],
                 theta: FloatArray) -> dict[str, tuple[float, float]]:
-    """Body rows whose in-band equation error is clearly more than measurement noise.
-
-    Row ``r``'s error power is compared with ``sum_i theta_i^2 N_i`` from the channels'
-    noise floors: a misfit exceeds it by :data:`~estimator.identify.misfit.MISFIT_FLOOR`
-    with an excess above :data:`~estimator.identify.misfit.MISFIT_SHARE` of the row's held
-    terms' power.
-
-    Parameters
-    ----------
-    model : SuspensionModel
-    eqs : BodyEquations
-    blocks : list
-        Each segment's ``(A, y, equations)`` (:func:`_solve`).
-    theta : ndarray
-        Every column's coefficient, in :attr:`BodyEquations.names` order (SI).
-
-    Returns
-    -------
-    dict
-        ``coordinate -> (ratio, share)`` of the misfit rows (dimensionless).
+    """Body rows whose in-band equation error is clearly more than measurement noise:
+    ``coordinate -> (ratio, share)``, the error power over ``sum_i theta_i^2 N_i`` from the
+    channels' noise floors above :data:`~estimator.identify.misfit.MISFIT_FLOOR` and the
+    excess over the held terms' power above :data:`~estimator.identify.misfit.MISFIT_SHARE`
+    (``blocks``: :func:`_solve`'s; ``theta``: every column, in :attr:`BodyEquations.names` order).
     """
     n_rows = len(eqs.rows)
     err = np.zeros(n_rows)
@@ -667,12 +629,6 @@ def _real(z: np.ndarray) -> np.ndarray:
     """Complex equations (..., p) or (...,) flattened and stacked as real then imaginary parts."""
     flat: np.ndarray = z.reshape(-1, z.shape[2]) if z.ndim == 3 else z.reshape(-1)
     return np.concatenate([flat.real, flat.imag])
-
-
-def _band(segs: list[_SegmentEquations]) -> list[float]:
-    lo = min(float(s.omega.min()) for s in segs) / (2 * np.pi)
-    hi = max(float(s.omega.max()) for s in segs) / (2 * np.pi)
-    return [round(lo, 4), round(hi, 4)]
 
 
 def _rms_residual(model: SuspensionModel, eqs: BodyEquations,

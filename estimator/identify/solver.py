@@ -34,24 +34,10 @@ SAME_COST = 1e-3
 
 
 def too_little_data(problem: OutputErrorProblem, n_free: int, n_extra: int = 0) -> str | None:
-    """Why the record cannot give estimates of ``n_free`` parameters, or ``None``.
-
-    The unknowns are the free parameters, the estimated initial states and ``n_extra``
-    more (removed offsets); a record with no more values in the cost fits any of them.
-
-    Parameters
-    ----------
-    problem : OutputErrorProblem
-        The record and its cost.
-    n_free : int
-        Free parameters.
-    n_extra : int
-        Further unknowns fitted with them.
-
-    Returns
-    -------
-    str or None
-        The warning naming the counts and the remedy; ``None`` with enough values.
+    """Why the record cannot give estimates of ``n_free`` parameters: the warning naming the
+    counts and the remedy, ``None`` with enough values. The unknowns are the free
+    parameters, the estimated initial states and ``n_extra`` more (removed offsets); a
+    record with no more values in the cost fits any of them.
     """
     n_x0 = problem.model.n_states if problem.is_estimating_x0 else 0
     unknowns = n_free + n_x0 + n_extra

@@ -53,22 +53,10 @@ KIND_MAX = 3
 
 @dataclass
 class StartEstimate:
-    """A data-driven starting point.
-
-    Attributes
-    ----------
-    values : dict
-        Free parameter -> estimate (SI); empty when the method could not apply.
-    reason : str or None
-        Why no estimate was made.
-    bandwidth_hz : float
-        Filter bandwidth of the chosen estimate (Hz).
-    cost : float
-        Normalised output-error cost at the estimate (1 = no fit).
-    notes : list of str
-        Adjustments made.
-    undetermined : list of str
-        Parameters whose estimate was replaced by a floor value.
+    """A data-driven starting point: ``values`` (free parameter -> estimate, SI; empty when
+    the method could not apply, ``reason`` says why), the chosen filter ``bandwidth_hz``, the
+    normalised output-error ``cost`` there (1 = no fit), the adjustments made (``notes``) and
+    the parameters whose estimate was replaced by a floor value (``undetermined``).
     """
 
     values: dict[str, float] = field(default_factory=dict)
@@ -191,8 +179,7 @@ def _floored(model: SuspensionModel, base: Mapping[str, float], lin: list[str],
     return out, floored, notes
 
 
-def estimate_start(problem: OutputErrorProblem, params: Parameters,
-                   bandwidths_hz: list[float] | None = None) -> StartEstimate:
+def estimate_start(problem: OutputErrorProblem, params: Parameters) -> StartEstimate:
     """Data-driven start of the free parameters of ``params`` for ``problem``'s record.
 
     Parameters
@@ -202,10 +189,9 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
         that ranks the candidate estimates.
     params : Parameters
         Fixed values and, for parameters that do not enter linearly, their grid's centre.
-    bandwidths_hz : list of float, optional
-        Filter bandwidths (Hz) tried in turn; default four from 0.2 Hz to a fifth of
-        Nyquist. The sweep ends at an exact estimate or, on a noisy record, one that leaves
-        only white noise; otherwise the lowest output-error cost wins.
+        Four filter bandwidths from 0.2 Hz to a fifth of Nyquist are tried in turn; the
+        sweep ends at an exact estimate or, on a noisy record, one that leaves only white
+        noise; otherwise the lowest output-error cost wins.
 
     Returns
     -------
@@ -225,12 +211,9 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
     lin, nonlin = _split_linear(model, base, free)
     if not lin:
         return StartEstimate(reason="no free parameter enters the equations of motion linearly")
-    nyq = 0.5 / h
     # the coefficients as a polynomial of the free values (when the noise compensation needs it)
     poly: list[tuple[FloatArray, FloatArray] | None] = []
-    if bandwidths_hz is None:
-        top = nyq / 5.0
-        bandwidths_hz = [float(f) for f in np.geomspace(0.2, max(top, 0.3), 4)]
+    bandwidths_hz = [float(f) for f in np.geomspace(0.2, max(0.5 / h / 5.0, 0.3), 4)]
     best = StartEstimate(reason="no filter bandwidth gave a usable estimate")
     reasons: list[str] = []
     seeds: list[FloatArray] = []
@@ -338,15 +321,15 @@ def estimate_start(problem: OutputErrorProblem, params: Parameters,
 
 def _refine_iv(problem: OutputErrorProblem, est: StartEstimate, reg: "_Regression",
                wts: FloatArray, base: Mapping[str, float], lin: list[str], nonlin: list[str],
-               h: float, iterations: int = 4) -> StartEstimate:
-    """Instrumental-variable iterations against the noise bias in the regressors.
+               h: float) -> StartEstimate:
+    """Four instrumental-variable iterations against the noise bias in the regressors.
 
     The instruments are the filtered noise-free simulation at the current estimate; an
     iterate is kept only when it lowers the output-error cost.
     """
     model = problem.model
     nq = len(model.coords)
-    for _ in range(iterations):
+    for _ in range(4):
         p = {**base, **est.values}
         try:
             x0 = problem.predict(p).x0
