@@ -64,7 +64,7 @@ def measurement_frames(meas: Measurement, model_name: str, db: Database, t0: flo
     columns.update(meas.road)
     enc = SensorEncoder(db, model_name, list(columns))
     res = result if result is not None else EncodeResult()
-    res.messages = enc.message_names
+    res.messages = [enc.sync.name] + [p.codec.name for p in enc.plans]
     res.model = model_name
     t = np.asarray(meas.t, dtype=float)
     n = t.size
