@@ -50,13 +50,11 @@ def signal_spec(message: Message, name: str) -> SignalSpec:
     """Compile the layout of signal ``name`` of ``message``."""
     sig = message.get_signal_by_name(name)
     length = sig.length
-    if sig.byte_order == "big_endian":
+    big = sig.byte_order == "big_endian"
+    start = sig.start
+    if big:
         msb_left = 8 * (sig.start // 8) + (7 - sig.start % 8)
         start = 8 * message.length - 1 - (msb_left + length - 1)
-        big = True
-    else:
-        start = sig.start
-        big = False
     lo_full = -(1 << (length - 1)) if sig.is_signed else 0
     hi_full = (1 << (length - 1)) - 1 if sig.is_signed else (1 << length) - 1
     scale = float(sig.scale)
