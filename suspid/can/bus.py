@@ -43,14 +43,8 @@ def adapter_ms(line: str) -> Optional[int]:
     if head is None or len(body) < head:
         return None
     try:
-        dlc = int(body[head - 1], 16)
-    except ValueError:
-        return None
-    pay = 0 if body[0] in "rR" else 2 * min(dlc, 8)
-    if len(body) != head + pay + 4:
-        return None
-    try:
-        return int(body[head + pay:], 16)
+        pay = 0 if body[0] in "rR" else 2 * min(int(body[head - 1], 16), 8)
+        return int(body[head + pay:], 16) if len(body) == head + pay + 4 else None
     except ValueError:
         return None
 
@@ -58,14 +52,9 @@ def adapter_ms(line: str) -> Optional[int]:
 class BufferedSlcanBus(slcanBus):
     """python-can's SLCAN bus with a chunked serial reader (python-can reads byte by byte).
 
-    Parameters
-    ----------
-    timestamps : bool
-        Switch the adapter's timestamp mode on (``Z1``): frame times are the host time of the
-        first timestamped frame plus the adapter's elapsed time (its 60 s ms counter
-        unwrapped). Frames without a timestamp keep the host's arrival time.
-    **kwargs
-        python-can's ``slcan`` options.
+    ``timestamps`` switches the adapter's timestamp mode on (``Z1``): frame times are the host
+    time of the first timestamped frame plus the adapter's elapsed time (its 60 s ms counter
+    unwrapped); frames without one keep the host's arrival time. ``kwargs``: python-can's.
     """
 
     def __init__(self, *args: Any, timestamps: bool = False, **kwargs: Any) -> None:
@@ -87,11 +76,9 @@ class BufferedSlcanBus(slcanBus):
 
     def _recv_internal(self, timeout: Optional[float]) -> tuple[Optional[can.Message], bool]:
         msg, filtered = super()._recv_internal(timeout)
-        if msg is None or not self._ts_on:
-            if msg is not None:
-                self.host_timed += 1
+        if msg is None:
             return msg, filtered
-        ms = adapter_ms(self._line)
+        ms = adapter_ms(self._line) if self._ts_on else None
         if ms is None:
             self.host_timed += 1
             return msg, filtered
@@ -111,12 +98,9 @@ class BufferedSlcanBus(slcanBus):
         port = self.serialPortOrig
         deadline = serial.Timeout(timeout)
         while True:
-            i = -1
-            for term in (b"\r", b"\a"):
-                k = buf.find(term)
-                if k >= 0 and (i < 0 or k < i):
-                    i = k
-            if i >= 0:
+            ends = [k for k in (buf.find(b"\r"), buf.find(b"\a")) if k >= 0]
+            if ends:
+                i = min(ends)
                 self._line = buf[: i + 1].decode(errors="replace")
                 del buf[: i + 1]
                 return self._line
@@ -183,13 +167,12 @@ class SocketcanReader:
     as python-can's ``capture_message`` does. Once behind, frames are taken in batches
     (``recvmmsg``, :mod:`suspid.can.mmsg`), each with its own ancillary data.
 
-    ``bus`` is an open python-can SocketCAN bus; ``batch`` the most frames per system call
-    (1: one ``recvmsg`` per frame). ``dropped``: frames the kernel dropped at the socket's
+    ``bus`` is an open python-can SocketCAN bus. ``dropped``: frames the kernel dropped at the socket's
     full receive queue, as of the newest frame; ``error_frames``: error frames received
     (counted, not returned); ``errors``: by class (:func:`error_frame_classes`).
     """
 
-    def __init__(self, bus: Any, batch: int = 64) -> None:
+    def __init__(self, bus: Any) -> None:
         sock = getattr(bus, "socket", None)
         if not isinstance(sock, socket.socket) or sock.family != getattr(socket, "AF_CAN", -1):
             raise TypeError(f"{type(bus).__name__} has no SocketCAN socket")
@@ -203,7 +186,7 @@ class SocketcanReader:
         sock.setsockopt(socket.SOL_SOCKET, SO_RXQ_OVFL, 1)
         sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
         sock.setsockopt(SOL_CAN_RAW, CAN_RAW_ERR_FILTER, CAN_ERR_MASK)
-        self.multi = mmsg.make(sock, CANFD_MTU, _ANC_SIZE, batch) if batch > 1 else None
+        self.multi = mmsg.make(sock, CANFD_MTU, _ANC_SIZE)
         self._pending: deque[tuple[bytes, list[tuple[int, int, bytes]], int]] = deque()
         self._full = False
 
@@ -282,15 +265,9 @@ class SocketcanReader:
 
 
 def open_bus(interface: str = "virtual", channel: str = "suspid", **kwargs: Any) -> can.BusABC:
-    """Open a python-can bus for any suspid component.
-
-    ``interface`` and ``channel`` as python-can names them; ``kwargs`` go to the bus class.
-
-    Raises
-    ------
-    UsageError
-        An interface refused, unknown or unavailable, or a channel that cannot be opened.
-    """
+    """Open a python-can bus for any suspid component (``interface`` and ``channel`` as
+    python-can names them; ``kwargs`` go to the bus class); a :class:`UsageError` for an
+    interface refused, unknown or unavailable, or a channel that cannot be opened."""
     if interface in REFUSED:
         raise UsageError(f"--interface {interface}: not supported ({REFUSED[interface]})")
     try:

@@ -60,50 +60,46 @@ def _candump_odd(path: Path, numbered: Iterable[tuple[int, int, str]],
     ``numbered`` gives ``(tag, lineno, text)``; yields ``(tag, message)`` in line order, error
     frames made as the array parser makes them; a bad line is counted in ``stats``.
     """
-    frames = 0
     block: list[tuple[int, int, list[str], str | None]] = []
     it = iter(numbered)
-    try:
-        while True:
-            block.clear()
-            for tag, lineno, line in it:
-                parts = line.split()
-                if parts:
-                    block.append((tag, lineno, parts[:3] + [f for f in parts[3:4]
-                                                            if f.lower() in ("r", "t")],
-                                  _line_fault(parts)))
-                    if len(block) >= _ODD_BLOCK:
-                        break
-            if not block:
-                return
-            good = [" ".join(p) for _, _, p, why in block if why is None]
-            try:
-                msgs = iter(_canutils(good))
-                failed: dict[int, str] = {}
-            except (ValueError, IndexError):   # the block line by line
-                got: list[can.Message] = []
-                failed = {}
-                for k, (_, _, parts, why) in enumerate(block):
-                    if why is None:
-                        try:
-                            got.extend(_canutils([" ".join(parts)]))
-                        except (ValueError, IndexError) as exc:
-                            failed[k] = str(exc) or "unparseable line"
-                msgs = iter(got)
-            for k, (tag, lineno, parts, why) in enumerate(block):
-                why = why or failed.get(k)
-                if why is not None:
-                    stats.bad(f"{path}:{lineno}", why)
-                    continue
-                msg = next(msgs)
-                frames += 1
-                id_s = parts[2].partition("#")[0]
-                if int(id_s, 16) & _CAN_ERR_FLAG and len(id_s) > 3:
-                    msg = can.Message(timestamp=msg.timestamp, is_error_frame=True, check=False)
-                msg.channel = parts[1]
-                yield tag, msg
-    finally:
-        stats.frames += frames
+    while True:
+        block.clear()
+        for tag, lineno, line in it:
+            parts = line.split()
+            if parts:
+                block.append((tag, lineno, parts[:3] + [f for f in parts[3:4]
+                                                        if f.lower() in ("r", "t")],
+                              _line_fault(parts)))
+                if len(block) >= _ODD_BLOCK:
+                    break
+        if not block:
+            return
+        good = [" ".join(p) for _, _, p, why in block if why is None]
+        try:
+            msgs = iter(_canutils(good))
+            failed: dict[int, str] = {}
+        except (ValueError, IndexError):   # the block line by line
+            got: list[can.Message] = []
+            failed = {}
+            for k, (_, _, parts, why) in enumerate(block):
+                if why is None:
+                    try:
+                        got.extend(_canutils([" ".join(parts)]))
+                    except (ValueError, IndexError) as exc:
+                        failed[k] = str(exc) or "unparseable line"
+            msgs = iter(got)
+        for k, (tag, lineno, parts, why) in enumerate(block):
+            why = why or failed.get(k)
+            if why is not None:
+                stats.bad(f"{path}:{lineno}", why)
+                continue
+            msg = next(msgs)
+            stats.frames += 1
+            id_s = parts[2].partition("#")[0]
+            if int(id_s, 16) & _CAN_ERR_FLAG and len(id_s) > 3:
+                msg = can.Message(timestamp=msg.timestamp, is_error_frame=True, check=False)
+            msg.channel = parts[1]
+            yield tag, msg
 
 
 def read_candump(path: Path, stats: ReadStats) -> Iterator[can.Message]:
@@ -223,31 +219,17 @@ def _parse_layout(rows: np.ndarray, layout: tuple[int, int, int, int, int, int]
     return good, ts, ids, data
 
 
-#: interfaces told apart by comparisons in one layout of a chunk, before a sort does it
-_FEW_NAMES = 4
-
-
 def _name_codes(iface: np.ndarray, code_of: Callable[[str], int]) -> np.ndarray | int:
-    """The code (``code_of(name)``) of each interface name of ``iface`` (an ``S<n>`` array):
-    one code when all are equal, a comparison per name while few, a sort beyond."""
+    """The code (``code_of(name)``) of each interface name of ``iface`` (an ``S<n>`` array),
+    names coded in order of appearance; one code when all are equal."""
     first = iface[0]
-    same = iface == first
-    if bool(same.all()):
+    if bool((iface == first).all()):
         return code_of(bytes(first).decode("ascii", errors="replace"))
-    out = np.empty(iface.size, dtype=np.int32)
-    out[same] = code_of(bytes(first).decode("ascii", errors="replace"))
-    left = np.flatnonzero(~same)
-    for _ in range(_FEW_NAMES):
-        name = iface[left[0]]
-        same = iface[left] == name
-        out[left[same]] = code_of(bytes(name).decode("ascii", errors="replace"))
-        left = left[~same]
-        if not left.size:
-            return out
-    uniq, inv = np.unique(iface[left], return_inverse=True)
-    out[left] = np.array([code_of(bytes(u).decode("ascii", errors="replace"))
-                          for u in uniq.tolist()], dtype=np.int32)[inv.reshape(-1)]
-    return out
+    uniq, at, inv = np.unique(iface, return_index=True, return_inverse=True)
+    codes = np.zeros(uniq.size, dtype=np.int32)
+    for k in np.argsort(at).tolist():
+        codes[k] = code_of(bytes(uniq[k]).decode("ascii", errors="replace"))
+    return codes[inv.reshape(-1)]
 
 
 def _candump_chunk(buf: bytes, path: Path, line0: int, stats: ReadStats
@@ -289,15 +271,10 @@ def _candump_chunk(buf: bytes, path: Path, line0: int, stats: ReadStats
     ldata64 = ldata.view(np.uint64).reshape(nlines)    # one 8-byte store per row
     fast = np.zeros(nlines, dtype=bool)
     lcode = np.zeros(nlines, dtype=np.int32)
-    names: list[str] = []
-    name_code: dict[str, int] = {}
+    name_code: dict[str, int] = {}   # interface name -> code, in order of appearance
 
     def code_of(name: str) -> int:
-        c = name_code.get(name)
-        if c is None:
-            c = name_code[name] = len(names)
-            names.append(name)
-        return c
+        return name_code.setdefault(name, len(name_code))
 
     cand = (length >= 10) & (length <= _MAX_FAST_LINE) & ~slow
     cidx = np.flatnonzero(cand)
@@ -316,12 +293,11 @@ def _candump_chunk(buf: bytes, path: Path, line0: int, stats: ReadStats
                 if layout is None:
                     left = left[1:]
                     continue
-                whole = left.size == idx.size
-                good, ts, ids, data = _parse_layout(rows if whole else rows[left], layout)
-                all_good = bool(good.all())
-                at = idx if whole and all_good else idx[left[good]]
-                if not all_good:
-                    ts, ids, data = ts[good], ids[good], data[good]
+                part = rows if left.size == idx.size else rows[left]
+                good, ts, ids, data = _parse_layout(part, layout)
+                if not good.all():
+                    part, ts, ids, data = part[good], ts[good], ids[good], data[good]
+                at = idx[left[good]]
                 fast[at] = True
                 lt[at] = ts
                 lid[at] = ids
@@ -329,9 +305,7 @@ def _candump_chunk(buf: bytes, path: Path, line0: int, stats: ReadStats
                 lnb[at] = (layout[5] - layout[4] - 1) // 2
                 ldata64[at] = data.view(np.uint64).reshape(-1)
                 sp1, sp2 = layout[2], layout[3]
-                part = rows if whole else rows[left]
-                iface = np.ascontiguousarray(part[:, sp1 + 1:sp2]).view(f"S{sp2 - sp1 - 1}")
-                iface = iface.reshape(-1) if all_good else iface.reshape(-1)[good]
+                iface = np.ascontiguousarray(part[:, sp1 + 1:sp2]).view(f"S{sp2 - sp1 - 1}").reshape(-1)
                 if iface.size:
                     lcode[at] = _name_codes(iface, code_of)
                 left = left[~good]
@@ -365,15 +339,14 @@ def _candump_chunk(buf: bytes, path: Path, line0: int, stats: ReadStats
     total_lines = nlines + sum(c for _, c in extra_at)
     ext = lidlen > 3
     ft = ((lid & _CAN_ERR_FLAG) != 0) & ext
-    if ft.any():   # error frames: no identifier, no data (as the message reader makes them)
-        lid[ft] = 0
-        lnb[ft] = 0
-        ldata[ft] = 0
+    lid[ft] = 0   # error frames: no identifier, no data (as the message reader makes them)
+    lnb[ft] = 0
+    ldata[ft] = 0
     regular = FrameArrays(lt, lid, ext, ft, lnb, ldata)
     if not slow_msgs:   # every frame from a regular line: in file order already
         if n_fast == nlines:
-            return regular, total_lines, lcode, names
-        return regular.select(fast), total_lines, lcode[fast], names
+            return regular, total_lines, lcode, list(name_code)
+        return regular.select(fast), total_lines, lcode[fast], list(name_code)
     where = np.array(slow_line, dtype=np.int64)
     np.add.at(per_line, where, 1)
     n = int(per_line.sum())
@@ -389,7 +362,7 @@ def _candump_chunk(buf: bytes, path: Path, line0: int, stats: ReadStats
     at = offs[where] + nth
     codes[at] = [code_of(str(m.channel)) for m in slow_msgs]
     out.put(at, extra)
-    return out, total_lines, codes, names
+    return out, total_lines, codes, list(name_code)
 
 
 def read_candump_arrays(path: str | Path, stats: Optional[ReadStats] = None, *,

@@ -50,13 +50,11 @@ def signal_spec(message: Message, name: str) -> SignalSpec:
     """Compile the layout of signal ``name`` of ``message``."""
     sig = message.get_signal_by_name(name)
     length = sig.length
-    if sig.byte_order == "big_endian":
+    big = sig.byte_order == "big_endian"
+    start = sig.start
+    if big:
         msb_left = 8 * (sig.start // 8) + (7 - sig.start % 8)
         start = 8 * message.length - 1 - (msb_left + length - 1)
-        big = True
-    else:
-        start = sig.start
-        big = False
     lo_full = -(1 << (length - 1)) if sig.is_signed else 0
     hi_full = (1 << (length - 1)) - 1 if sig.is_signed else (1 << length) - 1
     scale = float(sig.scale)
@@ -77,18 +75,9 @@ def signal_spec(message: Message, name: str) -> SignalSpec:
                       scale, offset, lo, hi)
 
 
-def _float_code(x: float) -> str:
-    return repr(float(x))
-
-
 class MessageCodec:
-    """Precompiled decoder (and encoder) of selected signals of one DBC message.
-
-    Parameters
-    ----------
-    message : cantools Message
-    signals : sequence of str, optional
-        Signals to handle, in this order (default: every non-multiplexed signal).
+    """Precompiled decoder (and encoder) of the ``signals`` of one DBC message (default: every
+    non-multiplexed signal).
 
     ``names`` is the signal order of :meth:`decode` / :meth:`unpack_raw` results; ``fast``
     is ``True`` if decoding uses one ``struct`` unpack.
@@ -108,7 +97,10 @@ class MessageCodec:
         self.fast = False
         self.unpack_raw: Callable[[bytes], tuple] = self._compile_unpack(scaled=False)
         self.decode: Callable[[bytes], tuple] = self._compile_unpack(scaled=True)
-        self._pack = self._compile_pack()
+        #: ``(mask, start bit)`` per signal of an all-Intel integer layout (``None``: encoded by
+        #: cantools)
+        self._pack = None if any(s.big_endian or s.is_float for s in self.specs) else \
+            [((1 << s.length) - 1, s.start) for s in self.specs]
 
     # ---- decoding --------------------------------------------------------------------
     def _compile_unpack(self, scaled: bool) -> Callable[[bytes], tuple]:
@@ -185,17 +177,10 @@ class MessageCodec:
         if s.scale == 1.0 and s.offset == 0.0:
             return term
         if s.offset == 0.0:
-            return f"{term} * {_float_code(s.scale)}"
-        return f"{term} * {_float_code(s.scale)} + {_float_code(s.offset)}"
+            return f"{term} * {s.scale!r}"
+        return f"{term} * {s.scale!r} + {s.offset!r}"
 
     # ---- encoding --------------------------------------------------------------------
-    def _compile_pack(self) -> list[tuple[int, int]] | None:
-        """``(mask, start bit)`` per signal of an all-Intel integer layout (``None``: any
-        other layout, encoded by cantools)."""
-        if any(s.big_endian or s.is_float for s in self.specs):
-            return None
-        return [((1 << s.length) - 1, s.start) for s in self.specs]
-
     def pack_raw(self, raw: Sequence[int]) -> bytearray:
         """Payload with the raw values ``raw`` (in :attr:`names` order); other bits zero."""
         if self._pack is not None:
@@ -243,17 +228,9 @@ class _MessagePlan:
 
 
 class SensorEncoder:
-    """Encode samples of model channels into the sensor frames of a suspid DBC.
-
-    Parameters
-    ----------
-    db : cantools Database
-        A DBC with suspid's conventions.
-    model_name : str
-        A registered model; selects the message set (by ``SuspidChannel``).
-    channels : iterable of str
-        Channels (and road columns) that will be given; messages carrying none of them are
-        not sent; a channel the DBC does not carry raises.
+    """Encode samples of model ``channels`` (and road columns) into the sensor frames of a
+    suspid DBC (messages by ``SuspidChannel`` for ``model_name``; those carrying none of the
+    channels are not sent; a channel the DBC does not carry raises).
 
     ``plans`` are the sensor messages sent each sample, in order; ``saturated`` counts the
     samples clamped per channel.
@@ -290,11 +267,6 @@ class SensorEncoder:
             self.plans.append(_MessagePlan(codec, slots, names.index("Saturated") if has_sat else -1))
         self.sync = MessageCodec(find_message(db, SYNC_MESSAGE), ["Tick", "PeriodUs"])
         self.saturated: dict[str, int] = {}
-
-    @property
-    def message_names(self) -> list[str]:
-        """Names of the frames sent per sample (sync first)."""
-        return [self.sync.name] + [p.codec.name for p in self.plans]
 
     def sync_frame(self, tick: int, period_s: float) -> tuple[int, bytearray]:
         """``(frame_id, payload)`` of the ``SN_Sync`` frame of sample ``tick``."""
@@ -373,28 +345,12 @@ def _choices(db: Database, signal: str) -> dict[str, int]:
     return {str(v): int(k) for k, v in (sig.choices or {}).items()}
 
 
-def alert_param_ids(db: Database) -> dict[str, int]:
-    """``parameter name -> ParamId`` of ``SUSPID_Alert`` (the DBC's value table)."""
-    return _choices(db, "ParamId")
-
-
 def encode_alert(db: Database, model_name: str, parameter: str, value: float, nominal: float,
                  severity: str = "warning", counter: int = 0) -> can.Message:
-    """The ``SUSPID_Alert`` frame an estimator sends for a parameter drop.
-
-    Parameters
-    ----------
-    db : cantools Database
-        suspid's DBC.
-    model_name, parameter : str
-        Model and parameter name (``c1``, ``k1``, ...).
-    value, nominal : float
-        Identified and nominal value (SI); clamped to the DBC range of the kind.
-    severity : {"info", "warning", "critical", "forecast"}
-    counter : int
-        E2E alive counter of the alert.
-    """
-    param_ids = alert_param_ids(db)
+    """The ``SUSPID_Alert`` frame an estimator sends for a parameter drop of ``parameter``
+    (``c1``, ...) of ``model_name``: identified and nominal ``value`` (SI, clamped to the DBC
+    range of the kind), ``severity`` of :data:`SEVERITIES`, E2E alive ``counter``."""
+    param_ids = _choices(db, "ParamId")
     if parameter not in param_ids:
         raise UsageError(f"alert parameter {parameter!r} unknown; expected one of {', '.join(param_ids)}")
     if severity not in SEVERITIES:
@@ -430,7 +386,7 @@ def decode_alert(db: Database, data: bytes | bytearray) -> dict[str, object]:
     prefix = _KIND_PREFIX.get(kind)
     if prefix is None:
         raise InputError(f"alert frame: ParamKind {kind} unknown; expected 0..4")
-    names = {v: k for k, v in alert_param_ids(db).items()}
+    names = {v: k for k, v in _choices(db, "ParamId").items()}
     models = {v: k for k, v in _choices(db, "Model").items()}
     sev = {v: k for k, v in SEVERITIES.items()}
     return {"model": models.get(int(d["Model"]), str(d["Model"])),

@@ -30,16 +30,8 @@ def default_dbc_path() -> Path:
     return Path(str(resources.files("suspid") / "data" / "suspension.dbc"))
 
 
-def message_attribute(message: Message, name: str, default: object = None) -> object:
-    """Value of a DBC message attribute (``default`` if unset)."""
-    dbc = message.dbc
-    if dbc is None or name not in dbc.attributes:
-        return default
-    return dbc.attributes[name].value
-
-
 def signal_attribute(signal: object, name: str, default: object = None) -> object:
-    """Value of a DBC signal attribute (``default`` if unset)."""
+    """Value of a DBC signal (or message) attribute (``default`` if unset)."""
     dbc = getattr(signal, "dbc", None)
     if dbc is None or name not in dbc.attributes:
         return default
@@ -48,7 +40,7 @@ def signal_attribute(signal: object, name: str, default: object = None) -> objec
 
 def is_e2e(message: Message) -> bool:
     """``True`` if the message is E2E protected (``E2EProfile = "P01"``)."""
-    return message_attribute(message, ATTR_E2E, "") == "P01"
+    return signal_attribute(message, ATTR_E2E, "") == "P01"
 
 
 #: bit 31 of a DBC frame ID: the message is an extended (29-bit) frame
@@ -65,15 +57,11 @@ def _id_text(message: Message) -> str:
 
 
 def find_message(db: Database, ref: str, where: str = "") -> Message:
-    """Message by name, or by frame ID (decimal or ``0x`` hex).
+    """Message by name, or by frame ID (decimal or ``0x`` hex), else an :class:`InputError`
+    naming ``where`` (e.g. the map entry) and a few of the known messages.
 
     A frame ID is standard unless it has bit 31 set (``0x80000100``) or exceeds 11 bits; an
     ID only an extended message has finds it too. A name two messages share is an error.
-
-    Raises
-    ------
-    InputError
-        Naming ``where`` (e.g. the map entry) and a few of the known messages.
     """
     lead = f"{where}{': ' if where else ''}"
     src = getattr(db, "suspid_path", "DBC")

@@ -9,19 +9,14 @@ from cantools.database.can import Database
 
 from suspid.can.conventions import (ALERT_MESSAGE, ATTR_CHANNEL, ATTR_E2E, STATUS_MESSAGE,
                                     SYNC_MESSAGE, channel_signals, default_dbc_path,
-                                    find_message, has_suspid_channels, is_e2e,
-                                    message_attribute, signal_attribute)
+                                    find_message, has_suspid_channels, is_e2e)
 from suspid.errors import InputError, require_file
 
 __all__ = ["ALERT_MESSAGE", "ATTR_CHANNEL", "ATTR_E2E", "STATUS_MESSAGE", "SYNC_MESSAGE",
            "channel_signals", "default_dbc_path", "find_message", "has_suspid_channels",
-           "is_e2e", "load_dbc", "message_attribute", "signal_attribute"]
+           "is_e2e", "load_dbc"]
 
 log = logging.getLogger(__name__)
-
-
-def _one_line(text: str) -> str:
-    return " ".join(str(text).split())
 
 
 def _not_a_name_overwrite(record: logging.LogRecord) -> bool:
@@ -30,41 +25,24 @@ def _not_a_name_overwrite(record: logging.LogRecord) -> bool:
     return not str(record.msg).startswith("Overwriting message '%s' with '%s' in the name")
 
 
-def load_dbc(path: str | Path | None = None, strict: bool = True) -> Database:
-    """Load a DBC file with cantools.
-
-    Parameters
-    ----------
-    path : str or Path, optional
-        DBC file; default :func:`default_dbc_path`.
-    strict : bool, optional
-        cantools strict mode; a DBC failing only the strict checks is loaded non-strict with
-        a logged warning.
-
-    Returns
-    -------
-    cantools.database.can.Database
-        With ``db.suspid_path``, the path it came from.
-
-    Raises
-    ------
-    InputError
-        Missing or unreadable file, or a parse error.
-    """
+def load_dbc(path: str | Path | None = None) -> Database:
+    """Load a DBC file (default :func:`default_dbc_path`) with cantools in strict mode; one
+    failing only the strict checks is loaded non-strict with a logged warning. The database's
+    ``suspid_path`` is the path it came from; an :class:`InputError` for a missing or unreadable
+    file or a parse error."""
     p = require_file(path if path is not None else default_dbc_path(), "DBC file")
     try:
         text = p.read_text(encoding="utf-8", errors="replace")
     except OSError as exc:
         raise InputError(f"{p}: cannot read DBC: {exc.strerror}") from None
-    db = Database(strict=strict)
+    db = Database(strict=True)
     cantools_log = logging.getLogger(Database.__module__)
     cantools_log.addFilter(_not_a_name_overwrite)
     try:
         db.add_dbc_string(text)
     except Exception as exc:  # cantools raises several types (ParseError, Error, ...)
-        msg = _one_line(str(exc))
-        syntax = "Invalid syntax" in msg
-        if strict and not syntax:
+        msg = " ".join(str(exc).split())
+        if "Invalid syntax" not in msg:
             db = Database(strict=False)
             try:
                 db.add_dbc_string(text)

@@ -23,17 +23,6 @@ from suspid.io.csvio import Measurement, read_measurement
 from suspid.models import get_model, infer_model
 
 
-def csv_header(path: str | Path) -> list[str]:
-    """Column names of a CSV's header row (InputError if unreadable)."""
-    p = require_file(path)
-    try:
-        with p.open(encoding="utf-8-sig", errors="strict") as fh:
-            first = fh.readline()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{p}:1: not a readable CSV text file ({exc})") from None
-    return [c.strip() for c in first.split(",")]
-
-
 @dataclass
 class EncodeResult:
     """Summary of an encoding run."""
@@ -48,23 +37,12 @@ class EncodeResult:
 def measurement_frames(meas: Measurement, model_name: str, db: Database, t0: float = 0.0,
                        status_hz: float = 10.0, result: EncodeResult | None = None
                        ) -> Iterator[can.Message]:
-    """Frames for every row of a measurement, stamped ``t + t0``.
-
-    Parameters
-    ----------
-    t0 : float
-        Added to every timestamp (s).
-    status_hz : float
-        ``SN_Status`` rate (Hz; 0 = none).
-    result : EncodeResult, optional
-        Filled with counts while iterating.
-    """
-    columns: dict[str, np.ndarray] = {}
-    columns.update(meas.measured)
-    columns.update(meas.road)
+    """Frames for every row of a measurement, stamped ``t + t0`` (s), ``SN_Status`` at
+    ``status_hz`` (0: none); ``result`` filled with counts while iterating."""
+    columns: dict[str, np.ndarray] = {**meas.measured, **meas.road}
     enc = SensorEncoder(db, model_name, list(columns))
     res = result if result is not None else EncodeResult()
-    res.messages = enc.message_names
+    res.messages = [enc.sync.name] + [p.codec.name for p in enc.plans]
     res.model = model_name
     t = np.asarray(meas.t, dtype=float)
     n = t.size
@@ -78,10 +56,8 @@ def measurement_frames(meas: Measurement, model_name: str, db: Database, t0: flo
     # the sensor clock's tick of every row, never twice the same
     ticks = np.zeros(n, dtype=np.int64)
     if n > 1 and period > 0:
-        ticks = np.rint((t - t[0]) / period).astype(np.int64)
-        for i in range(1, n):
-            if ticks[i] <= ticks[i - 1]:
-                ticks[i] = ticks[i - 1] + 1
+        row = np.arange(n)
+        ticks = np.maximum.accumulate(np.rint((t - t[0]) / period).astype(np.int64) - row) + row
     for i in range(n):
         ts = float(t[i]) + t0
         tick = int(ticks[i])
@@ -110,7 +86,13 @@ def encode_csv(csv_path: str | Path, out_path: str | Path, db: Database,
         raise InputError(f"{csv_path}: --input must be a measurement CSV, got a CAN log "
                          f"({Path(csv_path).suffix}); encode writes logs, identify reads them")
     if model_name is None:
-        model_name = infer_model(csv_header(csv_path))
+        p = require_file(csv_path)
+        try:
+            with p.open(encoding="utf-8-sig", errors="strict") as fh:
+                header = fh.readline()
+        except (OSError, UnicodeDecodeError) as exc:
+            raise InputError(f"{p}:1: not a readable CSV text file ({exc})") from None
+        model_name = infer_model([c.strip() for c in header.split(",")])
     model = get_model(model_name)
     meas = read_measurement(csv_path, model)
     if not math.isfinite(t0):

@@ -47,11 +47,6 @@ def channel_wanted(suffix: str, text: str) -> str:
     return str(int(m.group(1))) if m else text
 
 
-def _channel_order(label: str) -> tuple[int, int, str]:
-    """Sort key of channel labels: numbers in numeric order, then names."""
-    return (0, int(label), "") if label.isdigit() else (1, 0, label)
-
-
 def describe_channels(counts: dict[str, int]) -> str:
     """``"1 (1200 frames), 2 (1200 frames)"``, or ``"no frames"`` for a log without any."""
     return ", ".join(f"{ch} ({n} frames)" for ch, n in counts.items()) or "no frames"
@@ -110,7 +105,9 @@ class ReadStats:
         want = None if keys is None else set(keys)
         out = {ch: sum(n for k, n in per.items() if want is None or k in want)
                for ch, per in self.channels.items()}
-        return dict(sorted(out.items(), key=lambda kv: _channel_order(kv[0])))
+        # numbered channels in numeric order, then names
+        return dict(sorted(out.items(), key=lambda kv: (0, int(kv[0]), "") if kv[0].isdigit()
+                           else (1, 0, kv[0])))
 
     def damaged(self, path: Path, what: str) -> None:
         """Record the damage of a binary file (the first one named): truncated, one record
@@ -207,23 +204,18 @@ class FrameArrays:
 
     def payload(self, i: int) -> bytes:
         """Payload of frame ``i``."""
-        got = self.long_data.get(i)
-        if got is not None:
-            return got
-        return self.data[i, :int(self.length[i])].tobytes()
+        return self.long_data.get(i) or self.data[i, :int(self.length[i])].tobytes()
 
-    def iter_messages(self, channels: Sequence[str] | None = None,
-                      codes: np.ndarray | None = None) -> Iterator[can.Message]:
+    def iter_messages(self, channels: Sequence[str], codes: np.ndarray) -> Iterator[can.Message]:
         """The frames as python-can messages (error and remote frames as error frames, over 8
-        bytes as CAN FD), with ``channels[codes[i]]`` as frame ``i``'s channel when given."""
+        bytes as CAN FD), with ``channels[codes[i]]`` as frame ``i``'s channel."""
         ts = self.timestamp.tolist()
         ids = self.arbitration_id.tolist()
         ext = self.is_extended.tolist()
         ft = self.frame_type.tolist()
         lens = self.length.tolist()
         raw = np.ascontiguousarray(self.data).tobytes()
-        chan: list[str | None] = [None] * len(ts) if channels is None or codes is None else \
-            [channels[c] for c in np.broadcast_to(codes, (len(ts),)).tolist()]
+        chan = [channels[c] for c in np.broadcast_to(codes, (len(ts),)).tolist()]
         long_data = self.long_data
         Message = can.Message
         for i in range(len(ts)):

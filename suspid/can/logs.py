@@ -12,6 +12,7 @@ equal the frames' ``timestamp`` to the format's resolution (1 µs; BLF ns).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Callable, Iterable, Iterator, Optional
 
@@ -91,29 +92,13 @@ def first_timestamp(path: str | Path) -> float | None:
 
 def read_log(path: str | Path, stats: Optional[ReadStats] = None, *,
              channel: Optional[str] = None) -> Iterator[can.Message]:
-    """Iterate over the frames of a CAN log (format by suffix), skipping bad lines.
+    """The frames of a CAN log (format by suffix of :data:`LOG_FORMATS`) in file order, bad
+    lines skipped; ``stats`` filled with the frames read, lines skipped and frames per bus
+    channel. With ``channel`` (:func:`channel_wanted`: ``"1"``, ``"CAN1"``, ``"can1"`` for
+    candump) only its frames, the others counted in ``stats.other_channel``.
 
-    Parameters
-    ----------
-    path : str or Path
-        A log of a format of :data:`LOG_FORMATS`.
-    stats : ReadStats, optional
-        Filled with the frames read, lines skipped and frames per bus channel.
-    channel : str, optional
-        Only the frames of this bus channel (:func:`channel_wanted`: ``"1"``, ``"CAN1"``,
-        ``"can1"`` for candump); the others are counted in ``stats.other_channel``.
-
-    Yields
-    ------
-    can.Message
-        In file order, with the log's timestamps (s).
-
-    Raises
-    ------
-    InputError
-        Missing or unreadable file, or a file whose header cannot be read.
-    UsageError
-        Unknown suffix; at the end of the log, a ``channel`` that no frame has.
+    Raises :class:`InputError` for a missing or unreadable file or header, :class:`UsageError`
+    for an unknown suffix and, at the end of the log, a ``channel`` that no frame has.
     """
     p, suf, st = _open_log(path, stats)
     fmt = LOG_FORMATS[suf]
@@ -141,10 +126,6 @@ def open_log_writer(path: str | Path) -> can.io.generic.MessageWriter:
         raise InputError(f"{p}: cannot create log file: {exc.strerror or exc}") from None
 
 
-def _candump_writer(path: str) -> can.io.generic.MessageWriter:
-    return can.CanutilsLogWriter(path, channel="can0")
-
-
 @dataclass(frozen=True)
 class LogFormat:
     """One CAN log format of :data:`LOG_FORMATS`.
@@ -163,7 +144,8 @@ class LogFormat:
 #: suffix (lower case) -> format: the one table choosing readers and writers (use
 #: :func:`is_can_log` or :func:`log_format` rather than a list of suffixes of your own)
 LOG_FORMATS: dict[str, LogFormat] = {
-    ".log": LogFormat(FORMATS[".log"], read_candump, _candump_writer, candump_batches),
+    ".log": LogFormat(FORMATS[".log"], read_candump, partial(can.CanutilsLogWriter, channel="can0"),
+                      candump_batches),
     ".asc": LogFormat(FORMATS[".asc"], read_asc, ASCWriter),
     ".blf": LogFormat(FORMATS[".blf"], read_blf, BLFWriter),
     ".trc": LogFormat(FORMATS[".trc"], read_trc, can.TRCWriter),

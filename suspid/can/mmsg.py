@@ -156,10 +156,9 @@ class MultiReceiver:
         return out
 
 
-def make(sock: socket.socket, size: int, ancsize: int, batch: int = 64
-         ) -> Optional[MultiReceiver]:
+def make(sock: socket.socket, size: int, ancsize: int) -> Optional[MultiReceiver]:
     """A :class:`MultiReceiver` on ``sock``, or ``None`` where ``recvmmsg`` is missing."""
     try:
-        return MultiReceiver(sock, size, ancsize, batch)
+        return MultiReceiver(sock, size, ancsize)
     except OSError:
         return None

@@ -81,11 +81,6 @@ class _AscLines(_LineCounter):
         return line
 
 
-def _skip_header(*_args: object, **_kwargs: object) -> None:
-    """Stands in for a python-can text reader's header parser once the header is read."""
-    return None
-
-
 def _read_text_resumable(path: Path, reader: can.ASCReader | can.TRCReader,
                          counter: _LineCounter, stats: ReadStats) -> Iterator[can.Message]:
     """Run a python-can text reader on ``counter``, restarting it after a line that raises.
@@ -115,7 +110,7 @@ def _read_text_resumable(path: Path, reader: can.ASCReader | can.TRCReader,
         if first:
             first = False
             # header already parsed: do not consume lines again
-            reader._extract_header = _skip_header  # type: ignore[method-assign, assignment]
+            reader._extract_header = lambda *_a, **_k: None  # type: ignore[method-assign]
 
 
 def _read_text(path: Path, stats: ReadStats, make: Callable[[TextIO], can.ASCReader | can.TRCReader],
@@ -168,21 +163,20 @@ def read_blf(path: Path, stats: ReadStats) -> Iterator[can.Message]:
     return _read_binary(path, can.BLFReader(str(path)), stats, lambda: blf_damage(path))
 
 
-def _quiet_mdf4_del(original: Callable[[object], None]) -> Callable[[object], None]:
-    """``MDF4.__del__`` that skips an object whose construction failed before it opened the
-    file (asammdf's own would print 8 lines of "Exception ignored in")."""
+def _guard_mdf4_del() -> None:
+    """Make asammdf's ``MDF4.__del__`` (once, if installed) skip an object whose construction
+    failed before it opened the file (asammdf's own would print 8 lines of "Exception ignored
+    in")."""
+    mdf4 = getattr(can.io.mf4, "MDF4", None)
+    if mdf4 is None or getattr(mdf4.__del__, "suspid_guard", False):
+        return
+    original = mdf4.__del__
+
     def __del__(self: object) -> None:
         if hasattr(self, "_file"):
             original(self)
     __del__.suspid_guard = True  # type: ignore[attr-defined]
-    return __del__
-
-
-def _guard_mdf4_del() -> None:
-    """Install :func:`_quiet_mdf4_del` on asammdf's ``MDF4`` once (if installed)."""
-    mdf4 = getattr(can.io.mf4, "MDF4", None)
-    if mdf4 is not None and not getattr(mdf4.__del__, "suspid_guard", False):
-        mdf4.__del__ = _quiet_mdf4_del(mdf4.__del__)
+    mdf4.__del__ = __del__
 
 
 def _quiet_asammdf(record: logging.LogRecord) -> bool:

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Iterable, Sequence, Union
 
 from suspid.can.conventions import channel_signals, find_message
 from suspid.errors import InputError, UsageError
-from suspid.io.csvio import AUX_CHANNELS, normalize_unit
+from suspid.io.csvio import normalize_unit, si_units
 from suspid.models.base import SuspensionModel
 
 if TYPE_CHECKING:
@@ -152,16 +152,10 @@ class SignalMap:
     @classmethod
     def from_table(cls, table: dict[str, object], source: str,
                    dbc: Path | None = None) -> "SignalMap":
-        """Build from a parsed ``[map]`` table (a signal-map file's, or a ``--config`` file's).
-
-        ``table``: ``channel -> "MESSAGE.SIGNAL..."`` or ``channel -> {message, signal[, scale,
-        offset]}``; ``source`` names the file in messages; ``dbc`` is the DBC it names.
-
-        Raises
-        ------
-        InputError
-            An entry that is neither, naming ``FILE: map.CHANNEL``.
-        """
+        """Build from a parsed ``[map]`` table (a signal-map file's, or a ``--config`` file's):
+        ``channel -> "MESSAGE.SIGNAL..."`` or ``channel -> {message, signal[, scale, offset]}``
+        (else an :class:`InputError` naming ``FILE: map.CHANNEL``); ``source`` names the file
+        in messages; ``dbc`` is the DBC it names."""
         mappings = []
         for channel, spec in table.items():
             where = f"{source}: map.{channel}"
@@ -202,8 +196,7 @@ class SignalMap:
         for m in self.mappings:
             if m.scale != 1.0:
                 continue
-            expected = model.column_units(m.channel) or (
-                (AUX_CHANNELS[m.channel],) if m.channel in AUX_CHANNELS else ())
+            expected = si_units(model, m.channel)
             try:
                 msg = find_message(db, m.message, self.source)
             except (InputError, UsageError):
@@ -212,25 +205,19 @@ class SignalMap:
             unit = " ".join(str(getattr(sig, "unit", "") or "").split())
             if not expected or unit in ("", "-") or normalize_unit(unit) in expected:
                 continue
-            factor = TO_SI.get(unit.lower())
+            factor, si = TO_SI.get(unit.lower(), (0.0, None))
             # a factor only where it converts to the channel's unit
             hint = (f" (e.g. {m.channel}={m.message}.{m.signal}*{factor:.6g})"
-                    if factor is not None and SI_OF.get(unit.lower()) in expected else "")
+                    if si in expected else "")
             out.append(f"{self.source}: {m}: signal {msg.name}.{m.signal} is in {unit!r} by the "
                        f"DBC but {m.channel} is read in {' or '.join(expected)}, with no scale; "
                        f"give the factor to SI{hint}")
         return out
 
     def validate(self, db: Database, allowed_channels: Sequence[str]) -> None:
-        """Check every mapping against the DBC and the model's channels.
-
-        Raises
-        ------
-        InputError
-            Unknown message or signal, or a signal of nested multiplexing.
-        UsageError
-            A channel that the model does not have, a channel mapped twice, or a scale 0.
-        """
+        """Check every mapping against the DBC and the model's channels: an
+        :class:`InputError` for an unknown message or signal or a signal of nested multiplexing,
+        a :class:`UsageError` for a channel the model does not have, mapped twice, or scale 0."""
         seen: set[str] = set()
         for m in self.mappings:
             where = f"{self.source}: {m}"
@@ -260,14 +247,12 @@ class SignalMap:
                 raise UsageError(f"{where}: scale must not be 0")
 
 
-#: factors to SI of the units a DBC commonly gives motion signals in (lower case)
-TO_SI = {"mm": 1e-3, "cm": 1e-2, "mm/s": 1e-3, "cm/s": 1e-2, "mm/s^2": 1e-3, "g": 9.80665,
-         "mg": 9.80665e-3, "deg": math.pi / 180, "°": math.pi / 180, "deg/s": math.pi / 180,
-         "°/s": math.pi / 180, "km/h": 1 / 3.6, "km": 1e3}
-#: the SI unit each of :data:`TO_SI`'s units converts to
-SI_OF = {"mm": "m", "cm": "m", "mm/s": "m/s", "cm/s": "m/s", "mm/s^2": "m/s^2", "g": "m/s^2",
-         "mg": "m/s^2", "deg": "rad", "°": "rad", "deg/s": "rad/s", "°/s": "rad/s",
-         "km/h": "m/s", "km": "m"}
+#: factor to SI and SI unit of the units a DBC commonly gives motion signals in (lower case)
+TO_SI = {"mm": (1e-3, "m"), "cm": (1e-2, "m"), "mm/s": (1e-3, "m/s"), "cm/s": (1e-2, "m/s"),
+         "mm/s^2": (1e-3, "m/s^2"), "g": (9.80665, "m/s^2"), "mg": (9.80665e-3, "m/s^2"),
+         "deg": (math.pi / 180, "rad"), "°": (math.pi / 180, "rad"),
+         "deg/s": (math.pi / 180, "rad/s"), "°/s": (math.pi / 180, "rad/s"),
+         "km/h": (1 / 3.6, "m/s"), "km": (1e3, "m")}
 
 SignalMapLike = Union[SignalMap, str, Path, Sequence[str], None]
 

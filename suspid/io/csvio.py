@@ -15,7 +15,7 @@ import re
 from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable, Mapping
+from typing import Mapping
 
 import numpy as np
 
@@ -61,7 +61,7 @@ def normalize_unit(unit: str) -> str:
     return _SPELLINGS.get(u, u)
 
 
-def _si_units(model: SuspensionModel, column: str) -> tuple[str, ...]:
+def si_units(model: SuspensionModel, column: str) -> tuple[str, ...]:
     """The SI unit(s) of a column: the model's, or a vehicle channel's (empty: neither)."""
     units = model.column_units(column)
     return units or ((AUX_CHANNELS[column],) if column in AUX_CHANNELS else ())
@@ -74,7 +74,7 @@ def _annotated(cell: str, model: SuspensionModel) -> tuple[str, str | None]:
     if m is None:
         return cell, None
     name, unit = m.group("name").strip(), " ".join(m.group("unit").split())
-    units = _si_units(model, name)
+    units = si_units(model, name)
     if not units:
         return cell, None
     return (name, None) if normalize_unit(unit) in units else (name, unit)
@@ -128,38 +128,25 @@ def _integrated(t: FloatArray, r: FloatArray, r_dot: FloatArray) -> FloatArray:
     edges = np.flatnonzero(np.diff(np.concatenate(([0], gap.view(np.int8), [0]))))
     for a, b in zip(edges[::2], edges[1::2]):  # missing samples a..b-1
         lo, hi = a - 1, b  # valid neighbours (may be outside the record)
-        if lo >= 0:
-            seg = np.arange(lo, min(hi, r.size - 1) + 1)
-            steps = 0.5 * (r_dot[seg[1:]] + r_dot[seg[:-1]]) * np.diff(t[seg])
-            path = r[lo] + np.concatenate(([0.0], np.cumsum(steps)))
-            if hi < r.size:  # spread the mismatch at the far end, keep r[hi]
-                path += (r[hi] - path[-1]) * (t[seg] - t[lo]) / (t[hi] - t[lo])
-                path = path[:-1]
-            out[lo + 1:lo + path.size] = path[1:]
-        else:  # a run at the start: integrate backwards from the sample after it
-            seg = np.arange(0, hi + 1)
-            steps = 0.5 * (r_dot[seg[1:]] + r_dot[seg[:-1]]) * np.diff(t[seg])
+        seg = np.arange(max(lo, 0), min(hi, r.size - 1) + 1)
+        steps = 0.5 * (r_dot[seg[1:]] + r_dot[seg[:-1]]) * np.diff(t[seg])
+        if lo < 0:  # a run at the start: integrate backwards from the sample after it
             out[:hi] = r[hi] - np.cumsum(steps[::-1])[::-1]
+            continue
+        path = r[lo] + np.concatenate(([0.0], np.cumsum(steps)))
+        if hi < r.size:  # spread the mismatch at the far end, keep r[hi]
+            path += (r[hi] - path[-1]) * (t[seg] - t[lo]) / (t[hi] - t[lo])
+            path = path[:-1]
+        out[lo + 1:lo + path.size] = path[1:]
     return out
 
 
 def read_measurement(path: str | Path, model: SuspensionModel, *,
                      require_measured: bool = True) -> Measurement:
-    """Read a measurement CSV for ``model``.
-
-    Parameters
-    ----------
-    path : str or Path
-    model : SuspensionModel
-    require_measured : bool
-        Whether a file without any measured channel of the model is an error (``False`` for
-        a road-only file).
-
-    Raises
-    ------
-    InputError
-        Missing/empty file, no ``t``, bad cells or rows, non-increasing ``t``, no channel.
-    """
+    """Read a measurement CSV for ``model``; a file without any measured channel of the model
+    is an error if ``require_measured`` (``False`` for a road-only file). Raises
+    :class:`InputError` for a missing/empty file, no ``t``, bad cells or rows, non-increasing
+    ``t``, no channel."""
     p = require_file(path)
     name = str(path)
     try:
@@ -180,10 +167,9 @@ def read_measurement(path: str | Path, model: SuspensionModel, *,
             col, unit = _annotated(cell, model)
             if unit is None:
                 header[i] = col
-            else:
+            elif col != "t":
                 off_unit[i] = (col, unit)
-        for i, (col, unit) in off_unit.items():
-            if col == "t":
+            else:
                 raise InputError(f"{name}:1: column {header[i]!r}: time in {unit!r}, expected s "
                                  "(convert the column to seconds)")
         if "t" not in header:
@@ -213,7 +199,7 @@ def read_measurement(path: str | Path, model: SuspensionModel, *,
                    if h not in known and i not in off_unit]
         for i, (col, unit) in off_unit.items():
             warnings.append(f"{name}: ignoring column {header[i]!r}: {col} in {unit!r}, expected "
-                            f"{' or '.join(_si_units(model, col))} (SI; convert the column)")
+                            f"{' or '.join(si_units(model, col))} (SI; convert the column)")
         if unknown:
             warnings.append(f"{name}: ignoring column(s) not used by model {model.name}: "
                             f"{', '.join(unknown)}")
@@ -294,7 +280,7 @@ def read_measurement(path: str | Path, model: SuspensionModel, *,
         warnings.append(f"{name}: road column {h!r}: {int(gap.sum())} missing samples {how}")
     if not measured and require_measured:
         units = "".join(f"; column {header[i]!r} is {col} in {unit!r}, expected "
-                        f"{' or '.join(_si_units(model, col))}" for i, (col, unit) in off_unit.items())
+                        f"{' or '.join(si_units(model, col))}" for i, (col, unit) in off_unit.items())
         if empty:
             raise InputError(f"{name}: every measured column is empty ({', '.join(empty)}: no "
                              f"value in {t.size} rows); expected values of at least one")
@@ -304,11 +290,10 @@ def read_measurement(path: str | Path, model: SuspensionModel, *,
                        aux=aux)
 
 
-def write_measurement(path: str | Path, t: FloatArray, columns: Mapping[str, FloatArray],
-                      order: Iterable[str] | None = None) -> None:
+def write_measurement(path: str | Path, t: FloatArray, columns: Mapping[str, FloatArray]) -> None:
     """Write a measurement CSV with ``t`` first, then ``columns`` (SI units, ``%.10g``); an
     :class:`InputError` if the file cannot be created."""
-    names = list(order) if order is not None else list(columns)
+    names = list(columns)
     data = np.column_stack([np.asarray(t, dtype=float)] + [np.asarray(columns[n], dtype=float)
                                                           for n in names])
     try:
