@@ -17,13 +17,11 @@ from cantools.database.can import Database
 
 from estimator.decode.buffer import RollingBuffer
 from estimator.decode.routes import DATA, EXT, STATUS, SYNC, Route, Routes
-from estimator.decode.rules.counters import CounterRules, period_after, steady_frames
+from estimator.decode.rules.counters import CounterRules, FrameCounts, period_after, steady_frames
 from estimator.decode.rules.e2e import Payload, alive_counter, alive_counters, crc_ok_rows
-from estimator.decode.rules.timebase import (SyncTrack, TickClock, TimeOrder, fresh_ticks,
-                                             stale_tick,
+from estimator.decode.rules.timebase import (SyncTrack, TickClock, TimeOrder, fresh_ticks, stale_tick,
                                              sync_time, sync_times, tick_of_counter, tick_time,
                                              tick_times, ticks_of_counters, time_breaks)
-from estimator.decode.rules.counters import FrameCounts
 from suspid.can.codec import decode_alert
 from suspid.can.crc import COUNTER_MODULUS
 from suspid.can.logs import FrameArrays

@@ -199,12 +199,8 @@ class SlcanPtyBus(can.BusABC):
             self.overflows += 1
 
     def _recv_internal(self, timeout: Optional[float]) -> tuple[Optional[can.Message], bool]:
-        try:
-            if timeout is None:
-                return self._rx.get(), False
-            if timeout <= 0:
-                return self._rx.get_nowait(), False
-            return self._rx.get(timeout=timeout), False
+        try:   # a timeout of 0 (or less) polls
+            return self._rx.get(timeout=None if timeout is None else max(timeout, 0.0)), False
         except queue.Empty:
             return None, False
 
