@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import threading
 from array import array
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import Callable, Iterable, Sequence, cast
 
 import numpy as np
@@ -32,8 +32,7 @@ class Gap:
     samples: int
 
     def as_dict(self) -> dict[str, object]:
-        return {"channel": self.channel, "t_start": self.t_start, "t_end": self.t_end,
-                "samples": self.samples}
+        return asdict(self)
 
 
 @dataclass

@@ -39,13 +39,13 @@ class DecodeEngine:
     """Validate, decode and store frames; the state that carries from frame to frame."""
 
     def __init__(self, db: Database, routes: Routes, buffer: RollingBuffer, *, tick_time: bool,
-                 max_counter_delta: int, stale_window: int, collect_alerts: bool) -> None:
+                 max_counter_delta: int, collect_alerts: bool) -> None:
         self.db = db
         self.routes = routes
         self.buffer = buffer
         self.counts = FrameCounts()
         self._rejected = self.counts.rejected
-        self.counters = CounterRules(self.counts, max_counter_delta, stale_window)
+        self.counters = CounterRules(self.counts, max_counter_delta)
         self.order = TimeOrder()
         self.tick_time = tick_time
         self.sync_tick: int | None = None

@@ -23,7 +23,7 @@ from estimator.decode.engine import DecodeEngine
 from estimator.decode.j1939 import J1939Match
 from estimator.decode.routes import DATA, EXT, SYNC, Routes, model_channels
 from estimator.decode.rules.arrival import arrival_slots, place_messages
-from estimator.decode.rules.arrival_live import LivePlacer, retimed
+from estimator.decode.rules.arrival_live import LivePlacer
 from estimator.decode.rules.counters import REJECT_REASONS, FrameCounts
 from estimator.decode.rules.timebase import AUTO_FRAMES, choose_time_base, first_sync
 from suspid.can.crc import COUNTER_MODULUS
@@ -38,13 +38,6 @@ from suspid.models import SuspensionModel, get_model
 BATCH_SIZE = 2048
 
 __all__ = ["BATCH_SIZE", "DecodeListener", "REJECT_REASONS", "model_channels"]
-
-
-def _key_of(msg: can.Message) -> int | None:
-    """Route key of a frame (None: error and remote frames, which carry no data)."""
-    if msg.is_error_frame or msg.is_remote_frame:
-        return None
-    return msg.arbitration_id | EXT if msg.is_extended_id else msg.arbitration_id
 
 
 def _as_arrays(msgs: list[can.Message], counts: FrameCounts) -> FrameArrays:
@@ -62,14 +55,6 @@ def _as_arrays(msgs: list[can.Message], counts: FrameCounts) -> FrameArrays:
             continue
         good.append(m)
     return FrameArrays.from_messages(good)
-
-
-def _time_of(msg: can.Message) -> float:
-    """Arrival time (s) of a frame (NaN when it has none the rule can use)."""
-    try:
-        return float(msg.timestamp)
-    except (TypeError, ValueError):
-        return float("nan")
 
 
 def _engine_setting(name: str, doc: str) -> Any:
@@ -96,8 +81,8 @@ class DecodeListener(can.Listener):
     time_source : {"timestamp", "tick", "auto"}
         Data time from the frame timestamps, the ``SN_Sync`` tick, or the tick when an
         ``SN_Sync`` comes among the first ``AUTO_FRAMES`` frames of the DBC.
-    max_counter_delta, stale_window : int
-        Largest accepted counter advance; counter steps back read as an old frame.
+    max_counter_delta : int
+        Largest accepted counter advance.
     batch_size : int
         Frames queued before they are processed as one batch (``1``: on arrival).
     on_alert : callable, optional
@@ -114,8 +99,7 @@ class DecodeListener(can.Listener):
                  signal_map: SignalMapLike = None, *, capacity: int = 1 << 16,
                  growable: bool = False,
                  time_source: Literal["timestamp", "tick", "auto"] = "timestamp",
-                 max_counter_delta: int = 4, stale_window: int = 5,
-                 batch_size: int = BATCH_SIZE,
+                 max_counter_delta: int = 4, batch_size: int = BATCH_SIZE,
                  on_alert: Callable[[dict[str, object]], None] | None = None,
                  arrival_slots: bool = False, j1939_source: str | int | None = None) -> None:
         self.model = get_model(model) if isinstance(model, str) else model
@@ -147,7 +131,6 @@ class DecodeListener(can.Listener):
         if batch_size < 1:
             raise UsageError(f"batch_size must be >= 1, got {batch_size}")
         self.max_counter_delta = max_counter_delta
-        self.stale_window = max(0, min(stale_window, COUNTER_MODULUS - 1 - max_counter_delta))
         self._buffer = RollingBuffer(capacity, growable)
         self.mean_channels = [m.channel for m in smap.mappings if m.remove_mean]
         self.receive_stats: dict[str, object] = {}
@@ -166,7 +149,6 @@ class DecodeListener(can.Listener):
         self.routes = routes
         self.engine = DecodeEngine(db, routes, self._buffer, tick_time=time_source == "tick",
                                    max_counter_delta=max_counter_delta,
-                                   stale_window=self.stale_window,
                                    collect_alerts=on_alert is not None)
         self.batch_size = batch_size
         self.on_alert = on_alert
@@ -193,7 +175,7 @@ class DecodeListener(can.Listener):
             live = self._live
             if live is None:
                 names = {r.key: r.name for r in self.routes.ordered if r.kind == DATA}
-                live = self._live = LivePlacer(names, _key_of, _time_of, retimed)
+                live = self._live = LivePlacer(names)
             for m in live.push(msg):
                 self._receive(m)
             return

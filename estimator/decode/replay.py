@@ -97,9 +97,7 @@ def feed_log(listener: can.Listener, path: str | Path, stats: Optional[ReadStats
     chooser = listener if isinstance(listener, _TimeBaseChooser) else None
     for fa in _placed(listener, path, stats, channel) if feed_arrays is not None else ():
         size = len(fa)
-        if chooser is not None:
-            # "auto": decided on the first chunk
-            chooser.choose_time_base(fa.arbitration_id, final=True)
+        if chooser is not None:   # "auto": decided on the first chunk (_placed)
             k = chooser.sync_first_index(fa.arbitration_id) \
                 if chooser.time_source_requested == "auto" else -1
             chooser = None
