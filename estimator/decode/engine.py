@@ -1,10 +1,8 @@
-"""The decoder's engine: batches of frames (:class:`~suspid.can.logs.FrameArrays`) ->
-validated, decoded samples in the :class:`~estimator.decode.buffer.RollingBuffer`.
+"""The decoder's engine: batches of frames -> validated, decoded samples in the rolling buffer.
 
-:meth:`DecodeEngine.process` is the one entry, for a log's chunks and a live bus's queue.
-The stateless checks run over the whole batch, the time check splits it into segments, and
-per message the steady frames need only the period recurrence; what the array code does not
-cover (anomalies, CAN FD payloads, small batches) goes through the per-frame rules
+:meth:`DecodeEngine.process` (a log's chunks, a live bus's queue) runs the stateless checks over
+the whole batch, splits it at time anomalies, and per message needs only the period recurrence
+for steady frames; anomalies, CAN FD payloads and small batches go through the per-frame rules
 (:meth:`DecodeEngine.validate`) with the same results. No lock: the listener serialises calls.
 """
 from __future__ import annotations

@@ -70,28 +70,15 @@ def _engine_setting(name: str, doc: str) -> Any:
 class DecodeListener(can.Listener):
     """Validate, decode and buffer the frames of a suspension sensor bus.
 
-    Parameters
-    ----------
-    model : str or SuspensionModel
-    dbc, signal_map : optional
-        The DBC (default suspid's) and its ``channel = MESSAGE.SIGNAL`` mappings (default
-        the DBC's ``SuspidChannel`` attributes).
-    capacity, growable : int, bool
-        Rows per message in the rolling buffer; grow it instead of overwriting.
-    time_source : {"timestamp", "tick", "auto"}
-        Data time from the frame timestamps, the ``SN_Sync`` tick, or the tick when an
-        ``SN_Sync`` comes among the first ``AUTO_FRAMES`` frames of the DBC.
-    max_counter_delta : int
-        Largest accepted counter advance.
-    batch_size : int
-        Frames queued before they are processed as one batch (``1``: on arrival).
-    on_alert : callable, optional
-        Called with each accepted ``SUSPID_Alert`` dict as soon as it arrives.
-    arrival_slots : bool
-        With the timestamp time base, place data frames in their sample slots.
-    j1939_source : str or int, optional
-        A J1939 DBC: decode each PGN from this source address only (``"0x47"``).
-
+    ``dbc`` (default suspid's) and ``signal_map`` (``channel = MESSAGE.SIGNAL``; default the
+    DBC's ``SuspidChannel`` attributes); ``capacity`` rows per message in the rolling buffer
+    (``growable``: grow it instead of overwriting); ``time_source``: data time from the frame
+    timestamps, the ``SN_Sync`` tick, or ``"auto"`` (the tick when an ``SN_Sync`` comes among
+    the first ``AUTO_FRAMES`` frames of the DBC); ``max_counter_delta`` the largest accepted
+    counter advance; ``batch_size`` frames queued before they are processed (``1``: on
+    arrival); ``on_alert(alert)`` called for each accepted ``SUSPID_Alert`` as it arrives;
+    ``arrival_slots``: with timestamps, place data frames in their sample slots;
+    ``j1939_source``: a J1939 DBC's PGNs decoded from this source address only (``"0x47"``).
     :attr:`time_source` names the time base in use, :attr:`receive_stats` live counters.
     """
 
@@ -424,16 +411,10 @@ class DecodeListener(can.Listener):
 
     def aligned(self, window: float | None = None, t_end: float | None = None,
                 dt: float | None = None, channels: Sequence[str] | None = None) -> Aligned:
-        """Buffered ``channels`` (default all mapped; a map's mean removal applied) on a
-        uniform grid, NaN and gap records where samples are missing.
-
-        Parameters
-        ----------
-        window, t_end : float, optional
-            Window length and end (s, data time; default everything, the newest sample).
-        dt : float, optional
-            Grid step (s); default the ``SN_Sync`` period in tick mode, else the median interval.
-        """
+        """Buffered ``channels`` (default all mapped; a map's mean removal applied) on a uniform
+        grid of step ``dt`` (s; default the ``SN_Sync`` period in tick mode, else the median
+        interval), NaN and gap records where samples are missing; the ``window`` (s, data time)
+        ending at ``t_end`` (default everything, the newest sample)."""
         self.flush()
         self._live_stats()
         if dt is None and self.time_source == "tick":
