@@ -13,7 +13,6 @@ from bisect import bisect_left
 import numpy as np
 from cantools.database.can import Database
 
-from estimator.decode.buffer import RollingBuffer
 from estimator.decode.routes import DATA, EXT, STATUS, SYNC, Route, Routes
 from estimator.decode.rules.counters import CounterRules, FrameCounts, period_after, steady_frames
 from estimator.decode.rules.e2e import Payload, alive_counter, alive_counters, crc_ok_rows
@@ -36,11 +35,10 @@ _O_UNKNOWN, _O_IGNORED, _O_DLC, _O_CRC = 1, 2, 3, 4
 class DecodeEngine:
     """Validate, decode and store frames; the state that carries from frame to frame."""
 
-    def __init__(self, db: Database, routes: Routes, buffer: RollingBuffer, *, tick_time: bool,
-                 max_counter_delta: int, collect_alerts: bool) -> None:
+    def __init__(self, db: Database, routes: Routes, *, tick_time: bool, max_counter_delta: int,
+                 collect_alerts: bool) -> None:
         self.db = db
         self.routes = routes
-        self.buffer = buffer
         self.counts = FrameCounts()
         self._rejected = self.counts.rejected
         self.counters = CounterRules(self.counts, max_counter_delta)

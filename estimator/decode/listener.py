@@ -134,7 +134,7 @@ class DecodeListener(can.Listener):
             raise UsageError(f"time_source 'tick' needs message {SYNC_MESSAGE} in the DBC "
                              f"{getattr(self.db, 'suspid_path', '')}")
         self.routes = routes
-        self.engine = DecodeEngine(db, routes, self._buffer, tick_time=time_source == "tick",
+        self.engine = DecodeEngine(db, routes, tick_time=time_source == "tick",
                                    max_counter_delta=max_counter_delta,
                                    collect_alerts=on_alert is not None)
         self.batch_size = batch_size
