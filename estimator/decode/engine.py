@@ -292,20 +292,18 @@ class DecodeEngine:
             k, a, b = runs[0]
             route = route_list[k]
             b8 = rows[a:b].view(np.uint8).reshape(b - a, 8)
-            vals = self._sync_values(route, b8)
-            tk, pus = vals
+            tk, pus = self._sync_values(route, b8)
             t_s = arr[a:b]
             if route.check is not None:
                 # the unbroken tick across wraps and node restarts (TickClock)
-                raw = np.asarray(tk, dtype=np.int64)
+                raw = tk
                 tk = self.clock.extend_many(raw, pus, t_s)
-                vals = (tk, pus)
                 syncs.pending_shifts = (tk - raw) % COUNTER_MODULUS
                 t_s = sync_times(tk, pus, t_s)
                 acc = self._runs(runs[:1], rows, arr, t_s, a, syncs)
             else:
                 acc = np.ones(b - a, dtype=bool)
-            self._accepted(route, b8, t_s, acc, vals, syncs, h[a:b])
+            self._accepted(route, b8, t_s, acc, (tk, pus), syncs, h[a:b])
             runs = runs[1:]
             if not runs:
                 return

@@ -117,7 +117,6 @@ class DecodeListener(can.Listener):
             raise UsageError(f"max_counter_delta must be 1..13, got {max_counter_delta}")
         if batch_size < 1:
             raise UsageError(f"batch_size must be >= 1, got {batch_size}")
-        self.max_counter_delta = max_counter_delta
         self._buffer = RollingBuffer(capacity, growable)
         self.mean_channels = [m.channel for m in smap.mappings if m.remove_mean]
         self.receive_stats: dict[str, object] = {}
@@ -266,18 +265,11 @@ class DecodeListener(can.Listener):
 
     def message_slot_times(self, arrivals: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
         """Route key -> data times (s) of the frames placed in sample slots, from arrival times."""
-        names, keys, slots = [], [], []
-        for r in self.routes.ordered:
-            t = arrivals.get(r.key)
-            if r.kind != DATA or t is None or not t.size:
-                continue
-            sl = arrival_slots(t)
-            if sl is not None:
-                names.append(r.name)
-                keys.append(r.key)
-                slots.append(sl)
+        placed = [(r.name, r.key, sl) for r in self.routes.ordered
+                  if r.kind == DATA and arrivals.get(r.key, np.empty(0)).size
+                  and (sl := arrival_slots(arrivals[r.key])) is not None]
         out: dict[int, np.ndarray] = {}
-        for name, key, sl, tm in zip(names, keys, slots, place_messages(slots)):
+        for (name, key, sl), tm in zip(placed, place_messages([p[2] for p in placed])):
             if tm is not None:
                 out[key] = tm
                 self._slot_period = sl.period if not self._slot_period else \
@@ -367,18 +359,11 @@ class DecodeListener(can.Listener):
                                   "ignored": c.ignored, "lost": c.lost,
                                   "time_base": "tick" if self.engine.tick_time else "timestamp"}
         clock = self.engine.clock
-        if clock.restarts:
-            out["node_restarts"] = clock.restarts
-        if clock.wraps:
-            out["tick_wraps"] = clock.wraps
         self._live_stats()
-        if self.arrival_stats:
-            out["arrival_slots"] = {k: dict(v) for k, v in self.arrival_stats.items()}
-        if self.receive_stats:
-            out["receive"] = dict(self.receive_stats)
-        unknown = self.unknown_pages()
-        if unknown:
-            out["unknown_page"] = unknown
+        extra = {"node_restarts": clock.restarts, "tick_wraps": clock.wraps,
+                 "arrival_slots": {k: dict(v) for k, v in self.arrival_stats.items()},
+                 "receive": dict(self.receive_stats), "unknown_page": self.unknown_pages()}
+        out.update((k, v) for k, v in extra.items() if v)   # the non-zero, non-empty ones
         if self.j1939 is not None:
             out["j1939"] = self.j1939.stats()
         return out
@@ -422,9 +407,8 @@ class DecodeListener(can.Listener):
         t_start = None
         buf = self._buffer
         if window is not None:
-            end = buf.latest_time() if t_end is None else t_end
-            t_start = end - window
-            t_end = end
+            t_end = buf.latest_time() if t_end is None else t_end
+            t_start = t_end - window
             if self._slot_period:
                 # slot times a + k P: an edge sample stays in whatever P's last bits
                 t_start -= 0.25 * self._slot_period
