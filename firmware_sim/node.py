@@ -41,18 +41,6 @@ class FrameBus(Protocol):
     def recv(self, timeout: float | None = None) -> can.Message | None: ...
 
 
-def expand_channel_sets(model: SuspensionModel, names: Sequence[str]) -> list[str]:
-    """Channel names with each set of :data:`~suspid.models.base.CHANNEL_SETS` expanded."""
-    out: list[str] = []
-    for n in names:
-        out += model.channel_set(n) if n in CHANNEL_SETS else [n]
-    return list(dict.fromkeys(out))
-
-
-def _order(channel: str) -> int:
-    return 2 if channel.endswith("_ddot") else 1 if channel.endswith("_dot") else 0
-
-
 @dataclass
 class NodeConfig:
     """Configuration of a node run: model and scenario (:mod:`firmware_sim.scenarios`), run
@@ -164,7 +152,8 @@ class SensorNode:
                            self.setup.x0, chunk_s=0.05 if self.setup.name == "damper-wear" else 1.0,
                            extra_forces=extra_forces, effects=effects)
         available = list(self.plant.channels)
-        chans = (expand_channel_sets(self.model, config.channels) if config.channels
+        sets = [self.model.channel_set(n) if n in CHANNEL_SETS else [n] for n in config.channels or []]
+        chans = (list(dict.fromkeys(c for s in sets for c in s)) if config.channels
                  else [c for c in available if c not in self.model.ride_height_channels])
         bad = [c for c in chans if c not in available]
         if bad:
@@ -178,7 +167,8 @@ class SensorNode:
                                  f"of {', '.join(chans)}")
         self.encoder = SensorEncoder(self.db, self.model.name, chans)
         self.rng = np.random.default_rng(config.seed + 7919)
-        self.noise = {c: DEFAULT_NOISE[_order(c)] * config.noise for c in chans}
+        self.noise = {c: DEFAULT_NOISE[c.endswith("_dot") + 2 * c.endswith("_ddot")] * config.noise
+                      for c in chans}
         self.n_ticks = int(self.setup.t.size)
         self.period = 1.0 / config.rate
         self.faults = FaultInjector(config.faults, np.random.default_rng(config.seed + 104729),
@@ -323,7 +313,7 @@ class SensorNode:
         sched = self._scheduler(0.0)
         for k in range(self.n_ticks):
             for task in sched.tasks:
-                if k % task.every == task.offset:
+                if k % task.every == 0:
                     task.fn(k)
             if out:
                 yield from out

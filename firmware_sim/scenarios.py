@@ -44,12 +44,11 @@ def canonical_name(name: str) -> str:
 
 def build_scenario(model: SuspensionModel, name: str, duration: float | None = None,
                    fs: float = 500.0, params: Mapping[str, float] | None = None,
-                   seed: int = 0, wear_start: float = 20.0, wear_to: float = 0.5,
-                   damper: str | None = None) -> ScenarioSetup:
+                   seed: int = 0, wear_start: float = 20.0, wear_to: float = 0.5) -> ScenarioSetup:
     """Build the road, initial state and parameter schedule of scenario ``name`` (or an
     alias): ``duration`` (s, default :data:`DEFAULT_DURATION`), sample rate ``fs`` (Hz),
     parameter overrides (SI), road ``seed``; damper wear from ``wear_start`` (s) to
-    ``wear_to`` x nominal at the end, of ``damper`` (default the first strut damper)."""
+    ``wear_to`` x nominal at the end, of the first strut damper."""
     n = canonical_name(name)
     dur = DEFAULT_DURATION[n] if duration is None else float(duration)
     if not dur > 0:
@@ -69,7 +68,7 @@ def build_scenario(model: SuspensionModel, name: str, duration: float | None = N
     if n != "damper-wear":
         fixed = dict(nominal)
         return ScenarioSetup(n, t, road, x0, lambda _t: fixed, nominal, events)
-    dname = damper or next((s.c_name for s in model.strut_sites(nominal) if s.c_name), "c1")
+    dname = next((s.c_name for s in model.strut_sites(nominal) if s.c_name), "c1")
     if dname not in nominal:
         raise UsageError(f"damper parameter {dname!r} not in model {model.name}")
     if not 0 < wear_to <= 1:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import threading
 from array import array
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import Callable, Iterable, Sequence, cast
 
 import numpy as np
@@ -32,25 +32,16 @@ class Gap:
     samples: int
 
     def as_dict(self) -> dict[str, object]:
-        return {"channel": self.channel, "t_start": self.t_start, "t_end": self.t_end,
-                "samples": self.samples}
+        return asdict(self)
 
 
 @dataclass
 class Aligned:
-    """Channels on one uniform time base.
-
-    Attributes
-    ----------
-    t, dt : ndarray (N,), float
-        Grid times (s; the frames' own where all lie within 1e-9 dt of the grid) and step (s).
-    values : dict
-        ``channel -> ndarray (N,)``, NaN where no valid sample fell.
-    gaps : list of Gap
-        Runs of NaN per channel (for one sample every ``N`` cells: of ``N`` or more).
-    collisions, snapped
-        Samples that fell on a filled cell (the later kept); largest snap (s) to a cell.
-    """
+    """Channels on one uniform time base: grid times ``t`` (s; the frames' own where all lie
+    within 1e-9 dt of the grid) and step ``dt`` (s), ``values`` (channel -> array, NaN where no
+    valid sample fell), ``gaps`` (runs of NaN per channel; for one sample every ``N`` cells: of
+    ``N`` or more), ``collisions`` (samples that fell on a filled cell, the later kept) and
+    ``snapped`` (largest snap to a cell, s)."""
 
     t: np.ndarray
     dt: float
@@ -316,17 +307,10 @@ class RollingBuffer:
 
     def align(self, channels: Iterable[str] | None = None, dt: float | None = None,
               t_start: float | None = None, t_end: float | None = None) -> Aligned:
-        """Put ``channels`` (default all) on one uniform grid without interpolating.
-
-        Parameters
-        ----------
-        dt : float, optional
-            Grid step (s); default the smallest median frame interval of the messages.
-        t_start, t_end : float, optional
-            Window (s, inclusive); default everything held.
-
-        Raises InputError for no data or a grid far longer than the data (a timestamp outlier).
-        """
+        """Put ``channels`` (default all) on one uniform grid of step ``dt`` (s; default the
+        smallest median frame interval of the messages) without interpolating, the rows from
+        ``t_start`` to ``t_end`` (s, inclusive; default everything held). InputError for no data
+        or a grid far longer than the data (a timestamp outlier)."""
         names = list(channels) if channels is not None else self.channels
         unknown = [c for c in names if c not in self._where]
         if unknown:

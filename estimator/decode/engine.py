@@ -1,10 +1,8 @@
-"""The decoder's engine: batches of frames (:class:`~suspid.can.logs.FrameArrays`) ->
-validated, decoded samples in the :class:`~estimator.decode.buffer.RollingBuffer`.
+"""The decoder's engine: batches of frames -> validated, decoded samples in the rolling buffer.
 
-:meth:`DecodeEngine.process` is the one entry, for a log's chunks and a live bus's queue.
-The stateless checks run over the whole batch, the time check splits it into segments, and
-per message the steady frames need only the period recurrence; what the array code does not
-cover (anomalies, CAN FD payloads, small batches) goes through the per-frame rules
+:meth:`DecodeEngine.process` (a log's chunks, a live bus's queue) runs the stateless checks over
+the whole batch, splits it at time anomalies, and per message needs only the period recurrence
+for steady frames; anomalies, CAN FD payloads and small batches go through the per-frame rules
 (:meth:`DecodeEngine.validate`) with the same results. No lock: the listener serialises calls.
 """
 from __future__ import annotations
@@ -15,15 +13,12 @@ from bisect import bisect_left
 import numpy as np
 from cantools.database.can import Database
 
-from estimator.decode.buffer import RollingBuffer
 from estimator.decode.routes import DATA, EXT, STATUS, SYNC, Route, Routes
-from estimator.decode.rules.counters import CounterRules, period_after, steady_frames
+from estimator.decode.rules.counters import CounterRules, FrameCounts, period_after, steady_frames
 from estimator.decode.rules.e2e import Payload, alive_counter, alive_counters, crc_ok_rows
-from estimator.decode.rules.timebase import (SyncTrack, TickClock, TimeOrder, fresh_ticks,
-                                             stale_tick,
+from estimator.decode.rules.timebase import (SyncTrack, TickClock, TimeOrder, fresh_ticks, stale_tick,
                                              sync_time, sync_times, tick_of_counter, tick_time,
                                              tick_times, ticks_of_counters, time_breaks)
-from estimator.decode.rules.counters import FrameCounts
 from suspid.can.codec import decode_alert
 from suspid.can.crc import COUNTER_MODULUS
 from suspid.can.logs import FrameArrays
@@ -40,14 +35,13 @@ _O_UNKNOWN, _O_IGNORED, _O_DLC, _O_CRC = 1, 2, 3, 4
 class DecodeEngine:
     """Validate, decode and store frames; the state that carries from frame to frame."""
 
-    def __init__(self, db: Database, routes: Routes, buffer: RollingBuffer, *, tick_time: bool,
-                 max_counter_delta: int, stale_window: int, collect_alerts: bool) -> None:
+    def __init__(self, db: Database, routes: Routes, *, tick_time: bool, max_counter_delta: int,
+                 collect_alerts: bool) -> None:
         self.db = db
         self.routes = routes
-        self.buffer = buffer
         self.counts = FrameCounts()
         self._rejected = self.counts.rejected
-        self.counters = CounterRules(self.counts, max_counter_delta, stale_window)
+        self.counters = CounterRules(self.counts, max_counter_delta)
         self.order = TimeOrder()
         self.tick_time = tick_time
         self.sync_tick: int | None = None
@@ -298,20 +292,18 @@ class DecodeEngine:
             k, a, b = runs[0]
             route = route_list[k]
             b8 = rows[a:b].view(np.uint8).reshape(b - a, 8)
-            vals = self._sync_values(route, b8)
-            tk, pus = vals
+            tk, pus = self._sync_values(route, b8)
             t_s = arr[a:b]
             if route.check is not None:
                 # the unbroken tick across wraps and node restarts (TickClock)
-                raw = np.asarray(tk, dtype=np.int64)
+                raw = tk
                 tk = self.clock.extend_many(raw, pus, t_s)
-                vals = (tk, pus)
                 syncs.pending_shifts = (tk - raw) % COUNTER_MODULUS
                 t_s = sync_times(tk, pus, t_s)
                 acc = self._runs(runs[:1], rows, arr, t_s, a, syncs)
             else:
                 acc = np.ones(b - a, dtype=bool)
-            self._accepted(route, b8, t_s, acc, vals, syncs, h[a:b])
+            self._accepted(route, b8, t_s, acc, (tk, pus), syncs, h[a:b])
             runs = runs[1:]
             if not runs:
                 return

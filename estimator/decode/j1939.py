@@ -61,7 +61,7 @@ class J1939Match:
         self.senders: dict[str, dict[int, int]] = {}
         self.used: dict[str, int] = {}
         self.other_source = 0
-        self._ids: dict[int, tuple[int, int, str] | None] = {}   # frame ID -> (pgn, sa, name)
+        self._ids: dict[int, tuple[int, str] | None] = {}   # DBC J1939 frame ID -> (sa, name)
         self._pgn = {n: p for p, (_f, n) in table.items()}
 
     @classmethod
@@ -77,23 +77,17 @@ class J1939Match:
             return None
         return cls(table, addr)
 
-    def _lookup(self, frame_id: int) -> tuple[int, int, str] | None:
-        """(PGN, source address, message name) of a frame ID of a DBC J1939 message."""
-        if frame_id not in self._ids:
-            pgn = pgn_from_frame_id(frame_id)
-            hit = self.table.get(pgn)
-            self._ids[frame_id] = (pgn, frame_id_unpack(frame_id).source_address, hit[1]) \
-                if hit else None
-        return self._ids[frame_id]
-
     def _target(self, frame_id: int, count: int) -> int:
         """The DBC frame ID for ``count`` frames of ``frame_id`` (-1: another sender's), counted."""
         pgn = pgn_from_frame_id(frame_id)
         self.pgns[pgn] = self.pgns.get(pgn, 0) + count
-        hit = self._lookup(frame_id)
+        if frame_id not in self._ids:
+            msg = self.table.get(pgn)
+            self._ids[frame_id] = (frame_id_unpack(frame_id).source_address, msg[1]) if msg else None
+        hit = self._ids[frame_id]
         if hit is None:
             return frame_id
-        _pgn, sa, name = hit
+        sa, name = hit
         per = self.senders.setdefault(name, {})
         per[sa] = per.get(sa, 0) + count
         want = self.source if self.source is not None else self.used.setdefault(name, sa)

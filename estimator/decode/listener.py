@@ -23,7 +23,7 @@ from estimator.decode.engine import DecodeEngine
 from estimator.decode.j1939 import J1939Match
 from estimator.decode.routes import DATA, EXT, SYNC, Routes, model_channels
 from estimator.decode.rules.arrival import arrival_slots, place_messages
-from estimator.decode.rules.arrival_live import LivePlacer, retimed
+from estimator.decode.rules.arrival_live import LivePlacer
 from estimator.decode.rules.counters import REJECT_REASONS, FrameCounts
 from estimator.decode.rules.timebase import AUTO_FRAMES, choose_time_base, first_sync
 from suspid.can.crc import COUNTER_MODULUS
@@ -38,13 +38,6 @@ from suspid.models import SuspensionModel, get_model
 BATCH_SIZE = 2048
 
 __all__ = ["BATCH_SIZE", "DecodeListener", "REJECT_REASONS", "model_channels"]
-
-
-def _key_of(msg: can.Message) -> int | None:
-    """Route key of a frame (None: error and remote frames, which carry no data)."""
-    if msg.is_error_frame or msg.is_remote_frame:
-        return None
-    return msg.arbitration_id | EXT if msg.is_extended_id else msg.arbitration_id
 
 
 def _as_arrays(msgs: list[can.Message], counts: FrameCounts) -> FrameArrays:
@@ -64,14 +57,6 @@ def _as_arrays(msgs: list[can.Message], counts: FrameCounts) -> FrameArrays:
     return FrameArrays.from_messages(good)
 
 
-def _time_of(msg: can.Message) -> float:
-    """Arrival time (s) of a frame (NaN when it has none the rule can use)."""
-    try:
-        return float(msg.timestamp)
-    except (TypeError, ValueError):
-        return float("nan")
-
-
 def _engine_setting(name: str, doc: str) -> Any:
     """A listener property that reads and sets the engine's ``name`` (tuning: same results)."""
     def get(self: DecodeListener) -> int:
@@ -85,28 +70,15 @@ def _engine_setting(name: str, doc: str) -> Any:
 class DecodeListener(can.Listener):
     """Validate, decode and buffer the frames of a suspension sensor bus.
 
-    Parameters
-    ----------
-    model : str or SuspensionModel
-    dbc, signal_map : optional
-        The DBC (default suspid's) and its ``channel = MESSAGE.SIGNAL`` mappings (default
-        the DBC's ``SuspidChannel`` attributes).
-    capacity, growable : int, bool
-        Rows per message in the rolling buffer; grow it instead of overwriting.
-    time_source : {"timestamp", "tick", "auto"}
-        Data time from the frame timestamps, the ``SN_Sync`` tick, or the tick when an
-        ``SN_Sync`` comes among the first ``AUTO_FRAMES`` frames of the DBC.
-    max_counter_delta, stale_window : int
-        Largest accepted counter advance; counter steps back read as an old frame.
-    batch_size : int
-        Frames queued before they are processed as one batch (``1``: on arrival).
-    on_alert : callable, optional
-        Called with each accepted ``SUSPID_Alert`` dict as soon as it arrives.
-    arrival_slots : bool
-        With the timestamp time base, place data frames in their sample slots.
-    j1939_source : str or int, optional
-        A J1939 DBC: decode each PGN from this source address only (``"0x47"``).
-
+    ``dbc`` (default suspid's) and ``signal_map`` (``channel = MESSAGE.SIGNAL``; default the
+    DBC's ``SuspidChannel`` attributes); ``capacity`` rows per message in the rolling buffer
+    (``growable``: grow it instead of overwriting); ``time_source``: data time from the frame
+    timestamps, the ``SN_Sync`` tick, or ``"auto"`` (the tick when an ``SN_Sync`` comes among
+    the first ``AUTO_FRAMES`` frames of the DBC); ``max_counter_delta`` the largest accepted
+    counter advance; ``batch_size`` frames queued before they are processed (``1``: on
+    arrival); ``on_alert(alert)`` called for each accepted ``SUSPID_Alert`` as it arrives;
+    ``arrival_slots``: with timestamps, place data frames in their sample slots;
+    ``j1939_source``: a J1939 DBC's PGNs decoded from this source address only (``"0x47"``).
     :attr:`time_source` names the time base in use, :attr:`receive_stats` live counters.
     """
 
@@ -114,8 +86,7 @@ class DecodeListener(can.Listener):
                  signal_map: SignalMapLike = None, *, capacity: int = 1 << 16,
                  growable: bool = False,
                  time_source: Literal["timestamp", "tick", "auto"] = "timestamp",
-                 max_counter_delta: int = 4, stale_window: int = 5,
-                 batch_size: int = BATCH_SIZE,
+                 max_counter_delta: int = 4, batch_size: int = BATCH_SIZE,
                  on_alert: Callable[[dict[str, object]], None] | None = None,
                  arrival_slots: bool = False, j1939_source: str | int | None = None) -> None:
         self.model = get_model(model) if isinstance(model, str) else model
@@ -146,8 +117,6 @@ class DecodeListener(can.Listener):
             raise UsageError(f"max_counter_delta must be 1..13, got {max_counter_delta}")
         if batch_size < 1:
             raise UsageError(f"batch_size must be >= 1, got {batch_size}")
-        self.max_counter_delta = max_counter_delta
-        self.stale_window = max(0, min(stale_window, COUNTER_MODULUS - 1 - max_counter_delta))
         self._buffer = RollingBuffer(capacity, growable)
         self.mean_channels = [m.channel for m in smap.mappings if m.remove_mean]
         self.receive_stats: dict[str, object] = {}
@@ -164,9 +133,8 @@ class DecodeListener(can.Listener):
             raise UsageError(f"time_source 'tick' needs message {SYNC_MESSAGE} in the DBC "
                              f"{getattr(self.db, 'suspid_path', '')}")
         self.routes = routes
-        self.engine = DecodeEngine(db, routes, self._buffer, tick_time=time_source == "tick",
+        self.engine = DecodeEngine(db, routes, tick_time=time_source == "tick",
                                    max_counter_delta=max_counter_delta,
-                                   stale_window=self.stale_window,
                                    collect_alerts=on_alert is not None)
         self.batch_size = batch_size
         self.on_alert = on_alert
@@ -193,7 +161,7 @@ class DecodeListener(can.Listener):
             live = self._live
             if live is None:
                 names = {r.key: r.name for r in self.routes.ordered if r.kind == DATA}
-                live = self._live = LivePlacer(names, _key_of, _time_of, retimed)
+                live = self._live = LivePlacer(names)
             for m in live.push(msg):
                 self._receive(m)
             return
@@ -297,18 +265,11 @@ class DecodeListener(can.Listener):
 
     def message_slot_times(self, arrivals: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
         """Route key -> data times (s) of the frames placed in sample slots, from arrival times."""
-        names, keys, slots = [], [], []
-        for r in self.routes.ordered:
-            t = arrivals.get(r.key)
-            if r.kind != DATA or t is None or not t.size:
-                continue
-            sl = arrival_slots(t)
-            if sl is not None:
-                names.append(r.name)
-                keys.append(r.key)
-                slots.append(sl)
+        placed = [(r.name, r.key, sl) for r in self.routes.ordered
+                  if r.kind == DATA and arrivals.get(r.key, np.empty(0)).size
+                  and (sl := arrival_slots(arrivals[r.key])) is not None]
         out: dict[int, np.ndarray] = {}
-        for name, key, sl, tm in zip(names, keys, slots, place_messages(slots)):
+        for (name, key, sl), tm in zip(placed, place_messages([p[2] for p in placed])):
             if tm is not None:
                 out[key] = tm
                 self._slot_period = sl.period if not self._slot_period else \
@@ -398,18 +359,11 @@ class DecodeListener(can.Listener):
                                   "ignored": c.ignored, "lost": c.lost,
                                   "time_base": "tick" if self.engine.tick_time else "timestamp"}
         clock = self.engine.clock
-        if clock.restarts:
-            out["node_restarts"] = clock.restarts
-        if clock.wraps:
-            out["tick_wraps"] = clock.wraps
         self._live_stats()
-        if self.arrival_stats:
-            out["arrival_slots"] = {k: dict(v) for k, v in self.arrival_stats.items()}
-        if self.receive_stats:
-            out["receive"] = dict(self.receive_stats)
-        unknown = self.unknown_pages()
-        if unknown:
-            out["unknown_page"] = unknown
+        extra = {"node_restarts": clock.restarts, "tick_wraps": clock.wraps,
+                 "arrival_slots": {k: dict(v) for k, v in self.arrival_stats.items()},
+                 "receive": dict(self.receive_stats), "unknown_page": self.unknown_pages()}
+        out.update((k, v) for k, v in extra.items() if v)   # the non-zero, non-empty ones
         if self.j1939 is not None:
             out["j1939"] = self.j1939.stats()
         return out
@@ -442,16 +396,10 @@ class DecodeListener(can.Listener):
 
     def aligned(self, window: float | None = None, t_end: float | None = None,
                 dt: float | None = None, channels: Sequence[str] | None = None) -> Aligned:
-        """Buffered ``channels`` (default all mapped; a map's mean removal applied) on a
-        uniform grid, NaN and gap records where samples are missing.
-
-        Parameters
-        ----------
-        window, t_end : float, optional
-            Window length and end (s, data time; default everything, the newest sample).
-        dt : float, optional
-            Grid step (s); default the ``SN_Sync`` period in tick mode, else the median interval.
-        """
+        """Buffered ``channels`` (default all mapped; a map's mean removal applied) on a uniform
+        grid of step ``dt`` (s; default the ``SN_Sync`` period in tick mode, else the median
+        interval), NaN and gap records where samples are missing; the ``window`` (s, data time)
+        ending at ``t_end`` (default everything, the newest sample)."""
         self.flush()
         self._live_stats()
         if dt is None and self.time_source == "tick":
@@ -459,9 +407,8 @@ class DecodeListener(can.Listener):
         t_start = None
         buf = self._buffer
         if window is not None:
-            end = buf.latest_time() if t_end is None else t_end
-            t_start = end - window
-            t_end = end
+            t_end = buf.latest_time() if t_end is None else t_end
+            t_start = t_end - window
             if self._slot_period:
                 # slot times a + k P: an edge sample stays in whatever P's last bits
                 t_start -= 0.25 * self._slot_period

@@ -113,24 +113,12 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
                             channel: str | None = None,
                             j1939_source: str | int | None = None,
                             ) -> tuple[Measurement, dict[str, object]]:
-    """Decode a CAN log into a measurement on a uniform time grid.
-
-    Parameters
-    ----------
-    path, dbc_path : str or Path
-        The log (``.log`` candump -L, ``.asc``, ``.blf``, ``.trc``, ``.mf4``); the DBC (or a
-        Database; default the signal map's ``dbc``, else suspid's).
-    dt : float, optional
-        Grid step (s); default the median frame interval.
-    channel : str, optional
-        One bus channel of a multi-bus log (:func:`suspid.can.logs.channel_wanted`).
-    signal_map, time_source, max_counter_delta, arrival_slots, j1939_source
-        As :class:`~estimator.decode.listener.DecodeListener`'s.
-
-    Returns
-    -------
-    measurement, frame_stats
-        The measurement; :meth:`DecodeListener.frame_stats` plus :func:`channel_notes`.
+    """Decode a CAN log (``.log`` candump -L, ``.asc``, ``.blf``, ``.trc``, ``.mf4``) into a
+    measurement on a uniform grid of step ``dt`` (s; default the median frame interval) and
+    its frame statistics (:meth:`DecodeListener.frame_stats` plus :func:`channel_notes`).
+    ``dbc_path``: a DBC or Database (default the signal map's ``dbc``, else suspid's);
+    ``channel``: one bus channel of a multi-bus log (:func:`suspid.can.logs.channel_wanted`);
+    the other options as :class:`~estimator.decode.listener.DecodeListener`'s.
     """
     m = get_model(model) if isinstance(model, str) else model
     listener = DecodeListener(m, dbc_path, signal_map, capacity=1 << 14, growable=True,

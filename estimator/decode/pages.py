@@ -57,14 +57,6 @@ class PageSplit:
         self.defined = tuple(frozenset(d) for d in defined)
         self._defined_a = [np.array(sorted(d), dtype=np.int64) for d in self.defined]
 
-    def _page_rows(self, k: int, rows: np.ndarray) -> np.ndarray:
-        """Raw values of multiplexer ``k`` of payloads ``rows`` (m, 8)."""
-        f = self._vraw[k]
-        if f is not None:
-            return f(rows)
-        dec = self._raw[k]
-        return np.array([dec(r.tobytes())[0] for r in rows[:, :self.dlc]], dtype=np.int64)
-
     def push(self, t: float, data: Payload) -> None:
         """Store one accepted frame (time ``t`` in s, payload ``data``) in its rings."""
         page = [int(f(data)[0]) for f in self._raw]
@@ -78,7 +70,10 @@ class PageSplit:
 
     def push_many(self, t: np.ndarray, rows: np.ndarray) -> None:
         """Store accepted frames (times ``t`` in s, zero-padded payloads ``rows`` (m, 8))."""
-        page = [self._page_rows(k, rows) for k in range(len(self.muxes))]
+        # raw values of each multiplexer
+        page = [f(rows) if f is not None else np.array(
+            [dec(r.tobytes())[0] for r in rows[:, :self.dlc]], dtype=np.int64)
+            for f, dec in zip(self._vraw, self._raw)]
         bad = np.zeros(t.shape[0], dtype=bool)
         for k, p in enumerate(page):
             bad |= ~np.isin(p, self._defined_a[k])

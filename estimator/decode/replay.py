@@ -5,23 +5,13 @@ from __future__ import annotations
 import itertools
 import time
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator, Optional, Protocol, runtime_checkable
+from typing import Any, Callable, Iterable, Iterator, Optional
 
 import can
 import numpy as np
 
+from estimator.decode.listener import DecodeListener
 from suspid.can.logs import FrameArrays, ReadStats, read_log, read_log_arrays
-
-
-@runtime_checkable
-class _TimeBaseChooser(Protocol):
-    """A listener that picks its time base from the first frames (``DecodeListener``)."""
-
-    time_source_requested: str
-
-    def choose_time_base(self, ids: Any, final: bool = False) -> Any: ...
-
-    def sync_first_index(self, ids: Any) -> int: ...
 
 
 def concat_frames(parts: list[FrameArrays]) -> FrameArrays:
@@ -70,22 +60,13 @@ def feed(listener: can.Listener, messages: Iterable[can.Message]) -> int:
 
 def feed_log(listener: can.Listener, path: str | Path, stats: Optional[ReadStats] = None, *,
              poll: Optional[Callable[[], int]] = None, channel: Optional[str] = None) -> int:
-    """Feed every frame of a CAN log to a listener, as fast as possible (a
-    ``DecodeListener`` gets arrays; same results); returns the frames fed.
-
-    Parameters
-    ----------
-    path : str or Path
-        ``.log``, ``.asc``, ``.blf``, ``.trc`` or ``.mf4``; ``stats`` counts what was read.
-    poll : callable, optional
-        Called after the first frame, then after as many frames as it returns.
-    channel : str, optional
-        One bus channel of a multi-bus log (:func:`suspid.can.logs.channel_wanted`).
-    """
+    """Feed every frame of a CAN log (``.log``, ``.asc``, ``.blf``, ``.trc``, ``.mf4``) to a
+    listener as fast as possible (a ``DecodeListener`` gets arrays; same results); returns the
+    frames fed. ``stats`` counts what was read; ``poll()`` is called after the first frame,
+    then after as many frames as it returns; ``channel``: one bus channel of a multi-bus log."""
     left = 1
     n = 0
-    feed_arrays: Any = getattr(listener, "feed_arrays", None)
-    if feed_arrays is None:
+    if not isinstance(listener, DecodeListener):
         on = listener.on_message_received
         for msg in read_log(path, stats, channel=channel):
             on(msg)
@@ -94,52 +75,47 @@ def feed_log(listener: can.Listener, path: str | Path, stats: Optional[ReadStats
                 left -= 1
                 if left <= 0:
                     left = max(1, int(poll()))
-    chooser = listener if isinstance(listener, _TimeBaseChooser) else None
-    for fa in _placed(listener, path, stats, channel) if feed_arrays is not None else ():
-        size = len(fa)
-        if chooser is not None:
-            # "auto": decided on the first chunk
-            chooser.choose_time_base(fa.arbitration_id, final=True)
-            k = chooser.sync_first_index(fa.arbitration_id) \
-                if chooser.time_source_requested == "auto" else -1
-            chooser = None
-            if k > 0:
-                fa = sync_to_front(fa, k)
-        if poll is None:
-            n += feed_arrays(fa)
-            continue
-        pos = 0
-        while pos < size:
-            take = min(left, size - pos)
-            feed_arrays(fa, pos, pos + take)
-            pos += take
-            n += take
-            left -= take
-            if left <= 0:
-                left = max(1, int(poll()))
+    else:
+        first = listener.time_source_requested == "auto"
+        for fa in _placed(listener, path, stats, channel):
+            size = len(fa)
+            if first:   # "auto": decided on the first chunk (_placed)
+                first = False
+                k = listener.sync_first_index(fa.arbitration_id)
+                if k > 0:
+                    fa = sync_to_front(fa, k)
+            if poll is None:
+                n += listener.feed_arrays(fa)
+                continue
+            pos = 0
+            while pos < size:
+                take = min(left, size - pos)
+                listener.feed_arrays(fa, pos, pos + take)
+                pos += take
+                n += take
+                left -= take
+                if left <= 0:
+                    left = max(1, int(poll()))
     finish = getattr(listener, "finish", None)
     if finish is not None:
         finish()
     return n
 
 
-def _placed(listener: can.Listener, path: str | Path, stats: Optional[ReadStats],
+def _placed(listener: DecodeListener, path: str | Path, stats: Optional[ReadStats],
             channel: Optional[str] = None) -> Iterator[FrameArrays]:
     """The chunks of a log (with arrival slots: read twice, the times then the frames)."""
     chunks = read_log_arrays(path, stats, channel=channel)
     first = next(chunks, None)
     if first is None:
         return
-    chooser = listener if isinstance(listener, _TimeBaseChooser) else None
-    if chooser is not None:
-        chooser.choose_time_base(first.arbitration_id, final=True)
-    places = getattr(listener, "places_arrivals", None)
-    if places is None or not places():
+    listener.choose_time_base(first.arbitration_id, final=True)
+    if not listener.places_arrivals():
         yield first
         yield from chunks
         return
     # pass 1: each data message's arrival times; are they finite and in order?
-    per: dict[int, list[np.ndarray]] = {k: [] for k in listener.data_keys()}  # type: ignore[attr-defined]
+    per: dict[int, list[np.ndarray]] = {k: [] for k in listener.data_keys()}
     ordered = True
     last = -np.inf
     for fa in itertools.chain((first,), chunks):
@@ -153,8 +129,8 @@ def _placed(listener: can.Listener, path: str | Path, stats: Optional[ReadStats]
         for k, got in per.items():
             got.append(ts[(keys == k) & good])
     del first, fa, ts, keys, good   # the loop ran at least once (over `first`)
-    moved = listener.message_slot_times(   # type: ignore[attr-defined]
-        {k: np.concatenate(v) for k, v in per.items()}) if ordered else {}
+    moved = listener.message_slot_times({k: np.concatenate(v) for k, v in per.items()}) \
+        if ordered else {}
     del per
     # pass 2: the frames (read and counted once already)
     again = read_log_arrays(path, ReadStats(), channel=channel)

@@ -46,7 +46,8 @@ class SlcanPtyBus(can.BusABC):
         self.dropped_closed = 0
         self.host_frames = 0
         self._opened = threading.Event()
-        self._closed_by_host = threading.Event()
+        #: set when the host closes the channel (``C``), cleared when it opens it again
+        self.closed_by_host = threading.Event()
         self._stop = threading.Event()
         self._wlock = threading.Lock()
         self._rx: "queue.SimpleQueue[can.Message]" = queue.SimpleQueue()
@@ -60,11 +61,6 @@ class SlcanPtyBus(can.BusABC):
     @property
     def is_open(self) -> bool:
         return self._opened.is_set()
-
-    @property
-    def closed_by_host(self) -> threading.Event:
-        """Set when the host closes the channel (``C``); cleared when it opens it again."""
-        return self._closed_by_host
 
     def wait_open(self, timeout: Optional[float] = None) -> bool:
         """Block until the host opens the channel; ``False`` on timeout."""
@@ -108,12 +104,12 @@ class SlcanPtyBus(can.BusABC):
         if c in "OL":
             # python-can sends 'O' twice when it sets a bitrate; accept a repeated open
             self.listen_only = c == "L"
-            self._closed_by_host.clear()
+            self.closed_by_host.clear()
             self._opened.set()
             return "\r"
         if c == "C":
             self._opened.clear()
-            self._closed_by_host.set()
+            self.closed_by_host.set()
             return "\r"
         if c == "S":
             if line[:2] not in _BITRATES or self.is_open:
@@ -199,12 +195,8 @@ class SlcanPtyBus(can.BusABC):
             self.overflows += 1
 
     def _recv_internal(self, timeout: Optional[float]) -> tuple[Optional[can.Message], bool]:
-        try:
-            if timeout is None:
-                return self._rx.get(), False
-            if timeout <= 0:
-                return self._rx.get_nowait(), False
-            return self._rx.get(timeout=timeout), False
+        try:   # a timeout of 0 (or less) polls
+            return self._rx.get(timeout=None if timeout is None else max(timeout, 0.0)), False
         except queue.Empty:
             return None, False
 
@@ -220,14 +212,14 @@ class SlcanPtyBus(can.BusABC):
         """Wait until the host has read everything (or closed the channel); ``False`` on timeout."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
-            if self.pending() == 0 or self._closed_by_host.is_set():
+            if self.pending() == 0 or self.closed_by_host.is_set():
                 return True
             time.sleep(0.01)
         return False
 
     def wait_closed(self, timeout: Optional[float] = None) -> bool:
         """Block until the host closes the channel (``C``); ``False`` on timeout."""
-        return self._closed_by_host.wait(timeout)
+        return self.closed_by_host.wait(timeout)
 
     def shutdown(self) -> None:
         """Stop the adapter and close the pseudo-terminal."""

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from estimator.decode import load_log_as_measurement
-from firmware_sim.corrupt import corrupt_candump
+from tools.corrupt_log import corrupt_candump
 import can
 
 from suspid.can.logs import (FORMATS, LOG_FORMATS, ReadStats, is_can_log, log_format,

@@ -14,7 +14,7 @@ import pytest
 from estimator.decode import DecodeListener
 from estimator.stream.drivers import CanWindowDriver, replay, replay_log
 from estimator.stream.wear_streams import damper_wear, write_log
-from firmware_sim.corrupt import corrupt_candump
+from tools.corrupt_log import corrupt_candump
 from suspid.can.logs import ReadStats, read_log
 from suspid.models import get_model
 

@@ -51,24 +51,18 @@ class Slots:
         return self.anchor + self.k * self.period
 
 
-def _window_min(u: np.ndarray, w: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(ahead, behind)``: at each ``i`` the least of ``u[i:i+w]`` and of ``u[i-w:i]``."""
-    n = u.size
-    pad = np.full(w - 1, np.inf)
-    ahead = sliding_window_view(np.r_[u, pad], w).min(axis=1)
-    behind = np.empty(n)
-    behind[0] = u[0]
-    behind[1:] = sliding_window_view(np.r_[pad, u], w).min(axis=1)[:n - 1]
-    return ahead, behind
-
-
 def _slots(t: np.ndarray, period: float) -> np.ndarray:
     """Slots of arrival times ``t`` for a period estimate (step 2 of the module docstring)."""
     n = t.size
     u = t - np.arange(n) * period
     side = min(SIDE, n)
-    ahead, behind = _window_min(u, min(DETECT, n))
-    rise = ahead - behind
+    # at each i the least of u[i:i+w] (ahead) and of u[i-w:i] (behind)
+    w = min(DETECT, n)
+    pad = np.full(w - 1, np.inf)
+    behind = np.empty(n)
+    behind[0] = u[0]
+    behind[1:] = sliding_window_view(np.r_[pad, u], w).min(axis=1)[:n - 1]
+    rise = sliding_window_view(np.r_[u, pad], w).min(axis=1) - behind
     rise[0] = 0.0
     rise[max(1, n - TAIL):] = 0.0         # the last frames: a delay, not a gap
     k = np.arange(n, dtype=np.int64)
@@ -141,29 +135,21 @@ def arrival_slots(t: np.ndarray) -> Slots | None:
     if not p > 0:
         return None
     k = _slots(t, p)
-    for _ in range(REFITS):
-        p_new = _fit_period(t, k)
-        if not p_new > 0:
+    for i in range(REFITS + 1):
+        p = _fit_period(t, k)
+        if not p > 0:
             return None
-        p = p_new
-        k = _slots(t, p)
-    p = _snap(t, k, _fit_period(t, k))
-    if not p > 0:
-        return None
-    r = t - k * p
-    return Slots(k, p, float(r.min()), int(k[-1] - (n - 1)), False, t)
-
-
-def _snap(t: np.ndarray, k: np.ndarray, p: float) -> float:
-    """``p`` rounded to whole µs when within ``SNAP_SE`` standard errors (timers count µs)."""
+        if i < REFITS:
+            k = _slots(t, p)
+    # rounded to whole µs when within SNAP_SE standard errors (timers count µs)
     p_us = round(p * 1e6) / 1e6
     kc = k - k.mean()
-    den = float(np.dot(kc, kc))
-    if not den > 0 or not p_us > 0:
-        return p
     resid = t - t.mean() - p * kc
-    se = float(np.sqrt(np.dot(resid, resid) / max(1, t.size - 2) / den))
-    return p_us if abs(p_us - p) <= SNAP_SE * se else p
+    se = float(np.sqrt(np.dot(resid, resid) / max(1, n - 2) / float(np.dot(kc, kc))))
+    if p_us > 0 and abs(p_us - p) <= SNAP_SE * se:
+        p = p_us
+    r = t - k * p
+    return Slots(k, p, float(r.min()), int(k[-1] - (n - 1)), False, t)
 
 
 def _regular(t: np.ndarray) -> Slots | None:

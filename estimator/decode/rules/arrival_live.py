@@ -8,10 +8,12 @@ import copy
 import heapq
 import math
 from collections import deque
-from typing import Any, Callable
+from typing import Any
 
+import can
 import numpy as np
 
+from estimator.decode.routes import EXT
 from estimator.decode.rules.arrival import (DETECT, MIN_FRAMES, SAME_RATE, SIDE, SNAP_SE,
                                             arrival_slots)
 
@@ -243,12 +245,8 @@ class LiveSlots:
 class LivePlacer:
     """Place a live stream's data frames in their sample slots, every frame in time order."""
 
-    def __init__(self, names: dict[int, str], key_of: Callable[[Any], int | None],
-                 time_of: Callable[[Any], float], retime: Callable[[Any, float], Any]) -> None:
+    def __init__(self, names: dict[int, str]) -> None:
         self.msgs = {k: LiveSlots(n) for k, n in names.items()}
-        self._key_of = key_of
-        self._time_of = time_of
-        self._retime = retime
         self._heap: list[tuple[float, int, bool, Any]] = []
         self._last_out = -math.inf
         self._first = -math.inf
@@ -256,9 +254,9 @@ class LivePlacer:
         self._newest = -math.inf
         self._groups: list[LiveSlots] = []
 
-    def push(self, frame: Any) -> list[Any]:
+    def push(self, frame: can.Message) -> list[can.Message]:
         """Take one frame; returns the frames that may go to the decoder now, in time order."""
-        t = self._time_of(frame)
+        t = _time_of(frame)
         if not math.isfinite(t):   # the time check rejects it
             self._add(t, frame, False)
             return self._drain(False)
@@ -271,7 +269,7 @@ class LivePlacer:
         self._newest = max(self._newest, t)
         if self._first == -math.inf:
             self._first = t
-        key = self._key_of(frame)
+        key = _key_of(frame)
         ls = self.msgs.get(key) if key is not None else None
         if ls is None:
             self._add(t, frame, False)
@@ -343,14 +341,29 @@ class LivePlacer:
             tm, _, moved, frame = heapq.heappop(heap)
             if moved:   # never behind a frame already passed on
                 tm = max(tm, self._last_out)
-                frame = self._retime(frame, tm)
+                frame = retimed(frame, tm)
             if tm > self._last_out:
                 self._last_out = tm
             out.append(frame)
         return out
 
 
-def retimed(msg: Any, tm: float) -> Any:
+def _key_of(msg: can.Message) -> int | None:
+    """Route key of a frame (None: error and remote frames, which carry no data)."""
+    if msg.is_error_frame or msg.is_remote_frame:
+        return None
+    return msg.arbitration_id | EXT if msg.is_extended_id else msg.arbitration_id
+
+
+def _time_of(msg: can.Message) -> float:
+    """Arrival time (s) of a frame (NaN when it has none the rule can use)."""
+    try:
+        return float(msg.timestamp)
+    except (TypeError, ValueError):
+        return float("nan")
+
+
+def retimed(msg: can.Message, tm: float) -> can.Message:
     """A copy of a python-can message with timestamp ``tm`` (s)."""
     m = copy.copy(msg)
     m.timestamp = tm

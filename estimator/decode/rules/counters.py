@@ -19,6 +19,8 @@ SILENCE_SAFE = 1.5 * (1.0 - 1e-9)
 #: rejection reasons, in check order
 REJECT_REASONS: tuple[str, ...] = ("malformed", "frame_type", "time", "unknown_id", "dlc", "crc",
                                    "counter_stale", "counter_jump", "no_sync")
+#: counter steps back (at most) that read as an old frame (``counter_stale``)
+STALE_WINDOW = 5
 
 
 @dataclass
@@ -46,11 +48,12 @@ class CounterRules:
 
     __slots__ = ("counts", "rejected", "max_counter_delta", "stale_window")
 
-    def __init__(self, counts: FrameCounts, max_counter_delta: int, stale_window: int) -> None:
+    def __init__(self, counts: FrameCounts, max_counter_delta: int,
+                 stale_window: int = STALE_WINDOW) -> None:
         self.counts = counts
         self.rejected = counts.rejected
         self.max_counter_delta = max_counter_delta
-        self.stale_window = stale_window
+        self.stale_window = max(0, min(stale_window, COUNTER_MODULUS - 1 - max_counter_delta))
 
     def step(self, route: RouteState, c: int, t: float) -> bool:
         """Counter continuity of one frame at data time ``t`` (s); ``False``: rejected."""

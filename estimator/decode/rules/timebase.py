@@ -135,8 +135,7 @@ class SyncTrack:
             np.asarray(shifts, dtype=np.int64)
         given = period_us > 0
         last = np.maximum.accumulate(np.where(given, np.arange(given.size), -1))
-        per = (period_us * 1e-6) if period_us.dtype.kind == "f" else \
-            period_us.astype(np.float64) * 1e-6
+        per = period_us * 1e-6
         self.pos = np.asarray(pos, dtype=np.int64)
         self.ticks = np.asarray(ticks, dtype=np.int64)
         self.periods = np.where(last >= 0, per[np.maximum(last, 0)],
