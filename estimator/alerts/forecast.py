@@ -268,10 +268,6 @@ class ForecastEngine:
     active: dict[str, ForecastEvent] = field(default_factory=dict)
     emitted: list[ForecastEvent] = field(default_factory=list)
 
-    def __post_init__(self) -> None:
-        if not (self.horizon_s > 0 and math.isfinite(self.horizon_s)):
-            raise UsageError(f"alert.forecast_horizon_s: expected a time > 0 s, got {self.horizon_s}")
-
     def update(self, trends: Mapping[str, Trend]) -> list[ForecastEvent]:
         """Fold in the tracker's trends at one estimate; returns the events emitted now."""
         out: list[ForecastEvent] = []

@@ -272,12 +272,12 @@ def make_estimator(spec: MonitorSpec, channels: list[str], fs: float) -> Any:
     road = spec.road or "measured"
     if spec.baseline == "nm" and not spec.decimate_given:
         spec.config.decimate = default_decimation(spec.model, spec.params.valuesdict(), fs)
+    key = spec.baseline
     if spec.baseline != "output_only" and road == "unknown":
-        mod, _, fn = ESTIMATORS[f"{spec.baseline}/unknown"].partition(":")
-        return getattr(importlib.import_module(mod), fn)(spec, channels, fs)
-    if spec.baseline != "output_only" and road == "zero":
-        channels = list(channels) + [r for r in spec.model.input_names if r not in channels]
-    if spec.baseline != "output_only":
+        key = f"{spec.baseline}/unknown"
+    elif spec.baseline != "output_only":
+        if road == "zero":
+            channels = list(channels) + [r for r in spec.model.input_names if r not in channels]
         absent = [r for r in spec.model.roads if r not in channels]
         if len(absent) == len(spec.model.roads):
             raise InputError(f"the stream carries no road input {', '.join(absent)} "
@@ -291,7 +291,7 @@ def make_estimator(spec: MonitorSpec, channels: list[str], fs: float) -> Any:
                              f"{spec.model.name}'s {', '.join(spec.model.roads)} (channels: "
                              f"{', '.join(channels)}); input-output identification needs "
                              "every wheel's road")
-    mod, _, fn = ESTIMATORS[spec.baseline].partition(":")
+    mod, _, fn = ESTIMATORS[key].partition(":")
     factory: Callable[[MonitorSpec, list[str], float], Any] = getattr(
         importlib.import_module(mod), fn)
     est = factory(spec, channels, fs)

@@ -135,8 +135,8 @@ def _butter_sos(order: int, wn: float) -> FloatArray:
     return np.asarray(scipy.signal.butter(order, wn, output="sos"), dtype=float)
 
 
-def lowpass_road(v: FloatArray, h: float, cutoff_hz: float, order: int = 2) -> FloatArray:
-    """Zero-phase Butterworth low-pass (``sosfiltfilt``, -6 dB at ``cutoff_hz``, odd padding of
+def lowpass_road(v: FloatArray, h: float, cutoff_hz: float) -> FloatArray:
+    """Zero-phase second-order Butterworth low-pass (``sosfiltfilt``, -6 dB at ``cutoff_hz``, odd padding of
     ``3 / cutoff_hz`` s) of one road channel sampled every ``h`` s; unchanged when a sample is
     not finite, the cutoff is at or above 0.9 x Nyquist or the window is shorter than the pad."""
     v = np.asarray(v, dtype=float)
@@ -144,7 +144,7 @@ def lowpass_road(v: FloatArray, h: float, cutoff_hz: float, order: int = 2) -> F
     pad = int(math.ceil(3.0 / (cutoff_hz * h))) if cutoff_hz > 0 else 0
     if not 0 < wn < 0.9 or v.size <= pad + 1 or not math.isfinite(float(np.add.reduce(v))):
         return v
-    return np.asarray(scipy.signal.sosfiltfilt(_butter_sos(order, wn), v, padtype="odd", padlen=pad),
+    return np.asarray(scipy.signal.sosfiltfilt(_butter_sos(2, wn), v, padtype="odd", padlen=pad),
                       dtype=float)
 
 
@@ -156,7 +156,6 @@ class SlidingWindowIdentifier:
 
     def __init__(self, model: SuspensionModel, params: Parameters, config: WindowConfig,
                  channels: list[str]) -> None:
-        config.validate()
         self.model = model
         self.config = config
         self.channels = [c for c in model.channels if c in channels]
@@ -165,8 +164,6 @@ class SlidingWindowIdentifier:
                              f"expected some of {', '.join(model.channels)}")
         self.params = params.copy()
         self.free = self.params.free
-        if not self.free:
-            raise UsageError("every parameter is fixed (--fix); nothing to monitor")
         self.nominal = self.params.valuesdict()
         #: the forward model's affine pieces in the free parameters, once per monitor
         self._affine: AffinePieces | None
@@ -255,7 +252,7 @@ class SlidingWindowIdentifier:
         (up to 3) estimates of consecutive windows, capped at 5 %; ``None`` otherwise."""
         cfg = self.config
         h = self._hist
-        if not cfg.warm_predict or len(h) < 2:
+        if len(h) < 2:
             return None
         pts = h[-3:]
         ts = [a for a, _ in pts]
@@ -333,12 +330,11 @@ class SlidingWindowIdentifier:
         Jb = Jg / half
         # weighted least squares in x = (a, b), the prior's rows included
         M = np.hstack([Ja, Jb]) * w
+        rhs = r0 * w[:, 0]
         if sd_u > 0:
             P = np.zeros((nd, 2 * nd))
             P[:, nd:] = np.eye(nd) / sd_u
             M = np.vstack([M, P])
-        rhs = r0 * w[:, 0]
-        if sd_u > 0:
             rhs = np.concatenate([rhs, b_prior / sd_u])
         Q, Rq = np.linalg.qr(M)
         x = np.asarray(np.linalg.solve(Rq, Q.T @ rhs), dtype=float)
@@ -451,8 +447,7 @@ class SlidingWindowIdentifier:
                 P[:, nd:] = np.eye(nd) / sd_u
                 J = np.vstack([J, P])
                 rhs = np.concatenate([rhs, -(u[nd:] - u_prior) / sd_u])
-            du = np.zeros(2 * nd)
-            du[:J.shape[1]] = np.linalg.lstsq(J, rhs, rcond=None)[0]
+            du = np.linalg.lstsq(J, rhs, rcond=None)[0]
             ss = objective(R, u)
             for _half in range(4):
                 un = u + du
@@ -470,7 +465,7 @@ class SlidingWindowIdentifier:
             return
         p, rates = unpack(u)
         se = fit.drift_stderr(p, self.free, rates, t_end, chunk,
-                               rate_prior_sd=(cfg.drift_rate_sd if sd_u > 0 else None), R0=R)
+                              cfg.drift_rate_sd if sd_u > 0 else None, R)
         if se is None:
             self._to_end(drift, g_hist, half, out, "drift fit without stderr")
             return

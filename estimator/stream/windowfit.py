@@ -475,33 +475,17 @@ class WindowFit:
         return v if math.isfinite(v) else math.inf
 
     def drift_stderr(self, p: Mapping[str, float], free: list[str], rates: Mapping[str, float],
-                     t_ref: float, chunk_s: float, rel_step: float = 1e-4,
-                     rate_prior_sd: float | None = None, R0: FloatArray | None = None
-                     ) -> dict[str, float] | None:
+                     t_ref: float, chunk_s: float, rate_prior_sd: float | None, R0: FloatArray,
+                     rel_step: float = 1e-4) -> dict[str, float] | None:
         """Gauss-Newton standard errors (SI) of ``free`` at ``t_ref`` with the drift ``rates``
         free too (forward differences); ``rate_prior_sd`` (1/s) adds a prior on each rate;
-        ``R0`` the residual at ``p`` when already computed."""
+        ``R0`` the residual at ``p``."""
         rates = dict(rates)
-
-        def resid(q: Mapping[str, float], g: Mapping[str, float]) -> FloatArray | None:
-            return self.drift_residual(q, g, t_ref, chunk_s)
-
-        if R0 is None:
-            R0 = resid(p, rates)
-        if R0 is None:
-            return None
+        moved = ([(dict(p, **{k: p[k] * math.exp(rel_step)}), rates) for k in free]
+                 + [(dict(p), dict(rates, **{k: rates[k] + rel_step})) for k in rates])
         cols = []
-        for k in free:
-            q = dict(p)
-            q[k] = p[k] * math.exp(rel_step)
-            Rk = resid(q, rates)
-            if Rk is None:
-                return None
-            cols.append(((Rk - R0) / rel_step).ravel())
-        for k in rates:
-            g = dict(rates)
-            g[k] = rates[k] + rel_step
-            Rk = resid(p, g)
+        for q, g in moved:
+            Rk = self.drift_residual(q, g, t_ref, chunk_s)
             if Rk is None:
                 return None
             cols.append(((Rk - R0) / rel_step).ravel())
