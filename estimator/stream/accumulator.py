@@ -53,10 +53,7 @@ class WindowAccumulator:
             self._t[a:b] = t[pos:pos + take]
             for i, name in enumerate(self.names):
                 v = data.get(name)
-                if v is None:
-                    self._d[i, a:b] = np.nan
-                else:
-                    self._d[i, a:b] = v[pos:pos + take]
+                self._d[i, a:b] = np.nan if v is None else v[pos:pos + take]
             self._n = b
             self.total += take
             pos += take

@@ -8,8 +8,8 @@ from the modes at the nominal parameters; the rules and the measurements behind 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
-from typing import Any, Mapping
+from dataclasses import dataclass
+from typing import Mapping
 
 from suspid.errors import UsageError
 from suspid.models.base import SuspensionModel
@@ -93,12 +93,6 @@ class WindowOptions:
     drift_chunk_s: float | None = None
     drift_rate_sd: float | None = None
     offset: str | None = None
-
-    def overrides(self) -> dict[str, Any]:
-        """The fields given, other than window, step and decimation (the defaults' inputs)."""
-        return {f.name: getattr(self, f.name) for f in fields(self)
-                if f.name not in ("window_s", "step_s", "decimate")
-                and getattr(self, f.name) is not None}
 
 
 @dataclass

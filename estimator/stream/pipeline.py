@@ -11,7 +11,7 @@ from __future__ import annotations
 import importlib
 import math
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from statistics import NormalDist
 from typing import Any, Callable, Literal, Mapping, cast
@@ -161,10 +161,10 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
         raise UsageError(f"window.drift = {list(given_drift)}: does not apply with --road "
                          "unknown (each window's body equations are one linear fit of constant "
                          "parameters); give drift = [] or leave it out")
-    for attr, v in wo.overrides().items():
-        setattr(cfg, attr, v)
-    if decimate is not None:
-        cfg.decimate = decimate
+    # the fields given, other than window and step (the defaults' inputs)
+    for f in fields(wo):
+        if f.name not in ("window_s", "step_s") and getattr(wo, f.name) is not None:
+            setattr(cfg, f.name, getattr(wo, f.name))
     cfg.validate()
     acfg = AlertConfig(nominal=dict(nominal_all), drop=ao.drop, z=z,
                        persistence_s=cfg.step_s if ao.persistence_s is None else ao.persistence_s,

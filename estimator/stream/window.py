@@ -471,23 +471,6 @@ class SlidingWindowIdentifier:
             return
         self._drift_result(fit, R, out, [(k, p[k], se[k]) for k in drift])
 
-    def _twin_choice(self, prob: OutputErrorProblem, params: Parameters, p_hat: dict[str, float]
-                     ) -> tuple[dict[str, float], str | None]:
-        """The first window's fit, or its twin (:meth:`SuspensionModel.twin`) when that fits as
-        well and the model's rule prefers it; with a warning when the twin was taken."""
-        tw = twin_of(prob, params, p_hat)
-        if tw is None or not tw.prefer:
-            return p_hat, None
-        # as well = within 3 sigma of the noise (a cost rise of SIGMAS^2 residual variances)
-        c_fit, c_twin = prob.normalized_ss(p_hat), prob.normalized_ss(tw.params)
-        dof = max(prob.n_obs - len(self.free), 1)
-        if not c_twin <= c_fit * (1.0 + SIGMAS ** 2 / dof) + EXACT_FIT:
-            return p_hat, None
-        vals = ", ".join(f"{k} = {p_hat[k]:.6g}" for k in self.free)
-        return tw.params, (f"the first window's fit ({vals}) has a twin that fits as well: the "
-                           f"cost cannot tell {tw.swapped}; the twin is taken by the rule: "
-                           f"{tw.rule}")
-
     def process(self, t: FloatArray, data: Mapping[str, FloatArray]) -> WindowResult:
         """Fit one window (times ``t``, s; channel and road arrays, SI, NaN where missing)."""
         c0 = time.process_time()
@@ -540,11 +523,18 @@ class SlidingWindowIdentifier:
             jac = gn.jacobian
             if gn.params is not None:
                 p_hat = gn.params
+        # the first window: its fit's twin (SuspensionModel.twin) when that fits as well, within
+        # 3 sigma of the noise (a cost rise of SIGMAS^2 residual variances), and the rule prefers it
         twin_note = None
-        if not warm:
-            p_hat, twin_note = self._twin_choice(prob, params, p_hat)
-            if twin_note is not None:  # the simplex and Jacobian belong to the other fit
-                final, jac = None, None
+        tw = None if warm else twin_of(prob, params, p_hat)
+        if tw is not None and tw.prefer:
+            c_fit, c_twin = prob.normalized_ss(p_hat), prob.normalized_ss(tw.params)
+            if c_twin <= c_fit * (1.0 + SIGMAS ** 2 / max(prob.n_obs - len(free), 1)) + EXACT_FIT:
+                vals = ", ".join(f"{k} = {p_hat[k]:.6g}" for k in free)
+                twin_note = (f"the first window's fit ({vals}) has a twin that fits as well: the "
+                             f"cost cannot tell {tw.swapped}; the twin is taken by the rule: {tw.rule}")
+                # the simplex and Jacobian belong to the other fit
+                p_hat, final, jac = tw.params, None, None
         res = fit.finish(params, p_hat, nfev, True, simplex=final, jacobian=jac)
         out.params = res.params
         out.stderr_fit = dict(res.stderr)
