@@ -41,15 +41,11 @@ class OffsetStage:
         self.checked = False
         self._excited: SlidingWindowIdentifier | None = None
 
-    def _needed(self, data: Mapping[str, FloatArray]) -> tuple[list[str], list[str]]:
-        """The model's measured channels in ``data`` and its road columns in ``data``."""
+    def _check(self, t: FloatArray, data: Mapping[str, FloatArray]) -> Notice | None:
+        # the model's measured channels and road columns in ``data``
         chans = [c for c in self.model.channels if c in data
                  and np.mean(np.isfinite(np.asarray(data[c], dtype=float))) > 0.5]
         roads = [k for r in self.model.roads for k in (r, f"{r}_dot") if k in data]
-        return chans, roads
-
-    def _check(self, t: FloatArray, data: Mapping[str, FloatArray]) -> Notice | None:
-        chans, roads = self._needed(data)
         if not chans or not all(r in roads for r in self.model.roads):
             return None
         if self._excited is None:

@@ -25,7 +25,7 @@ from estimator.decode.log_input import channel_notes, unparsed_hint
 from estimator.identify import Parameters
 from estimator.identify.inputs import CSV_SUFFIXES
 from estimator.identify.regrid import to_uniform_grid
-from estimator.identify.roadfree import ROAD_MODES, resolve_road
+from estimator.identify.roadfree import resolve_road
 from estimator.stream.config import (AlertOptions, EkfOptions, OutputOnlyOptions, WindowConfig,
                                      WindowOptions, default_config, default_decimation,
                                      strut_parameters)
@@ -105,23 +105,16 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
     horizon = DEFAULT_HORIZON_S if ao.forecast_horizon_s is None else ao.forecast_horizon_s
     if not 0 < ao.drop < 1:
         raise UsageError(f"--alert-drop: expected a fraction in (0, 1), got {ao.drop}")
-    if not 0.5 < ao.confidence < 1:
-        raise UsageError(f"alert.confidence: expected a probability in (0.5, 1), got {ao.confidence}")
-    if not (horizon > 0 and math.isfinite(horizon)):
-        raise UsageError(f"alert.forecast_horizon_s: expected a time > 0 s, got {horizon}")
+    # the [alert] keys and --road are checked where they are read (suspid.cli)
     z = float(NormalDist().inv_cdf(ao.confidence))
-    if road is not None and road not in ROAD_MODES:
-        raise UsageError(f"--road: expected one of {', '.join(ROAD_MODES)}, got {road!r}")
     if baseline == "output_only":
         return _output_only_spec(model, nominal_in, ao, z, wo, horizon, oo)
     for k in list(fix) + list(nominal_in) + list(init):
         model.spec(k)
-    both = set(fix) & set(nominal_in)
-    if both:
+    if both := set(fix) & set(nominal_in):
         raise UsageError(f"parameter(s) {', '.join(sorted(both))} given both --fix and --nominal; "
                          "a fixed parameter is not monitored")
-    bad = set(fix) & set(init)
-    if bad:
+    if bad := set(fix) & set(init):
         raise UsageError(f"--init {sorted(bad)[0]}: the parameter is fixed (--fix)")
     params = Parameters.for_model(model, fix=fix, init=nominal_in)
     warnings: list[str] = []
