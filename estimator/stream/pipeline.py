@@ -249,10 +249,7 @@ class ZeroRoad:
 
     def process(self, t: FloatArray, data: Mapping[str, FloatArray]) -> Any:
         """Delegate with every road and its rate set to zero."""
-        d = dict(data)
-        for r in self.model.input_names:
-            d[r] = np.zeros(len(t))
-        return self.inner.process(t, d)
+        return self.inner.process(t, dict(data, **{r: np.zeros(len(t)) for r in self.model.input_names}))
 
     def summary(self) -> dict[str, Any]:
         return dict(self.inner.summary(), road="zero")
@@ -319,19 +316,18 @@ class LazyEstimator:
 
 
 def build_monitor(spec: MonitorSpec, emit: Callable[[Any], None], store: AlertStore | None = None,
-                  sinks: list[Any] | None = None, estimator: Any = None) -> StreamMonitor:
+                  estimator: Any = None) -> StreamMonitor:
     """The monitor of ``spec``: estimator (lazy unless given), tracker, alerts, forecasts.
 
-    ``emit`` receives every event; ``store`` is the durable alert log, ``sinks`` further alert
-    outputs (the bus); ``estimator`` a ready one (``compare`` builds it from the stream).
+    ``emit`` receives every event; ``store`` is the durable alert log; ``estimator`` a ready
+    one (``compare`` builds it from the stream).
     """
     est = estimator if estimator is not None else LazyEstimator(spec)
-    all_sinks: list[Any] = [CallbackSink(emit)] + list(sinks or [])
     engine = None
     forecasts = None
     if spec.alert.nominal:
         engine = AlertEngine(spec.alert, spec.model.name, units=dict(spec.units), store=store,
-                             sinks=all_sinks)
+                             sinks=[CallbackSink(emit)])
         forecasts = ForecastEngine({k: spec.alert.limit(k) for k in spec.alert.nominal},
                                    dict(spec.alert.nominal), spec.forecast_horizon_s,
                                    spec.model.name, dict(spec.units), publish=engine.publish)
@@ -392,13 +388,12 @@ def run_monitor(spec: MonitorSpec, source: Source, emit: Callable[[Any], None],
                 alert_file: str | Path | None = None) -> Summary:
     """Stream ``source`` through the monitor of ``spec`` (events to ``emit``); the summary."""
     store = AlertStore(alert_file) if alert_file else None
-    sinks: list[Any] = []
-    mon = build_monitor(spec, emit, store, sinks)
+    mon = build_monitor(spec, emit, store)
     extra: dict[str, Any] = {}
     if spec.baseline == "output_only":
         extra = {"mode": "output_only", "channel": spec.accel_channel, "method": spec.oo_method}
     try:
-        extra.update(run_source(source, spec, mon, sinks))
+        extra.update(run_source(source, spec, mon))
     finally:
         if store is not None:
             store.close()
@@ -409,20 +404,19 @@ def run_monitor(spec: MonitorSpec, source: Source, emit: Callable[[Any], None],
     return mon.summary(extra)
 
 
-def run_source(source: Source, spec: MonitorSpec, mon: StreamMonitor,
-               sinks: list[Any]) -> dict[str, Any]:
+def run_source(source: Source, spec: MonitorSpec, mon: StreamMonitor) -> dict[str, Any]:
     """Stream a log, a CSV or the live bus through ``mon``; the summary's source fields."""
     buses: list[Any] = []
     try:
         if source.input is not None:
             path = require_file(source.input)
             if is_can_log(path):
-                return _run_log(source, spec, mon, sinks, buses)
+                return _run_log(source, spec, mon, buses)
             if path.suffix.lower() not in CSV_SUFFIXES:  # as identify: no guess at the format
                 raise InputError(f"{path}: unknown input format {path.suffix!r}; expected .csv "
                                  f"or a CAN log ({', '.join(LOG_FORMATS)})")
             return _run_csv(source, spec, mon)
-        return _run_live(source, spec, mon, sinks, buses)
+        return _run_live(source, spec, mon, buses)
     finally:
         for b in buses:
             try:
@@ -431,8 +425,8 @@ def run_source(source: Source, spec: MonitorSpec, mon: StreamMonitor,
                 pass
 
 
-def _can_driver(source: Source, spec: MonitorSpec, mon: StreamMonitor, sinks: list[Any],
-                buses: list[Any], live_bus: Any = None) -> tuple[DecodeListener, CanWindowDriver]:
+def _can_driver(source: Source, spec: MonitorSpec, mon: StreamMonitor, buses: list[Any],
+                live_bus: Any = None) -> tuple[DecodeListener, CanWindowDriver]:
     """The decoder (its buffer sized for the windows), the SUSPID_Alert frame sink (the live
     bus, or ``alert_interface``) given to the alert engine, and the window driver."""
     cfg = spec.config
@@ -449,19 +443,16 @@ def _can_driver(source: Source, spec: MonitorSpec, mon: StreamMonitor, sinks: li
         bus = open_checked_bus(source.alert_interface, source.alert_channel, source.bitrate,
                                "live.alert_interface")
         buses.append(bus)
-    if source.alert_frames and bus is not None:
-        sinks.append(BusAlertSink(bus, listener.db))
-    if mon.alerts is not None:
-        mon.alerts.sinks.extend(s for s in sinks if s not in mon.alerts.sinks)
+    if source.alert_frames and bus is not None and mon.alerts is not None:
+        mon.alerts.sinks.append(BusAlertSink(bus, listener.db))
     return listener, CanWindowDriver(listener, cfg.window_s, cfg.step_s, mon.window,
                                      max_missing=cfg.max_missing)
 
 
-def _run_log(source: Source, spec: MonitorSpec, mon: StreamMonitor, sinks: list[Any],
-             buses: list[Any]) -> dict[str, Any]:
+def _run_log(source: Source, spec: MonitorSpec, mon: StreamMonitor, buses: list[Any]) -> dict[str, Any]:
     """Replay a CAN log as fast as possible through the decoder and the windows."""
     cfg = spec.config
-    listener, drv = _can_driver(source, spec, mon, sinks, buses)
+    listener, drv = _can_driver(source, spec, mon, buses)
     stats = ReadStats()
     replay_log(drv, source.input, stats, channel=source.can_channel)
     listener.count_malformed(stats.malformed)
@@ -512,15 +503,14 @@ def _run_csv(source: Source, spec: MonitorSpec, mon: StreamMonitor) -> dict[str,
     return {"windows_cut": n, "warnings": list(meas.warnings)}
 
 
-def _run_live(source: Source, spec: MonitorSpec, mon: StreamMonitor, sinks: list[Any],
-              buses: list[Any]) -> dict[str, Any]:
+def _run_live(source: Source, spec: MonitorSpec, mon: StreamMonitor, buses: list[Any]) -> dict[str, Any]:
     """Receive from a live python-can bus until idle, ``duration``, SIGINT or SIGTERM."""
     if source.interface is None:
         raise UsageError("give --input LOG or --interface I --channel C")
     bus = open_checked_bus(source.interface, source.channel, source.bitrate, "--interface",
                            slcan_timestamps=source.slcan_timestamps)
     buses.append(bus)
-    listener, drv = _can_driver(source, spec, mon, sinks, buses, live_bus=bus)
+    listener, drv = _can_driver(source, spec, mon, buses, live_bus=bus)
     stop = LiveStop(duration=source.duration,
                     idle_timeout=None if not source.idle_timeout else source.idle_timeout)
     stop.install()

@@ -227,20 +227,15 @@ class SlidingWindowIdentifier:
 
     def _problem(self, t: FloatArray, data: Mapping[str, FloatArray]) -> OutputErrorProblem:
         d = self.config.decimate
-        fc = self.config.road_fusion_hz
+        fc, lp = self.config.road_fusion_hz, self.config.road_lowpass_hz
         full = dict(data)
-        if fc > 0:
-            for r in self.model.roads:
-                if r in data and f"{r}_dot" in data:
-                    full[r] = fuse_road(t, data[r], data[f"{r}_dot"], fc)
-        lp = self.config.road_lowpass_hz
-        if lp > 0 and t.size > 1:
-            h = float(t[1] - t[0])
-            for r in self.model.roads:
-                if r in full:
-                    full[r] = lowpass_road(full[r], h, lp)
+        for r in self.model.roads:
+            if fc > 0 and r in data and f"{r}_dot" in data:
+                full[r] = fuse_road(t, data[r], data[f"{r}_dot"], fc)
+            if lp > 0 and t.size > 1 and r in full:
+                full[r] = lowpass_road(full[r], float(t[1] - t[0]), lp)
         road = {k: np.asarray(full[k][::d], dtype=float) for k in
-                [r for r in self.model.roads] + [f"{r}_dot" for r in self.model.roads] if k in full}
+                list(self.model.roads) + [f"{r}_dot" for r in self.model.roads] if k in full}
         meas = Measurement(t[::d].copy(), road,
                            {c: np.asarray(data[c][::d], dtype=float) for c in self.channels},
                            source="window")
