@@ -130,9 +130,7 @@ def strut_parameters(model: SuspensionModel, params: Mapping[str, float],
                      free: list[str]) -> tuple[str, ...]:
     """The free dampers and springs of the model's struts (not the tyres), in ``free``'s order;
     ``params`` (SI) give the site geometry."""
-    names: set[str] = set()
-    for site in model.strut_sites(params):
-        names.update(k for k in (site.c_name, site.k_name) if k)
+    names = {k for site in model.strut_sites(params) for k in (site.c_name, site.k_name) if k}
     return tuple(k for k in free if k in names)
 
 

@@ -83,9 +83,7 @@ class CanWindowDriver:
             # from the oldest sample: frames a decoder held back arrive together
             t0 = buf.earliest_time()
             self._t_seen = t0 if math.isfinite(t0) else latest
-        if all(src.n > 0 for src in srcs.values()):
-            return True
-        return latest - self._t_seen >= self.window_s
+        return all(src.n > 0 for src in srcs.values()) or latest - self._t_seen >= self.window_s
 
     def on_message(self, msg: Any) -> None:
         """Validate/decode one frame (through the listener) and cut due windows."""
@@ -365,8 +363,7 @@ class Receiver:
             with self._ready:
                 if not q:
                     self._ready.wait(timeout)
-        n = len(q)
-        return [q.popleft() for _ in range(n)]
+        return [q.popleft() for _ in range(len(q))]
 
     def drain(self) -> list[Any]:
         """After :meth:`stop`: the buffered frames, then what the kernel still holds."""
@@ -420,13 +417,13 @@ class LossLedger:
     """Which loss the decoder's counter gaps follow, so that no lost frame counts twice.
 
     After each loss event the ledger books the counter gap found at the first frame of each
-    counter-carrying (E2E) message to the event's cause, for at most ``span`` s of frame
-    time; gaps found elsewhere (``none``) were lost before this receiver saw a loss.
+    counter-carrying (E2E) message to the event's cause, for at most
+    :data:`LOSS_ATTRIBUTION_S` of frame time; gaps found elsewhere (``none``) were lost before
+    this receiver saw a loss.
     """
 
-    def __init__(self, listener: Any, span: float = LOSS_ATTRIBUTION_S) -> None:
+    def __init__(self, listener: Any) -> None:
         self.listener = listener
-        self.span = span
         self.gaps: collections.Counter[str] = collections.Counter()
         self.cause: str | None = None
         self.until = math.inf
@@ -444,7 +441,7 @@ class LossLedger:
         per = getattr(self.listener, "per_message", None)
         seen = per() if callable(per) else {}
         self.pending = {self._ids[name] for name, n in seen.items() if n and name in self._ids}
-        self.until = t + self.span
+        self.until = t + LOSS_ATTRIBUTION_S
         if not self.pending:
             self.cause = None
 

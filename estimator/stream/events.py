@@ -1,6 +1,6 @@
 """Typed events of the monitor; only the sinks turn them into JSON lines (``to_json``) or text.
 
-Alerts and forecasts are :class:`estimator.alerts.AlertEvent` and
+Alerts and forecasts are :class:`estimator.alerts.engine.AlertEvent` and
 :class:`estimator.alerts.ForecastEvent`.
 """
 from __future__ import annotations

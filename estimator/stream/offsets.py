@@ -75,21 +75,18 @@ class OffsetStage:
         fields["offset_kind"] = fields.pop("kind")          # the event's kind is "offset"
         return Notice(self.t, "offset", found.warning(self.model, self.remove), fields)
 
-    def apply(self, t: FloatArray, data: Mapping[str, FloatArray]) -> Mapping[str, FloatArray]:
-        """``data`` with the offset subtracted, unless none was found or it is kept."""
-        if self.offset is None or not self.remove:
-            return data
-        out = dict(data)
-        for e in self.offset.effects():
-            out = e.compensate(t, out)
-        return out
-
     def process(self, t: FloatArray, data: Mapping[str, FloatArray]
                 ) -> tuple[Mapping[str, FloatArray], Notice | None]:
         """One window: checked while no excited window has been, then corrected; returns the
-        window for the estimator and the ``offset`` notice on the window that found it."""
+        window for the estimator (the offset subtracted, unless none was found or it is kept)
+        and the ``offset`` notice on the window that found it."""
         notice = None if self.checked else self._check(t, data)
-        return self.apply(t, data), notice
+        if self.offset is not None and self.remove:
+            out = dict(data)
+            for e in self.offset.effects():
+                out = e.compensate(t, out)
+            return out, notice
+        return data, notice
 
     def summary(self) -> dict[str, Any] | None:
         """The summary's ``offset``: ``None``, or ``t`` (s) and :meth:`Offset.to_json`."""
