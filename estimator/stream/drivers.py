@@ -243,12 +243,8 @@ LOSS_ATTRIBUTION_S = 1.0
 def bus_frame_rate(db: Any) -> float:
     """Frames per second the receiver's buffer is sized for: the DBC's messages at their
     cycle times (``db``: cantools Database or None), at least :data:`RECEIVE_RATE`."""
-    rate = 0.0
-    for msg in getattr(db, "messages", None) or ():
-        cycle = getattr(msg, "cycle_time", None)
-        if cycle:
-            rate += 1000.0 / float(cycle)
-    return max(rate, RECEIVE_RATE)
+    cycles = [getattr(msg, "cycle_time", None) for msg in getattr(db, "messages", None) or ()]
+    return max(sum(1000.0 / float(c) for c in cycles if c), RECEIVE_RATE)
 
 
 def receive_capacity(seconds: float, db: Any = None) -> int:
