@@ -144,8 +144,7 @@ def load_stream(model: SuspensionModel, path: str | Path, dbc: Path | None = Non
                                           j1939_source=j1939_source)
     else:
         meas = read_measurement(p, model)
-    data = dict(meas.measured)
-    data.update(meas.road)
+    data = {**meas.measured, **meas.road}
     truth = None
     if truth_csv:
         try:

@@ -494,8 +494,7 @@ def _run_csv(source: Source, spec: MonitorSpec, mon: StreamMonitor) -> dict[str,
     meas, jitter = to_uniform_grid(meas)
     if jitter is not None:
         meas.warnings.append(jitter)
-    data = dict(meas.measured)
-    data.update(meas.road)
+    data = {**meas.measured, **meas.road}
     if meas.t.size < 3 or meas.t[-1] - meas.t[0] < cfg.window_s:
         raise InputError(f"{source.input}: {meas.t[-1] - meas.t[0]:.3g} s of data, less than one "
                          f"window ({cfg.window_s:g} s); give a shorter --window")
