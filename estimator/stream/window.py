@@ -249,16 +249,15 @@ class SlidingWindowIdentifier:
         h = self._hist
         if len(h) < 2:
             return None
-        pts = h[-3:]
-        ts = [a for a, _ in pts]
+        ts = [a for a, _ in h]
         gap = 1.5 * cfg.step_s
         if any(b - a > gap for a, b in zip(ts, ts[1:])) or t_end - ts[-1] > gap:
             return None
         tm = sum(ts) / len(ts)
         stt = sum((a - tm) ** 2 for a in ts)
         out = []
-        for i in range(len(pts[0][1])):
-            ls = [b[i] for _, b in pts]
+        for i in range(len(h[0][1])):
+            ls = [b[i] for _, b in h]
             lm = sum(ls) / len(ls)
             slope = sum((a - tm) * (b - lm) for a, b in zip(ts, ls)) / stt
             step = lm + slope * (t_end - tm) - ls[-1]
