@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Mapping, Protocol
+from typing import Any, Mapping
 
 from estimator.alerts.event import ParameterEvent
 from suspid.errors import UsageError
@@ -114,12 +114,6 @@ class AlertEvent(ParameterEvent):
                    stderr=float(d.get("stderr") or 0.0), nominal=float(d["nominal"]),
                    bound=float(d.get("bound") or d["value"]), limit=float(d.get("limit") or 0.0),
                    severity=str(d.get("severity", "warning")), model=str(d.get("model", "")))
-
-
-class AlertSink(Protocol):
-    """Anything that delivers an event (stdout, a CAN bus)."""
-
-    def emit(self, event: AlertEvent) -> None: ...
 
 
 @dataclass

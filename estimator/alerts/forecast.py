@@ -148,9 +148,7 @@ def crossing(trend: Trend, limit: float, z: float = Z90) -> Crossing | None:
     """
     a = trend.value - limit
     r = trend.rate
-    if a == 0 or r == 0 or (a > 0) == (r > 0):
-        return None
-    if r * r <= z * z * trend.var_rate:
+    if a == 0 or r == 0 or (a > 0) == (r > 0) or r * r <= z * z * trend.var_rate:
         return None
     if trend.q_value == 0.0 and trend.q_rate == 0.0:
         fc = band_crossing(a, r, trend.var_value, trend.cov, trend.var_rate, z)
@@ -162,14 +160,12 @@ def crossing(trend: Trend, limit: float, z: float = Z90) -> Crossing | None:
     a, r = abs(a), -abs(r)
     tau = a / -r
 
-    def var(x: float) -> float:
-        return (trend.var_value + 2.0 * x * trend.cov
-                + x * x * trend.var_rate + trend.q_value * x + trend.q_rate * x ** 3 / 3.0)
-
     def edge(sign: float) -> float:
         """First tau >= 0 where a + r tau + sign z s(tau) <= 0 (sign -1: early, +1: late)."""
         def g(x: float) -> float:
-            return a + r * x + sign * z * math.sqrt(max(var(x), 0.0))
+            var = (trend.var_value + 2.0 * x * trend.cov
+                   + x * x * trend.var_rate + trend.q_value * x + trend.q_rate * x ** 3 / 3.0)
+            return a + r * x + sign * z * math.sqrt(max(var, 0.0))
         if g(0.0) <= 0:
             return 0.0
         hi = tau
@@ -268,39 +264,31 @@ class ForecastEngine:
     active: dict[str, ForecastEvent] = field(default_factory=dict)
     emitted: list[ForecastEvent] = field(default_factory=list)
 
-    def __post_init__(self) -> None:
-        if not (self.horizon_s > 0 and math.isfinite(self.horizon_s)):
-            raise UsageError(f"alert.forecast_horizon_s: expected a time > 0 s, got {self.horizon_s}")
-
     def update(self, trends: Mapping[str, Trend]) -> list[ForecastEvent]:
         """Fold in the tracker's trends at one estimate; returns the events emitted now."""
         out: list[ForecastEvent] = []
         for k, tr in trends.items():
             if k not in self.limits:
                 continue
-            lim = self.limits[k]
-            cr = crossing(tr, lim) if tr.value > lim else None
-            prev = self.active.get(k)
-            if tr.value <= lim:
+            if tr.value <= self.limits[k]:
                 # crossed: the alert engine takes over; the forecast is fulfilled, not withdrawn
                 self.active.pop(k, None)
                 continue
-            within = (cr is not None and cr.t - tr.t <= self.horizon_s
-                      and cr.high - tr.t <= 2.0 * self.horizon_s)
-            if prev is None:
-                if within and cr is not None and tr.span >= self.min_span_s:
-                    ev = self._event("forecast", tr, k, cr)
-                    self.active[k] = ev
-                    self._publish(ev, out)
-                continue
-            keep = cr is not None and cr.t - tr.t <= 1.5 * self.horizon_s
-            if not keep:
-                ev = self._event("forecast_withdrawn", tr, k, None)
+            cr = crossing(tr, self.limits[k])
+            prev = self.active.get(k)
+            if prev is not None and (cr is None or not cr.t - tr.t <= 1.5 * self.horizon_s):
                 del self.active[k]
-                self._publish(ev, out)
-            elif cr is not None and prev.crossing_t_low is not None \
-                    and prev.crossing_t_high is not None \
-                    and not prev.crossing_t_low <= cr.t <= prev.crossing_t_high:
+                self._publish(self._event("forecast_withdrawn", tr, k, None), out)
+                continue
+            if cr is None:
+                continue
+            if prev is None:   # announced within the horizon, from a long enough trend
+                new = (cr.t - tr.t <= self.horizon_s and cr.high - tr.t <= 2.0 * self.horizon_s
+                       and tr.span >= self.min_span_s)
+            else:   # replaced when the crossing left the interval announced
+                new = (prev.crossing_t_low is not None and prev.crossing_t_high is not None
+                       and not prev.crossing_t_low <= cr.t <= prev.crossing_t_high)
+            if new:
                 ev = self._event("forecast", tr, k, cr)
                 self.active[k] = ev
                 self._publish(ev, out)

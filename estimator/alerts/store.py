@@ -10,20 +10,13 @@ import json
 import os
 from pathlib import Path
 
-from typing import Any, Mapping, Union
+from typing import Union
 
 from estimator.alerts.engine import AlertEvent
 from estimator.alerts.forecast import ForecastEvent
 from suspid.errors import InputError
 
 StoredEvent = Union[AlertEvent, ForecastEvent]
-
-
-def event_from_json(d: Mapping[str, Any]) -> StoredEvent:
-    """An alert, clear, forecast or forecast withdrawal from its JSON line."""
-    if str(d.get("type", "")).startswith("forecast"):
-        return ForecastEvent.from_json(d)
-    return AlertEvent.from_json(d)
 
 
 class AlertStore:
@@ -52,7 +45,9 @@ class AlertStore:
                     if not line.strip():
                         continue
                     try:
-                        ev = event_from_json(json.loads(line))
+                        d = json.loads(line)
+                        ev: StoredEvent = (ForecastEvent.from_json(d) if str(d.get("type", ""))
+                                           .startswith("forecast") else AlertEvent.from_json(d))
                     except (ValueError, KeyError, TypeError):
                         self.skipped_lines += 1
                         continue

@@ -14,8 +14,8 @@ from suspid.models.base import FloatArray
 
 class WindowAccumulator:
     """Collect samples and yield overlapping windows of ``window`` samples every ``step``
-    (``names``: the channels kept; absent ones are NaN; ``max_block``: the largest block
-    taken without splitting)."""
+    (``names``: the channels kept; absent ones are NaN; ``max_block``: the buffer's room
+    beyond two windows, so that it is compacted once per ``max_block`` samples at most)."""
 
     def __init__(self, names: Sequence[str], window: int, step: int, max_block: int = 4096) -> None:
         if window < 2 or step < 1:
@@ -35,12 +35,6 @@ class WindowAccumulator:
         """Append a block (increasing times ``t``, s; channel arrays) and yield copies of
         every window ``(t, data)`` it completes."""
         t = np.asarray(t, dtype=float)
-        for s in range(0, t.size, self.max_block):
-            e = min(s + self.max_block, t.size)
-            yield from self._push_part(t[s:e], {k: v[s:e] for k, v in data.items()})
-
-    def _push_part(self, t: FloatArray, data: Mapping[str, FloatArray]
-                   ) -> Iterator[tuple[FloatArray, dict[str, FloatArray]]]:
         n = t.size
         pos = 0
         while pos < n:
@@ -53,10 +47,7 @@ class WindowAccumulator:
             self._t[a:b] = t[pos:pos + take]
             for i, name in enumerate(self.names):
                 v = data.get(name)
-                if v is None:
-                    self._d[i, a:b] = np.nan
-                else:
-                    self._d[i, a:b] = v[pos:pos + take]
+                self._d[i, a:b] = np.nan if v is None else v[pos:pos + take]
             self._n = b
             self.total += take
             pos += take

@@ -108,14 +108,9 @@ def metrics(rec: RunRecord, t: FloatArray, truth: Mapping[str, FloatArray] | Non
             if se.size == te.size and np.all(se > 0):
                 m["error_over_stderr_rms"] = float(np.sqrt(np.mean((err / se) ** 2)))
             bad = np.flatnonzero(np.abs(rel) > tol)
-            if bad.size == 0:
-                m["convergence_s"] = float(te[0] - t0)
-            elif bad[-1] + 1 < te.size:
-                m["convergence_s"] = float(te[bad[-1] + 1] - t0)
-            else:
-                m["convergence_s"] = None
-            limit = (1 - drop) * nom
-            below = np.flatnonzero(truth[k] < limit)
+            first_ok = bad[-1] + 1 if bad.size else 0   # within tol from here on
+            m["convergence_s"] = float(te[first_ok] - t0) if first_ok < te.size else None
+            below = np.flatnonzero(truth[k] < (1 - drop) * nom)
             crossing = float(t[below[0]]) if below.size else math.inf
             m["crossing_t"] = crossing if math.isfinite(crossing) else None
             m["false_alarms"] = sum(1 for a in m["alerts"] if a < crossing)
@@ -149,8 +144,7 @@ def load_stream(model: SuspensionModel, path: str | Path, dbc: Path | None = Non
                                           j1939_source=j1939_source)
     else:
         meas = read_measurement(p, model)
-    data = dict(meas.measured)
-    data.update(meas.road)
+    data = {**meas.measured, **meas.road}
     truth = None
     if truth_csv:
         try:
@@ -205,7 +199,6 @@ def compare(model: SuspensionModel, t: FloatArray, data: Mapping[str, FloatArray
     # the EKF shares the window length and step (its alert persistence), not the fit tuning
     ekf_spec = monitor_spec(model, baseline="ekf",
                             window=WindowOptions(window_s=wo.window_s, step_s=wo.step_s), **kw)
-    alert_drop = alert.drop
     rec_nm = run_one(nm_spec, t, data)
     rec_ekf = run_one(ekf_spec, t, data)
     n = int(t.size)
@@ -223,9 +216,9 @@ def compare(model: SuspensionModel, t: FloatArray, data: Mapping[str, FloatArray
                 "q_param": ekf.q if ekf.q is not None else 0.005},
         "nominal": dict(nm_spec.nominal),
         "start": {k: nm_spec.params[k].value for k in nm_spec.nominal},
-        "alert_drop": alert_drop, "forecast_horizon_s": nm_spec.forecast_horizon_s,
-        "nm": metrics(rec_nm, t, truth, nm_spec.alert.nominal, alert_drop, n),
-        "ekf_result": metrics(rec_ekf, t, truth, ekf_spec.alert.nominal, alert_drop, n),
+        "alert_drop": alert.drop, "forecast_horizon_s": nm_spec.forecast_horizon_s,
+        "nm": metrics(rec_nm, t, truth, nm_spec.alert.nominal, alert.drop, n),
+        "ekf_result": metrics(rec_ekf, t, truth, ekf_spec.alert.nominal, alert.drop, n),
     }
     return out, [rec_nm, rec_ekf]
 

@@ -8,11 +8,9 @@ from the modes at the nominal parameters; the rules and the measurements behind 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
-from typing import Any, Mapping
+from dataclasses import dataclass
+from typing import Mapping
 
-
-from estimator.identify.record import OFFSET_MODES
 from suspid.errors import UsageError
 from suspid.models.base import SuspensionModel
 from suspid.models.modes import modes
@@ -45,7 +43,6 @@ class WindowConfig:
     warm_adaptive: bool = True  # dimension-adapted Nelder-Mead coefficients on warm windows
     gauss_newton_step: bool = False  # Gauss-Newton steps after Nelder-Mead (their Jacobian: stderr)
     gauss_newton_steps: int = 1  # most Gauss-Newton steps on that Jacobian
-    warm_predict: bool = True  # start warm windows on the last 3 estimates' straight-line trend
     max_missing: float = 0.2  # skip a window missing more than this fraction of a channel
     min_deflection: float = 5e-4  # skip a window whose RMS strut deflection is below this (m) ...
     min_snr: float = 3.0  # ... or below this times the noise floor
@@ -62,7 +59,8 @@ class WindowConfig:
     offset: str = "remove"  # "remove" or "keep" a sensor offset found (estimator.stream.offsets)
 
     def validate(self) -> None:
-        """Raise :class:`UsageError` naming the first inconsistent setting."""
+        """Raise :class:`UsageError` naming the first inconsistent window length or step (the
+        ``[window]`` keys are checked where the configuration is read)."""
         if not (self.window_s > 0 and math.isfinite(self.window_s)):
             raise UsageError(f"--window: expected a window length > 0 s, got {self.window_s}")
         if not (0 < self.step_s <= 10 * self.window_s):
@@ -72,23 +70,6 @@ class WindowConfig:
             raise UsageError(f"--window/--step: a window and two steps span {span:g} s, more than "
                              f"the {MAX_SPAN_S:g} s a monitor's decoder buffers (at up to 2 kHz); "
                              "give a shorter --window or --step, or use identify for a whole record")
-        if self.decimate < 1:
-            raise UsageError(f"window.decimate: expected an integer >= 1, got {self.decimate}")
-        if self.offset not in OFFSET_MODES:
-            raise UsageError(f"window.offset: expected one of {', '.join(OFFSET_MODES)}, "
-                             f"got {self.offset!r}")
-        if self.maxfev < 10 or self.first_maxfev < 10:
-            raise UsageError(f"window.budget, window.first_budget: expected at least 10 "
-                             f"evaluations, got {self.maxfev}, {self.first_maxfev}")
-        if self.drift and not (self.drift_chunk_s > 0 and self.drift_iterations >= 1):
-            raise UsageError(f"drift: expected drift_chunk_s > 0 s and drift_iterations >= 1, "
-                             f"got {self.drift_chunk_s} s and {self.drift_iterations}")
-        for opt, hz in (("window.road_fusion_hz", self.road_fusion_hz),
-                        ("window.road_lowpass_hz", self.road_lowpass_hz)):
-            if not (hz >= 0 and math.isfinite(hz)):
-                raise UsageError(f"{opt}: expected a frequency >= 0 Hz (0: off), got {hz}")
-        if not 0 <= self.max_missing < 1:
-            raise UsageError(f"max_missing must be in [0, 1), got {self.max_missing}")
 
 
 @dataclass
@@ -112,12 +93,6 @@ class WindowOptions:
     drift_chunk_s: float | None = None
     drift_rate_sd: float | None = None
     offset: str | None = None
-
-    def overrides(self) -> dict[str, Any]:
-        """The fields given, other than window, step and decimation (the defaults' inputs)."""
-        return {f.name: getattr(self, f.name) for f in fields(self)
-                if f.name not in ("window_s", "step_s", "decimate")
-                and getattr(self, f.name) is not None}
 
 
 @dataclass
@@ -155,9 +130,7 @@ def strut_parameters(model: SuspensionModel, params: Mapping[str, float],
                      free: list[str]) -> tuple[str, ...]:
     """The free dampers and springs of the model's struts (not the tyres), in ``free``'s order;
     ``params`` (SI) give the site geometry."""
-    names: set[str] = set()
-    for site in model.strut_sites(params):
-        names.update(k for k in (site.c_name, site.k_name) if k)
+    names = {k for site in model.strut_sites(params) for k in (site.c_name, site.k_name) if k}
     return tuple(k for k in free if k in names)
 
 

@@ -58,7 +58,7 @@ class CanWindowDriver:
     step_s: float
     on_window: WindowFn  # called with (t, data) per window
     #: channels to align (default: those of the messages that delivered when the first window
-    #: starts, which waits up to ``start_wait_s`` of data time for late ones)
+    #: starts, which waits up to a window of data time for late ones)
     channels: list[str] | None = None
     check_every: int = 32  # fewest frames between checks of the buffer (next_check)
     frames: int = 0
@@ -68,8 +68,6 @@ class CanWindowDriver:
     t_first: float = math.nan
     next_end: float = math.nan
     _left: int = 1
-    on_first_dt: Callable[[float], None] | None = None
-    start_wait_s: float | None = None
     #: a window reaching into a gap and covering less than ``1 - max_missing`` of its span is
     #: padded with NaN, so it is skipped at its own end time
     max_missing: float = 0.2
@@ -85,10 +83,7 @@ class CanWindowDriver:
             # from the oldest sample: frames a decoder held back arrive together
             t0 = buf.earliest_time()
             self._t_seen = t0 if math.isfinite(t0) else latest
-        if all(src.n > 0 for src in srcs.values()):
-            return True
-        wait = self.window_s if self.start_wait_s is None else self.start_wait_s
-        return latest - self._t_seen >= wait
+        return all(src.n > 0 for src in srcs.values()) or latest - self._t_seen >= self.window_s
 
     def on_message(self, msg: Any) -> None:
         """Validate/decode one frame (through the listener) and cut due windows."""
@@ -144,8 +139,6 @@ class CanWindowDriver:
             return
         if self.dt is None:
             self.dt = float(al.dt)
-            if self.on_first_dt is not None:
-                self.on_first_dt(self.dt)
             # of the messages that started, the channels that carry data (a node's --channels
             # subset sends the others' validity bits as 0: they stay out)
             live = [c for c, v in al.values.items()
@@ -155,8 +148,16 @@ class CanWindowDriver:
                 al.values = {c: al.values[c] for c in live}
         if al.t.size < 3:
             return
-        t, values = _pad_to_window(al.t, al.values, float(al.dt), t_end - self.window_s, t_end,
-                                   self.max_missing)
+        t, values, dt = al.t, al.values, float(al.dt)
+        t_start = t_end - self.window_s
+        # a window reaching into a gap: padded with NaN to its span
+        if dt > 0 and t[-1] - t[0] + dt < (1.0 - self.max_missing) * (t_end - t_start):
+            before = max(0, int(math.floor((t[0] - t_start) / dt + 1e-6)))
+            after = max(0, int(math.floor((t_end - t[-1]) / dt + 1e-6)))
+            t = np.concatenate([t[0] - dt * np.arange(before, 0, -1), t,
+                                t[-1] + dt * np.arange(1, after + 1)])
+            values = {c: np.concatenate([np.full(before, np.nan), v, np.full(after, np.nan)])
+                      for c, v in values.items()}
         self.on_window(t, values)
         self.windows += 1
 
@@ -171,22 +172,6 @@ class CanWindowDriver:
             while latest >= self.next_end - 1e-9:
                 self._cut(self.next_end)
                 self.next_end += self.step_s
-
-
-def _pad_to_window(t: np.ndarray, values: dict[str, np.ndarray], dt: float, t_start: float,
-                   t_end: float, max_missing: float) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """A window's grid ``t`` (s) and ``values``, padded with NaN to ``[t_start, t_end]`` when
-    they cover less than ``1 - max_missing`` of it."""
-    span = t_end - t_start
-    if not (dt > 0 and span > 0) or t[-1] - t[0] + dt >= (1.0 - max_missing) * span:
-        return t, values
-    before = max(0, int(math.floor((t[0] - t_start) / dt + 1e-6)))
-    after = max(0, int(math.floor((t_end - t[-1]) / dt + 1e-6)))
-    t_new = np.concatenate([t[0] - dt * np.arange(before, 0, -1), t,
-                            t[-1] + dt * np.arange(1, after + 1)])
-    pad = {c: np.concatenate([np.full(before, np.nan), v, np.full(after, np.nan)])
-           for c, v in values.items()}
-    return t_new, pad
 
 
 def replay(driver: CanWindowDriver, messages: Iterable[Any]) -> int:
@@ -258,12 +243,8 @@ LOSS_ATTRIBUTION_S = 1.0
 def bus_frame_rate(db: Any) -> float:
     """Frames per second the receiver's buffer is sized for: the DBC's messages at their
     cycle times (``db``: cantools Database or None), at least :data:`RECEIVE_RATE`."""
-    rate = 0.0
-    for msg in getattr(db, "messages", None) or ():
-        cycle = getattr(msg, "cycle_time", None)
-        if cycle:
-            rate += 1000.0 / float(cycle)
-    return max(rate, RECEIVE_RATE)
+    cycles = [getattr(msg, "cycle_time", None) for msg in getattr(db, "messages", None) or ()]
+    return max(sum(1000.0 / float(c) for c in cycles if c), RECEIVE_RATE)
 
 
 def receive_capacity(seconds: float, db: Any = None) -> int:
@@ -271,7 +252,7 @@ def receive_capacity(seconds: float, db: Any = None) -> int:
     return max(1, int(math.ceil(seconds * bus_frame_rate(db))))
 
 
-def enlarge_socket_buffer(bus: Any, size: int = SOCKET_RCVBUF) -> int:
+def enlarge_socket_buffer(bus: Any) -> int:
     """Ask for a larger kernel receive queue on a SocketCAN bus (``SO_RCVBUFFORCE``, else
     ``SO_RCVBUF``); returns its size (bytes), 0 without a socket."""
     sock = getattr(bus, "socket", None)
@@ -279,7 +260,7 @@ def enlarge_socket_buffer(bus: Any, size: int = SOCKET_RCVBUF) -> int:
         return 0
     for opt in (getattr(socket, "SO_RCVBUFFORCE", 33), socket.SO_RCVBUF):
         try:
-            sock.setsockopt(socket.SOL_SOCKET, opt, size)
+            sock.setsockopt(socket.SOL_SOCKET, opt, SOCKET_RCVBUF)
             break
         except OSError:
             continue
@@ -291,11 +272,10 @@ class Receiver:
 
     A slow fit on the caller's thread delays the decoding, not the reception. Lost frames
     are counted by cause and each loss is noted in :attr:`events` for :class:`LossLedger`;
-    ``rcvbuf`` is the kernel queue asked for on a SocketCAN bus (bytes; ``None``: as it is).
+    a SocketCAN bus's kernel queue is enlarged (:func:`enlarge_socket_buffer`).
     """
 
-    def __init__(self, bus: Any, capacity: int | None = None,
-                 rcvbuf: int | None = SOCKET_RCVBUF) -> None:
+    def __init__(self, bus: Any, capacity: int | None = None) -> None:
         self.bus = bus
         self.capacity = int(capacity) if capacity else receive_capacity(RECEIVE_BUFFER_S)
         self.queue: collections.deque[Any] = collections.deque()
@@ -312,12 +292,7 @@ class Receiver:
             self.reader: SocketcanReader | None = SocketcanReader(bus)
         except (TypeError, OSError):
             self.reader = None
-        sock = getattr(bus, "socket", None)
-        if rcvbuf is not None:
-            self.socket_rcvbuf = enlarge_socket_buffer(bus, rcvbuf)
-        else:
-            self.socket_rcvbuf = (int(sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF))
-                                  if isinstance(sock, socket.socket) else 0)
+        self.socket_rcvbuf = enlarge_socket_buffer(bus)
         self._dropped = 0
         self._overflowing = False
         self._stop = threading.Event()
@@ -384,8 +359,7 @@ class Receiver:
             with self._ready:
                 if not q:
                     self._ready.wait(timeout)
-        n = len(q)
-        return [q.popleft() for _ in range(n)]
+        return [q.popleft() for _ in range(len(q))]
 
     def drain(self) -> list[Any]:
         """After :meth:`stop`: the buffered frames, then what the kernel still holds."""
@@ -439,13 +413,13 @@ class LossLedger:
     """Which loss the decoder's counter gaps follow, so that no lost frame counts twice.
 
     After each loss event the ledger books the counter gap found at the first frame of each
-    counter-carrying (E2E) message to the event's cause, for at most ``span`` s of frame
-    time; gaps found elsewhere (``none``) were lost before this receiver saw a loss.
+    counter-carrying (E2E) message to the event's cause, for at most
+    :data:`LOSS_ATTRIBUTION_S` of frame time; gaps found elsewhere (``none``) were lost before
+    this receiver saw a loss.
     """
 
-    def __init__(self, listener: Any, span: float = LOSS_ATTRIBUTION_S) -> None:
+    def __init__(self, listener: Any) -> None:
         self.listener = listener
-        self.span = span
         self.gaps: collections.Counter[str] = collections.Counter()
         self.cause: str | None = None
         self.until = math.inf
@@ -463,7 +437,7 @@ class LossLedger:
         per = getattr(self.listener, "per_message", None)
         seen = per() if callable(per) else {}
         self.pending = {self._ids[name] for name, n in seen.items() if n and name in self._ids}
-        self.until = t + self.span
+        self.until = t + LOSS_ATTRIBUTION_S
         if not self.pending:
             self.cause = None
 
@@ -498,15 +472,14 @@ class LossLedger:
 
 
 def run_bus(driver: CanWindowDriver, bus: Any, stop: LiveStop,
-            buffer_s: float = RECEIVE_BUFFER_S, rcvbuf: int | None = SOCKET_RCVBUF) -> int:
+            buffer_s: float = RECEIVE_BUFFER_S) -> int:
     """Receive from a live bus until ``stop`` (signal, duration, idle) or the bus closes;
     returns frames received. A :class:`Receiver` thread reads, this thread decodes and fits;
     the listener's ``receive_stats`` get the losses by cause (:class:`LossLedger`)."""
     start = time.monotonic()
     last_rx = start
     n = 0
-    rx = Receiver(bus, receive_capacity(buffer_s, getattr(driver.listener, "db", None)),
-                  rcvbuf=rcvbuf).start()
+    rx = Receiver(bus, receive_capacity(buffer_s, getattr(driver.listener, "db", None))).start()
     ledger = LossLedger(driver.listener)
     on = driver.on_message
     events = rx.events
@@ -548,14 +521,12 @@ def run_bus(driver: CanWindowDriver, bus: Any, stop: LiveStop,
         feed(rx.drain())
         driver.flush()
         rstats = rx.stats()
-        counts = getattr(driver.listener, "counts", None)
-        gap = int(getattr(counts, "lost", 0)) if counts is not None else 0
+        gap = int(getattr(getattr(driver.listener, "counts", None), "lost", 0))
         after = ledger.summary(gap)
         rstats["counter_gap"] = gap
         rstats["counter_gap_after"] = after
-        overrun = rstats["socket_overrun"]
         rstats["lost_by_cause"] = {
-            "buffer_overflow": rx.overflow, "socket_overrun": overrun,
+            "buffer_overflow": rx.overflow, "socket_overrun": rstats["socket_overrun"],
             "bus": after["bus"], "counter_gap": after["none"]}
         if isinstance(getattr(driver.listener, "receive_stats", None), dict):
             driver.listener.receive_stats.update(rstats)

@@ -1,6 +1,6 @@
 """Typed events of the monitor; only the sinks turn them into JSON lines (``to_json``) or text.
 
-Alerts and forecasts are :class:`estimator.alerts.AlertEvent` and
+Alerts and forecasts are :class:`estimator.alerts.engine.AlertEvent` and
 :class:`estimator.alerts.ForecastEvent`.
 """
 from __future__ import annotations
@@ -27,9 +27,8 @@ class Estimate:
     def to_json(self) -> dict[str, Any]:
         """The ``estimate`` JSON line."""
         out: dict[str, Any] = {"type": "estimate", "t": self.t, "t_start": self.t_start,
-                               "params": self.params, "stderr": self.stderr}
-        out.update(self.info)
-        out["baseline"] = self.baseline
+                               "params": self.params, "stderr": self.stderr, **self.info,
+                               "baseline": self.baseline}
         if self.track is not None:
             out["track"] = self.track
         return out
@@ -47,11 +46,8 @@ class Skip:
 
     def to_json(self) -> dict[str, Any]:
         """The ``skip`` JSON line."""
-        out: dict[str, Any] = {"type": "skip", "t": self.t, "t_start": self.t_start,
-                               "reason": self.reason}
-        out.update(self.info)
-        out["baseline"] = self.baseline
-        return out
+        return {"type": "skip", "t": self.t, "t_start": self.t_start, "reason": self.reason,
+                **self.info, "baseline": self.baseline}
 
 
 @dataclass
@@ -66,10 +62,8 @@ class Notice:
 
     def to_json(self) -> dict[str, Any]:
         """The ``warning`` JSON line."""
-        out: dict[str, Any] = {"type": "warning", "t": self.t, "kind": self.kind}
-        out.update(self.fields)
-        out["message"] = self.message
-        return out
+        return {"type": "warning", "t": self.t, "kind": self.kind, **self.fields,
+                "message": self.message}
 
 
 @dataclass

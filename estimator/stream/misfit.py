@@ -77,9 +77,6 @@ class MisfitWatch:
         if self.warned or self.run < self.windows:
             return True, None
         self.warned = True
-        return True, self._notice(t)
-
-    def _notice(self, t: float) -> Notice:
         chans = sorted(self.worst, key=lambda c: -self.worst[c])
         ratio = self.worst[chans[0]]
         shown = ", ".join(f"{c} {self.worst[c]:.3g}x" for c in chans)
@@ -91,6 +88,6 @@ class MisfitWatch:
                f"data. Likely causes: {causes}, an effect the model lacks (run `suspid "
                f"diagnose` on a stretch of the data), or a faulty sensor channel. Estimates "
                f"marked misfit are not to be trusted")
-        return Notice(t, "misfit", msg, {"ratio": ratio, "channels": {c: self.worst[c] for c in chans},
-                                         "windows": self.run, "since": self.since,
-                                         "threshold": self.threshold, "fixed": dict(self.fixed)})
+        return True, Notice(t, "misfit", msg, {"ratio": ratio, "channels": {c: self.worst[c] for c in chans},
+                                               "windows": self.run, "since": self.since,
+                                               "threshold": self.threshold, "fixed": dict(self.fixed)})

@@ -41,15 +41,11 @@ class OffsetStage:
         self.checked = False
         self._excited: SlidingWindowIdentifier | None = None
 
-    def _needed(self, data: Mapping[str, FloatArray]) -> tuple[list[str], list[str]]:
-        """The model's measured channels in ``data`` and its road columns in ``data``."""
+    def _check(self, t: FloatArray, data: Mapping[str, FloatArray]) -> Notice | None:
+        # the model's measured channels and road columns in ``data``
         chans = [c for c in self.model.channels if c in data
                  and np.mean(np.isfinite(np.asarray(data[c], dtype=float))) > 0.5]
         roads = [k for r in self.model.roads for k in (r, f"{r}_dot") if k in data]
-        return chans, roads
-
-    def _check(self, t: FloatArray, data: Mapping[str, FloatArray]) -> Notice | None:
-        chans, roads = self._needed(data)
         if not chans or not all(r in roads for r in self.model.roads):
             return None
         if self._excited is None:
@@ -79,21 +75,18 @@ class OffsetStage:
         fields["offset_kind"] = fields.pop("kind")          # the event's kind is "offset"
         return Notice(self.t, "offset", found.warning(self.model, self.remove), fields)
 
-    def apply(self, t: FloatArray, data: Mapping[str, FloatArray]) -> Mapping[str, FloatArray]:
-        """``data`` with the offset subtracted, unless none was found or it is kept."""
-        if self.offset is None or not self.remove:
-            return data
-        out = dict(data)
-        for e in self.offset.effects():
-            out = e.compensate(t, out)
-        return out
-
     def process(self, t: FloatArray, data: Mapping[str, FloatArray]
                 ) -> tuple[Mapping[str, FloatArray], Notice | None]:
         """One window: checked while no excited window has been, then corrected; returns the
-        window for the estimator and the ``offset`` notice on the window that found it."""
+        window for the estimator (the offset subtracted, unless none was found or it is kept)
+        and the ``offset`` notice on the window that found it."""
         notice = None if self.checked else self._check(t, data)
-        return self.apply(t, data), notice
+        if self.offset is not None and self.remove:
+            out = dict(data)
+            for e in self.offset.effects():
+                out = e.compensate(t, out)
+            return out, notice
+        return data, notice
 
     def summary(self) -> dict[str, Any] | None:
         """The summary's ``offset``: ``None``, or ``t`` (s) and :meth:`Offset.to_json`."""

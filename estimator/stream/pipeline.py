@@ -11,7 +11,7 @@ from __future__ import annotations
 import importlib
 import math
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from statistics import NormalDist
 from typing import Any, Callable, Literal, Mapping, cast
@@ -25,7 +25,7 @@ from estimator.decode.log_input import channel_notes, unparsed_hint
 from estimator.identify import Parameters
 from estimator.identify.inputs import CSV_SUFFIXES
 from estimator.identify.regrid import to_uniform_grid
-from estimator.identify.roadfree import ROAD_MODES, resolve_road
+from estimator.identify.roadfree import resolve_road
 from estimator.stream.config import (AlertOptions, EkfOptions, OutputOnlyOptions, WindowConfig,
                                      WindowOptions, default_config, default_decimation,
                                      strut_parameters)
@@ -105,23 +105,16 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
     horizon = DEFAULT_HORIZON_S if ao.forecast_horizon_s is None else ao.forecast_horizon_s
     if not 0 < ao.drop < 1:
         raise UsageError(f"--alert-drop: expected a fraction in (0, 1), got {ao.drop}")
-    if not 0.5 < ao.confidence < 1:
-        raise UsageError(f"alert.confidence: expected a probability in (0.5, 1), got {ao.confidence}")
-    if not (horizon > 0 and math.isfinite(horizon)):
-        raise UsageError(f"alert.forecast_horizon_s: expected a time > 0 s, got {horizon}")
+    # the [alert] keys and --road are checked where they are read (suspid.cli)
     z = float(NormalDist().inv_cdf(ao.confidence))
-    if road is not None and road not in ROAD_MODES:
-        raise UsageError(f"--road: expected one of {', '.join(ROAD_MODES)}, got {road!r}")
     if baseline == "output_only":
         return _output_only_spec(model, nominal_in, ao, z, wo, horizon, oo)
     for k in list(fix) + list(nominal_in) + list(init):
         model.spec(k)
-    both = set(fix) & set(nominal_in)
-    if both:
+    if both := set(fix) & set(nominal_in):
         raise UsageError(f"parameter(s) {', '.join(sorted(both))} given both --fix and --nominal; "
                          "a fixed parameter is not monitored")
-    bad = set(fix) & set(init)
-    if bad:
+    if bad := set(fix) & set(init):
         raise UsageError(f"--init {sorted(bad)[0]}: the parameter is fixed (--fix)")
     params = Parameters.for_model(model, fix=fix, init=nominal_in)
     warnings: list[str] = []
@@ -161,10 +154,10 @@ def monitor_spec(model: SuspensionModel, *, fix: Mapping[str, float] | None = No
         raise UsageError(f"window.drift = {list(given_drift)}: does not apply with --road "
                          "unknown (each window's body equations are one linear fit of constant "
                          "parameters); give drift = [] or leave it out")
-    for attr, v in wo.overrides().items():
-        setattr(cfg, attr, v)
-    if decimate is not None:
-        cfg.decimate = decimate
+    # the fields given, other than window and step (the defaults' inputs)
+    for f in fields(wo):
+        if f.name not in ("window_s", "step_s") and getattr(wo, f.name) is not None:
+            setattr(cfg, f.name, getattr(wo, f.name))
     cfg.validate()
     acfg = AlertConfig(nominal=dict(nominal_all), drop=ao.drop, z=z,
                        persistence_s=cfg.step_s if ao.persistence_s is None else ao.persistence_s,
@@ -256,10 +249,7 @@ class ZeroRoad:
 
     def process(self, t: FloatArray, data: Mapping[str, FloatArray]) -> Any:
         """Delegate with every road and its rate set to zero."""
-        d = dict(data)
-        for r in self.model.input_names:
-            d[r] = np.zeros(len(t))
-        return self.inner.process(t, d)
+        return self.inner.process(t, dict(data, **{r: np.zeros(len(t)) for r in self.model.input_names}))
 
     def summary(self) -> dict[str, Any]:
         return dict(self.inner.summary(), road="zero")
@@ -272,12 +262,12 @@ def make_estimator(spec: MonitorSpec, channels: list[str], fs: float) -> Any:
     road = spec.road or "measured"
     if spec.baseline == "nm" and not spec.decimate_given:
         spec.config.decimate = default_decimation(spec.model, spec.params.valuesdict(), fs)
+    key = spec.baseline
     if spec.baseline != "output_only" and road == "unknown":
-        mod, _, fn = ESTIMATORS[f"{spec.baseline}/unknown"].partition(":")
-        return getattr(importlib.import_module(mod), fn)(spec, channels, fs)
-    if spec.baseline != "output_only" and road == "zero":
-        channels = list(channels) + [r for r in spec.model.input_names if r not in channels]
-    if spec.baseline != "output_only":
+        key = f"{spec.baseline}/unknown"
+    elif spec.baseline != "output_only":
+        if road == "zero":
+            channels = list(channels) + [r for r in spec.model.input_names if r not in channels]
         absent = [r for r in spec.model.roads if r not in channels]
         if len(absent) == len(spec.model.roads):
             raise InputError(f"the stream carries no road input {', '.join(absent)} "
@@ -291,7 +281,7 @@ def make_estimator(spec: MonitorSpec, channels: list[str], fs: float) -> Any:
                              f"{spec.model.name}'s {', '.join(spec.model.roads)} (channels: "
                              f"{', '.join(channels)}); input-output identification needs "
                              "every wheel's road")
-    mod, _, fn = ESTIMATORS[spec.baseline].partition(":")
+    mod, _, fn = ESTIMATORS[key].partition(":")
     factory: Callable[[MonitorSpec, list[str], float], Any] = getattr(
         importlib.import_module(mod), fn)
     est = factory(spec, channels, fs)
@@ -326,19 +316,18 @@ class LazyEstimator:
 
 
 def build_monitor(spec: MonitorSpec, emit: Callable[[Any], None], store: AlertStore | None = None,
-                  sinks: list[Any] | None = None, estimator: Any = None) -> StreamMonitor:
+                  estimator: Any = None) -> StreamMonitor:
     """The monitor of ``spec``: estimator (lazy unless given), tracker, alerts, forecasts.
 
-    ``emit`` receives every event; ``store`` is the durable alert log, ``sinks`` further alert
-    outputs (the bus); ``estimator`` a ready one (``compare`` builds it from the stream).
+    ``emit`` receives every event; ``store`` is the durable alert log; ``estimator`` a ready
+    one (``compare`` builds it from the stream).
     """
     est = estimator if estimator is not None else LazyEstimator(spec)
-    all_sinks: list[Any] = [CallbackSink(emit)] + list(sinks or [])
     engine = None
     forecasts = None
     if spec.alert.nominal:
         engine = AlertEngine(spec.alert, spec.model.name, units=dict(spec.units), store=store,
-                             sinks=all_sinks)
+                             sinks=[CallbackSink(emit)])
         forecasts = ForecastEngine({k: spec.alert.limit(k) for k in spec.alert.nominal},
                                    dict(spec.alert.nominal), spec.forecast_horizon_s,
                                    spec.model.name, dict(spec.units), publish=engine.publish)
@@ -399,13 +388,12 @@ def run_monitor(spec: MonitorSpec, source: Source, emit: Callable[[Any], None],
                 alert_file: str | Path | None = None) -> Summary:
     """Stream ``source`` through the monitor of ``spec`` (events to ``emit``); the summary."""
     store = AlertStore(alert_file) if alert_file else None
-    sinks: list[Any] = []
-    mon = build_monitor(spec, emit, store, sinks)
+    mon = build_monitor(spec, emit, store)
     extra: dict[str, Any] = {}
     if spec.baseline == "output_only":
         extra = {"mode": "output_only", "channel": spec.accel_channel, "method": spec.oo_method}
     try:
-        extra.update(run_source(source, spec, mon, sinks))
+        extra.update(run_source(source, spec, mon))
     finally:
         if store is not None:
             store.close()
@@ -416,20 +404,19 @@ def run_monitor(spec: MonitorSpec, source: Source, emit: Callable[[Any], None],
     return mon.summary(extra)
 
 
-def run_source(source: Source, spec: MonitorSpec, mon: StreamMonitor,
-               sinks: list[Any]) -> dict[str, Any]:
+def run_source(source: Source, spec: MonitorSpec, mon: StreamMonitor) -> dict[str, Any]:
     """Stream a log, a CSV or the live bus through ``mon``; the summary's source fields."""
     buses: list[Any] = []
     try:
         if source.input is not None:
             path = require_file(source.input)
             if is_can_log(path):
-                return _run_log(source, spec, mon, sinks, buses)
+                return _run_log(source, spec, mon, buses)
             if path.suffix.lower() not in CSV_SUFFIXES:  # as identify: no guess at the format
                 raise InputError(f"{path}: unknown input format {path.suffix!r}; expected .csv "
                                  f"or a CAN log ({', '.join(LOG_FORMATS)})")
             return _run_csv(source, spec, mon)
-        return _run_live(source, spec, mon, sinks, buses)
+        return _run_live(source, spec, mon, buses)
     finally:
         for b in buses:
             try:
@@ -438,8 +425,8 @@ def run_source(source: Source, spec: MonitorSpec, mon: StreamMonitor,
                 pass
 
 
-def _can_driver(source: Source, spec: MonitorSpec, mon: StreamMonitor, sinks: list[Any],
-                buses: list[Any], live_bus: Any = None) -> tuple[DecodeListener, CanWindowDriver]:
+def _can_driver(source: Source, spec: MonitorSpec, mon: StreamMonitor, buses: list[Any],
+                live_bus: Any = None) -> tuple[DecodeListener, CanWindowDriver]:
     """The decoder (its buffer sized for the windows), the SUSPID_Alert frame sink (the live
     bus, or ``alert_interface``) given to the alert engine, and the window driver."""
     cfg = spec.config
@@ -456,19 +443,16 @@ def _can_driver(source: Source, spec: MonitorSpec, mon: StreamMonitor, sinks: li
         bus = open_checked_bus(source.alert_interface, source.alert_channel, source.bitrate,
                                "live.alert_interface")
         buses.append(bus)
-    if source.alert_frames and bus is not None:
-        sinks.append(BusAlertSink(bus, listener.db))
-    if mon.alerts is not None:
-        mon.alerts.sinks.extend(s for s in sinks if s not in mon.alerts.sinks)
+    if source.alert_frames and bus is not None and mon.alerts is not None:
+        mon.alerts.sinks.append(BusAlertSink(bus, listener.db))
     return listener, CanWindowDriver(listener, cfg.window_s, cfg.step_s, mon.window,
                                      max_missing=cfg.max_missing)
 
 
-def _run_log(source: Source, spec: MonitorSpec, mon: StreamMonitor, sinks: list[Any],
-             buses: list[Any]) -> dict[str, Any]:
+def _run_log(source: Source, spec: MonitorSpec, mon: StreamMonitor, buses: list[Any]) -> dict[str, Any]:
     """Replay a CAN log as fast as possible through the decoder and the windows."""
     cfg = spec.config
-    listener, drv = _can_driver(source, spec, mon, sinks, buses)
+    listener, drv = _can_driver(source, spec, mon, buses)
     stats = ReadStats()
     replay_log(drv, source.input, stats, channel=source.can_channel)
     listener.count_malformed(stats.malformed)
@@ -510,8 +494,7 @@ def _run_csv(source: Source, spec: MonitorSpec, mon: StreamMonitor) -> dict[str,
     meas, jitter = to_uniform_grid(meas)
     if jitter is not None:
         meas.warnings.append(jitter)
-    data = dict(meas.measured)
-    data.update(meas.road)
+    data = {**meas.measured, **meas.road}
     if meas.t.size < 3 or meas.t[-1] - meas.t[0] < cfg.window_s:
         raise InputError(f"{source.input}: {meas.t[-1] - meas.t[0]:.3g} s of data, less than one "
                          f"window ({cfg.window_s:g} s); give a shorter --window")
@@ -519,15 +502,14 @@ def _run_csv(source: Source, spec: MonitorSpec, mon: StreamMonitor) -> dict[str,
     return {"windows_cut": n, "warnings": list(meas.warnings)}
 
 
-def _run_live(source: Source, spec: MonitorSpec, mon: StreamMonitor, sinks: list[Any],
-              buses: list[Any]) -> dict[str, Any]:
+def _run_live(source: Source, spec: MonitorSpec, mon: StreamMonitor, buses: list[Any]) -> dict[str, Any]:
     """Receive from a live python-can bus until idle, ``duration``, SIGINT or SIGTERM."""
     if source.interface is None:
         raise UsageError("give --input LOG or --interface I --channel C")
     bus = open_checked_bus(source.interface, source.channel, source.bitrate, "--interface",
                            slcan_timestamps=source.slcan_timestamps)
     buses.append(bus)
-    listener, drv = _can_driver(source, spec, mon, sinks, buses, live_bus=bus)
+    listener, drv = _can_driver(source, spec, mon, buses, live_bus=bus)
     stop = LiveStop(duration=source.duration,
                     idle_timeout=None if not source.idle_timeout else source.idle_timeout)
     stop.install()

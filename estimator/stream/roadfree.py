@@ -37,11 +37,6 @@ def road_unknown_window(model: SuspensionModel, params: Mapping[str, float]) -> 
     return math.ceil(FIRST_BIN / (BAND_START_OF_BODY_MODE * ms[0].f_n) * 2.0) / 2.0
 
 
-def production_channels(model: SuspensionModel) -> list[str]:
-    """Every channel the body equations may use: motion channels, ride heights and their rates."""
-    return list(model.channels) + list(model.ride_height_channels)
-
-
 def road_unknown_params(model: SuspensionModel, params: Parameters
                         ) -> tuple[Parameters, list[str]]:
     """The free parameters a road-unknown monitor can follow, the others held.
@@ -52,7 +47,8 @@ def road_unknown_params(model: SuspensionModel, params: Parameters
     """
     out = params.copy()
     values = out.valuesdict()
-    probe = {c: np.zeros(1) for c in production_channels(model)}
+    # every channel the body equations may use: motion channels, ride heights and their rates
+    probe = {c: np.zeros(1) for c in list(model.channels) + list(model.ride_height_channels)}
     names = body_equations(model, probe, values).names
     warns: list[str] = []
     outside = [k for k in out.free if k not in names]

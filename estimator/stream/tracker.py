@@ -67,8 +67,6 @@ class TrendTracker:
     restart_mu: float = 0.5  # changing-model probability that restarts the rate
     restart_rate: float = 0.005  # width of the restarted rate's prior; 0: no restart
     restart_glr: float = 3.84  # 2 Delta log L a restart must pass
-    restart_back: int = 1  # estimates the restart goes back
-    restart_confirm: int = 0  # further estimates the changing model must hold first
     restart_hold: int = 2  # estimates during which the trend reports no data span
     innov_scale: bool = True  # widen the reported variances by the innovations' kappa^2
     innov_prior: float = 0.5  # pseudo-observations of kappa^2 = 1
@@ -204,11 +202,11 @@ class TrendTracker:
             tr.hist.append((before, t, float(v), r, ll))
             tr.held = tr.held + 1 if float(tr.mu[-1]) >= self.restart_mu else 0
             tr.hold = max(tr.hold - 1, 0)
-            back = self.restart_back + self.restart_confirm
+            # the restart goes back one estimate, as soon as the changing model takes over
             if (tr.mu.size > 1 and self.restart_rate > 0.0 and (lag > 0.0 or k in self.lags)
-                    and len(tr.hist) > back and tr.held == 1 + self.restart_confirm):
-                self._restart(tr, lag, back)
-            del tr.hist[:-(back + 1)]
+                    and len(tr.hist) > 1 and tr.held == 1):
+                self._restart(tr, lag)
+            del tr.hist[:-2]
         return self.state(t)
 
     def _step(self, tr: _Track, t: float, v: float, r: float, lag: float) -> float:
@@ -239,11 +237,11 @@ class TrendTracker:
         tr.t, tr.xs, tr.Ps, tr.mu = t0, [x.copy() for x in xs], [P.copy() for P in Ps], mu.copy()
         self._combine(tr)
 
-    def _restart(self, tr: _Track, lag: float, back: int) -> None:
-        """The changing model has just taken over: go back ``back`` estimates, widen the rate
+    def _restart(self, tr: _Track, lag: float) -> None:
+        """The changing model has just taken over: go back one estimate, widen the rate
         by ``restart_rate`` and fold them in again; kept only if ``2 (log L_restart - log L)
         >= restart_glr``, then no forecast span for ``restart_hold`` estimates."""
-        old = tr.hist[-(back + 1):]
+        old = tr.hist[-2:]
         keep = self._snapshot(tr)
         self._restore(tr, old[0][0])
         extra = (self.restart_rate * tr.nominal) ** 2
@@ -260,11 +258,8 @@ class TrendTracker:
 
     def state(self, t: float | None = None) -> dict[str, dict[str, float]]:
         """The tracked values at ``t`` (default: each track's last update), JSON-ready."""
-        out: dict[str, dict[str, float]] = {}
-        for k, tr in self.trends(t).items():
-            out[k] = {"value": tr.value, "stderr": tr.value_stderr, "rate": tr.rate,
-                      "rate_stderr": tr.rate_stderr}
-        return out
+        return {k: {"value": tr.value, "stderr": tr.value_stderr, "rate": tr.rate,
+                    "rate_stderr": tr.rate_stderr} for k, tr in self.trends(t).items()}
 
     def trends(self, t: float | None = None) -> dict[str, Trend]:
         """Each track as a :class:`~estimator.alerts.forecast.Trend` at ``t``."""

@@ -81,10 +81,9 @@ def damper_wear(model: SuspensionModel, duration: float = 150.0, fs: float = 500
     x = np.zeros(model.n_states)
     step = max(1, int(round(chunk_s * fs)))
     affine = model.affine(p0, [damper])  # one forward model for every chunk
-    starts = list(range(0, n - 1, step))
     # acceleration needs the parameters of each sample: collect per chunk
     acc_rows = {c: np.empty(n) for c in model.channels if c.endswith("_ddot")}
-    for i0 in starts:
+    for i0 in range(0, n - 1, step):
         i1 = min(i0 + step, n - 1)
         p = dict(p0)
         p[damper] = float(c_true[(i0 + i1) // 2])
@@ -95,8 +94,7 @@ def damper_wear(model: SuspensionModel, duration: float = 150.0, fs: float = 500
         out = outputs(model, p, Xs, U[seg], affine)
         for c in acc_rows:
             acc_rows[c][seg] = out[c]
-    p_end = dict(p0)
-    allout = outputs(model, p_end, X, U)
+    allout = outputs(model, p0, X, U)
     allout.update(acc_rows)
     rng = np.random.default_rng(seed + 1)
     data: dict[str, FloatArray] = {}

@@ -135,8 +135,8 @@ def _butter_sos(order: int, wn: float) -> FloatArray:
     return np.asarray(scipy.signal.butter(order, wn, output="sos"), dtype=float)
 
 
-def lowpass_road(v: FloatArray, h: float, cutoff_hz: float, order: int = 2) -> FloatArray:
-    """Zero-phase Butterworth low-pass (``sosfiltfilt``, -6 dB at ``cutoff_hz``, odd padding of
+def lowpass_road(v: FloatArray, h: float, cutoff_hz: float) -> FloatArray:
+    """Zero-phase second-order Butterworth low-pass (``sosfiltfilt``, -6 dB at ``cutoff_hz``, odd padding of
     ``3 / cutoff_hz`` s) of one road channel sampled every ``h`` s; unchanged when a sample is
     not finite, the cutoff is at or above 0.9 x Nyquist or the window is shorter than the pad."""
     v = np.asarray(v, dtype=float)
@@ -144,7 +144,7 @@ def lowpass_road(v: FloatArray, h: float, cutoff_hz: float, order: int = 2) -> F
     pad = int(math.ceil(3.0 / (cutoff_hz * h))) if cutoff_hz > 0 else 0
     if not 0 < wn < 0.9 or v.size <= pad + 1 or not math.isfinite(float(np.add.reduce(v))):
         return v
-    return np.asarray(scipy.signal.sosfiltfilt(_butter_sos(order, wn), v, padtype="odd", padlen=pad),
+    return np.asarray(scipy.signal.sosfiltfilt(_butter_sos(2, wn), v, padtype="odd", padlen=pad),
                       dtype=float)
 
 
@@ -156,7 +156,6 @@ class SlidingWindowIdentifier:
 
     def __init__(self, model: SuspensionModel, params: Parameters, config: WindowConfig,
                  channels: list[str]) -> None:
-        config.validate()
         self.model = model
         self.config = config
         self.channels = [c for c in model.channels if c in channels]
@@ -165,8 +164,6 @@ class SlidingWindowIdentifier:
                              f"expected some of {', '.join(model.channels)}")
         self.params = params.copy()
         self.free = self.params.free
-        if not self.free:
-            raise UsageError("every parameter is fixed (--fix); nothing to monitor")
         self.nominal = self.params.valuesdict()
         #: the forward model's affine pieces in the free parameters, once per monitor
         self._affine: AffinePieces | None
@@ -230,20 +227,15 @@ class SlidingWindowIdentifier:
 
     def _problem(self, t: FloatArray, data: Mapping[str, FloatArray]) -> OutputErrorProblem:
         d = self.config.decimate
-        fc = self.config.road_fusion_hz
+        fc, lp = self.config.road_fusion_hz, self.config.road_lowpass_hz
         full = dict(data)
-        if fc > 0:
-            for r in self.model.roads:
-                if r in data and f"{r}_dot" in data:
-                    full[r] = fuse_road(t, data[r], data[f"{r}_dot"], fc)
-        lp = self.config.road_lowpass_hz
-        if lp > 0 and t.size > 1:
-            h = float(t[1] - t[0])
-            for r in self.model.roads:
-                if r in full:
-                    full[r] = lowpass_road(full[r], h, lp)
+        for r in self.model.roads:
+            if fc > 0 and r in data and f"{r}_dot" in data:
+                full[r] = fuse_road(t, data[r], data[f"{r}_dot"], fc)
+            if lp > 0 and t.size > 1 and r in full:
+                full[r] = lowpass_road(full[r], float(t[1] - t[0]), lp)
         road = {k: np.asarray(full[k][::d], dtype=float) for k in
-                [r for r in self.model.roads] + [f"{r}_dot" for r in self.model.roads] if k in full}
+                list(self.model.roads) + [f"{r}_dot" for r in self.model.roads] if k in full}
         meas = Measurement(t[::d].copy(), road,
                            {c: np.asarray(data[c][::d], dtype=float) for c in self.channels},
                            source="window")
@@ -255,18 +247,17 @@ class SlidingWindowIdentifier:
         (up to 3) estimates of consecutive windows, capped at 5 %; ``None`` otherwise."""
         cfg = self.config
         h = self._hist
-        if not cfg.warm_predict or len(h) < 2:
+        if len(h) < 2:
             return None
-        pts = h[-3:]
-        ts = [a for a, _ in pts]
+        ts = [a for a, _ in h]
         gap = 1.5 * cfg.step_s
         if any(b - a > gap for a, b in zip(ts, ts[1:])) or t_end - ts[-1] > gap:
             return None
         tm = sum(ts) / len(ts)
         stt = sum((a - tm) ** 2 for a in ts)
         out = []
-        for i in range(len(pts[0][1])):
-            ls = [b[i] for _, b in pts]
+        for i in range(len(h[0][1])):
+            ls = [b[i] for _, b in h]
             lm = sum(ls) / len(ls)
             slope = sum((a - tm) * (b - lm) for a, b in zip(ts, ls)) / stt
             step = lm + slope * (t_end - tm) - ls[-1]
@@ -333,12 +324,11 @@ class SlidingWindowIdentifier:
         Jb = Jg / half
         # weighted least squares in x = (a, b), the prior's rows included
         M = np.hstack([Ja, Jb]) * w
+        rhs = r0 * w[:, 0]
         if sd_u > 0:
             P = np.zeros((nd, 2 * nd))
             P[:, nd:] = np.eye(nd) / sd_u
             M = np.vstack([M, P])
-        rhs = r0 * w[:, 0]
-        if sd_u > 0:
             rhs = np.concatenate([rhs, b_prior / sd_u])
         Q, Rq = np.linalg.qr(M)
         x = np.asarray(np.linalg.solve(Rq, Q.T @ rhs), dtype=float)
@@ -451,8 +441,7 @@ class SlidingWindowIdentifier:
                 P[:, nd:] = np.eye(nd) / sd_u
                 J = np.vstack([J, P])
                 rhs = np.concatenate([rhs, -(u[nd:] - u_prior) / sd_u])
-            du = np.zeros(2 * nd)
-            du[:J.shape[1]] = np.linalg.lstsq(J, rhs, rcond=None)[0]
+            du = np.linalg.lstsq(J, rhs, rcond=None)[0]
             ss = objective(R, u)
             for _half in range(4):
                 un = u + du
@@ -470,28 +459,11 @@ class SlidingWindowIdentifier:
             return
         p, rates = unpack(u)
         se = fit.drift_stderr(p, self.free, rates, t_end, chunk,
-                               rate_prior_sd=(cfg.drift_rate_sd if sd_u > 0 else None), R0=R)
+                              cfg.drift_rate_sd if sd_u > 0 else None, R)
         if se is None:
             self._to_end(drift, g_hist, half, out, "drift fit without stderr")
             return
         self._drift_result(fit, R, out, [(k, p[k], se[k]) for k in drift])
-
-    def _twin_choice(self, prob: OutputErrorProblem, params: Parameters, p_hat: dict[str, float]
-                     ) -> tuple[dict[str, float], str | None]:
-        """The first window's fit, or its twin (:meth:`SuspensionModel.twin`) when that fits as
-        well and the model's rule prefers it; with a warning when the twin was taken."""
-        tw = twin_of(prob, params, p_hat)
-        if tw is None or not tw.prefer:
-            return p_hat, None
-        # as well = within 3 sigma of the noise (a cost rise of SIGMAS^2 residual variances)
-        c_fit, c_twin = prob.normalized_ss(p_hat), prob.normalized_ss(tw.params)
-        dof = max(prob.n_obs - len(self.free), 1)
-        if not c_twin <= c_fit * (1.0 + SIGMAS ** 2 / dof) + EXACT_FIT:
-            return p_hat, None
-        vals = ", ".join(f"{k} = {p_hat[k]:.6g}" for k in self.free)
-        return tw.params, (f"the first window's fit ({vals}) has a twin that fits as well: the "
-                           f"cost cannot tell {tw.swapped}; the twin is taken by the rule: "
-                           f"{tw.rule}")
 
     def process(self, t: FloatArray, data: Mapping[str, FloatArray]) -> WindowResult:
         """Fit one window (times ``t``, s; channel and road arrays, SI, NaN where missing)."""
@@ -545,11 +517,18 @@ class SlidingWindowIdentifier:
             jac = gn.jacobian
             if gn.params is not None:
                 p_hat = gn.params
+        # the first window: its fit's twin (SuspensionModel.twin) when that fits as well, within
+        # 3 sigma of the noise (a cost rise of SIGMAS^2 residual variances), and the rule prefers it
         twin_note = None
-        if not warm:
-            p_hat, twin_note = self._twin_choice(prob, params, p_hat)
-            if twin_note is not None:  # the simplex and Jacobian belong to the other fit
-                final, jac = None, None
+        tw = None if warm else twin_of(prob, params, p_hat)
+        if tw is not None and tw.prefer:
+            c_fit, c_twin = prob.normalized_ss(p_hat), prob.normalized_ss(tw.params)
+            if c_twin <= c_fit * (1.0 + SIGMAS ** 2 / max(prob.n_obs - len(free), 1)) + EXACT_FIT:
+                vals = ", ".join(f"{k} = {p_hat[k]:.6g}" for k in free)
+                twin_note = (f"the first window's fit ({vals}) has a twin that fits as well: the "
+                             f"cost cannot tell {tw.swapped}; the twin is taken by the rule: {tw.rule}")
+                # the simplex and Jacobian belong to the other fit
+                p_hat, final, jac = tw.params, None, None
         res = fit.finish(params, p_hat, nfev, True, simplex=final, jacobian=jac)
         out.params = res.params
         out.stderr_fit = dict(res.stderr)

@@ -18,7 +18,6 @@ from scipy.linalg.lapack import dsyev as _dsyev
 
 from estimator.identify import OutputErrorProblem, Parameters, finish
 from estimator.identify.identifiability import WEAK_TOL, Identifiability, assess
-from estimator.identify.fastpath import Evaluation
 from estimator.identify.outputs import channel_kinds, output_maps
 from estimator.identify.result import IdentResult
 from suspid.models.base import FloatArray
@@ -123,13 +122,6 @@ class WindowFit:
         self._all = [c for c in m.channels if c in problem.meas.measured]
         self._all_kind = channel_kinds(m.coords, self._all)
 
-    def _all_outputs(self, ev: Evaluation) -> FloatArray:
-        """Every measured model channel (rows) of an evaluation, from its estimated ``x0``."""
-        Cm, Dm = output_maps(self._all_kind, ev.A, ev.B, self._nq)
-        CV = (Cm @ ev.vr) @ ev.pat.sel_cv
-        Y = (CV @ ev.modal(self._r)).real + (Cm @ ev.B[:, self._nr:]) @ self._r + Dm @ self.problem.U.T
-        return Y
-
     def finish(self, params: Parameters, p_hat: Mapping[str, float], nfev: int,
                converged: bool, simplex: list[Mapping[str, float]] | None = None,
                rel_step: float = 1e-6, jacobian: FloatArray | None = None) -> IdentResult:
@@ -149,7 +141,10 @@ class WindowFit:
         pch, N = ev.R.shape
         r0 = ev.R.ravel()
         x0 = self.problem.initial_state(ev)
-        Yall = self._all_outputs(ev)
+        # every measured model channel (rows), from the estimated x0
+        Cm, Dm = output_maps(self._all_kind, ev.A, ev.B, self._nq)
+        Yall = ((Cm @ ev.vr @ ev.pat.sel_cv @ ev.modal(self._r)).real
+                + (Cm @ ev.B[:, self._nr:]) @ self._r + Dm @ self.problem.U.T)
         Mall = np.array([np.asarray(self.problem.meas.measured[c], dtype=float) for c in self._all])
         rms = dict(zip(self._all, np.sqrt(((Mall - Yall) ** 2).mean(axis=1)).tolist()))
         nf = len(free)
@@ -475,33 +470,17 @@ class WindowFit:
         return v if math.isfinite(v) else math.inf
 
     def drift_stderr(self, p: Mapping[str, float], free: list[str], rates: Mapping[str, float],
-                     t_ref: float, chunk_s: float, rel_step: float = 1e-4,
-                     rate_prior_sd: float | None = None, R0: FloatArray | None = None
-                     ) -> dict[str, float] | None:
+                     t_ref: float, chunk_s: float, rate_prior_sd: float | None, R0: FloatArray,
+                     rel_step: float = 1e-4) -> dict[str, float] | None:
         """Gauss-Newton standard errors (SI) of ``free`` at ``t_ref`` with the drift ``rates``
         free too (forward differences); ``rate_prior_sd`` (1/s) adds a prior on each rate;
-        ``R0`` the residual at ``p`` when already computed."""
+        ``R0`` the residual at ``p``."""
         rates = dict(rates)
-
-        def resid(q: Mapping[str, float], g: Mapping[str, float]) -> FloatArray | None:
-            return self.drift_residual(q, g, t_ref, chunk_s)
-
-        if R0 is None:
-            R0 = resid(p, rates)
-        if R0 is None:
-            return None
+        moved = ([(dict(p, **{k: p[k] * math.exp(rel_step)}), rates) for k in free]
+                 + [(dict(p), dict(rates, **{k: rates[k] + rel_step})) for k in rates])
         cols = []
-        for k in free:
-            q = dict(p)
-            q[k] = p[k] * math.exp(rel_step)
-            Rk = resid(q, rates)
-            if Rk is None:
-                return None
-            cols.append(((Rk - R0) / rel_step).ravel())
-        for k in rates:
-            g = dict(rates)
-            g[k] = rates[k] + rel_step
-            Rk = resid(p, g)
+        for q, g in moved:
+            Rk = self.drift_residual(q, g, t_ref, chunk_s)
             if Rk is None:
                 return None
             cols.append(((Rk - R0) / rel_step).ravel())
