@@ -11,8 +11,7 @@ deflection ``d`` (m) is the extension (``d' > 0`` rebound); a physical effect's 
 from __future__ import annotations
 
 from suspid.effects.base import (ENTRY_POINT_GROUP, REGISTRY, Effect, EffectParam, PhysicalEffect,
-                                 SensorEffect, Site, Trial, effect_classes, load_plugins, register,
-                                 strut_sites, tyre_sites)
+                                 SensorEffect, Site, Trial, effect_classes, load_plugins, register)
 from suspid.models.base import GRAVITY
 from suspid.nlsim import Law
 
@@ -34,6 +33,6 @@ EFFECT_NAMES: tuple[str, ...] = tuple(REGISTRY)
 __all__ = ["Effect", "EffectParam", "PhysicalEffect", "SensorEffect", "Site", "REGISTRY",
            "EFFECT_NAMES", "ENTRY_POINT_GROUP", "Trial", "register", "load_plugins",
            "effect_classes", "make_effect", "parse_effect", "as_effect", "inject", "Injection",
-           "strut_sites", "tyre_sites", "effects_for", "GRAVITY", "V_EPS", "CoulombFriction",
+           "effects_for", "GRAVITY", "V_EPS", "CoulombFriction",
            "AsymmetricDamping", "QuadraticDamping", "ProgressiveSpring", "BumpStop",
            "TireLiftoff", "SensorDelay", "SensorOffset", "Law"]
