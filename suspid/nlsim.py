@@ -1,16 +1,10 @@
 """Fast simulation of a linear model plus physical effect terms (exponential integrator).
 
-The model is ``x' = A x + B u + B_f Q(x, u)`` with ``Q = sum_sites b * phi(s, s')`` of the
-physical effects (any :class:`ForceTerm`). As in :func:`suspid.simulate.simulate` the road is a
-first-order hold absorbed by ``z = x - B_v r``; each site force ``phi`` is also interpolated
-linearly over the step (ETD2 predictor-corrector)::
-
-    z_p     = Phi z_k + G0 r_k + G1 r_k+1 + (F0 + F1) phi_k          (predictor)
-    z_k+1   = z_p + F1 (phi(z_p) - phi_k)                           (corrector)
-
-The linear part is exact, the effect term second-order accurate (first order across a kink
-such as ``sgn(d')``; use ``substeps`` for a stiff effect). The time loop is Python generated
-and unrolled for the model's size.
+The model is ``x' = A x + B u + B_f Q(x, u)``, ``Q = sum_sites b * phi(s, s')``. The road is
+a first-order hold absorbed by ``z = x - B_v r``; each site force is interpolated linearly over
+the step (ETD2 predictor-corrector ``z_p = Phi z_k + G0 r_k + G1 r_k+1 + (F0 + F1) phi_k``,
+``z_k+1 = z_p + F1 (phi(z_p) - phi_k)``): the linear part exact, the effect term second-order
+accurate. The time loop is Python generated and unrolled for the model's size.
 """
 from __future__ import annotations
 
@@ -45,11 +39,6 @@ class ForceTerm(Protocol):
 
     def law(self, site: Any, base: Mapping[str, float]) -> Law:
         """Scalar force law at ``site`` for base parameters ``base``."""
-        ...
-
-    def generalized_force(self, model: SuspensionModel, X: FloatArray, U: FloatArray,
-                          base: Mapping[str, float]) -> FloatArray:
-        """Generalised force rows ``Q`` (N, nq) at state rows ``X`` and input rows ``U``."""
         ...
 
 

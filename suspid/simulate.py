@@ -1,13 +1,7 @@
-"""Simulation of the suspension models.
-
-* :func:`simulate` -- exact for the linear models: the road is piecewise linear between samples
-  (first-order hold, FOH) and the state equation is solved per sample in modal form, the
-  road velocity absorbed by ``z = x - B_v r`` (``z' = A z + (A B_v + B_r) r``).
-* :func:`simulate_ode` -- :func:`scipy.integrate.solve_ivp` on ``model.rhs``, for nonlinear
-  right-hand sides (effect terms) and for validation.
-
-Both return ``channel -> ndarray`` (positions, ``_dot``, ``_ddot``, ride heights). ``affine=``
-(the model's affine pieces) gives ``A``, ``B`` when many damper/spring sets are stepped.
+"""Simulation of the suspension models: :func:`simulate`, exact for the linear models (the
+road a first-order hold (FOH), solved per sample in modal form with the road velocity absorbed
+by ``z = x - B_v r``), and :func:`simulate_ode` (``solve_ivp`` on ``model.rhs``, for effect
+terms and validation). Both return ``channel -> ndarray``.
 """
 from __future__ import annotations
 
@@ -420,20 +414,9 @@ def simulate(model: SuspensionModel, params: Mapping[str, float], t: FloatArray,
              road: Mapping[str, FloatArray] | None = None,
              x0: FloatArray | None = None,
              affine: AffinePieces | None = None) -> dict[str, FloatArray]:
-    """Simulate a linear model exactly (FOH road) and return every channel.
-
-    Parameters
-    ----------
-    params : mapping
-        Parameter values (SI units).
-    t : ndarray, shape (N,)
-        Sample times (s).
-    road : dict, optional
-        Road arrays by road name (m), optional ``<name>_dot`` (m/s).
-    x0 : ndarray, optional
-        Initial state ``[q, q']`` (default: rest).
-    affine : AffinePieces, optional
-        The model's affine pieces, for callers that simulate many damper/spring sets.
+    """Simulate a linear model exactly (FOH road) and return every channel: ``params`` (SI),
+    times ``t`` (s), road arrays by name (m; optional ``<name>_dot``, m/s), initial state ``x0``
+    (default rest); ``affine``: the model's affine pieces, when many damper/spring sets are run.
     """
     t = np.asarray(t, dtype=float)
     U = road_matrix(model, t, road)

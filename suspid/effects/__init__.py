@@ -1,10 +1,6 @@
-"""Effect library: optional terms the linear suspension models lack.
-
-One registered class per entry of the contract's ``suspid diagnose`` table.
-Each class carries its law, where it applies (from the model's structure, never its name:
-:func:`effects_for`) and what ``suspid diagnose`` needs to find and refit it. The strut
-deflection ``d`` (m) is the extension (``d' > 0`` rebound); a physical effect's force
-``phi(s, s')`` at a site enters as ``Q = b * phi`` through ``SuspensionModel.extra_force``.
+"""Effect library: optional terms the linear suspension models lack, one registered class per
+entry of the contract's ``suspid diagnose`` table: its law, where it applies (from the model's
+structure: :func:`effects_for`) and what ``suspid diagnose`` needs to find and refit it.
 :func:`inject` adds undeclared effects to a simulation. Adding an effect (a class with
 :func:`register`, or an entry point in ``suspid.effects``): ``docs/architecture.md``.
 """

@@ -6,13 +6,8 @@ front-left, 2 front-right, 3 rear-left, 4 rear-right.
 
 Corner ``i`` at ``l_i`` (front ``-a1``, rear ``+a2``) and ``y_i`` (left ``+w/2``, right
 ``-w/2``) has the strut extension ``d_i = x + l_i delta + y_i phi - x_i`` (spring ``ki``,
-damper ``ci``); wheel ``mi`` stands on the tyre spring ``kti`` over road ``ri``::
-
-    M q'' + sum_i ci g_i g_i^T q' + (sum_i ki g_i g_i^T + diag(kt)) q = Fk r
-    g_i = e_x + l_i e_delta + y_i e_phi - e_xi,   M = diag(m, Iy, Ix, m1, m2, m3, m4)
-
-The centre of mass is at mid-track. With equal left and right parameters and roads the roll
-stays zero and heave and pitch equal a ``half4`` with summed corners (tested).
+damper ``ci``); wheel ``mi`` stands on the tyre spring ``kti`` over road ``ri``. The centre
+of mass is at mid-track.
 """
 from __future__ import annotations
 
