@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any
 
 from suspid.cli._args import add_road_option, options_from_config
 from suspid.cli._can import add_can_arguments, can_inputs, command_config
@@ -104,22 +104,6 @@ def _text(d: dict[str, Any], model: SuspensionModel | None = None) -> str:
     return " ".join(f"{k}={num(v)}" for k, v in d.items() if not isinstance(v, (dict, list)))
 
 
-def _emitter(jsonl: bool, model: SuspensionModel | None = None) -> Callable[[Any], None]:
-    """The sink: JSON lines, or one readable line per event; a ``warning`` also on stderr."""
-    def emit(ev: Any) -> None:
-        d = ev.to_json()
-        if d.get("type") == "warning":
-            sys.stderr.write(f"warning: {data_time(float(d['t']))}: {d['message']}\n")
-            sys.stderr.flush()
-        if jsonl:
-            print_json(d)
-        else:
-            sys.stdout.write(_text(d, model) + "\n")
-            sys.stdout.flush()
-
-    return emit
-
-
 def _skip_mf4_backend(args: argparse.Namespace) -> None:
     """Keep python-can from importing asammdf (slow) when the input is not an MF4 log: a
     ``None`` entry in :data:`sys.modules` makes that optional import fail in this process."""
@@ -150,7 +134,19 @@ def run(args: argparse.Namespace) -> int:
     warn(spec)
     for msg in assignment_warnings(args, model):
         sys.stderr.write(f"warning: {msg}\n")
-    emit = _emitter(args.jsonl, model)
+
+    def emit(ev: Any) -> None:
+        """JSON lines, or one readable line per event; a ``warning`` also on stderr."""
+        d = ev.to_json()
+        if d.get("type") == "warning":
+            sys.stderr.write(f"warning: {data_time(float(d['t']))}: {d['message']}\n")
+            sys.stderr.flush()
+        if args.jsonl:
+            print_json(d)
+        else:
+            sys.stdout.write(_text(d, model) + "\n")
+            sys.stdout.flush()
+
     dbc_path, smap = can_inputs(args, cfg)
     source = Source(input=args.input, interface=args.interface, channel=args.channel,
                     dbc=dbc_path, signal_map=smap, can_channel=args.can_channel,

@@ -252,13 +252,6 @@ class SensorEffect(Effect):
         return [c for p in self.params if p.kind in ("channels", "channel")
                 for c in (self.values[p.name] if p.kind == "channels" else [self.values[p.name]])]
 
-    def check_channels(self, model: SuspensionModel) -> None:
-        """Raise :class:`UsageError` if a named channel is not one of the model's."""
-        bad = [c for c in self.affected() if c not in model.channels]
-        if bad:
-            raise UsageError(f"effect {self.name}: unknown channel(s) {', '.join(bad)} for model "
-                             f"{model.name}; expected any of {', '.join(model.channels)}")
-
     @classmethod
     def screen_groups(cls, model: SuspensionModel, measured: Sequence[str]) -> list[list[str]]:
         """Channel groups the effect may affect (default: each measured channel alone)."""

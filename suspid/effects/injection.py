@@ -149,8 +149,9 @@ def inject(model: SuspensionModel,
         e.check_model(model)
         if isinstance(e, PhysicalEffect):
             aug.extra_force.append(e.force_fn(aug))
-        elif isinstance(e, SensorEffect):
-            e.check_channels(model)
+        elif isinstance(e, SensorEffect) and (bad := [c for c in e.affected() if c not in model.channels]):
+            raise UsageError(f"effect {e.name}: unknown channel(s) {', '.join(bad)} for model "
+                             f"{model.name}; expected any of {', '.join(model.channels)}")
     return Injection(model=aug, base=model, effects=effs)
 
 

@@ -91,20 +91,14 @@ class Full7(SuspensionModel):
             scale_invariant=tuple(s.name for s in params if s.kind != "length"),
         )
 
-    def corner_geometry(self, p: Mapping[str, float]) -> tuple[FloatArray, FloatArray]:
-        """Longitudinal ``l_i`` and lateral ``y_i`` positions (m) of the four corners."""
-        a1, a2, w1, w2 = p["a1"], p["a2"], p["w1"], p["w2"]
-        lon = np.array([-a1, -a1, a2, a2])
-        lat = np.array([w1 / 2, -w1 / 2, w2 / 2, -w2 / 2])
-        return lon, lat
-
     def strut_directions(self, p: Mapping[str, float]) -> FloatArray:
-        """Rows ``g_i`` (4, 7): strut extension ``d_i = g_i . q`` per corner."""
-        lon, lat = self.corner_geometry(p)
+        """Rows ``g_i`` (4, 7): strut extension ``d_i = g_i . q`` per corner (longitudinal
+        position ``l_i``, lateral ``y_i``, m)."""
+        a1, a2, w1, w2 = p["a1"], p["a2"], p["w1"], p["w2"]
         G = np.zeros((4, 7))
         G[:, 0] = 1.0
-        G[:, 1] = lon
-        G[:, 2] = lat
+        G[:, 1] = np.array([-a1, -a1, a2, a2])
+        G[:, 2] = np.array([w1 / 2, -w1 / 2, w2 / 2, -w2 / 2])
         G[:, 3:] = -np.eye(4)
         return G
 
