@@ -135,12 +135,9 @@ def make_scenario(model: SuspensionModel, name: str, duration: float = 5.0, fs: 
     """
     t = time_grid(duration, fs)
     p = dict(model.defaults(), **(params or {}))
-    n = model.n_states
     road: dict[str, FloatArray] = {}
     if name == "initial":
-        if x0 is None:
-            x0 = model.initial_state()
-        return t, road, np.asarray(x0, dtype=float)
+        return t, road, np.asarray(model.initial_state() if x0 is None else x0, dtype=float)
     if name not in SCENARIOS:
         raise UsageError(f"unknown scenario {name!r}; expected one of {', '.join(SCENARIOS)}")
     v = v_kmh / 3.6
@@ -159,4 +156,4 @@ def make_scenario(model: SuspensionModel, name: str, duration: float = 5.0, fs: 
             r, rd = iso8608_profile(t, road_class, v_kmh, seed + 7919 * track, lag=lag, lead=lead)
         road[rn] = r
         road[f"{rn}_dot"] = rd
-    return t, road, np.zeros(n) if x0 is None else np.asarray(x0, dtype=float)
+    return t, road, np.zeros(model.n_states) if x0 is None else np.asarray(x0, dtype=float)

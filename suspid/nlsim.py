@@ -192,17 +192,16 @@ def simulate_effects(model: SuspensionModel, params: Mapping[str, float],
     x0v = np.zeros(n) if x0 is None else np.asarray(x0, dtype=float)
     z0 = x0v - st.Bv @ r[0]
     S = len(sites)
-    AP, AV, CP, CV = [], [], [], []
+    AP, CP, CV = [], [], []
     for site in sites:
         ap = np.concatenate([site.g, np.zeros(nq)])
         av = np.concatenate([np.zeros(nq), site.g])
-        AP.append(site.g.tolist())
-        AV.append(site.g.tolist())
+        AP.append(site.g.tolist())  # the rate has the same direction as the position
         CP.append((r @ (ap @ st.Bv) + r @ site.gr).tolist())
         CV.append((r @ (av @ st.Bv) + Uf[:, nr:] @ site.gr).tolist())
     kern = _kernel(n, nq, S)
     Zl, PHl = kern(st.Phi.ravel().tolist(), D.ravel().tolist(),
-                   (st.F0 + st.F1).T.tolist(), st.F1.T.tolist(), AP, AV, CP, CV, laws,
+                   (st.F0 + st.F1).T.tolist(), st.F1.T.tolist(), AP, AP, CP, CV, laws,
                    z0.tolist(), Nf)
     Z = np.asarray(Zl).reshape(Nf, n)[::substeps]
     PH = np.asarray(PHl).reshape(Nf, max(S, 1))[::substeps, :S]

@@ -304,11 +304,8 @@ def load_config(path: str | Path | None) -> Config:
                 raise InputError(f"{p}: {name}.{key}: expected {spec.expected()}{unit}, "
                                  f"got {_got(value)}") from None
         tables[name] = out
-    dbc = tables.get("can", {}).get("dbc")
-    dbc_path = (p.parent / dbc) if dbc else None
+    dbc_path = (p.parent / tables["can"]["dbc"]) if tables.get("can", {}).get("dbc") else None
     if dbc_path is not None:
         tables["can"]["dbc"] = str(dbc_path)
-    smap = None
-    if data.get("map"):
-        smap = SignalMap.from_table(data["map"], str(p), dbc_path)
+    smap = SignalMap.from_table(data["map"], str(p), dbc_path) if data.get("map") else None
     return Config(p, tables, smap)

@@ -13,16 +13,11 @@ EPOCH_FROM_S = 1e8
 def num(v: Any, digits: int = 4, unit: str = "") -> str:
     """``v`` to ``digits`` significant digits, with ``unit`` after a space; ``-`` for a
     missing or non-finite value, integers and text as they are."""
-    if v is None or isinstance(v, bool):
-        return "-" if v is None else str(v)
-    if isinstance(v, int):
-        text = str(v)
-    elif isinstance(v, float):
-        if not math.isfinite(v):
-            return "-"
-        text = f"{v:.{digits}g}"
-    else:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "-"
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
         return str(v)
+    text = f"{v:.{digits}g}" if isinstance(v, float) else str(v)
     return f"{text} {unit}" if unit else text
 
 

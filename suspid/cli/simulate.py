@@ -160,10 +160,7 @@ def run(args: argparse.Namespace) -> int:
         out = simulate(model, params, t, road, x0)
     chans, roads = select_channels(model, args.channels)
     rng = np.random.default_rng(args.seed)
-    cols: dict[str, np.ndarray] = {}
-    for r in roads:
-        if road:
-            cols[r] = out[r]
+    cols: dict[str, np.ndarray] = {r: out[r] for r in roads} if road else {}
     for c in chans:
         y = out[c]
         if args.noise > 0:
