@@ -39,18 +39,15 @@ def _pairs(d: Mapping[str, Any], skip_zero: bool = True) -> str:
 
 def summary_lines(d: Mapping[str, Any]) -> list[str]:
     """The monitor's ``summary`` event as a few readable lines."""
-    done = {"type"}
-    lines: list[str] = []
+    done = {"type", "windows_cut", "baseline", "data_s", "wall_s", "realtime_factor", "cpu_s"}
     parts = []
     if "windows" in d:
         parts.append(f"{d['windows']} windows fitted, {d.get('skipped', 0)} skipped")
         done |= {"windows", "skipped"}
     if "windows_cut" in d:
         parts.append(f"{d['windows_cut']} cut")
-        done.add("windows_cut")
     if "baseline" in d:
         parts.append(f"estimator {d['baseline']}")
-        done.add("baseline")
     speed = []
     if "data_s" in d:
         speed.append(f"{num(d['data_s'], 4, 's')} of data")
@@ -61,8 +58,7 @@ def summary_lines(d: Mapping[str, Any]) -> list[str]:
     text = " ".join(speed)
     if "cpu_s" in d:
         text += (", " if text else "") + f"CPU {num(d['cpu_s'], 3, 's')}"
-    done |= {"data_s", "wall_s", "realtime_factor", "cpu_s"}
-    lines.append("summary: " + ", ".join(parts) + ("; " + text if text else ""))
+    lines = ["summary: " + ", ".join(parts) + ("; " + text if text else "")]
     fr = d.get("frames")
     if isinstance(fr, Mapping):
         rej = fr.get("rejected") or {}

@@ -190,8 +190,8 @@ class PhysicalEffect(Effect):
         return Q
 
     def force_fn(self, model: SuspensionModel) -> ForceFn:
-        """The effect as a ``model.extra_force`` term ``f(t, x, u, params) -> Q``."""
-        self.check_model(model)
+        """The effect as a ``model.extra_force`` term ``f(t, x, u, params) -> Q`` (unchecked:
+        :func:`~suspid.effects.inject` checks the model, :meth:`sites` the parameters)."""
 
         def f(t: float, x: FloatArray, u: FloatArray, params: Mapping[str, float]) -> FloatArray:
             return self.generalized_force(model, x, u, params)[0]

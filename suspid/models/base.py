@@ -61,13 +61,10 @@ class Site:
 
     def coordinate(self, X: FloatArray, U: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Site coordinate ``s`` (m) and rate ``s'`` (m/s) for state rows ``X`` and inputs ``U``."""
-        nq = self.g.size
-        nr = self.gr.size
-        X2 = np.atleast_2d(X)
-        U2 = np.atleast_2d(U)
-        s = X2[:, :nq] @ self.g + U2[:, :nr] @ self.gr
-        sd = X2[:, nq:] @ self.g + U2[:, nr:] @ self.gr
-        return s, sd
+        nq, nr = self.g.size, self.gr.size
+        X2, U2 = np.atleast_2d(X), np.atleast_2d(U)
+        return (X2[:, :nq] @ self.g + U2[:, :nr] @ self.gr,
+                X2[:, nq:] @ self.g + U2[:, nr:] @ self.gr)
 
 
 @dataclass(frozen=True)
