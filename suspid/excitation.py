@@ -1,16 +1,9 @@
-"""Excitations (road inputs and initial states) for the suspension models.
-
-* ``initial``: no road; the model's :meth:`~suspid.models.base.SuspensionModel.initial_state`.
-* ``curb``: a step of height ``h`` (m) at ``t0`` (s) with a half-cosine rise of ``rise`` (s).
-* ``bump``: the raised cosine ``r(s) = h/2 (1 - cos(2 pi s / l))`` over its length ``l`` (m),
-  crossed at ``v`` (km/h) from ``t0``.
-* ``iso8608``: a random road of ISO 8608 class A-H at ``v`` (km/h): displacement PSD
-  ``Gd(n) = Gd(n0) (n / n0)^-2``, ``n0 = 0.1 cycles/m``, ``Gd(n0)`` 16e-6 m^3 for A and 4x per
-  class, by inverse FFT with random phases over 0.011-2.83 cycles/m.
-
-A road on track ``j`` running ``L`` m behind the first axle (the model's ``road_tracks``,
-``road_lags``) sees its track delayed by ``L / v``; curbs and bumps span every track, the
-ISO road draws one profile per track (seed ``seed + 7919 j``).
+"""Excitations for the suspension models: ``initial`` (no road; the model's initial state),
+``curb`` (a half-cosine step of height ``h``), ``bump`` (a raised cosine of length ``l``
+crossed at ``v`` km/h) and ``iso8608`` (a random road of ISO 8608 class A-H: displacement PSD
+``Gd(n0) (n / n0)^-2``, ``n0 = 0.1 cycles/m``, ``Gd(n0)`` 16e-6 m^3 for A and 4x per class,
+over 0.011-2.83 cycles/m). A road running ``L`` m behind the first axle on its track sees the
+track delayed by ``L / v``; the ISO road draws one profile per track (seed ``seed + 7919 j``).
 """
 from __future__ import annotations
 
@@ -96,12 +89,6 @@ def time_grid(duration: float, fs: float) -> FloatArray:
     return np.arange(int(round(duration * fs)) + 1) / fs
 
 
-def _track_sources(model: SuspensionModel, p: Mapping[str, float]
-                   ) -> list[tuple[int, float]]:
-    """Per road: ``(track, lag in m)``."""
-    return list(zip(model.road_tracks(), model.road_lags(p)))
-
-
 def measured_road(model: SuspensionModel, t: FloatArray, road: Mapping[str, FloatArray],
                   params: Mapping[str, float] | None = None, v_kmh: float = 20.0,
                   source: str = "road") -> dict[str, FloatArray]:
@@ -113,7 +100,7 @@ def measured_road(model: SuspensionModel, t: FloatArray, road: Mapping[str, Floa
     """
     out = {k: np.asarray(v, dtype=float) for k, v in road.items()}
     p = dict(model.defaults(), **(params or {}))
-    where = _track_sources(model, p)
+    where = list(zip(model.road_tracks(), model.road_lags(p)))
     for i, name in enumerate(model.roads):
         if name in out:
             continue
@@ -148,16 +135,13 @@ def make_scenario(model: SuspensionModel, name: str, duration: float = 5.0, fs: 
     """
     t = time_grid(duration, fs)
     p = dict(model.defaults(), **(params or {}))
-    n = model.n_states
     road: dict[str, FloatArray] = {}
     if name == "initial":
-        if x0 is None:
-            x0 = model.initial_state()
-        return t, road, np.asarray(x0, dtype=float)
+        return t, road, np.asarray(model.initial_state() if x0 is None else x0, dtype=float)
     if name not in SCENARIOS:
         raise UsageError(f"unknown scenario {name!r}; expected one of {', '.join(SCENARIOS)}")
     v = v_kmh / 3.6
-    where = _track_sources(model, p)
+    where = list(zip(model.road_tracks(), model.road_lags(p)))
     lead = max((lag for _, lag in where), default=0.0)
     if lead > 0 and not 0 < v < math.inf:
         raise UsageError(f"speed must be finite and > 0 km/h to delay the rear roads, got {v_kmh}")
@@ -172,4 +156,4 @@ def make_scenario(model: SuspensionModel, name: str, duration: float = 5.0, fs: 
             r, rd = iso8608_profile(t, road_class, v_kmh, seed + 7919 * track, lag=lag, lead=lead)
         road[rn] = r
         road[f"{rn}_dot"] = rd
-    return t, road, np.zeros(n) if x0 is None else np.asarray(x0, dtype=float)
+    return t, road, np.zeros(model.n_states) if x0 is None else np.asarray(x0, dtype=float)

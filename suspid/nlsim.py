@@ -1,16 +1,10 @@
 """Fast simulation of a linear model plus physical effect terms (exponential integrator).
 
-The model is ``x' = A x + B u + B_f Q(x, u)`` with ``Q = sum_sites b * phi(s, s')`` of the
-physical effects (any :class:`ForceTerm`). As in :func:`suspid.simulate.simulate` the road is a
-first-order hold absorbed by ``z = x - B_v r``; each site force ``phi`` is also interpolated
-linearly over the step (ETD2 predictor-corrector)::
-
-    z_p     = Phi z_k + G0 r_k + G1 r_k+1 + (F0 + F1) phi_k          (predictor)
-    z_k+1   = z_p + F1 (phi(z_p) - phi_k)                           (corrector)
-
-The linear part is exact, the effect term second-order accurate (first order across a kink
-such as ``sgn(d')``; use ``substeps`` for a stiff effect). The time loop is Python generated
-and unrolled for the model's size.
+The model is ``x' = A x + B u + B_f Q(x, u)``, ``Q = sum_sites b * phi(s, s')``. The road is
+a first-order hold absorbed by ``z = x - B_v r``; each site force is interpolated linearly over
+the step (ETD2 predictor-corrector ``z_p = Phi z_k + G0 r_k + G1 r_k+1 + (F0 + F1) phi_k``,
+``z_k+1 = z_p + F1 (phi(z_p) - phi_k)``): the linear part exact, the effect term second-order
+accurate. The time loop is Python generated and unrolled for the model's size.
 """
 from __future__ import annotations
 
@@ -45,11 +39,6 @@ class ForceTerm(Protocol):
 
     def law(self, site: Any, base: Mapping[str, float]) -> Law:
         """Scalar force law at ``site`` for base parameters ``base``."""
-        ...
-
-    def generalized_force(self, model: SuspensionModel, X: FloatArray, U: FloatArray,
-                          base: Mapping[str, float]) -> FloatArray:
-        """Generalised force rows ``Q`` (N, nq) at state rows ``X`` and input rows ``U``."""
         ...
 
 
@@ -203,17 +192,16 @@ def simulate_effects(model: SuspensionModel, params: Mapping[str, float],
     x0v = np.zeros(n) if x0 is None else np.asarray(x0, dtype=float)
     z0 = x0v - st.Bv @ r[0]
     S = len(sites)
-    AP, AV, CP, CV = [], [], [], []
+    AP, CP, CV = [], [], []
     for site in sites:
         ap = np.concatenate([site.g, np.zeros(nq)])
         av = np.concatenate([np.zeros(nq), site.g])
-        AP.append(site.g.tolist())
-        AV.append(site.g.tolist())
+        AP.append(site.g.tolist())  # the rate has the same direction as the position
         CP.append((r @ (ap @ st.Bv) + r @ site.gr).tolist())
         CV.append((r @ (av @ st.Bv) + Uf[:, nr:] @ site.gr).tolist())
     kern = _kernel(n, nq, S)
     Zl, PHl = kern(st.Phi.ravel().tolist(), D.ravel().tolist(),
-                   (st.F0 + st.F1).T.tolist(), st.F1.T.tolist(), AP, AV, CP, CV, laws,
+                   (st.F0 + st.F1).T.tolist(), st.F1.T.tolist(), AP, AP, CP, CV, laws,
                    z0.tolist(), Nf)
     Z = np.asarray(Zl).reshape(Nf, n)[::substeps]
     PH = np.asarray(PHl).reshape(Nf, max(S, 1))[::substeps, :S]

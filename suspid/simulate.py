@@ -1,13 +1,7 @@
-"""Simulation of the suspension models.
-
-* :func:`simulate` -- exact for the linear models: the road is piecewise linear between samples
-  (first-order hold, FOH) and the state equation is solved per sample in modal form, the
-  road velocity absorbed by ``z = x - B_v r`` (``z' = A z + (A B_v + B_r) r``).
-* :func:`simulate_ode` -- :func:`scipy.integrate.solve_ivp` on ``model.rhs``, for nonlinear
-  right-hand sides (effect terms) and for validation.
-
-Both return ``channel -> ndarray`` (positions, ``_dot``, ``_ddot``, ride heights). ``affine=``
-(the model's affine pieces) gives ``A``, ``B`` when many damper/spring sets are stepped.
+"""Simulation of the suspension models: :func:`simulate`, exact for the linear models (the
+road a first-order hold (FOH), solved per sample in modal form with the road velocity absorbed
+by ``z = x - B_v r``), and :func:`simulate_ode` (``solve_ivp`` on ``model.rhs``, for effect
+terms and validation). Both return ``channel -> ndarray``.
 """
 from __future__ import annotations
 
@@ -71,10 +65,6 @@ class Modal:
     A: FloatArray
     B: FloatArray
 
-    def real_part(self, W: np.ndarray, Cm: FloatArray) -> FloatArray:
-        """``Re(sum_i fac_i (Cm V)_i W_i)``: map modal trajectories ``W`` (N, m) to outputs."""
-        return np.real(W @ ((Cm @ self.V) * self.fac).T)
-
 
 def state_matrices(model: SuspensionModel, p: Mapping[str, float],
                    affine: AffinePieces | None = None) -> tuple[FloatArray, FloatArray]:
@@ -96,29 +86,12 @@ def mass_inverse(model: SuspensionModel, p: Mapping[str, float],
 MODE_COND_MAX = 1e8
 
 
-def mode_pattern(lam: np.ndarray, V: np.ndarray, Vinv: np.ndarray
-                 ) -> tuple[np.ndarray, np.ndarray] | None:
-    """The modes an eigen-decomposition keeps: ``(keep, is_real)``, the real eigenvalues and
-    the positive-imaginary member of each pair; ``None`` when ``A`` is (nearly) defective
-    (``V``'s 1-norm condition above ``MODE_COND_MAX``) or the eigenvalues do not pair up."""
-    if not np.abs(V).sum(axis=0).max() * np.abs(Vinv).sum(axis=0).max() <= MODE_COND_MAX:
-        return None
-    lim = np.abs(lam).max()
-    tol = 1e-12 * (lim if lim > 1.0 else 1.0)
-    im = lam.imag
-    keep = np.flatnonzero(im >= -tol)
-    is_real = np.abs(im[keep]) <= tol
-    n_real = int(is_real.sum())
-    # a real eigenvalue must have a real eigenvector; pairs must really pair up
-    if n_real + 2 * (keep.size - n_real) != lam.size:
-        return None
-    return keep, is_real
-
-
 def modal_form(model: SuspensionModel, p: Mapping[str, float],
                affine: AffinePieces | None = None) -> Modal | None:
-    """Eigen-decomposition of ``A`` for ``p`` (through ``affine`` when it applies); ``None`` if
-    ``A`` is (nearly) defective."""
+    """Eigen-decomposition of ``A`` for ``p`` (through ``affine`` when it applies), keeping the
+    real eigenvalues and the positive-imaginary member of each pair; ``None`` if ``A`` is
+    (nearly) defective (``V``'s 1-norm condition above ``MODE_COND_MAX``) or the eigenvalues
+    do not pair up."""
     A, B = state_matrices(model, p, affine)
     nr = len(model.roads)
     Br, Bv = B[:, :nr], B[:, nr:]
@@ -128,11 +101,16 @@ def modal_form(model: SuspensionModel, p: Mapping[str, float],
         Vinv = np.linalg.inv(V)
     except np.linalg.LinAlgError:  # non-finite A, no convergence or a singular V
         return None
-    pattern = mode_pattern(lam, V, Vinv)
-    if pattern is None:
+    if not np.abs(V).sum(axis=0).max() * np.abs(Vinv).sum(axis=0).max() <= MODE_COND_MAX:
         return None
-    keep, is_real = pattern
+    lim = np.abs(lam).max()
+    tol = 1e-12 * (lim if lim > 1.0 else 1.0)
+    keep = np.flatnonzero(lam.imag >= -tol)
+    is_real = np.abs(lam.imag[keep]) <= tol
     n_real = int(is_real.sum())
+    # a real eigenvalue must have a real eigenvector; pairs must really pair up
+    if n_real + 2 * (keep.size - n_real) != lam.size:
+        return None
     Vk = V[:, keep]
     if n_real:
         Vk[:, is_real] = Vk[:, is_real].real
@@ -300,7 +278,7 @@ def simulate_states(model: SuspensionModel, p: Mapping[str, float], t: FloatArra
         modal = modal_form(model, p, affine)
     if modal is not None:
         W = modal_trajectory(modal, h if h is not None else np.diff(t), r, x0)
-        return modal.real_part(W, np.eye(n)) + r @ modal.Bv.T
+        return np.real(W @ ((np.eye(n) @ modal.V) * modal.fac).T) + r @ modal.Bv.T
     return _simulate_states_loop(model, p, t, U, x0, affine)
 
 
@@ -420,20 +398,9 @@ def simulate(model: SuspensionModel, params: Mapping[str, float], t: FloatArray,
              road: Mapping[str, FloatArray] | None = None,
              x0: FloatArray | None = None,
              affine: AffinePieces | None = None) -> dict[str, FloatArray]:
-    """Simulate a linear model exactly (FOH road) and return every channel.
-
-    Parameters
-    ----------
-    params : mapping
-        Parameter values (SI units).
-    t : ndarray, shape (N,)
-        Sample times (s).
-    road : dict, optional
-        Road arrays by road name (m), optional ``<name>_dot`` (m/s).
-    x0 : ndarray, optional
-        Initial state ``[q, q']`` (default: rest).
-    affine : AffinePieces, optional
-        The model's affine pieces, for callers that simulate many damper/spring sets.
+    """Simulate a linear model exactly (FOH road) and return every channel: ``params`` (SI),
+    times ``t`` (s), road arrays by name (m; optional ``<name>_dot``, m/s), initial state ``x0``
+    (default rest); ``affine``: the model's affine pieces, when many damper/spring sets are run.
     """
     t = np.asarray(t, dtype=float)
     U = road_matrix(model, t, road)

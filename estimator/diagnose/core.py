@@ -29,7 +29,7 @@ from suspid.errors import InputError, UsageError
 from suspid.io.csvio import Measurement
 from suspid.models.base import FloatArray, SuspensionModel
 from suspid.simulate import uniform_step
-from suspid.effects import PhysicalEffect, SensorEffect, effect_classes, make_effect, strut_sites
+from suspid.effects import PhysicalEffect, SensorEffect, effect_classes, make_effect
 
 
 #: signal RMS below this fraction of the largest channel's is numerically silent
@@ -225,7 +225,7 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
         refs[rn] = mo.r[:, j]
         refs[f"{rn}_dot"] = mo.rd[:, j]
     try:
-        struts = strut_sites(model, p0)
+        struts = model.strut_sites(p0)
     except UsageError:
         struts = []
     for site in struts:

@@ -10,7 +10,7 @@ from typing import Any, Mapping, Sequence
 
 from suspid.errors import UsageError
 from suspid.models.base import SuspensionModel
-from suspid.effects import Law, PhysicalEffect, Site, effect_classes, strut_sites
+from suspid.effects import Law, PhysicalEffect, Site, effect_classes
 
 
 class SiteRestricted(PhysicalEffect):
@@ -70,7 +70,7 @@ def effect_sites(effect: PhysicalEffect, model: SuspensionModel, p: Mapping[str,
 
 def _struts(model: SuspensionModel) -> list[Site]:
     try:
-        return strut_sites(model, model.defaults())
+        return model.strut_sites(model.defaults())
     except UsageError:
         return []
 

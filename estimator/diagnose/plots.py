@@ -10,7 +10,7 @@ from estimator.diagnose.residuals import autocorr, residual_force
 from suspid.io.csvio import Measurement
 from suspid.models import get_model
 from suspid.errors import UsageError
-from suspid.effects import PhysicalEffect, Site, strut_sites, tyre_sites
+from suspid.effects import PhysicalEffect, Site
 from suspid.plots import _plt
 
 
@@ -59,7 +59,7 @@ def plot_evidence(res: DiagnoseResult, meas: Measurement, path: str | Path) -> N
     if res.motion is not None:
         R = residual_force(model, res.baseline.params, res.motion)
         try:
-            sites = strut_sites(model, res.baseline.params) or tyre_sites(model, res.baseline.params)
+            sites = model.strut_sites(res.baseline.params) or model.tyre_sites(res.baseline.params)
         except UsageError:
             sites = []
         if isinstance(res.effect, PhysicalEffect) and res.effect.site_kind == "strut":

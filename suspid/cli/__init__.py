@@ -97,16 +97,6 @@ def _subcommand(argv: Sequence[str]) -> str | None:
     return None
 
 
-def _drop_stdout() -> None:
-    """Point file descriptor 1 at ``/dev/null`` (after its reader closed the pipe)."""
-    try:
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
-        os.close(devnull)
-    except (OSError, ValueError):   # no real stdout (captured, closed): nothing to flush
-        pass
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``suspid`` console script."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -124,8 +114,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         sys.stderr.write(f"error: {_one_line(str(exc))}\n")
         return 2
     except BrokenPipeError:
-        # the reader of stdout went away (``| head -1``): stop quietly
-        _drop_stdout()
+        # the reader of stdout went away (``| head -1``): stop quietly, fd 1 at /dev/null
+        try:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+            os.close(devnull)
+        except (OSError, ValueError):   # no real stdout (captured, closed): nothing to flush
+            pass
         return 0
     except OSError as exc:
         # last resort for a file a subcommand opened without its own check

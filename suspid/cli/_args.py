@@ -4,16 +4,17 @@ and the ``--config`` file. Each command words its own help; names, types and def
 from __future__ import annotations
 
 import argparse
-from dataclasses import dataclass
-
 from typing import TYPE_CHECKING
 
 from estimator.choices import COSTS, OFFSET_MODES, ROAD_MODES
-from suspid.cli._common import load_measurement, model_from_args, params_from_args, positive_int
+from suspid.cli._can import can_inputs, command_config
+from suspid.cli._common import parse_assignments, positive_int
 from suspid.cli._lazy import lazy_names
+from suspid.models import get_model
 
 if TYPE_CHECKING:
     from estimator.identify import Parameters
+    from estimator.identify.inputs import read_input
     from estimator.stream.config import AlertOptions, EkfOptions, WindowOptions
     from suspid.cli._config import Config
     from suspid.io.csvio import Measurement
@@ -22,45 +23,34 @@ else:
     # the estimator loads when a command runs
     AlertOptions, EkfOptions, WindowOptions = lazy_names(
         "estimator.stream.config", "AlertOptions", "EkfOptions", "WindowOptions")
+    Parameters, = lazy_names("estimator.identify", "Parameters")
+    read_input, = lazy_names("estimator.identify.inputs", "read_input")
 
 
-@dataclass(frozen=True)
-class FitHelp:
-    """Help of ``--cost`` and ``--maxfev``, as one command words it."""
-
-    cost: str
-    maxfev: str
-
-
-def add_fit_options(p: argparse.ArgumentParser, helps: FitHelp, restarts: int,
-                    group: argparse._ActionsContainer | None = None) -> None:
-    """Add ``--cost`` and ``--maxfev`` (to ``group``, default ``p``) and the defaults of the
-    ``[fit]`` settings (``restarts`` the command's Nelder-Mead restarts)."""
+def add_fit_options(p: argparse.ArgumentParser, restarts: int, cost: str, maxfev: str,
+                    offset: str | None = None, group: argparse._ActionsContainer | None = None) -> None:
+    """Add ``--cost``, ``--maxfev`` and, with its help ``offset``, ``--offset remove|keep`` (to
+    ``group``, default ``p``; each command words the help) and the defaults of the ``[fit]``
+    settings (``restarts`` the command's Nelder-Mead restarts)."""
     g = p if group is None else group
-    g.add_argument("--cost", choices=list(COSTS), default="sse", help=helps.cost)
-    g.add_argument("--maxfev", type=positive_int, default=None, help=helps.maxfev)
+    g.add_argument("--cost", choices=list(COSTS), default="sse", help=cost)
+    g.add_argument("--maxfev", type=positive_int, default=None, help=maxfev)
+    if offset is not None:
+        g.add_argument("--offset", choices=list(OFFSET_MODES), default="remove", help=offset)
     p.set_defaults(restarts=restarts, multistart=4, polish=True, data_start=True, x0="estimate")
 
 
-def add_offset_option(p: argparse._ActionsContainer, help_text: str) -> None:
-    """Add ``--offset remove|keep`` (default ``remove``): what to do with a constant offset found."""
-    p.add_argument("--offset", choices=list(OFFSET_MODES), default="remove", help=help_text)
-
-
-def comma_list(text: str | None) -> list[str] | None:
-    """The stripped, non-empty items of a comma-separated option; ``None`` when not given."""
-    if not text:
-        return None
-    return [x.strip() for x in text.split(",") if x.strip()]
-
-
-def fit_inputs(args: argparse.Namespace, cfg: Config
+def fit_inputs(args: argparse.Namespace, command: str
                ) -> tuple[SuspensionModel, Parameters, Measurement, dict[str, object] | None]:
-    """The model, its parameters, the record and its frame statistics (CAN input, else
-    ``None``) of a fitting command."""
-    model = model_from_args(args)
-    params = params_from_args(args, model)
-    meas, frames = load_measurement(args, model, cfg)
+    """The model, its parameters (``--fix``, ``--init``), the record (``--input``: a CSV or a CAN
+    log) and its frame statistics (CAN input, else ``None``) of a fitting command."""
+    model = get_model(args.model)
+    cfg = command_config(args, command)
+    params = Parameters.for_model(model, fix=parse_assignments(args.fix, "--fix"),
+                                  init=parse_assignments(args.init, "--init"))
+    dbc_path, signal_map = can_inputs(args, cfg)
+    meas, frames = read_input(args.input, model, dbc_path, signal_map, channel=args.can_channel,
+                              j1939_source=args.j1939_source)
     return model, params, meas, frames
 
 

@@ -5,24 +5,14 @@ import argparse
 import json
 import math
 import sys
-from typing import TYPE_CHECKING, Any, Mapping
+from typing import Any, Mapping
 
 import numpy as np
 
-from suspid.cli._can import add_can_arguments, can_inputs
-from suspid.cli._lazy import lazy_names
+from suspid.cli._can import add_can_arguments
 from suspid.errors import UsageError
-from suspid.models import MODELS, SuspensionModel, get_model
+from suspid.models import MODELS, SuspensionModel
 from suspid.models.base import FloatArray
-
-if TYPE_CHECKING:
-    from estimator.identify import Parameters
-    from estimator.identify.inputs import read_input
-    from suspid.cli._config import Config
-    from suspid.io.csvio import Measurement
-else:
-    Parameters, = lazy_names("estimator.identify", "Parameters")
-    read_input, = lazy_names("estimator.identify.inputs", "read_input")
 
 #: what ``--model`` help says of the bundled models (a plug-in model is listed by name)
 MODEL_HELP = {"quarter1": "1 DOF, eq. 1", "quarter2": "2 DOF, eqs. 2-3",
@@ -59,7 +49,7 @@ def positive_int(text: str) -> int:
     try:
         v = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}") from None
+        v = 0
     if v < 1:
         raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}")
     return v
@@ -114,15 +104,6 @@ def parse_state(text: str, n: int, option: str) -> FloatArray:
     return v
 
 
-def load_measurement(args: argparse.Namespace, model: SuspensionModel,
-                     cfg: Config) -> tuple[Measurement, dict[str, object] | None]:
-    """Read ``--input`` as a CSV or a CAN log: ``(Measurement, frame statistics or None)``."""
-    dbc_path, signal_map = can_inputs(args, cfg)
-    return read_input(args.input, model, dbc_path, signal_map,
-                      channel=getattr(args, "can_channel", None),
-                      j1939_source=getattr(args, "j1939_source", None))
-
-
 def print_json(obj: Any) -> None:
     """Print one JSON object on stdout (NaN/inf become null)."""
     def clean(o: Any) -> Any:
@@ -165,13 +146,3 @@ def assignment_warnings(args: argparse.Namespace, model: SuspensionModel) -> lis
         if items:
             out += implausible_values(model, parse_assignments(items, option), option)
     return out
-
-
-def params_from_args(args: argparse.Namespace, model: SuspensionModel) -> Parameters:
-    """``Parameters`` of ``model`` from ``--fix``/``--init``."""
-    return Parameters.for_model(model, fix=parse_assignments(args.fix, "--fix"),
-                                init=parse_assignments(args.init, "--init"))
-
-
-def model_from_args(args: argparse.Namespace) -> SuspensionModel:
-    return get_model(args.model)

@@ -55,48 +55,27 @@ class Key:
 
     def check(self, value: Any) -> Any:
         """``value`` converted to the key's Python type, or ``ValueError`` if it does not fit."""
-        if self.type == "bool":
-            if not isinstance(value, bool):
-                raise ValueError
+        number = isinstance(value, (int, float)) and not isinstance(value, bool)
+        if self.type == "bool" and isinstance(value, bool):
             return value
-        if self.type == "int":
-            if isinstance(value, bool) or not isinstance(value, int):
-                raise ValueError
+        if self.type == "int" and number and isinstance(value, int):
             self._check_range(value)
             return value
-        if self.type == "float":
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise ValueError
-            v = float(value)
-            if not math.isfinite(v):
-                raise ValueError
-            self._check_range(v)
-            return v
-        if self.type == "str":
-            if not isinstance(value, str) or (self.choices and value not in self.choices):
-                raise ValueError
+        if self.type == "float" and number and math.isfinite(float(value)):
+            self._check_range(float(value))
+            return float(value)
+        if self.type == "str" and isinstance(value, str) and (not self.choices or value in self.choices):
             return value
-        if self.type == "names":
-            if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
-                raise ValueError
+        if self.type == "names" and isinstance(value, list) and all(isinstance(v, str) for v in value):
             return tuple(v.strip() for v in value)
-        if self.type == "x0":
-            if value in ("estimate", "rest"):
-                return value
-            if (not isinstance(value, list) or not value or not all(
-                    isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-                    for v in value)):
-                raise ValueError
+        if self.type == "x0" and value in ("estimate", "rest"):
+            return value
+        if self.type == "x0" and isinstance(value, list) and value and all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value):
             return ",".join(repr(float(v)) for v in value)
-        if self.type == "address":
-            if isinstance(value, bool) or not isinstance(value, (str, int)):
-                raise ValueError
+        if self.type == "address" and isinstance(value, (str, int)) and not isinstance(value, bool):
             if self.hi is not None:   # a numeric address: 0x47, "71", 71
-                try:
-                    v = value if isinstance(value, int) else int(value.strip(), 0)
-                except ValueError:
-                    raise ValueError from None
-                self._check_range(v)
+                self._check_range(value if isinstance(value, int) else int(value.strip(), 0))
             return str(value)
         raise ValueError
 
@@ -325,11 +304,8 @@ def load_config(path: str | Path | None) -> Config:
                 raise InputError(f"{p}: {name}.{key}: expected {spec.expected()}{unit}, "
                                  f"got {_got(value)}") from None
         tables[name] = out
-    dbc = tables.get("can", {}).get("dbc")
-    dbc_path = (p.parent / dbc) if dbc else None
+    dbc_path = (p.parent / tables["can"]["dbc"]) if tables.get("can", {}).get("dbc") else None
     if dbc_path is not None:
         tables["can"]["dbc"] = str(dbc_path)
-    smap = None
-    if data.get("map"):
-        smap = SignalMap.from_table(data["map"], str(p), dbc_path)
+    smap = SignalMap.from_table(data["map"], str(p), dbc_path) if data.get("map") else None
     return Config(p, tables, smap)

@@ -13,16 +13,11 @@ EPOCH_FROM_S = 1e8
 def num(v: Any, digits: int = 4, unit: str = "") -> str:
     """``v`` to ``digits`` significant digits, with ``unit`` after a space; ``-`` for a
     missing or non-finite value, integers and text as they are."""
-    if v is None or isinstance(v, bool):
-        return "-" if v is None else str(v)
-    if isinstance(v, int):
-        text = str(v)
-    elif isinstance(v, float):
-        if not math.isfinite(v):
-            return "-"
-        text = f"{v:.{digits}g}"
-    else:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "-"
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
         return str(v)
+    text = f"{v:.{digits}g}" if isinstance(v, float) else str(v)
     return f"{text} {unit}" if unit else text
 
 
@@ -44,18 +39,15 @@ def _pairs(d: Mapping[str, Any], skip_zero: bool = True) -> str:
 
 def summary_lines(d: Mapping[str, Any]) -> list[str]:
     """The monitor's ``summary`` event as a few readable lines."""
-    done = {"type"}
-    lines: list[str] = []
+    done = {"type", "windows_cut", "baseline", "data_s", "wall_s", "realtime_factor", "cpu_s"}
     parts = []
     if "windows" in d:
         parts.append(f"{d['windows']} windows fitted, {d.get('skipped', 0)} skipped")
         done |= {"windows", "skipped"}
     if "windows_cut" in d:
         parts.append(f"{d['windows_cut']} cut")
-        done.add("windows_cut")
     if "baseline" in d:
         parts.append(f"estimator {d['baseline']}")
-        done.add("baseline")
     speed = []
     if "data_s" in d:
         speed.append(f"{num(d['data_s'], 4, 's')} of data")
@@ -66,8 +58,7 @@ def summary_lines(d: Mapping[str, Any]) -> list[str]:
     text = " ".join(speed)
     if "cpu_s" in d:
         text += (", " if text else "") + f"CPU {num(d['cpu_s'], 3, 's')}"
-    done |= {"data_s", "wall_s", "realtime_factor", "cpu_s"}
-    lines.append("summary: " + ", ".join(parts) + ("; " + text if text else ""))
+    lines = ["summary: " + ", ".join(parts) + ("; " + text if text else "")]
     fr = d.get("frames")
     if isinstance(fr, Mapping):
         rej = fr.get("rejected") or {}

@@ -39,9 +39,6 @@ class LazyName:
     def __instancecheck__(self, obj: Any) -> bool:
         return isinstance(obj, self.resolve())
 
-    def __repr__(self) -> str:
-        return f"<lazy {self._module}.{self._name}>"
-
 
 def lazy_names(module: str, *names: str) -> tuple[LazyName, ...]:
     """One :class:`LazyName` per attribute ``names`` of the dotted ``module``, in order."""

@@ -5,8 +5,7 @@ import argparse
 import sys
 from typing import TYPE_CHECKING
 
-from suspid.cli._can import command_config
-from suspid.cli._args import FitHelp, add_fit_options, add_road_option, fit_inputs
+from suspid.cli._args import add_fit_options, add_road_option, fit_inputs
 from suspid.cli._format import num
 from suspid.cli._common import (add_input_options, add_model_option, add_param_options,
                                 assignment_warnings, print_json)
@@ -23,17 +22,6 @@ else:
     plot_evidence, = lazy_names("estimator.diagnose.plots", "plot_evidence")
     diagnose_road_unknown, = lazy_names("estimator.diagnose.roadfree", "diagnose_road_unknown")
     resolve_road, = lazy_names("estimator.identify.roadfree", "resolve_road")
-
-#: help of the identifier's options as diagnose words them (the baseline fit's settings)
-FIT_HELP = FitHelp(
-    cost="sse: sum of squared position differences (seed cost 1); frobenius: "
-         "Frobenius norm over all measured channels (seed cost 2)",
-    maxfev="evaluation budget of every fit diagnose makes: the baseline fit (and, for a "
-           "quarter car seen from the body, the fit from its twin), the linear refit on every "
-           "channel, each candidate effect's refit and its reference fit; Nelder-Mead and "
-           "Levenberg-Marquardt evaluations together, Jacobians included (default: each fit's "
-           "own budget); restarts, further starts, the polish and the initial state of the "
-           "baseline fit are the --config file's [fit] table")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -53,7 +41,16 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     add_model_option(p)
     add_input_options(p, "diagnose")
     add_param_options(p)
-    add_fit_options(p, FIT_HELP, restarts=3)
+    add_fit_options(
+        p, restarts=3,
+        cost="sse: sum of squared position differences (seed cost 1); frobenius: "
+             "Frobenius norm over all measured channels (seed cost 2)",
+        maxfev="evaluation budget of every fit diagnose makes: the baseline fit (and, for a "
+               "quarter car seen from the body, the fit from its twin), the linear refit on every "
+               "channel, each candidate effect's refit and its reference fit; Nelder-Mead and "
+               "Levenberg-Marquardt evaluations together, Jacobians included (default: each fit's "
+               "own budget); restarts, further starts, the polish and the initial state of the "
+               "baseline fit are the --config file's [fit] table")
     add_road_option(p)
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
     p.add_argument("--plot", metavar="PNG", default=None,
@@ -64,7 +61,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     """Run ``suspid diagnose`` (JSON or text on stdout, warnings on stderr); exit status 0."""
-    model, params, meas, frames = fit_inputs(args, command_config(args, "diagnose"))
+    model, params, meas, frames = fit_inputs(args, "diagnose")
     road, meas, road_warnings = resolve_road(model, meas, args.road)
     if road == "unknown":
         out = diagnose_road_unknown(model, meas, params).to_json()

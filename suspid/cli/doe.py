@@ -9,7 +9,7 @@ import argparse
 import sys
 import time
 from dataclasses import asdict
-from typing import TYPE_CHECKING, Any, TextIO
+from typing import TYPE_CHECKING, Any, Callable, TextIO
 
 from threadpoolctl import threadpool_limits
 
@@ -76,32 +76,22 @@ def _parse_ids(text: str | None, total: int) -> list[int] | None:
     return ids
 
 
-class ProgressBar:
-    """A one-line progress bar on a text stream (stderr), redrawn with carriage returns."""
+def progress_bar(stream: TextIO, total: int, label: str) -> Callable[[int, bool], None]:
+    """A one-line progress bar on a text stream (stderr), redrawn with carriage returns:
+    drawn at 0, then ``update(done, success)`` after each experiment."""
+    t0 = time.perf_counter()
+    ok = 0
 
-    def __init__(self, stream: TextIO, total: int, label: str, width: int = 28) -> None:
-        self.stream = stream
-        self.total = total
-        self.label = label
-        self.width = width
-        self.ok = 0
-        self.t0 = time.perf_counter()
-        self.draw(0)
+    def update(done: int, success: bool) -> None:
+        nonlocal ok
+        ok += int(success)
+        filled = int(28 * done / max(total, 1))
+        stream.write(f"\r{label} [{'#' * filled}{'.' * (28 - filled)}] {done}/{total} "
+                     f"ok {ok} {time.perf_counter() - t0:5.1f}s" + ("\n" if done >= total else ""))
+        stream.flush()
 
-    def draw(self, done: int) -> None:
-        filled = int(self.width * done / max(self.total, 1))
-        bar = "#" * filled + "." * (self.width - filled)
-        el = time.perf_counter() - self.t0
-        self.stream.write(f"\r{self.label} [{bar}] {done}/{self.total} "
-                          f"ok {self.ok} {el:5.1f}s")
-        self.stream.flush()
-
-    def update(self, done: int, success: bool) -> None:
-        self.ok += int(success)
-        self.draw(done)
-        if done >= self.total:
-            self.stream.write("\n")
-            self.stream.flush()
+    update(0, False)
+    return update
 
 
 def run(args: argparse.Namespace) -> int:
@@ -129,10 +119,10 @@ def run(args: argparse.Namespace) -> int:
     n = len(ids) if ids is not None else total
     bar = None
     if tuning.get("progress", False) or sys.stderr.isatty():
-        bar = ProgressBar(sys.stderr, n, f"doe {args.model} {args.cost}")
+        bar = progress_bar(sys.stderr, n, f"doe {args.model} {args.cost}")
     t0 = time.perf_counter()
     out = run_design(model, settings, ids=ids,
-                     progress=(lambda i, _n, o: bar.update(i, o.success)) if bar else None)
+                     progress=(lambda i, _n, o: bar(i, o.success)) if bar else None)
     seconds = time.perf_counter() - t0
     result: dict[str, Any] = {
         "design": out["design"], "experiments": out["experiments"],

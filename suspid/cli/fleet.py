@@ -8,7 +8,7 @@ from datetime import datetime, timezone
 from statistics import NormalDist
 from typing import TYPE_CHECKING, Any
 
-from suspid.cli._args import FitHelp, add_fit_options, add_offset_option, add_road_option
+from suspid.cli._args import add_fit_options, add_road_option
 from suspid.cli._can import add_can_arguments, can_inputs, command_config
 from suspid.cli._common import (add_model_option, add_param_options, assignment_warnings,
                                 parse_assignments, print_json)
@@ -24,15 +24,6 @@ else:
     (AlertConfig, FleetConfig, IdentifySettings, ProgressBar, available_cpus,
      run_fleet) = lazy_names("estimator.fleet", "AlertConfig", "FleetConfig", "IdentifySettings",
                              "ProgressBar", "available_cpus", "run_fleet")
-
-
-#: help of the identifier's options as fleet words them (each drive fitted as identify does)
-FIT_HELP = FitHelp(
-    cost="sse (seed cost 1, default) or frobenius (seed cost 2)",
-    maxfev="evaluation budget of each fit over all its restarts, further starts and polish "
-           "(default: 1200 per free parameter shared by every fit of a drive), as for identify; "
-           "restarts, further starts, polish, the data-driven start and the initial state "
-           "are the --config file's [fit] table")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -51,11 +42,17 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     add_can_arguments(p, "fleet")
     add_param_options(p)
     i = p.add_argument_group("identification (as suspid identify)")
-    add_fit_options(p, FIT_HELP, restarts=6, group=i)
-    add_offset_option(i, "a constant offset in a drive's road column(s) or one position channel "
-                         "(a sensor zero not at rest), as identify finds it: remove: subtract "
-                         "it before the drive's fit (default); keep: fit the drive as it is; "
-                         "either way the drive's first warning and its offset field name it")
+    add_fit_options(
+        p, restarts=6, group=i,
+        cost="sse (seed cost 1, default) or frobenius (seed cost 2)",
+        maxfev="evaluation budget of each fit over all its restarts, further starts and polish "
+               "(default: 1200 per free parameter shared by every fit of a drive), as for identify; "
+               "restarts, further starts, polish, the data-driven start and the initial state "
+               "are the --config file's [fit] table",
+        offset="a constant offset in a drive's road column(s) or one position channel "
+               "(a sensor zero not at rest), as identify finds it: remove: subtract "
+               "it before the drive's fit (default); keep: fit the drive as it is; "
+               "either way the drive's first warning and its offset field name it")
     add_road_option(i)
     a = p.add_argument_group("alerts and forecasts")
     a.add_argument("--nominal", action="append", default=[], metavar="NAME=VALUE",

@@ -6,12 +6,10 @@ import math
 import sys
 from typing import TYPE_CHECKING
 
-from suspid.cli._args import FitHelp, add_fit_options, add_offset_option, add_road_option
+from suspid.cli._args import add_fit_options, add_road_option, fit_inputs
 from suspid.cli._format import num
 from suspid.cli._common import (parse_state, add_input_options, add_model_option, add_param_options,
-                                load_measurement, model_from_args, params_from_args, print_json,
-                                assignment_warnings)
-from suspid.cli._can import command_config
+                                print_json, assignment_warnings)
 from suspid.cli._lazy import lazy_names
 from suspid.models.base import FloatArray
 
@@ -27,19 +25,6 @@ else:
                                                 "resolve_road")
     plot_comparison, = lazy_names("suspid.plots", "plot_comparison")
 
-#: help of the identifier's options as identify words them
-FIT_HELP = FitHelp(
-    cost="sse: sum of squared position differences (seed cost 1); frobenius: "
-         "Frobenius norm of measured-minus-simulated over all measured channels "
-         "(seed cost 2)",
-    maxfev="evaluation budget of each fit over all its restarts, further starts and "
-           "polish; the fits from the data-driven start, from --init/the defaults "
-           "and from the quarter car's twin each have their own, and nfev reports "
-           "their sum (default: 1200 per free parameter shared by every fit of the "
-           "record, further starts ending once one returns to the best cost); "
-           "restarts, further starts, polish, the data-driven start and the "
-           "initial state are the --config file's [fit] table")
-
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser("identify", help="identify suspension parameters from a measurement",
@@ -49,13 +34,23 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     add_model_option(p)
     add_input_options(p, "identify")
     add_param_options(p)
-    add_fit_options(p, FIT_HELP, restarts=6)
-    add_offset_option(p, "a constant offset in the road column(s) or in one position channel "
-                         "(a sensor zero not at the rest position; estimated at the data-driven "
-                         "start as extra linear unknowns, found when it is most of the misfit): "
-                         "remove: subtract it and fit the corrected record (default); keep: fit "
-                         "the record as it is (slow: every further start chases the offset's "
-                         "misfit); either way a warning names it")
+    add_fit_options(
+        p, restarts=6,
+        cost="sse: sum of squared position differences (seed cost 1); frobenius: Frobenius norm "
+             "of measured-minus-simulated over all measured channels (seed cost 2)",
+        maxfev="evaluation budget of each fit over all its restarts, further starts and "
+               "polish; the fits from the data-driven start, from --init/the defaults "
+               "and from the quarter car's twin each have their own, and nfev reports "
+               "their sum (default: 1200 per free parameter shared by every fit of the "
+               "record, further starts ending once one returns to the best cost); "
+               "restarts, further starts, polish, the data-driven start and the "
+               "initial state are the --config file's [fit] table",
+        offset="a constant offset in the road column(s) or in one position channel "
+               "(a sensor zero not at the rest position; estimated at the data-driven "
+               "start as extra linear unknowns, found when it is most of the misfit): "
+               "remove: subtract it and fit the corrected record (default); keep: fit "
+               "the record as it is (slow: every further start chases the offset's "
+               "misfit); either way a warning names it")
     add_road_option(p)
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
     p.add_argument("--plot", metavar="PNG", default=None,
@@ -71,10 +66,7 @@ def parse_x0(text: str, n: int) -> str | FloatArray:
 
 
 def run(args: argparse.Namespace) -> int:
-    model = model_from_args(args)
-    cfg = command_config(args, "identify")
-    params = params_from_args(args, model)
-    meas, frames = load_measurement(args, model, cfg)
+    model, params, meas, frames = fit_inputs(args, "identify")
     x0 = parse_x0(args.x0, model.n_states)
     road, meas, road_warnings = resolve_road(model, meas, args.road)
     if road == "unknown":

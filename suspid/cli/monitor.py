@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any
 
 from suspid.cli._args import add_road_option, options_from_config
 from suspid.cli._can import add_can_arguments, can_inputs, command_config
 from suspid.cli._common import add_model_option, assignment_warnings, parse_assignments, print_json
-from suspid.cli._config import Config
 from suspid.cli._format import data_time, num, summary_lines
 from suspid.cli._lazy import lazy_names
 from suspid.errors import UsageError
@@ -18,7 +17,6 @@ from suspid.models.base import SuspensionModel
 
 if TYPE_CHECKING:
     from estimator.stream.config import OutputOnlyOptions
-    from estimator.stream.pipeline import Source
 else:
     # resolved in run(), after _skip_mf4_backend (the estimator loads python-can)
     OutputOnlyOptions, = lazy_names("estimator.stream.config", "OutputOnlyOptions")
@@ -99,33 +97,11 @@ def _text(d: dict[str, Any], model: SuspensionModel | None = None) -> str:
         return f"{when} {pv}{extra}" + (" MISFIT" if d.get("misfit") else "")
     if typ == "skip":
         return f"{when} skipped: {d['reason']}"
-    if typ in ("alert", "clear"):
-        return f"{when} {typ.upper()}: {d['message']}"
-    if typ == "forecast":
-        return f"{when} FORECAST: {d['message']}"
-    if typ == "forecast_withdrawn":
-        return f"{when} FORECAST WITHDRAWN: {d['message']}"
-    if typ == "warning":
-        return f"{when} WARNING: {d['message']}"
+    if typ in ("alert", "clear", "forecast", "forecast_withdrawn", "warning"):
+        return f"{when} {typ.replace('_', ' ').upper()}: {d['message']}"
     if typ == "summary":
         return "\n".join(summary_lines(d))
     return " ".join(f"{k}={num(v)}" for k, v in d.items() if not isinstance(v, (dict, list)))
-
-
-def _emitter(jsonl: bool, model: SuspensionModel | None = None) -> Callable[[Any], None]:
-    """The sink: JSON lines, or one readable line per event; a ``warning`` also on stderr."""
-    def emit(ev: Any) -> None:
-        d = ev.to_json()
-        if d.get("type") == "warning":
-            sys.stderr.write(f"warning: {data_time(float(d['t']))}: {d['message']}\n")
-            sys.stderr.flush()
-        if jsonl:
-            print_json(d)
-        else:
-            sys.stdout.write(_text(d, model) + "\n")
-            sys.stdout.flush()
-
-    return emit
 
 
 def _skip_mf4_backend(args: argparse.Namespace) -> None:
@@ -137,22 +113,10 @@ def _skip_mf4_backend(args: argparse.Namespace) -> None:
     sys.modules["asammdf"] = None  # type: ignore[assignment]  # None is the documented "fails" marker
 
 
-def source_from_args(args: argparse.Namespace, cfg: Config) -> "Source":
-    """The stream options and the ``[live]`` table as a ``Source``."""
-    from estimator.stream.pipeline import Source  # noqa: PLC0415 - see run()
-
-    dbc_path, smap = can_inputs(args, cfg)
-    return Source(input=args.input, interface=args.interface, channel=args.channel,
-                  dbc=dbc_path, signal_map=smap, can_channel=args.can_channel,
-                  j1939_source=args.j1939_source,
-                  **cfg.fields("live", {"idle_timeout_s": "idle_timeout",
-                                        "duration_s": "duration"}))
-
-
 def run(args: argparse.Namespace) -> int:
     _skip_mf4_backend(args)
     # imported here: it loads python-can, which must come after _skip_mf4_backend
-    from estimator.stream.pipeline import monitor_spec, run_monitor, warn  # noqa: PLC0415
+    from estimator.stream.pipeline import Source, monitor_spec, run_monitor, warn  # noqa: PLC0415
 
     cfg = command_config(args, "monitor")
     model = get_model(args.model)
@@ -170,8 +134,25 @@ def run(args: argparse.Namespace) -> int:
     warn(spec)
     for msg in assignment_warnings(args, model):
         sys.stderr.write(f"warning: {msg}\n")
-    emit = _emitter(args.jsonl, model)
-    summary = run_monitor(spec, source_from_args(args, cfg), emit, alert_file=args.alert_file)
+
+    def emit(ev: Any) -> None:
+        """JSON lines, or one readable line per event; a ``warning`` also on stderr."""
+        d = ev.to_json()
+        if d.get("type") == "warning":
+            sys.stderr.write(f"warning: {data_time(float(d['t']))}: {d['message']}\n")
+            sys.stderr.flush()
+        if args.jsonl:
+            print_json(d)
+        else:
+            sys.stdout.write(_text(d, model) + "\n")
+            sys.stdout.flush()
+
+    dbc_path, smap = can_inputs(args, cfg)
+    source = Source(input=args.input, interface=args.interface, channel=args.channel,
+                    dbc=dbc_path, signal_map=smap, can_channel=args.can_channel,
+                    j1939_source=args.j1939_source,
+                    **cfg.fields("live", {"idle_timeout_s": "idle_timeout", "duration_s": "duration"}))
+    summary = run_monitor(spec, source, emit, alert_file=args.alert_file)
     if cfg.get("monitor", "summary", True):
         emit(summary)
     return 0

@@ -7,7 +7,6 @@ import sys
 from typing import TYPE_CHECKING
 
 from firmware_sim.scenarios import SCENARIOS
-from suspid.cli._args import comma_list
 from suspid.cli._can import add_config_option
 from suspid.cli._config import load_config
 from suspid.cli._common import parse_assignments
@@ -108,7 +107,7 @@ def run(args: argparse.Namespace) -> int:
     """Run the node; exit 0 after the scenario ends."""
     pty = load_config(args.config).table("node")
     open_timeout, linger = pty.get("open_timeout_s", 60.0), pty.get("linger_s", 3.0)
-    channels = comma_list(args.channels)
+    channels = [x.strip() for x in args.channels.split(",") if x.strip()] if args.channels else None
     cfg = NodeConfig(model=args.model, scenario=args.scenario, duration=args.duration,
                      rate=args.rate, speed=args.speed, noise=args.noise, channels=channels,
                      params=parse_assignments(args.param, "--param"), seed=args.seed,

@@ -9,12 +9,12 @@ import numpy as np
 
 from suspid.cli._can import add_config_option
 from suspid.cli._config import load_config
-from suspid.cli._common import (add_model_option, model_from_args, parse_assignments, parse_state,
-                                print_json)
+from suspid.cli._common import add_model_option, parse_assignments, parse_state, print_json
 from suspid.cli._lazy import lazy_names
 from suspid.errors import UsageError
 from suspid.excitation import SCENARIOS, make_scenario, measured_road
 from suspid.io.csvio import read_measurement, write_measurement
+from suspid.models import get_model
 from suspid.models.base import CHANNEL_SETS, SuspensionModel
 from suspid.simulate import simulate, uniform_step
 
@@ -104,7 +104,7 @@ def select_channels(model: SuspensionModel, spec: str | None) -> tuple[list[str]
 
 def run(args: argparse.Namespace) -> int:
     shape = load_config(args.config).table("simulate")
-    model = model_from_args(args)
+    model = get_model(args.model)
     params = model.defaults()
     given = parse_assignments(args.param, "--param")
     for k, v in given.items():
@@ -160,10 +160,7 @@ def run(args: argparse.Namespace) -> int:
         out = simulate(model, params, t, road, x0)
     chans, roads = select_channels(model, args.channels)
     rng = np.random.default_rng(args.seed)
-    cols: dict[str, np.ndarray] = {}
-    for r in roads:
-        if road:
-            cols[r] = out[r]
+    cols: dict[str, np.ndarray] = {r: out[r] for r in roads} if road else {}
     for c in chans:
         y = out[c]
         if args.noise > 0:

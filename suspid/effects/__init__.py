@@ -1,18 +1,13 @@
-"""Effect library: optional terms the linear suspension models lack.
-
-One registered class per entry of the contract's ``suspid diagnose`` table.
-Each class carries its law, where it applies (from the model's structure, never its name:
-:func:`effects_for`) and what ``suspid diagnose`` needs to find and refit it. The strut
-deflection ``d`` (m) is the extension (``d' > 0`` rebound); a physical effect's force
-``phi(s, s')`` at a site enters as ``Q = b * phi`` through ``SuspensionModel.extra_force``.
+"""Effect library: optional terms the linear suspension models lack, one registered class per
+entry of the contract's ``suspid diagnose`` table: its law, where it applies (from the model's
+structure: :func:`effects_for`) and what ``suspid diagnose`` needs to find and refit it.
 :func:`inject` adds undeclared effects to a simulation. Adding an effect (a class with
 :func:`register`, or an entry point in ``suspid.effects``): ``docs/architecture.md``.
 """
 from __future__ import annotations
 
 from suspid.effects.base import (ENTRY_POINT_GROUP, REGISTRY, Effect, EffectParam, PhysicalEffect,
-                                 SensorEffect, Site, Trial, effect_classes, load_plugins, register,
-                                 strut_sites, tyre_sites)
+                                 SensorEffect, Site, Trial, effect_classes, load_plugins, register)
 from suspid.models.base import GRAVITY
 from suspid.nlsim import Law
 
@@ -34,6 +29,6 @@ EFFECT_NAMES: tuple[str, ...] = tuple(REGISTRY)
 __all__ = ["Effect", "EffectParam", "PhysicalEffect", "SensorEffect", "Site", "REGISTRY",
            "EFFECT_NAMES", "ENTRY_POINT_GROUP", "Trial", "register", "load_plugins",
            "effect_classes", "make_effect", "parse_effect", "as_effect", "inject", "Injection",
-           "strut_sites", "tyre_sites", "effects_for", "GRAVITY", "V_EPS", "CoulombFriction",
+           "effects_for", "GRAVITY", "V_EPS", "CoulombFriction",
            "AsymmetricDamping", "QuadraticDamping", "ProgressiveSpring", "BumpStop",
            "TireLiftoff", "SensorDelay", "SensorOffset", "Law"]

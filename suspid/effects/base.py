@@ -29,16 +29,6 @@ class EffectParam:
     kind: str = "positive"
 
 
-def strut_sites(model: SuspensionModel, p: Mapping[str, float]) -> list[Site]:
-    """The suspension struts of ``model`` (deflection = extension, force resists extension)."""
-    return model.strut_sites(p)
-
-
-def tyre_sites(model: SuspensionModel, p: Mapping[str, float]) -> list[Site]:
-    """The tyre contacts of ``model`` (coordinate = tyre compression ``r - x_wheel``)."""
-    return model.tyre_sites(p)
-
-
 #: settings of one screening trial of a physical effect (e.g. ``{"gap": 0.01}``)
 Trial = dict[str, float]
 
@@ -61,9 +51,8 @@ class Effect:
         missing = [k for k in names if k not in values]
         if missing:
             raise UsageError(f"effect {self.name}: missing parameter(s) {', '.join(missing)}")
-        self.values: dict[str, Any] = {}
-        for spec in self.params:
-            self.values[spec.name] = _check_value(self.name, spec, values[spec.name])
+        self.values: dict[str, Any] = {spec.name: _check_value(self.name, spec, values[spec.name])
+                                       for spec in self.params}
 
     @property
     def numeric_names(self) -> list[str]:
@@ -85,10 +74,9 @@ class Effect:
 
     def to_json(self) -> dict[str, Any]:
         """``{"name": ..., "params": {...}}`` as the contract prints it."""
-        out: dict[str, Any] = {}
-        for k, v in self.values.items():
-            out[k] = list(v) if isinstance(v, (list, tuple)) else (float(v) if isinstance(v, float) else v)
-        return {"name": self.name, "params": out}
+        return {"name": self.name, "params": {
+            k: list(v) if isinstance(v, (list, tuple)) else (float(v) if isinstance(v, float) else v)
+            for k, v in self.values.items()}}
 
     @classmethod
     def unavailable_reason(cls, model: SuspensionModel) -> str | None:
@@ -161,7 +149,7 @@ class PhysicalEffect(Effect):
     def model_sites(cls, model: SuspensionModel, p: Mapping[str, float] | None = None) -> list[Site]:
         """Every site of ``model`` of this effect's kind (``p``: parameters, default the model's)."""
         q = model.defaults() if p is None else p
-        return strut_sites(model, q) if cls.site_kind == "strut" else tyre_sites(model, q)
+        return model.strut_sites(q) if cls.site_kind == "strut" else model.tyre_sites(q)
 
     @classmethod
     def sites_problem(cls, sites: Sequence[Site]) -> str | None:
@@ -202,8 +190,8 @@ class PhysicalEffect(Effect):
         return Q
 
     def force_fn(self, model: SuspensionModel) -> ForceFn:
-        """The effect as a ``model.extra_force`` term ``f(t, x, u, params) -> Q``."""
-        self.check_model(model)
+        """The effect as a ``model.extra_force`` term ``f(t, x, u, params) -> Q`` (unchecked:
+        :func:`~suspid.effects.inject` checks the model, :meth:`sites` the parameters)."""
 
         def f(t: float, x: FloatArray, u: FloatArray, params: Mapping[str, float]) -> FloatArray:
             return self.generalized_force(model, x, u, params)[0]
@@ -261,19 +249,8 @@ class SensorEffect(Effect):
 
     def affected(self) -> list[str]:
         """Channels this effect changes (its ``channels`` or ``channel`` parameter)."""
-        names = [p.name for p in self.params if p.kind in ("channels", "channel")]
-        out: list[str] = []
-        for n in names:
-            v = self.values[n]
-            out += list(v) if isinstance(v, list) else [v]
-        return out
-
-    def check_channels(self, model: SuspensionModel) -> None:
-        """Raise :class:`UsageError` if a named channel is not one of the model's."""
-        bad = [c for c in self.affected() if c not in model.channels]
-        if bad:
-            raise UsageError(f"effect {self.name}: unknown channel(s) {', '.join(bad)} for model "
-                             f"{model.name}; expected any of {', '.join(model.channels)}")
+        return [c for p in self.params if p.kind in ("channels", "channel")
+                for c in (self.values[p.name] if p.kind == "channels" else [self.values[p.name]])]
 
     @classmethod
     def screen_groups(cls, model: SuspensionModel, measured: Sequence[str]) -> list[list[str]]:
@@ -309,12 +286,12 @@ def register(cls: type[Effect]) -> type[Effect]:
     return cls
 
 
-def load_plugins(force: bool = False) -> None:
-    """Add the effects of the entry-point group ``suspid.effects`` to :data:`REGISTRY` (once;
-    ``force`` reads it again). UsageError, naming the entry point and its package, for a
-    plugin that cannot load, is no effect class, lacks a hook or takes a taken name."""
+def load_plugins() -> None:
+    """Add the effects of the entry-point group ``suspid.effects`` to :data:`REGISTRY` (once).
+    UsageError, naming the entry point and its package, for a plugin that cannot load, is no
+    effect class, lacks a hook or takes a taken name."""
     global _plugins_loaded
-    if _plugins_loaded and not force:
+    if _plugins_loaded:
         return
     _plugins_loaded = True
     for ep in entry_points(group=ENTRY_POINT_GROUP):

@@ -13,7 +13,10 @@ from suspid.effects.base import Effect, PhysicalEffect, SensorEffect, effect_cla
 from suspid.errors import UsageError
 from suspid.models.base import FloatArray, SuspensionModel
 from suspid.nlsim import simulate_effects
-from suspid.simulate import simulate, simulate_ode
+from suspid.simulate import simulate
+
+#: longest internal step (s) of an injected simulation
+MAX_STEP = 2.5e-4
 
 
 def make_effect(name: str, **values: Any) -> Effect:
@@ -78,26 +81,19 @@ class Injection:
         return out
 
     def simulate(self, params: Mapping[str, float], t: FloatArray,
-                 road: Mapping[str, FloatArray] | None = None, x0: FloatArray | None = None,
-                 method: str = "fast", max_step: float = 2.5e-4) -> dict[str, FloatArray]:
-        """Simulate the model with every effect and return what the sensors report.
-
-        ``params`` are the base model's (SI), ``t``, ``road``, ``x0`` as for
-        :func:`suspid.simulate.simulate`. ``method``: ``fast`` (:mod:`suspid.nlsim`, steps of at
-        most ``max_step`` s) or ``ode`` (:func:`simulate_ode`, reference accuracy).
-        """
+                 road: Mapping[str, FloatArray] | None = None,
+                 x0: FloatArray | None = None) -> dict[str, FloatArray]:
+        """Simulate the model with every effect (:mod:`suspid.nlsim`, steps of at most
+        :data:`MAX_STEP` s) and return what the sensors report; ``params`` are the base
+        model's (SI), ``t``, ``road``, ``x0`` as for :func:`suspid.simulate.simulate`."""
         t = np.asarray(t, dtype=float)
         p = dict(params)
         if not self.physical:
             out = simulate(self.base, p, t, road, x0)
-        elif method == "ode":
-            out = simulate_ode(self.model, p, t, road, x0)
-        elif method == "fast":
-            h = float(np.min(np.diff(t))) if t.size > 1 else max_step
-            sub = max(1, int(math.ceil(h / max_step - 1e-9)))
-            out = simulate_effects(self.base, p, self.physical, t, road, x0, substeps=sub)
         else:
-            raise UsageError(f"unknown simulation method {method!r}; expected 'fast' or 'ode'")
+            h = float(np.min(np.diff(t))) if t.size > 1 else MAX_STEP
+            sub = max(1, int(math.ceil(h / MAX_STEP - 1e-9)))
+            out = simulate_effects(self.base, p, self.physical, t, road, x0, substeps=sub)
         return self.measure(t, out)
 
     def check_record(self, t: FloatArray) -> None:
@@ -153,8 +149,9 @@ def inject(model: SuspensionModel,
         e.check_model(model)
         if isinstance(e, PhysicalEffect):
             aug.extra_force.append(e.force_fn(aug))
-        elif isinstance(e, SensorEffect):
-            e.check_channels(model)
+        elif isinstance(e, SensorEffect) and (bad := [c for c in e.affected() if c not in model.channels]):
+            raise UsageError(f"effect {e.name}: unknown channel(s) {', '.join(bad)} for model "
+                             f"{model.name}; expected any of {', '.join(model.channels)}")
     return Injection(model=aug, base=model, effects=effs)
 
 

@@ -7,17 +7,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from suspid.effects.base import (
-    _NUMBER,
-    EffectParam,
-    PhysicalEffect,
-    Trial,
-    _and,
-    _short,
-    register,
-    strut_sites,
-)
-
+from suspid.effects.base import _NUMBER, EffectParam, PhysicalEffect, Trial, _and, _short, register
 from suspid.errors import UsageError
 from suspid.models.base import FloatArray, Site, SuspensionModel
 from suspid.nlsim import Law
@@ -230,7 +220,7 @@ class TireLiftoff(PhysicalEffect):
         # a tyre whose element is also a strut's: no wheel mass between them
         try:
             tyres = cls.model_sites(model)
-            struts = strut_sites(model, model.defaults())
+            struts = model.strut_sites(model.defaults())
         except UsageError:
             return {}
         shared = {s.k_name for s in struts} & {s.k_name for s in tyres} - {None}

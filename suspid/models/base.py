@@ -61,13 +61,10 @@ class Site:
 
     def coordinate(self, X: FloatArray, U: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Site coordinate ``s`` (m) and rate ``s'`` (m/s) for state rows ``X`` and inputs ``U``."""
-        nq = self.g.size
-        nr = self.gr.size
-        X2 = np.atleast_2d(X)
-        U2 = np.atleast_2d(U)
-        s = X2[:, :nq] @ self.g + U2[:, :nr] @ self.gr
-        sd = X2[:, nq:] @ self.g + U2[:, nr:] @ self.gr
-        return s, sd
+        nq, nr = self.g.size, self.gr.size
+        X2, U2 = np.atleast_2d(X), np.atleast_2d(U)
+        return (X2[:, :nq] @ self.g + U2[:, :nr] @ self.gr,
+                X2[:, nq:] @ self.g + U2[:, nr:] @ self.gr)
 
 
 @dataclass(frozen=True)
@@ -394,10 +391,6 @@ class SuspensionModel:
             M, C, K, Fk, Fc = self.matrices(p)
             return M, np.hstack([-K, -C, Fk, Fc])
 
-        def rows(p: Mapping[str, float]) -> FloatArray:
-            M, H = parts(p)
-            return np.asarray(np.linalg.solve(M, H), dtype=np.float64)
-
         M0, H0 = parts(p0)
         Minv = np.asarray(np.linalg.inv(M0), dtype=np.float64)
         f0 = Minv @ H0
@@ -416,7 +409,7 @@ class SuspensionModel:
         exact = True
         for factors in _check_factors(th0.size):
             th = th0 * factors
-            ref = rows(dict(p0, **dict(zip(names, th.tolist()))))
+            ref = np.linalg.solve(*parts(dict(p0, **dict(zip(names, th.tolist())))))
             got = AB0 + np.tensordot(th, dAB, axes=1)
             if not np.all(np.abs(got - ref) <= 1e-12 * (np.abs(ref).max() + 1e-300)):
                 exact = False

@@ -6,13 +6,8 @@ front-left, 2 front-right, 3 rear-left, 4 rear-right.
 
 Corner ``i`` at ``l_i`` (front ``-a1``, rear ``+a2``) and ``y_i`` (left ``+w/2``, right
 ``-w/2``) has the strut extension ``d_i = x + l_i delta + y_i phi - x_i`` (spring ``ki``,
-damper ``ci``); wheel ``mi`` stands on the tyre spring ``kti`` over road ``ri``::
-
-    M q'' + sum_i ci g_i g_i^T q' + (sum_i ki g_i g_i^T + diag(kt)) q = Fk r
-    g_i = e_x + l_i e_delta + y_i e_phi - e_xi,   M = diag(m, Iy, Ix, m1, m2, m3, m4)
-
-The centre of mass is at mid-track. With equal left and right parameters and roads the roll
-stays zero and heave and pitch equal a ``half4`` with summed corners (tested).
+damper ``ci``); wheel ``mi`` stands on the tyre spring ``kti`` over road ``ri``. The centre
+of mass is at mid-track.
 """
 from __future__ import annotations
 
@@ -96,20 +91,14 @@ class Full7(SuspensionModel):
             scale_invariant=tuple(s.name for s in params if s.kind != "length"),
         )
 
-    def corner_geometry(self, p: Mapping[str, float]) -> tuple[FloatArray, FloatArray]:
-        """Longitudinal ``l_i`` and lateral ``y_i`` positions (m) of the four corners."""
-        a1, a2, w1, w2 = p["a1"], p["a2"], p["w1"], p["w2"]
-        lon = np.array([-a1, -a1, a2, a2])
-        lat = np.array([w1 / 2, -w1 / 2, w2 / 2, -w2 / 2])
-        return lon, lat
-
     def strut_directions(self, p: Mapping[str, float]) -> FloatArray:
-        """Rows ``g_i`` (4, 7): strut extension ``d_i = g_i . q`` per corner."""
-        lon, lat = self.corner_geometry(p)
+        """Rows ``g_i`` (4, 7): strut extension ``d_i = g_i . q`` per corner (longitudinal
+        position ``l_i``, lateral ``y_i``, m)."""
+        a1, a2, w1, w2 = p["a1"], p["a2"], p["w1"], p["w2"]
         G = np.zeros((4, 7))
         G[:, 0] = 1.0
-        G[:, 1] = lon
-        G[:, 2] = lat
+        G[:, 1] = np.array([-a1, -a1, a2, a2])
+        G[:, 2] = np.array([w1 / 2, -w1 / 2, w2 / 2, -w2 / 2])
         G[:, 3:] = -np.eye(4)
         return G
 

@@ -2,12 +2,8 @@
 
 Coordinates ``q = [x, delta, x1, x2]``: body heave (m), pitch (rad; the body at the front
 axle moves by ``x - a1 delta``), front and rear wheels (m). Suspensions ``k1``, ``c1`` at
-``a1`` ahead of the centre of mass and ``k2``, ``c2`` at ``a2`` behind; tyres ``k3``, ``k4``.
-
-    m x'' + c1 (x' - x1' - a1 d') + c2 (x' - x2' + a2 d') + k1 (x - x1 - a1 d) + k2 (x - x2 + a2 d) = 0
-    I d'' - a1 c1 (...) + a2 c2 (...) - a1 k1 (...) + a2 k2 (...) = 0
-    m1 x1'' - c1 (x' - x1' - a1 d') + k3 (x1 - r1) - k1 (x - x1 - a1 d) = 0
-    m2 x2'' - c2 (x' - x2' + a2 d') + k4 (x2 - r2) - k2 (x - x2 + a2 d) = 0
+``a1`` ahead of the centre of mass and ``k2``, ``c2`` at ``a2`` behind; tyres ``k3``, ``k4``
+(the suspension deflections ``x - x1 - a1 delta`` and ``x - x2 + a2 delta``).
 """
 from __future__ import annotations
 

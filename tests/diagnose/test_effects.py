@@ -9,7 +9,7 @@ from suspid.excitation import make_scenario
 from suspid.models import get_model
 from suspid.simulate import simulate
 from suspid.effects import (EFFECT_NAMES, REGISTRY, PhysicalEffect, effects_for, inject,
-                                   make_effect, parse_effect, strut_sites, tyre_sites)
+                                   make_effect, parse_effect)
 
 from ..conftest import TABLE1
 
@@ -48,7 +48,7 @@ def _strut_force(name: str, d: float, dd: float, **v: float) -> float:
     m = get_model("quarter2")
     e = make_effect(name, **v)
     assert isinstance(e, PhysicalEffect)
-    site = strut_sites(m, TABLE1)[0]
+    site = m.strut_sites(TABLE1)[0]
     return e.law(site, TABLE1)(d, dd)
 
 
@@ -71,7 +71,7 @@ def test_law_signs() -> None:
 def test_tire_liftoff_only_when_pulling() -> None:
     m = get_model("quarter2")
     e = make_effect("tire_liftoff")
-    site = tyre_sites(m, TABLE1)[0]
+    site = m.tyre_sites(TABLE1)[0]
     phi = e.law(site, TABLE1)
     W = (TABLE1["m1"] + TABLE1["m2"]) * 9.81
     assert phi(0.0, 0.0) == 0.0          # static contact
