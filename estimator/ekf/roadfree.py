@@ -12,9 +12,8 @@ import time
 from typing import Any, Mapping, Sequence
 
 import numpy as np
-from filterpy.kalman import ExtendedKalmanFilter
 
-from estimator.ekf.filter import EKFTuning
+from estimator.ekf.filter import EKFTuning, ParamEKF
 from estimator.ekf.stream import WindowEKF, ekf_tuning, noise_sd
 from estimator.identify import Parameters
 from estimator.identify.roadfree import fit_road_unknown
@@ -33,7 +32,7 @@ P0_OFFSET = 1.0
 GAP_STEPS = 1.5
 
 
-class BodyEquationEKF(ExtendedKalmanFilter):
+class BodyEquationEKF(ParamEKF):
     """filterpy EKF on the body equations: deflections and their rates, offsets, struts.
 
     ``params`` (SI) hold the ``augmented`` struts' start values; ``channels`` are the body
@@ -92,8 +91,6 @@ class BodyEquationEKF(ExtendedKalmanFilter):
                          + [P0_OFFSET ** 2] * nb + [tuning.p0_param ** 2] * len(self.aug))
         self.x = np.concatenate([np.zeros(self.nx), np.ones(len(self.aug))])[:, None]
         self._I = np.eye(nz)
-        self.nis_sum = 0.0
-        self.nis_dof = 0
         H0 = np.zeros((len(self.channels), nz))
         for r, c in enumerate(self.channels[nb:], start=nb):
             base = c.removesuffix("_dot")
@@ -142,35 +139,7 @@ class BodyEquationEKF(ExtendedKalmanFilter):
         """Predict one step and update with ``y`` (NaN entries left out; Joseph form)."""
         self.x = self.F @ self.x
         self.P = self.F @ self.P @ self.F.T + self.Q
-        zz = np.asarray(y, dtype=float)
-        ok = np.isfinite(zz)
-        if not ok.any():
-            return
-        hx, H = self.hx_jac(self.x[:, 0])
-        Rm = np.asarray(self.R, dtype=float)
-        if not ok.all():
-            H, hx, zz, Rm = H[ok], hx[ok], zz[ok], Rm[np.ix_(ok, ok)]
-        PHT = self.P @ H.T
-        S = H @ PHT + Rm
-        K = np.linalg.solve(S, PHT.T).T
-        e = zz - hx
-        self.x = self.x + (K @ e)[:, None]
-        I_KH = self._I - K @ H
-        self.P = I_KH @ self.P @ I_KH.T + K @ Rm @ K.T
-        self.nis_sum += float(e @ np.linalg.solve(S, e))
-        self.nis_dof += int(e.size)
-
-    def param_values(self) -> dict[str, float]:
-        """Every parameter (SI), the augmented ones from the state."""
-        out = dict(self.params)
-        for j, k in enumerate(self.aug):
-            out[k] = float(self.nominal[j] * self.x[self.nx + j, 0])
-        return out
-
-    def param_stderr(self) -> dict[str, float]:
-        """Standard deviation of each augmented parameter (SI)."""
-        d = np.sqrt(np.clip(np.diag(self.P)[self.nx:], 0.0, None))
-        return {k: float(self.nominal[j] * d[j]) for j, k in enumerate(self.aug)}
+        self.joseph_update(y, lambda: self.hx_jac(self.x[:, 0]))
 
 
 class RoadFreeEKFEstimator(WindowEKF):
@@ -184,9 +153,8 @@ class RoadFreeEKFEstimator(WindowEKF):
     road = "unknown"
 
     def __init__(self, model: SuspensionModel, params: Parameters, channels: Sequence[str],
-                 tuning: EKFTuning, decimate: int = 1, first_window: Sequence[str] = (),
-                 nis_level: float = 0.999, nis_tolerance: float = 1.5) -> None:
-        self._setup(model, tuning, decimate, nis_level, nis_tolerance)
+                 tuning: EKFTuning, decimate: int = 1, first_window: Sequence[str] = ()) -> None:
+        self._setup(model, tuning, decimate)
         self.params = params.copy()
         self.channels = list(channels)
         self.first_window = list(first_window)

@@ -7,11 +7,11 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any, Mapping, Protocol, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from estimator.ekf.filter import AugmentedEKF, EKFTuning, window_nis
+from estimator.ekf.filter import AugmentedEKF, EKFTuning, ParamEKF, window_nis
 from estimator.identify import Parameters
 from estimator.stream.config import WindowConfig, default_decimation
 from estimator.stream.events import Estimate
@@ -34,16 +34,6 @@ def noise_sd(y: FloatArray, resolution: float) -> float:
     return max(nf if math.isfinite(nf) else 0.0, resolution / math.sqrt(12.0))
 
 
-class _Filter(Protocol):
-    nis_sum: float
-    nis_dof: int
-    aug: list[str]
-
-    def param_values(self) -> dict[str, float]: ...
-
-    def param_stderr(self) -> dict[str, float]: ...
-
-
 class WindowEKF:
     """What both window EKFs share: the monitor's estimator interface, counters, the report."""
 
@@ -53,13 +43,10 @@ class WindowEKF:
     lag = 0.0
     overlap = 1.0
 
-    def _setup(self, model: SuspensionModel, tuning: EKFTuning, decimate: int, nis_level: float,
-               nis_tolerance: float) -> None:
+    def _setup(self, model: SuspensionModel, tuning: EKFTuning, decimate: int) -> None:
         self.model = model
         self.tuning = tuning
         self.decimate = max(1, int(decimate))
-        self.nis_level = nis_level
-        self.nis_tolerance = nis_tolerance
         self.t_last = -math.inf
         self._t_seen = -math.inf
         self._phase = 0
@@ -74,7 +61,7 @@ class WindowEKF:
         self._nis0 = (0.0, 0)
         self.start_from: dict[str, float] = {}
 
-    def _report(self, t: FloatArray, ekf: _Filter, cpu: float, checked: Sequence[str] | None,
+    def _report(self, t: FloatArray, ekf: ParamEKF, cpu: float, checked: Sequence[str] | None,
                 notes: list[str], head: dict[str, Any], tail: dict[str, Any],
                 track: bool = True, first: str | None = None) -> StepResult:
         """The window's estimate: parameters, NIS and its band, warnings (``first`` leads)."""
@@ -82,8 +69,7 @@ class WindowEKF:
         se = ekf.param_stderr()
         ok = all(math.isfinite(vals[k]) and vals[k] > 0 for k in (vals if checked is None else checked))
         warns = [] if ok else ["EKF parameter state left the physical range"]
-        nis, _, lo, hi, nis_warning = window_nis(ekf.nis_sum, ekf.nis_dof, self._nis0,
-                                                 self.nis_level, self.nis_tolerance)
+        nis, _, lo, hi, nis_warning = window_nis(ekf.nis_sum, ekf.nis_dof, self._nis0)
         self._nis0 = (ekf.nis_sum, ekf.nis_dof)
         if nis_warning is not None:
             self.nis_windows_out += 1
@@ -100,7 +86,7 @@ class WindowEKF:
         track = track and ok
         return StepResult(ev, vals if track else None, se if track else None)
 
-    def _summary(self, ekf: _Filter | None, head: dict[str, Any], augmented: list[str],
+    def _summary(self, ekf: ParamEKF | None, head: dict[str, Any], augmented: list[str],
                  held: dict[str, str]) -> dict[str, Any]:
         """Samples filtered, CPU time, consistency, restarts."""
         return {**head, "samples": self.samples, "cpu_s": self.cpu,
@@ -125,16 +111,15 @@ class EKFWindowEstimator(WindowEKF):
     ``params`` (SI) hold the fixed values and the ``augmented`` ones' starts; ``decimate``: use every
     n-th sample; ``held``: ``parameter -> reason`` of free parameters the filter holds;
     ``first_window`` ``(Parameters, WindowConfig, names)`` starts ``names`` from a sliding-window fit
-    of the first window; ``nis_level`` and ``nis_tolerance`` set the NIS band and its widening.
+    of the first window.
     """
 
     def __init__(self, model: SuspensionModel, params: Mapping[str, float],
                  augmented: Sequence[str], channels: Sequence[str],
                  tuning: EKFTuning | None = None, decimate: int = 1,
                  held: Mapping[str, str] | None = None,
-                 first_window: tuple[Parameters, WindowConfig, Sequence[str]] | None = None,
-                 nis_level: float = 0.999, nis_tolerance: float = 1.5) -> None:
-        self._setup(model, tuning or EKFTuning(), decimate, nis_level, nis_tolerance)
+                 first_window: tuple[Parameters, WindowConfig, Sequence[str]] | None = None) -> None:
+        self._setup(model, tuning or EKFTuning(), decimate)
         self.held = dict(held or {})
         self.first_window = first_window
         self.params = dict(params)
