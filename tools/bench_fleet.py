@@ -29,7 +29,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository: tools.*
 
 from tools.synthetic_fleet import FleetSpec, VehicleWear, make_fleet  # noqa: E402
-from estimator.fleet import AlertConfig, FleetConfig, IdentifySettings, run_fleet
+from estimator.fleet.runner import AlertConfig, FleetConfig, IdentifySettings, run_fleet
 
 
 class Clock:

@@ -99,6 +99,3 @@ def model_limits(model: SuspensionModel) -> dict[str, str]:
             f"value or in one strut alone, and a {pair} disagreement of the screening regression "
             "is reported in evidence.candidates.NAME.screen.per_site")
     return out
-
-
-__all__ = ["SiteRestricted", "effect_sites", "model_limits", "strut_limit_key"]

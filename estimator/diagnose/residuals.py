@@ -35,19 +35,6 @@ def autocorr(e: FloatArray, maxlag: int) -> FloatArray:
     return np.array([float(x[: n - k] @ x[k:]) / d for k in range(min(maxlag, n - 1) + 1)])
 
 
-def ljung_box(e: FloatArray, lags: int = 20) -> tuple[float, float]:
-    """Ljung–Box statistic ``Q`` and its chi-square p-value over ``lags`` lags."""
-    x = np.asarray(e, dtype=float)
-    n = int(np.sum(~np.isnan(x)))
-    if n < 3:  # no lag to test (autocorr's own limit): no evidence against whiteness
-        return 0.0, 1.0
-    lags = max(1, min(lags, n // 4))
-    rho = autocorr(x, lags)[1:]
-    k = np.arange(1, rho.size + 1)
-    Q = float(n * (n + 2) * np.sum(rho ** 2 / (n - k)))
-    return Q, float(chi2.sf(Q, rho.size))
-
-
 def noise_variance(e: FloatArray) -> float:
     """White-noise variance estimate ``var(second difference) / 6`` (smooth parts cancel)."""
     x = np.asarray(e, dtype=float)
@@ -115,7 +102,13 @@ def channel_stats(name: str, e: FloatArray, y: FloatArray, lags: int = 20, skip:
     """Residual ``e`` of signal ``y``; whiteness ignores the first ``skip`` samples."""
     rms = float(np.sqrt(np.nanmean(e ** 2)))
     nv = noise_variance(e)
-    q, p = ljung_box(e[skip:], lags)
+    # the Ljung–Box statistic and its chi-square p-value (no lag to test below 3 samples)
+    n = int(np.sum(~np.isnan(e[skip:])))
+    q, p = 0.0, 1.0
+    if n >= 3:
+        rho = autocorr(e[skip:], max(1, min(lags, n // 4)))[1:]
+        q = float(n * (n + 2) * np.sum(rho ** 2 / (n - np.arange(1, rho.size + 1))))
+        p = float(chi2.sf(q, rho.size))
     m, mp = mean_test(e[skip:])
     return ChannelStats(name, rms, float(np.sqrt(np.nanmean(y ** 2))), math.sqrt(nv),
                         math.sqrt(max(rms ** 2 - nv, 0.0)), q, p, float(autocorr(e[skip:], 1)[1]),
@@ -436,13 +429,9 @@ def screen_physical(model: SuspensionModel, p: Mapping[str, float], free: list[s
 
 def output_residuals(meas: Measurement, predicted: Mapping[str, FloatArray]) -> dict[str, FloatArray]:
     """``measured - predicted`` of every measured channel the model predicts (not all NaN)."""
-    resid: dict[str, FloatArray] = {}
-    for c in meas.measured:
-        if c in predicted:
-            e = np.asarray(meas.measured[c], dtype=float) - np.asarray(predicted[c], dtype=float)
-            if np.any(~np.isnan(e)):
-                resid[c] = e
-    return resid
+    resid = {c: np.asarray(meas.measured[c], dtype=float) - np.asarray(predicted[c], dtype=float)
+             for c in meas.measured if c in predicted}
+    return {c: e for c, e in resid.items() if np.any(~np.isnan(e))}
 
 
 def output_regression(cls: type[SensorEffect], group: Sequence[str], t: FloatArray,
@@ -533,10 +522,7 @@ def screen_time_shift(cls: type[SensorEffect], model: SuspensionModel, meas: Mea
         beta, ss, _ = _regress(y, X)
         return ss, _refined(p, base_names, beta)
 
-    def ss_for(m: Motion) -> float:
-        return regress_for(m)[0]
-
-    ss0 = ss_for(mo0)
+    ss0 = regress_for(mo0)[0]
     shifted: dict[tuple[int, float], Motion] = {}
     groups = cls.screen_groups(model, list(meas.measured))
     grid = [d for d in h * np.array([0.5, 1, 1.5, 2, 3, 4, 6, 8, 11, 16, 22, 32]) if d <= max_delay]
@@ -592,7 +578,7 @@ def screen_time_shift(cls: type[SensorEffect], model: SuspensionModel, meas: Mea
                 a[:, i] = shift_allpass(t, a[:, i], d)  # advance; the tail is trimmed
             m2 = Motion(arrs["q"], arrs["qd"], arrs["qdd"], mo0.r, mo0.rd, mo0.source)
             shifted[(gi, float(d))] = m2
-            sss.append(ss_for(m2))
+            sss.append(regress_for(m2)[0])
         f_share = max(0.0, (ss0 - min(sss)) / ss0) if sss and ss0 > 0 else 0.0
         o_share, o_delay = output_screen(g)
         if not sss and o_share <= 0:
@@ -637,9 +623,3 @@ def screen_time_shift(cls: type[SensorEffect], model: SuspensionModel, meas: Mea
         if len(best.alternatives) >= 2:
             break
     return best
-
-
-__all__ = ["autocorr", "ljung_box", "mean_test", "noise_variance", "xcorr_peak", "effective_n", "ChannelStats",
-           "shift_allpass", "velocity_noise", "output_residuals", "output_regression",
-           "channel_stats", "Motion", "motion_from", "residual_force", "force_sensitivity", "Screen",
-           "screen_physical", "screen_sensor", "screen_time_shift"]

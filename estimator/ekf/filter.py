@@ -120,10 +120,9 @@ class AugmentedEKF(ParamEKF):
             raise UsageError(f"model {model.name}: the parameters {', '.join(self.aug)} do not "
                              f"enter its matrices affinely; the EKF needs them to")
         self._G = self.pieces.dAB * self.nominal[:, None, None]  # per relative unit
-        nzz = self.nx + len(self.aug)
-        self._J0 = np.zeros((nzz, nzz))                          # dq/dt = q'
+        self._J0 = np.zeros((nz, nz))                          # dq/dt = q'
         self._J0[:self.nq, self.nq:self.nx] = np.eye(self.nq)
-        self._I = np.eye(nzz)
+        self._I = np.eye(nz)
         self._linear = not model.extra_force
         self._rows = []
         for c in self.channels:
@@ -143,16 +142,9 @@ class AugmentedEKF(ParamEKF):
 
     def set_q(self, dt: float) -> None:
         """Process noise for a step ``dt`` (s)."""
-        tu = self.tuning
-        nz = self.dim_x
-        Q = np.zeros((nz, nz))
-        qa = tu.q_state ** 2 * dt
-        for i in range(self.nq):  # white acceleration noise on each coordinate
-            Q[i, i] = qa * dt * dt / 3.0
-            Q[i, self.nq + i] = Q[self.nq + i, i] = qa * dt / 2.0
-            Q[self.nq + i, self.nq + i] = qa
-        for j in range(len(self.aug)):
-            Q[self.nx + j, self.nx + j] = tu.q_param ** 2 * dt
+        nq, qa = self.nq, self.tuning.q_state ** 2 * dt   # white acceleration noise per coordinate
+        Q = np.diag([qa * dt * dt / 3.0] * nq + [qa] * nq + [self.tuning.q_param ** 2 * dt] * len(self.aug))
+        Q[:nq, nq:self.nx] = Q[nq:self.nx, :nq] = np.eye(nq) * (qa * dt / 2.0)
         self.Q = Q + self._q_input
 
     def set_input_noise(self, sig_u: FloatArray) -> None:

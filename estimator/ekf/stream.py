@@ -156,24 +156,18 @@ class EKFWindowEstimator(WindowEKF):
                 U[:, nr + i] = np.gradient(v, t) if n > 2 else 0.0
         return U
 
-    def _first_window_start(self, t: FloatArray, data: Mapping[str, FloatArray]) -> None:
-        """Start the parameters named in ``first_window`` from a fit of this window."""
-        if self.first_window is None:
-            return
-        params, cfg, names = self.first_window
-        ident = SlidingWindowIdentifier(self.model, params, cfg, self.channels)
-        res = ident.process(t, data)
-        if res.skipped or not res.identifiable:
-            self.held_note = (f"first window not identified ({res.reason or 'unidentifiable'}); "
-                              "the EKF starts from the defaults")
-            return
-        for k in names:
-            if k in res.params and k in self.params:
-                self.params[k] = float(res.params[k])
-                self.start_from[k] = float(res.params[k])
-
     def _start(self, t: FloatArray, data: Mapping[str, FloatArray]) -> None:
-        self._first_window_start(t, data)
+        if self.first_window is not None:   # the named parameters start from a fit of this window
+            params, cfg, names = self.first_window
+            res = SlidingWindowIdentifier(self.model, params, cfg, self.channels).process(t, data)
+            if res.skipped or not res.identifiable:
+                self.held_note = (f"first window not identified ({res.reason or 'unidentifiable'}); "
+                                  "the EKF starts from the defaults")
+            else:
+                for k in names:
+                    if k in res.params and k in self.params:
+                        self.params[k] = float(res.params[k])
+                        self.start_from[k] = float(res.params[k])
         h = uniform_step(t) or float(np.median(np.diff(t)))
         dt = h * self.decimate
         self.ekf = self._new_filter(dt)
@@ -181,10 +175,8 @@ class EKFWindowEstimator(WindowEKF):
         self.ekf.R = np.diag(np.square(sig))
         if self.tuning.input_noise:
             roads = list(self.model.roads) + [f"{r}_dot" for r in self.model.roads]
-            sig_u = np.zeros(len(roads))
-            for i, c in enumerate(roads):
-                if c in data:
-                    sig_u[i] = noise_sd(data[c], DBC_RESOLUTION.get(c, 0.0))
+            sig_u = np.array([noise_sd(data[c], DBC_RESOLUTION.get(c, 0.0)) if c in data else 0.0
+                              for c in roads])
             nr = len(self.model.roads)
             for i, r in enumerate(self.model.roads):
                 if f"{r}_dot" not in data:  # the road's central difference (see _road)
@@ -196,8 +188,7 @@ class EKFWindowEstimator(WindowEKF):
 
     def _new_filter(self, dt: float) -> AugmentedEKF:
         """A filter at the start values, with the first window's measurement and road noise when known."""
-        ekf = AugmentedEKF(self.model, self.params, self.augmented, self.channels, dt,
-                           self.tuning)
+        ekf = AugmentedEKF(self.model, self.params, self.augmented, self.channels, dt, self.tuning)
         if self.ekf is not None:
             ekf.R = self.ekf.R.copy()
             if self._sig_u is not None:
@@ -354,13 +345,8 @@ class EKFWindowEstimator(WindowEKF):
                      "measurements each time; this estimate goes to neither the "
                      "tracker nor the alerts (the model does not describe the data: a "
                      "sensor offset kept, a wrong fixed value)")
-        tail: dict[str, Any] = {}
-        if gaps:
-            tail["gaps"] = len(gaps)
-        if diverged:
-            tail["divergences"] = diverged
-        if self.held:
-            tail["held"] = dict(self.held)
+        tail = {k: v for k, v in (("gaps", len(gaps)), ("divergences", diverged),
+                                  ("held", dict(self.held))) if v}
         # a restarted filter's values are no estimate
         return self._report(t, self._filter(), cpu, None, notes, {}, tail, not diverged, first)
 

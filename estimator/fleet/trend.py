@@ -68,15 +68,6 @@ def _median(a: np.ndarray) -> float:
     return float(b[n // 2]) if n % 2 else 0.5 * float(b[n // 2 - 1] + b[n // 2])
 
 
-def theil_sen(x: np.ndarray, v: np.ndarray) -> tuple[float, float]:
-    """Theil--Sen line ``(intercept, slope)``: median pairwise slope (pairs with distinct x)."""
-    i, j = np.triu_indices(x.size, 1)
-    dx = x[j] - x[i]
-    ok = dx != 0
-    b = float(np.median((v[j] - v[i])[ok] / dx[ok])) if ok.any() else 0.0
-    return float(np.median(v - b * x)), b
-
-
 def robust_trend(t: np.ndarray, v: np.ndarray, s: np.ndarray | None = None,
                  iterations: int = 50, scale: float = DAY_S) -> Trend | None:
     """Robust weighted straight-line trend of ``v`` (SI, stderr ``s``; NaN: unknown) over ``t``.
@@ -98,7 +89,12 @@ def robust_trend(t: np.ndarray, v: np.ndarray, s: np.ndarray | None = None,
     if np.ptp(x) == 0:
         return None
     n = x.size
-    a, b = theil_sen(x, v)
+    # the Theil--Sen line: median pairwise slope (pairs with distinct x)
+    i, j = np.triu_indices(n, 1)
+    dx = x[j] - x[i]
+    ok = dx != 0
+    b = float(np.median((v[j] - v[i])[ok] / dx[ok])) if ok.any() else 0.0
+    a = float(np.median(v - b * x))
     if n == 2:
         return Trend(t_ref, a, b / scale, math.nan, math.nan, math.nan, n=n)
     floor = (1e-12 * max(float(np.max(np.abs(v))), 1e-300)) ** 2
