@@ -15,7 +15,7 @@ from typing import Any, Callable, Mapping
 import numpy as np
 from scipy.stats import chi2
 
-from estimator.diagnose.corners import SiteRestricted, effect_sites, model_limits, strut_limit_key
+from estimator.diagnose.corners import SiteRestricted, model_limits, strut_limit_key
 from estimator.identify.regrid import JITTER_FRACTION, grid_jitter, to_uniform_grid
 from estimator.diagnose.refit import (ModelFit, PhysicalRefit, SensorRefit, baseline_fit,
                                       reweighted_linear_fit)
@@ -139,14 +139,9 @@ def compare(base: ModelFit, aug: ModelFit, noise_var: Mapping[str, float],
     dbic = -2.0 * f * dll + dk * math.log(max(ntot * f, 2.0))
     lr = 2.0 * f * dll
     p = float(chi2.sf(lr, max(dk, 1))) if lr > 0 else 1.0
-    num, den = 0.0, 0.0
-    for c in channels:
-        n, msb = tb[c]
-        _, msa = ta[c]
-        if n == 0 or msb <= 0:
-            continue
-        num += (msb - msa) / msb
-        den += max(msb - noise_var.get(c, 0.0), 0.0) / msb
+    used = [c for c in channels if tb[c][0] and tb[c][1] > 0]
+    num = sum((tb[c][1] - ta[c][1]) / tb[c][1] for c in used)
+    den = sum(max(tb[c][1] - noise_var.get(c, 0.0), 0.0) / tb[c][1] for c in used)
     explained = num / den if den > 0 else 0.0
     return dbic, p, explained, f, aug.rms()
 
@@ -211,10 +206,8 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
         evidence["limits"] = limits
     mo = motion_from(model, meas, base.predicted, problem.U)
     maxlag = max(1, int(round(0.1 / h)))
-    refs: dict[str, FloatArray] = {}
-    for j, rn in enumerate(model.roads):
-        refs[rn] = mo.r[:, j]
-        refs[f"{rn}_dot"] = mo.rd[:, j]
+    refs = {k: v for j, rn in enumerate(model.roads)
+            for k, v in ((rn, mo.r[:, j]), (f"{rn}_dot", mo.rd[:, j]))}
     try:
         struts = strut_sites(model, p0)
     except UsageError:
@@ -327,7 +320,7 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
         result.augmented = fits[best.name]
         where = ""
         if isinstance(result.effect, PhysicalEffect):
-            sites = effect_sites(result.effect, model, result.augmented.params)
+            sites = [s.name for s in result.effect.sites(model, result.augmented.params)]
             evidence["effect_sites"] = sites
             if isinstance(result.effect, SiteRestricted):
                 where = f" in the {' and '.join(sites)} only"

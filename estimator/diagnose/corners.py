@@ -63,11 +63,6 @@ class SiteRestricted(PhysicalEffect):
                 and self.site_names == other.site_names)
 
 
-def effect_sites(effect: PhysicalEffect, model: SuspensionModel, p: Mapping[str, float]) -> list[str]:
-    """Names of the sites ``effect`` acts at in ``model`` (``["front strut", "rear strut"]``)."""
-    return [s.name for s in effect.sites(model, p)]
-
-
 def _struts(model: SuspensionModel) -> list[Site]:
     try:
         return strut_sites(model, model.defaults())

@@ -219,9 +219,8 @@ class PhysicalRefit:
                                       maxfev=150 * len(names) if left is None else left,
                                       coarse=coarse, cap=left)
             nfev += n_used
-            _, x0_new, _ = self.residual(to_theta(u))
-            self.x0 = x0_new
             theta = to_theta(u)
+            self.x0 = self.residual(theta)[1]
             finer = False
             if worth is None or worth(self.simulate(*self.split(theta), self.x0)):
                 try:    # re-check the internal steps at theta: finer if more are needed
@@ -254,10 +253,8 @@ def nm_then_lm(vec: Callable[[FloatArray], FloatArray], u0: FloatArray, step: fl
     all evaluations. Returns ``(u, |vec(u)|^2, nfev)``.
     """
     n = u0.size
-    budget = maxfev if maxfev is not None else 150 * max(n, 1)
     total = cap if cap is not None else 1 << 62
-    if cap is not None:
-        budget = min(budget, cap)
+    budget = min(maxfev if maxfev is not None else 150 * max(n, 1), total)
 
     def cost(u: FloatArray) -> float:
         v = vec(u)

@@ -7,7 +7,7 @@ the share of ``R`` it explains); sensor effects are screened in the output resid
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import Any, Mapping, Sequence
 
 import numpy as np
@@ -92,10 +92,7 @@ class ChannelStats:
         return min(self.ljung_box_p, self.mean_p)
 
     def to_json(self) -> dict[str, float | str]:
-        return {"rms": self.rms, "signal_rms": self.signal_rms, "noise_rms": self.noise_rms,
-                "structured_rms": self.structured_rms, "ljung_box_q": self.ljung_box_q,
-                "ljung_box_p": self.ljung_box_p, "acf_lag1": self.acf_lag1,
-                "mean": self.mean, "mean_p": self.mean_p}
+        return {k: v for k, v in asdict(self).items() if k != "channel"}
 
 
 def channel_stats(name: str, e: FloatArray, y: FloatArray, lags: int = 20, skip: int = 0) -> ChannelStats:
@@ -324,9 +321,8 @@ def velocity_noise(mo: Motion, noise_var: Mapping[str, float], coords: tuple[str
     return out
 
 
-def screen_physical(model: SuspensionModel, p: Mapping[str, float], free: list[str],
-                    mo: Motion, noise_var: Mapping[str, float] | None = None,
-                    h: float | None = None) -> tuple[list[Screen], dict[str, Any]]:
+def screen_physical(model: SuspensionModel, p: Mapping[str, float], free: list[str], mo: Motion,
+                    noise_var: Mapping[str, float], h: float) -> tuple[list[Screen], dict[str, Any]]:
     """Regress the residual force on base sensitivities plus each registered physical candidate.
 
     Each effect is tried in the library's form and in each strut alone; the best plausible form is

@@ -110,8 +110,7 @@ def free_names(model: SuspensionModel, free_masses: bool) -> list[str]:
 
 def truncate(meas: Measurement, fraction: float) -> Measurement:
     """The first ``fraction`` of a record (at least 10 samples)."""
-    n = max(10, int(round(fraction * (meas.t.size - 1))) + 1)
-    n = min(n, meas.t.size)
+    n = min(max(10, int(round(fraction * (meas.t.size - 1))) + 1), meas.t.size)
     return Measurement(t=meas.t[:n], road={k: v[:n] for k, v in meas.road.items()},
                        measured={k: v[:n] for k, v in meas.measured.items()},
                        warnings=list(meas.warnings), source=meas.source)
@@ -163,14 +162,10 @@ def start_parameters(model: SuspensionModel, exp: Experiment, settings: Settings
 
 def band_of(res: IdentResult, free: list[str]) -> dict[str, tuple[float, float]]:
     """The reported 3-sigma band of each free parameter (honest band, else ``+- 3 stderr``)."""
-    out = {}
-    for k in free:
-        if res.bands is not None and k in res.bands:
-            out[k] = res.bands[k]
-        else:
-            v, s = res.params[k], res.stderr[k]
-            out[k] = (v - SIGMAS * s, v + SIGMAS * s) if math.isfinite(s) else (math.nan, math.nan)
-    return out
+    bands = res.bands or {}
+    return {k: bands[k] if k in bands else
+            ((res.params[k] - SIGMAS * res.stderr[k], res.params[k] + SIGMAS * res.stderr[k])
+             if math.isfinite(res.stderr[k]) else (math.nan, math.nan)) for k in free}
 
 
 def joint_region(res: IdentResult, truth: dict[str, float], free: list[str]
@@ -271,8 +266,6 @@ def band_coverage(rows: list[dict[str, Any]]) -> dict[str, Any]:
     """
     n = missed = 0
     rows_missed: list[int] = []
-    joint_rows = 0
-    joint_outside: list[int] = []
     for r in rows:
         truth = r.get("true", {})
         row_miss = False
@@ -286,11 +279,9 @@ def band_coverage(rows: list[dict[str, Any]]) -> dict[str, Any]:
                 row_miss = True
         if row_miss:
             rows_missed.append(int(r["id"]))
-        joint = r.get("joint_3sigma")
-        if joint is not None:
-            joint_rows += 1
-            if not joint["inside"]:
-                joint_outside.append(int(r["id"]))
+    joints = [(int(r["id"]), r["joint_3sigma"]) for r in rows if r.get("joint_3sigma") is not None]
+    joint_rows = len(joints)
+    joint_outside = [i for i, j in joints if not j["inside"]]
     k = len(joint_outside)
     return {"bands": n, "missed": missed, "expected": round(n * JOINT_ALPHA, 4),
             "rows_missed": rows_missed, "joint_rows": joint_rows, "joint_outside": joint_outside,

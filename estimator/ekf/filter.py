@@ -63,6 +63,15 @@ class ParamEKF(ExtendedKalmanFilter):
         d = np.sqrt(np.clip(np.diag(self.P)[self.nx:], 0.0, None))
         return {k: float(self.nominal[j] * d[j]) for j, k in enumerate(self.aug)}
 
+    def restart_motion(self, n: int, tuning: EKFTuning, walk: float = 0.0) -> None:
+        """The first ``2 n`` states' (positions, rates) initial covariance back; ``walk`` s of walk."""
+        P = self.P.copy()
+        P[:2 * n, :] = 0.0
+        P[:, :2 * n] = 0.0
+        P[:2 * n, :2 * n] = np.diag([tuning.p0_pos ** 2] * n + [tuning.p0_vel ** 2] * n)
+        P[self.nx:, self.nx:] += np.eye(len(self.aug)) * tuning.q_param ** 2 * walk
+        self.P = P
+
     def joseph_update(self, y: FloatArray,
                       hx_jac: Callable[[], tuple[FloatArray, FloatArray]]) -> None:
         """Kalman update with measurement ``y`` and ``hx_jac() = (h(x), dh/dx)`` (filterpy's algebra,

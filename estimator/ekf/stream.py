@@ -99,9 +99,7 @@ class WindowEKF:
 
 def ekf_tuning(spec: Any, fs: float) -> tuple[EKFTuning, int]:
     """The EKF's tuning (``ekf.q``) and decimation (``ekf.decimate``, default to about 250 Hz)."""
-    tun = EKFTuning()
-    if spec.ekf_q is not None:
-        tun.q_param = spec.ekf_q
+    tun = EKFTuning() if spec.ekf_q is None else EKFTuning(q_param=spec.ekf_q)
     return tun, spec.ekf_decimate or max(1, int(math.floor(fs / 250.0 + 1e-9)))
 
 
@@ -168,7 +166,7 @@ class EKFWindowEstimator(WindowEKF):
                     if k in res.params and k in self.params:
                         self.params[k] = float(res.params[k])
                         self.start_from[k] = float(res.params[k])
-        h = uniform_step(t) or float(np.median(np.diff(t)))
+        self.h = h = uniform_step(t) or float(np.median(np.diff(t)))
         dt = h * self.decimate
         self.ekf = self._new_filter(dt)
         sig = [max(noise_sd(data[c], DBC_RESOLUTION.get(c, 0.0)), 1e-9) for c in self.channels]
@@ -183,7 +181,6 @@ class EKFWindowEstimator(WindowEKF):
                     sig_u[nr + i] = sig_u[i] / (math.sqrt(2.0) * h)
             self.ekf.set_input_noise(sig_u)
             self._sig_u = sig_u
-        self.h = h
         self.ekf.x[:self.ekf.nx, 0] = self._motion_state(data, 0)
 
     def _new_filter(self, dt: float) -> AugmentedEKF:
@@ -245,17 +242,9 @@ class EKFWindowEstimator(WindowEKF):
         The parameters keep their estimate, their random walk predicted over the real elapsed time.
         """
         ekf = self._filter()
-        nx = ekf.nx
-        tu = self.tuning
         elapsed = t_k - self._t_step
-        ekf.x[:nx, 0] = self._motion_state(data, k)
-        P = ekf.P.copy()
-        P[:nx, :] = 0.0
-        P[:, :nx] = 0.0
-        nq = ekf.nq
-        P[:nx, :nx] = np.diag([tu.p0_pos ** 2] * nq + [tu.p0_vel ** 2] * nq)
-        P[nx:, nx:] += np.eye(P.shape[0] - nx) * tu.q_param ** 2 * max(elapsed, 0.0)
-        ekf.P = P
+        ekf.x[:ekf.nx, 0] = self._motion_state(data, k)
+        ekf.restart_motion(ekf.nq, self.tuning, max(elapsed, 0.0))
         gap = t_k - self._t_seen
         self.restarts += 1
         self.gap_s += gap
@@ -337,14 +326,12 @@ class EKFWindowEstimator(WindowEKF):
         cpu = time.process_time() - c0
         self.cpu += cpu
         notes = ([self.held_note] if self.held_note and self.samples == 0 else []) + gaps
-        first = None
-        if diverged:
-            first = (f"EKF diverged {diverged} time{'s' if diverged > 1 else ''} in this "
-                     f"window (first at t={first_div:.4f} s): its state or covariance "
-                     "was no longer finite; restarted from the start values and the "
-                     "measurements each time; this estimate goes to neither the "
-                     "tracker nor the alerts (the model does not describe the data: a "
-                     "sensor offset kept, a wrong fixed value)")
+        first = None if not diverged else (
+            f"EKF diverged {diverged} time{'s' if diverged > 1 else ''} in this window (first at "
+            f"t={first_div:.4f} s): its state or covariance was no longer finite; restarted from the "
+            "start values and the measurements each time; this estimate goes to neither the tracker "
+            "nor the alerts (the model does not describe the data: a sensor offset kept, a wrong "
+            "fixed value)")
         tail = {k: v for k, v in (("gaps", len(gaps)), ("divergences", diverged),
                                   ("held", dict(self.held))) if v}
         # a restarted filter's values are no estimate

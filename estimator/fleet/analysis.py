@@ -103,8 +103,7 @@ class VehicleSummary:
 
     def margin(self) -> float:
         """Smallest ``(latest - limit) / (nominal - limit)`` over monitored parameters."""
-        last = self.latest
-        if last is None:
+        if self.latest is None:
             return math.inf
         out = math.inf
         for k in self.monitored:

@@ -211,8 +211,7 @@ def classify(result: dict[str, Any] | None) -> tuple[str, str | None]:
         return "ok", None
     notes = [w for w in result.get("warnings", [])
              if "identifiab" in w or "cannot form" in w or w.startswith("road unknown: no ")]
-    why = ("success false" if not result.get("success")
-           else "no free parameter determined")
+    why = "success false" if not result.get("success") else "no free parameter determined"
     return "unidentified", one_line(f"not identified ({why})"
                                     + (f": {'; '.join(notes)}" if notes else ""))
 

@@ -233,9 +233,7 @@ def render(vehicles: Sequence[VehicleSummary], drives: Sequence[dict[str, Any]],
 def _days(fc: Forecast) -> str:
     """``in 41 d (33 to 52 d)`` after the latest drive."""
     d, lo, hi = fc.days()
-    if not math.isfinite(d):
-        return ""
-    return f"in {d:.0f} d ({lo:.0f} to {hi:.0f} d)"
+    return f"in {d:.0f} d ({lo:.0f} to {hi:.0f} d)" if math.isfinite(d) else ""
 
 
 def _km(fc: Forecast) -> str:

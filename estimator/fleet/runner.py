@@ -55,10 +55,7 @@ class ProgressBar:
         rate = done / dt if dt > 0 else 0.0
         line = (f"[{'#' * fill}{'.' * (self.width - fill)}] {done}/{total} drives, "
                 f"{failed} failed, {rate:.1f} drives/s")
-        if self.tty:
-            self.stream.write("\r" + line + ("\n" if done >= total else ""))
-        else:
-            self.stream.write(line + "\n")
+        self.stream.write("\r" + line + ("\n" if done >= total else "") if self.tty else line + "\n")
         self.stream.flush()
 
 
@@ -257,12 +254,10 @@ def _identify(files: list[DriveFile], settings: IdentifySettings, history: Histo
     jobs: list[tuple[str, str, str | None]] = []
     reuse: dict[int, dict[str, Any]] = {}
     for i, f in enumerate(files):
-        digest = None
-        if history is not None:
-            try:
-                digest = file_digest(f.path)
-            except OSError:
-                digest = None       # the task reports the reason
+        try:
+            digest = file_digest(f.path) if history is not None else None
+        except OSError:
+            digest = None       # the task reports the reason
         if digest is not None and digest in known and known[digest]["status"] in READ:
             reuse[i] = {**known[digest], "path": f.path, "vehicle": f.vehicle}
         else:

@@ -68,8 +68,8 @@ def _median(a: np.ndarray) -> float:
     return float(b[n // 2]) if n % 2 else 0.5 * float(b[n // 2 - 1] + b[n // 2])
 
 
-def robust_trend(t: np.ndarray, v: np.ndarray, s: np.ndarray | None = None,
-                 iterations: int = 50, scale: float = DAY_S) -> Trend | None:
+def robust_trend(t: np.ndarray, v: np.ndarray, s: np.ndarray | None = None, scale: float = DAY_S
+                 ) -> Trend | None:
     """Robust weighted straight-line trend of ``v`` (SI, stderr ``s``; NaN: unknown) over ``t``.
 
     ``t`` is epoch s, or odometer m for a trend against distance; ``scale`` the abscissa's unit in
@@ -104,7 +104,7 @@ def robust_trend(t: np.ndarray, v: np.ndarray, s: np.ndarray | None = None,
     var = s * s
     M = np.eye(2)
     for c, kind in ((HUBER_C, "huber"), (BISQUARE_C, "bisquare")):
-        for _ in range(iterations):
+        for _ in range(50):
             r = v - (beta[0] + beta[1] * x)
             mad = MAD_TO_SIGMA * _median(np.abs(r - _median(r)))
             tau2 = max(0.0, mad * mad - _median(s * s))
