@@ -4,7 +4,7 @@ database's size and the report's time, on a synthetic fleet.
 The fleet: ``--drives`` drive logs (default 1000) of ``--duration`` s (default 30) at 200 Hz,
 spread over ``--vehicles`` vehicles (default 5) whose dampers wear at 0, 0.25, 0.5, 0.75,
 1 %/day ... over 40 days; each drive a ``quarter2`` simulation over its own ISO 8608 road,
-encoded by the sensor node's encoder into a candump log (``estimator.fleet.synthetic``).
+encoded by the sensor node's encoder into a candump log (``tools.synthetic_fleet``).
 Identification as ``suspid fleet --model quarter2 --fix m1=300 --fix m2=40``.
 
 Usage::
@@ -21,12 +21,15 @@ from __future__ import annotations
 import argparse
 import os
 import shutil
+import sys
 import tempfile
 import time
 from pathlib import Path
 
-from estimator.fleet import AlertConfig, FleetConfig, IdentifySettings, run_fleet
-from estimator.fleet.synthetic import FleetSpec, VehicleWear, make_fleet
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository: tools.*
+
+from tools.synthetic_fleet import FleetSpec, VehicleWear, make_fleet  # noqa: E402
+from estimator.fleet.runner import AlertConfig, FleetConfig, IdentifySettings, run_fleet
 
 
 class Clock:

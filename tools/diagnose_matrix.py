@@ -30,13 +30,16 @@ import json
 import math
 import sys
 import time
+from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository: tools.*
+
+from tools.synthetic_record import synthetic_record  # noqa: E402
 from estimator.diagnose import diagnose
 from estimator.diagnose.corners import SiteRestricted
-from estimator.diagnose.synthetic import synthetic_record
 from estimator.identify import Parameters
 from suspid.models import get_model
 from suspid.effects import Effect, PhysicalEffect, parse_effect

@@ -3,7 +3,7 @@
 The records are those of the worked example in ``docs/closing-the-loop.md`` (the seed's
 Table 1 quarter car over the speed bump, 2 s at 250 Hz, masses known, the other parameters
 started at 0.7 x the truth), made exactly as ``suspid simulate ... --noise N --seed S``
-makes them (:func:`estimator.diagnose.synthetic.synthetic_record` with ``noise_seed=S``).
+makes them (:func:`tools.synthetic_record.synthetic_record` with ``noise_seed=S``).
 
 Usage::
 
@@ -22,10 +22,13 @@ import argparse
 import json
 import sys
 import time
+from pathlib import Path
 from typing import Any, Sequence
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository: tools.*
+
+from tools.synthetic_record import synthetic_record  # noqa: E402
 from estimator.diagnose.core import diagnose
-from estimator.diagnose.synthetic import synthetic_record
 from estimator.identify import Parameters
 from suspid.models import get_model
 

@@ -13,10 +13,9 @@ from dataclasses import asdict, dataclass, field
 from typing import Any, Callable, Mapping
 
 import numpy as np
-from numpy.typing import NDArray
 from scipy.stats import chi2
 
-from estimator.diagnose.corners import SiteRestricted, effect_sites, model_limits, strut_limit_key
+from estimator.diagnose.corners import SiteRestricted, model_limits, strut_limit_key
 from estimator.identify.regrid import JITTER_FRACTION, grid_jitter, to_uniform_grid
 from estimator.diagnose.refit import (ModelFit, PhysicalRefit, SensorRefit, baseline_fit,
                                       reweighted_linear_fit)
@@ -119,15 +118,6 @@ class DiagnoseResult:
                 "evidence": self.evidence, "warnings": list(self.warnings)}
 
 
-def _loglik_terms(fitm: ModelFit, common: Mapping[str, NDArray[np.bool_]]) -> dict[str, tuple[int, float]]:
-    """Per channel ``(n, mean square)`` of the residual on the samples valid in every fit."""
-    out = {}
-    for c, ok in common.items():
-        e = fitm.residual[c][ok]
-        out[c] = (int(e.size), float(np.mean(e ** 2)) if e.size else 0.0)
-    return out
-
-
 def compare(base: ModelFit, aug: ModelFit, noise_var: Mapping[str, float],
             channels: list[str]) -> tuple[float, float, float, float, dict[str, float]]:
     """Evidence of ``aug`` against ``base``: ``(dBIC, LR p, structured fraction explained, f, rms)``.
@@ -136,7 +126,9 @@ def compare(base: ModelFit, aug: ModelFit, noise_var: Mapping[str, float],
     correlated residuals do not overstate the evidence.
     """
     common = {c: ~(np.isnan(base.residual[c]) | np.isnan(aug.residual[c])) for c in channels}
-    tb, ta = _loglik_terms(base, common), _loglik_terms(aug, common)
+    # per channel (n, mean square) of each residual on the samples valid in both fits
+    tb, ta = ({c: (int(ok.sum()), float(np.mean(f.residual[c][ok] ** 2)) if ok.any() else 0.0)
+               for c, ok in common.items()} for f in (base, aug))
     tiny = 1e-300
     dll = sum(0.5 * n * (math.log(max(tb[c][1], tiny)) - math.log(max(ta[c][1], tiny)))
               for c, (n, _) in tb.items() if n)
@@ -147,14 +139,9 @@ def compare(base: ModelFit, aug: ModelFit, noise_var: Mapping[str, float],
     dbic = -2.0 * f * dll + dk * math.log(max(ntot * f, 2.0))
     lr = 2.0 * f * dll
     p = float(chi2.sf(lr, max(dk, 1))) if lr > 0 else 1.0
-    num, den = 0.0, 0.0
-    for c in channels:
-        n, msb = tb[c]
-        _, msa = ta[c]
-        if n == 0 or msb <= 0:
-            continue
-        num += (msb - msa) / msb
-        den += max(msb - noise_var.get(c, 0.0), 0.0) / msb
+    used = [c for c in channels if tb[c][0] and tb[c][1] > 0]
+    num = sum((tb[c][1] - ta[c][1]) / tb[c][1] for c in used)
+    den = sum(max(tb[c][1] - noise_var.get(c, 0.0), 0.0) / tb[c][1] for c in used)
     explained = num / den if den > 0 else 0.0
     return dbic, p, explained, f, aug.rms()
 
@@ -206,8 +193,8 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
     p0 = dict(ident.params)
     base = baseline_fit(problem, p0, np.asarray(ident.x0), ident.nfev, len(free))
     channels = list(base.residual)
-    h0 = problem.h or float(np.median(np.diff(meas.t)))
-    skip = min(int(round(th.settle_s / h0)), meas.t.size // 10)
+    h = problem.h or float(np.median(np.diff(meas.t)))
+    skip = min(int(round(th.settle_s / h)), meas.t.size // 10)
     stats = {c: channel_stats(c, base.residual[c], np.asarray(meas.measured[c], dtype=float), skip=skip)
              for c in channels}
     noise_var = {c: noise_variance(base.residual[c]) for c in channels}
@@ -218,12 +205,9 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
     if limits:
         evidence["limits"] = limits
     mo = motion_from(model, meas, base.predicted, problem.U)
-    h = problem.h or float(np.median(np.diff(meas.t)))
     maxlag = max(1, int(round(0.1 / h)))
-    refs: dict[str, FloatArray] = {}
-    for j, rn in enumerate(model.roads):
-        refs[rn] = mo.r[:, j]
-        refs[f"{rn}_dot"] = mo.rd[:, j]
+    refs = {k: v for j, rn in enumerate(model.roads)
+            for k, v in ((rn, mo.r[:, j]), (f"{rn}_dot", mo.rd[:, j]))}
     try:
         struts = model.strut_sites(p0)
     except UsageError:
@@ -336,7 +320,7 @@ def diagnose(model: SuspensionModel, meas: Measurement, params: Parameters, cost
         result.augmented = fits[best.name]
         where = ""
         if isinstance(result.effect, PhysicalEffect):
-            sites = effect_sites(result.effect, model, result.augmented.params)
+            sites = [s.name for s in result.effect.sites(model, result.augmented.params)]
             evidence["effect_sites"] = sites
             if isinstance(result.effect, SiteRestricted):
                 where = f" in the {' and '.join(sites)} only"
@@ -508,10 +492,8 @@ def _beats(base: ModelFit, problem: OutputErrorProblem,
 
 
 def _refit(problem: OutputErrorProblem, p0: Mapping[str, float], free: list[str], base: ModelFit,
-           sc: Screen, th: Thresholds, motion: Motion,
-           noise_var: Mapping[str, float] | None = None,
-           references: dict[tuple[str, ...], ModelFit] | None = None,
-           maxfev: int | None = None) -> tuple[ModelFit, ModelFit]:
+           sc: Screen, th: Thresholds, motion: Motion, noise_var: Mapping[str, float],
+           references: dict[tuple[str, ...], ModelFit], maxfev: int | None) -> tuple[ModelFit, ModelFit]:
     """Refit the model augmented with ``sc``: the fit and the one it is judged against (the baseline,
     or the linear model fitted on the channels a sensor effect adds).
     """
@@ -533,14 +515,9 @@ def _refit(problem: OutputErrorProblem, p0: Mapping[str, float], free: list[str]
     rf2 = SensorRefit(problem, p0, free, eff, th.max_delay_s, noise_var)
     start_base = {k: (sc.base[k] if sc.base.get(k, 0) > 0 else p0[k]) for k in p0}
     fm = rf2.fit(start_base, sc.params, maxfev=maxfev)
-    if not rf2.needs_reference:
+    if not rf2.extra:   # the refit sees no channel the baseline's cost does not
         return fm, base
     key = (sc.name, *sorted(rf2.extra), "|", *sorted(eff.affected()))
-    if references is None:
-        references = {}
     if key not in references:
         references[key] = rf2.fit_null(p0, maxfev)
     return fm, references[key]
-
-
-__all__ = ["diagnose", "DiagnoseResult", "Thresholds", "Verdict", "compare", "select_for_refit"]

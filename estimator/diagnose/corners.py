@@ -63,11 +63,6 @@ class SiteRestricted(PhysicalEffect):
                 and self.site_names == other.site_names)
 
 
-def effect_sites(effect: PhysicalEffect, model: SuspensionModel, p: Mapping[str, float]) -> list[str]:
-    """Names of the sites ``effect`` acts at in ``model`` (``["front strut", "rear strut"]``)."""
-    return [s.name for s in effect.sites(model, p)]
-
-
 def _struts(model: SuspensionModel) -> list[Site]:
     try:
         return model.strut_sites(model.defaults())
@@ -99,6 +94,3 @@ def model_limits(model: SuspensionModel) -> dict[str, str]:
             f"value or in one strut alone, and a {pair} disagreement of the screening regression "
             "is reported in evidence.candidates.NAME.screen.per_site")
     return out
-
-
-__all__ = ["SiteRestricted", "effect_sites", "model_limits", "strut_limit_key"]

@@ -101,6 +101,3 @@ def plot_evidence(res: DiagnoseResult, meas: Measurement, path: str | Path) -> N
     fig.tight_layout(rect=(0, 0, 1, 1 - 0.3 / fig.get_figheight()))   # room for the verdict
     fig.savefig(path, dpi=100)
     plt.close(fig)
-
-
-__all__ = ["plot_evidence"]

@@ -150,18 +150,6 @@ class PhysicalRefit:
             p.update(eff.base_overrides(self.sites))
         return p, eff
 
-    def _substeps_at(self, theta: Mapping[str, float]) -> bool:
-        """Re-check the internal steps at ``theta``; True if more were needed (then set)."""
-        p, eff = self.split(theta)
-        try:
-            sub = substeps_for(self.problem, p, eff, self.problem.h or 1.0, self.x0, self.affine)
-        except (np.linalg.LinAlgError, ValueError, FloatingPointError, OverflowError):
-            return False
-        if sub <= self.substeps:
-            return False
-        self.substeps = sub
-        return True
-
     def simulate(self, p: Mapping[str, float], eff: PhysicalEffect,
                  x0: FloatArray) -> dict[str, FloatArray]:
         pr = self.problem
@@ -190,12 +178,11 @@ class PhysicalRefit:
         res = np.where(pr.mask, pr.Ymeas - Y, 0.0) * pr.w
         return res, x0, sim
 
-    def fit(self, start: Mapping[str, float], restarts: int = 3, maxfev: int | None = None,
-            step: float = 0.15, passes: int = 3,
+    def fit(self, start: Mapping[str, float], maxfev: int | None = None,
             worth: Callable[[Mapping[str, FloatArray]], bool] | None = None) -> ModelFit:
         """Nelder–Mead to about 1 %, then Levenberg–Marquardt, from ``start`` (SI, by name).
 
-        Up to ``passes`` runs, restarted while re-centring the initial state or re-checking the
+        Up to 3 runs, restarted while re-centring the initial state or re-checking the
         substeps changes the problem; ``worth(channels)``: whether finer simulation is worth it.
         """
         names = self.base_free + self.eff_names
@@ -223,20 +210,25 @@ class PhysicalRefit:
         nfev = 0
         u = np.zeros(len(names))
         coarse = True
-        for sweep in range(passes):
+        for sweep in range(3):
             left = None if maxfev is None else maxfev - nfev
             if left is not None and left <= 0:
                 break
-            u, f, n_used = nm_then_lm(vec, u, step=step if sweep == 0 else step / 4,
-                                      restarts=restarts if sweep == 0 else 1,
+            u, f, n_used = nm_then_lm(vec, u, step=0.15 if sweep == 0 else 0.15 / 4,
+                                      restarts=3 if sweep == 0 else 1,
                                       maxfev=150 * len(names) if left is None else left,
                                       coarse=coarse, cap=left)
             nfev += n_used
-            _, x0_new, _ = self.residual(to_theta(u))
-            self.x0 = x0_new
             theta = to_theta(u)
-            finer = ((worth is None or worth(self.simulate(*self.split(theta), self.x0)))
-                     and self._substeps_at(theta))
+            self.x0 = self.residual(theta)[1]
+            finer = False
+            if worth is None or worth(self.simulate(*self.split(theta), self.x0)):
+                try:    # re-check the internal steps at theta: finer if more are needed
+                    sub = substeps_for(pr, *self.split(theta), pr.h or 1.0, self.x0, self.affine)
+                except (np.linalg.LinAlgError, ValueError, FloatingPointError, OverflowError):
+                    sub = 0
+                finer = sub > self.substeps
+                self.substeps = max(sub, self.substeps)
             v = vec(u)
             recentred = float(v @ v) < 0.98 * f
             if not (finer or recentred):
@@ -261,10 +253,8 @@ def nm_then_lm(vec: Callable[[FloatArray], FloatArray], u0: FloatArray, step: fl
     all evaluations. Returns ``(u, |vec(u)|^2, nfev)``.
     """
     n = u0.size
-    budget = maxfev if maxfev is not None else 150 * max(n, 1)
     total = cap if cap is not None else 1 << 62
-    if cap is not None:
-        budget = min(budget, cap)
+    budget = min(maxfev if maxfev is not None else 150 * max(n, 1), total)
 
     def cost(u: FloatArray) -> float:
         v = vec(u)
@@ -376,7 +366,7 @@ class SensorRefit:
                                   affine=self.affine)
 
     def fit(self, start_base: Mapping[str, float], start_effect: Mapping[str, Any],
-            restarts: int = 3, maxfev: int | None = None, step: float = 0.15) -> ModelFit:
+            maxfev: int | None = None) -> ModelFit:
         """Fit base and effect parameters from the screening start (see :func:`nm_then_lm`).
 
         ``maxfev`` bounds the whole refit (default 200 per fitted parameter).
@@ -412,15 +402,9 @@ class SensorRefit:
             return r if r.size == big.size and np.all(np.isfinite(r)) else big
 
         budget = maxfev if maxfev is not None else 200 * len(names)
-        u, _, nfev = nm_then_lm(vec, np.zeros(len(names)), step=step, restarts=restarts,
-                                maxfev=budget, cap=maxfev)
+        u, _, nfev = nm_then_lm(vec, np.zeros(len(names)), maxfev=budget, cap=maxfev)
         p, eff = split(to_theta(u))
         return self._model_fit(p, eff, nfev, len(names))
-
-    @property
-    def needs_reference(self) -> bool:
-        """True when the refit sees channels the baseline's cost does not (:meth:`fit_null`)."""
-        return bool(self.extra)
 
     def fit_null(self, start_base: Mapping[str, float], maxfev: int | None = None) -> ModelFit:
         """The declared linear model fitted as :meth:`fit` fits the augmented one, without the effect
@@ -516,7 +500,3 @@ def baseline_fit(problem: OutputErrorProblem, p: Mapping[str, float], x0: FloatA
     allout = all_channels(problem, p, pred.x0)
     resid = residuals_of(problem.model.channels, problem.meas.measured, allout)
     return ModelFit(dict(p), None, resid, allout, problem.seed_cost(ss), nfev, pred.x0, k)
-
-
-__all__ = ["ModelFit", "PhysicalRefit", "SensorRefit", "compensated", "baseline_fit", "substeps_for",
-           "nm_then_lm", "reweighted_linear_fit"]

@@ -7,7 +7,7 @@ the share of ``R`` it explains); sensor effects are screened in the output resid
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import Any, Mapping, Sequence
 
 import numpy as np
@@ -33,19 +33,6 @@ def autocorr(e: FloatArray, maxlag: int) -> FloatArray:
     if d <= 0 or n < 3:
         return np.zeros(maxlag + 1)
     return np.array([float(x[: n - k] @ x[k:]) / d for k in range(min(maxlag, n - 1) + 1)])
-
-
-def ljung_box(e: FloatArray, lags: int = 20) -> tuple[float, float]:
-    """Ljung–Box statistic ``Q`` and its chi-square p-value over ``lags`` lags."""
-    x = np.asarray(e, dtype=float)
-    n = int(np.sum(~np.isnan(x)))
-    if n < 3:  # no lag to test (autocorr's own limit): no evidence against whiteness
-        return 0.0, 1.0
-    lags = max(1, min(lags, n // 4))
-    rho = autocorr(x, lags)[1:]
-    k = np.arange(1, rho.size + 1)
-    Q = float(n * (n + 2) * np.sum(rho ** 2 / (n - k)))
-    return Q, float(chi2.sf(Q, rho.size))
 
 
 def noise_variance(e: FloatArray) -> float:
@@ -105,17 +92,20 @@ class ChannelStats:
         return min(self.ljung_box_p, self.mean_p)
 
     def to_json(self) -> dict[str, float | str]:
-        return {"rms": self.rms, "signal_rms": self.signal_rms, "noise_rms": self.noise_rms,
-                "structured_rms": self.structured_rms, "ljung_box_q": self.ljung_box_q,
-                "ljung_box_p": self.ljung_box_p, "acf_lag1": self.acf_lag1,
-                "mean": self.mean, "mean_p": self.mean_p}
+        return {k: v for k, v in asdict(self).items() if k != "channel"}
 
 
 def channel_stats(name: str, e: FloatArray, y: FloatArray, lags: int = 20, skip: int = 0) -> ChannelStats:
     """Residual ``e`` of signal ``y``; whiteness ignores the first ``skip`` samples."""
     rms = float(np.sqrt(np.nanmean(e ** 2)))
     nv = noise_variance(e)
-    q, p = ljung_box(e[skip:], lags)
+    # the Ljung–Box statistic and its chi-square p-value (no lag to test below 3 samples)
+    n = int(np.sum(~np.isnan(e[skip:])))
+    q, p = 0.0, 1.0
+    if n >= 3:
+        rho = autocorr(e[skip:], max(1, min(lags, n // 4)))[1:]
+        q = float(n * (n + 2) * np.sum(rho ** 2 / (n - np.arange(1, rho.size + 1))))
+        p = float(chi2.sf(q, rho.size))
     m, mp = mean_test(e[skip:])
     return ChannelStats(name, rms, float(np.sqrt(np.nanmean(y ** 2))), math.sqrt(nv),
                         math.sqrt(max(rms ** 2 - nv, 0.0)), q, p, float(autocorr(e[skip:], 1)[1]),
@@ -331,9 +321,8 @@ def velocity_noise(mo: Motion, noise_var: Mapping[str, float], coords: tuple[str
     return out
 
 
-def screen_physical(model: SuspensionModel, p: Mapping[str, float], free: list[str],
-                    mo: Motion, noise_var: Mapping[str, float] | None = None,
-                    h: float | None = None) -> tuple[list[Screen], dict[str, Any]]:
+def screen_physical(model: SuspensionModel, p: Mapping[str, float], free: list[str], mo: Motion,
+                    noise_var: Mapping[str, float], h: float) -> tuple[list[Screen], dict[str, Any]]:
     """Regress the residual force on base sensitivities plus each registered physical candidate.
 
     Each effect is tried in the library's form and in each strut alone; the best plausible form is
@@ -436,13 +425,9 @@ def screen_physical(model: SuspensionModel, p: Mapping[str, float], free: list[s
 
 def output_residuals(meas: Measurement, predicted: Mapping[str, FloatArray]) -> dict[str, FloatArray]:
     """``measured - predicted`` of every measured channel the model predicts (not all NaN)."""
-    resid: dict[str, FloatArray] = {}
-    for c in meas.measured:
-        if c in predicted:
-            e = np.asarray(meas.measured[c], dtype=float) - np.asarray(predicted[c], dtype=float)
-            if np.any(~np.isnan(e)):
-                resid[c] = e
-    return resid
+    resid = {c: np.asarray(meas.measured[c], dtype=float) - np.asarray(predicted[c], dtype=float)
+             for c in meas.measured if c in predicted}
+    return {c: e for c, e in resid.items() if np.any(~np.isnan(e))}
 
 
 def output_regression(cls: type[SensorEffect], group: Sequence[str], t: FloatArray,
@@ -533,10 +518,7 @@ def screen_time_shift(cls: type[SensorEffect], model: SuspensionModel, meas: Mea
         beta, ss, _ = _regress(y, X)
         return ss, _refined(p, base_names, beta)
 
-    def ss_for(m: Motion) -> float:
-        return regress_for(m)[0]
-
-    ss0 = ss_for(mo0)
+    ss0 = regress_for(mo0)[0]
     shifted: dict[tuple[int, float], Motion] = {}
     groups = cls.screen_groups(model, list(meas.measured))
     grid = [d for d in h * np.array([0.5, 1, 1.5, 2, 3, 4, 6, 8, 11, 16, 22, 32]) if d <= max_delay]
@@ -592,7 +574,7 @@ def screen_time_shift(cls: type[SensorEffect], model: SuspensionModel, meas: Mea
                 a[:, i] = shift_allpass(t, a[:, i], d)  # advance; the tail is trimmed
             m2 = Motion(arrs["q"], arrs["qd"], arrs["qdd"], mo0.r, mo0.rd, mo0.source)
             shifted[(gi, float(d))] = m2
-            sss.append(ss_for(m2))
+            sss.append(regress_for(m2)[0])
         f_share = max(0.0, (ss0 - min(sss)) / ss0) if sss and ss0 > 0 else 0.0
         o_share, o_delay = output_screen(g)
         if not sss and o_share <= 0:
@@ -637,9 +619,3 @@ def screen_time_shift(cls: type[SensorEffect], model: SuspensionModel, meas: Mea
         if len(best.alternatives) >= 2:
             break
     return best
-
-
-__all__ = ["autocorr", "ljung_box", "mean_test", "noise_variance", "xcorr_peak", "effective_n", "ChannelStats",
-           "shift_allpass", "velocity_noise", "output_residuals", "output_regression",
-           "channel_stats", "Motion", "motion_from", "residual_force", "force_sensitivity", "Screen",
-           "screen_physical", "screen_sensor", "screen_time_shift"]

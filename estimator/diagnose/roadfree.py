@@ -49,29 +49,17 @@ class RoadUnknownDiagnosis:
                 "evidence": self.evidence, "warnings": list(self.warnings)}
 
 
-def _lowpass_and_rate(x: FloatArray, dt: float, f_hi: float) -> tuple[FloatArray, FloatArray, float]:
-    """``x`` low-passed at ``f_hi`` (Hz), its spectral rate, and the white-noise std (m/s) of the rate."""
-    n = x.size
-    X = np.fft.rfft(x - x.mean())
-    f = np.fft.rfftfreq(n, dt)
-    taper = np.clip((f_hi - f) / (0.2 * f_hi), 0.0, 1.0)
-    taper = 0.5 - 0.5 * np.cos(np.pi * taper)
-    Xs = X * taper
-    s = np.fft.irfft(Xs, n) + x.mean()
-    sd = np.fft.irfft(2j * np.pi * f * Xs, n)
-    top = max(4, int(0.16 * f.size))
-    floor = float(np.median(np.abs(X[-top:]) ** 2) / math.log(2.0))   # per bin, white
-    rate_var = 2.0 * floor * float(np.sum((2 * np.pi * f * taper) ** 2)) / (n * n)
-    return s, sd, math.sqrt(max(rate_var, 0.0))
-
-
 def _strut_motion(model: SuspensionModel, meas: Measurement, p: Mapping[str, float],
                   f_hi: float) -> tuple[list[FloatArray], list[FloatArray], list[float]] | None:
-    """Each strut's extension (m) and rate (m/s), low-passed; None when a strut is unmeasured or gapped."""
+    """Each strut's extension (m) and rate (m/s), low-passed at ``f_hi`` (Hz), and the white-noise std
+    (m/s) of the rate; None when a strut is unmeasured or gapped.
+    """
     t = np.asarray(meas.t, dtype=float)
     if t.size < 64:
         return None
-    dt = float(np.median(np.diff(t)))
+    n = t.size
+    f = np.fft.rfftfreq(n, float(np.median(np.diff(t))))
+    taper = 0.5 - 0.5 * np.cos(np.pi * np.clip((f_hi - f) / (0.2 * f_hi), 0.0, 1.0))
     s_list, sd_list, noise = [], [], []
     for name, site in zip(model.ride_heights, model.strut_sites(p)):
         if name in meas.measured:
@@ -84,10 +72,12 @@ def _strut_motion(model: SuspensionModel, meas: Measurement, p: Mapping[str, flo
             return None
         if not np.all(np.isfinite(d)):
             return None
-        s, sd, sig = _lowpass_and_rate(d, dt, f_hi)
-        s_list.append(s)
-        sd_list.append(sd)
-        noise.append(sig)
+        X = np.fft.rfft(d - d.mean())
+        s_list.append(np.fft.irfft(X * taper, n) + d.mean())
+        sd_list.append(np.fft.irfft(2j * np.pi * f * (X * taper), n))
+        floor = float(np.median(np.abs(X[-max(4, int(0.16 * f.size)):]) ** 2) / math.log(2.0))  # per bin
+        rate_var = 2.0 * floor * float(np.sum((2 * np.pi * f * taper) ** 2)) / (n * n)
+        noise.append(math.sqrt(max(rate_var, 0.0)))
     return s_list, sd_list, noise
 
 

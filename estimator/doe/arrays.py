@@ -82,17 +82,3 @@ L27_ARRAY: IntArray = np.array([
     [3, 3, 2, 1, 2, 1, 3, 1, 3, 2],
     [3, 3, 2, 1, 3, 2, 1, 2, 1, 3],
 ], dtype=np.int64)
-
-
-def is_orthogonal(array: IntArray) -> bool:
-    """``True`` if every pair of columns (levels from 1) shows every level pair equally often."""
-    runs, k = array.shape
-    levels = int(array.max())
-    expected = runs / levels ** 2
-    for i in range(k):
-        for j in range(i + 1, k):
-            counts = np.zeros((levels, levels), dtype=int)
-            np.add.at(counts, (array[:, i] - 1, array[:, j] - 1), 1)
-            if not np.all(counts == expected):
-                return False
-    return True

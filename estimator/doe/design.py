@@ -78,11 +78,8 @@ def design_spec(model: SuspensionModel) -> DesignSpec:
                       dict(d.body_x0), dict(d.choices))
 
 
-class _Designs(Mapping[str, Any]):
-    """``model name -> DesignSpec`` (or its attribute ``attr``) of every model with a design."""
-
-    def __init__(self, attr: str | None = None) -> None:
-        self._attr = attr
+class _Designs(Mapping[str, str]):
+    """``model name -> design name`` of every model with a design."""
 
     def _names(self) -> list[str]:
         out = []
@@ -94,14 +91,11 @@ class _Designs(Mapping[str, Any]):
                 continue
         return out
 
-    def __getitem__(self, name: str) -> Any:
-        if name not in MODELS:
+    def __getitem__(self, name: str) -> str:
+        model = get_model(name) if name in MODELS else None
+        if model is None or model.doe_design is None:
             raise KeyError(name)
-        model = get_model(name)
-        if model.doe_design is None:
-            raise KeyError(name)
-        spec = design_spec(model)
-        return spec if self._attr is None else getattr(spec, self._attr)
+        return design_spec(model).name
 
     def __iter__(self) -> Iterator[str]:
         return iter(self._names())
@@ -110,10 +104,8 @@ class _Designs(Mapping[str, Any]):
         return len(self._names())
 
 
-#: every model's design, by model name (read from the models; nothing here names one)
-DESIGN_SPECS: Mapping[str, DesignSpec] = _Designs()
-#: the design's name of every model that has one (``suspid doe --model`` choices)
-DESIGNS: Mapping[str, str] = _Designs("name")
+#: the design's name of every model that has one (``suspid doe --model`` choices; read from the models)
+DESIGNS: Mapping[str, str] = _Designs()
 
 
 @dataclass
@@ -136,9 +128,8 @@ def experiments(model: SuspensionModel | str) -> list[Experiment]:
     states = {s: i for i, s in enumerate(model.state_names)}
     out = []
     for row_id, row in enumerate(array, start=1):
-        truth: dict[str, float] = {}
+        truth = dict(spec.constants)
         x0 = np.zeros(model.n_states)
-        truth.update(spec.constants)
         for s, v in spec.body_x0.items():
             x0[states[s]] = v
         lv = {}
@@ -177,10 +168,8 @@ def setup_record(model: SuspensionModel | str, horizon: float = HORIZON,
         "column_mapping": {k: f"{levels[k][0]} -> {v}" for k, v in cols.items()},
         "simulation": "exact modal solution (suspid.simulate), not ode45",
     }
-    if spec.constants:
-        rec["constants"] = dict(spec.constants)
-    if spec.body_x0:
-        rec["body_initial_state"] = dict(spec.body_x0)
-    if spec.choices:
-        rec["choices"] = dict(spec.choices)
+    for key, value in (("constants", spec.constants), ("body_initial_state", spec.body_x0),
+                       ("choices", spec.choices)):
+        if value:
+            rec[key] = dict(value)
     return rec

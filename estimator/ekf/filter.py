@@ -35,7 +35,69 @@ class EKFTuning:
     input_noise: bool = True
 
 
-class AugmentedEKF(ExtendedKalmanFilter):
+class ParamEKF(ExtendedKalmanFilter):
+    """What both EKFs share: relative parameters after the ``nx`` motion states, the update, the NIS."""
+
+    nx: int
+    nominal: FloatArray
+    aug: list[str]
+    params: dict[str, float]
+    x: FloatArray
+    P: FloatArray
+    F: Any
+    _I: FloatArray
+    #: running sum of the normalised innovations squared and their degrees of freedom
+    nis_sum = 0.0
+    nis_dof = 0
+
+    def param_values(self, z: FloatArray | None = None) -> dict[str, float]:
+        """Every parameter (SI) with the augmented ones from state ``z`` (default current)."""
+        zz = self.x[:, 0] if z is None else z
+        p = dict(self.params)
+        for j, k in enumerate(self.aug):
+            p[k] = float(self.nominal[j] * zz[self.nx + j])
+        return p
+
+    def param_stderr(self) -> dict[str, float]:
+        """Standard deviation of each augmented parameter (SI) from ``P``."""
+        d = np.sqrt(np.clip(np.diag(self.P)[self.nx:], 0.0, None))
+        return {k: float(self.nominal[j] * d[j]) for j, k in enumerate(self.aug)}
+
+    def restart_motion(self, n: int, tuning: EKFTuning, walk: float = 0.0) -> None:
+        """The first ``2 n`` states' (positions, rates) initial covariance back; ``walk`` s of walk."""
+        P = self.P.copy()
+        P[:2 * n, :] = 0.0
+        P[:, :2 * n] = 0.0
+        P[:2 * n, :2 * n] = np.diag([tuning.p0_pos ** 2] * n + [tuning.p0_vel ** 2] * n)
+        P[self.nx:, self.nx:] += np.eye(len(self.aug)) * tuning.q_param ** 2 * walk
+        self.P = P
+
+    def joseph_update(self, y: FloatArray,
+                      hx_jac: Callable[[], tuple[FloatArray, FloatArray]]) -> None:
+        """Kalman update with measurement ``y`` and ``hx_jac() = (h(x), dh/dx)`` (filterpy's algebra,
+        Joseph form, without its deep copies); NaN entries left out.
+        """
+        zz = np.asarray(y, dtype=float).reshape(-1)
+        ok = np.isfinite(zz)
+        if not ok.any():
+            return
+        hx, H = hx_jac()
+        Rm = np.asarray(self.R, dtype=float)
+        if not ok.all():
+            H, hx, zz, Rm = H[ok], hx[ok], zz[ok], Rm[np.ix_(ok, ok)]
+        PHT = self.P @ H.T
+        S = H @ PHT + Rm
+        K = np.linalg.solve(S, PHT.T).T
+        e = zz - hx
+        self.x = self.x + (K @ e)[:, None]
+        I_KH = self._I - K @ H
+        self.P = I_KH @ self.P @ I_KH.T + K @ Rm @ K.T
+        # normalised innovation squared: chi-square with e.size dof when the filter fits
+        self.nis_sum += float(e @ np.linalg.solve(S, e))
+        self.nis_dof += int(e.size)
+
+
+class AugmentedEKF(ParamEKF):
     """filterpy EKF whose prediction integrates the model's right-hand side.
 
     ``params`` holds every value (SI), the ``augmented`` dampers and springs at nominal;
@@ -67,10 +129,9 @@ class AugmentedEKF(ExtendedKalmanFilter):
             raise UsageError(f"model {model.name}: the parameters {', '.join(self.aug)} do not "
                              f"enter its matrices affinely; the EKF needs them to")
         self._G = self.pieces.dAB * self.nominal[:, None, None]  # per relative unit
-        nzz = self.nx + len(self.aug)
-        self._J0 = np.zeros((nzz, nzz))                          # dq/dt = q'
+        self._J0 = np.zeros((nz, nz))                          # dq/dt = q'
         self._J0[:self.nq, self.nq:self.nx] = np.eye(self.nq)
-        self._I = np.eye(nzz)
+        self._I = np.eye(nz)
         self._linear = not model.extra_force
         self._rows = []
         for c in self.channels:
@@ -84,39 +145,15 @@ class AugmentedEKF(ExtendedKalmanFilter):
         self.P = np.diag([tu.p0_pos ** 2] * self.nq + [tu.p0_vel ** 2] * self.nq
                          + [tu.p0_param ** 2] * len(self.aug))
         self.x = np.concatenate([np.zeros(self.nx), np.ones(len(self.aug))])[:, None]
-        #: running sum of the normalised innovations squared and their degrees of freedom
-        self.nis_sum = 0.0
-        self.nis_dof = 0
         #: process noise from the road's own noise (:meth:`set_input_noise`)
         self._q_input = np.zeros((nz, nz))
         self.set_q(self.dt)
 
-    # ---- parameters ----------------------------------------------------------------------
-    def param_values(self, z: FloatArray | None = None) -> dict[str, float]:
-        """Every parameter (SI) with the augmented ones from state ``z`` (default current)."""
-        zz = self.x[:, 0] if z is None else z
-        p = dict(self.params)
-        for j, k in enumerate(self.aug):
-            p[k] = float(self.nominal[j] * zz[self.nx + j])
-        return p
-
-    def param_stderr(self) -> dict[str, float]:
-        """Standard deviation of each augmented parameter (SI) from ``P``."""
-        d = np.sqrt(np.clip(np.diag(self.P)[self.nx:], 0.0, None))
-        return {k: float(self.nominal[j] * d[j]) for j, k in enumerate(self.aug)}
-
     def set_q(self, dt: float) -> None:
         """Process noise for a step ``dt`` (s)."""
-        tu = self.tuning
-        nz = self.dim_x
-        Q = np.zeros((nz, nz))
-        qa = tu.q_state ** 2 * dt
-        for i in range(self.nq):  # white acceleration noise on each coordinate
-            Q[i, i] = qa * dt * dt / 3.0
-            Q[i, self.nq + i] = Q[self.nq + i, i] = qa * dt / 2.0
-            Q[self.nq + i, self.nq + i] = qa
-        for j in range(len(self.aug)):
-            Q[self.nx + j, self.nx + j] = tu.q_param ** 2 * dt
+        nq, qa = self.nq, self.tuning.q_state ** 2 * dt   # white acceleration noise per coordinate
+        Q = np.diag([qa * dt * dt / 3.0] * nq + [qa] * nq + [self.tuning.q_param ** 2 * dt] * len(self.aug))
+        Q[:nq, nq:self.nx] = Q[nq:self.nx, :nq] = np.eye(nq) * (qa * dt / 2.0)
         self.Q = Q + self._q_input
 
     def set_input_noise(self, sig_u: FloatArray) -> None:
@@ -263,62 +300,22 @@ class AugmentedEKF(ExtendedKalmanFilter):
                 H[k] = J[self.nq + i]
         return H
 
-    # ---- filterpy hooks -------------------------------------------------------------------
-    def predict_step(self, u0: FloatArray, u1: FloatArray) -> None:
-        """Nonlinear prediction over one sample (sets ``F`` then calls filterpy's predict)."""
-        znext, F = self.rk4(self.x[:, 0], u0, u1, self.dt)
-        self.F = F
-        self._znext = znext
-        self.predict()
-
-    def predict_x(self, u: Any = 0) -> None:
-        """filterpy hook: the state prediction is the RK4 step computed in :meth:`predict_step`."""
-        self.x = self._znext[:, None]
-
-    def update(self, z: FloatArray, HJacobian: Callable[..., FloatArray],
-               Hx: Callable[..., FloatArray], R: FloatArray | float | None = None,
-               args: Any = (), hx_args: Any = (),
-               residual: Callable[[FloatArray, FloatArray], FloatArray] = np.subtract) -> None:
-        """Kalman update with measurement ``z`` (filterpy's signature and algebra, Joseph form, without
-        its deep copies); NaN entries left out.
-        """
-        if z is None:
-            return
-        zz = np.asarray(z, dtype=float).reshape(-1)
-        ok = np.isfinite(zz)
-        if not ok.any():
-            return
-        if not isinstance(args, tuple):
-            args = (args,)
-        if not isinstance(hx_args, tuple):
-            hx_args = (hx_args,)
-        Rm: FloatArray = (np.asarray(self.R, dtype=float) if R is None
-                          else np.eye(self.dim_z) * float(R) if isinstance(R, (int, float))
-                          else np.asarray(R, dtype=float))
-        H = HJacobian(self.x, *args)
-        hx = Hx(self.x, *hx_args)[:, 0]
-        if not ok.all():
-            H, hx, zz, Rm = H[ok], hx[ok], zz[ok], Rm[np.ix_(ok, ok)]
-        PHT = self.P @ H.T
-        S = H @ PHT + Rm
-        K = np.linalg.solve(S, PHT.T).T
-        y = residual(zz, hx)
-        self.x = self.x + (K @ y)[:, None]
-        I_KH = self._I - K @ H
-        self.P = I_KH @ self.P @ I_KH.T + K @ Rm @ K.T
-        self.y, self.K, self.S = y, K, S
-        # normalised innovation squared: chi-square with y.size dof when the filter fits
-        self.nis_sum += float(y @ np.linalg.solve(S, y))
-        self.nis_dof += int(y.size)
-
     def step(self, y: FloatArray, u0: FloatArray, u1: FloatArray) -> None:
-        """Predict to this sample and update with measurement ``y`` (NaN entries left out)."""
-        self.predict_step(u0, u1)
-        self.update(y, self.HJ, self.hx, args=(u1,), hx_args=(u1,))
+        """Predict to this sample (RK4 and its Jacobian as ``F``) and update with measurement ``y``."""
+        znext, self.F = self.rk4(self.x[:, 0], u0, u1, self.dt)
+        self.x = znext[:, None]
+        self.P = np.dot(self.F, self.P).dot(self.F.T) + self.Q
+        self.joseph_update(y, lambda: (self.hx(self.x, u1)[:, 0], self.HJ(self.x, u1)))
 
 
-def window_nis(nis_sum: float, nis_dof: int, before: tuple[float, int], level: float,
-               tolerance: float) -> tuple[float, int, float, float, str | None]:
+#: the NIS consistency band: its probability and the factor it is widened by
+NIS_LEVEL = 0.999
+NIS_TOLERANCE = 1.5
+
+
+def window_nis(nis_sum: float, nis_dof: int, before: tuple[float, int],
+               level: float = NIS_LEVEL, tolerance: float = NIS_TOLERANCE
+               ) -> tuple[float, int, float, float, str | None]:
     """Mean normalised innovation squared per dof since ``before`` and its consistency band:
     ``(nis, dof, lo, hi, warning)``, the ``level`` band widened ``tolerance`` times.
     """

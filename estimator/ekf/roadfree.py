@@ -12,9 +12,8 @@ import time
 from typing import Any, Mapping, Sequence
 
 import numpy as np
-from filterpy.kalman import ExtendedKalmanFilter
 
-from estimator.ekf.filter import EKFTuning
+from estimator.ekf.filter import EKFTuning, ParamEKF
 from estimator.ekf.stream import WindowEKF, ekf_tuning, noise_sd
 from estimator.identify import Parameters
 from estimator.identify.roadfree import fit_road_unknown
@@ -33,7 +32,7 @@ P0_OFFSET = 1.0
 GAP_STEPS = 1.5
 
 
-class BodyEquationEKF(ExtendedKalmanFilter):
+class BodyEquationEKF(ParamEKF):
     """filterpy EKF on the body equations: deflections and their rates, offsets, struts.
 
     ``params`` (SI) hold the ``augmented`` struts' start values; ``channels`` are the body
@@ -70,6 +69,10 @@ class BodyEquationEKF(ExtendedKalmanFilter):
         self.c_idx = {s.c_name: i for i, s in enumerate(sites) if s.c_name}
         self.k_idx = {s.k_name: i for i, s in enumerate(sites) if s.k_name}
         self.nominal = np.array([float(p[k]) for k in self.aug])
+        #: the struts' held dampers and springs (SI)
+        self._c0, self._k0 = np.zeros(ns), np.zeros(ns)
+        self._c0[list(self.c_idx.values())] = [p[n] for n in self.c_idx]
+        self._k0[list(self.k_idx.values())] = [p[n] for n in self.k_idx]
         self.ns, self.nb = ns, nb
         self.nx = 2 * ns + nb
         nz = self.nx + len(self.aug)
@@ -92,8 +95,6 @@ class BodyEquationEKF(ExtendedKalmanFilter):
                          + [P0_OFFSET ** 2] * nb + [tuning.p0_param ** 2] * len(self.aug))
         self.x = np.concatenate([np.zeros(self.nx), np.ones(len(self.aug))])[:, None]
         self._I = np.eye(nz)
-        self.nis_sum = 0.0
-        self.nis_dof = 0
         H0 = np.zeros((len(self.channels), nz))
         for r, c in enumerate(self.channels[nb:], start=nb):
             base = c.removesuffix("_dot")
@@ -105,12 +106,7 @@ class BodyEquationEKF(ExtendedKalmanFilter):
 
     def struts(self, z: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Every strut's damper and spring (SI) at state ``z``."""
-        c = np.zeros(self.ns)
-        k = np.zeros(self.ns)
-        for name, i in self.c_idx.items():
-            c[i] = self.params[name]
-        for name, i in self.k_idx.items():
-            k[i] = self.params[name]
+        c, k = self._c0.copy(), self._k0.copy()
         for j, name in enumerate(self.aug):
             v = self.nominal[j] * z[self.nx + j]
             if name in self.c_idx:
@@ -142,35 +138,7 @@ class BodyEquationEKF(ExtendedKalmanFilter):
         """Predict one step and update with ``y`` (NaN entries left out; Joseph form)."""
         self.x = self.F @ self.x
         self.P = self.F @ self.P @ self.F.T + self.Q
-        zz = np.asarray(y, dtype=float)
-        ok = np.isfinite(zz)
-        if not ok.any():
-            return
-        hx, H = self.hx_jac(self.x[:, 0])
-        Rm = np.asarray(self.R, dtype=float)
-        if not ok.all():
-            H, hx, zz, Rm = H[ok], hx[ok], zz[ok], Rm[np.ix_(ok, ok)]
-        PHT = self.P @ H.T
-        S = H @ PHT + Rm
-        K = np.linalg.solve(S, PHT.T).T
-        e = zz - hx
-        self.x = self.x + (K @ e)[:, None]
-        I_KH = self._I - K @ H
-        self.P = I_KH @ self.P @ I_KH.T + K @ Rm @ K.T
-        self.nis_sum += float(e @ np.linalg.solve(S, e))
-        self.nis_dof += int(e.size)
-
-    def param_values(self) -> dict[str, float]:
-        """Every parameter (SI), the augmented ones from the state."""
-        out = dict(self.params)
-        for j, k in enumerate(self.aug):
-            out[k] = float(self.nominal[j] * self.x[self.nx + j, 0])
-        return out
-
-    def param_stderr(self) -> dict[str, float]:
-        """Standard deviation of each augmented parameter (SI)."""
-        d = np.sqrt(np.clip(np.diag(self.P)[self.nx:], 0.0, None))
-        return {k: float(self.nominal[j] * d[j]) for j, k in enumerate(self.aug)}
+        self.joseph_update(y, lambda: self.hx_jac(self.x[:, 0]))
 
 
 class RoadFreeEKFEstimator(WindowEKF):
@@ -184,9 +152,8 @@ class RoadFreeEKFEstimator(WindowEKF):
     road = "unknown"
 
     def __init__(self, model: SuspensionModel, params: Parameters, channels: Sequence[str],
-                 tuning: EKFTuning, decimate: int = 1, first_window: Sequence[str] = (),
-                 nis_level: float = 0.999, nis_tolerance: float = 1.5) -> None:
-        self._setup(model, tuning, decimate, nis_level, nis_tolerance)
+                 tuning: EKFTuning, decimate: int = 1, first_window: Sequence[str] = ()) -> None:
+        self._setup(model, tuning, decimate)
         self.params = params.copy()
         self.channels = list(channels)
         self.first_window = list(first_window)
@@ -207,8 +174,7 @@ class RoadFreeEKFEstimator(WindowEKF):
                 else:
                     self.note = (f"first window did not determine {k}; the EKF starts it from "
                                  f"{self.params[k].value:g} {model.spec(k).unit}")
-        h = uniform_step(t) or float(np.median(np.diff(t)))
-        self.h = h
+        self.h = h = uniform_step(t) or float(np.median(np.diff(t)))
         dt = h * self.decimate
         res_q = channel_resolution(model.name)
         # deflection acceleration variance at the filter's step, less the noise part
@@ -223,18 +189,17 @@ class RoadFreeEKFEstimator(WindowEKF):
             s = noise_sd(data[name], res_q.get(name, 0.0))
             acc_var.append(max(float(np.var(a)) - 6.0 * s * s / dt ** 4, 0.1 * float(np.var(a)),
                                1e-6))
-        aug = list(self.params.free)
-        ekf = BodyEquationEKF(model, self.params.valuesdict(), aug, self.channels, dt,
+        ekf = BodyEquationEKF(model, self.params.valuesdict(), list(self.params.free), self.channels, dt,
                               self.tuning, np.array(acc_var))
         sig = [max(noise_sd(data[c], res_q.get(c, 0.0)), 1e-9) for c in ekf.channels]
         ekf.R = np.diag(np.square(sig))
         self._init_motion(ekf, data, 0)
         return ekf
 
-    def _init_motion(self, ekf: BodyEquationEKF, data: Mapping[str, FloatArray], k: int) -> None:
-        """Deflections and rates from the ride heights at sample ``k``; the motion's initial covariance."""
+    def _init_motion(self, ekf: BodyEquationEKF, data: Mapping[str, FloatArray], k: int,
+                     walk: float = 0.0) -> None:
+        """Deflections and rates from the ride heights at sample ``k``, covariance :meth:`restart_motion`."""
         ns = ekf.ns
-        tu = self.tuning
         for i, name in enumerate(self.model.ride_heights):
             y = np.asarray(data[name], dtype=float)[k:k + 3]
             if y.size and np.isfinite(y[0]):
@@ -244,11 +209,7 @@ class RoadFreeEKFEstimator(WindowEKF):
             v = data.get(f"{name}_dot")
             if v is not None and k < len(v) and np.isfinite(v[k]):
                 ekf.x[ns + i, 0] = float(v[k])
-        P = ekf.P.copy()
-        P[:2 * ns, :] = 0.0
-        P[:, :2 * ns] = 0.0
-        P[:2 * ns, :2 * ns] = np.diag([tu.p0_pos ** 2] * ns + [tu.p0_vel ** 2] * ns)
-        ekf.P = P
+        ekf.restart_motion(ns, self.tuning, walk)
 
     def process(self, t: FloatArray, data: Mapping[str, FloatArray]) -> StepResult:
         """Filter the window's new samples; report the struts at the window end."""
@@ -274,9 +235,7 @@ class RoadFreeEKFEstimator(WindowEKF):
                     continue
                 if tk - self._t_seen > limit:
                     gap = tk - self._t_seen
-                    self._init_motion(ekf, dnew, k)
-                    ekf.P[ekf.nx:, ekf.nx:] += (np.eye(len(ekf.aug)) * self.tuning.q_param ** 2
-                                                * gap)
+                    self._init_motion(ekf, dnew, k, gap)
                     self.restarts += 1
                     self.gap_s += gap
                     gaps.append(f"gap in the data from t={self._t_seen:.4f} s to t={tk:.4f} s "

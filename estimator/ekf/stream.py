@@ -7,11 +7,11 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any, Mapping, Protocol, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from estimator.ekf.filter import AugmentedEKF, EKFTuning, window_nis
+from estimator.ekf.filter import AugmentedEKF, EKFTuning, ParamEKF, window_nis
 from estimator.identify import Parameters
 from estimator.stream.config import WindowConfig, default_decimation
 from estimator.stream.events import Estimate
@@ -34,16 +34,6 @@ def noise_sd(y: FloatArray, resolution: float) -> float:
     return max(nf if math.isfinite(nf) else 0.0, resolution / math.sqrt(12.0))
 
 
-class _Filter(Protocol):
-    nis_sum: float
-    nis_dof: int
-    aug: list[str]
-
-    def param_values(self) -> dict[str, float]: ...
-
-    def param_stderr(self) -> dict[str, float]: ...
-
-
 class WindowEKF:
     """What both window EKFs share: the monitor's estimator interface, counters, the report."""
 
@@ -53,13 +43,10 @@ class WindowEKF:
     lag = 0.0
     overlap = 1.0
 
-    def _setup(self, model: SuspensionModel, tuning: EKFTuning, decimate: int, nis_level: float,
-               nis_tolerance: float) -> None:
+    def _setup(self, model: SuspensionModel, tuning: EKFTuning, decimate: int) -> None:
         self.model = model
         self.tuning = tuning
         self.decimate = max(1, int(decimate))
-        self.nis_level = nis_level
-        self.nis_tolerance = nis_tolerance
         self.t_last = -math.inf
         self._t_seen = -math.inf
         self._phase = 0
@@ -74,7 +61,7 @@ class WindowEKF:
         self._nis0 = (0.0, 0)
         self.start_from: dict[str, float] = {}
 
-    def _report(self, t: FloatArray, ekf: _Filter, cpu: float, checked: Sequence[str] | None,
+    def _report(self, t: FloatArray, ekf: ParamEKF, cpu: float, checked: Sequence[str] | None,
                 notes: list[str], head: dict[str, Any], tail: dict[str, Any],
                 track: bool = True, first: str | None = None) -> StepResult:
         """The window's estimate: parameters, NIS and its band, warnings (``first`` leads)."""
@@ -82,8 +69,7 @@ class WindowEKF:
         se = ekf.param_stderr()
         ok = all(math.isfinite(vals[k]) and vals[k] > 0 for k in (vals if checked is None else checked))
         warns = [] if ok else ["EKF parameter state left the physical range"]
-        nis, _, lo, hi, nis_warning = window_nis(ekf.nis_sum, ekf.nis_dof, self._nis0,
-                                                 self.nis_level, self.nis_tolerance)
+        nis, _, lo, hi, nis_warning = window_nis(ekf.nis_sum, ekf.nis_dof, self._nis0)
         self._nis0 = (ekf.nis_sum, ekf.nis_dof)
         if nis_warning is not None:
             self.nis_windows_out += 1
@@ -100,7 +86,7 @@ class WindowEKF:
         track = track and ok
         return StepResult(ev, vals if track else None, se if track else None)
 
-    def _summary(self, ekf: _Filter | None, head: dict[str, Any], augmented: list[str],
+    def _summary(self, ekf: ParamEKF | None, head: dict[str, Any], augmented: list[str],
                  held: dict[str, str]) -> dict[str, Any]:
         """Samples filtered, CPU time, consistency, restarts."""
         return {**head, "samples": self.samples, "cpu_s": self.cpu,
@@ -113,9 +99,7 @@ class WindowEKF:
 
 def ekf_tuning(spec: Any, fs: float) -> tuple[EKFTuning, int]:
     """The EKF's tuning (``ekf.q``) and decimation (``ekf.decimate``, default to about 250 Hz)."""
-    tun = EKFTuning()
-    if spec.ekf_q is not None:
-        tun.q_param = spec.ekf_q
+    tun = EKFTuning() if spec.ekf_q is None else EKFTuning(q_param=spec.ekf_q)
     return tun, spec.ekf_decimate or max(1, int(math.floor(fs / 250.0 + 1e-9)))
 
 
@@ -125,16 +109,15 @@ class EKFWindowEstimator(WindowEKF):
     ``params`` (SI) hold the fixed values and the ``augmented`` ones' starts; ``decimate``: use every
     n-th sample; ``held``: ``parameter -> reason`` of free parameters the filter holds;
     ``first_window`` ``(Parameters, WindowConfig, names)`` starts ``names`` from a sliding-window fit
-    of the first window; ``nis_level`` and ``nis_tolerance`` set the NIS band and its widening.
+    of the first window.
     """
 
     def __init__(self, model: SuspensionModel, params: Mapping[str, float],
                  augmented: Sequence[str], channels: Sequence[str],
                  tuning: EKFTuning | None = None, decimate: int = 1,
                  held: Mapping[str, str] | None = None,
-                 first_window: tuple[Parameters, WindowConfig, Sequence[str]] | None = None,
-                 nis_level: float = 0.999, nis_tolerance: float = 1.5) -> None:
-        self._setup(model, tuning or EKFTuning(), decimate, nis_level, nis_tolerance)
+                 first_window: tuple[Parameters, WindowConfig, Sequence[str]] | None = None) -> None:
+        self._setup(model, tuning or EKFTuning(), decimate)
         self.held = dict(held or {})
         self.first_window = first_window
         self.params = dict(params)
@@ -171,48 +154,38 @@ class EKFWindowEstimator(WindowEKF):
                 U[:, nr + i] = np.gradient(v, t) if n > 2 else 0.0
         return U
 
-    def _first_window_start(self, t: FloatArray, data: Mapping[str, FloatArray]) -> None:
-        """Start the parameters named in ``first_window`` from a fit of this window."""
-        if self.first_window is None:
-            return
-        params, cfg, names = self.first_window
-        ident = SlidingWindowIdentifier(self.model, params, cfg, self.channels)
-        res = ident.process(t, data)
-        if res.skipped or not res.identifiable:
-            self.held_note = (f"first window not identified ({res.reason or 'unidentifiable'}); "
-                              "the EKF starts from the defaults")
-            return
-        for k in names:
-            if k in res.params and k in self.params:
-                self.params[k] = float(res.params[k])
-                self.start_from[k] = float(res.params[k])
-
     def _start(self, t: FloatArray, data: Mapping[str, FloatArray]) -> None:
-        self._first_window_start(t, data)
-        h = uniform_step(t) or float(np.median(np.diff(t)))
+        if self.first_window is not None:   # the named parameters start from a fit of this window
+            params, cfg, names = self.first_window
+            res = SlidingWindowIdentifier(self.model, params, cfg, self.channels).process(t, data)
+            if res.skipped or not res.identifiable:
+                self.held_note = (f"first window not identified ({res.reason or 'unidentifiable'}); "
+                                  "the EKF starts from the defaults")
+            else:
+                for k in names:
+                    if k in res.params and k in self.params:
+                        self.params[k] = float(res.params[k])
+                        self.start_from[k] = float(res.params[k])
+        self.h = h = uniform_step(t) or float(np.median(np.diff(t)))
         dt = h * self.decimate
         self.ekf = self._new_filter(dt)
         sig = [max(noise_sd(data[c], DBC_RESOLUTION.get(c, 0.0)), 1e-9) for c in self.channels]
         self.ekf.R = np.diag(np.square(sig))
         if self.tuning.input_noise:
             roads = list(self.model.roads) + [f"{r}_dot" for r in self.model.roads]
-            sig_u = np.zeros(len(roads))
-            for i, c in enumerate(roads):
-                if c in data:
-                    sig_u[i] = noise_sd(data[c], DBC_RESOLUTION.get(c, 0.0))
+            sig_u = np.array([noise_sd(data[c], DBC_RESOLUTION.get(c, 0.0)) if c in data else 0.0
+                              for c in roads])
             nr = len(self.model.roads)
             for i, r in enumerate(self.model.roads):
                 if f"{r}_dot" not in data:  # the road's central difference (see _road)
                     sig_u[nr + i] = sig_u[i] / (math.sqrt(2.0) * h)
             self.ekf.set_input_noise(sig_u)
             self._sig_u = sig_u
-        self.h = h
         self.ekf.x[:self.ekf.nx, 0] = self._motion_state(data, 0)
 
     def _new_filter(self, dt: float) -> AugmentedEKF:
         """A filter at the start values, with the first window's measurement and road noise when known."""
-        ekf = AugmentedEKF(self.model, self.params, self.augmented, self.channels, dt,
-                           self.tuning)
+        ekf = AugmentedEKF(self.model, self.params, self.augmented, self.channels, dt, self.tuning)
         if self.ekf is not None:
             ekf.R = self.ekf.R.copy()
             if self._sig_u is not None:
@@ -269,17 +242,9 @@ class EKFWindowEstimator(WindowEKF):
         The parameters keep their estimate, their random walk predicted over the real elapsed time.
         """
         ekf = self._filter()
-        nx = ekf.nx
-        tu = self.tuning
         elapsed = t_k - self._t_step
-        ekf.x[:nx, 0] = self._motion_state(data, k)
-        P = ekf.P.copy()
-        P[:nx, :] = 0.0
-        P[:, :nx] = 0.0
-        nq = ekf.nq
-        P[:nx, :nx] = np.diag([tu.p0_pos ** 2] * nq + [tu.p0_vel ** 2] * nq)
-        P[nx:, nx:] += np.eye(P.shape[0] - nx) * tu.q_param ** 2 * max(elapsed, 0.0)
-        ekf.P = P
+        ekf.x[:ekf.nx, 0] = self._motion_state(data, k)
+        ekf.restart_motion(ekf.nq, self.tuning, max(elapsed, 0.0))
         gap = t_k - self._t_seen
         self.restarts += 1
         self.gap_s += gap
@@ -361,21 +326,14 @@ class EKFWindowEstimator(WindowEKF):
         cpu = time.process_time() - c0
         self.cpu += cpu
         notes = ([self.held_note] if self.held_note and self.samples == 0 else []) + gaps
-        first = None
-        if diverged:
-            first = (f"EKF diverged {diverged} time{'s' if diverged > 1 else ''} in this "
-                     f"window (first at t={first_div:.4f} s): its state or covariance "
-                     "was no longer finite; restarted from the start values and the "
-                     "measurements each time; this estimate goes to neither the "
-                     "tracker nor the alerts (the model does not describe the data: a "
-                     "sensor offset kept, a wrong fixed value)")
-        tail: dict[str, Any] = {}
-        if gaps:
-            tail["gaps"] = len(gaps)
-        if diverged:
-            tail["divergences"] = diverged
-        if self.held:
-            tail["held"] = dict(self.held)
+        first = None if not diverged else (
+            f"EKF diverged {diverged} time{'s' if diverged > 1 else ''} in this window (first at "
+            f"t={first_div:.4f} s): its state or covariance was no longer finite; restarted from the "
+            "start values and the measurements each time; this estimate goes to neither the tracker "
+            "nor the alerts (the model does not describe the data: a sensor offset kept, a wrong "
+            "fixed value)")
+        tail = {k: v for k, v in (("gaps", len(gaps)), ("divergences", diverged),
+                                  ("held", dict(self.held))) if v}
         # a restarted filter's values are no estimate
         return self._report(t, self._filter(), cpu, None, notes, {}, tail, not diverged, first)
 

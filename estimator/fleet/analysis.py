@@ -103,8 +103,7 @@ class VehicleSummary:
 
     def margin(self) -> float:
         """Smallest ``(latest - limit) / (nominal - limit)`` over monitored parameters."""
-        last = self.latest
-        if last is None:
+        if self.latest is None:
             return math.inf
         out = math.inf
         for k in self.monitored:
@@ -118,6 +117,7 @@ class VehicleSummary:
         last = self.latest
         res = last["result"] if last else {}
         known = set(determined(res)) | set(res.get("fixed", [])) if last else set()
+        pos = self.latest_position()
         return {
             "vehicle": self.vehicle,
             "drives": len(self.drives),
@@ -146,17 +146,13 @@ class VehicleSummary:
             "loads": {k: [{"t": float(r["t"]), "value": float(r["result"]["params"][k]),
                            "stderr": r["result"]["stderr"].get(k)} for r in self.series(k)]
                       for k in self.loads},
-            "distance": self.distance_json(),
+            # the latest drive's position and the drives with one
+            "distance": {"source": self.distance_source,
+                         "odometer_km": None if pos is None else round(pos / KM, 3),
+                         "drives": len(self.positions)},
             "trend_km": {k: trend_json(tr, per=KM, unit="km")
                          for k, tr in self.trends_km.items() if tr is not None},
         }
-
-    def distance_json(self) -> dict[str, Any]:
-        """``source``, ``odometer_km`` (the latest drive's position) and ``drives`` with a position."""
-        pos = self.latest_position()
-        return {"source": self.distance_source,
-                "odometer_km": None if pos is None else round(pos / KM, 3),
-                "drives": len(self.positions)}
 
 
 def sensor_offsets(records: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:

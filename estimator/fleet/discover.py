@@ -112,19 +112,15 @@ def find_drives(inputs: Iterable[str]) -> list[DriveFile]:
     found: dict[str, DriveFile] = {}
 
     def add(p: Path) -> None:
-        key = str(p)
-        if key not in found:
-            found[key] = DriveFile(key, vehicle_of(p))
-
-    def walk(d: Path) -> None:
-        for q, _, is_dir in _entries(d):
-            if not is_dir and _is_drive(q) and (q.is_file() or q.is_symlink()):
-                add(q)
+        if str(p) not in found:
+            found[str(p)] = DriveFile(str(p), vehicle_of(p))
 
     for item in inputs:
         p = Path(item)
         if p.is_dir():
-            walk(p)
+            for q, _, is_dir in _entries(p):
+                if not is_dir and _is_drive(q) and (q.is_file() or q.is_symlink()):
+                    add(q)
         elif p.is_file():
             add(p)
         elif glob.has_magic(item):

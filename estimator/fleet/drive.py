@@ -75,10 +75,9 @@ class IdentifySettings:
         except OSError:
             d["dbc_sha256"] = None
         d["suspid"] = __version__
-        if d["can_channel"] is None:
-            del d["can_channel"]
-        if d["j1939_source"] is None:
-            del d["j1939_source"]
+        for k in ("can_channel", "j1939_source"):
+            if d[k] is None:
+                del d[k]
         d["road"] = self.road if self.road is not None else "auto"
         d["x0"] = self.x0 if isinstance(self.x0, str) else [float(v) for v in self.x0]
         d["signal_map"] = (None if self.signal_map is None else
@@ -173,15 +172,6 @@ def one_line(text: object) -> str:
     return " ".join(str(text).split())
 
 
-def identify(problem: OutputErrorProblem, settings: IdentifySettings) -> IdentResult:
-    """The identification ``suspid identify`` runs with the road measured or zero, same arguments."""
-    return identify_record(problem, settings.parameters(), restarts=settings.restarts,
-                           maxfev=settings.maxfev, polish=settings.polish,
-                           multistart=settings.multistart, data_start=settings.data_start,
-                           keep_init=bool(settings.init) or not settings.data_start,
-                           offset=settings.offset)[0]
-
-
 def identify_measurement(model: SuspensionModel, meas: Measurement,
                          settings: IdentifySettings) -> IdentResult:
     """Identify one record as ``suspid identify --road ...`` does (the road mode resolved first)."""
@@ -192,7 +182,11 @@ def identify_measurement(model: SuspensionModel, meas: Measurement,
         problem = OutputErrorProblem(model, meas, cost=settings.cost,
                                      x0=(settings.x0 if isinstance(settings.x0, str)
                                          else np.asarray(settings.x0, dtype=float)))
-        result = identify(problem, settings)
+        result = identify_record(problem, settings.parameters(), restarts=settings.restarts,
+                                 maxfev=settings.maxfev, polish=settings.polish,
+                                 multistart=settings.multistart, data_start=settings.data_start,
+                                 keep_init=bool(settings.init) or not settings.data_start,
+                                 offset=settings.offset)[0]
         result.road = road
     result.warnings[:0] = road_warnings
     return result
@@ -205,13 +199,8 @@ def determined(result: dict[str, Any]) -> list[str]:
     fixed = set(result.get("fixed", []))
     und = set(result.get("undetermined") or [])
     se = result.get("stderr") or {}
-    out = []
-    for k in result.get("params", {}):
-        s = se.get(k)
-        if k in fixed or k in und or s is None or not math.isfinite(float(s)):
-            continue
-        out.append(k)
-    return out
+    return [k for k in result.get("params", {}) if k not in fixed and k not in und
+            and se.get(k) is not None and math.isfinite(float(se[k]))]
 
 
 def classify(result: dict[str, Any] | None) -> tuple[str, str | None]:
@@ -222,8 +211,7 @@ def classify(result: dict[str, Any] | None) -> tuple[str, str | None]:
         return "ok", None
     notes = [w for w in result.get("warnings", [])
              if "identifiab" in w or "cannot form" in w or w.startswith("road unknown: no ")]
-    why = ("success false" if not result.get("success")
-           else "no free parameter determined")
+    why = "success false" if not result.get("success") else "no free parameter determined"
     return "unidentified", one_line(f"not identified ({why})"
                                     + (f": {'; '.join(notes)}" if notes else ""))
 

@@ -150,12 +150,7 @@ class History:
     def drives(self) -> list[dict[str, Any]]:
         """Every stored drive as a record (``path``, ``vehicle``, ``t``, ``status``, ...)."""
         rows = self.conn.execute(self._select() + " ORDER BY vehicle, t, path")
-        out = []
-        for r in rows:
-            rec = _record(r)
-            rec["model"] = r[8]
-            out.append(rec)
-        return out
+        return [{**_record(r), "model": r[8]} for r in rows]
 
     def last_options(self) -> dict[str, Any] | None:
         """The options of the latest run (nominal values, alert settings), if any."""

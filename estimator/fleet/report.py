@@ -149,8 +149,10 @@ def render(vehicles: Sequence[VehicleSummary], drives: Sequence[dict[str, Any]],
              f"<p>{len(vehicles)} vehicles, {n_ok} drives identified, {len(unidentified)} "
              f"read but not identified (never in a trend, alert or forecast), "
              f"{len(failed)} failed logs. Limit: {100 * (1 - rule.drop):.0f} % of nominal; "
-             f"alert when the {100 * _conf(rule.z):.0f} % upper bound is below it in "
-             f"{_drives_text(rule.min_count)}; forecasts with {100 * rule.level:.0f} % "
+             f"alert when the {50 * (1.0 + math.erf(rule.z / math.sqrt(2.0))):.0f} % upper bound is "
+             "below it in " + ("the latest drive" if rule.min_count == 1
+                               else f"{rule.min_count} consecutive drives")
+             + f"; forecasts with {100 * rule.level:.0f} % "
              f"intervals, in days after the vehicle's latest drive and, where the logs carry "
              "the vehicle's odometer or speed, in odometer km (the trend against distance). "
              "Generated "
@@ -214,33 +216,24 @@ def render(vehicles: Sequence[VehicleSummary], drives: Sequence[dict[str, Any]],
             parts.append("</div>")
         if s.drives or s.unidentified:
             parts.append(_drives_table(s))
-    parts.append('<h2>Drives read but not identified</h2><table id="unidentified"><thead><tr>'
-                 "<th>Log</th><th>Vehicle</th><th>Road</th><th>Reason</th></tr></thead><tbody>")
-    for d in unidentified:
-        road = str((d.get("result") or {}).get("road", ""))
-        parts.append(f"<tr><td>{html.escape(d['path'])}</td><td>{html.escape(d['vehicle'])}</td>"
-                     f"<td>{html.escape(road)}</td>"
-                     f"<td>{html.escape(d.get('error') or '')}</td></tr>")
-    parts.append("</tbody></table>")
-    parts.append('<h2>Failed logs</h2><table id="failed"><thead><tr><th>Log</th><th>Vehicle</th>'
-                 "<th>Reason</th></tr></thead><tbody>")
-    for d in failed:
-        parts.append(f"<tr><td>{html.escape(d['path'])}</td><td>{html.escape(d['vehicle'])}</td>"
-                     f"<td>{html.escape(d.get('error') or '')}</td></tr>")
-    parts.append("</tbody></table></body></html>\n")
+    for title, tid, rows in (("Drives read but not identified", "unidentified", unidentified),
+                             ("Failed logs", "failed", failed)):
+        road = tid == "unidentified"     # the road a read drive was fitted with
+        parts.append(f'<h2>{title}</h2><table id="{tid}"><thead><tr><th>Log</th><th>Vehicle</th>'
+                     + ("<th>Road</th>" if road else "") + "<th>Reason</th></tr></thead><tbody>")
+        for d in rows:
+            cell = f"<td>{html.escape(str((d.get('result') or {}).get('road', '')))}</td>" if road else ""
+            parts.append(f"<tr><td>{html.escape(d['path'])}</td><td>{html.escape(d['vehicle'])}</td>"
+                         f"{cell}<td>{html.escape(d.get('error') or '')}</td></tr>")
+        parts.append("</tbody></table>")
+    parts[-1] += "</body></html>\n"
     return "\n".join(parts)
-
-
-def _drives_text(n: int) -> str:
-    return "the latest drive" if n == 1 else f"{n} consecutive drives"
 
 
 def _days(fc: Forecast) -> str:
     """``in 41 d (33 to 52 d)`` after the latest drive."""
     d, lo, hi = fc.days()
-    if not math.isfinite(d):
-        return ""
-    return f"in {d:.0f} d ({lo:.0f} to {hi:.0f} d)"
+    return f"in {d:.0f} d ({lo:.0f} to {hi:.0f} d)" if math.isfinite(d) else ""
 
 
 def _km(fc: Forecast) -> str:
@@ -295,10 +288,6 @@ def _offset(column: str, value: float, model: str) -> str:
     except (KeyError, ValueError, UsageError):
         unit = "m"
     return f"{1e3 * value:+.3g} {'mrad' if unit == 'rad' else 'mm'}"
-
-
-def _conf(z: float) -> float:
-    return 0.5 * (1.0 + math.erf(z / math.sqrt(2.0)))
 
 
 def prepare_report_folder(folder: str | Path) -> Path:

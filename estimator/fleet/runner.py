@@ -34,12 +34,6 @@ def available_cpus() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def local_workers(workers: int | None, drives: int) -> int:
-    """Local worker processes: ``workers`` (default the CPUs), at most the CPUs and the drives."""
-    cpus = available_cpus()
-    return max(1, min(cpus if workers is None else workers, cpus, drives))
-
-
 class ProgressBar:
     """A text progress bar on a stream: one redrawn line on a terminal, else a line per tenth."""
 
@@ -61,10 +55,7 @@ class ProgressBar:
         rate = done / dt if dt > 0 else 0.0
         line = (f"[{'#' * fill}{'.' * (self.width - fill)}] {done}/{total} drives, "
                 f"{failed} failed, {rate:.1f} drives/s")
-        if self.tty:
-            self.stream.write("\r" + line + ("\n" if done >= total else ""))
-        else:
-            self.stream.write(line + "\n")
+        self.stream.write("\r" + line + ("\n" if done >= total else "") if self.tty else line + "\n")
         self.stream.flush()
 
 
@@ -125,15 +116,6 @@ def drive_json(rec: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def check_settings(settings: IdentifySettings, files: list[DriveFile]) -> None:
-    """Fail early (exit 2) on options that would fail every drive (parameters, DBC, signal map)."""
-    settings.parameters()
-    if any(Path(f.path).suffix.lower() in CAN_SUFFIXES for f in files):
-        db = cached_database(settings.dbc)
-        DecodeListener(settings.model, db, with_declared_channels(
-            settings.signal_map, db, get_model(settings.model)))
-
-
 def execute(jobs: list[tuple[str, str, str | None]], settings: IdentifySettings,
             scheduler: str | None = None, workers: int | None = None,
             progress: Progress | None = None) -> list[dict[str, Any]]:
@@ -163,7 +145,8 @@ def execute(jobs: list[tuple[str, str, str | None]], settings: IdentifySettings,
                 raise UsageError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler "
                                  f"({' '.join(str(exc).split())})") from None
         else:
-            n = local_workers(workers, total)
+            cpus = available_cpus()   # local workers: at most the CPUs and the drives
+            n = max(1, min(cpus if workers is None else workers, cpus, total))
             cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                    dashboard_address=None, silence_logs=logging.ERROR)
             client = Client(cluster)
@@ -214,7 +197,12 @@ def run_fleet(config: FleetConfig) -> FleetResult:
         if not files:
             raise InputError(f"--input {' '.join(config.inputs)}: no drive log found (expected "
                              f"files ending in {', '.join(CAN_SUFFIXES)} or .csv)")
-        check_settings(config.settings, files)
+        # fail early (exit 2) on options that would fail every drive (parameters, DBC, signal map)
+        config.settings.parameters()
+        if any(Path(f.path).suffix.lower() in CAN_SUFFIXES for f in files):
+            db = cached_database(config.settings.dbc)
+            DecodeListener(config.settings.model, db, with_declared_channels(
+                config.settings.signal_map, db, get_model(config.settings.model)))
     if not config.inputs and config.db is not None and not Path(config.db).is_file():
         raise InputError(f"--db {config.db}: no such history database (a run with --input "
                          "creates it)")
@@ -245,8 +233,9 @@ def run_fleet(config: FleetConfig) -> FleetResult:
             if not files:
                 # a report from the history alone: every read drive comes from it
                 reused = sum(r["status"] in READ for r in records)
-
-        records = sort_drives(records)
+        # by vehicle, then time (failed ones without a time last), then path
+        records = sorted(records, key=lambda r: (r["vehicle"], r["t"] if r.get("t") is not None
+                                                 else math.inf, r["path"]))
         vehicles = summarize_fleet(records, rule)
         result = FleetResult(records, vehicles, duplicates, new, reused)
         if config.report is not None:
@@ -265,12 +254,10 @@ def _identify(files: list[DriveFile], settings: IdentifySettings, history: Histo
     jobs: list[tuple[str, str, str | None]] = []
     reuse: dict[int, dict[str, Any]] = {}
     for i, f in enumerate(files):
-        digest = None
-        if history is not None:
-            try:
-                digest = file_digest(f.path)
-            except OSError:
-                digest = None       # the task reports the reason
+        try:
+            digest = file_digest(f.path) if history is not None else None
+        except OSError:
+            digest = None       # the task reports the reason
         if digest is not None and digest in known and known[digest]["status"] in READ:
             reuse[i] = {**known[digest], "path": f.path, "vehicle": f.vehicle}
         else:
@@ -293,8 +280,3 @@ def _dedupe(records: list[dict[str, Any]]) -> tuple[list[dict[str, Any]], list[d
         out.append(r)
     return out, dups
 
-
-def sort_drives(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Records by vehicle, then time (failed ones without a time last), then path."""
-    return sorted(records, key=lambda r: (r["vehicle"], r["t"] if r.get("t") is not None
-                                          else math.inf, r["path"]))

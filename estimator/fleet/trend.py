@@ -68,17 +68,8 @@ def _median(a: np.ndarray) -> float:
     return float(b[n // 2]) if n % 2 else 0.5 * float(b[n // 2 - 1] + b[n // 2])
 
 
-def theil_sen(x: np.ndarray, v: np.ndarray) -> tuple[float, float]:
-    """Theil--Sen line ``(intercept, slope)``: median pairwise slope (pairs with distinct x)."""
-    i, j = np.triu_indices(x.size, 1)
-    dx = x[j] - x[i]
-    ok = dx != 0
-    b = float(np.median((v[j] - v[i])[ok] / dx[ok])) if ok.any() else 0.0
-    return float(np.median(v - b * x)), b
-
-
-def robust_trend(t: np.ndarray, v: np.ndarray, s: np.ndarray | None = None,
-                 iterations: int = 50, scale: float = DAY_S) -> Trend | None:
+def robust_trend(t: np.ndarray, v: np.ndarray, s: np.ndarray | None = None, scale: float = DAY_S
+                 ) -> Trend | None:
     """Robust weighted straight-line trend of ``v`` (SI, stderr ``s``; NaN: unknown) over ``t``.
 
     ``t`` is epoch s, or odometer m for a trend against distance; ``scale`` the abscissa's unit in
@@ -98,7 +89,12 @@ def robust_trend(t: np.ndarray, v: np.ndarray, s: np.ndarray | None = None,
     if np.ptp(x) == 0:
         return None
     n = x.size
-    a, b = theil_sen(x, v)
+    # the Theil--Sen line: median pairwise slope (pairs with distinct x)
+    i, j = np.triu_indices(n, 1)
+    dx = x[j] - x[i]
+    ok = dx != 0
+    b = float(np.median((v[j] - v[i])[ok] / dx[ok])) if ok.any() else 0.0
+    a = float(np.median(v - b * x))
     if n == 2:
         return Trend(t_ref, a, b / scale, math.nan, math.nan, math.nan, n=n)
     floor = (1e-12 * max(float(np.max(np.abs(v))), 1e-300)) ** 2
@@ -108,7 +104,7 @@ def robust_trend(t: np.ndarray, v: np.ndarray, s: np.ndarray | None = None,
     var = s * s
     M = np.eye(2)
     for c, kind in ((HUBER_C, "huber"), (BISQUARE_C, "bisquare")):
-        for _ in range(iterations):
+        for _ in range(50):
             r = v - (beta[0] + beta[1] * x)
             mad = MAD_TO_SIGMA * _median(np.abs(r - _median(r)))
             tau2 = max(0.0, mad * mad - _median(s * s))

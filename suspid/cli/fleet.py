@@ -18,11 +18,11 @@ from suspid.errors import UsageError
 from suspid.models import get_model
 
 if TYPE_CHECKING:
-    from estimator.fleet import (AlertConfig, FleetConfig, IdentifySettings, ProgressBar,
-                                 available_cpus, run_fleet)
+    from estimator.fleet.runner import (AlertConfig, FleetConfig, IdentifySettings, ProgressBar,
+                                        available_cpus, run_fleet)
 else:
     (AlertConfig, FleetConfig, IdentifySettings, ProgressBar, available_cpus,
-     run_fleet) = lazy_names("estimator.fleet", "AlertConfig", "FleetConfig", "IdentifySettings",
+     run_fleet) = lazy_names("estimator.fleet.runner", "AlertConfig", "FleetConfig", "IdentifySettings",
                              "ProgressBar", "available_cpus", "run_fleet")
 
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from typing import Any, Sequence
 
-from estimator.diagnose.synthetic import synthetic_record
+from tools.synthetic_record import synthetic_record
 from suspid.io.csvio import Measurement
 from suspid.models.base import ForceFn
 from suspid.effects import Effect
@@ -24,7 +24,7 @@ def make_measurement(effects: Sequence["str | Effect"], scenario: str = "bump", 
     effect restricted to one strut of a half car); ``quarter2`` defaults to the seed's
     Table 1, the other models to their documented defaults; ``noise_seed=S`` draws the
     noise ``suspid simulate --seed S`` draws. See
-    :func:`estimator.diagnose.synthetic.synthetic_record`.
+    :func:`tools.synthetic_record.synthetic_record`.
     """
     p = dict(TABLE1) if params is None and model == "quarter2" else params
     return synthetic_record(model, effects, scenario, params=p, fs=fs, duration=duration,

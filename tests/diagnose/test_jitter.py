@@ -12,7 +12,7 @@ import numpy as np
 
 from estimator.diagnose import diagnose
 from estimator.identify.regrid import grid_jitter, to_uniform_grid
-from estimator.diagnose.synthetic import synthetic_record
+from tools.synthetic_record import synthetic_record
 from estimator.identify import Parameters
 from suspid.io.csvio import Measurement
 from suspid.models import get_model

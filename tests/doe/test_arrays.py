@@ -7,9 +7,23 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from estimator.doe.arrays import L16_ARRAY, L16_LEVELS, L27_ARRAY, L27_LEVELS, is_orthogonal
+from estimator.doe.arrays import L16_ARRAY, L16_LEVELS, L27_ARRAY, L27_LEVELS, IntArray
 
 SEED = Path(__file__).resolve().parents[2].parent / "shared" / "seeds" / "000_62c11f2ef4afa30d.txt"
+
+
+def is_orthogonal(array: IntArray) -> bool:
+    """``True`` if every pair of columns (levels from 1) shows every level pair equally often."""
+    runs, k = array.shape
+    levels = int(array.max())
+    expected = runs / levels ** 2
+    for i in range(k):
+        for j in range(i + 1, k):
+            counts = np.zeros((levels, levels), dtype=int)
+            np.add.at(counts, (array[:, i] - 1, array[:, j] - 1), 1)
+            if not np.all(counts == expected):
+                return False
+    return True
 
 
 def _table_rows(text: str, caption: str, ncols: int) -> np.ndarray:

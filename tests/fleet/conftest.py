@@ -17,7 +17,7 @@ from typing import Any
 
 import pytest
 
-from estimator.fleet.synthetic import EPOCH0, FleetSpec, VehicleWear, make_fleet, write_drive
+from tools.synthetic_fleet import EPOCH0, FleetSpec, VehicleWear, make_fleet, write_drive
 from suspid.can.dbc import load_dbc
 from tests.conftest import REPO, suspid_env
 

@@ -14,7 +14,7 @@ import pytest
 from estimator.fleet.analysis import drive_positions
 from estimator.fleet.drive import IdentifySettings, drive_distance, identify_drive
 from estimator.fleet.history import History
-from estimator.fleet.synthetic import (DISTANCE_MAP, EPOCH0, FleetSpec, VehicleWear,
+from tools.synthetic_fleet import (DISTANCE_MAP, EPOCH0, FleetSpec, VehicleWear,
                                        distance_dbc, make_fleet)
 from suspid.can.dbc import load_dbc
 from suspid.can.signal_map import SignalMap

@@ -13,7 +13,7 @@ from estimator.fleet import runner
 from estimator.fleet.history import History
 from estimator.fleet.runner import FleetConfig, execute, run_fleet
 from estimator.fleet.drive import IdentifySettings
-from estimator.fleet.synthetic import EPOCH0, FleetSpec, VehicleWear, write_drive
+from tools.synthetic_fleet import EPOCH0, FleetSpec, VehicleWear, write_drive
 from suspid.can.dbc import load_dbc
 from suspid.errors import InputError
 from tests.fleet.conftest import run_fleet_cli

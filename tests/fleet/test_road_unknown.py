@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from estimator.fleet.synthetic import DAY_S, EPOCH0, write_production_drive
+from tools.synthetic_fleet import DAY_S, EPOCH0, write_production_drive
 from tests.conftest import write_config
 from tests.fleet.conftest import fleet_json, run_fleet_cli
 

@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 from filterpy.kalman import ExtendedKalmanFilter
 
-from estimator.ekf import AugmentedEKF, EKFTuning, EKFWindowEstimator
+from estimator.ekf.filter import AugmentedEKF, EKFTuning
+from estimator.ekf.stream import EKFWindowEstimator
 from estimator.stream.drivers import run_arrays
 from estimator.stream.wear_streams import damper_wear
 from suspid.errors import UsageError

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from estimator.ekf import EKFWindowEstimator
+from estimator.ekf.stream import EKFWindowEstimator
 from estimator.ekf.stream import BRIDGE_SAMPLES
 from estimator.stream.wear_streams import damper_wear, write_log
 from suspid.io.csvio import write_measurement

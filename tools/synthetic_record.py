@@ -1,4 +1,5 @@
-"""Synthetic records with undeclared effects (the diagnose tests and ``tools/diagnose_matrix.py``)."""
+"""Synthetic records with undeclared effects (the diagnose tests, ``tools/diagnose_matrix.py``,
+``tools/noise_sweep.py``)."""
 from __future__ import annotations
 
 from typing import Any, Mapping, Sequence
