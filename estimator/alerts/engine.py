@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any, Mapping, Protocol
 
 from estimator.alerts.event import ParameterEvent
 from suspid.errors import UsageError
@@ -116,6 +116,12 @@ class AlertEvent(ParameterEvent):
                    severity=str(d.get("severity", "warning")), model=str(d.get("model", "")))
 
 
+class AlertSink(Protocol):
+    """Anything that delivers an event: a callback (stdout, a file), the DBC alert frame on a bus."""
+
+    def emit(self, event: ParameterEvent) -> None: ...
+
+
 @dataclass
 class _State:
     active: bool = False
@@ -136,7 +142,7 @@ class AlertEngine:
     model: str
     units: dict[str, str] = field(default_factory=dict)
     store: Any = None
-    sinks: list[Any] = field(default_factory=list)
+    sinks: list[AlertSink] = field(default_factory=list)
     states: dict[str, _State] = field(default_factory=dict)
     emitted: list[Any] = field(default_factory=list)
     suppressed: int = 0
