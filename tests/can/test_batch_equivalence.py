@@ -1,7 +1,7 @@
 """The decoder's batch path is the frame-by-frame path, exactly.
 
 :class:`estimator.decode.DecodeListener` validates and decodes queued frames in batches with
-NumPy (``on_message_received`` + implicit flush, ``feed_messages``, ``feed_arrays``) and hands
+NumPy (``on_message_received`` + implicit flush, ``feed_arrays``) and hands
 what the array code does not cover to its frame-by-frame code. Property: whatever the
 stream -- valid node output with drops, bursts, bit flips, duplicates, reordering, foreign
 and unknown IDs, wrong DLCs, error/remote/FD frames, clocks going back, NaN/inf times, node
