@@ -40,7 +40,7 @@ parallel=$?
 timeout --signal=INT --kill-after=30 "${SLOW_LIMIT:-1200}" \
   .venv/bin/python -m pytest -m "slow and not socketcan and not realtime" -n "$workers" "$@"
 slow=$?
-if [[ $slow -eq 124 || $slow -eq 130 ]]; then
+if [[ $slow -eq 124 || $slow -eq 137 ]]; then   # timeout: INT sent, then KILL
   echo "tools/test.sh: the slow step overran its ${SLOW_LIMIT:-1200} s bound" >&2
 fi
 .venv/bin/python -m pytest -m "realtime and not socketcan" "$@"

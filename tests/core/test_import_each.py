@@ -6,10 +6,11 @@ the first one imported. Each module is imported in a fresh set of project module
 """
 from __future__ import annotations
 
-import pytest
 import subprocess
 import sys
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 

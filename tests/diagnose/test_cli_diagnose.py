@@ -1,13 +1,14 @@
 """`suspid simulate --effect` + `suspid diagnose --json`: friction on the quarter car found through the CLI."""
 from __future__ import annotations
 
-import pytest
 import argparse
 import json
 import math
 import subprocess
 import sys
 from pathlib import Path
+
+import pytest
 
 from suspid.cli import diagnose, fleet, identify, main
 from suspid.models import get_model

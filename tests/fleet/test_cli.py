@@ -1,11 +1,12 @@
 """``suspid fleet``: the contract's JSON, identity with ``suspid identify``, failed logs."""
 from __future__ import annotations
 
-import pytest
 import json
 import subprocess
 import sys
 from typing import Any
+
+import pytest
 
 from tests.conftest import REPO, suspid_env
 from tests.fleet.conftest import FIX, TIMEOUT, Fleet, run_fleet_cli

@@ -2,9 +2,10 @@
 report from the history alone."""
 from __future__ import annotations
 
-import pytest
 import sqlite3
 from typing import Any
+
+import pytest
 
 from tests.fleet.conftest import run_fleet_cli, Fleet, HistoryRuns, fleet_json
 

@@ -8,8 +8,9 @@ No timing assertions: the host is shared.
 """
 from __future__ import annotations
 
-import pytest
 import math
+
+import pytest
 
 from tools.soak import soak
 

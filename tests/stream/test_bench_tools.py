@@ -1,11 +1,12 @@
 """The benchmark scripts run and report what docs/monitoring.md quotes (no timing asserted)."""
 from __future__ import annotations
 
-import pytest
 import json
 import subprocess
 import sys
 from pathlib import Path
+
+import pytest
 
 REPO = Path(__file__).resolve().parents[2]
 
