@@ -9,7 +9,7 @@ from __future__ import annotations
 import threading
 from array import array
 from dataclasses import asdict, dataclass, field
-from typing import Callable, Iterable, Sequence, cast
+from typing import Iterable, Sequence
 
 import numpy as np
 
@@ -59,7 +59,7 @@ class Source:
     """Ring of rows ``(t, v_0, ..., v_{k-1})`` of one message; created by :meth:`RollingBuffer.source`."""
 
     __slots__ = ("name", "group", "channels", "t", "cols", "w", "n", "cap", "growable",
-                 "overwritten", "_lock", "push", "_views", "_cleared", "_checked", "_drop")
+                 "overwritten", "_lock", "_views", "_cleared", "_checked", "_drop")
 
     def __init__(self, name: str, channels: Sequence[str], capacity: int, growable: bool,
                  lock: threading.Lock, group: str | None = None) -> None:
@@ -82,37 +82,6 @@ class Source:
         self._drop = -1
         self._lock = lock
         self._views: list[np.ndarray] | None = None   # NumPy views of (t, *cols) for push_many
-        self.push = self._compile_push()
-
-    def _compile_push(self) -> Callable[[float, Sequence[float]], None]:
-        """Generate ``push(t, values)``, column stores unrolled (docs/performance.md "One decoder path")."""
-        ns: dict[str, object] = {"src": self, "lock": self._lock, "T": self.t}
-        stores = []
-        for k, col in enumerate(self.cols):
-            ns[f"C{k}"] = col
-            stores.append(f"        C{k}[i] = values[{k}]")
-        code = "\n".join([
-            "def push(t, values):",
-            "    with lock:",
-            "        i = src.w",
-            "        if src.n == src.cap:",
-            "            src.overwritten += 1",
-            "        else:",
-            "            src.n += 1",
-            "        T[i] = t",
-            *stores,
-            "        i += 1",
-            "        src.w = i if i < src.cap else src._at_end()",
-        ])
-        exec(code, ns)  # noqa: S102 - generated from the column count only
-        return cast("Callable[[float, Sequence[float]], None]", ns["push"])   # exec'd above
-
-    def _at_end(self) -> int:
-        """The write index reached the end: grow or wrap; the new write index."""
-        if not self.growable:
-            return 0
-        self._grow(2 * self.cap)
-        return self.cap // 2
 
     def _grow(self, cap: int) -> None:
         """Enlarge the columns to ``cap`` rows (zeros appended); caller holds the lock."""
@@ -124,7 +93,8 @@ class Source:
         self.cap = cap
 
     def push_many(self, t: np.ndarray, values: np.ndarray | Sequence[np.ndarray]) -> None:
-        """Append rows ``(t[i], values[i, :])`` exactly as :attr:`push` of each row in turn would."""
+        """Append rows ``(t[i], values[i, :])`` in order: a growable ring doubles each time its
+        write index reaches the end, a fixed one overwrites its oldest rows (``overwritten``)."""
         m = int(np.shape(t)[0])
         if m == 0:
             return
@@ -136,7 +106,7 @@ class Source:
             cap = self.cap
             if self.growable:
                 need = self.w + m
-                if need >= cap:   # push doubles the ring each time the write index reaches it
+                if need >= cap:   # doubled each time the write index reaches the end
                     while cap <= need:
                         cap *= 2
                     self._grow(cap)

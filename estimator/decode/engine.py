@@ -1,33 +1,27 @@
 """The decoder's engine: batches of frames -> validated, decoded samples in the rolling buffer.
 
-:meth:`DecodeEngine.process` (a log's chunks, a live bus's queue) runs the stateless checks over
-the whole batch, splits it at time anomalies, and per message needs only the period recurrence
-for steady frames; anomalies, CAN FD payloads and small batches go through the per-frame rules
-(:meth:`DecodeEngine.validate`) with the same results. No lock: the listener serialises calls.
+:meth:`DecodeEngine.process` takes every batch, of any size (a log's chunks, a live bus's
+queue, one frame): the time order and the stateless checks (ID, DLC, CRC) over the whole
+batch, then per message the counter rules, which for steady frames reduce to the period
+recurrence; only a message's irregular frames (a counter gap, a stale tick) step through the
+sequential rules one by one. No lock: the listener serialises calls.
 """
 from __future__ import annotations
 
-import math
 from bisect import bisect_left
 
 import numpy as np
 from cantools.database.can import Database
 
-from estimator.decode.routes import DATA, EXT, STATUS, SYNC, Route, Routes
+from estimator.decode.routes import DATA, STATUS, SYNC, Route, Routes
 from estimator.decode.rules.counters import CounterRules, FrameCounts, period_after, steady_frames
-from estimator.decode.rules.e2e import Payload, alive_counter, alive_counters, crc_ok_rows
+from estimator.decode.rules.e2e import Payload, alive_counters, crc_ok_rows
 from estimator.decode.rules.timebase import (SyncTrack, TickClock, TimeOrder, fresh_ticks, stale_tick,
-                                             sync_time, sync_times, tick_of_counter, tick_time,
-                                             tick_times, ticks_of_counters, time_breaks)
+                                             sync_times, tick_times, ticks_of_counters)
 from suspid.can.codec import decode_alert
 from suspid.can.crc import COUNTER_MODULUS
 from suspid.can.logs import FrameArrays
 
-_INF = math.inf
-#: default ``min_batch``: fewer frames than this are validated one by one
-SMALL_BATCH = 192
-#: default ``min_run``: a run between two time anomalies shorter than this goes frame by frame
-MIN_RUN = 192
 #: stateless outcome of a frame in a batch (0: passed ID, DLC and CRC)
 _O_UNKNOWN, _O_IGNORED, _O_DLC, _O_CRC = 1, 2, 3, 4
 
@@ -54,88 +48,14 @@ class DecodeEngine:
         self.collect_alerts = collect_alerts
         self.outbox: list[dict[str, object]] = []
         self.frames = 0
-        self.min_batch = SMALL_BATCH
-        self.min_run = MIN_RUN
+        #: the batch being processed and its rows' indices in it (CAN FD payloads only)
+        self._long: tuple[FrameArrays, np.ndarray] | None = None
         self._by_key = routes.by_key
         self._known = routes.known
 
-    def validate(self, ts: float, key: int, data: Payload) -> None:
-        """Every check after the frame type, decode and store one frame of a batch."""
-        rejected = self._rejected
-        order = self.order
-        if not order.last <= ts < _INF:  # one chained compare: backwards, NaN or inf
-            if not order.out_of_order(ts):
-                rejected["time"] += 1
-                return
-        order.rejects = 0
-        order.last = ts
-        route = self._by_key.get(key)
-        if route is None:
-            if key in self._known:
-                self.counts.ignored += 1
-            else:
-                rejected["unknown_id"] += 1
-            return
-        if len(data) != route.dlc:
-            rejected["dlc"] += 1
-            return
-        c = -1
-        ext = ext_shift = 0
-        if route.check is not None:
-            if not route.check(data):
-                rejected["crc"] += 1
-                return
-            c = alive_counter(data)
-            arrival = ts
-            if self.tick_time:
-                # the gap rules below need data time (a host's arrival times bunch)
-                if route.kind == SYNC:
-                    tick, period_us = route.decode(data)
-                    ext = self.clock.extend(int(tick), period_us, arrival)
-                    ext_shift = (ext - int(tick)) % COUNTER_MODULUS
-                    if period_us > 0:
-                        ts = sync_time(ext, period_us)
-                elif route.kind == DATA and self.sync_tick is not None and self.period:
-                    if stale_tick(route, self.sync_n, self.period, arrival):
-                        rejected["no_sync"] += 1
-                        return
-                    ts = tick_time(tick_of_counter(
-                        self.sync_tick, (c + self.sync_shift) % COUNTER_MODULUS), self.period)
-                elif route.kind != DATA and self.sync_tick is not None and self.period:
-                    # SN_Status (SUSPID_Alert): sent in the tick of the last SN_Sync
-                    ts = tick_time(self.sync_tick, self.period)
-                route.last_arrival = arrival
-                route.sync_n = self.sync_n
-            if not self.counters.step(route, c, ts):
-                return
-        if route.kind == DATA:
-            if self.tick_time:
-                if self.sync_tick is None or c < 0:
-                    rejected["no_sync"] += 1
-                    return
-            if route.source is not None and route.row is not None:
-                route.source.push(ts, route.row(data))
-            elif route.pages is not None:   # a multiplexed message: page by page
-                route.pages.push(ts, data)
-            else:   # every DATA route has a source and a decoder, or pages
-                raise RuntimeError(f"data route {route.name} without a source or decoder")
-        elif not self._special(route, data, ts):
-            return
-        elif route.kind == SYNC and self.tick_time and route.check is not None:
-            self.sync_tick = ext   # the unbroken tick (TickClock)
-            self.sync_shift = ext_shift
-        route.accepted += 1
-        self.counts.accepted += 1
-
     def _special(self, route: Route, data: Payload, ts: float) -> bool:
-        """SN_Sync, SN_Status and SUSPID_Alert frames; ``False`` if rejected."""
-        if route.kind == SYNC:
-            tick, period_us = route.decode(data)
-            self.sync_tick = int(tick)
-            self.sync_n += 1
-            if period_us > 0:
-                self.period = period_us * 1e-6
-        elif route.kind == STATUS:
+        """An accepted SN_Status or SUSPID_Alert frame; ``False`` if rejected."""
+        if route.kind == STATUS:
             state, rate, flags, busoff, sset = route.decode(data)
             self.node_status = {"t": ts, "state": int(state), "sample_rate": float(rate),
                                 "fault_flags": int(flags), "busoff_count": int(busoff),
@@ -153,26 +73,28 @@ class DecodeEngine:
         return True
 
     def process(self, fa: FrameArrays, lo: int, hi: int) -> None:
-        """Frames ``lo:hi`` of ``fa``, exactly as the frame-by-frame path would take them."""
+        """Validate, decode and store frames ``lo:hi`` of ``fa`` (any number, from one up)."""
         n = hi - lo
         if n <= 0:
             return
-        if n < self.min_batch:
-            self._small(fa, lo, hi)
-            return
         self.frames += n
         ft = fa.frame_type[lo:hi]
-        data64 = np.ascontiguousarray(fa.data).view(np.uint64).reshape(-1)
-        nf = None
         sel: slice | np.ndarray = slice(lo, hi)
-        m = n
         if ft.any():
             self._rejected["frame_type"] += int(np.count_nonzero(ft))
-            nf = sel = np.flatnonzero(~ft) + lo
-            m = int(nf.size)
-            if not m:
+            sel = np.flatnonzero(~ft) + lo
+            if not ft.size - np.count_nonzero(ft):
                 return
         ts = fa.timestamp[sel]
+        keep = self.order.admit(ts)
+        if not keep.all():
+            self._rejected["time"] += int(keep.size - np.count_nonzero(keep))
+            if not keep.any():
+                return
+            sel = (np.arange(lo, hi) if isinstance(sel, slice) else sel)[keep]
+            ts = ts[keep]
+        m = ts.size
+        data64 = np.ascontiguousarray(fa.data).view(np.uint64).reshape(-1)
         fid = fa.arbitration_id[sel]
         ext = fa.is_extended[sel]
         length = fa.length[sel]
@@ -195,90 +117,63 @@ class DecodeEngine:
         bad = hit & (length != rdlc)
         if bad.any():
             outcome[bad] = _O_DLC
+        self._long = None
+        if fa.long_data:   # CAN FD payloads: the whole payload from the batch
+            self._long = (fa, np.arange(lo, hi) if isinstance(sel, slice) else sel)
         e2e = rt.e2e[r] & (outcome == 0)
         if e2e.any():
-            ok = crc_ok_rows(rows.view(np.uint8).reshape(m, 8), rt.start[r], rdlc, e2e)
+            wide = e2e & (rdlc > 8)
+            ok = crc_ok_rows(rows.view(np.uint8).reshape(m, 8), rt.start[r], rdlc, e2e & ~wide)
+            if wide.any():
+                at = np.flatnonzero(wide)
+                ok[at] = crc_ok_rows(self._wide(at, int(rdlc[at].max())), rt.start[r[at]],
+                                     rdlc[at], np.ones(at.size, dtype=bool))
             outcome[~ok] = _O_CRC
-        badt = time_breaks(self.order.last, ts)
-        long_rows = None
-        if fa.long_data:
-            long_rows = length > 8
-            badt |= long_rows
-        bad_at = np.flatnonzero(badt).tolist()
-        nb = len(bad_at)
-        b = 0
-        pos = 0
-        while pos < m:
-            # the frame at pos against the time base as it is now, the later ones against
-            # their predecessor
-            while b < nb and bad_at[b] <= pos:
-                b += 1
-            if not self.order.last <= float(ts[pos]) < _INF or (long_rows is not None
-                                                                 and long_rows[pos]):
-                j = pos
-            else:
-                j = bad_at[b] if b < nb else m
-            if j - pos >= max(1, self.min_run):
-                self._segment(pos, j, ts, r, outcome, rows)
-                pos = j
-            else:
-                end = min(j + 1, m)
-                for k in range(pos, end):
-                    i = int(nf[k]) if nf is not None else lo + k
-                    self.validate(float(ts[k]), int(keys[k]), fa.payload(i))
-                pos = end
+        self._segment(ts, r, outcome, rows)
 
-    def _small(self, fa: FrameArrays, lo: int, hi: int) -> None:
-        """A batch smaller than ``min_batch``: frame type, then :meth:`validate` each frame."""
-        ts = fa.timestamp[lo:hi].tolist()
-        ids = fa.arbitration_id[lo:hi].tolist()
-        ext = fa.is_extended[lo:hi].tolist()
-        ft = fa.frame_type[lo:hi].tolist()
-        lens = fa.length[lo:hi].tolist()
-        raw = np.ascontiguousarray(fa.data[lo:hi]).tobytes()
-        long_data = fa.long_data
-        rejected = self._rejected
-        validate = self.validate
-        for k in range(hi - lo):
-            self.frames += 1
-            if ft[k]:
-                rejected["frame_type"] += 1
-                continue
-            payload = long_data.get(lo + k) if long_data else None
-            if payload is None:   # FrameArrays.payload: data[i, :length] (8 bytes at most)
-                payload = raw[8 * k:8 * k + 8][:lens[k]]
-            fid = ids[k]
-            validate(ts[k], fid | EXT if ext[k] else fid, payload)
+    def _wide(self, q: np.ndarray, width: int) -> np.ndarray:
+        """Whole payloads (``width`` bytes, zero-padded) of the batch's frames at ``q``."""
+        out = np.zeros((q.size, width), dtype=np.uint8)
+        if self._long is not None:
+            fa, at = self._long
+            for j, i in enumerate(at[q].tolist()):
+                p = fa.payload(i)[:width]
+                out[j, :len(p)] = np.frombuffer(p, dtype=np.uint8)
+        return out
 
-    def _segment(self, lo: int, hi: int, ts: np.ndarray, r: np.ndarray, outcome: np.ndarray,
+    def _payloads(self, route: Route, rows: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """Payloads (m, max(8, dlc)) uint8 of one message's frames at ``q`` (``rows``: uint64)."""
+        if route.dlc > 8:
+            return self._wide(q, route.dlc)
+        return rows.view(np.uint8).reshape(rows.size, 8)
+
+    def _segment(self, ts: np.ndarray, r: np.ndarray, outcome: np.ndarray,
                  rows: np.ndarray) -> None:
-        """Batch frames ``lo:hi`` passing the time check: counter rules by message, then stored."""
-        self.order.last = float(ts[hi - 1])
-        self.order.rejects = 0
-        oc = outcome[lo:hi]
-        if oc.any():
-            cnt = np.bincount(oc, minlength=5).tolist()
+        """Frames in time order (times ``ts``, routes ``r``, stateless ``outcome``, payloads
+        ``rows`` as uint64): counter rules by message, then stored."""
+        if outcome.any():
+            cnt = np.bincount(outcome, minlength=5).tolist()
             rejected = self._rejected
             rejected["unknown_id"] += cnt[_O_UNKNOWN]
             self.counts.ignored += cnt[_O_IGNORED]
             rejected["dlc"] += cnt[_O_DLC]
             rejected["crc"] += cnt[_O_CRC]
-            h = np.flatnonzero(oc == 0) + lo
+            h = np.flatnonzero(outcome == 0)
             if not h.size:
                 return
             r_h = r[h]
         else:
             h = None
-            r_h = r[lo:hi]
+            r_h = r
         route_list = self.routes.ordered
         nroutes = len(route_list)
         if r_h.size > 1 and (r_h[1:] < r_h[:-1]).any():
             order = np.argsort(r_h.astype(np.uint8 if nroutes < 256 else np.uint16),
                                kind="stable")
-            h = order + lo if h is None else h[order]
+            h = order if h is None else h[order]
             r_h = r_h[order]
         elif h is None:
-            h = np.arange(lo, hi)
+            h = np.arange(ts.size)
         rows = rows[h]
         arr = ts[h]
         cnt_r = np.bincount(r_h, minlength=nroutes)
@@ -291,10 +186,10 @@ class DecodeEngine:
             # tick mode: SN_Sync first (its data time is its own Tick x PeriodUs)
             k, a, b = runs[0]
             route = route_list[k]
-            b8 = rows[a:b].view(np.uint8).reshape(b - a, 8)
+            b8 = self._payloads(route, rows[a:b], h[a:b])
             tk, pus = self._sync_values(route, b8)
             t_s = arr[a:b]
-            if route.check is not None:
+            if route.e2e:
                 # the unbroken tick across wraps and node restarts (TickClock)
                 raw = tk
                 tk = self.clock.extend_many(raw, pus, t_s)
@@ -321,22 +216,22 @@ class DecodeEngine:
                     st, (alive_counters(rows[a0:]) + shift) % COUNTER_MODULUS), st)
                 tsd = arr.copy()
                 tsd[a0:] = np.where(conv | at_sync, tick_times(tk, per), arr[a0:])
-        e2e_runs = [x for x in runs if route_list[x[0]].check is not None]
+        e2e_runs = [x for x in runs if route_list[x[0]].e2e]
         if e2e_runs:
             a0, b0 = e2e_runs[0][1], e2e_runs[-1][2]
             acc = self._runs(e2e_runs, rows, arr, tsd[a0:b0], a0, syncs)
             for k, a, b in e2e_runs:
-                self._accepted(route_list[k], rows[a:b].view(np.uint8).reshape(b - a, 8),
+                self._accepted(route_list[k], self._payloads(route_list[k], rows[a:b], h[a:b]),
                                tsd[a:b], acc[a - a0:b - a0], None, syncs, h[a:b])
         for k, a, b in runs:
             route = route_list[k]
-            if route.check is not None:
+            if route.e2e:
                 continue
             # not E2E protected: no counter, the data time is the frame time
             if route.kind == DATA and syncs is not None:
                 self._rejected["no_sync"] += b - a
                 continue
-            b8 = rows[a:b].view(np.uint8).reshape(b - a, 8)
+            b8 = self._payloads(route, rows[a:b], h[a:b])
             sync_vals = self._sync_values(route, b8) if syncs is not None and \
                 route.kind == SYNC else None
             self._accepted(route, b8, arr[a:b], np.ones(b - a, dtype=bool), sync_vals, syncs,
@@ -459,7 +354,8 @@ class DecodeEngine:
         kind = route.kind
         if kind == DATA:
             if n_acc < acc.size:
-                rows = rows.view(np.uint64).reshape(-1)[acc].view(np.uint8).reshape(n_acc, 8)
+                rows = rows[acc] if rows.shape[1] > 8 else \
+                    rows.view(np.uint64).reshape(-1)[acc].view(np.uint8).reshape(n_acc, 8)
                 tsd = tsd[acc]
             if route.source is None or route.row is None:
                 if route.pages is None:   # every DATA route has a source and a decoder, or pages

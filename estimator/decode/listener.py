@@ -57,16 +57,6 @@ def _as_arrays(msgs: list[can.Message], counts: FrameCounts) -> FrameArrays:
     return FrameArrays.from_messages(good)
 
 
-def _engine_setting(name: str, doc: str) -> Any:
-    """A listener property that reads and sets the engine's ``name`` (tuning: same results)."""
-    def get(self: DecodeListener) -> int:
-        return int(getattr(self.engine, name))
-
-    def put(self: DecodeListener, value: int) -> None:
-        setattr(self.engine, name, value)
-    return property(get, put, doc=doc)
-
-
 class DecodeListener(can.Listener):
     """Validate, decode and buffer the frames of a suspension sensor bus.
 
@@ -143,9 +133,6 @@ class DecodeListener(can.Listener):
         self._prompt = routes.alert_ids if on_alert is not None else frozenset()
         if not routes.sync_ids.size:
             self._auto = False   # no SN_Sync in the DBC: the timestamps are the only clock
-
-    min_batch = _engine_setting("min_batch", "Batches smaller than this go frame by frame.")
-    min_run = _engine_setting("min_run", "Runs between time anomalies shorter than this go frame by frame.")
 
     def on_message_received(self, msg: can.Message) -> None:
         """Queue one frame (not to be modified after), through the live slot rule with ``arrival_slots``."""

@@ -57,19 +57,8 @@ class PageSplit:
         self.defined = tuple(frozenset(d) for d in defined)
         self._defined_a = [np.array(sorted(d), dtype=np.int64) for d in self.defined]
 
-    def push(self, t: float, data: Payload) -> None:
-        """Store one accepted frame (time ``t`` in s, payload ``data``) in its rings."""
-        page = [int(f(data)[0]) for f in self._raw]
-        for k, p in enumerate(page):
-            if p not in self.defined[k]:
-                self.unknown += 1
-                break
-        for s in self.sinks:
-            if s.mux < 0 or page[s.mux] in s.pages:
-                s.source.push(t, s.row(data))
-
     def push_many(self, t: np.ndarray, rows: np.ndarray) -> None:
-        """Store accepted frames (times ``t`` in s, zero-padded payloads ``rows`` (m, 8))."""
+        """Store accepted frames (times ``t`` in s, zero-padded payloads ``rows`` (m, max(8, dlc)))."""
         # raw values of each multiplexer
         page = [f(rows) if f is not None else np.array(
             [dec(r.tobytes())[0] for r in rows[:, :self.dlc]], dtype=np.int64)

@@ -13,7 +13,7 @@ from cantools.database.can import Database, Message
 
 from estimator.decode.buffer import RollingBuffer, Source
 from estimator.decode.pages import PageSink, PageSplit
-from estimator.decode.rules.e2e import Payload, crc_checker, crc_start
+from estimator.decode.rules.e2e import Payload, crc_start
 from estimator.decode.vector import RowsFn, compile_raw, compile_vector_row
 from suspid.can.codec import MessageCodec, signal_spec
 from suspid.can.dbc import ALERT_MESSAGE, STATUS_MESSAGE, SYNC_MESSAGE, find_message, is_e2e
@@ -46,7 +46,7 @@ class Route:
     name: str
     kind: int
     dlc: int
-    check: Callable[[Payload], bool] | None   # E2E CRC checker, None if not protected
+    e2e: bool                                  # E2E protected (CRC and alive counter)
     decode: Unpack                             # special messages
     source: Source | None = None
     row: Unpack | None = None   # data messages: payload -> channel values
@@ -183,17 +183,17 @@ class Routes:
             else:
                 dec = _decoded_elsewhere  # decode_alert, with cantools (multiplexed, rare)
             self._add(msg, kind, dec)
-        rl = sorted(self.by_key.values(), key=lambda r: (r.kind != SYNC, r.check is None))
+        rl = sorted(self.by_key.values(), key=lambda r: (r.kind != SYNC, not r.e2e))
         self.ordered = rl
         order = sorted(range(len(rl)), key=lambda i: rl[i].key)
         self.keys = np.array([rl[i].key for i in order], dtype=np.int64)
         self.num = np.array(order, dtype=np.int64)
         self.ignored_keys = np.array(sorted(self.known - set(self.by_key)), dtype=np.int64)
         self.dlc = np.array([r.dlc for r in rl], dtype=np.int64)
-        self.e2e = np.array([r.check is not None for r in rl], dtype=bool)
+        self.e2e = np.array([r.e2e for r in rl], dtype=bool)
         self.start = np.array([r.start_reg for r in rl], dtype=np.uint8)
-        self.data_e2e = np.array([r.kind == DATA and r.check is not None for r in rl])
-        self.tick_e2e = np.array([r.kind in (STATUS, ALERT) and r.check is not None
+        self.data_e2e = np.array([r.kind == DATA and r.e2e for r in rl])
+        self.tick_e2e = np.array([r.kind in (STATUS, ALERT) and r.e2e
                                   for r in rl])
         self.alert_ids = frozenset(r.key & ~EXT for r in rl if r.kind == ALERT)
         self.known_ids = np.array(sorted(k & ~EXT for k in self.known), dtype=np.int64)
@@ -202,9 +202,9 @@ class Routes:
 
     def _add(self, msg: Message, kind: int, decode: Unpack, source: Source | None = None,
              row: Unpack | None = None) -> Route:
-        check = crc_checker(msg.frame_id, msg.length) if is_e2e(msg) else None
-        route = Route(msg.name, kind, msg.length, check, decode, source, row)
+        e2e = is_e2e(msg)
+        route = Route(msg.name, kind, msg.length, e2e, decode, source, row)
         route.key = route_key(msg.frame_id, msg.is_extended_frame)
-        route.start_reg = crc_start(msg.frame_id) if check is not None else 0
+        route.start_reg = crc_start(msg.frame_id) if e2e else 0
         self.by_key[route.key] = route
         return route

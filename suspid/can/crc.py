@@ -12,7 +12,7 @@ The scheme follows AUTOSAR E2E profile 1 (P01) in spirit:
 """
 from __future__ import annotations
 
-from typing import Callable, Final
+from typing import Final
 
 import numpy as np
 
@@ -80,27 +80,6 @@ def e2e_check(payload: bytes | bytearray | memoryview, data_id: int) -> bool:
     if len(payload) < 2 or (payload[1] & 0x0F) >= COUNTER_MODULUS:
         return False
     return payload[0] == e2e_crc(data_id, payload)
-
-
-def make_e2e_checker(data_id: int, length: int) -> "Callable[[bytes | bytearray], bool]":
-    """A checker ``f(payload) -> bool`` of the E2E CRC for one CAN ID and payload length.
-
-    The CRC walk is unrolled into one expression with the data-ID part precomputed (twice the
-    loop's speed). The payload must have exactly ``length`` bytes (the caller checks the DLC).
-    """
-    if not 2 <= length <= 64:
-        raise ValueError(f"E2E frames have 2..64 bytes, got {length}")
-    start = data_id_register(data_id)
-    names = [f"b{i}" for i in range(length)]
-    expr = str(start)
-    for i in range(1, length):
-        expr = f"T[{expr} ^ b{i}]"
-    code = (f"def _check(data, T=T):\n"
-            f"    {', '.join(names)}{',' if length == 1 else ''} = data\n"
-            f"    return ({expr}) ^ {XOR_OUT} == b0\n")
-    ns: dict[str, object] = {"T": TABLE}
-    exec(code, ns)  # noqa: S102 - generated from integers only
-    return ns["_check"]  # type: ignore[return-value]
 
 
 #: :data:`TABLE` as a NumPy array (an ``np.take`` index for CRCs of many frames at once)

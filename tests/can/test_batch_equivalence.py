@@ -1,12 +1,12 @@
-"""The decoder's batch path is the frame-by-frame path, exactly.
+"""The decoder's batch path applies the rules exactly as the frame-by-frame oracle does.
 
-:class:`estimator.decode.DecodeListener` validates and decodes queued frames in batches with
-NumPy (``on_message_received`` + implicit flush, ``feed_arrays``) and hands
-what the array code does not cover to its frame-by-frame code. Property: whatever the
+:class:`estimator.decode.DecodeListener` validates and decodes queued frames in batches of any
+size with NumPy (``on_message_received`` + implicit flush, ``feed_arrays``);
+:mod:`tests.can.frame_by_frame` applies the same rules one frame at a time. Property: whatever the
 stream -- valid node output with drops, bursts, bit flips, duplicates, reordering, foreign
 and unknown IDs, wrong DLCs, error/remote/FD frames, clocks going back, NaN/inf times, node
 restarts (counter resets), silences, corrupted alerts -- and wherever the batches are cut,
-the results are identical to feeding the same frames one by one with ``batch_size=1``:
+the results are identical to the oracle's on the same frames one by one:
 every counter by reason, lost frames, per-message acceptance and state, SN_Sync/SN_Status
 and alert state, and the rolling buffers bit for bit (times, values including NaN, write
 index, fill, capacity, overwritten rows), in both time sources.
@@ -23,6 +23,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from estimator.decode import DecodeListener, feed_log
+from tests.can.frame_by_frame import frame_by_frame
 from firmware_sim.node import NodeConfig, SensorNode
 from firmware_sim.faults import FaultConfig
 from suspid.can.codec import SensorEncoder, encode_alert, encode_status, make_message
@@ -215,9 +216,9 @@ RATES = st.fixed_dictionaries({
 
 def _listeners(time_source: str, capacity: int, growable: bool, max_delta: int,
                **kw: object) -> tuple[DecodeListener, DecodeListener]:
-    ref = DecodeListener("quarter2", DB, capacity=capacity, growable=growable,
-                         time_source=time_source, max_counter_delta=max_delta,  # type: ignore[arg-type]
-                         batch_size=1)
+    ref = frame_by_frame(DecodeListener("quarter2", DB, capacity=capacity, growable=growable,
+                                        time_source=time_source,  # type: ignore[arg-type]
+                                        max_counter_delta=max_delta, batch_size=1))
     lst = DecodeListener("quarter2", DB, capacity=capacity, growable=growable,
                          time_source=time_source, max_counter_delta=max_delta,  # type: ignore[arg-type]
                          **kw)  # type: ignore[arg-type]
@@ -229,17 +230,13 @@ def _listeners(time_source: str, capacity: int, growable: bool, max_delta: int,
        time_source=st.sampled_from(["timestamp", "tick"]), restart=st.booleans(),
        capacity=st.sampled_from([16, 128, 4096]), growable=st.booleans(),
        max_delta=st.integers(1, 6), batch=st.sampled_from([1, 7, 64, 300, 2048]),
-       thresholds=st.sampled_from([(1, 1), (2, 3), (24, 16), (None, None)]),
        reads=st.integers(0, 6))
 def test_batches_equal_frame_by_frame(seed: int, n: int, rates: dict[str, float],
                                       time_source: str, restart: bool, capacity: int,
                                       growable: bool, max_delta: int, batch: int,
-                                      thresholds: tuple[int | None, int | None],
                                       reads: int) -> None:
     frames = _stream(seed, n, rates, time_source == "tick", restart)
     ref, lst = _listeners(time_source, capacity, growable, max_delta, batch_size=batch)
-    if thresholds[0] is not None:   # exercise the array code on small batches too
-        lst.min_batch, lst.min_run = thresholds  # type: ignore[assignment]
     for m in frames:
         ref.on_message_received(m)
     rng = np.random.default_rng(seed + 1)
@@ -259,10 +256,9 @@ def test_batches_equal_frame_by_frame(seed: int, n: int, rates: dict[str, float]
 def test_arrays_equal_frame_by_frame(seed: int, n: int, rates: dict[str, float],
                                      time_source: str, restart: bool, capacity: int,
                                      growable: bool, chunks: list[int]) -> None:
-    """``feed_arrays`` on FrameArrays cut anywhere, with the array code on every size."""
+    """``feed_arrays`` on FrameArrays cut anywhere."""
     frames = _stream(seed, n, rates, time_source == "tick", restart)
     ref, lst = _listeners(time_source, capacity, growable, 4)
-    lst.min_batch, lst.min_run = 1, 1
     for m in frames:
         ref.on_message_received(m)
     feed_in_chunks(lst, FrameArrays.from_messages(frames), chunks)
@@ -279,7 +275,6 @@ def test_node_with_faults_equal(time_source: str, faults: list[str]) -> None:
     frames = list(node.frames())
     for batch in (256, 2048):
         ref, lst = _listeners(time_source, 512, False, 4, batch_size=batch)
-        lst.min_batch, lst.min_run = 8, 8
         for m in frames:
             ref.on_message_received(m)
             lst.on_message_received(m)

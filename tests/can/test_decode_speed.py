@@ -6,11 +6,11 @@
   the former snapshot-everything alignment (kept here as the reference) for random pushes,
   gaps, dropped frames, out-of-order and NaN times, clears and ring wrap-around, with
   windows sliding over the stream as the monitor's driver cuts them.
-* :func:`estimator.decode.listener._ema`: the period recurrence with the products taken
-  out of the loop is the scalar recurrence bit for bit, whatever the inputs.
+* :func:`estimator.decode.rules.counters.period_after`: the period recurrence with the
+  products taken out of the loop is the scalar recurrence bit for bit, whatever the inputs.
 * The candump column parser on lines of one layout (any timestamp digits, ID digits,
   payload length) equals ``float()``/``int()``/``fromhex`` line by line.
-* Small ``feed_arrays`` batches (frame by frame from lists) equal frames one by one.
+* Small ``feed_arrays`` batches, down to one frame, equal the frame-by-frame oracle.
 """
 from __future__ import annotations
 
@@ -26,6 +26,7 @@ from estimator.decode.rules.counters import period_after as _ema
 from suspid.can import candump
 from suspid.can.logs import FrameArrays
 from suspid.errors import InputError
+from tests.can.frame_by_frame import push_one
 from tests.can.test_batch_equivalence import (RATES, _listeners, _stream, feed_in_chunks,
                                               snapshot)
 
@@ -178,7 +179,7 @@ def test_align_equals_snapshot_alignment(ops: list[tuple], capacity: int, growab
                 src.push_many(np.array(times), vals)
             else:
                 for tk, row in zip(times, vals):
-                    src.push(tk, row.tolist())
+                    push_one(src, tk, row.tolist())
             t_hi = max([t_hi] + [x for x in times if x == x])
             continue
         for t_start, t_end in _windows(data.draw, t_hi):
@@ -224,7 +225,7 @@ def test_sliding_windows_over_a_wrapping_ring(capacity: int) -> None:
             if rng.random() < 0.03:
                 continue                                   # a lost frame
             tk = t - (0.0006 if rng.random() < 0.01 else 0.0)   # late, out of order
-            src.push(tk, rng.normal(size=len(src.channels)).tolist())
+            push_one(src, tk, rng.normal(size=len(src.channels)).tolist())
         if k == 1500:
             t -= 2.0                                       # the logger clock jumps back
             next_end = t + win
@@ -311,9 +312,9 @@ def test_parse_layout_equals_message_parser(ts: list[tuple[int, int, int]], id_d
 def test_small_array_batches_equal_frame_by_frame(seed: int, n: int, rates: dict[str, float],
                                                   time_source: str, restart: bool,
                                                   capacity: int, chunks: list[int]) -> None:
-    """``feed_arrays`` with the default thresholds: batches below ``min_batch`` (the driver's
-    last frames before a window end) go frame by frame from lists -- error/remote frames,
-    payloads longer than 8 bytes, extended IDs included."""
+    """``feed_arrays`` in small batches (the driver's last frames before a window end), down
+    to single frames -- error/remote frames, payloads longer than 8 bytes, extended IDs
+    included."""
     frames = _stream(seed, n, rates, time_source == "tick", restart)
     ref, lst = _listeners(time_source, capacity, False, 4)
     for m in frames:
@@ -328,7 +329,7 @@ def test_rows_between_never_returns_a_nan_time(times: list[float]) -> None:
     buf = RollingBuffer(2, False)
     src = buf.source("B", ["b1"])
     for t in times:
-        src.push(t, [1.0])
+        push_one(src, t, [1.0])
     for lo, hi in ((0.0, None), (None, 1.0), (0.0, 1.0)):
         t, v = src.rows_between(lo, hi, [0])
         assert not np.isnan(t).any() and t.size == v[0].size
@@ -339,7 +340,7 @@ def test_align_skips_rows_without_a_finite_time() -> None:
     buf = RollingBuffer(16, False)
     src = buf.source("A", ["a"])
     for t, v in ((0.0, 1.0), (0.002, 2.0), (math.nan, 9.0), (math.inf, 9.0), (0.004, 3.0)):
-        src.push(t, [v])
+        push_one(src, t, [v])
     al = buf.align()
     np.testing.assert_allclose(al.t, [0.0, 0.002, 0.004])
     np.testing.assert_array_equal(al.values["a"], [1.0, 2.0, 3.0])

@@ -12,6 +12,7 @@ from estimator.decode import DecodeListener, RollingBuffer, feed, feed_with_noti
 from suspid.can.codec import SensorEncoder, make_message
 from suspid.can.crc import e2e_crc, e2e_protect
 from suspid.errors import InputError, UsageError
+from tests.can.frame_by_frame import push_one
 
 FS = 500.0
 
@@ -171,7 +172,7 @@ def test_rolling_buffer_is_bounded():
     buf = RollingBuffer(capacity=64)
     src = buf.source("m", ["a", "b"])
     for k in range(1000):
-        src.push(k * 0.01, (float(k), -float(k)))
+        push_one(src, k * 0.01, (float(k), -float(k)))
     assert buf.overwritten == 1000 - 64
     t, v = buf.series("a")
     np.testing.assert_array_equal(v, np.arange(936, 1000))

@@ -27,6 +27,7 @@ from suspid.io.csvio import Measurement, read_measurement
 from suspid.models import get_model
 from suspid.simulate import simulate
 
+from tests.can.frame_by_frame import frame_by_frame
 from tests.can.test_batch_equivalence import snapshot
 
 T0 = 1764183653.0
@@ -201,7 +202,7 @@ def test_the_batch_path_stores_what_the_frame_by_frame_path_does(
     monkeypatch.setattr(PageSplit, "push_many", spy)
     feed_log(batch, log)
     assert sum(blocks) == ref.t.size   # every frame through the array path
-    one = DecodeListener(m, dbc, MUX_MAP, capacity=1 << 12, batch_size=1)
+    one = frame_by_frame(DecodeListener(m, dbc, MUX_MAP, capacity=1 << 12, batch_size=1))
     for msg in read_log(log):
         one.on_message_received(msg)
     a, b = snapshot(batch), snapshot(one)

@@ -1,6 +1,7 @@
-"""The decoder's rules (estimator/decode/rules/) directly: each array form equals its scalar
-form frame by frame, and the scalar rules do what the docs say (lost frames, stale and
-jumping counters, the tick of a counter, the time order and its re-anchoring)."""
+"""The decoder's rules (estimator/decode/rules/) directly: each array form equals the
+frame-by-frame form of the oracle (tests/can/frame_by_frame.py) frame by frame, and the rules
+do what the docs say (lost frames, stale and jumping counters, the tick of a counter, the time
+order and its re-anchoring)."""
 from __future__ import annotations
 
 import math
@@ -13,6 +14,7 @@ from hypothesis import strategies as st
 from estimator.decode.rules import counters, e2e, timebase
 from estimator.decode.rules.counters import FrameCounts
 from suspid.can.crc import COUNTER_MODULUS, e2e_crc
+from tests.can import frame_by_frame as scalar
 
 _SETTINGS = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
@@ -45,10 +47,10 @@ def test_crc_rows_equal_the_scalar_check(seed: int, frames: list[tuple[int, int,
     check = rng.random(len(frames)) < 0.8
     got = e2e.crc_ok_rows(b8, start, dlc, check)
     for i, (fid, n, _) in enumerate(frames):
-        want = e2e.crc_checker(fid, n)(bytes(b8[i, :n])) if check[i] else True
+        want = e2e_crc(fid, bytes(b8[i, :n])) == b8[i, 0] if check[i] else True
         assert got[i] == want
     rows = b8.view(np.uint64).reshape(-1)
-    assert e2e.alive_counters(rows).tolist() == [e2e.alive_counter(bytes(r)) for r in b8]
+    assert e2e.alive_counters(rows).tolist() == [int(r[1]) & 0x0F for r in b8]
 
 
 # ---- counters ----------------------------------------------------------------------------
@@ -133,46 +135,32 @@ def test_tick_of_counter_scalar_equals_arrays(pairs: list[tuple[int, int]], peri
     per = np.full(len(pairs), period_us * 1e-6)
     times = timebase.tick_times(ticks, per)
     for k, (s, ck) in enumerate(pairs):
-        tick = timebase.tick_of_counter(s, ck)
+        tick = scalar.tick_of_counter(s, ck)
         assert tick == ticks[k] and tick % COUNTER_MODULUS == ck
         assert s - COUNTER_MODULUS // 2 <= tick <= s + COUNTER_MODULUS // 2
-        assert timebase.tick_time(tick, period_us * 1e-6) == times[k]
+        assert scalar.tick_time(tick, period_us * 1e-6) == times[k]
     sy = timebase.sync_times(st_, np.full(len(pairs), period_us, dtype=np.int64),
                              np.zeros(len(pairs)))
-    assert sy.tolist() == [timebase.sync_time(s, period_us) for s, _ in pairs]
+    assert sy.tolist() == [s * period_us / 1e6 for s, _ in pairs]
 
 
 @_SETTINGS
-@given(st.lists(st.one_of(st.floats(-5, 5), st.just(math.nan), st.just(math.inf)),
-                min_size=1, max_size=60))
-def test_time_order(ts: list[float]) -> None:
-    """Where the array form sees no break (the frame not earlier than its predecessor, and
-    finite) and the predecessor was admitted, the scalar rule admits the frame; a frame it
-    rejects is a break."""
-    order = timebase.TimeOrder()
-    assert order.admit(-10.0)
-    breaks = timebase.time_breaks(order.last, np.array(ts))
-    prev_admitted = True
-    for k, t in enumerate(ts):
-        resyncs = order.resyncs
-        admitted = order.admit(t)
-        if not breaks[k] and prev_admitted:
-            assert admitted
-        if not admitted:
-            assert breaks[k] or not prev_admitted
-        if admitted and order.resyncs == resyncs:
-            assert order.last == t and math.isfinite(t)
-        prev_admitted = admitted
-
-
-def test_time_order_reanchors_after_a_clock_reset() -> None:
-    order = timebase.TimeOrder()
-    assert order.admit(100.0)
-    for k in range(timebase.TIME_RESYNC - 1):
-        assert not order.admit(1.0 + k)
-    assert order.admit(50.0) and order.resyncs == 1 and order.last == 50.0
-    assert not order.admit(math.nan) and not order.admit(math.inf)
-    assert order.rejects == 0 and order.last == 50.0     # NaN/inf never count to a re-anchor
+@given(st.lists(st.one_of(st.floats(-5, 5), st.just(math.nan), st.just(math.inf),
+                          st.just(-math.inf)), min_size=1, max_size=80),
+       st.lists(st.integers(1, 20), min_size=1, max_size=5))
+def test_time_order_equals_frame_by_frame(ts: list[float], cuts: list[int]) -> None:
+    """The array time order, in batches cut anywhere, admits exactly the frames the
+    frame-by-frame rule admits, with the same state after (re-anchors included)."""
+    order, one = timebase.TimeOrder(), scalar.ScalarTimeOrder()
+    want = [one.admit_one(t) for t in ts]
+    got: list[bool] = []
+    pos = k = 0
+    while pos < len(ts):
+        got += order.admit(np.array(ts[pos:pos + cuts[k % len(cuts)]])).tolist()
+        pos += cuts[k % len(cuts)]
+        k += 1
+    assert got == want
+    assert (order.last, order.rejects, order.resyncs) == (one.last, one.rejects, one.resyncs)
 
 
 @_SETTINGS

@@ -19,6 +19,7 @@ from firmware_sim.node import NodeConfig, SensorNode
 from suspid.can.dbc import STATUS_MESSAGE, load_dbc
 from suspid.can.logs import FrameArrays
 
+from tests.can.frame_by_frame import frame_by_frame
 from tests.can.test_batch_equivalence import _write_candump, snapshot
 
 DB = load_dbc()
@@ -53,8 +54,9 @@ def _without_status(frames: list[can.Message], n: int) -> list[can.Message]:
 
 
 def _decode(frames: list[can.Message], time_source: str) -> tuple[DecodeListener, DecodeListener]:
-    """Frame by frame (the reference) and in batches through the array code."""
-    ref = DecodeListener("quarter2", DB, time_source=time_source, batch_size=1)  # type: ignore[arg-type]
+    """Frame by frame (the oracle) and in batches through the engine."""
+    ref = frame_by_frame(DecodeListener("quarter2", DB, time_source=time_source,  # type: ignore[arg-type]
+                                        batch_size=1))
     for m in frames:
         ref.on_message_received(m)
     lst = DecodeListener("quarter2", DB, time_source=time_source)  # type: ignore[arg-type]

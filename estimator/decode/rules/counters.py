@@ -108,7 +108,7 @@ def steady_frames(c: np.ndarray, t: np.ndarray, starts: np.ndarray, last_c: np.n
     ``starts``; each message's state before): those for which :meth:`CounterRules.step`
     reduces to :func:`period_after`. Returns the mask, each frame's interval (s) and run."""
     m = c.size
-    rid = np.repeat(np.arange(starts.size), np.diff(np.r_[starts, m]))
+    rid = np.repeat(np.arange(starts.size), np.diff(np.append(starts, m)))
     prev_c = np.empty(m, dtype=np.int64)
     prev_c[1:] = c[:-1]
     prev_c[starts] = last_c

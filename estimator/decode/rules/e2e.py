@@ -6,19 +6,12 @@ from typing import Union
 
 import numpy as np
 
-from suspid.can.crc import TABLE_NP, data_id_register, make_e2e_checker
+from suspid.can.crc import TABLE_NP, data_id_register
 
 #: a frame payload (python-can gives ``bytearray``, the batch path ``bytes``)
 Payload = Union[bytes, bytearray]
-#: ``crc_checker(frame_id, dlc)(payload) -> bool``: the per-frame CRC check
-crc_checker = make_e2e_checker
 #: CRC register after the data-ID bytes of a frame ID (the array check's start value)
 crc_start = data_id_register
-
-
-def alive_counter(data: Payload) -> int:
-    """The alive counter (0..15) of one protected payload."""
-    return data[1] & 0x0F
 
 
 def alive_counters(rows: np.ndarray) -> np.ndarray:

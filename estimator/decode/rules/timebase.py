@@ -1,6 +1,6 @@
 """Data time: which clock places a frame (:func:`choose_time_base`), the time order check
-(:class:`TimeOrder`), a frame's tick from its alive counter (:func:`tick_of_counter`), the
-stale-tick rule (:func:`stale_tick`) and the sensor clock across wraps and restarts
+(:class:`TimeOrder`), frames' ticks from their alive counters (:func:`ticks_of_counters`), the
+stale-tick rule (:func:`stale`) and the sensor clock across wraps and restarts
 (:class:`TickClock`). docs/can.md "Sample time: SN_Sync".
 """
 from __future__ import annotations
@@ -34,77 +34,80 @@ class TimeOrder:
         self.rejects = 0
         self.resyncs = 0
 
-    def admit(self, ts: float) -> bool:
-        """Whether a frame stamped ``ts`` passes (and becomes the last); ``False``: ``time``."""
-        if not self.last <= ts < _INF:  # one chained compare: backwards, NaN or inf
-            if not self.out_of_order(ts):
-                return False
-        self.rejects = 0
-        self.last = ts
-        return True
+    def admit(self, ts: np.ndarray) -> np.ndarray:
+        """Which frames stamped ``ts`` (s, in arrival order) pass; ``last`` moves past them.
 
-    def out_of_order(self, ts: float) -> bool:
-        """A frame that failed ``last <= ts < inf``: True when it re-anchors the time base."""
-        if not -_INF < ts < _INF:
-            return False  # NaN/inf: never a data time, never a re-anchor
-        self.rejects += 1
-        if self.rejects < TIME_RESYNC:
-            return False
-        self.resyncs += 1  # the clock was reset: re-anchor on this frame
-        return True
-
-
-def time_breaks(last: float, ts: np.ndarray) -> np.ndarray:
-    """Frames of a batch out of time order with their predecessor (the first: with ``last``)."""
-    prev = np.empty(ts.size)
-    prev[0] = last
-    prev[1:] = ts[:-1]
-    return ~((prev <= ts) & (ts < _INF))
-
-
-def tick_of_counter(sync_tick: int, c: int) -> int:
-    """The tick nearest ``sync_tick`` whose residue mod 15 is the alive counter ``c``."""
-    d = (sync_tick - c) % COUNTER_MODULUS
-    return sync_tick - d if d <= COUNTER_MODULUS // 2 else sync_tick - d + COUNTER_MODULUS
+        A frame passes when finite and not before every earlier finite time (a frame it
+        rejects never raised that maximum); the ``TIME_RESYNC``-th finite rejection in a row
+        passes too, and the check starts again from it."""
+        if ts.size and self.last <= ts[0] and ts[-1] < _INF and \
+                (ts.size == 1 or bool((ts[1:] >= ts[:-1]).all())):
+            self.last = float(ts[-1])   # in order and finite (NaN fails every compare)
+            self.rejects = 0
+            return np.ones(ts.size, dtype=bool)
+        keep = np.zeros(ts.size, dtype=bool)
+        pos = 0
+        while pos < ts.size:
+            t = ts[pos:]
+            fin = np.isfinite(t)
+            prior = np.maximum.accumulate(np.r_[self.last, np.where(fin, t, -_INF)[:-1]])
+            ok = fin & (prior <= t)
+            rej = fin & ~ok
+            cr = np.cumsum(rej)
+            since = np.maximum.accumulate(np.where(ok, cr, 0))
+            run = np.where(np.logical_or.accumulate(ok), cr - since, self.rejects + cr)
+            at = np.flatnonzero(rej & (run >= TIME_RESYNC))
+            end = int(at[0]) if at.size else t.size
+            keep[pos:pos + end] = ok[:end]
+            passed = np.flatnonzero(ok[:end])
+            if passed.size:
+                self.last = float(t[passed[-1]])
+            if not at.size:
+                self.rejects = int(run[-1])
+                break
+            keep[pos + end] = True   # the clock was reset: re-anchor on this frame
+            self.last = float(t[end])
+            self.rejects = 0
+            self.resyncs += 1
+            pos += end + 1
+        return keep
 
 
 def ticks_of_counters(sync_tick: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """:func:`tick_of_counter` of many frames (int64 arrays)."""
+    """The ticks nearest ``sync_tick`` whose residue mod 15 is the alive counter ``c`` (int64)."""
     d = (sync_tick - c) % COUNTER_MODULUS
     return sync_tick - d + np.where(d <= COUNTER_MODULUS // 2, 0, COUNTER_MODULUS)
 
 
-def tick_time(tick: int, period: float) -> float:
-    """Data time (s) of sample ``tick`` at ``period`` s, rounded to the µs as SN_Sync's own."""
-    return round(tick * period * 1e6) / 1e6
-
-
 def tick_times(ticks: np.ndarray, period: np.ndarray) -> np.ndarray:
-    """:func:`tick_time` of many frames."""
+    """Data times (s) of samples ``ticks`` at ``period`` s, rounded to the µs as SN_Sync's own."""
     return np.round(ticks * period * 1e6) / 1e6
 
 
-def sync_time(tick: Any, period_us: Any) -> float:
-    """Data time (s) of an SN_Sync frame: its ``Tick x PeriodUs`` (the exact decimal time)."""
-    return int(tick) * period_us / 1e6
-
-
 def sync_times(ticks: np.ndarray, period_us: np.ndarray, arrival: np.ndarray) -> np.ndarray:
-    """:func:`sync_time` of SN_Sync frames with integer fields; ``arrival`` where PeriodUs is 0."""
+    """Data times (s) of SN_Sync frames, ``Tick x PeriodUs`` (the exact decimal time);
+    ``arrival`` where PeriodUs is 0."""
     return np.where(period_us > 0, (ticks * period_us).astype(np.float64) / 1e6, arrival)
+
+
+def stale(same_sync: Any, gap: Any, period: Any) -> Any:
+    """The stale-tick rule, on scalars or arrays: no SN_Sync since the message's last frame
+    (``same_sync``) and a silence ``gap`` (s) of more than ``STALE_PERIODS`` periods (s)."""
+    return same_sync & (gap > STALE_PERIODS * period)
 
 
 def stale_tick(route: RouteState, sync_n: int, period: float, arrival: float) -> bool:
     """Tick mode: whether a data frame arriving at ``arrival`` (s) is ``no_sync`` (a stale tick)."""
-    return (route.sync_n == sync_n and route.last_c >= 0 and arrival - route.last_arrival
-            > STALE_PERIODS * max(route.period, period))
+    return route.last_c >= 0 and bool(stale(route.sync_n == sync_n,
+                                            arrival - route.last_arrival,
+                                            max(route.period, period)))
 
 
 def fresh_ticks(sn: np.ndarray, prev_sn: np.ndarray, arrival: np.ndarray,
                 prev_arrival: np.ndarray, period: np.ndarray, known: np.ndarray) -> np.ndarray:
-    """Data frames whose tick is certainly usable (:func:`stale_tick` False)."""
-    return known & ~np.isnan(period) & ((sn != prev_sn)
-                                        | (arrival - prev_arrival <= STALE_PERIODS * period))
+    """Data frames whose tick is certainly usable: :func:`stale` with the SN_Sync period
+    alone (never above :func:`stale_tick`'s), a known tick and period."""
+    return known & ~np.isnan(period) & ~stale(sn == prev_sn, arrival - prev_arrival, period)
 
 
 class SyncTrack:
@@ -145,9 +148,9 @@ class SyncTrack:
                                          np.ndarray]:
         """At positions ``q``: SN_Sync count, tick, tick known, period (NaN unknown), shift."""
         k = np.searchsorted(self.pos, q)   # 0: the state before the segment
-        st = np.r_[0 if self.tick0 is None else self.tick0, self.ticks].astype(np.int64)[k]
-        per = np.r_[math.nan if self.period0 is None else self.period0, self.periods][k]
-        sh = np.r_[self.shift0, self.shifts].astype(np.int64)[k]
+        st = np.append(np.int64(0 if self.tick0 is None else self.tick0), self.ticks)[k]
+        per = np.append(math.nan if self.period0 is None else self.period0, self.periods)[k]
+        sh = np.append(np.int64(self.shift0), self.shifts)[k]
         return self.n0 + k, st, (k > 0) | (self.tick0 is not None), per, sh
 
 
