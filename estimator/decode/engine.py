@@ -3,8 +3,9 @@
 :meth:`DecodeEngine.process` takes every batch, of any size (a log's chunks, a live bus's
 queue, one frame): the time order and the stateless checks (ID, DLC, CRC) over the whole
 batch, then per message the counter rules, which for steady frames reduce to the period
-recurrence; only a message's irregular frames (a counter gap, a stale tick) step through the
-sequential rules one by one. No lock: the listener serialises calls.
+recurrence; from a message's first irregular frame in the batch (a counter gap, a stale
+tick) its frames step through the sequential rules one by one. No lock: the listener
+serialises calls.
 """
 from __future__ import annotations
 
