@@ -40,8 +40,9 @@ class Aligned:
     """Channels on one uniform time base: grid times ``t`` (s; the frames' own where all lie
     within 1e-9 dt of the grid) and step ``dt`` (s), ``values`` (channel -> array, NaN where no
     valid sample fell), ``gaps`` (runs of NaN per channel; for one sample every ``N`` cells: of
-    ``N`` or more), ``collisions`` (samples that fell on a filled cell, the later kept) and
-    ``snapped`` (largest snap to a cell, s)."""
+    ``N`` or more), ``collisions`` (samples that fell on a filled cell, the later kept; the
+    most of one ring), ``snapped`` (largest snap to a cell, s) and ``collided`` (ring -> times
+    (s) of its samples that fell on a cell already filled, each the later of its pair)."""
 
     t: np.ndarray
     dt: float
@@ -49,6 +50,18 @@ class Aligned:
     gaps: list[Gap] = field(default_factory=list)
     collisions: int = 0
     snapped: float = 0.0
+    collided: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+def collision_notes(counts: dict[str, int], where: object, stats: dict[str, object]) -> list[str]:
+    """Record ``counts`` (ring -> samples that fell on a grid cell already filled, the later
+    kept) in the frame statistics ``stats`` as ``collisions`` (the non-zero ones; none: no
+    key) and return one warning per such ring, prefixed by ``where`` (the input)."""
+    counts = {k: n for k, n in counts.items() if n}
+    if counts:
+        stats["collisions"] = counts
+    return [f"{where}: {k}: {n} samples fell on a grid cell already filled; the later of "
+            "each pair was kept" for k, n in counts.items()]
 
 
 class NoSamplesError(InputError):
@@ -338,6 +351,7 @@ class RollingBuffer:
         values: dict[str, np.ndarray] = {}
         collisions = 0
         cells: dict[str, np.ndarray] = {}
+        collided: dict[str, np.ndarray] = {}
         filled = np.zeros(n, dtype=bool)
         for name, (t, _) in snaps.items():
             kk = cells[name] = np.rint((t - t0) / dt).astype(np.int64)   # t0 <= t <= t_last
@@ -345,7 +359,11 @@ class RollingBuffer:
             if kk.size:   # frames minus distinct cells
                 filled[:] = False
                 filled[kk] = True
-                collisions = max(collisions, int(kk.size - np.count_nonzero(filled)))
+                extra = int(kk.size - np.count_nonzero(filled))
+                collisions = max(collisions, extra)
+                if extra:   # the later of each pair on one cell, in push order
+                    o = np.argsort(kk, kind="stable")
+                    collided[name] = t[o[1:][kk[o[1:]] == kk[o[:-1]]]]
         for c in names:
             src, col = self._where[c]
             out = np.full(n, np.nan)
@@ -363,7 +381,7 @@ class RollingBuffer:
         gaps: list[Gap] = []
         for c in names:
             gaps.extend(_gaps(c, values[c], t_out))
-        return Aligned(t_out, dt_fit, values, gaps, collisions, snapped)
+        return Aligned(t_out, dt_fit, values, gaps, collisions, snapped, collided)
 
 
 def cadence(v: np.ndarray) -> int:

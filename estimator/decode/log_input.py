@@ -8,7 +8,7 @@ from typing import Iterable, Literal, cast
 import numpy as np
 from cantools.database import Database
 
-from estimator.decode.buffer import Aligned, cadence
+from estimator.decode.buffer import Aligned, cadence, collision_notes
 from estimator.decode.listener import DecodeListener
 from estimator.decode.replay import feed_log
 from suspid.can.logs import ReadStats, describe_channels
@@ -168,9 +168,8 @@ def load_log_as_measurement(path: str | Path, model: str | SuspensionModel,
     if aligned.snapped > 1e-3 * aligned.dt:
         warnings.append(f"{path}: frame times snapped to a uniform grid of {aligned.dt:.6g} s "
                         f"(largest shift {aligned.snapped:.3g} s)")
-    if aligned.collisions:
-        warnings.append(f"{path}: {aligned.collisions} frames fell on an already filled grid "
-                        "cell (the later kept)")
+    warnings += collision_notes({k: v.size for k, v in aligned.collided.items()}, path,
+                                frame_stats)
     warnings += [f"{path}: {w}" for w in summarize_gaps(aligned)]
     meas = aligned_to_measurement(aligned, m, str(path), warnings)
     if not meas.measured:

@@ -72,6 +72,10 @@ class CanWindowDriver:
     #: padded with NaN, so it is skipped at its own end time
     max_missing: float = 0.2
     _t_seen: float = math.nan
+    #: ring -> samples that fell on a grid cell already filled, each counted in the first
+    #: window that holds it (:attr:`~estimator.decode.buffer.Aligned.collided`)
+    collisions: dict[str, int] = field(default_factory=dict)
+    _counted_to: float = -math.inf
 
     def _sources_started(self, latest: float) -> bool:
         """Every mapped message has delivered, or the start has waited long enough."""
@@ -137,6 +141,10 @@ class CanWindowDriver:
             # a gap in the stream longer than a window: nothing to fit
             self.empty_windows += 1
             return
+        for ring, t_col in al.collided.items():
+            self.collisions[ring] = (self.collisions.get(ring, 0)
+                                     + int(np.count_nonzero(t_col > self._counted_to)))
+        self._counted_to = max(t_end, float(al.t[-1]))
         if self.dt is None:
             self.dt = float(al.dt)
             # of the messages that started, the channels that carry data (a node's --channels

@@ -21,6 +21,7 @@ import numpy as np
 from estimator.alerts import (DEFAULT_HORIZON_S, AlertConfig, AlertEngine, AlertStore,
                               BusAlertSink, CallbackSink, ForecastEngine)
 from estimator.decode import DecodeListener
+from estimator.decode.buffer import collision_notes
 from estimator.decode.log_input import channel_notes, unparsed_hint
 from estimator.identify import Parameters
 from estimator.identify.inputs import CSV_SUFFIXES
@@ -481,6 +482,7 @@ def _run_log(source: Source, spec: MonitorSpec, mon: StreamMonitor, buses: list[
         warnings.append(stats.damage)
     elif stats.truncated:
         warnings.append(f"{source.input}: the file ends inside a record (truncated)")
+    warnings += collision_notes(drv.collisions, source.input, frames)
     if warnings:
         out["warnings"] = warnings
     return out
@@ -517,8 +519,10 @@ def _run_live(source: Source, spec: MonitorSpec, mon: StreamMonitor, buses: list
         n = run_bus(drv, bus, stop, buffer_s=source.rx_buffer_s)
     finally:
         stop.restore()
-    return {"frames": listener.frame_stats(), "frames_received": n, "windows_cut": drv.windows,
-            "stopped": stop.reason}
+    frames = listener.frame_stats()
+    warnings = collision_notes(drv.collisions, f"{source.interface} {source.channel}", frames)
+    return {"frames": frames, "frames_received": n, "windows_cut": drv.windows,
+            "stopped": stop.reason, **({"warnings": warnings} if warnings else {})}
 
 
 def warn(spec: MonitorSpec) -> None:
