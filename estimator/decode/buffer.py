@@ -1,13 +1,12 @@
 """Bounded, preallocated rolling buffer of decoded samples, and alignment on a uniform grid.
 
-One ring of :class:`array.array` columns per message: full, it overwrites its oldest row
+One ring of NumPy columns per message: full, it overwrites its oldest row
 (:attr:`RollingBuffer.overwritten`) or doubles (``growable``). :meth:`RollingBuffer.align`
 puts channels on one grid without interpolating; empty cells stay NaN (:class:`Gap`).
 """
 from __future__ import annotations
 
 import threading
-from array import array
 from dataclasses import asdict, dataclass, field
 from typing import Iterable, Sequence
 
@@ -72,7 +71,7 @@ class Source:
     """Ring of rows ``(t, v_0, ..., v_{k-1})`` of one message; created by :meth:`RollingBuffer.source`."""
 
     __slots__ = ("name", "group", "channels", "t", "cols", "w", "n", "cap", "growable",
-                 "overwritten", "_lock", "_views", "_cleared", "_checked", "_drop")
+                 "overwritten", "_lock", "_cleared", "_checked", "_drop")
 
     def __init__(self, name: str, channels: Sequence[str], capacity: int, growable: bool,
                  lock: threading.Lock, group: str | None = None) -> None:
@@ -81,9 +80,8 @@ class Source:
         self.group = name if group is None else group
         self.channels = tuple(channels)
         self.cap = capacity
-        zeros = bytes(8 * capacity)
-        self.t = array("d", zeros)
-        self.cols = tuple(array("d", zeros) for _ in self.channels)
+        self.t = np.zeros(capacity)   # calloc'd: pages are mapped as rows are written
+        self.cols = tuple(np.zeros(capacity) for _ in self.channels)
         self.w = 0          # next write index
         self.n = 0          # rows held (<= cap)
         self.growable = growable
@@ -94,15 +92,12 @@ class Source:
         self._checked = 0
         self._drop = -1
         self._lock = lock
-        self._views: list[np.ndarray] | None = None   # NumPy views of (t, *cols) for push_many
 
     def _grow(self, cap: int) -> None:
         """Enlarge the columns to ``cap`` rows (zeros appended); caller holds the lock."""
-        self._views = None   # an array.array cannot resize while a view of it exists
-        more = bytes(8 * (cap - self.cap))
-        self.t.frombytes(more)
-        for col in self.cols:
-            col.frombytes(more)
+        more = np.zeros(cap - self.cap)
+        self.t = np.concatenate([self.t, more])
+        self.cols = tuple(np.concatenate([col, more]) for col in self.cols)
         self.cap = cap
 
     def push_many(self, t: np.ndarray, values: np.ndarray | Sequence[np.ndarray]) -> None:
@@ -125,16 +120,11 @@ class Source:
                     self._grow(cap)
             elif self.n + m > cap:
                 self.overwritten += self.n + m - cap
-            views = self._views
-            if views is None:
-                views = [np.frombuffer(c, dtype=np.float64, count=self.cap)
-                         for c in (self.t, *self.cols)]
-                self._views = views
             skip = max(0, m - cap)          # rows overwritten within this block itself
             p = (self.w + skip) % cap
             c = m - skip
             first = min(c, cap - p)
-            for view, src in zip(views, (t, *cols)):
+            for view, src in zip((self.t, *self.cols), (t, *cols)):
                 view[p:p + first] = src[skip:skip + first]
                 if first < c:
                     view[:c - first] = src[skip + first:]
@@ -155,7 +145,7 @@ class Source:
         lo = max(self._checked, first + 1)        # rows to compare with their predecessor
         if lo < total:
             pos = (self.w - (total - lo) - 1 + np.arange(total - lo + 1)) % cap
-            t = np.frombuffer(self.t, dtype=np.float64, count=cap)[pos]
+            t = self.t[pos]
             bad = np.flatnonzero(~(t[1:] >= t[:-1]))   # NaN too
             del t
             if bad.size:
@@ -173,8 +163,7 @@ class Source:
         """Copies of the times and ``{column: values}`` of the rows with ``t_start <= t <= t_end``."""
         with self._lock:
             n, w, cap = self.n, self.w, self.cap
-            # views released before the lock is: an array.array cannot resize under a view
-            tv = np.frombuffer(self.t, dtype=np.float64, count=cap)
+            tv = self.t
             if n < cap or w == 0:
                 lo = w - n if n < cap else 0
                 spans = [(lo, lo + n)]
@@ -211,9 +200,7 @@ class Source:
                 return np.concatenate([view[p] for p in pick])
 
             t = take(tv)
-            vals = {j: take(np.frombuffer(self.cols[j], dtype=np.float64, count=cap))
-                    for j in cols}
-            del tv
+            vals = {j: take(self.cols[j]) for j in cols}
         return t, vals
 
     def clear(self) -> None:
