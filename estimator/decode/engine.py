@@ -51,8 +51,6 @@ class DecodeEngine:
         self.frames = 0
         #: the batch being processed and its rows' indices in it (CAN FD payloads only)
         self._long: tuple[FrameArrays, np.ndarray] | None = None
-        self._by_key = routes.by_key
-        self._known = routes.known
 
     def _special(self, route: Route, data: Payload, ts: float) -> bool:
         """An accepted SN_Status or SUSPID_Alert frame; ``False`` if rejected."""
@@ -131,6 +129,7 @@ class DecodeEngine:
                                      rdlc[at], np.ones(at.size, dtype=bool))
             outcome[~ok] = _O_CRC
         self._segment(ts, r, outcome, rows)
+        self._long = None
 
     def _wide(self, q: np.ndarray, width: int) -> np.ndarray:
         """Whole payloads (``width`` bytes, zero-padded) of the batch's frames at ``q``."""

@@ -101,10 +101,11 @@ class CanWindowDriver:
     def next_check(self, fed: int, max_steps: float = 0.5) -> int:
         """Frames to take before the next :meth:`poll` after ``fed`` frames: those expected
         before the next window end at the rate seen, at least ``check_every`` and at most
-        ``max_steps`` steps' worth (1 until the first sample is in)."""
-        if not math.isfinite(self.t_first):
-            return 1
+        ``max_steps`` steps' worth (``check_every`` until the first window is placed: it starts
+        at the oldest sample whenever the check comes)."""
         every = max(1, self.check_every)
+        if not math.isfinite(self.t_first):
+            return every
         span = self.listener.buffer.latest_time() - self.t_first
         if not span > 0:
             return every

@@ -106,9 +106,9 @@ class FrameByFrame(DecodeEngine):
         if not self.order.admit_one(ts):  # type: ignore[attr-defined]
             rejected["time"] += 1
             return
-        route = self._by_key.get(key)
+        route = self.routes.by_key.get(key)
         if route is None:
-            if key in self._known:
+            if key in self.routes.known:
                 self.counts.ignored += 1
             else:
                 rejected["unknown_id"] += 1
