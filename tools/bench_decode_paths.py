@@ -13,7 +13,9 @@ Paths: messages into :class:`~estimator.decode.DecodeListener` through
 ``on_message_received`` (the live path) with the default queue and with ``batch_size=64``
 (a live bus polled often); ``feed_log`` (a candump log as arrays); the candump reader alone
 (:func:`~suspid.can.logs.read_candump_arrays`), on regular lines and on lines with two
-blanks after the time (none fits the column parser); ``read_log``'s candump messages.
+blanks after the time (none fits the column parser); ``read_log``'s candump messages; with
+``--batches K,...`` also the log's arrays fed to the listener in batches of K frames (the
+engine's fixed cost per batch: a live bus read often, the start of a monitor run).
 CPU time (``time.process_time``) rather than wall time: the machine is shared.
 """
 from __future__ import annotations
@@ -39,6 +41,13 @@ def best(fn: Callable[[], object], repeat: int) -> float:
     return out
 
 
+def feed_batches(lst: DecodeListener, chunks: list, k: int) -> None:
+    """Every frame of ``chunks`` (FrameArrays) through ``lst.feed_arrays`` ``k`` at a time."""
+    for c in chunks:
+        for s in range(0, len(c), k):
+            lst.feed_arrays(c, s, s + k)
+
+
 def make(folder: Path, seconds: float) -> None:
     """Write ``bench.log`` (quarter2 at 1 kHz) and ``odd.log`` (two blanks after the time)."""
     sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -55,6 +64,7 @@ def main() -> int:
     ap.add_argument("--make", action="store_true", help="write the logs into FOLDER and stop")
     ap.add_argument("--seconds", type=float, default=15.0, help="log length (s) for --make")
     ap.add_argument("--repeat", type=int, default=3, help="runs per path (best kept)")
+    ap.add_argument("--batches", default="", help="batch sizes K,... of extra feed_arrays rows")
     args = ap.parse_args()
     if args.make:
         make(args.folder, args.seconds)
@@ -76,6 +86,10 @@ def main() -> int:
             len(f) for f in read_candump_arrays(odd, ReadStats())),
         "read_log (candump messages)": lambda: sum(1 for _ in read_log(log)),
     }
+    chunks = list(read_candump_arrays(log, ReadStats()))
+    for k in [int(x) for x in args.batches.split(",") if x]:
+        rows[f"feed_arrays, batches of {k}"] = lambda k=k: feed_batches(
+            DecodeListener("quarter2", db, growable=True), chunks, k)
     for name, fn in rows.items():
         print(f"{name:40s} {n / best(fn, k):12,.0f}")
     return 0
