@@ -87,9 +87,9 @@ def main() -> int:
         "read_log (candump messages)": lambda: sum(1 for _ in read_log(log)),
     }
     chunks = list(read_candump_arrays(log, ReadStats()))
-    for k in [int(x) for x in args.batches.split(",") if x]:
-        rows[f"feed_arrays, batches of {k}"] = lambda k=k: feed_batches(
-            DecodeListener("quarter2", db, growable=True), chunks, k)
+    for size in [int(x) for x in args.batches.split(",") if x]:
+        rows[f"feed_arrays, batches of {size}"] = lambda size=size: feed_batches(
+            DecodeListener("quarter2", db, growable=True), chunks, size)
     for name, fn in rows.items():
         print(f"{name:40s} {n / best(fn, k):12,.0f}")
     return 0
