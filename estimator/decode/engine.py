@@ -80,10 +80,11 @@ class DecodeEngine:
         ft = fa.frame_type[lo:hi]
         sel: slice | np.ndarray = slice(lo, hi)
         if ft.any():
-            self._rejected["frame_type"] += int(np.count_nonzero(ft))
-            sel = np.flatnonzero(~ft) + lo
-            if not ft.size - np.count_nonzero(ft):
+            kept = np.flatnonzero(~ft) + lo
+            self._rejected["frame_type"] += n - kept.size
+            if not kept.size:
                 return
+            sel = kept
         ts = fa.timestamp[sel]
         keep = self.order.admit(ts)
         if not keep.all():
